@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs everything fivecal needs on a Debian machine (system packages with
+# apt-get, Python packages with pip) and installs fivecal itself.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+SUDO=""
+if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
+DEB_PACKAGES=(libeigen3-dev libceres-dev nlohmann-json3-dev libgtest-dev)
+missing=()
+for p in "${DEB_PACKAGES[@]}"; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "fivecal: installing Debian packages: ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+PY=${PYTHON:-python3}
+command -v cmake >/dev/null 2>&1 || $PY -m pip install -q cmake
+command -v ninja >/dev/null 2>&1 || $PY -m pip install -q ninja
+$PY -m pip install -q --disable-pip-version-check ".[test]"
+command -v pyenv >/dev/null 2>&1 && pyenv rehash || true
+echo "fivecal: installed ($($PY -c 'import fivecal; print(fivecal.__version__)'))"
