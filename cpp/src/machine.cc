@@ -2,15 +2,16 @@
 
 #include <cmath>
 #include <fstream>
-#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 #include <stdexcept>
 
+#include "json_util.h"
+
 namespace fivecal {
 namespace {
 
-using nlohmann::json;
+using namespace json_util;
 
 constexpr const char* kAxisLetters = "XYZABCS";
 
@@ -66,21 +67,6 @@ void ParseTopology(const std::string& topo, std::string* workpiece, std::string*
   workpiece->assign(tokens.begin() + 1, tokens.begin() + foundation);
   tool->assign(tokens.begin() + foundation + 1, tokens.end() - 1);
 }
-
-Eigen::Vector3d ReadVector3(const json& j, const std::string& where) {
-  if (!j.is_array() || j.size() != 3)
-    throw std::invalid_argument(where + ": expected an array of 3 numbers");
-  Eigen::Vector3d v;
-  for (int i = 0; i < 3; ++i) {
-    if (!j[i].is_number())
-      throw std::invalid_argument(where + "[" + std::to_string(i) + "]: not a number");
-    v[i] = j[i].get<double>();
-    RequireFinite(v[i], where + "[" + std::to_string(i) + "]");
-  }
-  return v;
-}
-
-json Vector3Json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
 
 }  // namespace
 
@@ -242,12 +228,7 @@ int Machine::RequireParameter(const std::string& name) const {
 }
 
 Machine Machine::FromJson(const std::string& text) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw std::invalid_argument(std::string("machine: invalid JSON: ") + e.what());
-  }
+  const json j = Parse(text, "machine");
   if (!j.is_object()) throw std::invalid_argument("machine: expected a JSON object");
   std::string name = j.value("name", std::string("unnamed"));
   if (!j.contains("topology") || !j["topology"].is_string())
@@ -315,12 +296,12 @@ std::string Machine::ToJson() const {
   for (const Axis& a : axes_) {
     json ja;
     ja["type"] = a.rotary() ? "rotary" : "linear";
-    ja["direction"] = Vector3Json(a.direction);
-    if (a.rotary()) ja["point"] = Vector3Json(a.point);
+    ja["direction"] = Array3(a.direction);
+    if (a.rotary()) ja["point"] = Array3(a.point);
     axes[std::string(1, a.name)] = ja;
   }
   j["axes"] = axes;
-  j["tool"] = {{"tip", Vector3Json(tip_)}, {"axis", Vector3Json(tool_axis_)}};
+  j["tool"] = {{"tip", Array3(tip_)}, {"axis", Array3(tool_axis_)}};
   return j.dump(1);
 }
 
@@ -328,12 +309,7 @@ ErrorModel::ErrorModel(const Machine& machine)
     : machine_(machine), values_(Eigen::VectorXd::Zero(machine.num_parameters())) {}
 
 ErrorModel ErrorModel::FromJson(const Machine& machine, const std::string& text) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw std::invalid_argument(std::string("errors: invalid JSON: ") + e.what());
-  }
+  json j = Parse(text, "errors");
   // Accept both {"EX0C": 0.1} and the result format {"parameters": {"EX0C": {"value": ..}}}.
   if (j.is_object() && j.contains("parameters")) j = j["parameters"];
   if (!j.is_object()) throw std::invalid_argument("errors: expected a JSON object name -> value");

@@ -1,0 +1,41 @@
+// Identifiability of a parameter set from the Jacobian of the residuals.
+//
+// Columns are scaled to unit norm first, so the condition number does not
+// depend on the parameters' units (mm, rad, mm/mm^3 ...). Parameters whose
+// scaled columns are (numerically) linearly dependent are confounded: the
+// null space of the scaled Jacobian names them.
+#ifndef FIVECAL_IDENTIFIABILITY_H_
+#define FIVECAL_IDENTIFIABILITY_H_
+
+#include <Eigen/Core>
+#include <vector>
+
+namespace fivecal {
+
+struct Identifiability {
+  double condition_number = 0.0;    // sigma_max / sigma_min of the scaled Jacobian
+  int rank = 0;
+  Eigen::VectorXd singular_values;  // scaled Jacobian, descending
+  Eigen::VectorXd column_norms;     // the scaling used
+  // Groups of column indices that are confounded with each other (from the
+  // null-space vectors; a zero column forms a group of one).
+  std::vector<std::vector<int>> confounded;
+  // Scaled-space pseudo-inverse of J^T J, unscaled: (J^T J)^+ in parameter units.
+  Eigen::MatrixXd inverse_normal;
+  // D-optimality figure: log det of the scaled J^T J / p (per parameter).
+  double log_det_per_parameter = 0.0;
+};
+
+// rank_tolerance: singular values below rank_tolerance * sigma_max count as zero.
+Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance = 1e-9);
+
+// Greedy selection of a maximal identifiable subset: `forced` columns first
+// (all must be independent), then `candidates` in order, each kept when its
+// scaled column is not explained by the kept ones to within `tolerance`
+// (relative residual norm after projection).
+std::vector<int> SelectIdentifiable(const Eigen::MatrixXd& J, const std::vector<int>& forced,
+                                    const std::vector<int>& candidates, double tolerance = 1e-4);
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_IDENTIFIABILITY_H_

@@ -1,0 +1,107 @@
+#include "fivecal/identifiability.h"
+
+#include <Eigen/Dense>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace fivecal {
+
+Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance) {
+  Identifiability out;
+  const int p = static_cast<int>(J.cols());
+  out.column_norms = J.colwise().norm().transpose();
+  Eigen::VectorXd inv_scale(p);
+  std::vector<int> zero_columns;
+  for (int i = 0; i < p; ++i) {
+    if (out.column_norms[i] > 0) {
+      inv_scale[i] = 1.0 / out.column_norms[i];
+    } else {
+      inv_scale[i] = 0.0;
+      zero_columns.push_back(i);
+    }
+  }
+  const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Js, Eigen::ComputeThinV);
+  const Eigen::VectorXd s = svd.singularValues();
+  // Thin SVD of an n x p matrix with n < p has only n singular values.
+  out.singular_values = Eigen::VectorXd::Zero(p);
+  out.singular_values.head(s.size()) = s;
+  const double smax = s.size() ? s[0] : 0.0;
+  const double cutoff = rank_tolerance * smax;
+  out.rank = 0;
+  for (int i = 0; i < s.size(); ++i)
+    if (s[i] > cutoff) ++out.rank;
+  out.condition_number = (out.rank == p && p > 0) ? smax / s[p - 1] : INFINITY;
+
+  double logdet = 0;
+  for (int i = 0; i < p; ++i) logdet += 2.0 * std::log(std::max(out.singular_values[i], 1e-300));
+  out.log_det_per_parameter = p ? logdet / p : 0.0;
+
+  // (J^T J)^+ = D V S^-2 V^T D over the retained singular values.
+  const Eigen::MatrixXd& V = svd.matrixV();
+  Eigen::VectorXd inv_s2 = Eigen::VectorXd::Zero(V.cols());
+  for (int i = 0; i < out.rank; ++i) inv_s2[i] = 1.0 / (s[i] * s[i]);
+  out.inverse_normal = inv_scale.asDiagonal() * (V * inv_s2.asDiagonal() * V.transpose()) *
+                       inv_scale.asDiagonal();
+
+  // Confounded groups: union of the significant entries of each null vector.
+  std::vector<int> parent(p);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  std::vector<bool> involved(p, false);
+  Eigen::MatrixXd null_space(p, 0);
+  if (out.rank < p) {
+    // Null space: right singular vectors beyond the rank (full V when n < p).
+    Eigen::JacobiSVD<Eigen::MatrixXd> full(Js, Eigen::ComputeFullV);
+    null_space = full.matrixV().rightCols(p - out.rank);
+  }
+  for (int c = 0; c < null_space.cols(); ++c) {
+    const Eigen::VectorXd v = null_space.col(c);
+    const double vmax = v.cwiseAbs().maxCoeff();
+    int first = -1;
+    for (int i = 0; i < p; ++i) {
+      if (std::abs(v[i]) < 0.05 * vmax) continue;
+      involved[i] = true;
+      if (first < 0) first = i;
+      else parent[find(i)] = find(first);
+    }
+  }
+  for (int i : zero_columns) involved[i] = true;
+  std::vector<std::vector<int>> groups(p);
+  for (int i = 0; i < p; ++i)
+    if (involved[i]) groups[find(i)].push_back(i);
+  for (auto& g : groups)
+    if (!g.empty()) out.confounded.push_back(g);
+  return out;
+}
+
+std::vector<int> SelectIdentifiable(const Eigen::MatrixXd& J, const std::vector<int>& forced,
+                                    const std::vector<int>& candidates, double tolerance) {
+  const int n = static_cast<int>(J.rows());
+  std::vector<int> kept;
+  Eigen::MatrixXd Q(n, 0);  // orthonormal basis of the kept scaled columns
+  auto try_add = [&](int c) {
+    const double norm = J.col(c).norm();
+    if (!(norm > 0)) return false;
+    Eigen::VectorXd v = J.col(c) / norm;
+    // Two passes of Gram-Schmidt for numerical safety.
+    for (int pass = 0; pass < 2; ++pass)
+      if (Q.cols()) v -= Q * (Q.transpose() * v);
+    const double r = v.norm();
+    if (r < tolerance) return false;
+    Q.conservativeResize(n, Q.cols() + 1);
+    Q.col(Q.cols() - 1) = v / r;
+    kept.push_back(c);
+    return true;
+  };
+  for (int c : forced) try_add(c);
+  for (int c : candidates) try_add(c);
+  return kept;
+}
+
+}  // namespace fivecal
