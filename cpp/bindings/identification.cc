@@ -1,8 +1,101 @@
-// Bindings of the identification engine (Problem, Solve, Result).
+// Bindings of the identification engine: Dataset, Simulate, Identify, Result.
 #include <pybind11/eigen.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-namespace py = pybind11;
+#include "fivecal/dataset.h"
+#include "fivecal/identify.h"
+#include "fivecal/simulate.h"
 
-void BindIdentification(py::module_& m) { (void)m; }
+namespace py = pybind11;
+using namespace fivecal;
+
+void BindIdentification(py::module_& m) {
+  py::class_<Dataset>(m, "Dataset")
+      .def_static("from_json", &Dataset::FromJson, py::arg("text"),
+                  py::arg("require_observations") = true)
+      .def("to_json", &Dataset::ToJson)
+      .def("subset", &Dataset::Subset, py::arg("indices"))
+      .def_property_readonly("machine", &Dataset::machine)
+      .def_readonly("tip_radius", &Dataset::tip_radius)
+      .def_property_readonly("num_observations",
+                             [](const Dataset& d) { return d.observations.size(); })
+      .def_property_readonly("observation_types", [](const Dataset& d) {
+        std::vector<std::string> t;
+        for (const auto& o : d.observations) t.push_back(ObservationTypeName(o.type));
+        return t;
+      });
+
+  m.def("simulate", &Simulate, py::arg("spec_json"), py::call_guard<py::gil_scoped_release>());
+
+  py::class_<Result>(m, "Result")
+      .def_readonly("names", &Result::names)
+      .def_readonly("values", &Result::values)
+      .def_readonly("estimated", &Result::estimated)
+      .def_readonly("std", &Result::std)
+      .def_readonly("covariance", &Result::covariance)
+      .def_readonly("correlation", &Result::correlation)
+      .def_readonly("residuals", &Result::residuals)
+      .def_readonly("residual_source", &Result::residual_source)
+      .def_readonly("residual_vectors", &Result::residual_vectors)
+      .def_readonly("points", &Result::points)
+      .def_readonly("rms", &Result::rms)
+      .def_readonly("max_abs", &Result::max_abs)
+      .def_readonly("sigma", &Result::sigma)
+      .def_readonly("condition_number", &Result::condition_number)
+      .def_readonly("rank", &Result::rank)
+      .def_readonly("unidentifiable", &Result::unidentifiable)
+      .def_readonly("converged", &Result::converged)
+      .def_readonly("iterations", &Result::iterations)
+      .def_readonly("message", &Result::message)
+      .def_readonly("n_observations", &Result::n_observations)
+      .def_readonly("n_parameters", &Result::n_parameters)
+      .def_readonly("outliers", &Result::outliers)
+      .def_readonly("robust_scale", &Result::robust_scale)
+      .def("to_json", &Result::ToJson);
+
+  m.def(
+      "identify",
+      [](const Dataset& ds, const std::vector<std::string>& estimate,
+         const std::vector<std::string>& fix, const std::map<std::string, double>& initial,
+         const std::string& robust, double robust_scale, int max_iterations,
+         bool allow_unidentifiable, bool include_default_setup, int num_threads) {
+        IdentifyOptions o;
+        o.estimate = estimate;
+        o.fix = fix;
+        o.initial = initial;
+        o.robust = robust;
+        o.robust_scale = robust_scale;
+        o.max_iterations = max_iterations;
+        o.allow_unidentifiable = allow_unidentifiable;
+        o.include_default_setup = include_default_setup;
+        o.num_threads = num_threads;
+        py::gil_scoped_release release;
+        return Identify(ds, o);
+      },
+      py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"),
+      py::arg("robust") = "", py::arg("robust_scale") = 0.0, py::arg("max_iterations") = 200,
+      py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
+      py::arg("num_threads") = 1);
+
+  m.def(
+      "resolve_estimate",
+      [](const Dataset& ds, const std::vector<std::string>& estimate,
+         const std::vector<std::string>& fix, const std::map<std::string, double>& initial) {
+        IdentifyOptions o;
+        o.estimate = estimate;
+        o.fix = fix;
+        o.initial = initial;
+        return ResolveEstimate(ds, o);
+      },
+      py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"));
+
+  m.def(
+      "predict_residuals",
+      [](const Dataset& ds, const std::map<std::string, double>& values) {
+        std::vector<int> source;
+        Eigen::VectorXd r = PredictResiduals(ds, values, &source);
+        return py::make_tuple(r, source);
+      },
+      py::arg("dataset"), py::arg("values"));
+}

@@ -3,8 +3,12 @@
 Units: mm for lengths and linear commands, degrees for rotary commands, rad
 for angular error parameters. See DESIGN.md for the conventions.
 """
+from .dataset import Dataset, load_dataset, save_dataset
+from .identification import Result, identify, resolve_estimate
 from .machine import Machine, RadiansWarning
+from .simulation import simulate
 
 __version__ = "0.1.0"
 
-__all__ = ["Machine", "RadiansWarning", "__version__"]
+__all__ = ["Machine", "RadiansWarning", "Dataset", "load_dataset", "save_dataset", "simulate",
+           "identify", "resolve_estimate", "Result", "__version__"]

@@ -14,6 +14,7 @@ from typing import Mapping, Optional, Union
 import numpy as np
 
 from . import _core
+from ._json import dumps
 
 ArrayLike = Union[float, np.ndarray, list]
 
@@ -64,7 +65,7 @@ class Machine:
             return d
         if not isinstance(d, Mapping):
             raise ValueError("machine: expected a mapping with 'topology' and 'axes'")
-        return cls(_core.Machine.from_json(json.dumps(d)))
+        return cls(_core.Machine.from_json(dumps(d, "machine")))
 
     def to_dict(self) -> dict:
         return json.loads(self._core.to_json())

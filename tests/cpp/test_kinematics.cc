@@ -18,6 +18,7 @@
 #include <cmath>
 #include <map>
 #include <memory>
+#include <ostream>
 #include <random>
 #include <string>
 #include <vector>
@@ -633,6 +634,9 @@ struct IkCase {
   double tilt_lo, tilt_hi;  // |tilt| range sampled (deg), away from singularities
 };
 
+// Readable test output: the gtest default prints the raw bytes.
+void PrintTo(const IkCase& c, std::ostream* os) { *os << Machine::FromJson(c.json).name(); }
+
 const IkCase kIkCases[] = {
     {kTableJson, 'A', 'C', true, 8, 110},
     {kHu40tJson, 'B', 'C', true, 8, 150},
@@ -700,6 +704,7 @@ TEST_P(InverseKinematicsTest, TakesTheSmallestMove) {
   std::mt19937 rng(8);
   std::uniform_real_distribution<double> nudge(-100, 100);
   std::uniform_int_distribution<int> turns(-2, 2);
+  std::bernoulli_distribution coin(0.5);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(m->num_parameters());
   const int kt = m->AxisIndex(GetParam().tilt), kc = m->AxisIndex(GetParam().turn);
   int flipped = 0, kept = 0;
@@ -707,8 +712,13 @@ TEST_P(InverseKinematicsTest, TakesTheSmallestMove) {
     const Eigen::RowVectorXd pose = RandomPose(&rng);
     Eigen::MatrixXd target, target_axis;
     ToolPoses(*m, zero, Eigen::MatrixXd(pose), nullptr, &target, &target_axis);
-    // Start somewhere else, whole turns away on the turning axis.
+    // Start somewhere else, whole turns away on the turning axis; for the
+    // machines with a known second solution, half of the starts lie near it.
     Eigen::VectorXd start = pose.transpose();
+    if (GetParam().flip && coin(rng)) {
+      start[kt] = -pose[kt];
+      start[kc] = pose[kc] + 180.0;
+    }
     start[kt] += nudge(rng) / 2;
     start[kc] += nudge(rng) + 360.0 * turns(rng);
     const Eigen::MatrixXd cmd = InverseKinematics(*m, zero, target, &target_axis, start);
@@ -740,6 +750,30 @@ TEST_P(InverseKinematicsTest, TakesTheSmallestMove) {
     // Both branches were exercised, so the choice was really tested.
     EXPECT_GT(flipped, 10);
     EXPECT_GT(kept, 10);
+  }
+}
+
+TEST_P(InverseKinematicsTest, SingularToolAxisKeepsTheTurningAxis) {
+  // With the tilt at 0 the tool axis is parallel to the turning axis, which
+  // then cannot change it: the smallest move leaves the turning axis alone.
+  std::mt19937 rng(11);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(m->num_parameters());
+  const int kt = m->AxisIndex(GetParam().tilt), kc = m->AxisIndex(GetParam().turn);
+  for (int i = 0; i < 20; ++i) {
+    Eigen::RowVectorXd pose = RandomPose(&rng);
+    pose[kt] = 0;
+    Eigen::MatrixXd target, target_axis;
+    ToolPoses(*m, zero, Eigen::MatrixXd(pose), nullptr, &target, &target_axis);
+    Eigen::VectorXd start = pose.transpose();
+    start[kt] = 3.0;
+    start[kc] = pose[kc] + 77.7;
+    const Eigen::MatrixXd cmd = InverseKinematics(*m, zero, target, &target_axis, start);
+    EXPECT_NEAR(cmd(0, kt), 0.0, 1e-7);
+    EXPECT_NEAR(cmd(0, kc), start[kc], 1e-9);
+    Eigen::MatrixXd p, v;
+    ToolPoses(*m, zero, cmd, nullptr, &p, &v);
+    EXPECT_LT((p - target).norm(), 1e-9);
+    EXPECT_LT((v - target_axis).norm(), 1e-9);
   }
 }
 

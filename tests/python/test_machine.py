@@ -465,10 +465,6 @@ def test_nan_in_machine_dict_is_a_value_error(field):
         fivecal.Machine.from_dict(d)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core bug: Machine.from_dict json.dumps()es float('nan') to the bare token NaN, so the "
-    "C++ parser fails with 'machine: invalid JSON: [json.exception.parse_error.101] ...' "
-    "instead of 'machine.axes.A.direction[0]: value is not finite (NaN or inf)'"))
 @pytest.mark.parametrize("field,where", [("direction", r"machine\.axes\.A\.direction\[0\]"),
                                          ("point", r"machine\.axes\.A\.point\[0\]")])
 def test_nan_in_machine_dict_names_the_field(field, where):
@@ -477,10 +473,6 @@ def test_nan_in_machine_dict_names_the_field(field, where):
         fivecal.Machine.from_dict(d)
 
 
-@pytest.mark.xfail(strict=True, raises=TypeError, reason=(
-    "core bug: Machine.from_dict passes the dict to json.dumps, so numpy arrays "
-    "(np.array([1., 0, 0]) as a direction) raise TypeError 'Object of type ndarray is not "
-    "JSON serializable' instead of being accepted"))
 def test_machine_dict_accepts_numpy_vectors():
     d = _bad_machine(lambda d: d["axes"]["A"].update(direction=np.array([-1.0, 0, 0])))
     m = fivecal.Machine.from_dict(d)

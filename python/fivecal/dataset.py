@@ -1,0 +1,93 @@
+"""Dataset: a machine, its artefact and the recorded observations
+(DESIGN.md, "Dataset interchange"). Validated by the C++ core on load; errors
+name the observation index and field."""
+from __future__ import annotations
+
+import json
+import os
+from typing import Iterable, Mapping, Union
+
+import numpy as np
+
+from . import _core, _json
+from .machine import Machine
+
+
+def dumps(obj, path: str = "dataset") -> str:
+    """JSON text of dicts that may hold numpy arrays or a Machine."""
+    return _json.dumps(obj, path)
+
+
+class Dataset:
+    """A validated dataset. Build with :func:`load_dataset`, :meth:`from_dict`
+    or :func:`fivecal.simulate`."""
+
+    def __init__(self, core: "_core.Dataset"):
+        self._core = core
+        self._dict = None
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "Dataset":
+        if isinstance(d, Dataset):
+            return d
+        return cls(_core.Dataset.from_json(dumps(d)))
+
+    def to_dict(self) -> dict:
+        if self._dict is None:
+            self._dict = json.loads(self._core.to_json())
+        return self._dict
+
+    @property
+    def machine(self) -> Machine:
+        return Machine(self._core.machine)
+
+    @property
+    def observations(self) -> list:
+        return self.to_dict()["observations"]
+
+    @property
+    def artefact(self) -> dict:
+        return self.to_dict()["artefact"]
+
+    @property
+    def observation_types(self) -> list:
+        return self._core.observation_types
+
+    def __len__(self) -> int:
+        return self._core.num_observations
+
+    def subset(self, indices: Iterable[int]) -> "Dataset":
+        """The same machine and artefact with only the given observations."""
+        return Dataset(self._core.subset([int(i) for i in indices]))
+
+    def axes(self) -> dict:
+        """Axis readings of every observation: dict axis -> array (mm / degrees)."""
+        m = self.machine
+        return {a: np.array([o["axes"].get(a, 0.0) for o in self.observations]) for a in m.axis_names}
+
+    def __repr__(self) -> str:
+        types = {}
+        for t in self.observation_types:
+            types[t] = types.get(t, 0) + 1
+        return f"Dataset({self.machine.name!r}, {types})"
+
+
+def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
+    """Load a dataset JSON file; ValueError names the file, observation and field."""
+    path = os.fspath(path)
+    try:
+        with open(path) as f:
+            text = f.read()
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    try:
+        return Dataset(_core.Dataset.from_json(text))
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
+
+
+def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
+    ds = Dataset.from_dict(ds)
+    with open(os.fspath(path), "w") as f:
+        json.dump(ds.to_dict(), f, indent=1)
+        f.write("\n")

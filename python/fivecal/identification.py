@@ -1,0 +1,133 @@
+"""identify(): from recorded machine readings to the machine's errors, with
+uncertainties and an identifiability report (C++ core, Ceres)."""
+from __future__ import annotations
+
+import json
+from typing import Iterable, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _core
+from .dataset import Dataset
+from .units import display_scale
+
+
+class Result:
+    """Identified parameters (mm, rad), their one-sigma uncertainties,
+    residuals and the identifiability diagnosis."""
+
+    def __init__(self, core: "_core.Result", dataset: Dataset):
+        self._core = core
+        self.dataset = dataset
+        self.estimated: list = list(core.estimated)
+        all_values = dict(zip(core.names, np.asarray(core.values)))
+        #: estimated parameters and fixed non-zero ones, name -> value
+        self.values: dict = {n: float(v) for n, v in all_values.items() if v != 0.0 or n in self.estimated}
+        self.std: dict = {n: float(s) for n, s in zip(self.estimated, np.asarray(core.std))}
+        self.covariance: np.ndarray = np.asarray(core.covariance)
+        self.correlation: np.ndarray = np.asarray(core.correlation)
+        self.residuals: np.ndarray = np.asarray(core.residuals)
+        self.residual_source: np.ndarray = np.asarray(core.residual_source)
+        self.residual_vectors: np.ndarray = np.asarray(core.residual_vectors)
+        self.points: np.ndarray = np.asarray(core.points)
+        self.rms: float = core.rms
+        self.max_abs: float = core.max_abs
+        self.sigma: float = core.sigma
+        self.condition_number: float = core.condition_number
+        self.rank: int = core.rank
+        self.unidentifiable: list = [list(g) for g in core.unidentifiable]
+        self.converged: bool = core.converged
+        self.iterations: int = core.iterations
+        self.n_observations: int = core.n_observations
+        self.n_parameters: int = core.n_parameters
+        self.outliers: list = list(core.outliers)
+
+    def machine_errors(self) -> dict:
+        """Only the machine parameters (no facet/sphere/dbb setup values)."""
+        names = set(self.dataset.machine.parameter_names())
+        return {n: v for n, v in self.values.items() if n in names}
+
+    def predict(self, dataset: Dataset) -> np.ndarray:
+        """Residuals (mm) of another dataset's observations under these values:
+        the prediction check on held-out indexations."""
+        r, _ = _core.predict_residuals(dataset._core, self.values)
+        return np.asarray(r)
+
+    def to_dict(self) -> dict:
+        return json.loads(self._core.to_json())
+
+    def to_json(self) -> str:
+        return self._core.to_json()
+
+    def save(self, path) -> None:
+        with open(path, "w") as f:
+            f.write(self.to_json())
+            f.write("\n")
+
+    def report(self) -> str:
+        """A readable text report in µm, µrad and µm/m."""
+        m = self.dataset.machine
+        lines = [f"fivecal identification: {m.name} ({m.topology})",
+                 f"  observations {self.n_observations}, parameters {self.n_parameters}, "
+                 f"rank {self.rank}, condition number {self.condition_number:.4g}",
+                 f"  residual rms {self.rms * 1e3:.3f} µm, max {self.max_abs * 1e3:.3f} µm, "
+                 f"sigma {self.sigma * 1e3:.3f} µm; "
+                 f"{'converged' if self.converged else 'NOT converged'} in {self.iterations} iterations",
+                 ""]
+        lines.append(f"  {'parameter':<18}{'value':>14}{'std':>12}  unit")
+        negative = {a["name"] for a in m.axes if min(a["direction"]) < -0.5 and max(a["direction"]) < 0.5}
+        machine_names = set(m.parameter_names())
+        for n in self.estimated:
+            f, unit = display_scale(n)
+            note = ""
+            if n in machine_names and len(n) == 4 and n[1] == n[2] and n[3] == "1" and n[2] in negative:
+                note = "  (axis points along a negative basis vector: positive shortens the travel)"
+            lines.append(f"  {n:<18}{self.values[n] * f:>14.3f}{self.std[n] * f:>12.3f}  {unit}{note}")
+        if self.unidentifiable:
+            lines.append("")
+            lines.append("  confounded (not separable with this data):")
+            for g in self.unidentifiable:
+                lines.append("    " + ", ".join(g))
+        if self.outliers:
+            lines.append(f"  robust loss flagged {len(self.outliers)} outlier rows: {self.outliers[:20]}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return (f"Result({self.n_parameters} parameters, rms {self.rms * 1e3:.3f} µm, "
+                f"cond {self.condition_number:.3g})")
+
+
+def _names(x: Union[None, str, Iterable[str]]) -> list:
+    if x is None:
+        return []
+    if isinstance(x, str):
+        return [s for s in x.replace(",", " ").split() if s]
+    return list(x)
+
+
+def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str]] = "auto",
+             fix: Union[None, str, Sequence[str]] = None, robust: Optional[str] = None,
+             initial: Optional[Mapping[str, float]] = None, robust_scale: float = 0.0,
+             allow_unidentifiable: bool = False, default_setup: bool = True,
+             max_iterations: int = 200, num_threads: int = 1) -> Result:
+    """Fit the machine errors to a dataset.
+
+    ``estimate``: parameter names and/or presets (``S1``-``S4`` on ``wCBXfZYSt``,
+    ``location``, ``auto``), as a list or a comma/space separated string. The
+    default setup set (tip, touched facets, touched sphere centres, DBB lengths) is
+    added unless ``default_setup=False``. ``fix`` removes names. ``robust``:
+    ``"huber"`` or ``"cauchy"`` to down-weight and flag outlier touches.
+    Raises ValueError when the data cannot identify the requested set, naming
+    the confounded parameters.
+    """
+    ds = Dataset.from_dict(dataset)
+    core = _core.identify(ds._core, _names(estimate), _names(fix), dict(initial or {}),
+                          robust or "", float(robust_scale), int(max_iterations),
+                          bool(allow_unidentifiable), bool(default_setup), int(num_threads))
+    return Result(core, ds)
+
+
+def resolve_estimate(dataset: Union[Dataset, Mapping], estimate, fix=None, initial=None) -> list:
+    """The parameter names ``estimate`` resolves to on this dataset (no fit)."""
+    ds = Dataset.from_dict(dataset)
+    return list(_core.resolve_estimate(ds._core, _names(estimate), _names(fix), dict(initial or {})))
