@@ -213,6 +213,16 @@ class Machine:
         """Tool point (N, 3) mm in the workpiece frame for the given axis readings."""
         return self.tool_pose(axes, errors, directions)[0]
 
+    def volumetric_error(self, axes: Mapping[str, ArrayLike], errors, directions=None) -> np.ndarray:
+        """Tool-point error (N, 3) mm in the workpiece frame at the given poses:
+        where the erroneous machine puts the tool minus where the nominal one
+        would (a volumetric error map of identified errors)."""
+        q = self.axes_matrix(axes)
+        d = self.directions_matrix(directions, q.shape[0])
+        real = _core.tool_poses(self._core, self.theta(errors), q, d)[0]
+        ideal = _core.tool_poses(self._core, self.theta(None), q, None)[0]
+        return real - ideal
+
     def inverse(self, points, tool_axes=None, start: Optional[Mapping[str, float]] = None,
                 errors=None, directions=None) -> dict:
         """Axis commands (dict axis -> array, mm / degrees) that put the tool point at
