@@ -59,8 +59,10 @@ void BindIdentification(py::module_& m) {
       [](const Dataset& ds, const std::vector<std::string>& estimate,
          const std::vector<std::string>& fix, const std::map<std::string, double>& initial,
          const std::string& robust, double robust_scale, int max_iterations,
-         bool allow_unidentifiable, bool include_default_setup, int num_threads) {
+         bool allow_unidentifiable, bool include_default_setup, int num_threads,
+         double selection_tolerance) {
         IdentifyOptions o;
+        o.selection_tolerance = selection_tolerance;
         o.estimate = estimate;
         o.fix = fix;
         o.initial = initial;
@@ -76,7 +78,7 @@ void BindIdentification(py::module_& m) {
       py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"),
       py::arg("robust") = "", py::arg("robust_scale") = 0.0, py::arg("max_iterations") = 200,
       py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
-      py::arg("num_threads") = 1);
+      py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance);
 
   m.def(
       "resolve_estimate",

@@ -179,10 +179,15 @@ std::vector<std::string> MotionCandidates(const Machine& m) {
   std::vector<std::string> out;
   for (const Axis& a : m.axes())
     if (a.name != 'S') out.push_back(std::string("E") + a.name + a.name + "b");
+  // Scale gains first: the most common and best-determined error motions.
+  for (const Axis& a : m.axes())
+    if (!a.rotary()) out.push_back(std::string("E") + a.name + a.name + "1");
   for (int d = 1; d <= 3; ++d)
     for (const Axis& a : m.axes())
-      for (int c = 0; c < 6; ++c)
-        out.push_back(std::string("E") + kComponentLetters[c] + a.name + std::to_string(d));
+      for (int c = 0; c < 6; ++c) {
+        std::string n = std::string("E") + kComponentLetters[c] + a.name + std::to_string(d);
+        if (std::find(out.begin(), out.end(), n) == out.end()) out.push_back(n);
+      }
   return out;
 }
 

@@ -109,13 +109,16 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
              fix: Union[None, str, Sequence[str]] = None, robust: Optional[str] = None,
              initial: Optional[Mapping[str, float]] = None, robust_scale: float = 0.0,
              allow_unidentifiable: bool = False, default_setup: bool = True,
-             max_iterations: int = 200, num_threads: int = 1) -> Result:
+             max_iterations: int = 200, num_threads: int = 1,
+             selection_tolerance: Optional[float] = None) -> Result:
     """Fit the machine errors to a dataset.
 
     ``estimate``: parameter names and/or presets (``S1``-``S4`` on ``wCBXfZYSt``,
     ``location``, ``auto``), as a list or a comma/space separated string. The
     default setup set (tip, touched facets, touched sphere centres, DBB lengths) is
-    added unless ``default_setup=False``. ``fix`` removes names. ``robust``:
+    added unless ``default_setup=False``. ``selection_tolerance``: for ``location``
+    and ``auto``, the fraction of a candidate's (scaled) Jacobian column that must
+    lie outside the span of the parameters already chosen. ``fix`` removes names. ``robust``:
     ``"huber"`` or ``"cauchy"`` to down-weight and flag outlier touches.
     Raises ValueError when the data cannot identify the requested set, naming
     the confounded parameters.
@@ -123,7 +126,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     ds = Dataset.from_dict(dataset)
     core = _core.identify(ds._core, _names(estimate), _names(fix), dict(initial or {}),
                           robust or "", float(robust_scale), int(max_iterations),
-                          bool(allow_unidentifiable), bool(default_setup), int(num_threads))
+                          bool(allow_unidentifiable), bool(default_setup), int(num_threads),
+                          *([] if selection_tolerance is None else [float(selection_tolerance)]))
     return Result(core, ds)
 
 

@@ -29,7 +29,7 @@ struct IdentifyOptions {
   // then names the confounded groups. Otherwise such a request throws.
   bool allow_unidentifiable = false;
   double rank_tolerance = 1e-9;
-  double selection_tolerance = 1e-3;       // for "location" / "auto"
+  double selection_tolerance = 1e-2;       // for "location" / "auto"
   int num_threads = 1;
 };
 
