@@ -29,7 +29,9 @@ Eigen::VectorXd InitialValues(const ParameterTable& table, const IdentifyOptions
   return v;
 }
 
-std::string GroupText(const std::vector<std::string>& g) {
+std::string GroupText(std::vector<std::string> g) {
+  // Machine errors (what the user asked for) before the setup parameters.
+  std::stable_partition(g.begin(), g.end(), [](const std::string& n) { return n[0] == 'E'; });
   std::string s = "{";
   const size_t shown = std::min<size_t>(g.size(), 8);
   for (size_t i = 0; i < shown; ++i) s += (i ? ", " : "") + g[i];

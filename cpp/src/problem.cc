@@ -266,8 +266,13 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
       }
     }
   }
+  std::set<std::string> probed;
+  for (const Observation& o : ds.observations)
+    if (o.type == ObservationType::kSphere) probed.insert(o.target);
   for (size_t b = 0; b < ds.artefact.scale_bars.size(); ++b) {
     const ScaleBar& bar = ds.artefact.scale_bars[b];
+    // A bar whose balls were not probed in this dataset says nothing about it.
+    if (!probed.count(bar.sphere1) || !probed.count(bar.sphere2)) continue;
     const int s1 = ds.artefact.SphereIndex(bar.sphere1), s2 = ds.artefact.SphereIndex(bar.sphere2);
     std::vector<double*> ptrs;
     auto ref = [&](int index) {

@@ -235,10 +235,9 @@ def test_held_out_indexations_predicted(s3_data):
     assert 60 <= len(test) <= 90
     fit = fivecal.identify(train, "S3")
     nominal = fivecal.identify(train, "S1")       # setup only, no machine errors
-    # Result.predict also returns the scale-bar row (see the xfail test below):
-    # keep the rows of the held-out touches
-    p3 = fit.predict(test)[:len(test)]
-    p1 = nominal.predict(test)[:len(test)]
+    p3 = fit.predict(test)
+    p1 = nominal.predict(test)
+    assert len(p3) == len(test)
     rms3, rms1 = np.sqrt(np.mean(p3 ** 2)), np.sqrt(np.mean(p1 ** 2))
     assert rms3 < 3 * SIGMA                        # thesis S3: 5.6 µm sd vs 29.9 µm (S1)
     assert rms1 > 10 * rms3 and rms1 > 0.010
@@ -363,29 +362,14 @@ def test_confounded_request_is_named(s3_data, name, partner):
 
 
 # --------------------------------------------------------------------------
-# core defects found while building these tests
+# defects found while building these tests (now fixed)
 # --------------------------------------------------------------------------
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core: a confounded group is printed truncated to its first 8 names in "
-    "estimation order (GroupText in cpp/src/identify.cc), and the default setup "
-    "(tip, facets, spheres) comes first, so the parameter the user asked for "
-    "(EZ0C, 13th of its group with ten top-face facets and two sphere z) is hidden "
-    "behind '... (5 more)'. Fix: list non-setup / explicitly requested names first."))
 def test_confounded_message_names_requested_parameter(s3_data):
     with pytest.raises(ValueError, match="EZ0C"):
         fivecal.identify(s3_data, ["EZ0C"])
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core: Problem adds a ScaleBarResidual row for every artefact scale bar "
-    "(cpp/src/problem.cc, loop over ds.artefact.scale_bars) even when neither ball "
-    "is probed in the dataset, and Dataset::Subset copies the whole artefact. "
-    "The balls' centre offsets are then not estimated (the default setup only has "
-    "touched spheres), so the bar row is a constant |c1-c2| - L (here 136 µm from "
-    "the bar placement): identify on a facet-only subset (the thesis' 'pure TANGO') "
-    "gets rms ~12 sigma, and Result.predict(subset) returns len(subset)+1 rows. "
-    "Fix: skip bars whose balls are not observed (or drop them in Subset)."))
 def test_sphere_free_subset_has_no_scale_bar_row(s3_data):
     facets = [i for i, o in enumerate(s3_data.observations) if o["type"] == "facet"]
     sub = s3_data.subset(facets)
