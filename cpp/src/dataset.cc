@@ -35,8 +35,16 @@ int Artefact::SphereIndex(const std::string& id) const {
   return -1;
 }
 
+namespace {
+Dataset ParseDataset(const json& j, bool require_observations);
+}
+
 Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
-  const json j = Parse(text, "dataset");
+  return Guard("dataset", [&] { return ParseDataset(Parse(text, "dataset"), require_observations); });
+}
+
+namespace {
+Dataset ParseDataset(const json& j, bool require_observations) {
   if (!j.is_object()) throw std::invalid_argument("dataset: expected a JSON object");
   if (!j.contains("machine")) throw std::invalid_argument("dataset.machine: missing");
   Dataset ds(Machine::FromJson(j["machine"].dump()));
@@ -172,6 +180,7 @@ Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
   if (require_observations || !ds.observations.empty()) ds.Validate();
   return ds;
 }
+}  // namespace
 
 void Dataset::Validate() const {
   if (observations.empty()) throw std::invalid_argument("dataset.observations: empty; nothing to fit");

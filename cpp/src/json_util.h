@@ -22,6 +22,17 @@ inline json Parse(const std::string& text, const std::string& what) {
   }
 }
 
+// Runs a parser body, turning nlohmann's type errors (a number where a string
+// belongs, ...) into std::invalid_argument prefixed with `what`.
+template <typename F>
+auto Guard(const std::string& what, F&& body) -> decltype(body()) {
+  try {
+    return body();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(what + ": wrong JSON type: " + e.what());
+  }
+}
+
 inline Eigen::Vector3d ReadVector3(const json& j, const std::string& where) {
   if (!j.is_array() || j.size() != 3)
     throw std::invalid_argument(where + ": expected an array of 3 numbers");

@@ -227,9 +227,19 @@ int Machine::RequireParameter(const std::string& name) const {
   throw std::invalid_argument(msg);
 }
 
+namespace {
+Machine ParseMachine(const json& j);
+}
+
 Machine Machine::FromJson(const std::string& text) {
-  const json j = Parse(text, "machine");
+  return Guard("machine", [&] { return ParseMachine(Parse(text, "machine")); });
+}
+
+namespace {
+Machine ParseMachine(const json& j) {
   if (!j.is_object()) throw std::invalid_argument("machine: expected a JSON object");
+  if (j.contains("name") && !j["name"].is_string())
+    throw std::invalid_argument("machine.name: expected a string");
   std::string name = j.value("name", std::string("unnamed"));
   if (!j.contains("topology") || !j["topology"].is_string())
     throw std::invalid_argument("machine.topology: missing (a string such as \"wCBXfZYSt\")");
@@ -275,6 +285,7 @@ Machine Machine::FromJson(const std::string& text) {
   }
   return Machine(name, topology, axes, tip, has_tool_axis ? &tool_axis : nullptr);
 }
+}  // namespace
 
 Machine Machine::Load(const std::string& path) {
   std::ifstream in(path);

@@ -25,8 +25,16 @@ Eigen::Vector3d ToolAt(const Machine& m, const Eigen::VectorXd& theta, const Eig
 
 }  // namespace
 
+namespace {
+Dataset SimulateSpec(const json& spec);
+}
+
 Dataset Simulate(const std::string& spec_text) {
-  const json spec = Parse(spec_text, "simulate");
+  return Guard("simulate", [&] { return SimulateSpec(Parse(spec_text, "simulate")); });
+}
+
+namespace {
+Dataset SimulateSpec(const json& spec) {
   if (!spec.is_object() || !spec.contains("machine"))
     throw std::invalid_argument("simulate: missing 'machine'");
   json base = {{"machine", spec["machine"]},
@@ -212,4 +220,5 @@ Dataset Simulate(const std::string& spec_text) {
   return ds;
 }
 
+}  // namespace
 }  // namespace fivecal
