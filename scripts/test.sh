@@ -10,4 +10,10 @@ cmake -S . -B build/ctest -G Ninja -DFIVECAL_BUILD_PYTHON=OFF -DFIVECAL_BUILD_TE
 cmake --build build/ctest -j "$JOBS"
 ctest --test-dir build/ctest --output-on-failure -j "$JOBS"
 
+# The C++ core as an embedder uses it: install, find_package(fivecal), run.
+cmake --install build/ctest --prefix build/prefix >/dev/null
+cmake -S examples/cpp -B build/example -G Ninja -DCMAKE_PREFIX_PATH="$PWD/build/prefix" >/dev/null
+cmake --build build/example
+./build/example/compensate examples/machines/hu40t.json examples/cpp/errors_example.json
+
 $PY -m pytest -q tests/python
