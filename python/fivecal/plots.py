@@ -104,16 +104,16 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
     mag = magnification or _nice_floor(0.12 * span / vmax)
     W = V * mag
 
-    fig = plt.figure(figsize=(15, 8.2))
-    gs = fig.add_gridspec(2, 3, width_ratios=[1.3, 1, 0.34], height_ratios=[1.35, 1], wspace=0.3)
+    fig = plt.figure(figsize=(13.5, 7.6))
+    gs = fig.add_gridspec(2, 3, width_ratios=[1.45, 1, 0.34], height_ratios=[1.3, 1], wspace=0.22,
+                          hspace=0.32, left=0.01, right=0.99, top=0.88, bottom=0.07)
     ax3 = fig.add_subplot(gs[:, 0], projection="3d")
     ax3.scatter(P[:, 0], P[:, 1], P[:, 2], s=3, color="#aaa", depthshade=False)
     ax3.quiver(P[:, 0], P[:, 1], P[:, 2], W[:, 0], W[:, 1], W[:, 2], colors=colors,
                arrow_length_ratio=0.25, linewidth=1.6, normalize=False)
     ax3.set_xlabel("x (mm)")
     ax3.set_ylabel("y (mm)")
-    ax3.set_zlabel("z (mm)", labelpad=-2)
-    ax3.set_title("3D view (table frame)", fontsize=11)
+    ax3.set_title("3D view (table frame; z up, mm)", fontsize=12)
     ax3.view_init(elev=28, azim=-60)
     try:
         ax3.set_box_aspect(tuple(np.maximum(np.ptp(P, axis=0), 0.45 * span)))
@@ -152,12 +152,11 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
         labels = ["(" + ", ".join(f"{v:g}" for v in k) + ")" for k in uniq]
         ncol = 1 if len(uniq) <= 28 else 2
         axl.legend(handles, labels, loc="upper left", fontsize=8 if len(uniq) <= 28 else 7, ncol=ncol,
-                   title=f"indexation ({', '.join(rot)}) °", title_fontsize=9, frameon=False,
+                   title=f"indexation ({', '.join(rot)}), deg", title_fontsize=9, frameon=False,
                    handlelength=1.2, columnspacing=0.8)
     rms = float(np.sqrt(np.mean(np.square(result.residuals)))) if np.size(result.residuals) else 0.0
     fig.suptitle(f"{title}\nmagnified {mag:g}x; residual rms {rms * 1e3:.2f} µm, largest vector "
                  f"{vmax * 1e3:.2f} µm; colour = indexation", fontsize=12)
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
