@@ -1,0 +1,413 @@
+"""The HTML report of an identification: one self-contained HTML file (the
+plots embedded as base64 PNG) written next to the same plots as PNG files and
+the result JSON.
+
+Contents: machine and data summary, fit quality, identifiability (confounded
+groups, strongly correlated pairs), the parameter table in µm / µrad / µm/m
+with one-sigma uncertainties, residual vectors in the table frame (thesis
+Figure 4-7 style), residual histogram, parameter bars with ±2σ error bars,
+the correlation matrix and, when the data holds double ball bar traces and
+the ball bar plotting module ``fivecal.polar`` is present, its polar plots.
+
+    from fivecal.report import write_report
+    path = write_report(result, "report_dir")        # -> report_dir/report.html
+
+Hook for ball bar plots: if ``fivecal.polar`` defines
+``report_figures(result, out_dir)`` it is called when the dataset has ``dbb``
+observations and must return a list of PNG paths or ``(path, caption)``
+pairs (written inside ``out_dir``); ``plot_dbb_polar(result, path)`` is used
+as a fallback. A failure there is shown in the report, not raised.
+"""
+from __future__ import annotations
+
+import base64
+import datetime
+import html
+import json
+import os
+from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import __version__
+from .units import display_scale
+
+__all__ = ["write_report", "Section"]
+
+Section = Tuple[str, str]  # (title, HTML body)
+Figure = Tuple[str, str]   # (png path, caption)
+
+_CSS = """
+body{font-family:-apple-system,'Segoe UI',Helvetica,Arial,sans-serif;margin:0;color:#222;background:#fafafa}
+main{max-width:1180px;margin:0 auto;padding:18px 28px 60px;background:#fff}
+h1{font-size:1.6em;margin:0.2em 0 0.1em}h2{font-size:1.25em;border-bottom:2px solid #4c78a8;
+padding-bottom:3px;margin-top:1.8em}h3{font-size:1.05em;margin-bottom:0.3em}
+.sub{color:#666;margin-bottom:1em}
+table{border-collapse:collapse;margin:0.5em 0 1em;font-size:0.92em}
+th,td{border:1px solid #ddd;padding:3px 9px;text-align:left;vertical-align:top}
+th{background:#eef2f7}td.num{text-align:right;font-family:Menlo,Consolas,monospace;white-space:nowrap}
+tr.conf td{background:#fff4e5}tr.fixed td{color:#777}
+.kv td:first-child{color:#555;white-space:nowrap}
+.box{border-left:4px solid #4c78a8;background:#f3f6fa;padding:8px 14px;margin:0.8em 0}
+.warn{border-left-color:#e4a000;background:#fff8e6}.bad{border-left-color:#d62728;background:#fdeeee}
+.ok{border-left-color:#2ca02c;background:#eff8ef}
+figure{margin:1em 0 1.6em}figure img{max-width:100%;border:1px solid #e3e3e3}
+figcaption{color:#555;font-size:0.9em;margin-top:4px}
+nav a{margin-right:12px}small,.muted{color:#777}
+details summary{cursor:pointer;color:#4c78a8}
+pre{background:#f6f6f6;padding:8px;overflow-x:auto;font-size:0.85em}
+"""
+
+
+def _e(x) -> str:
+    return html.escape(str(x))
+
+
+def _fmt(v: float, digits: int = 3) -> str:
+    if v is None or not np.isfinite(v):
+        return "–"
+    return f"{v:.{digits}f}"
+
+
+def _img_tag(path: str, out_dir: str, embed: bool, alt: str) -> str:
+    if embed:
+        with open(path, "rb") as f:
+            data = base64.b64encode(f.read()).decode("ascii")
+        src = f"data:image/png;base64,{data}"
+    else:
+        src = os.path.relpath(os.path.abspath(path), os.path.abspath(out_dir)).replace(os.sep, "/")
+    return f'<img src="{_e(src)}" alt="{_e(alt)}">'
+
+
+def _kind(machine_names: set, machine, name: str) -> str:
+    if name in machine_names:
+        return machine.parameter_kind(name)
+    return name.split(".", 1)[0] if "." in name else "setup"
+
+
+def _negative_axes(machine) -> set:
+    return {a["name"] for a in machine.axes if min(a["direction"]) < -0.5 and max(a["direction"]) < 0.5}
+
+
+def _machine_section(machine) -> str:
+    rows = []
+    for a in machine.axes:
+        d = ", ".join(f"{x:g}" for x in a["direction"])
+        p = ", ".join(f"{x:g}" for x in a.get("point", [0, 0, 0])) if a["type"] == "rotary" else ""
+        rows.append(f"<tr><td>{_e(a['name'])}</td><td>{_e(a['type'])}</td><td>[{d}]</td>"
+                    f"<td>{('[' + p + ']') if p else ''}</td></tr>")
+    tip = ", ".join(f"{x:g}" for x in machine.tip)
+    return (f'<table class="kv"><tr><td>name</td><td>{_e(machine.name)}</td></tr>'
+            f"<tr><td>topology</td><td><code>{_e(machine.topology)}</code> (workpiece to tool)</td></tr>"
+            f"<tr><td>workpiece chain</td><td>{_e(' → '.join(machine.workpiece_chain) or '–')} "
+            f"<small>(from the foundation outward)</small></td></tr>"
+            f"<tr><td>tool chain</td><td>{_e(' → '.join(machine.tool_chain) or '–')}</td></tr>"
+            f"<tr><td>tool tip</td><td>[{tip}] mm</td></tr></table>"
+            "<table><tr><th>axis</th><th>type</th><th>direction (F, zero pose)</th>"
+            "<th>point (mm)</th></tr>" + "".join(rows) + "</table>")
+
+
+def _data_section(dataset, result) -> str:
+    obs = dataset.observations
+    types: dict = {}
+    for o in obs:
+        types[o["type"]] = types.get(o["type"], 0) + 1
+    rot = [a for a in dataset.machine.axis_names if a in "ABCS"]
+    idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs}
+    art = dataset.artefact or {}
+    d = dataset.to_dict()
+    tip_r = (d.get("probe") or {}).get("tip_radius")
+    targets = sorted({o.get("target") for o in obs if o.get("target")}, key=str)
+    rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none"),
+            ("residual rows", f"{len(result.residuals)} (observations plus scale bars)"),
+            ("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"),
+            ("artefact", f"{len(art.get('facets', []))} facets, {len(art.get('spheres', []))} spheres, "
+                         f"{len(art.get('scale_bars', []))} scale bars"),
+            ("targets touched", f"{len(targets)}" + (f": {', '.join(map(str, targets[:40]))}"
+                                                      + (" …" if len(targets) > 40 else "") if targets else "")),
+            ("probe tip radius", f"{tip_r:g} mm" if tip_r is not None else "–")]
+    return '<table class="kv">' + "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in rows) \
+        + "</table>"
+
+
+def _fit_section(result) -> str:
+    est = len(result.estimated)
+    cls = "ok" if result.converged and not result.unidentifiable else "warn"
+    if not result.converged:
+        cls = "bad"
+    rows = [("residual rms", f"{result.rms * 1e3:.3f} µm"), ("largest |residual|", f"{result.max_abs * 1e3:.3f} µm"),
+            ("σ̂ (a posteriori)", f"{result.sigma * 1e3:.3f} µm"),
+            ("parameters", f"{result.n_parameters} estimated, rank {result.rank}"),
+            ("condition number", f"{result.condition_number:.4g} (of the scaled Jacobian)"),
+            ("solver", f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} "
+                       "iterations")]
+    if result.outliers:
+        rows.append(("robust loss", f"{len(result.outliers)} outlier rows flagged: "
+                                    f"{', '.join(map(str, result.outliers[:30]))}"))
+    verdict = ("The fit converged and every estimated parameter is identifiable from this data."
+               if cls == "ok" else
+               "The solver did not converge; treat the values below with suspicion." if cls == "bad" else
+               "Some parameters cannot be separated with this data (see Identifiability).")
+    _ = est
+    return (f'<div class="box {cls}">{_e(verdict)}</div><table class="kv">'
+            + "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in rows) + "</table>")
+
+
+def _strong_pairs(result, threshold: float = 0.9, limit: int = 20) -> List[Tuple[str, str, float]]:
+    C = np.asarray(result.correlation)
+    est = result.estimated
+    pairs = []
+    for i in range(len(est)):
+        for j in range(i + 1, len(est)):
+            if abs(C[i, j]) >= threshold:
+                pairs.append((est[i], est[j], float(C[i, j])))
+    pairs.sort(key=lambda p: -abs(p[2]))
+    return pairs[:limit]
+
+
+def _identifiability_section(result) -> str:
+    parts = []
+    if result.unidentifiable:
+        parts.append('<div class="box warn">These groups are <b>confounded</b>: the data cannot separate '
+                     "their members; only combinations are determined. Fix all but one member of each "
+                     "group, or add measurements that move them differently.</div><ul>")
+        for g in result.unidentifiable:
+            parts.append("<li>{" + ", ".join(f"<code>{_e(n)}</code>" for n in g) + "}</li>")
+        parts.append("</ul>")
+    else:
+        parts.append(f'<div class="box ok">No confounded groups: the {len(result.estimated)} estimated '
+                     f"parameters are separable (rank {result.rank}, condition number "
+                     f"{result.condition_number:.3g}).</div>")
+    pairs = _strong_pairs(result, limit=100000)
+    machine_names = set(result.dataset.machine.parameter_names())
+    shown = [p for p in pairs if (p[0] in machine_names and not p[0].startswith("tip."))
+             or (p[1] in machine_names and not p[1].startswith("tip."))][:15]
+    rest = len(pairs) - len(shown)
+    if pairs:
+        parts.append("<h3>Strongly correlated pairs (|r| ≥ 0.9)</h3><p class='muted'>Identifiable, but "
+                     "their uncertainties are inflated by the correlation.</p>")
+    if shown:
+        parts.append("<table><tr><th>parameter</th><th>parameter</th><th>r</th></tr>")
+        parts += [f"<tr><td>{_e(a)}</td><td>{_e(b)}</td><td class='num'>{r:+.3f}</td></tr>"
+                  for a, b, r in shown]
+        parts.append("</table>")
+    if rest > 0:
+        setup_only = [p for p in pairs if p not in shown]
+        names = sorted({n for a, b, _ in setup_only for n in (a, b)})
+        parts.append(f"<p>{rest} {'further ' if shown else ''}pair{'s' if rest != 1 else ''} among setup "
+                     f"parameters ({_e(', '.join(names[:12]))}{' …' if len(names) > 12 else ''}), "
+                     "typically the probe tip length against the facet offsets.</p>")
+    return "".join(parts)
+
+
+def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tuple[str, str]:
+    machine_names = set(machine.parameter_names())
+    confounded = {n: g for g in result.unidentifiable for n in g}
+    negative = _negative_axes(machine)
+    order = {n: i for i, n in enumerate(machine.parameter_names())}
+    est = list(result.estimated)
+    mach = sorted([n for n in est if n in machine_names and not n.startswith("tip.")], key=order.get)
+    other = [n for n in est if n not in mach]
+
+    def row(n: str) -> str:
+        f, unit = display_scale(n)
+        v, s = result.values[n], result.std.get(n, float("nan"))
+        sig = abs(v) / s if s and np.isfinite(s) and s > 0 else float("nan")
+        notes = []
+        if n in confounded:
+            notes.append("confounded with " + ", ".join(x for x in confounded[n] if x != n))
+        if len(n) == 4 and n[0] == "E" and n[1] == n[2] and n[3] == "1" and n[2] in negative:
+            notes.append("axis moves along a negative basis vector: positive shortens the travel")
+        if np.isfinite(sig) and sig < 2:
+            notes.append("not significant (|value| < 2σ)")
+        cells = [f"<td><code>{_e(n)}</code></td><td>{_e(_kind(machine_names, machine, n))}</td>",
+                 f"<td class='num'>{_fmt(v * f)}</td><td class='num'>{_fmt(s * f)}</td>",
+                 f"<td class='num'>{_fmt(2 * s * f)}</td><td>{_e(unit)}</td>",
+                 f"<td class='num'>{_fmt(sig, 1)}</td>"]
+        if truth is not None:
+            t = truth.get(n)
+            z = (v - t) / s if t is not None and s > 0 else float("nan")
+            cells.append(f"<td class='num'>{_fmt(t * f) if t is not None else '–'}</td>"
+                         f"<td class='num'>{_fmt(z, 2)}</td>")
+        cells.append(f"<td>{_e('; '.join(notes))}</td>")
+        cls = ' class="conf"' if n in confounded else ""
+        return f"<tr{cls}>" + "".join(cells) + "</tr>"
+
+    head = ("<tr><th>parameter</th><th>kind</th><th>value</th><th>u (1σ)</th><th>U (2σ)</th>"
+            "<th>unit</th><th>|value|/σ</th>" + ("<th>true</th><th>z</th>" if truth is not None else "")
+            + "<th>notes</th></tr>")
+    return head + "".join(row(n) for n in mach), head + "".join(row(n) for n in other)
+
+
+def _parameter_section(result, machine, truth) -> str:
+    mach_rows, other_rows = _parameter_rows(result, machine, truth)
+    fixed = {n: v for n, v in result.values.items() if n not in result.std}
+    out = ["<p>Values in µm, µrad, µm/m (µm/m per mm of travel for linear error-motion slopes, "
+           "µrad/rad for rotary ones); files keep mm and rad. u: one-sigma standard uncertainty; "
+           "U: expanded uncertainty (k = 2). Sign conventions: see the notes at the end.</p>",
+           "<h3>Machine errors</h3><table>", mach_rows, "</table>",
+           f"<details{' open' if other_rows.count('<tr') <= 13 else ''}><summary>Setup parameters (probe tip, "
+           f"artefact, ball bar): {other_rows.count('<tr') - 1}</summary><table>",
+           other_rows, "</table></details>"]
+    if fixed:
+        out.append("<h3>Fixed at non-zero values (not estimated)</h3><table><tr><th>parameter</th>"
+                   "<th>value</th><th>unit</th></tr>")
+        for n, v in fixed.items():
+            f, unit = display_scale(n)
+            out.append(f"<tr class='fixed'><td>{_e(n)}</td><td class='num'>{_fmt(v * f)}</td>"
+                       f"<td>{_e(unit)}</td></tr>")
+        out.append("</table>")
+    return "".join(out)
+
+
+_CONVENTIONS = """
+<ul>
+<li>Units: files and APIs keep mm and rad; this report shows µm, µrad, µm/m. Rotary commands are in degrees.</li>
+<li>Location errors <code>E{X,Y,Z}0k</code> / <code>E{A,B,C}0k</code>: offset along / rotation about the x, y, z
+axes of the machine frame F (at the zero pose) of axis k relative to the next axis toward the foundation
+(chain-relative: C relative to B on a B-C table). Positive = displaced in +x / rotated counter-clockwise
+about +x (right-hand rule). On the workpiece side that moves the workpiece, so the tool seen from the part
+moves the opposite way.</li>
+<li>Error motions <code>E{D}{k}{1,2,3}</code>: coefficients of q, q², q³ (q in mm for linear axes, rad for rotary
+axes) of the error motion of axis k along/about the axes of F. For an axis whose direction is a negative basis
+vector a positive <code>Ekk1</code> shortens the travel.</li>
+<li>Backlash <code>Ekkb</code>: added to the command in the direction the axis last moved.</li>
+<li>Residuals follow DESIGN.md: for a facet touch n̂·(P − a) − r − facet offset, i.e. how far the identified
+model puts the stylus ball from the facet at the moment the probe triggered (mm; 0 for a perfect model). Residual
+vectors are these distances along the surface normal, drawn in the workpiece (table) frame.</li>
+</ul>
+"""
+
+
+def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
+    """Polar plots from fivecal.polar when the data has DBB traces."""
+    if "dbb" not in set(result.dataset.observation_types):
+        return [], None
+    try:
+        from . import polar  # built in parallel by the ball bar work; optional here
+    except ImportError:
+        return [], ("The data holds double ball bar traces; polar plots appear here once the "
+                    "<code>fivecal.polar</code> module is installed.")
+    try:
+        figs: list = []
+        if hasattr(polar, "report_figures"):
+            figs = list(polar.report_figures(result, out_dir) or [])
+        elif hasattr(polar, "plot_dbb_polar"):
+            p = polar.plot_dbb_polar(result, os.path.join(out_dir, "dbb_polar.png"))
+            figs = [p if p else os.path.join(out_dir, "dbb_polar.png")]
+        else:
+            return [], "fivecal.polar has neither report_figures() nor plot_dbb_polar()."
+        out = []
+        for f in figs:
+            path, cap = (f, "Double ball bar trace (polar plot)") if isinstance(f, (str, os.PathLike)) else f
+            out.append((os.fspath(path), str(cap)))
+        return out, None
+    except Exception as e:  # a plotting problem must not lose the rest of the report
+        return [], f"DBB polar plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}"
+
+
+def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] = None,
+                 truth: Optional[Mapping[str, float]] = None,
+                 sections: Sequence[Section] = (), figures: Sequence[Figure] = (),
+                 embed_images: bool = True, write_result_json: bool = True,
+                 summary: Optional[str] = None) -> str:
+    """Write ``out_dir/report.html`` (plus PNGs and ``result.json``) for an
+    identification :class:`fivecal.Result`; returns the HTML path.
+
+    ``truth``: known true values (simulations) to show beside the estimates,
+    with z = (estimate - truth) / σ. ``sections``: extra (title, HTML) blocks
+    placed after the parameter table (the demo adds its validation).
+    ``figures``: extra (PNG path, caption) pairs shown after the standard
+    plots. ``embed_images``: embed the plots as base64 so the HTML file stands
+    alone (default); otherwise it references the PNG files next to it.
+    ``summary``: a line of text shown under the title.
+    """
+    from . import plots
+
+    out_dir = os.fspath(out_dir)
+    os.makedirs(out_dir, exist_ok=True)
+    ds = result.dataset
+    machine = ds.machine
+    machine_names = set(machine.parameter_names())
+    if write_result_json:
+        result.save(os.path.join(out_dir, "result.json"))
+
+    figs: List[Figure] = []
+    p = os.path.join(out_dir, "residual_vectors.png")
+    plots.plot_residual_vectors(result, p, title="Unexplained residual vectors")
+    figs.append((p, "Residual vectors at the touch points in the table (workpiece) frame, magnified, one "
+                    "colour per rotary indexation (Rahman 2016, Figure 4-7 style). Systematic patterns "
+                    "(arrows of one colour pointing the same way) mean unmodelled errors; random "
+                    "directions mean probing noise."))
+    p = os.path.join(out_dir, "residual_histogram.png")
+    plots.plot_residual_histogram(result, p)
+    figs.append((p, "Distribution of the residuals with the normal density of the a-posteriori σ̂."))
+    mnames = [n for n in result.estimated if n in machine_names and not n.startswith("tip.")]
+    if mnames:
+        p = os.path.join(out_dir, "parameters.png")
+        plots.plot_parameters(result, p, names=mnames, truth=truth,
+                              title="Identified machine errors (error bars ±2σ)")
+        figs.append((p, "Identified machine errors with ±2σ error bars, one panel per unit"
+                        + (", true values in red." if truth else ".")))
+    cnames = [n for n in result.estimated if n in machine_names]
+    if len(cnames) >= 2:
+        p = os.path.join(out_dir, "correlation.png")
+        plots.plot_correlation(result, p, names=cnames, title="Correlation of the machine parameters")
+        figs.append((p, "Correlation coefficients between the estimated machine parameters (setup "
+                        "parameters omitted; strongly correlated pairs are listed under Identifiability)."))
+    dbb_figs, dbb_note = _dbb_figures(result, out_dir)
+    figs += dbb_figs
+    figs += list(figures)
+
+    title = title or f"fivecal identification report — {machine.name}"
+    now = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    body = [f"<h1>{_e(title)}</h1>",
+            f"<div class='sub'>fivecal {__version__} · {now} · {_e(machine.name)} "
+            f"(<code>{_e(machine.topology)}</code>) · {len(ds)} observations · residual rms "
+            f"{result.rms * 1e3:.3f} µm</div>"]
+    if summary:
+        body.append(f"<div class='box'>{_e(summary)}</div>")
+    nav = ["machine", "data", "fit", "identifiability", "parameters"] + \
+          [f"extra{i}" for i in range(len(sections))] + ["plots", "conventions", "files"]
+    labels = ["Machine", "Data", "Fit", "Identifiability", "Parameters"] + [t for t, _ in sections] + \
+             ["Plots", "Conventions", "Files"]
+    body.append("<nav>" + "".join(f"<a href='#{a}'>{_e(b)}</a>" for a, b in zip(nav, labels)) + "</nav>")
+    body += ["<h2 id='machine'>Machine</h2>", _machine_section(machine),
+             "<h2 id='data'>Data</h2>", _data_section(ds, result),
+             "<h2 id='fit'>Fit</h2>", _fit_section(result),
+             "<h2 id='identifiability'>Identifiability</h2>", _identifiability_section(result),
+             "<h2 id='parameters'>Parameters</h2>", _parameter_section(result, machine, truth)]
+    for i, (t, h) in enumerate(sections):
+        body += [f"<h2 id='extra{i}'>{_e(t)}</h2>", h]
+    body.append("<h2 id='plots'>Plots</h2>")
+    for path, cap in figs:
+        body.append(f"<figure>{_img_tag(path, out_dir, embed_images, cap)}<figcaption>{_e(cap)}"
+                    f" <small>({_e(os.path.basename(path))})</small></figcaption></figure>")
+    if dbb_note:
+        body.append(f"<div class='box warn'>{dbb_note}</div>")
+    body += ["<h2 id='conventions'>Conventions</h2>", _CONVENTIONS,
+             "<h2 id='files'>Files</h2><ul>",
+             "<li><a href='result.json'>result.json</a> — the result (DESIGN.md format: values in mm and "
+             "rad, one-sigma std)</li>" if write_result_json else "",
+             "".join(f"<li><a href='{_e(os.path.basename(pth))}'>{_e(os.path.basename(pth))}</a></li>"
+                     for pth, _ in figs if os.path.dirname(os.path.abspath(pth)) == os.path.abspath(out_dir)),
+             "</ul>"]
+    doc = ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+           "<meta name='viewport' content='width=device-width, initial-scale=1'>"
+           f"<title>{_e(title)}</title><style>{_CSS}</style></head><body><main>\n"
+           + "\n".join(body) + "\n</main></body></html>\n")
+    path = os.path.join(out_dir, "report.html")
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(doc)
+    return path
+
+
+def table_html(header: Sequence[str], rows: Iterable[Sequence], numeric: Sequence[bool] = ()) -> str:
+    """A small HTML table (for the ``sections`` of :func:`write_report`)."""
+    num = list(numeric) + [False] * (len(header) - len(numeric))
+    out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in header) + "</tr>"]
+    for r in rows:
+        out.append("<tr>" + "".join(f"<td class='num'>{_e(c)}</td>" if num[i] else f"<td>{_e(c)}</td>"
+                                    for i, c in enumerate(r)) + "</tr>")
+    out.append("</table>")
+    return "".join(out)
