@@ -1,6 +1,8 @@
-"""Command line: fivecal identify | simulate | demo.
+"""Command line: fivecal identify | simulate | compensate | demo.
 
-Errors are one clear line on stderr (exit status 2), never a traceback.
+Errors are one clear line on stderr (exit status 2), never a traceback
+(set FIVECAL_DEBUG=1 to see one). Long runs draw a progress bar on stderr
+when it is a terminal (FIVECAL_PROGRESS=1 forces it, =0 silences it).
 """
 from __future__ import annotations
 
@@ -24,6 +26,74 @@ def _identify(args) -> int:
     if args.out:
         result.save(args.out)
         print(f"\nresult written to {args.out}")
+    if args.report:
+        from .report import write_report
+
+        path = write_report(result, args.report, title=f"fivecal identification — {os.path.basename(args.dataset)}",
+                            summary=f"dataset {args.dataset}, estimate {args.estimate}"
+                                    + (f", fixed {args.fix}" if args.fix else ""))
+        print(f"\nreport: {os.path.abspath(path)} (with result.json and the plots as PNG)")
+    return 0
+
+
+def _read_json(path: str, what: str):
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read {what} ({e.strerror})") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON ({e.msg} at line {e.lineno}, column {e.colno})") from None
+
+
+def _axis_values(text: str, option: str) -> dict:
+    out = {}
+    for item in [t for t in text.replace(";", ",").split(",") if t.strip()]:
+        if "=" not in item:
+            raise ValueError(f"{option}: expected AXIS=VALUE pairs like X=0,Z=100, got '{item.strip()}'")
+        k, v = item.split("=", 1)
+        try:
+            out[k.strip().upper()] = float(v)
+        except ValueError:
+            raise ValueError(f"{option}: {k.strip()}: '{v.strip()}' is not a number") from None
+    return out
+
+
+def _compensate(args) -> int:
+    from .compensation import compensate_gcode_file, load_errors, write_error_table
+    from .machine import Machine
+
+    doc = _read_json(args.machine, "the machine")
+    if isinstance(doc, dict) and "observations" in doc and isinstance(doc.get("machine"), dict):
+        doc = doc["machine"]  # a dataset file: use its machine
+    machine = Machine.from_dict(doc)
+    errors = load_errors(args.result, machine)
+    if not args.program and not args.table:
+        raise ValueError("nothing to do: give a PROGRAM (with --out) and/or --table FILE")
+    if args.table:
+        kinds = ("location", "backlash", "motion") if args.table_all else ("location",)
+        rows = write_error_table(args.table, args.result, machine, kinds=kinds)
+        print(f"{len(rows)} identified {'machine' if args.table_all else 'location'} errors of "
+              f"{machine.name} written to {args.table} (sign convention in its header)")
+    if args.program:
+        if not args.out:
+            raise ValueError("--out OUT.nc is required with a PROGRAM")
+        if os.path.abspath(args.out) == os.path.abspath(args.program):
+            raise ValueError(f"--out {args.out}: refusing to overwrite the input program")
+        tip = None
+        if args.tool_tip:
+            try:
+                tip = [float(x) for x in args.tool_tip.split(",")]
+            except ValueError:
+                raise ValueError(f"--tool-tip: expected x,y,z in mm, got '{args.tool_tip}'") from None
+        res = compensate_gcode_file(args.program, args.out, machine, errors,
+                                    start=_axis_values(args.start, "--start") if args.start else None,
+                                    work_offset=_axis_values(args.work_offset, "--work-offset")
+                                    if args.work_offset else None,
+                                    orientation=not args.position_only, tool_tip=tip,
+                                    progress=None)
+        print(f"{args.program}: {res.summary()}")
+        print(f"compensated program written to {args.out}")
     return 0
 
 
@@ -32,13 +102,16 @@ def _simulate(args) -> int:
     from .machine import Machine
     from .simulation import simulate
 
-    with open(args.spec) as f:
-        spec = json.load(f)
+    spec = _read_json(args.spec, "the simulation spec")
+    if not isinstance(spec, dict):
+        raise ValueError(f"{args.spec}: expected a JSON object with machine, plan, errors, ...")
     machine = spec.get("machine")
     if isinstance(machine, str):  # a path relative to the spec file
         machine = Machine.load(os.path.join(os.path.dirname(os.path.abspath(args.spec)), machine))
     if machine is None:
         raise ValueError(f"{args.spec}: 'machine' missing (a machine object or a path)")
+    if not isinstance(spec, dict):
+        raise ValueError(f"{args.spec}: expected a JSON object with machine, plan, errors, ...")
     ds = simulate(machine, spec.get("plan", []), errors=spec.get("errors"), artefact=spec.get("artefact"),
                   tip_radius=spec.get("probe", {}).get("tip_radius", 0.0),
                   sigma=args.sigma if args.sigma is not None else spec.get("sigma", 0.0),
@@ -53,6 +126,14 @@ def _demo(args) -> int:
 
     run_demo(args.out, seed=args.seed)
     return 0
+
+
+def _one_line(e: BaseException) -> str:
+    if isinstance(e, OSError) and e.filename is not None and e.strerror:
+        text = f"{e.filename}: {e.strerror}"
+    else:
+        text = str(e) or type(e).__name__
+    return " ".join(text.split())
 
 
 def main(argv=None) -> int:
@@ -78,6 +159,8 @@ def main(argv=None) -> int:
     pi.add_argument("--allow-unidentifiable", action="store_true",
                     help="fit even when parameters are confounded (they are named in the report)")
     pi.add_argument("--out", help="write the result JSON here")
+    pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
+                    "plots as PNG) into this folder")
     pi.set_defaults(func=_identify)
 
     ps = sub.add_parser("simulate", help="simulate a measurement on a machine with known errors",
@@ -96,18 +179,61 @@ def main(argv=None) -> int:
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         epilog="example:\n  fivecal demo --out fivecal_demo")
     pd.add_argument("--out", default="fivecal_demo", help="report folder (default: fivecal_demo)")
-    pd.add_argument("--seed", type=int, default=1)
+    pd.add_argument("--seed", type=int, default=1, help="random seed of the simulated noise and of the "
+                    "held-out indexations (default: 1)")
     pd.set_defaults(func=_demo)
 
+    pc = sub.add_parser("compensate", help="compensated G-code and error tables from identified errors",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        description="Rewrite the G0/G1 moves of an absolute (G90) ISO G-code program so "
+                        "that the erroneous machine puts the tool where the nominal one would: X Y Z and the "
+                        "rotary words are replaced by the commands of the inverse kinematics on the "
+                        "identified error model; comments, N numbers, F, S, M and all other words, "
+                        "spacing and case are kept. Program words are read as machine axis commands "
+                        "(mm or inch after G20, degrees). With --table, write the identified location "
+                        "errors as a controller-neutral CSV or JSON table with the sign convention.",
+                        epilog="examples:\n"
+                        "  fivecal compensate result.json machine.json part.nc --out part_comp.nc\n"
+                        "  fivecal compensate result.json machine.json --table errors.csv\n"
+                        "  fivecal compensate result.json machine.json part.nc --out part_comp.nc "
+                        "--work-offset X=-120,Y=35 --tool-tip 0,0,150")
+    pc.add_argument("result", help="result JSON of fivecal identify (or a JSON object name -> value, mm/rad)")
+    pc.add_argument("machine", help="machine definition JSON (or a dataset JSON: its machine is used)")
+    pc.add_argument("program", nargs="?", help="G-code program to compensate")
+    pc.add_argument("--out", help="compensated program to write (required with PROGRAM)")
+    pc.add_argument("--table", metavar="FILE", help="write the identified errors as a table: CSV, or JSON "
+                    "when FILE ends in .json")
+    pc.add_argument("--table-all", action="store_true", help="table: include error motions and backlash, "
+                    "not only the location errors")
+    pc.add_argument("--start", metavar="AXES", help="axis positions before the first line, e.g. "
+                    "X=0,Y=0,Z=300,B=0,C=0 (default: unknown; moves before every axis is known stay as "
+                    "written)")
+    pc.add_argument("--work-offset", metavar="AXES", help="machine command = program word + offset for the "
+                    "linear axes (mm), e.g. X=-120.5,Y=35,Z=-410")
+    pc.add_argument("--tool-tip", metavar="X,Y,Z", help="the cutting tool's tip in the machine frame at the "
+                    "zero pose (mm), replacing the machine file's tool.tip")
+    pc.add_argument("--position-only", action="store_true", help="compensate the tool point only; keep the "
+                    "rotary axes at their programmed values")
+    pc.set_defaults(func=_compensate)
+
     args = p.parse_args(argv)
+    debug = os.environ.get("FIVECAL_DEBUG", "") not in ("", "0")
     try:
         return args.func(args)
-    except (ValueError, OSError) as e:
-        print(f"fivecal {args.command}: error: {e}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("fivecal: interrupted", file=sys.stderr)
         return 130
+    except (ValueError, OSError) as e:
+        if debug:
+            raise
+        print(f"fivecal {args.command}: error: {_one_line(e)}", file=sys.stderr)
+        return 2
+    except Exception as e:  # an unexpected failure: still one line, with a way to see more
+        if debug:
+            raise
+        print(f"fivecal {args.command}: internal error ({type(e).__name__}): {_one_line(e)} "
+              "(set FIVECAL_DEBUG=1 for a traceback)", file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":
