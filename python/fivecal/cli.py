@@ -19,9 +19,12 @@ def _identify(args) -> int:
     from .dataset import load_dataset
     from .identification import identify
 
+    from .progress import busy
+
     ds = load_dataset(args.dataset)
-    result = identify(ds, estimate=args.estimate, fix=args.fix, robust=args.robust,
-                      allow_unidentifiable=args.allow_unidentifiable)
+    with busy(f"fitting {len(ds)} observations"):
+        result = identify(ds, estimate=args.estimate, fix=args.fix, robust=args.robust,
+                          allow_unidentifiable=args.allow_unidentifiable)
     print(result.report())
     if args.out:
         result.save(args.out)
@@ -66,7 +69,10 @@ def _compensate(args) -> int:
     doc = _read_json(args.machine, "the machine")
     if isinstance(doc, dict) and "observations" in doc and isinstance(doc.get("machine"), dict):
         doc = doc["machine"]  # a dataset file: use its machine
-    machine = Machine.from_dict(doc)
+    try:
+        machine = Machine.from_dict(doc)
+    except ValueError as e:
+        raise ValueError(f"{args.machine}: {e}") from None
     errors = load_errors(args.result, machine)
     if not args.program and not args.table:
         raise ValueError("nothing to do: give a PROGRAM (with --out) and/or --table FILE")

@@ -16,14 +16,16 @@ It draws only when stderr is a terminal, or when forced with
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+import threading
 import time
 from typing import Iterable, Iterator, Optional, TextIO, TypeVar
 
 T = TypeVar("T")
 
-__all__ = ["Progress", "progress", "progress_enabled"]
+__all__ = ["Progress", "progress", "progress_enabled", "busy"]
 
 
 def progress_enabled(enabled: Optional[bool] = None, stream: Optional[TextIO] = None) -> bool:
@@ -138,3 +140,46 @@ def progress(iterable: Iterable[T], total: Optional[int] = None, label: str = ""
         for item in iterable:
             yield item
             bar.update()
+
+
+@contextlib.contextmanager
+def busy(label: str, enabled: Optional[bool] = None, stream: Optional[TextIO] = None,
+         delay: float = 1.0, interval: float = 0.25):
+    """An elapsed-time indicator for a single long call that reports no
+    steps (a large fit in the C++ core, which releases the GIL): after
+    ``delay`` seconds it shows ``label: 12.3s`` on stderr and clears the line
+    when the block ends. Nothing is drawn for calls shorter than ``delay``."""
+    stream = stream if stream is not None else sys.stderr
+    if not progress_enabled(enabled, stream):
+        yield
+        return
+    stop = threading.Event()
+    t0 = time.perf_counter()
+    drawn = []
+
+    def run() -> None:
+        if stop.wait(delay):
+            return
+        while True:
+            try:
+                stream.write(f"\r{label}: {_fmt_time(time.perf_counter() - t0)}\x1b[K")
+                stream.flush()
+                drawn.append(True)
+            except (OSError, ValueError):
+                return
+            if stop.wait(interval):
+                return
+
+    th = threading.Thread(target=run, daemon=True)
+    th.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        th.join()
+        if drawn:
+            try:
+                stream.write(f"\r{label}: done in {_fmt_time(time.perf_counter() - t0)}\x1b[K\n")
+                stream.flush()
+            except (OSError, ValueError):
+                pass
