@@ -97,7 +97,7 @@ def _compensate(args) -> int:
                                     work_offset=_axis_values(args.work_offset, "--work-offset")
                                     if args.work_offset else None,
                                     orientation=not args.position_only, tool_tip=tip,
-                                    progress=None)
+                                    min_decimals=args.decimals, progress=None)
         print(f"{args.program}: {res.summary()}")
         print(f"compensated program written to {args.out}")
     return 0
@@ -218,6 +218,8 @@ def main(argv=None) -> int:
                     "linear axes (mm), e.g. X=-120.5,Y=35,Z=-410")
     pc.add_argument("--tool-tip", metavar="X,Y,Z", help="the cutting tool's tip in the machine frame at the "
                     "zero pose (mm), replacing the machine file's tool.tip")
+    pc.add_argument("--decimals", type=int, default=4, help="at least this many decimals for the "
+                    "compensated words (default 4; a word written with more keeps its own)")
     pc.add_argument("--position-only", action="store_true", help="compensate the tool point only; keep the "
                     "rotary axes at their programmed values")
     pc.set_defaults(func=_compensate)
