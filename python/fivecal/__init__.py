@@ -7,8 +7,11 @@ from .dataset import Dataset, load_dataset, save_dataset
 from .identification import Result, identify, resolve_estimate
 from .machine import Machine, RadiansWarning
 from .simulation import simulate
+from .compensation import compensate_gcode, compensate_poses, write_error_table
+from .report import write_report
 
 __version__ = "0.1.0"
 
 __all__ = ["Machine", "RadiansWarning", "Dataset", "load_dataset", "save_dataset", "simulate",
-           "identify", "resolve_estimate", "Result", "__version__"]
+           "identify", "resolve_estimate", "Result", "compensate_poses", "compensate_gcode",
+           "write_error_table", "write_report", "__version__"]

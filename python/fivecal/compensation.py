@@ -305,6 +305,10 @@ class GcodeCompensation:
     text changed; ``skipped``: (line number, reason) of moves left as written
     (an axis position not yet known from the program or ``start``);
     ``poses``: the :class:`CompensatedPoses` of the compensated moves, in order.
+    ``written_error`` (moves, 3) mm: the tool-point error of the erroneous
+    machine at the commands as written (after rounding to the output
+    decimals), relative to the nominal target; ``lines``: the 1-based line
+    number of each compensated move.
     """
 
     text: str
@@ -312,13 +316,22 @@ class GcodeCompensation:
     changed_lines: int
     skipped: List[Tuple[int, str]] = field(default_factory=list)
     poses: Optional[CompensatedPoses] = None
+    written_error: Optional[np.ndarray] = None
+    lines: List[int] = field(default_factory=list)
+
+    def max_written_error(self) -> float:
+        """Largest tool-point error (mm) left by the written program."""
+        if self.written_error is None or not len(self.written_error):
+            return 0.0
+        return float(np.linalg.norm(self.written_error, axis=1).max())
 
     def summary(self) -> str:
         p = self.poses
         s = (f"{self.moves} moves compensated, {self.changed_lines} lines changed")
         if p is not None and len(p):
             s += (f"; tool-point error {p.max_before() * 1e3:.2f} µm max before, "
-                  f"{p.max_remaining() * 1e3:.2g} µm max after")
+                  f"{self.max_written_error() * 1e3:.2g} µm max after (as written, rounded to the "
+                  f"output decimals)")
             n_pos = int((~p.orientation).sum())
             if n_pos:
                 s += (f"; {n_pos} moves next to a singularity compensated for the tool point only "
@@ -464,7 +477,7 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
         for a, w in axis_words.items():
             modal[a] = w.value
             decimals[a] = w.decimals
-        unknown = [a for a in axis_letters if modal[a] is None]
+        unknown = [a for a in sorted(axis_letters, key="XYZABC".index) if modal[a] is None]
         if unknown:
             skipped.append((ln, f"position of {', '.join(unknown)} not known yet"))
             continue
@@ -511,6 +524,7 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
     # The values the controller holds, in program units, as the program is rewritten.
     held: Dict[str, Optional[float]] = {a: None for a in axis_letters}
     held_dec: Dict[str, int] = {a: min_decimals for a in axis_letters}
+    written = np.zeros((len(moves), len(machine.axis_names)))
     mi = 0
     changed = 0
     move_at = {mv.line: i for i, mv in enumerate(moves)}
@@ -553,6 +567,12 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
                 s = _fmt(v, dec, False)
                 inserts.append(mv.sep + (a.lower() if mv.lower else a) + s)
                 held[a] = float(s)
+        for k, a in enumerate(machine.axis_names):
+            if a == "S":
+                written[mi, k] = spindle
+            else:
+                h = held[a] if held[a] is not None else mv.program[a]
+                written[mi, k] = to_machine(a, h, mv.inch)
         if not edits and not inserts:
             continue
         new = text
@@ -562,7 +582,10 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
             new = new[:s0] + s + new[e0:]
         result_lines[li] = new + ending
         changed += 1
-    return GcodeCompensation("".join(result_lines), len(moves), changed, skipped, comp)
+    d = machine.directions_matrix(dirs, len(moves))
+    real = _core.tool_poses(machine._core, machine.theta(errs), written, d)[0]
+    return GcodeCompensation("".join(result_lines), len(moves), changed, skipped, comp,
+                             written_error=real - comp.points, lines=[mv.line + 1 for mv in moves])
 
 
 def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.PathLike], machine, errors,

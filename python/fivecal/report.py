@@ -29,7 +29,6 @@ from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import __version__
 from .units import display_scale
 
 __all__ = ["write_report", "Section"]
@@ -322,7 +321,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     alone (default); otherwise it references the PNG files next to it.
     ``summary``: a line of text shown under the title.
     """
-    from . import plots
+    from . import __version__, plots
 
     out_dir = os.fspath(out_dir)
     os.makedirs(out_dir, exist_ok=True)
