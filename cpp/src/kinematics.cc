@@ -1,5 +1,7 @@
 #include "fivecal/kinematics.h"
 
+#include "fivecal/kinematic_model.h"
+
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -49,7 +51,7 @@ void ToolPoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::Matr
   const int n = static_cast<int>(axes.rows()), na = m.num_axes();
   points->resize(n, 3);
   if (tool_axes) tool_axes->resize(n, 3);
-  const Vec3<double> tip = TipWithOffsets(m, theta.data());
+  const KinematicModel model(m, theta.data());
   std::vector<double> row(na), q(na);
   std::vector<int> dir(na, 0);
   for (int r = 0; r < n; ++r) {
@@ -58,9 +60,8 @@ void ToolPoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::Matr
       if (dirs) dir[k] = (*dirs)(r, k);
     }
     AxisValuesToInternal(m, row.data(), q.data());
-    Vec3<double> p, a;
-    ToolInWorkpiece<double>(m, theta.data(), q.data(), dirs ? dir.data() : nullptr, tip, &p,
-                            tool_axes ? &a : nullptr);
+    Eigen::Vector3d p, a;
+    model.ToolPose(q.data(), dirs ? dir.data() : nullptr, model.tip(), &p, tool_axes ? &a : nullptr);
     points->row(r) = p.transpose();
     if (tool_axes) tool_axes->row(r) = a.transpose();
   }

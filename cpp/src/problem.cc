@@ -1,5 +1,7 @@
 #include "fivecal/problem.h"
 
+#include "fivecal/analytic_residuals.h"
+
 #include <algorithm>
 #include <set>
 #include <stdexcept>
@@ -194,7 +196,8 @@ std::vector<std::string> MotionCandidates(const Machine& m) {
 // ---- Problem ----------------------------------------------------------------
 
 Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
-                 const std::vector<int>& estimated, const std::string& robust, double robust_scale)
+                 const std::vector<int>& estimated, const std::string& robust, double robust_scale,
+                 bool analytic)
     : ds_(ds), table_(table), values_(values), estimated_(estimated) {
   if (values_.size() != table.size())
     throw std::invalid_argument("problem: expected " + std::to_string(table.size()) + " values");
@@ -218,6 +221,17 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
     throw std::invalid_argument("robust: unknown loss '" + robust + "' (huber, cauchy or none)");
   if (loss_ && !(robust_scale > 0))
     throw std::invalid_argument("robust: the loss scale must be > 0 mm");
+
+  if (analytic && loss_ == nullptr && !estimated_.empty()) {
+    auto* cost = new AnalyticResiduals(ds, table, values_, estimated_);
+    std::vector<double*> ptrs;
+    for (int i : estimated_) ptrs.push_back(&values_[i]);
+    blocks_.push_back(problem_->AddResidualBlock(cost, nullptr, ptrs));
+    block_row_.push_back(0);
+    row_source_ = cost->row_source();
+    num_rows_ = cost->num_residuals();
+    return;
+  }
 
   // Block pointers of the estimated machine parameters, shared by every
   // machine-dependent residual.

@@ -421,7 +421,9 @@ void GradientCheckEveryBlock(const char* machine_json, uint32_t seed) {
   // Every parameter estimated, so every residual sees every machine error,
   // backlash, tip and setup offset as a parameter block.
   const Eigen::VectorXd at = ProbePoint(fx.values);
-  Problem problem(fx.ds, fx.table, at, AllIndices(fx.table.size()));
+  // The per-observation functors (the reference implementation); the
+  // analytic batch is compared against them in test_analytic_residuals.cc.
+  Problem problem(fx.ds, fx.table, at, AllIndices(fx.table.size()), "", 0.0, /*analytic=*/false);
   ASSERT_EQ(problem.values(), at);
 
   std::vector<ceres::ResidualBlockId> blocks;

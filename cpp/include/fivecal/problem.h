@@ -69,9 +69,13 @@ class Problem {
  public:
   // `values`: every parameter's value (initial for the estimated ones, the
   // fixed value for the others). `estimated`: indices into the table.
+  //
+  // analytic: evaluate all rows in one AnalyticResiduals block (fast). A
+  // robust loss needs one block per observation, so it uses the templated
+  // functors with automatic derivatives, as does analytic = false.
   Problem(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
           const std::vector<int>& estimated, const std::string& robust = "",
-          double robust_scale = 0.0);
+          double robust_scale = 0.0, bool analytic = true);
 
   ceres::Problem& ceres_problem() { return *problem_; }
   const Eigen::VectorXd& values() const { return values_; }
