@@ -6,7 +6,8 @@ cd "$(dirname "$0")/.."
 
 SUDO=""
 if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
-DEB_PACKAGES=(libeigen3-dev libceres-dev nlohmann-json3-dev libgtest-dev)
+# chromium: headless browser the report test renders the HTML report with
+DEB_PACKAGES=(libeigen3-dev libceres-dev nlohmann-json3-dev libgtest-dev chromium)
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
