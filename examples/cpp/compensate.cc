@@ -3,7 +3,7 @@
 // command that puts it where the nominal one was meant to be.
 //
 //   compensate MACHINE.json ERRORS.json
-// ERRORS.json: {"EX0C": 0.01, ...} or a fivecal result file.
+// ERRORS.json: {"EX0C": 0.01, ...} or a fivecal result file (mm, rad).
 #include <fivecal/inverse.h>
 #include <fivecal/kinematics.h>
 
@@ -21,7 +21,11 @@ int main(int argc, char** argv) {
     std::ifstream in(argv[2]);
     std::stringstream text;
     text << in.rdbuf();
-    const fivecal::ErrorModel errors = fivecal::ErrorModel::FromJson(m, text.str());
+    fivecal::ErrorModel errors = fivecal::ErrorModel::FromJson(m, text.str());
+    // A result file also carries the probe stylus offsets tip.x|y|z: they describe the
+    // measuring probe, not the cutting tool, so compensation does not apply them.
+    for (const char* n : {"tip.x", "tip.y", "tip.z"})
+      if (m.ParameterIndex(n) >= 0) errors.Set(n, 0.0);
     const Eigen::VectorXd nominal = Eigen::VectorXd::Zero(m.num_parameters());
 
     // A nominal command: every linear axis at 50 mm, every rotary axis at 30 deg.
