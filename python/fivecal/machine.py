@@ -61,6 +61,9 @@ class Machine:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Machine":
+        """Build from a machine definition dict (DESIGN.md keys: name, topology,
+        axes with direction and point in mm, tool.tip in mm); a Machine is
+        returned as is."""
         if isinstance(d, Machine):
             return d
         if not isinstance(d, Mapping):
@@ -68,15 +71,18 @@ class Machine:
         return cls(_core.Machine.from_json(dumps(d, "machine")))
 
     def to_dict(self) -> dict:
+        """The machine definition as a JSON-ready dict (mm, unit directions)."""
         return json.loads(self._core.to_json())
 
     # ---- description --------------------------------------------------
     @property
     def name(self) -> str:
+        """The machine's name from its definition."""
         return self._core.name
 
     @property
     def topology(self) -> str:
+        """Topology string read from workpiece to tool, e.g. ``'wCBXfZYSt'``."""
         return self._core.topology
 
     @property
@@ -86,6 +92,9 @@ class Machine:
 
     @property
     def axes(self) -> list:
+        """Axis descriptions in topology order: dicts with name, type
+        (``linear``/``rotary``), direction (unit vector in F at the zero pose)
+        and point (mm)."""
         return self._core.axes
 
     @property
@@ -100,9 +109,11 @@ class Machine:
 
     @property
     def tip(self) -> np.ndarray:
+        """Nominal tool tip (3,) in mm, in the machine frame F at the zero pose."""
         return np.asarray(self._core.tip)
 
     def is_rotary(self, axis: str) -> bool:
+        """True for the rotary axis letters A, B, C and the spindle S (commands in degrees)."""
         return axis in "ABCS"
 
     def parameter_names(self) -> list:
@@ -178,6 +189,8 @@ class Machine:
         return out
 
     def directions_matrix(self, directions: Optional[Mapping[str, ArrayLike]], n: int):
+        """(n, num_axes) int32 matrix of last-move directions (-1, 0, +1) in
+        machine axis order from a dict axis -> array, or None."""
         if directions is None:
             return None
         out = np.zeros((n, len(self.axis_names)), dtype=np.int32)
@@ -195,6 +208,7 @@ class Machine:
         return out
 
     def axes_dict(self, matrix: np.ndarray) -> dict:
+        """Dict axis letter -> (N,) array (mm / degrees) from an (N, num_axes) matrix."""
         return {a: np.ascontiguousarray(matrix[:, i]) for i, a in enumerate(self.axis_names)}
 
     # ---- kinematics ---------------------------------------------------
