@@ -16,6 +16,24 @@ void BindIdentification(py::module_& m) {
                   py::arg("require_observations") = true)
       .def("to_json", &Dataset::ToJson)
       .def("subset", &Dataset::Subset, py::arg("indices"))
+      .def_static(
+          "balls",
+          [](const Machine& m, const std::string& type, const std::string& setup,
+             const Eigen::MatrixXd& axes, const std::optional<Eigen::MatrixXi>& dirs,
+             const Eigen::Vector3d& tool_ball, const Eigen::Vector3d& table_ball, double length,
+             const Eigen::MatrixXd& values) {
+            Dataset d(m);
+            ObservationType t = type == "dbb" ? ObservationType::kDbb : ObservationType::kBall3d;
+            if (type != "dbb" && type != "ball3d")
+              throw std::invalid_argument("ball samples: type must be 'dbb' or 'ball3d'");
+            d.AppendBallSamples(t, setup, axes, dirs ? &*dirs : nullptr, tool_ball, table_ball,
+                                length, values);
+            d.Validate();
+            return d;
+          },
+          py::arg("machine"), py::arg("type"), py::arg("setup"), py::arg("axes"),
+          py::arg("directions"), py::arg("tool_ball"), py::arg("table_ball"), py::arg("length"),
+          py::arg("values"))
       .def_property_readonly("machine", &Dataset::machine)
       .def_readonly("tip_radius", &Dataset::tip_radius)
       .def_property_readonly("num_observations",

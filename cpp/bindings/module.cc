@@ -89,15 +89,16 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "tool_poses",
       [](const Machine& mc, const Eigen::VectorXd& theta, const Eigen::MatrixXd& axes,
-         const std::optional<Eigen::MatrixXi>& dirs) {
+         const std::optional<Eigen::MatrixXi>& dirs, const std::optional<Eigen::Vector3d>& tip) {
         Eigen::MatrixXd p, a;
         {
           py::gil_scoped_release release;
-          ToolPoses(mc, theta, axes, OptionalDirs(dirs), &p, &a);
+          ToolPoses(mc, theta, axes, OptionalDirs(dirs), &p, &a, tip ? &*tip : nullptr);
         }
         return py::make_tuple(p, a);
       },
       py::arg("machine"), py::arg("theta"), py::arg("axes"), py::arg("directions") = py::none(),
+      py::arg("tip") = py::none(),
       "Tool points and tool axes (N x 3 each, workpiece frame) for N poses; axes N x num_axes "
       "in mm / degrees.");
 

@@ -46,12 +46,16 @@ void ValidatePoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::
 }
 
 void ToolPoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::MatrixXd& axes,
-               const Eigen::MatrixXi* dirs, Eigen::MatrixXd* points, Eigen::MatrixXd* tool_axes) {
+               const Eigen::MatrixXi* dirs, Eigen::MatrixXd* points, Eigen::MatrixXd* tool_axes,
+               const Eigen::Vector3d* tip) {
+  if (tip)
+    for (int i = 0; i < 3; ++i) RequireFinite((*tip)[i], "tip[" + std::to_string(i) + "]");
   ValidatePoses(m, theta, axes, dirs);
   const int n = static_cast<int>(axes.rows()), na = m.num_axes();
   points->resize(n, 3);
   if (tool_axes) tool_axes->resize(n, 3);
   const KinematicModel model(m, theta.data());
+  const Eigen::Vector3d t = tip ? *tip : model.tip();
   std::vector<double> row(na), q(na);
   std::vector<int> dir(na, 0);
   for (int r = 0; r < n; ++r) {
@@ -61,7 +65,7 @@ void ToolPoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::Matr
     }
     AxisValuesToInternal(m, row.data(), q.data());
     Eigen::Vector3d p, a;
-    model.ToolPose(q.data(), dirs ? dir.data() : nullptr, model.tip(), &p, tool_axes ? &a : nullptr);
+    model.ToolPose(q.data(), dirs ? dir.data() : nullptr, t, &p, tool_axes ? &a : nullptr);
     points->row(r) = p.transpose();
     if (tool_axes) tool_axes->row(r) = a.transpose();
   }

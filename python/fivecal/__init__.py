@@ -3,7 +3,7 @@
 Units: mm for lengths and linear commands, degrees for rotary commands, rad
 for angular error parameters. See DESIGN.md for the conventions.
 """
-from .dataset import Dataset, load_dataset, save_dataset
+from .dataset import Dataset, ball_dataset, load_dataset, save_dataset
 from .identification import Result, identify, resolve_estimate
 from .machine import Machine, RadiansWarning
 from .simulation import simulate
@@ -12,6 +12,6 @@ from .report import write_report
 
 __version__ = "0.1.0"
 
-__all__ = ["Machine", "RadiansWarning", "Dataset", "load_dataset", "save_dataset", "simulate",
+__all__ = ["Machine", "RadiansWarning", "Dataset", "ball_dataset", "load_dataset", "save_dataset", "simulate",
            "identify", "resolve_estimate", "Result", "compensate_poses", "compensate_gcode",
            "write_error_table", "write_report", "__version__"]

@@ -91,3 +91,25 @@ def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> 
     with open(os.fspath(path), "w") as f:
         json.dump(ds.to_dict(), f, indent=1)
         f.write("\n")
+
+
+def ball_dataset(machine, type: str, axes: Mapping, tool_ball, table_ball, length: float = 0.0,
+                 readings=None, measured=None, setup: str = "", directions=None) -> Dataset:
+    """A dataset of ball-bar (``type="dbb"``, ``readings`` (N,) mm, bar ``length`` mm)
+    or 3D ball (``type="ball3d"``, ``measured`` (N, 3) mm) samples of one mounting,
+    built from arrays without JSON (fast for 10^5-10^6 samples). ``axes``: dict axis ->
+    array (mm / degrees); ``tool_ball`` in F at the zero pose, ``table_ball`` in the
+    workpiece frame."""
+    m = Machine.from_dict(machine)
+    q = m.axes_matrix(axes)
+    d = m.directions_matrix(directions, q.shape[0])
+    if type == "dbb":
+        if readings is None:
+            raise ValueError("ball_dataset: 'readings' missing for type dbb")
+        values = np.asarray(readings, dtype=float).reshape(-1, 1)
+    else:
+        if measured is None:
+            raise ValueError("ball_dataset: 'measured' missing for type ball3d")
+        values = np.asarray(measured, dtype=float).reshape(-1, 3)
+    return Dataset(_core.Dataset.balls(m._core, type, setup, q, d, np.asarray(tool_ball, float),
+                                       np.asarray(table_ball, float), float(length), values))

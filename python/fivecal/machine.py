@@ -212,20 +212,24 @@ class Machine:
         return {a: np.ascontiguousarray(matrix[:, i]) for i, a in enumerate(self.axis_names)}
 
     # ---- kinematics ---------------------------------------------------
-    def tool_pose(self, axes: Mapping[str, ArrayLike], errors=None, directions=None):
+    def tool_pose(self, axes: Mapping[str, ArrayLike], errors=None, directions=None, tip=None):
         """Tool point (N, 3) mm and unit tool axis (N, 3), both in the workpiece frame.
 
         ``axes``: dict axis letter -> array (mm, rotary in degrees);
         ``errors``: dict parameter name -> value (mm, rad);
-        ``directions``: dict axis letter -> array of -1/+1 (last move direction, for backlash).
+        ``directions``: dict axis letter -> array of -1/+1 (last move direction, for backlash);
+        ``tip``: a tool point (mm, F at the zero pose) replacing the machine tip and its
+        tip.x|y|z offsets, e.g. a ball-bar tool ball.
         """
         q = self.axes_matrix(axes)
         d = self.directions_matrix(directions, q.shape[0])
-        return _core.tool_poses(self._core, self.theta(errors), q, d)
+        t = None if tip is None else np.asarray(tip, dtype=float).reshape(3)
+        return _core.tool_poses(self._core, self.theta(errors), q, d, t)
 
-    def tool_point(self, axes: Mapping[str, ArrayLike], errors=None, directions=None) -> np.ndarray:
+    def tool_point(self, axes: Mapping[str, ArrayLike], errors=None, directions=None,
+                   tip=None) -> np.ndarray:
         """Tool point (N, 3) mm in the workpiece frame for the given axis readings."""
-        return self.tool_pose(axes, errors, directions)[0]
+        return self.tool_pose(axes, errors, directions, tip)[0]
 
     def volumetric_error(self, axes: Mapping[str, ArrayLike], errors, directions=None) -> np.ndarray:
         """Tool-point error (N, 3) mm in the workpiece frame at the given poses:

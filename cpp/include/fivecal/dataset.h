@@ -69,6 +69,14 @@ class Dataset {
 
   // Throws std::invalid_argument naming the observation index and field.
   void Validate() const;
+  // Appends N ball-bar (type kDbb: `values` N x 1 readings, `length` the bar)
+  // or ball3d (`values` N x 3 measured displacements) samples of one mounting
+  // from arrays: large traces (10^6 samples) without going through JSON.
+  // axes: N x num_axes (mm / degrees); dirs: optional N x num_axes.
+  void AppendBallSamples(ObservationType type, const std::string& setup, const Eigen::MatrixXd& axes,
+                         const Eigen::MatrixXi* dirs, const Eigen::Vector3d& tool_ball,
+                         const Eigen::Vector3d& table_ball, double length,
+                         const Eigen::MatrixXd& values);
   // A dataset with only the observations at `indices` (same machine and artefact).
   Dataset Subset(const std::vector<int>& indices) const;
 

@@ -160,8 +160,11 @@ Eigen::MatrixXd ToolPoints(const Machine& m, const Eigen::VectorXd& theta,
                            const Eigen::MatrixXd& axes, const Eigen::MatrixXi* dirs = nullptr);
 
 // Tool points and unit tool axis directions (both N x 3, workpiece frame).
+// `tip`, when given, replaces the machine tip and its tip.x|y|z offsets (a
+// ball-bar tool ball, in F at the zero pose).
 void ToolPoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::MatrixXd& axes,
-               const Eigen::MatrixXi* dirs, Eigen::MatrixXd* points, Eigen::MatrixXd* tool_axes);
+               const Eigen::MatrixXi* dirs, Eigen::MatrixXd* points, Eigen::MatrixXd* tool_axes,
+               const Eigen::Vector3d* tip = nullptr);
 
 }  // namespace fivecal
 
