@@ -28,29 +28,37 @@ class Dataset:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Dataset":
+        """Validate and build from a dict in the DESIGN.md dataset format
+        (mm, degrees for rotary readings); a Dataset is returned as is.
+        ValueError names the observation and field."""
         if isinstance(d, Dataset):
             return d
         return cls(_core.Dataset.from_json(dumps(d)))
 
     def to_dict(self) -> dict:
+        """The dataset as a JSON-ready dict (DESIGN.md format, mm / degrees)."""
         if self._dict is None:
             self._dict = json.loads(self._core.to_json())
         return self._dict
 
     @property
     def machine(self) -> Machine:
+        """The machine the observations were taken on."""
         return Machine(self._core.machine)
 
     @property
     def observations(self) -> list:
+        """Observation dicts (type, target or setup, axes in mm / degrees, ...)."""
         return self.to_dict()["observations"]
 
     @property
     def artefact(self) -> dict:
+        """Facets, spheres and scale bars (mm, workpiece frame)."""
         return self.to_dict()["artefact"]
 
     @property
     def observation_types(self) -> list:
+        """The type of each observation (``facet``, ``sphere``, ``dbb``, ``ball3d``, ...)."""
         return self._core.observation_types
 
     def __len__(self) -> int:
@@ -87,6 +95,7 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
 
 
 def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
+    """Write a dataset (validated first) as JSON in the DESIGN.md format."""
     ds = Dataset.from_dict(ds)
     with open(os.fspath(path), "w") as f:
         json.dump(ds.to_dict(), f, indent=1)
