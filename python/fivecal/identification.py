@@ -54,12 +54,15 @@ class Result:
         return np.asarray(r)
 
     def to_dict(self) -> dict:
+        """The result in the DESIGN.md result format (values and std in mm / rad)."""
         return json.loads(self._core.to_json())
 
     def to_json(self) -> str:
+        """JSON text of :meth:`to_dict`."""
         return self._core.to_json()
 
     def save(self, path) -> None:
+        """Write :meth:`to_json` to ``path`` (the result file ``fivecal compensate`` reads)."""
         with open(path, "w") as f:
             f.write(self.to_json())
             f.write("\n")
