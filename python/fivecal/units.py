@@ -29,5 +29,6 @@ def display_scale(name: str) -> tuple[float, str]:
 
 
 def format_value(name: str, value: float) -> str:
+    """A parameter value (mm / rad based) as report text, e.g. ``'-108.060 µm'``."""
     f, unit = display_scale(name)
     return f"{value * f:.3f} {unit}"
