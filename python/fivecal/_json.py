@@ -27,4 +27,5 @@ def plain(obj, path: str):
 
 
 def dumps(obj, path: str) -> str:
+    """JSON text of :func:`plain` ``(obj, path)``."""
     return json.dumps(plain(obj, path))
