@@ -34,10 +34,15 @@ def example_machine_path(name: str) -> str:
 
 
 def indexation_keys(dataset, axes: str = "BCS") -> list:
+    """Per observation, its rotary indexation as a tuple of whole degrees over ``axes``."""
     return [tuple(round(o["axes"].get(a, 0.0)) for a in axes) for o in dataset.observations]
 
 
 def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
+    """Simulate, identify (S3) and validate the HU40T-like TANGO example and
+    write the report folder ``out`` (report.html, report.txt, result.json,
+    dataset.json, PNGs). Returns the result, the true errors (mm / rad), the
+    held-out and setup-only prediction rms (mm) and the largest |z|."""
     t0 = time.perf_counter()
     say = print if verbose else (lambda *a, **k: None)
     os.makedirs(out, exist_ok=True)
