@@ -163,6 +163,8 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
 
 
 def plot_residual_histogram(result, path: str) -> str:
+    """Histogram of the residuals (µm) with the normal density of the
+    a-posteriori sigma; writes ``path`` (PNG) and returns it."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.5))
     r = result.residuals * 1e3
