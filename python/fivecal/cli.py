@@ -143,6 +143,8 @@ def _one_line(e: BaseException) -> str:
 
 
 def main(argv=None) -> int:
+    """Entry point of the ``fivecal`` command; returns the exit status (0 ok,
+    2 a user error reported in one line, 3 an unexpected failure)."""
     p = argparse.ArgumentParser(prog="fivecal", description="Geometric error identification for "
                                 "five-axis machine tools (units: mm, degrees for rotary commands, rad "
                                 "for angular errors).")
