@@ -30,6 +30,7 @@ const Eigen::MatrixXi* OptionalDirs(const std::optional<Eigen::MatrixXi>& d) {
 }  // namespace
 
 void BindIdentification(py::module_& m);
+void BindDbb(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "fivecal C++ core: machine model, kinematics, identification";
@@ -115,4 +116,5 @@ PYBIND11_MODULE(_core, m) {
       py::arg("start"), py::arg("directions") = py::none());
 
   BindIdentification(m);
+  BindDbb(m);
 }

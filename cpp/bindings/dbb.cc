@@ -1,0 +1,221 @@
+// Bindings of the double ball bar algorithms: circle fits, the Jiang & Cripps
+// four-step test, the Wang et al. path and planar circular tests. Inputs are
+// validated in the core (std::invalid_argument -> ValueError).
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <limits>
+#include <optional>
+#include <stdexcept>
+#include <tuple>
+
+#include "fivecal/circle_fit.h"
+#include "fivecal/circular_test.h"
+#include "fivecal/dataset.h"
+#include "fivecal/dbb_four_step.h"
+#include "fivecal/wang_path.h"
+
+namespace py = pybind11;
+using namespace fivecal;
+
+namespace {
+
+ARemoval ParseRemoval(const std::string& s) {
+  if (s == "full") return ARemoval::kFull;
+  if (s == "position") return ARemoval::kPositionOnly;
+  if (s == "none") return ARemoval::kNone;
+  throw std::invalid_argument("a_removal: '" + s + "' (expected full, position or none)");
+}
+
+Eigen::Vector3d OptionalVector(const std::optional<Eigen::Vector3d>& v) {
+  return v ? *v : Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+}
+
+}  // namespace
+
+void BindDbb(py::module_& m) {
+  py::class_<CircleFit>(m, "CircleFit")
+      .def_readonly("centre", &CircleFit::centre)
+      .def_readonly("radius", &CircleFit::radius)
+      .def_readonly("residuals", &CircleFit::residuals)
+      .def_readonly("rms", &CircleFit::rms)
+      .def_readonly("covariance", &CircleFit::covariance)
+      .def_readonly("iterations", &CircleFit::iterations);
+  m.def(
+      "fit_circle",
+      [](const Eigen::MatrixXd& points, const std::string& method) {
+        if (method == "algebraic") return FitCircleAlgebraic(points);
+        if (method == "geometric") return FitCircleGeometric(points);
+        throw std::invalid_argument("fit_circle.method: '" + method + "' (algebraic or geometric)");
+      },
+      py::arg("points"), py::arg("method") = "algebraic");
+
+  py::class_<FourStepStep>(m, "FourStepStep")
+      .def_readonly("setup", &FourStepStep::setup)
+      .def_property_readonly("axis", [](const FourStepStep& s) { return std::string(1, s.axis); })
+      .def_readonly("extended", &FourStepStep::extended)
+      .def_readonly("spindle_ball", &FourStepStep::spindle_ball)
+      .def_readonly("e1", &FourStepStep::e1)
+      .def_readonly("e2", &FourStepStep::e2)
+      .def_readonly("normal", &FourStepStep::normal)
+      .def_readonly("nominal_radius", &FourStepStep::nominal_radius)
+      .def_readonly("start_angle_error", &FourStepStep::start_angle_error)
+      .def_readonly("arm", &FourStepStep::arm)
+      .def_readonly("angles", &FourStepStep::angles)
+      .def_readonly("points", &FourStepStep::points)
+      .def_readonly("centre", &FourStepStep::centre)
+      .def_readonly("radius", &FourStepStep::radius)
+      .def_readonly("residuals", &FourStepStep::residuals)
+      .def_readonly("rms", &FourStepStep::rms)
+      .def_readonly("centre_covariance", &FourStepStep::centre_covariance)
+      .def_readonly("observations", &FourStepStep::observations);
+  py::class_<FourStepResult>(m, "FourStepResult")
+      .def_readonly("steps", &FourStepResult::steps)
+      .def_readonly("a_oe", &FourStepResult::a_oe)
+      .def_readonly("c_oe", &FourStepResult::c_oe)
+      .def_readonly("a_direction", &FourStepResult::a_direction)
+      .def_readonly("c_direction", &FourStepResult::c_direction)
+      .def_readonly("a_point", &FourStepResult::a_point)
+      .def_readonly("c_point", &FourStepResult::c_point)
+      .def_readonly("a_delta", &FourStepResult::a_delta)
+      .def_readonly("c_delta", &FourStepResult::c_delta)
+      .def_readonly("names", &FourStepResult::names)
+      .def_readonly("values", &FourStepResult::values)
+      .def_readonly("std", &FourStepResult::std)
+      .def_readonly("covariance", &FourStepResult::covariance);
+  m.def(
+      "four_step",
+      [](const Dataset& ds, const std::vector<std::string>& setups,
+         const std::map<std::string, double>& length_offsets, const Eigen::Vector2d& a_pivot_offset,
+         const Eigen::Vector2d& c_pivot_offset, bool uniform_angles, bool refer_positions,
+         const std::string& a_removal) {
+        FourStepOptions o;
+        if (setups.size() != 4)
+          throw std::invalid_argument("setups: expected four ids (A, A extended, C, C extended)");
+        o.a_setup = setups[0];
+        o.a_extended_setup = setups[1];
+        o.c_setup = setups[2];
+        o.c_extended_setup = setups[3];
+        o.length_offsets = length_offsets;
+        o.a_pivot_offset = a_pivot_offset;
+        o.c_pivot_offset = c_pivot_offset;
+        o.uniform_angles = uniform_angles;
+        o.refer_positions = refer_positions;
+        o.a_removal = ParseRemoval(a_removal);
+        py::gil_scoped_release release;
+        return AnalyzeFourStep(ds, o);
+      },
+      py::arg("dataset"), py::arg("setups"), py::arg("length_offsets"), py::arg("a_pivot_offset"),
+      py::arg("c_pivot_offset"), py::arg("uniform_angles"), py::arg("refer_positions"),
+      py::arg("a_removal"));
+  m.def("four_step_parameter_names", &FourStepParameterNames);
+  m.def(
+      "four_step_plan",
+      [](const Machine& mc, double length, double extended_length, double a_start, double a_end,
+         double c_start, double c_end, double step, const std::optional<Eigen::Vector3d>& a_pivot,
+         const std::optional<Eigen::Vector3d>& c_pivot, const std::optional<Eigen::Vector3d>& tool_ball,
+         double a_extension_sign, double c_extension_sign, const std::vector<std::string>& setups) {
+        FourStepPlanOptions o;
+        o.length = length;
+        o.extended_length = extended_length;
+        o.a_start = a_start;
+        o.a_end = a_end;
+        o.c_start = c_start;
+        o.c_end = c_end;
+        o.step = step;
+        o.a_pivot = OptionalVector(a_pivot);
+        o.c_pivot = OptionalVector(c_pivot);
+        o.tool_ball = OptionalVector(tool_ball);
+        o.a_extension_sign = a_extension_sign;
+        o.c_extension_sign = c_extension_sign;
+        if (setups.size() != 4)
+          throw std::invalid_argument("setups: expected four ids (A, A extended, C, C extended)");
+        o.a_setup = setups[0];
+        o.a_extended_setup = setups[1];
+        o.c_setup = setups[2];
+        o.c_extended_setup = setups[3];
+        return FourStepPlanJson(mc, o);
+      },
+      py::arg("machine"), py::arg("length"), py::arg("extended_length"), py::arg("a_start"),
+      py::arg("a_end"), py::arg("c_start"), py::arg("c_end"), py::arg("step"), py::arg("a_pivot"),
+      py::arg("c_pivot"), py::arg("tool_ball"), py::arg("a_extension_sign"),
+      py::arg("c_extension_sign"), py::arg("setups"));
+
+  py::class_<WangPath>(m, "WangPath")
+      .def_property_readonly("tilt_axis", [](const WangPath& p) { return std::string(1, p.tilt_axis); })
+      .def_property_readonly("rotary_axis", [](const WangPath& p) { return std::string(1, p.rotary_axis); })
+      .def_readonly("tracking", &WangPath::tracking)
+      .def_readonly("tilt", &WangPath::tilt)
+      .def_readonly("rotary", &WangPath::rotary)
+      .def_readonly("other_tilt", &WangPath::other_tilt)
+      .def_readonly("other_rotary", &WangPath::other_rotary)
+      .def_readonly("tilt_direction", &WangPath::tilt_direction)
+      .def_readonly("rotary_direction", &WangPath::rotary_direction)
+      .def_readonly("pivot", &WangPath::pivot)
+      .def_readonly("centre", &WangPath::centre)
+      .def_readonly("normal", &WangPath::normal)
+      .def_readonly("e1", &WangPath::e1)
+      .def_readonly("e2", &WangPath::e2)
+      .def_readonly("spindle_ball", &WangPath::spindle_ball)
+      .def_readonly("radius", &WangPath::radius)
+      .def_readonly("height", &WangPath::height)
+      .def_readonly("bar_length", &WangPath::bar_length)
+      .def_readonly("max_circle_error", &WangPath::max_circle_error);
+  m.def(
+      "wang_path",
+      [](const Machine& mc, const Eigen::Vector3d& table_ball, double radius, double height,
+         double start, double end, double step, double start_tilt, double start_rotary) {
+        WangPathOptions o;
+        o.table_ball = table_ball;
+        o.radius = radius;
+        o.height = height;
+        o.start = start;
+        o.end = end;
+        o.step = step;
+        o.start_tilt = start_tilt;
+        o.start_rotary = start_rotary;
+        return ComputeWangPath(mc, o);
+      },
+      py::arg("machine"), py::arg("table_ball"), py::arg("radius"), py::arg("height"),
+      py::arg("start"), py::arg("end"), py::arg("step"), py::arg("start_tilt"),
+      py::arg("start_rotary"));
+
+  py::class_<CircularRunResult>(m, "CircularRunResult")
+      .def_readonly("direction", &CircularRunResult::direction)
+      .def_readonly("centre", &CircularRunResult::centre)
+      .def_readonly("mean_radius", &CircularRunResult::mean_radius)
+      .def_readonly("circular_deviation", &CircularRunResult::circular_deviation)
+      .def_readonly("radial_deviation_max", &CircularRunResult::radial_deviation_max)
+      .def_readonly("radial_deviation_min", &CircularRunResult::radial_deviation_min)
+      .def_readonly("radial", &CircularRunResult::radial);
+  py::class_<CircularDiagnosis>(m, "CircularDiagnosis")
+      .def_readonly("names", &CircularDiagnosis::names)
+      .def_readonly("values", &CircularDiagnosis::values)
+      .def_readonly("std", &CircularDiagnosis::std)
+      .def_readonly("not_fitted", &CircularDiagnosis::not_fitted)
+      .def_readonly("rms", &CircularDiagnosis::rms);
+  py::class_<CircularTestResult>(m, "CircularTestResult")
+      .def_readonly("nominal_radius", &CircularTestResult::nominal_radius)
+      .def_readonly("runs", &CircularTestResult::runs)
+      .def_readonly("hysteresis", &CircularTestResult::hysteresis)
+      .def_readonly("has_hysteresis", &CircularTestResult::has_hysteresis)
+      .def_readonly("diagnosis", &CircularTestResult::diagnosis);
+  m.def(
+      "circular_test",
+      [](const std::vector<std::tuple<Eigen::VectorXd, Eigen::VectorXd, int>>& runs, double radius,
+         double feed) {
+        std::vector<CircularRun> rs;
+        for (const auto& t : runs) {
+          CircularRun r;
+          r.angles = std::get<0>(t);
+          r.readings = std::get<1>(t);
+          r.direction = std::get<2>(t);
+          rs.push_back(r);
+        }
+        return AnalyzeCircularTest(rs, radius, feed);
+      },
+      py::arg("runs"), py::arg("radius"), py::arg("feed") = 0.0);
+  m.def("trace_harmonics", &TraceHarmonics, py::arg("angles"), py::arg("values"),
+        py::arg("max_order"));
+}
