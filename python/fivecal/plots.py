@@ -152,7 +152,7 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
         labels = ["(" + ", ".join(f"{v:g}" for v in k) + ")" for k in uniq]
         ncol = 1 if len(uniq) <= 28 else 2
         axl.legend(handles, labels, loc="upper left", fontsize=8 if len(uniq) <= 28 else 7, ncol=ncol,
-                   title=f"indexation ({', '.join(rot)}), deg", title_fontsize=9, frameon=False,
+                   title=f"{', '.join(rot)} (deg)", title_fontsize=9, frameon=False,
                    handlelength=1.2, columnspacing=0.8)
     rms = float(np.sqrt(np.mean(np.square(result.residuals)))) if np.size(result.residuals) else 0.0
     fig.suptitle(f"{title}\nmagnified {mag:g}x; residual rms {rms * 1e3:.2f} µm, largest vector "

@@ -78,6 +78,10 @@ def _img_tag(path: str, out_dir: str, embed: bool, alt: str) -> str:
     return f'<img src="{_e(src)}" alt="{_e(alt)}">'
 
 
+def _count(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 def _kind(machine_names: set, machine, name: str) -> str:
     if name in machine_names:
         return machine.parameter_kind(name)
@@ -120,8 +124,8 @@ def _data_section(dataset, result) -> str:
     rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none"),
             ("residual rows", f"{len(result.residuals)} (observations plus scale bars)"),
             ("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"),
-            ("artefact", f"{len(art.get('facets', []))} facets, {len(art.get('spheres', []))} spheres, "
-                         f"{len(art.get('scale_bars', []))} scale bars"),
+            ("artefact", ", ".join(_count(len(art.get(k, [])), w) for k, w in
+                                   (("facets", "facet"), ("spheres", "sphere"), ("scale_bars", "scale bar")))),
             ("targets touched", f"{len(targets)}" + (f": {', '.join(map(str, targets[:40]))}"
                                                       + (" …" if len(targets) > 40 else "") if targets else "")),
             ("probe tip radius", f"{tip_r:g} mm" if tip_r is not None else "–")]
@@ -178,24 +182,31 @@ def _identifiability_section(result) -> str:
                      f"parameters are separable (rank {result.rank}, condition number "
                      f"{result.condition_number:.3g}).</div>")
     pairs = _strong_pairs(result, limit=100000)
-    machine_names = set(result.dataset.machine.parameter_names())
-    shown = [p for p in pairs if (p[0] in machine_names and not p[0].startswith("tip."))
-             or (p[1] in machine_names and not p[1].startswith("tip."))][:15]
-    rest = len(pairs) - len(shown)
+    machine_names = set(result.dataset.machine.parameter_names())  # includes tip.x|y|z
+    both = [p for p in pairs if p[0] in machine_names and p[1] in machine_names][:20]
+    mixed: dict = {}
+    for a, b, r in pairs:
+        if (a in machine_names) != (b in machine_names):
+            m, o = (a, b) if a in machine_names else (b, a)
+            mixed.setdefault(m, []).append((o, r))
+    setup_only = [p for p in pairs if p[0] not in machine_names and p[1] not in machine_names]
     if pairs:
         parts.append("<h3>Strongly correlated pairs (|r| ≥ 0.9)</h3><p class='muted'>Identifiable, but "
                      "their uncertainties are inflated by the correlation.</p>")
-    if shown:
-        parts.append("<table><tr><th>parameter</th><th>parameter</th><th>r</th></tr>")
-        parts += [f"<tr><td>{_e(a)}</td><td>{_e(b)}</td><td class='num'>{r:+.3f}</td></tr>"
-                  for a, b, r in shown]
+    rows = [(a, b, f"{r:+.3f}") for a, b, r in both]
+    for m, lst in mixed.items():
+        o, r = lst[0]
+        more = f" and {len(lst) - 1} more setup parameters (|r| ≥ 0.9)" if len(lst) > 1 else ""
+        rows.append((m, o + more, f"{r:+.3f}"))
+    if rows:
+        parts.append("<table><tr><th>parameter</th><th>correlated with</th><th>r</th></tr>")
+        parts += [f"<tr><td>{_e(a)}</td><td>{_e(b)}</td><td class='num'>{r}</td></tr>" for a, b, r in rows]
         parts.append("</table>")
-    if rest > 0:
-        setup_only = [p for p in pairs if p not in shown]
+    if setup_only:
         names = sorted({n for a, b, _ in setup_only for n in (a, b)})
-        parts.append(f"<p>{rest} {'further ' if shown else ''}pair{'s' if rest != 1 else ''} among setup "
-                     f"parameters ({_e(', '.join(names[:12]))}{' …' if len(names) > 12 else ''}), "
-                     "typically the probe tip length against the facet offsets.</p>")
+        parts.append(f"<p>{len(setup_only)} pair{'s' if len(setup_only) != 1 else ''} among setup "
+                     f"parameters only ({_e(', '.join(names[:10]))}{' …' if len(names) > 10 else ''}), "
+                     "typically artefact offsets against each other.</p>")
     return "".join(parts)
 
 
