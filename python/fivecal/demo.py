@@ -103,9 +103,9 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
 
     s1_png = plot_residual_vectors(nominal, os.path.join(out, "residuals_S1.png"),
                                    title="Unexplained residuals, subset S1 (setup only)")
+    held_text = "; ".join(f"B {b}°, C {c}°, S {s}°" for b, c, s in sorted(held))
     validation = (f"<p>{len(test_idx)} touches at five indexations held out of the fit "
-                  f"{', '.join(map(str, sorted(held)))} (B, C, S in degrees), predicted from the "
-                  "identified values:</p>"
+                  f"({held_text}), predicted from the identified values:</p>"
                   + table_html(["model", "held-out residual rms (µm)", "fit residual rms (µm)"],
                                [["S1: setup only (tip, facets, spheres)", f"{rms(pred_nominal) * 1e3:.2f}",
                                  f"{nominal.rms * 1e3:.2f}"],
