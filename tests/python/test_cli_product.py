@@ -65,7 +65,7 @@ def bad_invocations(d):
         ("identify", [d / "bad.json"], "bad.json"),
         ("identify", [d / "list.json"], "list.json"),
         ("identify", [d / "ds.json", "--estimate", "EQ0C"], "EQ0C"),
-        ("identify", [d / "ds.json", "--estimate", "EX0B,tip.x"], "tip.x"),
+        ("identify", [d / "ds.json", "--estimate", "EX0Y,EX0S"], "{EX0Y, EX0S}"),
         ("simulate", [d / "bad.json", "--out", d / "x.json"], "bad.json"),
         ("simulate", [d / "list.json", "--out", d / "x.json"], "list.json"),
         ("simulate", ["/no/such/spec.json", "--out", d / "x.json"], "spec.json"),
