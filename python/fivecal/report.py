@@ -401,6 +401,9 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
              "rad, one-sigma std)</li>" if write_result_json else "",
              "".join(f"<li><a href='{_e(os.path.basename(pth))}'>{_e(os.path.basename(pth))}</a></li>"
                      for pth, _ in figs if os.path.dirname(os.path.abspath(pth)) == os.path.abspath(out_dir)),
+             "".join(f"<li><a href='{_e(f)}'>{_e(f)}</a></li>" for f in sorted(os.listdir(out_dir))
+                     if f not in ("result.json", "report.html") and not f.startswith("_")
+                     and os.path.splitext(f)[1] in (".json", ".txt", ".csv", ".nc")),
              "</ul>"]
     doc = ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
            "<meta name='viewport' content='width=device-width, initial-scale=1'>"
