@@ -134,6 +134,13 @@ def _demo(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (the subcommand parsers share it)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _one_line(e: BaseException) -> str:
     if isinstance(e, OSError) and e.filename is not None and e.strerror:
         text = f"{e.filename}: {e.strerror}"
@@ -145,7 +152,7 @@ def _one_line(e: BaseException) -> str:
 def main(argv=None) -> int:
     """Entry point of the ``fivecal`` command; returns the exit status (0 ok,
     2 a user error reported in one line, 3 an unexpected failure)."""
-    p = argparse.ArgumentParser(prog="fivecal", description="Geometric error identification for "
+    p = _Parser(prog="fivecal", description="Geometric error identification for "
                                 "five-axis machine tools (units: mm, degrees for rotary commands, rad "
                                 "for angular errors).")
     p.add_argument("--version", action="version", version=f"fivecal {__version__}")
