@@ -61,6 +61,8 @@ def files(tmp_path_factory):
 
 def bad_invocations(d):
     return [
+        ("identify", [], "required: dataset"),                       # usage errors too
+        ("compensate", ["r.json", "m.json", "--decimals", "x"], "--decimals"),
         ("identify", ["/no/such/file.json"], "/no/such/file.json"),
         ("identify", [d / "bad.json"], "bad.json"),
         ("identify", [d / "list.json"], "list.json"),
