@@ -30,7 +30,9 @@ const Eigen::MatrixXi* OptionalDirs(const std::optional<Eigen::MatrixXi>& d) {
 }  // namespace
 
 void BindIdentification(py::module_& m);
+void BindUncertainty(py::module_& m);
 void BindDbb(py::module_& m);
+void BindDesign(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "fivecal C++ core: machine model, kinematics, identification";
@@ -116,5 +118,7 @@ PYBIND11_MODULE(_core, m) {
       py::arg("start"), py::arg("directions") = py::none());
 
   BindIdentification(m);
+  BindUncertainty(m);
   BindDbb(m);
+  BindDesign(m);
 }
