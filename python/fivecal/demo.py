@@ -91,7 +91,8 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
     pred_nominal = nominal.predict(test)
     rms = lambda x: float(np.sqrt(np.mean(np.square(x))))
     lines += ["",
-              f"  validation on {len(test_idx)} touches at 5 held-out indexations {sorted(held)}:",
+              f"  validation on {len(test_idx)} touches at 5 held-out indexations (B, C, S in deg) "
+              f"{', '.join(map(str, sorted(held)))}:",
               f"    setup-only model (S1) predicts them to {rms(pred_nominal) * 1e3:.2f} µm rms, "
               f"the identified S3 model to {rms(pred) * 1e3:.2f} µm rms"]
     text = report + "\n" + "\n".join(lines)
