@@ -23,7 +23,16 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
     }
   }
   const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Js, Eigen::ComputeThinV);
+  // A tall Jacobian is reduced to its p x p triangular factor first: same
+  // singular values and right vectors, and the SVD then costs O(p^3), not O(n p^2).
+  Eigen::MatrixXd reduced;
+  if (Js.rows() > p) {
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(Js);
+    reduced = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+  } else {
+    reduced = Js;
+  }
+  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
   const Eigen::VectorXd s = svd.singularValues();
   // Thin SVD of an n x p matrix with n < p has only n singular values.
   out.singular_values = Eigen::VectorXd::Zero(p);
@@ -55,11 +64,7 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
   };
   std::vector<bool> involved(p, false);
   Eigen::MatrixXd null_space(p, 0);
-  if (out.rank < p) {
-    // Null space: right singular vectors beyond the rank (full V when n < p).
-    Eigen::JacobiSVD<Eigen::MatrixXd> full(Js, Eigen::ComputeFullV);
-    null_space = full.matrixV().rightCols(p - out.rank);
-  }
+  if (out.rank < p) null_space = V.rightCols(p - out.rank);  // beyond the rank (full V)
   for (int c = 0; c < null_space.cols(); ++c) {
     const Eigen::VectorXd v = null_space.col(c);
     const double vmax = v.cwiseAbs().maxCoeff();

@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "fivecal/identifiability.h"
+#include "fivecal/kinematic_model.h"
 #include "fivecal/kinematics.h"
 #include "fivecal/problem.h"
 #include "json_util.h"
@@ -101,8 +102,8 @@ void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const Param
   const int n = static_cast<int>(ds.observations.size());
   res->residual_vectors = Eigen::MatrixXd::Zero(n, 3);
   res->points = Eigen::MatrixXd::Zero(n, 3);
-  const Eigen::VectorXd theta = values.head(m.num_parameters());
-  const Eigen::Vector3d tip = TipWithOffsets<double>(m, theta.data());
+  const KinematicModel model(m, values.data());
+  const Eigen::Vector3d tip = model.tip();
   int row = 0;
   for (int i = 0; i < n; ++i) {
     const Observation& o = ds.observations[i];
@@ -117,7 +118,7 @@ void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const Param
         table_ball[c] += values[mt[4 + c]];
       }
     }
-    ToolInWorkpiece<double>(m, theta.data(), pose.q.data(), pose.dir.data(), t, &P);
+    P = model.ToolPoint(pose.q.data(), pose.dir.data(), t);
     res->points.row(i) = P.transpose();
     Eigen::Vector3d dir = Eigen::Vector3d::Zero();
     switch (o.type) {
@@ -170,14 +171,14 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   const int p = static_cast<int>(est.size());
 
   // Identifiability at the starting point: refuse to return garbage.
+  std::unique_ptr<Problem> problem = std::make_unique<Problem>(ds, table, values, est);
   {
-    Problem check(ds, table, values, est);
     Eigen::VectorXd r;
     Eigen::MatrixXd J;
-    check.Evaluate(&r, &J);
-    if (check.num_rows() < p && !opt.allow_unidentifiable)
+    problem->Evaluate(&r, &J);
+    if (problem->num_rows() < p && !opt.allow_unidentifiable)
       throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
-                                  std::to_string(check.num_rows()) + " residuals");
+                                  std::to_string(problem->num_rows()) + " residuals");
     const Identifiability id = AnalyzeJacobian(J, opt.rank_tolerance);
     for (const auto& g : id.confounded) {
       std::vector<std::string> names;
@@ -195,7 +196,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   }
 
   ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_QR;
+  // Normal equations: the problems are small and dense, and with Jacobi
+  // scaling the squared condition number stays far from double precision.
+  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   so.max_num_iterations = opt.max_iterations;
   so.function_tolerance = 1e-15;
   so.parameter_tolerance = 1e-12;
@@ -203,19 +206,17 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   so.num_threads = std::max(1, opt.num_threads);
   so.logging_type = ceres::SILENT;
 
-  auto solve = [&](const std::string& robust, double scale) {
-    auto problem = std::make_unique<Problem>(ds, table, values, est, robust, scale);
+  auto run = [&](Problem* pr) {
     ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem->ceres_problem(), &summary);
-    values = problem->values();
+    ceres::Solve(so, &pr->ceres_problem(), &summary);
+    values = pr->values();
     res.converged = summary.termination_type == ceres::CONVERGENCE;
     res.iterations += static_cast<int>(summary.iterations.size()) - 1;
     res.message = summary.message;
     if (res.initial_cost == 0) res.initial_cost = summary.initial_cost;
     res.final_cost = summary.final_cost;
-    return problem;
   };
-  std::unique_ptr<Problem> problem = solve("", 0.0);
+  run(problem.get());
   if (!opt.robust.empty() && opt.robust != "none") {
     double scale = opt.robust_scale;
     if (!(scale > 0)) {
@@ -228,7 +229,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
       if (!(scale > 0)) scale = 1e-6;
     }
     res.robust_scale = scale;
-    problem = solve(opt.robust, scale);
+    problem = std::make_unique<Problem>(ds, table, values, est, opt.robust, scale);
+    run(problem.get());
   }
 
   Eigen::VectorXd r;

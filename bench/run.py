@@ -1,0 +1,234 @@
+"""fivecal benchmark harness.
+
+    python3 bench/run.py              # all cases, writes bench/results.json, prints a table
+    python3 bench/run.py --quick      # smaller sizes (a smoke run)
+    python3 bench/run.py --readme     # also rewrite the README's performance section
+
+Every case runs fivecal and the numpy/SciPy baseline (bench/baseline_numpy.py)
+in this process on the same data, checks they agree, and records medians of
+at least 5 runs, the problem sizes and the ratio baseline / fivecal.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+import fivecal  # noqa: E402
+from fivecal import tango  # noqa: E402
+
+import baseline_numpy as base  # noqa: E402
+
+
+def timed(fn, repeat=5):
+    """Median wall time (s) of `repeat` runs and the last return value."""
+    times, out = [], None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times), times, out
+
+
+def machine_info():
+    cpu = platform.processor()
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    import scipy
+
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "numpy": np.__version__, "scipy": scipy.__version__, "fivecal": fivecal.__version__,
+            "platform": platform.platform(), "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+
+
+# ---- cases -------------------------------------------------------------------
+
+def case_forward_kinematics(n, repeat):
+    m = tango.hu40t_machine()
+    errors = tango.thesis_s4_errors()
+    rng = np.random.default_rng(0)
+    axes = {"X": rng.uniform(-300, 300, n), "Y": rng.uniform(-300, 300, n), "Z": rng.uniform(-300, 300, n),
+            "B": rng.uniform(-90, 90, n), "C": rng.uniform(-360, 360, n), "S": rng.uniform(0, 360, n)}
+    q = m.axes_matrix(axes)
+    theta = m.theta(errors)
+    dirs = np.zeros((n, len(m.axis_names)), dtype=np.int32)
+    t_f, runs_f, p_f = timed(lambda: fivecal._core.tool_poses(m._core, theta, q, dirs)[0], repeat)
+    nm = base.NumpyMachine(m)
+    qi = q.copy()
+    for i, a in enumerate(m.axis_names):
+        if m.is_rotary(a):
+            qi[:, i] = np.deg2rad(qi[:, i])
+    t_b, runs_b, p_b = timed(lambda: nm.tool_points(qi, errors), repeat)
+    diff = float(np.abs(p_f - p_b).max())
+    assert diff < 1e-9, f"forward kinematics disagree by {diff} mm"
+    return {"case": "forward_kinematics", "size": {"poses": n, "parameters_nonzero": len(errors)},
+            "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
+            "fivecal_poses_per_s": n / t_f, "baseline_poses_per_s": n / t_b,
+            "max_difference_mm": diff, "runs_fivecal_s": runs_f, "runs_baseline_s": runs_b,
+            "note": "single thread; fivecal time includes the Python call and array conversion"}
+
+
+def case_tango(subset, repeat, baseline_repeat):
+    errors = tango.thesis_s4_errors() if subset == "S4" else tango.thesis_s3_errors()
+    ds = tango.hu40t_dataset(errors=errors, seed=3)
+    t_f, runs_f, r = timed(lambda: fivecal.identify(ds, subset), repeat)
+    names = r.estimated
+    prob = base.NumpyProblem(ds)
+    t_b, runs_b, sol = timed(lambda: base.fit(prob.residuals, names), baseline_repeat)
+    # The baseline must find the same optimum (the fivecal values are its reference).
+    fitted = dict(zip(names, sol.x))
+    z = max(abs(fitted[n] - r.values[n]) / r.std[n] for n in names)
+    return {"case": f"tango_{subset}", "size": {"touches": len(ds), "unknowns": len(names),
+                                                "rows": r.n_observations},
+            "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
+            "fivecal_iterations": r.iterations, "baseline_function_evaluations": int(sol.nfev),
+            "max_difference_in_sigma": float(z), "runs_fivecal_s": runs_f, "runs_baseline_s": runs_b,
+            "note": "fivecal time is identify() end to end: identifiability check, fit, covariance"}
+
+
+def case_ball3d(n, repeat, baseline):
+    m = fivecal.Machine.load(os.path.join(HERE, "..", "examples", "machines", "c600u.json"))
+    true = {"EB0A": 3e-5, "EA0C": 4e-5, "EB0C": -2e-5, "EY0C": -0.012}
+    rng = np.random.default_rng(1)
+    axes = {"X": np.zeros(n), "Y": np.zeros(n), "Z": np.zeros(n), "A": rng.uniform(-90, 90, n),
+            "C": rng.uniform(0, 360, n)}
+    tool, table = [0.0, 0.0, 150.0], [50.0, 0.0, 80.0]
+    meas = m.tool_point(axes, true, tip=tool) - np.array(table) + rng.normal(0, 5e-4, (n, 3))
+    ds = fivecal.ball_dataset(m, "ball3d", axes, tool, table, measured=meas, setup="R1")
+    names = list(true)
+    t_f, runs_f, r = timed(lambda: fivecal.identify(ds, names, default_setup=False), repeat)
+    out = {"case": f"ball3d_fit_{n}", "size": {"samples": n, "rows": 3 * n, "unknowns": len(names)},
+           "fivecal_s": t_f, "runs_fivecal_s": runs_f,
+           "fivecal_us_per_sample": 1e6 * t_f / n}
+    if baseline:
+        nm = base.NumpyMachine(m)
+        q = m.axes_matrix(axes)
+        q[:, [m.axis_names.index("A"), m.axis_names.index("C")]] = np.deg2rad(
+            q[:, [m.axis_names.index("A"), m.axis_names.index("C")]])
+        fun = lambda v: base.ball3d_residuals(nm, q, tool, table, meas, v)  # noqa: E731
+        t_b, runs_b, sol = timed(lambda: base.fit(fun, names), repeat)
+        z = max(abs(sol.x[i] - r.values[k]) / r.std[k] for i, k in enumerate(names))
+        out.update({"baseline_s": t_b, "ratio": t_b / t_f, "runs_baseline_s": runs_b,
+                    "max_difference_in_sigma": float(z)})
+    return out
+
+
+def optional_cases(quick, repeat):
+    """Monte Carlo and design search, when those modules are present."""
+    out = []
+    try:
+        from fivecal import uncertainty  # noqa: F401
+    except ImportError:
+        out.append({"case": "monte_carlo", "skipped": "fivecal.uncertainty not available"})
+    try:
+        from fivecal import design  # noqa: F401
+    except ImportError:
+        out.append({"case": "design_search", "skipped": "fivecal.design not available"})
+    return out
+
+
+# ---- output ------------------------------------------------------------------
+
+def table(results):
+    lines = [f"{'case':<26}{'size':<34}{'fivecal':>12}{'baseline':>12}{'ratio':>9}"]
+    for r in results:
+        if "skipped" in r:
+            lines.append(f"{r['case']:<26}skipped: {r['skipped']}")
+            continue
+        size = ", ".join(f"{k} {v}" for k, v in r["size"].items())
+        f = f"{r['fivecal_s'] * 1e3:.2f} ms"
+        b = f"{r['baseline_s'] * 1e3:.1f} ms" if "baseline_s" in r else "-"
+        ratio = f"{r['ratio']:.0f}x" if "ratio" in r else "-"
+        lines.append(f"{r['case']:<26}{size:<34}{f:>12}{b:>12}{ratio:>9}")
+    return "\n".join(lines)
+
+
+def readme_section(doc):
+    res = {r["case"]: r for r in doc["results"]}
+    lines = ["<!-- performance:begin (generated by python3 bench/run.py --readme) -->",
+             f"Measured on {doc['machine']['cpu']} ({doc['machine']['cores']} cores), "
+             f"{doc['machine']['date']}; medians of at least 5 runs, the numpy/SciPy baseline "
+             "(`bench/baseline_numpy.py`: vectorised numpy transforms, `scipy.optimize.least_squares` "
+             "with a finite-difference Jacobian) run in the same process on the same data.", "",
+             "| case | size | fivecal | numpy/SciPy | ratio |", "|---|---|---|---|---|"]
+    for r in doc["results"]:
+        if "skipped" in r:
+            lines.append(f"| {r['case']} | – | not measured: {r['skipped']} | | |")
+            continue
+        size = ", ".join(f"{k} {v}" for k, v in r["size"].items())
+        b = f"{r['baseline_s'] * 1e3:.1f} ms" if "baseline_s" in r else "–"
+        ratio = f"{r['ratio']:.0f}×" if "ratio" in r else "–"
+        lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} |")
+    fk = res.get("forward_kinematics")
+    if fk:
+        lines += ["", f"Forward kinematics: {fk['fivecal_poses_per_s'] / 1e6:.2f} M poses/s on one core "
+                  f"(baseline {fk['baseline_poses_per_s'] / 1e6:.2f} M poses/s)."]
+    scaling = [r for r in doc["results"] if r["case"].startswith("ball3d_fit_")]
+    if scaling:
+        lines += ["", "Fit cost per 3D ball sample: " + ", ".join(
+            f"{r['size']['samples']:.0e} samples {r['fivecal_us_per_sample']:.2f} µs" for r in scaling) + "."]
+    lines.append("<!-- performance:end -->")
+    return "\n".join(lines)
+
+
+def update_readme(doc, path):
+    with open(path) as f:
+        text = f.read()
+    section = readme_section(doc)
+    b, e = "<!-- performance:begin", "<!-- performance:end -->"
+    if b in text:
+        i = text.index(b)
+        j = text.index(e) + len(e)
+        text = text[:i] + section + text[j:]
+    else:
+        text = text.rstrip() + "\n\n## Performance\n\n" + section + "\n"
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    p.add_argument("--readme", action="store_true", help="rewrite the README performance section")
+    p.add_argument("--out", default=os.path.join(HERE, "results.json"))
+    a = p.parse_args(argv)
+    repeat = 5
+    results = []
+    results.append(case_forward_kinematics(20_000 if a.quick else 1_000_000, repeat))
+    print(table(results[-1:]), flush=True)
+    for s in ("S3", "S4"):
+        results.append(case_tango(s, repeat, 1 if a.quick else 5))
+        print(table(results[-1:]), flush=True)
+    for n in ((10_000,) if a.quick else (10_000, 100_000, 1_000_000)):
+        results.append(case_ball3d(n, repeat, baseline=n <= 100_000))
+        print(table(results[-1:]), flush=True)
+    results += optional_cases(a.quick, repeat)
+    doc = {"machine": machine_info(), "quick": a.quick, "results": results}
+    with open(a.out, "w") as f:
+        json.dump(doc, f, indent=1)
+    print()
+    print(table(results))
+    print(f"\nwritten {a.out}")
+    if a.readme:
+        update_readme(doc, os.path.join(HERE, "..", "README.md"))
+        print("README performance section updated")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
