@@ -203,8 +203,8 @@ std::vector<MachiningTest> ZhangZhangTests(const Machine& m, double L, double H)
   const double sa = ua.x() > 0 ? 1.0 : -1.0, sc = uc.z() > 0 ? 1.0 : -1.0;
   auto pose = [&](double alpha, double gamma) {
     Eigen::VectorXd q = Eigen::VectorXd::Zero(m.num_axes());
-    q[a] = sa * alpha;  // Rot(-u, -q) = Rot(u, q)
-    q[c] = sc * gamma;
+    q[a] = sa * alpha + 0.0;  // Rot(-u, -q) = Rot(u, q); + 0.0: no -0
+    q[c] = sc * gamma + 0.0;
     return q;
   };
   const Eigen::Vector3d W(0.0, L, H);

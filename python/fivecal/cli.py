@@ -1,4 +1,4 @@
-"""Command line: fivecal identify | simulate | compensate | demo.
+"""Command line: fivecal identify | simulate | compensate | design | sphere | demo.
 
 Errors are one clear line on stderr (exit status 2), never a traceback
 (set FIVECAL_DEBUG=1 to see one). Long runs draw a progress bar on stderr
@@ -134,6 +134,105 @@ def _demo(args) -> int:
     return 0
 
 
+def _design_spec(path: str) -> dict:
+    from .machine import Machine
+
+    spec = _read_json(path, "design spec")
+    if not isinstance(spec, dict):
+        raise ValueError(f"{path}: expected a JSON object (a simulation spec with a candidate plan)")
+    machine = spec.get("machine")
+    if isinstance(machine, str):  # a path relative to the spec file
+        machine = Machine.load(os.path.join(os.path.dirname(os.path.abspath(path)), machine))
+    if machine is None:
+        raise ValueError(f"{path}: 'machine' missing (a machine object or a path)")
+    spec["machine"] = Machine.from_dict(machine).to_dict()
+    return spec
+
+
+def _design(args) -> int:
+    from . import design
+
+    spec = _design_spec(args.spec)
+    machine, artefact = spec["machine"], spec.get("artefact") or {}
+    tip_radius = float((spec.get("probe") or {}).get("tip_radius", 0.0))
+    groups = None
+    if spec.get("candidates"):
+        c = spec["candidates"]
+        plan, groups = design.candidate_plan(machine, artefact, c.get("indexations", []), tip_radius=tip_radius,
+                                             limits=c.get("limits"), min_dot=c.get("min_dot", -0.02),
+                                             targets=c.get("targets"), sphere_normals=c.get("sphere_normals"))
+        if not plan:
+            raise ValueError(f"{args.spec}: no accessible candidate touch at the given indexations")
+    else:
+        plan = spec.get("plan")
+        if not plan:
+            raise ValueError(f"{args.spec}: give the candidate touches as 'plan' or 'candidates'")
+    try:
+        ks = [int(x) for x in str(args.k).split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"-k: expected a number of indexations or a comma-separated list, got '{args.k}'") from None
+    required = [int(x) for x in args.require.split(",") if x.strip()] if args.require else None
+    pool = design._as_dataset(plan, machine, artefact, tip_radius, None)
+    rows = None
+    for i, k in enumerate(ks):
+        d = design.design_plan(pool, k, args.estimate, groups=groups, fix=args.fix, required=required,
+                               criterion=args.criterion, method=args.method, max_touches=args.max_touches,
+                               sigma=args.sigma, progress=False if args.no_progress else "auto")
+        d.plan = [plan[j] for j in d.observations]
+        if len(ks) == 1:
+            print(d.report())
+        else:
+            if rows is None:
+                print(f"fivecal design ({args.criterion}, estimate {args.estimate}): candidate pool "
+                      f"{len(set(d.pool_groups))} indexations, {d.reference.n_observations} touches")
+                rows = [{"plan": "complete", "indexations": len(set(d.pool_groups)),
+                         "touches": d.reference.n_observations, "condition_number": d.reference.condition_number,
+                         "d_criterion": d.reference.d_criterion, "d_std": d.reference.d_std}]
+            rows.append({"plan": f"designed k={k}", "indexations": len(d.groups), "touches": d.quality.n_observations,
+                         "condition_number": d.quality.condition_number, "d_criterion": d.quality.d_criterion,
+                         "d_std": d.quality.d_std})
+        if args.out:
+            out = args.out.replace("{k}", str(k)) if "{k}" in args.out or len(ks) == 1 else \
+                f"{os.path.splitext(args.out)[0]}_k{k}{os.path.splitext(args.out)[1] or '.json'}"
+            result = dict(spec)
+            result.pop("candidates", None)
+            result["plan"] = d.plan
+            finite = lambda x: x if x == x and abs(x) != float("inf") else None  # noqa: E731
+            result["design"] = {"criterion": args.criterion, "estimate": args.estimate, "k": k,
+                                "condition_number": finite(d.quality.condition_number),
+                                "candidate_condition_number": finite(d.reference.condition_number),
+                                "groups": d.groups}
+            with open(out, "w") as f:
+                json.dump(result, f, indent=1)
+                f.write("\n")
+            print(f"designed plan (a simulation spec) written to {out}")
+    if rows is not None:
+        print(design.format_comparison(rows))
+    return 0
+
+
+def _sphere(args) -> int:
+    from . import cmm
+    from .dataset import load_dataset
+
+    ds = load_dataset(args.dataset)
+    tests = {"nominal model": cmm.sphere_test(ds, None, args.sphere)}
+    if args.values:
+        res = _read_json(args.values, "result")
+        params = res.get("parameters", res) if isinstance(res, dict) else None
+        if not isinstance(params, dict):
+            raise ValueError(f"{args.values}: expected a result JSON with 'parameters'")
+        values = {k: (v["value"] if isinstance(v, dict) else v) for k, v in params.items()}
+        tests["identified model"] = cmm.sphere_test(ds, values, args.sphere)
+    t0 = next(iter(tests.values()))
+    print(f"fivecal sphere test: sphere {t0.sphere}, {len(t0.observations)} touches on {ds.machine.name}")
+    print(cmm.format_sphere_tests(tests))
+    if len(tests) == 2:
+        a, b = (t.fit.out_of_sphericity for t in tests.values())
+        print(f"\nout of sphericity reduced {a / b:.3g}-fold by the identified model" if b > 0 else "")
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line usage errors (the subcommand parsers share it)."""
 
@@ -232,6 +331,47 @@ def main(argv=None) -> int:
     pc.add_argument("--position-only", action="store_true", help="compensate the tool point only; keep the "
                     "rotary axes at their programmed values")
     pc.set_defaults(func=_compensate)
+
+    pg = sub.add_parser("design", help="choose K rotary indexations that minimise the condition number",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        description="Read a simulation spec whose 'plan' is the pool of candidate touches "
+                        "(visits: consecutive touches at one rotary pose), or whose 'candidates' lists "
+                        "indexations ({'indexations': [{'B': 30, 'C': -90}, ...], 'limits': {'X': [-300, 300]}, "
+                        "'min_dot': -0.02}: every facet or sphere touch facing the probe within the axis "
+                        "limits), pick K indexations (greedy, then exchange) and write the chosen plan as "
+                        "a simulation spec. Compares the condition number, a D-optimality figure and the "
+                        "predicted uncertainties of the candidates and of the design (thesis Table 8-4).",
+                        epilog="examples:\n"
+                        "  fivecal design examples/design/hu40t_table_4_2.json -k 14 --estimate S3 "
+                        "--out plan14.json\n"
+                        "  fivecal simulate plan14.json --out plan14_data.json\n"
+                        "  fivecal design examples/design/hu40t_table_4_2.json -k 21,22,23,24,25 "
+                        "   (Table 8-4: several subsets)")
+    pg.add_argument("spec", help="simulation spec JSON with the candidate plan")
+    pg.add_argument("-k", required=True, help="indexations to pick (or a comma-separated list)")
+    pg.add_argument("--estimate", default="S3", help="parameter names and/or presets (default: S3)")
+    pg.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
+    pg.add_argument("--criterion", choices=["condition", "d"], default="condition",
+                    help="minimise the condition number (default) or maximise the D-optimality")
+    pg.add_argument("--method", choices=["exchange", "greedy"], default="exchange")
+    pg.add_argument("--require", default=None, help="candidate visit numbers always kept, comma separated")
+    pg.add_argument("--max-touches", type=int, default=0, help="then drop single touches down to this many")
+    pg.add_argument("--sigma", type=float, default=0.0006, help="probing noise (mm) for the predicted "
+                    "uncertainties (default 0.0006)")
+    pg.add_argument("--no-progress", action="store_true", help="no progress bar")
+    pg.add_argument("--out", help="write the designed plan (a simulation spec) here; '{k}' is replaced by K")
+    pg.set_defaults(func=_design)
+
+    pp = sub.add_parser("sphere", help="machine as a CMM: sphere test with the nominal and identified model",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        description="Express the touches of a precision sphere in the table frame with the "
+                        "nominal model (and with an identification result), fit a sphere by Gauss-Newton "
+                        "and report the out of sphericity and residual statistics (thesis Table 6-3).",
+                        epilog="example:\n  fivecal sphere sphere_data.json --values result.json")
+    pp.add_argument("dataset", help="dataset JSON with sphere touches")
+    pp.add_argument("--values", help="identification result JSON (the compensated model)")
+    pp.add_argument("--sphere", default=None, help="sphere id (default: the only sphere touched)")
+    pp.set_defaults(func=_sphere)
 
     args = p.parse_args(argv)
     debug = os.environ.get("FIVECAL_DEBUG", "") not in ("", "0")
