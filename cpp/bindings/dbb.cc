@@ -14,6 +14,7 @@
 #include "fivecal/circular_test.h"
 #include "fivecal/dataset.h"
 #include "fivecal/dbb_four_step.h"
+#include "fivecal/dbb_setup.h"
 #include "fivecal/wang_path.h"
 
 namespace py = pybind11;
@@ -216,6 +217,23 @@ void BindDbb(py::module_& m) {
         return AnalyzeCircularTest(rs, radius, feed);
       },
       py::arg("runs"), py::arg("radius"), py::arg("feed") = 0.0);
+  m.def(
+      "dbb_ball_positions",
+      [](const Machine& mc, const Eigen::MatrixXd& axes, const Eigen::Vector3d& tool_ball,
+         const Eigen::Vector3d& table_ball) {
+        if (axes.cols() != mc.num_axes())
+          throw std::invalid_argument("axes: expected N x " + std::to_string(mc.num_axes()) + " (" +
+                                      mc.axis_names() + ")");
+        Eigen::MatrixXd S(axes.rows(), 3), B(axes.rows(), 3);
+        for (int i = 0; i < axes.rows(); ++i) {
+          const Eigen::VectorXd q = axes.row(i).transpose();
+          S.row(i) = NominalToolBallInF(mc, q, tool_ball).transpose();
+          B.row(i) = NominalTableBallInF(mc, q, table_ball).transpose();
+        }
+        return py::make_tuple(S, B);
+      },
+      py::arg("machine"), py::arg("axes"), py::arg("tool_ball"), py::arg("table_ball"),
+      "Nominal spindle-ball and table-ball positions in F (N x 3 each, mm).");
   m.def("trace_harmonics", &TraceHarmonics, py::arg("angles"), py::arg("values"),
         py::arg("max_order"));
 }

@@ -37,8 +37,8 @@ namespace fivecal {
 
 struct WangPathOptions {
   Eigen::Vector3d table_ball = Eigen::Vector3d(0, 150, 130);  // workpiece frame (mm)
-  double radius = 100.0;    // rho, radius of the horizontal circle (mm)
-  double height = 0.0;      // H, spindle ball above the circle plane (mm)
+  double radius = 80.0;     // rho, radius of the horizontal circle (mm)
+  double height = 60.0;     // H, spindle ball above the circle plane (mm): a 100 mm bar
   double start = 0.0, end = 540.0, step = 1.0;  // tracking angle (deg)
   double start_tilt = 0.0, start_rotary = 0.0;  // pose before the path (deg)
 };

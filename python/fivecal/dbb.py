@@ -1,0 +1,710 @@
+"""Double ball bar (DBB) tests: the Jiang & Cripps four-step test of the A
+and C axes, the Wang et al. simultaneous A/C path, planar circular tests
+(ISO 230-4 and ballbar diagnosis) and reading import.
+
+The algorithms live in the C++ core (``dbb_four_step.h``, ``wang_path.h``,
+``circular_test.h``, ``circle_fit.h``); this module builds plans, moves
+readings between CSV files, datasets and the core, runs the general engine
+beside the papers' methods and writes reports. Units: mm, degrees for axis
+commands and angles, rad for angular errors; reports show µm and µrad.
+See docs/dbb.md for the formulas and the limits of each method.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _core
+from .dataset import Dataset
+from .machine import Machine
+from .units import display_scale
+
+FOUR_STEP_SETUPS = ("A1", "A2", "C1", "C2")
+FOUR_STEP_PARAMETERS = tuple(_core.four_step_parameter_names())
+#: The four errors Wang et al. (2013) study: the C axis relative to the A axis.
+WANG_ERRORS = ("EX0C", "EY0C", "EZ0C", "EA0C")
+#: What a Wang path could be asked to separate: the C and A location errors and
+#: the placement of both balls.
+WANG_CANDIDATES = ("EX0C", "EY0C", "EZ0C", "EA0C", "EB0C", "EC0C", "EY0A", "EZ0A", "EB0A", "EC0A")
+WANG_SETUP = "W1"
+
+
+def _fmt(name: str, value: float) -> str:
+    f, unit = display_scale(name)
+    return f"{value * f:10.3f} {unit}"
+
+
+# --------------------------------------------------------------------------
+# Traces and CSV import
+# --------------------------------------------------------------------------
+@dataclass
+class Trace:
+    """One DBB run: angles (deg) and readings (mm, bar length minus nominal).
+
+    ``direction``: +1 counter-clockwise (angle increasing), -1 clockwise, 0 unknown.
+    """
+
+    angles: np.ndarray
+    readings: np.ndarray
+    direction: int = 0
+    label: str = ""
+
+    def __post_init__(self):
+        self.angles = np.asarray(self.angles, dtype=float).ravel()
+        self.readings = np.asarray(self.readings, dtype=float).ravel()
+        if self.angles.shape != self.readings.shape:
+            raise ValueError(f"trace {self.label or ''}: {self.angles.size} angles but "
+                             f"{self.readings.size} readings")
+        if self.direction == 0 and self.angles.size > 1:
+            d = self.angles[-1] - self.angles[0]
+            self.direction = 1 if d > 0 else (-1 if d < 0 else 0)
+
+
+def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
+                   sweep: Optional[float] = None, start: float = 0.0) -> Trace:
+    """Read ``angle, reading`` rows (deg, mm) from a CSV file.
+
+    Separators: comma, semicolon, tab or spaces; a header line and ``#``
+    comments are skipped. A file with a single column holds readings only;
+    the angles then follow Jiang & Cripps eq. 2 (``theta_i = i/N * sweep``
+    from ``start``), which needs ``sweep`` (deg, signed).
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, newline="") as f:
+            text = f.read()
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    rows = []
+    for lineno, line in enumerate(text.splitlines(), 1):
+        s = line.split("#", 1)[0].strip()
+        if not s:
+            continue
+        parts = [p for p in s.replace(";", " ").replace(",", " ").replace("\t", " ").split(" ") if p]
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            if not rows:
+                continue  # header
+            raise ValueError(f"{path}:{lineno}: not a number in {line.strip()!r}") from None
+        if len(vals) not in (1, 2):
+            raise ValueError(f"{path}:{lineno}: expected 'angle, reading' (2 columns), got {len(vals)}")
+        if rows and len(vals) != len(rows[0]):
+            raise ValueError(f"{path}:{lineno}: {len(vals)} columns, earlier rows have {len(rows[0])}")
+        if not all(math.isfinite(v) for v in vals):
+            raise ValueError(f"{path}:{lineno}: value is not finite")
+        rows.append(vals)
+    if len(rows) < 3:
+        raise ValueError(f"{path}: {len(rows)} data rows; a trace needs at least 3")
+    a = np.array(rows)
+    if a.shape[1] == 1:
+        if sweep is None:
+            raise ValueError(f"{path}: one column (readings only); give the sweep angle to space "
+                             "the samples evenly (Jiang & Cripps eq. 2)")
+        n = a.shape[0] - 1
+        angles = start + np.arange(a.shape[0]) / n * sweep
+        return Trace(angles, a[:, 0], label=label or os.path.basename(path))
+    return Trace(a[:, 0], a[:, 1], label=label or os.path.basename(path))
+
+
+def write_trace_csv(trace: Trace, path: Union[str, os.PathLike]) -> None:
+    with open(os.fspath(path), "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["angle_deg", "reading_mm"])
+        for a, r in zip(trace.angles, trace.readings):
+            w.writerow([f"{a:.6f}", f"{r:.9f}"])
+
+
+def _dbb_rows(ds: Dataset, setup: str):
+    obs = ds.observations
+    idx = [i for i, o in enumerate(obs) if o.get("type") == "dbb" and o.get("setup", "") == setup]
+    if not idx:
+        setups = sorted({o.get("setup", "") for o in obs if o.get("type") == "dbb"})
+        raise ValueError(f"dataset: no DBB observations with setup {setup!r} "
+                         f"(setups: {', '.join(s or '(default)' for s in setups) or 'none'})")
+    return idx
+
+
+def ball_positions(ds: Dataset, setup: str):
+    """Nominal spindle-ball and table-ball positions in F (N x 3 each, mm) and
+    the observation indices of one DBB setup."""
+    ds = Dataset.from_dict(ds)
+    idx = _dbb_rows(ds, setup)
+    m = ds.machine
+    obs = [ds.observations[i] for i in idx]
+    q = np.array([[o["axes"].get(a, 0.0) for a in m.axis_names] for o in obs])
+    tool = np.asarray(obs[0]["tool_ball"], float)
+    table = np.asarray(obs[0]["table_ball"], float)
+    S, B = _core.dbb_ball_positions(m._core, q, tool, table)
+    return np.asarray(S), np.asarray(B), idx
+
+
+_PLANES = {0: ("Y", "Z"), 1: ("Z", "X"), 2: ("X", "Y")}
+
+
+def trace_from_dataset(ds: Union[Dataset, Mapping], setup: str) -> Trace:
+    """The readings of one DBB setup as a polar trace: the angle of the moving
+    ball about the stationary one, in the plane the moving ball sweeps (YZ,
+    ZX or XY: measured from the first axis towards the second)."""
+    ds = Dataset.from_dict(ds)
+    S, B, idx = ball_positions(ds, setup)
+    moving, fixed = (B, S) if np.ptp(B, axis=0).sum() >= np.ptp(S, axis=0).sum() else (S, B)
+    rel = moving - fixed
+    _, _, vt = np.linalg.svd(rel - rel.mean(axis=0))
+    k = int(np.argmax(np.abs(vt[2])))
+    e = np.eye(3)
+    e1, e2 = e[(k + 1) % 3], e[(k + 2) % 3]
+    ang = np.unwrap(np.arctan2(rel @ e2, rel @ e1))
+    readings = np.array([ds.observations[i]["reading"] for i in idx])
+    t = Trace(np.degrees(ang), readings, label=setup)
+    t.plane = "".join(_PLANES[k])  # type: ignore[attr-defined]
+    return t
+
+
+# --------------------------------------------------------------------------
+# Jiang & Cripps four-step test
+# --------------------------------------------------------------------------
+def four_step_plan(machine: Union[Machine, Mapping], length: float = 100.0,
+                   extended_length: float = 150.0, a_range=(-20.0, 70.0), c_range=(0.0, 359.0),
+                   step: float = 1.0, a_pivot=None, c_pivot=None, tool_ball=None,
+                   a_extension_sign: float = -1.0, c_extension_sign: float = 1.0,
+                   setups: Sequence[str] = FOUR_STEP_SETUPS) -> list:
+    """Plan entries of the four steps for :func:`fivecal.simulate` (and the axis
+    commands of a real test). Defaults follow Jiang & Cripps Section 3.1 and
+    Table 1: A from -20 to 70 deg, C over a full turn, 100 mm bar and 150 mm
+    with the extension; pivots one bar length from the axes."""
+    m = Machine.from_dict(machine)
+    opt = lambda v: None if v is None else np.asarray(v, float)  # noqa: E731
+    return json.loads(_core.four_step_plan(m._core, float(length), float(extended_length),
+                                           float(a_range[0]), float(a_range[1]), float(c_range[0]),
+                                           float(c_range[1]), float(step), opt(a_pivot), opt(c_pivot),
+                                           opt(tool_ball), float(a_extension_sign),
+                                           float(c_extension_sign), list(setups)))
+
+
+class FourStepResult:
+    """The four-step PIGEs, the per-step fits and (optionally) the general
+    engine's fit of the same readings."""
+
+    def __init__(self, core, dataset: Dataset, engine=None, engine_error: Optional[str] = None,
+                 options: Optional[dict] = None):
+        self._core = core
+        self.dataset = dataset
+        self.names: list = list(core.names)
+        self.values: dict = {n: float(v) for n, v in zip(core.names, np.asarray(core.values))}
+        self.std: dict = {n: float(s) for n, s in zip(core.names, np.asarray(core.std))}
+        self.steps = list(core.steps)
+        self.engine = engine
+        self.engine_error = engine_error
+        self.options = options or {}
+
+    @property
+    def a_oe(self) -> np.ndarray:
+        return np.asarray(self._core.a_oe)
+
+    @property
+    def c_oe(self) -> np.ndarray:
+        return np.asarray(self._core.c_oe)
+
+    def step(self, setup: str):
+        for s in self.steps:
+            if s.setup == setup:
+                return s
+        raise KeyError(setup)
+
+    def step_trace(self, setup: str) -> Trace:
+        """Radial deviations from the fitted circle of one step, against the
+        plane angle (deg)."""
+        s = self.step(setup)
+        return Trace(np.degrees(np.asarray(s.angles)), np.asarray(s.residuals), label=setup)
+
+    def to_dict(self) -> dict:
+        d = {"method": "Jiang & Cripps 2015 four-step DBB test",
+             "parameters": {n: {"value": self.values[n], "std": self.std[n]} for n in self.names},
+             "steps": [{"setup": s.setup, "axis": s.axis, "extended": bool(s.extended),
+                        "samples": int(len(s.residuals)), "centre": list(map(float, s.centre)),
+                        "radius": float(s.radius), "fit_rms": float(s.rms),
+                        "start_angle_error": float(s.start_angle_error), "arm": float(s.arm)}
+                       for s in self.steps],
+             "O'E": {"A": list(map(float, self.a_oe)), "C": list(map(float, self.c_oe))},
+             "delta_eq20": {"A": float(self._core.a_delta), "C": float(self._core.c_delta)},
+             "options": self.options}
+        if self.engine is not None:
+            d["engine"] = json.loads(self.engine.to_json())
+        if self.engine_error:
+            d["engine_error"] = self.engine_error
+        return d
+
+    def report(self) -> str:
+        m = self.dataset.machine
+        L = [f"Jiang & Cripps four-step DBB test: {m.name} ({m.topology})", ""]
+        L.append("  step  axis  extension  samples   centre (µm, plane axes)   radius (mm)  "
+                 "fit rms (µm)  d_e (µrad)  |S'O'| (mm)")
+        planes = {"A": "Y,Z", "C": "X,Y"}
+        for s in self.steps:
+            c = np.asarray(s.centre) * 1e3
+            L.append(f"  {s.setup:<5} {s.axis:<5} {'yes' if s.extended else 'no':<10} {len(s.residuals):>6}  "
+                     f"({planes[s.axis]}) {c[0]:9.3f} {c[1]:9.3f}   {s.radius:11.4f}  {s.rms * 1e3:11.3f}  "
+                     f"{s.start_angle_error * 1e6:10.2f}  {s.arm:10.3f}")
+        L.append(f"  O'E (eqs. 18-19): A (Y,Z) = ({self.a_oe[0] * 1e3:.3f}, {self.a_oe[1] * 1e3:.3f}) µm, "
+                 f"C (X,Y) = ({self.c_oe[0] * 1e3:.3f}, {self.c_oe[1] * 1e3:.3f}) µm")
+        L.append(f"  eq. 20 substitution error Delta: A {self._core.a_delta:.2e} mm, "
+                 f"C {self._core.c_delta:.2e} mm")
+        L.append("")
+        eng = self.engine
+        head = f"  {'parameter':<10}{'four-step':>16}{'± std':>10}"
+        if eng is not None:
+            head += f"{'engine':>16}{'± std':>10}{'difference':>14}"
+        L.append(head)
+        for n in self.names:
+            f, unit = display_scale(n)
+            row = f"  {n:<10}{self.values[n] * f:>16.3f}{self.std[n] * f:>10.3f}"
+            if eng is not None and n in eng.values:
+                row += (f"{eng.values[n] * f:>16.3f}{eng.std.get(n, float('nan')) * f:>10.3f}"
+                        f"{(self.values[n] - eng.values[n]) * f:>14.3f}")
+            L.append(row + f"  {unit}")
+        if eng is not None:
+            L.append("")
+            L.append(f"  general engine: {eng.n_observations} readings, {eng.n_parameters} parameters "
+                     f"(with the bar lengths), rank {eng.rank}, condition {eng.condition_number:.3g}, "
+                     f"rms {eng.rms * 1e3:.3f} µm")
+        if self.engine_error:
+            L.append(f"  general engine: not run ({self.engine_error})")
+        L.append("  signs: DESIGN.md (E = Trans.Rz.Ry.Rx); the paper's eq. 18 gives E_B0A with the "
+                 "opposite sign.")
+        return "\n".join(L)
+
+    def __repr__(self) -> str:
+        return "FourStepResult(" + ", ".join(f"{n}={self.values[n]:.4g}" for n in self.names) + ")"
+
+
+def _workpiece_offset(m: Machine, axes: Mapping, offset_f: np.ndarray) -> np.ndarray:
+    """A vector given in F at pose `axes`, expressed in the workpiece frame."""
+    q = np.array([[axes.get(a, 0.0) for a in m.axis_names]])
+    _, b0 = _core.dbb_ball_positions(m._core, q, np.zeros(3), np.zeros(3))
+    R = np.zeros((3, 3))
+    for k in range(3):
+        _, bk = _core.dbb_ball_positions(m._core, q, np.zeros(3), np.eye(3)[k])
+        R[:, k] = np.asarray(bk)[0] - np.asarray(b0)[0]
+    return R.T @ offset_f
+
+
+def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Sequence[str] = FOUR_STEP_SETUPS,
+                 length_offsets: Optional[Mapping[str, float]] = None,
+                 a_pivot_offset=(0.0, 0.0), c_pivot_offset=(0.0, 0.0), uniform_angles: bool = False,
+                 refer_positions: bool = True, a_removal: str = "full", engine: bool = True,
+                 engine_estimate: Optional[Sequence[str]] = None) -> FourStepResult:
+    """Run the four-step analysis (C++ core) on the DBB observations of the
+    setups ``A1 A2 C1 C2`` and, with ``engine=True``, fit the same readings
+    with the general engine (the eight PIGEs plus every setup's bar length).
+
+    ``a_pivot_offset`` (Y, Z) and ``c_pivot_offset`` (X, Y): the pivot's start
+    position error P0P0' (mm) from the planar test around it (eq. 1); the
+    engine gets them as known table-ball offsets. ``length_offsets``:
+    calibrated minus nominal bar length per setup (mm). ``a_removal``:
+    ``full`` | ``position`` | ``none`` (see ``dbb_four_step.h``).
+    """
+    ds = Dataset.from_dict(dataset)
+    setups = list(setups)
+    core = _core.four_step(ds._core, setups, {k: float(v) for k, v in (length_offsets or {}).items()},
+                           np.asarray(a_pivot_offset, float), np.asarray(c_pivot_offset, float),
+                           bool(uniform_angles), bool(refer_positions), str(a_removal))
+    options = {"setups": setups, "a_pivot_offset": list(map(float, a_pivot_offset)),
+               "c_pivot_offset": list(map(float, c_pivot_offset)), "uniform_angles": uniform_angles,
+               "refer_positions": refer_positions, "a_removal": a_removal,
+               "length_offsets": dict(length_offsets or {})}
+    eng, err = None, None
+    if engine:
+        from .identification import identify
+
+        m = ds.machine
+        initial = {}
+        for k, (setup_ids, off) in enumerate(((setups[:2], a_pivot_offset), (setups[2:], c_pivot_offset))):
+            off = np.asarray(off, float)
+            if not np.any(off):
+                continue
+            step = core.steps[2 * k]
+            off_f = off[0] * np.asarray(step.e1) + off[1] * np.asarray(step.e2)
+            first = ds.observations[step.observations[0]]["axes"]
+            w = _workpiece_offset(m, first, off_f)
+            for sid in setup_ids:
+                for c, v in zip("xyz", w):
+                    initial[f"dbb.{sid}.table.{c}"] = float(v)
+        for sid in setups:
+            if length_offsets and sid in length_offsets:
+                initial[f"dbb.{sid}.length"] = float(length_offsets[sid])
+        try:
+            eng = identify(ds, list(engine_estimate or FOUR_STEP_PARAMETERS), initial=initial)
+        except ValueError as e:
+            err = str(e)
+    return FourStepResult(core, ds, eng, err, options)
+
+
+def four_step_dataset(machine: Union[Machine, Mapping], traces: Mapping[str, Trace],
+                      plan: Optional[list] = None, **plan_options) -> Dataset:
+    """A dataset from four CSV traces (angle = the moving axis command in deg,
+    reading in mm), one per setup id, placed on the geometry of
+    :func:`four_step_plan` (same keyword options)."""
+    m = Machine.from_dict(machine)
+    plan = plan or four_step_plan(m, **plan_options)
+    by_setup: dict = {}
+    for e in plan:
+        by_setup.setdefault(e["setup"], []).append(e)
+    obs = []
+    for sid, trace in traces.items():
+        if sid not in by_setup:
+            raise ValueError(f"four-step traces: unknown setup {sid!r} (plan setups: "
+                             f"{', '.join(by_setup)})")
+        template = by_setup[sid][0]
+        axis = next(iter(template["direction"]))
+        for a, r in zip(trace.angles, trace.readings):
+            o = {k: (dict(v) if isinstance(v, dict) else v) for k, v in template.items()}
+            o["axes"][axis] = float(a)
+            o["direction"] = {axis: int(np.sign(trace.direction) or 1)}
+            o["reading"] = float(r)
+            obs.append(o)
+    return Dataset.from_dict({"machine": m.to_dict(), "observations": obs})
+
+
+# --------------------------------------------------------------------------
+# Wang et al. simultaneous A/C path
+# --------------------------------------------------------------------------
+class WangPath:
+    """The path of :func:`wang_path` (C++ ``wang_path.h``)."""
+
+    def __init__(self, core, machine: Machine):
+        self._core = core
+        self.machine = machine
+        self.tilt_axis: str = core.tilt_axis
+        self.rotary_axis: str = core.rotary_axis
+        self.tracking = np.asarray(core.tracking)
+        self.tilt = np.asarray(core.tilt)
+        self.rotary = np.asarray(core.rotary)
+        self.other_tilt = np.asarray(core.other_tilt)
+        self.other_rotary = np.asarray(core.other_rotary)
+        self.tilt_direction = np.asarray(core.tilt_direction)
+        self.rotary_direction = np.asarray(core.rotary_direction)
+        self.centre = np.asarray(core.centre)
+        self.spindle_ball = np.asarray(core.spindle_ball)
+        self.radius: float = core.radius
+        self.height: float = core.height
+        self.bar_length: float = core.bar_length
+        self.max_circle_error: float = core.max_circle_error
+        self.table_ball = np.zeros(3)
+
+    def table(self, every: float = 45.0) -> list:
+        """Rows (tracking angle, tilt, rotary, other branch tilt, rotary,
+        direction of each axis) every ``every`` degrees (Wang et al. Table 1)."""
+        rows = []
+        for i, phi in enumerate(self.tracking):
+            k = (phi - self.tracking[0]) / every
+            if abs(k - round(k)) < 1e-9:
+                rows.append((float(phi), float(self.tilt[i]), float(self.rotary[i]),
+                             float(self.other_tilt[i]), float(self.other_rotary[i]),
+                             int(self.tilt_direction[i]), int(self.rotary_direction[i])))
+        return rows
+
+    def format_table(self, every: float = 45.0) -> str:
+        t, r = self.tilt_axis, self.rotary_axis
+        sgn = {1: "+", -1: "-", 0: "0"}
+        L = [f"Wang et al. path on {self.machine.name}: table ball on a horizontal circle of radius "
+             f"{self.radius:g} mm, centre ({', '.join(f'{x:.3f}' for x in self.centre)}) mm",
+             f"spindle ball at ({', '.join(f'{x:.3f}' for x in self.spindle_ball)}) mm, bar "
+             f"{self.bar_length:.3f} mm; max deviation of the table ball from the circle "
+             f"{self.max_circle_error:.1e} mm",
+             "",
+             f"  {'phi (deg)':>9}  {t + ' (deg)':>11}  {r + ' (deg)':>11}   {'moving':>8}   "
+             f"{'other branch ' + t:>17}  {r:>9}"]
+        for phi, a, c, oa, oc, da, dc in self.table(every):
+            L.append(f"  {phi:9.0f}  {a:11.4f}  {c:11.4f}   {t}{sgn[da]} {r}{sgn[dc]:<3}   {oa:17.4f}  {oc:9.4f}")
+        L.append("  (smallest-move branch; 'moving' is the direction of each axis into the row)")
+        return "\n".join(L)
+
+
+def wang_path(machine: Union[Machine, Mapping], table_ball=(0.0, 150.0, 130.0), radius: float = 80.0,
+              height: float = 60.0, start: float = 0.0, end: float = 540.0, step: float = 1.0,
+              start_pose=(0.0, 0.0)) -> WangPath:
+    """Rotary commands that keep the table ball on a horizontal circle of
+    ``radius`` around the stationary spindle ball, ``height`` mm above its
+    centre; tracking angle from ``start`` to ``end`` deg (Wang et al. 0-540).
+    Defaults (the paper's Table 2 did not survive): table ball 150 mm off the
+    C axis and 130 mm above the A axis, circle radius 80 mm and the spindle
+    ball 60 mm above it, i.e. a 100 mm bar; A then swings between about -25
+    and -73 deg and C between -32 and +32 deg."""
+    m = Machine.from_dict(machine)
+    core = _core.wang_path(m._core, np.asarray(table_ball, float), float(radius), float(height),
+                           float(start), float(end), float(step), float(start_pose[0]),
+                           float(start_pose[1]))
+    p = WangPath(core, m)
+    p.table_ball = np.asarray(table_ball, float)
+    return p
+
+
+def wang_plan(machine: Union[Machine, Mapping], capture=(90.0, 450.0), setup: str = WANG_SETUP,
+              tool_ball=None, path: Optional[WangPath] = None, **path_options) -> list:
+    """DBB plan entries along the Wang path, sampled where the paper captures
+    data (tracking angle 90-450 deg), with the direction of each rotary axis
+    recorded for backlash. The linear axes hold the spindle ball still."""
+    m = Machine.from_dict(machine)
+    p = path or wang_path(m, **path_options)
+    tb = np.asarray(tool_ball if tool_ball is not None else m.tip, float)
+    table_ball = [float(x) for x in p.table_ball]
+    # Linear commands: the nominal inverse puts the tool ball at the spindle ball.
+    lin = m.inverse([p.spindle_ball + (m.tip - tb)], start={a: 0.0 for a in m.axis_names})
+    plan = []
+    for i, phi in enumerate(p.tracking):
+        if phi < capture[0] - 1e-9 or phi > capture[1] + 1e-9:
+            continue
+        axes = {a: float(v[0]) for a, v in lin.items()}
+        axes[p.tilt_axis] = float(p.tilt[i])
+        axes[p.rotary_axis] = float(p.rotary[i])
+        plan.append({"type": "dbb", "setup": setup, "axes": axes, "length": float(p.bar_length),
+                     "direction": {p.tilt_axis: int(p.tilt_direction[i]),
+                                   p.rotary_axis: int(p.rotary_direction[i])},
+                     "tool_ball": [float(x) for x in tb], "table_ball": table_ball,
+                     "tracking": float(phi)})
+    return plan
+
+
+def _plan_for_simulation(plan: list) -> list:
+    return [{k: v for k, v in e.items() if k != "tracking"} for e in plan]
+
+
+@dataclass
+class Pattern:
+    """A simulated trace and its Fourier harmonics (row k: a_k cos + b_k sin, mm)."""
+
+    name: str
+    value: float
+    tracking: np.ndarray
+    readings: np.ndarray
+    harmonics: np.ndarray
+
+    def shift(self) -> np.ndarray:
+        """Centre shift of the polar pattern (first harmonic, mm, along X and Y)."""
+        return self.harmonics[1].copy()
+
+
+def trace_harmonics(angles, values, max_order: int = 4) -> np.ndarray:
+    """Least-squares Fourier coefficients, rows (a_k, b_k), k = 0..max_order."""
+    return np.asarray(_core.trace_harmonics(np.asarray(angles, float), np.asarray(values, float),
+                                            int(max_order)))
+
+
+def wang_patterns(machine: Union[Machine, Mapping], errors: Mapping[str, float], max_order: int = 4,
+                  capture=(90.0, 450.0), **path_options) -> dict:
+    """Noise-free traces of the Wang path for each error alone (name -> value),
+    with their harmonics: the patterns of Wang et al. Section 4."""
+    from .simulation import simulate
+
+    m = Machine.from_dict(machine)
+    plan = wang_plan(m, capture=capture, **path_options)
+    phi = np.array([e["tracking"] for e in plan])
+    out = {}
+    for name, value in errors.items():
+        ds = simulate(m, _plan_for_simulation(plan), errors={name: float(value)})
+        r = np.array([o["reading"] for o in ds.observations])
+        out[name] = Pattern(name, float(value), phi, r, trace_harmonics(phi, r, max_order))
+    return out
+
+
+@dataclass
+class WangIdentification:
+    """Least-squares identification from a whole Wang trace."""
+
+    result: object                       # fivecal.Result for the requested errors
+    confounded: list = field(default_factory=list)  # groups this path cannot separate
+    candidates: list = field(default_factory=list)
+    candidate_rank: int = 0
+
+    def report(self) -> str:
+        L = ["Wang et al. simultaneous A/C DBB test: least squares on the whole trace", "",
+             self.result.report(), "",
+             f"  identifiability of {len(self.candidates)} candidates (rank {self.candidate_rank}):"]
+        if self.confounded:
+            L.append("  this path cannot separate (each line is one confounded group):")
+            for g in self.confounded:
+                L.append("    " + ", ".join(g))
+        else:
+            L.append("  every candidate is separable")
+        return "\n".join(L)
+
+
+def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WANG_ERRORS,
+                  setup: str = WANG_SETUP, candidates: Sequence[str] = WANG_CANDIDATES,
+                  include_ball_placement: bool = True) -> WangIdentification:
+    """Fit ``estimate`` (default the paper's four errors; the bar length is
+    added) to every reading of the trace, then ask the engine which of the
+    ``candidates`` plus the ball placements (``dbb.<setup>.tool|table.x|y|z``)
+    this path can and cannot separate."""
+    from .identification import identify
+
+    ds = Dataset.from_dict(dataset)
+    _dbb_rows(ds, setup)
+    result = identify(ds, list(estimate))
+    cand = list(candidates)
+    if include_ball_placement:
+        cand += [f"dbb.{setup}.{b}.{c}" for b in ("tool", "table") for c in "xyz"]
+    wide = identify(ds, cand, allow_unidentifiable=True)
+    return WangIdentification(result, [list(g) for g in wide.unidentifiable], cand, wide.rank)
+
+
+# --------------------------------------------------------------------------
+# Planar circular tests
+# --------------------------------------------------------------------------
+_DIAG_LABELS = {
+    "radius": ("radius change (bar length + mean scale)", 1e3, "µm"),
+    "centre.1": ("centre offset {a1}", 1e3, "µm"),
+    "centre.2": ("centre offset {a2}", 1e3, "µm"),
+    "scale_mismatch": ("scale mismatch {a1}-{a2}", 1e6, "µm/m"),
+    "squareness": ("squareness {a1}{a2} (angle - 90°)", 1e6, "µrad"),
+    "servo_mismatch": ("servo mismatch (lag {a1} - lag {a2}) x feed", 1e3, "µm"),
+    "backlash.1": ("backlash {a1} (offset in the direction of motion)", 1e3, "µm"),
+    "backlash.2": ("backlash {a2} (offset in the direction of motion)", 1e3, "µm"),
+}
+
+
+class CircularResult:
+    """ISO 230-4 values per run and the least-squares diagnosis."""
+
+    def __init__(self, core, plane: str, feed: Optional[float], traces: list):
+        self._core = core
+        self.plane = plane
+        self.feed = feed
+        self.traces = traces
+        self.nominal_radius: float = core.nominal_radius
+        self.runs = list(core.runs)
+        self.hysteresis: Optional[float] = core.hysteresis if core.has_hysteresis else None
+        d = core.diagnosis
+        self.diagnosis: dict = {n: float(v) for n, v in zip(d.names, np.asarray(d.values))}
+        self.diagnosis_std: dict = {n: float(s) for n, s in zip(d.names, np.asarray(d.std))}
+        self.not_fitted: list = list(d.not_fitted)
+        self.diagnosis_rms: float = d.rms
+
+    @property
+    def servo_mismatch_ms(self) -> Optional[float]:
+        """Lag difference in ms when the feed is known (dtau = l / v)."""
+        if not self.feed or "servo_mismatch" not in self.diagnosis:
+            return None
+        return self.diagnosis["servo_mismatch"] / (self.feed / 60.0) * 1e3
+
+    def run(self, direction: int):
+        for r in self.runs:
+            if r.direction == direction:
+                return r
+        return None
+
+    def summary_lines(self) -> list:
+        """Short ISO 230-4 lines (per run, then the hysteresis) for plots."""
+        L = []
+        for r in self.runs:
+            name = "CCW" if r.direction > 0 else "CW "
+            L.append(f"{name} G {r.circular_deviation * 1e3:6.2f} µm  F {r.radial_deviation_min * 1e3:+6.2f}"
+                     f"/{r.radial_deviation_max * 1e3:+6.2f} µm")
+            L.append(f"    centre ({r.centre[0] * 1e3:+.2f}, {r.centre[1] * 1e3:+.2f}) µm")
+            L.append(f"    mean radius {r.mean_radius:.4f} mm")
+        if self.hysteresis is not None:
+            L.append(f"H (hysteresis) {self.hysteresis * 1e3:.2f} µm")
+        return L
+
+    def report(self) -> str:
+        a1, a2 = self.plane[0], self.plane[1]
+        L = [f"Circular test in the {self.plane} plane, nominal radius {self.nominal_radius:g} mm "
+             f"(angles from +{a1} towards +{a2})", "", "  ISO 230-4:"]
+        for r in self.runs:
+            name = "CCW" if r.direction > 0 else "CW "
+            L.append(f"    {name} circular deviation G {r.circular_deviation * 1e3:8.3f} µm   radial "
+                     f"deviation F max {r.radial_deviation_max * 1e3:+8.3f} µm, min "
+                     f"{r.radial_deviation_min * 1e3:+8.3f} µm")
+            L.append(f"        least-squares circle: centre ({r.centre[0] * 1e3:+.3f}, "
+                     f"{r.centre[1] * 1e3:+.3f}) µm, mean radius {r.mean_radius:.5f} mm")
+        if self.hysteresis is not None:
+            L.append(f"    circular hysteresis H {self.hysteresis * 1e3:.3f} µm")
+        L += ["", "  diagnosis (least squares on every reading; formulas in circular_test.h):"]
+        for n in self.diagnosis:
+            label, f, unit = _DIAG_LABELS[n]
+            L.append(f"    {label.format(a1=a1, a2=a2):<52}{self.diagnosis[n] * f:>10.3f} ± "
+                     f"{self.diagnosis_std[n] * f:.3f} {unit}")
+        if self.servo_mismatch_ms is not None:
+            L.append(f"    {'servo mismatch as a lag difference':<52}{self.servo_mismatch_ms:>10.4f} ms "
+                     f"(feed {self.feed:g} mm/min)")
+        for nf in self.not_fitted:
+            L.append(f"    not fitted: {nf}")
+        L.append(f"    residual rms after the diagnosis {self.diagnosis_rms * 1e3:.3f} µm")
+        return "\n".join(L)
+
+    def to_dict(self) -> dict:
+        return {"plane": self.plane, "nominal_radius": self.nominal_radius, "feed": self.feed,
+                "runs": [{"direction": "CCW" if r.direction > 0 else "CW",
+                          "circular_deviation": float(r.circular_deviation),
+                          "radial_deviation_max": float(r.radial_deviation_max),
+                          "radial_deviation_min": float(r.radial_deviation_min),
+                          "centre": list(map(float, r.centre)), "mean_radius": float(r.mean_radius)}
+                         for r in self.runs],
+                "hysteresis": self.hysteresis,
+                "diagnosis": {n: {"value": v, "std": self.diagnosis_std[n]} for n, v in self.diagnosis.items()},
+                "servo_mismatch_ms": self.servo_mismatch_ms, "not_fitted": self.not_fitted,
+                "diagnosis_rms": self.diagnosis_rms}
+
+
+def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
+                  feed: Optional[float] = None) -> CircularResult:
+    """ISO 230-4 circular deviation, radial deviation, LSC centre and radius per
+    run, hysteresis of a CW/CCW pair, and the least-squares diagnosis of
+    centre offset, scale mismatch, squareness, backlash per axis and servo
+    mismatch (C++ ``circular_test.h``). ``feed`` (mm/min) converts the servo
+    mismatch to a lag difference in ms."""
+    runs = [r for r in runs if r is not None]
+    plane = plane.upper()
+    if plane not in ("XY", "YZ", "ZX", "YX", "ZY", "XZ"):
+        raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")
+    core = _core.circular_test([(r.angles, r.readings, int(r.direction)) for r in runs], float(radius),
+                               float(feed or 0.0))
+    return CircularResult(core, plane, feed, runs)
+
+
+def planar_plan(machine: Union[Machine, Mapping], plane: str = "XY", radius: float = 100.0,
+                centre=None, step: float = 1.0, directions=(1, -1), setup_prefix: str = "P",
+                tool_ball=None) -> list:
+    """DBB plan of planar circular tests: the spindle ball runs a circle of
+    ``radius`` around the table ball ``centre`` (workpiece frame; default the
+    tool tip at the zero pose) with the rotary axes at 0, CCW (+1) and/or CW
+    (-1), one sample per ``step`` degrees, recording each linear axis'
+    direction of motion (for backlash). Setup ids ``P+`` / ``P-``."""
+    m = Machine.from_dict(machine)
+    plane = plane.upper()
+    idx = {"X": 0, "Y": 1, "Z": 2}
+    if len(plane) != 2 or plane[0] not in idx or plane[1] not in idx or plane[0] == plane[1]:
+        raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")
+    tb = np.asarray(tool_ball if tool_ball is not None else m.tip, float)
+    c = np.asarray(centre if centre is not None else m.tip, float)
+    e1, e2 = np.eye(3)[idx[plane[0]]], np.eye(3)[idx[plane[1]]]
+    plan = []
+    for s in directions:
+        phis = np.arange(0.0, 360.0, step) * (1 if s > 0 else -1)
+        pts = np.array([c + radius * (math.cos(math.radians(p)) * e1 + math.sin(math.radians(p)) * e2)
+                        for p in phis])
+        cmd = m.inverse(pts + (m.tip - tb), start={a: 0.0 for a in m.axis_names})
+        for i, p in enumerate(phis):
+            axes = {a: float(v[i]) for a, v in cmd.items()}
+            # Velocity of the circle point: d/dphi (cos, sin) times the direction.
+            vel = s * (-math.sin(math.radians(p)) * e1 + math.cos(math.radians(p)) * e2)
+            direction = {}
+            for ax in m.axes:
+                if ax["type"] != "linear":
+                    continue
+                # Command sign of the motion: a table axis moves the part, so
+                # the tool runs against its direction relative to the part.
+                side = -1.0 if ax["name"] in m.workpiece_chain else 1.0
+                v = side * float(np.dot(vel, ax["direction"]))
+                direction[ax["name"]] = 0 if abs(v) < 1e-12 else int(np.sign(v))
+            plan.append({"type": "dbb", "setup": f"{setup_prefix}{'+' if s > 0 else '-'}", "axes": axes,
+                         "direction": direction, "length": float(radius),
+                         "tool_ball": [float(x) for x in tb], "table_ball": [float(x) for x in c]})
+    return plan

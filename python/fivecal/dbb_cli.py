@@ -1,0 +1,359 @@
+"""``fivecal dbb ...``: double ball bar tests from the command line.
+
+  jiang     Jiang & Cripps four-step test of A and C (and the general engine)
+  wang      Wang et al. simultaneous A/C path: Table 1, patterns, identification
+  circular  planar circular test: ISO 230-4 values and diagnosis
+  plot      polar plot of traces (CSV or a dataset setup)
+
+Errors are one line on stderr (the caller, cli.main, prints them).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+
+import numpy as np
+
+#: Jiang & Cripps Tables 2-3 (positions in mm; orientations read as arc-seconds,
+#: see examples/machines/README.md).
+_ARCSEC = math.pi / (180 * 3600)
+PAPER_JIANG = {"EY0A": 0.0342, "EZ0A": -0.0353, "EB0A": 6.62 * _ARCSEC, "EC0A": 1.89 * _ARCSEC,
+               "EX0C": 0.0013, "EY0C": -0.0525, "EA0C": -22.32 * _ARCSEC, "EB0C": -3.75 * _ARCSEC}
+#: Wang et al. Section 5.1: 7, -5, 6 um before compensation; the angular value did
+#: not survive in the text, 20 urad is assumed.
+PAPER_WANG = {"EX0C": 0.007, "EY0C": -0.005, "EZ0C": 0.006, "EA0C": 20e-6}
+
+
+def _values(text, what: str, paper=None) -> dict:
+    """NAME=VALUE pairs (mm, rad), a JSON file of them, or 'paper'."""
+    if text is None:
+        return {}
+    if text == "paper" and paper is not None:
+        return dict(paper)
+    if os.path.exists(text):
+        with open(text) as f:
+            try:
+                d = json.load(f)
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{text}: invalid JSON ({e.msg})") from None
+        if not isinstance(d, dict):
+            raise ValueError(f"{text}: expected an object name -> value")
+        return {k: float(v) for k, v in d.items()}
+    out = {}
+    for part in text.replace(";", ",").split(","):
+        if not part.strip():
+            continue
+        if "=" not in part:
+            raise ValueError(f"{what}: expected NAME=VALUE pairs, a JSON file or 'paper', got {part!r}")
+        k, v = part.split("=", 1)
+        try:
+            out[k.strip()] = float(v)
+        except ValueError:
+            raise ValueError(f"{what}: {k.strip()}: not a number ({v!r})") from None
+    return out
+
+
+def _vector(text, n: int, what: str):
+    if text is None:
+        return None
+    try:
+        v = [float(x) for x in text.replace(" ", "").split(",")]
+    except ValueError:
+        raise ValueError(f"{what}: expected {n} comma-separated numbers, got {text!r}") from None
+    if len(v) != n:
+        raise ValueError(f"{what}: expected {n} comma-separated numbers, got {len(v)}")
+    return v
+
+
+def _machine(path):
+    from .machine import Machine
+
+    if path is None:
+        raise ValueError("--machine is required here (a machine JSON file)")
+    if not os.path.exists(path):
+        bundled = os.path.join(os.path.dirname(__file__), "examples", "machines", path)
+        if os.path.exists(bundled):
+            path = bundled
+        elif os.path.exists(bundled + ".json"):
+            path = bundled + ".json"
+    return Machine.load(path)
+
+
+def _write_json(d: dict, path: str) -> None:
+    with open(path, "w") as f:
+        json.dump(d, f, indent=1, default=float)
+        f.write("\n")
+
+
+# ---- jiang -----------------------------------------------------------------
+def _jiang(args) -> int:
+    from . import dbb
+    from .dataset import load_dataset, save_dataset
+    from .simulation import simulate
+
+    setups = [s.strip() for s in args.setups.split(",")]
+    if len(setups) != 4:
+        raise ValueError("--setups: four ids (A, A extended, C, C extended), e.g. A1,A2,C1,C2")
+    if args.dataset:
+        ds = load_dataset(args.dataset)
+    else:
+        m = _machine(args.machine)
+        plan = dbb.four_step_plan(m, step=args.step, setups=setups)
+        if args.csv:
+            traces = {}
+            for part in args.csv.split(","):
+                if "=" not in part:
+                    raise ValueError("--csv: expected SETUP=FILE pairs, e.g. A1=a1.csv,A2=a2.csv,...")
+                sid, path = part.split("=", 1)
+                traces[sid.strip()] = dbb.read_trace_csv(path.strip())
+            ds = dbb.four_step_dataset(m, traces, plan)
+        elif args.simulate is not None:
+            errors = _values(args.simulate, "--simulate", PAPER_JIANG)
+            ds = simulate(m, plan, errors=errors, sigma={"dbb": args.sigma}, seed=args.seed)
+        else:
+            raise ValueError("give a DATASET, or --machine with --simulate ERRORS or --csv SETUP=FILE,...")
+        if args.save_dataset:
+            save_dataset(ds, args.save_dataset)
+    res = dbb.jiang_cripps(ds, setups=setups, a_pivot_offset=_vector(args.a_pivot_offset, 2, "--a-pivot-offset") or (0, 0),
+                           c_pivot_offset=_vector(args.c_pivot_offset, 2, "--c-pivot-offset") or (0, 0),
+                           uniform_angles=args.uniform_angles, refer_positions=not args.no_refer,
+                           a_removal=args.a_removal, engine=not args.no_engine)
+    print(res.report())
+    if args.out:
+        _write_json(res.to_dict(), args.out)
+        print(f"\nresult written to {args.out}")
+    if args.plot:
+        from .polar import plot_four_step
+
+        plot_four_step(res, args.plot)
+        print(f"polar plots written to {args.plot}")
+    return 0
+
+
+# ---- wang ------------------------------------------------------------------
+def _wang(args) -> int:
+    from . import dbb
+    from .dataset import load_dataset, save_dataset
+    from .simulation import simulate
+
+    geometry = {"table_ball": _vector(args.table_ball, 3, "--table-ball") or (0.0, 150.0, 130.0),
+                "radius": args.radius, "height": args.height}
+    ds = load_dataset(args.dataset) if args.dataset else None
+    m = ds.machine if ds is not None and args.machine is None else _machine(args.machine)
+    path = dbb.wang_path(m, **geometry)
+    print(path.format_table(args.every))
+    if args.patterns:
+        from .polar import plot_wang_patterns
+
+        sizes = _values(args.pattern_errors, "--pattern-errors") or {"EX0C": 0.01, "EY0C": 0.01,
+                                                                     "EZ0C": 0.01, "EA0C": 50e-6}
+        pats = dbb.wang_patterns(m, sizes, **geometry)
+        plot_wang_patterns(pats, args.patterns, path)
+        print(f"\npatterns written to {args.patterns}")
+    if ds is None and args.simulate is not None:
+        plan = dbb.wang_plan(m, setup=args.setup, path=path)
+        ds = simulate(m, [{k: v for k, v in e.items() if k != "tracking"} for e in plan],
+                      errors=_values(args.simulate, "--simulate", PAPER_WANG),
+                      sigma={"dbb": args.sigma}, seed=args.seed)
+        if args.save_dataset:
+            save_dataset(ds, args.save_dataset)
+    if ds is not None:
+        estimate = [s.strip() for s in args.estimate.split(",")] if args.estimate else list(dbb.WANG_ERRORS)
+        ident = dbb.wang_identify(ds, estimate=estimate, setup=args.setup)
+        print()
+        print(ident.report())
+        if args.out:
+            _write_json({"result": json.loads(ident.result.to_json()), "confounded": ident.confounded,
+                         "candidates": ident.candidates}, args.out)
+            print(f"\nresult written to {args.out}")
+        if args.plot:
+            from .polar import plot_polar
+
+            t = dbb.trace_from_dataset(ds, args.setup)
+            r = ident.result
+            notes = ["identified (least squares):"] + [
+                f"  {n:<6}{r.values[n] * dbb.display_scale(n)[0]:+9.2f} ± "
+                f"{r.std[n] * dbb.display_scale(n)[0]:.2f} {dbb.display_scale(n)[1]}" for n in estimate]
+            plot_polar([t], args.plot, path.bar_length, f"Wang et al. DBB trace, setup {args.setup}",
+                       annotations=notes, plane=tuple(getattr(t, "plane", "XY")))
+            print(f"polar plot written to {args.plot}")
+    return 0
+
+
+# ---- circular --------------------------------------------------------------
+def _circular(args) -> int:
+    from . import dbb
+    from .dataset import load_dataset
+    from .simulation import simulate
+
+    traces = []
+    if args.simulate is not None:
+        m = _machine(args.machine)
+        plan = dbb.planar_plan(m, args.plane, args.radius, step=args.step)
+        ds = simulate(m, plan, errors=_values(args.simulate, "--simulate"), sigma={"dbb": args.sigma},
+                      seed=args.seed)
+        for sid, label in (("P-", "CW"), ("P+", "CCW")):
+            t = dbb.trace_from_dataset(ds, sid)
+            t.label = label
+            traces.append(t)
+    elif args.dataset:
+        ds = load_dataset(args.dataset)
+        for sid in args.setups.split(","):
+            t = dbb.trace_from_dataset(ds, sid.strip())
+            t.label = ("CCW" if t.direction > 0 else "CW") + f" ({sid.strip()})"
+            traces.append(t)
+    else:
+        if not args.runs:
+            raise ValueError("give one or two CSV files (angle, reading), --dataset or --simulate")
+        for path in args.runs:
+            t = dbb.read_trace_csv(path)
+            t.label = ("CCW" if t.direction > 0 else "CW") + f" ({os.path.basename(path)})"
+            traces.append(t)
+    if len(traces) > 2:
+        raise ValueError(f"{len(traces)} runs; give one or two (CW and CCW)")
+    res = dbb.circular_test(traces, args.radius, args.plane, args.feed)
+    print(res.report())
+    if args.out:
+        _write_json(res.to_dict(), args.out)
+        print(f"\nresult written to {args.out}")
+    if args.plot:
+        from .polar import plot_circular_test
+
+        plot_circular_test(res, args.plot)
+        print(f"polar plot written to {args.plot}")
+    return 0
+
+
+# ---- plot ------------------------------------------------------------------
+def _plot(args) -> int:
+    from . import dbb
+    from .dataset import load_dataset
+    from .polar import plot_polar
+
+    traces, plane = [], args.plane
+    for inp in args.inputs:
+        if inp.lower().endswith(".json"):
+            ds = load_dataset(inp)
+            setups = [s.strip() for s in (args.setup or "").split(",") if s.strip()]
+            if not setups:
+                setups = sorted({o.get("setup", "") for o in ds.observations if o.get("type") == "dbb"})
+            for sid in setups:
+                t = dbb.trace_from_dataset(ds, sid)
+                plane = plane or t.plane
+                traces.append(t)
+        else:
+            traces.append(dbb.read_trace_csv(inp))
+    plane = (plane or "XY").upper()
+    out = plot_polar(traces, args.out, args.radius, args.title or "DBB trace", scale=args.scale,
+                     plane=(plane[0], plane[1]))
+    print(f"polar plot written to {out}")
+    return 0
+
+
+def register(sub) -> None:
+    """Add the ``dbb`` subcommand group to the main parser's subparsers."""
+    RD = argparse.RawDescriptionHelpFormatter
+    pd = sub.add_parser("dbb", help="double ball bar tests: jiang, wang, circular, plot", formatter_class=RD,
+                        description="Double ball bar tests (docs/dbb.md).",
+                        epilog="example:\n  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003")
+    dsub = pd.add_subparsers(dest="dbb_command", required=True)
+
+    pj = dsub.add_parser("jiang", formatter_class=RD,
+                         help="Jiang & Cripps four-step test of the A and C axes",
+                         description="Four-step DBB test (A and C, without and with the 50 mm extension): "
+                         "eqs. 1-20 of Jiang & Cripps 2015, then the same readings through the general "
+                         "engine. Input: a dataset with DBB setups A1 A2 C1 C2, four CSV traces "
+                         "(angle = axis command in deg, reading in mm) or a simulation.",
+                         epilog="examples:\n"
+                         "  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003 --plot jiang.png\n"
+                         "  fivecal dbb jiang dataset.json --c-pivot-offset 0,0.8 --out result.json\n"
+                         "  fivecal dbb jiang --machine c600u.json --csv A1=a1.csv,A2=a2.csv,C1=c1.csv,C2=c2.csv")
+    pj.add_argument("dataset", nargs="?", help="dataset JSON with the four DBB setups")
+    pj.add_argument("--machine", help="machine JSON (with --simulate or --csv)")
+    pj.add_argument("--simulate", metavar="ERRORS",
+                    help="simulate the test: NAME=VALUE,... (mm, rad), a JSON file, or 'paper' (Tables 2-3)")
+    pj.add_argument("--csv", metavar="SETUP=FILE,...", help="readings of the four steps from CSV files")
+    pj.add_argument("--sigma", type=float, default=0.0003, help="simulated reading noise, mm (default 0.0003)")
+    pj.add_argument("--seed", type=int, default=1)
+    pj.add_argument("--step", type=float, default=1.0, help="deg between samples of a planned test")
+    pj.add_argument("--setups", default="A1,A2,C1,C2", help="setup ids of the four steps")
+    pj.add_argument("--a-pivot-offset", metavar="DY,DZ", help="A pivot start-position error P0P0' (mm), eq. 1")
+    pj.add_argument("--c-pivot-offset", metavar="DX,DY", help="C pivot start-position error P0P0' (mm), eq. 1")
+    pj.add_argument("--uniform-angles", action="store_true", help="angles from eq. 2 instead of the commands")
+    pj.add_argument("--a-removal", choices=["full", "position", "none"], default="full",
+                    help="how A's errors are removed from C (default full)")
+    pj.add_argument("--no-refer", action="store_true",
+                    help="keep the positions in the pivot plane (do not refer them to the axis points)")
+    pj.add_argument("--no-engine", action="store_true", help="skip the general engine")
+    pj.add_argument("--save-dataset", help="write the simulated / imported dataset here")
+    pj.add_argument("--out", help="write the result JSON here")
+    pj.add_argument("--plot", help="write polar plots of the four steps (PNG)")
+    pj.set_defaults(func=_jiang)
+
+    pw = dsub.add_parser("wang", formatter_class=RD, help="Wang et al. simultaneous A/C test",
+                         description="The A/C path that keeps the table ball on a horizontal circle "
+                         "(Table 1 listing), the simulated patterns of single errors, and least-squares "
+                         "identification from a whole trace with the identifiability report.",
+                         epilog="examples:\n"
+                         "  fivecal dbb wang --machine vmc0656.json --every 45\n"
+                         "  fivecal dbb wang --machine vmc0656.json --patterns wang_patterns.png\n"
+                         "  fivecal dbb wang --machine vmc0656.json --simulate paper --sigma 0.0003 --plot trace.png\n"
+                         "  fivecal dbb wang dataset.json --setup W1")
+    pw.add_argument("dataset", nargs="?", help="dataset JSON with the Wang trace (identify)")
+    pw.add_argument("--machine", help="machine JSON (default: the dataset's machine)")
+    pw.add_argument("--table-ball", metavar="X,Y,Z", help="table ball, workpiece frame (mm); default 0,150,130")
+    pw.add_argument("--radius", type=float, default=80.0, help="circle radius (mm), default 80")
+    pw.add_argument("--height", type=float, default=60.0,
+                    help="spindle ball above the circle plane (mm), default 60 (100 mm bar)")
+    pw.add_argument("--every", type=float, default=45.0, help="table rows every N deg (default 45)")
+    pw.add_argument("--patterns", metavar="PNG", help="write the single-error patterns (polar plots)")
+    pw.add_argument("--pattern-errors", metavar="ERRORS", help="errors for --patterns (default 10 µm, 50 µrad)")
+    pw.add_argument("--simulate", metavar="ERRORS", help="simulate a trace: NAME=VALUE,..., a JSON file or 'paper'")
+    pw.add_argument("--sigma", type=float, default=0.0003, help="simulated reading noise, mm")
+    pw.add_argument("--seed", type=int, default=1)
+    pw.add_argument("--setup", default="W1", help="DBB setup id of the trace (default W1)")
+    pw.add_argument("--estimate", help="errors to identify (default EX0C,EY0C,EZ0C,EA0C)")
+    pw.add_argument("--save-dataset", help="write the simulated dataset here")
+    pw.add_argument("--out", help="write the identification JSON here")
+    pw.add_argument("--plot", help="write the polar plot of the trace (PNG)")
+    pw.set_defaults(func=_wang)
+
+    pc = dsub.add_parser("circular", formatter_class=RD, help="planar circular test (ISO 230-4, diagnosis)",
+                         description="ISO 230-4 circular deviation G, radial deviation F, hysteresis H, "
+                         "least-squares centre and radius, and a least-squares diagnosis of centre offset, "
+                         "scale mismatch, squareness, backlash per axis and servo mismatch. Input: CSV "
+                         "files (angle deg, reading mm; CW and/or CCW), a dataset, or a simulation.",
+                         epilog="examples:\n"
+                         "  fivecal dbb circular cw.csv ccw.csv --radius 100 --plane XY --feed 1000 --plot xy.png\n"
+                         "  fivecal dbb circular --machine c600u.json --simulate EXX1=2e-5,EC0Y=3e-5,EXXb=0.002 "
+                         "--radius 100")
+    pc.add_argument("runs", nargs="*", help="CSV files (angle, reading): one or two runs")
+    pc.add_argument("--radius", type=float, required=True, help="nominal radius = bar length (mm)")
+    pc.add_argument("--plane", default="XY", help="XY, YZ or ZX (angles from the first axis to the second)")
+    pc.add_argument("--feed", type=float, default=None, help="feed (mm/min): servo mismatch as a time")
+    pc.add_argument("--dataset", help="dataset JSON instead of CSV files")
+    pc.add_argument("--setups", default="P-,P+", help="setup ids of the runs in --dataset")
+    pc.add_argument("--machine", help="machine JSON for --simulate")
+    pc.add_argument("--simulate", metavar="ERRORS", help="simulate CW and CCW runs with these errors")
+    pc.add_argument("--sigma", type=float, default=0.0003, help="simulated reading noise, mm")
+    pc.add_argument("--seed", type=int, default=1)
+    pc.add_argument("--step", type=float, default=1.0, help="deg between simulated samples")
+    pc.add_argument("--out", help="write the result JSON here")
+    pc.add_argument("--plot", help="write the CW/CCW polar plot (PNG)")
+    pc.set_defaults(func=_circular)
+
+    pp = dsub.add_parser("plot", formatter_class=RD, help="polar plot of DBB traces",
+                         description="Polar plot of one or more traces: CSV files (angle deg, reading mm) "
+                         "or the DBB setups of a dataset JSON.",
+                         epilog="examples:\n  fivecal dbb plot cw.csv ccw.csv --radius 100 --out xy.png\n"
+                         "  fivecal dbb plot dataset.json --setup W1 --radius 100 --out w1.png")
+    pp.add_argument("inputs", nargs="+", help="CSV files and/or dataset JSON files")
+    pp.add_argument("--radius", type=float, required=True, help="nominal radius (mm)")
+    pp.add_argument("--setup", help="dataset setups to plot (comma separated; default all)")
+    pp.add_argument("--plane", default=None, help="plane labels, e.g. XY (default from the data or XY)")
+    pp.add_argument("--scale", type=float, default=None, help="ring spacing in µm (default automatic)")
+    pp.add_argument("--title", default=None)
+    pp.add_argument("--out", required=True, help="PNG to write")
+    pp.set_defaults(func=_plot)

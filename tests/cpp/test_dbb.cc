@@ -1,0 +1,413 @@
+// Double ball bar algorithms: circle fits (Jiang & Cripps eqs. 5-8), the
+// four-step test against simulated C600U-like readings, the Wang et al.
+// path on the VMC0656-like table, planar circular tests (ISO 230-4 values
+// and the least-squares diagnosis) and trace harmonics.
+//
+// Truth tests simulate known errors with the virtual machine (simulate.h)
+// and check the recovery; the tolerances are the measured approximation
+// errors of docs/dbb.md or 3 sigma with noise.
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "fivecal/circle_fit.h"
+#include "fivecal/circular_test.h"
+#include "fivecal/dataset.h"
+#include "fivecal/dbb_four_step.h"
+#include "fivecal/identify.h"
+#include "fivecal/machine.h"
+#include "fivecal/simulate.h"
+#include "fivecal/wang_path.h"
+
+namespace fivecal {
+namespace {
+
+using nlohmann::json;
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kUm = 1e-3, kUrad = 1e-6;
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+json MachineJson(const char* name) {
+  return json::parse(ReadFile(std::string(FIVECAL_SOURCE_DIR) + "/examples/machines/" + name));
+}
+
+// Jiang & Cripps Tables 2-3 sizes: positions as printed (mm), orientations
+// read as arc-seconds (examples/machines/README.md).
+std::map<std::string, double> PaperPiges() {
+  const double arcsec = kPi / (180.0 * 3600.0);
+  return {{"EY0A", 0.0342},          {"EZ0A", -0.0353},         {"EB0A", 6.62 * arcsec},
+          {"EC0A", 1.89 * arcsec},   {"EX0C", 0.0013},          {"EY0C", -0.0525},
+          {"EA0C", -22.32 * arcsec}, {"EB0C", -3.75 * arcsec}};
+}
+
+Dataset SimulateFourStep(const std::map<std::string, double>& errors, double sigma, int seed,
+                         const std::map<std::string, double>& setup = {}) {
+  const json mj = MachineJson("c600u.json");
+  const Machine m = Machine::FromJson(mj.dump());
+  json spec = {{"machine", mj}, {"errors", errors}, {"setup", setup},
+               {"plan", json::parse(FourStepPlanJson(m))}, {"sigma", {{"dbb", sigma}}}, {"seed", seed}};
+  return Simulate(spec.dump());
+}
+
+// ---- circle fits -----------------------------------------------------------
+
+TEST(CircleFit, AlgebraicAndGeometricRecoverAnExactCircle) {
+  for (double sweep : {2 * kPi, kPi / 2}) {  // full circle and the A test's quarter arc
+    Eigen::MatrixXd p(91, 2);
+    for (int i = 0; i < 91; ++i) {
+      const double t = -0.3 + sweep * i / 90.0;
+      p.row(i) << 0.0342 + 99.99 * std::cos(t), -0.0353 + 99.99 * std::sin(t);
+    }
+    for (const CircleFit& f : {FitCircleAlgebraic(p), FitCircleGeometric(p)}) {
+      EXPECT_NEAR(f.centre.x(), 0.0342, 1e-10);
+      EXPECT_NEAR(f.centre.y(), -0.0353, 1e-10);
+      EXPECT_NEAR(f.radius, 99.99, 1e-10);
+      EXPECT_LT(f.rms, 1e-10);
+    }
+  }
+}
+
+TEST(CircleFit, CovarianceMatchesTheScatterOfRepeatedFits) {
+  // The first-order covariance must predict the spread of centres over
+  // noisy repetitions of a quarter arc (the A steps), within 20 %.
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.0005);
+  std::vector<double> cx;
+  double predicted = 0;
+  for (int rep = 0; rep < 300; ++rep) {
+    Eigen::MatrixXd p(91, 2);
+    for (int i = 0; i < 91; ++i) {
+      const double t = kPi / 2 * i / 90.0, r = 100 + noise(rng);
+      p.row(i) << r * std::cos(t), r * std::sin(t);
+    }
+    const CircleFit f = FitCircleAlgebraic(p);
+    cx.push_back(f.centre.x());
+    predicted += std::sqrt(f.covariance(0, 0)) / 300;
+  }
+  double mean = 0, var = 0;
+  for (double x : cx) mean += x / cx.size();
+  for (double x : cx) var += (x - mean) * (x - mean) / (cx.size() - 1);
+  EXPECT_NEAR(std::sqrt(var) / predicted, 1.0, 0.2);
+}
+
+TEST(CircleFit, RejectsTooFewOrCollinearPoints) {
+  Eigen::MatrixXd two(2, 2);
+  two << 0, 0, 1, 1;
+  EXPECT_THROW(FitCircleAlgebraic(two), std::invalid_argument);
+  Eigen::MatrixXd line(5, 2);
+  for (int i = 0; i < 5; ++i) line.row(i) << i, 2.0 * i;
+  try {
+    FitCircleAlgebraic(line, "A1 fit");
+    ADD_FAILURE() << "collinear points accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("A1 fit"), std::string::npos);
+  }
+}
+
+// ---- Jiang & Cripps four-step test -----------------------------------------
+
+TEST(FourStep, RecoversThePaperSizedPigesWithoutNoise) {
+  const auto truth = PaperPiges();
+  const FourStepResult r = AnalyzeFourStep(SimulateFourStep(truth, 0.0, 1));
+  ASSERT_EQ(r.names.size(), 8u);
+  for (const auto& [n, v] : truth) {
+    // Approximation error at these sizes (docs/dbb.md): < 0.05 um, < 0.05 urad.
+    const double tol = n[1] == 'A' || n[1] == 'B' || n[1] == 'C' ? 0.05 * kUrad : 0.05 * kUm;
+    EXPECT_NEAR(r.Get(n), v, tol) << n;
+  }
+  EXPECT_LT(r.a_delta, 1e-9);  // eq. 20: negligible, as the paper says
+  EXPECT_LT(r.c_delta, 1e-9);
+  for (const FourStepStep& s : r.steps) EXPECT_LT(s.rms, 1e-4) << s.setup;
+}
+
+TEST(FourStep, FourStepAndEngineBothRecoverTheTruthWithNoise) {
+  const auto truth = PaperPiges();
+  for (int seed : {1, 2}) {
+    const Dataset ds = SimulateFourStep(truth, 0.0003, seed);
+    const FourStepResult r = AnalyzeFourStep(ds);
+    IdentifyOptions opt;
+    opt.estimate = FourStepParameterNames();
+    const Result e = Identify(ds, opt);
+    ASSERT_TRUE(e.converged);
+    for (size_t i = 0; i < r.names.size(); ++i) {
+      const std::string& n = r.names[i];
+      EXPECT_LT(std::abs(r.values[i] - truth.at(n)), 3 * r.std[i]) << "four-step " << n;
+      const auto it = std::find(e.estimated.begin(), e.estimated.end(), n);
+      ASSERT_NE(it, e.estimated.end());
+      const int k = static_cast<int>(it - e.estimated.begin());
+      const int j = static_cast<int>(std::find(e.names.begin(), e.names.end(), n) - e.names.begin());
+      EXPECT_LT(std::abs(e.values[j] - truth.at(n)), 3 * e.std[k]) << "engine " << n;
+      // Both see the same readings: their uncertainties agree within a factor 1.5.
+      EXPECT_NEAR(r.std[i] / e.std[k], 1.0, 0.5) << n;
+    }
+  }
+}
+
+// Where the four-step approximations break (docs/dbb.md, "Four-step
+// approximations"): the error grows with the square of the tilt.
+TEST(FourStep, OrientationApproximationErrorGrowsQuadratically) {
+  const auto paper = PaperPiges();
+  double err_at[3];
+  const double scale[3] = {10, 30, 100};  // 1.1, 3.2, 10.8 mrad largest tilt
+  for (int k = 0; k < 3; ++k) {
+    auto truth = paper;
+    for (auto& [n, v] : truth)
+      if (n[1] == 'A' || n[1] == 'B' || n[1] == 'C') v *= scale[k];
+    const FourStepResult r = AnalyzeFourStep(SimulateFourStep(truth, 0.0, 1));
+    err_at[k] = 0;
+    for (const auto& [n, v] : truth)
+      if (n[1] == 'A' || n[1] == 'B' || n[1] == 'C') err_at[k] = std::max(err_at[k], std::abs(r.Get(n) - v));
+  }
+  EXPECT_LT(err_at[0], 1.0 * kUrad);   // ~1 mrad: below 1 urad
+  EXPECT_LT(err_at[1], 5.0 * kUrad);   // ~3 mrad: the paper's 1" (4.8 urad) repeatability
+  EXPECT_GT(err_at[2], 10.0 * kUrad);  // ~10 mrad: the method has broken down
+  EXPECT_GT(err_at[2] / err_at[0], 30.0);
+}
+
+TEST(FourStep, LargePositionErrorsOvaliseTheCircleFit) {
+  auto truth = PaperPiges();
+  for (auto& [n, v] : truth)
+    if (n[1] == 'X' || n[1] == 'Y' || n[1] == 'Z') v *= 10;  // 0.34 - 0.53 mm
+  const FourStepResult r = AnalyzeFourStep(SimulateFourStep(truth, 0.0, 1));
+  // e^2/R: (0.525 mm)^2 / 100 mm ~ 2.8 um (Zargarbashi & Mayer, the paper's ref. [28]).
+  EXPECT_GT(std::abs(r.Get("EY0A") - truth["EY0A"]), 1.0 * kUm);
+  EXPECT_LT(std::abs(r.Get("EY0A") - truth["EY0A"]), 4.0 * kUm);
+}
+
+TEST(FourStep, SpindleBallPlacementErrorBecomesAnOrientationError) {
+  // 1 um of lateral error of the spindle ball in the extension step tilts the
+  // measured axis by 1 um / |S'O'| = 1/111.8 mm = 8.94 urad.
+  const auto truth = PaperPiges();
+  const FourStepResult r0 = AnalyzeFourStep(SimulateFourStep(truth, 0.0, 1));
+  const FourStepResult r1 = AnalyzeFourStep(SimulateFourStep(truth, 0.0, 1, {{"dbb.A2.tool.y", 0.001}}));
+  const FourStepResult r2 = AnalyzeFourStep(SimulateFourStep(truth, 0.0, 1, {{"dbb.C2.tool.x", 0.001}}));
+  EXPECT_NEAR(r1.Get("EC0A") - r0.Get("EC0A"), 0.001 / std::sqrt(150.0 * 150 - 100 * 100), 0.05 * kUrad);
+  EXPECT_NEAR(r2.Get("EB0C") - r0.Get("EB0C"), -0.001 / std::sqrt(150.0 * 150 - 100 * 100), 0.05 * kUrad);
+}
+
+TEST(FourStep, StartAngleCorrectionRemovesAPivotOffset) {
+  const auto truth = PaperPiges();
+  // The C pivot 1 mm off along Y (tangential at the start): uncorrected, the
+  // fitted centres turn by d_e = 10 mrad; eq. 1 with P0P0' = (0, 1) mm undoes it.
+  const Dataset ds = SimulateFourStep(truth, 0.0, 1, {{"dbb.C1.table.y", 1.0}, {"dbb.C2.table.y", 1.0}});
+  FourStepOptions corrected;
+  corrected.c_pivot_offset = Eigen::Vector2d(0.0, 1.0);
+  const FourStepResult raw = AnalyzeFourStep(ds), fixed = AnalyzeFourStep(ds, corrected);
+  EXPECT_NEAR(fixed.steps[2].start_angle_error, std::atan(1.0 / 100.0), 1e-12);
+  EXPECT_GT(std::abs(raw.Get("EB0C") - truth.at("EB0C")), 0.5 * kUrad);
+  EXPECT_NEAR(fixed.Get("EB0C"), truth.at("EB0C"), 0.05 * kUrad);
+  EXPECT_NEAR(fixed.Get("EX0C"), truth.at("EX0C"), 0.01 * kUm);
+}
+
+TEST(FourStep, PositionOnlyRemovalLeavesTheATiltInC) {
+  // The paper's text removes A's position from C; A's tilt EB0A then stays in EB0C.
+  const auto truth = PaperPiges();
+  const Dataset ds = SimulateFourStep(truth, 0.0, 1);
+  FourStepOptions pos;
+  pos.a_removal = ARemoval::kPositionOnly;
+  FourStepOptions none;
+  none.a_removal = ARemoval::kNone;
+  EXPECT_NEAR(AnalyzeFourStep(ds, pos).Get("EB0C") - truth.at("EB0C"), truth.at("EB0A"), 0.1 * kUrad);
+  EXPECT_NEAR(AnalyzeFourStep(ds, none).Get("EY0C") - truth.at("EY0C"), truth.at("EY0A"), 0.1 * kUm);
+  // Not referring the A position from the pivot plane (100 mm along A) to the
+  // axis point leaves the tilt x 100 mm in it.
+  FourStepOptions local;
+  local.refer_positions = false;
+  EXPECT_NEAR(AnalyzeFourStep(ds, local).Get("EZ0A") - truth.at("EZ0A"), -100.0 * truth.at("EB0A"),
+              0.1 * kUm);
+}
+
+TEST(FourStep, RejectsSetupsTheEquationsDoNotDescribe) {
+  const Dataset ds = SimulateFourStep(PaperPiges(), 0.0, 1);
+  FourStepOptions o;
+  o.c_setup = "C9";
+  try {
+    AnalyzeFourStep(ds, o);
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'C9'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("A1, A2, C1, C2"), std::string::npos) << e.what();
+  }
+  FourStepPlanOptions p;
+  p.a_pivot = Eigen::Vector3d(100, 90, 0);  // 90 mm from the A axis with a 100 mm bar
+  const Machine m = Machine::FromJson(MachineJson("c600u.json").dump());
+  EXPECT_THROW(FourStepPlanJson(m, p), std::invalid_argument);
+  const Machine hu = Machine::FromJson(MachineJson("hu40t.json").dump());
+  try {
+    FourStepPlanJson(hu);
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("wCAf"), std::string::npos) << e.what();
+  }
+}
+
+// ---- Wang et al. path --------------------------------------------------------
+
+TEST(WangPath, KeepsTheTableBallOnTheCircle) {
+  const Machine m = Machine::FromJson(MachineJson("vmc0656.json").dump());
+  for (const auto& [ball, rho, h] :
+       std::vector<std::tuple<Eigen::Vector3d, double, double>>{
+           {Eigen::Vector3d(0, 150, 130), 80, 60}, {Eigen::Vector3d(0, 150, 130), 100, 0},
+           {Eigen::Vector3d(20, 120, 160), 60, 40}}) {
+    WangPathOptions o;
+    o.table_ball = ball;
+    o.radius = rho;
+    o.height = h;
+    o.step = 0.5;
+    const WangPath p = ComputeWangPath(m, o);
+    EXPECT_LT(p.max_circle_error, 1e-9);
+    EXPECT_NEAR(p.bar_length, std::hypot(rho, h), 1e-12);
+    // The whole path moves in small steps: no branch jump.
+    for (int i = 1; i < p.tilt.size(); ++i) {
+      EXPECT_LT(std::abs(p.tilt[i] - p.tilt[i - 1]), 2.0);
+      EXPECT_LT(std::abs(p.rotary[i] - p.rotary[i - 1]), 2.0);
+    }
+  }
+}
+
+TEST(WangPath, AxesReverseWhereThePaperSays) {
+  // A reverses at phi = 90, 270 deg, C at 180, 360 deg (Section 3).
+  const Machine m = Machine::FromJson(MachineJson("vmc0656.json").dump());
+  const WangPath p = ComputeWangPath(m);
+  std::vector<double> a_rev, c_rev;
+  for (int i = 1; i + 1 < p.tracking.size(); ++i) {
+    if ((p.tilt[i] - p.tilt[i - 1]) * (p.tilt[i + 1] - p.tilt[i]) < 0) a_rev.push_back(p.tracking[i]);
+    if ((p.rotary[i] - p.rotary[i - 1]) * (p.rotary[i + 1] - p.rotary[i]) < 0) c_rev.push_back(p.tracking[i]);
+  }
+  EXPECT_EQ(a_rev, (std::vector<double>{90, 270, 450}));
+  EXPECT_EQ(c_rev, (std::vector<double>{180, 360}));
+  // The chosen branch is the smaller move from the start pose (0, 0).
+  EXPECT_LT(std::hypot(p.tilt[0], p.rotary[0]), std::hypot(p.other_tilt[0], p.other_rotary[0]));
+}
+
+TEST(WangPath, RejectsGeometryWithoutASphere) {
+  json mj = MachineJson("vmc0656.json");
+  mj["axes"]["C"]["point"] = {0, 5, 100};  // C no longer meets A
+  try {
+    ComputeWangPath(Machine::FromJson(mj.dump()));
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("miss each other"), std::string::npos) << e.what();
+  }
+  WangPathOptions o;
+  o.radius = 500;
+  try {
+    ComputeWangPath(Machine::FromJson(MachineJson("vmc0656.json").dump()), o);
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("radius"), std::string::npos) << e.what();
+  }
+}
+
+// ---- planar circular tests -----------------------------------------------------
+
+// A CW or CCW run with the errors of circular_test.h put in exactly (not
+// through the linear model): scale, squareness, backlash as axis offsets,
+// servo lag as a delayed angle, centre offset of the pivot.
+CircularRun SyntheticRun(int dir, double R, double k1, double k2, double psi, double b1, double b2,
+                         double lag1, double lag2, double feed_mm_s, Eigen::Vector2d centre,
+                         double sigma, int seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, sigma);
+  CircularRun r;
+  r.direction = dir;
+  const int n = 720;
+  r.angles.resize(n);
+  r.readings.resize(n);
+  const double w = feed_mm_s / R;  // rad/s
+  for (int i = 0; i < n; ++i) {
+    const double phi = dir * 0.5 * i * kPi / 180.0;
+    const double p1 = phi - dir * w * lag1, p2 = phi - dir * w * lag2;  // lagging axes
+    const double x1c = R * std::cos(p1), x2c = R * std::sin(p2);
+    const double v1 = -dir * std::sin(phi), v2 = dir * std::cos(phi);
+    const double s1 = v1 > 1e-12 ? 1 : (v1 < -1e-12 ? -1 : 0), s2 = v2 > 1e-12 ? 1 : (v2 < -1e-12 ? -1 : 0);
+    const double x2 = (1 + k2) * x2c + b2 * s2;
+    const double x1 = (1 + k1) * x1c - psi * x2 + b1 * s1;
+    r.angles[i] = phi * 180.0 / kPi;
+    r.readings[i] = std::hypot(x1 - centre.x(), x2 - centre.y()) - R + noise(rng);
+  }
+  return r;
+}
+
+TEST(CircularTest, DiagnosisRecoversInjectedErrors) {
+  const double R = 100, feed = 2000.0 / 60;  // 2000 mm/min
+  const Eigen::Vector2d c(0.004, -0.003);
+  std::vector<CircularRun> runs = {
+      SyntheticRun(-1, R, 25e-6, -5e-6, 40e-6, 0.002, -0.003, 0.0012, 0.0010, feed, c, 0.0003, 1),
+      SyntheticRun(+1, R, 25e-6, -5e-6, 40e-6, 0.002, -0.003, 0.0012, 0.0010, feed, c, 0.0003, 2)};
+  const CircularTestResult res = AnalyzeCircularTest(runs, R, 2000);
+  const CircularDiagnosis& d = res.diagnosis;
+  const std::map<std::string, double> truth = {{"scale_mismatch", 30e-6}, {"squareness", 40e-6},
+                                               {"backlash.1", 0.002},      {"backlash.2", -0.003},
+                                               {"servo_mismatch", feed * 0.0002}, {"centre.1", -0.004},
+                                               {"centre.2", 0.003}};
+  for (const auto& [n, v] : truth) {
+    const int i = static_cast<int>(std::find(d.names.begin(), d.names.end(), n) - d.names.begin());
+    ASSERT_LT(i, static_cast<int>(d.names.size())) << n;
+    // 3 sigma plus the first-order model error (~1 % of the effect).
+    EXPECT_LT(std::abs(d.values[i] - v), 3 * d.std[i] + 0.01 * std::abs(v)) << n << " " << d.values[i];
+  }
+  EXPECT_LT(d.rms, 0.00035);
+  EXPECT_TRUE(res.has_hysteresis);
+}
+
+TEST(CircularTest, IsoValuesOfAnOffsetCircle) {
+  // A pivot off by 5 um: the path is a circle (G ~ 0), F = +-5 um, the LSC
+  // centre is the offset (readings see the machine circle from the pivot).
+  std::vector<CircularRun> runs = {
+      SyntheticRun(+1, 100, 0, 0, 0, 0, 0, 0, 0, 10, Eigen::Vector2d(0.005, 0), 0.0, 1)};
+  const CircularTestResult res = AnalyzeCircularTest(runs, 100);
+  EXPECT_LT(res.runs[0].circular_deviation, 1e-6);
+  EXPECT_NEAR(res.runs[0].radial_deviation_max, 0.005, 1e-6);
+  EXPECT_NEAR(res.runs[0].radial_deviation_min, -0.005, 1e-6);
+  EXPECT_NEAR(res.runs[0].centre.x(), -0.005, 1e-6);
+  EXPECT_FALSE(res.diagnosis.Has("servo_mismatch"));  // one direction only
+  ASSERT_EQ(res.diagnosis.not_fitted.size(), 1u);
+  EXPECT_FALSE(res.has_hysteresis);
+}
+
+TEST(CircularTest, RejectsBadRuns) {
+  CircularRun r;
+  r.angles = Eigen::VectorXd::LinSpaced(10, 0, 90);
+  r.readings = Eigen::VectorXd::Zero(9);
+  EXPECT_THROW(AnalyzeCircularTest({r}, 100), std::invalid_argument);
+  r.readings = Eigen::VectorXd::Zero(10);
+  EXPECT_THROW(AnalyzeCircularTest({r}, -1), std::invalid_argument);
+  EXPECT_THROW(AnalyzeCircularTest({r, r}, 100), std::invalid_argument);  // both CCW
+}
+
+TEST(TraceHarmonics, RecoversCoefficients) {
+  Eigen::VectorXd a(300), v(300);
+  for (int i = 0; i < 300; ++i) {
+    a[i] = 90 + 1.2 * i;
+    const double p = a[i] * kPi / 180;
+    v[i] = 0.5 + 2 * std::cos(p) - 3 * std::sin(p) + 0.25 * std::cos(2 * p) + 0.1 * std::sin(3 * p);
+  }
+  const Eigen::MatrixXd h = TraceHarmonics(a, v, 4);
+  EXPECT_NEAR(h(0, 0), 0.5, 1e-12);
+  EXPECT_NEAR(h(1, 0), 2, 1e-12);
+  EXPECT_NEAR(h(1, 1), -3, 1e-12);
+  EXPECT_NEAR(h(2, 0), 0.25, 1e-12);
+  EXPECT_NEAR(h(3, 1), 0.1, 1e-12);
+  EXPECT_NEAR(h(4, 0), 0.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace fivecal
