@@ -9,9 +9,12 @@ from .machine import Machine, RadiansWarning
 from .simulation import simulate
 from .compensation import compensate_gcode, compensate_poses, write_error_table
 from .report import write_report
+from . import dbb
+from .dbb import Trace, circular_test, jiang_cripps, read_trace_csv, wang_identify, wang_path
 
 __version__ = "0.1.0"
 
 __all__ = ["Machine", "RadiansWarning", "Dataset", "ball_dataset", "load_dataset", "save_dataset", "simulate",
            "identify", "resolve_estimate", "Result", "compensate_poses", "compensate_gcode",
-           "write_error_table", "write_report", "__version__"]
+           "write_error_table", "write_report", "dbb", "Trace", "jiang_cripps", "wang_path",
+           "wang_identify", "circular_test", "read_trace_csv", "__version__"]

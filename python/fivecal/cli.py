@@ -297,6 +297,10 @@ def main(argv=None) -> int:
                     "held-out indexations (default: 1)")
     pd.set_defaults(func=_demo)
 
+    from .dbb_cli import register as _register_dbb
+
+    _register_dbb(sub)
+
     pc = sub.add_parser("compensate", help="compensated G-code and error tables from identified errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Rewrite the G0/G1 moves of an absolute (G90) ISO G-code program so "
