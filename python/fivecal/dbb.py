@@ -516,23 +516,41 @@ def wang_patterns(machine: Union[Machine, Mapping], errors: Mapping[str, float],
 
 @dataclass
 class WangIdentification:
-    """Least-squares identification from a whole Wang trace."""
+    """Least-squares identification from a whole Wang trace, and what the
+    path can and cannot separate: each further candidate is classified as
+    ``no effect`` (its column is zero on this path), ``confounded`` (exactly,
+    the engine's rank analysis names the group), ``practically confounded``
+    (full rank but correlated beyond ``|r| > 0.9999`` with one fitted
+    parameter) or ``separable`` (with its largest correlation)."""
 
-    result: object                       # fivecal.Result for the requested errors
-    confounded: list = field(default_factory=list)  # groups this path cannot separate
-    candidates: list = field(default_factory=list)
-    candidate_rank: int = 0
+    result: object                                   # fivecal.Result for the requested errors
+    verdicts: dict = field(default_factory=dict)     # candidate -> (kind, partners, figure)
+
+    @property
+    def confounded(self) -> dict:
+        """Candidates this path cannot separate: name -> the parameters it is tied to."""
+        return {c: p for c, (k, p, _) in self.verdicts.items() if k != "separable"}
+
+    @property
+    def separable(self) -> dict:
+        """Candidates this path separates: name -> largest |correlation| with the fitted set."""
+        return {c: f for c, (k, _, f) in self.verdicts.items() if k == "separable"}
 
     def report(self) -> str:
         L = ["Wang et al. simultaneous A/C DBB test: least squares on the whole trace", "",
              self.result.report(), "",
-             f"  identifiability of {len(self.candidates)} candidates (rank {self.candidate_rank}):"]
-        if self.confounded:
-            L.append("  this path cannot separate (each line is one confounded group):")
-            for g in self.confounded:
-                L.append("    " + ", ".join(g))
-        else:
-            L.append("  every candidate is separable")
+             "  identifiability: each further candidate added to the fitted set on its own"]
+        order = {"no effect": 0, "confounded": 1, "practically confounded": 2, "separable": 3}
+        for c, (kind, partners, fig) in sorted(self.verdicts.items(), key=lambda kv: order[kv[1][0]]):
+            if kind == "no effect":
+                L.append(f"    {c:<16} no effect on this path")
+            elif kind == "confounded":
+                L.append(f"    {c:<16} cannot be separated from {', '.join(partners)}")
+            elif kind == "practically confounded":
+                L.append(f"    {c:<16} practically confounded with {', '.join(partners)} "
+                         f"(correlation {fig:.6f})")
+            else:
+                L.append(f"    {c:<16} separable (largest correlation {fig:.3f}, with {partners[0]})")
         return "\n".join(L)
 
 
@@ -540,19 +558,34 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
                   setup: str = WANG_SETUP, candidates: Sequence[str] = WANG_CANDIDATES,
                   include_ball_placement: bool = True) -> WangIdentification:
     """Fit ``estimate`` (default the paper's four errors; the bar length is
-    added) to every reading of the trace, then ask the engine which of the
-    ``candidates`` plus the ball placements (``dbb.<setup>.tool|table.x|y|z``)
-    this path can and cannot separate."""
+    added) to every reading of the trace. Then add each further candidate
+    (the other C and A location errors and, with ``include_ball_placement``,
+    the ball placements ``dbb.<setup>.tool|table.x|y|z``) on its own and let
+    the engine say whether this path separates it from the fitted set."""
     from .identification import identify
 
     ds = Dataset.from_dict(dataset)
     _dbb_rows(ds, setup)
-    result = identify(ds, list(estimate))
-    cand = list(candidates)
+    estimate = list(estimate)
+    result = identify(ds, estimate)
+    cand = [c for c in candidates if c not in estimate]
     if include_ball_placement:
         cand += [f"dbb.{setup}.{b}.{c}" for b in ("tool", "table") for c in "xyz"]
-    wide = identify(ds, cand, allow_unidentifiable=True)
-    return WangIdentification(result, [list(g) for g in wide.unidentifiable], cand, wide.rank)
+    verdicts = {}
+    for c in cand:
+        r = identify(ds, estimate + [c], allow_unidentifiable=True)
+        if r.rank < r.n_parameters:
+            groups = [list(g) for g in r.unidentifiable if c in g]
+            partners = [n for n in (groups[0] if groups else []) if n != c]
+            verdicts[c] = ("confounded" if partners else "no effect", partners, 1.0)
+            continue
+        i = r.estimated.index(c)
+        corr = np.abs(np.asarray(r.correlation)[i])
+        corr[i] = 0.0
+        j = int(np.argmax(corr))
+        kind = "practically confounded" if corr[j] > 0.9999 else "separable"
+        verdicts[c] = (kind, [r.estimated[j]], float(corr[j]))
+    return WangIdentification(result, verdicts)
 
 
 # --------------------------------------------------------------------------

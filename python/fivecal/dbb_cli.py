@@ -166,18 +166,26 @@ def _wang(args) -> int:
         print(ident.report())
         if args.out:
             _write_json({"result": json.loads(ident.result.to_json()), "confounded": ident.confounded,
-                         "candidates": ident.candidates}, args.out)
+                         "separable": ident.separable}, args.out)
             print(f"\nresult written to {args.out}")
         if args.plot:
             from .polar import plot_polar
 
             t = dbb.trace_from_dataset(ds, args.setup)
+            t.label = f"measured ({args.setup})"
             r = ident.result
+            # The fitted model's readings: residual = predicted - measured length.
+            src = np.asarray(r.residual_source)
+            _, _, idx = dbb.ball_positions(ds, args.setup)
+            res_by_obs = {int(o): float(v) for o, v in zip(src, r.residuals)}
+            fit = dbb.Trace(t.angles, t.readings + np.array([res_by_obs[i] for i in idx]), label="fitted model")
             notes = ["identified (least squares):"] + [
                 f"  {n:<6}{r.values[n] * dbb.display_scale(n)[0]:+9.2f} ± "
                 f"{r.std[n] * dbb.display_scale(n)[0]:.2f} {dbb.display_scale(n)[1]}" for n in estimate]
-            plot_polar([t], args.plot, path.bar_length, f"Wang et al. DBB trace, setup {args.setup}",
-                       annotations=notes, plane=tuple(getattr(t, "plane", "XY")))
+            notes += ["", f"residual rms {r.rms * 1e3:.2f} µm", "angle: tracking angle from +X"]
+            plot_polar([t, fit], args.plot, path.bar_length, f"Wang et al. DBB trace, setup {args.setup}",
+                       annotations=notes, plane=tuple(getattr(t, "plane", "XY")),
+                       colors=["#d62728", "#222222"])
             print(f"polar plot written to {args.plot}")
     return 0
 

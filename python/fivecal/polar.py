@@ -104,6 +104,11 @@ def draw_polar(ax, traces: Sequence, nominal_radius: float, scale: Optional[floa
         lo, hi = arc
         ax.set_thetamin(lo)
         ax.set_thetamax(hi)
+        step = 15 if hi - lo <= 120 else 30
+        ticks = np.arange(step * math.ceil(lo / step), hi + 1e-9, step)
+        names = {0: f"+{p1} ", 90: f"+{p2} ", 180: f"−{p1} ", 270: f"−{p2} "}
+        ax.set_xticks(np.radians(ticks))
+        ax.set_xticklabels([f"{names.get(int(t) % 360, '')}{t:g}°" for t in ticks], fontsize=8)
     if title:
         ax.set_title(title, fontsize=10, pad=14)
     if legend:
@@ -159,12 +164,14 @@ def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols
     plt = _pyplot()
     n = len(panels)
     nrows = math.ceil(n / ncols)
-    fig = plt.figure(figsize=(5.6 * ncols, 5.9 * nrows + 0.6))
+    top_in, foot_in = 0.6, (0.25 + 0.2 * (footer.count("\n") + 1)) if footer else 0.1
+    fig = plt.figure(figsize=(5.6 * ncols, 5.9 * nrows + top_in + foot_in))
+    H = fig.get_figheight()
     for i, p in enumerate(panels):
         r, c = divmod(i, ncols)
-        w, h = 1.0 / ncols, (1.0 - 0.6 / fig.get_figheight()) / nrows
+        w, h = 1.0 / ncols, (1.0 - (top_in + foot_in) / H) / nrows
         left = c * w + 0.09 * w
-        bottom = 1.0 - 0.6 / fig.get_figheight() - (r + 1) * h + 0.24 * h
+        bottom = 1.0 - top_in / H - (r + 1) * h + 0.24 * h
         ax = fig.add_axes([left, bottom, 0.78 * w, 0.64 * h], projection="polar")
         traces = [_as_trace(t) for t in p["traces"]]
         arc = p.get("arc", "auto")
@@ -180,7 +187,7 @@ def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols
     if title:
         fig.suptitle(title, fontsize=13, y=0.995)
     if footer:
-        fig.text(0.01, 0.003, footer, fontsize=8, color="#555")
+        fig.text(0.02, 0.12 / H, footer, fontsize=8.5, color="#333", family="monospace", va="bottom")
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
@@ -214,3 +221,62 @@ def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
     return plot_polar(traces, path, result.nominal_radius,
                       title or f"Circular test {result.plane}, R {result.nominal_radius:g} mm",
                       annotations=notes, plane=(a1, a2))
+
+
+def plot_four_step(result, path: str) -> str:
+    """The four Jiang & Cripps steps as polar plots of the raw readings
+    (plane angle of the pivot about the spindle ball), with each step's
+    fitted centre, and the PIGEs of both methods underneath."""
+    from .units import display_scale
+
+    ds = result.dataset
+    panels = []
+    planes = {"A": ("Y", "Z"), "C": ("X", "Y")}
+    for s in result.steps:
+        obs = ds.observations
+        r = np.array([obs[i]["reading"] for i in s.observations])
+        length = obs[s.observations[0]]["length"]
+        c = np.asarray(s.centre) * 1e3
+        e1, e2 = planes[s.axis]
+        panels.append({"traces": [Trace(np.degrees(np.asarray(s.angles)), r, label=s.setup)],
+                       "nominal_radius": length, "plane": planes[s.axis],
+                       "title": f"{s.setup}: {s.axis} axis, {length:g} mm bar"
+                                + (" (extension)" if s.extended else ""),
+                       "annotations": [f"centre {e1} {c[0]:+8.2f} µm, {e2} {c[1]:+8.2f} µm",
+                                       f"fit rms {s.rms * 1e3:.2f} µm"
+                                       + (f", |S'O'| {s.arm:.1f} mm" if s.extended else "")]})
+    eng = result.engine
+    parts = []
+    for n in result.names:
+        f, unit = display_scale(n)
+        t = f"{n} {result.values[n] * f:+.2f}"
+        if eng is not None and n in eng.values:
+            t += f" ({eng.values[n] * f:+.2f})"
+        parts.append(t + f" {unit}")
+    footer = ("four-step (engine):  " + ",  ".join(parts[:4]) + "\n" + " " * 21 + ",  ".join(parts[4:]))
+    return plot_polar_grid(panels, path, f"Jiang & Cripps four-step DBB test: {ds.machine.name}",
+                           footer=footer)
+
+
+def plot_wang_patterns(patterns: Mapping, path: str, wang_path=None) -> str:
+    """Polar plots of single-error traces along the Wang path (tracking angle
+    90-450 deg), with their Fourier content: centre shift (1st harmonic),
+    size change (mean), 2nd and 3rd harmonic amplitudes."""
+    from .units import display_scale
+
+    panels = []
+    for name, p in patterns.items():
+        h = np.asarray(p.harmonics) * 1e3
+        f, unit = display_scale(name)
+        panels.append({"traces": [Trace(p.tracking, p.readings, label=name)],
+                       "nominal_radius": wang_path.bar_length if wang_path is not None else 100.0,
+                       "title": f"{name} = {p.value * f:+g} {unit}",
+                       "annotations": [f"shift ({h[1, 0]:+.2f}, {h[1, 1]:+.2f}) µm (X, Y)",
+                                       f"size {h[0, 0]:+.2f} µm, 2nd {math.hypot(*h[2]):.2f}, "
+                                       f"3rd {math.hypot(*h[3]):.2f} µm"]})
+    footer = ""
+    if wang_path is not None:
+        footer = (f"table ball on a circle of radius {wang_path.radius:g} mm at height "
+                  f"{wang_path.centre[2]:.1f} mm; spindle ball {wang_path.height:g} mm above its centre; "
+                  f"bar {wang_path.bar_length:g} mm; angle = tracking angle (from +X)")
+    return plot_polar_grid(panels, path, "Wang et al. patterns: one error at a time", footer=footer)
