@@ -1,6 +1,7 @@
 #include "fivecal/simulate.h"
 
 #include <cmath>
+#include <functional>
 #include <random>
 #include <stdexcept>
 
@@ -26,15 +27,90 @@ Eigen::Vector3d ToolAt(const Machine& m, const Eigen::VectorXd& theta, const Eig
 }  // namespace
 
 namespace {
-Dataset SimulateSpec(const json& spec);
+SimulationPlan PlanSpec(const json& spec);
+
+void AddInput(SimulationPlan* plan, int obs, int component, double sensitivity, double sigma) {
+  plan->input_observation.push_back(obs);
+  plan->input_component.push_back(component);
+  const int n = plan->num_inputs();
+  plan->sensitivity.conservativeResize(n);
+  plan->input_sigma.conservativeResize(n);
+  plan->sensitivity[n - 1] = sensitivity;
+  plan->input_sigma[n - 1] = sigma;
+}
+
+// Per-observation slots of a plan, filled with the dataset's own readings.
+void InitSlots(SimulationPlan* plan) {
+  const size_t n = plan->base.observations.size();
+  plan->start.resize(n);
+  plan->approach.assign(n, Eigen::VectorXd());
+  plan->s0.assign(n, 0.0);
+  plan->reading0.assign(n, 0.0);
+  plan->measured0.assign(n, Eigen::Vector3d::Zero());
+  for (size_t i = 0; i < n; ++i) {
+    const Observation& o = plan->base.observations[i];
+    plan->start[i] = o.axes;
+    plan->reading0[i] = o.reading;
+    plan->measured0[i] = o.measured;
+  }
+}
+
+// Observation i of `ds` with input values `x` (one per input of i, in the
+// input's own unit, added to the noise-free value).
+template <typename Draw>
+Dataset Realize(const SimulationPlan& plan, Draw&& draw) {
+  Dataset ds = plan.base;
+  const int n_in = plan.num_inputs();
+  for (int k = 0; k < n_in; ++k) {
+    const int i = plan.input_observation[k];
+    Observation& o = ds.observations[i];
+    const double x = draw(k);
+    switch (o.type) {
+      case ObservationType::kFacet:
+      case ObservationType::kSphere: {
+        const double s = plan.s0[i] + x;
+        o.axes = plan.start[i] + s * plan.approach[i];
+        break;
+      }
+      case ObservationType::kDbb:
+        o.reading = plan.reading0[i] + x;
+        break;
+      case ObservationType::kBall3d: {
+        const int c = plan.input_component[k];
+        o.measured[c] = plan.measured0[i][c] + x;
+        break;
+      }
+    }
+  }
+  return ds;
+}
+}  // namespace
+
+SimulationPlan BuildSimulationPlan(const std::string& spec_text) {
+  return Guard("simulate", [&] { return PlanSpec(Parse(spec_text, "simulate")); });
 }
 
 Dataset Simulate(const std::string& spec_text) {
-  return Guard("simulate", [&] { return SimulateSpec(Parse(spec_text, "simulate")); });
+  const SimulationPlan plan = BuildSimulationPlan(spec_text);
+  return AddNoise(plan, plan.seed);
+}
+
+Dataset AddNoise(const SimulationPlan& plan, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  // One draw per input, in input order (the order Simulate has always used).
+  return Realize(plan, [&](int k) { return plan.input_sigma[k] * normal(rng); });
+}
+
+Dataset ApplyInputDeviations(const SimulationPlan& plan, const Eigen::VectorXd& deviation) {
+  if (deviation.size() != plan.num_inputs())
+    throw std::invalid_argument("input deviations: " + std::to_string(deviation.size()) +
+                                " values for " + std::to_string(plan.num_inputs()) + " inputs");
+  return Realize(plan, [&](int k) { return deviation[k] / plan.sensitivity[k]; });
 }
 
 namespace {
-Dataset SimulateSpec(const json& spec) {
+SimulationPlan PlanSpec(const json& spec) {
   if (!spec.is_object() || !spec.contains("machine"))
     throw std::invalid_argument("simulate: missing 'machine'");
   json base = {{"machine", spec["machine"]},
@@ -73,8 +149,12 @@ Dataset SimulateSpec(const json& spec) {
       if (!(x >= 0) || !std::isfinite(x)) throw std::invalid_argument("simulate.sigma: must be >= 0 mm");
   }
   const uint64_t seed = spec.value("seed", uint64_t{0});
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> normal(0.0, 1.0);
+  // Per observation: the noise-free readings and the noise directions.
+  struct Slot {
+    Eigen::VectorXd start, approach;
+    double s0 = 0, sensitivity = -1;
+  };
+  std::vector<Slot> slots;
 
   if (!spec.contains("plan") || !spec["plan"].is_array() || spec["plan"].empty())
     throw std::invalid_argument("simulate.plan: empty; give at least one planned touch or sample");
@@ -174,7 +254,13 @@ Dataset SimulateSpec(const json& spec) {
       if (std::abs(s) > 50.0)
         throw std::invalid_argument(w + ": the erroneous machine touches " + std::to_string(s) +
                                     " mm away from the nominal point; errors far too large?");
-      s += noise.probe * normal(rng);
+      const double h = 1e-4;
+      Slot slot;
+      slot.start = c0;
+      slot.approach = d;
+      slot.s0 = s;
+      slot.sensitivity = (g(s + h) - g(s - h)) / (2 * h);
+      slots.push_back(slot);
       ob.axes = c0 + s * d;
       for (int k = 0; k < na; ++k) ob.direction[k] = dir[k];
     } else if (type == "dbb" || type == "ball3d") {
@@ -192,11 +278,11 @@ Dataset SimulateSpec(const json& spec) {
       if (ob.type == ObservationType::kDbb) {
         if (!e.contains("length")) throw std::invalid_argument(w + ".length: missing (nominal bar length, mm)");
         ob.length = e["length"].get<double>();
-        ob.reading = (P - table_true).norm() - ob.length - S(prefix + ".length") + noise.dbb * normal(rng);
+        ob.reading = (P - table_true).norm() - ob.length - S(prefix + ".length");
       } else {
         ob.measured = P - table_true;
-        for (int c = 0; c < 3; ++c) ob.measured[c] += noise.ball3d * normal(rng);
       }
+      slots.push_back(Slot());
     } else {
       throw std::invalid_argument(w + ".type: unknown type '" + type + "' (facet, sphere, dbb, ball3d)");
     }
@@ -217,8 +303,115 @@ Dataset SimulateSpec(const json& spec) {
     if (idx < 0 || idx < table.num_machine())
       throw std::invalid_argument("setup." + kv.first + ": not a setup parameter of this dataset");
   }
-  return ds;
+
+  SimulationPlan out(std::move(ds));
+  out.noise = noise;
+  out.seed = seed;
+  const Machine& mm = out.base.machine();  // `ds` (and `m`) moved into `out`
+  for (int i = 0; i < mm.num_parameters(); ++i)
+    if (theta[i] != 0.0) out.values[mm.parameters()[i].name] = theta[i];
+  for (const auto& kv : setup) out.values[kv.first] = kv.second;
+  InitSlots(&out);
+  for (size_t i = 0; i < out.base.observations.size(); ++i) {
+    const Observation& o = out.base.observations[i];
+    const int oi = static_cast<int>(i);
+    switch (o.type) {
+      case ObservationType::kFacet:
+      case ObservationType::kSphere:
+        out.start[i] = slots[i].start;
+        out.approach[i] = slots[i].approach;
+        out.s0[i] = slots[i].s0;
+        AddInput(&out, oi, 0, slots[i].sensitivity, noise.probe);
+        break;
+      case ObservationType::kDbb:
+        AddInput(&out, oi, 0, -1.0, noise.dbb);
+        break;
+      case ObservationType::kBall3d:
+        for (int c = 0; c < 3; ++c) AddInput(&out, oi, c, -1.0, noise.ball3d);
+        break;
+    }
+  }
+  return out;
 }
 
 }  // namespace
+
+SimulationPlan PlanFromDataset(const Dataset& ds, const std::map<std::string, double>& values,
+                               const NoiseLevels& noise) {
+  ds.Validate();
+  const Machine& m = ds.machine();
+  const int na = m.num_axes();
+  const ParameterTable table(ds);
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  for (const auto& [name, value] : values) {
+    RequireFinite(value, "values." + name);
+    v[table.Require(name)] = value;
+  }
+  const Eigen::VectorXd theta = v.head(m.num_parameters());
+  const Eigen::VectorXd nominal = Eigen::VectorXd::Zero(m.num_parameters());
+  const Eigen::Vector3d tip = TipWithOffsets<double>(m, theta.data());
+  const Eigen::Vector3d tip0 = m.tip();
+
+  SimulationPlan plan(ds);
+  plan.noise = noise;
+  plan.values = values;
+  InitSlots(&plan);
+  for (size_t i = 0; i < ds.observations.size(); ++i) {
+    const Observation& o = ds.observations[i];
+    const int oi = static_cast<int>(i);
+    const std::string w = "observations[" + std::to_string(i) + "]";
+    std::vector<int> dir(o.direction.data(), o.direction.data() + na);
+    switch (o.type) {
+      case ObservationType::kFacet:
+      case ObservationType::kSphere: {
+        // Nominal approach: along minus the nominal surface normal at the
+        // nominal tool point, as a line in linear-axis command space.
+        const Eigen::Vector3d P0 = ToolAt(m, nominal, o.axes, dir, tip0);
+        Eigen::Vector3d n;
+        std::function<double(const Eigen::Vector3d&)> gap;
+        if (o.type == ObservationType::kFacet) {
+          const int fi = ds.artefact.FacetIndex(o.target);
+          const Facet& f = ds.artefact.facets[fi];
+          n = f.normal;
+          const double off = v[table.facet(fi)];
+          gap = [=](const Eigen::Vector3d& P) { return n.dot(P - f.point) - off; };
+        } else {
+          const int si = ds.artefact.SphereIndex(o.target);
+          const Sphere& sp = ds.artefact.spheres[si];
+          n = P0 - sp.center;
+          if (n.norm() < 1e-9) throw std::invalid_argument(w + ": touch at the sphere centre");
+          n.normalize();
+          const auto& ix = table.sphere(si);
+          const Eigen::Vector3d c = sp.center + Eigen::Vector3d(v[ix[0]], v[ix[1]], v[ix[2]]);
+          gap = [=](const Eigen::Vector3d& P) { return (P - c).norm(); };
+        }
+        Eigen::MatrixXd target(2, 3);
+        target.row(0) = P0.transpose();
+        target.row(1) = (P0 - n).transpose();
+        const Eigen::MatrixXd cmds = InverseKinematics(m, nominal, target, nullptr, o.axes);
+        Eigen::VectorXd d = (cmds.row(1) - cmds.row(0)).transpose();
+        for (int k = 0; k < na; ++k)
+          if (m.axis(k).rotary()) d[k] = 0.0;
+        plan.start[i] = o.axes;
+        plan.approach[i] = d;
+        plan.s0[i] = 0.0;
+        const double h = 1e-4;
+        const double sens = (gap(ToolAt(m, theta, o.axes + h * d, dir, tip)) -
+                             gap(ToolAt(m, theta, o.axes - h * d, dir, tip))) / (2 * h);
+        if (!(std::abs(sens) > 1e-6))
+          throw std::invalid_argument(w + ": the nominal approach does not move the tip off the surface");
+        AddInput(&plan, oi, 0, sens, noise.probe);
+        break;
+      }
+      case ObservationType::kDbb:
+        AddInput(&plan, oi, 0, -1.0, noise.dbb);
+        break;
+      case ObservationType::kBall3d:
+        for (int c = 0; c < 3; ++c) AddInput(&plan, oi, c, -1.0, noise.ball3d);
+        break;
+    }
+  }
+  return plan;
+}
+
 }  // namespace fivecal

@@ -1,5 +1,5 @@
 """Type stubs of the C++ extension module fivecal._core."""
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -73,3 +73,169 @@ def identify(dataset: Dataset, estimate: Sequence[str], fix: Sequence[str], init
 def resolve_estimate(dataset: Dataset, estimate: Sequence[str], fix: Sequence[str],
                      initial: dict) -> list[str]: ...
 def predict_residuals(dataset: Dataset, values: dict) -> tuple[np.ndarray, list[int]]: ...
+
+# ---- uncertainty (cpp/bindings/uncertainty.cc) ----------------------------
+
+class SimulationPlan:
+    base: Dataset
+    seed: int
+    values: dict[str, float]
+    sensitivity: np.ndarray
+    input_sigma: np.ndarray
+    input_observation: list[int]
+    input_component: list[int]
+    num_inputs: int
+    @staticmethod
+    def from_spec(spec_json: str) -> SimulationPlan: ...
+    @staticmethod
+    def from_dataset(dataset: Dataset, values: dict, probe: float, dbb: float,
+                     ball3d: float) -> SimulationPlan: ...
+    def add_noise(self, seed: int) -> Dataset: ...
+    def apply_input_deviations(self, deviation: np.ndarray) -> Dataset: ...
+
+class MonteCarloResult:
+    estimated: list[str]
+    reference: np.ndarray
+    truth: np.ndarray
+    trials: int
+    used: int
+    not_converged: int
+    failed: int
+    threads: int
+    seed: int
+    seconds: float
+    probability: float
+    mean: np.ndarray
+    std: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    symmetric_low: np.ndarray
+    symmetric_high: np.ndarray
+    gum_covariance: np.ndarray
+    gum_std: np.ndarray
+    gum_low: np.ndarray
+    gum_high: np.ndarray
+    gum_k: float
+    tolerance: np.ndarray
+    d_low: np.ndarray
+    d_high: np.ndarray
+    validated: list[bool]
+    stable: list[bool]
+    stability: np.ndarray
+    std_ratio: np.ndarray
+    significant_digits: int
+    samples: np.ndarray
+    trial_std: np.ndarray
+    usable: list[int]
+    def to_json(self, include_samples: bool = False) -> str: ...
+
+def monte_carlo(plan: SimulationPlan, estimate: Sequence[str], fix: Sequence[str], initial: dict,
+                robust: str = "", robust_scale: float = 0.0, max_iterations: int = 200,
+                include_default_setup: bool = True, selection_tolerance: float = 0.01,
+                trials: int = 10000, threads: int = 0, seed: int = 1, probability: float = 0.95,
+                significant_digits: int = 2, blocks: int = 10,
+                input_covariance: Optional[np.ndarray] = None, trial_std: bool = False,
+                keep_samples: bool = True,
+                progress: Optional[Callable[[int, int], object]] = None) -> MonteCarloResult: ...
+def trial_seed(seed: int, trial: int) -> int: ...
+def coverage_interval(values: Sequence[float], probability: float) -> tuple[float, float, float, float]: ...
+def numerical_tolerance(u: float, significant_digits: int = 2) -> float: ...
+
+class CoverageFactor:
+    probability: float
+    dof: float
+    k: float
+    k_joint: float
+    outputs: int
+    method: str
+
+def coverage_factor(probability: float, dof: float = ..., outputs: int = 0, k: float = 0.0) -> CoverageFactor: ...
+def normal_quantile(p: float) -> float: ...
+def student_t_quantile(p: float, dof: float) -> float: ...
+def chi_square_quantile(p: float, dof: float) -> float: ...
+def f_quantile(p: float, dof1: float, dof2: float) -> float: ...
+
+class PooledCovariance:
+    covariance: np.ndarray
+    mean: np.ndarray
+    group_means: np.ndarray
+    group_labels: list[int]
+    group_sizes: list[int]
+    dof: int
+
+def pool_covariance(samples: np.ndarray, groups: Sequence[int]) -> PooledCovariance: ...
+
+class GumResult:
+    names: list[str]
+    values: np.ndarray
+    covariance: np.ndarray
+    std: np.ndarray
+    correlation: np.ndarray
+    coverage: CoverageFactor
+    expanded: np.ndarray
+    def to_json(self) -> str: ...
+
+def gum_propagate(C: np.ndarray, Ux: np.ndarray, names: Sequence[str], values: np.ndarray,
+                  coverage: CoverageFactor) -> GumResult: ...
+
+class Sensitivity:
+    names: list[str]
+    values: np.ndarray
+    C: np.ndarray
+    input_rows: list[int]
+    input_source: list[int]
+
+def sensitivity_matrix(dataset: Dataset, result: Result) -> Sensitivity: ...
+
+class CyclesUncertainty:
+    gum: GumResult
+    inputs: PooledCovariance
+    estimated: list[str]
+    cycle_values: np.ndarray
+    output_pooled: np.ndarray
+    day: list[int]
+    cycle: list[int]
+    pooling: str
+    def to_json(self) -> str: ...
+
+def gum_from_cycles(cycles: Sequence[Dataset], day: Sequence[int], cycle: Sequence[int],
+                    estimate: Sequence[str], fix: Sequence[str], initial: dict, pooling: str = "cycles",
+                    probability: float = 0.95, coverage_factor: float = 0.0, reference: int = 0,
+                    include_default_setup: bool = True) -> CyclesUncertainty: ...
+
+class PooledStd:
+    pooled_std: float
+    dof: int
+    group_std: list[float]
+    group_size: list[int]
+
+def pooled_std(groups: Sequence[Sequence[float]]) -> PooledStd: ...
+def window_pooled_std(series: np.ndarray, window: int) -> PooledStd: ...
+
+class GridStatistics:
+    points: int
+    cycles: int
+    window: int
+    mean: float
+    total_std: float
+    total_range: float
+    point_pooled_std: np.ndarray
+    max_pooled_std: float
+    pooled_std: float
+    pooled_dof: int
+    point_means: np.ndarray
+    surface_std: float
+    surface_range: float
+    cycle_means: np.ndarray
+    drift_std: float
+    drift_range: float
+    point_std: np.ndarray
+    point_std_pooled: float
+    repeatability: float
+    surface_component: float
+    drift_component: float
+    def to_json(self) -> str: ...
+
+def analyze_grid(P: np.ndarray, window: int = 5) -> GridStatistics: ...

@@ -1,0 +1,84 @@
+#include "fivecal/refit.h"
+
+#include <ceres/ceres.h>
+
+#include <cmath>
+#include <stdexcept>
+
+#include "fivecal/identifiability.h"
+#include "fivecal/problem.h"
+
+namespace fivecal {
+
+struct Refit::Impl {
+  Impl(const Dataset& ref, const IdentifyOptions& o) : reference(ref), table(ref), options(o) {}
+  Dataset reference;
+  ParameterTable table;
+  IdentifyOptions options;
+  std::vector<std::string> estimated;
+  std::vector<int> est;
+  Eigen::VectorXd start;
+  double robust_scale = 0;
+};
+
+Refit::Refit(const Dataset& reference, const IdentifyOptions& options, const Result& fit)
+    : impl_(std::make_unique<Impl>(reference, options)) {
+  reference.Validate();
+  Impl& d = *impl_;
+  if (fit.names != d.table.names())
+    throw std::invalid_argument("refit: the reference result belongs to another dataset");
+  d.estimated = fit.estimated;
+  for (const std::string& n : fit.estimated) d.est.push_back(d.table.Require(n));
+  d.start = fit.values;
+  d.robust_scale = fit.robust_scale;
+  if (!options.robust.empty() && options.robust != "none" && !(d.robust_scale > 0))
+    throw std::invalid_argument("refit: robust loss without a robust scale in the reference result");
+}
+
+Refit::~Refit() = default;
+
+const std::vector<std::string>& Refit::estimated() const { return impl_->estimated; }
+
+RefitResult Refit::Fit(const Dataset& ds, bool with_std) const {
+  const Impl& d = *impl_;
+  const auto& a = d.reference.observations;
+  const auto& b = ds.observations;
+  if (a.size() != b.size())
+    throw std::invalid_argument("refit: " + std::to_string(b.size()) + " observations, the reference has " +
+                                std::to_string(a.size()));
+  for (size_t i = 0; i < a.size(); ++i)
+    if (a[i].type != b[i].type || a[i].target != b[i].target || a[i].setup != b[i].setup ||
+        a[i].axes.size() != b[i].axes.size())
+      throw std::invalid_argument("refit: observations[" + std::to_string(i) +
+                                  "] differs from the reference (type, target or setup)");
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;  // as Identify
+  so.max_num_iterations = d.options.max_iterations;
+  so.function_tolerance = 1e-15;
+  so.parameter_tolerance = 1e-12;
+  so.gradient_tolerance = 1e-16;
+  so.num_threads = 1;
+  so.logging_type = ceres::SILENT;
+  const bool robust = !d.options.robust.empty() && d.options.robust != "none";
+  Problem problem(ds, d.table, d.start, d.est, robust ? d.options.robust : "", robust ? d.robust_scale : 0.0);
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem.ceres_problem(), &summary);
+  RefitResult out;
+  out.converged = summary.termination_type == ceres::CONVERGENCE;
+  out.iterations = static_cast<int>(summary.iterations.size()) - 1;
+  out.final_cost = summary.final_cost;
+  out.values.resize(d.est.size());
+  for (size_t i = 0; i < d.est.size(); ++i) out.values[i] = problem.values()[d.est[i]];
+  if (with_std) {
+    Eigen::VectorXd r;
+    Eigen::MatrixXd J;
+    problem.Evaluate(&r, &J);
+    const Identifiability id = AnalyzeJacobian(J, d.options.rank_tolerance);
+    const int dof = problem.num_rows() - id.rank;
+    out.sigma = dof > 0 ? std::sqrt(r.squaredNorm() / dof) : 0.0;
+    out.std = (out.sigma * out.sigma * id.inverse_normal.diagonal()).cwiseMax(0.0).cwiseSqrt();
+  }
+  return out;
+}
+
+}  // namespace fivecal
