@@ -11,10 +11,13 @@ from .compensation import compensate_gcode, compensate_poses, write_error_table
 from .report import write_report
 from . import dbb
 from .dbb import Trace, circular_test, jiang_cripps, read_trace_csv, wang_identify, wang_path
+from . import probing_stats, uncertainty
+from .uncertainty import gum_input_covariance, monte_carlo
 
 __version__ = "0.1.0"
 
 __all__ = ["Machine", "RadiansWarning", "Dataset", "ball_dataset", "load_dataset", "save_dataset", "simulate",
            "identify", "resolve_estimate", "Result", "compensate_poses", "compensate_gcode",
            "write_error_table", "write_report", "dbb", "Trace", "jiang_cripps", "wang_path",
-           "wang_identify", "circular_test", "read_trace_csv", "__version__"]
+           "wang_identify", "circular_test", "read_trace_csv", "uncertainty", "monte_carlo",
+           "gum_input_covariance", "probing_stats", "__version__"]
