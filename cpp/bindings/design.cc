@@ -250,6 +250,8 @@ void BindDesign(py::module_& m) {
   m.def("machining_poses", &MachiningPoses, py::arg("machine"), py::arg("tests"));
   m.def("predict_machining", &PredictMachining, py::arg("machine"), py::arg("tests"), py::arg("values"),
         py::call_guard<py::gil_scoped_release>());
+  m.def("machining_jacobian", &MachiningJacobian, py::arg("machine"), py::arg("tests"), py::arg("names"),
+        py::arg("values"), py::call_guard<py::gil_scoped_release>());
   m.def(
       "identify_machining",
       [](const Machine& mc, const std::vector<MachiningTest>& tests, const std::vector<std::string>& estimate,

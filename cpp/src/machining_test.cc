@@ -245,6 +245,27 @@ Eigen::VectorXd PredictMachining(const Machine& m, const std::vector<MachiningTe
   return e;
 }
 
+Eigen::MatrixXd MachiningJacobian(const Machine& m, const std::vector<MachiningTest>& tests,
+                                  const std::vector<std::string>& names,
+                                  const std::map<std::string, double>& values) {
+  const std::vector<PreparedTest> prepared = Prepare(m, tests);
+  const Eigen::VectorXd all = FullValues(m, values);
+  if (names.empty()) throw std::invalid_argument("machining_jacobian: no parameter names");
+  std::vector<int> est;
+  for (const std::string& n : names) {
+    const int i = RequireIndex(m, n);
+    if (std::find(est.begin(), est.end(), i) != est.end())
+      throw std::invalid_argument("machining_jacobian: '" + n + "' named twice");
+    est.push_back(i);
+  }
+  std::vector<double> x(est.size());
+  for (size_t i = 0; i < est.size(); ++i) x[i] = all[est[i]];
+  ceres::Problem problem;
+  for (const PreparedTest& t : prepared)
+    problem.AddResidualBlock(MachiningTestResidual::Create(m, t, all, est), nullptr, x.data());
+  return DenseJacobian(problem, nullptr);
+}
+
 std::string MachiningResult::ToJson() const {
   json j;
   json p = json::object();

@@ -36,7 +36,7 @@ from . import _core
 from .machine import Machine
 from .units import display_scale
 
-__all__ = ["TILT_AXIS_ERRORS", "WORKPIECE_SETUP", "zhang_tests", "poses", "predict", "first_order",
+__all__ = ["TILT_AXIS_ERRORS", "WORKPIECE_SETUP", "zhang_tests", "poses", "predict", "sensitivity", "first_order",
            "identify", "MachiningResult"]
 
 #: The three errors of the tilt axis the paper identifies (A_xi_x, A_delta_y, A_delta_z).
@@ -119,6 +119,17 @@ def predict(machine, tests: Sequence[Mapping], errors=None, setup: Optional[Mapp
     v = _values(errors)
     v.update(_values(setup))
     return np.asarray(_core.predict_machining(m._core, _core_tests(m, tests), v))
+
+
+def sensitivity(machine, tests: Sequence[Mapping], names: Iterable[str], errors=None,
+                setup: Optional[Mapping[str, float]] = None) -> np.ndarray:
+    """d(machining error) / d(parameter): (tests, names) matrix, mm per
+    parameter unit, at ``errors`` / ``setup`` (default nominal): which errors
+    each test is sensitive to (the automatic derivatives of the identification)."""
+    m = Machine.from_dict(machine)
+    v = _values(errors)
+    v.update(_values(setup))
+    return np.asarray(_core.machining_jacobian(m._core, _core_tests(m, tests), [str(n) for n in names], v))
 
 
 def first_order(L: float, H: float, errors=None, setup: Optional[Mapping[str, float]] = None) -> np.ndarray:

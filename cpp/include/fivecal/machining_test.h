@@ -82,6 +82,13 @@ Eigen::MatrixXd MachiningPoses(const Machine& m, const std::vector<MachiningTest
 Eigen::VectorXd PredictMachining(const Machine& m, const std::vector<MachiningTest>& tests,
                                  const std::map<std::string, double>& values);
 
+// Sensitivities d e_i / d p_j of the machining errors to the parameters
+// `names` (machine and workpiece.*) at `values`: tests x names, from the
+// automatic derivatives the identification uses (mm per parameter unit).
+Eigen::MatrixXd MachiningJacobian(const Machine& m, const std::vector<MachiningTest>& tests,
+                                  const std::vector<std::string>& names,
+                                  const std::map<std::string, double>& values);
+
 struct MachiningOptions {
   std::vector<std::string> estimate = {"EA0C", "EY0C", "EZ0C"};  // machine and/or workpiece.* names
   std::map<std::string, double> values;  // fixed values and starting values
