@@ -239,3 +239,105 @@ class GridStatistics:
     def to_json(self) -> str: ...
 
 def analyze_grid(P: np.ndarray, window: int = 5) -> GridStatistics: ...
+
+# ---- test design, sphere test, machining tests (cpp/bindings/design.cc) ----
+
+class PlanQuality:
+    parameters: list[str]
+    n_observations: int
+    n_rows: int
+    n_parameters: int
+    n_machine: int
+    condition_number: float
+    rank: int
+    log_det_per_parameter: float
+    d_criterion: float
+    d_std: float
+    predicted_std: np.ndarray
+    confounded: list[list[str]]
+    def to_json(self) -> str: ...
+
+class DesignResult:
+    groups: list[int]
+    observations: list[int]
+    quality: PlanQuality
+    reference: PlanQuality
+    history: list[float]
+    evaluations: int
+    stopped: bool
+    def to_json(self) -> str: ...
+
+def characteristic_scale(machine: Machine, name: str, length: float = 400.0) -> float: ...
+def plan_quality(dataset: Dataset, estimate: Sequence[str], fix: Sequence[str] = ..., values: dict = ...,
+                 sigma: float = 0.0006, characteristic_length: float = 400.0,
+                 include_default_setup: bool = True, subset: Optional[Sequence[int]] = None) -> PlanQuality: ...
+def design_plan(dataset: Dataset, group: Sequence[int], estimate: Sequence[str], fix: Sequence[str] = ...,
+                values: dict = ..., sigma: float = 0.0006, characteristic_length: float = 400.0, *, k: int,
+                required: Sequence[int] = ..., criterion: str = "condition", method: str = "exchange",
+                max_passes: int = 50, max_touches: int = 0,
+                progress: Optional[Callable[[str, int, int, float], bool]] = None) -> DesignResult: ...
+def candidate_plan(setup: Dataset, indexations: np.ndarray, directions: Optional[np.ndarray],
+                   sphere_normals: np.ndarray, limits: dict, min_dot: float = -0.02,
+                   targets: Sequence[str] = ...) -> tuple[str, list[int]]: ...
+
+class SphereFit:
+    center: np.ndarray
+    radius: float
+    residuals: np.ndarray
+    out_of_sphericity: float
+    max_residual: float
+    min_residual: float
+    std_residual: float
+    rms: float
+    iterations: int
+    converged: bool
+
+class SphereTestResult:
+    sphere: str
+    observations: list[int]
+    points: np.ndarray
+    fit: SphereFit
+    size_error: float
+    def to_json(self) -> str: ...
+
+def sphere_points(rings: Sequence[tuple[float, int]] = ..., pole: np.ndarray = ...) -> np.ndarray: ...
+def fit_sphere(points: np.ndarray, max_iterations: int = 50, tolerance: float = 1e-13) -> SphereFit: ...
+def table_points(dataset: Dataset, values: dict, indices: Sequence[int]) -> np.ndarray: ...
+def sphere_test(dataset: Dataset, sphere: str, values: dict) -> SphereTestResult: ...
+def sphere_sensitivity(setup: Dataset, plan_json: str, sphere: str, names: Sequence[str], values: dict = ...,
+                       characteristic_length: float = 400.0) -> list[dict]: ...
+
+class MachiningTest:
+    id: str
+    point: np.ndarray
+    direction: np.ndarray
+    pose: np.ndarray
+    reference: np.ndarray
+    measured: float
+    def __init__(self, id: str, point: np.ndarray, direction: np.ndarray, pose: np.ndarray,
+                 reference: Optional[np.ndarray] = None, measured: float = 0.0) -> None: ...
+
+class MachiningResult:
+    estimated: list[str]
+    values: np.ndarray
+    std: np.ndarray
+    covariance: np.ndarray
+    predicted: np.ndarray
+    residuals: np.ndarray
+    sigma: float
+    condition_number: float
+    rank: int
+    converged: bool
+    iterations: int
+    def to_json(self) -> str: ...
+
+def workpiece_setup_names() -> list[str]: ...
+def zhang_zhang_tests(machine: Machine, L: float, H: float) -> list[MachiningTest]: ...
+def zhang_zhang_first_order(L: float, H: float, a_delta: np.ndarray, a_xi: np.ndarray, c_delta: np.ndarray,
+                            c_xi: np.ndarray) -> np.ndarray: ...
+def machining_poses(machine: Machine, tests: Sequence[MachiningTest]) -> np.ndarray: ...
+def predict_machining(machine: Machine, tests: Sequence[MachiningTest], values: dict) -> np.ndarray: ...
+def machining_jacobian(machine: Machine, tests: Sequence[MachiningTest], names: Sequence[str],
+                       values: dict) -> np.ndarray: ...
+def identify_machining(machine: Machine, tests: Sequence[MachiningTest], estimate: Sequence[str], values: dict,
+                       sigma: float = 0.0, max_iterations: int = 50) -> MachiningResult: ...
