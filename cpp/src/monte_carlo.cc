@@ -201,6 +201,7 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
   std::vector<std::thread> pool;
   pool.reserve(T);
   for (int i = 0; i < T; ++i) pool.emplace_back(worker);
+  int reported = -1;
   {
     std::unique_lock<std::mutex> lock(mu);
     while (done.load() < M && !cancel.load()) {
@@ -209,7 +210,8 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
         lock.unlock();
         bool go = true;
         try {
-          go = progress(done.load(), M);
+          reported = done.load();
+          go = progress(reported, M);
         } catch (...) {
           go = false;
         }
@@ -220,7 +222,7 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
   }
   for (auto& th : pool) th.join();
   if (cancel.load()) throw std::runtime_error("monte carlo: cancelled");
-  if (progress) progress(M, M);
+  if (progress && reported != M) progress(M, M);
 
   // ---- Statistics, reduced in trial order ------------------------------------
   std::vector<int> used;

@@ -31,8 +31,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
-import time
 from typing import Callable, Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -45,8 +43,7 @@ from .machine import Machine
 from .units import display_scale
 
 __all__ = ["make_spec", "simulation_plan", "monte_carlo", "MonteCarloResult", "gum_input_covariance",
-           "CyclesUncertainty", "propagate", "pooled_covariance", "sensitivity", "coverage_factor",
-           "ProgressBar"]
+           "CyclesUncertainty", "propagate", "pooled_covariance", "sensitivity", "coverage_factor"]
 
 
 # --------------------------------------------------------------------------
@@ -105,30 +102,19 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
 # Progress bar
 # --------------------------------------------------------------------------
 
-class ProgressBar:
-    """A one-line text progress bar on a stream (stderr), called as
-    ``bar(done, total)``; returns True (continue)."""
+class _Bar:
+    """Adapter from the core's ``(done, total)`` callback to the shared
+    :class:`fivecal.progress.Progress` bar (drawn on a terminal or with
+    ``FIVECAL_PROGRESS=1``)."""
 
-    def __init__(self, label: str = "Monte Carlo", stream=None, width: int = 30):
-        self.label, self.stream, self.width = label, stream or sys.stderr, width
-        self.t0 = time.monotonic()
-        self._last = -1.0
+    def __init__(self, total: int, label: str = "Monte Carlo"):
+        from .progress import Progress
+        self.bar = Progress(total, label)
 
     def __call__(self, done: int, total: int) -> bool:
-        now = time.monotonic()
-        if done < total and now - self._last < 0.2:
-            return True
-        self._last = now
-        frac = done / total if total else 1.0
-        fill = int(round(self.width * frac))
-        el = now - self.t0
-        eta = el / frac - el if frac > 0 else float("nan")
-        tail = f"ETA {eta:5.0f} s" if done < total else f"{el:.1f} s"
-        self.stream.write(f"\r{self.label} [{'#' * fill}{'.' * (self.width - fill)}] "
-                          f"{done}/{total} trials {tail}  ")
+        self.bar.update(done - self.bar.n)
         if done >= total:
-            self.stream.write("\n")
-        self.stream.flush()
+            self.bar.close()
         return True
 
 
@@ -287,21 +273,27 @@ def monte_carlo(dataset_or_spec, estimate: Union[str, Sequence[str]] = "auto", t
     inputs x inputs covariance (mm^2, along the residuals) for correlated
     noise.  ``robust``/``robust_scale``: a robust loss with a fixed scale (mm;
     give it for simulated specs, whose noise-free reference fit has no
-    residual scale).  ``progress``: True for a bar on stderr, or a callable
-    ``(done, total) -> bool`` (False cancels).  Ctrl-C cancels too.
+    residual scale).  ``progress``: True for the shared bar on stderr (drawn on a
+    terminal or with ``FIVECAL_PROGRESS=1``), or a callable ``(done, total)
+    -> bool`` called about every 0.1 s (False cancels).  Ctrl-C cancels too.
     """
     plan, fit = simulation_plan(dataset_or_spec, estimate=estimate, sigma=sigma, fix=fix,
                                 initial=initial)
-    cb = ProgressBar() if progress is True else (progress or None)
+    bar = _Bar(int(trials)) if progress is True else None
+    cb = bar if bar is not None else (progress or None)
     cov = None if input_covariance is None else np.asarray(input_covariance, float)
     kw = {} if selection_tolerance is None else {"selection_tolerance": float(selection_tolerance)}
-    core = _core.monte_carlo(plan, _names(estimate), _names(fix), dict(initial or {}), robust=robust or "",
-                             robust_scale=float(robust_scale), max_iterations=int(max_iterations),
-                             include_default_setup=bool(default_setup),
-                             trials=int(trials), threads=int(threads), seed=int(seed),
-                             probability=float(probability), significant_digits=int(significant_digits),
-                             blocks=int(blocks), input_covariance=cov, trial_std=bool(trial_std),
-                             keep_samples=bool(keep_samples), progress=cb, **kw)
+    try:
+        core = _core.monte_carlo(plan, _names(estimate), _names(fix), dict(initial or {}),
+                                 robust=robust or "", robust_scale=float(robust_scale),
+                                 max_iterations=int(max_iterations), include_default_setup=bool(default_setup),
+                                 trials=int(trials), threads=int(threads), seed=int(seed),
+                                 probability=float(probability), significant_digits=int(significant_digits),
+                                 blocks=int(blocks), input_covariance=cov, trial_std=bool(trial_std),
+                                 keep_samples=bool(keep_samples), progress=cb, **kw)
+    finally:
+        if bar is not None:
+            bar.bar.close()
     return MonteCarloResult(core, fit)
 
 

@@ -158,12 +158,12 @@ def test_gum_propagation_hand_computed():
     assert g.expanded[1] == pytest.approx(2.228138852 * math.sqrt(10))
     p = uncertainty.pooled_covariance([[1, 2], [0, 0], [3, 4], [2, -2]], [0, 1, 0, 1])
     assert p.dof == 2 and np.allclose(p.covariance, 2 * np.eye(2))
-    from scipy import stats
-    assert uncertainty.coverage_factor(0.95, 7).k == pytest.approx(stats.t.ppf(0.975, 7), rel=1e-10)
+    # Table values (scipy.stats t.ppf(0.975, 7), chi2.ppf(0.95, 10), f.ppf(0.95, 4, 27)).
+    assert uncertainty.coverage_factor(0.95, 7).k == pytest.approx(2.364624251592784, rel=1e-10)
     assert uncertainty.coverage_factor(0.95, math.inf, 10).k_joint == pytest.approx(
-        math.sqrt(stats.chi2.ppf(0.95, 10)), rel=1e-10)
-    kq = uncertainty.coverage_factor(0.95, 30, 4).k_joint
-    assert kq ** 2 == pytest.approx(4 * 30 / 27 * stats.f.ppf(0.95, 4, 27), rel=1e-9)
+        math.sqrt(18.307038053275146), rel=1e-10)
+    kq = uncertainty.coverage_factor(0.95, 30, 4).k_joint           # Hotelling, JCGM 102
+    assert kq ** 2 == pytest.approx(4 * 30 / 27 * 2.7277653060339873, rel=1e-9)
 
 
 def test_gum_with_correlated_inputs_agrees_with_monte_carlo(spec):
