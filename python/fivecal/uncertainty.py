@@ -364,7 +364,11 @@ class CyclesUncertainty:
             f.write("\n")
 
     def report(self, names: Optional[Iterable[str]] = None) -> str:
-        names = list(names) if names is not None else self.names
+        """Table in µm, µrad, µm/m (machine errors first): value, u, U = k u
+        and the same pooling applied to the cycles' own estimates."""
+        if names is None:
+            names = [k for k in self.names if k.startswith("E")] + [k for k in self.names if not k.startswith("E")]
+        names = list(names)
         lines = [f"fivecal GUM with input covariance (thesis eq. 8-3): {len(self.day)} cycles pooled by "
                  f"{self.pooling}, {int(self.dof)} degrees of freedom",
                  f"  coverage: {self.coverage}; joint region of {len(self.names)} parameters: "

@@ -155,7 +155,7 @@ TEST(MonteCarlo, BitIdenticalWithOneAndTwoThreads) {
 TEST(MonteCarlo, CancelledByTheProgressCallback) {
   const SimulationPlan plan = BuildSimulationPlan(TangoSpec());
   MonteCarloOptions o;
-  o.trials = 2000;
+  o.trials = 20000;  // far more than can finish before the first poll (0.1 s)
   o.threads = 2;
   EXPECT_THROW(MonteCarlo(plan, SmallFit(), o, [](int, int) { return false; }), std::runtime_error);
 }
