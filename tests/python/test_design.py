@@ -302,3 +302,27 @@ def test_cli_design_help_and_errors(capsys, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"machine": "../nowhere.json"}))
     assert main(["design", str(bad), "-k", "3"]) == 2
+
+
+def test_cli_design_from_candidate_indexations(tmp_path, capsys):
+    """A spec with 'candidates' (indexations + accessibility limits) instead of a plan."""
+    s2 = math.sqrt(0.5)
+    spec = {"machine": str(ROOT / "examples" / "machines" / "hu40t.json"), "probe": {"tip_radius": 3.0},
+            "artefact": tango.octagonal_table(),
+            "candidates": {"indexations": [{"B": float(b), "C": float(c)} for b in (-90, -45, 0, 45, 90)
+                                           for c in (-180, -90, 0, 90)] + [{"B": 0.0, "C": 0.0, "S": 90.0}],
+                           "limits": {"X": [-400, 400]}, "min_dot": 0.0,
+                           "sphere_normals": [[0, 0, 1], [s2, 0, s2], [-s2, 0, s2], [0, s2, s2], [0, -s2, s2]]},
+            "errors": {**tango.thesis_s3_errors(), **tango.STYLUS_OFFSETS}, "sigma": 0.0006, "seed": 2}
+    path = tmp_path / "cand.json"
+    path.write_text(json.dumps(spec))
+    out = tmp_path / "designed.json"
+    assert main(["design", str(path), "-k", "8", "--estimate", "S3", "--out", str(out), "--no-progress"]) == 0
+    assert "8 of 21 indexations" in capsys.readouterr().out
+    designed = json.loads(out.read_text())
+    assert "candidates" not in designed and designed["plan"]
+    assert math.isfinite(designed["design"]["condition_number"])
+    assert main(["simulate", str(out), "--out", str(tmp_path / "d.json")]) == 0
+    r = fivecal.identify(fivecal.load_dataset(tmp_path / "d.json"), "S3")
+    t = truth(None)
+    assert all(abs(r.values[n] - t.get(n, 0.0)) < 3 * r.std[n] for n in tango.S3_NAMES)
