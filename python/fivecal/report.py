@@ -15,8 +15,10 @@ the ball bar plotting module ``fivecal.polar`` is present, its polar plots.
 Hook for ball bar plots: if ``fivecal.polar`` defines
 ``report_figures(result, out_dir)`` it is called when the dataset has ``dbb``
 observations and must return a list of PNG paths or ``(path, caption)``
-pairs (written inside ``out_dir``); ``plot_dbb_polar(result, path)`` is used
-as a fallback. A failure there is shown in the report, not raised.
+pairs (written inside ``out_dir``); else ``plot_dbb_polar(result, path)``;
+else the report draws one ``polar.plot_polar`` per ball-bar setup (recorded
+readings and residuals against the angle of the moving axis). A failure
+there is shown in the report, not raised.
 """
 from __future__ import annotations
 
@@ -305,8 +307,10 @@ def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
         elif hasattr(polar, "plot_dbb_polar"):
             p = polar.plot_dbb_polar(result, os.path.join(out_dir, "dbb_polar.png"))
             figs = [p if p else os.path.join(out_dir, "dbb_polar.png")]
+        elif hasattr(polar, "plot_polar"):
+            figs = _dbb_polar_plots(result, out_dir, polar)
         else:
-            return [], "fivecal.polar has neither report_figures() nor plot_dbb_polar()."
+            return [], "fivecal.polar has none of report_figures(), plot_dbb_polar(), plot_polar()."
         out = []
         for f in figs:
             path, cap = (f, "Double ball bar trace (polar plot)") if isinstance(f, (str, os.PathLike)) else f
@@ -314,6 +318,54 @@ def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
         return out, None
     except Exception as e:  # a plotting problem must not lose the rest of the report
         return [], f"DBB polar plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}"
+
+
+def _dbb_polar_plots(result, out_dir: str, polar) -> List[Figure]:
+    """One polar plot per ball-bar setup through ``polar.plot_polar``: the
+    recorded readings and the residuals left by the fit, against the angle of
+    the rotary axis that moves most in that setup (or, for a circle of two
+    linear axes, the angle around the circle's centre)."""
+    from .dbb import Trace
+
+    ds = result.dataset
+    obs = ds.observations
+    src = np.asarray(result.residual_source)
+    res = np.asarray(result.residuals)
+    resid = {int(k): float(r) for k, r in zip(src, res) if k >= 0}
+    groups: dict = {}
+    for i, o in enumerate(obs):
+        if o.get("type") == "dbb":
+            groups.setdefault(o.get("setup") or "dbb", []).append(i)
+    letters = [a for a in ds.machine.axis_names if a != "S"]
+    figs: List[Figure] = []
+    for setup, idx in groups.items():
+        if len(idx) < 4:
+            continue
+        q = {a: np.array([float(obs[i]["axes"].get(a, 0.0)) for i in idx]) for a in letters}
+        spans = {a: float(np.ptp(v)) for a, v in q.items()}
+        rotary = [a for a in letters if a in "ABC" and spans[a] > 1e-9]
+        if rotary:
+            key = max(rotary, key=spans.get)
+            angles, what, plane = q[key], f"axis {key} position (deg)", ("", "")
+        else:
+            a1, a2 = sorted(letters, key=spans.get, reverse=True)[:2]
+            angles = np.degrees(np.unwrap(np.arctan2(q[a2] - q[a2].mean(), q[a1] - q[a1].mean())))
+            what, plane = f"angle in the {a1}{a2} plane (deg)", (a1, a2)
+        readings = np.array([float(obs[i].get("reading", 0.0)) for i in idx])
+        left = np.array([resid.get(i, np.nan) for i in idx])
+        radius = float(obs[idx[0]].get("length", 100.0))
+        rms = lambda x: float(np.sqrt(np.nanmean(np.square(x)))) * 1e3
+        path = os.path.join(out_dir, f"dbb_polar_{setup}.png")
+        polar.plot_polar([Trace(angles, readings, label="recorded reading"),
+                          Trace(angles, left, label="residual after the fit")], path, radius,
+                         title=f"Ball bar setup {setup}: recorded and unexplained",
+                         annotations=[f"{len(idx)} samples", f"angle: {what}",
+                                      f"bar length {radius:g} mm",
+                                      f"reading rms  {rms(readings):.2f} µm",
+                                      f"residual rms {rms(left):.2f} µm"], plane=plane)
+        figs.append((path, f"Ball bar setup {setup}: the recorded readings and what the identified model "
+                           "leaves unexplained, as a polar plot (deviations magnified)."))
+    return figs
 
 
 def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] = None,
