@@ -436,7 +436,9 @@ def main(argv=None) -> int:
     pg.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
     pg.add_argument("--criterion", choices=["condition", "d"], default="condition",
                     help="minimise the condition number (default) or maximise the D-optimality")
-    pg.add_argument("--method", choices=["exchange", "greedy"], default="exchange")
+    pg.add_argument("--method", choices=["exchange", "greedy"], default="exchange",
+                    help="forward greedy selection, then exchange swaps while they improve (default), "
+                    "or greedy only")
     pg.add_argument("--require", default=None, help="candidate visit numbers always kept, comma separated")
     pg.add_argument("--max-touches", type=int, default=0, help="then drop single touches down to this many")
     pg.add_argument("--sigma", type=float, default=0.0006, help="probing noise (mm) for the predicted "
