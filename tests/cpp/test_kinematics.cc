@@ -21,6 +21,7 @@
 #include <ostream>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "fivecal/inverse.h"
@@ -69,19 +70,20 @@ const char* kKx8Json = R"({"name": "KX8-like", "topology": "wCAYbXZSt",
           "S": {"type": "rotary", "direction": [0,0,1]}},
  "tool": {"tip": [0,0,150]}})";
 
-// (d) Table C + swivelling head B (mixed), (e) head-head C/A. Only used to
-// cover the other branches of the inverse kinematics.
+// (d) Table C + swivelling head B (mixed), (e) head-head C/A. Used to cover
+// the other branches of the inverse kinematics; their spindle points are not
+// at the origin, so Trans(tip - p_last) is exercised.
 const char* kMixedJson = R"({"name": "mixed", "topology": "wCfXYZBSt",
  "axes": {"C": {"direction": [0,0,1], "point": [10,-5,0]},
           "X": {"direction": [1,0,0]}, "Y": {"direction": [0,1,0]}, "Z": {"direction": [0,0,1]},
           "B": {"direction": [0,1,0], "point": [0,0,250]},
-          "S": {"direction": [0,0,1]}},
+          "S": {"direction": [0,0,1], "point": [0,0,250]}},
  "tool": {"tip": [0,0,120]}})";
 const char* kHeadHeadJson = R"({"name": "head-head", "topology": "wfXYZCASt",
  "axes": {"X": {"direction": [1,0,0]}, "Y": {"direction": [0,1,0]}, "Z": {"direction": [0,0,1]},
           "C": {"direction": [0,0,1], "point": [0,0,300]},
           "A": {"direction": [1,0,0], "point": [0,0,260]},
-          "S": {"direction": [0,0,1]}},
+          "S": {"direction": [0,0,1], "point": [0,0,260]}},
  "tool": {"tip": [0,0,100]}})";
 
 using Values = std::map<char, double>;
@@ -271,14 +273,18 @@ TEST(Kinematics, RotaryOffsetMovesPivot) {
 }
 
 TEST(Kinematics, RotaryPointMaySlideAlongItsAxis) {
-  // Only the axis line matters: moving C's point along C's own direction
-  // leaves the kinematics unchanged (the point is not a second parameter).
+  // Only the axis line matters: moving C's point (on the workpiece side) and
+  // the spindle's point (last on the tool side, so it is p_last in
+  // Trans(tip - p_last)) along their own directions leaves the kinematics
+  // unchanged.
   const Machine m = Machine::FromJson(kTableJson);
   std::string moved = kTableJson;
-  const std::string from = R"("point": [4,7,0])", to = R"("point": [4,7,33])";
-  moved.replace(moved.find(from), from.size(), to);
+  for (const auto& [from, to] : {std::make_pair(R"("point": [4,7,0])", R"("point": [4,7,33])"),
+                                 std::make_pair(R"("point": [0,0,0])", R"("point": [0,0,-40])")})
+    moved.replace(moved.find(from), std::string(from).size(), to);
   const Machine m2 = Machine::FromJson(moved);
   ASSERT_EQ(m2.axis(m2.AxisIndex('C')).point, Eigen::Vector3d(4, 7, 33));
+  ASSERT_EQ(m2.axis(m2.AxisIndex('S')).point, Eigen::Vector3d(0, 0, -40));
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> lin(-300, 300), rot(-180, 180);
   Eigen::MatrixXd axes(50, 6);
@@ -431,6 +437,53 @@ TEST_F(ErrorEffects, ScaleErrorOfNegativeLinearAxisShortensTravel) {
                                             {'Y', lin(rng)}, {'S', rot(rng)}});
     const Eigen::Vector3d expected = Rz(c * kRad, Ry(b * kRad, -k * x * Eigen::Vector3d::UnitX()));
     EXPECT_NEAR((Dev(hu, "EXX1", k, row) - expected).norm(), 0, 1e-11);
+  }
+}
+
+TEST_F(ErrorEffects, LinearAxisErrorMotionsActAtTheCarriage) {
+  // T_X = Trans(x ex) . eps_X(x): the error motions of X act at the moved X
+  // carriage and are carried by Y, Z, S and the tip. With a = c = 0:
+  //   y_F = x ex + eps_X(x) v,  v = y ey + z ez + Rz(s) tip.
+  // Straightness EYX2: eps_X = Trans(0, EYX2 x^2, 0), dP = EYX2 x^2 ey exactly.
+  // Yaw ECX1: eps_X = Rz(ECX1 x), dP = Rz(ECX1 x) v - v, which to first order
+  // is ECX1 x (-v_y, v_x, 0): the Abbe offset is v, measured from the
+  // carriage, not from the machine origin.
+  for (double x : {-220.0, 35.0, 260.0}) {
+    const double y = 40, z = -75, s = 30;
+    const Eigen::RowVectorXd row = Row(table, {{'X', x}, {'Y', y}, {'Z', z}, {'S', s}});
+    EXPECT_NEAR((Dev(table, "EYX2", 2e-8, row) - 2e-8 * x * x * Eigen::Vector3d::UnitY()).norm(),
+                0, 1e-12) << x;
+    const double k = 5e-8;  // rad/mm: 1e-5 rad at x = 200
+    const Eigen::Vector3d v = Eigen::Vector3d(0, y, z) + Rz(s * kRad, kTableTip);
+    const Eigen::Vector3d dev = Dev(table, "ECX1", k, row);
+    EXPECT_NEAR((dev - (Rz(k * x, v) - v)).norm(), 0, 1e-12) << x;
+    EXPECT_NEAR((dev - k * x * Eigen::Vector3d(-v.y(), v.x(), 0)).norm(), 0,
+                std::pow(k * x, 2) * v.norm()) << x;
+  }
+}
+
+TEST_F(ErrorEffects, RotaryAxisErrorMotionsTurnWithTheTable) {
+  // T_C = Trans(pC - pA) . Rz(c) . eps_C(c): the error motions of C are
+  // expressed in the turned table frame. A radial motion EXC1 (c in rad):
+  //   P sits in F at pA + Rx(a) (pC - pA + Rz(c) (EXC1 c ex + P - pC)),
+  // so dP = -EXC1 c ex exactly, along the table's own -X whatever c is.
+  const double k = 1e-4;  // mm/rad
+  for (int i = 0; i < 20; ++i) {
+    const Eigen::RowVectorXd row = RandomTablePose();
+    const double c = row[table.AxisIndex('C')] * kRad;
+    EXPECT_NEAR((Dev(table, "EXC1", k, row) - (-k * c) * Eigen::Vector3d::UnitX()).norm(), 0,
+                1e-11) << "pose " << i;
+  }
+  // An angular positioning error ECC1: Rz(c) Rz(ECC1 c) = Rz((1 + ECC1) c),
+  // exactly the closed form at the scaled angle.
+  ErrorModel e(table);
+  e.Set("ECC1", 3e-5);
+  for (int i = 0; i < 20; ++i) {
+    const Eigen::RowVectorXd row = RandomTablePose();
+    auto at = [&](char a) { return row[table.AxisIndex(a)]; };
+    const Eigen::Vector3d expected = TableClosedForm(at('C') * (1 + 3e-5), at('A'), at('X'),
+                                                     at('Y'), at('Z'), at('S'), kTableTip, nullptr);
+    EXPECT_NEAR((Point(table, e.values(), row) - expected).norm(), 0, 1e-9);
   }
 }
 
@@ -622,6 +675,72 @@ TEST(Kinematics, JetMatchesDoubleAndFiniteDifferencesTable) {
 
 TEST(Kinematics, JetMatchesDoubleAndFiniteDifferencesHu40t) {
   CheckJetAgainstDouble(kHu40tJson, 6);
+}
+
+// Each parameter set alone (the others exactly 0, as when a user sets one
+// error) moves the double forward kinematics by its Jet derivative at the
+// nominal machine times its value, up to second order. This catches a double
+// path that skips a component which is the only non-zero one.
+void CheckEachParameterAlone(const char* json, unsigned seed) {
+  const Machine m = Machine::FromJson(json);
+  ASSERT_EQ(m.num_parameters(), kNumParams);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> lin(-300, 300), rot(-180, 180);
+  std::bernoulli_distribution coin(0.5);
+  std::vector<Jet> zero_j(kNumParams);
+  for (int i = 0; i < kNumParams; ++i) zero_j[i] = Jet(0.0, i);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(kNumParams);
+  for (int pose = 0; pose < 3; ++pose) {
+    Eigen::MatrixXd axes(1, m.num_axes());
+    Eigen::MatrixXi dirs(1, m.num_axes());
+    for (int k = 0; k < m.num_axes(); ++k) {
+      axes(0, k) = m.axis(k).rotary() ? rot(rng) : lin(rng);
+      dirs(0, k) = coin(rng) ? 1 : -1;
+    }
+    std::vector<double> q(m.num_axes());
+    AxisValuesToInternal(m, axes.data(), q.data());
+    std::vector<int> dir(dirs.data(), dirs.data() + m.num_axes());
+    Vec3<Jet> pj, vj;
+    ToolInWorkpiece<Jet>(m, zero_j.data(), q.data(), dir.data(),
+                         TipWithOffsets<Jet>(m, zero_j.data()), &pj, &vj);
+    Eigen::MatrixXd p0, v0;
+    ToolPoses(m, zero, axes, &dirs, &p0, &v0);
+    for (int i = 0; i < kNumParams; ++i) {
+      const double value = 0.1 * Scale(m, i);
+      Eigen::VectorXd theta = zero;
+      theta[i] = value;
+      Eigen::MatrixXd p, v;
+      ToolPoses(m, theta, axes, &dirs, &p, &v);
+      Eigen::Vector3d dp_lin, dv_lin;
+      for (int r = 0; r < 3; ++r) {
+        dp_lin[r] = pj[r].v[i] * value;
+        dv_lin[r] = vj[r].v[i] * value;
+      }
+      const Eigen::Vector3d dp = (p - p0).row(0).transpose(), dv = (v - v0).row(0).transpose();
+      EXPECT_LE((dp - dp_lin).norm(), 1e-3 * dp_lin.norm() + 1e-12)
+          << m.parameters()[i].name << ": moved " << dp.transpose() << ", expected "
+          << dp_lin.transpose();
+      EXPECT_LE((dv - dv_lin).norm(), 1e-3 * dv_lin.norm() + 1e-14) << m.parameters()[i].name;
+    }
+  }
+}
+
+TEST(Kinematics, EachParameterAloneMatchesItsDerivativeTable) {
+  CheckEachParameterAlone(kTableJson, 14);
+}
+
+TEST(Kinematics, EachParameterAloneMatchesItsDerivativeHu40t) {
+  CheckEachParameterAlone(kHu40tJson, 15);
+}
+
+// Rotary axes on the tool side and a spindle point off the origin (p_last in
+// Trans(tip - p_last)).
+TEST(Kinematics, JetMatchesDoubleAndFiniteDifferencesMixed) {
+  CheckJetAgainstDouble(kMixedJson, 12);
+}
+
+TEST(Kinematics, JetMatchesDoubleAndFiniteDifferencesHeadHead) {
+  CheckJetAgainstDouble(kHeadHeadJson, 13);
 }
 
 // ---- 4. Inverse kinematics ---------------------------------------------------------

@@ -295,18 +295,23 @@ TEST(MachineValidation, NaNDirectionConstructedDirectly) {
 }
 
 TEST(MachineValidation, OverflowingDirectionInJson) {
-  // 1e999 overflows a double. The parser's own exception must not leak: the
-  // user is promised std::invalid_argument naming the field.
+  // 1e999 overflows a double. The parser's own exception
+  // (nlohmann::json::out_of_range) must not leak: the user is promised
+  // std::invalid_argument naming the document and the bad value.
   ExpectInvalid([] { Machine::FromJson(R"({"topology": "wfXt",
       "axes": {"X": {"direction": [1e999,0,0]}}})"); },
-                {"machine"});
+                {"machine", "1e999"});
 }
 
 TEST(MachineValidation, WrongJsonTypeForName) {
-  // A JSON value of the wrong type must also surface as std::invalid_argument.
+  // A JSON value of the wrong type must also surface as std::invalid_argument
+  // (not nlohmann::json::type_error).
   ExpectInvalid([] { Machine::FromJson(R"({"name": 5, "topology": "wfXt",
       "axes": {"X": {"direction": [1,0,0]}}})"); },
-                {"name"});
+                {"machine.name"});
+  ExpectInvalid([] { Machine::FromJson(R"({"topology": "wfXt",
+      "axes": {"X": {"direction": [1,0,"a"]}}})"); },
+                {"machine.axes.X.direction[2]"});
 }
 
 TEST(MachineValidation, LinearAxisWithTypeRotary) {
