@@ -83,6 +83,21 @@ def test_jcgm101_validation_fields_are_consistent(mc):
                                             "validated", "verdict"}
 
 
+def test_jcgm101_validates_the_gum_with_the_default_10000_trials(spec):
+    """JCGM 101 §8 with M = 10,000 (the default) and u(y) to one significant
+    digit: the GUM intervals of the 17 S3 errors agree with the Monte Carlo
+    shortest intervals within the numerical tolerance (the model is nearly
+    linear over a few µm), and the Monte Carlo is itself stable at that
+    tolerance for almost all of them (JCGM 101 §7.9.4 on 10 blocks)."""
+    r = uncertainty.monte_carlo(spec, "S3", seed=101, progress=False, significant_digits=1)
+    assert r.trials == 10000 and r.used == 10000
+    assert all(r.validated[k] for k in S3), [k for k in S3 if not r.validated[k]]
+    assert sum(r.stable[k] for k in S3) >= 14
+    assert max(max(r.d_low[k], r.d_high[k]) / r.tolerance[k] for k in S3) < 0.8
+    # With two significant digits the tolerance is at least ten times tighter.
+    assert all(r.tolerance[k] >= 9.999 * _core.numerical_tolerance(r.gum_std[k], 2) for k in S3)
+
+
 def test_95_percent_intervals_cover_the_truth_over_300_simulated_calibrations(spec, mc):
     """300 independent simulated calibrations (another master seed): each
     reports its own GUM interval y +- 1.96 u (u from its own residuals, as
