@@ -169,3 +169,180 @@ def fit(fun, names, x0=None):
     x0 = np.zeros(len(names)) if x0 is None else x0
     return least_squares(lambda x: fun(dict(zip(names, x))), x0, jac="2-point", method="trf",
                          x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12)
+
+
+# ---- test design: greedy + exchange D-optimal search ----------------------------
+
+def fd_jacobian(fun, names, h=1e-6):
+    """Central finite-difference Jacobian of fun(dict) at 0 over ``names``."""
+    cols = []
+    for n in names:
+        cols.append((fun({n: h}) - fun({n: -h})) / (2 * h))
+    return np.stack(cols, axis=1)
+
+
+class NumpyDesign:
+    """The search of fivecal.design.design_plan (criterion "d", method
+    "exchange"), written with numpy: the Jacobian of the DESIGN.md residuals
+    at the nominal machine by central finite differences of NumpyProblem,
+    per-indexation information matrices J_g^T J_g, and batched numpy linear
+    algebra (one ``eigvalsh`` over the stack of all candidate selections of a
+    step). Same rules as the C++ search: a setup column (facet offset, sphere
+    centre) counts only once a chosen touch uses it, the scale bar's row once
+    both of its balls are touched; rank first (fewest null directions, then
+    the largest sum of log non-null eigenvalues), then the Ds-criterion
+    (1/p_m) log det of the Schur complement on the machine columns in
+    characteristic units.
+
+    ``names``: the estimated columns, machine parameters first (``n_machine``
+    of them); ``scale``: their characteristic scales (mm per unit).
+    """
+
+    def __init__(self, dataset, names, n_machine, scale, groups, tol=1e-7):
+        prob = NumpyProblem(dataset)
+        self.names, self.p, self.pm = list(names), len(names), int(n_machine)
+        self.tol = tol
+        J = fd_jacobian(prob.residuals, self.names)
+        n_obs = len(prob.types)
+        row_obs = np.concatenate([prob.f_idx, prob.s_idx, prob.b_idx]).astype(int)
+        if prob.b_idx.size:
+            raise ValueError("NumpyDesign: probing datasets only (facets, spheres, scale bars)")
+        n_touch_rows = row_obs.size
+        self.groups = np.asarray(groups, dtype=int)
+        self.G = int(self.groups.max()) + 1
+        col = {n: i for i, n in enumerate(self.names)}
+        # per-indexation information and activation counts
+        g_row = self.groups[row_obs]
+        order = np.argsort(g_row, kind="stable")
+        cuts = np.searchsorted(g_row[order], np.arange(self.G + 1))
+        Jt = J[:n_touch_rows][order]
+        self.info = np.empty((self.G, self.p, self.p))
+        for g in range(self.G):
+            Jg = Jt[cuts[g]:cuts[g + 1]]
+            self.info[g] = Jg.T @ Jg
+        obs = dataset.to_dict()["observations"]
+        sphere_ids = sorted({o["target"] for o in obs if o["type"] == "sphere"})
+        sph = {s: i for i, s in enumerate(sphere_ids)}
+        self.cnt = np.zeros((self.G, self.p), dtype=int)
+        self.sph = np.zeros((self.G, max(1, len(sphere_ids))), dtype=int)
+        for i in range(n_obs):
+            o, g = obs[i], self.groups[i]
+            if o["type"] == "facet":
+                c = col.get(f"facet.{o['target']}")
+                if c is not None:
+                    self.cnt[g, c] += 1
+            else:
+                self.sph[g, sph[o["target"]]] += 1
+                for a in "xyz":
+                    c = col.get(f"sphere.{o['target']}.{a}")
+                    if c is not None:
+                        self.cnt[g, c] += 1
+        self.core = np.arange(self.p) < self.pm            # machine columns: always estimated
+        self.bars = []
+        for b, (s1, s2, _, _) in enumerate(prob.bars):
+            r = J[n_touch_rows + b]
+            self.bars.append((sph[s1], sph[s2], np.outer(r, r)))
+        self.log_scale2 = 2.0 * np.log(np.asarray(scale, float)[: self.pm])
+        self.evaluations = 0
+
+    # -- scoring a stack of selections ------------------------------------------
+    def _with_bars(self, M, sph):
+        """M: (B, p, p) touches only; sph: (B, n_spheres) touch counts."""
+        for s1, s2, Mb in self.bars:
+            on = (sph[:, s1] > 0) & (sph[:, s2] > 0)
+            if on.any():
+                M = M + on[:, None, None] * Mb
+        return M
+
+    def score(self, M, cnt, sph):
+        """Deficiency, log-eigenvalue sum (rank-deficient ranking) and
+        Ds-criterion of each selection of the stack."""
+        self.evaluations += M.shape[0]
+        A = self._with_bars(M, sph)
+        active = self.core[None, :] | (cnt > 0)
+        d = np.diagonal(A, axis1=1, axis2=2)
+        live = active & (d > 0)
+        s = np.where(live, 1.0 / np.sqrt(np.where(live, d, 1.0)), 0.0)
+        Ms = A * s[:, :, None] * s[:, None, :]
+        i = np.arange(self.p)
+        Ms[:, i, i] = np.where(live, Ms[:, i, i], 1.0)     # unused columns: decoupled unit eigenvalues
+        lam = np.linalg.eigvalsh(Ms)
+        cut = self.tol ** 2 * lam[:, -1:]
+        pos = lam > cut
+        deficiency = (active.sum(1) - live.sum(1)) + (~pos).sum(1)
+        logsum = np.where(pos, np.log(np.where(pos, lam, 1.0)), 0.0).sum(1)
+        nonnull = logsum / active.sum(1)
+        dcrit = np.full(M.shape[0], -np.inf)
+        ok = deficiency == 0
+        if ok.any():
+            Ss = Ms[ok][:, self.pm:, self.pm:]
+            sign, logdet_ss = np.linalg.slogdet(Ss) if Ss.shape[1] else (np.ones(ok.sum()), np.zeros(ok.sum()))
+            shift = (np.log(d[ok][:, : self.pm]) + self.log_scale2).sum(1)
+            dcrit[ok] = np.where(sign > 0, (logsum[ok] - logdet_ss + shift) / self.pm, -np.inf)
+        return deficiency, nonnull, dcrit
+
+    @staticmethod
+    def _best(deficiency, nonnull, dcrit):
+        m = deficiency.min()
+        key = -nonnull if m > 0 else -dcrit
+        return int(np.argmin(np.where(deficiency == m, key, np.inf)))
+
+    @staticmethod
+    def _better(a, b):
+        """fivecal's strict ordering of two (deficiency, nonnull, dcrit)."""
+        if a[0] != b[0]:
+            return a[0] < b[0]
+        if a[0] > 0:
+            return a[1] > b[1] + 1e-12
+        return -a[2] < -b[2] - 1e-9 * max(1.0, abs(b[2]))
+
+    def search(self, k, max_passes=50):
+        """Greedy forward selection of k indexations, then best-swap exchange
+        passes while a swap improves. Returns (groups, history)."""
+        chosen = np.zeros(self.G, dtype=bool)
+        M = np.zeros((self.p, self.p))
+        cnt = np.zeros(self.p, dtype=int)
+        sph = np.zeros(self.sph.shape[1], dtype=int)
+        history = []
+        best = None
+        for _ in range(k):
+            h = np.where(~chosen)[0]
+            sc = self.score(M + self.info[h], cnt + self.cnt[h], sph + self.sph[h])
+            j = self._best(*sc)
+            g = h[j]
+            chosen[g] = True
+            M, cnt, sph = M + self.info[g], cnt + self.cnt[g], sph + self.sph[g]
+            best = tuple(x[j] for x in sc)
+            history.append(best[2] if best[0] == 0 else -np.inf)
+        for _ in range(max_passes):
+            swap, swap_score = None, best
+            h = np.where(~chosen)[0]
+            if h.size == 0:
+                break
+            for g in np.where(chosen)[0]:
+                Mw, cw, sw = M - self.info[g], cnt - self.cnt[g], sph - self.sph[g]
+                sc = self.score(Mw + self.info[h], cw + self.cnt[h], sw + self.sph[h])
+                j = self._best(*sc)
+                cand = tuple(x[j] for x in sc)
+                if self._better(cand, swap_score):
+                    swap, swap_score = (g, h[j]), cand
+            if swap is None:
+                break
+            g, hh = swap
+            chosen[g], chosen[hh] = False, True
+            M = M - self.info[g] + self.info[hh]
+            cnt = cnt - self.cnt[g] + self.cnt[hh]
+            sph = sph - self.sph[g] + self.sph[hh]
+            best = swap_score
+            history.append(best[2] if best[0] == 0 else -np.inf)
+        return [int(g) for g in np.where(chosen)[0]], history
+
+
+def design_search(dataset, names, n_machine, scale, groups, k, max_passes=50):
+    """Everything the numpy way, from the candidate dataset: Jacobian, per-
+    indexation information, greedy + exchange. Returns (groups, observation
+    indices, history, evaluations)."""
+    nd = NumpyDesign(dataset, names, n_machine, scale, groups)
+    chosen, history = nd.search(k, max_passes)
+    obs = np.where(np.isin(nd.groups, chosen))[0]
+    return chosen, [int(i) for i in obs], history, nd.evaluations
