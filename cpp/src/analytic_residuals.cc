@@ -85,7 +85,8 @@ bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residu
   const int np = m.num_parameters(), nb = static_cast<int>(estimated_.size());
   Eigen::VectorXd v = values_;
   for (int b = 0; b < nb; ++b) v[estimated_[b]] = parameters[b][0];
-  const KinematicModel model(m, v.data());
+  KinematicModel model(m, v.data());
+  if (jacobians) model.RestrictJacobian(estimated_);
   const int nr = num_residuals();
   if (jacobians)
     for (int b = 0; b < nb; ++b)

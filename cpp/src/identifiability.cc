@@ -7,6 +7,42 @@
 #include <numeric>
 
 namespace fivecal {
+namespace {
+
+// Below this condition number the singular values are taken from the
+// eigenvalues of R^T R: their relative error is about p eps kappa^2 (1e-6 at
+// the bound), and the symmetric eigensolver is ten times faster than Eigen's
+// SVD of a 100 x 100 triangle. Above it, the SVD.
+constexpr double kEigenConditionBound = 1e4;
+
+// Full-rank, well-conditioned square triangle R (the scaled Jacobian's QR
+// factor): rank, condition, log det and (R^T R)^-1 (unscaled) without an SVD.
+bool WellConditioned(const Eigen::MatrixXd& R, double rank_tolerance, Identifiability* out) {
+  const int p = static_cast<int>(R.cols());
+  if (p == 0) return false;
+  const auto U = R.triangularView<Eigen::Upper>();
+  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
+  N.selfadjointView<Eigen::Lower>().rankUpdate(R.transpose());
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
+  if (eig.info() != Eigen::Success) return false;
+  const Eigen::VectorXd lambda = eig.eigenvalues();  // ascending
+  if (!(lambda[0] > 0) || lambda[p - 1] > kEigenConditionBound * kEigenConditionBound * lambda[0] ||
+      std::sqrt(lambda[0]) <= rank_tolerance * std::sqrt(lambda[p - 1]))
+    return false;
+  out->singular_values = lambda.reverse().cwiseSqrt();
+  out->rank = p;
+  out->condition_number = out->singular_values[0] / out->singular_values[p - 1];
+  double logdet = 0;
+  for (int i = 0; i < p; ++i) logdet += 2.0 * std::log(std::abs(R(i, i)));
+  out->log_det_per_parameter = logdet / p;
+  const Eigen::MatrixXd Ri = U.solve(Eigen::MatrixXd::Identity(p, p));
+  Eigen::VectorXd inv_scale = out->column_norms.cwiseInverse();
+  out->inverse_normal.noalias() = Ri * Ri.transpose();
+  out->inverse_normal = inv_scale.asDiagonal() * out->inverse_normal * inv_scale.asDiagonal();
+  return true;
+}
+
+}  // namespace
 
 Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance) {
   Identifiability out;
@@ -32,6 +68,8 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
   } else {
     reduced = Js;
   }
+  if (zero_columns.empty() && reduced.rows() == p && WellConditioned(reduced, rank_tolerance, &out))
+    return out;
   Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
   const Eigen::VectorXd s = svd.singularValues();
   // Thin SVD of an n x p matrix with n < p has only n singular values.

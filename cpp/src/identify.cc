@@ -199,19 +199,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     }
   }
 
-  ceres::Solver::Options so;
-  // Normal equations: the problems are small and dense, and with Jacobi
-  // scaling the squared condition number stays far from double precision.
-  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
-  so.max_num_iterations = opt.max_iterations;
-  so.function_tolerance = 1e-15;
-  so.parameter_tolerance = 1e-12;
-  so.gradient_tolerance = 1e-16;
-  so.num_threads = std::max(1, opt.num_threads);
-  so.logging_type = ceres::SILENT;
-  // The models are nearly linear in the errors: start with a trust region so
-  // large that the first steps are Gauss-Newton steps.
-  so.initial_trust_region_radius = 1e12;
+  const ceres::Solver::Options so = Problem::SolverOptions(opt.max_iterations, opt.num_threads);
 
   auto run = [&](Problem* pr) {
     ceres::Solver::Summary summary;

@@ -51,14 +51,7 @@ RefitResult Refit::Fit(const Dataset& ds, bool with_std) const {
         a[i].axes.size() != b[i].axes.size())
       throw std::invalid_argument("refit: observations[" + std::to_string(i) +
                                   "] differs from the reference (type, target or setup)");
-  ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;  // as Identify
-  so.max_num_iterations = d.options.max_iterations;
-  so.function_tolerance = 1e-15;
-  so.parameter_tolerance = 1e-12;
-  so.gradient_tolerance = 1e-16;
-  so.num_threads = 1;
-  so.logging_type = ceres::SILENT;
+  const ceres::Solver::Options so = Problem::SolverOptions(d.options.max_iterations, 1);
   const bool robust = !d.options.robust.empty() && d.options.robust != "none";
   Problem problem(ds, d.table, d.start, d.est, robust ? d.options.robust : "", robust ? d.robust_scale : 0.0);
   ceres::Solver::Summary summary;

@@ -109,5 +109,49 @@ TEST(KinematicModel, ToolAxisMatchesTemplatedKinematics) {
   EXPECT_LT((a - aref).norm(), 1e-14);
 }
 
+TEST(KinematicModel, RestrictedJacobianWritesTheWantedGroupsUnchanged) {
+  const Machine m = Machine::FromJson(kMachines[0]);
+  std::mt19937 rng(5);
+  const Eigen::VectorXd theta = RandomTheta(m, rng);
+  KinematicModel full(m, theta.data()), part(m, theta.data());
+  // One location error of B, one error motion of X: those two axis groups and the tip.
+  const int b = m.AxisIndex('B'), x = m.AxisIndex('X');
+  part.RestrictJacobian({m.location_index(b, 4), m.motion_index(x, 1, 2)});
+  std::vector<double> q = {0.3, -0.7, 120.0, -40.0, 33.0, 1.1};
+  std::vector<int> dir = {1, -1, 1, 1, -1, 0};
+  const int np = m.num_parameters();
+  Eigen::MatrixXd Jf(3, np), Jp = Eigen::MatrixXd::Constant(3, np, 7.0);
+  Eigen::Vector3d Pf, Pp;
+  full.ToolPointJacobian(q.data(), dir.data(), full.tip(), &Pf, Jf.data());
+  part.ToolPointJacobian(q.data(), dir.data(), part.tip(), &Pp, Jp.data());
+  EXPECT_EQ(Pf, Pp);
+  for (int i = 0; i < np; ++i) {
+    const ParameterInfo& p = m.parameters()[i];
+    const bool wanted = p.axis < 0 || (p.axis == b && p.kind != ParameterKind::kMotion) ||
+                        (p.axis == x && p.kind == ParameterKind::kMotion);
+    if (wanted) EXPECT_EQ(Jp.col(i), Jf.col(i)) << p.name;
+    else EXPECT_EQ(Jp.col(i), Eigen::Vector3d::Constant(7.0)) << p.name << " was written";
+  }
+}
+
+// Large location angles and error motions (outside the small-angle series)
+// still give the templated kinematics' point.
+TEST(KinematicModel, LargeAnglesMatchTemplatedKinematics) {
+  const Machine m = Machine::FromJson(kMachines[1]);
+  std::mt19937 rng(9);
+  Eigen::VectorXd theta = RandomTheta(m, rng);
+  for (int k = 0; k < m.num_axes(); ++k)
+    for (int c = 3; c < 6; ++c) {
+      theta[m.location_index(k, c)] = 0.05 * (c + k) - 0.2;
+      theta[m.motion_index(k, c, 1)] = 0.002 * (c - 4);
+    }
+  const KinematicModel model(m, theta.data());
+  std::vector<double> q = {150.0, 0.9, -2.5, -80.0, 60.0, 0.05};
+  Eigen::Vector3d P, Pref;
+  model.ToolPose(q.data(), nullptr, model.tip(), &P, nullptr);
+  ToolInWorkpiece<double>(m, theta.data(), q.data(), nullptr, TipWithOffsets(m, theta.data()), &Pref);
+  EXPECT_LT((P - Pref).norm(), 1e-10);
+}
+
 }  // namespace
 }  // namespace fivecal

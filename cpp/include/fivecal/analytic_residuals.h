@@ -44,12 +44,12 @@ class AnalyticResiduals : public ceres::CostFunction {
 
  private:
   struct Row {
-    ObservationType type;
+    ObservationType type = ObservationType::kFacet;
     bool bar = false;
     std::vector<double> q;   // internal units
     std::vector<int> dir;
-    Eigen::Vector3d a, n;    // facet point/normal; sphere centre; ball positions
-    Eigen::Vector3d tool_ball, measured;
+    Eigen::Vector3d a = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();  // facet point/normal; sphere centre; ball positions
+    Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero(), measured = Eigen::Vector3d::Zero();
     double constant = 0;     // facet: r_tip; sphere: R + r_tip; dbb: L + reading; bar: L
     int idx[8] = {-1, -1, -1, -1, -1, -1, -1, -1};  // setup parameter indices
   };

@@ -41,35 +41,51 @@ class KinematicModel {
   void ToolPose(const double* q, const int* dir, const Eigen::Vector3d& tip, Eigen::Vector3d* point,
                 Eigen::Vector3d* axis) const;
 
-  // Tool point and J = dP/dtheta (3 x num_parameters, column-major, every
-  // column written). The tip.x|y|z columns are dP/dtip, which also serve a
-  // ball-bar tool ball whose tip is not the probe's.
+  // Tool point and J = dP/dtheta (3 x num_parameters, column-major). The
+  // tip.x|y|z columns are dP/dtip, which also serve a ball-bar tool ball
+  // whose tip is not the probe's. Every column is written unless
+  // RestrictJacobian was called.
   void ToolPointJacobian(const double* q, const int* dir, const Eigen::Vector3d& tip,
                          Eigen::Vector3d* point, double* J) const;
+
+  // A fit needs only the columns of its estimated parameters: afterwards
+  // ToolPointJacobian writes the columns of every axis group (location,
+  // backlash, error motions of one axis) holding a wanted parameter, and the
+  // tip columns; the others are left as they are.
+  void RestrictJacobian(const std::vector<int>& wanted_parameters);
 
  private:
   struct AxisConstants {
     Eigen::Matrix3d RE;     // Rz(EC0) Ry(EB0) Rx(EA0)
+    bool RE_identity = true;
     Eigen::Vector3d tE;     // p_k - p_parent + (EX0, EY0, EZ0)
     Eigen::Vector3d eAxes[3];  // local axes of EA0 EB0 EC0 (x_c, y_c, z)
+    Eigen::Vector3d direction;
+    int unit_axis = -1;     // direction = unit_sign * e_unit_axis, or -1 (general)
+    double unit_sign = 1.0;
+    bool rotary = false;
     const double* poly;     // theta + motion_index(k, 0, 1): 18 coefficients
     bool motion_t = false, motion_r = false;
     double backlash = 0.0;
     int offset = 0;         // location_index(k, 0)
     int backlash_index = -1;
+    int motion_index[6][4];  // motion_index(k, c, d), d = 1..3
+    bool want_location = true, want_motion = true;  // Jacobian groups to write
   };
-  // Frames recorded along one chain for the Jacobian.
+  // Frames recorded along one chain for the Jacobian (rotations relative to
+  // the chain's base frame).
   struct Factor {
     Eigen::Matrix3d R_before;   // before E_k (rotation only; translation irrelevant)
     Eigen::Vector3d oE;         // origin of the E_k rotations
-    Eigen::Matrix3d R_afterE;   // after E_k
+    Eigen::Vector3d backlash_w; // direction of the commanded motion (after E_k)
     Eigen::Matrix3d R_afterM;   // after M_k
     Eigen::Vector3d oEps;       // origin of the eps_k rotations
-    Eigen::Vector3d epsAxes[3]; // local axes of the eps rotations (frame R_afterM)
+    Eigen::Vector3d epsW[3];    // axes of the eps rotations EA EB EC (base frame)
     double qpow[4];             // 1, q, q^2, q^3
   };
 
   static constexpr int kMaxChain = 8;
+  template <bool kRecord>
   void Chain(const std::vector<int>& chain, const double* q, const int* dir, Eigen::Matrix3d* R,
              Eigen::Vector3d* t, Eigen::Vector3d* p_last, Factor* factors) const;
   void Columns(const std::vector<int>& chain, const Factor* f, const int* dir,

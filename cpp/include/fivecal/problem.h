@@ -65,6 +65,8 @@ std::vector<std::string> LocationCandidates(const Machine& m);
 // All error-motion and backlash candidates after the location errors, for `auto`.
 std::vector<std::string> MotionCandidates(const Machine& m);
 
+class AnalyticResiduals;
+
 class Problem {
  public:
   // `values`: every parameter's value (initial for the estimated ones, the
@@ -76,6 +78,9 @@ class Problem {
   Problem(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
           const std::vector<int>& estimated, const std::string& robust = "",
           double robust_scale = 0.0, bool analytic = true);
+
+  // The solver settings every fit of a Problem uses (Identify, Refit).
+  static ceres::Solver::Options SolverOptions(int max_iterations, int num_threads);
 
   ceres::Problem& ceres_problem() { return *problem_; }
   const Eigen::VectorXd& values() const { return values_; }
@@ -104,6 +109,7 @@ class Problem {
   ceres::LossFunction* loss_ = nullptr;  // owned by problem_ (TAKE_OWNERSHIP once)
   int num_rows_ = 0;
   std::vector<int> row_source_;
+  const AnalyticResiduals* analytic_ = nullptr;  // the single block when analytic (owned by problem_)
 };
 
 }  // namespace fivecal
