@@ -10,34 +10,35 @@ namespace fivecal {
 namespace {
 
 // Below this condition number the singular values are taken from the
-// eigenvalues of R^T R: their relative error is about p eps kappa^2 (1e-6 at
-// the bound), and the symmetric eigensolver is ten times faster than Eigen's
-// SVD of a 100 x 100 triangle. Above it, the SVD.
+// eigenvalues of the scaled normal matrix N = Js^T Js: their relative error is
+// about p eps kappa^2 (1e-6 at the bound), and forming N plus a symmetric
+// eigensolver costs a fifth of a QR and SVD of a 400 x 100 Jacobian. Above
+// the bound, the QR and SVD.
 constexpr double kEigenConditionBound = 1e4;
 
-// Full-rank, well-conditioned square triangle R (the scaled Jacobian's QR
-// factor): rank, condition, log det and (R^T R)^-1 (unscaled) without an SVD.
-bool WellConditioned(const Eigen::MatrixXd& R, double rank_tolerance, Identifiability* out) {
-  const int p = static_cast<int>(R.cols());
-  if (p == 0) return false;
-  const auto U = R.triangularView<Eigen::Upper>();
+// Full-rank, well-conditioned case: rank, condition, log det and
+// (J^T J)^-1 (unscaled) from N without an SVD. False: use the SVD.
+bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, Identifiability* out) {
+  const int p = static_cast<int>(Js.cols());
+  if (p == 0 || Js.rows() < p) return false;
   Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
-  N.selfadjointView<Eigen::Lower>().rankUpdate(R.transpose());
+  N.selfadjointView<Eigen::Lower>().rankUpdate(Js.transpose());
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
   if (eig.info() != Eigen::Success) return false;
   const Eigen::VectorXd lambda = eig.eigenvalues();  // ascending
   if (!(lambda[0] > 0) || lambda[p - 1] > kEigenConditionBound * kEigenConditionBound * lambda[0] ||
       std::sqrt(lambda[0]) <= rank_tolerance * std::sqrt(lambda[p - 1]))
     return false;
+  const Eigen::LLT<Eigen::MatrixXd> llt(N);
+  if (llt.info() != Eigen::Success) return false;
   out->singular_values = lambda.reverse().cwiseSqrt();
   out->rank = p;
   out->condition_number = out->singular_values[0] / out->singular_values[p - 1];
   double logdet = 0;
-  for (int i = 0; i < p; ++i) logdet += 2.0 * std::log(std::abs(R(i, i)));
+  for (int i = 0; i < p; ++i) logdet += std::log(lambda[i]);
   out->log_det_per_parameter = logdet / p;
-  const Eigen::MatrixXd Ri = U.solve(Eigen::MatrixXd::Identity(p, p));
-  Eigen::VectorXd inv_scale = out->column_norms.cwiseInverse();
-  out->inverse_normal.noalias() = Ri * Ri.transpose();
+  const Eigen::VectorXd inv_scale = out->column_norms.cwiseInverse();
+  out->inverse_normal = llt.solve(Eigen::MatrixXd::Identity(p, p));
   out->inverse_normal = inv_scale.asDiagonal() * out->inverse_normal * inv_scale.asDiagonal();
   return true;
 }
@@ -59,6 +60,7 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
     }
   }
   const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
+  if (zero_columns.empty() && WellConditioned(Js, rank_tolerance, &out)) return out;
   // A tall Jacobian is reduced to its p x p triangular factor first: same
   // singular values and right vectors, and the SVD then costs O(p^3), not O(n p^2).
   Eigen::MatrixXd reduced;
@@ -68,8 +70,6 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
   } else {
     reduced = Js;
   }
-  if (zero_columns.empty() && reduced.rows() == p && WellConditioned(reduced, rank_tolerance, &out))
-    return out;
   Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
   const Eigen::VectorXd s = svd.singularValues();
   // Thin SVD of an n x p matrix with n < p has only n singular values.
@@ -126,15 +126,27 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
 bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin) {
   const int p = static_cast<int>(J.cols());
   if (J.rows() < p) return false;
+  if (p == 0) return true;
   Eigen::VectorXd inv_scale(p);
   for (int i = 0; i < p; ++i) {
     const double n = J.col(i).norm();
     if (!(n > 0)) return false;
     inv_scale[i] = 1.0 / n;
   }
-  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J * inv_scale.asDiagonal());
-  const Eigen::VectorXd d = qr.matrixQR().diagonal().cwiseAbs();
-  return p == 0 || d.minCoeff() > margin * d.maxCoeff();
+  // L_jj of the scaled normal matrix is |R_jj| of the QR of the scaled J: the
+  // distance of column j from the span of the columns before it. An exactly
+  // dependent set always makes one of them vanish; sigma_min can hide below
+  // min |R_jj| only for pathological (Kahan-like) matrices, by far less than
+  // the 1e-3 between margin and the rank tolerance. L_jj^2 carries an
+  // absolute rounding error of about p eps, far below margin^2. A third of
+  // the cost of a pivoted QR.
+  const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
+  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
+  N.selfadjointView<Eigen::Lower>().rankUpdate(Js.transpose());
+  const Eigen::LLT<Eigen::MatrixXd> llt(N);
+  if (llt.info() != Eigen::Success) return false;
+  const Eigen::VectorXd d = llt.matrixLLT().diagonal();
+  return d.minCoeff() > margin * d.maxCoeff();
 }
 
 std::vector<int> SelectIdentifiable(const Eigen::MatrixXd& J, const std::vector<int>& forced,

@@ -30,8 +30,9 @@ struct Identifiability {
 Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance = 1e-9);
 
 // Cheap screen before a fit: true when the column-scaled Jacobian is clearly
-// of full column rank (column-pivoted QR, smallest |R_ii| above `margin`
-// times the largest). False means "run AnalyzeJacobian to be sure".
+// of full column rank (smallest |R_ii| of its QR factor, taken from the
+// Cholesky factor of the normal matrix, above `margin` times the largest).
+// False means "run AnalyzeJacobian to be sure".
 bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin = 1e-6);
 
 // Greedy selection of a maximal identifiable subset: `forced` columns first
