@@ -2,6 +2,7 @@
 // std::invalid_argument thrown by the core reaches Python as ValueError with
 // its message intact.
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -91,19 +92,24 @@ PYBIND11_MODULE(_core, m) {
 
   m.def(
       "tool_poses",
-      [](const Machine& mc, const Eigen::VectorXd& theta, const Eigen::MatrixXd& axes,
-         const std::optional<Eigen::MatrixXi>& dirs, const std::optional<Eigen::Vector3d>& tip) {
-        Eigen::MatrixXd p, a;
+      [](const Machine& mc, const Eigen::VectorXd& theta, const Eigen::Ref<const RowMatrixXd>& axes,
+         const std::optional<RowMatrixXi>& dirs, const std::optional<Eigen::Vector3d>& tip,
+         bool with_axes) {
+        // Written in place into the numpy arrays returned.
+        const py::ssize_t n = axes.rows();
+        py::array_t<double> p({n, py::ssize_t(3)}), a({with_axes ? n : 0, py::ssize_t(3)});
+        double* pp = p.mutable_data();
+        double* pa = with_axes ? a.mutable_data() : nullptr;
         {
           py::gil_scoped_release release;
-          ToolPoses(mc, theta, axes, OptionalDirs(dirs), &p, &a, tip ? &*tip : nullptr);
+          ToolPosesRowMajor(mc, theta, axes, dirs ? &*dirs : nullptr, pp, pa, tip ? &*tip : nullptr);
         }
-        return py::make_tuple(p, a);
+        return py::make_tuple(p, with_axes ? py::object(a) : py::object(py::none()));
       },
       py::arg("machine"), py::arg("theta"), py::arg("axes"), py::arg("directions") = py::none(),
-      py::arg("tip") = py::none(),
+      py::arg("tip") = py::none(), py::arg("with_axes") = true,
       "Tool points and tool axes (N x 3 each, workpiece frame) for N poses; axes N x num_axes "
-      "in mm / degrees.");
+      "in mm / degrees. with_axes=False skips the tool axes (returned as None).");
 
   m.def(
       "inverse",

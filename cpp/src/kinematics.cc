@@ -13,62 +13,106 @@ void AxisValuesToInternal(const Machine& m, const double* in, double* out) {
     out[k] = m.axis(k).rotary() ? in[k] * (M_PI / 180.0) : in[k];
 }
 
-void ValidatePoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::MatrixXd& axes,
-                   const Eigen::MatrixXi* dirs) {
+namespace {
+
+// KinematicModel allows 8 axes on each side.
+constexpr int kMaxAxes = 16;
+
+void ValidateTheta(const Machine& m, const Eigen::VectorXd& theta) {
   if (theta.size() != m.num_parameters())
     throw std::invalid_argument("errors: expected " + std::to_string(m.num_parameters()) +
                                 " machine parameter values, got " + std::to_string(theta.size()));
   for (int i = 0; i < theta.size(); ++i)
     RequireFinite(theta[i], "errors." + m.parameters()[i].name);
-  if (axes.cols() != m.num_axes())
+}
+
+void ValidateColumns(const Machine& m, Eigen::Index cols) {
+  if (cols != m.num_axes())
     throw std::invalid_argument("axes: expected " + std::to_string(m.num_axes()) +
-                                " columns (" + m.axis_names() + "), got " +
-                                std::to_string(axes.cols()));
-  for (int r = 0; r < axes.rows(); ++r)
+                                " columns (" + m.axis_names() + "), got " + std::to_string(cols));
+}
+
+[[noreturn]] void NotFinite(const Machine& m, Eigen::Index r, int k) {
+  throw std::invalid_argument("axes." + std::string(1, m.axis(k).name) + "[" + std::to_string(r) +
+                              "]: value is not finite (NaN or inf)");
+}
+
+[[noreturn]] void BadDirection(const Machine& m, Eigen::Index r, int k, int d) {
+  throw std::invalid_argument("directions." + std::string(1, m.axis(k).name) + "[" +
+                              std::to_string(r) + "]: must be -1, 0 or +1, got " + std::to_string(d));
+}
+
+}  // namespace
+
+void ValidatePoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::MatrixXd& axes,
+                   const Eigen::MatrixXi* dirs) {
+  ValidateTheta(m, theta);
+  ValidateColumns(m, axes.cols());
+  for (Eigen::Index r = 0; r < axes.rows(); ++r)
     for (int k = 0; k < axes.cols(); ++k)
-      if (!std::isfinite(axes(r, k)))
-        throw std::invalid_argument("axes." + std::string(1, m.axis(k).name) + "[" +
-                                    std::to_string(r) + "]: value is not finite (NaN or inf)");
+      if (!std::isfinite(axes(r, k))) NotFinite(m, r, k);
   if (dirs) {
     if (dirs->rows() != axes.rows() || dirs->cols() != axes.cols())
       throw std::invalid_argument("directions: shape must match axes (" +
                                   std::to_string(axes.rows()) + " x " +
                                   std::to_string(axes.cols()) + ")");
-    for (int r = 0; r < dirs->rows(); ++r)
-      for (int k = 0; k < dirs->cols(); ++k) {
-        int d = (*dirs)(r, k);
-        if (d < -1 || d > 1)
-          throw std::invalid_argument("directions." + std::string(1, m.axis(k).name) + "[" +
-                                      std::to_string(r) + "]: must be -1, 0 or +1, got " +
-                                      std::to_string(d));
+    for (Eigen::Index r = 0; r < dirs->rows(); ++r)
+      for (int k = 0; k < dirs->cols(); ++k)
+        if ((*dirs)(r, k) < -1 || (*dirs)(r, k) > 1) BadDirection(m, r, k, (*dirs)(r, k));
+  }
+}
+
+void ToolPosesRowMajor(const Machine& m, const Eigen::VectorXd& theta,
+                       const Eigen::Ref<const RowMatrixXd>& axes,
+                       const RowMatrixXi* dirs, double* points, double* tool_axes,
+                       const Eigen::Vector3d* tip) {
+  if (tip)
+    for (int i = 0; i < 3; ++i) RequireFinite((*tip)[i], "tip[" + std::to_string(i) + "]");
+  ValidateTheta(m, theta);
+  ValidateColumns(m, axes.cols());
+  if (dirs && (dirs->rows() != axes.rows() || dirs->cols() != axes.cols()))
+    throw std::invalid_argument("directions: shape must match axes (" + std::to_string(axes.rows()) +
+                                " x " + std::to_string(axes.cols()) + ")");
+  const Eigen::Index n = axes.rows();
+  const int na = m.num_axes();
+  const KinematicModel model(m, theta.data());
+  const Eigen::Vector3d t = tip ? *tip : model.tip();
+  double scale[kMaxAxes];
+  for (int k = 0; k < na; ++k) scale[k] = m.axis(k).rotary() ? M_PI / 180.0 : 1.0;
+  double q[kMaxAxes];
+  int dir[kMaxAxes];
+  // Validation is folded into the pass over the poses: one read of the data.
+  for (Eigen::Index r = 0; r < n; ++r) {
+    const double* row = axes.data() + r * axes.outerStride();
+    for (int k = 0; k < na; ++k) {
+      if (!std::isfinite(row[k])) NotFinite(m, r, k);
+      q[k] = row[k] * scale[k];
+    }
+    if (dirs) {
+      const int* d = dirs->data() + r * na;
+      for (int k = 0; k < na; ++k) {
+        if (d[k] < -1 || d[k] > 1) BadDirection(m, r, k, d[k]);
+        dir[k] = d[k];
       }
+    }
+    Eigen::Vector3d p, a;
+    model.ToolPose(q, dirs ? dir : nullptr, t, &p, tool_axes ? &a : nullptr);
+    for (int c = 0; c < 3; ++c) points[3 * r + c] = p[c];
+    if (tool_axes)
+      for (int c = 0; c < 3; ++c) tool_axes[3 * r + c] = a[c];
   }
 }
 
 void ToolPoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::MatrixXd& axes,
                const Eigen::MatrixXi* dirs, Eigen::MatrixXd* points, Eigen::MatrixXd* tool_axes,
                const Eigen::Vector3d* tip) {
-  if (tip)
-    for (int i = 0; i < 3; ++i) RequireFinite((*tip)[i], "tip[" + std::to_string(i) + "]");
-  ValidatePoses(m, theta, axes, dirs);
-  const int n = static_cast<int>(axes.rows()), na = m.num_axes();
-  points->resize(n, 3);
-  if (tool_axes) tool_axes->resize(n, 3);
-  const KinematicModel model(m, theta.data());
-  const Eigen::Vector3d t = tip ? *tip : model.tip();
-  std::vector<double> row(na), q(na);
-  std::vector<int> dir(na, 0);
-  for (int r = 0; r < n; ++r) {
-    for (int k = 0; k < na; ++k) {
-      row[k] = axes(r, k);
-      if (dirs) dir[k] = (*dirs)(r, k);
-    }
-    AxisValuesToInternal(m, row.data(), q.data());
-    Eigen::Vector3d p, a;
-    model.ToolPose(q.data(), dirs ? dir.data() : nullptr, t, &p, tool_axes ? &a : nullptr);
-    points->row(r) = p.transpose();
-    if (tool_axes) tool_axes->row(r) = a.transpose();
-  }
+  const RowMatrixXd ax = axes;
+  RowMatrixXi d;
+  if (dirs) d = *dirs;
+  RowMatrixX3d p(axes.rows(), 3), a(tool_axes ? axes.rows() : 0, 3);
+  ToolPosesRowMajor(m, theta, ax, dirs ? &d : nullptr, p.data(), tool_axes ? a.data() : nullptr, tip);
+  *points = p;
+  if (tool_axes) *tool_axes = a;
 }
 
 Eigen::MatrixXd ToolPoints(const Machine& m, const Eigen::VectorXd& theta,

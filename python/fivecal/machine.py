@@ -221,15 +221,18 @@ class Machine:
         ``tip``: a tool point (mm, F at the zero pose) replacing the machine tip and its
         tip.x|y|z offsets, e.g. a ball-bar tool ball.
         """
-        q = self.axes_matrix(axes)
-        d = self.directions_matrix(directions, q.shape[0])
-        t = None if tip is None else np.asarray(tip, dtype=float).reshape(3)
-        return _core.tool_poses(self._core, self.theta(errors), q, d, t)
+        return self._poses(axes, errors, directions, tip, True)
 
     def tool_point(self, axes: Mapping[str, ArrayLike], errors=None, directions=None,
                    tip=None) -> np.ndarray:
         """Tool point (N, 3) mm in the workpiece frame for the given axis readings."""
-        return self.tool_pose(axes, errors, directions, tip)[0]
+        return self._poses(axes, errors, directions, tip, False)[0]
+
+    def _poses(self, axes, errors, directions, tip, with_axes):
+        q = self.axes_matrix(axes)
+        d = self.directions_matrix(directions, q.shape[0])
+        t = None if tip is None else np.asarray(tip, dtype=float).reshape(3)
+        return _core.tool_poses(self._core, self.theta(errors), q, d, t, with_axes)
 
     def volumetric_error(self, axes: Mapping[str, ArrayLike], errors, directions=None) -> np.ndarray:
         """Tool-point error (N, 3) mm in the workpiece frame at the given poses:
@@ -237,8 +240,8 @@ class Machine:
         would (a volumetric error map of identified errors)."""
         q = self.axes_matrix(axes)
         d = self.directions_matrix(directions, q.shape[0])
-        real = _core.tool_poses(self._core, self.theta(errors), q, d)[0]
-        ideal = _core.tool_poses(self._core, self.theta(None), q, None)[0]
+        real = _core.tool_poses(self._core, self.theta(errors), q, d, None, False)[0]
+        ideal = _core.tool_poses(self._core, self.theta(None), q, None, None, False)[0]
         return real - ideal
 
     def inverse(self, points, tool_axes=None, start: Optional[Mapping[str, float]] = None,

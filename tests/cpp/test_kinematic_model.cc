@@ -146,11 +146,16 @@ TEST(KinematicModel, LargeAnglesMatchTemplatedKinematics) {
       theta[m.motion_index(k, c, 1)] = 0.002 * (c - 4);
     }
   const KinematicModel model(m, theta.data());
-  std::vector<double> q = {150.0, 0.9, -2.5, -80.0, 60.0, 0.05};
-  Eigen::Vector3d P, Pref;
-  model.ToolPose(q.data(), nullptr, model.tip(), &P, nullptr);
-  ToolInWorkpiece<double>(m, theta.data(), q.data(), nullptr, TipWithOffsets(m, theta.data()), &Pref);
-  EXPECT_LT((P - Pref).norm(), 1e-10);
+  // Multi-turn and negative commands exercise the argument reduction.
+  for (const double turn : {0.0, 40.0, -1234.5}) {
+    std::vector<double> q = {150.0, 0.9 + turn, -2.5 - turn, -80.0, 60.0, 0.05 + turn};
+    Eigen::Vector3d P, Pref;
+    model.ToolPose(q.data(), nullptr, model.tip(), &P, nullptr);
+    ToolInWorkpiece<double>(m, theta.data(), q.data(), nullptr, TipWithOffsets(m, theta.data()), &Pref);
+    // A wrong quadrant would be off by millimetres; 1e3 rad commands (and
+    // error motions cubic in them) carry ~1e-13 relative rounding.
+    EXPECT_LT((P - Pref).norm(), 1e-10 * (1.0 + std::abs(turn))) << "turn " << turn;
+  }
 }
 
 }  // namespace

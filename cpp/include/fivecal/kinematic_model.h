@@ -57,7 +57,8 @@ class KinematicModel {
  private:
   struct AxisConstants {
     Eigen::Matrix3d RE;     // Rz(EC0) Ry(EB0) Rx(EA0)
-    bool RE_identity = true;
+    double loc_sin[3], loc_cos[3];  // of EA0 EB0 EC0
+    bool loc_rot[3];                // EA0 EB0 EC0 nonzero
     Eigen::Vector3d tE;     // p_k - p_parent + (EX0, EY0, EZ0)
     Eigen::Vector3d eAxes[3];  // local axes of EA0 EB0 EC0 (x_c, y_c, z)
     Eigen::Vector3d direction;
@@ -66,6 +67,7 @@ class KinematicModel {
     bool rotary = false;
     const double* poly;     // theta + motion_index(k, 0, 1): 18 coefficients
     bool motion_t = false, motion_r = false;
+    bool motion[6];         // component c has a nonzero coefficient
     double backlash = 0.0;
     int offset = 0;         // location_index(k, 0)
     int backlash_index = -1;

@@ -159,6 +159,18 @@ void ValidatePoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::
 Eigen::MatrixXd ToolPoints(const Machine& m, const Eigen::VectorXd& theta,
                            const Eigen::MatrixXd& axes, const Eigen::MatrixXi* dirs = nullptr);
 
+using RowMatrixXd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using RowMatrixXi = Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using RowMatrixX3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+
+// ToolPoses on row-major data (numpy's layout, no copies at the Python
+// boundary): points and tool_axes (may be null) are N x 3 row-major buffers.
+// Validates as ValidatePoses does.
+void ToolPosesRowMajor(const Machine& m, const Eigen::VectorXd& theta,
+                       const Eigen::Ref<const RowMatrixXd>& axes,
+                       const RowMatrixXi* dirs, double* points, double* tool_axes,
+                       const Eigen::Vector3d* tip = nullptr);
+
 // Tool points and unit tool axis directions (both N x 3, workpiece frame).
 // `tip`, when given, replaces the machine tip and its tip.x|y|z offsets (a
 // ball-bar tool ball, in F at the zero pose).
