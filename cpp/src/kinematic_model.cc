@@ -256,39 +256,40 @@ FIVECAL_ISA_CLONES void KinematicModel::ToolPose(const double* q, const int* dir
   if (axis) *axis = Rw.transpose() * (Rt * machine_->tool_axis());
 }
 
-// Every column is out * (a twist at P) with `out` = R_w^T a rotation, so
-// out (a x b) = (out a) x (out b): the axes and lever arms are mapped once
-// per axis and the columns are then plain vectors and cross products.
+// Every column is out * (a twist at P), out = +-R_w^T. Lever-arm cross
+// products are taken in the chain's base frame before mapping: an error with
+// no effect (axis through P) then gives an exactly zero column, which the
+// identifiability analysis reports as "no effect".
 FIVECAL_ISA_CLONES void KinematicModel::Columns(const std::vector<int>& chain, const Factor* factors, const int* dir,
                              const Eigen::Vector3d& P, const Eigen::Matrix3d& out, double sign,
                              double* J) const {
   auto col = [&](int index) { return Eigen::Map<Eigen::Vector3d>(J + 3 * index); };
+  const Eigen::Matrix3d S = sign * out;
   int i = 0;
   for (int k : chain) {
     const AxisConstants& A = axes_[k];
     const Factor& F = factors[i++];
     if (A.want_location) {
-      const Eigen::Matrix3d Qb = sign * (out * F.R_before);
-      const Eigen::Vector3d dE = out * (P - F.oE);
+      const Eigen::Matrix3d Qb = S * F.R_before;
+      const Eigen::Vector3d dE = P - F.oE;
       for (int c = 0; c < 3; ++c) {
         col(A.offset + c) = Qb.col(c);
-        col(A.offset + 3 + c) = (Qb * A.eAxes[c]).cross(dE);
+        col(A.offset + 3 + c) = S * (F.R_before * A.eAxes[c]).cross(dE);
       }
       // Backlash: a shift of the command along or about the axis.
       if (A.backlash_index >= 0) {
         const int d = dir ? dir[k] : 0;
-        const Eigen::Vector3d w = (sign * d) * (out * F.backlash_w);
-        col(A.backlash_index) = A.rotary ? Eigen::Vector3d(w.cross(dE)) : w;
+        const Eigen::Vector3d& w = F.backlash_w;
+        col(A.backlash_index) = d * (S * (A.rotary ? Eigen::Vector3d(w.cross(dE)) : w));
       }
     }
     if (A.want_motion) {
       // Error motions: the unit effect of each component times q^d.
-      const Eigen::Matrix3d Qm = sign * (out * F.R_afterM);
-      const Eigen::Vector3d dEps = out * (P - F.oEps);
+      const Eigen::Matrix3d Qm = S * F.R_afterM;
+      const Eigen::Vector3d dEps = P - F.oEps;
       for (int c = 0; c < 6; ++c) {
         const Eigen::Vector3d unit =
-            c < 3 ? Eigen::Vector3d(Qm.col(c))
-                  : Eigen::Vector3d((sign * (out * F.epsW[c - 3])).cross(dEps));
+            c < 3 ? Eigen::Vector3d(Qm.col(c)) : Eigen::Vector3d(S * F.epsW[c - 3].cross(dEps));
         for (int d = 1; d <= 3; ++d) col(A.motion_index[c][d]) = unit * F.qpow[d];
       }
     }
