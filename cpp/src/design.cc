@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <set>
 #include <stdexcept>
 #include <tuple>
@@ -34,6 +35,27 @@ IdentifyOptions ResolveOptions(const DesignOptions& o) {
   io.rank_tolerance = o.rank_tolerance;
   return io;
 }
+
+// Sum of the logs of positive numbers for the price of one log (a log costs
+// as much as a column of the elimination): their product, renormalised to
+// mantissa and binary exponent before it could overflow or underflow.
+struct LogSum {
+  double m = 1.0;
+  long e = 0;
+  void Add(double x) {
+    int ex;
+    if (x > 1e-150 && x < 1e150) {
+      m *= x;
+      if (m > 1e-150 && m < 1e150) return;
+    } else {
+      m *= std::frexp(x, &ex);
+      e += ex;
+    }
+    m = std::frexp(m, &ex);
+    e += ex;
+  }
+  double Get() const { return std::log(m) + static_cast<double>(e) * 0.69314718055994530942; }
+};
 
 // Criterion of one information matrix A = J^T J over the active columns.
 struct Score {
@@ -313,6 +335,18 @@ class Pool {
     core_.clear();
     for (int c = 0; c < p_; ++c)
       if (!default_full.count(cols_.table_index[c])) core_.push_back(c);
+    // A setup column no row shares with another setup column (a facet) has
+    // J^T J zero against every other setup column in any selection.
+    isolated_.assign(p_, false);
+    std::vector<int> shared(p_, 0);
+    for (int row = 0; row < J_.rows(); ++row) {
+      int nz = 0;
+      for (int c = cols_.n_machine; c < p_; ++c) nz += J_(row, c) != 0;
+      if (nz > 1)
+        for (int c = cols_.n_machine; c < p_; ++c)
+          if (J_(row, c) != 0) shared[c] = 1;
+    }
+    for (int c = cols_.n_machine; c < p_; ++c) isolated_[c] = !shared[c];
     activates_.assign(n, {});
     sphere_of_.assign(n, -1);
     std::map<std::tuple<int, std::string, std::string>, std::vector<int>> cache;
@@ -357,6 +391,7 @@ class Pool {
   std::vector<bool> machine_;
   Eigen::VectorXd scale_;
   std::vector<int> core_;
+  std::vector<bool> isolated_;
   std::vector<std::vector<int>> activates_;
   std::vector<int> sphere_of_;
   std::vector<Eigen::MatrixXd> bar_M_;
@@ -372,10 +407,29 @@ struct State {
   std::vector<bool> bar_in;
 };
 
+// What the fast D-criterion path needs from the selection a step's candidates
+// are built on (the greedy state, the exchange state without one group, the
+// touch-budget state): computed once per step, so that a candidate's score
+// costs one sparse elimination instead of an eigen-decomposition.
+struct Reference {
+  bool usable = false;       // full rank with a margin: candidates can be certified
+  std::vector<int> pos;      // column -> position in `active`, -1 if inactive
+  std::vector<int> active;   // ascending
+  Eigen::VectorXd d;         // diagonal of M on `active`
+  double lmin = 0;           // lower bound on the smallest eigenvalue of the scaled M
+  double logdet = 0;         // log det of the scaled M
+  Eigen::MatrixXd inv;       // inverse of the scaled M (removals only)
+};
+
 class Selection {
  public:
   Selection(const Pool& pool, const DesignOptions& opt, const SearchOptions& search)
-      : pool_(pool), tol_(std::max(opt.rank_tolerance, 1e-7)), want_d_(search.criterion == "d") {}
+      : pool_(pool), tol_(std::max(opt.rank_tolerance, 1e-7)), want_d_(search.criterion == "d") {
+    is_core_.assign(pool_.p_, false);
+    for (int c : pool_.core_) is_core_[c] = true;
+    log_scale2_.resize(pool_.p_);
+    for (int c = 0; c < pool_.p_; ++c) log_scale2_[c] = 2.0 * std::log(pool_.scale_[c]);
+  }
 
   State Empty() const {
     State s;
@@ -403,13 +457,68 @@ class Selection {
     }
   }
 
-  Score Eval(const State& s) const {
+  std::vector<int> Active(const std::vector<int>& col_count) const {
     std::vector<int> active = pool_.core_;
     for (int c = 0; c < pool_.p_; ++c)
-      if (s.col_count[c] > 0) active.push_back(c);
+      if (col_count[c] > 0) active.push_back(c);
     std::sort(active.begin(), active.end());
+    return active;
+  }
+
+  // The exact score: eigenvalues of the scaled information matrix.
+  Score Eval(const State& s) const {
     ++evaluations;
-    return Evaluate(s.M, active, pool_.machine_, pool_.scale_, tol_, want_d_);
+    return Evaluate(s.M, Active(s.col_count), pool_.machine_, pool_.scale_, tol_, want_d_);
+  }
+
+  // `removals`: the step's candidates remove observations (else they add).
+  Reference Refer(const State& s, bool removals) const {
+    Reference r;
+    if (!want_d_) return r;
+    r.active = Active(s.col_count);
+    const int n = static_cast<int>(r.active.size());
+    if (n == 0) return r;
+    r.pos.assign(pool_.p_, -1);
+    r.d.resize(n);
+    for (int i = 0; i < n; ++i) {
+      r.pos[r.active[i]] = i;
+      r.d[i] = s.M(r.active[i], r.active[i]);
+      if (!(r.d[i] > 0) || !std::isfinite(r.d[i])) return r;
+    }
+    Eigen::MatrixXd Ms(n, n);
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        Ms(i, j) = s.M(r.active[i], r.active[j]) / std::sqrt(r.d[i] * r.d[j]);
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Ms, Eigen::EigenvaluesOnly);
+    const Eigen::VectorXd& lam = es.eigenvalues();
+    // The computed eigenvalues are within a few n eps lambda_max of the true ones.
+    r.lmin = lam[0] - 64.0 * n * std::numeric_limits<double>::epsilon() * lam[n - 1];
+    if (!(r.lmin > tol_ * tol_ * lam[n - 1]) || !std::isfinite(lam[n - 1])) return r;
+    r.logdet = lam.array().log().sum();
+    if (removals) {
+      Eigen::LLT<Eigen::MatrixXd> llt(Ms);
+      if (llt.info() != Eigen::Success) return r;
+      r.inv = llt.solve(Eigen::MatrixXd::Identity(n, n));
+    }
+    r.usable = true;
+    return r;
+  }
+
+  // The score of `base` changed by `obs` (sign +1 added, -1 removed; `info`
+  // their summed J^T J), equal to Eval of that selection; `fast` says whether
+  // the eigen-decomposition was avoided.
+  Score Candidate(const State& base, const Reference& ref, const std::vector<int>& obs,
+                  const Eigen::MatrixXd& info, int sign, bool* fast = nullptr) const {
+    Score s;
+    const bool ok = want_d_ && ref.usable && FastD(base, ref, obs, info, sign, &s);
+    if (fast) *fast = ok;
+    if (ok) {
+      ++evaluations;
+      return s;
+    }
+    State t = base;
+    Apply(&t, obs, info, sign);
+    return Eval(t);
   }
 
   // Strict ordering: lower is better.
@@ -429,6 +538,256 @@ class Selection {
   double tol_;
   bool want_d_;
   mutable int evaluations = 0;
+
+ private:
+  // The D-criterion of a full-rank candidate without an eigen-decomposition,
+  // and without copying the state.
+  //
+  // With the active columns ordered setup first, the pivots of an LDL^T
+  // elimination of the scaled information matrix Ms give both log det(Ms)
+  // and log det(Ms_ss) (the leading ones), so the log det of the Schur
+  // complement on the machine columns is the sum of the log machine pivots:
+  // Evaluate's log det(Ms) - log det(Ms_ss) without either. Most setup
+  // columns are isolated (a facet: no row touches another setup column), so
+  // they are eliminated first, together, as one rank update of the machine
+  // block; the coupled ones (sphere centres, joined by the scale bar) and the
+  // machine block are eliminated densely.
+  //
+  // Evaluate counts an eigenvalue below tol^2 lambda_max as a null direction;
+  // positive pivots do not show that, so full rank is certified by a lower
+  // bound on lambda_min (from the step's reference, whose eigenvalues are
+  // known) above tol^2 ||Ms||_F >= tol^2 lambda_max, with a factor 2 and a
+  // 1e-10 ||Ms||_F margin, far above the rounding of either computation.
+  // Returns false (the caller then takes the eigen path) when the bound does
+  // not certify, a pivot is not positive or a column has no information.
+  bool FastD(const State& base, const Reference& ref, const std::vector<int>& obs, const Eigen::MatrixXd& info,
+             int sign, Score* out) const {
+    const int p = pool_.p_;
+    cnt_ = base.col_count;
+    sph_ = base.sphere_count;
+    for (int i : obs) {
+      for (int c : pool_.activates_[i]) cnt_[c] += sign;
+      if (pool_.sphere_of_[i] >= 0) sph_[pool_.sphere_of_[i]] += sign;
+    }
+    bars_.clear();
+    for (size_t b = 0; b < pool_.bars_.size(); ++b) {
+      const auto [s1, s2] = pool_.bar_spheres_[b];
+      const bool in = sph_[s1] > 0 && sph_[s2] > 0;
+      if (in != base.bar_in[b]) bars_.push_back({static_cast<int>(b), in ? 1.0 : -1.0});
+    }
+    // Entries of the candidate's matrix, summed in Apply's order.
+    auto entry = [&](int r, int c) {
+      double v = base.M(r, c) + sign * info(r, c);
+      for (const auto& [b, w] : bars_) v += w * pool_.bar_M_[b](r, c);
+      return v;
+    };
+    // Isolated setup columns first, the other setup columns, the machine ones.
+    order_.clear();
+    int pm = 0, nd = 0;
+    for (int pass = 0; pass < 3; ++pass)
+      for (int c = 0; c < p; ++c) {
+        if (!(is_core_[c] || cnt_[c] > 0)) continue;
+        const int kind = pool_.machine_[c] ? 2 : pool_.isolated_[c] ? 0 : 1;
+        if (kind != pass) continue;
+        order_.push_back(c);
+        if (kind == 0) ++nd;
+        if (kind == 2) ++pm;
+      }
+    const int n = static_cast<int>(order_.size());
+    const int ns = n - pm;
+    if (pm == 0) return false;
+    dv_.resize(n);
+    sv_.resize(n);
+    LogSum log_d;
+    double shift = 0;
+    for (int k = 0; k < n; ++k) {
+      dv_[k] = entry(order_[k], order_[k]);
+      if (!(dv_[k] > 0) || !std::isfinite(dv_[k])) return false;
+      sv_[k] = 1.0 / std::sqrt(dv_[k]);
+      if (k >= ns) {
+        log_d.Add(dv_[k]);
+        shift += log_scale2_[order_[k]];
+      }
+    }
+    shift += log_d.Get();
+    // Scaled entries of the isolated columns: only their diagonals and machine
+    // rows are nonzero. X holds the machine rows divided by sqrt(pivot).
+    LogSum log_s, log_m;
+    double fro2 = 0;
+    X_.resize(pm, nd);
+    const int* om = &order_[ns];
+    const double* sm = &sv_[ns];
+    const double sg = sign;
+    // The machine columns come first in the pool: usually all active, rows 0..pm-1.
+    const bool dense = om[pm - 1] == pm - 1;
+    for (int t = 0; t < nd; ++t) {
+      const int c = order_[t];
+      const double* m = &base.M(0, c);
+      const double* a = &info(0, c);
+      double* x = &X_(0, t);
+      if (dense) {
+        for (int i = 0; i < pm; ++i) x[i] = m[i] + sg * a[i];
+      } else {
+        for (int i = 0; i < pm; ++i) x[i] = m[om[i]] + sg * a[om[i]];
+      }
+      for (const auto& [bar, w] : bars_) {
+        const double* e = &pool_.bar_M_[bar](0, c);
+        for (int i = 0; i < pm; ++i) x[i] += w * e[om[i]];
+      }
+      const double piv = dv_[t] * sv_[t] * sv_[t];
+      if (!(piv > 0)) return false;
+      log_s.Add(piv);
+      const double st = sv_[t];
+      for (int i = 0; i < pm; ++i) x[i] = x[i] * sm[i] * st;
+      fro2 += piv * piv + 2.0 * X_.col(t).squaredNorm();
+      X_.col(t) /= std::sqrt(piv);
+    }
+    // The other setup columns and the machine ones: lower triangle, column-major.
+    const int nr = n - nd;
+    W_.resize(nr, nr);
+    for (int j = 0; j < nr; ++j) {
+      const int c = order_[nd + j];
+      const int* o = &order_[nd];
+      const double* m = &base.M(0, c);
+      const double* a = &info(0, c);
+      double* wj = &W_(0, j);
+      for (int i = j; i < nr; ++i) wj[i] = m[o[i]] + sg * a[o[i]];
+      for (const auto& [bar, w] : bars_) {
+        const double* e = &pool_.bar_M_[bar](0, c);
+        for (int i = j; i < nr; ++i) wj[i] += w * e[o[i]];
+      }
+      const double* sv = &sv_[nd];
+      const double sj = sv[j];
+      for (int i = j; i < nr; ++i) wj[i] = wj[i] * sv[i] * sj;
+      fro2 += 2.0 * W_.col(j).segment(j + 1, nr - j - 1).squaredNorm() + wj[j] * wj[j];
+    }
+    // The isolated columns' rank-1 updates reach only the machine block (and
+    // do not change each other's pivots): one rank update.
+    const int nc = nr - pm;
+    if (nd > 0) W_.block(nc, nc, pm, pm).selfadjointView<Eigen::Lower>().rankUpdate(X_, -1.0);
+    for (int k = 0; k < nr; ++k) {
+      const double* wk = &W_(0, k);
+      const double piv = wk[k];
+      if (!(piv > 0) || !std::isfinite(piv)) return false;
+      (k >= nc ? log_m : log_s).Add(piv);
+      for (int j = k + 1; j < nr; ++j) {
+        if (wk[j] == 0) continue;
+        const double f = wk[j] / piv;
+        double* wj = &W_(0, j);
+        for (int i = j; i < nr; ++i) wj[i] -= f * wk[i];
+      }
+    }
+    const double logdet_m = log_m.Get(), logdet_all = log_s.Get() + logdet_m;
+    const double bound = sign > 0 ? AddedBound(base, ref, info) : RemovedBound(ref, logdet_all);
+    const double fro = std::sqrt(fro2);
+    if (!(0.5 * bound > (tol_ * tol_ + 1e-10) * fro)) return false;
+    out->deficiency = 0;
+    out->dcrit = (logdet_m + shift) / pm;
+    return true;
+  }
+
+  // Candidate = reference + B (B >= 0: the added rows and bars), on the
+  // reference's columns plus new ones N. With [N, old] blocks and candidate
+  // scaling, Ms = T^T diag(P, S) T, T = [I K; 0 I], K = P^-1 Q, and the Schur
+  // complement S >= E Ms_ref E, E^2 = d_ref / d (B's own Schur complement is
+  // >= 0). So lambda_min(Ms) >= min(lambda_min(P), lambda_min(Ms_ref) min E^2)
+  // / (1 + ||K||)^2, less the norm of what the reference holds on N (rounding
+  // left by earlier removals; zero in exact arithmetic for touch columns).
+  double AddedBound(const State& base, const Reference& ref, const Eigen::MatrixXd& info) const {
+    const int n = static_cast<int>(order_.size());
+    double ratio = kInf;
+    newk_.clear();
+    oldk_.clear();
+    for (int k = 0; k < n; ++k) {
+      const int i = ref.pos[order_[k]];
+      if (i < 0) {
+        newk_.push_back(k);
+      } else {
+        oldk_.push_back(k);
+        ratio = std::min(ratio, ref.d[i] / dv_[k]);
+      }
+    }
+    double b = ref.lmin * ratio;
+    if (newk_.empty()) return b;
+    // Read down the new columns (contiguous: the matrices are symmetric).
+    auto added = [&](int r, int c) {
+      double v = info(r, c);
+      for (const auto& [bar, w] : bars_) v += w * pool_.bar_M_[bar](r, c);
+      return v;
+    };
+    const int nn = static_cast<int>(newk_.size()), no = static_cast<int>(oldk_.size());
+    P_.resize(nn, nn);
+    Q_.resize(nn, no);
+    double e2 = 0;
+    for (int a = 0; a < nn; ++a) {
+      const int ka = newk_[a], ca = order_[ka];
+      for (int c = 0; c < nn; ++c) {
+        const int kc = newk_[c];
+        const double s = sv_[ka] * sv_[kc];
+        P_(a, c) = added(order_[kc], ca) * s;
+        const double e = base.M(order_[kc], ca) * s;
+        e2 += e * e;
+      }
+      for (int c = 0; c < no; ++c) {
+        const int kc = oldk_[c];
+        const double s = sv_[ka] * sv_[kc];
+        Q_(a, c) = added(order_[kc], ca) * s;
+        const double e = base.M(order_[kc], ca) * s;
+        e2 += 2.0 * e * e;
+      }
+    }
+    Eigen::LLT<Eigen::MatrixXd> llt(P_);
+    if (llt.info() != Eigen::Success) return 0;
+    Eigen::MatrixXd Linv = Eigen::MatrixXd::Identity(nn, nn);
+    llt.matrixL().solveInPlace(Linv);
+    const double lmin_p = 1.0 / Linv.squaredNorm();  // 1 / trace(P^-1) <= lambda_min(P)
+    const double k = llt.solve(Q_).norm();            // ||K||_F >= ||K||_2
+    b = std::min(b, lmin_p) / ((1.0 + k) * (1.0 + k));
+    return b - std::sqrt(e2);
+  }
+
+  // Candidate = reference - B (B >= 0) on a subset of the reference's columns
+  // (R dropped). In the reference's scaling Y <= Ms_ref restricted, so every
+  // eigenvalue of Y is at most the restriction's, and
+  //   lambda_min(Y) >= det(Y) lambda_min(Ms_ref) / det(Ms_ref restricted),
+  //   det(Ms_ref restricted) = det(Ms_ref) det((Ms_ref^-1)_RR);
+  // the candidate's scaling multiplies lambda_min by at least min d_ref / d.
+  double RemovedBound(const Reference& ref, double logdet) const {
+    const int n = static_cast<int>(order_.size());
+    double log_ratio = 0, ratio = kInf;
+    std::vector<bool> kept(ref.active.size(), false);
+    for (int k = 0; k < n; ++k) {
+      const int i = ref.pos[order_[k]];
+      if (i < 0) return 0;  // a removal cannot activate a column
+      kept[i] = true;
+      log_ratio += std::log(dv_[k] / ref.d[i]);
+      ratio = std::min(ratio, ref.d[i] / dv_[k]);
+    }
+    std::vector<int> dropped;
+    for (size_t i = 0; i < kept.size(); ++i)
+      if (!kept[i]) dropped.push_back(static_cast<int>(i));
+    double logdet_rr = 0;
+    if (!dropped.empty()) {
+      if (ref.inv.rows() != static_cast<int>(ref.active.size())) return 0;
+      const int nr = static_cast<int>(dropped.size());
+      Eigen::MatrixXd Rr(nr, nr);
+      for (int a = 0; a < nr; ++a)
+        for (int c = 0; c < nr; ++c) Rr(a, c) = ref.inv(dropped[a], dropped[c]);
+      Eigen::LLT<Eigen::MatrixXd> llt(Rr);
+      if (llt.info() != Eigen::Success) return 0;
+      for (int a = 0; a < nr; ++a) logdet_rr += 2.0 * std::log(llt.matrixL()(a, a));
+    }
+    const double lb = logdet + log_ratio + std::log(ref.lmin) - ref.logdet - logdet_rr + std::log(ratio);
+    return std::isfinite(lb) ? std::exp(lb) : 0;
+  }
+
+  std::vector<bool> is_core_;
+  std::vector<double> log_scale2_;
+  // Workspace of FastD (one search at a time per Selection).
+  mutable std::vector<int> cnt_, sph_, order_, newk_, oldk_;
+  mutable std::vector<std::pair<int, double>> bars_;
+  mutable Eigen::VectorXd dv_, sv_;
+  mutable Eigen::MatrixXd W_, X_, P_, Q_;
 };
 
 }  // namespace
@@ -492,11 +851,10 @@ DesignResult DesignPlan(const Dataset& ds, const std::vector<int>& group, const 
   while (count < search.k && !res.stopped) {
     int pick = -1;
     Score pick_score;
+    const Reference ref = sel.Refer(state, false);
     for (int g = 0; g < G; ++g) {
       if (chosen[g]) continue;
-      State t = state;
-      sel.Apply(&t, members[g], info[g], +1);
-      const Score s = sel.Eval(t);
+      const Score s = sel.Candidate(state, ref, members[g], info[g], +1);
       if (pick < 0 || sel.Better(s, pick_score)) {
         pick = g;
         pick_score = s;
@@ -519,11 +877,10 @@ DesignResult DesignPlan(const Dataset& ds, const std::vector<int>& group, const 
         if (!chosen[g] || required.count(g)) continue;
         State without = state;
         sel.Apply(&without, members[g], info[g], -1);
+        const Reference ref = sel.Refer(without, false);
         for (int h = 0; h < G; ++h) {
           if (chosen[h]) continue;
-          State t = without;
-          sel.Apply(&t, members[h], info[h], +1);
-          const Score s = sel.Eval(t);
+          const Score s = sel.Candidate(without, ref, members[h], info[h], +1);
           if (sel.Better(s, swap_score)) {
             out = g;
             in = h;
@@ -558,10 +915,9 @@ DesignResult DesignPlan(const Dataset& ds, const std::vector<int>& group, const 
     while (static_cast<int>(obs.size()) > search.max_touches && !res.stopped) {
       int drop = -1;
       Score drop_score;
+      const Reference ref = sel.Refer(state, true);
       for (size_t k = 0; k < obs.size(); ++k) {
-        State t = state;
-        sel.Apply(&t, {obs[k]}, oinfo[obs[k]], -1);
-        const Score s = sel.Eval(t);
+        const Score s = sel.Candidate(state, ref, {obs[k]}, oinfo[obs[k]], -1);
         if (drop < 0 || sel.Better(s, drop_score)) {
           drop = static_cast<int>(k);
           drop_score = s;
@@ -601,6 +957,76 @@ DesignResult DesignPlan(const Dataset& ds, const std::vector<int>& group, const 
   res.reference = AssessPlan(ds, fixed, nullptr);
   return res;
 }
+
+namespace internal {
+
+std::vector<ScoreCheck> CheckDesignScores(const Dataset& ds, const std::vector<int>& group, const DesignOptions& opt,
+                                          int states, unsigned seed) {
+  CheckOptions(opt);
+  ds.Validate();
+  if (group.size() != ds.observations.size() || std::any_of(group.begin(), group.end(), [](int g) { return g < 0; }))
+    throw std::invalid_argument("design: one group label >= 0 per candidate observation");
+  const Pool pool(ds, opt);
+  SearchOptions search;
+  search.criterion = "d";
+  const Selection sel(pool, opt, search);
+  int G = 0;
+  for (int g : group) G = std::max(G, g + 1);
+  std::vector<std::vector<int>> members(G);
+  for (size_t i = 0; i < group.size(); ++i) members[group[i]].push_back(static_cast<int>(i));
+  std::vector<Eigen::MatrixXd> info(G);
+  for (int g = 0; g < G; ++g) {
+    std::vector<int> rows;
+    for (int i : members[g]) rows.insert(rows.end(), pool.rows_[i].begin(), pool.rows_[i].end());
+    info[g] = pool.Info(rows);
+  }
+  std::mt19937 rng(seed);
+  std::vector<ScoreCheck> out;
+  auto record = [&](const Score& f, bool fast, const Score& e, bool removal) {
+    ScoreCheck c;
+    c.fast = f.deficiency > 0 ? -kInf : f.dcrit;
+    c.exact = e.deficiency > 0 ? -kInf : e.dcrit;
+    c.fast_deficiency = f.deficiency;
+    c.exact_deficiency = e.deficiency;
+    c.fast_path = fast;
+    c.removal = removal;
+    out.push_back(c);
+  };
+  for (int t = 0; t < states; ++t) {
+    std::vector<int> order(G);
+    for (int g = 0; g < G; ++g) order[g] = g;
+    std::shuffle(order.begin(), order.end(), rng);
+    const int k = std::uniform_int_distribution<int>(1, std::max(1, std::min(G - 3, 12)))(rng);
+    // Two extra groups added and removed again leave the rounding an exchange leaves.
+    State state = sel.Empty();
+    for (int i = 0; i < k + 2 && i < G; ++i) sel.Apply(&state, members[order[i]], info[order[i]], +1);
+    for (int i = k; i < k + 2 && i < G; ++i) sel.Apply(&state, members[order[i]], info[order[i]], -1);
+    const Reference add = sel.Refer(state, false);
+    for (int i = k; i < std::min(G, k + 6); ++i) {
+      const int g = order[i];
+      bool fast = false;
+      const Score f = sel.Candidate(state, add, members[g], info[g], +1, &fast);
+      State x = state;
+      sel.Apply(&x, members[g], info[g], +1);
+      record(f, fast, sel.Eval(x), false);
+    }
+    std::vector<int> obs;
+    for (int i = 0; i < k; ++i) obs.insert(obs.end(), members[order[i]].begin(), members[order[i]].end());
+    std::shuffle(obs.begin(), obs.end(), rng);
+    const Reference rem = sel.Refer(state, true);
+    for (size_t i = 0; i < obs.size() && i < 6; ++i) {
+      const Eigen::MatrixXd oi = pool.ObsInfo(obs[i]);
+      bool fast = false;
+      const Score f = sel.Candidate(state, rem, {obs[i]}, oi, -1, &fast);
+      State x = state;
+      sel.Apply(&x, {obs[i]}, oi, -1);
+      record(f, fast, sel.Eval(x), true);
+    }
+  }
+  return out;
+}
+
+}  // namespace internal
 
 // ---- Candidate plans ------------------------------------------------------------------
 

@@ -244,6 +244,52 @@ TEST(Design, TouchBudget) {
   EXPECT_TRUE(std::isfinite(r.quality.condition_number));
 }
 
+TEST(Design, FastDCriterionIsTheEigenOne) {
+  // The search scores full-rank D-criterion candidates by an elimination
+  // certified against the step's reference instead of an eigen-decomposition:
+  // same value, same rank verdict, on random selections (additions of a group,
+  // removals of a touch, including ones that (de)activate facets, spheres and
+  // the scale bar).
+  const Pool pool = MakePool();
+  for (const std::vector<std::string>& estimate : {kLocation, std::vector<std::string>{"S3"}}) {
+    DesignOptions opt;
+    opt.estimate = estimate;
+    const auto checks = internal::CheckDesignScores(pool.ds, pool.group, opt, 40, 3);
+    int full[2] = {0, 0}, fast[2] = {0, 0}, deficient = 0;
+    for (const auto& c : checks) {
+      ASSERT_EQ(c.fast_deficiency, c.exact_deficiency);
+      if (c.exact_deficiency > 0) {
+        ++deficient;
+        EXPECT_FALSE(c.fast_path);
+        EXPECT_TRUE(std::isinf(c.fast) && c.fast < 0);
+        continue;
+      }
+      EXPECT_NEAR(c.fast, c.exact, 1e-9 * std::max(1.0, std::abs(c.exact)));
+      ++full[c.removal];
+      fast[c.removal] += c.fast_path;
+    }
+    EXPECT_GT(deficient, 0);
+    // The certificate is not so cautious that the fast path is rarely taken.
+    EXPECT_GT(full[0], 50);
+    EXPECT_GT(full[1], 50);
+    EXPECT_GE(fast[0], 0.8 * full[0]) << fast[0] << " of " << full[0] << " additions";
+    EXPECT_GE(fast[1], 0.8 * full[1]) << fast[1] << " of " << full[1] << " removals";
+  }
+  // And the whole search: its last criterion is the chosen plan's exact one.
+  DesignOptions opt;
+  opt.estimate = kLocation;
+  SearchOptions s;
+  s.k = 6;
+  s.criterion = "d";
+  const DesignResult all = DesignPlan(pool.ds, pool.group, opt, s);
+  EXPECT_NEAR(all.history.back(), all.quality.d_criterion, 1e-6 * std::abs(all.quality.d_criterion));
+  s.max_touches = static_cast<int>(all.observations.size()) - 12;
+  const DesignResult r = DesignPlan(pool.ds, pool.group, opt, s);
+  EXPECT_EQ(static_cast<int>(r.observations.size()), s.max_touches);
+  EXPECT_NEAR(r.history.back(), r.quality.d_criterion, 1e-6 * std::abs(r.quality.d_criterion));
+  EXPECT_LE(r.quality.d_criterion, all.quality.d_criterion);
+}
+
 TEST(Design, CharacteristicScale) {
   const Machine m = Machine::FromJson(MachineJson("hu40t").dump());
   EXPECT_EQ(CharacteristicScale(m, "EX0C", 400), 1.0);

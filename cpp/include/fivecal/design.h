@@ -22,15 +22,20 @@
 //   predicted_std      sigma sqrt(diag (J^T J)^+), parameter units.
 //
 // The search works on per-observation information matrices M_o = J_o^T J_o
-// (p x p, p the parameters of the whole pool), so one evaluation costs a p x p
-// eigen-decomposition whatever the number of touches; the chosen plan is then
-// assessed exactly from its Jacobian rows (AssessPlan). Candidates are grouped
-// into indexations (a group: the touches made at one rotary pose); the search
-// picks K groups: forward greedy (rank first, then the criterion), then
-// exchange passes (Fedorov-style swaps of one chosen and one unchosen group,
-// best improving swap first) until no swap improves. Optionally, touches are
-// then removed one at a time (the one whose removal hurts least) down to a
-// touch budget: the "targets" of the chosen indexations.
+// (p x p, p the parameters of the whole pool), so one evaluation costs O(p^3)
+// whatever the number of touches: a p x p eigen-decomposition for the
+// condition number and for rank-deficient selections; for the D-criterion of
+// a full-rank one, an elimination of the setup columns and a Cholesky
+// factorisation of the machine block, its full rank certified against the
+// step's reference selection (same value to rounding, about ten times
+// cheaper). The chosen plan is then assessed exactly from its Jacobian rows
+// (AssessPlan). Candidates are grouped into indexations (a group: the
+// touches made at one rotary pose); the search picks K groups: forward
+// greedy (rank first, then the criterion), then exchange passes
+// (Fedorov-style swaps of one chosen and one unchosen group, best improving
+// swap first) until no swap improves. Optionally, touches are then removed
+// one at a time (the one whose removal hurts least) down to a touch budget:
+// the "targets" of the chosen indexations.
 //
 // Accessibility: CandidatePlan lists, for each candidate indexation, the
 // targets a probe can touch there: facets whose outward normal does not face
@@ -142,6 +147,23 @@ std::string CandidatePlan(const Dataset& setup, const Eigen::MatrixXd& indexatio
                           const Eigen::MatrixXi* directions,
                           const std::vector<Eigen::Vector3d>& sphere_normals,
                           const Accessibility& access, std::vector<int>* group = nullptr);
+
+namespace internal {
+
+// Test hook for the search's D-criterion scoring: random selections of the
+// pool's groups (built by adding and removing groups, as the exchange does),
+// each changed by adding an unchosen group or removing one chosen touch, scored
+// as DesignPlan scores candidates and by the eigen-decomposition.
+struct ScoreCheck {
+  double fast = 0, exact = 0;          // d_criterion; -inf when rank deficient
+  int fast_deficiency = 0, exact_deficiency = 0;
+  bool fast_path = false;              // the eigen-decomposition was avoided
+  bool removal = false;
+};
+std::vector<ScoreCheck> CheckDesignScores(const Dataset& candidates, const std::vector<int>& group,
+                                          const DesignOptions& options, int states, unsigned seed);
+
+}  // namespace internal
 
 }  // namespace fivecal
 
