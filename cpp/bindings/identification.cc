@@ -6,6 +6,7 @@
 #include "fivecal/dataset.h"
 #include "fivecal/identify.h"
 #include "fivecal/simulate.h"
+#include "identify_options.h"
 
 namespace py = pybind11;
 using namespace fivecal;
@@ -79,17 +80,9 @@ void BindIdentification(py::module_& m) {
          const std::string& robust, double robust_scale, int max_iterations,
          bool allow_unidentifiable, bool include_default_setup, int num_threads,
          double selection_tolerance) {
-        IdentifyOptions o;
-        o.selection_tolerance = selection_tolerance;
-        o.estimate = estimate;
-        o.fix = fix;
-        o.initial = initial;
-        o.robust = robust;
-        o.robust_scale = robust_scale;
-        o.max_iterations = max_iterations;
-        o.allow_unidentifiable = allow_unidentifiable;
-        o.include_default_setup = include_default_setup;
-        o.num_threads = num_threads;
+        const IdentifyOptions o = MakeOptions(estimate, fix, initial, robust, robust_scale, max_iterations,
+                                              include_default_setup, selection_tolerance,
+                                              allow_unidentifiable, num_threads);
         py::gil_scoped_release release;
         return Identify(ds, o);
       },

@@ -15,27 +15,12 @@
 #include "fivecal/monte_carlo.h"
 #include "fivecal/probing_stats.h"
 #include "fivecal/simulate.h"
+#include "identify_options.h"
 
 namespace py = pybind11;
 using namespace fivecal;
 
 namespace {
-
-IdentifyOptions MakeOptions(const std::vector<std::string>& estimate, const std::vector<std::string>& fix,
-                            const std::map<std::string, double>& initial, const std::string& robust,
-                            double robust_scale, int max_iterations, bool include_default_setup,
-                            double selection_tolerance) {
-  IdentifyOptions o;
-  o.estimate = estimate;
-  o.fix = fix;
-  o.initial = initial;
-  o.robust = robust;
-  o.robust_scale = robust_scale;
-  o.max_iterations = max_iterations;
-  o.include_default_setup = include_default_setup;
-  o.selection_tolerance = selection_tolerance;
-  return o;
-}
 
 std::vector<bool> Bools(const std::vector<bool>& v) { return v; }
 

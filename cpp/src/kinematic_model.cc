@@ -162,20 +162,25 @@ template <bool kRecord>
 FIVECAL_ISA_CLONES void KinematicModel::Chain(const std::vector<int>& chain, const double* q, const int* dir,
                            Eigen::Matrix3d* R, Eigen::Vector3d* t, Eigen::Vector3d* p_last,
                            Factor* factors) const {
-  R->setIdentity();
-  t->setZero();
   int i = 0;
   const Machine& m = *machine_;
   for (int k : chain) {
     const AxisConstants& A = axes_[k];
-    Factor* F = kRecord ? &factors[i++] : nullptr;
-    if (kRecord) F->R_before = *R;
-    *t += *R * A.tE;
+    Factor* F = kRecord ? &factors[i] : nullptr;
+    if (i++ == 0) {
+      // The chain starts at F: its first frame is E itself.
+      if (kRecord) F->R_before.setIdentity();
+      *t = A.tE;
+      *R = A.RE;
+    } else {
+      if (kRecord) F->R_before = *R;
+      *t += *R * A.tE;
+      // R . Rz(EC0) Ry(EB0) Rx(EA0), skipping the zero angles.
+      if (A.loc_rot[2]) RotateAbout<2>(R, A.loc_sin[2], A.loc_cos[2]);
+      if (A.loc_rot[1]) RotateAbout<1>(R, A.loc_sin[1], A.loc_cos[1]);
+      if (A.loc_rot[0]) RotateAbout<0>(R, A.loc_sin[0], A.loc_cos[0]);
+    }
     if (kRecord) F->oE = *t;
-    // R . Rz(EC0) Ry(EB0) Rx(EA0), skipping the zero angles.
-    if (A.loc_rot[2]) RotateAbout<2>(R, A.loc_sin[2], A.loc_cos[2]);
-    if (A.loc_rot[1]) RotateAbout<1>(R, A.loc_sin[1], A.loc_cos[1]);
-    if (A.loc_rot[0]) RotateAbout<0>(R, A.loc_sin[0], A.loc_cos[0]);
     if (kRecord) F->backlash_w = *R * A.direction;
     const double qk = q[k];
     const double qm = (dir && dir[k] != 0) ? qk + A.backlash * dir[k] : qk;
@@ -233,8 +238,13 @@ FIVECAL_ISA_CLONES void KinematicModel::Chain(const std::vector<int>& chain, con
       for (int c = 0; c < 3; ++c) F->epsW[c] = R->col(c);
     }
   }
-  if (chain.empty()) p_last->setZero();
-  else *p_last = m.axis(chain.back()).point;
+  if (chain.empty()) {
+    R->setIdentity();
+    t->setZero();
+    p_last->setZero();
+  } else {
+    *p_last = m.axis(chain.back()).point;
+  }
 }
 
 Eigen::Vector3d KinematicModel::ToolPoint(const double* q, const int* dir,
