@@ -314,6 +314,10 @@ def readme_section(doc):
                       f"{r['fivecal_evaluations']:,} candidate selections scored) in {r['fivecal_s']:.2f} s "
                       f"(numpy baseline {r['baseline_s']:.2f} s, same search; D-criteria of the two plans "
                       f"{r['fivecal_d_criterion']:.4f} and {r['baseline_plan_d_criterion']:.4f})."]
+    extrapolated = [r["case"] for r in doc["results"] if "extrapolated" in r.get("note", "")]
+    if extrapolated:
+        lines += ["", "Extrapolated baseline (one SciPy re-fit on one thread times the trial count; a "
+                  "full run would take hours): " + ", ".join(extrapolated) + "."]
     scaling = [r for r in doc["results"] if r["case"].startswith("ball3d_fit_")]
     if scaling:
         lines += ["", "Fit cost per 3D ball sample: " + ", ".join(
