@@ -1,0 +1,83 @@
+"""The numpy/SciPy baseline of bench/ must compute what fivecal computes, or
+the speed ratios in the README compare different things."""
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+import fivecal
+from fivecal import tango
+
+ROOT = os.path.join(os.path.dirname(__file__), "..", "..")
+sys.path.insert(0, os.path.join(ROOT, "bench"))
+
+import baseline_numpy as base  # noqa: E402
+import run as bench  # noqa: E402
+
+
+def _poses(m, n, rng):
+    return {a: rng.uniform(-360, 360, n) if m.is_rotary(a) else rng.uniform(-300, 300, n)
+            for a in m.axis_names}
+
+
+def _radians(m, q):
+    q = q.copy()
+    for i, a in enumerate(m.axis_names):
+        if m.is_rotary(a):
+            q[:, i] = np.deg2rad(q[:, i])
+    return q
+
+
+@pytest.mark.parametrize("name", ["hu40t", "kx8", "c600u"])
+def test_numpy_forward_kinematics_is_fivecal_s(name):
+    m = fivecal.Machine.load(os.path.join(ROOT, "examples", "machines", f"{name}.json"))
+    rng = np.random.default_rng(4)
+    names = m.parameter_names()
+    # Every kind of parameter at realistic sizes, including cubic motions and backlash.
+    errors = {n: float(rng.normal(0, 2e-5 if n[1] in "ABC" else 5e-3))
+              for n in rng.choice(names, 40, replace=False) if not n.endswith(("2", "3"))}
+    errors.update({n: float(rng.normal(0, 1e-9)) for n in names if n.endswith("3")})
+    axes = _poses(m, 500, rng)
+    dirs = {a: rng.choice([-1, 1], 500) for a in m.axis_names if a != "S"}
+    ours = m.tool_point(axes, errors, directions=dirs)
+    q = _radians(m, m.axes_matrix(axes))
+    d = m.directions_matrix(dirs, 500).astype(float)
+    theirs = base.NumpyMachine(m).tool_points(q, errors, d)
+    assert np.abs(ours - theirs).max() < 1e-9
+
+
+def test_numpy_residuals_are_fivecal_s():
+    ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=2)
+    values = dict(tango.thesis_s3_errors())
+    values.update({"tip.x": 0.01, "facet.F3": 0.004})
+    ours, source = fivecal._core.predict_residuals(ds._core, values)
+    prob = base.NumpyProblem(ds)
+    theirs = prob.residuals(values)
+    # The baseline stacks facets, spheres, then the scale bars; fivecal keeps
+    # observation order with the bars last.
+    bars = [s for s in source if s < 0]
+    order = list(prob.f_idx) + list(prob.s_idx) + bars
+    rows = {s: i for i, s in enumerate(source)}
+    assert ours.shape == theirs.shape and len(order) == len(ours)
+    assert np.abs(ours[[rows[s] for s in order]] - theirs).max() < 1e-9
+
+
+def test_tango_case_agrees_with_the_baseline_fit():
+    r = bench.case_tango("S3", 1, 1)
+    assert r["max_difference_in_sigma"] < 0.01
+    assert r["ratio"] > 1
+
+
+def test_readme_section_is_generated_from_the_json():
+    doc = {"machine": {"cpu": "test cpu", "cores": 2, "date": "today"},
+           "results": [{"case": "forward_kinematics", "size": {"poses": 10}, "fivecal_s": 1e-3,
+                        "baseline_s": 2e-2, "ratio": 20.0, "fivecal_poses_per_s": 1e4,
+                        "baseline_poses_per_s": 5e2, "api_poses_per_s": 9e3},
+                       {"case": "design_search", "skipped": "not here"}]}
+    text = bench.readme_section(doc)
+    assert text.startswith("<!-- performance:begin") and text.endswith("<!-- performance:end -->")
+    assert "| forward_kinematics | poses 10 | 1.00 ms | 20.0 ms | 20× |" in text
+    assert "not measured: not here" in text
+    json.dumps(doc)  # the harness writes this document as JSON
