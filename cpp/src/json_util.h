@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "fivecal/machine.h"
 
@@ -14,11 +15,45 @@ namespace fivecal::json_util {
 
 using nlohmann::json;
 
+// Parses JSON; a syntax error or a number out of double range names the
+// field being read (what.observations[3].axes.B), tracked with the parser's
+// callback since the lexer fails before the value reaches the parsers.
 inline json Parse(const std::string& text, const std::string& what) {
+  struct Level {
+    bool array;
+    int done = 0;  // completed elements of an array
+    std::string key;
+  };
+  std::vector<Level> stack;
+  auto completed = [&] {
+    if (!stack.empty() && stack.back().array) ++stack.back().done;
+  };
+  json::parser_callback_t track = [&](int, json::parse_event_t event, json& parsed) {
+    switch (event) {
+      case json::parse_event_t::object_start: stack.push_back({false}); break;
+      case json::parse_event_t::array_start: stack.push_back({true}); break;
+      case json::parse_event_t::key: stack.back().key = parsed.get<std::string>(); break;
+      case json::parse_event_t::object_end:
+      case json::parse_event_t::array_end:
+        stack.pop_back();
+        completed();
+        break;
+      case json::parse_event_t::value: completed(); break;
+    }
+    return true;
+  };
+  auto where = [&] {
+    std::string path = what;
+    for (const Level& l : stack)
+      path += l.array ? "[" + std::to_string(l.done) + "]" : (l.key.empty() ? "" : "." + l.key);
+    return path;
+  };
   try {
-    return json::parse(text);
+    return json::parse(text, track);
   } catch (const json::parse_error& e) {
-    throw std::invalid_argument(what + ": invalid JSON: " + e.what());
+    throw std::invalid_argument(where() + ": invalid JSON: " + e.what());
+  } catch (const json::out_of_range& e) {
+    throw std::invalid_argument(where() + ": " + e.what() + " (a number outside the double range)");
   }
 }
 

@@ -300,7 +300,13 @@ TEST(MachineValidation, OverflowingDirectionInJson) {
   // std::invalid_argument naming the document and the bad value.
   ExpectInvalid([] { Machine::FromJson(R"({"topology": "wfXt",
       "axes": {"X": {"direction": [1e999,0,0]}}})"); },
-                {"machine", "1e999"});
+                {"machine.axes.X.direction[0]", "1e999", "double range"});
+  // Nested arrays of objects: the element index and the key inside it.
+  ExpectInvalid([] { Machine::FromJson(R"({"topology": "wfXt", "list": [{"a": 1}, [2, 3], {"b": [4, -1e999]}],
+      "axes": {"X": {"direction": [1,0,0]}}})"); },
+                {"machine.list[2].b[1]", "1e999"});
+  ExpectInvalid([] { Machine::FromJson(R"({"topology": "wfXt", "axes": {"X": {"direction": [1,0,]}}})"); },
+                {"machine.axes.X.direction[2]", "invalid JSON"});
 }
 
 TEST(MachineValidation, WrongJsonTypeForName) {
