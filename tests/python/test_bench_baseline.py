@@ -81,3 +81,15 @@ def test_readme_section_is_generated_from_the_json():
     assert "| forward_kinematics | poses 10 | 1.00 ms | 20.0 ms | 20× |" in text
     assert "not measured: not here" in text
     json.dumps(doc)  # the harness writes this document as JSON
+
+
+def test_core_choices_measure_the_used_paths_faster():
+    exe = os.path.join(ROOT, "build", "ctest", "fivecal_bench_choices")
+    if not os.path.exists(exe):
+        pytest.skip("C++ build (scripts/test.sh builds it) not present")
+    choices = bench.core_choices(3)
+    assert [c["preset"] for c in choices] == ["S3", "S4"]
+    for c in choices:
+        assert c["jacobian_ms"]["analytic"] * 10 < c["jacobian_ms"]["autodiff"]
+        assert c["solve_iterations"]["dense_normal_cholesky"] == c["solve_iterations"]["dense_qr"]
+        assert c["analysis_ms"]["normal_eigen"] > 0 and c["analysis_ms"]["qr_svd"] > 0
