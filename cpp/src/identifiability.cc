@@ -9,6 +9,13 @@
 namespace fivecal {
 namespace {
 
+// N = Js^T Js (both triangles) of the column-scaled Jacobian.
+Eigen::MatrixXd ScaledNormal(const Eigen::MatrixXd& Js) {
+  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(Js.cols(), Js.cols());
+  N.selfadjointView<Eigen::Lower>().rankUpdate(Js.transpose());
+  return N.selfadjointView<Eigen::Lower>();
+}
+
 // Below this condition number the singular values are taken from the
 // eigenvalues of the scaled normal matrix N = Js^T Js: their relative error is
 // about p eps kappa^2 (1e-6 at the bound), and forming N plus a symmetric
@@ -21,8 +28,7 @@ constexpr double kEigenConditionBound = 1e4;
 bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, Identifiability* out) {
   const int p = static_cast<int>(Js.cols());
   if (p == 0 || Js.rows() < p) return false;
-  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
-  N.selfadjointView<Eigen::Lower>().rankUpdate(Js.transpose());
+  const Eigen::MatrixXd N = ScaledNormal(Js);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
   if (eig.info() != Eigen::Success) return false;
   const Eigen::VectorXd lambda = eig.eigenvalues();  // ascending
@@ -140,10 +146,7 @@ bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin) {
   // the 1e-3 between margin and the rank tolerance. L_jj^2 carries an
   // absolute rounding error of about p eps, far below margin^2. A third of
   // the cost of a pivoted QR.
-  const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
-  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
-  N.selfadjointView<Eigen::Lower>().rankUpdate(Js.transpose());
-  const Eigen::LLT<Eigen::MatrixXd> llt(N);
+  const Eigen::LLT<Eigen::MatrixXd> llt(ScaledNormal(J * inv_scale.asDiagonal()));
   if (llt.info() != Eigen::Success) return false;
   const Eigen::VectorXd d = llt.matrixLLT().diagonal();
   return d.minCoeff() > margin * d.maxCoeff();
