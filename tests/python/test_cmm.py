@@ -40,11 +40,6 @@ def machine_truth() -> dict:
 
 
 @pytest.fixture(scope="module")
-def hu40t():
-    return tango.hu40t_machine()
-
-
-@pytest.fixture(scope="module")
 def calibration(hu40t):
     ds = tango.hu40t_dataset(errors=machine_truth(), seed=5)
     return fivecal.identify(ds, "S3")

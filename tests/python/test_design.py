@@ -35,24 +35,9 @@ SPEC = ROOT / "examples" / "design" / "hu40t_table_4_2.json"
 
 
 @pytest.fixture(scope="module")
-def hu40t():
-    return tango.hu40t_machine()
-
-
-@pytest.fixture(scope="module")
-def table():
-    return tango.octagonal_table()
-
-
-@pytest.fixture(scope="module")
-def full_plan(table, hu40t):
-    return tango.hu40t_plan(table, hu40t)
-
-
-@pytest.fixture(scope="module")
-def pool(full_plan, table, hu40t):
+def pool(plan, table, hu40t):
     """Table 4-2 touches simulated noise-free on the nominal machine."""
-    return fivecal.simulate(hu40t, full_plan, artefact=table, tip_radius=tango.TIP_RADIUS)
+    return fivecal.simulate(hu40t, plan, artefact=table, tip_radius=tango.TIP_RADIUS)
 
 
 @pytest.fixture(scope="module")
@@ -77,8 +62,8 @@ def z_scores(r, table):
 
 
 @pytest.fixture(scope="module")
-def full_result(full_plan, table):
-    return identify_plan(full_plan, table, seed=11)
+def full_result(plan, table):
+    return identify_plan(plan, table, seed=11)
 
 
 # --------------------------------------------------------------------------
@@ -96,8 +81,8 @@ def test_condition_number_is_the_one_identify_reports(pool, full_quality, full_r
     assert math.isfinite(q.d_criterion) and 0 < q.d_std < 1e-3
 
 
-def test_plan_without_the_scale_bar_cannot_see_the_scale(full_plan, table, hu40t):
-    no_bar = [e for e in full_plan if e["type"] == "facet"]
+def test_plan_without_the_scale_bar_cannot_see_the_scale(plan, table, hu40t):
+    no_bar = [e for e in plan if e["type"] == "facet"]
     q = design.plan_quality(no_bar, "S3", machine=hu40t, artefact=table, tip_radius=3.0)
     assert math.isinf(q.condition_number) and q.rank < q.n_parameters
     assert any({"EXX1", "EYY1", "EZZ1"} & set(g) for g in q.confounded), q.confounded
@@ -105,11 +90,11 @@ def test_plan_without_the_scale_bar_cannot_see_the_scale(full_plan, table, hu40t
     assert "confounded" in q.report()
 
 
-def test_visit_groups_of_table_4_2(full_plan):
-    g = design.visit_groups(full_plan)
+def test_visit_groups_of_table_4_2(plan):
+    g = design.visit_groups(plan)
     assert len(set(g)) == 28 and g == sorted(g)
     # visit i is row i of Table 4-2
-    for e, gi in zip(full_plan, g):
+    for e, gi in zip(plan, g):
         s, b, c, _ = tango.TABLE_4_2[gi]
         assert (e["axes"]["S"], e["axes"]["B"], e["axes"]["C"]) == (s, b, c)
 
@@ -265,9 +250,9 @@ def test_design_errors(pool, kwargs, pattern):
         design.design_plan(pool, k, **{"estimate": "S3", **kwargs})
 
 
-def test_plan_needs_its_machine(full_plan):
+def test_plan_needs_its_machine(plan):
     with pytest.raises(ValueError, match="machine="):
-        design.plan_quality(full_plan, "S3")
+        design.plan_quality(plan, "S3")
 
 
 # --------------------------------------------------------------------------

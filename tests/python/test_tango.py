@@ -32,21 +32,6 @@ HELD_OUT = [(0.0, 30.0, -90.0), (0.0, 75.0, -225.0), (0.0, -45.0, 135.0),
 # --------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def hu40t():
-    return tango.hu40t_machine()
-
-
-@pytest.fixture(scope="module")
-def table():
-    return tango.octagonal_table()
-
-
-@pytest.fixture(scope="module")
-def plan(table, hu40t):
-    return tango.hu40t_plan(table, hu40t)
-
-
-@pytest.fixture(scope="module")
 def s3_data(plan, table):
     """Truth: Table 4-5 sized S3 errors only (plus stylus offsets and facet
     offsets, which are setup)."""
