@@ -1,0 +1,251 @@
+"""Magnitude checks at the boundary: inputs whose size fits the wrong unit.
+
+A dataset in µm, ball bar readings in µm, a sphere radius given as its
+diameter or rotary readings in radians all load and fit without complaint,
+and give a confident wrong answer. These checks run where data comes in
+(:func:`fivecal.load_dataset`, :meth:`fivecal.Dataset.from_dict`, the plan of
+:func:`fivecal.simulate`, CSV traces) and decide per case:
+
+* **refuse** (ValueError naming the field) when the evidence does not depend
+  on the nominal model: a ball bar reading beyond ±2 mm (a QC20 ballbar
+  measures about ±1 mm), an R-test displacement beyond 5 mm, a position or
+  length beyond 100 m, a sphere whose touches at the nominal machine lie
+  consistently at R/2 + r from its centre (the radius is the diameter);
+* **warn** (:class:`fivecal.UnitsWarning`) when a rough nominal model could
+  explain it: positions or lengths beyond 10 m, sphere touches far from
+  R + r, facet touches more than 5 mm from their facet;
+* **warn** (:class:`fivecal.RadiansWarning`) once per rotary axis whose
+  values look like radians (:func:`fivecal.units.looks_like_radians`).
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import warnings
+from typing import Mapping, Optional, Sequence
+
+import numpy as np
+
+from .machine import Machine, RadiansWarning
+from .units import UnitsWarning, looks_like_radians, radians_message
+
+#: mm. Beyond WARN_POSITION a value is more likely µm than a machine of that size;
+#: beyond REFUSE_POSITION no machine tool explains it.
+WARN_POSITION = 1e4
+REFUSE_POSITION = 1e5
+#: mm: a ball bar reading is the bar length minus its nominal length; a QC20
+#: ballbar's range is about ±1 mm.
+DBB_RANGE = 2.0
+#: mm: R-test / 3D ball sensors measure displacements of at most a few mm.
+BALL3D_RANGE = 5.0
+#: mm: facet touches farther than this from their facet at the nominal machine.
+FACET_DISTANCE = 5.0
+
+
+def _num(v) -> float:
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        return math.nan
+    return float(v)
+
+
+def _vec(v, n=3) -> np.ndarray:
+    if isinstance(v, (list, tuple, np.ndarray)) and len(v) == n:
+        return np.array([_num(x) for x in v])
+    return np.full(n, math.nan)
+
+
+def _check_size(values: np.ndarray, fields: Sequence[str], where: str, what: str) -> None:
+    """Refuse / warn on the largest |value| of a set of positions or lengths (mm)."""
+    if not len(values):
+        return
+    a = np.abs(np.where(np.isfinite(values), values, 0.0))
+    i = int(np.argmax(a))
+    if a[i] > REFUSE_POSITION:
+        raise ValueError(f"{where}: {fields[i]} = {values[i]:.6g} mm is beyond any machine tool "
+                         f"({REFUSE_POSITION / 1e3:g} m); {what} look like µm: divide by 1000 "
+                         "(fivecal expects mm)")
+    if a[i] > WARN_POSITION:
+        warnings.warn(f"{where}: {fields[i]} = {values[i]:.6g} mm is beyond {WARN_POSITION / 1e3:g} m; "
+                      f"if {what} are in µm, divide by 1000 (fivecal expects mm)", UnitsWarning,
+                      stacklevel=4)
+
+
+def check_rotary(machine: Machine, columns: Mapping[str, np.ndarray], where: str) -> None:
+    """One RadiansWarning per rotary axis whose values look like radians."""
+    for a, v in columns.items():
+        letter = "S" if a == "C1" else a
+        if letter in machine.axis_names and machine.is_rotary(letter) and looks_like_radians(v):
+            warnings.warn(radians_message(f"{where}.{a}", v), RadiansWarning, stacklevel=4)
+
+
+def _axis_columns(machine: Machine, entries: Sequence[Mapping]):
+    cols = {}
+    for a in machine.axis_names:
+        cols[a] = np.array([_num(e["axes"].get(a, 0.0 if a == "S" else math.nan))
+                            if isinstance(e, Mapping) and isinstance(e.get("axes"), Mapping) else math.nan
+                            for e in entries])
+    return cols
+
+
+def _positions(machine: Machine, entries, cols, where_list: str):
+    vals, fields = [], []
+    for a in machine.axis_names:
+        if not machine.is_rotary(a) and len(cols[a]):
+            i = int(np.nanargmax(np.abs(cols[a]))) if np.isfinite(cols[a]).any() else 0
+            vals.append(cols[a][i])
+            fields.append(f"{where_list}[{i}].axes.{a}")
+    for i, e in enumerate(entries):
+        if not isinstance(e, Mapping):
+            continue
+        if "length" in e:
+            vals.append(_num(e["length"]))
+            fields.append(f"{where_list}[{i}].length")
+        for key in ("tool_ball", "table_ball"):
+            if key in e:
+                v = _vec(e[key])
+                k = int(np.argmax(np.abs(np.nan_to_num(v))))
+                vals.append(v[k])
+                fields.append(f"{where_list}[{i}].{key}[{k}]")
+    return vals, fields
+
+
+def check_plan(machine: Machine, plan: Sequence[Mapping], where: str = "plan") -> None:
+    """Rotary plan values in radians (warn), positions and lengths in µm."""
+    if not isinstance(plan, (list, tuple)) or not plan:
+        return
+    cols = _axis_columns(machine, plan)
+    check_rotary(machine, cols, f"{where}[*].axes")
+    vals, fields = _positions(machine, plan, cols, where)
+    _check_size(np.array(vals, dtype=float), fields, where, "the plan's positions")
+
+
+def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "dataset") -> None:
+    """All magnitude checks of a dataset dict (the JSON format)."""
+    if not isinstance(d, Mapping):
+        return
+    if machine is None:
+        machine = Machine.from_dict(d["machine"])
+    obs = d.get("observations") or []
+    if not isinstance(obs, list):
+        return
+    obs = [o for o in obs if isinstance(o, Mapping)]
+    cols = _axis_columns(machine, obs)
+    check_rotary(machine, cols, f"{where}: observations[*].axes")
+
+    # Positions and lengths: a dataset in µm.
+    vals, fields = _positions(machine, obs, cols, "observations")
+    art = d.get("artefact") or {}
+    if isinstance(art, Mapping):
+        for k, s in enumerate(art.get("spheres") or []):
+            if isinstance(s, Mapping):
+                for j, v in enumerate(_vec(s.get("center"))):
+                    vals.append(v)
+                    fields.append(f"artefact.spheres[{k}].center[{j}]")
+                vals.append(_num(s.get("radius")))
+                fields.append(f"artefact.spheres[{k}].radius")
+        for k, f in enumerate(art.get("facets") or []):
+            if isinstance(f, Mapping):
+                for j, v in enumerate(_vec(f.get("point"))):
+                    vals.append(v)
+                    fields.append(f"artefact.facets[{k}].point[{j}]")
+        for k, b in enumerate(art.get("scale_bars") or []):
+            if isinstance(b, Mapping):
+                vals.append(_num(b.get("length")))
+                fields.append(f"artefact.scale_bars[{k}].length")
+    _check_size(np.array(vals, dtype=float), fields, where, "the dataset's positions")
+
+    # Instrument ranges.
+    dbb = [(i, _num(o.get("reading"))) for i, o in enumerate(obs) if o.get("type") == "dbb"]
+    if dbb:
+        r = np.array([v for _, v in dbb])
+        k = int(np.argmax(np.abs(np.nan_to_num(r))))
+        if abs(r[k]) > DBB_RANGE:
+            big = int((np.abs(r) > DBB_RANGE).sum())
+            raise ValueError(f"{where}: observations[{dbb[k][0]}].reading = {r[k]:.6g} mm ({big} of {r.size} "
+                             f"ball bar readings beyond ±{DBB_RANGE:g} mm; a ballbar measures about ±1 mm): "
+                             "readings look like µm: divide by 1000 (a reading is the bar length minus "
+                             "its nominal length, in mm)")
+    b3 = [(i, _vec(o.get("measured"))) for i, o in enumerate(obs) if o.get("type") == "ball3d"]
+    if b3:
+        mv = np.array([v for _, v in b3])
+        a = np.abs(np.nan_to_num(mv)).max(axis=1)
+        k = int(np.argmax(a))
+        if a[k] > BALL3D_RANGE:
+            raise ValueError(f"{where}: observations[{b3[k][0]}].measured = {mv[k].tolist()} mm is beyond "
+                             f"an R-test / 3D ball sensor's range (a few mm, {BALL3D_RANGE:g} mm here): "
+                             "displacements look like µm: divide by 1000")
+    _check_touches(machine, d, obs, cols, where)
+
+
+def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
+    """Sphere and facet touches against the artefact, at the nominal machine."""
+    art = d.get("artefact") or {}
+    if not isinstance(art, Mapping):
+        return
+    probe = d.get("probe") or {}
+    r = _num(probe.get("tip_radius", 0.0)) if isinstance(probe, Mapping) else 0.0
+    if not math.isfinite(r):
+        return
+    idx = [i for i, o in enumerate(obs) if o.get("type") in ("sphere", "facet")]
+    if not idx:
+        return
+    sub = {a: c[idx] for a, c in cols.items()}
+    if any(not np.isfinite(c).all() for a, c in sub.items() if a != "S"):
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RadiansWarning)  # warned once above
+        try:
+            P = machine.tool_point(sub)
+        except ValueError:
+            return  # the loader names what is wrong with the poses
+    targets = np.array([str(obs[i].get("target")) for i in idx])
+    types = np.array([obs[i].get("type") for i in idx])
+    for k, s in enumerate(art.get("spheres") or []):
+        if not isinstance(s, Mapping):
+            continue
+        sel = (types == "sphere") & (targets == str(s.get("id")))
+        c, R = _vec(s.get("center")), _num(s.get("radius"))
+        if sel.sum() < 3 or not np.isfinite(c).all() or not (math.isfinite(R) and R > 0):
+            continue
+        dist = np.linalg.norm(P[sel] - c, axis=1)
+        med = float(np.median(dist))
+        spread = float(np.median(np.abs(dist - med)))
+        expected, half = R + r, R / 2 + r
+        name = f"artefact.spheres[{k}] ('{s.get('id')}')"
+        if abs(med - half) < 0.05 * R and spread < 0.05 * R and abs(med - expected) > 0.25 * R:
+            raise ValueError(f"{where}: {name}: its {int(sel.sum())} touches lie {med:.4g} mm from its "
+                             f"centre at the nominal machine, radius + tip radius = {expected:.4g} mm "
+                             f"expected: the radius looks like the diameter; give radius {R / 2:g}")
+        if abs(med - expected) > 0.25 * R + 1.0:
+            warnings.warn(f"{where}: {name}: its touches lie {med:.4g} mm (median) from its centre at the "
+                          f"nominal machine, radius + tip radius = {expected:.4g} mm expected; check the "
+                          "radius (not the diameter), the centre, probe.tip_radius and their units",
+                          UnitsWarning, stacklevel=3)
+    for k, f in enumerate(art.get("facets") or []):
+        if not isinstance(f, Mapping):
+            continue
+        sel = (types == "facet") & (targets == str(f.get("id")))
+        a, n = _vec(f.get("point")), _vec(f.get("normal"))
+        if not sel.any() or not (np.isfinite(a).all() and np.isfinite(n).all()) or np.linalg.norm(n) == 0:
+            continue
+        dist = (P[sel] - a) @ (n / np.linalg.norm(n)) - r
+        j = int(np.argmax(np.abs(dist)))
+        if abs(dist[j]) > FACET_DISTANCE:
+            warnings.warn(f"{where}: artefact.facets[{k}] ('{f.get('id')}'): touches lie up to "
+                          f"{dist[j]:.4g} mm from the facet at the nominal machine (more than "
+                          f"{FACET_DISTANCE:g} mm); check the facet point and normal, the machine file "
+                          "and their units", UnitsWarning, stacklevel=3)
+
+
+def check_balls(machine: Machine, kind: str, q: np.ndarray, values: np.ndarray, where: str) -> None:
+    """Checks of :func:`fivecal.ball_dataset` arrays: rotary columns of the
+    (N, axes) command matrix ``q``, readings (dbb) or displacements (ball3d)."""
+    check_rotary(machine, {a: q[:, i] for i, a in enumerate(machine.axis_names)}, f"{where}: axes")
+    v = np.abs(np.nan_to_num(np.asarray(values, dtype=float)))
+    if not v.size:
+        return
+    limit, what = (DBB_RANGE, "readings") if kind == "dbb" else (BALL3D_RANGE, "measured")
+    k = int(np.argmax(v.max(axis=1) if v.ndim == 2 else v))
+    if v.reshape(v.shape[0], -1)[k].max() > limit:
+        raise ValueError(f"{where}: {what}[{k}] is {v.reshape(v.shape[0], -1)[k].max():.6g} mm, beyond the "
+                         f"instrument's range ({limit:g} mm): {what} look like µm: divide by 1000")
