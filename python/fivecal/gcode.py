@@ -27,6 +27,7 @@ Reading rules:
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
@@ -62,6 +63,16 @@ _REFUSED = {92.0: "G92 (set position) changes the coordinate system",
 _REFUSED_M = {98.0: "M98 (subprogram call) moves the axes where the program does not say",
               99.0: "M99 (return / jump) changes the order of the blocks",
               198.0: "M198 (subprogram call) moves the axes where the program does not say"}
+
+
+_LINE = re.compile(r"[^\r\n]*(?:\r\n|\r|\n)|[^\r\n]+\Z")
+
+
+def split_lines(text: str) -> List[str]:
+    """Lines with their endings, split at CR LF, LF or CR only: str.splitlines
+    also splits at form feed, NEL (byte 0x85, the ellipsis of Windows-1252 read
+    as Latin-1) and others, which would cut a comment and shift line numbers."""
+    return _LINE.findall(text)
 
 
 def _refuse(name: str, ln: int, text: str, msg: str) -> ValueError:
@@ -245,7 +256,7 @@ def read_program(program: str, axis_letters: Sequence[str], machine_name: str = 
     axis_letters = [a for a in axis_letters if a != "S"]
     off = {a: 0.0 for a in axis_letters}
     off.update(offset or {})
-    prog = Program(program.splitlines(keepends=True), list(axis_letters), off, {})
+    prog = Program(split_lines(program), list(axis_letters), off, {})
     modal: Dict[str, Optional[float]] = {a: None for a in axis_letters}  # machine units
     for k, v in (start or {}).items():
         try:

@@ -109,6 +109,16 @@ def test_unit_switch_writes_inserted_words_in_the_line_units(hu40t):
     assert abs(x_inch * 25.4 - a.poses.axes["X"][1]) < 1e-4
 
 
+def test_windows_1252_comment_bytes_do_not_split_lines(hu40t):
+    # 0x85 is the ellipsis of Windows-1252; read as Latin-1 it is NEL, a line
+    # break for str.splitlines, which cut the comment and shifted line numbers
+    text = HEAD + "(roughing\x85 done)\nG1 X5\x0c\nG1 X1e2\n"
+    with pytest.raises(ValueError, match=r"program:4: "):
+        compensate_gcode(text, hu40t, {})
+    ok = HEAD + "(roughing\x85 done)\nG1 X5\n"
+    assert compensate_gcode(ok, hu40t, {}).text == ok
+
+
 def test_refusal_messages_are_short_and_quote_the_line(hu40t):
     msg = refusal(HEAD + "G1 X1e2" + " Y0" * 100 + "\n", hu40t, 2)
     assert "..." in msg and len(msg) < 300
@@ -184,7 +194,7 @@ def _machine():
     return _M["m"]
 
 
-GARBAGE = st.text(alphabet=st.sampled_from(list("GXYZBCAMNFST0123456789.+-eE ;()#[]=%/\t\n\r:*xyz")),
+GARBAGE = st.text(alphabet=st.sampled_from(list("GXYZBCAMNFST0123456789.+-eE ;()#[]=%/\t\n\r:*xyz\x85\x0c\xe9")),
                   max_size=120)
 
 
@@ -200,7 +210,7 @@ def test_property_garbage_raises_only_named_value_errors(text):
             msg = str(e)
             mt = re.match(r"program:(\d+): .*\(line (\d+): ", msg, re.S)
             assert mt and mt.group(1) == mt.group(2), msg
-            assert 1 <= int(mt.group(1)) <= len((HEAD + text).splitlines())
+            assert 1 <= int(mt.group(1)) <= len(gcode.split_lines(HEAD + text))
 
 
 @st.composite
