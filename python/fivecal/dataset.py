@@ -34,7 +34,7 @@ class Dataset:
         if isinstance(d, Dataset):
             return d
         ds = cls(_core.Dataset.from_json(dumps(d)))
-        plausibility.check_dataset(d, ds.machine)
+        plausibility.check_loaded(ds)
         return ds
 
     def to_dict(self) -> dict:
@@ -94,7 +94,7 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
         ds = Dataset(_core.Dataset.from_json(text))
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
-    plausibility.check_dataset(json.loads(text), ds.machine, where=path)
+    plausibility.check_loaded(ds, where=path)
     return ds
 
 

@@ -78,34 +78,56 @@ def check_rotary(machine: Machine, columns: Mapping[str, np.ndarray], where: str
             warnings.warn(radians_message(f"{where}.{a}", v), RadiansWarning, stacklevel=4)
 
 
+def _column(values: list) -> np.ndarray:
+    """Floats of a list (NaN where a value is not a number)."""
+    try:
+        a = np.array(values, dtype=float)
+        if a.ndim == 1:
+            return a
+    except (TypeError, ValueError):
+        pass
+    return np.array([_num(v) for v in values], dtype=float)
+
+
+def _rows(values: list, n: int = 3) -> np.ndarray:
+    """(N, n) floats of a list of n-vectors (NaN rows where one is not)."""
+    try:
+        a = np.array(values, dtype=float)
+        if a.ndim == 2 and a.shape[1] == n:
+            return a
+    except (TypeError, ValueError):
+        pass
+    return np.array([_vec(v, n) for v in values], dtype=float).reshape(-1, n)
+
+
 def _axis_columns(machine: Machine, entries: Sequence[Mapping]):
-    cols = {}
-    for a in machine.axis_names:
-        cols[a] = np.array([_num(e["axes"].get(a, 0.0 if a == "S" else math.nan))
-                            if isinstance(e, Mapping) and isinstance(e.get("axes"), Mapping) else math.nan
-                            for e in entries])
-    return cols
+    axes = [e.get("axes") if isinstance(e, dict) else None for e in entries]
+    axes = [x if isinstance(x, dict) else {} for x in axes]
+    return {a: _column([x.get(a, 0.0 if a == "S" else math.nan) for x in axes])
+            for a in machine.axis_names}
 
 
-def _positions(machine: Machine, entries, cols, where_list: str):
+def _largest(values: np.ndarray, fields, out_vals: list, out_fields: list) -> None:
+    if values.size:
+        a = np.abs(np.nan_to_num(values, nan=0.0, posinf=np.inf, neginf=np.inf)).reshape(values.shape[0], -1)
+        i = int(np.argmax(a.max(axis=1)))
+        j = int(np.argmax(a[i]))
+        out_vals.append(float(values.reshape(values.shape[0], -1)[i, j]))
+        out_fields.append(fields(i, j))
+
+
+def _positions(machine: Machine, entries, cols, where_list: str, ix=lambda i: i):
     vals, fields = [], []
     for a in machine.axis_names:
-        if not machine.is_rotary(a) and len(cols[a]):
-            i = int(np.nanargmax(np.abs(cols[a]))) if np.isfinite(cols[a]).any() else 0
-            vals.append(cols[a][i])
-            fields.append(f"{where_list}[{i}].axes.{a}")
-    for i, e in enumerate(entries):
-        if not isinstance(e, Mapping):
-            continue
-        if "length" in e:
-            vals.append(_num(e["length"]))
-            fields.append(f"{where_list}[{i}].length")
-        for key in ("tool_ball", "table_ball"):
-            if key in e:
-                v = _vec(e[key])
-                k = int(np.argmax(np.abs(np.nan_to_num(v))))
-                vals.append(v[k])
-                fields.append(f"{where_list}[{i}].{key}[{k}]")
+        if not machine.is_rotary(a):
+            _largest(cols[a], lambda i, j, a=a: f"{where_list}[{ix(i)}].axes.{a}", vals, fields)
+    idx = [i for i, e in enumerate(entries) if isinstance(e, dict) and "length" in e]
+    _largest(_column([entries[i]["length"] for i in idx]),
+             lambda i, j: f"{where_list}[{ix(idx[i])}].length", vals, fields)
+    for key in ("tool_ball", "table_ball"):
+        idx_k = [i for i, e in enumerate(entries) if isinstance(e, dict) and key in e]
+        _largest(_rows([entries[i][key] for i in idx_k]),
+                 lambda i, j, key=key, idx_k=idx_k: f"{where_list}[{ix(idx_k[i])}].{key}[{j}]", vals, fields)
     return vals, fields
 
 
@@ -119,21 +141,41 @@ def check_plan(machine: Machine, plan: Sequence[Mapping], where: str = "plan") -
     _check_size(np.array(vals, dtype=float), fields, where, "the plan's positions")
 
 
-def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "dataset") -> None:
-    """All magnitude checks of a dataset dict (the JSON format)."""
+#: Datasets with more observations are checked on this many evenly spaced ones
+#: (a unit error affects every observation; this keeps loading 10^6 fast).
+SAMPLE = 20000
+
+
+def check_loaded(ds, where: str = "dataset") -> None:
+    """:func:`check_dataset` of a validated :class:`fivecal.Dataset`; on more
+    than :data:`SAMPLE` observations, on SAMPLE evenly spaced ones (messages
+    keep the indices of the full dataset)."""
+    n = len(ds)
+    if n <= SAMPLE:
+        check_dataset(ds.to_dict(), ds.machine, where)
+        return
+    idx = np.unique(np.linspace(0, n - 1, SAMPLE).round().astype(int))
+    check_dataset(ds.subset(idx).to_dict(), ds.machine, where, indices=idx)
+
+
+def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "dataset",
+                  indices: Optional[Sequence[int]] = None) -> None:
+    """All magnitude checks of a dataset dict (the JSON format). ``indices``:
+    the index in the full dataset of each observation of ``d`` (a sample)."""
     if not isinstance(d, Mapping):
         return
+    ix = (lambda i: i) if indices is None else (lambda i: int(indices[i]))
     if machine is None:
         machine = Machine.from_dict(d["machine"])
     obs = d.get("observations") or []
     if not isinstance(obs, list):
         return
-    obs = [o for o in obs if isinstance(o, Mapping)]
+    obs = [o for o in obs if isinstance(o, dict)]
     cols = _axis_columns(machine, obs)
     check_rotary(machine, cols, f"{where}: observations[*].axes")
 
     # Positions and lengths: a dataset in µm.
-    vals, fields = _positions(machine, obs, cols, "observations")
+    vals, fields = _positions(machine, obs, cols, "observations", ix)
     art = d.get("artefact") or {}
     if isinstance(art, Mapping):
         for k, s in enumerate(art.get("spheres") or []):
@@ -155,23 +197,24 @@ def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "d
     _check_size(np.array(vals, dtype=float), fields, where, "the dataset's positions")
 
     # Instrument ranges.
-    dbb = [(i, _num(o.get("reading"))) for i, o in enumerate(obs) if o.get("type") == "dbb"]
+    types = [o.get("type") for o in obs]
+    dbb = [i for i, t in enumerate(types) if t == "dbb"]
     if dbb:
-        r = np.array([v for _, v in dbb])
+        r = _column([obs[i].get("reading") for i in dbb])
         k = int(np.argmax(np.abs(np.nan_to_num(r))))
         if abs(r[k]) > DBB_RANGE:
             big = int((np.abs(r) > DBB_RANGE).sum())
-            raise ValueError(f"{where}: observations[{dbb[k][0]}].reading = {r[k]:.6g} mm ({big} of {r.size} "
+            raise ValueError(f"{where}: observations[{ix(dbb[k])}].reading = {r[k]:.6g} mm ({big} of {r.size} "
                              f"ball bar readings beyond ±{DBB_RANGE:g} mm; a ballbar measures about ±1 mm): "
                              "readings look like µm: divide by 1000 (a reading is the bar length minus "
                              "its nominal length, in mm)")
-    b3 = [(i, _vec(o.get("measured"))) for i, o in enumerate(obs) if o.get("type") == "ball3d"]
+    b3 = [i for i, t in enumerate(types) if t == "ball3d"]
     if b3:
-        mv = np.array([v for _, v in b3])
+        mv = _rows([obs[i].get("measured") for i in b3])
         a = np.abs(np.nan_to_num(mv)).max(axis=1)
         k = int(np.argmax(a))
         if a[k] > BALL3D_RANGE:
-            raise ValueError(f"{where}: observations[{b3[k][0]}].measured = {mv[k].tolist()} mm is beyond "
+            raise ValueError(f"{where}: observations[{ix(b3[k])}].measured = {mv[k].tolist()} mm is beyond "
                              f"an R-test / 3D ball sensor's range (a few mm, {BALL3D_RANGE:g} mm here): "
                              "displacements look like µm: divide by 1000")
     _check_touches(machine, d, obs, cols, where)

@@ -227,3 +227,18 @@ def test_column_unit():
     assert column_unit("reading (µm)", "length") == (1e-3, "µm")
     assert column_unit("angle", "angle") == (1.0, None)
     assert abs(column_unit("angle_rad", "angle")[0] - 180 / np.pi) < 1e-12
+
+
+def test_large_dataset_checked_on_a_sample_with_full_indices(c600u):
+    n = 25000  # above plausibility.SAMPLE: checked on evenly spaced observations
+    rng = np.random.default_rng(0)
+    axes = {a: rng.uniform(-50, 50, n) for a in "XYZ"}
+    axes.update({"A": rng.uniform(-20, 70, n), "C": rng.uniform(0, 359, n)})
+    r = rng.normal(0, 0.01, n)
+    ds = fivecal.ball_dataset(c600u, "dbb", axes, [0, 0, 100], [0, 0, 0], length=100, readings=r)
+    d = copy.deepcopy(ds.to_dict())
+    for o in d["observations"]:
+        o["reading"] *= 1000
+    d["observations"][-1]["reading"] = 99.0
+    with pytest.raises(ValueError, match=rf"observations\[{n - 1}\]\.reading = 99 mm"):
+        fivecal.Dataset.from_dict(d)
