@@ -34,12 +34,15 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 ROTARY = "ABC"
 AXIS_ORDER = "XYZABC"
 INCH = 25.4  # mm
+_DIGITS = "0123456789"  # str.isdigit also takes '²' and '٣', which no controller reads
 MAX_DIGITS = 15  # a double holds 15-17 significant digits; controllers about 9
 
 _MOTION_LINEAR = {0.0, 1.0}
 _MOTION_ARC = {2.0, 3.0}
 _CYCLES = {73.0, 74.0, 76.0, 81.0, 82.0, 83.0, 84.0, 85.0, 86.0, 87.0, 88.0, 89.0}
-_NONMODAL_AXIS_WORDS = {28.0, 30.0, 53.0}  # axis words are not a G0/G1 target
+# Axis words that are not a G0/G1 target, or a move that ends where the program does
+# not say (G31 / G38.x skip and probe moves stop at the touch).
+_NONMODAL_AXIS_WORDS = {27.0, 28.0, 30.0, 31.0, 38.2, 38.3, 38.4, 38.5, 53.0}
 _DWELL = 4.0  # G4 X1.5: X is a time
 _INCH = {20.0, 70.0, 700.0}
 _MM = {21.0, 71.0, 710.0}
@@ -123,13 +126,13 @@ def _number_end(s: str, i: int) -> int:
     if j < n and s[j] in "+-":
         j += 1
     k = j
-    while k < n and s[k].isdigit():
+    while k < n and s[k] in _DIGITS:
         k += 1
     digits = k - j
     if k < n and s[k] == ".":
         k += 1
         m = k
-        while k < n and s[k].isdigit():
+        while k < n and s[k] in _DIGITS:
             k += 1
         digits += k - m
     return k if digits else i
@@ -150,7 +153,7 @@ def tokenize(text: str, name: str = "program", ln: int = 0) -> List[Word]:
             if ch == "%" or (ch == "/" and not words and not s[:i].strip()):
                 # program start/end marker; block delete at the start of a line
                 i += 1
-                while ch == "/" and i < n and s[i].isdigit():
+                while ch == "/" and i < n and s[i] in _DIGITS:
                     i += 1
                 continue
             if ch == ":" and not words and not s[:i].strip():
@@ -180,7 +183,7 @@ def tokenize(text: str, name: str = "program", ln: int = 0) -> List[Word]:
                     kind = "axis word" if ch.upper() in AXIS_ORDER else "word"
                     raise _refuse(name, ln, text, f"{kind} '{ch}{num}{s[k]}…' uses a variable or "
                                   "expression; only literal numbers can be compensated")
-                ndig = sum(c.isdigit() for c in num)
+                ndig = sum(c in _DIGITS for c in num)
                 if ndig > MAX_DIGITS:
                     shown = num if len(num) <= 24 else num[:20] + "…"
                     raise _refuse(name, ln, text, f"word '{ch}{shown}' has {ndig} digits; a controller "
@@ -189,7 +192,7 @@ def tokenize(text: str, name: str = "program", ln: int = 0) -> List[Word]:
                 words.append(Word(ch.upper(), ch, float(num), a + j, a + k, dec, num.startswith("+")))
                 i = k
                 continue
-            if ch.isdigit() or ch in "+-.":
+            if ch in _DIGITS or ch in "+-.":
                 k = _number_end(s, i)
                 raise _refuse(name, ln, text, f"number '{s[i:max(k, i + 1)]}' without a letter")
             if ch in "#[]=":
@@ -311,6 +314,8 @@ def read_program(program: str, axis_letters: Sequence[str], machine_name: str = 
                 dwell = True
             elif 54.0 <= g < 60.0:
                 code = f"G{g:g}"
+                if g == 54.1:  # additional work offsets: G54.1 P1 .. P300
+                    code += "".join(f" P{w.value:g}" for w in words if w.letter == "P")
                 if wcs is None:
                     wcs = (code, ln)
                 elif wcs[0] != code:
@@ -333,8 +338,9 @@ def read_program(program: str, axis_letters: Sequence[str], machine_name: str = 
         if not axis_words or dwell:
             continue
         if nonmodal_axis:
-            # G28/G30 (via a point to home), G53 (machine coordinates): left as
-            # written; the axes they move end where the program does not say.
+            # G27/G28/G30 (via a point to home), G31/G38.x (stop at a touch), G53
+            # (machine coordinates): left as written; the axes they move end where the
+            # program does not say.
             for a in axis_words:
                 modal[a] = None
             prog.other[li] = LineState(axis_words, inch, True)

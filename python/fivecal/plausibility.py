@@ -204,8 +204,9 @@ def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "d
         k = int(np.argmax(np.abs(np.nan_to_num(r))))
         if abs(r[k]) > DBB_RANGE:
             big = int((np.abs(r) > DBB_RANGE).sum())
-            raise ValueError(f"{where}: observations[{ix(dbb[k])}].reading = {r[k]:.6g} mm ({big} of {r.size} "
-                             f"ball bar readings beyond ±{DBB_RANGE:g} mm; a ballbar measures about ±1 mm): "
+            raise ValueError(f"{where}: observations[{ix(dbb[k])}].reading = {r[k]:.6g} mm ({big} of the "
+                             f"{r.size} ball bar readings checked are beyond ±{DBB_RANGE:g} mm; a ballbar "
+                             "measures about ±1 mm): "
                              "readings look like µm: divide by 1000 (a reading is the bar length minus "
                              "its nominal length, in mm)")
     b3 = [i for i, t in enumerate(types) if t == "ball3d"]

@@ -119,6 +119,23 @@ def test_windows_1252_comment_bytes_do_not_split_lines(hu40t):
     assert compensate_gcode(ok, hu40t, {}).text == ok
 
 
+@pytest.mark.parametrize("word", ["X1\u00b2", "X\u0663", "X\u0663.5", "Y1.\u00b2"])
+def test_non_ascii_digits_are_refused(hu40t, word):
+    # before: 'X1²' escaped as a bare float() error without the line, and
+    # 'X٣' (an Arabic-Indic three) was read as X3
+    refusal(HEAD + "G1 " + word + "\n", hu40t, 2)
+
+
+def test_additional_work_offsets_are_told_apart(hu40t):
+    refusal("G54.1 P1 G0 X0 Y0 Z0 B0 C0\nG54.1 P2 G0 X1\n", hu40t, 2, "G54.1 P2 after G54.1 P1")
+
+
+def test_probe_moves_end_where_the_program_does_not_say(hu40t):
+    text = HEAD + "G31 X50 F100\nG1 Y5\nG1 X10\n"
+    res = compensate_gcode(text, hu40t, {"EX0C": 0.01})
+    assert res.skipped == [(3, "position of X not known yet")] and res.lines == [1, 4]
+
+
 def test_refusal_messages_are_short_and_quote_the_line(hu40t):
     msg = refusal(HEAD + "G1 X1e2" + " Y0" * 100 + "\n", hu40t, 2)
     assert "..." in msg and len(msg) < 300
@@ -194,7 +211,8 @@ def _machine():
     return _M["m"]
 
 
-GARBAGE = st.text(alphabet=st.sampled_from(list("GXYZBCAMNFST0123456789.+-eE ;()#[]=%/\t\n\r:*xyz\x85\x0c\xe9")),
+GARBAGE = st.text(alphabet=st.sampled_from(list("GXYZBCAMNFST0123456789.+-eE ;()#[]=%/\t\n\r:*xyz"
+                                                "\x85\x0c\xe9\u00b2\u0663")),
                   max_size=120)
 
 

@@ -136,7 +136,8 @@ def test_dbb_readings_in_um_are_refused(dbb_dict):
 def test_ball_arrays_in_um_are_refused(hu40t):
     axes = {a: np.zeros(5) for a in "XYZBC"}
     with pytest.raises(ValueError, match=r"readings\[\d\] .* divide by 1000"):
-        fivecal.ball_dataset(hu40t, "dbb", axes, [0, 0, 100], [0, 0, 0], length=100, readings=np.full(5, 12.0))
+        fivecal.ball_dataset(hu40t, "dbb", axes, [0, 0, 100], [0, 0, 0], length=100,
+                             readings=np.full(5, 12.0))
     with pytest.raises(ValueError, match=r"measured\[\d\] .* divide by 1000"):
         fivecal.ball_dataset(hu40t, "ball3d", axes, [0, 0, 100], [0, 0, 0], measured=np.full((5, 3), 30.0))
     fivecal.ball_dataset(hu40t, "ball3d", axes, [0, 0, 100], [0, 0, 0], measured=np.full((5, 3), 0.03))
