@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import sys
 import warnings
 from typing import Mapping, Optional, Sequence
 
@@ -40,6 +42,15 @@ DBB_RANGE = 2.0
 BALL3D_RANGE = 5.0
 #: mm: facet touches farther than this from their facet at the nominal machine.
 FACET_DISTANCE = 5.0
+
+
+def _warn(message: str, category) -> None:
+    """Warn at the first caller outside the fivecal package (the user's line)."""
+    pkg = os.path.dirname(os.path.abspath(__file__))
+    level, f = 2, sys._getframe(1)
+    while f is not None and os.path.dirname(os.path.abspath(f.f_code.co_filename)) == pkg:
+        f, level = f.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
 
 
 def _num(v) -> float:
@@ -65,9 +76,8 @@ def _check_size(values: np.ndarray, fields: Sequence[str], where: str, what: str
                          f"({REFUSE_POSITION / 1e3:g} m); {what} look like µm: divide by 1000 "
                          "(fivecal expects mm)")
     if a[i] > WARN_POSITION:
-        warnings.warn(f"{where}: {fields[i]} = {values[i]:.6g} mm is beyond {WARN_POSITION / 1e3:g} m; "
-                      f"if {what} are in µm, divide by 1000 (fivecal expects mm)", UnitsWarning,
-                      stacklevel=4)
+        _warn(f"{where}: {fields[i]} = {values[i]:.6g} mm is beyond {WARN_POSITION / 1e3:g} m; "
+              f"if {what} are in µm, divide by 1000 (fivecal expects mm)", UnitsWarning)
 
 
 def check_rotary(machine: Machine, columns: Mapping[str, np.ndarray], where: str) -> None:
@@ -75,7 +85,7 @@ def check_rotary(machine: Machine, columns: Mapping[str, np.ndarray], where: str
     for a, v in columns.items():
         letter = "S" if a == "C1" else a
         if letter in machine.axis_names and machine.is_rotary(letter) and looks_like_radians(v):
-            warnings.warn(radians_message(f"{where}.{a}", v), RadiansWarning, stacklevel=4)
+            _warn(radians_message(f"{where}.{a}", v), RadiansWarning)
 
 
 def _column(values: list) -> np.ndarray:
@@ -261,10 +271,9 @@ def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
                              f"centre at the nominal machine, radius + tip radius = {expected:.4g} mm "
                              f"expected: the radius looks like the diameter; give radius {R / 2:g}")
         if abs(med - expected) > 0.25 * R + 1.0:
-            warnings.warn(f"{where}: {name}: its touches lie {med:.4g} mm (median) from its centre at the "
+            _warn(f"{where}: {name}: its touches lie {med:.4g} mm (median) from its centre at the "
                           f"nominal machine, radius + tip radius = {expected:.4g} mm expected; check the "
-                          "radius (not the diameter), the centre, probe.tip_radius and their units",
-                          UnitsWarning, stacklevel=3)
+                          "radius (not the diameter), the centre, probe.tip_radius and their units", UnitsWarning)
     for k, f in enumerate(art.get("facets") or []):
         if not isinstance(f, Mapping):
             continue
@@ -275,10 +284,10 @@ def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
         dist = (P[sel] - a) @ (n / np.linalg.norm(n)) - r
         j = int(np.argmax(np.abs(dist)))
         if abs(dist[j]) > FACET_DISTANCE:
-            warnings.warn(f"{where}: artefact.facets[{k}] ('{f.get('id')}'): touches lie up to "
+            _warn(f"{where}: artefact.facets[{k}] ('{f.get('id')}'): touches lie up to "
                           f"{dist[j]:.4g} mm from the facet at the nominal machine (more than "
                           f"{FACET_DISTANCE:g} mm); check the facet point and normal, the machine file "
-                          "and their units", UnitsWarning, stacklevel=3)
+                          "and their units", UnitsWarning)
 
 
 def check_balls(machine: Machine, kind: str, q: np.ndarray, values: np.ndarray, where: str) -> None:

@@ -171,6 +171,15 @@ def test_plan_in_um_is_refused(hu40t):
         fivecal.simulate(hu40t, plan)
 
 
+def test_plan_beyond_10_m_warns(hu40t):
+    # a 20 m position: µm, or a very large machine; warned, not refused
+    plan = [{"type": "dbb", "setup": "P", "axes": {"X": 20000.0, "Y": 0, "Z": 0, "B": 0, "C": 0},
+             "length": 100.0, "tool_ball": [0, 0, 100], "table_ball": [0, 0, 0]}]
+    _, w = caught(fivecal.simulate, hu40t, plan)
+    assert any("plan[0].axes.X = 20000 mm is beyond 10 m" in str(x.message) for x in w)
+    assert all(x.filename == __file__ for x in w)  # points at the caller's line
+
+
 # ---------------------------------------------------------------- CSV traces
 def write(tmp_path, name, header, angles, readings):
     p = tmp_path / name
