@@ -6,6 +6,7 @@ for angular error parameters. See DESIGN.md for the conventions.
 from .dataset import Dataset, ball_dataset, load_dataset, save_dataset
 from .identification import Result, identify, resolve_estimate
 from .machine import Machine, RadiansWarning
+from .units import UnitsWarning
 from .simulation import simulate
 from .compensation import compensate_gcode, compensate_poses, write_error_table
 from .report import write_report
@@ -16,7 +17,7 @@ from .uncertainty import gum_input_covariance, monte_carlo
 
 __version__ = "0.1.0"
 
-__all__ = ["Machine", "RadiansWarning", "Dataset", "ball_dataset", "load_dataset", "save_dataset", "simulate",
+__all__ = ["Machine", "RadiansWarning", "UnitsWarning", "Dataset", "ball_dataset", "load_dataset", "save_dataset", "simulate",
            "identify", "resolve_estimate", "Result", "compensate_poses", "compensate_gcode",
            "write_error_table", "write_report", "dbb", "Trace", "jiang_cripps", "wang_path",
            "wang_identify", "circular_test", "read_trace_csv", "uncertainty", "monte_carlo",

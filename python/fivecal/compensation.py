@@ -30,7 +30,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _core
+from . import _core, gcode
 from .machine import Machine
 from .progress import Progress
 from .units import display_scale
@@ -39,7 +39,6 @@ __all__ = ["load_errors", "compensate_poses", "CompensatedPoses", "compensate_gc
            "GcodeCompensation", "error_table", "write_error_table", "SIGN_CONVENTION"]
 
 ROTARY = "ABC"
-INCH = 25.4  # mm
 
 
 # ---------------------------------------------------------------------------
@@ -213,89 +212,8 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
 
 
 # ---------------------------------------------------------------------------
-# G-code
+# G-code (reader and writer in gcode.py)
 # ---------------------------------------------------------------------------
-_WORD = re.compile(r"([A-Za-z])[ \t]*([+-]?(?:\d+\.?\d*|\.\d+))")
-_EXPR = re.compile(r"([XYZABCxyzabc])[ \t]*[=#\[]")
-_MOTION_LINEAR = {0.0, 1.0}
-_MOTION_ARC = {2.0, 3.0}
-_CYCLES = {73.0, 74.0, 76.0, 81.0, 82.0, 83.0, 84.0, 85.0, 86.0, 87.0, 88.0, 89.0}
-_NONMODAL_AXIS_WORDS = {4.0, 10.0, 28.0, 30.0, 53.0}  # axis words are not a G0/G1 target
-_REFUSED = {92.0: "G92 (set position) changes the coordinate system",
-            52.0: "G52 (local coordinate system) shifts the coordinates",
-            68.0: "G68 (coordinate rotation) rotates the coordinates",
-            68.2: "G68.2 (tilted working plane) transforms the coordinates",
-            53.1: "G53.1 (tool axis control for a tilted plane) moves the rotary axes implicitly",
-            43.4: "G43.4 (tool centre point control) means the words are tool-tip coordinates, "
-                  "not axis commands",
-            43.5: "G43.5 (tool centre point control) means the words are tool-tip coordinates, "
-                  "not axis commands",
-            51.0: "G51 (scaling) scales the coordinates"}
-
-
-def _code_spans(text: str) -> List[Tuple[int, int]]:
-    """(start, end) of the parts of a line outside ( ) and ; comments."""
-    spans = []
-    i, start, n = 0, 0, len(text)
-    while i < n:
-        ch = text[i]
-        if ch == "(":
-            spans.append((start, i))
-            j = text.find(")", i + 1)
-            i = n if j < 0 else j + 1
-            start = i
-            continue
-        if ch == ";":
-            spans.append((start, i))
-            start = i = n
-            break
-        i += 1
-    spans.append((start, n))
-    return [(a, b) for a, b in spans if b > a]
-
-
-@dataclass
-class _Word:
-    letter: str        # upper case
-    raw_letter: str
-    value: float
-    start: int         # span of the number text in the line
-    end: int
-    decimals: int
-    plus: bool
-
-
-def _parse_words(text: str) -> List[_Word]:
-    words = []
-    for a, b in _code_spans(text):
-        seg = text[a:b]
-        for m in _WORD.finditer(seg):
-            num = m.group(2)
-            dec = len(num.split(".", 1)[1]) if "." in num else 0
-            words.append(_Word(m.group(1).upper(), m.group(1), float(num), a + m.start(2), a + m.end(2),
-                               dec, num.startswith("+")))
-    return words
-
-
-def _has_expression(text: str) -> Optional[str]:
-    for a, b in _code_spans(text):
-        m = _EXPR.search(text[a:b])
-        if m:
-            return m.group(0)
-    return None
-
-
-@dataclass
-class _Move:
-    line: int                      # 0-based line index
-    words: Dict[str, _Word]        # axis words present on the line
-    program: Dict[str, float]      # modal program values of every machine axis after the line
-    insert_at: int                 # where missing axis words go (end of the last axis word)
-    sep: str
-    lower: bool
-    inch: bool
-
-
 @dataclass
 class GcodeCompensation:
     """Result of :func:`compensate_gcode`.
@@ -342,15 +260,6 @@ class GcodeCompensation:
         return s
 
 
-def _fmt(value: float, decimals: int, plus: bool) -> str:
-    s = f"{value:.{decimals}f}"
-    if float(s) == 0.0:
-        s = s.lstrip("-")
-    if plus and not s.startswith("-"):
-        s = "+" + s
-    return s
-
-
 def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
                      start: Optional[Mapping[str, float]] = None,
                      work_offset: Optional[Mapping[str, float]] = None,
@@ -372,11 +281,19 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
     first line (default: unknown; moves before every axis is known are left
     as written and listed in ``skipped``). ``name``: used in error messages.
 
-    Refused with ValueError naming the line: incremental moves (G91), arcs
-    (G2/G3), canned cycles (G73-G89), coordinate transformations (G92, G52,
-    G68, G68.2, G51), tool centre point control (G43.4/G43.5), variables or
-    expressions in axis words, rotary words of axes the machine does not have,
-    and more than one work offset (G54-G59.x) in one program.
+    Units: G20/G70 inch, G21/G71 mm; each word is converted with the unit
+    mode of its own line and positions are held in mm, so a unit switch never
+    reinterprets a held position. ``start`` is in program coordinates in mm.
+
+    Refused with ValueError naming the line (``name:N: ... (line N: text)``):
+    incremental moves (G91), arcs (G2/G3), canned cycles (G73-G89), coordinate
+    transformations (G92, G52, G68, G68.2, G51, G51.1, G16, G7.1, G12.1),
+    offset changes (G10), macro and subprogram calls (G65, G66, M98, M99),
+    tool centre point control (G43.4/G43.5), variables or expressions,
+    rotary words of axes the machine does not have, more than one work offset
+    (G54-G59.x) in one program, and text that is not ISO words: exponent
+    notation (``X1e2``), a letter without a number, a number without a
+    letter, numbers of more than 15 digits, an unclosed ``(`` comment.
     """
     if not isinstance(program, str):
         raise ValueError(f"{name}: expected the program text (str)")
@@ -388,123 +305,18 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
         if k not in axis_letters or k in ROTARY:
             raise ValueError(f"work_offset: '{k}' is not a linear axis of machine {machine.name!r}")
         offset[k] = float(v)
-    modal: Dict[str, Optional[float]] = {a: None for a in axis_letters}  # program units
-    for k, v in (start or {}).items():
-        if k == "S":
-            continue
-        if k not in modal:
+    for k in (start or {}):
+        if k != "S" and k not in axis_letters:
             raise ValueError(f"start: unknown axis '{k}' (machine axes {', '.join(axis_letters)})")
-        modal[k] = float(v)
     spindle = float((start or {}).get("S", 0.0))
-
-    lines = program.splitlines(keepends=True)
-    motion: Optional[float] = None
-    absolute = True
-    g91_line = 0
-    inch = False
-    wcs: Optional[Tuple[str, int]] = None
-    moves: List[_Move] = []
-    skipped: List[Tuple[int, str]] = []
-    decimals = {a: None for a in axis_letters}
-
-    for li, raw in enumerate(lines):
-        ln = li + 1
-        text = raw.rstrip("\r\n")
-        words = _parse_words(text)
-        if not words:
-            continue
-        expr = _has_expression(text)
-        if expr:
-            raise ValueError(f"{name}:{ln}: axis word '{expr.strip()}…' uses a variable or expression; "
-                             "only literal numbers can be compensated")
-        gs = [w.value for w in words if w.letter == "G"]
-        nonmodal_axis = False
-        for g in gs:
-            g = round(g, 1)
-            if g in _REFUSED:
-                raise ValueError(f"{name}:{ln}: {_REFUSED[g]}; compensation needs plain machine axis "
-                                 "commands")
-            if g in _MOTION_LINEAR or g in _MOTION_ARC or g in _CYCLES:
-                motion = g
-            elif g == 80.0:
-                motion = None
-            elif g == 90.0:
-                absolute = True
-            elif g == 91.0:
-                absolute, g91_line = False, ln
-            elif g == 20.0:
-                inch = True
-            elif g == 21.0:
-                inch = False
-            elif g in _NONMODAL_AXIS_WORDS:
-                nonmodal_axis = True
-            elif 54.0 <= g < 60.0:
-                code = f"G{g:g}"
-                if wcs is None:
-                    wcs = (code, ln)
-                elif wcs[0] != code:
-                    raise ValueError(f"{name}:{ln}: work offset {code} after {wcs[0]} (line {wcs[1]}); "
-                                     "compensate the parts of the program for each work offset separately")
-        axis_words: Dict[str, _Word] = {}
-        for w in words:
-            if w.letter in "XYZABC":
-                if w.letter not in axis_letters:
-                    if w.letter in ROTARY and not nonmodal_axis:
-                        raise ValueError(f"{name}:{ln}: rotary word {w.raw_letter} but machine "
-                                         f"{machine.name!r} has no {w.letter} axis (axes "
-                                         f"{', '.join(axis_letters)})")
-                    continue
-                if w.letter in axis_words:
-                    raise ValueError(f"{name}:{ln}: axis word {w.letter} appears twice")
-                axis_words[w.letter] = w
-        if not axis_words:
-            continue
-        if nonmodal_axis:
-            # G28/G30 (via a point to home), G53 (machine coordinates), G10, G4: left as
-            # written; the axes they move end where the program does not say.
-            for a in axis_words:
-                modal[a] = None
-            continue
-        if motion is not None and motion in _MOTION_ARC:
-            raise ValueError(f"{name}:{ln}: G{motion:g} arc moves are not supported; post the program "
-                             "with linear moves (G1)")
-        if motion is not None and motion in _CYCLES:
-            raise ValueError(f"{name}:{ln}: canned cycle G{motion:g} is not supported; post the "
-                             "program with explicit G0/G1 moves")
-        if not absolute:
-            raise ValueError(f"{name}:{ln}: incremental move (G91 set at line {g91_line}); only "
-                             "absolute programs (G90) can be compensated")
-        for a, w in axis_words.items():
-            modal[a] = w.value
-            decimals[a] = w.decimals
-        unknown = [a for a in sorted(axis_letters, key="XYZABC".index) if modal[a] is None]
-        if unknown:
-            skipped.append((ln, f"position of {', '.join(unknown)} not known yet"))
-            continue
-        last = max(axis_words.values(), key=lambda w: w.end)
-        first = min(axis_words.values(), key=lambda w: w.start)
-        codes = [text[a:b] for a, b in _code_spans(text)]
-        sep = " " if any(c in " \t" for c in "".join(codes).strip()) else ""
-        moves.append(_Move(li, axis_words, {a: float(modal[a]) for a in axis_letters}, last.end, sep,
-                           first.raw_letter.islower(), inch))
-
-    result_lines = list(lines)
+    prog = gcode.read_program(program, axis_letters, machine.name, offset,
+                              {k: v for k, v in (start or {}).items() if k != "S"}, name)
+    moves = prog.moves
     if not moves:
-        return GcodeCompensation(program, 0, 0, skipped, None)
+        return GcodeCompensation(program, 0, 0, prog.skipped, None)
 
     # Nominal machine commands (mm, degrees) and the backlash directions of the sequence.
-    def to_machine(a: str, v: float, inch_mode: bool) -> float:
-        if a in ROTARY:
-            return v
-        return (v * INCH if inch_mode else v) + offset[a]
-
-    def to_program(a: str, v: float, inch_mode: bool) -> float:
-        if a in ROTARY:
-            return v
-        v = v - offset[a]
-        return v / INCH if inch_mode else v
-
-    Q = {a: np.array([to_machine(a, mv.program[a], mv.inch) for mv in moves]) for a in axis_letters}
+    Q = {a: np.array([mv.pose[a] for mv in moves]) for a in axis_letters}
     if "S" in machine.axis_names:
         Q["S"] = np.full(len(moves), spindle)
     dirs = {}
@@ -518,73 +330,21 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
             d[i] = cur
             prev = v
         dirs[a] = d
-    comp = compensate_poses(machine, errs, Q, directions=dirs, orientation=orientation,
-                            max_rotary_correction=max_rotary_correction, progress=progress)
-
-    # The values the controller holds, in program units, as the program is rewritten.
-    held: Dict[str, Optional[float]] = {a: None for a in axis_letters}
-    held_dec: Dict[str, int] = {a: min_decimals for a in axis_letters}
-    written = np.zeros((len(moves), len(machine.axis_names)))
-    mi = 0
-    changed = 0
-    move_at = {mv.line: i for i, mv in enumerate(moves)}
-    # Replay the program to keep `held` in step with lines that are not compensated moves.
-    for li, raw in enumerate(lines):
-        if li not in move_at:
-            words = _parse_words(raw.rstrip("\r\n"))
-            gs = {round(w.value, 1) for w in words if w.letter == "G"}
-            for w in words:
-                if w.letter in held:
-                    if gs & _NONMODAL_AXIS_WORDS:
-                        held[w.letter] = None
-                    else:
-                        held[w.letter] = w.value
-                        held_dec[w.letter] = max(w.decimals, min_decimals)
-            continue
-        mi = move_at[li]
-        mv = moves[mi]
-        text = raw.rstrip("\r\n")
-        ending = raw[len(text):]
-        edits: List[Tuple[int, int, str]] = []
-        inserts: List[str] = []
-        for a in sorted(axis_letters, key="XYZABC".index):
-            v = to_program(a, float(comp.axes[a][mi]), mv.inch)
-            if a in mv.words:
-                w = mv.words[a]
-                dec = max(w.decimals, min_decimals)
-                held_dec[a] = dec
-                if abs(v - w.value) < 0.5 * 10.0 ** (-dec):
-                    held[a] = w.value
-                    continue
-                s = _fmt(v, dec, w.plus)
-                edits.append((w.start, w.end, s))
-                held[a] = float(s)
-            else:
-                dec = held_dec[a]
-                h = held[a] if held[a] is not None else mv.program[a]
-                if abs(v - h) < 0.5 * 10.0 ** (-dec):
-                    continue
-                s = _fmt(v, dec, False)
-                inserts.append(mv.sep + (a.lower() if mv.lower else a) + s)
-                held[a] = float(s)
-        for k, a in enumerate(machine.axis_names):
-            if a == "S":
-                written[mi, k] = spindle
-            else:
-                h = held[a] if held[a] is not None else mv.program[a]
-                written[mi, k] = to_machine(a, h, mv.inch)
-        if not edits and not inserts:
-            continue
-        new = text
-        if inserts:
-            new = new[:mv.insert_at] + "".join(inserts) + new[mv.insert_at:]
-        for s0, e0, s in sorted(edits, reverse=True):
-            new = new[:s0] + s + new[e0:]
-        result_lines[li] = new + ending
-        changed += 1
+    try:
+        comp = compensate_poses(machine, errs, Q, directions=dirs, orientation=orientation,
+                                max_rotary_correction=max_rotary_correction, progress=progress)
+    except ValueError as e:
+        m = re.match(r"pose (\d+): (.*)", str(e), re.S)
+        if m is None:
+            raise
+        mv = moves[int(m.group(1))]
+        raise ValueError(f"{name}:{mv.line + 1}: cannot compensate this move: {m.group(2)} "
+                         f"(line {mv.line + 1}: {prog.lines[mv.line].strip()[:60]})") from None
+    text, changed, held = gcode.write_program(prog, comp.axes, min_decimals)
+    written = np.array([held[a] if a != "S" else [spindle] * len(moves) for a in machine.axis_names]).T
     d = machine.directions_matrix(dirs, len(moves))
     real = _core.tool_poses(machine._core, machine.theta(errs), written, d)[0]
-    return GcodeCompensation("".join(result_lines), len(moves), changed, skipped, comp,
+    return GcodeCompensation(text, len(moves), changed, prog.skipped, comp,
                              written_error=real - comp.points, lines=[mv.line + 1 for mv in moves])
 
 

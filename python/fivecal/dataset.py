@@ -9,7 +9,7 @@ from typing import Iterable, Mapping, Union
 
 import numpy as np
 
-from . import _core, _json
+from . import _core, _json, plausibility
 from .machine import Machine
 
 
@@ -33,7 +33,9 @@ class Dataset:
         ValueError names the observation and field."""
         if isinstance(d, Dataset):
             return d
-        return cls(_core.Dataset.from_json(dumps(d)))
+        ds = cls(_core.Dataset.from_json(dumps(d)))
+        plausibility.check_loaded(ds)
+        return ds
 
     def to_dict(self) -> dict:
         """The dataset as a JSON-ready dict (DESIGN.md format, mm / degrees)."""
@@ -89,9 +91,11 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
     except OSError as e:
         raise ValueError(f"{path}: cannot read ({e.strerror})") from None
     try:
-        return Dataset(_core.Dataset.from_json(text))
+        ds = Dataset(_core.Dataset.from_json(text))
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
+    plausibility.check_loaded(ds, where=path)
+    return ds
 
 
 def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
@@ -120,5 +124,6 @@ def ball_dataset(machine, type: str, axes: Mapping, tool_ball, table_ball, lengt
         if measured is None:
             raise ValueError("ball_dataset: 'measured' missing for type ball3d")
         values = np.asarray(measured, dtype=float).reshape(-1, 3)
+    plausibility.check_balls(m, type, q, values, "ball_dataset")
     return Dataset(_core.Dataset.balls(m._core, type, setup, q, d, np.asarray(tool_ball, float),
                                        np.asarray(table_ball, float), float(length), values))

@@ -15,6 +15,7 @@ import csv
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from typing import Iterable, Mapping, Optional, Sequence, Union
 
@@ -22,8 +23,8 @@ import numpy as np
 
 from . import _core
 from .dataset import Dataset
-from .machine import Machine
-from .units import display_scale
+from .machine import Machine, RadiansWarning
+from .units import column_unit, display_scale, looks_like_radians, radians_message
 
 FOUR_STEP_SETUPS = ("A1", "A2", "C1", "C2")
 FOUR_STEP_PARAMETERS = tuple(_core.four_step_parameter_names())
@@ -33,6 +34,10 @@ WANG_ERRORS = ("EX0C", "EY0C", "EZ0C", "EA0C")
 #: the placement of both balls.
 WANG_CANDIDATES = ("EX0C", "EY0C", "EZ0C", "EA0C", "EB0C", "EC0C", "EY0A", "EZ0A", "EB0A", "EC0A")
 WANG_SETUP = "W1"
+#: degrees: the shortest sweep :func:`circular_test` accepts. ISO 230-4 asks for a
+#: full circle; under 10 degrees a circle fit has no meaning (its centre and
+#: radius are undetermined), and such a "circle" is most often angles in radians.
+MIN_CIRCLE_SWEEP = 10.0
 
 
 def _fmt(name: str, value: float) -> str:
@@ -66,6 +71,19 @@ class Trace:
             self.direction = 1 if d > 0 else (-1 if d < 0 else 0)
 
 
+def _split(line: str) -> list:
+    return [p for p in line.replace(";", " ").replace(",", " ").replace("\t", " ").split(" ") if p]
+
+
+def _header_names(line: str) -> list:
+    """Column names of a header line: split at commas, semicolons or tabs when
+    it has them (so 'reading (um)' stays one name), else at spaces."""
+    for sep in (",", ";", "\t"):
+        if sep in line:
+            return [p.strip() for p in line.split(sep) if p.strip()]
+    return line.split()
+
+
 def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
                    sweep: Optional[float] = None, start: float = 0.0) -> Trace:
     """Read ``angle, reading`` rows (deg, mm) from a CSV file.
@@ -74,6 +92,13 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
     comments are skipped. A file with a single column holds readings only;
     the angles then follow Jiang & Cripps eq. 2 (``theta_i = i/N * sweep``
     from ``start``), which needs ``sweep`` (deg, signed).
+
+    Units named in the header are honoured: a suffix ``_um``, ``_mm`` (or
+    ``_m``, ``_in``) on the reading column, ``_deg`` or ``_rad`` on the angle
+    column, or the unit in brackets (``reading [um]``); another suffix is
+    refused naming the column. Without a unit, readings beyond ±2 mm are
+    refused as µm (a ballbar measures about ±1 mm), and angles that look like
+    radians give one :class:`fivecal.RadiansWarning`.
     """
     path = os.fspath(path)
     try:
@@ -81,17 +106,21 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
             text = f.read()
     except OSError as e:
         raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{path}: not a text file ({e.reason} at byte {e.start})") from None
     rows = []
+    header = None
     for lineno, line in enumerate(text.splitlines(), 1):
         s = line.split("#", 1)[0].strip()
         if not s:
             continue
-        parts = [p for p in s.replace(";", " ").replace(",", " ").replace("\t", " ").split(" ") if p]
+        parts = _split(s)
         try:
             vals = [float(p) for p in parts]
         except ValueError:
             if not rows:
-                continue  # header
+                header = s  # the last line before the data names the columns
+                continue
             raise ValueError(f"{path}:{lineno}: not a number in {line.strip()!r}") from None
         if len(vals) not in (1, 2):
             raise ValueError(f"{path}:{lineno}: expected 'angle, reading' (2 columns), got {len(vals)}")
@@ -103,14 +132,33 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
     if len(rows) < 3:
         raise ValueError(f"{path}: {len(rows)} data rows; a trace needs at least 3")
     a = np.array(rows)
+    names = _header_names(header) if header is not None else []
+    if len(names) != a.shape[1]:
+        names = []  # a title line, not column names
+    kinds = ["length"] if a.shape[1] == 1 else ["angle", "length"]
+    units = [column_unit(n, k, path) for n, k in zip(names, kinds)] if names else [(1.0, None)] * len(kinds)
+    for j, (factor, _) in enumerate(units):
+        a[:, j] *= factor
+    readings = a[:, -1]
+    reading_col = names[-1] if names else "reading"
+    k = int(np.argmax(np.abs(readings)))
+    if abs(readings[k]) > 2.0:
+        hint = (f"readings look like µm: divide by 1000 or name the column {reading_col.split('_')[0]}_um"
+                if units[-1][1] is None else "check the unit in the column name")
+        raise ValueError(f"{path}: column '{reading_col}': reading {readings[k]:.6g} mm (row {k + 1}) is "
+                         f"beyond a ballbar's range (about ±1 mm); {hint}")
     if a.shape[1] == 1:
         if sweep is None:
             raise ValueError(f"{path}: one column (readings only); give the sweep angle to space "
                              "the samples evenly (Jiang & Cripps eq. 2)")
         n = a.shape[0] - 1
         angles = start + np.arange(a.shape[0]) / n * sweep
-        return Trace(angles, a[:, 0], label=label or os.path.basename(path))
-    return Trace(a[:, 0], a[:, 1], label=label or os.path.basename(path))
+        return Trace(angles, readings, label=label or os.path.basename(path))
+    if units[0][1] is None and looks_like_radians(a[:, 0]):
+        col = names[0] if names else "angle"
+        warnings.warn(radians_message(f"{path}: column '{col}'", a[:, 0]) +
+                      f" or name the column {col.split('_')[0]}_rad", RadiansWarning, stacklevel=2)
+    return Trace(a[:, 0], readings, label=label or os.path.basename(path))
 
 
 def write_trace_csv(trace: Trace, path: Union[str, os.PathLike]) -> None:
@@ -694,6 +742,14 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
     mismatch (C++ ``circular_test.h``). ``feed`` (mm/min) converts the servo
     mismatch to a lag difference in ms."""
     runs = [r for r in runs if r is not None]
+    for i, r in enumerate(runs):
+        span = float(r.angles.max() - r.angles.min()) if r.angles.size else 0.0
+        if span < MIN_CIRCLE_SWEEP:
+            hint = (" (the angles look like radians: give degrees, or name the column angle_rad)"
+                    if looks_like_radians(r.angles) else "")
+            raise ValueError(f"run {i + 1} ({r.label or 'no label'}): angles sweep {span:.4g} degrees; a "
+                             f"circular test needs a full circle (at least {MIN_CIRCLE_SWEEP:g} degrees "
+                             f"here){hint}")
     plane = plane.upper()
     if plane not in ("XY", "YZ", "ZX", "YX", "ZY", "XZ"):
         raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")

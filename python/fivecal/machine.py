@@ -15,26 +15,13 @@ import numpy as np
 
 from . import _core
 from ._json import dumps
+from .units import looks_like_radians, radians_message
 
 ArrayLike = Union[float, np.ndarray, list]
 
 
 class RadiansWarning(UserWarning):
     """Rotary axis values look like radians where degrees are expected."""
-
-
-def _looks_like_radians(v: np.ndarray) -> bool:
-    a = np.abs(v[np.isfinite(v)])
-    if a.size == 0 or a.max() == 0.0 or a.max() > 2 * np.pi + 1e-6:
-        return False
-    non_integer = a[np.abs(a - np.round(a)) > 1e-9]
-    if non_integer.size == 0:
-        return False
-    # Typical radian indexations (multiples of pi/12) or a dense sweep within 2 pi.
-    k = non_integer / (np.pi / 12)
-    if np.any(np.abs(k - np.round(k)) < 1e-4):
-        return True
-    return np.unique(np.round(non_integer, 9)).size > 3 and a.max() > 1.0
 
 
 class Machine:
@@ -172,10 +159,8 @@ class Machine:
             bad = ~np.isfinite(np.atleast_1d(arr))
             if bad.any():
                 raise ValueError(f"{name}.{key}[{int(np.argmax(bad))}]: value is not finite (NaN or inf)")
-            if letter in "ABC" and _looks_like_radians(np.atleast_1d(arr)):
-                warnings.warn(
-                    f"{name}.{key}: rotary values look like radians (max {np.abs(arr).max():.4g}); "
-                    "fivecal expects degrees", RadiansWarning, stacklevel=3)
+            if letter in "ABC" and looks_like_radians(arr):
+                warnings.warn(radians_message(f"{name}.{key}", arr), RadiansWarning, stacklevel=3)
             cols[letter] = arr
         missing = [a for a in self.axis_names if a not in cols and a != "S"]
         if missing:

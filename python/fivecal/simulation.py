@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Mapping, Optional, Sequence, Union
 
-from . import _core
+from . import _core, plausibility
 from .dataset import Dataset, dumps
 from .machine import Machine
 
@@ -24,6 +24,7 @@ def simulate(machine: Union[Machine, Mapping], plan: Sequence[Mapping], errors: 
     repeatability along the approach, or a dict with ``probe``, ``dbb``, ``ball3d``.
     """
     machine = Machine.from_dict(machine)
+    plausibility.check_plan(machine, plan)
     spec = {"machine": machine.to_dict(), "errors": dict(errors or {}), "setup": dict(setup or {}),
             "probe": {"tip_radius": float(tip_radius)}, "artefact": dict(artefact or {}),
             "plan": list(plan), "sigma": sigma, "seed": int(seed)}

@@ -32,3 +32,85 @@ def format_value(name: str, value: float) -> str:
     """A parameter value (mm / rad based) as report text, e.g. ``'-108.060 µm'``."""
     f, unit = display_scale(name)
     return f"{value * f:.3f} {unit}"
+
+
+# ---------------------------------------------------------------------------
+# units at the boundary: radians where degrees are expected, units in CSV headers
+# ---------------------------------------------------------------------------
+class UnitsWarning(UserWarning):
+    """Input magnitudes look like the wrong unit (µm for mm, a diameter for a
+    radius) but a rough nominal model could also explain them."""
+
+
+def looks_like_radians(values) -> bool:
+    """True when rotary values (meant in degrees) are clearly radians.
+
+    Evidence required, all of it: every |value| <= 2*pi; the values span more
+    than 1 (rad, 57 degrees of motion); and at least one value is not round
+    in degrees (more than 3 decimals, e.g. 0.785398 = pi/4). Or: every
+    non-zero value is a multiple of pi/12 written to 4 or more decimals
+    (``1.5708``, even alone). So a dense sweep ``linspace(0, 2*pi, n)`` or
+    indexations ``[0, pi/2, pi]`` warn, while ``[0, 0.5, 1]`` (ambiguous),
+    ``[0, 0.001, 0.002]`` (tiny motions) or a single round value do not.
+    Non-finite values are ignored.
+    """
+    import numpy as np
+
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0 or np.abs(v).max() > 2 * np.pi + 1e-6:
+        return False
+    milli = v * 1000.0
+    non_round = np.abs(milli - np.round(milli)) > 1e-6 * np.maximum(1.0, np.abs(milli))
+    nz = v[v != 0.0]
+    if nz.size and np.all(non_round[v != 0.0]):
+        # Radian indexations written out (1.5708 = 90 degrees): every non-zero value
+        # a multiple of pi/12 to 4 decimals, none round in degrees.
+        k = nz / (np.pi / 12)
+        if np.all(np.abs(k - np.round(k)) < 5e-4) and np.all(np.round(k) != 0):
+            return True
+    if v.size < 2 or v.max() - v.min() <= 1.0:
+        return False
+    return bool(np.any(non_round))
+
+
+def radians_message(where: str, values) -> str:
+    import numpy as np
+
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    return (f"{where}: rotary values look like radians ({v.size} values within ±2π spanning "
+            f"{v.max() - v.min():.4g}, max |value| {np.abs(v).max():.4g}); fivecal expects degrees "
+            "(multiply by 180/π)")
+
+
+#: Unit suffixes of CSV column names (``reading_um``, ``angle_rad``) and the
+#: factor to fivecal's unit of that quantity (mm, degrees).
+LENGTH_SUFFIXES = {"mm": 1.0, "um": 1e-3, "µm": 1e-3, "μm": 1e-3, "m": 1e3, "in": 25.4, "inch": 25.4}
+ANGLE_SUFFIXES = {"deg": 1.0, "rad": 180.0 / 3.141592653589793, "mrad": 0.18 / 3.141592653589793,
+                  "urad": 1.8e-4 / 3.141592653589793}
+
+
+def column_unit(column: str, kind: str, where: str = "CSV"):
+    """(factor to mm or degrees, unit text or None) of a CSV column named with
+    a unit suffix after the last ``_`` (``reading_um``) or in brackets
+    (``reading [um]``, ``reading (um)``); ``kind`` is ``length`` or
+    ``angle``. No suffix: (1.0, None). An unknown suffix, or the unit of the
+    other kind (``reading_deg``), is a ValueError naming the column."""
+    import re
+
+    name = column.strip().strip('"').strip("'")
+    m = re.match(r"^(.*?)\s*[\[(]\s*([^\])]*)\s*[\])]\s*$", name)
+    if m:
+        suffix = m.group(2).strip()
+    elif "_" in name:
+        suffix = name.rsplit("_", 1)[1]
+    else:
+        return 1.0, None
+    table = LENGTH_SUFFIXES if kind == "length" else ANGLE_SUFFIXES
+    key = suffix.lower()
+    if key in table:
+        return table[key], key
+    expected = "_mm or _um" if kind == "length" else "_deg or _rad"
+    raise ValueError(f"{where}: column '{column.strip()}': unknown unit '{suffix}' for a "
+                     f"{'length' if kind == 'length' else 'angle'} (name it with {expected})")

@@ -1,0 +1,304 @@
+"""Magnitude checks at the boundary: inputs whose size fits the wrong unit.
+
+A dataset in µm, ball bar readings in µm, a sphere radius given as its
+diameter or rotary readings in radians all load and fit without complaint,
+and give a confident wrong answer. These checks run where data comes in
+(:func:`fivecal.load_dataset`, :meth:`fivecal.Dataset.from_dict`, the plan of
+:func:`fivecal.simulate`, CSV traces) and decide per case:
+
+* **refuse** (ValueError naming the field) when the evidence does not depend
+  on the nominal model: a ball bar reading beyond ±2 mm (a QC20 ballbar
+  measures about ±1 mm), an R-test displacement beyond 5 mm, a position or
+  length beyond 100 m, a sphere whose touches at the nominal machine lie
+  consistently at R/2 + r from its centre (the radius is the diameter);
+* **warn** (:class:`fivecal.UnitsWarning`) when a rough nominal model could
+  explain it: positions or lengths beyond 10 m, sphere touches far from
+  R + r, facet touches more than 5 mm from their facet;
+* **warn** (:class:`fivecal.RadiansWarning`) once per rotary axis whose
+  values look like radians (:func:`fivecal.units.looks_like_radians`).
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import os
+import sys
+import warnings
+from typing import Mapping, Optional, Sequence
+
+import numpy as np
+
+from .machine import Machine, RadiansWarning
+from .units import UnitsWarning, looks_like_radians, radians_message
+
+#: mm. Beyond WARN_POSITION a value is more likely µm than a machine of that size;
+#: beyond REFUSE_POSITION no machine tool explains it.
+WARN_POSITION = 1e4
+REFUSE_POSITION = 1e5
+#: mm: a ball bar reading is the bar length minus its nominal length; a QC20
+#: ballbar's range is about ±1 mm.
+DBB_RANGE = 2.0
+#: mm: R-test / 3D ball sensors measure displacements of at most a few mm.
+BALL3D_RANGE = 5.0
+#: mm: facet touches farther than this from their facet at the nominal machine.
+FACET_DISTANCE = 5.0
+
+
+def _warn(message: str, category) -> None:
+    """Warn at the first caller outside the fivecal package (the user's line)."""
+    pkg = os.path.dirname(os.path.abspath(__file__))
+    level, f = 2, sys._getframe(1)
+    while f is not None and os.path.dirname(os.path.abspath(f.f_code.co_filename)) == pkg:
+        f, level = f.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
+
+
+def _num(v) -> float:
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        return math.nan
+    return float(v)
+
+
+def _vec(v, n=3) -> np.ndarray:
+    if isinstance(v, (list, tuple, np.ndarray)) and len(v) == n:
+        return np.array([_num(x) for x in v])
+    return np.full(n, math.nan)
+
+
+def _check_size(values: np.ndarray, fields: Sequence[str], where: str, what: str) -> None:
+    """Refuse / warn on the largest |value| of a set of positions or lengths (mm)."""
+    if not len(values):
+        return
+    a = np.abs(np.where(np.isfinite(values), values, 0.0))
+    i = int(np.argmax(a))
+    if a[i] > REFUSE_POSITION:
+        raise ValueError(f"{where}: {fields[i]} = {values[i]:.6g} mm is beyond any machine tool "
+                         f"({REFUSE_POSITION / 1e3:g} m); {what} look like µm: divide by 1000 "
+                         "(fivecal expects mm)")
+    if a[i] > WARN_POSITION:
+        _warn(f"{where}: {fields[i]} = {values[i]:.6g} mm is beyond {WARN_POSITION / 1e3:g} m; "
+              f"if {what} are in µm, divide by 1000 (fivecal expects mm)", UnitsWarning)
+
+
+def check_rotary(machine: Machine, columns: Mapping[str, np.ndarray], where: str) -> None:
+    """One RadiansWarning per rotary axis whose values look like radians."""
+    for a, v in columns.items():
+        letter = "S" if a == "C1" else a
+        if letter in machine.axis_names and machine.is_rotary(letter) and looks_like_radians(v):
+            _warn(radians_message(f"{where}.{a}", v), RadiansWarning)
+
+
+def _column(values: list) -> np.ndarray:
+    """Floats of a list (NaN where a value is not a number)."""
+    try:
+        a = np.array(values, dtype=float)
+        if a.ndim == 1:
+            return a
+    except (TypeError, ValueError):
+        pass
+    return np.array([_num(v) for v in values], dtype=float)
+
+
+def _rows(values: list, n: int = 3) -> np.ndarray:
+    """(N, n) floats of a list of n-vectors (NaN rows where one is not)."""
+    try:
+        a = np.array(values, dtype=float)
+        if a.ndim == 2 and a.shape[1] == n:
+            return a
+    except (TypeError, ValueError):
+        pass
+    return np.array([_vec(v, n) for v in values], dtype=float).reshape(-1, n)
+
+
+def _axis_columns(machine: Machine, entries: Sequence[Mapping]):
+    axes = [e.get("axes") if isinstance(e, dict) else None for e in entries]
+    axes = [x if isinstance(x, dict) else {} for x in axes]
+    return {a: _column([x.get(a, 0.0 if a == "S" else math.nan) for x in axes])
+            for a in machine.axis_names}
+
+
+def _largest(values: np.ndarray, fields, out_vals: list, out_fields: list) -> None:
+    if values.size:
+        a = np.abs(np.nan_to_num(values, nan=0.0, posinf=np.inf, neginf=np.inf)).reshape(values.shape[0], -1)
+        i = int(np.argmax(a.max(axis=1)))
+        j = int(np.argmax(a[i]))
+        out_vals.append(float(values.reshape(values.shape[0], -1)[i, j]))
+        out_fields.append(fields(i, j))
+
+
+def _positions(machine: Machine, entries, cols, where_list: str, ix=lambda i: i):
+    vals, fields = [], []
+    for a in machine.axis_names:
+        if not machine.is_rotary(a):
+            _largest(cols[a], lambda i, j, a=a: f"{where_list}[{ix(i)}].axes.{a}", vals, fields)
+    idx = [i for i, e in enumerate(entries) if isinstance(e, dict) and "length" in e]
+    _largest(_column([entries[i]["length"] for i in idx]),
+             lambda i, j: f"{where_list}[{ix(idx[i])}].length", vals, fields)
+    for key in ("tool_ball", "table_ball"):
+        idx_k = [i for i, e in enumerate(entries) if isinstance(e, dict) and key in e]
+        _largest(_rows([entries[i][key] for i in idx_k]),
+                 lambda i, j, key=key, idx_k=idx_k: f"{where_list}[{ix(idx_k[i])}].{key}[{j}]", vals, fields)
+    return vals, fields
+
+
+def check_plan(machine: Machine, plan: Sequence[Mapping], where: str = "plan") -> None:
+    """Rotary plan values in radians (warn), positions and lengths in µm."""
+    if not isinstance(plan, (list, tuple)) or not plan:
+        return
+    cols = _axis_columns(machine, plan)
+    check_rotary(machine, cols, f"{where}[*].axes")
+    vals, fields = _positions(machine, plan, cols, where)
+    _check_size(np.array(vals, dtype=float), fields, where, "the plan's positions")
+
+
+#: Datasets with more observations are checked on this many evenly spaced ones
+#: (a unit error affects every observation; this keeps loading 10^6 fast).
+SAMPLE = 20000
+
+
+def check_loaded(ds, where: str = "dataset") -> None:
+    """:func:`check_dataset` of a validated :class:`fivecal.Dataset`; on more
+    than :data:`SAMPLE` observations, on SAMPLE evenly spaced ones (messages
+    keep the indices of the full dataset)."""
+    n = len(ds)
+    if n <= SAMPLE:
+        check_dataset(ds.to_dict(), ds.machine, where)
+        return
+    idx = np.unique(np.linspace(0, n - 1, SAMPLE).round().astype(int))
+    check_dataset(ds.subset(idx).to_dict(), ds.machine, where, indices=idx)
+
+
+def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "dataset",
+                  indices: Optional[Sequence[int]] = None) -> None:
+    """All magnitude checks of a dataset dict (the JSON format). ``indices``:
+    the index in the full dataset of each observation of ``d`` (a sample)."""
+    if not isinstance(d, Mapping):
+        return
+    ix = (lambda i: i) if indices is None else (lambda i: int(indices[i]))
+    if machine is None:
+        machine = Machine.from_dict(d["machine"])
+    obs = d.get("observations") or []
+    if not isinstance(obs, list):
+        return
+    obs = [o for o in obs if isinstance(o, dict)]
+    cols = _axis_columns(machine, obs)
+    check_rotary(machine, cols, f"{where}: observations[*].axes")
+
+    # Positions and lengths: a dataset in µm.
+    vals, fields = _positions(machine, obs, cols, "observations", ix)
+    art = d.get("artefact") or {}
+    if isinstance(art, Mapping):
+        for k, s in enumerate(art.get("spheres") or []):
+            if isinstance(s, Mapping):
+                for j, v in enumerate(_vec(s.get("center"))):
+                    vals.append(v)
+                    fields.append(f"artefact.spheres[{k}].center[{j}]")
+                vals.append(_num(s.get("radius")))
+                fields.append(f"artefact.spheres[{k}].radius")
+        for k, f in enumerate(art.get("facets") or []):
+            if isinstance(f, Mapping):
+                for j, v in enumerate(_vec(f.get("point"))):
+                    vals.append(v)
+                    fields.append(f"artefact.facets[{k}].point[{j}]")
+        for k, b in enumerate(art.get("scale_bars") or []):
+            if isinstance(b, Mapping):
+                vals.append(_num(b.get("length")))
+                fields.append(f"artefact.scale_bars[{k}].length")
+    _check_size(np.array(vals, dtype=float), fields, where, "the dataset's positions")
+
+    # Instrument ranges.
+    types = [o.get("type") for o in obs]
+    dbb = [i for i, t in enumerate(types) if t == "dbb"]
+    if dbb:
+        r = _column([obs[i].get("reading") for i in dbb])
+        k = int(np.argmax(np.abs(np.nan_to_num(r))))
+        if abs(r[k]) > DBB_RANGE:
+            big = int((np.abs(r) > DBB_RANGE).sum())
+            raise ValueError(f"{where}: observations[{ix(dbb[k])}].reading = {r[k]:.6g} mm ({big} of the "
+                             f"{r.size} ball bar readings checked are beyond ±{DBB_RANGE:g} mm; a ballbar "
+                             "measures about ±1 mm): "
+                             "readings look like µm: divide by 1000 (a reading is the bar length minus "
+                             "its nominal length, in mm)")
+    b3 = [i for i, t in enumerate(types) if t == "ball3d"]
+    if b3:
+        mv = _rows([obs[i].get("measured") for i in b3])
+        a = np.abs(np.nan_to_num(mv)).max(axis=1)
+        k = int(np.argmax(a))
+        if a[k] > BALL3D_RANGE:
+            raise ValueError(f"{where}: observations[{ix(b3[k])}].measured = {mv[k].tolist()} mm is beyond "
+                             f"an R-test / 3D ball sensor's range (a few mm, {BALL3D_RANGE:g} mm here): "
+                             "displacements look like µm: divide by 1000")
+    _check_touches(machine, d, obs, cols, where)
+
+
+def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
+    """Sphere and facet touches against the artefact, at the nominal machine."""
+    art = d.get("artefact") or {}
+    if not isinstance(art, Mapping):
+        return
+    probe = d.get("probe") or {}
+    r = _num(probe.get("tip_radius", 0.0)) if isinstance(probe, Mapping) else 0.0
+    if not math.isfinite(r):
+        return
+    idx = [i for i, o in enumerate(obs) if o.get("type") in ("sphere", "facet")]
+    if not idx:
+        return
+    sub = {a: c[idx] for a, c in cols.items()}
+    if any(not np.isfinite(c).all() for a, c in sub.items() if a != "S"):
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RadiansWarning)  # warned once above
+        try:
+            P = machine.tool_point(sub)
+        except ValueError:
+            return  # the loader names what is wrong with the poses
+    targets = np.array([str(obs[i].get("target")) for i in idx])
+    types = np.array([obs[i].get("type") for i in idx])
+    for k, s in enumerate(art.get("spheres") or []):
+        if not isinstance(s, Mapping):
+            continue
+        sel = (types == "sphere") & (targets == str(s.get("id")))
+        c, R = _vec(s.get("center")), _num(s.get("radius"))
+        if sel.sum() < 3 or not np.isfinite(c).all() or not (math.isfinite(R) and R > 0):
+            continue
+        dist = np.linalg.norm(P[sel] - c, axis=1)
+        med = float(np.median(dist))
+        spread = float(np.median(np.abs(dist - med)))
+        expected, half = R + r, R / 2 + r
+        name = f"artefact.spheres[{k}] ('{s.get('id')}')"
+        if abs(med - half) < 0.05 * R and spread < 0.05 * R and abs(med - expected) > 0.25 * R:
+            raise ValueError(f"{where}: {name}: its {int(sel.sum())} touches lie {med:.4g} mm from its "
+                             f"centre at the nominal machine, radius + tip radius = {expected:.4g} mm "
+                             f"expected: the radius looks like the diameter; give radius {R / 2:g}")
+        if abs(med - expected) > 0.25 * R + 1.0:
+            _warn(f"{where}: {name}: its touches lie {med:.4g} mm (median) from its centre at the "
+                          f"nominal machine, radius + tip radius = {expected:.4g} mm expected; check the "
+                          "radius (not the diameter), the centre, probe.tip_radius and their units", UnitsWarning)
+    for k, f in enumerate(art.get("facets") or []):
+        if not isinstance(f, Mapping):
+            continue
+        sel = (types == "facet") & (targets == str(f.get("id")))
+        a, n = _vec(f.get("point")), _vec(f.get("normal"))
+        if not sel.any() or not (np.isfinite(a).all() and np.isfinite(n).all()) or np.linalg.norm(n) == 0:
+            continue
+        dist = (P[sel] - a) @ (n / np.linalg.norm(n)) - r
+        j = int(np.argmax(np.abs(dist)))
+        if abs(dist[j]) > FACET_DISTANCE:
+            _warn(f"{where}: artefact.facets[{k}] ('{f.get('id')}'): touches lie up to "
+                          f"{dist[j]:.4g} mm from the facet at the nominal machine (more than "
+                          f"{FACET_DISTANCE:g} mm); check the facet point and normal, the machine file "
+                          "and their units", UnitsWarning)
+
+
+def check_balls(machine: Machine, kind: str, q: np.ndarray, values: np.ndarray, where: str) -> None:
+    """Checks of :func:`fivecal.ball_dataset` arrays: rotary columns of the
+    (N, axes) command matrix ``q``, readings (dbb) or displacements (ball3d)."""
+    check_rotary(machine, {a: q[:, i] for i, a in enumerate(machine.axis_names)}, f"{where}: axes")
+    v = np.abs(np.nan_to_num(np.asarray(values, dtype=float)))
+    if not v.size:
+        return
+    limit, what = (DBB_RANGE, "readings") if kind == "dbb" else (BALL3D_RANGE, "measured")
+    k = int(np.argmax(v.max(axis=1) if v.ndim == 2 else v))
+    if v.reshape(v.shape[0], -1)[k].max() > limit:
+        raise ValueError(f"{where}: {what}[{k}] is {v.reshape(v.shape[0], -1)[k].max():.6g} mm, beyond the "
+                         f"instrument's range ({limit:g} mm): {what} look like µm: divide by 1000")
