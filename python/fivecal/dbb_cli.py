@@ -120,6 +120,7 @@ def _jiang(args) -> int:
         ds = load_dataset(args.dataset)
     else:
         m = _machine(args.machine)
+        _check_step(args.step, 359.0)  # the C step of the default plan sweeps 0..359 deg
         try:
             plan = dbb.four_step_plan(m, step=args.step, setups=setups)
         except ValueError as e:
