@@ -21,7 +21,6 @@ the measurement, not the machine, and are never applied.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
