@@ -663,7 +663,15 @@ def main(argv=None) -> int:
     pp.add_argument("--sphere", default=None, help="sphere id (default: the only sphere touched)")
     pp.set_defaults(func=_sphere)
 
-    args = p.parse_args(argv)
+    old_stdout = sys.stdout
+    sys.stdout = _PipeSafeStdout(old_stdout)  # --help | head too
+    try:
+        args = p.parse_args(argv)
+    except SystemExit:
+        sys.stdout.flush()
+        raise
+    finally:
+        sys.stdout = old_stdout
     debug = os.environ.get("FIVECAL_DEBUG", "") not in ("", "0")
     try:
         return _run(args)

@@ -173,6 +173,13 @@ def test_a_closed_pipe_is_quiet_and_the_command_still_succeeds(dataset, tmp_path
     assert r.returncode == 0, r.stderr
     assert r.stderr == ""
     assert (tmp_path / "r.json").exists()  # the result is still written
+    r_fd, w_fd = os.pipe()
+    os.close(r_fd)
+    try:
+        r = fivecal_cli("uncertainty", "--help", stdout=w_fd)
+    finally:
+        os.close(w_fd)
+    assert (r.returncode, r.stderr) == (0, "")
 
 
 def test_unreadable_inputs_are_named(tmp_path):
