@@ -219,17 +219,20 @@ class MonteCarloResult:
                  f"  {'parameter':<14}{'mean':>11}{'u MC':>9}{'low':>11}{'high':>11}{'u GUM':>9}"
                  f"{'ratio':>7}{'delta':>8}{'d_low':>8}{'d_high':>8}  verdict  unit"]
         needed = self.trials_needed(names)
-        if needed is not None:  # the verdicts would only reflect Monte Carlo noise
+        # Too few trials when most parameters are not stable at the tolerance:
+        # their verdicts would only reflect Monte Carlo noise.
+        judged = needed is None or 2 * sum(bool(self.stable[k]) for k in names) >= len(names)
+        if not judged:
             lines[-1] = lines[-1].replace("  verdict  unit", "  unit")
         for k in names:
             f, unit = display_scale(k)
             lines.append(f"  {k:<14}{self.mean[k] * f:>11.3f}{self.std[k] * f:>9.3f}{self.low[k] * f:>11.3f}"
                          f"{self.high[k] * f:>11.3f}{self.gum_std[k] * f:>9.3f}{self.std_ratio[k]:>7.3f}"
                          f"{self.tolerance[k] * f:>8.3f}{self.d_low[k] * f:>8.3f}{self.d_high[k] * f:>8.3f}"
-                         + ("" if needed is not None else f"  {self.verdict(k)}") + f"  {unit}")
+                         + (f"  {self.verdict(k)}" if judged else "") + f"  {unit}")
         lines.append("")
         ratio = max((abs(self.std_ratio[k] - 1) for k in names), default=float("nan"))
-        if needed is not None:
+        if not judged:
             lines.append(f"  GUM not judged: {self.used} trials are too few for the numerical tolerance of "
                          f"{self.significant_digits} significant digits; about {needed} trials are needed "
                          f"(max |u_MC/u_GUM - 1| = {ratio:.3f})")
@@ -237,6 +240,9 @@ class MonteCarloResult:
             nv = sum(bool(self.validated[k]) for k in names)
             lines.append(f"  GUM validated for {nv} of {len(names)} parameters "
                          f"(max |u_MC/u_GUM - 1| = {ratio:.3f})")
+            if needed is not None:
+                lines.append(f"  {sum(not self.stable[k] for k in names)} not stable at this tolerance: about "
+                             f"{needed} trials are needed to judge them")
         return "\n".join(lines)
 
     def trials_needed(self, names: Optional[Iterable[str]] = None) -> Optional[int]:
