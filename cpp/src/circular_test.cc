@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <sstream>
 #include <stdexcept>
 
 #include "fivecal/circle_fit.h"
@@ -32,6 +33,21 @@ void ValidateRun(const CircularRun& r, int idx) {
   }
   if (std::abs(r.direction) > 1)
     throw std::invalid_argument(w + ".direction: must be +1 (CCW), -1 (CW) or 0 (from the angles)");
+  // A ball bar records at most a few thousand samples per revolution; the
+  // bound keeps the design matrix of the diagnosis in memory.
+  constexpr Eigen::Index kMaxSamples = 1000000;
+  if (r.angles.size() > kMaxSamples)
+    throw std::invalid_argument(w + ": " + std::to_string(r.angles.size()) +
+                                " samples; at most 1000000 per run");
+  // Angles read in radians sweep at most 6.3 "degrees": refuse rather than
+  // analyse a full circle as a 6 degree arc.
+  const double sweep = r.angles.maxCoeff() - r.angles.minCoeff();
+  if (sweep < 10.0) {
+    std::ostringstream s;
+    s << w << ".angles: sweep only " << sweep << " deg; a circular test needs at least 10 deg "
+      << "(angles must be in degrees, not radians)";
+    throw std::invalid_argument(s.str());
+  }
 }
 
 int RunDirection(const CircularRun& r, int idx) {

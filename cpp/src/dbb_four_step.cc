@@ -321,6 +321,18 @@ std::string FourStepPlanJson(const Machine& m, const FourStepPlanOptions& o) {
   if (!(o.extended_length > o.length))
     throw std::invalid_argument("four-step plan.extended_length: must exceed length");
   if (!(o.step > 0)) throw std::invalid_argument("four-step plan.step: must be > 0 deg");
+  // A real ball bar records a few thousand samples per revolution; a tiny
+  // step (1e-7 deg) would otherwise try to allocate billions of poses.
+  constexpr double kMaxSamplesPerStep = 1e6;
+  for (double span : {o.a_end - o.a_start, o.c_end - o.c_start}) {
+    const double count = std::floor(std::abs(span) / o.step + 1e-9) + 1;
+    if (!(count <= kMaxSamplesPerStep)) {
+      std::ostringstream s;
+      s << "four-step plan.step: " << o.step << " deg gives " << count << " samples over " << std::abs(span)
+        << " deg; at most 1000000 per step (use a larger step)";
+      throw std::invalid_argument(s.str());
+    }
+  }
   if (std::abs(o.a_extension_sign) != 1.0 || std::abs(o.c_extension_sign) != 1.0)
     throw std::invalid_argument("four-step plan: extension signs must be +1 or -1");
   const double arm = std::sqrt(o.extended_length * o.extended_length - o.length * o.length);

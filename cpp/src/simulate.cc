@@ -148,7 +148,25 @@ SimulationPlan PlanSpec(const json& spec) {
     for (double x : {noise.probe, noise.dbb, noise.ball3d})
       if (!(x >= 0) || !std::isfinite(x)) throw std::invalid_argument("simulate.sigma: must be >= 0 mm");
   }
-  const uint64_t seed = spec.value("seed", uint64_t{0});
+  // Read as a JSON value: get<uint64_t>() of a negative or a float (UB past
+  // 2^64) would silently collapse distinct seeds onto one.
+  uint64_t seed = 0;
+  if (spec.contains("seed")) {
+    const json& js = spec["seed"];
+    const char* bad = "simulate.seed: must be an integer 0 <= seed < 2^64";
+    if (js.is_number_unsigned()) {
+      seed = js.get<uint64_t>();
+    } else if (js.is_number_integer()) {
+      throw std::invalid_argument(std::string(bad) + ", got " + js.dump());
+    } else if (js.is_number_float()) {
+      const double x = js.get<double>();
+      if (!(x >= 0 && x < 18446744073709551616.0) || x != std::floor(x))
+        throw std::invalid_argument(std::string(bad) + ", got " + js.dump());
+      seed = static_cast<uint64_t>(x);
+    } else {
+      throw std::invalid_argument(std::string(bad) + ", got " + js.dump());
+    }
+  }
   // Per observation: the noise-free readings and the noise directions.
   struct Slot {
     Eigen::VectorXd start, approach;

@@ -63,6 +63,15 @@ WangPath ComputeWangPath(const Machine& m, const WangPathOptions& o) {
   if (!(o.radius > 0)) throw std::invalid_argument(w + ".radius: must be > 0 mm");
   if (!(o.step > 0)) throw std::invalid_argument(w + ".step: must be > 0 deg");
   if (!(o.end > o.start)) throw std::invalid_argument(w + ".end: must exceed start");
+  // Bounded before any allocation: a tiny step would ask for billions of poses.
+  constexpr double kMaxSamples = 1e6;
+  const double count = std::floor((o.end - o.start) / o.step + 1e-9) + 1;
+  if (!(count <= kMaxSamples)) {
+    std::ostringstream s;
+    s << w << ".step: " << o.step << " deg gives " << count << " samples from " << o.start << " to " << o.end
+      << " deg; at most 1000000 (use a larger step)";
+    throw std::invalid_argument(s.str());
+  }
 
   const Axis& a1 = m.axis(chain[0]);
   const Axis& a2 = m.axis(chain[1]);

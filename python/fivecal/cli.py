@@ -7,8 +7,10 @@ when it is a terminal (FIVECAL_PROGRESS=1 forces it, =0 silences it).
 from __future__ import annotations
 
 import argparse
-import json
+import io
+import math
 import os
+import signal
 import sys
 import time
 
@@ -40,13 +42,9 @@ def _identify(args) -> int:
 
 
 def _read_json(path: str, what: str):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except OSError as e:
-        raise ValueError(f"{path}: cannot read {what} ({e.strerror})") from None
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: not valid JSON ({e.msg} at line {e.lineno}, column {e.colno})") from None
+    from .files import read_json
+
+    return read_json(path, what)
 
 
 def _axis_values(text: str, option: str) -> dict:
@@ -55,11 +53,65 @@ def _axis_values(text: str, option: str) -> dict:
         if "=" not in item:
             raise ValueError(f"{option}: expected AXIS=VALUE pairs like X=0,Z=100, got '{item.strip()}'")
         k, v = item.split("=", 1)
+        k = k.strip().upper()
+        if len(k) != 1 or not k.isalpha():
+            raise ValueError(f"{option}: '{k}' is not an axis letter (AXIS=VALUE pairs like X=0,Z=100)")
+        if k in out:
+            raise ValueError(f"{option}: axis {k} given twice")
         try:
-            out[k.strip().upper()] = float(v)
+            x = float(v)
         except ValueError:
-            raise ValueError(f"{option}: {k.strip()}: '{v.strip()}' is not a number") from None
+            raise ValueError(f"{option}: {k}: '{v.strip()}' is not a number") from None
+        if not math.isfinite(x):
+            raise ValueError(f"{option}: {k}: '{v.strip()}' is not a finite number")
+        out[k] = x
     return out
+
+
+# ---- option types: a bad value is refused by argparse naming the option -----
+def _integer_type(low: int, high=None, what: str = "an integer"):
+    def parse(text: str) -> int:
+        t = text.strip()
+        try:
+            v = int(t, 10)
+        except ValueError:
+            try:
+                f = float(t)
+            except ValueError:
+                f = float("nan")
+            if not (math.isfinite(f) and f == math.floor(f)):
+                raise argparse.ArgumentTypeError(f"expected {what}, got '{text}'") from None
+            v = int(f)
+        if v < low or (high is not None and v >= high):
+            bound = f">= {low}" if high is None else f"in {low} .. {high - 1}"
+            raise argparse.ArgumentTypeError(f"expected {what} {bound}, got '{text}'")
+        return v
+
+    return parse
+
+
+def _float_type(low=None, high=None, low_open: bool = False, what: str = "a number"):
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got '{text}'") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"expected a finite number, got '{text}'")
+        if low is not None and (v < low or (low_open and v == low)):
+            raise argparse.ArgumentTypeError(f"must be {'>' if low_open else '>='} {low:g}, got '{text}'")
+        if high is not None and v >= high:
+            raise argparse.ArgumentTypeError(f"must be < {high:g}, got '{text}'")
+        return v
+
+    return parse
+
+
+SEED = _integer_type(0, 2 ** 64, "an integer seed")
+COUNT = _integer_type(0)
+SIGMA = _float_type(0.0, what="a noise level in mm")
+POSITIVE = _float_type(0.0, low_open=True)
+PROBABILITY = _float_type(0.0, 1.0, low_open=True, what="a probability")
 
 
 def _compensate(args) -> int:
@@ -116,12 +168,16 @@ def _simulate(args) -> int:
         machine = Machine.load(os.path.join(os.path.dirname(os.path.abspath(args.spec)), machine))
     if machine is None:
         raise ValueError(f"{args.spec}: 'machine' missing (a machine object or a path)")
-    if not isinstance(spec, dict):
-        raise ValueError(f"{args.spec}: expected a JSON object with machine, plan, errors, ...")
-    ds = simulate(machine, spec.get("plan", []), errors=spec.get("errors"), artefact=spec.get("artefact"),
-                  tip_radius=spec.get("probe", {}).get("tip_radius", 0.0),
-                  sigma=args.sigma if args.sigma is not None else spec.get("sigma", 0.0),
-                  seed=args.seed if args.seed is not None else spec.get("seed", 0), setup=spec.get("setup"))
+    probe = spec.get("probe") or {}
+    if not isinstance(probe, dict):
+        raise ValueError(f"{args.spec}: probe: expected an object like {{\"tip_radius\": 3.0}}")
+    try:
+        ds = simulate(machine, spec.get("plan", []), errors=spec.get("errors"), artefact=spec.get("artefact"),
+                      tip_radius=probe.get("tip_radius", 0.0),
+                      sigma=args.sigma if args.sigma is not None else spec.get("sigma", 0.0),
+                      seed=args.seed if args.seed is not None else spec.get("seed", 0), setup=spec.get("setup"))
+    except ValueError as e:
+        raise ValueError(f"{args.spec}: {e}") from None
     save_dataset(ds, args.out)
     print(f"simulated {len(ds)} observations on {ds.machine.name}; dataset written to {args.out}")
     return 0
@@ -154,10 +210,19 @@ def _design(args) -> int:
 
     spec = _design_spec(args.spec)
     machine, artefact = spec["machine"], spec.get("artefact") or {}
-    tip_radius = float((spec.get("probe") or {}).get("tip_radius", 0.0))
+    probe = spec.get("probe") or {}
+    if not isinstance(probe, dict) or not isinstance(artefact, dict):
+        raise ValueError(f"{args.spec}: {'probe' if not isinstance(probe, dict) else 'artefact'}: expected an object")
+    try:
+        tip_radius = float(probe.get("tip_radius", 0.0))
+    except (TypeError, ValueError):
+        raise ValueError(f"{args.spec}: probe.tip_radius: expected a number") from None
     groups = None
     if spec.get("candidates"):
         c = spec["candidates"]
+        if not isinstance(c, dict):
+            raise ValueError(f"{args.spec}: candidates: expected an object with 'indexations' (and 'limits', "
+                             "'min_dot', ...)")
         plan, groups = design.candidate_plan(machine, artefact, c.get("indexations", []), tip_radius=tip_radius,
                                              limits=c.get("limits"), min_dot=c.get("min_dot", -0.02),
                                              targets=c.get("targets"), sphere_normals=c.get("sphere_normals"))
@@ -170,8 +235,13 @@ def _design(args) -> int:
     try:
         ks = [int(x) for x in str(args.k).split(",") if x.strip()]
     except ValueError:
-        raise ValueError(f"-k: expected a number of indexations or a comma-separated list, got '{args.k}'") from None
-    required = [int(x) for x in args.require.split(",") if x.strip()] if args.require else None
+        ks = []
+    if not ks or min(ks) < 1:
+        raise ValueError(f"-k: expected a number of indexations (>= 1) or a comma-separated list, got '{args.k}'")
+    try:
+        required = [int(x) for x in args.require.split(",") if x.strip()] if args.require else None
+    except ValueError:
+        raise ValueError(f"--require: expected comma-separated visit numbers, got '{args.require}'") from None
     pool = design._as_dataset(plan, machine, artefact, tip_radius, None)
     rows = None
     for i, k in enumerate(ks):
@@ -202,9 +272,10 @@ def _design(args) -> int:
                                 "condition_number": finite(d.quality.condition_number),
                                 "candidate_condition_number": finite(d.reference.condition_number),
                                 "groups": d.groups}
-            with open(out, "w") as f:
-                json.dump(result, f, indent=1)
-                f.write("\n")
+            from ._json import plain
+            from .files import write_json
+
+            write_json(out, plain(result, "design"))
             print(f"designed plan (a simulation spec) written to {out}")
     if rows is not None:
         print(design.format_comparison(rows))
@@ -222,7 +293,12 @@ def _sphere(args) -> int:
         params = res.get("parameters", res) if isinstance(res, dict) else None
         if not isinstance(params, dict):
             raise ValueError(f"{args.values}: expected a result JSON with 'parameters'")
-        values = {k: (v["value"] if isinstance(v, dict) else v) for k, v in params.items()}
+        values = {}
+        for k, v in params.items():
+            v = v.get("value") if isinstance(v, dict) else v
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{args.values}: parameters.{k}: expected a finite number as the value")
+            values[k] = v
         tests["identified model"] = cmm.sphere_test(ds, values, args.sphere)
     t0 = next(iter(tests.values()))
     print(f"fivecal sphere test: sphere {t0.sphere}, {len(t0.observations)} touches on {ds.machine.name}")
@@ -238,8 +314,7 @@ def _uncertainty(args) -> int:
     from .machine import Machine
 
     def load(path):
-        with open(path) as f:
-            d = json.load(f)
+        d = _read_json(path, "spec or dataset")
         if isinstance(d, dict) and isinstance(d.get("machine"), str):  # a path relative to the file
             d["machine"] = Machine.load(os.path.join(os.path.dirname(os.path.abspath(path)),
                                                      d["machine"])).to_dict()
@@ -259,7 +334,11 @@ def _uncertainty(args) -> int:
             mc.save(args.out, include_samples=args.samples)
             print(f"result written to {args.out}")
         return 0
-    days = [int(x) for x in args.days.split(",")] if args.days else None
+    try:
+        days = [int(x) for x in args.days.split(",")] if args.days else None
+    except ValueError:
+        raise ValueError(f"--days: expected one integer day label per INPUT, comma separated (e.g. 1,1,2,2), "
+                         f"got '{args.days}'") from None
     if days is not None and len(days) != len(inputs):
         raise ValueError(f"--days: {len(days)} labels for {len(inputs)} cycles")
     u = uncertainty.gum_input_covariance(inputs, args.estimate, day=days, pooling=args.pool,
@@ -269,6 +348,130 @@ def _uncertainty(args) -> int:
         u.save(args.out)
         print(f"\nresult written to {args.out}")
     return 0
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that outputs are rolled back."""
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated()
+
+
+class _PipeSafeStdout(io.TextIOBase):
+    """stdout that goes quiet when the reader closes the pipe (``fivecal ... |
+    head``): the command carries on (its files are still written) and exits
+    with its own status, without a "Broken pipe" message."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self._closed_pipe = False
+
+    def _silence(self) -> None:
+        self._closed_pipe = True
+        # The Python docs recipe: point the descriptor at devnull so the
+        # interpreter's final flush does not fail again.
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(devnull, self._stream.fileno())
+            finally:
+                os.close(devnull)
+        except (OSError, ValueError, io.UnsupportedOperation):
+            pass
+
+    def write(self, text):
+        if not self._closed_pipe:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._silence()
+        return len(text)
+
+    def flush(self):
+        if not self._closed_pipe:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._silence()
+
+    def writable(self):
+        return True
+
+    def isatty(self):
+        return self._stream.isatty()
+
+    def fileno(self):
+        return self._stream.fileno()
+
+    @property
+    def encoding(self):
+        return getattr(self._stream, "encoding", "utf-8")
+
+
+def _existing(path) -> bool:
+    return isinstance(path, str) and os.path.exists(path)
+
+
+def _declared_files(args):
+    """(inputs, outputs) named on the command line, as (label, path) pairs."""
+    inputs, outputs = [], []
+    for attr, label in (("dataset", "dataset"), ("spec", "spec"), ("result", "result"), ("machine", "machine"),
+                        ("program", "program"), ("values", "--values")):
+        v = getattr(args, attr, None)
+        if _existing(v):
+            inputs.append((label, v))
+    for attr, label in (("inputs", "INPUT"), ("runs", "run")):
+        for v in getattr(args, attr, None) or []:
+            if _existing(v):
+                inputs.append((label, v))
+    for attr in ("simulate", "pattern_errors"):
+        v = getattr(args, attr, None)
+        if _existing(v):
+            inputs.append((f"--{attr.replace('_', '-')}", v))
+    csv = getattr(args, "csv", None)
+    if isinstance(csv, str):
+        for part in csv.split(","):
+            if "=" in part and _existing(part.split("=", 1)[1].strip()):
+                inputs.append(("--csv", part.split("=", 1)[1].strip()))
+    if args.command == "demo":
+        return inputs, []
+    for attr in ("out", "table", "plot", "patterns", "save_dataset"):
+        v = getattr(args, attr, None)
+        if isinstance(v, str) and not (attr == "out" and "{k}" in v):
+            outputs.append((f"--{attr.replace('_', '-')}", v))
+    report = getattr(args, "report", None)
+    if isinstance(report, str):
+        outputs += [("--report", os.path.join(report, "result.json")), ("--report", os.path.join(report, "report.html"))]
+    return inputs, outputs
+
+
+def _run(args) -> int:
+    """The command inside a files.transaction: an output that is an input
+    is refused before any work; if the command fails or is interrupted, the
+    outputs it wrote are removed (or restored to their previous content)."""
+    from . import files
+
+    files.check_outputs(*_declared_files(args))
+    old_stdout = sys.stdout
+    sys.stdout = _PipeSafeStdout(old_stdout)
+    old_term = None
+    try:
+        old_term = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread: leave the signal alone
+        pass
+    try:
+        # An exception (bad input, Ctrl-C, SIGTERM) rolls the outputs back; a
+        # command that ran to its end keeps them, whatever its exit status
+        # (a fit that did not converge is still written, and says so).
+        with files.transaction():
+            rc = args.func(args)
+            sys.stdout.flush()
+        return rc
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+        sys.stdout = old_stdout
 
 
 class _Parser(argparse.ArgumentParser):
@@ -323,15 +526,16 @@ def main(argv=None) -> int:
                         epilog="example:\n  fivecal simulate spec.json --out dataset.json --sigma 0.0006")
     ps.add_argument("spec", help="simulation spec JSON")
     ps.add_argument("--out", required=True, help="dataset JSON to write")
-    ps.add_argument("--sigma", type=float, default=None, help="noise (mm), overrides the spec")
-    ps.add_argument("--seed", type=int, default=None, help="random seed, overrides the spec")
+    ps.add_argument("--sigma", type=SIGMA, default=None, help="noise (mm), overrides the spec")
+    ps.add_argument("--seed", type=SEED, default=None, help="random seed (an integer 0 <= seed < 2^64), "
+                    "overrides the spec")
     ps.set_defaults(func=_simulate)
 
     pd = sub.add_parser("demo", help="simulate, identify and validate the bundled HU40T TANGO example",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         epilog="example:\n  fivecal demo --out fivecal_demo")
     pd.add_argument("--out", default="fivecal_demo", help="report folder (default: fivecal_demo)")
-    pd.add_argument("--seed", type=int, default=1, help="random seed of the simulated noise and of the "
+    pd.add_argument("--seed", type=SEED, default=1, help="random seed of the simulated noise and of the "
                     "held-out indexations (default: 1)")
     pd.set_defaults(func=_demo)
 
@@ -368,7 +572,7 @@ def main(argv=None) -> int:
                     "linear axes (mm), e.g. X=-120.5,Y=35,Z=-410")
     pc.add_argument("--tool-tip", metavar="X,Y,Z", help="the cutting tool's tip in the machine frame at the "
                     "zero pose (mm), replacing the machine file's tool.tip")
-    pc.add_argument("--decimals", type=int, default=4, help="at least this many decimals for the "
+    pc.add_argument("--decimals", type=_integer_type(0, 13), default=4, help="at least this many decimals for the "
                     "compensated words (default 4; a word written with more keeps its own)")
     pc.add_argument("--position-only", action="store_true", help="compensate the tool point only; keep the "
                     "rotary axes at their programmed values")
@@ -395,14 +599,15 @@ def main(argv=None) -> int:
     pu.add_argument("--estimate", default="location",
                     help="parameter names and/or presets, comma separated (default: location)")
     pu.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
-    pu.add_argument("--trials", type=int, default=10000, help="Monte Carlo trials M (default 10000)")
-    pu.add_argument("--threads", type=int, default=0, help="worker threads (default 0: all cores; the "
+    pu.add_argument("--trials", type=_integer_type(2, 2 ** 31), default=10000,
+                    help="Monte Carlo trials M (default 10000)")
+    pu.add_argument("--threads", type=_integer_type(0, 2 ** 16), default=0, help="worker threads (default 0: all cores; the "
                     "result does not depend on it)")
-    pu.add_argument("--seed", type=int, default=1, help="master seed (default 1)")
-    pu.add_argument("--sigma", type=float, default=None, help="noise (mm): overrides the spec's, or the "
+    pu.add_argument("--seed", type=SEED, default=1, help="master seed, 0 <= seed < 2^64 (default 1)")
+    pu.add_argument("--sigma", type=SIGMA, default=None, help="noise (mm): overrides the spec's, or the "
                     "fit's residual sigma for a dataset")
-    pu.add_argument("--probability", type=float, default=0.95, help="coverage probability (default 0.95)")
-    pu.add_argument("--digits", type=int, default=2, help="significant digits of u for the JCGM 101 "
+    pu.add_argument("--probability", type=PROBABILITY, default=0.95, help="coverage probability (default 0.95)")
+    pu.add_argument("--digits", type=_integer_type(1, 16), default=2, help="significant digits of u for the JCGM 101 "
                     "numerical tolerance (default 2)")
     pu.add_argument("--no-progress", action="store_true", help="no progress bar")
     pu.add_argument("--plot", help="write histograms (PNG) here")
@@ -410,7 +615,7 @@ def main(argv=None) -> int:
     pu.add_argument("--days", help="cycles: day label of each INPUT, comma separated (default: one day)")
     pu.add_argument("--pool", choices=["cycles", "days", "none"], default="cycles",
                     help="cycles: pool the input covariance by cycles (default) or by days")
-    pu.add_argument("--k", type=float, default=None, help="cycles: coverage factor (default: Student t "
+    pu.add_argument("--k", type=POSITIVE, default=None, help="cycles: coverage factor (default: Student t "
                     "with the pooled degrees of freedom)")
     pu.add_argument("--out", help="write the result JSON here")
     pu.set_defaults(func=_uncertainty)
@@ -440,8 +645,8 @@ def main(argv=None) -> int:
                     help="forward greedy selection, then exchange swaps while they improve (default), "
                     "or greedy only")
     pg.add_argument("--require", default=None, help="candidate visit numbers always kept, comma separated")
-    pg.add_argument("--max-touches", type=int, default=0, help="then drop single touches down to this many")
-    pg.add_argument("--sigma", type=float, default=0.0006, help="probing noise (mm) for the predicted "
+    pg.add_argument("--max-touches", type=COUNT, default=0, help="then drop single touches down to this many")
+    pg.add_argument("--sigma", type=POSITIVE, default=0.0006, help="probing noise (mm) for the predicted "
                     "uncertainties (default 0.0006)")
     pg.add_argument("--no-progress", action="store_true", help="no progress bar")
     pg.add_argument("--out", help="write the designed plan (a simulation spec) here; '{k}' is replaced by K")
@@ -458,13 +663,29 @@ def main(argv=None) -> int:
     pp.add_argument("--sphere", default=None, help="sphere id (default: the only sphere touched)")
     pp.set_defaults(func=_sphere)
 
-    args = p.parse_args(argv)
+    old_stdout = sys.stdout
+    sys.stdout = _PipeSafeStdout(old_stdout)  # --help | head too
+    try:
+        args = p.parse_args(argv)
+    except SystemExit:
+        sys.stdout.flush()
+        raise
+    finally:
+        sys.stdout = old_stdout
     debug = os.environ.get("FIVECAL_DEBUG", "") not in ("", "0")
     try:
-        return args.func(args)
+        return _run(args)
     except KeyboardInterrupt:
         print("fivecal: interrupted", file=sys.stderr)
         return 130
+    except _Terminated:
+        print("fivecal: terminated", file=sys.stderr)
+        return 143
+    except RecursionError:
+        if debug:
+            raise
+        print(f"fivecal {args.command}: error: input nested too deeply", file=sys.stderr)
+        return 2
     except (ValueError, OSError) as e:
         if debug:
             raise

@@ -21,7 +21,6 @@ the measurement, not the machine, and are never applied.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
@@ -53,13 +52,9 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
     where = "errors"
     if isinstance(source, (str, os.PathLike)):
         where = os.fspath(source)
-        try:
-            with open(where) as f:
-                source = json.load(f)
-        except OSError as e:
-            raise ValueError(f"{where}: cannot read ({e.strerror})") from None
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{where}: not valid JSON ({e.msg}, line {e.lineno})") from None
+        from . import files
+
+        source = files.read_json(where, "result")
     if hasattr(source, "values") and hasattr(source, "estimated"):  # a Result
         source = dict(source.values)
     if not isinstance(source, Mapping):
@@ -353,15 +348,13 @@ def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.Path
     """:func:`compensate_gcode` from file to file. Bytes outside the changed
     numbers are copied unchanged (the file is read and written as Latin-1,
     which maps every byte to itself)."""
+    from . import files
+
     path = os.fspath(path)
-    try:
-        with open(path, "rb") as f:
-            text = f.read().decode("latin-1")
-    except OSError as e:
-        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    files.check_outputs([("program", path)], [("out", out)])
+    text = files.read_bytes(path, "G-code program").decode("latin-1")
     res = compensate_gcode(text, machine, errors, name=path, **kwargs)
-    with open(os.fspath(out), "wb") as f:
-        f.write(res.text.encode("latin-1"))
+    files.write_bytes(out, res.text.encode("latin-1"))
     return res
 
 
@@ -434,8 +427,9 @@ def error_table(result, machine: Union[Machine, Mapping],
     machine = Machine.from_dict(machine)
     std: Dict[str, float] = {}
     if isinstance(result, (str, os.PathLike)):
-        with open(os.fspath(result)) as f:
-            result = json.load(f)
+        from . import files
+
+        result = files.read_json(result, "result")
     if hasattr(result, "std") and hasattr(result, "estimated"):
         std = dict(result.std)
     elif isinstance(result, Mapping) and isinstance(result.get("parameters"), Mapping):
@@ -468,6 +462,8 @@ def write_error_table(path: Union[str, os.PathLike], result, machine: Union[Mach
     """Write :func:`error_table` to ``path``: JSON when it ends in ``.json``,
     otherwise CSV with the sign convention as leading ``#`` comment lines."""
     machine = Machine.from_dict(machine)
+    from . import files
+
     rows = error_table(result, machine, kinds)
     path = os.fspath(path)
     head = [f"fivecal machine errors: {machine.name} ({machine.topology}); kinds: {', '.join(kinds)}"]
@@ -475,20 +471,20 @@ def write_error_table(path: Union[str, os.PathLike], result, machine: Union[Mach
         doc = {"format": "fivecal-error-table", "version": 1, "machine": machine.name,
                "topology": machine.topology, "kinds": list(kinds),
                "convention": SIGN_CONVENTION, "errors": rows}
-        with open(path, "w") as f:
-            json.dump(doc, f, indent=1, ensure_ascii=False)
-            f.write("\n")
+        files.write_json(path, doc, ensure_ascii=False)
         return rows
     import csv
+    import io
 
     cols = ["name", "kind", "axis", "component", "value", "std", "unit", "display_value", "display_std",
             "display_unit", "estimated", "description"]
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        for line in head + SIGN_CONVENTION:
-            f.write(f"# {line}\n")
-        w = csv.writer(f)
-        w.writerow(cols)
-        for r in rows:
-            w.writerow(["" if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else r[c])
-                        for c in cols])
+    f = io.StringIO(newline="")
+    for line in head + SIGN_CONVENTION:
+        f.write(f"# {line}\n")
+    w = csv.writer(f)
+    w.writerow(cols)
+    for r in rows:
+        w.writerow(["" if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else r[c])
+                    for c in cols])
+    files.write_text(path, f.getvalue())
     return rows

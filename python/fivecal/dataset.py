@@ -84,12 +84,10 @@ class Dataset:
 
 def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
     """Load a dataset JSON file; ValueError names the file, observation and field."""
+    from . import files
+
     path = os.fspath(path)
-    try:
-        with open(path) as f:
-            text = f.read()
-    except OSError as e:
-        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    text = files.read_text(path, "dataset")
     try:
         ds = Dataset(_core.Dataset.from_json(text))
     except ValueError as e:
@@ -100,10 +98,10 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
 
 def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
     """Write a dataset (validated first) as JSON in the DESIGN.md format."""
+    from . import files
+
     ds = Dataset.from_dict(ds)
-    with open(os.fspath(path), "w") as f:
-        json.dump(ds.to_dict(), f, indent=1)
-        f.write("\n")
+    files.write_json(path, ds.to_dict())
 
 
 def ball_dataset(machine, type: str, axes: Mapping, tool_ball, table_ball, length: float = 0.0,

@@ -101,13 +101,9 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
     radians give one :class:`fivecal.RadiansWarning`.
     """
     path = os.fspath(path)
-    try:
-        with open(path, newline="") as f:
-            text = f.read()
-    except OSError as e:
-        raise ValueError(f"{path}: cannot read ({e.strerror})") from None
-    except UnicodeDecodeError as e:
-        raise ValueError(f"{path}: not a text file ({e.reason} at byte {e.start})") from None
+    from . import files
+
+    text = files.read_text(path, "trace CSV")
     rows = []
     header = None
     for lineno, line in enumerate(text.splitlines(), 1):
@@ -162,11 +158,16 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
 
 
 def write_trace_csv(trace: Trace, path: Union[str, os.PathLike]) -> None:
-    with open(os.fspath(path), "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["angle_deg", "reading_mm"])
-        for a, r in zip(trace.angles, trace.readings):
-            w.writerow([f"{a:.6f}", f"{r:.9f}"])
+    import io
+
+    from . import files
+
+    f = io.StringIO(newline="")
+    w = csv.writer(f)
+    w.writerow(["angle_deg", "reading_mm"])
+    for a, r in zip(trace.angles, trace.readings):
+        w.writerow([f"{a:.6f}", f"{r:.9f}"])
+    files.write_text(path, f.getvalue())
 
 
 def _dbb_rows(ds: Dataset, setup: str):
@@ -767,6 +768,12 @@ def planar_plan(machine: Union[Machine, Mapping], plane: str = "XY", radius: flo
     (-1), one sample per ``step`` degrees, recording each linear axis'
     direction of motion (for backlash). Setup ids ``P+`` / ``P-``."""
     m = Machine.from_dict(machine)
+    step = float(step)
+    # bounded before allocating: one sample per step over 360 deg
+    if not (math.isfinite(step) and step > 0) or 360.0 / step > 1e6:
+        raise ValueError(f"step: {step:g} deg; must be > 0 and give at most 1000000 samples per turn")
+    if not (math.isfinite(float(radius)) and radius > 0):
+        raise ValueError(f"radius: {radius!r}; must be a finite number > 0 mm")
     plane = plane.upper()
     idx = {"X": 0, "Y": 1, "Z": 2}
     if len(plane) != 2 or plane[0] not in idx or plane[1] not in idx or plane[0] == plane[1]:

@@ -33,14 +33,17 @@ def _values(text, what: str, paper=None) -> dict:
     if text == "paper" and paper is not None:
         return dict(paper)
     if os.path.exists(text):
-        with open(text) as f:
-            try:
-                d = json.load(f)
-            except json.JSONDecodeError as e:
-                raise ValueError(f"{text}: invalid JSON ({e.msg})") from None
+        from .files import read_json
+
+        d = read_json(text, "errors")
         if not isinstance(d, dict):
             raise ValueError(f"{text}: expected an object name -> value")
-        return {k: float(v) for k, v in d.items()}
+        out = {}
+        for k, v in d.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{text}: {k}: expected a finite number (mm or rad), got {json.dumps(v)[:40]}")
+            out[k] = float(v)
+        return out
     out = {}
     for part in text.replace(";", ",").split(","):
         if not part.strip():
@@ -49,9 +52,12 @@ def _values(text, what: str, paper=None) -> dict:
             raise ValueError(f"{what}: expected NAME=VALUE pairs, a JSON file or 'paper', got {part!r}")
         k, v = part.split("=", 1)
         try:
-            out[k.strip()] = float(v)
+            x = float(v)
         except ValueError:
             raise ValueError(f"{what}: {k.strip()}: not a number ({v!r})") from None
+        if not math.isfinite(x):
+            raise ValueError(f"{what}: {k.strip()}: not a finite number ({v!r})")
+        out[k.strip()] = x
     return out
 
 
@@ -62,6 +68,8 @@ def _vector(text, n: int, what: str):
         v = [float(x) for x in text.replace(" ", "").split(",")]
     except ValueError:
         raise ValueError(f"{what}: expected {n} comma-separated numbers, got {text!r}") from None
+    if not all(math.isfinite(x) for x in v):
+        raise ValueError(f"{what}: expected {n} finite numbers, got {text!r}")
     if len(v) != n:
         raise ValueError(f"{what}: expected {n} comma-separated numbers, got {len(v)}")
     return v
@@ -82,9 +90,21 @@ def _machine(path):
 
 
 def _write_json(d: dict, path: str) -> None:
-    with open(path, "w") as f:
-        json.dump(d, f, indent=1, default=float)
-        f.write("\n")
+    from .files import write_text
+
+    write_text(path, json.dumps(d, indent=1, default=float) + "\n")
+
+
+#: Samples per simulated trace at most (a ball bar records a few thousand per
+#: turn); a tiny --step would otherwise ask for billions of poses.
+MAX_TRACE_SAMPLES = 1_000_000
+
+
+def _check_step(step: float, sweep: float) -> None:
+    n = math.floor(sweep / step + 1e-9) + 1
+    if n > MAX_TRACE_SAMPLES:
+        raise ValueError(f"--step: {step:g} deg gives {n} samples over {sweep:g} deg; at most "
+                         f"{MAX_TRACE_SAMPLES} per trace (use a larger step)")
 
 
 # ---- jiang -----------------------------------------------------------------
@@ -100,7 +120,13 @@ def _jiang(args) -> int:
         ds = load_dataset(args.dataset)
     else:
         m = _machine(args.machine)
-        plan = dbb.four_step_plan(m, step=args.step, setups=setups)
+        _check_step(args.step, 359.0)  # the C step of the default plan sweeps 0..359 deg
+        try:
+            plan = dbb.four_step_plan(m, step=args.step, setups=setups)
+        except ValueError as e:
+            if "plan.step" in str(e):
+                raise ValueError(f"--step: {e}") from None
+            raise
         if args.csv:
             traces = {}
             for part in args.csv.split(","):
@@ -199,6 +225,7 @@ def _circular(args) -> int:
     traces = []
     if args.simulate is not None:
         m = _machine(args.machine)
+        _check_step(args.step, 360.0)
         plan = dbb.planar_plan(m, args.plane, args.radius, step=args.step)
         ds = simulate(m, plan, errors=_values(args.simulate, "--simulate"), sigma={"dbb": args.sigma},
                       seed=args.seed)
@@ -262,6 +289,9 @@ def _plot(args) -> int:
 
 def register(sub) -> None:
     """Add the ``dbb`` subcommand group to the main parser's subparsers."""
+    from .cli import POSITIVE, SEED, SIGMA, _float_type
+
+    FINITE = _float_type()
     RD = argparse.RawDescriptionHelpFormatter
     pd = sub.add_parser("dbb", help="double ball bar tests: jiang, wang, circular, plot", formatter_class=RD,
                         description="Double ball bar tests (docs/dbb.md).",
@@ -283,9 +313,9 @@ def register(sub) -> None:
     pj.add_argument("--simulate", metavar="ERRORS",
                     help="simulate the test: NAME=VALUE,... (mm, rad), a JSON file, or 'paper' (Tables 2-3)")
     pj.add_argument("--csv", metavar="SETUP=FILE,...", help="readings of the four steps from CSV files")
-    pj.add_argument("--sigma", type=float, default=0.0003, help="simulated reading noise, mm (default 0.0003)")
-    pj.add_argument("--seed", type=int, default=1)
-    pj.add_argument("--step", type=float, default=1.0, help="deg between samples of a planned test")
+    pj.add_argument("--sigma", type=SIGMA, default=0.0003, help="simulated reading noise, mm (default 0.0003)")
+    pj.add_argument("--seed", type=SEED, default=1, help="random seed, 0 <= seed < 2^64 (default 1)")
+    pj.add_argument("--step", type=POSITIVE, default=1.0, help="deg between samples of a planned test")
     pj.add_argument("--setups", default="A1,A2,C1,C2", help="setup ids of the four steps")
     pj.add_argument("--a-pivot-offset", metavar="DY,DZ", help="A pivot start-position error P0P0' (mm), eq. 1")
     pj.add_argument("--c-pivot-offset", metavar="DX,DY", help="C pivot start-position error P0P0' (mm), eq. 1")
@@ -312,15 +342,15 @@ def register(sub) -> None:
     pw.add_argument("dataset", nargs="?", help="dataset JSON with the Wang trace (identify)")
     pw.add_argument("--machine", help="machine JSON (default: the dataset's machine)")
     pw.add_argument("--table-ball", metavar="X,Y,Z", help="table ball, workpiece frame (mm); default 0,150,130")
-    pw.add_argument("--radius", type=float, default=80.0, help="circle radius (mm), default 80")
-    pw.add_argument("--height", type=float, default=60.0,
+    pw.add_argument("--radius", type=POSITIVE, default=80.0, help="circle radius (mm), default 80")
+    pw.add_argument("--height", type=FINITE, default=60.0,
                     help="spindle ball above the circle plane (mm), default 60 (100 mm bar)")
-    pw.add_argument("--every", type=float, default=45.0, help="table rows every N deg (default 45)")
+    pw.add_argument("--every", type=POSITIVE, default=45.0, help="table rows every N deg (default 45)")
     pw.add_argument("--patterns", metavar="PNG", help="write the single-error patterns (polar plots)")
     pw.add_argument("--pattern-errors", metavar="ERRORS", help="errors for --patterns (default 10 µm, 50 µrad)")
     pw.add_argument("--simulate", metavar="ERRORS", help="simulate a trace: NAME=VALUE,..., a JSON file or 'paper'")
-    pw.add_argument("--sigma", type=float, default=0.0003, help="simulated reading noise, mm")
-    pw.add_argument("--seed", type=int, default=1)
+    pw.add_argument("--sigma", type=SIGMA, default=0.0003, help="simulated reading noise, mm")
+    pw.add_argument("--seed", type=SEED, default=1, help="random seed, 0 <= seed < 2^64 (default 1)")
     pw.add_argument("--setup", default="W1", help="DBB setup id of the trace (default W1)")
     pw.add_argument("--estimate", help="errors to identify (default EX0C,EY0C,EZ0C,EA0C)")
     pw.add_argument("--save-dataset", help="write the simulated dataset here")
@@ -338,16 +368,16 @@ def register(sub) -> None:
                          "  fivecal dbb circular --machine c600u.json --simulate EXX1=2e-5,EC0Y=3e-5,EXXb=0.002 "
                          "--radius 100")
     pc.add_argument("runs", nargs="*", help="CSV files (angle, reading): one or two runs")
-    pc.add_argument("--radius", type=float, required=True, help="nominal radius = bar length (mm)")
+    pc.add_argument("--radius", type=POSITIVE, required=True, help="nominal radius = bar length (mm)")
     pc.add_argument("--plane", default="XY", help="XY, YZ or ZX (angles from the first axis to the second)")
-    pc.add_argument("--feed", type=float, default=None, help="feed (mm/min): servo mismatch as a time")
+    pc.add_argument("--feed", type=POSITIVE, default=None, help="feed (mm/min): servo mismatch as a time")
     pc.add_argument("--dataset", help="dataset JSON instead of CSV files")
     pc.add_argument("--setups", default="P-,P+", help="setup ids of the runs in --dataset")
     pc.add_argument("--machine", help="machine JSON for --simulate")
     pc.add_argument("--simulate", metavar="ERRORS", help="simulate CW and CCW runs with these errors")
-    pc.add_argument("--sigma", type=float, default=0.0003, help="simulated reading noise, mm")
-    pc.add_argument("--seed", type=int, default=1)
-    pc.add_argument("--step", type=float, default=1.0, help="deg between simulated samples")
+    pc.add_argument("--sigma", type=SIGMA, default=0.0003, help="simulated reading noise, mm")
+    pc.add_argument("--seed", type=SEED, default=1, help="random seed, 0 <= seed < 2^64 (default 1)")
+    pc.add_argument("--step", type=POSITIVE, default=1.0, help="deg between simulated samples")
     pc.add_argument("--out", help="write the result JSON here")
     pc.add_argument("--plot", help="write the CW/CCW polar plot (PNG)")
     pc.set_defaults(func=_circular)
@@ -358,10 +388,10 @@ def register(sub) -> None:
                          epilog="examples:\n  fivecal dbb plot cw.csv ccw.csv --radius 100 --out xy.png\n"
                          "  fivecal dbb plot dataset.json --setup W1 --radius 100 --out w1.png")
     pp.add_argument("inputs", nargs="+", help="CSV files and/or dataset JSON files")
-    pp.add_argument("--radius", type=float, required=True, help="nominal radius (mm)")
+    pp.add_argument("--radius", type=POSITIVE, required=True, help="nominal radius (mm)")
     pp.add_argument("--setup", help="dataset setups to plot (comma separated; default all)")
     pp.add_argument("--plane", default=None, help="plane labels, e.g. XY (default from the data or XY)")
-    pp.add_argument("--scale", type=float, default=None, help="ring spacing in µm (default automatic)")
+    pp.add_argument("--scale", type=POSITIVE, default=None, help="ring spacing in µm (default automatic)")
     pp.add_argument("--title", default=None)
     pp.add_argument("--out", required=True, help="PNG to write")
     pp.set_defaults(func=_plot)

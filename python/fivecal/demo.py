@@ -45,7 +45,9 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
     held-out and setup-only prediction rms (mm) and the largest |z|."""
     t0 = time.perf_counter()
     say = print if verbose else (lambda *a, **k: None)
-    os.makedirs(out, exist_ok=True)
+    from .files import make_dirs
+
+    make_dirs(out)
     machine = Machine.load(example_machine_path("hu40t"))
     artefact = tango.octagonal_table()
     plan = tango.hu40t_plan(artefact, machine)
@@ -96,8 +98,9 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
               f"    setup-only model (S1) predicts them to {rms(pred_nominal) * 1e3:.2f} µm rms, "
               f"the identified S3 model to {rms(pred) * 1e3:.2f} µm rms"]
     text = report + "\n" + "\n".join(lines)
-    with open(os.path.join(out, "report.txt"), "w") as f:
-        f.write(text + "\n")
+    from .files import write_text
+
+    write_text(os.path.join(out, "report.txt"), text + "\n")
 
     from .plots import plot_residual_vectors
     from .report import table_html, write_report

@@ -63,9 +63,9 @@ class Result:
 
     def save(self, path) -> None:
         """Write :meth:`to_json` to ``path`` (the result file ``fivecal compensate`` reads)."""
-        with open(path, "w") as f:
-            f.write(self.to_json())
-            f.write("\n")
+        from . import files
+
+        files.write_text(path, self.to_json() + "\n")
 
     def report(self) -> str:
         """A readable text report in µm, µrad and µm/m."""

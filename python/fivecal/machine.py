@@ -38,13 +38,23 @@ class Machine:
     @classmethod
     def load(cls, path: Union[str, os.PathLike]) -> "Machine":
         """Load a machine definition (JSON, or TOML with the same keys)."""
-        path = os.fspath(path)
-        if path.endswith(".toml"):
-            import tomllib
+        from . import files
 
-            with open(path, "rb") as f:
-                return cls.from_dict(tomllib.load(f))
-        return cls(_core.Machine.load(path))
+        path = os.fspath(path)
+        text = files.read_text(path, "machine")
+        if path.endswith(".toml"):
+            try:
+                import tomllib
+            except ImportError:  # Python < 3.11: the same parser as the tomli package
+                import tomli as tomllib
+            try:
+                return cls.from_dict(tomllib.loads(text))
+            except tomllib.TOMLDecodeError as e:
+                raise ValueError(f"{path}: not valid TOML ({e})") from None
+        try:
+            return cls(_core.Machine.from_json(text))
+        except ValueError as e:
+            raise ValueError(f"{path}: {e}") from None
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Machine":

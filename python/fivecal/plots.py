@@ -5,16 +5,41 @@ from typing import Mapping, Optional
 
 import numpy as np
 
+from .files import save_figure
 from .units import display_scale
 
 
 def _pyplot():
-    import matplotlib
+    """The part of pyplot the plots use, on private ``Figure`` objects with
+    an Agg canvas: no pyplot global state, and the caller's matplotlib
+    backend (a notebook's, a GUI's) is left alone."""
+    return _Figures
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    return plt
+class _Figures:
+    @staticmethod
+    def figure(**kw):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(**kw)
+        FigureCanvasAgg(fig)
+        return fig
+
+    @staticmethod
+    def subplots(nrows: int = 1, ncols: int = 1, squeeze: bool = True, subplot_kw=None, **kw):
+        fig = _Figures.figure(**kw)
+        return fig, fig.subplots(nrows, ncols, squeeze=squeeze, subplot_kw=subplot_kw)
+
+    @staticmethod
+    def get_cmap(name: str):
+        import matplotlib
+
+        return matplotlib.colormaps[name]
+
+    @staticmethod
+    def close(fig) -> None:
+        """Nothing to release: the figure is not registered with pyplot."""
 
 
 def plot_parameters(result, path: str, names=None, truth: Optional[Mapping[str, float]] = None,
@@ -45,7 +70,7 @@ def plot_parameters(result, path: str, names=None, truth: Optional[Mapping[str, 
     axes[0][0].legend(loc="best", fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -157,7 +182,7 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
     rms = float(np.sqrt(np.mean(np.square(result.residuals)))) if np.size(result.residuals) else 0.0
     fig.suptitle(f"{title}\nmagnified {mag:g}x; residual rms {rms * 1e3:.2f} µm, largest vector "
                  f"{vmax * 1e3:.2f} µm; colour = indexation", fontsize=12)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -179,7 +204,7 @@ def plot_residual_histogram(result, path: str) -> str:
     ax.set_ylabel("count")
     ax.set_title(f"Residuals: rms {result.rms * 1e3:.3f} µm, σ̂ {result.sigma * 1e3:.3f} µm")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -208,6 +233,6 @@ def plot_correlation(result, path: str, names=None, title: str = "Parameter corr
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03, label="correlation coefficient")
     ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path

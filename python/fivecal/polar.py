@@ -24,6 +24,7 @@ from typing import Iterable, Mapping, Optional, Sequence
 import numpy as np
 
 from .dbb import Trace
+from .files import save_figure
 
 _NICE = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0)
 CW_COLOR, CCW_COLOR = "#1f5fbf", "#d62728"
@@ -31,12 +32,9 @@ _PALETTE = ("#d62728", "#1f5fbf", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#
 
 
 def _pyplot():
-    import matplotlib
+    from .plots import _pyplot as figures
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return figures()
 
 
 def nice_scale(max_abs_um: float) -> float:
@@ -151,7 +149,7 @@ def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = 
         fig.text(0.62, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
                  weight="bold" if bold else "normal")
         y -= 0.031
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -188,7 +186,7 @@ def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols
         fig.suptitle(title, fontsize=13, y=0.995)
     if footer:
         fig.text(0.02, 0.12 / H, footer, fontsize=8.5, color="#333", family="monospace", va="bottom")
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 

@@ -387,7 +387,9 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     from . import __version__, plots
 
     out_dir = os.fspath(out_dir)
-    os.makedirs(out_dir, exist_ok=True)
+    from .files import make_dirs
+
+    make_dirs(out_dir)
     ds = result.dataset
     machine = ds.machine
     machine_names = set(machine.parameter_names())
@@ -462,8 +464,9 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
            f"<title>{_e(title)}</title><style>{_CSS}</style></head><body><main>\n"
            + "\n".join(body) + "\n</main></body></html>\n")
     path = os.path.join(out_dir, "report.html")
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(doc)
+    from .files import write_text
+
+    write_text(path, doc)
     return path
 
 

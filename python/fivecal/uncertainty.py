@@ -56,18 +56,34 @@ def make_spec(machine, plan: Sequence[Mapping], errors: Optional[Mapping] = None
               setup: Optional[Mapping[str, float]] = None) -> dict:
     """The simulation spec :func:`fivecal.simulate` builds from the same
     arguments (``cpp/include/fivecal/simulate.h``), as a dict."""
+    from .simulation import seed_value
+
     machine = Machine.from_dict(machine)
     return {"machine": machine.to_dict(), "errors": dict(errors or {}), "setup": dict(setup or {}),
             "probe": {"tip_radius": float(tip_radius)}, "artefact": dict(artefact or {}),
-            "plan": list(plan), "sigma": sigma, "seed": int(seed)}
+            "plan": list(plan), "sigma": sigma, "seed": seed_value(seed)}
 
 
 def _noise_levels(sigma, default: float) -> tuple:
     if sigma is None:
         return default, default, default
+
+    def level(v, name):
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            x = float("nan")
+        if isinstance(v, bool) or not (math.isfinite(x) and x >= 0):
+            raise ValueError(f"{name}: must be a finite number >= 0 mm, got {v!r}")
+        return x
+
     if isinstance(sigma, Mapping):
-        return tuple(float(sigma.get(k, default)) for k in ("probe", "dbb", "ball3d"))
-    return float(sigma), float(sigma), float(sigma)
+        unknown = sorted(set(map(str, sigma)) - {"probe", "dbb", "ball3d"})
+        if unknown:
+            raise ValueError(f"sigma.{unknown[0]}: unknown key (probe, dbb, ball3d)")
+        return tuple(level(sigma.get(k, default), f"sigma.{k}") for k in ("probe", "dbb", "ball3d"))
+    x = level(sigma, "sigma")
+    return x, x, x
 
 
 def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
@@ -81,8 +97,9 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
     if isinstance(source, _core.SimulationPlan):
         return source, None
     if isinstance(source, (str, os.PathLike)):
-        with open(source) as f:
-            source = json.load(f)
+        from . import files
+
+        source = files.read_json(source, "spec or dataset")
     if isinstance(source, Mapping) and "plan" in source and "observations" not in source:
         spec = dict(source)
         if sigma is not None:
@@ -184,9 +201,9 @@ class MonteCarloResult:
         return self._core.to_json(include_samples)
 
     def save(self, path, include_samples: bool = False) -> None:
-        with open(path, "w") as f:
-            f.write(self.to_json(include_samples))
-            f.write("\n")
+        from . import files
+
+        files.write_text(path, self.to_json(include_samples) + "\n")
 
     def report(self, names: Optional[Iterable[str]] = None) -> str:
         """Table in µm, µrad, µm/m: MC mean and u, shortest interval, GUM u,
@@ -201,17 +218,53 @@ class MonteCarloResult:
                  "",
                  f"  {'parameter':<14}{'mean':>11}{'u MC':>9}{'low':>11}{'high':>11}{'u GUM':>9}"
                  f"{'ratio':>7}{'delta':>8}{'d_low':>8}{'d_high':>8}  verdict  unit"]
+        needed = self.trials_needed(names)
+        # Too few trials when most parameters are not stable at the tolerance:
+        # their verdicts would only reflect Monte Carlo noise.
+        judged = needed is None or 2 * sum(bool(self.stable[k]) for k in names) >= len(names)
+        if not judged:
+            lines[-1] = lines[-1].replace("  verdict  unit", "  unit")
         for k in names:
             f, unit = display_scale(k)
             lines.append(f"  {k:<14}{self.mean[k] * f:>11.3f}{self.std[k] * f:>9.3f}{self.low[k] * f:>11.3f}"
                          f"{self.high[k] * f:>11.3f}{self.gum_std[k] * f:>9.3f}{self.std_ratio[k]:>7.3f}"
                          f"{self.tolerance[k] * f:>8.3f}{self.d_low[k] * f:>8.3f}{self.d_high[k] * f:>8.3f}"
-                         f"  {self.verdict(k)}  {unit}")
-        nv = sum(bool(self.validated[k]) for k in names)
+                         + (f"  {self.verdict(k)}" if judged else "") + f"  {unit}")
         lines.append("")
-        lines.append(f"  GUM validated for {nv} of {len(names)} parameters "
-                     f"(max |u_MC/u_GUM - 1| = {max(abs(self.std_ratio[k] - 1) for k in names):.3f})")
+        ratio = max((abs(self.std_ratio[k] - 1) for k in names), default=float("nan"))
+        if not judged:
+            lines.append(f"  GUM not judged: {self.used} trials are too few for the numerical tolerance of "
+                         f"{self.significant_digits} significant digits; about {needed} trials are needed "
+                         f"(max |u_MC/u_GUM - 1| = {ratio:.3f})")
+        else:
+            nv = sum(bool(self.validated[k]) for k in names)
+            lines.append(f"  GUM validated for {nv} of {len(names)} parameters "
+                         f"(max |u_MC/u_GUM - 1| = {ratio:.3f})")
+            if needed is not None:
+                lines.append(f"  {sum(not self.stable[k] for k in names)} not stable at this tolerance: about "
+                             f"{needed} trials are needed to judge them")
         return "\n".join(lines)
+
+    def trials_needed(self, names: Optional[Iterable[str]] = None) -> Optional[int]:
+        """None when the Monte Carlo is stable at the numerical tolerance for
+        every parameter (its JCGM 101 §8 verdicts mean something); otherwise
+        about how many trials would make it so.  The stability figure (twice
+        the spread of the block means) falls as 1/sqrt(M)."""
+        names = list(names) if names is not None else self.names
+        worst = 1.0
+        for k in names:
+            if self.stable[k]:
+                continue
+            s, tol = self.stability[k], self.tolerance[k]
+            if math.isfinite(s) and tol > 0:
+                worst = max(worst, (s / tol) ** 2)
+            else:
+                worst = max(worst, 10.0)
+        if worst == 1.0 and all(self.stable[k] for k in names):
+            return None
+        m = max(self.used, 2) * worst * 1.1
+        digits = 10 ** max(0, int(math.floor(math.log10(m))) - 1)  # two significant digits, rounded up
+        return int(math.ceil(m / digits) * digits)
 
     def plot(self, path: str, names: Optional[Iterable[str]] = None, bins: int = 40) -> str:
         """Histograms of the trial values with the GUM normal density, the
@@ -243,7 +296,9 @@ class MonteCarloResult:
         for ax in list(axes.flat)[len(names):]:
             ax.axis("off")
         fig.tight_layout()
-        fig.savefig(path, dpi=110)
+        from .files import save_figure
+
+        save_figure(fig, path, dpi=110)
         plt.close(fig)
         return path
 
@@ -277,9 +332,19 @@ def monte_carlo(dataset_or_spec, estimate: Union[str, Sequence[str]] = "auto", t
     terminal or with ``FIVECAL_PROGRESS=1``), or a callable ``(done, total)
     -> bool`` called about every 0.1 s (False cancels).  Ctrl-C cancels too.
     """
+    from .simulation import integer, seed_value
+
+    trials = integer(trials, "trials", 2, 2 ** 31)
+    threads = integer(threads, "threads", 0, 2 ** 16)
+    seed = seed_value(seed)
+    significant_digits = integer(significant_digits, "significant_digits", 1, 16)
+    blocks = integer(blocks, "blocks", 2, 2 ** 31)
+    max_iterations = integer(max_iterations, "max_iterations", 1, 2 ** 31)
+    if not (0 < probability < 1):
+        raise ValueError(f"probability: must be between 0 and 1, got {probability!r}")
     plan, fit = simulation_plan(dataset_or_spec, estimate=estimate, sigma=sigma, fix=fix,
                                 initial=initial)
-    bar = _Bar(int(trials)) if progress is True else None
+    bar = _Bar(trials) if progress is True else None
     cb = bar if bar is not None else (progress or None)
     cov = None if input_covariance is None else np.asarray(input_covariance, float)
     kw = {} if selection_tolerance is None else {"selection_tolerance": float(selection_tolerance)}
@@ -359,9 +424,9 @@ class CyclesUncertainty:
         return json.loads(self._core.to_json())
 
     def save(self, path) -> None:
-        with open(path, "w") as f:
-            f.write(self._core.to_json())
-            f.write("\n")
+        from . import files
+
+        files.write_text(path, self._core.to_json() + "\n")
 
     def report(self, names: Optional[Iterable[str]] = None) -> str:
         """Table in µm, µrad, µm/m (machine errors first): value, u, U = k u

@@ -1,0 +1,334 @@
+"""Reading inputs and writing outputs safely.
+
+Every file the package writes goes through :func:`write_text` /
+:func:`write_bytes` (or :func:`save_figure`): the data goes to a temporary
+file in the destination's folder, is flushed and fsynced, and then replaces
+the destination with ``os.replace``.  An interrupted write (Ctrl-C, SIGTERM,
+a full disk) therefore leaves either the complete old file or the complete
+new one, never an empty or truncated file.
+
+Inputs are read with :func:`read_text` / :func:`read_bytes`: regular files
+(or pipes) up to :data:`MAX_INPUT_BYTES`; devices and directories are
+refused, and text must be UTF-8 without NUL bytes.  Errors name the file.
+
+Inside :func:`transaction` (the ``fivecal`` command runs each command in
+one), every path read is remembered, a write over one of them is refused,
+and when the command fails the files it created are removed and the files
+it replaced get their previous content back.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import stat
+import tempfile
+from typing import List, Optional, Sequence, Tuple, Union
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+#: Largest input file read (bytes).  Datasets of 10^6 observations are a few
+#: hundred MB; the cap keeps a wrong path (a device, a huge log) from filling
+#: memory before anything can be said about it.
+MAX_INPUT_BYTES = 2 * 1024 ** 3
+
+_CHUNK = 1 << 20
+
+
+class _Transaction:
+    def __init__(self):
+        self.inputs: List[Tuple[str, Optional[os.stat_result]]] = []
+        self.created: List[str] = []
+        self.backups: List[Tuple[str, str]] = []  # (destination, hard link to its previous content)
+        self.dirs: List[str] = []
+
+    def note_input(self, path: str) -> None:
+        try:
+            st = os.stat(path)
+        except OSError:
+            st = None
+        self.inputs.append((path, st))
+
+
+_active: List[_Transaction] = []
+
+
+def _same(a: os.stat_result, b: os.stat_result) -> bool:
+    return a.st_dev == b.st_dev and a.st_ino == b.st_ino
+
+
+def _input_clash(dest: str) -> Optional[str]:
+    """The input path of the active transaction that ``dest`` resolves to."""
+    if not _active:
+        return None
+    try:
+        st = os.stat(dest)
+    except OSError:
+        st = None
+    real = os.path.realpath(dest)
+    for path, ist in _active[-1].inputs:
+        if st is not None and ist is not None and _same(st, ist):
+            return path
+        if os.path.realpath(path) == real:
+            return path
+    return None
+
+
+@contextlib.contextmanager
+def transaction():
+    """All-or-nothing outputs: inside the block writes over an input read in
+    it are refused; if the block raises (or is interrupted), files it created
+    are removed, files it replaced are restored and folders it created are
+    removed when empty."""
+    t = _Transaction()
+    _active.append(t)
+    ok = False
+    try:
+        yield t
+        ok = True
+    finally:
+        _active.remove(t)
+        if ok:
+            for _, bak in t.backups:
+                _unlink_quiet(bak)
+        else:
+            for dest, bak in reversed(t.backups):
+                try:
+                    os.replace(bak, dest)
+                except OSError:
+                    _unlink_quiet(bak)
+            for p in reversed(t.created):
+                _unlink_quiet(p)
+            for d in reversed(t.dirs):
+                with contextlib.suppress(OSError):
+                    os.rmdir(d)
+
+
+def _unlink_quiet(p: str) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(p)
+
+
+# --------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------
+
+def read_bytes(path: PathLike, what: str = "input", max_bytes: int = MAX_INPUT_BYTES) -> bytes:
+    """The content of a regular file or a pipe, at most ``max_bytes``;
+    ValueError naming the file for devices, folders, unreadable or too large
+    files."""
+    path = os.fspath(path)
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read {what} ({e.strerror})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ValueError(f"{path}: is a folder, expected a {what} file")
+    if not (stat.S_ISREG(st.st_mode) or stat.S_ISFIFO(st.st_mode)):
+        raise ValueError(f"{path}: not a regular file (a device or socket); expected a {what} file")
+    if stat.S_ISREG(st.st_mode) and st.st_size > max_bytes:
+        raise ValueError(f"{path}: {st.st_size} bytes; {what} files larger than {max_bytes} bytes are refused")
+    if _active:
+        _active[-1].note_input(path)
+    try:
+        with open(path, "rb") as f:
+            parts, n = [], 0
+            while True:
+                b = f.read(min(_CHUNK, max_bytes + 1 - n))
+                if not b:
+                    break
+                parts.append(b)
+                n += len(b)
+                if n > max_bytes:
+                    raise ValueError(f"{path}: more than {max_bytes} bytes; {what} files this large are refused")
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read {what} ({e.strerror})") from None
+    return b"".join(parts)
+
+
+def decode_text(data: bytes, path: str) -> str:
+    """UTF-8 text (a leading BOM is dropped); ValueError naming the file and
+    the byte offset for binary data or another encoding."""
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise ValueError(f"{path}: binary data (a NUL byte at byte offset {nul}), expected UTF-8 text")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{path}: not UTF-8 text (byte 0x{data[e.start]:02x} at byte offset {e.start}); "
+                         "save the file as UTF-8") from None
+    return text[1:] if text.startswith("\ufeff") else text
+
+
+def read_text(path: PathLike, what: str = "input", max_bytes: int = MAX_INPUT_BYTES) -> str:
+    """:func:`read_bytes` decoded as UTF-8 (see :func:`decode_text`)."""
+    path = os.fspath(path)
+    return decode_text(read_bytes(path, what, max_bytes), path)
+
+
+def read_json(path: PathLike, what: str = "input"):
+    """A JSON document from a file; ValueError naming the file, line and column."""
+    import json
+
+    path = os.fspath(path)
+    text = read_text(path, what)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON ({e.msg} at line {e.lineno}, column {e.colno})") from None
+    except RecursionError:
+        raise ValueError(f"{path}: JSON nested too deeply") from None
+
+
+# --------------------------------------------------------------------------
+# Checks before a command writes anything
+# --------------------------------------------------------------------------
+
+def check_outputs(inputs: Sequence[Tuple[str, PathLike]], outputs: Sequence[Tuple[str, PathLike]]) -> None:
+    """Refuse (ValueError naming both) an output that is, or resolves through
+    a symbolic or hard link to, one of the inputs or another output.
+    ``inputs`` and ``outputs`` are ``(label, path)`` pairs; label is e.g.
+    ``"--out"`` or ``"dataset"``."""
+    def key(p):
+        try:
+            st = os.stat(p)
+            return ("ino", st.st_dev, st.st_ino)
+        except OSError:
+            return ("path", os.path.realpath(p))
+
+    seen = {}
+    for label, p in inputs:
+        if p is None:
+            continue
+        seen.setdefault(key(os.fspath(p)), (label, os.fspath(p), True))
+    for label, p in outputs:
+        if p is None:
+            continue
+        p = os.fspath(p)
+        k = key(p)
+        if k in seen:
+            other_label, other, is_input = seen[k]
+            if is_input:
+                raise ValueError(f"{label} {p}: is the input {other_label} {other}; refusing to overwrite "
+                                 "an input (choose another output file)")
+            raise ValueError(f"{label} {p}: the same file as {other_label} {other}; give each output its own file")
+        if os.path.isdir(p) and not label.endswith("DIR"):
+            raise ValueError(f"{label} {p}: is a folder, expected a file name")
+        seen[k] = (label, p, False)
+
+
+# --------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------
+
+def _new_file_mode() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+#: Test hook: called with the open temporary file between the data and the
+#: fsync (a test makes the write slow to interrupt it).
+_before_replace = None
+
+
+def write_bytes(path: PathLike, data: bytes) -> str:
+    """Atomically replace ``path`` (through a symbolic link: its target) with
+    ``data``; returns ``path``.  ValueError inside a :func:`transaction` when
+    ``path`` is one of its inputs."""
+    path = os.fspath(path)
+    clash = _input_clash(path)
+    if clash is not None:
+        raise ValueError(f"{path}: is the input {clash}; refusing to overwrite an input")
+    dest = os.path.realpath(path)
+    folder = os.path.dirname(dest) or "."
+    if os.path.isdir(dest):
+        raise ValueError(f"{path}: is a folder, expected a file name")
+    try:
+        old = os.stat(dest)
+    except OSError:
+        old = None
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{os.path.basename(dest)}.", suffix=".tmp")
+    except OSError as e:
+        raise ValueError(f"{path}: cannot write ({e.strerror})") from None
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            if _before_replace is not None:
+                _before_replace(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, stat.S_IMODE(old.st_mode) if old is not None else _new_file_mode())
+        backup = None
+        if _active and old is not None:
+            backup = tmp + ".old"
+            try:
+                os.link(dest, backup)
+            except OSError:
+                backup = None
+        os.replace(tmp, dest)
+    except BaseException as e:
+        _unlink_quiet(tmp)
+        if isinstance(e, OSError):
+            raise ValueError(f"{path}: cannot write ({e.strerror or e})") from None
+        raise
+    if _active:
+        if old is None:
+            _active[-1].created.append(dest)
+        elif backup is not None:
+            _active[-1].backups.append((dest, backup))
+    with contextlib.suppress(OSError):  # the rename itself durable
+        dfd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    return path
+
+
+def write_text(path: PathLike, text: str, encoding: str = "utf-8") -> str:
+    """:func:`write_bytes` of ``text`` encoded (UTF-8 by default)."""
+    return write_bytes(path, text.encode(encoding))
+
+
+def write_json(path: PathLike, obj, indent: int = 1, **kw) -> str:
+    """``obj`` as JSON text (and a final newline), written atomically."""
+    import json
+
+    return write_text(path, json.dumps(obj, indent=indent, **kw) + "\n")
+
+
+def make_dirs(path: PathLike) -> str:
+    """``os.makedirs(path, exist_ok=True)``; inside a :func:`transaction` the
+    folders created are removed again (when empty) if the command fails."""
+    path = os.fspath(path)
+    missing = []
+    p = os.path.abspath(path)
+    while p and not os.path.exists(p):
+        missing.append(p)
+        parent = os.path.dirname(p)
+        if parent == p:
+            break
+        p = parent
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"{path}: cannot create the folder ({e.strerror})") from None
+    if not os.path.isdir(path):
+        raise ValueError(f"{path}: exists and is not a folder")
+    if _active:
+        _active[-1].dirs.extend(reversed(missing))
+    return path
+
+
+def save_figure(fig, path: PathLike, **kw) -> str:
+    """Render a matplotlib Figure (PNG unless the name says otherwise) to
+    memory, then write it atomically."""
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower().lstrip(".")
+    buf = io.BytesIO()
+    fig.savefig(buf, format=kw.pop("format", None) or (ext if ext in ("png", "pdf", "svg", "eps", "ps", "jpg",
+                                                                        "jpeg", "tif", "tiff", "webp")
+                                                       else "png"), **kw)
+    return write_bytes(path, buf.getvalue())
