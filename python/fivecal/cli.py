@@ -12,7 +12,7 @@ import os
 import sys
 import time
 
-from . import __version__
+from . import __version__, schema
 
 
 def _identify(args) -> int:
@@ -42,7 +42,7 @@ def _identify(args) -> int:
 def _read_json(path: str, what: str):
     try:
         with open(path) as f:
-            return json.load(f)
+            return schema.validate(json.load(f), schema.guess_kind(what), path)
     except OSError as e:
         raise ValueError(f"{path}: cannot read {what} ({e.strerror})") from None
     except json.JSONDecodeError as e:

@@ -30,7 +30,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _core
+from . import _core, schema
 from .machine import Machine
 from .progress import Progress
 from .units import display_scale
@@ -56,7 +56,7 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
         where = os.fspath(source)
         try:
             with open(where) as f:
-                source = json.load(f)
+                source = schema.validate(json.load(f), "errors", where)
         except OSError as e:
             raise ValueError(f"{where}: cannot read ({e.strerror})") from None
         except json.JSONDecodeError as e:
@@ -675,7 +675,7 @@ def error_table(result, machine: Union[Machine, Mapping],
     std: Dict[str, float] = {}
     if isinstance(result, (str, os.PathLike)):
         with open(os.fspath(result)) as f:
-            result = json.load(f)
+            result = schema.validate(json.load(f), "errors", os.fspath(result))
     if hasattr(result, "std") and hasattr(result, "estimated"):
         std = dict(result.std)
     elif isinstance(result, Mapping) and isinstance(result.get("parameters"), Mapping):

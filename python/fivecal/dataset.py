@@ -9,7 +9,7 @@ from typing import Iterable, Mapping, Union
 
 import numpy as np
 
-from . import _core, _json
+from . import _core, _json, schema
 from .machine import Machine
 
 
@@ -33,7 +33,7 @@ class Dataset:
         ValueError names the observation and field."""
         if isinstance(d, Dataset):
             return d
-        return cls(_core.Dataset.from_json(dumps(d)))
+        return cls(_core.Dataset.from_json(schema.checked_dumps(d, "dataset")))
 
     def to_dict(self) -> dict:
         """The dataset as a JSON-ready dict (DESIGN.md format, mm / degrees)."""
@@ -88,6 +88,7 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
             text = f.read()
     except OSError as e:
         raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+    schema.check_text(text, "dataset", path)
     try:
         return Dataset(_core.Dataset.from_json(text))
     except ValueError as e:

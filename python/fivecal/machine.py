@@ -13,7 +13,7 @@ from typing import Mapping, Optional, Union
 
 import numpy as np
 
-from . import _core
+from . import _core, schema
 from ._json import dumps
 
 ArrayLike = Union[float, np.ndarray, list]
@@ -57,6 +57,7 @@ class Machine:
 
             with open(path, "rb") as f:
                 return cls.from_dict(tomllib.load(f))
+        schema.check_file(path, "machine")
         return cls(_core.Machine.load(path))
 
     @classmethod
@@ -68,7 +69,7 @@ class Machine:
             return d
         if not isinstance(d, Mapping):
             raise ValueError("machine: expected a mapping with 'topology' and 'axes'")
-        return cls(_core.Machine.from_json(dumps(d, "machine")))
+        return cls(_core.Machine.from_json(schema.checked_dumps(d, "machine")))
 
     def to_dict(self) -> dict:
         """The machine definition as a JSON-ready dict (mm, unit directions)."""

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from typing import Mapping, Optional, Sequence, Union
 
-from . import _core
-from .dataset import Dataset, dumps
+from . import _core, schema
+from .dataset import Dataset
 from .machine import Machine
 
 
@@ -27,4 +27,4 @@ def simulate(machine: Union[Machine, Mapping], plan: Sequence[Mapping], errors: 
     spec = {"machine": machine.to_dict(), "errors": dict(errors or {}), "setup": dict(setup or {}),
             "probe": {"tip_radius": float(tip_radius)}, "artefact": dict(artefact or {}),
             "plan": list(plan), "sigma": sigma, "seed": int(seed)}
-    return Dataset(_core.simulate(dumps(spec, "simulate")))
+    return Dataset(_core.simulate(schema.checked_dumps(spec, "spec")))
