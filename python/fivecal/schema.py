@@ -170,6 +170,8 @@ def _message(error, root: str) -> str:
         return f"{where}: must be <= {error.validator_value}, got {inst!r}"
     if v == "pattern" and error.validator_value == "^[^.]+$":
         return f"{where}: {inst!r} must not contain '.'"
+    if v == "not" and error.validator_value == {"required": ["S", "C1"]}:
+        return f"{where}: both 'S' and its alias 'C1' are given; keep one"
     if v == "minLength":
         return f"{where}: empty string"
     if v == "anyOf" and isinstance(sch.get("anyOf"), list) and error.context:

@@ -196,7 +196,7 @@ def test_unknown_key_is_refused_with_path_and_did_you_mean(docs, kind, doc, path
 def test_unknown_key_without_a_close_match_lists_the_allowed_keys(docs):
     d = docs["machine"]
     d["colour"] = "red"
-    with pytest.raises(ValueError, match=r"^machine\.colour: unknown key \(allowed: _comment, name, topology, axes"):
+    with pytest.raises(ValueError, match=r"^machine\.colour: unknown key \(allowed: \$schema, name, topology, axes"):
         schema.validate(d, "machine")
 
 
@@ -312,6 +312,23 @@ def test_sigma_and_id_are_observation_keys(dataset_doc):
     d["observations"][0].update({"id": "touch-1", "sigma": 0.0006})
     d["observations"][41].update({"id": "r1", "sigma": [0.001, 0.001, 0.002]})
     schema.validate(d, "dataset")
+
+
+def test_s_and_its_alias_c1_are_not_both_given(dataset_doc):
+    d = copy.deepcopy(dataset_doc)
+    d["observations"][0]["axes"]["C1"] = 0.0
+    with pytest.raises(ValueError, match=r"^dataset\.observations\[0\]\.axes: both 'S' and its alias 'C1'"):
+        schema.validate(d, "dataset")
+    m = machine_doc()
+    m["axes"]["C1"] = m["axes"]["S"]
+    with pytest.raises(ValueError, match=r"^machine\.axes: both 'S' and its alias 'C1'"):
+        schema.validate(m, "machine")
+
+
+def test_files_may_name_their_schema():
+    m = machine_doc()
+    m["$schema"] = "https://fivecal.invalid/schemas/machine.schema.json"
+    schema.validate(m, "machine")
 
 
 def test_machine_priors_are_positive_numbers():
