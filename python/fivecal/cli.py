@@ -301,7 +301,7 @@ def main(argv=None) -> int:
                         "(tip, touched facets, sphere centres, DBB lengths) and print a report.",
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
                         "  fivecal identify tango.json --estimate location,EXX1 --fix EXXb")
-    pi.add_argument("dataset", help="dataset JSON (DESIGN.md format)")
+    pi.add_argument("dataset", help="dataset JSON (format: docs/formats.md)")
     pi.add_argument("--estimate", default="location",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "
                     "(default: location)")

@@ -1,6 +1,6 @@
 """Compensation: from identified errors back to the machine.
 
-Three outputs, all computed on the erroneous model of DESIGN.md:
+Three outputs, all computed on the erroneous model of fivecal (README, "Concepts"):
 
 * :func:`compensate_poses` -- for a list of nominal axis commands (mm,
   degrees), the commands that put the real tool point (and, where the
@@ -609,7 +609,7 @@ def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.Path
 # controller-neutral error table
 # ---------------------------------------------------------------------------
 SIGN_CONVENTION = [
-    "Sign convention (fivecal DESIGN.md machine model):",
+    "Sign convention (fivecal machine model, README \"Concepts\"):",
     "Every axis k has a frame that is parallel to the machine frame F when all axes are at 0 (the zero "
     "pose), with its origin at the axis point p_k of the machine file.",
     "Chains are built from the foundation outward (workpiece side and tool side separately); the parent "

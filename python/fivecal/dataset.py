@@ -1,5 +1,5 @@
 """Dataset: a machine, its artefact and the recorded observations
-(DESIGN.md, "Dataset interchange"). Validated by the C++ core on load; errors
+(format: docs/formats.md, "Dataset"). Validated by the C++ core on load; errors
 name the observation index and field."""
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ class Dataset:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Dataset":
-        """Validate and build from a dict in the DESIGN.md dataset format
+        """Validate and build from a dict in the dataset format (docs/formats.md)
         (mm, degrees for rotary readings); a Dataset is returned as is.
         ValueError names the observation and field."""
         if isinstance(d, Dataset):
@@ -36,7 +36,7 @@ class Dataset:
         return cls(_core.Dataset.from_json(schema.checked_dumps(d, "dataset")))
 
     def to_dict(self) -> dict:
-        """The dataset as a JSON-ready dict (DESIGN.md format, mm / degrees)."""
+        """The dataset as a JSON-ready dict (docs/formats.md, mm / degrees)."""
         if self._dict is None:
             self._dict = json.loads(self._core.to_json())
         return self._dict
@@ -96,7 +96,7 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
 
 
 def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
-    """Write a dataset (validated first) as JSON in the DESIGN.md format."""
+    """Write a dataset (validated first) as JSON in the dataset format (docs/formats.md)."""
     ds = Dataset.from_dict(ds)
     with open(os.fspath(path), "w") as f:
         json.dump(ds.to_dict(), f, indent=1)

@@ -41,7 +41,7 @@ class Machine:
     """A machine tool: topology, axes and tool, with forward and inverse kinematics.
 
     Build one with :meth:`load` (JSON file) or :meth:`from_dict`. The topology
-    string is read from workpiece to tool (``wCBXfZYSt``); see DESIGN.md.
+    string is read from workpiece to tool (``wCBXfZYSt``); see docs/formats.md.
     """
 
     def __init__(self, core: "_core.Machine"):
@@ -62,7 +62,7 @@ class Machine:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Machine":
-        """Build from a machine definition dict (DESIGN.md keys: name, topology,
+        """Build from a machine definition dict (docs/formats.md keys: name, topology,
         axes with direction and point in mm, tool.tip in mm); a Machine is
         returned as is."""
         if isinstance(d, Machine):
