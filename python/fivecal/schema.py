@@ -171,7 +171,7 @@ def _message(error, root: str) -> str:
     if v == "pattern" and error.validator_value == "^[^.]+$":
         return f"{where}: {inst!r} must not contain '.'"
     if v == "not" and error.validator_value == {"required": ["S", "C1"]}:
-        return f"{where}: both 'S' and its alias 'C1' are given; keep one"
+        return f"{where}: duplicate axis 'S': both 'S' and its alias 'C1' are given; keep one"
     if v == "minLength":
         return f"{where}: empty string"
     if v == "anyOf" and isinstance(sch.get("anyOf"), list) and error.context:

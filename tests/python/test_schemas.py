@@ -317,11 +317,11 @@ def test_sigma_and_id_are_observation_keys(dataset_doc):
 def test_s_and_its_alias_c1_are_not_both_given(dataset_doc):
     d = copy.deepcopy(dataset_doc)
     d["observations"][0]["axes"]["C1"] = 0.0
-    with pytest.raises(ValueError, match=r"^dataset\.observations\[0\]\.axes: both 'S' and its alias 'C1'"):
+    with pytest.raises(ValueError, match=r"^dataset\.observations\[0\]\.axes: duplicate axis 'S': both 'S' and its alias 'C1'"):
         schema.validate(d, "dataset")
     m = machine_doc()
     m["axes"]["C1"] = m["axes"]["S"]
-    with pytest.raises(ValueError, match=r"^machine\.axes: both 'S' and its alias 'C1'"):
+    with pytest.raises(ValueError, match=r"^machine\.axes: duplicate axis 'S': both 'S' and its alias 'C1'"):
         schema.validate(m, "machine")
 
 
