@@ -200,7 +200,7 @@ void AxisLine(const FourStepStep& s1, const FourStepStep& s2, const Eigen::Vecto
   *point = s1.spindle_ball + c1.x() * s1.e1 + c1.y() * s1.e2;
 }
 
-// From the four centres to the eight PIGEs (DESIGN.md names and signs).
+// From the four centres to the eight PIGEs (fivecal names and signs).
 Eigen::VectorXd Assemble(const Machine& m, const TableAxes& t, const std::vector<FourStepStep>& st,
                          const Eigen::Vector2d c[4], const FourStepOptions& opt, FourStepResult* out) {
   const Eigen::Vector3d pA = m.axis(t.a).point, pC = m.axis(t.c).point;

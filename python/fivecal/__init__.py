@@ -1,7 +1,7 @@
 """fivecal: geometric error identification for five-axis machine tools.
 
 Units: mm for lengths and linear commands, degrees for rotary commands, rad
-for angular error parameters. See DESIGN.md for the conventions.
+for angular error parameters. Conventions: README "Concepts"; file formats: docs/formats.md.
 """
 from .dataset import Dataset, ball_dataset, load_dataset, save_dataset
 from .identification import Result, identify, resolve_estimate

@@ -14,7 +14,7 @@ import signal
 import sys
 import time
 
-from . import __version__
+from . import __version__, schema
 
 
 def _identify(args) -> int:
@@ -44,7 +44,7 @@ def _identify(args) -> int:
 def _read_json(path: str, what: str):
     from .files import read_json
 
-    return read_json(path, what)
+    return schema.validate(read_json(path, what), schema.guess_kind(what), path)
 
 
 def _axis_values(text: str, option: str) -> dict:
@@ -504,7 +504,7 @@ def main(argv=None) -> int:
                         "(tip, touched facets, sphere centres, DBB lengths) and print a report.",
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
                         "  fivecal identify tango.json --estimate location,EXX1 --fix EXXb")
-    pi.add_argument("dataset", help="dataset JSON (DESIGN.md format)")
+    pi.add_argument("dataset", help="dataset JSON (format: docs/formats.md)")
     pi.add_argument("--estimate", default="location",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "
                     "(default: location)")

@@ -1,6 +1,6 @@
 """Compensation: from identified errors back to the machine.
 
-Three outputs, all computed on the erroneous model of DESIGN.md:
+Three outputs, all computed on the erroneous model of fivecal (README, "Concepts"):
 
 * :func:`compensate_poses` -- for a list of nominal axis commands (mm,
   degrees), the commands that put the real tool point (and, where the
@@ -29,7 +29,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _core, gcode
+from . import _core, gcode, schema
 from .machine import Machine
 from .progress import Progress
 from .units import display_scale
@@ -54,7 +54,7 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
         where = os.fspath(source)
         from . import files
 
-        source = files.read_json(where, "result")
+        source = schema.validate(files.read_json(where, "result"), "errors", where)
     if hasattr(source, "values") and hasattr(source, "estimated"):  # a Result
         source = dict(source.values)
     if not isinstance(source, Mapping):
@@ -362,7 +362,7 @@ def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.Path
 # controller-neutral error table
 # ---------------------------------------------------------------------------
 SIGN_CONVENTION = [
-    "Sign convention (fivecal DESIGN.md machine model):",
+    "Sign convention (fivecal machine model, README \"Concepts\"):",
     "Every axis k has a frame that is parallel to the machine frame F when all axes are at 0 (the zero "
     "pose), with its origin at the axis point p_k of the machine file.",
     "Chains are built from the foundation outward (workpiece side and tool side separately); the parent "
@@ -429,7 +429,7 @@ def error_table(result, machine: Union[Machine, Mapping],
     if isinstance(result, (str, os.PathLike)):
         from . import files
 
-        result = files.read_json(result, "result")
+        result = schema.validate(files.read_json(result, "result"), "errors", os.fspath(result))
     if hasattr(result, "std") and hasattr(result, "estimated"):
         std = dict(result.std)
     elif isinstance(result, Mapping) and isinstance(result.get("parameters"), Mapping):

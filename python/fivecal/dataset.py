@@ -1,5 +1,5 @@
 """Dataset: a machine, its artefact and the recorded observations
-(DESIGN.md, "Dataset interchange"). Validated by the C++ core on load; errors
+(format: docs/formats.md, "Dataset"). Validated by the C++ core on load; errors
 name the observation index and field."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Iterable, Mapping, Union
 
 import numpy as np
 
-from . import _core, _json, plausibility
+from . import _core, _json, plausibility, schema
 from .machine import Machine
 
 
@@ -28,17 +28,17 @@ class Dataset:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Dataset":
-        """Validate and build from a dict in the DESIGN.md dataset format
+        """Validate and build from a dict in the dataset format (docs/formats.md)
         (mm, degrees for rotary readings); a Dataset is returned as is.
         ValueError names the observation and field."""
         if isinstance(d, Dataset):
             return d
-        ds = cls(_core.Dataset.from_json(dumps(d)))
+        ds = cls(_core.Dataset.from_json(schema.checked_dumps(d, "dataset")))
         plausibility.check_loaded(ds)
         return ds
 
     def to_dict(self) -> dict:
-        """The dataset as a JSON-ready dict (DESIGN.md format, mm / degrees)."""
+        """The dataset as a JSON-ready dict (docs/formats.md, mm / degrees)."""
         if self._dict is None:
             self._dict = json.loads(self._core.to_json())
         return self._dict
@@ -88,6 +88,7 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
 
     path = os.fspath(path)
     text = files.read_text(path, "dataset")
+    schema.check_text(text, "dataset", path)
     try:
         ds = Dataset(_core.Dataset.from_json(text))
     except ValueError as e:
@@ -97,7 +98,7 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
 
 
 def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
-    """Write a dataset (validated first) as JSON in the DESIGN.md format."""
+    """Write a dataset (validated first) as JSON in the dataset format (docs/formats.md)."""
     from . import files
 
     ds = Dataset.from_dict(ds)

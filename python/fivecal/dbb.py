@@ -325,7 +325,7 @@ class FourStepResult:
                      f"rms {eng.rms * 1e3:.3f} µm")
         if self.engine_error:
             L.append(f"  general engine: not run ({self.engine_error})")
-        L.append("  signs: DESIGN.md (E = Trans.Rz.Ry.Rx); the paper's eq. 18 gives E_B0A with the "
+        L.append("  signs: fivecal's (E = Trans.Rz.Ry.Rx); the paper's eq. 18 gives E_B0A with the "
                  "opposite sign.")
         return "\n".join(L)
 

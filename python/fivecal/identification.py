@@ -54,7 +54,7 @@ class Result:
         return np.asarray(r)
 
     def to_dict(self) -> dict:
-        """The result in the DESIGN.md result format (values and std in mm / rad)."""
+        """The result in the result format of docs/formats.md (values and std in mm / rad)."""
         return json.loads(self._core.to_json())
 
     def to_json(self) -> str:

@@ -13,8 +13,7 @@ from typing import Mapping, Optional, Union
 
 import numpy as np
 
-from . import _core
-from ._json import dumps
+from . import _core, schema
 from .units import looks_like_radians, radians_message
 
 ArrayLike = Union[float, np.ndarray, list]
@@ -28,7 +27,7 @@ class Machine:
     """A machine tool: topology, axes and tool, with forward and inverse kinematics.
 
     Build one with :meth:`load` (JSON file) or :meth:`from_dict`. The topology
-    string is read from workpiece to tool (``wCBXfZYSt``); see DESIGN.md.
+    string is read from workpiece to tool (``wCBXfZYSt``); see docs/formats.md.
     """
 
     def __init__(self, core: "_core.Machine"):
@@ -51,6 +50,7 @@ class Machine:
                 return cls.from_dict(tomllib.loads(text))
             except tomllib.TOMLDecodeError as e:
                 raise ValueError(f"{path}: not valid TOML ({e})") from None
+        schema.check_text(text, "machine", path)
         try:
             return cls(_core.Machine.from_json(text))
         except ValueError as e:
@@ -58,14 +58,14 @@ class Machine:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "Machine":
-        """Build from a machine definition dict (DESIGN.md keys: name, topology,
+        """Build from a machine definition dict (docs/formats.md keys: name, topology,
         axes with direction and point in mm, tool.tip in mm); a Machine is
         returned as is."""
         if isinstance(d, Machine):
             return d
         if not isinstance(d, Mapping):
             raise ValueError("machine: expected a mapping with 'topology' and 'axes'")
-        return cls(_core.Machine.from_json(dumps(d, "machine")))
+        return cls(_core.Machine.from_json(schema.checked_dumps(d, "machine")))
 
     def to_dict(self) -> dict:
         """The machine definition as a JSON-ready dict (mm, unit directions)."""

@@ -5,8 +5,8 @@ import math
 import numbers
 from typing import Mapping, Optional, Sequence, Union
 
-from . import _core, plausibility
-from .dataset import Dataset, dumps
+from . import _core, plausibility, schema
+from .dataset import Dataset
 from .machine import Machine
 
 SEED_LIMIT = 2 ** 64
@@ -82,4 +82,4 @@ def simulate(machine: Union[Machine, Mapping], plan: Sequence[Mapping], errors: 
             "probe": {"tip_radius": _number(tip_radius, "probe.tip_radius")},
             "artefact": _mapping(artefact, "artefact", "with facets, spheres, scale bars"),
             "plan": list(plan), "sigma": sigma, "seed": seed_value(seed)}
-    return Dataset(_core.simulate(dumps(spec, "simulate")))
+    return Dataset(_core.simulate(schema.checked_dumps(spec, "spec")))

@@ -7,7 +7,7 @@ of a 304.6686 mm scale bar.  Chapter 5: a Huron KX8-five (``wCAYbXZSt``, A axis
 tilted 45 deg) whose phi 500 mm cylindrical table is probed at 23 A/C
 indexations, estimating the ten parameters of Table 5-1.
 
-Everything here is plain data (dicts and lists in the formats of DESIGN.md) so
+Everything here is plain data (dicts and lists in the formats of docs/formats.md) so
 tests, the demo and the benchmarks build the same experiments::
 
     m = tango.hu40t_machine()
@@ -18,7 +18,7 @@ tests, the demo and the benchmarks build the same experiments::
                           setup=tango.hu40t_setup(art))
     fivecal.identify(ds, "S3")
 
-Units: mm, degrees for rotary commands, rad for angular errors (DESIGN.md).
+Units: mm, degrees for rotary commands, rad for angular errors (docs/formats.md).
 
 What comes from the thesis and what is assumed is said at each number.  The
 thesis figures (4-1, 4-2, 5-2, 5-3, 5-5) did not survive in the text, so the
@@ -458,7 +458,7 @@ def hu40t_setup(artefact: Optional[Mapping] = None, seed: int = 2016) -> Dict[st
 #: They are machine parameters in fivecal (pass them with the errors).
 STYLUS_OFFSETS = {"tip.x": 0.012, "tip.y": -0.008, "tip.z": 0.035}
 
-#: The thesis' subset S3 on wCBXfZYSt (§4.7, Table 4-5), DESIGN.md names.
+#: The thesis' subset S3 on wCBXfZYSt (§4.7, Table 4-5), fivecal names.
 S3_NAMES = ["EA0B", "EC0B", "EX0C", "EA0C", "EB0C", "EB0Z", "EA0Y", "EC0Y", "EX0S", "EY0S",
             "EXX1", "EYY1", "EZZ1", "EXXb", "EYYb", "EBBb", "ECCb"]
 #: The eight inter-axis errors and two spindle offsets of §4.4 / §4.7.
@@ -470,7 +470,7 @@ _URAD = 1e-6  # µrad -> rad (and µm/m -> mm/mm)
 
 def thesis_s3_errors() -> Dict[str, float]:
     """True errors of the size the thesis estimated for the HU40T, Table 4-5,
-    "Scale enriched TANGO" column, in DESIGN.md names, mm and rad.
+    "Scale enriched TANGO" column, in fivecal names, mm and rad.
 
     The thesis' parameter equivalences are used as printed: its E_AX0
     [E_A0B] -> ``EA0B``, E_CX0 [E_C0B] -> ``EC0B``, E_XB0 [E_X0C] -> ``EX0C``,

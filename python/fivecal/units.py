@@ -1,5 +1,5 @@
 """Display units for parameters: files and APIs keep mm and rad, reports show
-µm, µrad and µm/m (DESIGN.md, Units)."""
+µm, µrad and µm/m (docs/formats.md, "Units and conventions")."""
 from __future__ import annotations
 
 import re

@@ -42,7 +42,7 @@
 //    the same sin 2phi as squareness but with the sign of the direction s,
 //    which is why CW and CCW runs are both needed; l = v (tau1 - tau2) (mm),
 //    dtau = l / v when the feed is given;
-//  * backlash: x1 = x1_cmd + b1 sgn(dx1/dt) (DESIGN.md's E11b: the axis sits
+//  * backlash: x1 = x1_cmd + b1 sgn(dx1/dt) (fivecal's E11b: the axis sits
 //    b1 ahead of its command in the direction it moves; the step seen at the
 //    reversal is 2 b1; b < 0 is the usual lagging lost motion). The motion
 //    signs come from the recorded order of the samples.

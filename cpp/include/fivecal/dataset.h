@@ -1,5 +1,5 @@
 // Dataset: a machine, the artefact it measured and the recorded observations
-// (DESIGN.md, "Dataset interchange"). Validation happens here, once, with
+// (docs/formats.md, "Dataset"). Validation happens here, once, with
 // messages naming the observation index and field; the residuals never check.
 #ifndef FIVECAL_DATASET_H_
 #define FIVECAL_DATASET_H_

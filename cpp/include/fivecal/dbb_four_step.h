@@ -29,8 +29,8 @@
 //   Delta = PO' (1/cos(tilt_1) - 1)                               eq. 20
 //
 // What this implementation adds to the paper, each switchable:
-//  * signs and names follow DESIGN.md (E = Trans . Rz . Ry . Rx): the paper's
-//    eq. 18 gives E_B0A with the opposite sign to DESIGN's Ry;
+//  * signs and names follow fivecal's (E = Trans . Rz . Ry . Rx): the paper's
+//    eq. 18 gives E_B0A with the opposite sign to fivecal's Ry;
 //  * refer_positions: the centre is measured in the plane of the pivot,
 //    which lies a distance x0 along the axis from the axis point p_A (p_C);
 //    the position errors are moved there along the measured (tilted) axis,

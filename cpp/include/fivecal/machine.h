@@ -1,6 +1,6 @@
 // Machine: the immutable description of a multi-axis machine tool.
 //
-// Conventions (DESIGN.md, "Machine model"):
+// Conventions (README, "Concepts"; docs/formats.md, "Machine"):
 //  * The topology string is read from workpiece to tool, e.g. "wCBXfZYSt":
 //    axes between 'w' and 'f' (or 'b') form the workpiece branch, axes between
 //    'f' and 't' the tool branch. "(C1)" is accepted for the spindle 'S'.
@@ -50,7 +50,7 @@ struct ParameterInfo {
 
 class Machine {
  public:
-  // Parses the machine JSON of DESIGN.md. Throws std::invalid_argument naming
+  // Parses the machine JSON of docs/formats.md. Throws std::invalid_argument naming
   // the offending field.
   static Machine FromJson(const std::string& json_text);
   static Machine Load(const std::string& path);

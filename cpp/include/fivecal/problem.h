@@ -1,7 +1,7 @@
 // Problem: a dataset turned into a Ceres least-squares problem over a chosen
 // set of estimated parameters (machine errors and setup parameters).
 //
-// Parameter names (DESIGN.md): the machine's (E..., tip.x|y|z) followed by
+// Parameter names (README, "Concepts"): the machine's (E..., tip.x|y|z) followed by
 // the setup parameters the dataset implies: facet.<id>, sphere.<id>.x|y|z|r,
 // dbb.length, dbb.tool.x|y|z, dbb.table.x|y|z (or dbb.<setup>.… for a named
 // mounting), ball3d.<setup>.tool.x|y|z, ball3d.<setup>.table.x|y|z.
@@ -37,7 +37,7 @@ class ParameterTable {
   // Mount parameters: [length, tool x y z, table x y z]; length is -1 for ball3d.
   const std::vector<int>& mount(ObservationType type, const std::string& setup) const;
 
-  // Setup parameters estimated by default (DESIGN.md, CLI): tip.x|y|z when
+  // Setup parameters estimated by default (README, identify): tip.x|y|z when
   // there are probe touches, every touched facet, every touched sphere's
   // centre, every DBB mounting's length.
   std::vector<int> DefaultSetup(const Dataset& ds) const;

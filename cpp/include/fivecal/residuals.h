@@ -1,4 +1,4 @@
-// Ceres residuals of the observation types of DESIGN.md.
+// Ceres residuals of the observation types of docs/formats.md.
 //
 // Every residual sees the problem's full parameter vector (machine theta,
 // then setup parameters) through a ParameterAccess: estimated parameters come
