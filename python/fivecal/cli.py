@@ -314,7 +314,10 @@ def _uncertainty(args) -> int:
     from .machine import Machine
 
     def load(path):
-        d = _read_json(path, "spec or dataset")
+        from .files import read_json
+
+        d = read_json(path, "spec or dataset")
+        d = schema.validate(d, "dataset" if isinstance(d, dict) and "observations" in d else "spec", path)
         if isinstance(d, dict) and isinstance(d.get("machine"), str):  # a path relative to the file
             d["machine"] = Machine.load(os.path.join(os.path.dirname(os.path.abspath(path)),
                                                      d["machine"])).to_dict()
