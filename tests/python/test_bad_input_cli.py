@@ -156,7 +156,7 @@ def test_a_circular_test_in_radians_is_refused():
 
     a = np.linspace(0, 2 * np.pi, 100)  # a full turn written in radians
     runs = [dbb.Trace(a, 0.001 * np.sin(a), label="CCW", direction=1)]
-    with pytest.raises(ValueError, match=r"sweep 6.28.* at least 10 degrees"):
+    with pytest.raises(ValueError, match=r"sweep 6.28.*at least 10 degrees"):
         dbb.circular_test(runs, 100.0)
 
 
