@@ -42,11 +42,17 @@ class Result:
         self.n_parameters: int = core.n_parameters
         self.outliers: list = list(core.outliers)
 
-    def machine_errors(self, include_undetermined: bool = False) -> dict:
+    def machine_errors(self, force: bool = False, include_undetermined: bool = False) -> dict:
         """The machine's errors (name -> mm / rad): no setup values (facet,
         sphere, dbb), no probe stylus offsets ``tip.*`` (they belong to the
         probe, not the machine) and, unless ``include_undetermined``, no
-        parameter the data did not determine (its value is arbitrary)."""
+        parameter the data did not determine (its value is arbitrary).
+
+        The plain dict this returns is what compensation is fed and carries no
+        verdict, so the guard applies here: a result that is not
+        :attr:`usable` raises :class:`fivecal.UnusableResultError` unless
+        ``force``."""
+        self.require_usable(force)
         names = set(self.dataset.machine.parameter_names())
         skip = set() if include_undetermined else set(self.assessment().undetermined)
         return {n: v for n, v in self.values.items()
