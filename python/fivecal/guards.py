@@ -209,8 +209,9 @@ def require_usable(source: Any, force: bool = False, what: str = "this result") 
 
 
 #: posterior σ / prior σ above which a determined parameter counts as informed
-#: only in part: the data narrowed its plausible range by less than about 3x
-PARTLY_INFORMED = 0.3
+#: only in part: the data narrowed its plausible range less than tenfold (the
+#: fit itself calls a parameter undetermined above about 0.45)
+PARTLY_INFORMED = 0.1
 #: |r| at or above which two estimates are treated as not separable in practice
 NEAR_SINGULAR_R = 0.999
 

@@ -211,7 +211,8 @@ def finding_lines(fd: "guards.Findings") -> list:
            f"identified: none (the fit is not usable; {n} parameter{'s' if n != 1 else ''} estimated "
            "without a trustworthy value)"]
     if fd.partly:
-        out.append(f"informed only in part (posterior σ > {guards.PARTLY_INFORMED:g} × prior σ): "
+        out.append(f"informed only in part (the data narrowed the prior less than "
+                   f"{1 / guards.PARTLY_INFORMED:g}-fold): "
                    + ", ".join(fd.partly))
     if fd.undetermined:
         out.append("not determined by this data (values arbitrary, never used for compensation): "

@@ -186,7 +186,8 @@ def _findings_section(result, fd) -> str:
              f"none: the fit is not usable ({len(fd.identified)} parameters estimated without a "
              "trustworthy value)")]
     if fd.informed or fd.partly:
-        rows.append((f"Informed only in part (posterior σ > {_PARTLY:g} × prior σ)", names(fd.partly)))
+        rows.append((f"Informed only in part (the data narrowed the plausible range less than "
+                     f"{1 / _PARTLY:g}-fold)", names(fd.partly)))
     rows.append(("Not determined by this data (values arbitrary; never compensated)",
                  names(fd.undetermined)))
     if fd.inseparable:

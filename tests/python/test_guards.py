@@ -186,9 +186,11 @@ def test_report_of_a_good_fit_says_what_was_identified(good, tmp_path):
 def test_reports_name_undetermined_and_implausible(good, tmp_path):
     """Fields a fit with priors adds (undetermined, implausible, informed) are
     shown where they exist (set by hand here)."""
+    keys = ("undetermined", "implausible", "informed", "prior_std", "verdict")
+    saved = {k: good.__dict__[k] for k in keys if k in good.__dict__}
     good.undetermined = ["EYYb"]
     good.implausible = ["EX0C"]
-    good.informed = {n: (0.5 if n == "EA0Y" else 0.01) for n in good.estimated}
+    good.informed = {n: (0.3 if n == "EA0Y" else 0.01) for n in good.estimated}
     good.prior_std = {n: 0.01 for n in good.estimated}
     good.verdict = "ok"
     try:
@@ -200,8 +202,9 @@ def test_reports_name_undetermined_and_implausible(good, tmp_path):
         assert "box ok" not in doc.split("id='findings'")[0]  # amber, not green
         assert "IMPLAUSIBLE" in doc and "NOT DETERMINED" in doc and "informed (σ/prior σ)" in doc
     finally:
-        for k in ("undetermined", "implausible", "informed", "prior_std", "verdict"):
-            delattr(good, k)
+        for k in keys:
+            good.__dict__.pop(k, None)
+        good.__dict__.update(saved)
 
 
 # --- undetermined never exported; item 2: machine_errors without tip.* ----------------------------
