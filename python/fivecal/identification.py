@@ -207,7 +207,10 @@ def verdict_lines(result, fd: "guards.Findings") -> list:
 def finding_lines(fd: "guards.Findings") -> list:
     """What was identified, informed in part, not determined, implausible."""
     n = len(fd.identified)
-    out = [f"identified: {n} parameter{'s' if n != 1 else ''}" if fd.assessment.usable else
+    # an unconverged, non-finite or inadequate fit identified nothing; one that left
+    # requested parameters undetermined did determine the others
+    trusted = fd.assessment.verdict in ("ok", "undetermined")
+    out = [f"identified: {n} parameter{'s' if n != 1 else ''}" if trusted else
            f"identified: none (the fit is not usable; {n} parameter{'s' if n != 1 else ''} estimated "
            "without a trustworthy value)"]
     if fd.partly:

@@ -181,8 +181,8 @@ def _findings_section(result, fd) -> str:
             text += (" and " if text else "") + _count(setup, "setup parameter") + f" ({_e(rest)})"
         return text or "none"
 
-    usable = fd.assessment.usable
-    rows = [("Identified", names(fd.identified) if usable else
+    trusted = fd.assessment.verdict in ("ok", "undetermined")  # see identification.finding_lines
+    rows = [("Identified", names(fd.identified) if trusted else
              f"none: the fit is not usable ({len(fd.identified)} parameters estimated without a "
              "trustworthy value)")]
     if fd.informed or fd.partly:
@@ -254,9 +254,13 @@ def _identifiability_section(result) -> str:
     from . import guards
 
     fd = guards.findings(result)
-    if fd.inseparable:
-        names = sorted({n for a, b, _ in fd.inseparable for n in (a, b)})
-        parts.append(f'<div class="box bad">{_count(len(fd.inseparable), "pair")} of estimates have '
+    group = {n: i for i, g in enumerate(result.unidentifiable) for n in g}
+    # pairs inside one confounded group are already named above
+    extra = [(a, b, r) for a, b, r in fd.inseparable if a not in group or group[a] != group.get(b)]
+    if extra:
+        names = sorted({n for a, b, _ in extra for n in (a, b)})
+        parts.append(f'<div class="box bad">{_count(len(extra), "pair")} of estimates '
+                     f"{'has' if len(extra) == 1 else 'have'} "
                      f"|r| ≥ {_NEAR_R:g}: the data cannot separate "
                      f"{_e(', '.join(names[:12]))}{' …' if len(names) > 12 else ''} in practice; "
                      "only their combinations are determined (condition number "
