@@ -58,11 +58,22 @@ def good(dataset):
 
 @pytest.fixture(scope="module")
 def unconverged(dataset):
-    """Every other touch (the old README example): sphere S2 keeps two touches,
-    the fit runs into its iteration limit with r = 1.000 between facets."""
+    """A fit stopped before it converged (one iteration from a rough start)."""
     with pytest.warns(fivecal.FitWarning, match="did not converge"):
-        r = fivecal.identify(dataset.subset(range(0, len(dataset), 2)), "S3")
+        r = fivecal.identify(dataset, "S3", max_iterations=1, initial={"EX0C": 3.0, "EB0C": 0.05})
     assert not r.converged
+    return r
+
+
+@pytest.fixture(scope="module")
+def ill_posed(dataset):
+    """Every other touch (the old README example): sphere S2 keeps two touches,
+    so its centre and with it the length reference are lost. Fitted anyway
+    (allow_unidentifiable), the fit either runs into its iteration limit with
+    r = 1.000 between facets or says what it could not determine."""
+    with pytest.warns(fivecal.FitWarning):
+        r = fivecal.identify(dataset.subset(range(0, len(dataset), 2)), "S3", allow_unidentifiable=True)
+    assert not r.usable
     return r
 
 
@@ -132,12 +143,12 @@ def test_consumers_refuse_an_unconverged_result(unconverged, machine, tmp_path):
         with pytest.raises(fivecal.UnusableResultError, match="did not converge"):
             call()
     assert not (tmp_path / "o.nc").exists() and not (tmp_path / "e.csv").exists()
-    # force=True: the values are used (the limit must be lifted too: they are implausible)
+    # force=True: the values are used
     comp = fivecal.compensate_poses(machine, unconverged, POSES, force=True, max_correction=None,
                                     max_correction_deg=None)
     assert len(comp) == 2
     res = compensate_gcode_file(PROGRAM, tmp_path / "o.nc", machine, unconverged, force=True,
-                                max_correction=None)
+                                max_correction=None, max_correction_deg=None)
     assert res.moves > 0 and (tmp_path / "o.nc").is_file()
     fivecal.write_error_table(tmp_path / "e.csv", unconverged, machine, force=True)
     head = [line for line in open(tmp_path / "e.csv") if line.startswith("#")]
@@ -145,6 +156,7 @@ def test_consumers_refuse_an_unconverged_result(unconverged, machine, tmp_path):
 
 
 def test_report_of_an_unusable_fit_is_written_with_a_red_banner(unconverged, tmp_path):
+    # what was refused before the guards: the report of this fit looked fine
     path = fivecal.write_report(unconverged, tmp_path / "rep")
     doc = open(path, encoding="utf-8").read()
     body = doc[doc.index("<main>"):]
@@ -157,18 +169,19 @@ def test_report_of_an_unusable_fit_is_written_with_a_red_banner(unconverged, tmp
     assert "not usable" in unconverged.report().lower().splitlines()[1]
 
 
-def test_no_green_box_beside_r_of_one(unconverged, confounded, tmp_path):
+def test_no_green_box_beside_r_of_one(ill_posed, confounded, tmp_path):
     """The old report: a green 'No confounded groups' under a red non-convergence
     box, next to pairs with r = 1.000."""
-    C = np.abs(unconverged.correlation[np.triu_indices(len(unconverged.estimated), 1)])
-    assert C.max() >= 0.999 and not unconverged.unidentifiable  # the case that fooled it
-    for r, name in ((unconverged, "u"), (confounded, "c")):
+    C = np.abs(ill_posed.correlation[np.triu_indices(len(ill_posed.estimated), 1)])
+    assert C.max() >= 0.999
+    for r, name in ((ill_posed, "u"), (confounded, "c")):
         doc = open(fivecal.write_report(r, tmp_path / name), encoding="utf-8").read()
         assert "No confounded groups" not in doc and "box ok" not in doc
         ident = doc[doc.index("id='identifiability'"):doc.index("id='parameters'")]
         assert "cannot separate" in ident
+        assert "NOT USABLE" in doc[:doc.index("id='findings'")]
     # the pairs are named in the text report too
-    assert "pairs the data cannot separate (|r| ≥ 0.999)" in unconverged.report()
+    assert re.search(r"pairs the data cannot separate \(\|r\| ≥ 0.999\)|confounded", ill_posed.report())
 
 
 def test_report_of_a_good_fit_says_what_was_identified(good, tmp_path):
@@ -236,12 +249,22 @@ def test_undetermined_left_out_of_tables_and_compensation(confounded, machine, t
 
 # --- item 3: plausibility limit -----------------------------------------------------------------
 
-def test_max_correction_stops_compensation(good, unconverged, machine):
-    with pytest.raises(fivecal.CorrectionLimitError, match=r"pose 1: the correction of axis \w is [\d.]+ mm, "
-                                                           r"more than the plausibility limit of 0.5 mm"):
-        fivecal.compensate_poses(machine, unconverged, POSES, force=True)
+def implausible_result(good) -> dict:
+    """A usable result whose EX0C has a unit mistake (2 mm instead of 2 µm)."""
+    d = good.to_dict()
+    d["parameters"]["EX0C"]["value"] = 2.0
+    return d
+
+
+def test_max_correction_stops_compensation(good, machine):
+    bad = implausible_result(good)
+    assert guards.assess(bad).usable
+    with pytest.raises(fivecal.CorrectionLimitError, match=r"pose [01]: the correction of axis \w is [\d.]+ mm, "
+                                                           r"more than the plausibility limit of 0.5 mm \(max_correction, --max-correction\)"):
+        fivecal.compensate_poses(machine, bad, POSES)
     with pytest.raises(fivecal.CorrectionLimitError, match=r"part.nc:\d+: the correction of axis \w"):
-        compensate_gcode(open(PROGRAM).read(), machine, unconverged, force=True, name="part.nc")
+        compensate_gcode(open(PROGRAM).read(), machine, bad, name="part.nc")
+    assert len(fivecal.compensate_poses(machine, bad, POSES, max_correction=None)) == 2
     # a usable fit of a machine in working order stays far inside the default limit
     fivecal.compensate_poses(machine, good, POSES)
     with pytest.raises(fivecal.CorrectionLimitError) as e:
@@ -255,29 +278,32 @@ def test_max_correction_stops_compensation(good, unconverged, machine):
 # --- item 5: exit codes --------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def files(dataset, tmp_path_factory):
+def files(dataset, good, unconverged, tmp_path_factory):
     d = tmp_path_factory.mktemp("guards_cli")
     fivecal.save_dataset(dataset, d / "full.json")
     fivecal.save_dataset(dataset.subset(range(0, len(dataset), 2)), d / "half.json")
+    good.save(d / "good.json")
+    unconverged.save(d / "bad.json")
+    (d / "implausible.json").write_text(json.dumps(implausible_result(good)))
     return d
 
 
 def test_identify_exit_codes(files):
     d = files
-    ok = fivecal_cli("identify", d / "full.json", "--estimate", "S3", "--out", d / "good.json")
+    ok = fivecal_cli("identify", d / "full.json", "--estimate", "S3", "--out", d / "good_cli.json")
     assert ok.returncode == 0, ok.stderr
-    bad = fivecal_cli("identify", d / "half.json", "--estimate", "S3", "--out", d / "bad.json",
-                      "--report", d / "bad_report")
+    bad = fivecal_cli("identify", d / "half.json", "--estimate", "S3", "--allow-unidentifiable",
+                      "--out", d / "half_result.json", "--report", d / "bad_report")
     assert bad.returncode == 1, bad.stderr
     lines = bad.stderr.strip().splitlines()
-    assert len(lines) == 1 and "not usable" in lines[0] and "did not converge" in lines[0], bad.stderr
+    assert len(lines) == 1 and "not usable" in lines[0], bad.stderr
     assert "Warning" not in bad.stderr
     # still written, marked: a user can inspect why
-    assert (d / "bad.json").is_file() and json.load(open(d / "bad.json"))["converged"] is False
+    assert not guards.assess(str(d / "half_result.json")).usable
     assert "NOT USABLE" in (d / "bad_report" / "report.html").read_text(encoding="utf-8")
     assert "NOT USABLE" in bad.stdout
     conf = fivecal_cli("identify", d / "full.json", "--estimate", "S3,EX0B", "--allow-unidentifiable")
-    assert conf.returncode == 1 and "did not determine" in conf.stderr
+    assert conf.returncode == 1 and "EX0B" in conf.stderr
     refused = fivecal_cli("identify", d / "full.json", "--estimate", "S3,EX0B")
     assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
     missing = fivecal_cli("identify", d / "nope.json")
@@ -286,18 +312,16 @@ def test_identify_exit_codes(files):
 
 def test_compensate_exit_codes(files, tmp_path):
     d = files
-    if not (d / "bad.json").is_file():
-        test_identify_exit_codes(files)
     base = [HU40T, PROGRAM, "--out", tmp_path / "o.nc"]
     p = fivecal_cli("compensate", d / "bad.json", *base)
-    assert p.returncode == 2 and "refusing to use" in p.stderr and "--force" in p.stderr
-    assert not (tmp_path / "o.nc").exists()
+    assert p.returncode == 2 and "refusing to use" in p.stderr and "did not converge" in p.stderr
+    assert "--force" in p.stderr and not (tmp_path / "o.nc").exists()
     p = fivecal_cli("compensate", d / "bad.json", HU40T, "--table", tmp_path / "t.csv")
     assert p.returncode == 2 and not (tmp_path / "t.csv").exists()
-    p = fivecal_cli("compensate", d / "bad.json", *base, "--force")
-    assert p.returncode == 2 and "plausibility limit" in p.stderr and re.search(r"\.nc:\d+:", p.stderr)
     p = fivecal_cli("compensate", d / "bad.json", *base, "--force", "--max-correction", "off")
     assert p.returncode == 0, p.stderr
+    p = fivecal_cli("compensate", d / "implausible.json", *base)
+    assert p.returncode == 2 and "plausibility limit" in p.stderr and re.search(r"\.nc:\d+:", p.stderr)
     p = fivecal_cli("compensate", d / "good.json", *base)
     assert p.returncode == 0, p.stderr
     p = fivecal_cli("compensate", d / "good.json", *base, "--max-correction", "0.001")
@@ -346,3 +370,44 @@ def test_exit_codes_are_documented():
     for code, words in ((0, "success"), (1, "not converge"), (2, "bad input"), (3, "internal")):
         assert re.search(rf"`{code}`[^\n]*{words}", sec), (code, words)
     assert "--force" in sec and "--max-correction" in sec
+
+
+@pytest.mark.parametrize("fault, words", [
+    ({"adequate": False, "verdict": "inadequate", "chi2": 5400.0, "dof": 340, "chi2_p": 0.0,
+      "adequacy": "instrument setup not estimated"}, "likely cause: instrument setup not estimated"),
+    ({"verdict": "non_finite", "values": "nan"}, "not finite"),
+])
+def test_identify_exits_1_on_inadequate_or_non_finite(files, monkeypatch, capsys, fault, words):
+    """The fit's own verdict (chi-square against the declared noise, finiteness)
+    drives the exit status; the faults are injected into a real fit's result."""
+    from fivecal import cli, identification
+
+    real = identification.identify
+
+    def faulty(*a, **k):
+        r = real(*a, **k)
+        for key, v in fault.items():
+            if key == "values":
+                r.values = {**r.values, "EX0C": float("nan")}
+            else:
+                setattr(r, key, v)
+        return r
+
+    monkeypatch.setattr(identification, "identify", faulty)
+    assert cli.main(["identify", str(files / "full.json"), "--estimate", "S3"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0], err
+
+
+def test_identify_exits_1_when_the_fit_does_not_converge(files, monkeypatch, capsys):
+    """The solver stopped at its iteration limit: exit 1, one line, the result
+    still written and marked."""
+    from fivecal import cli, identification
+
+    real = identification.identify
+    monkeypatch.setattr(identification, "identify", lambda *a, **k: real(*a, **{**k, "max_iterations": 1}))
+    out = files / "stopped.json"
+    assert cli.main(["identify", str(files / "full.json"), "--estimate", "S3", "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "did not converge in 1 iterations" in err[0], err
+    assert guards.assess(str(out)).verdict == "not_converged"
