@@ -184,12 +184,6 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     return Result(core, ds)
 
 
-def resolve_estimate(dataset: Union[Dataset, Mapping], estimate, fix=None, initial=None) -> list:
-    """The parameter names ``estimate`` resolves to on this dataset (no fit)."""
-    ds = Dataset.from_dict(dataset)
-    return list(_core.resolve_estimate(ds._core, _names(estimate), _names(fix), dict(initial or {})))
-
-
 def verdict_lines(result, fd: "guards.Findings") -> list:
     """The verdict of a fit in plain words, for the text and HTML reports."""
     a = fd.assessment
@@ -249,3 +243,10 @@ def _warn_when_unusable(fit):
 
 
 identify = _warn_when_unusable(identify)
+
+
+def resolve_estimate(dataset: Union[Dataset, Mapping], estimate, fix=None, initial=None) -> list:
+    """The parameter names ``estimate`` resolves to on this dataset (no fit)."""
+    ds = Dataset.from_dict(dataset)
+    return list(_core.resolve_estimate(ds._core, _names(estimate), _names(fix), dict(initial or {})))
+
