@@ -103,7 +103,7 @@ def test_usable_and_require_usable(good, unconverged, confounded):
     unconverged.require_usable(force=True)
     a = confounded.assessment()
     assert a.verdict == "undetermined" and {"EX0B", "EX0S"} <= set(a.undetermined)
-    with pytest.raises(fivecal.UnusableResultError, match="did not determine EX0S, EX0B|did not determine EX0B"):
+    with pytest.raises(fivecal.UnusableResultError, match="did not determine .*EX0B"):
         confounded.require_usable()
 
 
