@@ -163,6 +163,8 @@ def assess(source: Any) -> Assessment:
     if f["rms"] is not None and not _finite(f["rms"]):
         bad.append("the residuals")
     verdict = f["verdict"]
+    if verdict == "ok" and (bad or not f["converged"]):
+        verdict = None  # a file edited after the fit, or a verdict that missed it: judge the values
     if verdict not in VERDICTS:
         # Results written before the fit reported a verdict: judge what they hold.
         if bad:
