@@ -4,6 +4,7 @@ Units: mm for lengths and linear commands, degrees for rotary commands, rad
 for angular error parameters. Conventions: README "Concepts"; file formats: docs/formats.md.
 """
 from .dataset import Dataset, ball_dataset, load_dataset, save_dataset
+from .guards import CorrectionLimitError, FitWarning, UnusableResultError
 from .identification import Result, identify, resolve_estimate
 from .machine import Machine, RadiansWarning
 from .units import UnitsWarning
@@ -18,7 +19,8 @@ from .uncertainty import gum_input_covariance, monte_carlo
 __version__ = "0.1.0"
 
 __all__ = ["Machine", "RadiansWarning", "UnitsWarning", "Dataset", "ball_dataset", "load_dataset", "save_dataset", "simulate",
-           "identify", "resolve_estimate", "Result", "compensate_poses", "compensate_gcode",
+           "identify", "resolve_estimate", "Result", "FitWarning", "UnusableResultError",
+           "CorrectionLimitError", "compensate_poses", "compensate_gcode",
            "write_error_table", "write_report", "dbb", "Trace", "jiang_cripps", "wang_path",
            "wang_identify", "circular_test", "read_trace_csv", "uncertainty", "monte_carlo",
            "gum_input_covariance", "probing_stats", "__version__"]

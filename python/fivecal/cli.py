@@ -1,7 +1,8 @@
 """Command line: fivecal identify | simulate | compensate | design | sphere | demo.
 
-Errors are one clear line on stderr (exit status 2), never a traceback
-(set FIVECAL_DEBUG=1 to see one). Long runs draw a progress bar on stderr
+Errors are one clear line on stderr, never a traceback (set FIVECAL_DEBUG=1
+to see one). Exit status: 0 success, 1 the fit failed / did not converge / is
+not usable, 2 bad input or a refused request, 3 internal error (a bug). Long runs draw a progress bar on stderr
 when it is a terminal (FIVECAL_PROGRESS=1 forces it, =0 silences it).
 """
 from __future__ import annotations
@@ -18,16 +19,21 @@ from . import __version__, schema
 
 
 def _identify(args) -> int:
+    import warnings
+
     from .dataset import load_dataset
     from .identification import identify
 
     from .progress import busy
 
     ds = load_dataset(args.dataset)
-    with busy(f"fitting {len(ds)} observations"):
+    with busy(f"fitting {len(ds)} observations"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", category=_fit_warning())  # said once below, in one line
         result = identify(ds, estimate=args.estimate, fix=args.fix, robust=args.robust,
                           allow_unidentifiable=args.allow_unidentifiable)
     print(result.report())
+    # An unusable fit is still written (marked so in the report and refused by
+    # `fivecal compensate`): it is what one inspects to find out why.
     if args.out:
         result.save(args.out)
         print(f"\nresult written to {args.out}")
@@ -38,7 +44,20 @@ def _identify(args) -> int:
                             summary=f"dataset {args.dataset}, estimate {args.estimate}"
                                     + (f", fixed {args.fix}" if args.fix else ""))
         print(f"\nreport: {os.path.abspath(path)} (with result.json and the plots as PNG)")
-    return 0
+    a = result.assessment()
+    if not a.usable:
+        written = [x for x in (args.out, args.report) if x]
+        print(f"fivecal identify: not usable: {a.reason}"
+              + (f" ({' and '.join(written)} written, marked not usable)" if written else ""),
+              file=sys.stderr)
+        return EXIT_FIT
+    return EXIT_OK
+
+
+def _fit_warning():
+    from .guards import FitWarning
+
+    return FitWarning
 
 
 def _read_json(path: str, what: str):
@@ -114,8 +133,32 @@ POSITIVE = _float_type(0.0, low_open=True)
 PROBABILITY = _float_type(0.0, 1.0, low_open=True, what="a probability")
 
 
+def _limits(text: str) -> tuple:
+    """--max-correction MM[,DEG]: the plausibility limits; 'off' switches them off."""
+    from .compensation import MAX_CORRECTION, MAX_CORRECTION_DEG
+
+    if text is None:
+        return MAX_CORRECTION, MAX_CORRECTION_DEG
+    parts = [t.strip() for t in text.split(",")]
+    if len(parts) > 2 or not all(parts):
+        raise ValueError(f"--max-correction: expected MM or MM,DEG (e.g. 0.5 or 0.5,0.2) or 'off', got '{text}'")
+    out = []
+    for t in parts:
+        if t.lower() in ("off", "none"):
+            out.append(None)
+            continue
+        try:
+            v = float(t)
+        except ValueError:
+            raise ValueError(f"--max-correction: '{t}' is not a number") from None
+        if not v > 0 or v != v or v == float("inf"):
+            raise ValueError(f"--max-correction: {t}: expected a positive limit")
+        out.append(v)
+    return (out[0], out[1] if len(out) == 2 else (MAX_CORRECTION_DEG if out[0] is not None else None))
+
+
 def _compensate(args) -> int:
-    from .compensation import compensate_gcode_file, load_errors, write_error_table
+    from .compensation import compensate_gcode_file, usable_errors, write_error_table
     from .machine import Machine
 
     doc = _read_json(args.machine, "the machine")
@@ -125,12 +168,15 @@ def _compensate(args) -> int:
         machine = Machine.from_dict(doc)
     except ValueError as e:
         raise ValueError(f"{args.machine}: {e}") from None
-    errors = load_errors(args.result, machine)
+    max_mm, max_deg = _limits(args.max_correction)
+    # Refuses a result that did not converge, is not finite, failed the chi-square
+    # test or left requested parameters undetermined, unless --force.
+    errors = usable_errors(args.result, machine, args.force, args.result)
     if not args.program and not args.table:
         raise ValueError("nothing to do: give a PROGRAM (with --out) and/or --table FILE")
     if args.table:
         kinds = ("location", "backlash", "motion") if args.table_all else ("location",)
-        rows = write_error_table(args.table, args.result, machine, kinds=kinds)
+        rows = write_error_table(args.table, args.result, machine, kinds=kinds, force=args.force)
         print(f"{len(rows)} identified {'machine' if args.table_all else 'location'} errors of "
               f"{machine.name} written to {args.table} (sign convention in its header)")
     if args.program:
@@ -149,7 +195,8 @@ def _compensate(args) -> int:
                                     work_offset=_axis_values(args.work_offset, "--work-offset")
                                     if args.work_offset else None,
                                     orientation=not args.position_only, tool_tip=tip,
-                                    min_decimals=args.decimals, progress=None)
+                                    min_decimals=args.decimals, progress=None,
+                                    max_correction=max_mm, max_correction_deg=max_deg, force=args.force)
         print(f"{args.program}: {res.summary()}")
         print(f"compensated program written to {args.out}")
     return 0
@@ -492,9 +539,17 @@ def _one_line(e: BaseException) -> str:
     return " ".join(text.split())
 
 
+#: Exit statuses of every command (README "Exit codes").
+EXIT_OK = 0        # success
+EXIT_FIT = 1       # the fit failed, did not converge, or is inadequate / not usable
+EXIT_INPUT = 2     # bad input or a refused request (unusable result, correction limit, ...)
+EXIT_INTERNAL = 3  # a bug: FIVECAL_DEBUG=1 shows the traceback
+
+
 def main(argv=None) -> int:
-    """Entry point of the ``fivecal`` command; returns the exit status (0 ok,
-    2 a user error reported in one line, 3 an unexpected failure)."""
+    """Entry point of the ``fivecal`` command; returns the exit status: 0 ok,
+    1 the fit failed, did not converge or is not usable, 2 bad input or a
+    refused request (one line), 3 an unexpected failure (a bug)."""
     p = _Parser(prog="fivecal", description="Geometric error identification for "
                                 "five-axis machine tools (units: mm, degrees for rotary commands, rad "
                                 "for angular errors).")
@@ -579,6 +634,13 @@ def main(argv=None) -> int:
                     "compensated words (default 4; a word written with more keeps its own)")
     pc.add_argument("--position-only", action="store_true", help="compensate the tool point only; keep the "
                     "rotary axes at their programmed values")
+    pc.add_argument("--max-correction", metavar="MM[,DEG]", default=None,
+                    help="plausibility limit: stop when a compensated command differs from the "
+                    "programmed one by more than MM (linear axes) or DEG (rotary axes), like the "
+                    "maximum-modification limit of controller calibration cycles (default 0.5,0.5; "
+                    "'off' switches it off)")
+    pc.add_argument("--force", action="store_true", help="use a result that is not usable (not "
+                    "converged, non-finite, inadequate or undetermined); only to inspect it")
     pc.set_defaults(func=_compensate)
 
     pu = sub.add_parser("uncertainty", help="Monte Carlo (JCGM 101) or pooled-cycles GUM uncertainty "
@@ -690,16 +752,17 @@ def main(argv=None) -> int:
         print(f"fivecal {args.command}: error: input nested too deeply", file=sys.stderr)
         return 2
     except (ValueError, OSError) as e:
+        # UnusableResultError and CorrectionLimitError are ValueErrors: a refused request
         if debug:
             raise
         print(f"fivecal {args.command}: error: {_one_line(e)}", file=sys.stderr)
-        return 2
+        return EXIT_INPUT
     except Exception as e:  # an unexpected failure: still one line, with a way to see more
         if debug:
             raise
         print(f"fivecal {args.command}: internal error ({type(e).__name__}): {_one_line(e)} "
               "(set FIVECAL_DEBUG=1 for a traceback)", file=sys.stderr)
-        return 3
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

@@ -29,15 +29,26 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _core, gcode, schema
+from . import _core, gcode, guards, schema
+from .guards import CorrectionLimitError, UnusableResultError
 from .machine import Machine
 from .progress import Progress
 from .units import display_scale
 
-__all__ = ["load_errors", "compensate_poses", "CompensatedPoses", "compensate_gcode",
+__all__ = ["load_errors", "usable_errors", "compensate_poses", "CorrectionLimitError", "UnusableResultError",
+           "MAX_CORRECTION", "MAX_CORRECTION_DEG", "CompensatedPoses", "compensate_gcode",
            "GcodeCompensation", "error_table", "write_error_table", "SIGN_CONVENTION"]
 
 ROTARY = "ABC"
+#: Plausibility limits of a compensation, like the maximum-modification limit of
+#: controller calibration cycles: a linear command corrected by more than
+#: MAX_CORRECTION mm or a rotary one by more than MAX_CORRECTION_DEG degrees
+#: stops compensation. Geometric errors of a machine in working order move the
+#: tool by micrometres to some 0.1 mm; half a millimetre or more is far more
+#: often a bad identification (wrong units, an unconverged or ill-posed fit)
+#: than the machine, and a crash is the price of getting it wrong.
+MAX_CORRECTION = 0.5
+MAX_CORRECTION_DEG = 0.5
 
 
 # ---------------------------------------------------------------------------
@@ -50,6 +61,7 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
     stylus offsets ``tip.*`` are dropped; an unknown machine parameter name is
     a ValueError naming it."""
     where = "errors"
+    undetermined = set(guards.assess(source).undetermined)  # never exported as if measured
     if isinstance(source, (str, os.PathLike)):
         where = os.fspath(source)
         from . import files
@@ -74,8 +86,8 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
     for name, value in source.items():
         if not isinstance(name, str):
             raise ValueError(f"{where}: parameter names must be strings, got {name!r}")
-        if name.startswith("tip.") or ("." in name):
-            continue  # probe stylus / setup parameters: not machine errors
+        if name.startswith("tip.") or ("." in name) or name in undetermined:
+            continue  # probe stylus / setup parameters: not machine errors; undetermined: not measured
         if name not in known:
             raise ValueError(f"{where}: '{name}' is not a parameter of machine {machine.name!r} "
                              f"({machine.topology})")
@@ -87,6 +99,37 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
             raise ValueError(f"{where}: {name}: value is not finite")
         out[name] = v
     return out
+
+
+def usable_errors(source, machine: Machine, force: bool = False,
+                  what: str = "this identification result") -> Dict[str, float]:
+    """:func:`load_errors` after the guard every consumer applies: a result
+    that did not converge, holds non-finite values, failed the chi-square test
+    or left requested parameters undetermined raises
+    :class:`fivecal.UnusableResultError` with the reason, unless ``force``."""
+    guards.require_usable(source, force, what)
+    return load_errors(source, machine)
+
+
+def _check_correction(machine: Machine, nominal: np.ndarray, commands: np.ndarray,
+                      max_correction: Optional[float], max_correction_deg: Optional[float],
+                      label=lambda i: f"pose {i}") -> None:
+    """Raise CorrectionLimitError at the largest correction beyond a limit."""
+    delta = np.abs(commands - nominal)
+    worst = None
+    for k, a in enumerate(machine.axis_names):
+        if a == "S":
+            continue
+        limit, unit = (max_correction_deg, "deg") if a in ROTARY else (max_correction, "mm")
+        if limit is None or not len(delta):
+            continue
+        i = int(np.argmax(delta[:, k]))
+        excess = delta[i, k] / limit if limit > 0 else (np.inf if delta[i, k] > 0 else 0.0)
+        if delta[i, k] > limit and (worst is None or excess > worst[0]):
+            worst = (excess, i, a, float(delta[i, k]), float(limit), unit)
+    if worst is not None:
+        _, i, a, size, limit, unit = worst
+        raise CorrectionLimitError(label(i), i, a, size, limit, unit)
 
 
 def _with_tool_tip(machine: Machine, tool_tip) -> Machine:
@@ -151,7 +194,10 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
                      directions: Optional[Mapping[str, Sequence[float]]] = None,
                      orientation: bool = True, max_rotary_correction: float = 0.1,
                      tool_tip: Optional[Sequence[float]] = None,
-                     progress: Optional[bool] = None) -> CompensatedPoses:
+                     progress: Optional[bool] = None,
+                     max_correction: Optional[float] = MAX_CORRECTION,
+                     max_correction_deg: Optional[float] = MAX_CORRECTION_DEG,
+                     force: bool = False) -> CompensatedPoses:
     """Compensated axis commands for a list of nominal poses.
 
     ``axes``: nominal commands, dict axis letter -> array (mm, rotary in
@@ -166,9 +212,17 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
     cutting tool's tip in the machine frame at the zero pose, replacing the
     machine file's ``tool.tip``. Raises ValueError naming a pose whose tool
     point cannot be reached.
+
+    Guards: a result that is not usable (see :meth:`fivecal.Result.usable`)
+    raises :class:`fivecal.UnusableResultError` unless ``force``; parameters
+    the data did not determine are left out. A compensated command that
+    differs from the nominal one by more than ``max_correction`` mm (linear
+    axes, default 0.5) or ``max_correction_deg`` degrees (rotary axes,
+    default 0.5) raises :class:`fivecal.CorrectionLimitError` naming the pose,
+    the axis and the size (None switches a limit off).
     """
     machine = _with_tool_tip(Machine.from_dict(machine), tool_tip)
-    errs = load_errors(errors, machine)
+    errs = usable_errors(errors, machine, force)
     q = machine.axes_matrix(axes)
     n, na = q.shape
     d = machine.directions_matrix(directions, n)
@@ -199,6 +253,7 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
                     raise ValueError(f"pose {i}: {e}") from None
             out[i] = sol
             bar.update()
+    _check_correction(machine, q, out, max_correction, max_correction_deg)
     P1, A1 = _core.tool_poses(core, theta, out, d)
     return CompensatedPoses(axes=machine.axes_dict(out), nominal=machine.axes_dict(q), points=P,
                             tool_axes=A, error_before=P0 - P, remaining=P1 - P,
@@ -260,7 +315,10 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
                      work_offset: Optional[Mapping[str, float]] = None,
                      orientation: bool = True, max_rotary_correction: float = 0.1,
                      tool_tip: Optional[Sequence[float]] = None, min_decimals: int = 4,
-                     name: str = "program", progress: Optional[bool] = None) -> GcodeCompensation:
+                     name: str = "program", progress: Optional[bool] = None,
+                     max_correction: Optional[float] = MAX_CORRECTION,
+                     max_correction_deg: Optional[float] = MAX_CORRECTION_DEG,
+                     force: bool = False) -> GcodeCompensation:
     """Compensate the G0/G1 moves of an ISO G-code program.
 
     The program's X Y Z words and the rotary words of the machine's rotary
@@ -289,11 +347,16 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
     (G54-G59.x) in one program, and text that is not ISO words: exponent
     notation (``X1e2``), a letter without a number, a number without a
     letter, numbers of more than 15 digits, an unclosed ``(`` comment.
+
+    Guards as in :func:`compensate_poses`: an unusable result is refused
+    unless ``force``; a correction beyond ``max_correction`` mm /
+    ``max_correction_deg`` degrees stops with a
+    :class:`fivecal.CorrectionLimitError` naming the program line.
     """
     if not isinstance(program, str):
         raise ValueError(f"{name}: expected the program text (str)")
     machine = _with_tool_tip(Machine.from_dict(machine), tool_tip)
-    errs = load_errors(errors, machine)
+    errs = usable_errors(errors, machine, force)
     axis_letters = [a for a in machine.axis_names if a != "S"]
     offset = {a: 0.0 for a in axis_letters}
     for k, v in (work_offset or {}).items():
@@ -327,7 +390,10 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
         dirs[a] = d
     try:
         comp = compensate_poses(machine, errs, Q, directions=dirs, orientation=orientation,
-                                max_rotary_correction=max_rotary_correction, progress=progress)
+                                max_rotary_correction=max_rotary_correction, progress=progress,
+                                max_correction=max_correction, max_correction_deg=max_correction_deg)
+    except CorrectionLimitError as e:
+        raise e.at(f"{name}:{moves[e.index].line + 1}") from None
     except ValueError as e:
         m = re.match(r"pose (\d+): (.*)", str(e), re.S)
         if m is None:
@@ -347,7 +413,9 @@ def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.Path
                           **kwargs) -> GcodeCompensation:
     """:func:`compensate_gcode` from file to file. Bytes outside the changed
     numbers are copied unchanged (the file is read and written as Latin-1,
-    which maps every byte to itself)."""
+    which maps every byte to itself). The guards of :func:`compensate_gcode`
+    (``force``, ``max_correction``, ``max_correction_deg``) apply before
+    anything is written."""
     from . import files
 
     path = os.fspath(path)
@@ -362,7 +430,7 @@ def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.Path
 # controller-neutral error table
 # ---------------------------------------------------------------------------
 SIGN_CONVENTION = [
-    "Sign convention (fivecal machine model, README \"Concepts\"):",
+    "Sign convention (fivecal machine model; README, Sign conventions):",
     "Every axis k has a frame that is parallel to the machine frame F when all axes are at 0 (the zero "
     "pose), with its origin at the axis point p_k of the machine file.",
     "Chains are built from the foundation outward (workpiece side and tool side separately); the parent "
@@ -418,18 +486,21 @@ def _describe(machine: Machine, name: str) -> Tuple[str, str, str, str]:
 
 
 def error_table(result, machine: Union[Machine, Mapping],
-                kinds: Sequence[str] = ("location",)) -> List[dict]:
+                kinds: Sequence[str] = ("location",), force: bool = False) -> List[dict]:
     """Rows (dicts) of the identified machine errors of the given ``kinds``
     (``location``, ``motion``, ``backlash``), in the machine's parameter order:
     name, kind, axis, component, value and std (mm or rad), unit, display_value,
     display_std, display_unit, estimated, description. ``result``: a Result, a
-    result JSON path or dict."""
+    result JSON path or dict. An unusable result raises
+    :class:`fivecal.UnusableResultError` unless ``force``; parameters the data
+    did not determine are left out (:func:`write_error_table` names them)."""
     machine = Machine.from_dict(machine)
     std: Dict[str, float] = {}
     if isinstance(result, (str, os.PathLike)):
         from . import files
 
         result = schema.validate(files.read_json(result, "result"), "errors", os.fspath(result))
+    guards.require_usable(result, force, "this identification result")
     if hasattr(result, "std") and hasattr(result, "estimated"):
         std = dict(result.std)
     elif isinstance(result, Mapping) and isinstance(result.get("parameters"), Mapping):
@@ -458,18 +529,38 @@ def error_table(result, machine: Union[Machine, Mapping],
 
 
 def write_error_table(path: Union[str, os.PathLike], result, machine: Union[Machine, Mapping],
-                      kinds: Sequence[str] = ("location",)) -> List[dict]:
+                      kinds: Sequence[str] = ("location",), force: bool = False) -> List[dict]:
     """Write :func:`error_table` to ``path``: JSON when it ends in ``.json``,
-    otherwise CSV with the sign convention as leading ``#`` comment lines."""
+    otherwise CSV with the sign convention as leading ``#`` comment lines.
+    Parameters the data did not determine are left out and named in the
+    header (JSON ``not_determined``); an unusable result is refused unless
+    ``force``, and a forced table says so in its header (JSON ``usable``)."""
     machine = Machine.from_dict(machine)
     from . import files
 
-    rows = error_table(result, machine, kinds)
+    if isinstance(result, (str, os.PathLike)):
+        src = os.fspath(result)
+        result = schema.validate(files.read_json(src, "result"), "errors", src)
+    rows = error_table(result, machine, kinds, force=force)
+    a = guards.assess(result)
+    known = set(machine.parameter_names())
+    left_out = [n for n in a.undetermined if n in known and not n.startswith("tip.")
+                and machine.parameter_kind(n) in kinds]
     path = os.fspath(path)
     head = [f"fivecal machine errors: {machine.name} ({machine.topology}); kinds: {', '.join(kinds)}"]
+    if left_out:
+        head.append("Not determined by the measurement, left out of this table (their values were "
+                    "arbitrary, not measured): " + ", ".join(left_out))
+    if not a.usable:
+        head.append(f"NOT USABLE, written only because it was forced: {a.reason}")
+    if a.implausible:
+        head.append("Implausible (far outside the plausible size; check before use): "
+                    + ", ".join(a.implausible))
     if path.lower().endswith(".json"):
         doc = {"format": "fivecal-error-table", "version": 1, "machine": machine.name,
                "topology": machine.topology, "kinds": list(kinds),
+               "usable": a.usable, "verdict": a.verdict, "not_determined": left_out,
+               "notes": head[1:],
                "convention": SIGN_CONVENTION, "errors": rows}
         files.write_json(path, doc, ensure_ascii=False)
         return rows

@@ -611,6 +611,9 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
     (the other C and A location errors and, with ``include_ball_placement``,
     the ball placements ``dbb.<setup>.tool|table.x|y|z``) on its own and let
     the engine say whether this path separates it from the fitted set."""
+    import warnings
+
+    from .guards import FitWarning
     from .identification import identify
 
     ds = Dataset.from_dict(dataset)
@@ -622,7 +625,9 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
         cand += [f"dbb.{setup}.{b}.{c}" for b in ("tool", "table") for c in "xyz"]
     verdicts = {}
     for c in cand:
-        r = identify(ds, estimate + [c], allow_unidentifiable=True)
+        with warnings.catch_warnings():  # probing confounded sets on purpose: not a failed fit
+            warnings.simplefilter("ignore", FitWarning)
+            r = identify(ds, estimate + [c], allow_unidentifiable=True)
         if r.rank < r.n_parameters:
             groups = [list(g) for g in r.unidentifiable if c in g]
             partners = [n for n in (groups[0] if groups else []) if n != c]

@@ -7,7 +7,7 @@ from typing import Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _core
+from . import _core, guards
 from .dataset import Dataset
 from .units import display_scale
 
@@ -42,10 +42,37 @@ class Result:
         self.n_parameters: int = core.n_parameters
         self.outliers: list = list(core.outliers)
 
-    def machine_errors(self) -> dict:
-        """Only the machine parameters (no facet/sphere/dbb setup values)."""
+    def machine_errors(self, force: bool = False, include_undetermined: bool = False) -> dict:
+        """The machine's errors (name -> mm / rad): no setup values (facet,
+        sphere, dbb), no probe stylus offsets ``tip.*`` (they belong to the
+        probe, not the machine) and, unless ``include_undetermined``, no
+        parameter the data did not determine (its value is arbitrary).
+
+        The plain dict this returns is what compensation is fed and carries no
+        verdict, so the guard applies here: a result that is not
+        :attr:`usable` raises :class:`fivecal.UnusableResultError` unless
+        ``force``."""
+        self.require_usable(force)
         names = set(self.dataset.machine.parameter_names())
-        return {n: v for n, v in self.values.items() if n in names}
+        skip = set() if include_undetermined else set(self.assessment().undetermined)
+        return {n: v for n, v in self.values.items()
+                if n in names and not n.startswith("tip.") and n not in skip}
+
+    # -- guards: may this result be used? ----------------------------------
+    def assessment(self) -> "guards.Assessment":
+        """Verdict, reason in plain words, undetermined and implausible names."""
+        return guards.assess(self)
+
+    @property
+    def usable(self) -> bool:
+        """True when the fit converged, is finite, agrees with the declared
+        noise and determined what was asked: what every consumer requires."""
+        return self.assessment().usable
+
+    def require_usable(self, force: bool = False) -> None:
+        """Raise :class:`fivecal.UnusableResultError` with the reason unless
+        the result is :attr:`usable` or ``force`` is set."""
+        guards.require_usable(self, force, "this identification result")
 
     def predict(self, dataset: Dataset) -> np.ndarray:
         """Residuals (mm) of another dataset's observations under these values:
@@ -68,31 +95,54 @@ class Result:
         files.write_text(path, self.to_json() + "\n")
 
     def report(self) -> str:
-        """A readable text report in µm, µrad and µm/m."""
+        """A readable text report in µm, µrad and µm/m: the verdict first,
+        then what was identified, what was informed only in part and what the
+        data could not tell."""
         m = self.dataset.machine
-        lines = [f"fivecal identification: {m.name} ({m.topology})",
-                 f"  observations {self.n_observations}, parameters {self.n_parameters}, "
-                 f"rank {self.rank}, condition number {self.condition_number:.4g}",
-                 f"  residual rms {self.rms * 1e3:.3f} µm, max {self.max_abs * 1e3:.3f} µm, "
-                 f"sigma {self.sigma * 1e3:.3f} µm; "
-                 f"{'converged' if self.converged else 'NOT converged'} in {self.iterations} iterations",
-                 ""]
-        lines.append(f"  {'parameter':<18}{'value':>14}{'std':>12}  unit")
-        negative = {a["name"] for a in m.axes if min(a["direction"]) < -0.5 and max(a["direction"]) < 0.5}
+        fd = guards.findings(self)
+        a = fd.assessment
+        lines = [f"fivecal identification: {m.name} ({m.topology})"]
+        lines += ["  " + t for t in verdict_lines(self, fd)]
+        lines += [f"  observations {self.n_observations}, parameters {self.n_parameters}, "
+                  f"rank {self.rank}, condition number {self.condition_number:.4g}",
+                  f"  residual rms {self.rms * 1e3:.3f} µm, max {self.max_abs * 1e3:.3f} µm, "
+                  f"sigma {self.sigma * 1e3:.3f} µm", ""]
+        prior = getattr(self, "prior_std", None) or {}
+        with_prior = bool(prior)
+        lines.append(f"  {'parameter':<18}{'value':>14}{'std':>12}"
+                     + (f"{'prior':>12}{'informed':>10}" if with_prior else "") + "  unit")
+        negative = {x["name"] for x in m.axes if min(x["direction"]) < -0.5 and max(x["direction"]) < 0.5}
         machine_names = set(m.parameter_names())
+        und, part, impl = set(fd.undetermined), set(fd.partly), set(fd.implausible)
         for n in self.estimated:
             f, unit = display_scale(n)
-            note = ""
+            notes = []
+            if n in und:
+                notes.append("NOT DETERMINED by this data")
+            elif n in part:
+                notes.append("informed only in part")
+            if n in impl:
+                notes.append("IMPLAUSIBLE: far outside its plausible size")
             if n in machine_names and len(n) == 4 and n[1] == n[2] and n[3] == "1" and n[2] in negative:
-                note = "  (axis points along a negative basis vector: positive shortens the travel)"
-            lines.append(f"  {n:<18}{self.values[n] * f:>14.3f}{self.std[n] * f:>12.3f}  {unit}{note}")
+                notes.append("axis points along a negative basis vector: positive shortens the travel")
+            extra = ""
+            if with_prior:
+                ps, inf = prior.get(n), fd.informed.get(n)
+                extra = (f"{ps * f:>12.3f}" if ps is not None else f"{'-':>12}") + \
+                        (f"{inf:>10.2f}" if inf is not None else f"{'-':>10}")
+            lines.append(f"  {n:<18}{self.values[n] * f:>14.3f}{self.std[n] * f:>12.3f}{extra}  {unit}"
+                         + (f"  ({'; '.join(notes)})" if notes else ""))
+        lines.append("")
+        lines += ["  " + t for t in finding_lines(fd)]
         if self.unidentifiable:
-            lines.append("")
             lines.append("  confounded (not separable with this data):")
             for g in self.unidentifiable:
                 lines.append("    " + ", ".join(g))
         if self.outliers:
             lines.append(f"  robust loss flagged {len(self.outliers)} outlier rows: {self.outliers[:20]}")
+        if not a.usable:
+            lines.append("  Not usable: compensation, error tables and G-code refuse this result "
+                         "(force=True / --force only to inspect it).")
         return "\n".join(lines)
 
     def __repr__(self) -> str:
@@ -134,7 +184,69 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     return Result(core, ds)
 
 
+def verdict_lines(result, fd: "guards.Findings") -> list:
+    """The verdict of a fit in plain words, for the text and HTML reports."""
+    a = fd.assessment
+    it = getattr(result, "iterations", 0)
+    chi2, dof, p = getattr(result, "chi2", None), getattr(result, "dof", None), getattr(result, "chi2_p", None)
+    noise = guards._chi2_words(chi2 if chi2 is not None and np.isfinite(chi2) else None, dof, p)
+    if not a.usable:
+        return [f"NOT USABLE ({a.verdict.replace('_', ' ')}): {a.reason}.",
+                "Do not compensate a machine with these values."]
+    adequacy = (f"the residuals agree with the declared instrument noise ({noise})" if noise else
+                "no chi-square test against the declared noise was reported")
+    return [f"Usable: the fit converged in {it} iterations; {adequacy}."]
+
+
+def finding_lines(fd: "guards.Findings") -> list:
+    """What was identified, informed in part, not determined, implausible."""
+    n = len(fd.identified)
+    # an unconverged, non-finite or inadequate fit identified nothing; one that left
+    # requested parameters undetermined did determine the others
+    trusted = fd.assessment.verdict in ("ok", "undetermined")
+    out = [f"identified: {n} parameter{'s' if n != 1 else ''}" if trusted else
+           f"identified: none (the fit is not usable; {n} parameter{'s' if n != 1 else ''} estimated "
+           "without a trustworthy value)"]
+    if fd.partly:
+        out.append(f"informed only in part (the data narrowed the prior less than "
+                   f"{1 / guards.PARTLY_INFORMED:g}-fold): "
+                   + ", ".join(fd.partly))
+    if fd.undetermined:
+        out.append("not determined by this data (values arbitrary, never used for compensation): "
+                   + ", ".join(fd.undetermined))
+    if fd.implausible:
+        out.append("implausible (far outside the plausible size; check units and setup): "
+                   + ", ".join(fd.implausible))
+    if fd.inseparable:
+        shown = fd.inseparable[:8]
+        out.append(f"pairs the data cannot separate (|r| ≥ {guards.NEAR_SINGULAR_R:g}): "
+                   + ", ".join(f"{x}/{y} (r = {r:+.4f})" for x, y, r in shown)
+                   + (f" and {len(fd.inseparable) - len(shown)} more" if len(fd.inseparable) > len(shown) else ""))
+    return out
+
+
+def _warn_when_unusable(fit):
+    """``identify`` emits a :class:`fivecal.FitWarning` when its result is
+    not usable, so a script that goes on learns it at once."""
+    import functools
+    import warnings
+
+    @functools.wraps(fit)
+    def wrapper(*args, **kwargs):
+        result = fit(*args, **kwargs)
+        a = result.assessment()
+        if not a.usable:
+            warnings.warn(f"fivecal.identify: the result is not usable: {a.reason}", guards.FitWarning,
+                          stacklevel=2)
+        return result
+    return wrapper
+
+
+identify = _warn_when_unusable(identify)
+
+
 def resolve_estimate(dataset: Union[Dataset, Mapping], estimate, fix=None, initial=None) -> list:
     """The parameter names ``estimate`` resolves to on this dataset (no fit)."""
     ds = Dataset.from_dict(dataset)
     return list(_core.resolve_estimate(ds._core, _names(estimate), _names(fix), dict(initial or {})))
+

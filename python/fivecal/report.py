@@ -31,11 +31,13 @@ from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from .guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
 from .units import display_scale
 
 __all__ = ["write_report", "Section"]
 
 Section = Tuple[str, str]  # (title, HTML body)
+
 Figure = Tuple[str, str]   # (png path, caption)
 
 _CSS = """
@@ -47,7 +49,7 @@ padding-bottom:3px;margin-top:1.8em}h3{font-size:1.05em;margin-bottom:0.3em}
 table{border-collapse:collapse;margin:0.5em 0 1em;font-size:0.92em}
 th,td{border:1px solid #ddd;padding:3px 9px;text-align:left;vertical-align:top}
 th{background:#eef2f7}td.num{text-align:right;font-family:Menlo,Consolas,monospace;white-space:nowrap}
-tr.conf td{background:#fff4e5}tr.fixed td{color:#777}
+tr.conf td{background:#fff4e5}tr.implausible td{background:#fdeeee}tr.fixed td{color:#777}
 .kv td:first-child{color:#555;white-space:nowrap}
 .box{border-left:4px solid #4c78a8;background:#f3f6fa;padding:8px 14px;margin:0.8em 0}
 .warn{border-left-color:#e4a000;background:#fff8e6}.bad{border-left-color:#d62728;background:#fdeeee}
@@ -135,25 +137,95 @@ def _data_section(dataset, result) -> str:
         + "</table>"
 
 
+def _verdict_banner(result, fd) -> str:
+    """The verdict at the top of the report: red when the fit is not usable
+    (never green then), amber when usable with reservations, green only for a
+    usable fit with nothing left undetermined or inseparable."""
+    from .identification import verdict_lines
+
+    a = fd.assessment
+    if not a.usable:
+        return (f"<div class='box bad' id='verdict'><b>NOT USABLE — {_e(a.verdict.replace('_', ' '))}.</b> "
+                f"{_e(a.reason[:1].upper() + a.reason[1:])}. Do not compensate a machine with these "
+                "values: compensation, error tables and G-code refuse this result (force=True / "
+                "<code>--force</code> only to inspect it). The values below are shown for diagnosis.</div>")
+    cls = "warn" if (fd.undetermined or fd.inseparable or fd.implausible or fd.partly) else "ok"
+    notes = []
+    if fd.undetermined:
+        notes.append(f"{len(fd.undetermined)} parameters not determined by this data (left out of "
+                     "compensation)")
+    if fd.partly:
+        notes.append(f"{len(fd.partly)} informed only in part")
+    if fd.implausible:
+        notes.append(f"implausible values: {', '.join(fd.implausible)}")
+    if fd.inseparable:
+        notes.append(f"{len(fd.inseparable)} pairs with |r| ≥ {_NEAR_R:g}")
+    text = " ".join(verdict_lines(result, fd))
+    return (f"<div class='box {cls}' id='verdict'><b>{_e(text)}</b>"
+            + (f" {_e('; '.join(notes))}." if notes else "") + "</div>")
+
+
+def _findings_section(result, fd) -> str:
+    """What was identified, what was informed only in part, what the data
+    could not tell: the plain-words summary under the verdict."""
+    machine_names = set(result.dataset.machine.parameter_names())
+
+    def names(lst):
+        # machine errors by name; the many setup values (probe tip, artefact) as a count
+        mach = [n for n in lst if n in machine_names and not n.startswith("tip.")]
+        setup = len(lst) - len(mach)
+        text = ", ".join(f"<code>{_e(n)}</code>" for n in mach)
+        if setup:
+            rest = ", ".join(n for n in lst if n not in mach)
+            rest = rest if len(rest) <= 160 else rest[:rest.rfind(",", 0, 160)] + " …"
+            text += (" and " if text else "") + _count(setup, "setup parameter") + f" ({_e(rest)})"
+        return text or "none"
+
+    trusted = fd.assessment.verdict in ("ok", "undetermined")  # see identification.finding_lines
+    rows = [("Identified", names(fd.identified) if trusted else
+             f"none: the fit is not usable ({len(fd.identified)} parameters estimated without a "
+             "trustworthy value)")]
+    if fd.informed or fd.partly:
+        rows.append((f"Informed only in part (the data narrowed the plausible range less than "
+                     f"{1 / _PARTLY:g}-fold)", names(fd.partly)))
+    rows.append(("Not determined by this data (values arbitrary; never compensated)",
+                 names(fd.undetermined)))
+    if fd.inseparable:
+        sep = sorted({n for a, b, _ in fd.inseparable for n in (a, b)})
+        rows.append((f"Not separable from one another (|r| ≥ {_NEAR_R:g}; only combinations are determined)",
+                     names(sep)))
+    rows.append(("Implausible (far outside the plausible size: check units, setup, the nominal)",
+                 names(fd.implausible)))
+    return ('<table class="kv">' + "".join(f"<tr><td>{_e(k)}</td><td>{v}</td></tr>" for k, v in rows)
+            + "</table>")
+
+
 def _fit_section(result) -> str:
-    est = len(result.estimated)
-    cls = "ok" if result.converged and not result.unidentifiable else "warn"
-    if not result.converged:
-        cls = "bad"
+    from . import guards
+
+    fd = guards.findings(result)
+    a = fd.assessment
+    cls = "bad" if not a.usable else ("warn" if result.unidentifiable or fd.inseparable else "ok")
+    chi2 = getattr(result, "chi2", None)
     rows = [("residual rms", f"{result.rms * 1e3:.3f} µm"), ("largest |residual|", f"{result.max_abs * 1e3:.3f} µm"),
             ("σ̂ (a posteriori)", f"{result.sigma * 1e3:.3f} µm"),
             ("parameters", f"{result.n_parameters} estimated, rank {result.rank}"),
             ("condition number", f"{result.condition_number:.4g} (of the scaled Jacobian)"),
             ("solver", f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} "
                        "iterations")]
+    if chi2 is not None and np.isfinite(chi2):
+        rows.append(("χ² against the declared noise",
+                     f"{chi2:.4g} for {getattr(result, 'dof', '?')} degrees of freedom, p = "
+                     f"{_fmt(getattr(result, 'chi2_p', float('nan')), 3)}: "
+                     + ("adequate" if getattr(result, "adequate", True) else "INADEQUATE")
+                     + (f" ({getattr(result, 'adequacy', '')})" if getattr(result, "adequacy", "") else "")))
     if result.outliers:
         rows.append(("robust loss", f"{len(result.outliers)} outlier rows flagged: "
                                     f"{', '.join(map(str, result.outliers[:30]))}"))
     verdict = ("The fit converged and every estimated parameter is identifiable from this data."
                if cls == "ok" else
-               "The solver did not converge; treat the values below with suspicion." if cls == "bad" else
+               f"Not usable: {a.reason}." if cls == "bad" else
                "Some parameters cannot be separated with this data (see Identifiability).")
-    _ = est
     return (f'<div class="box {cls}">{_e(verdict)}</div><table class="kv">'
             + "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in rows) + "</table>")
 
@@ -179,11 +251,35 @@ def _identifiability_section(result) -> str:
         for g in result.unidentifiable:
             parts.append("<li>{" + ", ".join(f"<code>{_e(n)}</code>" for n in g) + "}</li>")
         parts.append("</ul>")
-    else:
-        parts.append(f'<div class="box ok">No confounded groups: the {len(result.estimated)} estimated '
-                     f"parameters are separable (rank {result.rank}, condition number "
-                     f"{result.condition_number:.3g}).</div>")
-    pairs = _strong_pairs(result, limit=100000)
+    from . import guards
+
+    fd = guards.findings(result)
+    group = {n: i for i, g in enumerate(result.unidentifiable) for n in g}
+    # pairs inside one confounded group are already named above
+    extra = [(a, b, r) for a, b, r in fd.inseparable if a not in group or group[a] != group.get(b)]
+    if extra:
+        names = sorted({n for a, b, _ in extra for n in (a, b)})
+        parts.append(f'<div class="box bad">{_count(len(extra), "pair")} of estimates '
+                     f"{'has' if len(extra) == 1 else 'have'} "
+                     f"|r| ≥ {_NEAR_R:g}: the data cannot separate "
+                     f"{_e(', '.join(names[:12]))}{' …' if len(names) > 12 else ''} in practice; "
+                     "only their combinations are determined (condition number "
+                     f"{result.condition_number:.3g}). Fix all but one of each pair or add "
+                     "measurements that move them differently.</div>")
+    if fd.undetermined and not result.unidentifiable:
+        parts.append('<div class="box warn">Not determined by this data: '
+                     + ", ".join(f"<code>{_e(n)}</code>" for n in fd.undetermined)
+                     + ". Their values are arbitrary and are never used for compensation.</div>")
+    if not result.unidentifiable and not fd.inseparable and not fd.undetermined:
+        if fd.assessment.usable:
+            parts.append(f'<div class="box ok">No confounded groups: the {len(result.estimated)} estimated '
+                         f"parameters are separable (rank {result.rank}, condition number "
+                         f"{result.condition_number:.3g}).</div>")
+        else:
+            parts.append(f'<div class="box bad">No confounded group was found, but the fit is not usable '
+                         f"({_e(fd.assessment.reason)}), so separability says nothing about these "
+                         "values.</div>")
+    pairs = [p for p in _strong_pairs(result, limit=100000) if abs(p[2]) < _NEAR_R]
     machine_names = set(result.dataset.machine.parameter_names())  # includes tip.x|y|z
     both = [p for p in pairs if p[0] in machine_names and p[1] in machine_names][:20]
     mixed: dict = {}
@@ -193,8 +289,8 @@ def _identifiability_section(result) -> str:
             mixed.setdefault(m, []).append((o, r))
     setup_only = [p for p in pairs if p[0] not in machine_names and p[1] not in machine_names]
     if pairs:
-        parts.append("<h3>Strongly correlated pairs (|r| ≥ 0.9)</h3><p class='muted'>Identifiable, but "
-                     "their uncertainties are inflated by the correlation.</p>")
+        parts.append(f"<h3>Strongly correlated pairs (0.9 ≤ |r| &lt; {_NEAR_R:g})</h3><p class='muted'>"
+                     "Their uncertainties are inflated by the correlation.</p>")
     rows = [(a, b, f"{r:+.3f}") for a, b, r in both]
     for m, lst in mixed.items():
         o, r = lst[0]
@@ -221,11 +317,23 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
     mach = sorted([n for n in est if n in machine_names and not n.startswith("tip.")], key=order.get)
     other = [n for n in est if n not in mach]
 
+    from . import guards
+
+    fd = guards.findings(result)
+    und, part, impl = set(fd.undetermined), set(fd.partly), set(fd.implausible)
+    prior = getattr(result, "prior_std", None) or {}
+
     def row(n: str) -> str:
         f, unit = display_scale(n)
         v, s = result.values[n], result.std.get(n, float("nan"))
         sig = abs(v) / s if s and np.isfinite(s) and s > 0 else float("nan")
         notes = []
+        if n in und:
+            notes.append("NOT DETERMINED by this data: value arbitrary, never compensated")
+        elif n in part:
+            notes.append("informed only in part by the data")
+        if n in impl:
+            notes.append("IMPLAUSIBLE: far outside its plausible size")
         if n in confounded:
             notes.append("confounded with " + ", ".join(x for x in confounded[n] if x != n))
         if len(n) == 4 and n[0] == "E" and n[1] == n[2] and n[3] == "1" and n[2] in negative:
@@ -236,17 +344,23 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
                  f"<td class='num'>{_fmt(v * f)}</td><td class='num'>{_fmt(s * f)}</td>",
                  f"<td class='num'>{_fmt(2 * s * f)}</td><td>{_e(unit)}</td>",
                  f"<td class='num'>{_fmt(sig, 1)}</td>"]
+        if prior:
+            ps, inf = prior.get(n), fd.informed.get(n)
+            cells.append(f"<td class='num'>{_fmt(ps * f) if ps is not None else '–'}</td>"
+                         f"<td class='num'>{_fmt(inf, 2) if inf is not None else '–'}</td>")
         if truth is not None:
             t = truth.get(n)
             z = (v - t) / s if t is not None and s > 0 else float("nan")
             cells.append(f"<td class='num'>{_fmt(t * f) if t is not None else '–'}</td>"
                          f"<td class='num'>{_fmt(z, 2)}</td>")
         cells.append(f"<td>{_e('; '.join(notes))}</td>")
-        cls = ' class="conf"' if n in confounded else ""
+        cls = ' class="implausible"' if n in impl else ' class="conf"' if (n in confounded or n in und) else ""
         return f"<tr{cls}>" + "".join(cells) + "</tr>"
 
     head = ("<tr><th>parameter</th><th>kind</th><th>value</th><th>u (1σ)</th><th>U (2σ)</th>"
-            "<th>unit</th><th>|value|/σ</th>" + ("<th>true</th><th>z</th>" if truth is not None else "")
+            "<th>unit</th><th>|value|/σ</th>"
+            + ("<th>prior σ</th><th>informed (σ/prior σ)</th>" if prior else "")
+            + ("<th>true</th><th>z</th>" if truth is not None else "")
             + "<th>notes</th></tr>")
     return head + "".join(row(n) for n in mach), head + "".join(row(n) for n in other)
 
@@ -383,6 +497,12 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     plots. ``embed_images``: embed the plots as base64 so the HTML file stands
     alone (default); otherwise it references the PNG files next to it.
     ``summary``: a line of text shown under the title.
+
+    A result that is not usable (not converged, non-finite, inadequate against
+    the declared noise, or with requested parameters the data did not
+    determine) is still written, because the report is where one finds out
+    why; it then opens with a red "NOT USABLE" banner giving the reason, the
+    page title says so, and no box on the page is green.
     """
     from . import __version__, plots
 
@@ -423,20 +543,27 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     figs += dbb_figs
     figs += list(figures)
 
+    from . import guards
+
+    fd = guards.findings(result)
     title = title or f"fivecal identification report — {machine.name}"
+    if not fd.assessment.usable:
+        title += " — NOT USABLE"
     now = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     body = [f"<h1>{_e(title)}</h1>",
             f"<div class='sub'>fivecal {__version__} · {now} · {_e(machine.name)} "
             f"(<code>{_e(machine.topology)}</code>) · {len(ds)} observations · residual rms "
             f"{result.rms * 1e3:.3f} µm</div>"]
+    body.append(_verdict_banner(result, fd))
     if summary:
         body.append(f"<div class='box'>{_e(summary)}</div>")
-    nav = ["machine", "data", "fit", "identifiability", "parameters"] + \
+    nav = ["findings", "machine", "data", "fit", "identifiability", "parameters"] + \
           [f"extra{i}" for i in range(len(sections))] + ["plots", "conventions", "files"]
-    labels = ["Machine", "Data", "Fit", "Identifiability", "Parameters"] + [t for t, _ in sections] + \
-             ["Plots", "Conventions", "Files"]
+    labels = ["What the data told", "Machine", "Data", "Fit", "Identifiability", "Parameters"] + \
+             [t for t, _ in sections] + ["Plots", "Conventions", "Files"]
     body.append("<nav>" + "".join(f"<a href='#{a}'>{_e(b)}</a>" for a, b in zip(nav, labels)) + "</nav>")
-    body += ["<h2 id='machine'>Machine</h2>", _machine_section(machine),
+    body += ["<h2 id='findings'>What the data told</h2>", _findings_section(result, fd),
+             "<h2 id='machine'>Machine</h2>", _machine_section(machine),
              "<h2 id='data'>Data</h2>", _data_section(ds, result),
              "<h2 id='fit'>Fit</h2>", _fit_section(result),
              "<h2 id='identifiability'>Identifiability</h2>", _identifiability_section(result),

@@ -239,3 +239,30 @@ def test_dbb_polar_plots_through_the_real_polar_module(tmp_path):
     assert "Ball bar setup C1" in doc and "could not be drawn" not in doc
     found = render_check(path, tmp_path)
     assert found["broken"] == [] and found["images"] >= 4
+
+
+def test_unusable_fit_renders_with_a_red_banner_and_no_green(tmp_path):
+    """As a user sees it: the report of a fit that did not converge opens with
+    a red banner, and nothing in its text part is green (issue 13, item 5)."""
+    import warnings
+
+    from fivecal import tango
+    from fivecal.simulation import simulate
+
+    m = fivecal.Machine.load(os.path.join(os.path.dirname(__file__), "..", "..", "examples", "machines",
+                                          "hu40t.json"))
+    art = tango.octagonal_table()
+    ds = simulate(m, tango.hu40t_plan(art, m), errors={**tango.thesis_s3_errors(), "tip.z": 0.012},
+                  artefact=art, tip_radius=3.0, sigma=0.0006, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fivecal.FitWarning)
+        r = fivecal.identify(ds.subset(range(0, len(ds), 2)), "S3", allow_unidentifiable=True)
+    assert not r.usable
+    path = write_report(r, tmp_path / "bad")
+    img = screenshot(path, tmp_path, height=1400)[..., :3]
+    red_border = (np.abs(img - np.array([0xd6, 0x27, 0x28]) / 255).max(axis=2) < 0.06)
+    green_border = (np.abs(img - np.array([0x2c, 0xa0, 0x2c]) / 255).max(axis=2) < 0.06)
+    green_fill = (np.abs(img - np.array([0xef, 0xf8, 0xef]) / 255).max(axis=2) < 0.01)
+    rows = np.nonzero(red_border.any(axis=1))[0]
+    assert len(rows) and rows.min() < 200, "no red banner near the top"
+    assert not green_border.any() and green_fill.mean() < 1e-4

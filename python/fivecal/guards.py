@@ -1,0 +1,252 @@
+"""Whether an identification result may be used: the verdict of a fit and
+the refusal every consumer (report, compensation, error table, G-code, the
+command line) applies before it hands values to a machine.
+
+A result is usable when the solver converged, every value and uncertainty
+is finite, the residuals agree with the declared instrument noise (chi-square
+test, when the fit reports it) and every parameter the user asked for was
+determined by the data. Anything else is refused with the reason in plain
+words unless the caller forces it (``force=True``, ``--force``).
+
+Works on a :class:`fivecal.Result`, on the result JSON (a dict or a file
+path) and, for plain ``{name: value}`` mappings given by hand, accepts them
+as they are (they carry no fit to judge).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, List, Mapping, Optional
+
+__all__ = ["FitWarning", "UnusableResultError", "CorrectionLimitError", "Assessment", "assess",
+           "require_usable", "VERDICTS"]
+
+#: the verdicts of a fit, best first
+VERDICTS = ("ok", "not_converged", "non_finite", "inadequate", "undetermined")
+
+
+class FitWarning(UserWarning):
+    """:func:`fivecal.identify` returned a result that is not usable (not
+    converged, non-finite, inadequate or undetermined); the message says why."""
+
+
+class UnusableResultError(ValueError):
+    """A consumer refused a result that is not usable; ``force=True`` (the
+    command line's ``--force``) uses it anyway."""
+
+    def __init__(self, message: str, verdict: str = ""):
+        super().__init__(message)
+        self.verdict = verdict
+
+
+class CorrectionLimitError(ValueError):
+    """A compensated command differs from the nominal one by more than the
+    plausibility limit (``max_correction`` / ``max_correction_deg``)."""
+
+    def __init__(self, where: str, index: int, axis: str, size: float, limit: float, unit: str):
+        self.where, self.index, self.axis, self.size, self.limit, self.unit = where, index, axis, size, limit, unit
+        option = ("max_correction" if unit == "mm" else "max_correction_deg") + ", --max-correction"
+        super().__init__(
+            f"{where}: the correction of axis {axis} is {size:.4g} {unit}, more than the plausibility "
+            f"limit of {limit:g} {unit} ({option}); errors this large are more likely a bad "
+            "identification (wrong units, an unconverged or ill-posed fit) than the machine: check "
+            "the result, or raise the limit if the machine really is that far off")
+
+    def at(self, where: str) -> "CorrectionLimitError":
+        """The same error located at ``where`` (a program line instead of a pose)."""
+        return CorrectionLimitError(where, self.index, self.axis, self.size, self.limit, self.unit)
+
+
+@dataclass
+class Assessment:
+    """The verdict of a fit and what follows from it."""
+
+    verdict: str                      # one of VERDICTS
+    reason: str = ""                  # plain words; empty when usable
+    undetermined: List[str] = field(default_factory=list)  # never export these as measured
+    implausible: List[str] = field(default_factory=list)
+    judged: bool = True               # False for a plain name -> value mapping
+
+    @property
+    def usable(self) -> bool:
+        return self.verdict == "ok"
+
+
+def _flat(groups) -> List[str]:
+    out: List[str] = []
+    for g in groups or []:
+        for n in ([g] if isinstance(g, str) else g):
+            if n not in out:
+                out.append(n)
+    return out
+
+
+def _finite(x) -> bool:
+    try:
+        return math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
+
+
+def _chi2_words(chi2: Optional[float], dof: Optional[float], p: Optional[float]) -> str:
+    if chi2 is None or dof is None:
+        return ""
+    s = f"chi-square {chi2:.4g} for {dof:g} degrees of freedom"
+    if p is not None:
+        s += f" (p = {p:.2g})"
+    return s
+
+
+def _fields(source) -> Optional[dict]:
+    """The fields a verdict is judged on, from a Result or a result dict;
+    None for a plain name -> value mapping."""
+    if hasattr(source, "estimated") and hasattr(source, "values") and hasattr(source, "converged"):
+        values = dict(source.values)
+        std = dict(getattr(source, "std", {}) or {})
+        chi2 = getattr(source, "chi2", None)
+        return {"verdict": getattr(source, "verdict", None), "converged": bool(source.converged),
+                "iterations": getattr(source, "iterations", None), "values": values, "std": std,
+                "rms": getattr(source, "rms", None),
+                "unidentifiable": getattr(source, "unidentifiable", []) or [],
+                "undetermined": getattr(source, "undetermined", None),
+                "implausible": list(getattr(source, "implausible", []) or []),
+                "adequate": getattr(source, "adequate", None), "adequacy": getattr(source, "adequacy", ""),
+                "chi2": chi2 if _finite(chi2) else None, "dof": getattr(source, "dof", None),
+                "p": getattr(source, "chi2_p", None)}
+    if isinstance(source, Mapping) and isinstance(source.get("parameters"), Mapping) and (
+            "converged" in source or "verdict" in source):
+        values, std = {}, {}
+        for n, p in source["parameters"].items():
+            if isinstance(p, Mapping):
+                values[n] = p.get("value")
+                if p.get("std") is not None:
+                    std[n] = p.get("std")
+            else:
+                values[n] = p
+        c = source.get("chi2")
+        c = c if isinstance(c, Mapping) else {"value": c}
+        return {"verdict": source.get("verdict"), "converged": bool(source.get("converged", True)),
+                "iterations": source.get("iterations"), "values": values, "std": std,
+                "rms": source.get("residual_rms"),
+                "unidentifiable": source.get("unidentifiable") or [],
+                "undetermined": source.get("undetermined"),
+                "implausible": list(source.get("implausible") or []),
+                "adequate": source.get("adequate"), "adequacy": source.get("adequacy") or "",
+                "chi2": c.get("value") if _finite(c.get("value")) else None, "dof": c.get("dof"),
+                "p": c.get("p")}
+    return None
+
+
+def assess(source: Any) -> Assessment:
+    """The :class:`Assessment` of a Result, a result dict or a result JSON
+    path. A plain mapping name -> value is accepted as given (verdict "ok",
+    ``judged`` False)."""
+    if isinstance(source, (str, os.PathLike)):
+        path = os.fspath(source)
+        try:
+            with open(path) as f:
+                source = json.load(f)
+        except OSError as e:
+            raise ValueError(f"{path}: cannot read ({e.strerror})") from None
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path}: not valid JSON ({e.msg}, line {e.lineno})") from None
+    f = _fields(source)
+    if f is None:
+        return Assessment("ok", judged=False)
+    confounded = _flat(f["unidentifiable"])
+    undetermined = _flat(f["undetermined"]) if f["undetermined"] is not None else []
+    undetermined += [n for n in confounded if n not in undetermined]
+    bad = [n for n, v in f["values"].items() if not _finite(v)] + \
+          [n for n, s in f["std"].items() if not _finite(s) and _finite(f["values"].get(n))]
+    if f["rms"] is not None and not _finite(f["rms"]):
+        bad.append("the residuals")
+    verdict = f["verdict"]
+    if verdict == "ok" and (bad or not f["converged"]):
+        verdict = None  # a file edited after the fit, or a verdict that missed it: judge the values
+    if verdict not in VERDICTS:
+        # Results written before the fit reported a verdict: judge what they hold.
+        if bad:
+            verdict = "non_finite"
+        elif not f["converged"]:
+            verdict = "not_converged"
+        elif f["adequate"] is False:
+            verdict = "inadequate"
+        elif confounded or (f["undetermined"] is None and undetermined):
+            verdict = "undetermined"
+        else:
+            verdict = "ok"
+    reason = ""
+    if verdict == "non_finite":
+        reason = ("the fit produced values that are not finite numbers (NaN or infinity)"
+                  + (f" for {', '.join(bad[:8])}{' …' if len(bad) > 8 else ''}" if bad else ""))
+    elif verdict == "not_converged":
+        it = f["iterations"]
+        reason = ("the fit did not converge" + (f" in {it} iterations" if it else "")
+                  + ": its values are not a solution of the problem")
+    elif verdict == "inadequate":
+        words = _chi2_words(f["chi2"], f["dof"], f["p"])
+        reason = ("the model does not explain the data within the declared instrument noise"
+                  + (f" ({words})" if words else ""))
+        if f["adequacy"]:
+            reason += f"; likely cause: {f['adequacy']}"
+    elif verdict == "undetermined":
+        names = undetermined or confounded
+        reason = ("the data did not determine "
+                  + (", ".join(names[:12]) + (" …" if len(names) > 12 else "") if names else
+                     "some of the requested parameters")
+                  + " (their values are arbitrary, not measured)")
+    return Assessment(verdict, reason, undetermined, f["implausible"])
+
+
+def require_usable(source: Any, force: bool = False, what: str = "this result") -> Assessment:
+    """Raise :class:`UnusableResultError` naming the reason unless ``source``
+    is usable or ``force`` is set; returns the :class:`Assessment`."""
+    a = assess(source)
+    if not a.usable and not force:
+        raise UnusableResultError(f"refusing to use {what}: {a.reason}; force it (force=True, --force) "
+                                  "only to inspect the values", a.verdict)
+    return a
+
+
+#: posterior σ / prior σ above which a determined parameter counts as informed
+#: only in part: the data narrowed its plausible range less than tenfold (the
+#: fit itself calls a parameter undetermined above about 0.45)
+PARTLY_INFORMED = 0.1
+#: |r| at or above which two estimates are treated as not separable in practice
+NEAR_SINGULAR_R = 0.999
+
+
+@dataclass
+class Findings:
+    """What a result says, sorted for a reader: identified, informed only in
+    part, not determined, implausible, and pairs the data could not separate."""
+
+    assessment: Assessment
+    identified: List[str]
+    partly: List[str]
+    undetermined: List[str]
+    implausible: List[str]
+    inseparable: List[tuple]          # (name, name, r) with |r| >= NEAR_SINGULAR_R
+    informed: dict                    # name -> posterior σ / prior σ (empty without priors)
+
+
+def findings(result) -> Findings:
+    """Sort the estimated parameters of a :class:`fivecal.Result` for the reports."""
+    import numpy as np
+
+    a = assess(result)
+    est = list(result.estimated)
+    informed = {n: float(v) for n, v in (getattr(result, "informed", None) or {}).items() if _finite(v)}
+    undetermined = [n for n in est if n in set(a.undetermined)] + \
+                   [n for n in a.undetermined if n not in est]
+    und = set(undetermined)
+    partly = [n for n in est if n not in und and informed.get(n, 0.0) > PARTLY_INFORMED]
+    identified = [n for n in est if n not in und and n not in set(partly)]
+    pairs = []
+    C = np.asarray(getattr(result, "correlation", np.zeros((0, 0))), dtype=float)
+    if C.shape == (len(est), len(est)):
+        ii, jj = np.nonzero(np.triu(np.abs(np.nan_to_num(C, nan=1.0)) >= NEAR_SINGULAR_R, 1))
+        pairs = sorted(((est[i], est[j], float(C[i, j])) for i, j in zip(ii, jj)), key=lambda p: -abs(p[2]))
+    return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed)
