@@ -111,7 +111,10 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
   if (opt.significant_digits < 1 || opt.significant_digits > 17)
     throw std::invalid_argument("monte carlo: significant_digits must be in [1, 17], got " +
                                 std::to_string(opt.significant_digits));
-  if (!(opt.probability > 0 && opt.probability < 1))
+  // The GUM interval needs the normal quantile of (1 + p) / 2, which rounds
+  // to 1 (an infinite quantile) within an ulp of p = 1: refuse that before
+  // the trials run rather than after.
+  if (!(opt.probability > 0 && 0.5 * (1 + opt.probability) < 1))
     throw std::invalid_argument("monte carlo: probability must be in (0, 1)");
   if (opt.threads < 0 || opt.threads > kMaxThreads)
     throw std::invalid_argument("monte carlo: threads must be in [0, " + std::to_string(kMaxThreads) +

@@ -24,23 +24,6 @@ Eigen::Vector3d ToolAt(const Machine& m, const Eigen::VectorXd& theta, const Eig
   return p;
 }
 
-// The spec's seed: an integer 0 <= seed < 2^64, or a float with an integral
-// value in that range (numpy writes 7.0). nlohmann's own conversion casts a
-// float or a negative number to uint64_t unchecked (UB out of range, a
-// silent wrap for -1).
-uint64_t ReadSeed(const json& spec) {
-  if (!spec.contains("seed")) return 0;
-  const json& v = spec["seed"];
-  if (v.is_number_unsigned()) return v.get<uint64_t>();
-  if (v.is_number_integer() && v.get<int64_t>() >= 0) return static_cast<uint64_t>(v.get<int64_t>());
-  if (v.is_number_float()) {
-    const double x = v.get<double>();
-    // 2^64 is exactly representable; every double below it converts exactly.
-    if (x >= 0 && x < 18446744073709551616.0 && x == std::floor(x)) return static_cast<uint64_t>(x);
-  }
-  throw std::invalid_argument("simulate.seed: must be an integer in [0, 2^64), got " + v.dump());
-}
-
 }  // namespace
 
 namespace {
@@ -165,7 +148,7 @@ SimulationPlan PlanSpec(const json& spec) {
     for (double x : {noise.probe, noise.dbb, noise.ball3d})
       if (!(x >= 0) || !std::isfinite(x)) throw std::invalid_argument("simulate.sigma: must be >= 0 mm");
   }
-  const uint64_t seed = ReadSeed(spec);
+  const uint64_t seed = spec.value("seed", uint64_t{0});
   // Per observation: the noise-free readings and the noise directions.
   struct Slot {
     Eigen::VectorXd start, approach;

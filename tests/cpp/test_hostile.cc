@@ -80,8 +80,8 @@ TEST(HostileSeed, IntegersOverTheWholeUint64RangeAreAccepted) {
 }
 
 TEST(HostileSeed, NegativeFloatAndOutOfRangeSeedsAreRefusedByName) {
-  // Before: the float->uint64 cast of 1e20 or -1.5 was undefined behaviour
-  // (the fit ran with seed 0 on x86), and -1 wrapped to 2^64-1.
+  // Before: nlohmann's float->uint64 cast of 1e20 or -1.5 was undefined
+  // behaviour (the fit ran with seed 0 on x86), and -1 wrapped to 2^64-1.
   for (const char* s : {"-1", "-9223372036854775808", "1.5", "1e20", "-1e308", "1e308",
                         "18446744073709551616", "\"7\"", "null", "true"}) {
     try {
@@ -173,11 +173,13 @@ TEST(HostileMonteCarlo, ExtremeSeedAndProbabilityRun) {
   MonteCarloOptions o = FewTrials();
   o.seed = std::numeric_limits<uint64_t>::max();
   o.threads = 2;
-  o.probability = std::nextafter(1.0, 0.0);
+  o.probability = std::numeric_limits<double>::denorm_min();
   o.significant_digits = 17;
   const MonteCarloResult r = MonteCarlo(plan, SmallFit(), o);
   EXPECT_EQ(r.used + r.not_converged + r.failed, 6);
-  for (double p : {0.0, 1.0, -1.0, std::numeric_limits<double>::quiet_NaN()}) {
+  // Before: p one ulp below 1 ran every trial, then failed in the normal
+  // quantile of (1 + p) / 2 = 1.
+  for (double p : {0.0, 1.0, -1.0, std::nextafter(1.0, 0.0), std::numeric_limits<double>::quiet_NaN()}) {
     o.probability = p;
     ExpectMonteCarloRefuses(o, "probability");
   }
