@@ -219,8 +219,9 @@ TEST(HostileJson, HugeAxisValuesReadingsAndTipRadius) {
     ExpectValueOrNamedError(
         [&] { LoadAndFit(DatasetWith([](json& d, const json& v) { d["observations"][3]["axes"]["C"] = v; }, n)); },
         "observations[3]");
-    ExpectValueOrNamedError([&] { LoadAndFit(DatasetWith([](json& d, const json& v) { d["tip_radius"] = v; }, n)); },
-                            "tip_radius");
+    ExpectValueOrNamedError(
+        [&] { LoadAndFit(DatasetWith([](json& d, const json& v) { d["probe"]["tip_radius"] = v; }, n)); },
+        "tip_radius");
   }
 }
 
