@@ -213,6 +213,7 @@ void LoadAndFit(const std::string& text) {
 
 TEST(HostileJson, HugeAxisValuesReadingsAndTipRadius) {
   for (const char* n : kHugeNumbers) {
+    SCOPED_TRACE(n);
     ExpectValueOrNamedError(
         [&] { LoadAndFit(DatasetWith([](json& d, const json& v) { d["observations"][0]["axes"]["X"] = v; }, n)); },
         "observations[0]");
@@ -236,6 +237,7 @@ TEST(HostileJson, HugeArtefactGeometry) {
         json d = ds;
         if (value.is_array()) d["artefact"][part][0][key][2] = json::parse(n);
         else d["artefact"][part][0][key] = json::parse(n);
+        SCOPED_TRACE(std::string(part) + "[0]." + key + " = " + n);
         ExpectValueOrNamedError([&] { LoadAndFit(d.dump()); }, "artefact");
       }
     }
@@ -265,6 +267,7 @@ TEST(HostileJson, MachineAxisDirectionsAtTheDoubleLimits) {
 
 TEST(HostileJson, SpecNoiseAndErrorsAtTheDoubleLimits) {
   for (const char* n : kHugeNumbers) {
+    SCOPED_TRACE(n);
     json spec = json::parse(TangoSpec());
     spec["sigma"] = json::parse(n);
     ExpectValueOrNamedError([&] { (void)BuildSimulationPlan(spec.dump()); }, "sigma");
