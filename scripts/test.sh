@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs the whole test suite: the C++ gtest suite through ctest, then pytest.
+# Runs the whole test suite: the C++ gtest suite through ctest (plain, then
+# under the sanitizers: scripts/sanitize.sh), then pytest.
 # Expects scripts/install.sh to have run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -9,6 +10,9 @@ JOBS=${JOBS:-2}
 cmake -S . -B build/ctest -G Ninja -DFIVECAL_BUILD_PYTHON=OFF -DFIVECAL_BUILD_TESTS=ON >/dev/null
 cmake --build build/ctest -j "$JOBS"
 ctest --test-dir build/ctest --output-on-failure -j "$JOBS"
+
+# The same gtests once more under AddressSanitizer + UndefinedBehaviorSanitizer.
+bash scripts/sanitize.sh
 
 # The C++ core as an embedder uses it: install, find_package(fivecal), run.
 cmake --install build/ctest --prefix build/prefix >/dev/null

@@ -87,8 +87,12 @@ void CoverageInterval(std::vector<double> v, double p, double* low, double* high
 }
 
 double NumericalTolerance(double u, int significant_digits) {
+  // Beyond 17 digits a double has nothing left to compare (and a huge count
+  // would overflow the exponent below).
+  if (significant_digits < 1 || significant_digits > 17)
+    throw std::invalid_argument("significant_digits must be in [1, 17], got " + std::to_string(significant_digits));
   if (!(u > 0) || !std::isfinite(u)) return 0.0;
-  const int nd = std::max(1, significant_digits);
+  const int nd = significant_digits;
   int l = static_cast<int>(std::floor(std::log10(u))) - nd + 1;
   // Guard the rounding of log10 at exact powers of ten: c must have nd digits.
   const double c = std::round(u / std::pow(10.0, l));
@@ -98,10 +102,23 @@ double NumericalTolerance(double u, int significant_digits) {
 
 MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& identify,
                             const MonteCarloOptions& opt, const ProgressCallback& progress) {
-  if (opt.trials < 2) throw std::invalid_argument("monte carlo: trials must be >= 2");
-  if (!(opt.probability > 0 && opt.probability < 1))
+  // The trials x p sample matrix is allocated up front: bound it before.
+  constexpr int kMaxTrials = 10000000;
+  constexpr int kMaxThreads = 1024;
+  if (opt.trials < 2 || opt.trials > kMaxTrials)
+    throw std::invalid_argument("monte carlo: trials must be in [2, " + std::to_string(kMaxTrials) + "], got " +
+                                std::to_string(opt.trials));
+  if (opt.significant_digits < 1 || opt.significant_digits > 17)
+    throw std::invalid_argument("monte carlo: significant_digits must be in [1, 17], got " +
+                                std::to_string(opt.significant_digits));
+  // The GUM interval needs the normal quantile of (1 + p) / 2, which rounds
+  // to 1 (an infinite quantile) within an ulp of p = 1: refuse that before
+  // the trials run rather than after.
+  if (!(opt.probability > 0 && 0.5 * (1 + opt.probability) < 1))
     throw std::invalid_argument("monte carlo: probability must be in (0, 1)");
-  if (opt.threads < 0) throw std::invalid_argument("monte carlo: threads must be >= 0 (0 = all cores)");
+  if (opt.threads < 0 || opt.threads > kMaxThreads)
+    throw std::invalid_argument("monte carlo: threads must be in [0, " + std::to_string(kMaxThreads) +
+                                "] (0 = all cores), got " + std::to_string(opt.threads));
   if (opt.blocks < 2) throw std::invalid_argument("monte carlo: blocks must be >= 2");
   const auto t0 = std::chrono::steady_clock::now();
 

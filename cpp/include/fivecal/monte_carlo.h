@@ -43,11 +43,11 @@
 namespace fivecal {
 
 struct MonteCarloOptions {
-  int trials = 10000;
-  int threads = 0;              // 0: all cores (std::thread::hardware_concurrency)
+  int trials = 10000;           // 2 .. 10^7 (the trials x p samples are allocated up front)
+  int threads = 0;              // 0: all cores (std::thread::hardware_concurrency); at most 1024
   uint64_t seed = 1;            // master seed
   double probability = 0.95;    // coverage probability
-  int significant_digits = 2;   // n_dig of the numerical tolerance (JCGM 101 §7.9.2)
+  int significant_digits = 2;   // n_dig of the numerical tolerance (JCGM 101 §7.9.2), 1 .. 17
   int blocks = 10;              // h for the stability estimate
   // Optional input covariance (inputs x inputs, mm^2, along the residuals as
   // in gum.h). Empty: independent inputs with the plan's noise levels.
@@ -97,6 +97,7 @@ void CoverageInterval(std::vector<double> values, double p, double* low, double*
                       double* sym_low = nullptr, double* sym_high = nullptr);
 
 // JCGM 101 §7.9.2: delta = 1/2 10^l with u = c 10^l, c an n_dig-digit integer.
+// Throws std::invalid_argument unless 1 <= significant_digits <= 17.
 double NumericalTolerance(double u, int significant_digits);
 
 // Progress: called from the calling thread every ~0.1 s and at the end with
