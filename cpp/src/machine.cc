@@ -1,5 +1,7 @@
 #include "fivecal/machine.h"
 
+#include <Eigen/Geometry>
+
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -127,7 +129,7 @@ Machine::Machine(std::string name, std::string topology, std::vector<Axis> axes,
     // would turn the axis into a zero (motionless) one.
     const double n = a.direction.stableNorm();
     if (!(n > 1e-12) || !std::isfinite(n))
-      throw std::invalid_argument(where + ".direction: zero (or non-finite) vector");
+      throw std::invalid_argument(where + ".direction: zero vector (or not finite)");
     a.direction /= n;
     axes_.push_back(a);
     by_name.erase(it);
@@ -292,7 +294,7 @@ Machine ParseMachine(const json& j) {
                                   " (expected X Y Z A B C S)");
     if (!val.is_object()) throw std::invalid_argument(where + ": expected an object");
     if (letter == "S" && seen_spindle)
-      throw std::invalid_argument("machine.axes: both \"S\" and its alias \"C1\" are given; keep one");
+      throw std::invalid_argument("machine.axes: duplicate axis 'S': both \"S\" and its alias \"C1\" are given; keep one");
     if (letter == "S") seen_spindle = true;
     CheckKeys(val, {"type", "direction", "point"}, where);
     Axis a;

@@ -48,6 +48,10 @@ json Hu40t() {
  "tool": {"tip": [0,0,100]}})");
 }
 
+// At the zero pose the tool ball sits at its nominal place: a 100 mm bar to
+// (0,0,100) reads about 0, a 3D ball at the origin is displaced by the errors.
+json ZeroAxes() { return {{"X", 0.0}, {"Y", 0.0}, {"Z", 0.0}, {"B", 0.0}, {"C", 0.0}, {"S", 0.0}}; }
+
 json Axes() { return {{"X", 10.0}, {"Y", 20.0}, {"Z", -5.0}, {"B", 30.0}, {"C", 0.0}, {"S", 0.0}}; }
 
 // A small valid dataset: one facet touch, one sphere touch, one DBB sample and
@@ -182,10 +186,10 @@ json SimSpec() {
   spec["plan"] = {
       {{"type", "facet"}, {"target", "F1"}, {"axes", {{"B", 0}, {"C", 0}}}},
       {{"type", "sphere"}, {"target", "S1"}, {"axes", {{"B", 0}, {"C", 0}}}, {"normal", {0, 0, 1}}},
-      {{"type", "dbb"}, {"setup", "A1"}, {"axes", Axes()}, {"length", 100.0},
+      {{"type", "dbb"}, {"setup", "A1"}, {"axes", ZeroAxes()}, {"length", 100.0},
        {"tool_ball", {0, 0, 0}}, {"table_ball", {0, 0, 100}}},
-      {{"type", "ball3d"}, {"setup", "R1"}, {"axes", Axes()}, {"tool_ball", {0, 0, 0}},
-       {"table_ball", {0, 0, 100}}}};
+      {{"type", "ball3d"}, {"setup", "R1"}, {"axes", ZeroAxes()}, {"tool_ball", {0, 0, 0}},
+       {"table_ball", {0, 0, 0}}}};
   spec["seed"] = 3;
   return spec;
 }
@@ -352,7 +356,7 @@ TEST(LoaderBoundary, SimulateAppliesTheLoadersChecksNamingThePlanEntry) {
   spec["sigma"] = {{"probe", "0.001"}};
   ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.sigma.probe", "number"});
   spec = SimSpec();
-  spec["plan"][2]["length"] = 1.0;  // the balls are 100 mm apart: a 99 mm "reading"
+  spec["plan"][2]["length"] = 50.0;  // the balls are 100 mm apart: a 50 mm "reading"
   ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2]", "reading"});
   // What simulate writes, load_dataset reads.
   spec = SimSpec();

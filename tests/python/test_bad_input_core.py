@@ -20,6 +20,7 @@ HU40T = {"name": "HU40T-like", "topology": "wCBXfZYSt",
          "tool": {"tip": [0, 0, 100]}}
 
 AXES = {"X": 10.0, "Y": 20.0, "Z": -5.0, "B": 30.0, "C": 0.0, "S": 0.0}
+ZERO = {"X": 0.0, "Y": 0.0, "Z": 0.0, "B": 0.0, "C": 0.0, "S": 0.0}  # the tool ball at its nominal place
 
 
 def dataset():
@@ -90,7 +91,7 @@ def test_simulate_unknown_plan_type_and_loader_checks():
     plan = [{"type": "dbbb", "setup": "A1"}]
     with pytest.raises(ValueError, match=r"plan\[0\]\.type: unknown type 'dbbb'.*did you mean \"dbb\""):
         fivecal.simulate(HU40T, plan)
-    dbb = {"type": "dbb", "setup": "A1", "axes": dict(AXES), "length": 0.0,
+    dbb = {"type": "dbb", "setup": "A1", "axes": dict(ZERO), "length": 0.0,
            "tool_ball": [0, 0, 0], "table_ball": [0, 0, 100]}
     with pytest.raises(ValueError, match=r"plan\[0\]\.length"):
         fivecal.simulate(HU40T, [dbb])
@@ -103,7 +104,7 @@ def test_simulate_unknown_plan_type_and_loader_checks():
 
 
 def test_simulated_noise_is_declared_in_the_dataset():
-    dbb = {"type": "dbb", "setup": "A1", "axes": dict(AXES), "length": 100.0,
+    dbb = {"type": "dbb", "setup": "A1", "axes": dict(ZERO), "length": 100.0,
            "tool_ball": [0, 0, 0], "table_ball": [0, 0, 100]}
     ds = fivecal.simulate(HU40T, [dbb], sigma={"dbb": 0.0003}, seed=1)
     assert json.loads(ds._core.to_json())["observations"][0]["sigma"] == 0.0003
