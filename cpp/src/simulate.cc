@@ -113,7 +113,11 @@ namespace {
 SimulationPlan PlanSpec(const json& spec) {
   if (!spec.is_object()) throw std::invalid_argument("simulate: expected a JSON object");
   CheckKeys(spec, {"machine", "errors", "setup", "probe", "artefact", "plan", "sigma", "seed", "$schema",
-                   "_comment"}, "simulate");
+                   "_comment", "observations"}, "simulate");
+  // A dataset skeleton turned into a spec may keep its empty observation list.
+  if (spec.contains("observations") && !(spec["observations"].is_array() && spec["observations"].empty()))
+    throw std::invalid_argument("simulate.observations: a spec plans its observations in \"plan\"; "
+                                "remove \"observations\"");
   if (!spec.contains("machine")) throw std::invalid_argument("simulate.machine: missing");
   json base = {{"machine", spec["machine"]},
                {"probe", spec.value("probe", json::object())},
@@ -321,12 +325,12 @@ SimulationPlan PlanSpec(const json& spec) {
         // What the loader would refuse, refused here, naming the plan entry.
         if (!(std::abs(ob.reading) <= kMaxDbbReading))
           throw std::invalid_argument(w + ": the simulated reading " + std::to_string(ob.reading) +
-                                      " mm is beyond a ball bar's range (|reading| <= 10 mm); is the "
+                                      " mm is beyond a ball bar's range (|reading| <= 100 mm); is the "
                                       "bar length the ball distance at these axes?");
       } else {
         ob.measured = P - table_true;
         if (!(ob.measured.cwiseAbs().maxCoeff() <= kMaxBall3d))
-          throw std::invalid_argument(w + ": the simulated displacement exceeds 10 mm (a 3D ball "
+          throw std::invalid_argument(w + ": the simulated displacement exceeds 100 mm (a 3D ball "
                                       "sensor's range); are the balls where the axes put them?");
       }
       slots.push_back(Slot());

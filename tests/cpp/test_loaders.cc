@@ -356,7 +356,7 @@ TEST(LoaderBoundary, SimulateAppliesTheLoadersChecksNamingThePlanEntry) {
   spec["sigma"] = {{"probe", "0.001"}};
   ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.sigma.probe", "number"});
   spec = SimSpec();
-  spec["plan"][2]["length"] = 50.0;  // the balls are 100 mm apart: a 50 mm "reading"
+  spec["plan"][2]["length"] = 300.0;  // the balls are 100 mm apart: a -200 mm "reading"
   ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2]", "reading"});
   // What simulate writes, load_dataset reads.
   spec = SimSpec();
@@ -402,7 +402,7 @@ TEST(LoaderBoundary, ImplausibleMagnitudesAreRefusedNamingTheField) {
       {[](json& d) { d["probe"]["tip_radius"] = 1e308; }, "probe.tip_radius"},
       {[](json& d) { d["observations"][2]["length"] = 1e308; }, "observations[2].length"},
       {[](json& d) { d["observations"][2]["reading"] = 1e308; }, "observations[2].reading"},
-      {[](json& d) { d["observations"][2]["reading"] = 12.0; }, "observations[2].reading"},
+      {[](json& d) { d["observations"][2]["reading"] = 120.0; }, "observations[2].reading"},
       {[](json& d) { d["observations"][2]["tool_ball"][2] = 1e308; }, "observations[2].tool_ball[2]"},
       {[](json& d) { d["observations"][3]["measured"][0] = 1e308; }, "observations[3].measured[0]"},
       {[](json& d) { d["observations"][0]["axes"]["X"] = 1e308; }, "observations[0].axes.X"},

@@ -143,9 +143,9 @@ void RequireFinite(double x, const std::string& what);
 inline constexpr double kMaxLinear = 1e5;        // mm: coordinates, points, lengths, radii,
                                                  // linear axis commands (100 m)
 inline constexpr double kMaxRotaryDeg = 1e5;     // degrees: rotary axis commands (~280 turns)
-inline constexpr double kMaxDbbReading = 10.0;   // mm: a ball-bar reading (the instrument
-                                                 // travels about +-1 mm)
-inline constexpr double kMaxBall3d = 10.0;       // mm: a 3D ball displacement (R-test range)
+inline constexpr double kMaxDbbReading = 100.0;  // mm: a ball-bar reading (the instrument
+                                                 // travels about +-1 mm; synthetic plans go further)
+inline constexpr double kMaxBall3d = 100.0;      // mm: a 3D ball displacement (R-test range ~ +-2 mm)
 inline constexpr double kMaxErrorValue = 1e3;    // mm or rad: any error or setup parameter
 inline constexpr double kMinSigma = 1e-9;        // mm: a declared noise (1 pm) ...
 inline constexpr double kMaxSigma = 1e3;         // ... up to 1 m
