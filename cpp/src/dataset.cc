@@ -265,7 +265,7 @@ Dataset ParseDataset(const json& j, bool require_observations) {
         ob.tool_ball = ReadVector3(o.value("tool_ball", json()), w + ".tool_ball");
         ob.table_ball = ReadVector3(o.value("table_ball", json()), w + ".table_ball");
         if (ob.type == ObservationType::kBall3d)
-          ob.measured = ReadVector3(o.value("measured", json()), w + ".measured", kMaxBall3d);
+          ob.measured = ReadVector3(o.value("measured", json()), w + ".measured");
         break;
     }
     if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w + ".sigma");
@@ -321,8 +321,8 @@ void Dataset::Validate() const {
             throw std::invalid_argument(w() + ".length: must be > 0 and <= 1e5 mm");
         } else {
           for (int c = 0; c < 3; ++c)
-            if (!(std::abs(o.measured[c]) <= kMaxBall3d))
-              RequireBounded(o.measured[c], kMaxBall3d, w() + ".measured[" + std::to_string(c) + "]");
+            if (!(std::abs(o.measured[c]) <= kMaxLinear))
+              RequireBounded(o.measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
         }
         for (int c = 0; c < 3; ++c) {
           if (!(std::abs(o.tool_ball[c]) <= kMaxLinear))

@@ -329,9 +329,6 @@ SimulationPlan PlanSpec(const json& spec) {
                                       "bar length the ball distance at these axes?");
       } else {
         ob.measured = P - table_true;
-        if (!(ob.measured.cwiseAbs().maxCoeff() <= kMaxBall3d))
-          throw std::invalid_argument(w + ": the simulated displacement exceeds 100 mm (a 3D ball "
-                                      "sensor's range); are the balls where the axes put them?");
       }
       slots.push_back(Slot());
     } else {
