@@ -35,9 +35,9 @@ def test_a_quick_start_every_other_touch_is_refused_naming_the_half_probed_spher
     train = ds.subset(range(0, len(ds), 2))
     # Every other touch leaves a scale-bar sphere with two touches: its centre
     # (three coordinates) cannot be found, so neither can the length reference.
-    with pytest.raises(ValueError, match=r"not determined by this data.*sphere\.S2") as e:
+    with pytest.raises(ValueError, match=r"not determined by this data") as e:
         fivecal.identify(train, estimate="S3")
-    assert "EXX1" in str(e.value) or "sphere.S2" in str(e.value)
+    assert "sphere.S2" in str(e.value) or "no length reference" in str(e.value), str(e.value)
     # auto answers, but says which parameters it could not determine.
     r = fivecal.identify(train, estimate="auto")
     assert r.converged and r.finite
@@ -96,7 +96,7 @@ def test_c_ball3d_location_without_mount_is_inadequate_naming_the_setup():
 # ---- (d) a rough nominal ---------------------------------------------------------------------------
 
 def _rough_machine(offset):
-    d = json.loads(tango.hu40t_machine().to_json())
+    d = tango.hu40t_machine().to_dict()
     p = d["axes"]["C"].get("point", [0, 0, 0])
     d["axes"]["C"]["point"] = [p[0] + offset, p[1], p[2]]
     return fivecal.Machine.from_dict(d)
@@ -107,7 +107,7 @@ def test_d_rough_nominal_gives_the_same_set_and_values(estimate):
     ds = tango.hu40t_dataset(sigma=SIGMA)
     good = fivecal.identify(ds, estimate)
     rough_ds = ds.to_dict()
-    rough_ds["machine"] = json.loads(_rough_machine(53.0).to_json())
+    rough_ds["machine"] = _rough_machine(53.0).to_dict()
     rough = fivecal.identify(rough_ds, estimate)
     assert rough.estimated == good.estimated
     for n in good.estimated:
@@ -121,7 +121,7 @@ def test_d_rough_nominal_gives_the_same_set_and_values(estimate):
 def test_d_rough_nominal_auto_flags_the_implausible_offset():
     ds = tango.hu40t_dataset(sigma=SIGMA)
     rough_ds = ds.to_dict()
-    rough_ds["machine"] = json.loads(_rough_machine(53.0).to_json())
+    rough_ds["machine"] = _rough_machine(53.0).to_dict()
     r = fivecal.identify(rough_ds, "auto")
     assert "EX0C" in r.implausible
     assert r.converged and r.finite
