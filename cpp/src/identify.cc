@@ -468,9 +468,20 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
       Problem at(ds, table, pre.values, est);
       WeightedJacobian(&at, &r, &Jw);
       const Determination d2 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
-      if (d2.undetermined.empty()) values = pre.values;
-      else if (!opt.allow_unidentifiable)
-        throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(d2)));
+      if (d2.undetermined.empty()) {
+        values = pre.values;
+      } else if (!opt.allow_unidentifiable) {
+        // The MAP point may still sit where a weakly seen setup parameter
+        // (a sphere with few touches) looks free; the least-squares point
+        // decides. Refuse only when it too leaves the set undetermined.
+        const Solve ls = RunFit(ds, table, pre.values, est, opt, no_prior, nullptr);
+        Problem at_ls(ds, table, ls.values, est);
+        WeightedJacobian(&at_ls, &r, &Jw);
+        const Determination d3 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+        if (!d3.undetermined.empty())
+          throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(d2)));
+        values = ls.values;
+      }
     }
   }
 
