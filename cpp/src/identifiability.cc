@@ -226,9 +226,12 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
     double vmax = 0;
     for (int j = 0; j < p; ++j)
       if (bad[j]) vmax = std::max(vmax, std::abs(v[j]));
+    // An exactly free direction binds every parameter it touches, however
+    // lightly (their sigmas are all infinite); a weak one its main members.
+    const bool exact = out.singular_values[k] <= zero;
     int first = -1;
     for (int j = 0; j < p; ++j) {
-      if (!bad[j] || std::abs(v[j]) < 0.1 * vmax) continue;
+      if (!bad[j] || std::abs(v[j]) < (exact ? 1e-2 : 0.1) * vmax) continue;
       if (first < 0) first = j;
       else parent[find(j)] = find(first);
     }
