@@ -654,9 +654,8 @@ Eigen::VectorXd PredictResiduals(const Dataset& ds, const std::map<std::string, 
   for (const auto& [name, value] : values) {
     const int i = table.Index(name);
     if (i >= 0) v[i] = value;  // other datasets' setup parameters do not apply here
-    else if (name.rfind("facet.", 0) != 0 && name.rfind("sphere.", 0) != 0 &&
-             name.rfind("dbb.", 0) != 0 && name.rfind("ball3d.", 0) != 0)
-      table.Require(name);
+    else if (!json_util::IsSetupParameterName(name))
+      table.Require(name);  // throws: a machine name typo or a malformed dotted name
   }
   Problem problem(ds, table, v, {});
   Eigen::VectorXd r;

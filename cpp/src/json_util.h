@@ -4,6 +4,8 @@
 #define FIVECAL_SRC_JSON_UTIL_H_
 
 #include <Eigen/Core>
+#include <cstdint>
+#include <initializer_list>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
@@ -15,71 +17,58 @@ namespace fivecal::json_util {
 
 using nlohmann::json;
 
+// Deepest nesting a document may have: every format here is at most about 6
+// levels deep, and a pre-scan refusing deeper text keeps a hostile file
+// (100k unclosed '[') from costing memory, recursion or a huge message.
+inline constexpr int kMaxDepth = 64;
+
 // Parses JSON; a syntax error or a number out of double range names the
-// field being read (what.observations[3].axes.B), tracked with the parser's
-// callback since the lexer fails before the value reaches the parsers.
-inline json Parse(const std::string& text, const std::string& what) {
-  struct Level {
-    bool array;
-    int done = 0;  // completed elements of an array
-    std::string key;
-  };
-  std::vector<Level> stack;
-  auto completed = [&] {
-    if (!stack.empty() && stack.back().array) ++stack.back().done;
-  };
-  json::parser_callback_t track = [&](int, json::parse_event_t event, json& parsed) {
-    switch (event) {
-      case json::parse_event_t::object_start: stack.push_back({false}); break;
-      case json::parse_event_t::array_start: stack.push_back({true}); break;
-      case json::parse_event_t::key: stack.back().key = parsed.get<std::string>(); break;
-      case json::parse_event_t::object_end:
-      case json::parse_event_t::array_end:
-        stack.pop_back();
-        completed();
-        break;
-      case json::parse_event_t::value: completed(); break;
-    }
-    return true;
-  };
-  auto where = [&] {
-    std::string path = what;
-    for (const Level& l : stack)
-      path += l.array ? "[" + std::to_string(l.done) + "]" : (l.key.empty() ? "" : "." + l.key);
-    return path;
-  };
-  try {
-    return json::parse(text, track);
-  } catch (const json::parse_error& e) {
-    throw std::invalid_argument(where() + ": invalid JSON: " + e.what());
-  } catch (const json::out_of_range& e) {
-    throw std::invalid_argument(where() + ": " + e.what() + " (a number outside the double range)");
-  }
-}
+// field being read (what.observations[3].axes.B). The fast parse has no
+// callback; only after a failure is the text parsed again with a callback
+// tracking the path, to name the field.
+json Parse(const std::string& text, const std::string& what);
+
+// A message safe to hand to any caller: invalid UTF-8 bytes escaped as \xNN
+// (Python decodes exception messages as UTF-8) and at most `max_bytes` long,
+// cut on a character boundary.
+std::string SafeMessage(const std::string& s, size_t max_bytes = 2000);
+
+// `s` quoted for a message: truncated to `max_bytes` on a character boundary,
+// invalid UTF-8 escaped.
+std::string Quote(const std::string& s, size_t max_bytes = 80);
 
 // Runs a parser body, turning nlohmann's type errors (a number where a string
-// belongs, ...) into std::invalid_argument prefixed with `what`.
+// belongs, ...) into std::invalid_argument prefixed with `what`, and making
+// every message safe (SafeMessage).
 template <typename F>
 auto Guard(const std::string& what, F&& body) -> decltype(body()) {
   try {
     return body();
   } catch (const nlohmann::json::exception& e) {
-    throw std::invalid_argument(what + ": wrong JSON type: " + e.what());
+    throw std::invalid_argument(SafeMessage(what + ": wrong JSON type: " + e.what()));
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(SafeMessage(e.what()));
   }
 }
 
-inline Eigen::Vector3d ReadVector3(const json& j, const std::string& where) {
-  if (!j.is_array() || j.size() != 3)
-    throw std::invalid_argument(where + ": expected an array of 3 numbers");
-  Eigen::Vector3d v;
-  for (int i = 0; i < 3; ++i) {
-    if (!j[i].is_number())
-      throw std::invalid_argument(where + "[" + std::to_string(i) + "]: not a number");
-    v[i] = j[i].get<double>();
-    RequireFinite(v[i], where + "[" + std::to_string(i) + "]");
-  }
-  return v;
-}
+// " (did you mean "X"?)" for the candidate closest to `name` by edit
+// distance when it is close enough to be a typo, else "".
+std::string DidYouMean(const std::string& name, const std::vector<std::string>& candidates);
+
+// Refuses a key of `obj` not in `allowed`: `where: unknown key "k" (did you
+// mean "x"?)`, listing the allowed keys when none is close.
+void CheckKeys(const json& obj, std::initializer_list<const char*> allowed, const std::string& where);
+
+// An integer field that files may write as 1 or 1.0: exact integral values
+// only, compared as JSON values (no truncation of 2^32+1 or 0.5).
+bool IntegralValue(const json& v, int64_t* out);
+// A backlash direction: -1, 0 or +1 (integral floats accepted).
+int ReadDirection(const json& v, const std::string& where);
+// A seed: an integer 0 <= seed < 2^64 (integral floats accepted).
+uint64_t ReadSeed(const json& v, const std::string& where);
+
+// A 3-vector of finite numbers, each |x| <= bound.
+Eigen::Vector3d ReadVector3(const json& j, const std::string& where, double bound = kMaxLinear);
 
 inline double ReadNumber(const json& obj, const char* key, const std::string& where) {
   if (!obj.contains(key)) throw std::invalid_argument(where + "." + key + ": missing");
@@ -90,23 +79,38 @@ inline double ReadNumber(const json& obj, const char* key, const std::string& wh
   return x;
 }
 
+// A number |x| <= bound (unit named in the message).
+double ReadBounded(const json& obj, const char* key, const std::string& where, double bound,
+                   const char* unit = "mm");
+
 inline std::string ReadString(const json& obj, const char* key, const std::string& where) {
   if (!obj.contains(key) || !obj[key].is_string())
     throw std::invalid_argument(where + "." + key + ": missing (a string)");
   return obj[key].get<std::string>();
 }
 
+// A DBB / ball3d mounting id: a string without '.' (it becomes part of the
+// setup parameter names dbb.<setup>.length, ...).
+std::string ReadSetup(const json& obj, const std::string& where);
+
 inline json Array3(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
 
+// Whether `name` has the shape of a setup parameter name (facet.<id>,
+// sphere.<id>.x|y|z|r, dbb[.<setup>].length|tool.x|...|table.z,
+// ball3d.<setup>.tool.x|..., instrument.<id>.<field>), whatever dataset it
+// belongs to. A dotted name of any other shape (EX0C.x) is a mistake.
+bool IsSetupParameterName(const std::string& name);
+
 // Axis index for a JSON key ("C1" is the spindle S); throws naming `where`.
-inline int AxisOfKey(const Machine& m, const std::string& key, const std::string& where) {
-  const char c = key == "C1" ? 'S' : (key.size() == 1 ? key[0] : '?');
-  const int k = m.AxisIndex(c);
-  if (k < 0)
-    throw std::invalid_argument(where + ": machine '" + m.name() + "' has no axis '" + key +
-                                "' (axes " + m.axis_names() + ")");
-  return k;
-}
+int AxisOfKey(const Machine& m, const std::string& key, const std::string& where);
+
+// Reads an "axes" object (axis letter -> command, mm / degrees) into
+// `values` (machine axis order) and marks `given`; refuses unknown axes,
+// both S and its alias C1, non-numbers and implausible magnitudes.
+void ReadAxes(const Machine& m, const json& axes, const std::string& where, Eigen::VectorXd* values,
+              std::vector<bool>* given);
+// Reads a "direction" object (axis letter -> -1/0/+1) into `dir`.
+void ReadDirections(const Machine& m, const json& dirs, const std::string& where, Eigen::VectorXi* dir);
 
 }  // namespace fivecal::json_util
 

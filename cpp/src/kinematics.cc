@@ -23,7 +23,8 @@ void ValidateTheta(const Machine& m, const Eigen::VectorXd& theta) {
     throw std::invalid_argument("errors: expected " + std::to_string(m.num_parameters()) +
                                 " machine parameter values, got " + std::to_string(theta.size()));
   for (int i = 0; i < theta.size(); ++i)
-    RequireFinite(theta[i], "errors." + m.parameters()[i].name);
+    if (!(std::abs(theta[i]) <= kMaxErrorValue))
+      RequireBounded(theta[i], kMaxErrorValue, "errors." + m.parameters()[i].name, "(mm or rad)");
 }
 
 void ValidateColumns(const Machine& m, Eigen::Index cols) {
@@ -32,9 +33,13 @@ void ValidateColumns(const Machine& m, Eigen::Index cols) {
                                 " columns (" + m.axis_names() + "), got " + std::to_string(cols));
 }
 
-[[noreturn]] void NotFinite(const Machine& m, Eigen::Index r, int k) {
-  throw std::invalid_argument("axes." + std::string(1, m.axis(k).name) + "[" + std::to_string(r) +
-                              "]: value is not finite (NaN or inf)");
+// The plausibility bound of each axis command (mm or degrees).
+double AxisBound(const Machine& m, int k) { return m.axis(k).rotary() ? kMaxRotaryDeg : kMaxLinear; }
+
+[[noreturn]] void NotFinite(const Machine& m, Eigen::Index r, int k, double x) {
+  const std::string where = "axes." + std::string(1, m.axis(k).name) + "[" + std::to_string(r) + "]";
+  RequireBounded(x, AxisBound(m, k), where, m.axis(k).rotary() ? "degrees" : "mm");
+  throw std::invalid_argument(where + ": value is not finite (NaN or inf)");
 }
 
 void ValidateDirectionsShape(Eigen::Index dir_rows, Eigen::Index dir_cols, Eigen::Index rows,
@@ -57,7 +62,7 @@ void ValidatePoses(const Machine& m, const Eigen::VectorXd& theta, const Eigen::
   ValidateColumns(m, axes.cols());
   for (Eigen::Index r = 0; r < axes.rows(); ++r)
     for (int k = 0; k < axes.cols(); ++k)
-      if (!std::isfinite(axes(r, k))) NotFinite(m, r, k);
+      if (!(std::abs(axes(r, k)) <= AxisBound(m, k))) NotFinite(m, r, k, axes(r, k));
   if (dirs) {
     ValidateDirectionsShape(dirs->rows(), dirs->cols(), axes.rows(), axes.cols());
     for (Eigen::Index r = 0; r < dirs->rows(); ++r)
@@ -71,7 +76,7 @@ void ToolPosesRowMajor(const Machine& m, const Eigen::VectorXd& theta,
                        const RowMatrixXi* dirs, double* points, double* tool_axes,
                        const Eigen::Vector3d* tip) {
   if (tip)
-    for (int i = 0; i < 3; ++i) RequireFinite((*tip)[i], "tip[" + std::to_string(i) + "]");
+    for (int i = 0; i < 3; ++i) RequireBounded((*tip)[i], kMaxLinear, "tip[" + std::to_string(i) + "]");
   ValidateTheta(m, theta);
   ValidateColumns(m, axes.cols());
   if (dirs) ValidateDirectionsShape(dirs->rows(), dirs->cols(), axes.rows(), axes.cols());
@@ -81,15 +86,18 @@ void ToolPosesRowMajor(const Machine& m, const Eigen::VectorXd& theta,
   const Eigen::Vector3d t = tip ? *tip : model.tip();
   // AxisValuesToInternal's conversion with the per-axis factor hoisted out of
   // the pose loop: calling it per pose costs a fifth of the throughput.
-  double scale[kMaxAxes];
-  for (int k = 0; k < na; ++k) scale[k] = m.axis(k).rotary() ? M_PI / 180.0 : 1.0;
+  double scale[kMaxAxes], bound[kMaxAxes];
+  for (int k = 0; k < na; ++k) {
+    scale[k] = m.axis(k).rotary() ? M_PI / 180.0 : 1.0;
+    bound[k] = AxisBound(m, k);
+  }
   double q[kMaxAxes];
   int dir[kMaxAxes];
   // Validation is folded into the pass over the poses: one read of the data.
   for (Eigen::Index r = 0; r < n; ++r) {
     const double* row = axes.data() + r * axes.outerStride();
     for (int k = 0; k < na; ++k) {
-      if (!std::isfinite(row[k])) NotFinite(m, r, k);
+      if (!(std::abs(row[k]) <= bound[k])) NotFinite(m, r, k, row[k]);
       q[k] = row[k] * scale[k];
     }
     if (dirs) {

@@ -1,6 +1,9 @@
 #include "fivecal/machine.h"
 
+#include <Eigen/Geometry>
+
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -21,10 +24,18 @@ AxisType NaturalType(char c) {
   return (c == 'X' || c == 'Y' || c == 'Z') ? AxisType::kLinear : AxisType::kRotary;
 }
 
+// The whole (UTF-8) character starting at tokens[i], for messages: a
+// multi-byte letter such as 'é' must not be cut.
+std::string Character(const std::vector<char>& tokens, size_t i) {
+  const unsigned char c = static_cast<unsigned char>(tokens[i]);
+  const size_t n = c < 0x80 ? 1 : (c & 0xE0) == 0xC0 ? 2 : (c & 0xF0) == 0xE0 ? 3 : (c & 0xF8) == 0xF0 ? 4 : 1;
+  return std::string(tokens.begin() + i, tokens.begin() + std::min(tokens.size(), i + n));
+}
+
 // Splits the topology into the workpiece-side letters (read w->f) and the
 // tool-side letters (read f->t).
 void ParseTopology(const std::string& topo, std::string* workpiece, std::string* tool) {
-  const std::string where = "machine.topology '" + topo + "'";
+  const std::string where = "machine.topology " + Quote(topo);
   if (topo.empty()) throw std::invalid_argument(where + ": empty topology");
   std::vector<char> tokens;
   for (size_t i = 0; i < topo.size(); ++i) {
@@ -34,8 +45,8 @@ void ParseTopology(const std::string& topo, std::string* workpiece, std::string*
         throw std::invalid_argument(where + ": unmatched '('");
       std::string inner = topo.substr(i + 1, close - i - 1);
       if (inner != "C1")
-        throw std::invalid_argument(where + ": unknown token '(" + inner +
-                                    ")'; only '(C1)' (the spindle) is recognised");
+        throw std::invalid_argument(where + ": unknown token " + Quote("(" + inner + ")") +
+                                    "; only '(C1)' (the spindle) is recognised");
       tokens.push_back('S');
       i = close;
     } else {
@@ -57,8 +68,8 @@ void ParseTopology(const std::string& topo, std::string* workpiece, std::string*
       continue;
     }
     if (!IsAxisLetter(c))
-      throw std::invalid_argument(where + ": unknown axis letter '" + std::string(1, c) +
-                                  "' (expected X Y Z A B C S, 'f'/'b' foundation)");
+      throw std::invalid_argument(where + ": unknown axis letter " + Quote(Character(tokens, i)) +
+                                  " (expected X Y Z A B C S, 'f'/'b' foundation)");
     if (!seen.insert(c).second)
       throw std::invalid_argument(where + ": duplicate axis '" + std::string(1, c) + "'");
   }
@@ -72,6 +83,16 @@ void ParseTopology(const std::string& topo, std::string* workpiece, std::string*
 
 void RequireFinite(double x, const std::string& what) {
   if (!std::isfinite(x)) throw std::invalid_argument(what + ": value is not finite (NaN or inf)");
+}
+
+void RequireBounded(double x, double bound, const std::string& what, const char* unit) {
+  RequireFinite(x, what);
+  if (!(std::abs(x) <= bound)) {
+    char buf[128];
+    std::snprintf(buf, sizeof buf, ": %.6g %s is implausible (the bound is |x| <= %g %s)", x, unit, bound,
+                  unit);
+    throw std::invalid_argument(what + buf);
+  }
 }
 
 Machine::Machine(std::string name, std::string topology, std::vector<Axis> axes,
@@ -102,10 +123,13 @@ Machine::Machine(std::string name, std::string topology, std::vector<Axis> axes,
                                   " by ISO 230-1 naming");
     for (int i = 0; i < 3; ++i) {
       RequireFinite(a.direction[i], where + ".direction[" + std::to_string(i) + "]");
-      RequireFinite(a.point[i], where + ".point[" + std::to_string(i) + "]");
+      RequireBounded(a.point[i], kMaxLinear, where + ".point[" + std::to_string(i) + "]");
     }
-    double n = a.direction.norm();
-    if (!(n > 1e-12)) throw std::invalid_argument(where + ".direction: zero vector");
+    // stableNorm: the squared norm of [0,0,1.35e154] overflows and norm()
+    // would turn the axis into a zero (motionless) one.
+    const double n = a.direction.stableNorm();
+    if (!(n > 1e-12) || !std::isfinite(n))
+      throw std::invalid_argument(where + ".direction: zero vector (or not finite)");
     a.direction /= n;
     axes_.push_back(a);
     by_name.erase(it);
@@ -113,10 +137,23 @@ Machine::Machine(std::string name, std::string topology, std::vector<Axis> axes,
   if (!by_name.empty())
     throw std::invalid_argument("machine.axes: axis '" + std::string(1, by_name.begin()->first) +
                                 "' is defined but not in topology '" + topology_ + "'");
-  for (int i = 0; i < 3; ++i) RequireFinite(tip_[i], "machine.tool.tip[" + std::to_string(i) + "]");
+  if (axes_.empty())
+    throw std::invalid_argument("machine.topology " + Quote(topology_) +
+                                ": no axes between 'w' and 't'; a machine needs at least one");
+  // Two parallel linear axes move the tool along one line only: the model
+  // would be singular and a fit would "converge" to anything.
+  for (size_t i = 0; i < axes_.size(); ++i)
+    for (size_t k = i + 1; k < axes_.size(); ++k)
+      if (!axes_[i].rotary() && !axes_[k].rotary() &&
+          axes_[i].direction.cross(axes_[k].direction).norm() < 1e-6)
+        throw std::invalid_argument("machine.axes." + std::string(1, axes_[k].name) +
+                                    ".direction: parallel to linear axis " + std::string(1, axes_[i].name) +
+                                    "; linear axes must be independent");
+  for (int i = 0; i < 3; ++i)
+    RequireBounded(tip_[i], kMaxLinear, "machine.tool.tip[" + std::to_string(i) + "]");
   int s = AxisIndex('S');
   if (tool_axis) {
-    double n = tool_axis->norm();
+    double n = tool_axis->stableNorm();
     if (!std::isfinite(n) || n < 1e-12)
       throw std::invalid_argument("machine.tool.axis: zero or non-finite vector");
     tool_axis_ = *tool_axis / n;
@@ -217,8 +254,8 @@ int Machine::ParameterIndex(const std::string& name) const {
 int Machine::RequireParameter(const std::string& name) const {
   int i = ParameterIndex(name);
   if (i >= 0) return i;
-  std::string msg = "unknown parameter '" + name + "' for machine '" + name_ + "' (axes " +
-                    axis_names() + ")";
+  std::string msg = "unknown parameter " + Quote(name) + " for machine " + Quote(name_) + " (axes " +
+                    axis_names() + ")" + DidYouMean(name, parameter_names());
   if (name.size() >= 3 && name[0] == 'E') {
     char axis = name.size() >= 4 && name[2] == '0' ? name[3] : name[2];
     if (AxisIndex(axis) < 0 && IsAxisLetter(axis))
@@ -238,6 +275,7 @@ Machine Machine::FromJson(const std::string& text) {
 namespace {
 Machine ParseMachine(const json& j) {
   if (!j.is_object()) throw std::invalid_argument("machine: expected a JSON object");
+  CheckKeys(j, {"name", "topology", "axes", "tool", "priors", "$schema"}, "machine");
   if (j.contains("name") && !j["name"].is_string())
     throw std::invalid_argument("machine.name: expected a string");
   std::string name = j.value("name", std::string("unnamed"));
@@ -247,13 +285,18 @@ Machine ParseMachine(const json& j) {
   if (!j.contains("axes") || !j["axes"].is_object())
     throw std::invalid_argument("machine.axes: missing (an object keyed by axis letter)");
   std::vector<Axis> axes;
+  bool seen_spindle = false;
   for (auto& [key, val] : j["axes"].items()) {
     std::string letter = key == "C1" ? "S" : key;
     const std::string where = "machine.axes." + key;
     if (letter.size() != 1 || !IsAxisLetter(letter[0]))
-      throw std::invalid_argument(where + ": unknown axis letter '" + key +
-                                  "' (expected X Y Z A B C S)");
+      throw std::invalid_argument(where + ": unknown axis letter " + Quote(key) +
+                                  " (expected X Y Z A B C S)");
     if (!val.is_object()) throw std::invalid_argument(where + ": expected an object");
+    if (letter == "S" && seen_spindle)
+      throw std::invalid_argument("machine.axes: duplicate axis 'S': both \"S\" and its alias \"C1\" are given; keep one");
+    if (letter == "S") seen_spindle = true;
+    CheckKeys(val, {"type", "direction", "point"}, where);
     Axis a;
     a.name = letter[0];
     a.type = NaturalType(a.name);
@@ -265,7 +308,8 @@ Machine ParseMachine(const json& j) {
     }
     if (!val.contains("direction"))
       throw std::invalid_argument(where + ".direction: missing");
-    a.direction = ReadVector3(val["direction"], where + ".direction");
+    // Any finite scale: the direction is normalised (stably) by the model.
+    a.direction = ReadVector3(val["direction"], where + ".direction", HUGE_VAL);
     if (val.contains("point")) a.point = ReadVector3(val["point"], where + ".point");
     if (a.type == AxisType::kLinear && a.point.norm() != 0.0)
       throw std::invalid_argument(where + ".point: a linear axis has no pivot point; omit it");
@@ -277,25 +321,49 @@ Machine ParseMachine(const json& j) {
   if (j.contains("tool")) {
     const json& t = j["tool"];
     if (!t.is_object()) throw std::invalid_argument("machine.tool: expected an object");
+    CheckKeys(t, {"tip", "axis"}, "machine.tool");
     if (t.contains("tip")) tip = ReadVector3(t["tip"], "machine.tool.tip");
     if (t.contains("axis")) {
-      tool_axis = ReadVector3(t["axis"], "machine.tool.axis");
+      tool_axis = ReadVector3(t["axis"], "machine.tool.axis", HUGE_VAL);
       has_tool_axis = true;
     }
   }
-  return Machine(name, topology, axes, tip, has_tool_axis ? &tool_axis : nullptr);
+  Machine m(name, topology, axes, tip, has_tool_axis ? &tool_axis : nullptr);
+  if (j.contains("priors")) {
+    const json& p = j["priors"];
+    if (!p.is_object())
+      throw std::invalid_argument("machine.priors: expected an object parameter name -> prior sigma");
+    for (auto& [key, val] : p.items()) {
+      const std::string where = "machine.priors." + key;
+      if (key.rfind("class:", 0) == 0) {
+        if (key.size() == 6) throw std::invalid_argument(where + ": empty class name after 'class:'");
+      } else {
+        try {
+          m.RequireParameter(key);
+        } catch (const std::invalid_argument& e) {
+          throw std::invalid_argument(where + ": " + e.what());
+        }
+      }
+      if (!val.is_number()) throw std::invalid_argument(where + ": expected a number");
+      const double v = val.get<double>();
+      if (!(std::isfinite(v) && v > 0))
+        throw std::invalid_argument(where + ": must be a finite number > 0 (one sigma, mm or rad)");
+      m.priors[key] = v;
+    }
+  }
+  return m;
 }
 }  // namespace
 
 Machine Machine::Load(const std::string& path) {
   std::ifstream in(path);
-  if (!in) throw std::invalid_argument("machine: cannot open '" + path + "'");
+  if (!in) throw std::invalid_argument("machine: cannot open " + Quote(path, 400));
   std::stringstream ss;
   ss << in.rdbuf();
   try {
     return FromJson(ss.str());
   } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(path + ": " + e.what());
+    throw std::invalid_argument(SafeMessage(path + ": " + e.what()));
   }
 }
 
@@ -313,6 +381,7 @@ std::string Machine::ToJson() const {
   }
   j["axes"] = axes;
   j["tool"] = {{"tip", Array3(tip_)}, {"axis", Array3(tool_axis_)}};
+  if (!priors.empty()) j["priors"] = priors;
   return j.dump(1);
 }
 
@@ -326,8 +395,9 @@ ErrorModel ErrorModel::FromJson(const Machine& machine, const std::string& text)
   if (!j.is_object()) throw std::invalid_argument("errors: expected a JSON object name -> value");
   ErrorModel e(machine);
   for (auto& [name, val] : j.items()) {
-    // A result file also carries setup parameters (facet.F3, sphere.S1.x, ...).
-    if (machine.ParameterIndex(name) < 0 && name.find('.') != std::string::npos) continue;
+    // A result file also carries setup parameters (facet.F3, sphere.S1.x,
+    // ...): those are skipped, any other unknown name (EX0C.x) is refused.
+    if (machine.ParameterIndex(name) < 0 && IsSetupParameterName(name)) continue;
     double v;
     if (val.is_number()) v = val.get<double>();
     else if (val.is_object() && val.contains("value") && val["value"].is_number())
@@ -339,7 +409,7 @@ ErrorModel ErrorModel::FromJson(const Machine& machine, const std::string& text)
 }
 
 void ErrorModel::Set(const std::string& name, double value) {
-  RequireFinite(value, "errors." + name);
+  RequireBounded(value, kMaxErrorValue, "errors." + name, "(mm or rad)");
   values_[machine_.RequireParameter(name)] = value;
 }
 

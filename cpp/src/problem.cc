@@ -1,6 +1,7 @@
 #include "fivecal/problem.h"
 
 #include "fivecal/analytic_residuals.h"
+#include "json_util.h"
 
 #include <algorithm>
 #include <cmath>
@@ -114,11 +115,18 @@ int ParameterTable::Index(const std::string& name) const {
 
 int ParameterTable::Require(const std::string& name) const {
   int i = Index(name);
-  if (i < 0)
-    throw std::invalid_argument("unknown parameter '" + name +
-                                "': not a machine parameter and not a setup parameter of this "
-                                "dataset (facet.<id>, sphere.<id>.x|y|z|r, dbb.length, ...)");
-  return i;
+  if (i >= 0) return i;
+  // A typo (EX0c) gets the closest name; a dotted name of no setup shape
+  // (EX0C.x) is said to be malformed rather than "not in this dataset".
+  std::string msg = "unknown parameter " + json_util::Quote(name);
+  if (name.find('.') != std::string::npos && name.rfind("tip.", 0) != 0 &&
+      !json_util::IsSetupParameterName(name))
+    msg += ": not a parameter name (machine errors have no '.', setup parameters are facet.<id>, "
+           "sphere.<id>.x|y|z|r, dbb[.<setup>].length|tool.x|..., ball3d.<setup>.tool.x|..., tip.x|y|z)";
+  else
+    msg += ": not a machine parameter and not a setup parameter of this dataset (facet.<id>, "
+           "sphere.<id>.x|y|z|r, dbb.length, ...)";
+  throw std::invalid_argument(msg + json_util::DidYouMean(name, names_));
 }
 
 const std::vector<int>& ParameterTable::mount(ObservationType type, const std::string& setup) const {

@@ -111,25 +111,58 @@ Dataset ApplyInputDeviations(const SimulationPlan& plan, const Eigen::VectorXd& 
 
 namespace {
 SimulationPlan PlanSpec(const json& spec) {
-  if (!spec.is_object() || !spec.contains("machine"))
-    throw std::invalid_argument("simulate: missing 'machine'");
+  if (!spec.is_object()) throw std::invalid_argument("simulate: expected a JSON object");
+  CheckKeys(spec, {"machine", "errors", "setup", "probe", "artefact", "plan", "sigma", "seed", "$schema",
+                   "_comment", "observations"}, "simulate");
+  // A dataset skeleton turned into a spec may keep its empty observation list.
+  if (spec.contains("observations") && !(spec["observations"].is_array() && spec["observations"].empty()))
+    throw std::invalid_argument("simulate.observations: a spec plans its observations in \"plan\"; "
+                                "remove \"observations\"");
+  if (!spec.contains("machine")) throw std::invalid_argument("simulate.machine: missing");
   json base = {{"machine", spec["machine"]},
                {"probe", spec.value("probe", json::object())},
                {"artefact", spec.value("artefact", json::object())},
                {"observations", json::array()}};
-  Dataset ds = Dataset::FromJson(base.dump(), false);
+  Dataset ds = [&] {
+    try {
+      return Dataset::FromJson(base.dump(), false);
+    } catch (const std::invalid_argument& e) {
+      // The dataset parser's "dataset.<field>" is the spec's "simulate.<field>".
+      std::string msg = e.what();
+      if (msg.rfind("dataset.", 0) == 0) msg = "simulate." + msg.substr(8);
+      throw std::invalid_argument(msg);
+    }
+  }();
   const Machine& m = ds.machine();
   const int na = m.num_axes();
 
   Eigen::VectorXd theta = Eigen::VectorXd::Zero(m.num_parameters());
-  if (spec.contains("errors")) theta = ErrorModel::FromJson(m, spec["errors"].dump()).values();
+  if (spec.contains("errors")) {
+    if (!spec["errors"].is_object())
+      throw std::invalid_argument("simulate.errors: expected an object parameter name -> value");
+    ErrorModel e(m);
+    for (auto& [k, v] : spec["errors"].items()) {
+      if (!v.is_number()) throw std::invalid_argument("simulate.errors." + k + ": expected a number");
+      try {
+        e.Set(k, v.get<double>());
+      } catch (const std::invalid_argument& ex) {
+        std::string msg = ex.what();
+        if (msg.rfind("errors.", 0) == 0) msg = msg.substr(7 + k.size());  // ": ... implausible"
+        throw std::invalid_argument("simulate.errors." + k + (msg.rfind(":", 0) == 0 ? "" : ": ") + msg +
+                                    (k.find('.') != std::string::npos && k.rfind("tip.", 0) != 0
+                                         ? " (setup parameters go in simulate.setup)"
+                                         : ""));
+      }
+    }
+    theta = e.values();
+  }
   std::map<std::string, double> setup;
   if (spec.contains("setup")) {
     if (!spec["setup"].is_object()) throw std::invalid_argument("simulate.setup: expected an object");
     for (auto& [k, v] : spec["setup"].items()) {
-      if (!v.is_number()) throw std::invalid_argument("setup." + k + ": expected a number");
+      if (!v.is_number()) throw std::invalid_argument("simulate.setup." + k + ": expected a number");
       setup[k] = v.get<double>();
-      RequireFinite(setup[k], "setup." + k);
+      RequireBounded(setup[k], kMaxErrorValue, "simulate.setup." + k);
     }
   }
   auto S = [&](const std::string& n) {
@@ -139,16 +172,26 @@ SimulationPlan PlanSpec(const json& spec) {
   NoiseLevels noise;
   if (spec.contains("sigma")) {
     const json& s = spec["sigma"];
-    if (s.is_number()) noise.probe = noise.dbb = noise.ball3d = s.get<double>();
-    else if (s.is_object()) {
-      noise.probe = s.value("probe", 0.0);
-      noise.dbb = s.value("dbb", 0.0);
-      noise.ball3d = s.value("ball3d", 0.0);
-    } else throw std::invalid_argument("simulate.sigma: expected a number or an object");
+    auto level = [](const json& v, const std::string& where) {
+      if (!v.is_number()) throw std::invalid_argument(where + ": expected a number (mm)");
+      const double x = v.get<double>();
+      if (!(x >= 0 && x <= kMaxSigma)) throw std::invalid_argument(where + ": must be >= 0 and <= 1e3 mm");
+      return x;
+    };
+    if (s.is_number()) {
+      noise.probe = noise.dbb = noise.ball3d = level(s, "simulate.sigma");
+    } else if (s.is_object()) {
+      CheckKeys(s, {"probe", "dbb", "ball3d"}, "simulate.sigma");
+      if (s.contains("probe")) noise.probe = level(s["probe"], "simulate.sigma.probe");
+      if (s.contains("dbb")) noise.dbb = level(s["dbb"], "simulate.sigma.dbb");
+      if (s.contains("ball3d")) noise.ball3d = level(s["ball3d"], "simulate.sigma.ball3d");
+    } else {
+      throw std::invalid_argument("simulate.sigma: expected a number or an object {probe, dbb, ball3d}");
+    }
     for (double x : {noise.probe, noise.dbb, noise.ball3d})
-      if (!(x >= 0) || !std::isfinite(x)) throw std::invalid_argument("simulate.sigma: must be >= 0 mm");
+      if (x > 0 && x < kMinSigma) throw std::invalid_argument("simulate.sigma: 0 (no noise) or >= 1e-9 mm");
   }
-  const uint64_t seed = spec.value("seed", uint64_t{0});
+  const uint64_t seed = spec.contains("seed") ? ReadSeed(spec["seed"], "simulate.seed") : 0;
   // Per observation: the noise-free readings and the noise directions.
   struct Slot {
     Eigen::VectorXd start, approach;
@@ -163,40 +206,39 @@ SimulationPlan PlanSpec(const json& spec) {
   const json& plan = spec["plan"];
 
   for (size_t i = 0; i < plan.size(); ++i) {
-    const std::string w = "plan[" + std::to_string(i) + "]";
+    const std::string w = "simulate.plan[" + std::to_string(i) + "]";
     const json& e = plan[i];
-    if (!e.is_object() || !e.contains("type") || !e["type"].is_string())
-      throw std::invalid_argument(w + ".type: missing");
+    if (!e.is_object()) throw std::invalid_argument(w + ": expected an object");
+    if (!e.contains("type") || !e["type"].is_string())
+      throw std::invalid_argument(w + ".type: missing (facet, sphere, dbb, ball3d)");
     const std::string type = e["type"].get<std::string>();
+    // The type first: an unknown one must be named as such, not reported
+    // as whatever the other checks trip on.
+    if (type == "facet") CheckKeys(e, {"type", "target", "axes", "point", "direction", "id"}, w);
+    else if (type == "sphere") CheckKeys(e, {"type", "target", "axes", "normal", "direction", "id"}, w);
+    else if (type == "dbb")
+      CheckKeys(e, {"type", "setup", "axes", "length", "tool_ball", "table_ball", "direction", "id"}, w);
+    else if (type == "ball3d")
+      CheckKeys(e, {"type", "setup", "axes", "tool_ball", "table_ball", "direction", "id"}, w);
+    else
+      throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (facet, sphere, dbb, ball3d)" +
+                                  DidYouMean(type, {"facet", "sphere", "dbb", "ball3d"}));
     Observation ob;
     ob.axes = Eigen::VectorXd::Zero(na);
     ob.direction = Eigen::VectorXi::Zero(na);
+    if (e.contains("id")) ob.id = ReadString(e, "id", w);
     std::vector<bool> given(na, false);
-    if (e.contains("axes")) {
-      if (!e["axes"].is_object()) throw std::invalid_argument(w + ".axes: expected an object");
-      for (auto& [key, v] : e["axes"].items()) {
-        const int k = AxisOfKey(m, key, w + ".axes." + key);
-        if (!v.is_number()) throw std::invalid_argument(w + ".axes." + key + ": expected a number");
-        ob.axes[k] = v.get<double>();
-        RequireFinite(ob.axes[k], w + ".axes." + key);
-        given[k] = true;
-      }
-    }
-    if (e.contains("direction")) {
-      for (auto& [key, v] : e["direction"].items()) {
-        const int k = AxisOfKey(m, key, w + ".direction." + key);
-        if (!v.is_number_integer() || std::abs(v.get<int>()) > 1)
-          throw std::invalid_argument(w + ".direction." + key + ": must be -1, 0 or +1");
-        ob.direction[k] = v.get<int>();
-      }
-    }
+    if (e.contains("axes")) ReadAxes(m, e["axes"], w + ".axes", &ob.axes, &given);
+    if (e.contains("direction")) ReadDirections(m, e["direction"], w + ".direction", &ob.direction);
     const bool probe = type == "facet" || type == "sphere";
     for (int k = 0; k < na; ++k)
       if (!given[k] && m.axis(k).name != 'S' && (m.axis(k).rotary() || !probe))
-        throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) + "'");
+        throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
+                                    "' (machine axes " + m.axis_names() + ")");
 
     if (probe) {
-      if (ds.tip_radius <= 0) throw std::invalid_argument("probe.tip_radius: missing or zero");
+      if (ds.tip_radius <= 0)
+        throw std::invalid_argument("simulate.probe.tip_radius: missing or zero, but " + w + " is a probe touch");
       const double r = ds.tip_radius;
       if (!e.contains("target") || !e["target"].is_string())
         throw std::invalid_argument(w + ".target: missing");
@@ -206,7 +248,7 @@ SimulationPlan PlanSpec(const json& spec) {
       if (type == "facet") {
         ob.type = ObservationType::kFacet;
         const int fi = ds.artefact.FacetIndex(ob.target);
-        if (fi < 0) throw std::invalid_argument(w + ".target: unknown facet '" + ob.target + "'");
+        if (fi < 0) throw std::invalid_argument(w + ".target: unknown facet " + Quote(ob.target));
         const Facet& f = ds.artefact.facets[fi];
         n = f.normal;
         Eigen::Vector3d p = e.contains("point") ? ReadVector3(e["point"], w + ".point") : f.point;
@@ -217,7 +259,7 @@ SimulationPlan PlanSpec(const json& spec) {
       } else {
         ob.type = ObservationType::kSphere;
         const int si = ds.artefact.SphereIndex(ob.target);
-        if (si < 0) throw std::invalid_argument(w + ".target: unknown sphere '" + ob.target + "'");
+        if (si < 0) throw std::invalid_argument(w + ".target: unknown sphere " + Quote(ob.target));
         const Sphere& s = ds.artefact.spheres[si];
         if (!e.contains("normal")) throw std::invalid_argument(w + ".normal: missing (touch direction from the centre)");
         n = ReadVector3(e["normal"], w + ".normal");
@@ -265,7 +307,7 @@ SimulationPlan PlanSpec(const json& spec) {
       for (int k = 0; k < na; ++k) ob.direction[k] = dir[k];
     } else if (type == "dbb" || type == "ball3d") {
       ob.type = type == "dbb" ? ObservationType::kDbb : ObservationType::kBall3d;
-      if (e.contains("setup")) ob.setup = e["setup"].get<std::string>();
+      ob.setup = ReadSetup(e, w);
       ob.tool_ball = ReadVector3(e.value("tool_ball", json()), w + ".tool_ball");
       ob.table_ball = ReadVector3(e.value("table_ball", json()), w + ".table_ball");
       const std::string prefix = std::string(type) + (ob.setup.empty() ? "" : "." + ob.setup);
@@ -277,10 +319,19 @@ SimulationPlan PlanSpec(const json& spec) {
       const Eigen::Vector3d P = ToolAt(m, theta, ob.axes, dir, tool_true);
       if (ob.type == ObservationType::kDbb) {
         if (!e.contains("length")) throw std::invalid_argument(w + ".length: missing (nominal bar length, mm)");
-        ob.length = e["length"].get<double>();
+        ob.length = ReadBounded(e, "length", w, kMaxLinear);
+        if (!(ob.length > 0)) throw std::invalid_argument(w + ".length: must be > 0 mm");
         ob.reading = (P - table_true).norm() - ob.length - S(prefix + ".length");
+        // What the loader would refuse, refused here, naming the plan entry.
+        if (!(std::abs(ob.reading) <= kMaxDbbReading))
+          throw std::invalid_argument(w + ": the simulated reading " + std::to_string(ob.reading) +
+                                      " mm is beyond a ball bar's range (|reading| <= 100 mm); is the "
+                                      "bar length the ball distance at these axes?");
       } else {
         ob.measured = P - table_true;
+        if (!(ob.measured.cwiseAbs().maxCoeff() <= kMaxBall3d))
+          throw std::invalid_argument(w + ": the simulated displacement exceeds 100 mm (a 3D ball "
+                                      "sensor's range); are the balls where the axes put them?");
       }
       slots.push_back(Slot());
     } else {
@@ -296,12 +347,23 @@ SimulationPlan PlanSpec(const json& spec) {
     };
     b.length = (true_center(b.sphere1) - true_center(b.sphere2)).norm();
   }
-  ds.Validate();
+  try {
+    ds.Validate();  // what load_dataset would refuse in the written dataset
+  } catch (const std::invalid_argument& e) {
+    // Observation i is plan entry i.
+    std::string msg = e.what();
+    if (msg.rfind("observations[", 0) == 0) msg = "simulate.plan[" + msg.substr(13);
+    throw std::invalid_argument(msg);
+  }
   const ParameterTable table(ds);
   for (const auto& kv : setup) {
     const int idx = table.Index(kv.first);
-    if (idx < 0 || idx < table.num_machine())
-      throw std::invalid_argument("setup." + kv.first + ": not a setup parameter of this dataset");
+    if (idx < 0 || idx < table.num_machine()) {
+      std::vector<std::string> setup_names(table.names().begin() + table.num_machine(), table.names().end());
+      throw std::invalid_argument("simulate.setup." + kv.first + ": not a setup parameter of this plan" +
+                                  (idx >= 0 ? " (machine errors go in simulate.errors)"
+                                            : DidYouMean(kv.first, setup_names)));
+    }
   }
 
   SimulationPlan out(std::move(ds));
@@ -313,8 +375,14 @@ SimulationPlan PlanSpec(const json& spec) {
   for (const auto& kv : setup) out.values[kv.first] = kv.second;
   InitSlots(&out);
   for (size_t i = 0; i < out.base.observations.size(); ++i) {
-    const Observation& o = out.base.observations[i];
+    Observation& o = out.base.observations[i];
     const int oi = static_cast<int>(i);
+    // The noise drawn is the noise declared: a simulated dataset carries its
+    // sigma, so fitting it weighs the rows as they were made.
+    const double declared = o.type == ObservationType::kDbb      ? noise.dbb
+                            : o.type == ObservationType::kBall3d ? noise.ball3d
+                                                                 : noise.probe;
+    if (declared > 0) o.sigma = Eigen::VectorXd::Constant(ResidualRows(o.type), declared);
     switch (o.type) {
       case ObservationType::kFacet:
       case ObservationType::kSphere:

@@ -152,6 +152,8 @@ class Machine:
         Missing axes are an error except the spindle S (taken as 0)."""
         if not isinstance(axes, Mapping):
             raise ValueError(f"{name}: expected a dict axis letter -> array")
+        if "S" in axes and "C1" in axes:
+            raise ValueError(f"{name}: both 'S' and its alias 'C1' are given; keep one")
         cols = {}
         n = None
         for key, val in axes.items():
@@ -193,13 +195,26 @@ class Machine:
         machine axis order from a dict axis -> array, or None."""
         if directions is None:
             return None
+        if not isinstance(directions, Mapping):
+            raise ValueError("directions: expected a dict axis letter -> array of -1, 0 or +1, "
+                             f"got {type(directions).__name__}")
+        if "S" in directions and "C1" in directions:
+            raise ValueError("directions: both 'S' and its alias 'C1' are given; keep one")
         out = np.zeros((n, len(self.axis_names)), dtype=np.int32)
         for key, val in directions.items():
             letter = "S" if key == "C1" else key
             if letter not in self.axis_names:
                 raise ValueError(f"directions: unknown axis '{key}' (machine axes "
                                  f"{', '.join(self.axis_names)})")
-            arr = np.asarray(val, dtype=float)
+            try:
+                arr = np.asarray(val, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"directions.{key}: expected numbers -1, 0 or +1") from None
+            # A scalar applies to every pose, like a scalar axis value; any
+            # other shape than one value per pose is refused, never broadcast.
+            if arr.ndim > 1:
+                raise ValueError(f"directions.{key}: expected a 1-D array of {n} values, "
+                                 f"got shape {arr.shape}")
             if arr.ndim == 1 and arr.size != n:
                 raise ValueError(f"directions.{key}: length {arr.size}, expected {n}")
             if not np.all(np.isin(arr, (-1.0, 0.0, 1.0))):

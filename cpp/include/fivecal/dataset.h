@@ -41,6 +41,17 @@ enum class ObservationType { kFacet, kSphere, kDbb, kBall3d };
 
 const char* ObservationTypeName(ObservationType t);
 
+// Residual rows one observation of a kind contributes (1, or 3 for ball3d).
+int ResidualRows(ObservationType t);
+
+// Default instrument noise (one sigma, mm) of a kind, used when a file
+// declares none: typical noise levels of the instrument class, not of one
+// particular instrument. Touch probe (facet, sphere) 0.001 mm (a good
+// kinematic touch-trigger probe's repeatability), ball bar 0.0005 mm (its
+// resolution-limited reading noise), ball3d 0.001 mm (R-test / CapBall
+// displacement sensors).
+double DefaultSigma(ObservationType t);
+
 struct Observation {
   ObservationType type = ObservationType::kFacet;
   std::string target;  // facet or sphere id
@@ -52,6 +63,11 @@ struct Observation {
   Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero();   // in F at the zero pose
   Eigen::Vector3d table_ball = Eigen::Vector3d::Zero();  // workpiece frame
   Eigen::Vector3d measured = Eigen::Vector3d::Zero();    // ball3d displacement
+  // Declared noise (one sigma, mm): empty = DefaultSigma(type); otherwise one
+  // value per residual row (ResidualRows(type)), finite and > 0. A file's
+  // single number is expanded to every row.
+  Eigen::VectorXd sigma;
+  std::string id;  // optional user label, kept through load and save
 };
 
 class Dataset {
@@ -73,10 +89,11 @@ class Dataset {
   // or ball3d (`values` N x 3 measured displacements) samples of one mounting
   // from arrays: large traces (10^6 samples) without going through JSON.
   // axes: N x num_axes (mm / degrees); dirs: optional N x num_axes.
+  // sigma: the declared noise of every sample's rows (mm); 0 = the default.
   void AppendBallSamples(ObservationType type, const std::string& setup, const Eigen::MatrixXd& axes,
                          const Eigen::MatrixXi* dirs, const Eigen::Vector3d& tool_ball,
                          const Eigen::Vector3d& table_ball, double length,
-                         const Eigen::MatrixXd& values);
+                         const Eigen::MatrixXd& values, double sigma = 0.0);
   // A dataset with only the observations at `indices` (same machine and artefact).
   Dataset Subset(const std::vector<int>& indices) const;
 

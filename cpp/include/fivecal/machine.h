@@ -62,6 +62,11 @@ class Machine {
 
   std::string ToJson() const;
 
+  // Per-parameter prior scales (one sigma) from the machine file's "priors":
+  // a machine parameter name or "class:<name>" -> a positive finite value.
+  // Only stored and kept here; their meaning belongs to the fit.
+  std::map<std::string, double> priors;
+
   const std::string& name() const { return name_; }
   const std::string& topology() const { return topology_; }
   int num_axes() const { return static_cast<int>(axes_.size()); }
@@ -131,6 +136,22 @@ class ErrorModel {
 
 // Throws std::invalid_argument unless x is finite; `what` names the field.
 void RequireFinite(double x, const std::string& what);
+
+// Plausibility bounds of every file and API value. A value outside them is a
+// typing or unit mistake (1e308, a length in nm), never a measurement: it is
+// refused naming the field, so no inf or NaN can reach a fit or a report.
+inline constexpr double kMaxLinear = 1e5;        // mm: coordinates, points, lengths, radii,
+                                                 // linear axis commands (100 m)
+inline constexpr double kMaxRotaryDeg = 1e5;     // degrees: rotary axis commands (~280 turns)
+inline constexpr double kMaxDbbReading = 100.0;  // mm: a ball-bar reading (the instrument
+                                                 // travels about +-1 mm; synthetic plans go further)
+inline constexpr double kMaxBall3d = 100.0;      // mm: a 3D ball displacement (R-test range ~ +-2 mm)
+inline constexpr double kMaxErrorValue = 1e3;    // mm or rad: any error or setup parameter
+inline constexpr double kMinSigma = 1e-9;        // mm: a declared noise (1 pm) ...
+inline constexpr double kMaxSigma = 1e3;         // ... up to 1 m
+
+// Throws std::invalid_argument naming `what` unless x is finite and |x| <= bound.
+void RequireBounded(double x, double bound, const std::string& what, const char* unit = "mm");
 
 }  // namespace fivecal
 

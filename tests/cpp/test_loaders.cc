@@ -1,0 +1,510 @@
+// Loader boundary tests: what the machine, dataset and simulation parsers
+// accept, keep and refuse. Every refusal must be a std::invalid_argument that
+// names the field (an embedder sees these messages, not a Python layer).
+#include <gtest/gtest.h>
+
+#include <Eigen/Core>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "fivecal/dataset.h"
+#include "fivecal/identify.h"
+#include "fivecal/machine.h"
+#include "fivecal/problem.h"
+#include "fivecal/simulate.h"
+
+namespace fivecal {
+namespace {
+
+using nlohmann::json;
+
+void ExpectInvalid(const std::function<void()>& f, const std::vector<std::string>& needles) {
+  try {
+    f();
+    ADD_FAILURE() << "expected std::invalid_argument, nothing was thrown";
+  } catch (const std::invalid_argument& e) {
+    const std::string what = e.what();
+    for (const std::string& n : needles)
+      EXPECT_NE(what.find(n), std::string::npos)
+          << "message '" << what << "' does not mention '" << n << "'";
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "expected std::invalid_argument, got another exception type: " << e.what();
+  }
+}
+
+json Hu40t() {
+  return json::parse(R"({"name": "HU40T-like", "topology": "wCBXfZYSt",
+ "axes": {"X": {"type": "linear", "direction": [-1,0,0]},
+          "B": {"type": "rotary", "direction": [0,-1,0], "point": [0,0,-120]},
+          "C": {"type": "rotary", "direction": [0,0,-1], "point": [0,0,0]},
+          "Z": {"type": "linear", "direction": [0,0,1]},
+          "Y": {"type": "linear", "direction": [0,1,0]},
+          "S": {"type": "rotary", "direction": [0,0,1], "point": [0,0,0]}},
+ "tool": {"tip": [0,0,100]}})");
+}
+
+// At the zero pose the tool ball sits at its nominal place: a 100 mm bar to
+// (0,0,100) reads about 0, a 3D ball at the origin is displaced by the errors.
+json ZeroAxes() { return {{"X", 0.0}, {"Y", 0.0}, {"Z", 0.0}, {"B", 0.0}, {"C", 0.0}, {"S", 0.0}}; }
+
+json Axes() { return {{"X", 10.0}, {"Y", 20.0}, {"Z", -5.0}, {"B", 30.0}, {"C", 0.0}, {"S", 0.0}}; }
+
+// A small valid dataset: one facet touch, one sphere touch, one DBB sample and
+// one ball3d sample, a scale bar between two spheres.
+json SmallDataset() {
+  json d;
+  d["machine"] = Hu40t();
+  d["probe"] = {{"tip_radius", 3.0}};
+  d["artefact"] = {
+      {"facets", {{{"id", "F1"}, {"point", {0, 0, 10}}, {"normal", {0, 0, 1}}}}},
+      {"spheres", {{{"id", "S1"}, {"center", {0, 0, 50}}, {"radius", 12.7}},
+                   {{"id", "S2"}, {"center", {100, 0, 50}}, {"radius", 12.7}}}},
+      {"scale_bars", {{{"spheres", {"S1", "S2"}}, {"length", 100.0}}}}};
+  d["observations"] = {
+      {{"type", "facet"}, {"target", "F1"}, {"axes", Axes()}, {"direction", {{"X", 1}, {"Y", -1}}}},
+      {{"type", "sphere"}, {"target", "S1"}, {"axes", Axes()}},
+      {{"type", "dbb"}, {"setup", "A1"}, {"axes", Axes()}, {"reading", 0.001}, {"length", 100.0},
+       {"tool_ball", {0, 0, 0}}, {"table_ball", {0, 0, 100}}},
+      {{"type", "ball3d"}, {"setup", "R1"}, {"axes", Axes()}, {"measured", {0.001, 0.0, -0.002}},
+       {"tool_ball", {0, 0, 0}}, {"table_ball", {0, 0, 100}}}};
+  return d;
+}
+
+Dataset Load(const json& d) { return Dataset::FromJson(d.dump()); }
+
+// ---- Observation sigma and id, machine priors (kept and refused) -----------
+
+TEST(LoaderFields, ObservationSigmaNumberAndArrayAreReadAndKept) {
+  json d = SmallDataset();
+  d["observations"][0]["sigma"] = 0.002;
+  d["observations"][2]["sigma"] = json::array({0.0004});
+  d["observations"][3]["sigma"] = {0.001, 0.002, 0.003};
+  const Dataset ds = Load(d);
+  ASSERT_EQ(ds.observations[0].sigma.size(), 1);
+  EXPECT_EQ(ds.observations[0].sigma[0], 0.002);
+  EXPECT_EQ(ds.observations[1].sigma.size(), 0);  // the kind's default applies
+  EXPECT_EQ(ds.observations[2].sigma[0], 0.0004);
+  ASSERT_EQ(ds.observations[3].sigma.size(), 3);
+  EXPECT_EQ(ds.observations[3].sigma[2], 0.003);
+  // A single number on a ball3d observation applies to its three rows.
+  d["observations"][3]["sigma"] = 0.005;
+  EXPECT_EQ(Load(d).observations[3].sigma, Eigen::Vector3d::Constant(0.005));
+
+  // Round trip through ToJson, and through Subset.
+  d["observations"][3]["sigma"] = {0.001, 0.002, 0.003};
+  const Dataset again = Dataset::FromJson(Load(d).ToJson());
+  EXPECT_EQ(again.observations[0].sigma, ds.observations[0].sigma);
+  EXPECT_EQ(again.observations[1].sigma.size(), 0);
+  EXPECT_EQ(again.observations[3].sigma, ds.observations[3].sigma);
+  const Dataset sub = ds.Subset({3, 0});
+  EXPECT_EQ(sub.observations[0].sigma, ds.observations[3].sigma);
+  EXPECT_EQ(sub.observations[1].sigma, ds.observations[0].sigma);
+}
+
+TEST(LoaderFields, BadSigmaIsRefusedNamingTheObservation) {
+  for (const json& bad : {json(0.0), json(-1e-3), json("0.001"), json::array({0.001, 0.001}),
+                          json::array({0.001, -1.0, 0.001}), json(nullptr)}) {
+    json d = SmallDataset();
+    d["observations"][bad.is_array() && bad.size() == 3 ? 3 : 2]["sigma"] = bad;
+    ExpectInvalid([&] { Load(d); }, {"observations[", "].sigma"});
+  }
+  json d = SmallDataset();
+  d["observations"][1]["sigma"] = {0.001, 0.001, 0.001};  // a sphere touch has one row
+  ExpectInvalid([&] { Load(d); }, {"observations[1].sigma", "1 value"});
+}
+
+TEST(LoaderFields, ObservationIdIsKeptThroughLoadAndSave) {
+  json d = SmallDataset();
+  d["observations"][1]["id"] = "touch-7 (S1, B=30)";
+  const Dataset again = Dataset::FromJson(Load(d).ToJson());
+  EXPECT_EQ(again.observations[1].id, "touch-7 (S1, B=30)");
+  EXPECT_EQ(again.observations[0].id, "");
+  EXPECT_EQ(Load(d).Subset({1}).observations[0].id, "touch-7 (S1, B=30)");
+  d["observations"][1]["id"] = 7;
+  ExpectInvalid([&] { Load(d); }, {"observations[1].id"});
+}
+
+TEST(LoaderFields, DefaultSigmaPerKind) {
+  EXPECT_EQ(DefaultSigma(ObservationType::kFacet), 0.001);
+  EXPECT_EQ(DefaultSigma(ObservationType::kSphere), 0.001);
+  EXPECT_EQ(DefaultSigma(ObservationType::kDbb), 0.0005);
+  EXPECT_EQ(DefaultSigma(ObservationType::kBall3d), 0.001);
+}
+
+TEST(LoaderFields, BallSamplesCarryTheirSigma) {
+  Dataset ds(Machine::FromJson(Hu40t().dump()));
+  Eigen::MatrixXd axes = Eigen::MatrixXd::Zero(2, 6);
+  ds.AppendBallSamples(ObservationType::kBall3d, "R1", axes, nullptr, Eigen::Vector3d::Zero(),
+                       Eigen::Vector3d(0, 0, 100), 0.0, Eigen::MatrixXd::Zero(2, 3), 0.002);
+  ds.AppendBallSamples(ObservationType::kDbb, "A1", axes, nullptr, Eigen::Vector3d::Zero(),
+                       Eigen::Vector3d(0, 0, 100), 100.0, Eigen::MatrixXd::Zero(2, 1));
+  EXPECT_EQ(ds.observations[1].sigma, Eigen::Vector3d::Constant(0.002));
+  EXPECT_EQ(ds.observations[2].sigma.size(), 0);
+  ExpectInvalid([&] {
+    ds.AppendBallSamples(ObservationType::kDbb, "A1", axes, nullptr, Eigen::Vector3d::Zero(),
+                         Eigen::Vector3d(0, 0, 100), 100.0, Eigen::MatrixXd::Zero(2, 1), -1.0);
+  }, {"sigma"});
+}
+
+TEST(LoaderFields, MachinePriorsAreReadKeptAndChecked) {
+  json mj = Hu40t();
+  mj["priors"] = {{"EX0C", 0.05}, {"class:location_angle", 1e-4}};
+  const Machine m = Machine::FromJson(mj.dump());
+  ASSERT_EQ(m.priors.size(), 2u);
+  EXPECT_EQ(m.priors.at("EX0C"), 0.05);
+  EXPECT_EQ(m.priors.at("class:location_angle"), 1e-4);
+  EXPECT_EQ(Machine::FromJson(m.ToJson()).priors, m.priors);
+  // Through a dataset too.
+  json d = SmallDataset();
+  d["machine"] = mj;
+  EXPECT_EQ(Dataset::FromJson(Load(d).ToJson()).machine().priors, m.priors);
+
+  for (const json& bad : {json(0.0), json(-1.0), json("0.05"), json(nullptr)}) {
+    mj["priors"] = {{"EX0C", bad}};
+    ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.priors.EX0C"});
+  }
+  mj["priors"] = {{"EX0Q", 0.05}};
+  ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.priors.EX0Q", "unknown parameter"});
+  mj["priors"] = {{"class:", 0.05}};
+  ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.priors.class:"});
+  mj["priors"] = json::array({0.05});
+  ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.priors"});
+}
+
+json SimSpec() {
+  json d = SmallDataset();
+  json spec;
+  spec["machine"] = d["machine"];
+  spec["probe"] = d["probe"];
+  spec["artefact"] = d["artefact"];
+  spec["errors"] = {{"EX0C", 0.01}};
+  spec["plan"] = {
+      {{"type", "facet"}, {"target", "F1"}, {"axes", {{"B", 0}, {"C", 0}}}},
+      {{"type", "sphere"}, {"target", "S1"}, {"axes", {{"B", 0}, {"C", 0}}}, {"normal", {0, 0, 1}}},
+      {{"type", "dbb"}, {"setup", "A1"}, {"axes", ZeroAxes()}, {"length", 100.0},
+       {"tool_ball", {0, 0, 0}}, {"table_ball", {0, 0, 100}}},
+      {{"type", "ball3d"}, {"setup", "R1"}, {"axes", ZeroAxes()}, {"tool_ball", {0, 0, 0}},
+       {"table_ball", {0, 0, 0}}}};
+  spec["seed"] = 3;
+  return spec;
+}
+
+TEST(LoaderFields, SimulatedDatasetsCarryTheirDeclaredNoise) {
+  json spec = SimSpec();
+  spec["sigma"] = {{"probe", 0.0007}, {"dbb", 0.0003}};
+  const Dataset ds = Simulate(spec.dump());
+  EXPECT_EQ(ds.observations[0].sigma, Eigen::VectorXd::Constant(1, 0.0007));
+  EXPECT_EQ(ds.observations[1].sigma, Eigen::VectorXd::Constant(1, 0.0007));
+  EXPECT_EQ(ds.observations[2].sigma, Eigen::VectorXd::Constant(1, 0.0003));
+  EXPECT_EQ(ds.observations[3].sigma.size(), 0);  // ball3d drawn without noise
+  EXPECT_EQ(Dataset::FromJson(ds.ToJson()).observations[2].sigma, ds.observations[2].sigma);
+  spec.erase("sigma");
+  for (const Observation& o : Simulate(spec.dump()).observations) EXPECT_EQ(o.sigma.size(), 0);
+}
+
+// ---- issue 12: silent reinterpretations become named errors -----------------
+
+TEST(LoaderBoundary, BacklashDirectionsOutsideMinusOneToOneAreRefused) {
+  // get<int> truncation made 2^32+1 a 1 and INT_MIN went through std::abs (UB).
+  for (const char* bad : {"-2147483648", "4294967297", "18446744073709551615", "0.5", "2", "-2", "1e300",
+                          "\"1\"", "true", "null"}) {
+    std::string text = SmallDataset().dump();
+    const std::string from = R"("direction":{"X":1,)";
+    const size_t at = text.find(from);
+    ASSERT_NE(at, std::string::npos);
+    text.replace(at, from.size(), std::string(R"("direction":{"X":)") + bad + ",");
+    ExpectInvalid([&] { Dataset::FromJson(text); },
+                  {"observations[0].direction.X", "-1, 0 or +1"});
+  }
+}
+
+TEST(LoaderBoundary, IntegralFloatDirectionsAreAccepted) {
+  // numpy writes 1.0; JSON Schema counts it as an integer.
+  std::string text = SmallDataset().dump();
+  const size_t at = text.find(R"("direction":{"X":1,"Y":-1})");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, std::string(R"("direction":{"X":1,"Y":-1})").size(), R"("direction":{"X":1.0,"Y":-1.0,"Z":0.0})");
+  const Dataset ds = Dataset::FromJson(text);
+  const Machine& m = ds.machine();
+  EXPECT_EQ(ds.observations[0].direction[m.AxisIndex('X')], 1);
+  EXPECT_EQ(ds.observations[0].direction[m.AxisIndex('Y')], -1);
+  EXPECT_EQ(ds.observations[0].direction[m.AxisIndex('Z')], 0);
+}
+
+TEST(LoaderBoundary, SpecSeedIsAnIntegerBelowTwoToThe64) {
+  json spec = SimSpec();
+  spec["sigma"] = 0.001;
+  spec["seed"] = 5;
+  const Dataset a = Simulate(spec.dump());
+  spec["seed"] = 5.0;  // integral float: the same seed
+  const Dataset b = Simulate(spec.dump());
+  EXPECT_EQ(a.observations[2].reading, b.observations[2].reading);
+  for (const char* bad : {"-1", "18446744073709551616", "1.5", "\"7\"", "1e300"}) {
+    std::string text = spec.dump();
+    const size_t at = text.find(R"("seed":5.0)");
+    ASSERT_NE(at, std::string::npos);
+    text.replace(at, std::string(R"("seed":5.0)").size(), std::string(R"("seed":)") + bad);
+    ExpectInvalid([&] { Simulate(text); }, {"simulate.seed"});
+  }
+}
+
+TEST(LoaderBoundary, AxisDirectionWithOverflowingSquaredNormIsNormalisedStably) {
+  json mj = Hu40t();
+  mj["axes"]["Z"]["direction"] = {0, 0, 1.35e154};  // squaredNorm() overflows to inf
+  const Machine m = Machine::FromJson(mj.dump());
+  EXPECT_NEAR((m.axis(m.AxisIndex('Z')).direction - Eigen::Vector3d::UnitZ()).norm(), 0.0, 1e-15);
+  mj["axes"]["Z"]["direction"] = {0, 0, 0};
+  ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.axes.Z.direction", "zero"});
+  Axis z;
+  z.name = 'Z';
+  z.direction = Eigen::Vector3d(0, 0, 1.35e154);
+  const Machine direct("m", "wfZt", {z}, Eigen::Vector3d::Zero());
+  EXPECT_NEAR(direct.axis(0).direction.z(), 1.0, 1e-15);
+}
+
+TEST(LoaderBoundary, ParallelLinearAxesAndMachinesWithoutAxesAreRefused) {
+  json mj = Hu40t();
+  mj["axes"]["Y"]["direction"] = {-2, 0, 0};  // along X
+  ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.axes.", "parallel to linear axis"});
+  ExpectInvalid([] { Machine::FromJson(R"({"topology": "wft", "axes": {}})"); },
+                {"machine.topology", "no axes"});
+}
+
+TEST(LoaderBoundary, SpindleAndItsAliasC1TogetherAreRefused) {
+  json d = SmallDataset();
+  d["observations"][1]["axes"]["C1"] = 0.0;
+  ExpectInvalid([&] { Load(d); }, {"observations[1].axes", "\"S\"", "\"C1\""});
+  d = SmallDataset();
+  d["observations"][1]["direction"] = {{"S", 1}, {"C1", -1}};
+  ExpectInvalid([&] { Load(d); }, {"observations[1].direction", "\"S\"", "\"C1\""});
+  json mj = Hu40t();
+  mj["axes"]["C1"] = mj["axes"]["S"];
+  ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.axes", "\"C1\""});
+}
+
+TEST(LoaderBoundary, UnknownKeysAreRefusedWithDidYouMeanAtEveryLevel) {
+  struct Case {
+    std::function<void(json&)> edit;
+    std::vector<std::string> needles;
+  };
+  const std::vector<Case> cases = {
+      {[](json& d) { d["artifact"] = d["artefact"]; }, {"dataset: unknown key \"artifact\"", "did you mean \"artefact\""}},
+      {[](json& d) { d["observations"][3]["dirction"] = {{"X", 1}}; },
+       {"dataset.observations[3]: unknown key \"dirction\"", "did you mean \"direction\""}},
+      {[](json& d) { d["observations"][0]["reading"] = 0.1; }, {"dataset.observations[0]: unknown key \"reading\""}},
+      {[](json& d) { d["observations"][2]["lenght"] = 100; }, {"observations[2]: unknown key \"lenght\"", "\"length\""}},
+      {[](json& d) { d["probe"]["tip_radus"] = 3; }, {"dataset.probe: unknown key \"tip_radus\"", "\"tip_radius\""}},
+      {[](json& d) { d["artefact"]["facets"][0]["normals"] = {0, 0, 1}; },
+       {"dataset.artefact.facets[0]: unknown key \"normals\"", "\"normal\""}},
+      {[](json& d) { d["artefact"]["spheres"][1]["radious"] = 1; }, {"artefact.spheres[1]: unknown key", "\"radius\""}},
+      {[](json& d) { d["artefact"]["scale_bars"][0]["lenght"] = 1; }, {"artefact.scale_bars[0]: unknown key"}},
+      {[](json& d) { d["artefact"]["sphere"] = json::array(); }, {"dataset.artefact: unknown key \"sphere\"", "\"spheres\""}},
+      {[](json& d) { d["machine"]["topolgy"] = "wfXt"; }, {"machine: unknown key \"topolgy\"", "\"topology\""}},
+      {[](json& d) { d["machine"]["axes"]["X"]["directon"] = {1, 0, 0}; },
+       {"machine.axes.X: unknown key \"directon\"", "\"direction\""}},
+      {[](json& d) { d["machine"]["tool"]["tipp"] = {0, 0, 1}; }, {"machine.tool: unknown key \"tipp\"", "\"tip\""}},
+  };
+  for (const Case& c : cases) {
+    json d = SmallDataset();
+    c.edit(d);
+    ExpectInvalid([&] { Load(d); }, c.needles);
+  }
+  // Spec and plan.
+  json spec = SimSpec();
+  spec["sigmas"] = 0.001;
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate: unknown key \"sigmas\"", "\"sigma\""});
+  spec = SimSpec();
+  spec["plan"][1]["normall"] = {0, 0, 1};
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[1]: unknown key \"normall\"", "\"normal\""});
+  spec = SimSpec();
+  spec["sigma"] = {{"prob", 0.001}};
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.sigma: unknown key \"prob\"", "\"probe\""});
+  spec = SimSpec();
+  spec["artefact"]["facets"][0]["pointt"] = {0, 0, 0};
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.artefact.facets[0]: unknown key \"pointt\""});
+  // The fields a file may carry are still accepted.
+  json d = SmallDataset();
+  d["$schema"] = "https://example.org/dataset.schema.json";
+  d["observations"][0]["id"] = "t1";
+  d["observations"][0]["sigma"] = 0.001;
+  EXPECT_NO_THROW(Load(d));
+}
+
+TEST(LoaderBoundary, SimulateAppliesTheLoadersChecksNamingThePlanEntry) {
+  json spec = SimSpec();
+  spec["plan"][2]["length"] = 0.0;
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2].length", "> 0"});
+  spec["plan"][2]["length"] = -5.0;
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2].length"});
+  spec["plan"][2]["length"] = "100";
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2].length", "number"});
+  spec = SimSpec();
+  spec["plan"][2]["setup"] = "A.1";
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2].setup", "'.'"});
+  spec["plan"][2]["setup"] = 7;
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2].setup", "string"});
+  spec = SimSpec();
+  spec["plan"][0]["type"] = "facett";
+  spec["plan"][0].erase("axes");
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[0].type", "unknown type 'facett'", "\"facet\""});
+  spec = SimSpec();
+  spec["sigma"] = {{"probe", "0.001"}};
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.sigma.probe", "number"});
+  spec = SimSpec();
+  spec["plan"][2]["length"] = 300.0;  // the balls are 100 mm apart: a -200 mm "reading"
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.plan[2]", "reading"});
+  // What simulate writes, load_dataset reads.
+  spec = SimSpec();
+  spec["sigma"] = 0.001;
+  EXPECT_NO_THROW(Dataset::FromJson(Simulate(spec.dump()).ToJson()));
+}
+
+TEST(LoaderBoundary, MalformedAndMistypedParameterNamesAreRefused) {
+  const Dataset ds = Load(SmallDataset());
+  const ParameterTable table(ds);
+  ExpectInvalid([&] { table.Require("EX0c"); }, {"'EX0c'", "did you mean \"EX0C\"?"});
+  ExpectInvalid([&] { table.Require("EX0C.x"); }, {"'EX0C.x'", "not a parameter name"});
+  ExpectInvalid([&] { table.Require("sphere.S1.q"); }, {"'sphere.S1.q'"});
+  EXPECT_GE(table.Require("sphere.S1.x"), table.num_machine());
+  // Predicted residuals: another dataset's setup parameters are skipped on
+  // purpose, malformed dotted names are not.
+  EXPECT_NO_THROW(PredictResiduals(ds, {{"facet.F99", 0.001}, {"dbb.B7.length", 0.01}}, nullptr));
+  ExpectInvalid([&] { PredictResiduals(ds, {{"EX0C.x", 0.001}}, nullptr); }, {"'EX0C.x'"});
+  ExpectInvalid([&] { PredictResiduals(ds, {{"sphere.S1", 0.001}}, nullptr); }, {"'sphere.S1'"});
+  // Error files and simulate specs.
+  const Machine& m = ds.machine();
+  ExpectInvalid([&] { ErrorModel::FromJson(m, R"({"EX0C.x": 0.01})"); }, {"'EX0C.x'"});
+  EXPECT_NO_THROW(ErrorModel::FromJson(m, R"({"EX0C": 0.01, "facet.F3": 0.002, "sphere.S1.x": 0.1})"));
+  ExpectInvalid([&] { m.RequireParameter("ECCB"); }, {"did you mean \"ECCb\"?"});
+  json spec = SimSpec();
+  spec["errors"]["EX0C.x"] = 0.01;
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.errors.EX0C.x"});
+  spec = SimSpec();
+  spec["setup"] = {{"sphere.S1.q", 0.01}};
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.setup.sphere.S1.q"});
+}
+
+TEST(LoaderBoundary, ImplausibleMagnitudesAreRefusedNamingTheField) {
+  struct Case {
+    std::function<void(json&)> edit;
+    std::string field;
+  };
+  const std::vector<Case> cases = {
+      {[](json& d) { d["artefact"]["spheres"][0]["radius"] = 1e308; }, "artefact.spheres[0].radius"},
+      {[](json& d) { d["artefact"]["spheres"][0]["center"][1] = -1e6; }, "artefact.spheres[0].center[1]"},
+      {[](json& d) { d["artefact"]["facets"][0]["point"][0] = 1e308; }, "artefact.facets[0].point[0]"},
+      {[](json& d) { d["artefact"]["scale_bars"][0]["length"] = 1e308; }, "artefact.scale_bars[0].length"},
+      {[](json& d) { d["probe"]["tip_radius"] = 1e308; }, "probe.tip_radius"},
+      {[](json& d) { d["observations"][2]["length"] = 1e308; }, "observations[2].length"},
+      {[](json& d) { d["observations"][2]["reading"] = 1e308; }, "observations[2].reading"},
+      {[](json& d) { d["observations"][2]["reading"] = 120.0; }, "observations[2].reading"},
+      {[](json& d) { d["observations"][2]["tool_ball"][2] = 1e308; }, "observations[2].tool_ball[2]"},
+      {[](json& d) { d["observations"][3]["measured"][0] = 1e308; }, "observations[3].measured[0]"},
+      {[](json& d) { d["observations"][0]["axes"]["X"] = 1e308; }, "observations[0].axes.X"},
+      {[](json& d) { d["observations"][0]["axes"]["B"] = -1e308; }, "observations[0].axes.B"},
+      {[](json& d) { d["observations"][0]["axes"]["C"] = 2e5; }, "observations[0].axes.C"},
+      {[](json& d) { d["machine"]["axes"]["B"]["point"][2] = 1e308; }, "machine.axes.B.point[2]"},
+      {[](json& d) { d["machine"]["tool"]["tip"][2] = 1e308; }, "machine.tool.tip[2]"},
+  };
+  for (const Case& c : cases) {
+    json d = SmallDataset();
+    c.edit(d);
+    ExpectInvalid([&] { Load(d); }, {c.field});
+  }
+  json spec = SimSpec();
+  spec["errors"]["EX0C"] = 1e308;
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"errors.EX0C"});
+  spec = SimSpec();
+  spec["sigma"] = 1e308;
+  ExpectInvalid([&] { Simulate(spec.dump()); }, {"simulate.sigma"});
+}
+
+TEST(LoaderBoundary, ScaleBarsAreCheckedAtLoad) {
+  json d = SmallDataset();
+  d["artefact"]["scale_bars"][0]["spheres"] = {"S1", "S1"};
+  ExpectInvalid([&] { Load(d); }, {"artefact.scale_bars[0].spheres", "joins sphere 'S1' to itself"});
+  d["artefact"]["scale_bars"][0]["spheres"] = {"S1", 2};
+  ExpectInvalid([&] { Load(d); }, {"artefact.scale_bars[0].spheres[1]", "string"});
+  d["artefact"]["scale_bars"][0]["spheres"] = {"S1", "S9"};
+  ExpectInvalid([&] { Load(d); }, {"artefact.scale_bars[0].spheres", "'S9'"});
+}
+
+bool ValidUtf8(const std::string& s) {
+  for (size_t i = 0; i < s.size();) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    size_t n = c < 0x80 ? 1 : (c & 0xE0) == 0xC0 ? 2 : (c & 0xF0) == 0xE0 ? 3 : (c & 0xF8) == 0xF0 ? 4 : 0;
+    if (n == 0 || i + n > s.size()) return false;
+    for (size_t k = 1; k < n; ++k)
+      if ((static_cast<unsigned char>(s[i + k]) & 0xC0) != 0x80) return false;
+    i += n;
+  }
+  return true;
+}
+
+std::string MessageOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "no std::invalid_argument";
+  return "";
+}
+
+TEST(LoaderBoundary, DeepNestingGivesAShortNamedError) {
+  // 100k unclosed '[' once produced a 300 kB message.
+  const std::string deep = R"({"machine": )" + std::string(100000, '[');
+  const std::string msg = MessageOf([&] { Dataset::FromJson(deep); });
+  EXPECT_LT(msg.size(), 1000u);
+  EXPECT_NE(msg.find("dataset.machine"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("nested deeper than"), std::string::npos) << msg;
+  // A 5000-deep dict (closed): refused by name, no recursion.
+  std::string dict = R"({"machine": )";
+  for (int i = 0; i < 5000; ++i) dict += R"({"a": )";
+  dict += "1" + std::string(5000, '}') + "}";
+  const std::string msg2 = MessageOf([&] { Dataset::FromJson(dict); });
+  EXPECT_LT(msg2.size(), 1000u);
+  EXPECT_NE(msg2.find("nested deeper than"), std::string::npos) << msg2;
+  // Brackets inside strings do not count.
+  json d = SmallDataset();
+  d["observations"][0]["id"] = std::string(200, '[');
+  EXPECT_NO_THROW(Load(d));
+}
+
+TEST(LoaderBoundary, MessagesAreValidUtf8AndNeverCutACharacter) {
+  json mj = Hu40t();
+  mj["topology"] = "wC\xC3\xA9" "fXt";  // wCéfXt
+  const std::string msg = MessageOf([&] { Machine::FromJson(mj.dump()); });
+  EXPECT_TRUE(ValidUtf8(msg)) << msg;
+  EXPECT_NE(msg.find("'\xC3\xA9'"), std::string::npos) << msg;  // the whole letter, quoted
+  // Invalid bytes (not UTF-8) in the text: escaped, still valid UTF-8.
+  const std::string raw = R"({"topology": "wC)" + std::string("\xFF\xC3") + R"(fXt", "axes": {}})";
+  const std::string msg2 = MessageOf([&] { Machine::FromJson(raw); });
+  EXPECT_TRUE(ValidUtf8(msg2)) << msg2;
+  EXPECT_NE(msg2.find("\\xFF"), std::string::npos) << msg2;
+  // An unknown key with a multi-byte name is quoted whole.
+  json d = SmallDataset();
+  d["observations"][0]["dir\xC3\xA9" "ction"] = 1;
+  const std::string msg3 = MessageOf([&] { Load(d); });
+  EXPECT_TRUE(ValidUtf8(msg3)) << msg3;
+  EXPECT_NE(msg3.find("dir\xC3\xA9" "ction"), std::string::npos) << msg3;
+}
+
+TEST(LoaderBoundary, SyntaxErrorsStillNameTheField) {
+  std::string text = SmallDataset().dump();
+  const size_t at = text.find(R"("reading":0.001)");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, std::string(R"("reading":0.001)").size(), R"("reading":0.001.2)");
+  ExpectInvalid([&] { Dataset::FromJson(text); }, {"dataset.observations[2].reading", "invalid JSON"});
+  text = SmallDataset().dump();
+  text.replace(text.find(R"("reading":0.001)"), std::string(R"("reading":0.001)").size(), R"("reading":1e999)");
+  ExpectInvalid([&] { Dataset::FromJson(text); }, {"dataset.observations[2].reading", "double range"});
+}
+
+}  // namespace
+}  // namespace fivecal
