@@ -21,10 +21,7 @@ namespace {
 using namespace json_util;
 
 // The machine file's "priors" (name or class:<name> -> sigma).
-std::map<std::string, double> MachinePriors(const Machine& m) {
-  (void)m;  // PENDING_PRIORS: m.priors once the loader keeps them
-  return {};
-}
+std::map<std::string, double> MachinePriors(const Machine& m) { return m.priors; }
 
 bool IsPreset(const std::string& s) {
   return s == "S1" || s == "S2" || s == "S3" || s == "S4" || s == "location" || s == "auto";

@@ -71,11 +71,9 @@ PoseData::PoseData(const Machine& m, const Observation& o)
 }
 
 double ObservationSigma(const Observation& o, int k) {
-  (void)k;
-  switch (o.type) {  // PENDING_SIGMA: the declared per-row sigma once the loader has it
-    case ObservationType::kDbb: return 0.0005;
-    default: return 0.001;
-  }
+  if (o.sigma.size() > k) return o.sigma[k];
+  if (o.sigma.size() == 1) return o.sigma[0];
+  return DefaultSigma(o.type);
 }
 
 // ---- ParameterTable ---------------------------------------------------------

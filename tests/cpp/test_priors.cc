@@ -271,15 +271,17 @@ TEST(IdentifyPriors, AutoIsAMapFitThatListsWhatTheDataDidNotDetermine) {
 }
 
 TEST(IdentifyPriors, ChiSquareAgainstTheDeclaredNoise) {
-  // 0.6 um simulated noise against the 1 um declared touch-probe noise: the
-  // model is adequate; chi2/dof about 0.36.
+  // The simulated noise (0.6 um) against the declared one (the simulator's
+  // 0.6 um, or the 1 um default when a file declares none): adequate,
+  // chi2/dof between 0.36 and 1.
   IdentifyOptions o;
   o.estimate = {"S3"};
   const Result r = Identify(Tango(), o);
   EXPECT_TRUE(r.adequate) << r.adequacy;
   EXPECT_GT(r.dof, 0);
-  EXPECT_NEAR(r.chi2 / r.dof, 0.36, 0.15);
-  EXPECT_GT(r.chi2_p, 0.5);
+  EXPECT_GT(r.chi2 / r.dof, 0.2);
+  EXPECT_LT(r.chi2 / r.dof, 1.3);
+  EXPECT_GT(r.chi2_p, 1e-3);
   // Leaving the scale gains and backlash out: residuals of several um, inadequate.
   o.estimate = {"EX0C", "EY0S"};
   const Result bad = Identify(Tango(), o);
