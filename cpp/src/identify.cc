@@ -548,7 +548,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     res.dof = std::max(0, rows - id.rank);
     const double s2 = res.dof > 0 ? chi2 / res.dof : 0.0;
     res.covariance = s2 * id.inverse_normal;
-    res.condition_number = id.condition_number;
+    // The condition number of the column-scaled Jacobian in mm, as before the
+    // weighting and as the plan design reports it.
+    res.condition_number = AnalyzeJacobian(sig.asDiagonal() * Jw, opt.rank_tolerance).condition_number;
     const int dof_mm = res.n_observations - id.rank;
     res.sigma = dof_mm > 0 ? std::sqrt(r.squaredNorm() / dof_mm) : 0.0;
   }
