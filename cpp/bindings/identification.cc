@@ -5,6 +5,7 @@
 
 #include "fivecal/dataset.h"
 #include "fivecal/identify.h"
+#include "fivecal/priors.h"
 #include "fivecal/simulate.h"
 #include "identify_options.h"
 
@@ -71,7 +72,33 @@ void BindIdentification(py::module_& m) {
       .def_readonly("n_parameters", &Result::n_parameters)
       .def_readonly("outliers", &Result::outliers)
       .def_readonly("robust_scale", &Result::robust_scale)
+      .def_readonly("prior_std", &Result::prior_std)
+      .def_readonly("informed", &Result::informed)
+      .def_readonly("undetermined", &Result::undetermined)
+      .def_readonly("implausible", &Result::implausible)
+      .def_readonly("map_fit", &Result::map_fit)
+      .def_readonly("chi2", &Result::chi2)
+      .def_readonly("dof", &Result::dof)
+      .def_readonly("chi2_p", &Result::chi2_p)
+      .def_readonly("adequate", &Result::adequate)
+      .def_readonly("adequacy", &Result::adequacy)
+      .def_readonly("finite", &Result::finite)
+      .def_property_readonly("verdict", &Result::verdict)
       .def("to_json", &Result::ToJson);
+
+  m.def("prior_classes", []() {
+    std::vector<py::dict> out;
+    for (const PriorClass& c : PriorClasses()) {
+      py::dict d;
+      d["name"] = c.name;
+      d["sigma"] = c.sigma;
+      d["unit"] = c.unit;
+      d["description"] = c.description;
+      out.push_back(d);
+    }
+    return out;
+  });
+  m.def("informed_threshold", []() { return kInformedThreshold; });
 
   m.def(
       "identify",
@@ -79,29 +106,33 @@ void BindIdentification(py::module_& m) {
          const std::vector<std::string>& fix, const std::map<std::string, double>& initial,
          const std::string& robust, double robust_scale, int max_iterations,
          bool allow_unidentifiable, bool include_default_setup, int num_threads,
-         double selection_tolerance) {
+         double selection_tolerance, const std::map<std::string, double>& priors, bool prior) {
         const IdentifyOptions o = MakeOptions(estimate, fix, initial, robust, robust_scale, max_iterations,
                                               include_default_setup, selection_tolerance,
-                                              allow_unidentifiable, num_threads);
+                                              allow_unidentifiable, num_threads, priors, prior);
         py::gil_scoped_release release;
         return Identify(ds, o);
       },
       py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"),
       py::arg("robust") = "", py::arg("robust_scale") = 0.0, py::arg("max_iterations") = 200,
       py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
-      py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance);
+      py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
+      py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false);
 
   m.def(
       "resolve_estimate",
       [](const Dataset& ds, const std::vector<std::string>& estimate,
-         const std::vector<std::string>& fix, const std::map<std::string, double>& initial) {
+         const std::vector<std::string>& fix, const std::map<std::string, double>& initial,
+         const std::map<std::string, double>& priors) {
         IdentifyOptions o;
         o.estimate = estimate;
         o.fix = fix;
         o.initial = initial;
+        o.priors = priors;
         return ResolveEstimate(ds, o);
       },
-      py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"));
+      py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"),
+      py::arg("priors") = std::map<std::string, double>());
 
   m.def(
       "predict_residuals",

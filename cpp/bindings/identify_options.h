@@ -15,7 +15,9 @@ inline IdentifyOptions MakeOptions(const std::vector<std::string>& estimate, con
                                    const std::map<std::string, double>& initial, const std::string& robust,
                                    double robust_scale, int max_iterations, bool include_default_setup,
                                    double selection_tolerance, bool allow_unidentifiable = false,
-                                   int num_threads = 1) {
+                                   int num_threads = 1,
+                                   const std::map<std::string, double>& priors = {},
+                                   bool prior = false) {
   IdentifyOptions o;
   o.estimate = estimate;
   o.fix = fix;
@@ -27,6 +29,8 @@ inline IdentifyOptions MakeOptions(const std::vector<std::string>& estimate, con
   o.selection_tolerance = selection_tolerance;
   o.allow_unidentifiable = allow_unidentifiable;
   o.num_threads = num_threads;
+  o.priors = priors;
+  o.prior = prior;
   return o;
 }
 

@@ -329,7 +329,9 @@ Sensitivity SensitivityMatrix(const Dataset& ds, const Result& fit) {
   Eigen::VectorXd r;
   Eigen::MatrixXd J;
   problem.Evaluate(&r, &J);
-  const Identifiability id = AnalyzeJacobian(J);
+  // The fit minimises sum (r_i / sigma_i)^2: C = -(J^T W J)^+ J^T W, W = diag(1 / sigma^2).
+  const Eigen::VectorXd w = problem.row_sigma().cwiseInverse();
+  const Identifiability id = AnalyzeJacobian(w.asDiagonal() * J);
   Sensitivity s;
   s.names = fit.estimated;
   s.values.resize(est.size());
@@ -341,7 +343,8 @@ Sensitivity SensitivityMatrix(const Dataset& ds, const Result& fit) {
       s.input_source.push_back(src[row]);
     }
   Eigen::MatrixXd Jin(s.input_rows.size(), J.cols());
-  for (size_t k = 0; k < s.input_rows.size(); ++k) Jin.row(k) = J.row(s.input_rows[k]);
+  for (size_t k = 0; k < s.input_rows.size(); ++k)
+    Jin.row(k) = J.row(s.input_rows[k]) * (w[s.input_rows[k]] * w[s.input_rows[k]]);
   s.C = -id.inverse_normal * Jin.transpose();
   return s;
 }

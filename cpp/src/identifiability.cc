@@ -176,4 +176,87 @@ std::vector<int> SelectIdentifiable(const Eigen::MatrixXd& J, const std::vector<
   return kept;
 }
 
+Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
+                                   double threshold) {
+  Determination out;
+  const int p = static_cast<int>(Jw.cols());
+  out.ratio = Eigen::VectorXd::Zero(p);
+  if (p == 0) return out;
+  const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
+  Eigen::MatrixXd reduced;
+  if (Js.rows() > p) {
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(Js);
+    reduced = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+  } else {
+    reduced = Js;
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
+  out.singular_values = Eigen::VectorXd::Zero(p);
+  const Eigen::VectorXd s = svd.singularValues();
+  out.singular_values.head(s.size()) = s;
+  const Eigen::MatrixXd& V = svd.matrixV();
+  const double smax = s.size() ? s[0] : 0.0;
+  // Directions below this are exactly free (rounding level): infinite variance.
+  const double zero = 1e-12 * std::max(smax, 1.0);
+  const double weak = 1.0 / threshold;
+  for (int k = 0; k < p; ++k) {
+    const double sk = out.singular_values[k];
+    if (sk > weak) ++out.rank;
+    for (int j = 0; j < p; ++j) {
+      if (std::abs(V(j, k)) < 1e-9) continue;
+      out.ratio[j] += sk > zero ? V(j, k) * V(j, k) / (sk * sk) : INFINITY;
+    }
+  }
+  out.ratio = out.ratio.cwiseSqrt();
+  std::vector<int> parent(p);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  std::vector<bool> bad(p, false);
+  for (int j = 0; j < p; ++j)
+    if (!(out.ratio[j] < threshold)) {
+      bad[j] = true;
+      out.undetermined.push_back(j);
+    }
+  for (int k = 0; k < p; ++k) {
+    if (out.singular_values[k] > weak) continue;
+    const Eigen::VectorXd v = V.col(k);
+    double vmax = 0;
+    for (int j = 0; j < p; ++j)
+      if (bad[j]) vmax = std::max(vmax, std::abs(v[j]));
+    // An exactly free direction binds every parameter it touches, however
+    // lightly (their sigmas are all infinite); a weak one its main members.
+    const bool exact = out.singular_values[k] <= zero;
+    int first = -1;
+    for (int j = 0; j < p; ++j) {
+      if (!bad[j] || std::abs(v[j]) < (exact ? 1e-2 : 0.1) * vmax) continue;
+      if (first < 0) first = j;
+      else parent[find(j)] = find(first);
+    }
+  }
+  std::vector<std::vector<int>> groups(p);
+  for (int j : out.undetermined) groups[find(j)].push_back(j);
+  for (auto& g : groups)
+    if (!g.empty()) out.groups.push_back(g);
+  return out;
+}
+
+Eigen::VectorXd SubsetRatios(const Eigen::MatrixXd& Js, const std::vector<int>& cols) {
+  const int k = static_cast<int>(cols.size());
+  Eigen::MatrixXd N(k, k);
+  for (int a = 0; a < k; ++a)
+    for (int b = a; b < k; ++b) N(a, b) = N(b, a) = Js.col(cols[a]).dot(Js.col(cols[b]));
+  Eigen::LDLT<Eigen::MatrixXd> ldlt(N);
+  Eigen::VectorXd out = Eigen::VectorXd::Constant(k, INFINITY);
+  if (ldlt.info() != Eigen::Success) return out;
+  // A (near) singular subset: the smallest pivot at rounding level of the largest.
+  const Eigen::VectorXd d = ldlt.vectorD();
+  if (!(d.minCoeff() > 1e-13 * std::max(d.maxCoeff(), 1.0))) return out;
+  const Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
+  for (int a = 0; a < k; ++a) out[a] = std::sqrt(std::max(inv(a, a), 0.0));
+  return out;
+}
+
 }  // namespace fivecal

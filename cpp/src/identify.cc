@@ -1,6 +1,8 @@
 #include "fivecal/identify.h"
 
 #include <algorithm>
+#include <cstdio>
+#include <memory>
 #include <cmath>
 #include <set>
 #include <sstream>
@@ -9,6 +11,7 @@
 #include "fivecal/identifiability.h"
 #include "fivecal/kinematic_model.h"
 #include "fivecal/kinematics.h"
+#include "fivecal/priors.h"
 #include "fivecal/problem.h"
 #include "json_util.h"
 
@@ -16,6 +19,9 @@ namespace fivecal {
 namespace {
 
 using namespace json_util;
+
+// The machine file's "priors" (name or class:<name> -> sigma).
+std::map<std::string, double> MachinePriors(const Machine& m) { return m.priors; }
 
 bool IsPreset(const std::string& s) {
   return s == "S1" || s == "S2" || s == "S3" || s == "S4" || s == "location" || s == "auto";
@@ -40,11 +46,34 @@ std::string GroupText(std::vector<std::string> g) {
   return s + "}";
 }
 
-// The estimated index set: explicit names and presets plus the default setup,
-// minus the fixed ones; "location"/"auto" are selected greedily on the
-// Jacobian at the initial values.
-std::vector<int> ResolveIndices(const Dataset& ds, const ParameterTable& table,
-                                const Eigen::VectorXd& values, const IdentifyOptions& opt) {
+void ValidateOptions(const IdentifyOptions& o) {
+  if (o.max_iterations < 1 || o.max_iterations > 100000)
+    throw std::invalid_argument("identify: max_iterations must be in 1..100000, got " +
+                                std::to_string(o.max_iterations));
+  if (!(o.selection_tolerance > 0) || !(o.selection_tolerance < 1))
+    throw std::invalid_argument("identify: selection_tolerance must be in (0, 1), got " +
+                                std::to_string(o.selection_tolerance));
+  if (!(o.rank_tolerance > 0) || !(o.rank_tolerance < 1))
+    throw std::invalid_argument("identify: rank_tolerance must be in (0, 1), got " +
+                                std::to_string(o.rank_tolerance));
+  if (!o.robust.empty() && o.robust != "none" && o.robust != "huber" && o.robust != "cauchy")
+    throw std::invalid_argument("identify: robust must be 'huber', 'cauchy' or 'none', got '" +
+                                o.robust + "'");
+  if (!std::isfinite(o.robust_scale) || o.robust_scale < 0)
+    throw std::invalid_argument("identify: robust_scale must be finite and >= 0 mm");
+  if (o.num_threads < 1 || o.num_threads > 1024)
+    throw std::invalid_argument("identify: num_threads must be in 1..1024, got " +
+                                std::to_string(o.num_threads));
+}
+
+struct Request {
+  std::vector<int> forced;      // explicit names, presets, default setup
+  std::vector<int> candidates;  // "location" / "auto" candidates, in priority order
+  bool location = false, automatic = false;
+};
+
+Request Classify(const Dataset& ds, const ParameterTable& table, const IdentifyOptions& opt) {
+  Request q;
   std::set<int> fixed;
   for (const std::string& n : opt.fix) {
     if (IsPreset(n)) {
@@ -53,7 +82,6 @@ std::vector<int> ResolveIndices(const Dataset& ds, const ParameterTable& table,
       fixed.insert(table.Require(n));
     }
   }
-  std::vector<int> forced;
   std::set<int> seen;
   auto add = [&](int i, std::vector<int>* list) {
     if (fixed.count(i) || seen.count(i)) return;
@@ -61,39 +89,203 @@ std::vector<int> ResolveIndices(const Dataset& ds, const ParameterTable& table,
     list->push_back(i);
   };
   if (opt.include_default_setup)
-    for (int i : table.DefaultSetup(ds)) add(i, &forced);
-  bool location = false, automatic = false;
+    for (int i : table.DefaultSetup(ds)) add(i, &q.forced);
   for (const std::string& n : opt.estimate) {
-    if (n == "location") location = true;
-    else if (n == "auto") automatic = true;
+    if (n == "location") q.location = true;
+    else if (n == "auto") q.automatic = true;
     else if (IsPreset(n))
-      for (const std::string& p : ThesisSubset(ds.machine(), n)) add(table.Require(p), &forced);
-    else add(table.Require(n), &forced);
+      for (const std::string& p : ThesisSubset(ds.machine(), n)) add(table.Require(p), &q.forced);
+    else add(table.Require(n), &q.forced);
   }
-  if (!location && !automatic) return forced;
-
-  std::vector<int> candidates;
-  for (const std::string& n : LocationCandidates(ds.machine())) add(table.Require(n), &candidates);
-  if (automatic)
+  if (q.location || q.automatic)
+    for (const std::string& n : LocationCandidates(ds.machine())) add(table.Require(n), &q.candidates);
+  if (q.automatic)
     for (const std::string& n : MotionCandidates(ds.machine()))
-      if (table.Index(n) >= 0) add(table.Index(n), &candidates);
-  std::vector<int> all = forced;
-  all.insert(all.end(), candidates.begin(), candidates.end());
-  Problem probe(ds, table, values, all);
-  Eigen::VectorXd r;
-  Eigen::MatrixXd J;
-  probe.Evaluate(&r, &J);
-  std::vector<int> forced_cols(forced.size()), cand_cols(candidates.size());
-  for (size_t i = 0; i < forced.size(); ++i) forced_cols[i] = static_cast<int>(i);
-  for (size_t i = 0; i < candidates.size(); ++i)
-    cand_cols[i] = static_cast<int>(forced.size() + i);
-  // Forced parameters are kept whatever happens (a confounded explicit request
-  // is reported by the rank check), candidates only when independent.
-  std::vector<int> chosen = SelectIdentifiable(J, forced_cols, cand_cols, opt.selection_tolerance);
-  std::vector<int> out = forced;
-  for (int c : chosen)
-    if (c >= static_cast<int>(forced.size())) out.push_back(all[c]);
+      if (table.Index(n) >= 0) add(table.Index(n), &q.candidates);
+  return q;
+}
+
+Eigen::VectorXd Gather(const Eigen::VectorXd& all, const std::vector<int>& idx) {
+  Eigen::VectorXd v(idx.size());
+  for (size_t i = 0; i < idx.size(); ++i) v[i] = all[idx[i]];
+  return v;
+}
+
+// Residuals (mm) and the Jacobian with rows divided by their declared noise.
+void WeightedJacobian(Problem* pr, Eigen::VectorXd* r, Eigen::MatrixXd* Jw) {
+  pr->Evaluate(r, Jw);
+  const Eigen::VectorXd w = pr->row_sigma().cwiseInverse();
+  *Jw = w.asDiagonal() * *Jw;
+}
+
+struct Solve {
+  Eigen::VectorXd values;
+  bool converged = false;
+  int iterations = 0;
+  std::string message;
+  double initial_cost = 0, final_cost = 0, robust_scale = 0;
+};
+
+// One fit of `est` from `values`: plain least squares, or MAP with
+// `prior_all` (per table index; empty = no prior rows); with the robust loss a
+// plain pass first sets the loss scale.
+Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
+             const std::vector<int>& est, const IdentifyOptions& opt, const Eigen::VectorXd& prior_all,
+             std::unique_ptr<Problem>* final_problem) {
+  const ceres::Solver::Options so = Problem::SolverOptions(opt.max_iterations, opt.num_threads);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(table.size());
+  Solve out;
+  out.values = values;
+  auto run = [&](Problem* pr) {
+    if (prior_all.size()) pr->AddPriors(prior_all, zero);
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &pr->ceres_problem(), &summary);
+    out.values = pr->values();
+    out.converged = summary.termination_type == ceres::CONVERGENCE;
+    out.iterations += std::max(0, static_cast<int>(summary.iterations.size()) - 1);
+    out.message = summary.message;
+    if (out.initial_cost == 0) out.initial_cost = summary.initial_cost;
+    out.final_cost = summary.final_cost;
+  };
+  auto problem = std::make_unique<Problem>(ds, table, values, est);
+  run(problem.get());
+  if (!opt.robust.empty() && opt.robust != "none") {
+    double scale = opt.robust_scale;
+    if (!(scale > 0)) {
+      Eigen::VectorXd r;
+      problem->Evaluate(&r, nullptr);
+      std::vector<double> a(r.data(), r.data() + r.size());
+      for (double& x : a) x = std::abs(x);
+      std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+      scale = 3.0 * 1.4826 * a[a.size() / 2];
+      if (!(scale > 0)) scale = 1e-6;
+    }
+    out.robust_scale = scale;
+    problem = std::make_unique<Problem>(ds, table, out.values, est, opt.robust, scale);
+    run(problem.get());
+  }
+  if (final_problem) *final_problem = std::move(problem);
   return out;
+}
+
+// "location": the forced set, then each candidate in priority order while
+// every kept parameter stays determined (data-only sigma below
+// kDeterminedRatio x prior) and the candidate's unit-norm column is not
+// within selection_tolerance of the span of the kept ones.
+std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
+                                  int num_forced, double tolerance) {
+  const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
+  std::vector<int> kept;
+  for (int c = 0; c < num_forced; ++c) kept.push_back(c);
+  Eigen::VectorXd before = kept.empty() ? Eigen::VectorXd() : SubsetRatios(Js, kept);
+  Eigen::MatrixXd Q(Jw.rows(), 0);
+  auto unit_residual = [&](int c) {
+    const double norm = Jw.col(c).norm();
+    if (!(norm > 0)) return 0.0;
+    Eigen::VectorXd v = Jw.col(c) / norm;
+    for (int pass = 0; pass < 2; ++pass)
+      if (Q.cols()) v -= Q * (Q.transpose() * v);
+    return v.norm();
+  };
+  auto push_q = [&](int c) {
+    const double norm = Jw.col(c).norm();
+    if (!(norm > 0)) return;
+    Eigen::VectorXd v = Jw.col(c) / norm;
+    for (int pass = 0; pass < 2; ++pass)
+      if (Q.cols()) v -= Q * (Q.transpose() * v);
+    if (v.norm() > 1e-12) {
+      Q.conservativeResize(Eigen::NoChange, Q.cols() + 1);
+      Q.col(Q.cols() - 1) = v / v.norm();
+    }
+  };
+  for (int c = 0; c < num_forced; ++c) push_q(c);
+  for (int c = num_forced; c < Jw.cols(); ++c) {
+    if (unit_residual(c) < tolerance) continue;
+    std::vector<int> trial = kept;
+    trial.push_back(c);
+    const Eigen::VectorXd after = SubsetRatios(Js, trial);
+    bool ok = after[trial.size() - 1] < kDeterminedRatio;
+    for (size_t i = 0; ok && i < kept.size(); ++i)
+      if (before[i] < kDeterminedRatio && !(after[i] < kDeterminedRatio)) ok = false;
+    if (!ok) continue;
+    kept = trial;
+    before = after;
+    push_q(c);
+  }
+  return kept;
+}
+
+bool HasLengthReference(const Dataset& ds) {
+  std::set<std::string> probed;
+  for (const Observation& o : ds.observations) {
+    if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) return true;
+    if (o.type == ObservationType::kSphere) probed.insert(o.target);
+  }
+  for (const ScaleBar& b : ds.artefact.scale_bars)
+    if (probed.count(b.sphere1) && probed.count(b.sphere2)) return true;
+  return false;
+}
+
+// Plain words for why a group of parameters is not determined.
+std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group) {
+  const Machine& m = ds.machine();
+  int gains = 0, setup = 0, machine = 0;
+  for (const std::string& n : group) {
+    const int i = m.ParameterIndex(n);
+    if (i < 0 || m.parameters()[i].kind == ParameterKind::kTip) ++setup;
+    else ++machine;
+    if (i >= 0 && PriorClassOf(m, n) == "scale_gain") ++gains;
+  }
+  if (gains > 0 && !HasLengthReference(ds))
+    return "no length reference (no scale bar or ball-bar length in the data): only relative "
+           "scale can be found";
+  if (machine > 0 && setup > 0)
+    return "confounded with the setup (stylus tip, facet offsets, sphere centres or mounts)";
+  if (machine > 0)
+    return "confounded with each other or too weakly seen at these poses for their plausible size";
+  return "setup parameters the data do not separate";
+}
+
+std::string UndeterminedMessage(const Dataset& ds, const std::vector<std::vector<std::string>>& groups) {
+  std::string msg =
+      "identify: not determined by this data (confounded, or seen more weakly than their "
+      "plausible size): ";
+  for (size_t i = 0; i < groups.size(); ++i)
+    msg += (i ? "; " : "") + GroupText(groups[i]) + ": " + GroupCause(ds, groups[i]);
+  return msg + ". Fix one parameter of each group, add measurements that separate them, or use "
+               "estimate 'auto' (every error under its prior, the undetermined ones listed).";
+}
+
+// Regularised upper incomplete gamma Q(a, x) (series below a + 1, Lentz's
+// continued fraction above).
+double GammaQ(double a, double x) {
+  if (!(x > 0)) return 1.0;
+  const double lg = std::lgamma(a);
+  if (x < a + 1) {
+    double sum = 1.0 / a, term = sum, ap = a;
+    for (int n = 0; n < 100000; ++n) {
+      ap += 1;
+      term *= x / ap;
+      sum += term;
+      if (std::abs(term) < std::abs(sum) * 1e-15) break;
+    }
+    return std::max(0.0, 1.0 - sum * std::exp(-x + a * std::log(x) - lg));
+  }
+  const double tiny = 1e-300;
+  double b = x + 1 - a, c = 1 / tiny, d = 1 / b, h = d;
+  for (int i = 1; i < 100000; ++i) {
+    const double an = -i * (i - a);
+    b += 2;
+    d = an * d + b;
+    if (std::abs(d) < tiny) d = tiny;
+    c = b + an / c;
+    if (std::abs(c) < tiny) c = tiny;
+    d = 1 / d;
+    const double del = d * c;
+    h *= del;
+    if (std::abs(del - 1) < 1e-15) break;
+  }
+  return std::min(1.0, std::exp(-x + a * std::log(x) - lg) * h);
 }
 
 void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const ParameterTable& table,
@@ -148,104 +340,222 @@ void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const Param
 
 }  // namespace
 
+namespace {
+
+struct Setup {
+  ParameterTable table;
+  Eigen::VectorXd values;  // initial, every table entry
+  Eigen::VectorXd prior;   // prior sigma, every table entry
+  Request request;
+  explicit Setup(const Dataset& ds, const IdentifyOptions& opt) : table(ds) {
+    ValidateOptions(opt);
+    values = InitialValues(table, opt);
+    std::vector<std::string> machine_names = ds.machine().parameter_names();
+    ValidatePriors(MachinePriors(ds.machine()), "machine priors", table.names());
+    ValidatePriors(opt.priors, "priors", table.names());
+    const std::vector<double> p =
+        PriorScales(ds.machine(), table.names(), MachinePriors(ds.machine()), opt.priors);
+    prior = Eigen::Map<const Eigen::VectorXd>(p.data(), static_cast<Eigen::Index>(p.size()));
+    request = Classify(ds, table, opt);
+  }
+};
+
+// The "location" selection at given values (no fit).
+std::vector<int> SelectAt(const Dataset& ds, const Setup& s, const Eigen::VectorXd& values,
+                          const IdentifyOptions& opt) {
+  std::vector<int> all = s.request.forced;
+  all.insert(all.end(), s.request.candidates.begin(), s.request.candidates.end());
+  Problem probe(ds, s.table, values, all);
+  Eigen::VectorXd r;
+  Eigen::MatrixXd Jw;
+  WeightedJacobian(&probe, &r, &Jw);
+  const std::vector<int> cols = SelectDetermined(Jw, Gather(s.prior, all),
+                                                 static_cast<int>(s.request.forced.size()),
+                                                 opt.selection_tolerance);
+  std::vector<int> out;
+  for (int c : cols) out.push_back(all[c]);
+  return out;
+}
+
+}  // namespace
+
 std::vector<std::string> ResolveEstimate(const Dataset& ds, const IdentifyOptions& options) {
   ds.Validate();
-  const ParameterTable table(ds);
-  const Eigen::VectorXd values = InitialValues(table, options);
+  const Setup s(ds, options);
+  std::vector<int> idx = s.request.forced;
+  if (s.request.automatic) idx.insert(idx.end(), s.request.candidates.begin(), s.request.candidates.end());
+  else if (s.request.location) idx = SelectAt(ds, s, s.values, options);
   std::vector<std::string> out;
-  for (int i : ResolveIndices(ds, table, values, options)) out.push_back(table.names()[i]);
+  for (int i : idx) out.push_back(s.table.names()[i]);
   return out;
 }
 
 Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   ds.Validate();
-  const ParameterTable table(ds);
-  Eigen::VectorXd values = InitialValues(table, opt);
-  const std::vector<int> est = ResolveIndices(ds, table, values, opt);
+  const Setup setup(ds, opt);
+  const ParameterTable& table = setup.table;
+  const Request& rq = setup.request;
+  Eigen::VectorXd values = setup.values;
+  const bool map = rq.automatic || opt.prior;
+  const Eigen::VectorXd no_prior;
+
+  std::vector<int> est;
+  if (rq.automatic) {
+    est = rq.forced;
+    est.insert(est.end(), rq.candidates.begin(), rq.candidates.end());
+  } else if (rq.location) {
+    // Judge the selection near the solution, not at a possibly rough
+    // nominal: a MAP fit over every candidate first (always well posed),
+    // then select, refit, and select again until the set is stable.
+    std::vector<int> all = rq.forced;
+    all.insert(all.end(), rq.candidates.begin(), rq.candidates.end());
+    const Solve pre = RunFit(ds, table, values, all, opt, setup.prior, nullptr);
+    Eigen::VectorXd at = setup.values;
+    for (int i : all) at[i] = pre.values[i];
+    est = SelectAt(ds, setup, at, opt);
+    for (int round = 0; round < 4; ++round) {
+      Eigen::VectorXd start = setup.values;
+      for (int i : est) start[i] = at[i];
+      const Solve fit = RunFit(ds, table, start, est, opt, map ? setup.prior : no_prior, nullptr);
+      std::vector<int> again = SelectAt(ds, setup, fit.values, opt);
+      at = fit.values;
+      if (again == est) break;
+      est = again;
+    }
+    for (int i : est) values[i] = at[i];
+  } else {
+    est = rq.forced;
+  }
   if (est.empty())
     throw std::invalid_argument("identify: nothing to estimate (every parameter is fixed)");
 
   Result res;
   res.names = table.names();
   for (int i : est) res.estimated.push_back(table.names()[i]);
+  res.map_fit = map;
+  res.explicit_request = !rq.automatic;
   const int p = static_cast<int>(est.size());
+  const Eigen::VectorXd prior = Gather(setup.prior, est);
 
-  // Identifiability at the starting point: refuse to return garbage.
-  std::unique_ptr<Problem> problem = std::make_unique<Problem>(ds, table, values, est);
-  {
-    Eigen::VectorXd r;
-    Eigen::MatrixXd J;
-    problem->Evaluate(&r, &J);
-    if (problem->num_rows() < p && !opt.allow_unidentifiable)
-      throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
-                                  std::to_string(problem->num_rows()) + " residuals");
-    // The SVD (which names confounded groups) only when a QR screen is not
-    // conclusive: most requests are well posed and this halves the cost.
-    Identifiability id;
-    id.rank = p;
-    if (!ClearlyFullRank(J)) id = AnalyzeJacobian(J, opt.rank_tolerance);
-    for (const auto& g : id.confounded) {
+  auto undetermined_groups = [&](const Determination& d) {
+    std::vector<std::vector<std::string>> groups;
+    for (const auto& g : d.groups) {
       std::vector<std::string> names;
       for (int c : g) names.push_back(res.estimated[c]);
-      res.unidentifiable.push_back(names);
+      groups.push_back(names);
     }
-    if (id.rank < p && !opt.allow_unidentifiable) {
-      std::string msg = "identify: the data cannot identify the requested parameters (rank " +
-                        std::to_string(id.rank) + " of " + std::to_string(p) + "); confounded: ";
-      for (size_t i = 0; i < res.unidentifiable.size(); ++i)
-        msg += (i ? "; " : "") + GroupText(res.unidentifiable[i]);
-      msg += ". Fix one parameter of each group, or use estimate 'auto'.";
-      throw std::invalid_argument(msg);
-    }
-  }
-
-  const ceres::Solver::Options so = Problem::SolverOptions(opt.max_iterations, opt.num_threads);
-
-  auto run = [&](Problem* pr) {
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &pr->ceres_problem(), &summary);
-    values = pr->values();
-    res.converged = summary.termination_type == ceres::CONVERGENCE;
-    res.iterations += static_cast<int>(summary.iterations.size()) - 1;
-    res.message = summary.message;
-    if (res.initial_cost == 0) res.initial_cost = summary.initial_cost;
-    res.final_cost = summary.final_cost;
+    return groups;
   };
-  run(problem.get());
-  if (!opt.robust.empty() && opt.robust != "none") {
-    double scale = opt.robust_scale;
-    if (!(scale > 0)) {
-      Eigen::VectorXd r;
-      problem->Evaluate(&r, nullptr);
-      std::vector<double> a(r.data(), r.data() + r.size());
-      for (double& x : a) x = std::abs(x);
-      std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
-      scale = 3.0 * 1.4826 * a[a.size() / 2];
-      if (!(scale > 0)) scale = 1e-6;
+
+  if (!map) {
+    // A plain least-squares request must be determined by the data: judged
+    // at the start and, when the start says no, again near the solution
+    // (after a MAP fit, well posed whatever the start), so that a rough
+    // nominal neither drops nor admits parameters wrongly.
+    Problem start_problem(ds, table, values, est);
+    if (start_problem.num_rows() < p && !opt.allow_unidentifiable)
+      throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
+                                  std::to_string(start_problem.num_rows()) + " residuals");
+    Eigen::VectorXd r;
+    Eigen::MatrixXd Jw;
+    WeightedJacobian(&start_problem, &r, &Jw);
+    Determination d = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+    if (!d.undetermined.empty()) {
+      const Solve pre = RunFit(ds, table, values, est, opt, setup.prior, nullptr);
+      Problem at(ds, table, pre.values, est);
+      WeightedJacobian(&at, &r, &Jw);
+      const Determination d2 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+      if (d2.undetermined.empty()) {
+        values = pre.values;
+      } else if (!opt.allow_unidentifiable) {
+        // The MAP point may still sit where a weakly seen setup parameter
+        // (a sphere with few touches) looks free; the least-squares point
+        // decides. Refuse only when it too leaves the set undetermined.
+        const Solve ls = RunFit(ds, table, pre.values, est, opt, no_prior, nullptr);
+        Problem at_ls(ds, table, ls.values, est);
+        WeightedJacobian(&at_ls, &r, &Jw);
+        const Determination d3 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+        if (!d3.undetermined.empty())
+          throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(d2)));
+        values = ls.values;
+      }
     }
-    res.robust_scale = scale;
-    problem = std::make_unique<Problem>(ds, table, values, est, opt.robust, scale);
-    run(problem.get());
   }
+
+  std::unique_ptr<Problem> problem;
+  const Solve fit = RunFit(ds, table, values, est, opt, map ? setup.prior : no_prior, &problem);
+  values = fit.values;
+  res.converged = fit.converged;
+  res.iterations = fit.iterations;
+  res.message = fit.message;
+  res.initial_cost = fit.initial_cost;
+  res.final_cost = fit.final_cost;
+  res.robust_scale = fit.robust_scale;
 
   Eigen::VectorXd r;
-  Eigen::MatrixXd J;
-  problem->Evaluate(&r, &J);
-  const Identifiability id = AnalyzeJacobian(J, opt.rank_tolerance);
+  Eigen::MatrixXd Jw;
+  WeightedJacobian(problem.get(), &r, &Jw);
+  const Eigen::VectorXd sig = problem->row_sigma();
+  const Determination det = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+  if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable)
+    throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
+
   res.values = values;
   res.residuals = r;
   res.residual_source = problem->row_source();
   res.n_observations = problem->num_rows();
   res.n_parameters = p;
-  res.rank = id.rank;
-  res.condition_number = id.condition_number;
   res.rms = r.size() ? std::sqrt(r.squaredNorm() / r.size()) : 0.0;
   res.max_abs = r.size() ? r.cwiseAbs().maxCoeff() : 0.0;
-  const int dof = res.n_observations - id.rank;
-  res.sigma = dof > 0 ? std::sqrt(r.squaredNorm() / dof) : 0.0;
-  // Covariance: s^2 (J^T J)^-1 from the column-scaled SVD (robust to the
-  // parameters' very different units; pseudo-inverse when rank deficient).
-  res.covariance = res.sigma * res.sigma * id.inverse_normal;
+  if (res.robust_scale > 0)
+    for (int i = 0; i < r.size(); ++i)
+      if (std::abs(r[i]) > res.robust_scale) res.outliers.push_back(i);
+
+  // chi^2 of the data rows against the declared noise (rows the robust loss
+  // flagged are left out: they are reported as outliers instead).
+  std::vector<bool> outlier(r.size(), false);
+  for (int i : res.outliers) outlier[i] = true;
+  double chi2 = 0;
+  int rows = 0;
+  for (int i = 0; i < r.size(); ++i)
+    if (!outlier[i]) chi2 += (r[i] / sig[i]) * (r[i] / sig[i]), ++rows;
+
+  const Identifiability id = AnalyzeJacobian(Jw, opt.rank_tolerance);
+  res.rank = id.rank;
+  if (map) {
+    // Posterior covariance (Jw^T Jw + P)^-1, P = diag(1 / prior^2), in the
+    // declared noise; inflated by chi2/dof when the residuals exceed it.
+    Eigen::MatrixXd Js = Jw * prior.asDiagonal();
+    Eigen::MatrixXd N = Js.transpose() * Js;
+    N.diagonal().array() += 1.0;
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(N);
+    const Eigen::MatrixXd Cs = ldlt.solve(Eigen::MatrixXd::Identity(p, p));
+    const Eigen::MatrixXd C = prior.asDiagonal() * Cs * prior.asDiagonal();
+    // Effective number of parameters: trace of the hat matrix = p - trace(Cs).
+    const double p_eff = p - Cs.trace();
+    res.dof = std::max(1, rows - static_cast<int>(std::lround(p_eff)));
+    const double k2 = std::max(1.0, chi2 / res.dof);
+    res.covariance = k2 * C;
+    // Condition number of what the data determined (the rest is the prior's).
+    std::vector<int> informed_cols;
+    for (int j = 0; j < p; ++j)
+      if (std::sqrt(std::max(Cs(j, j), 0.0)) < kInformedThreshold) informed_cols.push_back(j);
+    Eigen::MatrixXd Ji(Jw.rows(), informed_cols.size());
+    for (size_t k = 0; k < informed_cols.size(); ++k) Ji.col(k) = Jw.col(informed_cols[k]);
+    res.condition_number = informed_cols.empty() ? 0.0 : AnalyzeJacobian(Ji, opt.rank_tolerance).condition_number;
+    res.sigma = res.dof > 0 ? std::sqrt(r.squaredNorm() / res.dof) : 0.0;
+  } else {
+    res.dof = std::max(0, rows - id.rank);
+    const double s2 = res.dof > 0 ? chi2 / res.dof : 0.0;
+    res.covariance = s2 * id.inverse_normal;
+    // The condition number of the column-scaled Jacobian in mm, as before the
+    // weighting and as the plan design reports it.
+    res.condition_number = AnalyzeJacobian(sig.asDiagonal() * Jw, opt.rank_tolerance).condition_number;
+    const int dof_mm = res.n_observations - id.rank;
+    res.sigma = dof_mm > 0 ? std::sqrt(r.squaredNorm() / dof_mm) : 0.0;
+  }
+  res.chi2 = chi2;
+  res.chi2_p = res.dof > 0 ? GammaQ(0.5 * res.dof, 0.5 * chi2) : 1.0;
   res.std = res.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   res.correlation = Eigen::MatrixXd::Zero(p, p);
   for (int i = 0; i < p; ++i)
@@ -253,11 +563,86 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
       const double d = res.std[i] * res.std[j];
       res.correlation(i, j) = d > 0 ? res.covariance(i, j) / d : (i == j ? 1.0 : 0.0);
     }
-  if (res.robust_scale > 0)
-    for (int i = 0; i < r.size(); ++i)
-      if (std::abs(r[i]) > res.robust_scale) res.outliers.push_back(i);
-  FillResiduals(ds, values, table, r, &res);
+
+  // What the data determined.
+  for (const auto& g : undetermined_groups(det)) res.unidentifiable.push_back(g);
+  for (int j = 0; j < p; ++j) {
+    res.prior_std.push_back(prior[j]);
+    res.informed.push_back(res.std[j] / prior[j]);
+    const double v = values[est[j]];
+    if (std::abs(v) > kImplausibleSigmas * prior[j]) res.implausible.push_back(res.estimated[j]);
+  }
+  if (map) {
+    // The posterior ratio without the chi2 inflation: how much the data, at
+    // the declared noise, narrowed the prior.
+    Eigen::MatrixXd Js = Jw * prior.asDiagonal();
+    Eigen::MatrixXd N = Js.transpose() * Js;
+    N.diagonal().array() += 1.0;
+    const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+    for (int j = 0; j < p; ++j)
+      if (!(std::sqrt(std::max(Cs(j, j), 0.0)) < kInformedThreshold))
+        res.undetermined.push_back(res.estimated[j]);
+  } else {
+    for (int c : det.undetermined) res.undetermined.push_back(res.estimated[c]);
+  }
+
+  // Adequacy: residuals against the declared noise.
+  const double ratio = res.dof > 0 ? chi2 / res.dof : 0.0;
+  res.adequate = !(res.chi2_p < 1e-3 && ratio > 2.0);
+  if (!res.adequate) {
+    bool mounts = false, mount_estimated = false;
+    for (const Observation& o : ds.observations)
+      if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) {
+        mounts = true;
+        const auto& mt = table.mount(o.type, o.setup);
+        for (int c = 1; c < 7; ++c)
+          if (std::find(est.begin(), est.end(), mt[c]) != est.end()) mount_estimated = true;
+      }
+    const double x = std::sqrt(ratio);
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.3g", x);
+    if (mounts && !mount_estimated)
+      res.adequacy = "instrument setup not estimated (ball3d/dbb mount: estimate its tool and "
+                     "table ball positions, e.g. ball3d.<setup>.table.x|y|z); residuals are " +
+                     std::string(buf) + "x the declared noise";
+    else if (x > 200 && x < 5000)
+      res.adequacy = "unit mistake (residuals ~" + std::string(buf) +
+                     "x the declared noise: readings in um where mm are expected, or a wrong sigma)";
+    else if (!HasLengthReference(ds))
+      res.adequacy = "no length reference (no scale bar / dbb length) and residuals " +
+                     std::string(buf) + "x the declared noise: the model misses errors the data show";
+    else
+      res.adequacy = "residuals " + std::string(buf) +
+                     "x the declared noise: the model misses errors the data show (estimate more, "
+                     "e.g. 'auto') or the declared noise is too small";
+  }
+
+  // Never hand out NaN or inf.
+  res.finite = values.allFinite() && res.std.allFinite() && res.covariance.allFinite();
+  if (!res.finite) {
+    for (int i = 0; i < res.values.size(); ++i)
+      if (!std::isfinite(res.values[i])) res.values[i] = setup.values[i];
+    for (int i = 0; i < res.std.size(); ++i)
+      if (!std::isfinite(res.std[i])) res.std[i] = 0.0;
+    res.covariance = res.covariance.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+    res.correlation = res.correlation.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+    for (double& x : res.informed)
+      if (!std::isfinite(x)) x = 0.0;
+  }
+  res.residuals = res.residuals.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+  if (!std::isfinite(res.rms)) res.rms = 0, res.finite = false;
+  if (!std::isfinite(res.max_abs)) res.max_abs = 0;
+  if (!std::isfinite(res.sigma)) res.sigma = 0;
+  FillResiduals(ds, res.values, table, res.residuals, &res);
   return res;
+}
+
+std::string Result::verdict() const {
+  if (!finite) return "non_finite";
+  if (!converged) return "not_converged";
+  if (!adequate) return "inadequate";
+  if (explicit_request && !undetermined.empty()) return "undetermined";
+  return "ok";
 }
 
 Eigen::VectorXd PredictResiduals(const Dataset& ds, const std::map<std::string, double>& values,
@@ -278,20 +663,30 @@ Eigen::VectorXd PredictResiduals(const Dataset& ds, const std::map<std::string, 
   return r;
 }
 
+namespace {
+// JSON has no inf or NaN: such a number is written as null.
+json Finite(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
+}  // namespace
+
 std::string Result::ToJson() const {
   json j;
   json params = json::object();
   for (size_t i = 0; i < estimated.size(); ++i) {
     const auto it = std::find(names.begin(), names.end(), estimated[i]);
-    params[estimated[i]] = {{"value", values[it - names.begin()]}, {"std", this->std[i]}};
+    json entry = {{"value", Finite(values[it - names.begin()])}, {"std", Finite(this->std[i])}};
+    if (i < prior_std.size()) {
+      entry["prior_std"] = Finite(prior_std[i]);
+      entry["informed"] = Finite(informed[i]);
+    }
+    params[estimated[i]] = entry;
   }
   for (size_t i = 0; i < names.size(); ++i)
     if (!params.contains(names[i]) && values[i] != 0.0)
-      params[names[i]] = {{"value", values[i]}, {"fixed", true}};
+      params[names[i]] = {{"value", Finite(values[i])}, {"fixed", true}};
   j["parameters"] = params;
-  j["residual_rms"] = rms;
-  j["residual_max"] = max_abs;
-  j["sigma"] = sigma;
+  j["residual_rms"] = Finite(rms);
+  j["residual_max"] = Finite(max_abs);
+  j["sigma"] = Finite(sigma);
   j["n_observations"] = n_observations;
   j["n_parameters"] = n_parameters;
   j["condition_number"] = std::isfinite(condition_number) ? json(condition_number) : json(nullptr);
@@ -300,14 +695,24 @@ std::string Result::ToJson() const {
   j["converged"] = converged;
   j["iterations"] = iterations;
   j["estimated"] = estimated;
+  j["undetermined"] = undetermined;
+  j["implausible"] = implausible;
+  j["map_fit"] = map_fit;
+  j["chi2"] = {{"value", Finite(chi2)}, {"dof", dof}, {"p", Finite(chi2_p)}};
+  j["adequate"] = adequate;
+  j["adequacy"] = adequacy;
+  j["finite"] = finite;
+  j["verdict"] = verdict();
   json corr = json::array();
   for (int i = 0; i < correlation.rows(); ++i) {
     json row = json::array();
-    for (int k = 0; k < correlation.cols(); ++k) row.push_back(correlation(i, k));
+    for (int k = 0; k < correlation.cols(); ++k) row.push_back(Finite(correlation(i, k)));
     corr.push_back(row);
   }
   j["correlation"] = corr;
-  j["residuals"] = std::vector<double>(residuals.data(), residuals.data() + residuals.size());
+  json res_rows = json::array();
+  for (int i = 0; i < residuals.size(); ++i) res_rows.push_back(Finite(residuals[i]));
+  j["residuals"] = res_rows;
   j["outliers"] = outliers;
   return j.dump(1);
 }

@@ -4,6 +4,7 @@
 #include "json_util.h"
 
 #include <algorithm>
+#include <cmath>
 #include <set>
 #include <stdexcept>
 
@@ -13,6 +14,49 @@ namespace {
 constexpr int kStride = 4;
 
 const char* kXYZ[3] = {"x", "y", "z"};
+
+// A cost function whose rows are those of `inner` divided by their declared
+// noise: the solver then minimises sum (r_i / sigma_i)^2.
+class WeightedCost : public ceres::CostFunction {
+ public:
+  WeightedCost(ceres::CostFunction* inner, std::vector<double> weight)
+      : inner_(inner), weight_(std::move(weight)) {
+    set_num_residuals(inner->num_residuals());
+    *mutable_parameter_block_sizes() = inner->parameter_block_sizes();
+  }
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    if (!inner_->Evaluate(parameters, residuals, jacobians)) return false;
+    const int n = num_residuals();
+    for (int i = 0; i < n; ++i) residuals[i] *= weight_[i];
+    if (jacobians) {
+      const auto& sizes = parameter_block_sizes();
+      for (size_t b = 0; b < sizes.size(); ++b) {
+        if (!jacobians[b]) continue;
+        for (int i = 0; i < n; ++i)
+          for (int c = 0; c < sizes[b]; ++c) jacobians[b][i * sizes[b] + c] *= weight_[i];
+      }
+    }
+    return true;
+  }
+
+ private:
+  std::unique_ptr<ceres::CostFunction> inner_;
+  std::vector<double> weight_;
+};
+
+// (theta - mean) / sigma: one parameter's prior as a residual row.
+class PriorCost : public ceres::SizedCostFunction<1, 1> {
+ public:
+  PriorCost(double mean, double sigma) : mean_(mean), inv_sigma_(1.0 / sigma) {}
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    residuals[0] = (parameters[0][0] - mean_) * inv_sigma_;
+    if (jacobians && jacobians[0]) jacobians[0][0] = inv_sigma_;
+    return true;
+  }
+
+ private:
+  const double mean_, inv_sigma_;
+};
 
 std::string MountPrefix(ObservationType t, const std::string& setup) {
   const std::string base = t == ObservationType::kDbb ? "dbb" : "ball3d";
@@ -24,6 +68,12 @@ std::string MountPrefix(ObservationType t, const std::string& setup) {
 PoseData::PoseData(const Machine& m, const Observation& o)
     : q(m.num_axes()), dir(o.direction.data(), o.direction.data() + o.direction.size()) {
   AxisValuesToInternal(m, o.axes.data(), q.data());
+}
+
+double ObservationSigma(const Observation& o, int k) {
+  if (o.sigma.size() > k) return o.sigma[k];
+  if (o.sigma.size() == 1) return o.sigma[0];
+  return DefaultSigma(o.type);
 }
 
 // ---- ParameterTable ---------------------------------------------------------
@@ -223,22 +273,29 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
   ceres::Problem::Options opts;
   opts.enable_fast_removal = false;
   problem_ = std::make_unique<ceres::Problem>(opts);
-  if (robust == "huber") loss_ = new ceres::HuberLoss(robust_scale);
-  else if (robust == "cauchy") loss_ = new ceres::CauchyLoss(robust_scale);
+  if (robust == "huber" || robust == "cauchy") robust_ = robust;
   else if (!robust.empty() && robust != "none")
     throw std::invalid_argument("robust: unknown loss '" + robust + "' (huber, cauchy or none)");
-  if (loss_ && !(robust_scale > 0))
+  robust_scale_ = robust_scale;
+  if (!robust_.empty() && !(robust_scale > 0))
     throw std::invalid_argument("robust: the loss scale must be > 0 mm");
 
-  if (analytic && loss_ == nullptr && !estimated_.empty()) {
+  if (analytic && robust_.empty() && !estimated_.empty()) {
     auto* cost = new AnalyticResiduals(ds, table, values_, estimated_);
     analytic_ = cost;
     std::vector<double*> ptrs;
     for (int i : estimated_) ptrs.push_back(&values_[i]);
-    blocks_.push_back(problem_->AddResidualBlock(cost, nullptr, ptrs));
-    block_row_.push_back(0);
     row_source_ = cost->row_source();
     num_rows_ = cost->num_residuals();
+    row_sigma_.resize(num_rows_);
+    std::vector<double> w(num_rows_);
+    for (int r = 0, k = 0; r < num_rows_; ++r) {
+      k = (r > 0 && row_source_[r] == row_source_[r - 1]) ? k + 1 : 0;
+      row_sigma_[r] = SigmaOfRow(row_source_[r], k);
+      w[r] = 1.0 / row_sigma_[r];
+    }
+    blocks_.push_back(problem_->AddResidualBlock(new WeightedCost(cost, w), nullptr, ptrs));
+    block_row_.push_back(0);
     return;
   }
 
@@ -313,6 +370,11 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
                                   d1, d2),
              1, ptrs, -1 - static_cast<int>(b));
   }
+  row_sigma_.resize(num_rows_);
+  for (int r = 0, k = 0; r < num_rows_; ++r) {
+    k = (r > 0 && row_source_[r] == row_source_[r - 1]) ? k + 1 : 0;
+    row_sigma_[r] = SigmaOfRow(row_source_[r], k);
+  }
   // An estimated parameter no residual depends on still gets a (zero) column,
   // so the identifiability analysis can name it.
   for (int i : estimated_)
@@ -379,6 +441,31 @@ void Problem::Evaluate(Eigen::VectorXd* residuals, Eigen::MatrixXd* jacobian) {
     }
   }
   for (auto& c : constant_) c.second(residuals->data() + c.first);
+  // The solver's rows are weighted; report them in mm.
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const int nr = problem_->GetCostFunctionForResidualBlock(blocks_[b])->num_residuals();
+    for (int k = 0; k < nr; ++k) {
+      const int row = block_row_[b] + k;
+      (*residuals)[row] *= row_sigma_[row];
+      if (want_j) jacobian->row(row) *= row_sigma_[row];
+    }
+  }
+}
+
+double Problem::SigmaOfRow(int source, int k) const {
+  if (source < 0) return kScaleBarSigma;
+  return ObservationSigma(ds_.observations[source], k);
+}
+
+void Problem::AddPriors(const Eigen::VectorXd& prior_sigma, const Eigen::VectorXd& prior_mean) {
+  if (!prior_blocks_.empty()) throw std::logic_error("problem: priors added twice");
+  for (int i : estimated_) {
+    if (!(prior_sigma[i] > 0) || !std::isfinite(prior_sigma[i]))
+      throw std::invalid_argument("problem: prior sigma of parameter " + table_.names()[i] +
+                                  " must be finite and > 0");
+    prior_blocks_.push_back(
+        problem_->AddResidualBlock(new PriorCost(prior_mean[i], prior_sigma[i]), nullptr, &values_[i]));
+  }
 }
 
 template <typename Functor>
@@ -397,7 +484,19 @@ void Problem::AddBlock(Functor* f, int num_residuals, const std::vector<double*>
   auto* cost = new ceres::DynamicAutoDiffCostFunction<Functor, kStride>(f);
   for (size_t i = 0; i < ptrs.size(); ++i) cost->AddParameterBlock(1);
   cost->SetNumResiduals(num_residuals);
-  blocks_.push_back(problem_->AddResidualBlock(cost, loss_, ptrs));
+  std::vector<double> w(num_residuals);
+  double block_sigma = 0;
+  for (int r = 0; r < num_residuals; ++r) {
+    const double s = SigmaOfRow(source, r);
+    w[r] = 1.0 / s;
+    block_sigma = std::max(block_sigma, s);
+  }
+  // The loss sees weighted rows, so its scale (mm) is carried into the
+  // block's units: the same touches are flagged as without weighting.
+  ceres::LossFunction* loss = nullptr;
+  if (robust_ == "huber") loss = new ceres::HuberLoss(robust_scale_ / block_sigma);
+  else if (robust_ == "cauchy") loss = new ceres::CauchyLoss(robust_scale_ / block_sigma);
+  blocks_.push_back(problem_->AddResidualBlock(new WeightedCost(cost, w), loss, ptrs));
   block_row_.push_back(num_rows_);
   for (int r = 0; r < num_residuals; ++r) row_source_.push_back(source);
   num_rows_ += num_residuals;

@@ -19,6 +19,7 @@ struct Refit::Impl {
   std::vector<int> est;
   Eigen::VectorXd start;
   double robust_scale = 0;
+  Eigen::VectorXd prior;  // per table index when the reference fit was MAP; empty otherwise
 };
 
 Refit::Refit(const Dataset& reference, const IdentifyOptions& options, const Result& fit)
@@ -31,6 +32,11 @@ Refit::Refit(const Dataset& reference, const IdentifyOptions& options, const Res
   for (const std::string& n : fit.estimated) d.est.push_back(d.table.Require(n));
   d.start = fit.values;
   d.robust_scale = fit.robust_scale;
+  if (fit.map_fit) {
+    // Every refit is the same MAP fit as the reference (its prior rows).
+    d.prior = Eigen::VectorXd::Ones(d.table.size());
+    for (size_t i = 0; i < d.est.size() && i < fit.prior_std.size(); ++i) d.prior[d.est[i]] = fit.prior_std[i];
+  }
   if (!options.robust.empty() && options.robust != "none" && !(d.robust_scale > 0))
     throw std::invalid_argument("refit: robust loss without a robust scale in the reference result");
 }
@@ -54,6 +60,7 @@ RefitResult Refit::Fit(const Dataset& ds, bool with_std) const {
   const ceres::Solver::Options so = Problem::SolverOptions(d.options.max_iterations, 1);
   const bool robust = !d.options.robust.empty() && d.options.robust != "none";
   Problem problem(ds, d.table, d.start, d.est, robust ? d.options.robust : "", robust ? d.robust_scale : 0.0);
+  if (d.prior.size()) problem.AddPriors(d.prior, Eigen::VectorXd::Zero(d.table.size()));
   ceres::Solver::Summary summary;
   ceres::Solve(so, &problem.ceres_problem(), &summary);
   RefitResult out;
@@ -66,10 +73,29 @@ RefitResult Refit::Fit(const Dataset& ds, bool with_std) const {
     Eigen::VectorXd r;
     Eigen::MatrixXd J;
     problem.Evaluate(&r, &J);
-    const Identifiability id = AnalyzeJacobian(J, d.options.rank_tolerance);
-    const int dof = problem.num_rows() - id.rank;
-    out.sigma = dof > 0 ? std::sqrt(r.squaredNorm() / dof) : 0.0;
-    out.std = (out.sigma * out.sigma * id.inverse_normal.diagonal()).cwiseMax(0.0).cwiseSqrt();
+    const Eigen::VectorXd w = problem.row_sigma().cwiseInverse();
+    const Eigen::MatrixXd Jw = w.asDiagonal() * J;
+    if (d.prior.size()) {
+      // Posterior covariance as Identify's MAP branch.
+      const int p = static_cast<int>(d.est.size());
+      Eigen::VectorXd prior(p);
+      for (int i = 0; i < p; ++i) prior[i] = d.prior[d.est[i]];
+      const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
+      Eigen::MatrixXd N = Js.transpose() * Js;
+      N.diagonal().array() += 1.0;
+      const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+      const int dof = std::max(1, problem.num_rows() - static_cast<int>(std::lround(p - Cs.trace())));
+      const double chi2 = r.cwiseProduct(w).squaredNorm();
+      const double k2 = std::max(1.0, chi2 / dof);
+      out.sigma = std::sqrt(r.squaredNorm() / dof);
+      out.std = (k2 * Cs.diagonal()).cwiseMax(0.0).cwiseSqrt().cwiseProduct(prior);
+    } else {
+      const Identifiability id = AnalyzeJacobian(Jw, d.options.rank_tolerance);
+      const int dof = problem.num_rows() - id.rank;
+      out.sigma = dof > 0 ? std::sqrt(r.squaredNorm() / dof) : 0.0;
+      const double s2 = dof > 0 ? r.cwiseProduct(w).squaredNorm() / dof : 0.0;
+      out.std = (s2 * id.inverse_normal.diagonal()).cwiseMax(0.0).cwiseSqrt();
+    }
   }
   return out;
 }

@@ -65,14 +65,30 @@ class Result:
     n_parameters: int
     outliers: list[int]
     robust_scale: float
+    prior_std: list[float]
+    informed: list[float]
+    undetermined: list[str]
+    implausible: list[str]
+    map_fit: bool
+    chi2: float
+    dof: int
+    chi2_p: float
+    adequate: bool
+    adequacy: str
+    finite: bool
+    @property
+    def verdict(self) -> str: ...
     def to_json(self) -> str: ...
 
 def identify(dataset: Dataset, estimate: Sequence[str], fix: Sequence[str], initial: dict,
              robust: str = "", robust_scale: float = 0.0, max_iterations: int = 200,
              allow_unidentifiable: bool = False, include_default_setup: bool = True,
-             num_threads: int = 1, selection_tolerance: float = 0.01) -> Result: ...
+             num_threads: int = 1, selection_tolerance: float = 0.01,
+             priors: dict = ..., prior: bool = False) -> Result: ...
 def resolve_estimate(dataset: Dataset, estimate: Sequence[str], fix: Sequence[str],
-                     initial: dict) -> list[str]: ...
+                     initial: dict, priors: dict = ...) -> list[str]: ...
+def prior_classes() -> list[dict]: ...
+def informed_threshold() -> float: ...
 def predict_residuals(dataset: Dataset, values: dict) -> tuple[np.ndarray, list[int]]: ...
 
 # ---- uncertainty (cpp/bindings/uncertainty.cc) ----------------------------

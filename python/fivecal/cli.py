@@ -563,9 +563,10 @@ def main(argv=None) -> int:
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
                         "  fivecal identify tango.json --estimate location,EXX1 --fix EXXb")
     pi.add_argument("dataset", help="dataset JSON (format: docs/formats.md)")
-    pi.add_argument("--estimate", default="location",
+    pi.add_argument("--estimate", default="auto",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "
-                    "(default: location)")
+                    "(default: auto, as in Python: every error under its prior, the undetermined "
+                    "ones listed)")
     pi.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
     pi.add_argument("--robust", choices=["huber", "cauchy"], default=None,
                     help="robust loss that down-weights and flags outlier touches")

@@ -41,6 +41,27 @@ class Result:
         self.n_observations: int = core.n_observations
         self.n_parameters: int = core.n_parameters
         self.outliers: list = list(core.outliers)
+        #: prior one-sigma scale of every estimated parameter (mm / rad ...)
+        self.prior_std: dict = {n: float(s) for n, s in zip(self.estimated, core.prior_std)}
+        #: posterior sigma / prior sigma: below ``INFORMED_THRESHOLD`` the data informed it
+        self.informed: dict = {n: float(s) for n, s in zip(self.estimated, core.informed)}
+        #: estimated parameters this data did not determine (their values are the prior's, not measured)
+        self.undetermined: list = list(core.undetermined)
+        #: values beyond 5 prior sigmas (flagged, not refused)
+        self.implausible: list = list(core.implausible)
+        #: True when the fit had prior rows (estimate "auto" or prior=True)
+        self.map_fit: bool = core.map_fit
+        #: chi-square of the residuals against the declared noise, its degrees of freedom and p value
+        self.chi2: float = core.chi2
+        self.dof: int = core.dof
+        self.chi2_p: float = core.chi2_p
+        #: False when the residuals are too large for the declared noise; ``adequacy`` says why
+        self.adequate: bool = core.adequate
+        self.adequacy: str = core.adequacy
+        #: every value and std finite
+        self.finite: bool = core.finite
+        #: "ok", "not_converged", "inadequate", "non_finite" or "undetermined"
+        self.verdict: str = core.verdict
 
     def machine_errors(self, force: bool = False, include_undetermined: bool = False) -> dict:
         """The machine's errors (name -> mm / rad): no setup values (facet,
@@ -150,6 +171,19 @@ class Result:
                 f"cond {self.condition_number:.3g})")
 
 
+class IdentifyOptionsDefaults:
+    selection_tolerance = 1e-2
+
+
+#: posterior sigma / prior sigma below which a parameter counts as informed by the data
+INFORMED_THRESHOLD: float = _core.informed_threshold()
+
+
+def prior_classes() -> list:
+    """The prior classes with their default one-sigma scales (dicts: name, sigma, unit, description)."""
+    return [dict(c) for c in _core.prior_classes()]
+
+
 def _names(x: Union[None, str, Iterable[str]]) -> list:
     if x is None:
         return []
@@ -163,7 +197,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
              initial: Optional[Mapping[str, float]] = None, robust_scale: float = 0.0,
              allow_unidentifiable: bool = False, default_setup: bool = True,
              max_iterations: int = 200, num_threads: int = 1,
-             selection_tolerance: Optional[float] = None) -> Result:
+             selection_tolerance: Optional[float] = None,
+             priors: Optional[Mapping[str, float]] = None, prior: bool = False) -> Result:
     """Fit the machine errors to a dataset.
 
     ``estimate``: parameter names and/or presets (``S1``-``S4`` on ``wCBXfZYSt``,
@@ -173,14 +208,23 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     and ``auto``, the fraction of a candidate's (scaled) Jacobian column that must
     lie outside the span of the parameters already chosen. ``fix`` removes names. ``robust``:
     ``"huber"`` or ``"cauchy"`` to down-weight and flag outlier touches.
-    Raises ValueError when the data cannot identify the requested set, naming
-    the confounded parameters.
+    ``estimate="auto"`` (the default) fits every candidate machine error under
+    its prior (a MAP fit): :attr:`Result.informed` says how far the data narrowed
+    each prior and :attr:`Result.undetermined` lists those the data did not
+    determine (their values are the prior's, not measurements). Explicit lists
+    and ``location`` are plain least squares (``prior=True`` adds the prior rows).
+    ``priors``: prior sigma overrides, a parameter name or ``"class:<name>"`` ->
+    sigma (see docs/identification.md for the classes and defaults).
+    Raises ValueError when the data cannot determine an explicitly requested
+    set, naming the groups and the likely cause.
     """
     ds = Dataset.from_dict(dataset)
     core = _core.identify(ds._core, _names(estimate), _names(fix), dict(initial or {}),
                           robust or "", float(robust_scale), int(max_iterations),
                           bool(allow_unidentifiable), bool(default_setup), int(num_threads),
-                          *([] if selection_tolerance is None else [float(selection_tolerance)]))
+                          IdentifyOptionsDefaults.selection_tolerance if selection_tolerance is None
+                          else float(selection_tolerance),
+                          {str(k): float(v) for k, v in (priors or {}).items()}, bool(prior))
     return Result(core, ds)
 
 
@@ -245,8 +289,10 @@ def _warn_when_unusable(fit):
 identify = _warn_when_unusable(identify)
 
 
-def resolve_estimate(dataset: Union[Dataset, Mapping], estimate, fix=None, initial=None) -> list:
-    """The parameter names ``estimate`` resolves to on this dataset (no fit)."""
+def resolve_estimate(dataset: Union[Dataset, Mapping], estimate, fix=None, initial=None,
+                     priors: Optional[Mapping[str, float]] = None) -> list:
+    """The parameter names ``estimate`` resolves to on this dataset (no fit;
+    ``location`` is selected at the initial values, ``auto`` lists every candidate)."""
     ds = Dataset.from_dict(dataset)
-    return list(_core.resolve_estimate(ds._core, _names(estimate), _names(fix), dict(initial or {})))
-
+    return list(_core.resolve_estimate(ds._core, _names(estimate), _names(fix), dict(initial or {}),
+                                       {str(k): float(v) for k, v in (priors or {}).items()}))

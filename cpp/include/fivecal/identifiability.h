@@ -42,6 +42,34 @@ bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin = 1e-6);
 std::vector<int> SelectIdentifiable(const Eigen::MatrixXd& J, const std::vector<int>& forced,
                                     const std::vector<int>& candidates, double tolerance = 1e-4);
 
+// What the data determine, measured against the priors.
+//
+// Jw: the Jacobian with every row divided by its declared noise (so a unit
+// change of a residual is one noise sigma); prior: one sigma per column. In
+// the scaled coordinates t_j = theta_j / prior_j the data-only covariance is
+// (Js^T Js)^+ with Js = Jw diag(prior), and
+//   ratio_j = sqrt([(Js^T Js)^+]_jj)  =  data-only sigma_j / prior_j
+// (infinite when the data leave a direction of t_j free). Parameter j is
+// determined when ratio_j < threshold (priors.h kDeterminedRatio): the
+// tolerance is tied to the noise and to the plausible size, not to machine
+// epsilon or to the parameters' units.
+struct Determination {
+  Eigen::VectorXd ratio;            // per column; +inf when not determined at all
+  Eigen::VectorXd singular_values;  // of Js, descending
+  int rank = 0;                     // singular values > 1 / threshold
+  std::vector<int> undetermined;    // columns with ratio >= threshold
+  // Undetermined columns grouped by the weakly determined directions
+  // (singular values <= 1 / threshold) they share.
+  std::vector<std::vector<int>> groups;
+};
+
+Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
+                                   double threshold);
+
+// The data-only ratio (as above) of every column of the subset `cols` of a
+// prior-scaled, noise-weighted Jacobian Js; +inf when the subset is singular.
+Eigen::VectorXd SubsetRatios(const Eigen::MatrixXd& Js, const std::vector<int>& cols);
+
 }  // namespace fivecal
 
 #endif  // FIVECAL_IDENTIFIABILITY_H_

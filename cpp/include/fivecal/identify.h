@@ -15,9 +15,12 @@ namespace fivecal {
 
 struct IdentifyOptions {
   // Parameter names and/or presets: S1 S2 S3 S4 (thesis subsets on
-  // wCBXfZYSt), "location" (identifiable location errors of any topology),
-  // "auto" (location errors, then backlash and error motions while they stay
-  // identifiable). The default setup set is always added (see ParameterTable).
+  // wCBXfZYSt), "location" (the location errors this data determines,
+  // selected on the prior-scaled, noise-weighted Jacobian at the solution),
+  // "auto" (every candidate machine error -- location, backlash, error
+  // motions -- estimated under its prior by a MAP fit; the result says which
+  // ones the data informed). The default setup set is always added (see
+  // ParameterTable).
   std::vector<std::string> estimate;
   std::vector<std::string> fix;            // removed from the estimated set
   std::map<std::string, double> initial;   // start values / fixed values
@@ -29,8 +32,14 @@ struct IdentifyOptions {
   // then names the confounded groups. Otherwise such a request throws.
   bool allow_unidentifiable = false;
   double rank_tolerance = 1e-9;
-  double selection_tolerance = 1e-2;       // for "location" / "auto"
-  int num_threads = 1;
+  double selection_tolerance = 1e-2;       // for "location", in (0, 1)
+  int num_threads = 1;                     // >= 1
+  // Prior sigma overrides (priors.h): parameter name or "class:<name>" ->
+  // sigma; applied after the machine file's "priors".
+  std::map<std::string, double> priors;
+  // MAP fit (prior rows) for explicit lists too; "auto" always fits under the
+  // priors, explicit lists and "location" are plain least squares by default.
+  bool prior = false;
 };
 
 struct Result {
@@ -56,6 +65,22 @@ struct Result {
   std::vector<int> outliers;          // residual rows beyond the robust scale
   double robust_scale = 0;
   double initial_cost = 0, final_cost = 0;
+
+  // Priors and statistical guards (priors.h). Per estimated parameter:
+  std::vector<double> prior_std;      // prior sigma used (scaling, MAP rows)
+  std::vector<double> informed;       // std / prior_std; < kInformedThreshold: informed by the data
+  std::vector<std::string> undetermined;  // estimated, but not determined by this data
+  std::vector<std::string> implausible;   // |value| > kImplausibleSigmas prior sigmas
+  bool map_fit = false;               // prior rows in the fit (estimate "auto" or prior=true)
+  double chi2 = 0;                    // sum (r_i / declared sigma_i)^2 over the data rows
+  int dof = 0;                        // rows - effective number of parameters
+  double chi2_p = 1;                  // P(chi2_dof >= chi2): small = residuals too large for the noise
+  bool adequate = true;
+  std::string adequacy;               // the likely cause when not adequate
+  bool finite = true;                 // every value and std finite
+  bool explicit_request = false;      // no "auto": undetermined parameters make the verdict
+  // "ok", "not_converged", "inadequate", "non_finite" or "undetermined".
+  std::string verdict() const;
 
   std::string ToJson() const;
 };

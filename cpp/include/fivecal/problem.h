@@ -67,6 +67,13 @@ std::vector<std::string> MotionCandidates(const Machine& m);
 
 class AnalyticResiduals;
 
+// Declared noise of a scale bar's length row (mm): a calibrated bar's length
+// uncertainty, of the order of a probe touch.
+constexpr double kScaleBarSigma = 0.001;
+
+// Declared noise of residual row k of an observation (mm).
+double ObservationSigma(const Observation& o, int k);
+
 class Problem {
  public:
   // `values`: every parameter's value (initial for the estimated ones, the
@@ -89,12 +96,24 @@ class Problem {
   // Per residual row: the observation index, or -(1 + scale bar index).
   const std::vector<int>& row_source() const { return row_source_; }
 
-  // Residuals and dense Jacobian (rows x estimated) at the current values.
+  // Residuals (mm) and dense Jacobian (rows x estimated) of the data rows at
+  // the current values, unweighted (the prior rows are not included).
   void Evaluate(Eigen::VectorXd* residuals, Eigen::MatrixXd* jacobian);
+
+  // Declared noise (one sigma, mm) of every data row: the observation's
+  // "sigma", else its kind's default; scale bars kScaleBarSigma. The solver
+  // sees every data row divided by it.
+  const Eigen::VectorXd& row_sigma() const { return row_sigma_; }
+
+  // Adds one prior row (theta_j - mean_j) / sigma_j per estimated parameter
+  // (indexed like the table): the MAP fit. Call once, before solving.
+  void AddPriors(const Eigen::VectorXd& prior_sigma, const Eigen::VectorXd& prior_mean);
+  bool has_priors() const { return !prior_blocks_.empty(); }
 
  private:
   template <typename Functor>
   void AddBlock(Functor* f, int num_residuals, const std::vector<double*>& ptrs, int source);
+  double SigmaOfRow(int source, int k) const;
 
   const Dataset& ds_;
   const ParameterTable& table_;
@@ -106,7 +125,10 @@ class Problem {
   std::vector<ceres::ResidualBlockId> blocks_;
   std::vector<int> block_row_;  // first residual row of each block
   std::vector<std::pair<int, std::function<void(double*)>>> constant_;
-  ceres::LossFunction* loss_ = nullptr;  // owned by problem_ (TAKE_OWNERSHIP once)
+  std::string robust_;
+  double robust_scale_ = 0.0;  // mm; each block's loss gets it in its weighted units
+  Eigen::VectorXd row_sigma_;
+  std::vector<ceres::ResidualBlockId> prior_blocks_;
   int num_rows_ = 0;
   std::vector<int> row_source_;
   const AnalyticResiduals* analytic_ = nullptr;  // the single block when analytic (owned by problem_)
