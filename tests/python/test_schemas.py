@@ -130,8 +130,8 @@ def test_result_schema_takes_the_fields_of_a_fit_with_priors(result_doc):
     r = copy.deepcopy(result_doc)
     name = next(iter(r["parameters"]))
     r["parameters"][name].update({"prior_std": 0.05, "informed": 0.1})
-    r.update({"verdict": "adequate", "adequate": True, "undetermined": ["EZ0C"], "implausible": [],
-              "chi2": 35.2})
+    r.update({"verdict": "ok", "adequate": True, "adequacy": "", "undetermined": ["EZ0C"], "implausible": [],
+              "map_fit": True, "finite": True, "chi2": {"value": 35.2, "dof": 30, "p": 0.23}})
     schema.validate(r, "result")
 
 
