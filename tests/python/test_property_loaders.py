@@ -6,8 +6,8 @@ load_dataset keeps the observations."""
 import copy
 import json
 import math
-import warnings
 import os
+import warnings
 
 import pytest
 from hypothesis import HealthCheck, given, settings
