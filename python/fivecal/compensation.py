@@ -107,6 +107,12 @@ def usable_errors(source, machine: Machine, force: bool = False,
     that did not converge, holds non-finite values, failed the chi-square test
     or left requested parameters undetermined raises
     :class:`fivecal.UnusableResultError` with the reason, unless ``force``."""
+    if isinstance(source, (str, os.PathLike)):
+        # a malformed file is bad input whatever its verdict: name the bad key
+        # first, not a refusal that --force would only trade for it
+        from . import files
+
+        schema.validate(files.read_json(os.fspath(source), "result"), "errors", os.fspath(source))
     guards.require_usable(source, force, what)
     return load_errors(source, machine)
 

@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import time
+import warnings
 
 import jsonschema
 import pytest
@@ -60,7 +61,9 @@ def dataset_doc():
 def result_doc(dataset_doc):
     d = copy.deepcopy(dataset_doc)
     d["observations"] = d["observations"][:40]
-    return json.loads(fivecal.identify(d, estimate=["EX0C", "EY0C"]).to_json())
+    with warnings.catch_warnings():  # only its shape matters here: an unusable fit is still a result file
+        warnings.simplefilter("ignore", fivecal.FitWarning)
+        return json.loads(fivecal.identify(d, estimate=["EX0C", "EY0C"]).to_json())
 
 
 def test_schema_files_are_valid_draft_2020_12_and_ship_in_the_package():
@@ -130,9 +133,24 @@ def test_result_schema_takes_the_fields_of_a_fit_with_priors(result_doc):
     r = copy.deepcopy(result_doc)
     name = next(iter(r["parameters"]))
     r["parameters"][name].update({"prior_std": 0.05, "informed": 0.1})
-    r.update({"verdict": "adequate", "adequate": True, "undetermined": ["EZ0C"], "implausible": [],
-              "chi2": 35.2})
+    r.update({"verdict": "ok", "adequate": True, "adequacy": "", "undetermined": ["EZ0C"], "implausible": [],
+              "map_fit": True, "finite": True, "chi2": {"value": 35.2, "dof": 30, "p": 0.23}})
     schema.validate(r, "result")
+
+
+def test_a_map_fit_result_validates_with_its_prior_fields(dataset_doc):
+    d = copy.deepcopy(dataset_doc)
+    d["observations"] = d["observations"][:40]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fivecal.FitWarning)
+        r = json.loads(fivecal.identify(d, estimate="auto").to_json())
+    assert r["map_fit"] is True
+    assert all("prior_std" in p and "informed" in p for p in r["parameters"].values() if not p.get("fixed"))
+    assert set(r["chi2"]) == {"value", "dof", "p"}
+    schema.validate(r, "result")
+    r["chi2"]["dofs"] = r["chi2"].pop("dof")
+    with pytest.raises(ValueError, match=r"^result\.chi2\.dofs: unknown key; did you mean 'dof'\?"):
+        schema.validate(r, "result")
 
 
 # ---- unknown keys, at every level -------------------------------------------------
