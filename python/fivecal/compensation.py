@@ -107,6 +107,13 @@ def usable_errors(source, machine: Machine, force: bool = False,
     that did not converge, holds non-finite values, failed the chi-square test
     or left requested parameters undetermined raises
     :class:`fivecal.UnusableResultError` with the reason, unless ``force``."""
+    if isinstance(source, (str, os.PathLike)):
+        from . import files
+
+        # a malformed file (a misspelt key) is named as such, before the
+        # guard judges the fit from whatever keys it could read
+        path = os.fspath(source)
+        schema.validate(files.read_json(path, "result"), "errors", path)
     guards.require_usable(source, force, what)
     return load_errors(source, machine)
 
