@@ -91,7 +91,14 @@ void RequireBounded(double x, double bound, const std::string& what, const char*
     char buf[128];
     std::snprintf(buf, sizeof buf, ": %.6g %s is implausible (the bound is |x| <= %g %s)", x, unit, bound,
                   unit);
-    throw std::invalid_argument(what + buf);
+    // A position or length past the machine-size bound is almost always a file
+    // written in µm; say so here, since this check refuses before the Python
+    // units heuristics (which say the same for 10-100 m) get to look.
+    const bool linear_mm = bound == kMaxLinear && std::string(unit) == "mm";
+    throw std::invalid_argument(what + buf +
+                                (linear_mm ? "; values this large look like \xc2\xb5m: divide by 1000 "
+                                             "(fivecal expects mm)"
+                                           : ""));
   }
 }
 

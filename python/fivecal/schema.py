@@ -134,6 +134,13 @@ def _message(error, root: str) -> str:
     """One line for a jsonschema error: the JSON path first, then what is wrong."""
     where = _path(root, error.absolute_path)
     v, inst, sch = error.validator, error.instance, error.schema
+    if (sch.get("type") == "integer" and sch.get("minimum") == -1 and sch.get("maximum") == 1
+            and v in ("type", "minimum", "maximum") and isinstance(inst, (int, float))
+            and not isinstance(inst, bool)):
+        # a backlash direction: name the three values, as the C++ loader does
+        # ("must be <= 1" would invite 0.5)
+        shown = f"{inst:g}" if isinstance(inst, float) and math.isfinite(inst) else repr(inst)
+        return f"{where}: must be -1, 0 or +1 (got {shown})"
     if v == "additionalProperties" and isinstance(inst, dict):
         allowed = list(sch.get("properties", {}))
         extra = [k for k in inst if k not in allowed]

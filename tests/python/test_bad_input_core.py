@@ -64,8 +64,11 @@ def test_sigma_and_id_survive_save_and_load(tmp_path):
 def test_backlash_direction_outside_range_is_refused(tmp_path, bad):
     d = dataset()
     d["observations"][0]["direction"]["X"] = bad
+    # the schema refuses first; the C++ loader (read directly) must refuse as well
     with pytest.raises(ValueError, match=r"observations\[0\]\.direction\.X: must be -1, 0 or \+1"):
         load(tmp_path, d)
+    with pytest.raises(ValueError, match=r"observations\[0\]\.direction\.X: must be -1, 0 or \+1"):
+        _core.Dataset.from_json(json.dumps(d))
 
 
 def test_backlash_direction_integral_floats_are_accepted(tmp_path):
@@ -78,19 +81,28 @@ def test_backlash_direction_integral_floats_are_accepted(tmp_path):
 def test_unknown_keys_get_did_you_mean(tmp_path):
     d = dataset()
     d["observations"][1]["dirction"] = {"X": 1}
+    # what the user gets: the schema's message (path and did-you-mean) ...
+    with pytest.raises(ValueError, match=r"dataset\.observations\[1\]\.dirction: unknown key; "
+                                         r"did you mean 'direction'\?"):
+        load(tmp_path, d)
+    # ... and the C++ loader's own check behind it, read directly
     with pytest.raises(ValueError, match=r'dataset\.observations\[1\]: unknown key "dirction" '
                                          r'\(did you mean "direction"\?\)'):
-        load(tmp_path, d)
+        _core.Dataset.from_json(json.dumps(d))
     d = dataset()
     d["artifact"] = d.pop("artefact")
-    with pytest.raises(ValueError, match=r'unknown key "artifact" \(did you mean "artefact"\?\)'):
+    with pytest.raises(ValueError, match=r"dataset\.artifact: unknown key; did you mean 'artefact'\?"):
         load(tmp_path, d)
+    with pytest.raises(ValueError, match=r'unknown key "artifact" \(did you mean "artefact"\?\)'):
+        _core.Dataset.from_json(json.dumps(d))
 
 
 def test_simulate_unknown_plan_type_and_loader_checks():
     plan = [{"type": "dbbb", "setup": "A1"}]
+    with pytest.raises(ValueError, match=r"plan\[0\]\.type: \"dbbb\" is not one of .*did you mean 'dbb'"):
+        fivecal.simulate(HU40T, plan)  # the schema's message
     with pytest.raises(ValueError, match=r"plan\[0\]\.type: unknown type 'dbbb'.*did you mean \"dbb\""):
-        fivecal.simulate(HU40T, plan)
+        _core.simulate(json.dumps({"machine": HU40T, "plan": plan}))  # the C++ check behind it
     dbb = {"type": "dbb", "setup": "A1", "axes": dict(ZERO), "length": 0.0,
            "tool_ball": [0, 0, 0], "table_ball": [0, 0, 100]}
     with pytest.raises(ValueError, match=r"plan\[0\]\.length"):
@@ -132,8 +144,10 @@ def test_overflowing_axis_direction_is_normalised():
 def test_spindle_and_alias_together_are_refused(tmp_path):
     d = dataset()
     d["observations"][1]["axes"]["C1"] = 0.0
+    with pytest.raises(ValueError, match=r"observations\[1\]\.axes: .*both 'S' and its alias 'C1'"):
+        load(tmp_path, d)  # the schema's message
     with pytest.raises(ValueError, match=r'observations\[1\]\.axes: both "S" and its alias "C1"'):
-        load(tmp_path, d)
+        _core.Dataset.from_json(json.dumps(d))
 
 
 @pytest.mark.parametrize("edit, field", [

@@ -289,9 +289,9 @@ def test_cli_refuses_unknown_keys_in_spec_design_spec_machine_and_result(docs, t
      "dataset.observations[1].type: \"sphre\" is not one of \"facet\", \"sphere\", \"dbb\", \"ball3d\"; "
      "did you mean 'sphere'?"),
     (lambda d: d["observations"][2]["direction"].__setitem__("X", 2),
-     "dataset.observations[2].direction.X: must be <= 1, got 2"),
+     "dataset.observations[2].direction.X: must be -1, 0 or +1 (got 2)"),
     (lambda d: d["observations"][2]["direction"].__setitem__("X", 0.5),
-     "dataset.observations[2].direction.X: expected an integer, got 0.5"),
+     "dataset.observations[2].direction.X: must be -1, 0 or +1 (got 0.5)"),
     (lambda d: d["observations"][1].pop("target"), "dataset.observations[1].target: missing"),
     (lambda d: d["observations"][40].__setitem__("setup", "A.1"),
      "dataset.observations[40].setup: 'A.1' must not contain '.'"),

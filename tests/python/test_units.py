@@ -172,9 +172,12 @@ def test_plan_in_um_is_refused(hu40t):
 
 
 def test_plan_beyond_10_m_warns(hu40t):
-    # a 20 m position: µm, or a very large machine; warned, not refused
+    # a 20 m position: µm, or a very large machine; warned, not refused. The
+    # table ball travels with X, so it sits 20 m out too: a 100 mm bar at 20 m
+    # (with the table ball at the origin the bar would be 20 m long, which the
+    # simulator rightly refuses as beyond a ball bar's range)
     plan = [{"type": "dbb", "setup": "P", "axes": {"X": 20000.0, "Y": 0, "Z": 0, "B": 0, "C": 0},
-             "length": 100.0, "tool_ball": [0, 0, 100], "table_ball": [0, 0, 0]}]
+             "length": 100.0, "tool_ball": [0, 0, 100], "table_ball": [20000, 0, 0]}]
     _, w = caught(fivecal.simulate, hu40t, plan)
     assert any("plan[0].axes.X = 20000 mm is beyond 10 m" in str(x.message) for x in w)
     assert all(x.filename == __file__ for x in w)  # points at the caller's line
