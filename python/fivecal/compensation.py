@@ -107,6 +107,12 @@ def usable_errors(source, machine: Machine, force: bool = False,
     that did not converge, holds non-finite values, failed the chi-square test
     or left requested parameters undetermined raises
     :class:`fivecal.UnusableResultError` with the reason, unless ``force``."""
+    if isinstance(source, (str, os.PathLike)):
+        # a malformed file is bad input (named key, did-you-mean), whatever its verdict says
+        from . import files
+
+        where = os.fspath(source)
+        source = schema.validate(files.read_json(where, "result"), "errors", where)
     guards.require_usable(source, force, what)
     return load_errors(source, machine)
 
