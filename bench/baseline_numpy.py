@@ -123,6 +123,20 @@ class NumpyProblem:
                      for b in d["artefact"]["scale_bars"] if set(b["spheres"]) <= probed]
         self.b_idx = np.where(np.isin(self.types, ["dbb", "ball3d"]))[0]
         self.balls = [obs[i] for i in self.b_idx]
+        # fivecal weights each row by 1 / its declared sigma (mm): the observation's
+        # "sigma" (one number or one per row), else its kind's default; a scale bar
+        # row has its own default. These defaults mirror the C++ DefaultSigma and
+        # kScaleBarSigma, so the baseline solves the same weighted problem.
+        default = {"facet": 0.001, "sphere": 0.001, "dbb": 0.0005, "ball3d": 0.001}
+
+        def sig(i):
+            o, n = obs[i], 3 if obs[i]["type"] == "ball3d" else 1
+            s = o.get("sigma", default[o["type"]])
+            return np.broadcast_to(np.asarray(s, float), (n,))
+
+        parts = [sig(i) for i in list(self.f_idx) + list(self.s_idx) + list(self.b_idx)]
+        parts += [np.array([0.001])] * len(self.bars)
+        self.sigma = np.concatenate(parts) if parts else np.zeros(0)
 
     def residuals(self, values):
         """values: dict name -> value (machine and setup) -> residual vector (mm)."""
@@ -143,6 +157,10 @@ class NumpyProblem:
             c2 = np.array(spheres[s2]["center"]) + [values.get(f"sphere.{s2}.{c}", 0.0) for c in "xyz"]
             out.append(np.array([np.linalg.norm(c1 - c2) - L]))
         return np.concatenate(out)
+
+    def weighted_residuals(self, values):
+        """residuals(values) / declared sigma: the rows fivecal's fit minimises."""
+        return self.residuals(values) / self.sigma
 
     def _ball_residuals(self, values):
         rows = []

@@ -97,7 +97,7 @@ def case_tango(subset, repeat, baseline_repeat):
     t_f, runs_f, r = timed(lambda: fivecal.identify(ds, subset), repeat)
     names = r.estimated
     prob = base.NumpyProblem(ds)
-    t_b, runs_b, sol = timed(lambda: base.fit(prob.residuals, names), baseline_repeat)
+    t_b, runs_b, sol = timed(lambda: base.fit(prob.weighted_residuals, names), baseline_repeat)
     # The baseline must find the same optimum (the fivecal values are its reference).
     fitted = dict(zip(names, sol.x))
     z = max(abs(fitted[n] - r.values[n]) / r.std[n] for n in names)
@@ -151,7 +151,7 @@ def case_monte_carlo(trials, threads, repeat, baseline_trials=0):
     if baseline_trials:
         r = fivecal.identify(ds, "S3")
         prob = base.NumpyProblem(ds)
-        t_b, runs_b, _ = timed(lambda: base.fit(prob.residuals, r.estimated), baseline_trials)
+        t_b, runs_b, _ = timed(lambda: base.fit(prob.weighted_residuals, r.estimated), baseline_trials)
         out.update({"baseline_s": t_b * trials, "ratio": t_b * trials / t_f,
                     "baseline_s_per_trial": t_b, "runs_baseline_s": runs_b,
                     "note": "baseline extrapolated from single SciPy re-fits, one thread"})

@@ -254,7 +254,17 @@ PlanQuality AssessColumns(const Dataset& ds, const DesignOptions& opt, const Col
   q.condition_number = id.condition_number;
   q.rank = id.rank;
   q.log_det_per_parameter = id.log_det_per_parameter;
-  q.predicted_std = opt.sigma * id.inverse_normal.diagonal().cwiseMax(0.0).cwiseSqrt();
+  // identify weights each row by its declared noise: a touch that declares a
+  // sigma keeps it, an undeclared touch gets opt.sigma (the plan's assumed probe
+  // noise), a scale bar its own (its length is calibrated, not probed). Predicted
+  // uncertainties must use the same weights to be the ones identify reports.
+  Eigen::VectorXd row_sigma = problem.row_sigma();
+  for (int i = 0; i < row_sigma.size(); ++i) {
+    const int s = problem.row_source()[i];
+    if (s >= 0 && ds.observations[s].sigma.size() == 0) row_sigma[i] = opt.sigma;
+  }
+  const Eigen::MatrixXd Jw = row_sigma.cwiseInverse().asDiagonal() * J;
+  q.predicted_std = AnalyzeJacobian(Jw, opt.rank_tolerance).inverse_normal.diagonal().cwiseMax(0.0).cwiseSqrt();
   // A pseudo-inverse says nothing about confounded parameters.
   for (const auto& g : id.confounded) {
     std::vector<std::string> names;

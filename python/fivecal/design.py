@@ -170,7 +170,9 @@ def plan_quality(plan: PlanLike, estimate="S3", *, machine=None, artefact=None, 
     default setup set.  A plan is simulated noise-free first (needs
     ``machine``, ``artefact``, ``tip_radius``), at ``values`` (the
     linearisation point, default nominal).  ``subset``: observation indices.
-    ``sigma`` (mm) scales the predicted uncertainties."""
+    ``sigma`` (mm): the probe noise of touches that declare none; the predicted
+    uncertainties weight rows as :func:`fivecal.identify` does (a declared sigma
+    is kept, a scale bar has its own)."""
     ds = _as_dataset(plan, machine, artefact, tip_radius, values)
     sub = None if subset is None else [int(i) for i in subset]
     q = _core.plan_quality(ds._core, _names(estimate), _names(fix), _values(values), float(sigma),
