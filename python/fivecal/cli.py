@@ -561,7 +561,7 @@ def main(argv=None) -> int:
                         description="Estimate the listed parameters plus the default setup set "
                         "(tip, touched facets, sphere centres, DBB lengths) and print a report.",
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
-                        "  fivecal identify tango.json --estimate S3 --fix EXXb")
+                        "  fivecal identify fivecal_demo/dataset.json --estimate S3 --robust huber")
     pi.add_argument("dataset", help="dataset JSON (format: docs/formats.md)")
     pi.add_argument("--estimate", default="auto",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "
