@@ -57,9 +57,16 @@ double IncompleteBeta(double a, double b, double x) {
   return 1.0 - std::exp(lbt) * BetaContinuedFraction(b, a, 1.0 - x) / b;
 }
 
-// P(a, x), the regularized lower incomplete gamma function.
-double IncompleteGammaP(double a, double x) {
-  if (x <= 0) return 0.0;
+// Both tails of the regularised incomplete gamma function, P(a, x) and
+// Q(a, x) = 1 - P: the series below a + 1, Lentz's continued fraction above.
+// Each method yields one tail directly, so a small tail (a chi-square p-value
+// of 1e-30) keeps its digits instead of vanishing in 1 - P.
+struct GammaTails {
+  double p, q;
+};
+
+GammaTails IncompleteGamma(double a, double x) {
+  if (!(x > 0)) return {0.0, 1.0};
   const double gln = std::lgamma(a);
   if (x < a + 1.0) {
     double ap = a, sum = 1.0 / a, del = sum;
@@ -69,7 +76,8 @@ double IncompleteGammaP(double a, double x) {
       sum += del;
       if (std::abs(del) < std::abs(sum) * 1e-17) break;
     }
-    return sum * std::exp(-x + a * std::log(x) - gln);
+    const double p = std::min(1.0, sum * std::exp(-x + a * std::log(x) - gln));
+    return {p, 1.0 - p};
   }
   const double tiny = 1e-300;
   double b = x + 1.0 - a, c = 1.0 / tiny, d = 1.0 / b, h = d;
@@ -85,8 +93,11 @@ double IncompleteGammaP(double a, double x) {
     h *= del;
     if (std::abs(del - 1.0) < 1e-16) break;
   }
-  return 1.0 - std::exp(-x + a * std::log(x) - gln) * h;
+  const double q = std::min(1.0, std::exp(-x + a * std::log(x) - gln) * h);
+  return {1.0 - q, q};
 }
+
+double IncompleteGammaP(double a, double x) { return IncompleteGamma(a, x).p; }
 
 // Inverts a continuous increasing CDF on [lo, inf) by bracketing and bisection.
 template <typename Cdf>
@@ -189,6 +200,11 @@ double StudentTQuantile(double p, double dof) {
 double ChiSquareCdf(double x, double dof) {
   if (!(dof > 0)) throw std::invalid_argument("chi-square: degrees of freedom must be > 0");
   return IncompleteGammaP(dof / 2, x / 2);
+}
+
+double ChiSquareSurvival(double x, double dof) {
+  if (!(dof > 0)) throw std::invalid_argument("chi-square: degrees of freedom must be > 0");
+  return IncompleteGamma(dof / 2, x / 2).q;
 }
 
 double ChiSquareQuantile(double p, double dof) {

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "fivecal/gum.h"
 #include "fivecal/identifiability.h"
 #include "fivecal/kinematic_model.h"
 #include "fivecal/kinematics.h"
@@ -254,38 +255,6 @@ std::string UndeterminedMessage(const Dataset& ds, const std::vector<std::vector
     msg += (i ? "; " : "") + GroupText(groups[i]) + ": " + GroupCause(ds, groups[i]);
   return msg + ". Fix one parameter of each group, add measurements that separate them, or use "
                "estimate 'auto' (every error under its prior, the undetermined ones listed).";
-}
-
-// Regularised upper incomplete gamma Q(a, x) (series below a + 1, Lentz's
-// continued fraction above).
-double GammaQ(double a, double x) {
-  if (!(x > 0)) return 1.0;
-  const double lg = std::lgamma(a);
-  if (x < a + 1) {
-    double sum = 1.0 / a, term = sum, ap = a;
-    for (int n = 0; n < 100000; ++n) {
-      ap += 1;
-      term *= x / ap;
-      sum += term;
-      if (std::abs(term) < std::abs(sum) * 1e-15) break;
-    }
-    return std::max(0.0, 1.0 - sum * std::exp(-x + a * std::log(x) - lg));
-  }
-  const double tiny = 1e-300;
-  double b = x + 1 - a, c = 1 / tiny, d = 1 / b, h = d;
-  for (int i = 1; i < 100000; ++i) {
-    const double an = -i * (i - a);
-    b += 2;
-    d = an * d + b;
-    if (std::abs(d) < tiny) d = tiny;
-    c = b + an / c;
-    if (std::abs(c) < tiny) c = tiny;
-    d = 1 / d;
-    const double del = d * c;
-    h *= del;
-    if (std::abs(del - 1) < 1e-15) break;
-  }
-  return std::min(1.0, std::exp(-x + a * std::log(x) - lg) * h);
 }
 
 void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const ParameterTable& table,
@@ -555,7 +524,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     res.sigma = dof_mm > 0 ? std::sqrt(r.squaredNorm() / dof_mm) : 0.0;
   }
   res.chi2 = chi2;
-  res.chi2_p = res.dof > 0 ? GammaQ(0.5 * res.dof, 0.5 * chi2) : 1.0;
+  res.chi2_p = res.dof > 0 ? ChiSquareSurvival(chi2, res.dof) : 1.0;
   res.std = res.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   res.correlation = Eigen::MatrixXd::Zero(p, p);
   for (int i = 0; i < p; ++i)

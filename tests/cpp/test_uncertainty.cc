@@ -200,6 +200,19 @@ TEST(MonteCarlo, NumericalToleranceOfJcgm101) {
 
 // ---- Distributions, pooled covariance, propagation -------------------------------------
 
+// With 2 degrees of freedom the chi-square tail is exp(-x/2) exactly: the
+// survival function must keep its digits far into the tail (the p-value of
+// an inadequate fit), where 1 - Cdf is 0.
+TEST(Gum, ChiSquareSurvivalKeepsTinyTails) {
+  for (double x : {0.5, 1.0, 2.9, 3.0, 10.0, 200.0, 1400.0})
+    EXPECT_NEAR(ChiSquareSurvival(x, 2) / std::exp(-x / 2), 1.0, 1e-10) << x;
+  for (double k : {1.0, 5.0, 37.0, 270.0})
+    for (double x : {0.3 * k, k, 1.5 * k})
+      EXPECT_NEAR(ChiSquareSurvival(x, k) + ChiSquareCdf(x, k), 1.0, 1e-12) << k << " " << x;
+  EXPECT_EQ(ChiSquareSurvival(0.0, 3), 1.0);
+  EXPECT_THROW(ChiSquareSurvival(1.0, 0), std::invalid_argument);
+}
+
 TEST(Gum, QuantilesMatchTables) {
   EXPECT_NEAR(NormalQuantile(0.975), 1.959963984540054, 1e-12);
   EXPECT_NEAR(NormalQuantile(0.001), -3.090232306167814, 1e-10);

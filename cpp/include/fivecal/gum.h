@@ -47,6 +47,9 @@ double ChiSquareQuantile(double p, double dof);
 double FQuantile(double p, double dof1, double dof2); // dof2 = inf -> chi2(dof1) / dof1
 double StudentTCdf(double t, double dof);
 double ChiSquareCdf(double x, double dof);
+// 1 - ChiSquareCdf, computed directly: the p-value of a chi-square test keeps
+// its digits when it is tiny.
+double ChiSquareSurvival(double x, double dof);
 double FCdf(double x, double dof1, double dof2);
 
 struct CoverageFactor {
