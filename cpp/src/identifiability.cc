@@ -49,6 +49,15 @@ bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, Identifia
   return true;
 }
 
+// A tall matrix reduced to its p x p triangular QR factor: same singular
+// values and right singular vectors, so an SVD after it costs O(p^3), not O(n p^2).
+Eigen::MatrixXd TriangularFactor(const Eigen::MatrixXd& A) {
+  const Eigen::Index p = A.cols();
+  if (A.rows() <= p) return A;
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr(A);
+  return qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+}
+
 }  // namespace
 
 Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance) {
@@ -67,15 +76,7 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
   }
   const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
   if (zero_columns.empty() && WellConditioned(Js, rank_tolerance, &out)) return out;
-  // A tall Jacobian is reduced to its p x p triangular factor first: same
-  // singular values and right vectors, and the SVD then costs O(p^3), not O(n p^2).
-  Eigen::MatrixXd reduced;
-  if (Js.rows() > p) {
-    Eigen::HouseholderQR<Eigen::MatrixXd> qr(Js);
-    reduced = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
-  } else {
-    reduced = Js;
-  }
+  const Eigen::MatrixXd reduced = TriangularFactor(Js);
   Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
   const Eigen::VectorXd s = svd.singularValues();
   // Thin SVD of an n x p matrix with n < p has only n singular values.
@@ -183,13 +184,7 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
   out.ratio = Eigen::VectorXd::Zero(p);
   if (p == 0) return out;
   const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
-  Eigen::MatrixXd reduced;
-  if (Js.rows() > p) {
-    Eigen::HouseholderQR<Eigen::MatrixXd> qr(Js);
-    reduced = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
-  } else {
-    reduced = Js;
-  }
+  const Eigen::MatrixXd reduced = TriangularFactor(Js);
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
   out.singular_values = Eigen::VectorXd::Zero(p);
   const Eigen::VectorXd s = svd.singularValues();
