@@ -77,6 +77,7 @@ void BindIdentification(py::module_& m) {
       .def_readonly("undetermined", &Result::undetermined)
       .def_readonly("implausible", &Result::implausible)
       .def_readonly("map_fit", &Result::map_fit)
+      .def_readonly("class_scales", &Result::class_scales)
       .def_readonly("chi2", &Result::chi2)
       .def_readonly("dof", &Result::dof)
       .def_readonly("chi2_p", &Result::chi2_p)

@@ -329,6 +329,83 @@ struct Setup {
   }
 };
 
+// The hierarchical prior of estimate "auto". Each class of machine errors
+// (location offsets, scale gains, rotary tilts of degree 2, ...) gets a scale
+// factor lambda in [kMinClassScale, 1] on its documented prior, found by
+// maximising the evidence (MacKay's fixed point, the type-II maximum
+// likelihood of sparse Bayesian learning):
+//   lambda_k^2 = sum_j (theta_j / s_j)^2 / sum_j gamma_j,
+//   gamma_j = 1 - posterior var_j / prior var_j   (j in class k),
+// theta at the MAP point of the current scales. A class the data show no sign
+// of shrinks towards zero, so it no longer spreads the noise over dozens of
+// weakly seen errors; this is what lets "auto" predict held-out poses as well
+// as the right hand-picked subset. The documented prior stays the ceiling
+// (lambda <= 1): the data may say an error class is smaller than plausible,
+// never larger. Only the point estimate uses the adapted scales; the
+// uncertainty and the informed/undetermined judgement use the documented
+// priors, so a class shrunk by the data of its siblings is never presented
+// as measured for a member the data cannot see.
+struct ClassScales {
+  Eigen::VectorXd prior;                 // per table entry, after the scales
+  std::map<std::string, double> scale;   // class -> lambda
+  Eigen::VectorXd values;                // MAP point under `prior`
+  int rounds = 0;
+};
+
+constexpr double kMinClassScale = 1e-3;
+
+ClassScales AdaptClassScales(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& start,
+                             const std::vector<int>& est, const IdentifyOptions& opt,
+                             const Eigen::VectorXd& prior_all) {
+  std::map<std::string, std::vector<int>> members;  // class -> positions in est
+  const Machine& m = ds.machine();
+  for (size_t j = 0; j < est.size(); ++j) {
+    const std::string& n = table.names()[est[j]];
+    if (m.ParameterIndex(n) < 0) continue;  // setup parameters keep their prior
+    const std::string cls = PriorClassOf(m, n);
+    if (cls != "tip") members[cls].push_back(static_cast<int>(j));
+  }
+  ClassScales out;
+  out.prior = prior_all;
+  out.values = start;
+  for (const auto& kv : members) out.scale[kv.first] = 1.0;
+  if (members.empty()) return out;
+  for (int round = 0; round < 40; ++round) {
+    for (const auto& [cls, js] : members)
+      for (int j : js) out.prior[est[j]] = out.scale[cls] * prior_all[est[j]];
+    std::unique_ptr<Problem> pr;
+    const Solve fit = RunFit(ds, table, out.values, est, opt, out.prior, &pr);
+    out.values = fit.values;
+    out.rounds = round + 1;
+    Eigen::VectorXd r;
+    Eigen::MatrixXd Jw;
+    WeightedJacobian(pr.get(), &r, &Jw);
+    const Eigen::VectorXd cur = Gather(out.prior, est);
+    const Eigen::MatrixXd Js = Jw * cur.asDiagonal();
+    Eigen::MatrixXd N = Js.transpose() * Js;
+    N.diagonal().array() += 1.0;
+    const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(N.rows(), N.cols()));
+    double change = 0;
+    for (const auto& [cls, js] : members) {
+      double m2 = 0, gamma = 0;
+      for (int j : js) {
+        const double t = out.values[est[j]] / prior_all[est[j]];
+        m2 += t * t;
+        gamma += std::clamp(1.0 - Cs(j, j), 0.0, 1.0);
+      }
+      double lambda = gamma > 1e-9 ? std::sqrt(m2 / gamma) : kMinClassScale;
+      if (!std::isfinite(lambda)) lambda = 1.0;
+      lambda = std::clamp(lambda, kMinClassScale, 1.0);
+      change = std::max(change, std::abs(std::log(lambda / out.scale[cls])));
+      out.scale[cls] = lambda;
+    }
+    if (change < 0.01) break;
+  }
+  for (const auto& [cls, js] : members)
+    for (int j : js) out.prior[est[j]] = out.scale[cls] * prior_all[est[j]];
+  return out;
+}
+
 // The "location" selection at given values (no fit).
 std::vector<int> SelectAt(const Dataset& ds, const Setup& s, const Eigen::VectorXd& values,
                           const IdentifyOptions& opt) {
@@ -451,8 +528,17 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     }
   }
 
+  // The prior rows of the fit: none (least squares), the documented priors
+  // (prior=true), or the hierarchical one of "auto".
+  Eigen::VectorXd fit_prior = map ? setup.prior : no_prior;
+  if (rq.automatic) {
+    const ClassScales cs = AdaptClassScales(ds, table, values, est, opt, setup.prior);
+    fit_prior = cs.prior;
+    values = cs.values;
+    res.class_scales = cs.scale;
+  }
   std::unique_ptr<Problem> problem;
-  const Solve fit = RunFit(ds, table, values, est, opt, map ? setup.prior : no_prior, &problem);
+  const Solve fit = RunFit(ds, table, values, est, opt, fit_prior, &problem);
   values = fit.values;
   res.converged = fit.converged;
   res.iterations = fit.iterations;
@@ -494,14 +580,19 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   if (map) {
     // Posterior covariance (Jw^T Jw + P)^-1, P = diag(1 / prior^2), in the
     // declared noise; inflated by chi2/dof when the residuals exceed it.
-    Eigen::MatrixXd Js = Jw * prior.asDiagonal();
-    Eigen::MatrixXd N = Js.transpose() * Js;
-    N.diagonal().array() += 1.0;
-    const Eigen::LDLT<Eigen::MatrixXd> ldlt(N);
-    const Eigen::MatrixXd Cs = ldlt.solve(Eigen::MatrixXd::Identity(p, p));
+    // The covariance uses the documented priors (see AdaptClassScales); the
+    // degrees of freedom those of the fit that made the residuals.
+    auto scaled_posterior = [&](const Eigen::VectorXd& s) {
+      const Eigen::MatrixXd Js = Jw * s.asDiagonal();
+      Eigen::MatrixXd N = Js.transpose() * Js;
+      N.diagonal().array() += 1.0;
+      return Eigen::MatrixXd(N.ldlt().solve(Eigen::MatrixXd::Identity(p, p)));
+    };
+    const Eigen::MatrixXd Cs = scaled_posterior(prior);
     const Eigen::MatrixXd C = prior.asDiagonal() * Cs * prior.asDiagonal();
     // Effective number of parameters: trace of the hat matrix = p - trace(Cs).
-    const double p_eff = p - Cs.trace();
+    const Eigen::VectorXd used = Gather(fit_prior, est);
+    const double p_eff = p - (rq.automatic ? scaled_posterior(used).trace() : Cs.trace());
     res.dof = std::max(1, rows - static_cast<int>(std::lround(p_eff)));
     const double k2 = std::max(1.0, chi2 / res.dof);
     res.covariance = k2 * C;
@@ -667,6 +758,11 @@ std::string Result::ToJson() const {
   j["undetermined"] = undetermined;
   j["implausible"] = implausible;
   j["map_fit"] = map_fit;
+  if (!class_scales.empty()) {
+    nlohmann::json cs = nlohmann::json::object();
+    for (const auto& [cls, v] : class_scales) cs[cls] = Finite(v);
+    j["class_scales"] = cs;
+  }
   j["chi2"] = {{"value", Finite(chi2)}, {"dof", dof}, {"p", Finite(chi2_p)}};
   j["adequate"] = adequate;
   j["adequacy"] = adequacy;

@@ -70,6 +70,7 @@ class Result:
     undetermined: list[str]
     implausible: list[str]
     map_fit: bool
+    class_scales: dict[str, float]
     chi2: float
     dof: int
     chi2_p: float

@@ -214,6 +214,8 @@ def require_usable(source: Any, force: bool = False, what: str = "this result") 
 #: only in part: the data narrowed its plausible range less than tenfold (the
 #: fit itself calls a parameter undetermined above about 0.45)
 PARTLY_INFORMED = 0.1
+#: class scale (estimate 'auto') below which the data show no sign of a class of errors
+ABSENT_CLASS_SCALE = 0.01
 #: |r| at or above which two estimates are treated as not separable in practice
 NEAR_SINGULAR_R = 0.999
 
@@ -230,6 +232,7 @@ class Findings:
     implausible: List[str]
     inseparable: List[tuple]          # (name, name, r) with |r| >= NEAR_SINGULAR_R
     informed: dict                    # name -> posterior σ / prior σ (empty without priors)
+    absent: List[str] = field(default_factory=list)  # auto: classes the data show no sign of
 
 
 def findings(result) -> Findings:
@@ -249,4 +252,6 @@ def findings(result) -> Findings:
     if C.shape == (len(est), len(est)):
         ii, jj = np.nonzero(np.triu(np.abs(np.nan_to_num(C, nan=1.0)) >= NEAR_SINGULAR_R, 1))
         pairs = sorted(((est[i], est[j], float(C[i, j])) for i, j in zip(ii, jj)), key=lambda p: -abs(p[2]))
-    return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed)
+    # a class whose prior the evidence shrank to the floor (see docs/identification.md)
+    absent = sorted(c for c, f in (getattr(result, "class_scales", None) or {}).items() if f < ABSENT_CLASS_SCALE)
+    return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed, absent)

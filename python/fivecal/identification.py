@@ -51,6 +51,9 @@ class Result:
         self.implausible: list = list(core.implausible)
         #: True when the fit had prior rows (estimate "auto" or prior=True)
         self.map_fit: bool = core.map_fit
+        #: estimate "auto": factor (0.001-1) the data put on each machine-error class's
+        #: prior for the point estimate (small: the data show no sign of that class)
+        self.class_scales: dict = dict(core.class_scales)
         #: chi-square of the residuals against the declared noise, its degrees of freedom and p value
         self.chi2: float = core.chi2
         self.dof: int = core.dof
@@ -258,6 +261,9 @@ def finding_lines(fd: "guards.Findings") -> list:
     if fd.undetermined:
         out.append("not determined by this data (values arbitrary, never used for compensation): "
                    + ", ".join(fd.undetermined))
+    if fd.absent:
+        out.append("error classes the data show no sign of (held near 0 in the point estimate): "
+                   + ", ".join(c.replace("_", " ") for c in fd.absent))
     if fd.implausible:
         out.append("implausible (far outside the plausible size; check units and setup): "
                    + ", ".join(fd.implausible))

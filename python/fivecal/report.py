@@ -194,6 +194,9 @@ def _findings_section(result, fd) -> str:
         sep = sorted({n for a, b, _ in fd.inseparable for n in (a, b)})
         rows.append((f"Not separable from one another (|r| ≥ {_NEAR_R:g}; only combinations are determined)",
                      names(sep)))
+    if fd.absent:
+        rows.append(("Error classes the data show no sign of (held near 0 in the point estimate)",
+                     _e(", ".join(c.replace("_", " ") for c in fd.absent))))
     rows.append(("Implausible (far outside the plausible size: check units, setup, the nominal)",
                  names(fd.implausible)))
     return ('<table class="kv">' + "".join(f"<tr><td>{_e(k)}</td><td>{v}</td></tr>" for k, v in rows)

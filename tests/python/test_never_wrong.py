@@ -179,9 +179,6 @@ def _rms(x):
 
 
 @pytest.mark.parametrize("truth_name", ["S3", "S4"])
-@pytest.mark.xfail(reason="known shortfall: on the thesis truths auto's held-out prediction is "
-                   "worse than S3's (3.7 vs 1.0 um on S3): the priors of the error motions are "
-                   "too wide for this plan", strict=False)
 def test_auto_on_thesis_truths(truth_name):
     truth = tango.thesis_s3_errors() if truth_name == "S3" else tango.thesis_s4_errors()
     full = {**tango.STYLUS_OFFSETS, **truth}

@@ -71,6 +71,9 @@ struct Result {
   std::vector<double> informed;       // std / prior_std; < kInformedThreshold: informed by the data
   std::vector<std::string> undetermined;  // estimated, but not determined by this data
   std::vector<std::string> implausible;   // |value| > kImplausibleSigmas prior sigmas
+  // estimate "auto": the factor (0.001-1) the data put on each machine-error
+  // class's prior for the point estimate (small: the data show no sign of it).
+  std::map<std::string, double> class_scales;
   bool map_fit = false;               // prior rows in the fit (estimate "auto" or prior=true)
   double chi2 = 0;                    // sum (r_i / declared sigma_i)^2 over the data rows
   int dof = 0;                        // rows - effective number of parameters
