@@ -200,17 +200,19 @@ void BindUncertainty(py::module_& m) {
   m.def(
       "gum_propagate",
       [](const Eigen::MatrixXd& C, const Eigen::MatrixXd& Ux, const std::vector<std::string>& names,
-         const Eigen::VectorXd& values, const CoverageFactor& cf) {
-        return PropagateCovariance(C, Ux, names, values, cf);
+         const Eigen::VectorXd& values, const CoverageFactor& cf, const Eigen::MatrixXd& prior_term) {
+        return PropagateCovariance(C, Ux, names, values, cf, prior_term);
       },
-      py::arg("C"), py::arg("Ux"), py::arg("names"), py::arg("values"), py::arg("coverage"));
+      py::arg("C"), py::arg("Ux"), py::arg("names"), py::arg("values"), py::arg("coverage"),
+      py::arg("prior_term") = Eigen::MatrixXd());
 
   py::class_<Sensitivity>(m, "Sensitivity")
       .def_readonly("names", &Sensitivity::names)
       .def_readonly("values", &Sensitivity::values)
       .def_readonly("C", &Sensitivity::C)
       .def_readonly("input_rows", &Sensitivity::input_rows)
-      .def_readonly("input_source", &Sensitivity::input_source);
+      .def_readonly("input_source", &Sensitivity::input_source)
+      .def_readonly("prior_term", &Sensitivity::prior_term);
   m.def("sensitivity_matrix", &SensitivityMatrix, py::arg("dataset"), py::arg("result"),
         py::call_guard<py::gil_scoped_release>());
 

@@ -300,7 +300,7 @@ PooledCovariance PoolCovariance(const Eigen::MatrixXd& X, const std::vector<int>
 
 GumResult PropagateCovariance(const Eigen::MatrixXd& C, const Eigen::MatrixXd& Ux,
                               const std::vector<std::string>& names, const Eigen::VectorXd& values,
-                              const CoverageFactor& coverage) {
+                              const CoverageFactor& coverage, const Eigen::MatrixXd& prior_term) {
   if (Ux.rows() != Ux.cols() || Ux.rows() != C.cols())
     throw std::invalid_argument("GUM: input covariance is " + std::to_string(Ux.rows()) + " x " +
                                 std::to_string(Ux.cols()) + ", the sensitivity matrix has " +
@@ -312,6 +312,12 @@ GumResult PropagateCovariance(const Eigen::MatrixXd& C, const Eigen::MatrixXd& U
   g.names = names;
   g.values = values;
   g.covariance = C * Ux.selfadjointView<Eigen::Upper>() * C.transpose();
+  if (prior_term.size()) {
+    if (prior_term.rows() != C.rows() || prior_term.cols() != C.rows() || !prior_term.allFinite())
+      throw std::invalid_argument("GUM: the prior term must be a finite " + std::to_string(C.rows()) + " x " +
+                                  std::to_string(C.rows()) + " matrix");
+    g.covariance += prior_term;
+  }
   g.covariance = 0.5 * (g.covariance + g.covariance.transpose()).eval();
   g.std = g.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   g.correlation = Correlation(g.covariance);
@@ -345,9 +351,23 @@ Sensitivity SensitivityMatrix(const Dataset& ds, const Result& fit) {
   Eigen::VectorXd r;
   Eigen::MatrixXd J;
   problem.Evaluate(&r, &J);
-  // The fit minimises sum (r_i / sigma_i)^2: C = -(J^T W J)^+ J^T W, W = diag(1 / sigma^2).
+  // The fit minimises sum (r_i / sigma_i)^2 (+ the prior rows of a MAP fit):
+  // C = -(J^T W J + P)^+ J^T W, W = diag(1 / sigma^2).
   const Eigen::VectorXd w = problem.row_sigma().cwiseInverse();
-  const Identifiability id = AnalyzeJacobian(w.asDiagonal() * J);
+  const bool map = fit.map_fit && fit.prior_std.size() == est.size();
+  Eigen::MatrixXd inverse_normal;
+  Eigen::VectorXd prior_precision;
+  if (map) {
+    // The documented priors, as the fit's reported covariance uses them.
+    prior_precision.resize(est.size());
+    for (size_t i = 0; i < est.size(); ++i) prior_precision[i] = 1.0 / (fit.prior_std[i] * fit.prior_std[i]);
+    const Eigen::MatrixXd Jw = w.asDiagonal() * J;
+    Eigen::MatrixXd N = Jw.transpose() * Jw;
+    N.diagonal() += prior_precision;
+    inverse_normal = N.ldlt().solve(Eigen::MatrixXd::Identity(N.rows(), N.cols()));
+  } else {
+    inverse_normal = AnalyzeJacobian(w.asDiagonal() * J).inverse_normal;
+  }
   Sensitivity s;
   s.names = fit.estimated;
   s.values.resize(est.size());
@@ -361,7 +381,8 @@ Sensitivity SensitivityMatrix(const Dataset& ds, const Result& fit) {
   Eigen::MatrixXd Jin(s.input_rows.size(), J.cols());
   for (size_t k = 0; k < s.input_rows.size(); ++k)
     Jin.row(k) = J.row(s.input_rows[k]) * (w[s.input_rows[k]] * w[s.input_rows[k]]);
-  s.C = -id.inverse_normal * Jin.transpose();
+  s.C = -inverse_normal * Jin.transpose();
+  if (map) s.prior_term = inverse_normal * prior_precision.asDiagonal() * inverse_normal;
   return s;
 }
 
@@ -420,7 +441,7 @@ CyclesUncertainty GumFromCycles(const std::vector<Dataset>& cycles, const std::v
   out.output_pooled = PoolCovariance(out.cycle_values, group).covariance;
   const CoverageFactor cf = MakeCoverageFactor(options.probability, out.inputs.dof,
                                                static_cast<int>(fit.estimated.size()), options.coverage_factor);
-  out.gum = PropagateCovariance(sens.C, out.inputs.covariance, sens.names, sens.values, cf);
+  out.gum = PropagateCovariance(sens.C, out.inputs.covariance, sens.names, sens.values, cf, sens.prior_term);
   out.day = day;
   out.cycle = cycle;
   out.pooling = options.pooling;

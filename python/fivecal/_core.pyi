@@ -196,7 +196,7 @@ class GumResult:
     def to_json(self) -> str: ...
 
 def gum_propagate(C: np.ndarray, Ux: np.ndarray, names: Sequence[str], values: np.ndarray,
-                  coverage: CoverageFactor) -> GumResult: ...
+                  coverage: CoverageFactor, prior_term: np.ndarray = ...) -> GumResult: ...
 
 class Sensitivity:
     names: list[str]
@@ -204,6 +204,7 @@ class Sensitivity:
     C: np.ndarray
     input_rows: list[int]
     input_source: list[int]
+    prior_term: np.ndarray
 
 def sensitivity_matrix(dataset: Dataset, result: Result) -> Sensitivity: ...
 

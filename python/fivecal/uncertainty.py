@@ -375,14 +375,18 @@ def coverage_factor(probability: float = 0.95, dof: float = math.inf, outputs: i
 
 
 def propagate(C, Ux, names: Sequence[str], values, probability: float = 0.95, dof: float = math.inf,
-              k: Optional[float] = None):
+              k: Optional[float] = None, prior_term=None):
     """U_y = C U_x C^T (thesis eq. 8-3) with a stated coverage factor;
     returns ``_core.GumResult`` (``covariance``, ``std``, ``expanded``,
-    ``coverage``)."""
+    ``coverage``). ``prior_term``: after a MAP fit (``estimate="auto"``), the
+    prior's share of U_y, :attr:`Sensitivity.prior_term` of :func:`sensitivity`
+    (without it an error the data did not determine would look as certain as
+    the data make the rest)."""
     C = np.atleast_2d(np.asarray(C, float))
     cf = coverage_factor(probability, dof, C.shape[0], k)
+    extra = np.zeros((0, 0)) if prior_term is None else np.atleast_2d(np.asarray(prior_term, float))
     return _core.gum_propagate(C, np.atleast_2d(np.asarray(Ux, float)), list(names),
-                               np.asarray(values, float), cf)
+                               np.asarray(values, float), cf, extra)
 
 
 def pooled_covariance(samples, groups: Sequence[int]):
@@ -393,7 +397,9 @@ def pooled_covariance(samples, groups: Sequence[int]):
 
 def sensitivity(dataset, result):
     """C = -(J^T J)^-1 J_in^T of a fit (``_core.Sensitivity``): the change of
-    each estimated parameter per mm of each input (along its residual)."""
+    each estimated parameter per mm of each input (along its residual). After a
+    MAP fit, C = -(J^T W J + P)^-1 J_in^T W and ``prior_term`` holds the prior's
+    share of the covariance (pass it to :func:`propagate`)."""
     ds = Dataset.from_dict(dataset)
     return _core.sensitivity_matrix(ds._core, result._core)
 

@@ -322,3 +322,35 @@ def test_cli_uncertainty(spec, tmp_path):
     assert json.loads(out.read_text())["trials"] == 30
     h = subprocess.run([sys.executable, "-m", "fivecal", "uncertainty", "--help"], capture_output=True, text=True)
     assert "example" in h.stdout and "--trials" in h.stdout
+
+
+def test_gum_after_a_map_fit_includes_the_prior_as_an_input():
+    """After estimate="auto" the prior is one more GUM input: with the declared
+    noise as U_x, C U_x C^T + prior_term is the fit's posterior covariance,
+    and an error the data did not determine keeps a sigma of the order of
+    its prior (without the prior term it would look determined)."""
+    ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), sigma=0.001, seed=5)
+    # Probe touches only: every residual row is a GUM input (the scale bar's are not).
+    ds = ds.subset([i for i, o in enumerate(ds.observations) if o.get("type") == "facet"])
+    r = fivecal.identify(ds, "auto")
+    s = uncertainty.sensitivity(ds, r)
+    assert s.prior_term.shape == (len(r.estimated),) * 2
+    Ux = np.eye(len(s.input_rows)) * 0.001 ** 2
+    g = uncertainty.propagate(s.C, Ux, s.names, s.values, prior_term=s.prior_term)
+    k2 = max(1.0, r.chi2 / r.dof)
+    post = np.asarray(r.covariance) / k2
+    std = np.sqrt(np.diag(post))
+    assert np.allclose(g.std, std, rtol=1e-6, atol=1e-12 * std.max())
+    und = [r.estimated.index(n) for n in r.undetermined if n in r.estimated]
+    assert und
+    data_only = uncertainty.propagate(s.C, Ux, s.names, s.values)
+    prior = np.array([r.prior_std[r.estimated[i]] for i in und])
+    assert np.all(g.std[und] > 0.4 * prior)
+    assert np.any(data_only.std[und] < 0.2 * prior)  # what the prior term prevents
+
+
+def test_gum_after_plain_least_squares_has_no_prior_term():
+    ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), sigma=0.001, seed=5)
+    r = fivecal.identify(ds, "S3")
+    s = uncertainty.sensitivity(ds, r)
+    assert s.prior_term.size == 0

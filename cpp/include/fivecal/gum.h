@@ -98,10 +98,12 @@ struct GumResult {
   std::string ToJson() const;
 };
 
-// U_y = C U_x C^T with the stated coverage factor.
+// U_y = C U_x C^T (+ prior_term, p x p, when given) with the stated coverage
+// factor.
 GumResult PropagateCovariance(const Eigen::MatrixXd& C, const Eigen::MatrixXd& Ux,
                               const std::vector<std::string>& names, const Eigen::VectorXd& values,
-                              const CoverageFactor& coverage);
+                              const CoverageFactor& coverage,
+                              const Eigen::MatrixXd& prior_term = Eigen::MatrixXd());
 
 // C = -(J^T J)^+ J_in^T of a fit (Result of Identify on `ds`), evaluated at
 // its values; input_rows lists, per input (column of C), its residual row.
@@ -111,6 +113,12 @@ struct Sensitivity {
   Eigen::MatrixXd C;               // p x inputs
   std::vector<int> input_rows;     // residual row of each input
   std::vector<int> input_source;   // observation index of each input
+  // After a MAP fit (Result::map_fit) the prior is one more input: the
+  // estimate is y = -N^-1 (J_in^T W dx - P theta0) with N = J^T W J + P,
+  // P = diag(1 / prior_std^2), so C = -N^-1 J_in^T W and the prior adds
+  // N^-1 P N^-1 (p x p) to U_y; with U_x = the declared noise the sum is the
+  // posterior covariance N^-1. Empty after a plain least-squares fit.
+  Eigen::MatrixXd prior_term;
 };
 Sensitivity SensitivityMatrix(const Dataset& ds, const Result& fit);
 
