@@ -78,6 +78,7 @@ void BindIdentification(py::module_& m) {
       .def_readonly("implausible", &Result::implausible)
       .def_readonly("map_fit", &Result::map_fit)
       .def_readonly("class_scales", &Result::class_scales)
+      .def_readonly("variance_components", &Result::variance_components)
       .def_readonly("chi2", &Result::chi2)
       .def_readonly("dof", &Result::dof)
       .def_readonly("chi2_p", &Result::chi2_p)
@@ -107,10 +108,12 @@ void BindIdentification(py::module_& m) {
          const std::vector<std::string>& fix, const std::map<std::string, double>& initial,
          const std::string& robust, double robust_scale, int max_iterations,
          bool allow_unidentifiable, bool include_default_setup, int num_threads,
-         double selection_tolerance, const std::map<std::string, double>& priors, bool prior) {
-        const IdentifyOptions o = MakeOptions(estimate, fix, initial, robust, robust_scale, max_iterations,
-                                              include_default_setup, selection_tolerance,
-                                              allow_unidentifiable, num_threads, priors, prior);
+         double selection_tolerance, const std::map<std::string, double>& priors, bool prior,
+         bool variance_components) {
+        IdentifyOptions o = MakeOptions(estimate, fix, initial, robust, robust_scale, max_iterations,
+                                        include_default_setup, selection_tolerance,
+                                        allow_unidentifiable, num_threads, priors, prior);
+        o.variance_components = variance_components;
         py::gil_scoped_release release;
         return Identify(ds, o);
       },
@@ -118,7 +121,17 @@ void BindIdentification(py::module_& m) {
       py::arg("robust") = "", py::arg("robust_scale") = 0.0, py::arg("max_iterations") = 200,
       py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
       py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
-      py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false);
+      py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false,
+      py::arg("variance_components") = false);
+
+  py::class_<VarianceComponent>(m, "VarianceComponent")
+      .def_readonly("group", &VarianceComponent::group)
+      .def_readonly("rows", &VarianceComponent::rows)
+      .def_readonly("redundancy", &VarianceComponent::redundancy)
+      .def_readonly("declared", &VarianceComponent::declared)
+      .def_readonly("factor", &VarianceComponent::factor)
+      .def_readonly("sigma", &VarianceComponent::sigma)
+      .def_readonly("estimated", &VarianceComponent::estimated);
 
   m.def(
       "resolve_estimate",

@@ -345,53 +345,106 @@ struct Setup {
 // uncertainty and the informed/undetermined judgement use the documented
 // priors, so a class shrunk by the data of its siblings is never presented
 // as measured for a member the data cannot see.
-struct ClassScales {
-  Eigen::VectorXd prior;                 // per table entry, after the scales
+struct Hyper {
+  Eigen::VectorXd prior;                 // per table entry, after the class scales
   std::map<std::string, double> scale;   // class -> lambda
-  Eigen::VectorXd values;                // MAP point under `prior`
+  Eigen::VectorXd values;                // MAP point under `prior` and `noise`
+  std::vector<VarianceComponent> noise;  // estimated instrument groups (variance components)
   int rounds = 0;
 };
 
 constexpr double kMinClassScale = 1e-3;
+// A group needs this much redundancy (rows minus what the fit used of them)
+// before its noise is estimated from its residuals.
+constexpr double kMinRedundancy = 5.0;
+// An estimated noise beyond this many times the declared one is not taken
+// for noise (the plain chi-square test flags sqrt(2) x already).
+constexpr double kMaxNoiseFactor = 3.0;
 
-ClassScales AdaptClassScales(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& start,
-                             const std::vector<int>& est, const IdentifyOptions& opt,
-                             const Eigen::VectorXd& prior_all) {
+// The instrument group of an observation: the variance component it shares.
+std::string NoiseGroup(const Observation& o) {
+  if (o.type == ObservationType::kFacet || o.type == ObservationType::kSphere) return "probe";
+  return ObservationTypeName(o.type);
+}
+
+Eigen::VectorXd DeclaredSigma(const Observation& o) {
+  const int rows = ResidualRows(o.type);
+  if (o.sigma.size() == rows) return o.sigma;
+  if (o.sigma.size() == 1) return Eigen::VectorXd::Constant(rows, o.sigma[0]);
+  return Eigen::VectorXd::Constant(rows, DefaultSigma(o.type));
+}
+
+// Variance components (Helmert / Foerstner's iterative estimator, the REML
+// fixed point for independent groups): with the hat matrix H of the weighted
+// (and prior-augmented) problem, group g's redundancy is
+//   r_g = sum_{i in g} (1 - H_ii),
+// and its noise factor is updated by f_g^2 <- f_g^2 * sum_{i in g} (e_i/s_i)^2 / r_g,
+// e the residuals, s the current sigmas. At the fixed point every group's
+// weighted residuals have the chi-square their redundancy predicts, so a
+// probe declared at 1 um and a ball bar at 0.5 um are weighed by what the
+// data show, not by a guess.
+//
+// Both hyperparameters (class scales of "auto", noise factors) are
+// evidence maximisations of the same model; they are iterated together.
+Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTable& table,
+                           const Eigen::VectorXd& start, const std::vector<int>& est,
+                           const IdentifyOptions& opt, const Eigen::VectorXd& prior_all, bool classes) {
   std::map<std::string, std::vector<int>> members;  // class -> positions in est
   const Machine& m = ds.machine();
-  for (size_t j = 0; j < est.size(); ++j) {
-    const std::string& n = table.names()[est[j]];
-    if (m.ParameterIndex(n) < 0) continue;  // setup parameters keep their prior
-    const std::string cls = PriorClassOf(m, n);
-    if (cls != "tip") members[cls].push_back(static_cast<int>(j));
-  }
-  ClassScales out;
+  if (classes)
+    for (size_t j = 0; j < est.size(); ++j) {
+      const std::string& n = table.names()[est[j]];
+      if (m.ParameterIndex(n) < 0) continue;  // setup parameters keep their prior
+      const std::string cls = PriorClassOf(m, n);
+      if (cls != "tip") members[cls].push_back(static_cast<int>(j));
+    }
+  Hyper out;
   out.prior = prior_all;
   out.values = start;
   for (const auto& kv : members) out.scale[kv.first] = 1.0;
-  if (members.empty()) return out;
-  for (int round = 0; round < 40; ++round) {
+  // Noise groups: the observations and declared sigmas of each.
+  std::map<std::string, double> factor;
+  std::vector<std::string> group_of(ds.observations.size());
+  if (opt.variance_components)
+    for (size_t i = 0; i < ds.observations.size(); ++i) factor[group_of[i] = NoiseGroup(ds.observations[i])] = 1.0;
+  auto apply_noise = [&]() {
+    for (size_t i = 0; i < ds.observations.size(); ++i)
+      scaled->observations[i].sigma = DeclaredSigma(ds.observations[i]) * factor[group_of[i]];
+  };
+  std::map<std::string, VarianceComponent> comp;
+  if (members.empty() && factor.empty()) return out;
+  const bool map = prior_all.size() > 0;
+  for (int round = 0; round < 60; ++round) {
     for (const auto& [cls, js] : members)
       for (int j : js) out.prior[est[j]] = out.scale[cls] * prior_all[est[j]];
+    if (!factor.empty()) apply_noise();
     std::unique_ptr<Problem> pr;
-    const Solve fit = RunFit(ds, table, out.values, est, opt, out.prior, &pr);
+    const Solve fit = RunFit(*scaled, table, out.values, est, opt, out.prior, &pr);
     out.values = fit.values;
     out.rounds = round + 1;
     Eigen::VectorXd r;
     Eigen::MatrixXd Jw;
     WeightedJacobian(pr.get(), &r, &Jw);
-    const Eigen::VectorXd cur = Gather(out.prior, est);
-    const Eigen::MatrixXd Js = Jw * cur.asDiagonal();
-    Eigen::MatrixXd N = Js.transpose() * Js;
-    N.diagonal().array() += 1.0;
-    const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(N.rows(), N.cols()));
+    const int p = static_cast<int>(est.size());
+    Eigen::MatrixXd Ninv;
+    Eigen::VectorXd cur;
+    if (map) {
+      cur = Gather(out.prior, est);
+      const Eigen::MatrixXd Js = Jw * cur.asDiagonal();
+      Eigen::MatrixXd N = Js.transpose() * Js;
+      N.diagonal().array() += 1.0;
+      const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+      Ninv = cur.asDiagonal() * Cs * cur.asDiagonal();
+    } else {
+      Ninv = AnalyzeJacobian(Jw, opt.rank_tolerance).inverse_normal;
+    }
     double change = 0;
     for (const auto& [cls, js] : members) {
       double m2 = 0, gamma = 0;
       for (int j : js) {
         const double t = out.values[est[j]] / prior_all[est[j]];
         m2 += t * t;
-        gamma += std::clamp(1.0 - Cs(j, j), 0.0, 1.0);
+        gamma += std::clamp(1.0 - Ninv(j, j) / (cur[j] * cur[j]), 0.0, 1.0);
       }
       double lambda = gamma > 1e-9 ? std::sqrt(m2 / gamma) : kMinClassScale;
       if (!std::isfinite(lambda)) lambda = 1.0;
@@ -399,10 +452,44 @@ ClassScales AdaptClassScales(const Dataset& ds, const ParameterTable& table, con
       change = std::max(change, std::abs(std::log(lambda / out.scale[cls])));
       out.scale[cls] = lambda;
     }
-    if (change < 0.01) break;
+    if (!factor.empty()) {
+      const Eigen::VectorXd h = (Jw * Ninv).cwiseProduct(Jw).rowwise().sum();
+      const Eigen::VectorXd sig = pr->row_sigma();
+      const std::vector<int>& src = pr->row_source();
+      comp.clear();
+      std::map<std::string, double> declared2;
+      for (int i = 0; i < r.size(); ++i) {
+        if (src[i] < 0) continue;  // a scale bar's length: a reference, not an instrument group
+        const std::string& g = group_of[src[i]];
+        VarianceComponent& c = comp[g];
+        c.group = g;
+        c.rows += 1;
+        c.redundancy += std::clamp(1.0 - h[i], 0.0, 1.0);
+        c.chi2 += (r[i] / sig[i]) * (r[i] / sig[i]);
+        declared2[g] += (sig[i] / factor[g]) * (sig[i] / factor[g]);
+      }
+      for (auto& [g, c] : comp) {
+        c.declared = std::sqrt(declared2[g] / c.rows);
+        c.estimated = c.redundancy >= kMinRedundancy;
+        if (!c.estimated) continue;
+        double f = factor[g] * std::sqrt(c.chi2 / c.redundancy);
+        if (!std::isfinite(f) || !(f > 0)) f = factor[g];
+        change = std::max(change, std::abs(std::log(f / factor[g])));
+        factor[g] = f;
+      }
+    }
+    if (change < (factor.empty() ? 0.01 : 1e-3)) break;
   }
   for (const auto& [cls, js] : members)
     for (int j : js) out.prior[est[j]] = out.scale[cls] * prior_all[est[j]];
+  if (!factor.empty()) {
+    apply_noise();
+    for (auto& [g, c] : comp) {
+      c.factor = factor[g];
+      c.sigma = c.declared * c.factor;
+      out.noise.push_back(c);
+    }
+  }
   return out;
 }
 
@@ -531,14 +618,18 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   // The prior rows of the fit: none (least squares), the documented priors
   // (prior=true), or the hierarchical one of "auto".
   Eigen::VectorXd fit_prior = map ? setup.prior : no_prior;
-  if (rq.automatic) {
-    const ClassScales cs = AdaptClassScales(ds, table, values, est, opt, setup.prior);
-    fit_prior = cs.prior;
-    values = cs.values;
-    res.class_scales = cs.scale;
+  // With variance components the fit runs on a copy whose sigmas are the
+  // estimated ones; everything below (covariance, chi-square) uses them.
+  Dataset weighted = ds;
+  if (rq.automatic || opt.variance_components) {
+    const Hyper hy = AdaptHyperparameters(ds, &weighted, table, values, est, opt, fit_prior, rq.automatic);
+    fit_prior = hy.prior;
+    values = hy.values;
+    res.class_scales = hy.scale;
+    res.variance_components = hy.noise;
   }
   std::unique_ptr<Problem> problem;
-  const Solve fit = RunFit(ds, table, values, est, opt, fit_prior, &problem);
+  const Solve fit = RunFit(weighted, table, values, est, opt, fit_prior, &problem);
   values = fit.values;
   res.converged = fit.converged;
   res.iterations = fit.iterations;
@@ -580,7 +671,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   if (map) {
     // Posterior covariance (Jw^T Jw + P)^-1, P = diag(1 / prior^2), in the
     // declared noise; inflated by chi2/dof when the residuals exceed it.
-    // The covariance uses the documented priors (see AdaptClassScales); the
+    // The covariance uses the documented priors (see AdaptHyperparameters); the
     // degrees of freedom those of the fit that made the residuals.
     auto scaled_posterior = [&](const Eigen::VectorXd& s) {
       const Eigen::MatrixXd Js = Jw * s.asDiagonal();
@@ -649,15 +740,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   // Adequacy: residuals against the declared noise.
   const double ratio = res.dof > 0 ? chi2 / res.dof : 0.0;
   res.adequate = !(res.chi2_p < 1e-3 && ratio > 2.0);
+  bool mounts = false, mount_estimated = false;
+  for (const Observation& o : ds.observations)
+    if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) {
+      mounts = true;
+      const auto& mt = table.mount(o.type, o.setup);
+      for (int c = 1; c < 7; ++c)
+        if (std::find(est.begin(), est.end(), mt[c]) != est.end()) mount_estimated = true;
+    }
   if (!res.adequate) {
-    bool mounts = false, mount_estimated = false;
-    for (const Observation& o : ds.observations)
-      if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) {
-        mounts = true;
-        const auto& mt = table.mount(o.type, o.setup);
-        for (int c = 1; c < 7; ++c)
-          if (std::find(est.begin(), est.end(), mt[c]) != est.end()) mount_estimated = true;
-      }
     const double x = std::sqrt(ratio);
     char buf[64];
     std::snprintf(buf, sizeof buf, "%.3g", x);
@@ -676,6 +767,26 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
                      "x the declared noise: the model misses errors the data show (estimate more, "
                      "e.g. 'auto') or the declared noise is too small";
   }
+
+  // With the noise estimated the chi-square passes by construction; what is
+  // left to judge is how far each group's noise is from its declaration.
+  // Variance components would otherwise absorb any misfit as "noise": beyond
+  // kMaxNoiseFactor it is a misfit or a unit mistake, not the instrument.
+  for (const VarianceComponent& c : res.variance_components)
+    if (c.estimated && res.adequate && c.factor > kMaxNoiseFactor) {
+      char buf[200];
+      std::snprintf(buf, sizeof buf,
+                    "the %s residuals are %.3gx their declared noise even with the noise estimated "
+                    "(%.3g um against %.3g um declared): ",
+                    c.group.c_str(), c.factor, c.sigma * 1e3, c.declared * 1e3);
+      res.adequate = false;
+      res.adequacy = std::string(buf) +
+                     (c.group != "probe" && mounts && !mount_estimated
+                          ? "instrument setup not estimated (ball3d/dbb mount: estimate its tool and "
+                            "table ball positions, e.g. ball3d.<setup>.table.x|y|z)"
+                          : "the model misses errors this instrument sees, or its readings are in other "
+                            "units; if the noise really is this large, declare it (sigma)");
+    }
 
   // Never hand out NaN or inf.
   res.finite = values.allFinite() && res.std.allFinite() && res.covariance.allFinite();
@@ -758,6 +869,14 @@ std::string Result::ToJson() const {
   j["undetermined"] = undetermined;
   j["implausible"] = implausible;
   j["map_fit"] = map_fit;
+  if (!variance_components.empty()) {
+    nlohmann::json vc = nlohmann::json::array();
+    for (const VarianceComponent& c : variance_components)
+      vc.push_back({{"group", c.group}, {"rows", c.rows}, {"redundancy", Finite(c.redundancy)},
+                    {"declared_sigma", Finite(c.declared)}, {"factor", Finite(c.factor)},
+                    {"sigma", Finite(c.sigma)}, {"estimated", c.estimated}});
+    j["variance_components"] = vc;
+  }
   if (!class_scales.empty()) {
     nlohmann::json cs = nlohmann::json::object();
     for (const auto& [cls, v] : class_scales) cs[cls] = Finite(v);

@@ -30,7 +30,8 @@ def _identify(args) -> int:
     with busy(f"fitting {len(ds)} observations"), warnings.catch_warnings():
         warnings.simplefilter("ignore", category=_fit_warning())  # said once below, in one line
         result = identify(ds, estimate=args.estimate, fix=args.fix, robust=args.robust,
-                          allow_unidentifiable=args.allow_unidentifiable)
+                          allow_unidentifiable=args.allow_unidentifiable,
+                          variance_components=args.variance_components)
     print(result.report())
     # An unusable fit is still written (marked so in the report and refused by
     # `fivecal compensate`): it is what one inspects to find out why.
@@ -572,6 +573,9 @@ def main(argv=None) -> int:
                     help="robust loss that down-weights and flags outlier touches")
     pi.add_argument("--allow-unidentifiable", action="store_true",
                     help="fit even when parameters are confounded (they are named in the report)")
+    pi.add_argument("--variance-components", action="store_true",
+                    help="estimate the noise of each instrument group (probe, dbb, ball3d) from the "
+                    "residuals instead of trusting the declared sigmas (docs/identification.md)")
     pi.add_argument("--out", help="write the result JSON here")
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")

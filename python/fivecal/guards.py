@@ -113,6 +113,7 @@ def _fields(source) -> Optional[dict]:
                 "undetermined": getattr(source, "undetermined", None),
                 "implausible": list(getattr(source, "implausible", []) or []),
                 "adequate": getattr(source, "adequate", None), "adequacy": getattr(source, "adequacy", ""),
+                "noise_estimated": bool(getattr(source, "variance_components", None)),
                 "chi2": chi2 if _finite(chi2) else None, "dof": getattr(source, "dof", None),
                 "p": getattr(source, "chi2_p", None)}
     if isinstance(source, Mapping) and isinstance(source.get("parameters"), Mapping) and (
@@ -134,6 +135,7 @@ def _fields(source) -> Optional[dict]:
                 "undetermined": source.get("undetermined"),
                 "implausible": list(source.get("implausible") or []),
                 "adequate": source.get("adequate"), "adequacy": source.get("adequacy") or "",
+                "noise_estimated": bool(source.get("variance_components")),
                 "chi2": c.get("value") if _finite(c.get("value")) else None, "dof": c.get("dof"),
                 "p": c.get("p")}
     return None
@@ -187,8 +189,12 @@ def assess(source: Any) -> Assessment:
                   + ": its values are not a solution of the problem")
     elif verdict == "inadequate":
         words = _chi2_words(f["chi2"], f["dof"], f["p"])
-        reason = ("the model does not explain the data within the declared instrument noise"
-                  + (f" ({words})" if words else ""))
+        if f.get("noise_estimated"):
+            # the chi-square passes by construction once the noise is estimated
+            reason = "the model does not explain the data with a plausible instrument noise"
+        else:
+            reason = ("the model does not explain the data within the declared instrument noise"
+                      + (f" ({words})" if words else ""))
         if f["adequacy"]:
             reason += f"; likely cause: {f['adequacy']}"
     elif verdict == "undetermined":

@@ -54,6 +54,12 @@ class Result:
         #: estimate "auto": factor (0.001-1) the data put on each machine-error class's
         #: prior for the point estimate (small: the data show no sign of that class)
         self.class_scales: dict = dict(core.class_scales)
+        #: variance_components=True: per instrument group ("probe", "dbb", "ball3d") a dict
+        #: with rows, redundancy, declared_sigma, factor, sigma (mm) and estimated
+        self.variance_components: dict = {
+            c.group: {"rows": c.rows, "redundancy": c.redundancy, "declared_sigma": c.declared,
+                      "factor": c.factor, "sigma": c.sigma, "estimated": c.estimated}
+            for c in core.variance_components}
         #: chi-square of the residuals against the declared noise, its degrees of freedom and p value
         self.chi2: float = core.chi2
         self.dof: int = core.dof
@@ -130,7 +136,9 @@ class Result:
         lines += [f"  observations {self.n_observations}, parameters {self.n_parameters}, "
                   f"rank {self.rank}, condition number {self.condition_number:.4g}",
                   f"  residual rms {self.rms * 1e3:.3f} µm, max {self.max_abs * 1e3:.3f} µm, "
-                  f"sigma {self.sigma * 1e3:.3f} µm", ""]
+                  f"sigma {self.sigma * 1e3:.3f} µm"]
+        lines += ["  " + t for t in noise_lines(self)]
+        lines.append("")
         prior = getattr(self, "prior_std", None) or {}
         with_prior = bool(prior)
         lines.append(f"  {'parameter':<18}{'value':>14}{'std':>12}"
@@ -201,7 +209,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
              allow_unidentifiable: bool = False, default_setup: bool = True,
              max_iterations: int = 200, num_threads: int = 1,
              selection_tolerance: Optional[float] = None,
-             priors: Optional[Mapping[str, float]] = None, prior: bool = False) -> Result:
+             priors: Optional[Mapping[str, float]] = None, prior: bool = False,
+             variance_components: bool = False) -> Result:
     """Fit the machine errors to a dataset.
 
     ``estimate``: parameter names and/or presets (``S1``-``S4`` on ``wCBXfZYSt``,
@@ -218,6 +227,11 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     and ``location`` are plain least squares (``prior=True`` adds the prior rows).
     ``priors``: prior sigma overrides, a parameter name or ``"class:<name>"`` ->
     sigma (see docs/identification.md for the classes and defaults).
+    ``variance_components``: estimate the noise of each instrument group (probe
+    touches, ball bar, ball3d) from its residuals (Helmert / REML variance
+    components) instead of trusting the declared sigmas; mixed data are then
+    weighed by what they show, :attr:`Result.variance_components` reports each
+    group's sigma, and the covariance uses them.
     Raises ValueError when the data cannot determine an explicitly requested
     set, naming the groups and the likely cause.
     """
@@ -227,7 +241,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
                           bool(allow_unidentifiable), bool(default_setup), int(num_threads),
                           IdentifyOptionsDefaults.selection_tolerance if selection_tolerance is None
                           else float(selection_tolerance),
-                          {str(k): float(v) for k, v in (priors or {}).items()}, bool(prior))
+                          {str(k): float(v) for k, v in (priors or {}).items()}, bool(prior),
+                          bool(variance_components))
     return Result(core, ds)
 
 
@@ -243,6 +258,19 @@ def verdict_lines(result, fd: "guards.Findings") -> list:
     adequacy = (f"the residuals agree with the declared instrument noise ({noise})" if noise else
                 "no chi-square test against the declared noise was reported")
     return [f"Usable: the fit converged in {it} iterations; {adequacy}."]
+
+
+def noise_lines(result) -> list:
+    """The instrument noise the fit estimated (variance components), one line per group."""
+    out = []
+    for g, c in sorted((getattr(result, "variance_components", None) or {}).items()):
+        if c["estimated"]:
+            out.append(f"noise of {g}: {c['sigma'] * 1e3:.3f} µm estimated from {c['rows']} rows "
+                       f"(declared {c['declared_sigma'] * 1e3:.3f} µm, x{c['factor']:.2f})")
+        else:
+            out.append(f"noise of {g}: declared {c['declared_sigma'] * 1e3:.3f} µm kept "
+                       f"(redundancy {c['redundancy']:.1f} of {c['rows']} rows is too little to estimate it)")
+    return out
 
 
 def finding_lines(fd: "guards.Findings") -> list:

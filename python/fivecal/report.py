@@ -216,8 +216,12 @@ def _fit_section(result) -> str:
             ("condition number", f"{result.condition_number:.4g} (of the scaled Jacobian)"),
             ("solver", f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} "
                        "iterations")]
+    from .identification import noise_lines
+    for line in noise_lines(result):
+        rows.append(("instrument noise", line))
     if chi2 is not None and np.isfinite(chi2):
-        rows.append(("χ² against the declared noise",
+        rows.append(("χ² against the " + ("estimated" if getattr(result, "variance_components", None)
+                                           else "declared") + " noise",
                      f"{chi2:.4g} for {getattr(result, 'dof', '?')} degrees of freedom, p = "
                      f"{_fmt(getattr(result, 'chi2_p', float('nan')), 3)}: "
                      + ("adequate" if getattr(result, "adequate", True) else "INADEQUATE")

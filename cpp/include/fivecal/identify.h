@@ -40,6 +40,22 @@ struct IdentifyOptions {
   // MAP fit (prior rows) for explicit lists too; "auto" always fits under the
   // priors, explicit lists and "location" are plain least squares by default.
   bool prior = false;
+  // Estimate the noise of each instrument group (probe touches, ball bar,
+  // ball3d) from the residuals (variance components) instead of trusting the
+  // declared sigmas; the covariance then uses the estimated noise.
+  bool variance_components = false;
+};
+
+// One instrument group's noise, estimated from its residuals.
+struct VarianceComponent {
+  std::string group;       // "probe", "dbb", "ball3d"
+  int rows = 0;
+  double redundancy = 0;   // rows minus what the fit used of them
+  double chi2 = 0;         // of the group's residuals at its current sigma
+  double declared = 0;     // rms declared sigma (mm)
+  double factor = 1;       // estimated / declared
+  double sigma = 0;        // estimated rms sigma (mm)
+  bool estimated = false;  // false: too little redundancy, the declared noise is kept
 };
 
 struct Result {
@@ -74,6 +90,8 @@ struct Result {
   // estimate "auto": the factor (0.001-1) the data put on each machine-error
   // class's prior for the point estimate (small: the data show no sign of it).
   std::map<std::string, double> class_scales;
+  // variance_components=true: the noise of each instrument group.
+  std::vector<VarianceComponent> variance_components;
   bool map_fit = false;               // prior rows in the fit (estimate "auto" or prior=true)
   double chi2 = 0;                    // sum (r_i / declared sigma_i)^2 over the data rows
   int dof = 0;                        // rows - effective number of parameters
