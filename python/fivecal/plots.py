@@ -146,9 +146,11 @@ def add_group_key(fig, axes, labels, colors, title: str, legend_ax=None):
         cb = fig.colorbar(sm, cax=cax)
     else:
         cb = fig.colorbar(sm, ax=axes, fraction=0.025, pad=0.015)
-    ticks = np.unique(np.round(np.linspace(0, n - 1, min(n, 12))).astype(int))
+    # every group named while the labels fit beside the bar, else 12 of them
+    ticks = np.arange(n) if n <= 24 else np.unique(np.round(np.linspace(0, n - 1, 12)).astype(int))
     cb.set_ticks(ticks)
     cb.set_ticklabels([labels[i] for i in ticks], fontsize=7)
+    cb.ax.minorticks_off()
     cb.set_label(f"{title} ({n} groups)", fontsize=9)
     return cb
 
@@ -256,7 +258,9 @@ def residual_vectors_figure(result, magnification: Optional[float] = None,
         axl = fig.add_subplot(gs[:, 2])
         axl.axis("off")
         labels = ["(" + ", ".join(f"{v:g}" for v in k) + ")" for k in uniq]
-        add_group_key(fig, [ax3, axp, axe], labels, palette, f"{', '.join(rot)} (deg)", legend_ax=axl)
+        add_group_key(fig, [ax3, axp, axe], labels, palette,
+                      f"{', '.join(rot)} (deg)" + (", in measurement order" if len(uniq) > MAX_LEGEND else ""),
+                      legend_ax=axl)
     res = np.asarray(result.residuals)
     src = np.asarray(result.residual_source)
     mine = res[np.isin(src, obs_rows)] if src.shape == res.shape else res
@@ -343,7 +347,7 @@ def ball3d_figure(result, title: str = "R-test / 3D ball: deviation per componen
             if c == 0:
                 ax.set_ylabel("deviation (µm)")
             if row == 1:
-                ax.set_xlabel(f"{key} axis (deg)" if key else "sample")
+                ax.set_xlabel(f"{key} axis command (deg)" if key else "sample")
     n_setups = len({obs[i].get("setup", "") for i in rows})
     add_group_key(fig, axes.ravel().tolist(), uniq, colors,
                   "group" if n_setups > 1 else ("indexation" if key else "setup"))
@@ -360,6 +364,51 @@ def plot_ball3d(result, path: str, title: str = "R-test / 3D ball: deviation per
         return None
     save_figure(fig, path, dpi=110)
     return path
+
+
+# ---- double ball bar ------------------------------------------------------------------------------
+def dbb_residual_figure(result, title: str = "Double ball bar: residuals after the fit"):
+    """Residuals of the DBB observations against the sample index (recording
+    order), one panel per setup, plane and bar length; the plane named in
+    each panel's title. None without DBB data."""
+    from .dbb import trace_from_dataset
+    from .polar import MIN_SWEEP, dbb_groups
+
+    plt = _pyplot()
+    ds = result.dataset
+    groups = dbb_groups(ds)
+    if not groups:
+        return None
+    resid = {}
+    for k, r in zip(np.asarray(result.residual_source), np.asarray(result.residuals)):
+        if k >= 0:
+            resid.setdefault(int(k), float(r))
+    n = len(groups)
+    ncols = min(3, n)
+    nrows = -(-n // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(max(4.8 * ncols, 8.0), 2.7 * nrows + 0.9), squeeze=False,
+                             layout="constrained")
+    for k, (setup, length, idx) in enumerate(groups):
+        ax = axes[k // ncols][k % ncols]
+        plane = "none"
+        if len(idx) >= 3:
+            t = trace_from_dataset(ds.subset(idx), setup)
+            plane = t.plane if np.ptp(t.angles) >= MIN_SWEEP else f"none (sweep {np.ptp(t.angles):.2g}°)"
+        r = np.array([resid.get(i, np.nan) for i in idx]) * 1e3
+        x = np.arange(len(idx))
+        ax.plot(x, r, "-o", ms=2, lw=1.0, color="#1f5fbf")
+        ax.axhline(0, color="#888", lw=0.7)
+        _limits(ax, x, np.r_[r, 0.0], margin=0.06)
+        rms = float(np.sqrt(np.nanmean(np.square(r)))) if np.isfinite(r).any() else float("nan")
+        ax.set_title(f"setup {setup or '(none)'} · plane {plane} · bar {length:g} mm\n"
+                     f"{len(idx)} samples, rms {rms:.2f} µm", fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("sample (recording order)", fontsize=9)
+        ax.set_ylabel("residual (µm)", fontsize=9)
+    for k in range(n, nrows * ncols):
+        axes[k // ncols][k % ncols].set_visible(False)
+    fig.suptitle(title, fontsize=12)
+    return fig
 
 
 def plot_residual_histogram(result, path: str) -> str:

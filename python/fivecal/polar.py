@@ -213,7 +213,8 @@ def polar_grid_figure(panels: Sequence[Mapping], title: str = "", ncols: int = 2
     ncols = max(1, min(ncols, n))
     nrows = math.ceil(n / ncols)
     top_in, foot_in = 0.9, (0.25 + 0.2 * (footer.count("\n") + 1)) if footer else 0.1
-    fig = plt.figure(figsize=(5.6 * ncols, 6.2 * nrows + top_in + foot_in))
+    # one column gets a wider page: the figure title and legend need the room
+    fig = plt.figure(figsize=(max(5.6 * ncols, 8.4), 6.2 * nrows + top_in + foot_in))
     H = fig.get_figheight()
     handles: dict = {}
     uses: dict = {}
@@ -243,12 +244,13 @@ def polar_grid_figure(panels: Sequence[Mapping], title: str = "", ncols: int = 2
                 handles.setdefault(lb, hd)
                 uses[lb] = uses.get(lb, 0) + 1
     if title:
-        fig.suptitle(title, fontsize=13, y=1.0 - 0.12 / H, va="top")
+        fig.suptitle(title, fontsize=13, x=0.02, y=1.0 - 0.1 / H, ha="left", va="top")
     # a legend only for labels shared by panels (CW / CCW, recorded / residual);
-    # a label of one panel is in its title already
+    # a label of one panel is in its title already. It goes under the title,
+    # where a one-column figure has room for it too.
     if 0 < len(handles) <= 12 and (n == 1 or max(uses.values()) > 1):
-        fig.legend(list(handles.values()), list(handles), loc="upper right", fontsize=9, frameon=False,
-                   bbox_to_anchor=(0.995, 1.0 - 0.05 / H), ncol=min(len(handles), 4))
+        fig.legend(list(handles.values()), list(handles), loc="upper left", fontsize=9, frameon=False,
+                   bbox_to_anchor=(0.015, 1.0 - 0.38 / H), ncol=min(len(handles), 4))
     if footer:
         fig.text(0.02, 0.12 / H, footer, fontsize=8.5, color="#333", family="monospace", va="bottom")
     return fig
@@ -352,7 +354,7 @@ def plot_wang_patterns(patterns: Mapping, path: str, wang_path=None) -> str:
     if wang_path is not None:
         footer = (f"table ball on a circle of radius {wang_path.radius:g} mm at height "
                   f"{wang_path.centre[2]:.1f} mm; spindle ball {wang_path.height:g} mm above its centre; "
-                  f"bar {wang_path.bar_length:g} mm; angle = tracking angle (from +X, counter-clockwise "
+                  f"bar {wang_path.bar_length:g} mm;\nangle = tracking angle (from +X, counter-clockwise "
                   "seen from +Z)")
     for p in panels:
         p["plane"] = "XY"  # the table ball's circle is horizontal; the tracking angle is its angle
@@ -360,6 +362,10 @@ def plot_wang_patterns(patterns: Mapping, path: str, wang_path=None) -> str:
 
 
 # ---- the report's ball bar figures ----------------------------------------------------------
+#: A trace sweeping less than this (deg) is no circle: not drawn as a polar plot.
+MIN_SWEEP = 10.0
+
+
 def dbb_groups(dataset) -> list:
     """The DBB observations of a dataset split so that no plot mixes setups,
     planes or bar lengths: a list of ``(setup, length, indices)`` in the
@@ -376,7 +382,8 @@ def dbb_panels(result) -> tuple:
     setup and bar length, the recorded readings and the residuals the fit
     leaves, against the plane angle (:func:`angle_convention`). Returns
     ``(panels, skipped)``; ``skipped`` names groups too short for a trace
-    (fewer than 3 samples: no plane)."""
+    (fewer than 3 samples: no plane) or sweeping less than
+    :data:`MIN_SWEEP` degrees."""
     from .dbb import trace_from_dataset
 
     ds = result.dataset
@@ -391,6 +398,10 @@ def dbb_panels(result) -> tuple:
             skipped.append(f"{setup or '(no setup id)'} ({len(idx)} samples)")
             continue
         t = trace_from_dataset(ds.subset(idx), setup)
+        if np.ptp(t.angles) < MIN_SWEEP:
+            skipped.append(f"{setup or '(no setup id)'} (the balls sweep {np.ptp(t.angles):.3g}° about "
+                           "each other: no circle to draw)")
+            continue
         left = np.array([resid.get(i, np.nan) for i in idx])
         panels.append({"traces": [Trace(t.angles, t.readings, label="recorded reading"),
                                   Trace(t.angles, left, label="residual after the fit")],
@@ -414,20 +425,34 @@ def dbb_figure(result, title: Optional[str] = None):
 
 def report_figures(result, out_dir: str) -> list:
     """Hook of :func:`fivecal.report.write_report` for data with DBB
-    observations: ``[(png path, caption)]``."""
+    observations: ``[(png path, caption)]``: the polar panels and the
+    residuals against the sample index, one panel per setup, plane and bar
+    length in both."""
     import os
 
-    fig = dbb_figure(result)
-    if fig is None:
-        return []
+    from .plots import dbb_residual_figure
+
+    out = []
     panels, skipped = dbb_panels(result)
-    path = os.path.join(out_dir, "dbb_polar.png")
-    save_figure(fig, path, dpi=100)
-    setups = ", ".join(p["title"].split(" · ")[0].replace("setup ", "") for p in panels)
-    cap = (f"Double ball bar setups {setups}: one polar panel per setup, plane and bar length, the recorded "
-           "readings and what the identified model leaves unexplained (deviations from the nominal bar "
-           "length, magnified; angle counter-clockwise from the first axis of the plane towards the second, "
-           "seen from the positive normal).")
-    if skipped:
-        cap += f" Not drawn (too few samples for a trace): {', '.join(skipped)}."
-    return [(path, cap)]
+    if panels:
+        fig = dbb_figure(result)
+        path = os.path.join(out_dir, "dbb_polar.png")
+        save_figure(fig, path, dpi=100)
+        setups = ", ".join(p["setup"] or "(none)" for p in panels)
+        cap = (f"Double ball bar setups {setups}: one polar panel per setup, plane and bar length, the recorded "
+               "readings and what the identified model leaves unexplained (deviations from the nominal bar "
+               "length, magnified; angle counter-clockwise from the first axis of the plane towards the "
+               "second, seen from the positive normal).")
+        if skipped:
+            cap += f" Not drawn as polar plots: {'; '.join(skipped)}."
+        out.append((path, cap))
+    fig = dbb_residual_figure(result)
+    if fig is not None:
+        path = os.path.join(out_dir, "dbb_residuals.png")
+        save_figure(fig, path, dpi=100)
+        cap = ("Double ball bar residuals after the fit against the sample index (recording order), one panel "
+               "per setup, plane and bar length.")
+        if skipped and not panels:
+            cap += f" No polar plot: {'; '.join(skipped)}."
+        out.append((path, cap))
+    return out
