@@ -125,7 +125,7 @@ def _setup_counts(obs, kind: str) -> dict:
 def _dbb_setup_text(dataset) -> str:
     """Each DBB setup with its sample count, plane and bar length."""
     try:
-        from .polar import dbb_groups
+        from .polar import MIN_SWEEP, dbb_groups
         from .dbb import trace_from_dataset
     except ImportError:  # pragma: no cover - polar is part of the package
         return ", ".join(f"{k} ({n})" for k, n in _setup_counts(dataset.observations, "dbb").items())
@@ -134,7 +134,9 @@ def _dbb_setup_text(dataset) -> str:
         plane = ""
         if len(idx) >= 3:
             try:
-                plane = f", plane {trace_from_dataset(dataset.subset(idx), setup).plane}"
+                t = trace_from_dataset(dataset.subset(idx), setup)
+                plane = (f", plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
+                         f", no circle: the balls sweep {np.ptp(t.angles):.2g}°")
             except ValueError:
                 plane = ""
         parts.append(f"{setup or '(no setup id)'} ({_count(len(idx), 'sample')}{plane}, bar {length:g} mm)")
