@@ -112,10 +112,10 @@ def group_colors(n: int):
     (a colour bar orders them)."""
     import matplotlib
 
-    if n <= 10:
-        return list(matplotlib.colormaps["tab10"](np.arange(max(n, 1))))[:n]
     if n <= MAX_LEGEND:
-        return list(matplotlib.colormaps["Paired"](np.arange(n)))
+        # tab10 and two more dark ones (Paired's pale yellow vanished on white)
+        extra = [matplotlib.colors.to_rgba(c) for c in ("#222222", "#a6761d")]
+        return (list(matplotlib.colormaps["tab10"](np.arange(10))) + extra)[:n]
     return list(matplotlib.colormaps["viridis"](np.linspace(0.0, 0.95, n)))
 
 
@@ -230,11 +230,15 @@ def residual_vectors_figure(result, magnification: Optional[float] = None,
     except (AttributeError, TypeError):
         pass
 
-    def flat(ax, i, j, label_i, label_j, name):
+    def flat(ax, i, j, label_i, label_j, name, strip=0.0):
         ax.scatter(P[:, i], P[:, j], s=4, color="#aaa", zorder=1)
         ax.quiver(P[:, i], P[:, j], W[:, i], W[:, j], color=colors, angles="xy", scale_units="xy",
                   scale=1.0, width=0.004, headwidth=3.5, headlength=4, zorder=2)
-        _limits(ax, np.r_[P[:, i], T[:, i]], np.r_[P[:, j], T[:, j]], equal=True)
+        _limits(ax, np.r_[P[:, i], T[:, i]], np.r_[P[:, j], T[:, j]])
+        if strip:  # an empty strip at the bottom for the scale arrow
+            y0, y1 = ax.get_ylim()
+            ax.set_ylim(y0 - strip * (y1 - y0), y1)
+        # equal scales by shaping the box: the limits (hence what is inside) stay as set
         ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel(f"{label_i} (mm)")
         ax.set_ylabel(f"{label_j} (mm)")
@@ -242,17 +246,18 @@ def residual_vectors_figure(result, magnification: Optional[float] = None,
         ax.grid(alpha=0.3)
 
     axp = fig.add_subplot(gs[0, 1])
-    flat(axp, 0, 1, "x", "y", "plan view (x-y components)")
+    flat(axp, 0, 1, "x", "y", "plan view (x-y components)", strip=0.14)
     axe = fig.add_subplot(gs[1, 1])
     flat(axe, 0, 2, "x", "z", "elevation (x-z components)")
     # scale arrow: a round residual length at the same magnification
     ref_um = _nice_floor(vmax * 1e3)
     x0, x1 = axp.get_xlim()
     y0, y1 = axp.get_ylim()
-    axp.annotate("", xy=(x0 + 0.05 * (x1 - x0) + ref_um * 1e-3 * mag, y0 + 0.06 * (y1 - y0)),
-                 xytext=(x0 + 0.05 * (x1 - x0), y0 + 0.06 * (y1 - y0)),
+    axp.annotate("", xy=(x0 + 0.05 * (x1 - x0) + ref_um * 1e-3 * mag, y0 + 0.04 * (y1 - y0)),
+                 xytext=(x0 + 0.05 * (x1 - x0), y0 + 0.04 * (y1 - y0)),
                  arrowprops=dict(arrowstyle="->", color="k", lw=1.5))
-    axp.text(x0 + 0.05 * (x1 - x0), y0 + 0.09 * (y1 - y0), f"{ref_um:g} µm", fontsize=9)
+    axp.text(x0 + 0.07 * (x1 - x0) + ref_um * 1e-3 * mag, y0 + 0.04 * (y1 - y0), f"{ref_um:g} µm (scale)",
+             fontsize=9, va="center")
 
     if legend:
         axl = fig.add_subplot(gs[:, 2])
@@ -390,17 +395,18 @@ def dbb_residual_figure(result, title: str = "Double ball bar: residuals after t
                              layout="constrained")
     for k, (setup, length, idx) in enumerate(groups):
         ax = axes[k // ncols][k % ncols]
-        plane = "none"
+        where = "too few samples for a plane"
         if len(idx) >= 3:
             t = trace_from_dataset(ds.subset(idx), setup)
-            plane = t.plane if np.ptp(t.angles) >= MIN_SWEEP else f"none (sweep {np.ptp(t.angles):.2g}°)"
+            where = (f"plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
+                     f"no circle (the balls sweep {np.ptp(t.angles):.2g}°)")
         r = np.array([resid.get(i, np.nan) for i in idx]) * 1e3
         x = np.arange(len(idx))
         ax.plot(x, r, "-o", ms=2, lw=1.0, color="#1f5fbf")
         ax.axhline(0, color="#888", lw=0.7)
         _limits(ax, x, np.r_[r, 0.0], margin=0.06)
         rms = float(np.sqrt(np.nanmean(np.square(r)))) if np.isfinite(r).any() else float("nan")
-        ax.set_title(f"setup {setup or '(none)'} · plane {plane} · bar {length:g} mm\n"
+        ax.set_title(f"setup {setup or '(none)'} · {where} · bar {length:g} mm\n"
                      f"{len(idx)} samples, rms {rms:.2f} µm", fontsize=10)
         ax.grid(alpha=0.3)
         ax.set_xlabel("sample (recording order)", fontsize=9)

@@ -132,6 +132,7 @@ def assert_data_inside(fig):
     from matplotlib.collections import LineCollection, PathCollection
     from matplotlib.quiver import Quiver
 
+    fig.canvas.draw()  # the limits as drawn (equal aspect, layout engines)
     for ax in fig.axes:
         name = getattr(ax, "name", "rectilinear")
         if not ax.get_visible() or ax.get_label() == "<colorbar>":
