@@ -145,7 +145,8 @@ def draw_polar(ax, traces: Sequence, nominal_radius: float, scale: Optional[floa
     ax.fivecal_plane = name  # read back by tests and callers: the plane this panel shows
     if title:
         ax.set_title(title, fontsize=10, pad=14)
-    if legend:
+    # beyond 12 traces a legend is a wall of text: the caller names them (titles, annotations)
+    if legend and len(ax.get_legend_handles_labels()[1]) <= 12:
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 0.08), fontsize=8, frameon=False)
     return s
 

@@ -327,6 +327,13 @@ def test_angle_convention_text_and_no_blank_plane():
         polar.polar_figure([t], 100.0, "t", plane=("", ""))
 
 
+def test_polar_plot_of_many_traces_has_no_long_legend():
+    a = np.arange(0, 360, 5.0)
+    traces = [dbb.Trace(a, 0.001 * k * np.cos(np.radians(a)), label=f"run {k}") for k in range(20)]
+    assert legend_sizes(polar.polar_figure(traces, 100.0, "20 runs")) == []
+    assert legend_sizes(polar.polar_figure(traces[:3], 100.0, "3 runs")) == [4]  # and the nominal circle
+
+
 def test_sector_plot_keeps_the_nominal_circle_inside_the_sector():
     t = dbb.Trace(np.arange(-20, 71, 5.0), 0.01 * np.sin(np.radians(np.arange(-20, 71, 5.0))))
     fig = polar.polar_figure([t], 100.0, "arc", plane="YZ")
