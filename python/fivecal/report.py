@@ -149,14 +149,16 @@ def _data_section(dataset, result) -> str:
     for o in obs:
         types[o["type"]] = types.get(o["type"], 0) + 1
     rot = [a for a in dataset.machine.axis_names if a in "ABCS"]
-    idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs}
+    idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs if o["type"] != "dbb"}
     art = dataset.artefact or {}
     d = dataset.to_dict()
     tip_r = (d.get("probe") or {}).get("tip_radius")
     targets = sorted({o.get("target") for o in obs if o.get("target")}, key=str)
     rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none"),
             ("residual rows", f"{len(result.residuals)} (observations plus scale bars)"),
-            ("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–")]
+            ]
+    if set(types) - {"dbb"}:  # a ball bar sweeps the axes: its poses are no indexations
+        rows.append(("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"))
     if "facet" in types or "sphere" in types:
         rows += [("artefact", ", ".join(_count(len(art.get(k, [])), w) for k, w in
                                         (("facets", "facet"), ("spheres", "sphere"), ("scale_bars", "scale bar")))),
@@ -463,16 +465,15 @@ def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
         return [], f"DBB polar plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}"
 
 
-def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[Figure], List[str]]:
+def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[str]]:
     """The figures chosen by the kinds of data present: residual vectors for
     touch probing (facet, sphere), per-component deviations for ball3d
-    (R-test), polar panels for DBB. Returns (figures before the generic
-    ones, figures after them, notes)."""
+    (R-test), polar panels and residuals per setup for DBB. Returns
+    (figures, notes on figures that could not be drawn)."""
     from . import plots
 
     types = set(result.dataset.observation_types)
     first: List[Figure] = []
-    later: List[Figure] = []
     notes: List[str] = []
     if types & set(plots.PROBING):
         p = os.path.join(out_dir, "residual_vectors.png")
@@ -492,10 +493,10 @@ def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[Figure], Lis
         except Exception as e:  # a plotting problem must not lose the rest of the report
             notes.append(f"R-test plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}")
     dbb_figs, dbb_note = _dbb_figures(result, out_dir)
-    later += dbb_figs
+    first += dbb_figs
     if dbb_note:
         notes.append(dbb_note)
-    return first, later, notes
+    return first, notes
 
 
 def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] = None,
@@ -533,8 +534,8 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
         result.save(os.path.join(out_dir, "result.json"))
 
     figs: List[Figure] = []
-    kind_first, kind_later, notes = _kind_figures(result, out_dir)
-    figs += kind_first
+    kind_figs, notes = _kind_figures(result, out_dir)
+    figs += kind_figs
     p = os.path.join(out_dir, "residual_histogram.png")
     plots.plot_residual_histogram(result, p)
     figs.append((p, "Distribution of the residuals with the normal density of the a-posteriori σ̂."))
@@ -551,7 +552,6 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
         plots.plot_correlation(result, p, names=cnames, title="Correlation of the machine parameters")
         figs.append((p, "Correlation coefficients between the estimated machine parameters (setup "
                         "parameters omitted; strongly correlated pairs are listed under Identifiability)."))
-    figs += kind_later
     figs += list(figures)
 
     from . import guards

@@ -254,6 +254,7 @@ def test_data_table_lists_the_setups_of_each_kind(results, tmp_path):
     doc = open(write_report(results["dbb"], tmp_path / "d"), encoding="utf-8").read()
     assert "A2 (19 samples, plane YZ, bar 150 mm)" in doc and "ZX- (72 samples, plane ZX, bar 100 mm)" in doc
     assert "probe tip radius" not in doc  # no touch probing in this data
+    assert "rotary indexations" not in doc  # a ball bar sweeps the axes: no indexations
 
 
 # ---- legends: a colour bar beyond 12 groups ----------------------------------------------------------
