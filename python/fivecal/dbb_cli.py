@@ -263,27 +263,53 @@ def _circular(args) -> int:
 
 # ---- plot ------------------------------------------------------------------
 def _plot(args) -> int:
+    """One polar panel per dataset setup and bar length (each in its own
+    plane), and one for the CSV traces (the plane of --plane): planes and bar
+    lengths are never mixed on one chart."""
     from . import dbb
     from .dataset import load_dataset
-    from .polar import plot_polar
+    from .polar import dbb_groups, plane_name, plot_polar, plot_polar_grid
 
-    traces, plane = [], args.plane
+    panels, csv_traces = [], []
+    csv_plane = plane_name(args.plane) if args.plane else "XY"
     for inp in args.inputs:
         if inp.lower().endswith(".json"):
             ds = load_dataset(inp)
-            setups = [s.strip() for s in (args.setup or "").split(",") if s.strip()]
-            if not setups:
-                setups = sorted({o.get("setup", "") for o in ds.observations if o.get("type") == "dbb"})
-            for sid in setups:
-                t = dbb.trace_from_dataset(ds, sid)
-                plane = plane or t.plane
-                traces.append(t)
+            wanted = [s.strip() for s in (args.setup or "").split(",") if s.strip()]
+            known = {s for s, _, _ in dbb_groups(ds)}
+            for sid in wanted:
+                if sid not in known:
+                    dbb.trace_from_dataset(ds, sid)  # raises, naming the setups the dataset has
+            for sid, length, idx in dbb_groups(ds):
+                if wanted and sid not in wanted:
+                    continue
+                t = dbb.trace_from_dataset(ds.subset(idx), sid)
+                if args.plane and plane_name(args.plane) != t.plane:
+                    raise ValueError(f"--plane {args.plane}: setup {sid} of {inp} runs in the {t.plane} plane")
+                t.label = sid or os.path.basename(inp)
+                panels.append({"traces": [t], "nominal_radius": length, "plane": t.plane,
+                               "title": f"setup {sid or '(none)'} · plane {t.plane} · bar {length:g} mm",
+                               "annotations": [f"{len(idx)} samples ({os.path.basename(inp)})"]})
         else:
-            traces.append(dbb.read_trace_csv(inp))
-    plane = (plane or "XY").upper()
-    out = plot_polar(traces, args.out, args.radius, args.title or "DBB trace", scale=args.scale,
-                     plane=(plane[0], plane[1]))
-    print(f"polar plot written to {out}")
+            csv_traces.append(dbb.read_trace_csv(inp))
+    if csv_traces:
+        if args.radius is None:
+            raise ValueError("--radius: required for CSV traces (the nominal radius, mm)")
+        panels.append({"traces": csv_traces, "nominal_radius": args.radius, "plane": csv_plane,
+                       "title": f"CSV traces · plane {csv_plane} · R {args.radius:g} mm"})
+    if not panels:
+        raise ValueError("no DBB traces to plot")
+    if args.scale is not None:
+        for p in panels:
+            p["scale"] = args.scale
+    title = args.title or "DBB trace"
+    if len(panels) == 1:
+        p = panels[0]
+        out = plot_polar(p["traces"], args.out, p["nominal_radius"], f"{title}: {p['title']}", scale=args.scale,
+                         plane=p["plane"], annotations=p.get("annotations", ()))
+    else:
+        out = plot_polar_grid(panels, args.out, title, ncols=2 if len(panels) in (2, 4) else 3)
+    print(f"polar plot written to {out} ({len(panels)} panel{'s' if len(panels) != 1 else ''})")
     return 0
 
 
@@ -384,13 +410,18 @@ def register(sub) -> None:
 
     pp = dsub.add_parser("plot", formatter_class=RD, help="polar plot of DBB traces",
                          description="Polar plot of one or more traces: CSV files (angle deg, reading mm) "
-                         "or the DBB setups of a dataset JSON.",
+                         "or the DBB setups of a dataset JSON. Each dataset setup gets its own panel "
+                         "(its plane and bar length from the data); the CSV traces share one panel in "
+                         "the --plane plane. Angles: counter-clockwise from the first axis of the "
+                         "plane towards the second, seen from the positive normal (XY: from +X, seen "
+                         "from +Z); CSV angles are read in that convention.",
                          epilog="examples:\n  fivecal dbb plot cw.csv ccw.csv --radius 100 --out xy.png\n"
-                         "  fivecal dbb plot dataset.json --setup W1 --radius 100 --out w1.png")
+                         "  fivecal dbb plot dataset.json --setup W1 --out w1.png")
     pp.add_argument("inputs", nargs="+", help="CSV files and/or dataset JSON files")
-    pp.add_argument("--radius", type=POSITIVE, required=True, help="nominal radius (mm)")
+    pp.add_argument("--radius", type=POSITIVE, default=None,
+                    help="nominal radius of the CSV traces (mm); dataset setups use their bar length")
     pp.add_argument("--setup", help="dataset setups to plot (comma separated; default all)")
-    pp.add_argument("--plane", default=None, help="plane labels, e.g. XY (default from the data or XY)")
+    pp.add_argument("--plane", default=None, help="plane of the CSV traces: XY, YZ or ZX (default XY)")
     pp.add_argument("--scale", type=POSITIVE, default=None, help="ring spacing in µm (default automatic)")
     pp.add_argument("--title", default=None)
     pp.add_argument("--out", required=True, help="PNG to write")

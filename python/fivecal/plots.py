@@ -1,7 +1,7 @@
 """Plots: parameter bars with uncertainty, residual vectors in the table frame."""
 from __future__ import annotations
 
-from typing import Mapping, Optional
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -27,9 +27,11 @@ class _Figures:
         return fig
 
     @staticmethod
-    def subplots(nrows: int = 1, ncols: int = 1, squeeze: bool = True, subplot_kw=None, **kw):
+    def subplots(nrows: int = 1, ncols: int = 1, squeeze: bool = True, subplot_kw=None, sharex=False,
+                 sharey=False, **kw):
         fig = _Figures.figure(**kw)
-        return fig, fig.subplots(nrows, ncols, squeeze=squeeze, subplot_kw=subplot_kw)
+        return fig, fig.subplots(nrows, ncols, squeeze=squeeze, subplot_kw=subplot_kw, sharex=sharex,
+                                 sharey=sharey)
 
     @staticmethod
     def get_cmap(name: str):
@@ -86,41 +88,117 @@ def _nice_floor(x: float) -> float:
     return float(e)
 
 
-def indexation_labels(dataset) -> tuple:
-    """Per observation, the rotary indexation it was taken at (a tuple of
-    degrees over the machine's rotary axes, spindle included), and the axis
-    letters."""
+#: Beyond this many groups (indexations, setups) a plot shows a colour bar, not a legend.
+MAX_LEGEND = 12
+
+#: Observation types of touch probing (the residual-vector figure's data).
+PROBING = ("facet", "sphere")
+
+
+def indexation_labels(dataset, rows=None) -> tuple:
+    """Per observation (or per observation in ``rows``), the rotary
+    indexation it was taken at (a tuple of degrees over the machine's rotary
+    axes, spindle included), and the axis letters."""
     rot = [a for a in dataset.machine.axis_names if a in "ABCS"]
-    keys = [tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in dataset.observations]
+    obs = dataset.observations
+    rows = range(len(obs)) if rows is None else rows
+    keys = [tuple(round(float(obs[i]["axes"].get(a, 0.0)), 1) for a in rot) for i in rows]
     return keys, rot
+
+
+def group_colors(n: int):
+    """``n`` colours for groups: distinct categorical colours up to
+    :data:`MAX_LEGEND` (a legend names them), a sequential colour map beyond
+    (a colour bar orders them)."""
+    import matplotlib
+
+    if n <= MAX_LEGEND:
+        # tab10 and two more dark ones (Paired's pale yellow vanished on white)
+        extra = [matplotlib.colors.to_rgba(c) for c in ("#222222", "#a6761d")]
+        return (list(matplotlib.colormaps["tab10"](np.arange(10))) + extra)[:n]
+    return list(matplotlib.colormaps["viridis"](np.linspace(0.0, 0.95, n)))
+
+
+def add_group_key(fig, axes, labels, colors, title: str, legend_ax=None):
+    """A legend of the groups when there are at most :data:`MAX_LEGEND`,
+    else a colour bar with (at most 12) ticks labelled by group: never
+    hundreds of legend entries. ``axes``: the axes the key belongs to;
+    ``legend_ax``: an empty axes to hold the legend (default: the figure)."""
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.lines import Line2D
+
+    n = len(labels)
+    if n == 0:
+        return None
+    if n <= MAX_LEGEND:
+        handles = [Line2D([0], [0], color=c, lw=2.5) for c in colors]
+        where = legend_ax if legend_ax is not None else fig
+        kw = dict(loc="upper left", fontsize=8, title=title, title_fontsize=9, frameon=False, handlelength=1.4)
+        if legend_ax is None:
+            kw.update(loc="outside right upper") if fig.get_layout_engine() is not None else \
+                kw.update(loc="upper right")
+        return where.legend(handles, list(labels), **kw)
+    sm = ScalarMappable(norm=BoundaryNorm(np.arange(n + 1) - 0.5, n), cmap=ListedColormap(colors))
+    if legend_ax is not None:
+        legend_ax.axis("off")
+        cax = legend_ax.inset_axes([0.05, 0.02, 0.12, 0.96])
+        cb = fig.colorbar(sm, cax=cax)
+    else:
+        cb = fig.colorbar(sm, ax=axes, fraction=0.025, pad=0.015)
+    # every group named while the labels fit beside the bar, else 12 of them
+    ticks = np.arange(n) if n <= 24 else np.unique(np.round(np.linspace(0, n - 1, 12)).astype(int))
+    cb.set_ticks(ticks)
+    cb.set_ticklabels([labels[i] for i in ticks], fontsize=7)
+    cb.ax.minorticks_off()
+    cb.set_label(f"{title} ({n} groups)", fontsize=9)
+    return cb
 
 
 def _indexation_colors(plt, keys):
     uniq = list(dict.fromkeys(keys))
-    if len(uniq) <= 10:
-        palette = plt.get_cmap("tab10")(np.arange(10))
-    elif len(uniq) <= 20:
-        palette = plt.get_cmap("tab20")(np.arange(20))
-    else:
-        palette = np.vstack([plt.get_cmap("tab20")(np.arange(20)), plt.get_cmap("tab20b")(np.arange(20)),
-                             plt.get_cmap("Dark2")(np.arange(8))])
+    palette = group_colors(len(uniq))
     index = {k: i for i, k in enumerate(uniq)}
-    return uniq, palette, np.array([palette[index[k] % len(palette)] for k in keys])
+    return uniq, palette, np.array([palette[index[k]] for k in keys]) if keys else np.zeros((0, 4))
 
 
-def plot_residual_vectors(result, path: str, magnification: Optional[float] = None,
-                          title: str = "Unexplained residual vectors", legend: bool = True) -> str:
-    """Residual vectors (mm) drawn at the touch points in the table
-    (workpiece) frame, magnified, coloured by rotary indexation (thesis
-    Figure 4-7 style): a 3D view plus a plan (x-y) and an elevation (x-z) view
-    with a scale arrow. ``magnification`` defaults to the largest 1-2-5 step
-    that keeps the largest vector within 12 % of the artefact size (10000x or
-    20000x for micrometre residuals on a 400 mm table)."""
+def _limits(ax, xs, ys, margin: float = 0.06, equal: bool = False) -> None:
+    """Axes limits from the data (every point inside, with a margin)."""
+    xs, ys = np.asarray(xs, float).ravel(), np.asarray(ys, float).ravel()
+    xs, ys = xs[np.isfinite(xs)], ys[np.isfinite(ys)]
+    if not xs.size or not ys.size:
+        return
+    (x0, x1), (y0, y1) = (xs.min(), xs.max()), (ys.min(), ys.max())
+    if equal:
+        half = 0.5 * max(x1 - x0, y1 - y0, 1e-9) * (1 + 2 * margin)
+        cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        ax.set_xlim(cx - half, cx + half)
+        ax.set_ylim(cy - half, cy + half)
+        return
+    dx = (x1 - x0) * margin or max(abs(x0) * 0.05, 1e-9)
+    dy = (y1 - y0) * margin or max(abs(y0) * 0.05, 1e-9)
+    ax.set_xlim(x0 - dx, x1 + dx)
+    ax.set_ylim(y0 - dy, y1 + dy)
+
+
+def residual_vectors_figure(result, magnification: Optional[float] = None,
+                            title: str = "Unexplained residual vectors", legend: bool = True,
+                            kinds: Optional[Sequence[str]] = None):
+    """The Figure of :func:`plot_residual_vectors` (not saved).
+
+    ``kinds``: observation types drawn (default: the touch-probing ones,
+    facet and sphere, when the data has any, else every observation)."""
     plt = _pyplot()
-    obs_rows = np.array([i for i, o in enumerate(result.dataset.observations)])
+    ds = result.dataset
+    types = list(ds.observation_types)
+    if kinds is None:
+        kinds = PROBING if any(t in PROBING for t in types) else tuple(set(types))
+    obs_rows = np.array([i for i, t in enumerate(types) if t in kinds], dtype=int)
+    if obs_rows.size == 0:
+        raise ValueError(f"residual vectors: no observations of type {', '.join(kinds)}")
     P = np.asarray(result.points)[obs_rows]
     V = np.asarray(result.residual_vectors)[obs_rows]
-    keys, rot = indexation_labels(result.dataset)
+    keys, rot = indexation_labels(ds, obs_rows)
     uniq, palette, colors = _indexation_colors(plt, keys)
     span = float(np.ptp(P, axis=0).max()) or 1.0
     norms = np.linalg.norm(V, axis=1)
@@ -128,63 +206,215 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
     vmax = vmax or 1e-9
     mag = magnification or _nice_floor(0.12 * span / vmax)
     W = V * mag
+    T = P + W
 
     fig = plt.figure(figsize=(13.5, 7.6))
     gs = fig.add_gridspec(2, 3, width_ratios=[1.45, 1, 0.34], height_ratios=[1.3, 1], wspace=0.22,
-                          hspace=0.32, left=0.01, right=0.99, top=0.88, bottom=0.07)
+                          hspace=0.32, left=0.01, right=0.97, top=0.88, bottom=0.07)
     ax3 = fig.add_subplot(gs[:, 0], projection="3d")
     ax3.scatter(P[:, 0], P[:, 1], P[:, 2], s=3, color="#aaa", depthshade=False)
     ax3.quiver(P[:, 0], P[:, 1], P[:, 2], W[:, 0], W[:, 1], W[:, 2], colors=colors,
                arrow_length_ratio=0.25, linewidth=1.6, normalize=False)
+    # 3D axes do not clip: the limits hold every arrow (tail and tip)
+    lo, hi = np.minimum(P.min(axis=0), T.min(axis=0)), np.maximum(P.max(axis=0), T.max(axis=0))
+    pad = 0.05 * np.maximum(hi - lo, 0.05 * span)
+    ax3.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
+    ax3.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
+    ax3.set_zlim(lo[2] - pad[2], hi[2] + pad[2])
     ax3.set_xlabel("x (mm)")
     ax3.set_ylabel("y (mm)")
     ax3.set_title("3D view (table frame; z up, mm)", fontsize=12)
     ax3.view_init(elev=28, azim=-60)
     try:
-        ax3.set_box_aspect(tuple(np.maximum(np.ptp(P, axis=0), 0.45 * span)))
+        ax3.set_box_aspect(tuple(np.maximum(hi - lo + 2 * pad, 0.45 * span)))
     except (AttributeError, TypeError):
         pass
 
-    def flat(ax, i, j, label_i, label_j, name):
+    def flat(ax, i, j, label_i, label_j, name, strip=0.0):
         ax.scatter(P[:, i], P[:, j], s=4, color="#aaa", zorder=1)
         ax.quiver(P[:, i], P[:, j], W[:, i], W[:, j], color=colors, angles="xy", scale_units="xy",
                   scale=1.0, width=0.004, headwidth=3.5, headlength=4, zorder=2)
-        ax.set_aspect("equal", adjustable="datalim")
+        _limits(ax, np.r_[P[:, i], T[:, i]], np.r_[P[:, j], T[:, j]])
+        if strip:  # an empty strip at the bottom for the scale arrow
+            y0, y1 = ax.get_ylim()
+            ax.set_ylim(y0 - strip * (y1 - y0), y1)
+        # equal scales by shaping the box: the limits (hence what is inside) stay as set
+        ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel(f"{label_i} (mm)")
         ax.set_ylabel(f"{label_j} (mm)")
         ax.set_title(name, fontsize=11)
         ax.grid(alpha=0.3)
 
     axp = fig.add_subplot(gs[0, 1])
-    flat(axp, 0, 1, "x", "y", "plan view (x-y components)")
+    flat(axp, 0, 1, "x", "y", "plan view (x-y components)", strip=0.14)
     axe = fig.add_subplot(gs[1, 1])
     flat(axe, 0, 2, "x", "z", "elevation (x-z components)")
     # scale arrow: a round residual length at the same magnification
     ref_um = _nice_floor(vmax * 1e3)
     x0, x1 = axp.get_xlim()
     y0, y1 = axp.get_ylim()
-    axp.annotate("", xy=(x0 + 0.05 * (x1 - x0) + ref_um * 1e-3 * mag, y0 + 0.06 * (y1 - y0)),
-                 xytext=(x0 + 0.05 * (x1 - x0), y0 + 0.06 * (y1 - y0)),
+    axp.annotate("", xy=(x0 + 0.05 * (x1 - x0) + ref_um * 1e-3 * mag, y0 + 0.04 * (y1 - y0)),
+                 xytext=(x0 + 0.05 * (x1 - x0), y0 + 0.04 * (y1 - y0)),
                  arrowprops=dict(arrowstyle="->", color="k", lw=1.5))
-    axp.text(x0 + 0.05 * (x1 - x0), y0 + 0.09 * (y1 - y0), f"{ref_um:g} µm", fontsize=9)
+    axp.text(x0 + 0.07 * (x1 - x0) + ref_um * 1e-3 * mag, y0 + 0.04 * (y1 - y0), f"{ref_um:g} µm (scale)",
+             fontsize=9, va="center")
 
     if legend:
         axl = fig.add_subplot(gs[:, 2])
         axl.axis("off")
-        from matplotlib.lines import Line2D
-
-        handles = [Line2D([0], [0], color=palette[i % len(palette)], lw=3) for i in range(len(uniq))]
         labels = ["(" + ", ".join(f"{v:g}" for v in k) + ")" for k in uniq]
-        ncol = 1 if len(uniq) <= 28 else 2
-        axl.legend(handles, labels, loc="upper left", fontsize=8 if len(uniq) <= 28 else 7, ncol=ncol,
-                   title=f"{', '.join(rot)} (deg)", title_fontsize=9, frameon=False,
-                   handlelength=1.2, columnspacing=0.8)
-    rms = float(np.sqrt(np.mean(np.square(result.residuals)))) if np.size(result.residuals) else 0.0
-    fig.suptitle(f"{title}\nmagnified {mag:g}x; residual rms {rms * 1e3:.2f} µm, largest vector "
-                 f"{vmax * 1e3:.2f} µm; colour = indexation", fontsize=12)
+        add_group_key(fig, [ax3, axp, axe], labels, palette,
+                      f"{', '.join(rot)} (deg)" + (", in measurement order" if len(uniq) > MAX_LEGEND else ""),
+                      legend_ax=axl)
+    res = np.asarray(result.residuals)
+    src = np.asarray(result.residual_source)
+    mine = res[np.isin(src, obs_rows)] if src.shape == res.shape else res
+    rms = float(np.sqrt(np.mean(np.square(mine)))) if mine.size else 0.0
+    what = "touches" if set(kinds) <= set(PROBING) else ", ".join(sorted(set(kinds)))
+    fig.suptitle(f"{title}\nmagnified {mag:g}x; {len(obs_rows)} {what}, residual rms {rms * 1e3:.2f} µm, "
+                 f"largest vector {vmax * 1e3:.2f} µm; colour = indexation", fontsize=12)
+    return fig
+
+
+def plot_residual_vectors(result, path: str, magnification: Optional[float] = None,
+                          title: str = "Unexplained residual vectors", legend: bool = True,
+                          kinds: Optional[Sequence[str]] = None) -> str:
+    """Residual vectors (mm) drawn at the touch points in the table
+    (workpiece) frame, magnified, coloured by rotary indexation (thesis
+    Figure 4-7 style): a 3D view plus a plan (x-y) and an elevation (x-z) view
+    with a scale arrow. ``magnification`` defaults to the largest 1-2-5 step
+    that keeps the largest vector within 12 % of the artefact size (10000x or
+    20000x for micrometre residuals on a 400 mm table). Up to 12 indexations
+    get a legend, more a colour bar. Only touch-probing observations are
+    drawn when there are any (``kinds`` chooses others)."""
+    fig = residual_vectors_figure(result, magnification, title, legend, kinds)
     save_figure(fig, path, dpi=110)
-    plt.close(fig)
     return path
+
+
+# ---- R-test / 3D ball data -----------------------------------------------------------------------
+def ball3d_groups(dataset) -> tuple:
+    """How the ball3d (R-test, 3D point) observations are plotted: the rotary
+    axis on the horizontal axis (the one taking the most distinct positions)
+    and, per observation, its group (setup and the other rotary axes'
+    positions). Returns ``(rows, angle axis or None, angles, group labels)``."""
+    obs = dataset.observations
+    rows = [i for i, o in enumerate(obs) if o.get("type") == "ball3d"]
+    rot = [a for a in dataset.machine.axis_names if a in "ABC"]
+    pos = {a: np.array([float(obs[i]["axes"].get(a, 0.0)) for i in rows]) for a in rot}
+    moving = [a for a in rot if rows and np.ptp(pos[a]) > 1e-9]
+    key = max(moving, key=lambda a: (len(np.unique(np.round(pos[a], 3))), np.ptp(pos[a]))) if moving else None
+    angles = pos[key] if key else np.arange(len(rows), dtype=float)
+    setups = {obs[i].get("setup", "") for i in rows}
+    labels = []
+    for n, i in enumerate(rows):
+        parts = [obs[i].get("setup", "") or "(no setup)"] if len(setups) > 1 else []
+        parts += [f"{a} {pos[a][n]:g}°" for a in moving if a != key]
+        labels.append(", ".join(parts) or (obs[i].get("setup", "") or "all"))
+    return rows, key, angles, labels
+
+
+def ball3d_figure(result, title: str = "R-test / 3D ball: deviation per component"):
+    """Per-component (dx, dy, dz) deviation of the ball3d observations
+    against the rotary angle: the recorded deviation (top row) and the
+    residual the fit leaves (bottom row), one panel per component, one line
+    per setup / indexation group (legend up to 12 groups, colour bar beyond).
+    None without ball3d data."""
+    plt = _pyplot()
+    ds = result.dataset
+    rows, key, angles, labels = ball3d_groups(ds)
+    if not rows:
+        return None
+    obs = ds.observations
+    rec = np.array([obs[i]["measured"] for i in rows], float) * 1e3
+    src = np.asarray(result.residual_source)
+    res_all = np.asarray(result.residuals)
+    left = np.full((len(rows), 3), np.nan)
+    for n, i in enumerate(rows):
+        r = res_all[src == i]
+        if r.size == 3:
+            left[n] = r * 1e3
+    uniq = list(dict.fromkeys(labels))
+    colors = group_colors(len(uniq))
+    gi = np.array([uniq.index(l) for l in labels])
+    fig, axes = plt.subplots(2, 3, figsize=(14.5, 7.6), sharex=True, squeeze=False, layout="constrained")
+    for row, (data, what) in enumerate(((rec, "recorded"), (left, "residual after the fit"))):
+        for c, comp in enumerate(("dx", "dy", "dz")):
+            ax = axes[row][c]
+            for g in range(len(uniq)):
+                sel = np.flatnonzero(gi == g)
+                sel = sel[np.argsort(angles[sel], kind="stable")]
+                ax.plot(angles[sel], data[sel, c], "-o", ms=2.5, lw=1.1, color=colors[g])
+            _limits(ax, angles, data[:, c], margin=0.05)
+            ax.axhline(0, color="#888", lw=0.7)
+            ax.set_title(f"{comp} {what}", fontsize=11)
+            ax.grid(alpha=0.3)
+            if c == 0:
+                ax.set_ylabel("deviation (µm)")
+            if row == 1:
+                ax.set_xlabel(f"{key} axis command (deg)" if key else "sample")
+    n_setups = len({obs[i].get("setup", "") for i in rows})
+    add_group_key(fig, axes.ravel().tolist(), uniq, colors,
+                  "group" if n_setups > 1 else ("indexation" if key else "setup"))
+    fig.suptitle(f"{title}: {len(rows)} samples, {n_setups} setup{'s' if n_setups != 1 else ''} "
+                 f"({', '.join(sorted({obs[i].get('setup', '') or '(none)' for i in rows}))}); "
+                 "components in the workpiece (table) frame", fontsize=12)
+    return fig
+
+
+def plot_ball3d(result, path: str, title: str = "R-test / 3D ball: deviation per component") -> Optional[str]:
+    """Write :func:`ball3d_figure` as a PNG; returns the path (None without ball3d data)."""
+    fig = ball3d_figure(result, title)
+    if fig is None:
+        return None
+    save_figure(fig, path, dpi=110)
+    return path
+
+
+# ---- double ball bar ------------------------------------------------------------------------------
+def dbb_residual_figure(result, title: str = "Double ball bar: residuals after the fit"):
+    """Residuals of the DBB observations against the sample index (recording
+    order), one panel per setup, plane and bar length; the plane named in
+    each panel's title. None without DBB data."""
+    from .dbb import trace_from_dataset
+    from .polar import MIN_SWEEP, dbb_groups
+
+    plt = _pyplot()
+    ds = result.dataset
+    groups = dbb_groups(ds)
+    if not groups:
+        return None
+    resid = {}
+    for k, r in zip(np.asarray(result.residual_source), np.asarray(result.residuals)):
+        if k >= 0:
+            resid.setdefault(int(k), float(r))
+    n = len(groups)
+    ncols = min(3, n)
+    nrows = -(-n // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(max(4.8 * ncols, 8.0), 2.7 * nrows + 0.9), squeeze=False,
+                             layout="constrained")
+    for k, (setup, length, idx) in enumerate(groups):
+        ax = axes[k // ncols][k % ncols]
+        where = "too few samples for a plane"
+        if len(idx) >= 3:
+            t = trace_from_dataset(ds.subset(idx), setup)
+            where = (f"plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
+                     f"no circle (the balls sweep {np.ptp(t.angles):.2g}°)")
+        r = np.array([resid.get(i, np.nan) for i in idx]) * 1e3
+        x = np.arange(len(idx))
+        ax.plot(x, r, "-o", ms=2, lw=1.0, color="#1f5fbf")
+        ax.axhline(0, color="#888", lw=0.7)
+        _limits(ax, x, np.r_[r, 0.0], margin=0.06)
+        rms = float(np.sqrt(np.nanmean(np.square(r)))) if np.isfinite(r).any() else float("nan")
+        ax.set_title(f"setup {setup or '(none)'} · {where} · bar {length:g} mm\n"
+                     f"{len(idx)} samples, rms {rms:.2f} µm", fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("sample (recording order)", fontsize=9)
+        ax.set_ylabel("residual (µm)", fontsize=9)
+    for k in range(n, nrows * ncols):
+        axes[k // ncols][k % ncols].set_visible(False)
+    fig.suptitle(title, fontsize=12)
+    return fig
 
 
 def plot_residual_histogram(result, path: str) -> str:

@@ -14,7 +14,15 @@ magnification a shifted circle turns egg- or pear-shaped (Wang et al.'s
 "pear shape gradually" as an error grows at a fixed magnification).
 
 i.e. how many times the deviations are enlarged relative to the drawn circle.
-Angles: 0 deg along the first plane axis, counter-clockwise positive.
+
+One angle convention for every ball bar plot of the package (stated on each
+plot by :func:`angle_convention`): the angle of a sample is measured in the
+plane of the trace, counter-clockwise from the first axis of the plane
+towards the second, seen from the positive normal (XY: from +X towards +Y,
+seen from +Z; YZ: from +Y, seen from +X; ZX: from +Z, seen from +Y). Traces
+of a dataset get it from :func:`fivecal.dbb.trace_from_dataset` (the
+geometric angle of the moving ball about the fixed one), never from a
+rotary axis command, whose sign depends on the axis direction.
 """
 from __future__ import annotations
 
@@ -35,6 +43,26 @@ def _pyplot():
     from .plots import _pyplot as figures
 
     return figures()
+
+
+_NORMALS = {"XY": "+Z", "YZ": "+X", "ZX": "+Y", "YX": "−Z", "ZY": "−X", "XZ": "−Y"}
+
+
+def plane_name(plane) -> str:
+    """'XY', 'YZ', 'ZX' (or a reversed pair) from a string or a pair of axis
+    letters; ValueError for anything else, so that no plot goes out with a
+    blank plane."""
+    name = "".join(str(p) for p in plane[:2]).upper() if plane is not None else ""
+    if name not in _NORMALS:
+        raise ValueError(f"plane: {name or plane!r}; expected XY, YZ or ZX")
+    return name
+
+
+def angle_convention(plane) -> str:
+    """The angle convention of the package, in words, for one plane."""
+    name = plane_name(plane)
+    return (f"angle: counter-clockwise from +{name[0]} towards +{name[1]}, "
+            f"seen from {_NORMALS[name]}")
 
 
 def nice_scale(max_abs_um: float) -> float:
@@ -62,10 +90,16 @@ def _as_trace(t) -> Trace:
 def draw_polar(ax, traces: Sequence, nominal_radius: float, scale: Optional[float] = None,
                plane: Sequence[str] = ("X", "Y"), title: str = "", arc: Optional[tuple] = None,
                colors: Optional[Sequence[str]] = None, legend: bool = True) -> float:
-    """Draw traces on a matplotlib polar axes; returns the ring spacing (µm)."""
+    """Draw traces on a matplotlib polar axes; returns the ring spacing (µm).
+
+    ``plane``: the plane of the traces ('XY', 'YZ', 'ZX' or a pair of
+    letters); the angles must follow :func:`angle_convention`. Deviations
+    beyond the outer ring are drawn on it (clipped), and within a sector
+    (``arc``) nothing is drawn outside the sector."""
+    name = plane_name(plane)
     traces = [_as_trace(t) for t in traces]
     dev = [np.asarray(t.readings) * 1e3 for t in traces]
-    big = max([float(np.max(np.abs(d))) for d in dev if d.size] + [1e-6])
+    big = max([float(np.nanmax(np.abs(d))) for d in dev if d.size and np.isfinite(d).any()] + [1e-6])
     s = scale or nice_scale(big)
     ax.set_rorigin(-3 * s)
     ax.set_rlim(-2 * s, 2 * s)
@@ -73,7 +107,8 @@ def draw_polar(ax, traces: Sequence, nominal_radius: float, scale: Optional[floa
     ax.set_yticklabels([f"{-2 * s:g}", f"{-s:g}", "0", f"+{s:g}", f"+{2 * s:g} µm"], fontsize=7,
                        color="#555")
     ax.set_rlabel_position(67.5)
-    th = np.linspace(0, 2 * np.pi, 721)
+    lo, hi = arc if arc is not None else (0.0, 360.0)
+    th = np.radians(np.linspace(lo, hi, 721))
     ax.plot(th, np.zeros_like(th), ls="--", lw=1.0, color="#333", label=f"nominal R {nominal_radius:g} mm")
     for i, (t, d) in enumerate(zip(traces, dev)):
         if colors is not None:
@@ -87,19 +122,19 @@ def draw_polar(ax, traces: Sequence, nominal_radius: float, scale: Optional[floa
         a = np.radians(np.asarray(t.angles))
         clipped = np.clip(d, -2 * s, 2 * s)
         ax.plot(a, clipped, lw=1.3, color=c, label=t.label or None)
-        if a.size:
-            ax.plot(a[:1], clipped[:1], "o", ms=4, color=c)
-            if a.size > 4:  # an arrowhead shows the direction of travel
-                j = max(1, a.size // 12)
+        ok = np.flatnonzero(np.isfinite(clipped))
+        if ok.size:
+            ax.plot(a[ok[:1]], clipped[ok[:1]], "o", ms=4, color=c)
+            if ok.size > 4:  # an arrowhead shows the direction of travel
+                j = ok[max(1, ok.size // 12)]
                 ax.annotate("", xy=(a[j], clipped[j]), xytext=(a[j - 1], clipped[j - 1]),
                             arrowprops=dict(arrowstyle="-|>", color=c, lw=1.2, mutation_scale=12))
-    p1, p2 = plane[0], plane[1]
+    p1, p2 = name[0], name[1]
     ax.set_xticks(np.radians([0, 45, 90, 135, 180, 225, 270, 315]))
     ax.set_xticklabels([f"+{p1}  0°", "45°", f"+{p2}\n90°", "135°", f"180°  −{p1}", "225°",
                         f"270°\n−{p2}", "315°"], fontsize=8)
     ax.grid(True, color="#ccc", lw=0.6)
     if arc is not None:
-        lo, hi = arc
         ax.set_thetamin(lo)
         ax.set_thetamax(hi)
         step = 15 if hi - lo <= 120 else 30
@@ -107,9 +142,11 @@ def draw_polar(ax, traces: Sequence, nominal_radius: float, scale: Optional[floa
         names = {0: f"+{p1} ", 90: f"+{p2} ", 180: f"−{p1} ", 270: f"−{p2} "}
         ax.set_xticks(np.radians(ticks))
         ax.set_xticklabels([f"{names.get(int(t) % 360, '')}{t:g}°" for t in ticks], fontsize=8)
+    ax.fivecal_plane = name  # read back by tests and callers: the plane this panel shows
     if title:
         ax.set_title(title, fontsize=10, pad=14)
-    if legend:
+    # beyond 12 traces a legend is a wall of text: the caller names them (titles, annotations)
+    if legend and len(ax.get_legend_handles_labels()[1]) <= 12:
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 0.08), fontsize=8, frameon=False)
     return s
 
@@ -117,11 +154,36 @@ def draw_polar(ax, traces: Sequence, nominal_radius: float, scale: Optional[floa
 def _arc(traces) -> Optional[tuple]:
     """Sector limits (deg) for traces covering less than 300 deg."""
     angs = np.concatenate([np.asarray(_as_trace(t).angles) for t in traces])
+    angs = angs[np.isfinite(angs)]
     if angs.size == 0 or np.ptp(angs) >= 300:
         return None
     lo, hi = float(np.min(angs)), float(np.max(angs))
     lo, hi = 5 * math.floor(lo / 5) - 5, 5 * math.ceil(hi / 5) + 5
     return (lo, hi)
+
+
+def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale: Optional[float] = None,
+                 annotations: Sequence[str] = (), plane: Sequence[str] = ("X", "Y"), arc="auto",
+                 colors=None):
+    """The matplotlib Figure of :func:`plot_polar` (not saved)."""
+    plt = _pyplot()
+    name = plane_name(plane)
+    traces = [_as_trace(t) for t in traces]
+    fig = plt.figure(figsize=(11.5, 7.4))
+    ax = fig.add_axes([0.04, 0.10, 0.52, 0.70], projection="polar")
+    s = draw_polar(ax, traces, nominal_radius, scale, name, "", _arc(traces) if arc == "auto" else arc, colors)
+    M = magnification(nominal_radius, s)
+    fig.suptitle(title, fontsize=13, x=0.03, ha="left", y=0.98)
+    fig.text(0.03, 0.915, f"plane {name}  ·  scale {s:g} µm/div  ·  deviations magnified ×{M:,.0f}  ·  "
+             f"nominal radius {nominal_radius:g} mm", fontsize=9, color="#333")
+    fig.text(0.03, 0.88, angle_convention(name), fontsize=9, color="#333")
+    y = 0.80
+    for line in annotations:
+        bold = line.endswith(":") or line.startswith("## ")
+        fig.text(0.62, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
+                 weight="bold" if bold else "normal")
+        y -= 0.031
+    return fig
 
 
 def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = "",
@@ -131,63 +193,77 @@ def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = 
 
     ``traces``: :class:`fivecal.dbb.Trace` objects (labels starting with CW /
     CCW get the ballbar colours), ``scale``: ring spacing in µm (default:
-    chosen from the data), ``annotations``: lines printed beside the plot.
+    chosen from the data), ``annotations``: lines printed beside the plot,
+    ``plane``: the plane of the traces (angles as :func:`angle_convention`
+    states, which the plot prints).
     """
-    plt = _pyplot()
-    traces = [_as_trace(t) for t in traces]
-    fig = plt.figure(figsize=(11.5, 7.4))
-    ax = fig.add_axes([0.04, 0.10, 0.52, 0.72], projection="polar")
-    s = draw_polar(ax, traces, nominal_radius, scale, plane, "", _arc(traces) if arc == "auto" else arc, colors)
-    M = magnification(nominal_radius, s)
-    fig.suptitle(title, fontsize=13, x=0.03, ha="left", y=0.98)
-    fig.text(0.03, 0.915, f"scale {s:g} µm/div   ·   deviations magnified ×{M:,.0f}   ·   "
-             f"nominal radius {nominal_radius:g} mm   ·   plane {''.join(plane[:2])}",
-             fontsize=9, color="#333")
-    y = 0.84
-    for line in annotations:
-        bold = line.endswith(":") or line.startswith("## ")
-        fig.text(0.62, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
-                 weight="bold" if bold else "normal")
-        y -= 0.031
+    fig = polar_figure(traces, nominal_radius, title, scale, annotations, plane, arc, colors)
     save_figure(fig, path, dpi=110)
-    plt.close(fig)
     return path
+
+
+def polar_grid_figure(panels: Sequence[Mapping], title: str = "", ncols: int = 2, footer: str = ""):
+    """The matplotlib Figure of :func:`plot_polar_grid` (not saved): one
+    polar axes per panel, the panel's plane in its title, the angle
+    convention under it, and one figure legend for the trace labels shared
+    by the panels (none beyond 12 labels: the titles name the traces then)."""
+    plt = _pyplot()
+    n = len(panels)
+    if n == 0:
+        raise ValueError("polar grid: no panels")
+    ncols = max(1, min(ncols, n))
+    nrows = math.ceil(n / ncols)
+    top_in, foot_in = 0.9, (0.25 + 0.2 * (footer.count("\n") + 1)) if footer else 0.1
+    # one column gets a wider page: the figure title and legend need the room
+    fig = plt.figure(figsize=(max(5.6 * ncols, 8.4), 6.2 * nrows + top_in + foot_in))
+    H = fig.get_figheight()
+    handles: dict = {}
+    uses: dict = {}
+    for i, p in enumerate(panels):
+        r, c = divmod(i, ncols)
+        w, h = 1.0 / ncols, (1.0 - (top_in + foot_in) / H) / nrows
+        left = c * w + 0.09 * w
+        bottom = 1.0 - top_in / H - (r + 1) * h + 0.27 * h
+        ax = fig.add_axes([left, bottom, 0.78 * w, 0.60 * h], projection="polar")
+        traces = [_as_trace(t) for t in p["traces"]]
+        arc = p.get("arc", "auto")
+        name = plane_name(p.get("plane", ("X", "Y")))
+        s = draw_polar(ax, traces, p["nominal_radius"], p.get("scale"), name, "",
+                       _arc(traces) if arc == "auto" else arc, p.get("colors"), legend=False)
+        M = magnification(p["nominal_radius"], s)
+        head = p.get("title", "")
+        if f"plane {name}" not in head:
+            head = f"{head} · plane {name}" if head else f"plane {name}"
+        # the panel title belongs to its axes (tests and readers find the plane there)
+        ax.set_title(head, fontsize=11, weight="bold", loc="left", x=-0.12, pad=26)
+        lines = [angle_convention(name), f"{s:g} µm/div, ×{M:,.0f}"] + list(p.get("annotations", ()))
+        for k, line in enumerate(lines):
+            fig.text(left - 0.05 * w, bottom - 0.1 * h - k * 0.042 * h, line, fontsize=8.5,
+                     family="monospace", color="#555" if k < 2 else "#222")
+        for hd, lb in zip(*ax.get_legend_handles_labels()):
+            if not lb.startswith("nominal R"):
+                handles.setdefault(lb, hd)
+                uses[lb] = uses.get(lb, 0) + 1
+    if title:
+        fig.suptitle(title, fontsize=13, x=0.02, y=1.0 - 0.1 / H, ha="left", va="top")
+    # a legend only for labels shared by panels (CW / CCW, recorded / residual);
+    # a label of one panel is in its title already. It goes under the title,
+    # where a one-column figure has room for it too.
+    if 0 < len(handles) <= 12 and (n == 1 or max(uses.values()) > 1):
+        fig.legend(list(handles.values()), list(handles), loc="upper left", fontsize=9, frameon=False,
+                   bbox_to_anchor=(0.015, 1.0 - 0.38 / H), ncol=min(len(handles), 4))
+    if footer:
+        fig.text(0.02, 0.12 / H, footer, fontsize=8.5, color="#333", family="monospace", va="bottom")
+    return fig
 
 
 def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols: int = 2,
                     footer: str = "") -> str:
     """Several polar plots on one PNG. Each panel: ``traces``,
-    ``nominal_radius``, optional ``title``, ``scale``, ``plane``,
-    ``annotations`` (short lines under the plot) and ``arc``."""
-    plt = _pyplot()
-    n = len(panels)
-    nrows = math.ceil(n / ncols)
-    top_in, foot_in = 0.6, (0.25 + 0.2 * (footer.count("\n") + 1)) if footer else 0.1
-    fig = plt.figure(figsize=(5.6 * ncols, 5.9 * nrows + top_in + foot_in))
-    H = fig.get_figheight()
-    for i, p in enumerate(panels):
-        r, c = divmod(i, ncols)
-        w, h = 1.0 / ncols, (1.0 - (top_in + foot_in) / H) / nrows
-        left = c * w + 0.09 * w
-        bottom = 1.0 - top_in / H - (r + 1) * h + 0.24 * h
-        ax = fig.add_axes([left, bottom, 0.78 * w, 0.64 * h], projection="polar")
-        traces = [_as_trace(t) for t in p["traces"]]
-        arc = p.get("arc", "auto")
-        s = draw_polar(ax, traces, p["nominal_radius"], p.get("scale"), p.get("plane", ("X", "Y")), "",
-                       _arc(traces) if arc == "auto" else arc, p.get("colors"), legend=False)
-        M = magnification(p["nominal_radius"], s)
-        fig.text(left - 0.05 * w, bottom + 0.64 * h + 0.07 * h, p.get("title", ""), fontsize=11,
-                 weight="bold")
-        lines = [f"{s:g} µm/div, ×{M:,.0f}"] + list(p.get("annotations", ()))
-        for k, line in enumerate(lines):
-            fig.text(left - 0.05 * w, bottom - 0.1 * h - k * 0.045 * h, line, fontsize=8.5,
-                     family="monospace", color="#222" if k else "#555")
-    if title:
-        fig.suptitle(title, fontsize=13, y=0.995)
-    if footer:
-        fig.text(0.02, 0.12 / H, footer, fontsize=8.5, color="#333", family="monospace", va="bottom")
+    ``nominal_radius``, ``plane`` (default XY), optional ``title``,
+    ``scale``, ``annotations`` (short lines under the plot) and ``arc``."""
+    fig = polar_grid_figure(panels, title, ncols, footer)
     save_figure(fig, path, dpi=100)
-    plt.close(fig)
     return path
 
 
@@ -223,21 +299,24 @@ def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
 
 def plot_four_step(result, path: str) -> str:
     """The four Jiang & Cripps steps as polar plots of the raw readings
-    (plane angle of the pivot about the spindle ball), with each step's
-    fitted centre, and the PIGEs of both methods underneath."""
+    against the angle of the moving ball about the fixed one in the plane it
+    sweeps (the package's angle convention, not the rotary command: an axis
+    whose direction is a negative basis vector turns the other way), with
+    each step's fitted centre, and the PIGEs of both methods underneath."""
+    from .dbb import trace_from_dataset
     from .units import display_scale
 
     ds = result.dataset
     panels = []
-    planes = {"A": ("Y", "Z"), "C": ("X", "Y")}
+    planes = {"A": ("Y", "Z"), "C": ("X", "Y")}  # coordinates of the fitted centre
     for s in result.steps:
         obs = ds.observations
-        r = np.array([obs[i]["reading"] for i in s.observations])
         length = obs[s.observations[0]]["length"]
         c = np.asarray(s.centre) * 1e3
         e1, e2 = planes[s.axis]
-        panels.append({"traces": [Trace(np.degrees(np.asarray(s.angles)), r, label=s.setup)],
-                       "nominal_radius": length, "plane": planes[s.axis],
+        t = trace_from_dataset(ds, s.setup)
+        panels.append({"traces": [Trace(t.angles, t.readings, label=s.setup)],
+                       "nominal_radius": length, "plane": t.plane,
                        "title": f"{s.setup}: {s.axis} axis, {length:g} mm bar"
                                 + (" (extension)" if s.extended else ""),
                        "annotations": [f"centre {e1} {c[0]:+8.2f} µm, {e2} {c[1]:+8.2f} µm",
@@ -276,5 +355,105 @@ def plot_wang_patterns(patterns: Mapping, path: str, wang_path=None) -> str:
     if wang_path is not None:
         footer = (f"table ball on a circle of radius {wang_path.radius:g} mm at height "
                   f"{wang_path.centre[2]:.1f} mm; spindle ball {wang_path.height:g} mm above its centre; "
-                  f"bar {wang_path.bar_length:g} mm; angle = tracking angle (from +X)")
+                  f"bar {wang_path.bar_length:g} mm;\nangle = tracking angle (from +X, counter-clockwise "
+                  "seen from +Z)")
+    for p in panels:
+        p["plane"] = "XY"  # the table ball's circle is horizontal; the tracking angle is its angle
     return plot_polar_grid(panels, path, "Wang et al. patterns: one error at a time", footer=footer)
+
+
+# ---- the report's ball bar figures ----------------------------------------------------------
+#: A trace sweeping less than this (deg) is no circle: not drawn as a polar plot.
+MIN_SWEEP = 10.0
+
+
+def dbb_groups(dataset) -> list:
+    """The DBB observations of a dataset split so that no plot mixes setups,
+    planes or bar lengths: a list of ``(setup, length, indices)`` in the
+    order the setups first appear."""
+    groups: dict = {}
+    for i, o in enumerate(dataset.observations):
+        if o.get("type") == "dbb":
+            groups.setdefault((o.get("setup", ""), float(o.get("length", 0.0))), []).append(i)
+    return [(s, L, idx) for (s, L), idx in groups.items()]
+
+
+def dbb_panels(result) -> tuple:
+    """Polar panels of the DBB setups of an identification result: per
+    setup and bar length, the recorded readings and the residuals the fit
+    leaves, against the plane angle (:func:`angle_convention`). Returns
+    ``(panels, skipped)``; ``skipped`` names groups too short for a trace
+    (fewer than 3 samples: no plane) or sweeping less than
+    :data:`MIN_SWEEP` degrees."""
+    from .dbb import trace_from_dataset
+
+    ds = result.dataset
+    resid = {}
+    for k, r in zip(np.asarray(result.residual_source), np.asarray(result.residuals)):
+        if k >= 0:
+            resid.setdefault(int(k), float(r))
+    rms = lambda x: float(np.sqrt(np.nanmean(np.square(x)))) * 1e3  # noqa: E731
+    panels, skipped = [], []
+    for setup, length, idx in dbb_groups(ds):
+        if len(idx) < 3:
+            skipped.append(f"{setup or '(no setup id)'} ({len(idx)} samples)")
+            continue
+        t = trace_from_dataset(ds.subset(idx), setup)
+        if np.ptp(t.angles) < MIN_SWEEP:
+            skipped.append(f"{setup or '(no setup id)'} (the balls sweep {np.ptp(t.angles):.3g}° about "
+                           "each other: no circle to draw)")
+            continue
+        left = np.array([resid.get(i, np.nan) for i in idx])
+        panels.append({"traces": [Trace(t.angles, t.readings, label="recorded reading"),
+                                  Trace(t.angles, left, label="residual after the fit")],
+                       "nominal_radius": length, "plane": t.plane, "setup": setup,
+                       "title": f"setup {setup or '(none)'} · plane {t.plane} · bar {length:g} mm",
+                       "annotations": [f"{len(idx)} samples; rms reading {rms(t.readings):.2f} µm, "
+                                       f"residual {rms(left):.2f} µm"]})
+    return panels, skipped
+
+
+def dbb_figure(result, title: Optional[str] = None):
+    """The report's ball bar Figure: one polar panel per DBB setup, plane
+    and bar length (never two on one panel). None without DBB data."""
+    panels, _ = dbb_panels(result)
+    if not panels:
+        return None
+    ncols = 1 if len(panels) == 1 else (2 if len(panels) in (2, 4) else 3)
+    return polar_grid_figure(panels, title or "Double ball bar: recorded readings and residuals after the fit",
+                             ncols=ncols)
+
+
+def report_figures(result, out_dir: str) -> list:
+    """Hook of :func:`fivecal.report.write_report` for data with DBB
+    observations: ``[(png path, caption)]``: the polar panels and the
+    residuals against the sample index, one panel per setup, plane and bar
+    length in both."""
+    import os
+
+    from .plots import dbb_residual_figure
+
+    out = []
+    panels, skipped = dbb_panels(result)
+    if panels:
+        fig = dbb_figure(result)
+        path = os.path.join(out_dir, "dbb_polar.png")
+        save_figure(fig, path, dpi=100)
+        setups = ", ".join(p["setup"] or "(none)" for p in panels)
+        cap = (f"Double ball bar setups {setups}: one polar panel per setup, plane and bar length, the recorded "
+               "readings and what the identified model leaves unexplained (deviations from the nominal bar "
+               "length, magnified; angle counter-clockwise from the first axis of the plane towards the "
+               "second, seen from the positive normal).")
+        if skipped:
+            cap += f" Not drawn as polar plots: {'; '.join(skipped)}."
+        out.append((path, cap))
+    fig = dbb_residual_figure(result)
+    if fig is not None:
+        path = os.path.join(out_dir, "dbb_residuals.png")
+        save_figure(fig, path, dpi=100)
+        cap = ("Double ball bar residuals after the fit against the sample index (recording order), one panel "
+               "per setup, plane and bar length.")
+        if skipped and not panels:
+            cap += f" No polar plot: {'; '.join(skipped)}."
+        out.append((path, cap))
+    return out

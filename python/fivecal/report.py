@@ -2,23 +2,22 @@
 plots embedded as base64 PNG) written next to the same plots as PNG files and
 the result JSON.
 
-Contents: machine and data summary, fit quality, identifiability (confounded
-groups, strongly correlated pairs), the parameter table in µm / µrad / µm/m
-with one-sigma uncertainties, residual vectors in the table frame (thesis
-Figure 4-7 style), residual histogram, parameter bars with ±2σ error bars,
-the correlation matrix and, when the data holds double ball bar traces and
-the ball bar plotting module ``fivecal.polar`` is present, its polar plots.
+Contents: machine and data summary (with the setups of each kind of data),
+fit quality, identifiability (confounded groups, strongly correlated pairs),
+the parameter table in µm / µrad / µm/m with one-sigma uncertainties, and
+the plots the kinds of data present call for: residual vectors in the table
+frame for touch probing (thesis Figure 4-7 style), per-component deviations
+against the rotary angle for R-test / 3D ball data, polar plots per setup,
+plane and bar length for double ball bar data; then the residual histogram,
+parameter bars with ±2σ error bars and the correlation matrix.
 
     from fivecal.report import write_report
     path = write_report(result, "report_dir")        # -> report_dir/report.html
 
-Hook for ball bar plots: if ``fivecal.polar`` defines
-``report_figures(result, out_dir)`` it is called when the dataset has ``dbb``
-observations and must return a list of PNG paths or ``(path, caption)``
-pairs (written inside ``out_dir``); else ``plot_dbb_polar(result, path)``;
-else the report draws one ``polar.plot_polar`` per ball-bar setup (recorded
-readings and residuals against the angle of the moving axis). A failure
-there is shown in the report, not raised.
+Ball bar plots come from ``fivecal.polar.report_figures(result, out_dir)``,
+called when the dataset has ``dbb`` observations; it returns a list of PNG
+paths or ``(path, caption)`` pairs written inside ``out_dir``. A failure
+there (or in the R-test plots) is shown in the report, not raised.
 """
 from __future__ import annotations
 
@@ -114,25 +113,65 @@ def _machine_section(machine) -> str:
             "<th>point (mm)</th></tr>" + "".join(rows) + "</table>")
 
 
+def _setup_counts(obs, kind: str) -> dict:
+    counts: dict = {}
+    for o in obs:
+        if o.get("type") == kind:
+            k = o.get("setup", "") or "(no setup id)"
+            counts[k] = counts.get(k, 0) + 1
+    return counts
+
+
+def _dbb_setup_text(dataset) -> str:
+    """Each DBB setup with its sample count, plane and bar length."""
+    try:
+        from .polar import MIN_SWEEP, dbb_groups
+        from .dbb import trace_from_dataset
+    except ImportError:  # pragma: no cover - polar is part of the package
+        return ", ".join(f"{k} ({n})" for k, n in _setup_counts(dataset.observations, "dbb").items())
+    parts = []
+    for setup, length, idx in dbb_groups(dataset):
+        plane = ""
+        if len(idx) >= 3:
+            try:
+                t = trace_from_dataset(dataset.subset(idx), setup)
+                plane = (f", plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
+                         f", no circle: the balls sweep {np.ptp(t.angles):.2g}°")
+            except ValueError:
+                plane = ""
+        parts.append(f"{setup or '(no setup id)'} ({_count(len(idx), 'sample')}{plane}, bar {length:g} mm)")
+    return ", ".join(parts)
+
+
 def _data_section(dataset, result) -> str:
     obs = dataset.observations
     types: dict = {}
     for o in obs:
         types[o["type"]] = types.get(o["type"], 0) + 1
     rot = [a for a in dataset.machine.axis_names if a in "ABCS"]
-    idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs}
+    idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs if o["type"] != "dbb"}
     art = dataset.artefact or {}
     d = dataset.to_dict()
     tip_r = (d.get("probe") or {}).get("tip_radius")
     targets = sorted({o.get("target") for o in obs if o.get("target")}, key=str)
     rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none"),
             ("residual rows", f"{len(result.residuals)} (observations plus scale bars)"),
-            ("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"),
-            ("artefact", ", ".join(_count(len(art.get(k, [])), w) for k, w in
-                                   (("facets", "facet"), ("spheres", "sphere"), ("scale_bars", "scale bar")))),
-            ("targets touched", f"{len(targets)}" + (f": {', '.join(map(str, targets[:40]))}"
-                                                      + (" …" if len(targets) > 40 else "") if targets else "")),
-            ("probe tip radius", f"{tip_r:g} mm" if tip_r is not None else "–")]
+            ]
+    if set(types) - {"dbb"}:  # a ball bar sweeps the axes: its poses are no indexations
+        rows.append(("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"))
+    if "facet" in types or "sphere" in types:
+        rows += [("artefact", ", ".join(_count(len(art.get(k, [])), w) for k, w in
+                                        (("facets", "facet"), ("spheres", "sphere"), ("scale_bars", "scale bar")))),
+                 ("targets touched", f"{len(targets)}" + (f": {', '.join(map(str, targets[:40]))}"
+                                                           + (" …" if len(targets) > 40 else "") if targets else "")),
+                 ("probe tip radius", f"{tip_r:g} mm" if tip_r is not None else "–")]
+    if "dbb" in types:
+        n = len(_setup_counts(obs, "dbb"))
+        rows.append((f"double ball bar setups ({n})", _dbb_setup_text(dataset)))
+    if "ball3d" in types:
+        c = _setup_counts(obs, "ball3d")
+        rows.append((f"R-test / 3D ball setups ({len(c)})",
+                     ", ".join(f"{k} ({_count(v, 'sample')})" for k, v in c.items())))
     return '<table class="kv">' + "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in rows) \
         + "</table>"
 
@@ -417,23 +456,15 @@ def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
     if "dbb" not in set(result.dataset.observation_types):
         return [], None
     try:
-        from . import polar  # built in parallel by the ball bar work; optional here
+        from . import polar  # optional here: the report must come out without it
     except ImportError:
         return [], ("The data holds double ball bar traces; polar plots appear here once the "
                     "<code>fivecal.polar</code> module is installed.")
+    if not hasattr(polar, "report_figures"):
+        return [], "fivecal.polar has no report_figures()."
     try:
-        figs: list = []
-        if hasattr(polar, "report_figures"):
-            figs = list(polar.report_figures(result, out_dir) or [])
-        elif hasattr(polar, "plot_dbb_polar"):
-            p = polar.plot_dbb_polar(result, os.path.join(out_dir, "dbb_polar.png"))
-            figs = [p if p else os.path.join(out_dir, "dbb_polar.png")]
-        elif hasattr(polar, "plot_polar"):
-            figs = _dbb_polar_plots(result, out_dir, polar)
-        else:
-            return [], "fivecal.polar has none of report_figures(), plot_dbb_polar(), plot_polar()."
         out = []
-        for f in figs:
+        for f in list(polar.report_figures(result, out_dir) or []):
             path, cap = (f, "Double ball bar trace (polar plot)") if isinstance(f, (str, os.PathLike)) else f
             out.append((os.fspath(path), str(cap)))
         return out, None
@@ -441,52 +472,38 @@ def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
         return [], f"DBB polar plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}"
 
 
-def _dbb_polar_plots(result, out_dir: str, polar) -> List[Figure]:
-    """One polar plot per ball-bar setup through ``polar.plot_polar``: the
-    recorded readings and the residuals left by the fit, against the angle of
-    the rotary axis that moves most in that setup (or, for a circle of two
-    linear axes, the angle around the circle's centre)."""
-    from .dbb import Trace
+def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[str]]:
+    """The figures chosen by the kinds of data present: residual vectors for
+    touch probing (facet, sphere), per-component deviations for ball3d
+    (R-test), polar panels and residuals per setup for DBB. Returns
+    (figures, notes on figures that could not be drawn)."""
+    from . import plots
 
-    ds = result.dataset
-    obs = ds.observations
-    src = np.asarray(result.residual_source)
-    res = np.asarray(result.residuals)
-    resid = {int(k): float(r) for k, r in zip(src, res) if k >= 0}
-    groups: dict = {}
-    for i, o in enumerate(obs):
-        if o.get("type") == "dbb":
-            groups.setdefault(o.get("setup") or "dbb", []).append(i)
-    letters = [a for a in ds.machine.axis_names if a != "S"]
-    figs: List[Figure] = []
-    for setup, idx in groups.items():
-        if len(idx) < 4:
-            continue
-        q = {a: np.array([float(obs[i]["axes"].get(a, 0.0)) for i in idx]) for a in letters}
-        spans = {a: float(np.ptp(v)) for a, v in q.items()}
-        rotary = [a for a in letters if a in "ABC" and spans[a] > 1e-9]
-        if rotary:
-            key = max(rotary, key=spans.get)
-            angles, what, plane = q[key], f"axis {key} position (deg)", ("", "")
-        else:
-            a1, a2 = sorted(letters, key=spans.get, reverse=True)[:2]
-            angles = np.degrees(np.unwrap(np.arctan2(q[a2] - q[a2].mean(), q[a1] - q[a1].mean())))
-            what, plane = f"angle in the {a1}{a2} plane (deg)", (a1, a2)
-        readings = np.array([float(obs[i].get("reading", 0.0)) for i in idx])
-        left = np.array([resid.get(i, np.nan) for i in idx])
-        radius = float(obs[idx[0]].get("length", 100.0))
-        rms = lambda x: float(np.sqrt(np.nanmean(np.square(x)))) * 1e3
-        path = os.path.join(out_dir, f"dbb_polar_{setup}.png")
-        polar.plot_polar([Trace(angles, readings, label="recorded reading"),
-                          Trace(angles, left, label="residual after the fit")], path, radius,
-                         title=f"Ball bar setup {setup}: recorded and unexplained",
-                         annotations=[f"{len(idx)} samples", f"angle: {what}",
-                                      f"bar length {radius:g} mm",
-                                      f"reading rms  {rms(readings):.2f} µm",
-                                      f"residual rms {rms(left):.2f} µm"], plane=plane)
-        figs.append((path, f"Ball bar setup {setup}: the recorded readings and what the identified model "
-                           "leaves unexplained, as a polar plot (deviations magnified)."))
-    return figs
+    types = set(result.dataset.observation_types)
+    first: List[Figure] = []
+    notes: List[str] = []
+    if types & set(plots.PROBING):
+        p = os.path.join(out_dir, "residual_vectors.png")
+        plots.plot_residual_vectors(result, p, title="Unexplained residual vectors (touch probing)",
+                                    kinds=plots.PROBING)
+        first.append((p, "Residual vectors at the touch points in the table (workpiece) frame, magnified, "
+                         "one colour per rotary indexation (Rahman 2016, Figure 4-7 style). Systematic "
+                         "patterns (arrows of one colour pointing the same way) mean unmodelled errors; "
+                         "random directions mean probing noise."))
+    if "ball3d" in types:
+        p = os.path.join(out_dir, "ball3d_components.png")
+        try:
+            plots.plot_ball3d(result, p)
+            first.append((p, "R-test / 3D ball: recorded deviation and residual after the fit per component "
+                             "(dx, dy, dz, workpiece frame) against the rotary angle, one line per setup / "
+                             "indexation group."))
+        except Exception as e:  # a plotting problem must not lose the rest of the report
+            notes.append(f"R-test plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}")
+    dbb_figs, dbb_note = _dbb_figures(result, out_dir)
+    first += dbb_figs
+    if dbb_note:
+        notes.append(dbb_note)
+    return first, notes
 
 
 def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] = None,
@@ -524,12 +541,8 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
         result.save(os.path.join(out_dir, "result.json"))
 
     figs: List[Figure] = []
-    p = os.path.join(out_dir, "residual_vectors.png")
-    plots.plot_residual_vectors(result, p, title="Unexplained residual vectors")
-    figs.append((p, "Residual vectors at the touch points in the table (workpiece) frame, magnified, one "
-                    "colour per rotary indexation (Rahman 2016, Figure 4-7 style). Systematic patterns "
-                    "(arrows of one colour pointing the same way) mean unmodelled errors; random "
-                    "directions mean probing noise."))
+    kind_figs, notes = _kind_figures(result, out_dir)
+    figs += kind_figs
     p = os.path.join(out_dir, "residual_histogram.png")
     plots.plot_residual_histogram(result, p)
     figs.append((p, "Distribution of the residuals with the normal density of the a-posteriori σ̂."))
@@ -546,8 +559,6 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
         plots.plot_correlation(result, p, names=cnames, title="Correlation of the machine parameters")
         figs.append((p, "Correlation coefficients between the estimated machine parameters (setup "
                         "parameters omitted; strongly correlated pairs are listed under Identifiability)."))
-    dbb_figs, dbb_note = _dbb_figures(result, out_dir)
-    figs += dbb_figs
     figs += list(figures)
 
     from . import guards
@@ -581,8 +592,8 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     for path, cap in figs:
         body.append(f"<figure>{_img_tag(path, out_dir, embed_images, cap)}<figcaption>{_e(cap)}"
                     f" <small>({_e(os.path.basename(path))})</small></figcaption></figure>")
-    if dbb_note:
-        body.append(f"<div class='box warn'>{dbb_note}</div>")
+    for note in notes:
+        body.append(f"<div class='box warn'>{note}</div>")
     body += ["<h2 id='conventions'>Conventions</h2>", _CONVENTIONS,
              "<h2 id='files'>Files</h2><ul>",
              "<li><a href='result.json'>result.json</a> — the result (format: docs/formats.md; values in mm and "

@@ -228,15 +228,21 @@ def test_dbb_polar_hook(tmp_path, monkeypatch):
 
 
 def test_dbb_polar_plots_through_the_real_polar_module(tmp_path):
-    """fivecal.polar (the ball bar plotting module) draws one polar plot per
-    ball-bar setup in the report: readings and residuals after the fit."""
+    """fivecal.polar (the ball bar plotting module) draws the report's ball
+    bar figures: residuals per setup against the sample index, and polar
+    panels only for setups whose balls sweep a circle. In this data the
+    table ball sits on the C axis, so the balls keep their relative angle:
+    the report says why there is no polar plot instead of drawing a
+    degenerate one (tests/python/test_plots_kinds.py covers real circles)."""
     from fivecal import polar  # noqa: F401  (must exist: the report relies on it for DBB data)
 
     result = _dbb_result()
     path = write_report(result, tmp_path / "dbb")
     doc = open(path, encoding="utf-8").read()
-    assert (tmp_path / "dbb" / "dbb_polar_C1.png").is_file()
-    assert "Ball bar setup C1" in doc and "could not be drawn" not in doc
+    assert (tmp_path / "dbb" / "dbb_residuals.png").is_file()
+    assert not (tmp_path / "dbb" / "dbb_polar.png").exists()
+    assert "No polar plot: C1 (the balls sweep 0°" in doc and "could not be drawn" not in doc
+    assert "C1 (36 samples" in doc  # the data table lists the setup
     found = render_check(path, tmp_path)
     assert found["broken"] == [] and found["images"] >= 4
 
