@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/machine.h"
+#include "fivecal/model/machine.h"
 
 namespace fivecal::json_util {
 
