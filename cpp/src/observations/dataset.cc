@@ -2,8 +2,10 @@
 
 #include <cmath>
 #include <set>
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 
+#include "fivecal/observations/registry.h"
 #include "json_util.h"
 
 namespace fivecal {
@@ -13,27 +15,11 @@ using namespace json_util;
 
 }  // namespace
 
-const char* ObservationTypeName(ObservationType t) {
-  switch (t) {
-    case ObservationType::kFacet: return "facet";
-    case ObservationType::kSphere: return "sphere";
-    case ObservationType::kDbb: return "dbb";
-    case ObservationType::kBall3d: return "ball3d";
-  }
-  return "?";
-}
+const char* ObservationTypeName(ObservationType t) { return KindOf(t).name(); }
 
-int ResidualRows(ObservationType t) { return t == ObservationType::kBall3d ? 3 : 1; }
+int ResidualRows(ObservationType t) { return KindOf(t).rows(); }
 
-double DefaultSigma(ObservationType t) {
-  switch (t) {
-    case ObservationType::kFacet:
-    case ObservationType::kSphere: return 0.001;
-    case ObservationType::kDbb: return 0.0005;
-    case ObservationType::kBall3d: return 0.001;
-  }
-  return 0.001;
-}
+double DefaultSigma(ObservationType t) { return KindOf(t).default_sigma(); }
 
 int Artefact::FacetIndex(const std::string& id) const {
   for (size_t i = 0; i < facets.size(); ++i)
@@ -213,26 +199,12 @@ Dataset ParseDataset(const json& j, bool require_observations) {
     const json* tj = Find(o, "type");
     if (!tj || !tj->is_string()) throw std::invalid_argument(w + ".type: missing (a string)");
     const std::string& type = tj->get_ref<const std::string&>();
-    if (type == "facet") ob.type = ObservationType::kFacet;
-    else if (type == "sphere") ob.type = ObservationType::kSphere;
-    else if (type == "dbb") ob.type = ObservationType::kDbb;
-    else if (type == "ball3d") ob.type = ObservationType::kBall3d;
-    else throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (facet, sphere, dbb, ball3d)" +
-                                     DidYouMean(type, {"facet", "sphere", "dbb", "ball3d"}));
-    switch (ob.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere:
-        CheckKeys(o, {"type", "target", "axes", "direction", "sigma", "id"}, w);
-        break;
-      case ObservationType::kDbb:
-        CheckKeys(o, {"type", "setup", "axes", "direction", "reading", "length", "tool_ball", "table_ball",
-                      "sigma", "id"}, w);
-        break;
-      case ObservationType::kBall3d:
-        CheckKeys(o, {"type", "setup", "axes", "direction", "measured", "tool_ball", "table_ball", "sigma",
-                      "id"}, w);
-        break;
-    }
+    const ObservationKind* kind = FindKind(type);
+    if (!kind)
+      throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (" + KindList() + ")" +
+                                  DidYouMean(type, KindNames()));
+    ob.type = kind->type();
+    CheckKeys(o, kind->json_keys(), w);
     const json* axes = Find(o, "axes");
     if (!axes || !axes->is_object())
       throw std::invalid_argument(w + ".axes: missing (an object axis letter -> reading)");
@@ -244,30 +216,7 @@ Dataset ParseDataset(const json& j, bool require_observations) {
         throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
                                     "' (machine axes " + m.axis_names() + ")");
     if (const json* d = Find(o, "direction")) ReadDirections(m, *d, w + ".direction", &ob.direction);
-    switch (ob.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere: {
-        ob.target = ReadString(o, "target", w);
-        bool facet = ob.type == ObservationType::kFacet;
-        int idx = facet ? ds.artefact.FacetIndex(ob.target) : ds.artefact.SphereIndex(ob.target);
-        if (idx < 0)
-          throw std::invalid_argument(w + ".target: unknown " + type + " " + Quote(ob.target) +
-                                      " (not in dataset.artefact." + (facet ? "facets" : "spheres") + ")");
-        break;
-      }
-      case ObservationType::kDbb:
-        ob.reading = ReadBounded(o, "reading", w, kMaxDbbReading);
-        ob.length = ReadBounded(o, "length", w, kMaxLinear);
-        if (ob.length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
-        [[fallthrough]];
-      case ObservationType::kBall3d:
-        ob.setup = ReadSetup(o, w);
-        ob.tool_ball = ReadVector3(o.value("tool_ball", json()), w + ".tool_ball");
-        ob.table_ball = ReadVector3(o.value("table_ball", json()), w + ".table_ball");
-        if (ob.type == ObservationType::kBall3d)
-          ob.measured = ReadVector3(o.value("measured", json()), w + ".measured");
-        break;
-    }
+    kind->Read(o, w, ds, &ob);
     if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w + ".sigma");
     if (o.contains("id")) ob.id = ReadString(o, "id", w);
     ds.observations.push_back(std::move(ob));
@@ -300,39 +249,7 @@ void Dataset::Validate() const {
         throw std::invalid_argument(w() + ".direction." + std::string(1, machine_.axis(k).name) +
                                     ": must be -1, 0 or +1");
     }
-    switch (o.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere:
-        if (tip_radius <= 0)
-          throw std::invalid_argument("dataset.probe.tip_radius: missing or zero but the dataset has probe touches");
-        if (o.type == ObservationType::kFacet && artefact.FacetIndex(o.target) < 0)
-          throw std::invalid_argument(w() + ".target: unknown facet " + Quote(o.target));
-        if (o.type == ObservationType::kSphere && artefact.SphereIndex(o.target) < 0)
-          throw std::invalid_argument(w() + ".target: unknown sphere " + Quote(o.target));
-        break;
-      case ObservationType::kDbb:
-      case ObservationType::kBall3d: {
-        if (o.setup.find('.') != std::string::npos)
-          throw std::invalid_argument(w() + ".setup: " + Quote(o.setup) + " must not contain '.'");
-        if (o.type == ObservationType::kDbb) {
-          if (!(std::abs(o.reading) <= kMaxDbbReading))
-            RequireBounded(o.reading, kMaxDbbReading, w() + ".reading");
-          if (!(o.length > 0 && o.length <= kMaxLinear))
-            throw std::invalid_argument(w() + ".length: must be > 0 and <= 1e5 mm");
-        } else {
-          for (int c = 0; c < 3; ++c)
-            if (!(std::abs(o.measured[c]) <= kMaxLinear))
-              RequireBounded(o.measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
-        }
-        for (int c = 0; c < 3; ++c) {
-          if (!(std::abs(o.tool_ball[c]) <= kMaxLinear))
-            RequireBounded(o.tool_ball[c], kMaxLinear, w() + ".tool_ball[" + std::to_string(c) + "]");
-          if (!(std::abs(o.table_ball[c]) <= kMaxLinear))
-            RequireBounded(o.table_ball[c], kMaxLinear, w() + ".table_ball[" + std::to_string(c) + "]");
-        }
-        break;
-      }
-    }
+    KindOf(o).Validate(*this, o, w);
     if (o.sigma.size() > 0) CheckSigma(o.sigma, o.type, w() + ".sigma");
   }
 }
@@ -432,15 +349,7 @@ std::string Dataset::ToJson() const {
     }
     jo["axes"] = ax;
     if (!dir.empty()) jo["direction"] = dir;
-    if (o.type == ObservationType::kDbb) {
-      jo["reading"] = o.reading;
-      jo["length"] = o.length;
-    }
-    if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) {
-      jo["tool_ball"] = Array3(o.tool_ball);
-      jo["table_ball"] = Array3(o.table_ball);
-    }
-    if (o.type == ObservationType::kBall3d) jo["measured"] = Array3(o.measured);
+    KindOf(o).Write(o, &jo);
     if (o.sigma.size() > 0) {
       // One number when every row shares it (the usual file form).
       if ((o.sigma.array() == o.sigma[0]).all()) {

@@ -2,21 +2,22 @@
 
 #include <cmath>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <stdexcept>
 
 #include "fivecal/model/inverse.h"
 #include "fivecal/model/kinematics.h"
 #include "fivecal/solve/problem.h"
+#include "fivecal/observations/registry.h"
 #include "json_util.h"
 
 namespace fivecal {
-namespace {
 
 using namespace json_util;
 
-Eigen::Vector3d ToolAt(const Machine& m, const Eigen::VectorXd& theta, const Eigen::VectorXd& cmd,
-                       const std::vector<int>& dir, const Eigen::Vector3d& tip) {
+Eigen::Vector3d ToolAtCommand(const Machine& m, const Eigen::VectorXd& theta, const Eigen::VectorXd& cmd,
+                              const std::vector<int>& dir, const Eigen::Vector3d& tip) {
   std::vector<double> q(m.num_axes());
   AxisValuesToInternal(m, cmd.data(), q.data());
   Eigen::Vector3d p;
@@ -24,12 +25,7 @@ Eigen::Vector3d ToolAt(const Machine& m, const Eigen::VectorXd& theta, const Eig
   return p;
 }
 
-}  // namespace
-
-namespace {
-SimulationPlan PlanSpec(const json& spec);
-
-void AddInput(SimulationPlan* plan, int obs, int component, double sensitivity, double sigma) {
+void AddPlanInput(SimulationPlan* plan, int obs, int component, double sensitivity, double sigma) {
   plan->input_observation.push_back(obs);
   plan->input_component.push_back(component);
   const int n = plan->num_inputs();
@@ -38,6 +34,9 @@ void AddInput(SimulationPlan* plan, int obs, int component, double sensitivity, 
   plan->sensitivity[n - 1] = sensitivity;
   plan->input_sigma[n - 1] = sigma;
 }
+
+namespace {
+SimulationPlan PlanSpec(const json& spec);
 
 // Per-observation slots of a plan, filled with the dataset's own readings.
 void InitSlots(SimulationPlan* plan) {
@@ -64,23 +63,7 @@ Dataset Realize(const SimulationPlan& plan, Draw&& draw) {
   for (int k = 0; k < n_in; ++k) {
     const int i = plan.input_observation[k];
     Observation& o = ds.observations[i];
-    const double x = draw(k);
-    switch (o.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere: {
-        const double s = plan.s0[i] + x;
-        o.axes = plan.start[i] + s * plan.approach[i];
-        break;
-      }
-      case ObservationType::kDbb:
-        o.reading = plan.reading0[i] + x;
-        break;
-      case ObservationType::kBall3d: {
-        const int c = plan.input_component[k];
-        o.measured[c] = plan.measured0[i][c] + x;
-        break;
-      }
-    }
+    KindOf(o).ApplyInput(plan, i, plan.input_component[k], draw(k), &o);
   }
   return ds;
 }
@@ -192,17 +175,16 @@ SimulationPlan PlanSpec(const json& spec) {
       if (x > 0 && x < kMinSigma) throw std::invalid_argument("simulate.sigma: 0 (no noise) or >= 1e-9 mm");
   }
   const uint64_t seed = spec.contains("seed") ? ReadSeed(spec["seed"], "simulate.seed") : 0;
-  // Per observation: the noise-free readings and the noise directions.
-  struct Slot {
-    Eigen::VectorXd start, approach;
-    double s0 = 0, sensitivity = -1;
-  };
-  std::vector<Slot> slots;
+  // Per observation: the noise directions.
+  std::vector<PlanSlot> slots;
 
   if (!spec.contains("plan") || !spec["plan"].is_array() || spec["plan"].empty())
     throw std::invalid_argument("simulate.plan: empty; give at least one planned touch or sample");
-  const Eigen::VectorXd nominal = Eigen::VectorXd::Zero(m.num_parameters());
-  const Eigen::Vector3d tip_true = TipWithOffsets<double>(m, theta.data());
+  PlanTruth truth;
+  truth.dataset = &ds;
+  truth.theta = theta;
+  truth.tip = TipWithOffsets<double>(m, theta.data());
+  truth.setup = S;
   const json& plan = spec["plan"];
 
   for (size_t i = 0; i < plan.size(); ++i) {
@@ -210,130 +192,32 @@ SimulationPlan PlanSpec(const json& spec) {
     const json& e = plan[i];
     if (!e.is_object()) throw std::invalid_argument(w + ": expected an object");
     if (!e.contains("type") || !e["type"].is_string())
-      throw std::invalid_argument(w + ".type: missing (facet, sphere, dbb, ball3d)");
+      throw std::invalid_argument(w + ".type: missing (" + KindList() + ")");
     const std::string type = e["type"].get<std::string>();
     // The type first: an unknown one must be named as such, not reported
     // as whatever the other checks trip on.
-    if (type == "facet") CheckKeys(e, {"type", "target", "axes", "point", "direction", "id"}, w);
-    else if (type == "sphere") CheckKeys(e, {"type", "target", "axes", "normal", "direction", "id"}, w);
-    else if (type == "dbb")
-      CheckKeys(e, {"type", "setup", "axes", "length", "tool_ball", "table_ball", "direction", "id"}, w);
-    else if (type == "ball3d")
-      CheckKeys(e, {"type", "setup", "axes", "tool_ball", "table_ball", "direction", "id"}, w);
-    else
-      throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (facet, sphere, dbb, ball3d)" +
-                                  DidYouMean(type, {"facet", "sphere", "dbb", "ball3d"}));
+    const ObservationKind* kind = FindKind(type);
+    if (!kind)
+      throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (" + KindList() + ")" +
+                                  DidYouMean(type, KindNames()));
+    CheckKeys(e, kind->plan_keys(), w);
     Observation ob;
+    ob.type = kind->type();
     ob.axes = Eigen::VectorXd::Zero(na);
     ob.direction = Eigen::VectorXi::Zero(na);
     if (e.contains("id")) ob.id = ReadString(e, "id", w);
     std::vector<bool> given(na, false);
     if (e.contains("axes")) ReadAxes(m, e["axes"], w + ".axes", &ob.axes, &given);
     if (e.contains("direction")) ReadDirections(m, e["direction"], w + ".direction", &ob.direction);
-    const bool probe = type == "facet" || type == "sphere";
+    // A touch's linear axes are the simulator's to find.
+    const bool probe = kind->probe_touch();
     for (int k = 0; k < na; ++k)
       if (!given[k] && m.axis(k).name != 'S' && (m.axis(k).rotary() || !probe))
         throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
                                     "' (machine axes " + m.axis_names() + ")");
-
-    if (probe) {
-      if (ds.tip_radius <= 0)
-        throw std::invalid_argument("simulate.probe.tip_radius: missing or zero, but " + w + " is a probe touch");
-      const double r = ds.tip_radius;
-      if (!e.contains("target") || !e["target"].is_string())
-        throw std::invalid_argument(w + ".target: missing");
-      ob.target = e["target"].get<std::string>();
-      Eigen::Vector3d n, c;
-      std::function<double(const Eigen::Vector3d&)> gap;
-      if (type == "facet") {
-        ob.type = ObservationType::kFacet;
-        const int fi = ds.artefact.FacetIndex(ob.target);
-        if (fi < 0) throw std::invalid_argument(w + ".target: unknown facet " + Quote(ob.target));
-        const Facet& f = ds.artefact.facets[fi];
-        n = f.normal;
-        Eigen::Vector3d p = e.contains("point") ? ReadVector3(e["point"], w + ".point") : f.point;
-        p -= n * n.dot(p - f.point);  // onto the nominal plane
-        c = p + r * n;
-        const Eigen::Vector3d a_true = f.point + S("facet." + f.id) * n;
-        gap = [=](const Eigen::Vector3d& P) { return n.dot(P - a_true) - r; };
-      } else {
-        ob.type = ObservationType::kSphere;
-        const int si = ds.artefact.SphereIndex(ob.target);
-        if (si < 0) throw std::invalid_argument(w + ".target: unknown sphere " + Quote(ob.target));
-        const Sphere& s = ds.artefact.spheres[si];
-        if (!e.contains("normal")) throw std::invalid_argument(w + ".normal: missing (touch direction from the centre)");
-        n = ReadVector3(e["normal"], w + ".normal");
-        if (n.norm() < 1e-12) throw std::invalid_argument(w + ".normal: zero vector");
-        n.normalize();
-        c = s.center + (s.radius + r) * n;
-        const std::string id = s.id;
-        const Eigen::Vector3d c_true = s.center + Eigen::Vector3d(S("sphere." + id + ".x"), S("sphere." + id + ".y"),
-                                                                  S("sphere." + id + ".z"));
-        const double R_true = s.radius + S("sphere." + id + ".r");
-        gap = [=](const Eigen::Vector3d& P) { return (P - c_true).norm() - (R_true + r); };
-      }
-      // Nominal linear commands for the tip-centre target and the approach line.
-      Eigen::MatrixXd target(2, 3);
-      target.row(0) = c.transpose();
-      target.row(1) = (c - n).transpose();
-      const Eigen::MatrixXd cmds = InverseKinematics(m, nominal, target, nullptr, ob.axes);
-      const Eigen::VectorXd c0 = cmds.row(0).transpose();
-      const Eigen::VectorXd d = (cmds.row(1) - cmds.row(0)).transpose();  // per mm of approach
-      std::vector<int> dir(ob.direction.data(), ob.direction.data() + na);
-      for (int k = 0; k < na; ++k)
-        if (!m.axis(k).rotary()) dir[k] = d[k] > 1e-12 ? 1 : (d[k] < -1e-12 ? -1 : 0);
-      auto g = [&](double s) { return gap(ToolAt(m, theta, c0 + s * d, dir, tip_true)); };
-      double s = 0;
-      for (int it = 0; it < 60; ++it) {
-        const double h = 1e-4;
-        const double gs = g(s), gp = (g(s + h) - g(s - h)) / (2 * h);
-        if (!(std::abs(gp) > 1e-6))
-          throw std::invalid_argument(w + ": the approach does not reach the surface");
-        const double ds_ = -gs / gp;
-        s += ds_;
-        if (std::abs(ds_) < 1e-13) break;
-      }
-      if (std::abs(s) > 50.0)
-        throw std::invalid_argument(w + ": the erroneous machine touches " + std::to_string(s) +
-                                    " mm away from the nominal point; errors far too large?");
-      const double h = 1e-4;
-      Slot slot;
-      slot.start = c0;
-      slot.approach = d;
-      slot.s0 = s;
-      slot.sensitivity = (g(s + h) - g(s - h)) / (2 * h);
-      slots.push_back(slot);
-      ob.axes = c0 + s * d;
-      for (int k = 0; k < na; ++k) ob.direction[k] = dir[k];
-    } else if (type == "dbb" || type == "ball3d") {
-      ob.type = type == "dbb" ? ObservationType::kDbb : ObservationType::kBall3d;
-      ob.setup = ReadSetup(e, w);
-      ob.tool_ball = ReadVector3(e.value("tool_ball", json()), w + ".tool_ball");
-      ob.table_ball = ReadVector3(e.value("table_ball", json()), w + ".table_ball");
-      const std::string prefix = std::string(type) + (ob.setup.empty() ? "" : "." + ob.setup);
-      const Eigen::Vector3d tool_true =
-          ob.tool_ball + Eigen::Vector3d(S(prefix + ".tool.x"), S(prefix + ".tool.y"), S(prefix + ".tool.z"));
-      const Eigen::Vector3d table_true =
-          ob.table_ball + Eigen::Vector3d(S(prefix + ".table.x"), S(prefix + ".table.y"), S(prefix + ".table.z"));
-      std::vector<int> dir(ob.direction.data(), ob.direction.data() + na);
-      const Eigen::Vector3d P = ToolAt(m, theta, ob.axes, dir, tool_true);
-      if (ob.type == ObservationType::kDbb) {
-        if (!e.contains("length")) throw std::invalid_argument(w + ".length: missing (nominal bar length, mm)");
-        ob.length = ReadBounded(e, "length", w, kMaxLinear);
-        if (!(ob.length > 0)) throw std::invalid_argument(w + ".length: must be > 0 mm");
-        ob.reading = (P - table_true).norm() - ob.length - S(prefix + ".length");
-        // What the loader would refuse, refused here, naming the plan entry.
-        if (!(std::abs(ob.reading) <= kMaxDbbReading))
-          throw std::invalid_argument(w + ": the simulated reading " + std::to_string(ob.reading) +
-                                      " mm is beyond a ball bar's range (|reading| <= 100 mm); is the "
-                                      "bar length the ball distance at these axes?");
-      } else {
-        ob.measured = P - table_true;
-      }
-      slots.push_back(Slot());
-    } else {
-      throw std::invalid_argument(w + ".type: unknown type '" + type + "' (facet, sphere, dbb, ball3d)");
-    }
+    PlanSlot slot;
+    kind->SimulateEntry(e, w, truth, &ob, &slot);
+    slots.push_back(slot);
     ds.observations.push_back(ob);
   }
   for (ScaleBar& b : ds.artefact.scale_bars) {
@@ -376,25 +260,10 @@ SimulationPlan PlanSpec(const json& spec) {
     const int oi = static_cast<int>(i);
     // The noise drawn is the noise declared: a simulated dataset carries its
     // sigma, so fitting it weighs the rows as they were made.
-    const double declared = o.type == ObservationType::kDbb      ? noise.dbb
-                            : o.type == ObservationType::kBall3d ? noise.ball3d
-                                                                 : noise.probe;
-    if (declared > 0) o.sigma = Eigen::VectorXd::Constant(ResidualRows(o.type), declared);
-    switch (o.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere:
-        out.start[i] = slots[i].start;
-        out.approach[i] = slots[i].approach;
-        out.s0[i] = slots[i].s0;
-        AddInput(&out, oi, 0, slots[i].sensitivity, noise.probe);
-        break;
-      case ObservationType::kDbb:
-        AddInput(&out, oi, 0, -1.0, noise.dbb);
-        break;
-      case ObservationType::kBall3d:
-        for (int c = 0; c < 3; ++c) AddInput(&out, oi, c, -1.0, noise.ball3d);
-        break;
-    }
+    const ObservationKind& kind = KindOf(o);
+    const double declared = kind.NoiseLevel(noise);
+    if (declared > 0) o.sigma = Eigen::VectorXd::Constant(kind.rows(), declared);
+    kind.AddInputs(&out, oi, &slots[i], nullptr);
   }
   return out;
 }
@@ -405,77 +274,25 @@ SimulationPlan PlanFromDataset(const Dataset& ds, const std::map<std::string, do
                                const NoiseLevels& noise) {
   ds.Validate();
   const Machine& m = ds.machine();
-  const int na = m.num_axes();
   const ParameterTable table(ds);
   Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
   for (const auto& [name, value] : values) {
     RequireFinite(value, "values." + name);
     v[table.Require(name)] = value;
   }
-  const Eigen::VectorXd theta = v.head(m.num_parameters());
-  const Eigen::VectorXd nominal = Eigen::VectorXd::Zero(m.num_parameters());
-  const Eigen::Vector3d tip = TipWithOffsets<double>(m, theta.data());
-  const Eigen::Vector3d tip0 = m.tip();
+  RecordedContext rec;
+  rec.dataset = &ds;
+  rec.table = &table;
+  rec.values = v;
+  rec.theta = v.head(m.num_parameters());
+  rec.tip = TipWithOffsets<double>(m, rec.theta.data());
 
   SimulationPlan plan(ds);
   plan.noise = noise;
   plan.values = values;
   InitSlots(&plan);
-  for (size_t i = 0; i < ds.observations.size(); ++i) {
-    const Observation& o = ds.observations[i];
-    const int oi = static_cast<int>(i);
-    const std::string w = "observations[" + std::to_string(i) + "]";
-    std::vector<int> dir(o.direction.data(), o.direction.data() + na);
-    switch (o.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere: {
-        // Nominal approach: along minus the nominal surface normal at the
-        // nominal tool point, as a line in linear-axis command space.
-        const Eigen::Vector3d P0 = ToolAt(m, nominal, o.axes, dir, tip0);
-        Eigen::Vector3d n;
-        std::function<double(const Eigen::Vector3d&)> gap;
-        if (o.type == ObservationType::kFacet) {
-          const int fi = ds.artefact.FacetIndex(o.target);
-          const Facet& f = ds.artefact.facets[fi];
-          n = f.normal;
-          const double off = v[table.facet(fi)];
-          gap = [=](const Eigen::Vector3d& P) { return n.dot(P - f.point) - off; };
-        } else {
-          const int si = ds.artefact.SphereIndex(o.target);
-          const Sphere& sp = ds.artefact.spheres[si];
-          n = P0 - sp.center;
-          if (n.norm() < 1e-9) throw std::invalid_argument(w + ": touch at the sphere centre");
-          n.normalize();
-          const auto& ix = table.sphere(si);
-          const Eigen::Vector3d c = sp.center + Eigen::Vector3d(v[ix[0]], v[ix[1]], v[ix[2]]);
-          gap = [=](const Eigen::Vector3d& P) { return (P - c).norm(); };
-        }
-        Eigen::MatrixXd target(2, 3);
-        target.row(0) = P0.transpose();
-        target.row(1) = (P0 - n).transpose();
-        const Eigen::MatrixXd cmds = InverseKinematics(m, nominal, target, nullptr, o.axes);
-        Eigen::VectorXd d = (cmds.row(1) - cmds.row(0)).transpose();
-        for (int k = 0; k < na; ++k)
-          if (m.axis(k).rotary()) d[k] = 0.0;
-        plan.start[i] = o.axes;
-        plan.approach[i] = d;
-        plan.s0[i] = 0.0;
-        const double h = 1e-4;
-        const double sens = (gap(ToolAt(m, theta, o.axes + h * d, dir, tip)) -
-                             gap(ToolAt(m, theta, o.axes - h * d, dir, tip))) / (2 * h);
-        if (!(std::abs(sens) > 1e-6))
-          throw std::invalid_argument(w + ": the nominal approach does not move the tip off the surface");
-        AddInput(&plan, oi, 0, sens, noise.probe);
-        break;
-      }
-      case ObservationType::kDbb:
-        AddInput(&plan, oi, 0, -1.0, noise.dbb);
-        break;
-      case ObservationType::kBall3d:
-        for (int c = 0; c < 3; ++c) AddInput(&plan, oi, c, -1.0, noise.ball3d);
-        break;
-    }
-  }
+  for (size_t i = 0; i < ds.observations.size(); ++i)
+    KindOf(ds.observations[i]).AddInputs(&plan, static_cast<int>(i), nullptr, &rec);
   return plan;
 }
 

@@ -1,11 +1,19 @@
 #include "fivecal/solve/analytic_residuals.h"
 
-#include <set>
-
-#include "fivecal/model/kinematic_model.h"
 #include "fivecal/model/kinematics.h"
+#include "fivecal/observations/registry.h"
 
 namespace fivecal {
+
+AnalyticEval::AnalyticEval(const Machine& m, const Eigen::VectorXd& values, const KinematicModel& model,
+                           const std::vector<int>& estimated, const std::vector<int>& block_of,
+                           double* res, double** jac)
+    : v(values), residuals(res), jacobians(jac), model_(model), block_of_(block_of),
+      tip0_(m.tip_index()), J_(3, m.num_parameters()) {
+  const int np = m.num_parameters();
+  for (size_t b = 0; b < estimated.size(); ++b)
+    if (estimated[b] < np) machine_blocks_.emplace_back(static_cast<int>(b), estimated[b]);
+}
 
 AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& table,
                                      const Eigen::VectorXd& values, const std::vector<int>& estimated)
@@ -16,73 +24,34 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
     mutable_parameter_block_sizes()->push_back(1);
   }
   const Machine& m = ds.machine();
-  int num_rows = 0;
-  std::set<std::string> probed;
+  rows_.reserve(ds.observations.size());
   for (size_t i = 0; i < ds.observations.size(); ++i) {
     const Observation& o = ds.observations[i];
-    Row r;
-    r.type = o.type;
+    const ObservationKind& kind = KindOf(o);
+    AnalyticRow r;
+    r.kind = &kind;
     r.q.resize(m.num_axes());
     AxisValuesToInternal(m, o.axes.data(), r.q.data());
     r.dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
-    int n = 1;
-    switch (o.type) {
-      case ObservationType::kFacet: {
-        const int fi = ds.artefact.FacetIndex(o.target);
-        r.a = ds.artefact.facets[fi].point;
-        r.n = ds.artefact.facets[fi].normal;
-        r.constant = ds.tip_radius;
-        r.idx[0] = table.facet(fi);
-        break;
-      }
-      case ObservationType::kSphere: {
-        const int si = ds.artefact.SphereIndex(o.target);
-        r.a = ds.artefact.spheres[si].center;
-        r.constant = ds.artefact.spheres[si].radius + ds.tip_radius;
-        for (int c = 0; c < 4; ++c) r.idx[c] = table.sphere(si)[c];
-        probed.insert(o.target);
-        break;
-      }
-      case ObservationType::kDbb:
-      case ObservationType::kBall3d: {
-        const auto& mt = table.mount(o.type, o.setup);
-        for (int c = 0; c < 7; ++c) r.idx[c] = mt[c];
-        r.a = o.table_ball;
-        r.tool_ball = o.tool_ball;
-        r.measured = o.measured;
-        r.constant = o.length + o.reading;
-        if (o.type == ObservationType::kBall3d) n = 3;
-        break;
-      }
-    }
+    kind.PrepareAnalytic(ds, table, o, &r);
     rows_.push_back(std::move(r));
-    for (int k = 0; k < n; ++k) row_source_.push_back(static_cast<int>(i));
-    num_rows += n;
+    for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(static_cast<int>(i));
   }
-  for (size_t b = 0; b < ds.artefact.scale_bars.size(); ++b) {
-    const ScaleBar& bar = ds.artefact.scale_bars[b];
-    if (!probed.count(bar.sphere1) || !probed.count(bar.sphere2)) continue;  // as Problem
-    const int s1 = ds.artefact.SphereIndex(bar.sphere1), s2 = ds.artefact.SphereIndex(bar.sphere2);
-    Row r;
-    r.bar = true;
-    r.a = ds.artefact.spheres[s1].center;
-    r.n = ds.artefact.spheres[s2].center;
-    r.constant = bar.length;
-    for (int c = 0; c < 3; ++c) {
-      r.idx[c] = table.sphere(s1)[c];
-      r.idx[3 + c] = table.sphere(s2)[c];
-    }
-    rows_.push_back(std::move(r));
-    row_source_.push_back(-1 - static_cast<int>(b));
-    ++num_rows;
+  for (const ObservationKind* kind : ObservationKinds())
+    kind->AddArtefactAnalyticRows(ds, table, &rows_, &row_source_);
+  for (int i = 0; i < static_cast<int>(rows_.size()); ++i) {
+    const AnalyticRow& r = rows_[i];
+    if (runs_.empty() || runs_.back().kind != r.kind || rows_[runs_.back().begin].variant != r.variant)
+      runs_.push_back({r.kind, i, i});
+    runs_.back().end = i + 1;
   }
-  set_num_residuals(num_rows);
+  set_num_residuals(static_cast<int>(row_source_.size()));
 }
 
 bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residuals,
                                  double** jacobians) const {
   const Machine& m = ds_.machine();
-  const int np = m.num_parameters(), nb = static_cast<int>(estimated_.size());
+  const int nb = static_cast<int>(estimated_.size());
   Eigen::VectorXd v = values_;
   for (int b = 0; b < nb; ++b) v[estimated_[b]] = parameters[b][0];
   KinematicModel model(m, v.data());
@@ -91,104 +60,8 @@ bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residu
   if (jacobians)
     for (int b = 0; b < nb; ++b)
       if (jacobians[b]) std::fill(jacobians[b], jacobians[b] + nr, 0.0);
-  // Machine blocks (b, theta index), split by whether they are the probe tip.
-  std::vector<std::pair<int, int>> machine_blocks;
-  for (int b = 0; b < nb; ++b)
-    if (estimated_[b] < np) machine_blocks.emplace_back(b, estimated_[b]);
-  const int tip0 = m.tip_index();
-  auto put = [&](int row, int index, double value) {
-    if (!jacobians || index < 0) return;
-    const int b = block_of_[index];
-    if (b >= 0 && jacobians[b]) jacobians[b][row] += value;
-  };
-
-  Eigen::Matrix<double, 3, Eigen::Dynamic> J(3, np);
-  int row = 0;
-  for (const Row& r : rows_) {
-    if (r.bar) {
-      Eigen::Vector3d d = r.a - r.n;
-      for (int c = 0; c < 3; ++c) d[c] += v[r.idx[c]] - v[r.idx[3 + c]];
-      const double len = d.norm();
-      residuals[row] = len - r.constant;
-      if (jacobians) {
-        const Eigen::Vector3d u = d / len;
-        for (int c = 0; c < 3; ++c) {
-          put(row, r.idx[c], u[c]);
-          put(row, r.idx[3 + c], -u[c]);
-        }
-      }
-      ++row;
-      continue;
-    }
-    const bool ball = r.type == ObservationType::kDbb || r.type == ObservationType::kBall3d;
-    Eigen::Vector3d tip = model.tip();
-    Eigen::Vector3d target = r.a;
-    if (ball) {
-      for (int c = 0; c < 3; ++c) {
-        tip[c] = r.tool_ball[c] + v[r.idx[1 + c]];
-        target[c] += v[r.idx[4 + c]];
-      }
-    }
-    Eigen::Vector3d P;
-    if (jacobians) model.ToolPointJacobian(r.q.data(), r.dir.data(), tip, &P, J.data());
-    else P = model.ToolPoint(r.q.data(), r.dir.data(), tip);
-
-    // Residual rows as g_k^T P + ..., with g_k the gradient of row k in P.
-    Eigen::Matrix3d G;  // rows: gradients in P of this observation's residual rows
-    int n = 1;
-    switch (r.type) {
-      case ObservationType::kFacet:
-        residuals[row] = r.n.dot(P - r.a) - r.constant - v[r.idx[0]];
-        G.row(0) = r.n.transpose();
-        put(row, r.idx[0], -1.0);
-        break;
-      case ObservationType::kSphere: {
-        const Eigen::Vector3d c = r.a + Eigen::Vector3d(v[r.idx[0]], v[r.idx[1]], v[r.idx[2]]);
-        const Eigen::Vector3d d = P - c;
-        const double len = d.norm();
-        residuals[row] = len - r.constant - v[r.idx[3]];
-        const Eigen::Vector3d u = d / len;
-        G.row(0) = u.transpose();
-        for (int k = 0; k < 3; ++k) put(row, r.idx[k], -u[k]);
-        put(row, r.idx[3], -1.0);
-        break;
-      }
-      case ObservationType::kDbb: {
-        const Eigen::Vector3d d = P - target;
-        const double len = d.norm();
-        residuals[row] = len - r.constant - v[r.idx[0]];
-        const Eigen::Vector3d u = d / len;
-        G.row(0) = u.transpose();
-        put(row, r.idx[0], -1.0);
-        for (int k = 0; k < 3; ++k) put(row, r.idx[4 + k], -u[k]);
-        break;
-      }
-      case ObservationType::kBall3d: {
-        n = 3;
-        const Eigen::Vector3d d = P - target - r.measured;
-        for (int k = 0; k < 3; ++k) {
-          residuals[row + k] = d[k];
-          put(row + k, r.idx[4 + k], -1.0);
-        }
-        G.setIdentity();
-        break;
-      }
-    }
-    if (jacobians) {
-      for (int k = 0; k < n; ++k) {
-        const Eigen::RowVector3d g = G.row(k);
-        for (const auto& [b, idx] : machine_blocks) {
-          if (!jacobians[b]) continue;
-          const bool is_tip = idx >= tip0 && idx < tip0 + 3;
-          if (ball && is_tip) continue;  // the probe tip does not carry the ball
-          jacobians[b][row + k] += g.dot(J.col(idx));
-        }
-        if (ball)  // the tool ball's offsets act like a tip: dP/dtip
-          for (int c = 0; c < 3; ++c) put(row + k, r.idx[1 + c], g.dot(J.col(tip0 + c)));
-      }
-    }
-    row += n;
-  }
+  AnalyticEval e(m, v, model, estimated_, block_of_, residuals, jacobians);
+  for (const Run& run : runs_) run.kind->EvaluateAnalytic(e, rows_.data() + run.begin, run.end - run.begin);
   return true;
 }
 

@@ -14,6 +14,7 @@
 #include "fivecal/model/kinematics.h"
 #include "fivecal/solve/priors.h"
 #include "fivecal/solve/problem.h"
+#include "fivecal/observations/registry.h"
 #include "json_util.h"
 
 namespace fivecal {
@@ -216,17 +217,6 @@ std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::Vector
   return kept;
 }
 
-bool HasLengthReference(const Dataset& ds) {
-  std::set<std::string> probed;
-  for (const Observation& o : ds.observations) {
-    if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) return true;
-    if (o.type == ObservationType::kSphere) probed.insert(o.target);
-  }
-  for (const ScaleBar& b : ds.artefact.scale_bars)
-    if (probed.count(b.sphere1) && probed.count(b.sphere2)) return true;
-  return false;
-}
-
 // Plain words for why a group of parameters is not determined.
 std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group) {
   const Machine& m = ds.machine();
@@ -264,46 +254,16 @@ void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const Param
   res->residual_vectors = Eigen::MatrixXd::Zero(n, 3);
   res->points = Eigen::MatrixXd::Zero(n, 3);
   const KinematicModel model(m, values.data());
-  const Eigen::Vector3d tip = model.tip();
+  const ReportContext ctx{&ds, &table, &values, &model};
   int row = 0;
   for (int i = 0; i < n; ++i) {
     const Observation& o = ds.observations[i];
-    const PoseData pose(m, o);
-    Eigen::Vector3d P;
-    Eigen::Vector3d t = tip;
-    Eigen::Vector3d table_ball = o.table_ball;
-    if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) {
-      const auto& mt = table.mount(o.type, o.setup);
-      for (int c = 0; c < 3; ++c) {
-        t[c] = o.tool_ball[c] + values[mt[1 + c]];
-        table_ball[c] += values[mt[4 + c]];
-      }
-    }
-    P = model.ToolPoint(pose.q.data(), pose.dir.data(), t);
+    const ObservationKind& kind = KindOf(o);
+    Eigen::Vector3d P, v;
+    kind.ReportVector(ctx, o, r.data() + row, &P, &v);
     res->points.row(i) = P.transpose();
-    Eigen::Vector3d dir = Eigen::Vector3d::Zero();
-    switch (o.type) {
-      case ObservationType::kFacet:
-        dir = ds.artefact.facets[ds.artefact.FacetIndex(o.target)].normal;
-        break;
-      case ObservationType::kSphere: {
-        const int si = ds.artefact.SphereIndex(o.target);
-        const auto& sp = table.sphere(si);
-        const Eigen::Vector3d c = ds.artefact.spheres[si].center +
-                                  Eigen::Vector3d(values[sp[0]], values[sp[1]], values[sp[2]]);
-        dir = (P - c).normalized();
-        break;
-      }
-      case ObservationType::kDbb:
-        dir = (P - table_ball).normalized();
-        break;
-      case ObservationType::kBall3d:
-        res->residual_vectors.row(i) = r.segment<3>(row).transpose();
-        row += 3;
-        continue;
-    }
-    res->residual_vectors.row(i) = (r[row] * dir).transpose();
-    row += 1;
+    res->residual_vectors.row(i) = v.transpose();
+    row += kind.rows();
   }
 }
 
@@ -561,11 +521,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   if (!res.adequate) {
     bool mounts = false, mount_estimated = false;
     for (const Observation& o : ds.observations)
-      if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d) {
+      for (int c : KindOf(o).MountPositions(table, o)) {
         mounts = true;
-        const auto& mt = table.mount(o.type, o.setup);
-        for (int c = 1; c < 7; ++c)
-          if (std::find(est.begin(), est.end(), mt[c]) != est.end()) mount_estimated = true;
+        if (std::find(est.begin(), est.end(), c) != est.end()) mount_estimated = true;
       }
     const double x = std::sqrt(ratio);
     char buf[64];

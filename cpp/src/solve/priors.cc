@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "fivecal/observations/registry.h"
+
 namespace fivecal {
 namespace {
 
@@ -48,22 +50,18 @@ std::vector<PriorClass> MakeClasses() {
       {"backlash_linear", 0.005, "mm", "reversal error of a linear axis (EXXb): 5 um"},
       {"backlash_rotary", 2e-5, "rad", "reversal error of a rotary axis (ECCb): 20 urad"},
       {"tip", 1.0, "mm", "stylus / tool tip offset tip.x|y|z: a stylus length is poorly known"},
-      {"facet", 1.0, "mm", "facet.<id>: offset of a facet from its nominal plane"},
-      {"sphere_center", 1.0, "mm", "sphere.<id>.x|y|z: where a sphere really sits"},
-      {"sphere_radius", 0.01, "mm", "sphere.<id>.r: a calibrated sphere's radius error"},
-      {"dbb_length", 1.0, "mm", "dbb[.<setup>].length: ball-bar length offset"},
-      {"mount", 2.0, "mm",
-       "dbb/ball3d tool and table ball positions (dbb.tool.x, ball3d.R1.table.z ...): "
-       "a nest is placed to about a millimetre"},
   };
   c.insert(c.end(), rest.begin(), rest.end());
+  // The setup parameters' classes, from their observation kinds (a class two
+  // kinds share is listed once).
+  for (const ObservationKind* kind : ObservationKinds())
+    for (const PriorClass& k : kind->prior_classes())
+      if (std::none_of(c.begin(), c.end(), [&](const PriorClass& x) { return x.name == k.name; }))
+        c.push_back(k);
   return c;
 }
 
 bool StartsWith(const std::string& s, const std::string& p) { return s.rfind(p, 0) == 0; }
-bool EndsWith(const std::string& s, const std::string& p) {
-  return s.size() >= p.size() && s.compare(s.size() - p.size(), p.size(), p) == 0;
-}
 
 int Distance(const std::string& a, const std::string& b) {
   std::vector<int> prev(b.size() + 1), cur(b.size() + 1);
@@ -111,10 +109,8 @@ std::string PriorClassOf(const Machine& m, const std::string& name) {
       }
     }
   }
-  if (StartsWith(name, "facet.")) return "facet";
-  if (StartsWith(name, "sphere.")) return EndsWith(name, ".r") ? "sphere_radius" : "sphere_center";
-  if (StartsWith(name, "dbb.") && EndsWith(name, ".length")) return "dbb_length";
-  if (StartsWith(name, "dbb.") || StartsWith(name, "ball3d.")) return "mount";
+  for (const ObservationKind* kind : ObservationKinds())
+    if (const char* c = kind->PriorClassOfName(name)) return c;
   throw std::invalid_argument("prior: no prior class for parameter '" + name + "'");
 }
 

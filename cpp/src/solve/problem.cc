@@ -1,6 +1,7 @@
 #include "fivecal/solve/problem.h"
 
 #include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/observations/registry.h"
 #include "json_util.h"
 
 #include <algorithm>
@@ -10,10 +11,6 @@
 
 namespace fivecal {
 namespace {
-
-constexpr int kStride = 4;
-
-const char* kXYZ[3] = {"x", "y", "z"};
 
 // A cost function whose rows are those of `inner` divided by their declared
 // noise: the solver then minimises sum (r_i / sigma_i)^2.
@@ -58,11 +55,6 @@ class PriorCost : public ceres::SizedCostFunction<1, 1> {
   const double mean_, inv_sigma_;
 };
 
-std::string MountPrefix(ObservationType t, const std::string& setup) {
-  const std::string base = t == ObservationType::kDbb ? "dbb" : "ball3d";
-  return setup.empty() ? base : base + "." + setup;
-}
-
 }  // namespace
 
 PoseData::PoseData(const Machine& m, const Observation& o)
@@ -87,23 +79,8 @@ int ParameterTable::Add(const std::string& name) {
 ParameterTable::ParameterTable(const Dataset& ds) {
   for (const std::string& n : ds.machine().parameter_names()) Add(n);
   num_machine_ = size();
-  for (const Facet& f : ds.artefact.facets) facet_.push_back(Add("facet." + f.id));
-  for (const Sphere& s : ds.artefact.spheres) {
-    std::vector<int> idx;
-    for (const char* c : {"x", "y", "z", "r"}) idx.push_back(Add("sphere." + s.id + "." + c));
-    sphere_.push_back(idx);
-  }
-  for (const Observation& o : ds.observations) {
-    if (o.type != ObservationType::kDbb && o.type != ObservationType::kBall3d) continue;
-    auto& map = o.type == ObservationType::kDbb ? dbb_ : ball3d_;
-    if (map.count(o.setup)) continue;
-    const std::string prefix = MountPrefix(o.type, o.setup);
-    std::vector<int> idx;
-    idx.push_back(o.type == ObservationType::kDbb ? Add(prefix + ".length") : -1);
-    for (const char* c : kXYZ) idx.push_back(Add(prefix + ".tool." + c));
-    for (const char* c : kXYZ) idx.push_back(Add(prefix + ".table." + c));
-    map[o.setup] = idx;
-  }
+  for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactParameters(ds, this);
+  for (const Observation& o : ds.observations) KindOf(o).AddObservationParameters(o, this);
 }
 
 int ParameterTable::Index(const std::string& name) const {
@@ -127,33 +104,9 @@ int ParameterTable::Require(const std::string& name) const {
   throw std::invalid_argument(msg + json_util::DidYouMean(name, names_));
 }
 
-const std::vector<int>& ParameterTable::mount(ObservationType type, const std::string& setup) const {
-  const auto& map = type == ObservationType::kDbb ? dbb_ : ball3d_;
-  return map.at(setup);
-}
-
 std::vector<int> ParameterTable::DefaultSetup(const Dataset& ds) const {
   std::set<int> s;
-  const int tip = ds.machine().tip_index();
-  for (const Observation& o : ds.observations) {
-    switch (o.type) {
-      case ObservationType::kFacet:
-        for (int c = 0; c < 3; ++c) s.insert(tip + c);
-        s.insert(facet_[ds.artefact.FacetIndex(o.target)]);
-        break;
-      case ObservationType::kSphere: {
-        for (int c = 0; c < 3; ++c) s.insert(tip + c);
-        const auto& sp = sphere_[ds.artefact.SphereIndex(o.target)];
-        for (int c = 0; c < 3; ++c) s.insert(sp[c]);
-        break;
-      }
-      case ObservationType::kDbb:
-        s.insert(mount(o.type, o.setup)[0]);
-        break;
-      case ObservationType::kBall3d:
-        break;
-    }
-  }
+  for (const Observation& o : ds.observations) KindOf(o).DefaultSetup(ds, *this, o, &s);
   return std::vector<int>(s.begin(), s.end());
 }
 
@@ -253,6 +206,28 @@ std::vector<std::string> MotionCandidates(const Machine& m) {
 
 // ---- Problem ----------------------------------------------------------------
 
+// The kinds add their templated residuals through this (residuals.h).
+class ProblemBuilder : public ResidualBuilder {
+ public:
+  ProblemBuilder(Problem* p, const std::vector<double*>& machine_ptrs)
+      : ResidualBuilder(p->ds_, p->table_, p->ctx_), p_(p) {
+    machine_ptrs_ = machine_ptrs;
+  }
+
+ protected:
+  double* Block(int index) override { return p_->block_of_[index] >= 0 ? &p_->values_[index] : nullptr; }
+  void AddCost(ceres::CostFunction* cost, int num_residuals, const std::vector<double*>& ptrs,
+               int source) override {
+    p_->AddCostBlock(cost, num_residuals, ptrs, source);
+  }
+  void AddConstant(int num_residuals, std::function<void(double*)> eval, int source) override {
+    p_->AddConstantRows(num_residuals, std::move(eval), source);
+  }
+
+ private:
+  Problem* p_;
+};
+
 Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
                  const std::vector<int>& estimated, const std::string& robust, double robust_scale,
                  bool analytic)
@@ -305,71 +280,13 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
   for (int i : estimated_)
     if (i < m.num_parameters()) machine_ptrs.push_back(&values_[i]);
 
+  ProblemBuilder builder(this, machine_ptrs);
   for (size_t i = 0; i < ds.observations.size(); ++i) {
     const Observation& o = ds.observations[i];
-    std::vector<double*> ptrs = machine_ptrs;
-    auto ref = [&](int index) {
-      SetupRef r{index, -1};
-      if (index >= 0 && block_of_[index] >= 0) {
-        r.block = static_cast<int>(ptrs.size());
-        ptrs.push_back(&values_[index]);
-      }
-      return r;
-    };
-    switch (o.type) {
-      case ObservationType::kFacet: {
-        const int fi = ds.artefact.FacetIndex(o.target);
-        const SetupRef off = ref(table.facet(fi));
-        AddBlock(new FacetResidual(ctx_, o, ds.artefact.facets[fi], ds.tip_radius, off), 1, ptrs,
-                 static_cast<int>(i));
-        break;
-      }
-      case ObservationType::kSphere: {
-        const int si = ds.artefact.SphereIndex(o.target);
-        const auto& sp = table.sphere(si);
-        const SetupRef c[3] = {ref(sp[0]), ref(sp[1]), ref(sp[2])};
-        const SetupRef r = ref(sp[3]);
-        AddBlock(new SphereResidual(ctx_, o, ds.artefact.spheres[si], ds.tip_radius, c, r), 1, ptrs,
-                 static_cast<int>(i));
-        break;
-      }
-      case ObservationType::kDbb:
-      case ObservationType::kBall3d: {
-        const auto& mt = table.mount(o.type, o.setup);
-        MountRefs refs;
-        if (mt[0] >= 0) refs.length = ref(mt[0]);
-        for (int c = 0; c < 3; ++c) refs.tool[c] = ref(mt[1 + c]);
-        for (int c = 0; c < 3; ++c) refs.table[c] = ref(mt[4 + c]);
-        auto* f = new BallResidual(ctx_, o, refs);
-        AddBlock(f, f->num_residuals(), ptrs, static_cast<int>(i));
-        break;
-      }
-    }
+    builder.Start(static_cast<int>(i), true);
+    KindOf(o).AddResidual(builder, o);
   }
-  std::set<std::string> probed;
-  for (const Observation& o : ds.observations)
-    if (o.type == ObservationType::kSphere) probed.insert(o.target);
-  for (size_t b = 0; b < ds.artefact.scale_bars.size(); ++b) {
-    const ScaleBar& bar = ds.artefact.scale_bars[b];
-    // A bar whose balls were not probed in this dataset says nothing about it.
-    if (!probed.count(bar.sphere1) || !probed.count(bar.sphere2)) continue;
-    const int s1 = ds.artefact.SphereIndex(bar.sphere1), s2 = ds.artefact.SphereIndex(bar.sphere2);
-    std::vector<double*> ptrs;
-    auto ref = [&](int index) {
-      SetupRef r{index, -1};
-      if (block_of_[index] >= 0) {
-        r.block = static_cast<int>(ptrs.size());
-        ptrs.push_back(&values_[index]);
-      }
-      return r;
-    };
-    const auto &p1 = table.sphere(s1), &p2 = table.sphere(s2);
-    const SetupRef d1[3] = {ref(p1[0]), ref(p1[1]), ref(p1[2])};
-    const SetupRef d2[3] = {ref(p2[0]), ref(p2[1]), ref(p2[2])};
-    AddBlock(new ScaleBarResidual(ctx_, ds.artefact.spheres[s1], ds.artefact.spheres[s2], bar.length,
-                                  d1, d2),
-             1, ptrs, -1 - static_cast<int>(b));
-  }
+  for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactResiduals(builder);
   row_sigma_.resize(num_rows_);
   for (int r = 0, k = 0; r < num_rows_; ++r) {
     k = (r > 0 && row_source_[r] == row_source_[r - 1]) ? k + 1 : 0;
@@ -468,22 +385,14 @@ void Problem::AddPriors(const Eigen::VectorXd& prior_sigma, const Eigen::VectorX
   }
 }
 
-template <typename Functor>
-void Problem::AddBlock(Functor* f, int num_residuals, const std::vector<double*>& ptrs, int source) {
-  if (ptrs.empty()) {
-    // Nothing estimated influences this residual: keep it out of the solver
-    // but evaluate it for the report.
-    std::shared_ptr<Functor> keep(f);
-    constant_.push_back({num_rows_, [keep](double* r) {
-                           (*keep)(static_cast<double const* const*>(nullptr), r);
-                         }});
-    for (int r = 0; r < num_residuals; ++r) row_source_.push_back(source);
-    num_rows_ += num_residuals;
-    return;
-  }
-  auto* cost = new ceres::DynamicAutoDiffCostFunction<Functor, kStride>(f);
-  for (size_t i = 0; i < ptrs.size(); ++i) cost->AddParameterBlock(1);
-  cost->SetNumResiduals(num_residuals);
+void Problem::AddConstantRows(int num_residuals, std::function<void(double*)> eval, int source) {
+  constant_.push_back({num_rows_, std::move(eval)});
+  for (int r = 0; r < num_residuals; ++r) row_source_.push_back(source);
+  num_rows_ += num_residuals;
+}
+
+void Problem::AddCostBlock(ceres::CostFunction* cost, int num_residuals, const std::vector<double*>& ptrs,
+                           int source) {
   std::vector<double> w(num_residuals);
   double block_sigma = 0;
   for (int r = 0; r < num_residuals; ++r) {

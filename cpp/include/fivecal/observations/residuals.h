@@ -1,4 +1,5 @@
-// Ceres residuals of the observation types of docs/formats.md.
+// What the residuals of every observation kind share (the kinds' own
+// functors are in observations/<kind>.h).
 //
 // Every residual sees the problem's full parameter vector (machine theta,
 // then setup parameters) through a ParameterAccess: estimated parameters come
@@ -11,6 +12,7 @@
 #include <ceres/ceres.h>
 
 #include <Eigen/Core>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -18,6 +20,8 @@
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
+
+class ParameterTable;
 
 // What every residual of one problem shares.
 struct ResidualContext {
@@ -64,154 +68,67 @@ struct PoseData {
   std::vector<int> dir;
 };
 
-// Facet touch. The probe tip centre P (tool point, workpiece frame) sits one
-// tip radius r off the facet plane, which may be offset along its normal:
-//
-//     n^ . (P - a) - r - facet.<id> = 0
-//
-//   a: nominal facet point, n^: unit outward normal (workpiece frame).
-class FacetResidual {
+// What a kind's AddResidual uses to add its templated residual to a problem:
+// Ref() turns a parameter index into a SetupRef (adding the parameter's block
+// when it is estimated), Add() wraps the functor for automatic derivatives.
+class ResidualBuilder {
  public:
-  FacetResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const Facet& f,
-                double tip_radius, SetupRef offset)
-      : access_(ctx), pose_(*ctx->machine, o), point_(f.point), normal_(f.normal),
-        tip_radius_(tip_radius), offset_(offset) {}
+  ResidualBuilder(const Dataset& ds, const ParameterTable& table, std::shared_ptr<const ResidualContext> ctx)
+      : dataset(ds), table(table), context(std::move(ctx)) {}
+  virtual ~ResidualBuilder() = default;
 
-  template <typename T>
-  bool operator()(T const* const* p, T* residual) const {
-    std::vector<T> theta;
-    access_.Theta(p, &theta);
-    const Machine& m = access_.machine();
-    Vec3<T> P;
-    ToolInWorkpiece<T>(m, theta.data(), pose_.q.data(), pose_.dir.data(),
-                       TipWithOffsets<T>(m, theta.data()), &P);
-    residual[0] = normal_.template cast<T>().dot(P - point_.template cast<T>()) - T(tip_radius_) -
-                  access_.Setup(p, offset_);
-    return true;
+  const Dataset& dataset;
+  const ParameterTable& table;
+  const std::shared_ptr<const ResidualContext> context;
+
+  // Starts the next residual: its rows belong to `source` (an observation
+  // index, or -(1 + index) of an artefact constraint); `machine`: it depends
+  // on the estimated machine parameters (their blocks come first).
+  void Start(int source, bool machine) {
+    source_ = source;
+    ptrs_.clear();
+    if (machine) ptrs_ = machine_ptrs_;
   }
-
- private:
-  const ParameterAccess access_;
-  const PoseData pose_;
-  const Eigen::Vector3d point_, normal_;
-  const double tip_radius_;
-  const SetupRef offset_;
-};
-
-// Sphere touch: the tip centre is R + r from the true sphere centre c + dc:
-//
-//     |P - (c + dc)| - (R + sphere.<id>.r + r) = 0
-class SphereResidual {
- public:
-  SphereResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const Sphere& s,
-                 double tip_radius, const SetupRef (&center)[3], SetupRef radius)
-      : access_(ctx), pose_(*ctx->machine, o), center_(s.center), radius_(s.radius),
-        tip_radius_(tip_radius), dc_{center[0], center[1], center[2]}, dr_(radius) {}
-
-  template <typename T>
-  bool operator()(T const* const* p, T* residual) const {
-    std::vector<T> theta;
-    access_.Theta(p, &theta);
-    const Machine& m = access_.machine();
-    Vec3<T> P;
-    ToolInWorkpiece<T>(m, theta.data(), pose_.q.data(), pose_.dir.data(),
-                       TipWithOffsets<T>(m, theta.data()), &P);
-    const Vec3<T> c = center_.template cast<T>() +
-                      Vec3<T>(access_.Setup(p, dc_[0]), access_.Setup(p, dc_[1]), access_.Setup(p, dc_[2]));
-    using std::sqrt;
-    residual[0] = sqrt((P - c).squaredNorm()) - (T(radius_ + tip_radius_) + access_.Setup(p, dr_));
-    return true;
-  }
-
- private:
-  const ParameterAccess access_;
-  const PoseData pose_;
-  const Eigen::Vector3d center_;
-  const double radius_, tip_radius_;
-  const SetupRef dc_[3];
-  const SetupRef dr_;
-};
-
-// Scale bar: the distance between the two estimated sphere centres equals
-// the calibrated length L:   |c1 + dc1 - c2 - dc2| - L = 0
-class ScaleBarResidual {
- public:
-  ScaleBarResidual(std::shared_ptr<const ResidualContext> ctx, const Sphere& s1, const Sphere& s2,
-                   double length, const SetupRef (&d1)[3], const SetupRef (&d2)[3])
-      : access_(ctx), c1_(s1.center), c2_(s2.center), length_(length),
-        d1_{d1[0], d1[1], d1[2]}, d2_{d2[0], d2[1], d2[2]} {}
-
-  template <typename T>
-  bool operator()(T const* const* p, T* residual) const {
-    Vec3<T> d = (c1_ - c2_).template cast<T>();
-    for (int i = 0; i < 3; ++i) d[i] += access_.Setup(p, d1_[i]) - access_.Setup(p, d2_[i]);
-    using std::sqrt;
-    residual[0] = sqrt(d.squaredNorm()) - T(length_);
-    return true;
-  }
-
- private:
-  const ParameterAccess access_;
-  const Eigen::Vector3d c1_, c2_;
-  const double length_;
-  const SetupRef d1_[3], d2_[3];
-};
-
-// Ball-bar setup parameters: length offset, tool-ball and table-ball offsets.
-struct MountRefs {
-  SetupRef length;
-  SetupRef tool[3];
-  SetupRef table[3];
-};
-
-// Double ball bar sample. The tool ball is the tool point of a tool whose
-// tip is tool_ball + dbb.tool (F at the zero pose); the table ball sits at
-// table_ball + dt in the workpiece frame:
-//
-//     |P_ball - (table_ball + dt)| - (length + dbb.length + reading) = 0
-//
-// Ball3d sample (R-test, CapBall, tracker): the 3D displacement of the tool
-// ball from its nest, workpiece frame (3 rows):
-//
-//     P_ball - (table_ball + dt) - measured = 0
-class BallResidual {
- public:
-  BallResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const MountRefs& refs)
-      : access_(ctx), pose_(*ctx->machine, o), three_d_(o.type == ObservationType::kBall3d),
-        tool_ball_(o.tool_ball), table_ball_(o.table_ball), measured_(o.measured),
-        target_length_(o.length + o.reading), refs_(refs) {}
-
-  int num_residuals() const { return three_d_ ? 3 : 1; }
-
-  template <typename T>
-  bool operator()(T const* const* p, T* residual) const {
-    std::vector<T> theta;
-    access_.Theta(p, &theta);
-    const Machine& m = access_.machine();
-    Vec3<T> tip = tool_ball_.template cast<T>(), table = table_ball_.template cast<T>();
-    for (int i = 0; i < 3; ++i) {
-      tip[i] += access_.Setup(p, refs_.tool[i]);
-      table[i] += access_.Setup(p, refs_.table[i]);
+  SetupRef Ref(int index) {
+    SetupRef r{index, -1};
+    if (index >= 0) {
+      double* p = Block(index);
+      if (p) {
+        r.block = static_cast<int>(ptrs_.size());
+        ptrs_.push_back(p);
+      }
     }
-    Vec3<T> P;
-    ToolInWorkpiece<T>(m, theta.data(), pose_.q.data(), pose_.dir.data(), tip, &P);
-    const Vec3<T> d = P - table;
-    if (three_d_) {
-      for (int i = 0; i < 3; ++i) residual[i] = d[i] - T(measured_[i]);
-    } else {
-      using std::sqrt;
-      residual[0] = sqrt(d.squaredNorm()) - (T(target_length_) + access_.Setup(p, refs_.length));
+    return r;
+  }
+  // Takes ownership of `f`.
+  template <typename Functor>
+  void Add(Functor* f, int num_residuals) {
+    if (ptrs_.empty()) {
+      // Nothing estimated influences this residual: keep it out of the solver
+      // but evaluate it for the report.
+      std::shared_ptr<Functor> keep(f);
+      AddConstant(num_residuals, [keep](double* r) { (*keep)(static_cast<double const* const*>(nullptr), r); },
+                  source_);
+      return;
     }
-    return true;
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<Functor, kStride>(f);
+    for (size_t i = 0; i < ptrs_.size(); ++i) cost->AddParameterBlock(1);
+    cost->SetNumResiduals(num_residuals);
+    AddCost(cost, num_residuals, ptrs_, source_);
   }
 
+ protected:
+  static constexpr int kStride = 4;
+  // The storage of an estimated parameter's block, or nullptr when fixed.
+  virtual double* Block(int index) = 0;
+  virtual void AddCost(ceres::CostFunction* cost, int num_residuals, const std::vector<double*>& ptrs,
+                       int source) = 0;
+  virtual void AddConstant(int num_residuals, std::function<void(double*)> eval, int source) = 0;
+  std::vector<double*> machine_ptrs_;
+
  private:
-  const ParameterAccess access_;
-  const PoseData pose_;
-  const bool three_d_;
-  const Eigen::Vector3d tool_ball_, table_ball_, measured_;
-  const double target_length_;
-  const MountRefs refs_;
+  std::vector<double*> ptrs_;
+  int source_ = 0;
 };
 
 }  // namespace fivecal

@@ -92,6 +92,13 @@ Dataset AddNoise(const SimulationPlan& plan, uint64_t seed);
 // (mm): input i moves by deviation[i] / sensitivity[i] in its own unit.
 Dataset ApplyInputDeviations(const SimulationPlan& plan, const Eigen::VectorXd& deviation);
 
+// For the observation kinds (observations/kind.h): the tool point (workpiece
+// frame) at axis commands `cmd` (mm / degrees) for machine parameters theta
+// and a tip at `tip`; and one more noise input of observation `obs`.
+Eigen::Vector3d ToolAtCommand(const Machine& m, const Eigen::VectorXd& theta, const Eigen::VectorXd& cmd,
+                              const std::vector<int>& dir, const Eigen::Vector3d& tip);
+void AddPlanInput(SimulationPlan* plan, int obs, int component, double sensitivity, double sigma);
+
 }  // namespace fivecal
 
 #endif  // FIVECAL_SIMULATE_H_

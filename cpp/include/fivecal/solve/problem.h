@@ -2,9 +2,10 @@
 // set of estimated parameters (machine errors and setup parameters).
 //
 // Parameter names (README, "Concepts"): the machine's (E..., tip.x|y|z) followed by
-// the setup parameters the dataset implies: facet.<id>, sphere.<id>.x|y|z|r,
-// dbb.length, dbb.tool.x|y|z, dbb.table.x|y|z (or dbb.<setup>.… for a named
-// mounting), ball3d.<setup>.tool.x|y|z, ball3d.<setup>.table.x|y|z.
+// the setup parameters the dataset implies, named by each observation kind
+// (observations/<kind>.h): facet.<id>, sphere.<id>.x|y|z|r, dbb.length,
+// dbb.tool.x|y|z, dbb.table.x|y|z (or dbb.<setup>.… for a named mounting),
+// ball3d.<setup>.tool.x|y|z, ball3d.<setup>.table.x|y|z.
 #ifndef FIVECAL_PROBLEM_H_
 #define FIVECAL_PROBLEM_H_
 
@@ -15,6 +16,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "fivecal/observations/dataset.h"
@@ -24,6 +26,9 @@ namespace fivecal {
 
 class ParameterTable {
  public:
+  // The machine's parameters, then every kind's artefact parameters (in
+  // registry order), then the parameters observations bring, in order of
+  // first appearance (observations/kind.h).
   explicit ParameterTable(const Dataset& ds);
 
   int size() const { return static_cast<int>(names_.size()); }
@@ -32,24 +37,31 @@ class ParameterTable {
   int Index(const std::string& name) const;    // -1 if unknown
   int Require(const std::string& name) const;  // throws naming the parameter
 
-  int facet(int facet_index) const { return facet_[facet_index]; }
-  const std::vector<int>& sphere(int sphere_index) const { return sphere_[sphere_index]; }  // x y z r
-  // Mount parameters: [length, tool x y z, table x y z]; length is -1 for ball3d.
-  const std::vector<int>& mount(ObservationType type, const std::string& setup) const;
+  // The parameters a kind registered under `key` (a facet or sphere id, a
+  // mounting's setup id), in the kind's order; throws std::out_of_range when
+  // absent.
+  const std::vector<int>& group(ObservationType kind, const std::string& key) const {
+    return groups_.at({kind, key});
+  }
+  bool has_group(ObservationType kind, const std::string& key) const {
+    return groups_.count({kind, key}) > 0;
+  }
 
-  // Setup parameters estimated by default (README, identify): tip.x|y|z when
-  // there are probe touches, every touched facet, every touched sphere's
-  // centre, every DBB mounting's length.
+  // Setup parameters estimated by default (README, identify): each kind
+  // names those of its observations (ObservationKind::DefaultSetup).
   std::vector<int> DefaultSetup(const Dataset& ds) const;
 
- private:
+  // For the kinds building the table: a new parameter, and a group.
   int Add(const std::string& name);
+  void AddGroup(ObservationType kind, const std::string& key, std::vector<int> indices) {
+    groups_[{kind, key}] = std::move(indices);
+  }
+
+ private:
   std::vector<std::string> names_;
   std::map<std::string, int> index_;
   int num_machine_ = 0;
-  std::vector<int> facet_;
-  std::vector<std::vector<int>> sphere_;
-  std::map<std::string, std::vector<int>> dbb_, ball3d_;
+  std::map<std::pair<ObservationType, std::string>, std::vector<int>> groups_;
 };
 
 // Expands presets (S1 S2 S3 S4 for wCBXfZYSt, "location", "auto") are
@@ -111,8 +123,10 @@ class Problem {
   bool has_priors() const { return !prior_blocks_.empty(); }
 
  private:
-  template <typename Functor>
-  void AddBlock(Functor* f, int num_residuals, const std::vector<double*>& ptrs, int source);
+  friend class ProblemBuilder;
+  void AddCostBlock(ceres::CostFunction* cost, int num_residuals, const std::vector<double*>& ptrs,
+                    int source);
+  void AddConstantRows(int num_residuals, std::function<void(double*)> eval, int source);
   double SigmaOfRow(int source, int k) const;
 
   const Dataset& ds_;
