@@ -20,9 +20,9 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/identifiability.h"
-#include "fivecal/identify.h"
-#include "fivecal/problem.h"
+#include "fivecal/solve/identifiability.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/solve/problem.h"
 
 using namespace fivecal;
 

@@ -10,12 +10,12 @@
 #include <stdexcept>
 #include <tuple>
 
-#include "fivecal/circle_fit.h"
-#include "fivecal/circular_test.h"
-#include "fivecal/dataset.h"
-#include "fivecal/dbb_four_step.h"
-#include "fivecal/dbb_setup.h"
-#include "fivecal/wang_path.h"
+#include "fivecal/procedures/circle_fit.h"
+#include "fivecal/procedures/circular_test.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/procedures/dbb_four_step.h"
+#include "fivecal/procedures/dbb_setup.h"
+#include "fivecal/procedures/wang_path.h"
 
 namespace py = pybind11;
 using namespace fivecal;

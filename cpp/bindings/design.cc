@@ -5,10 +5,10 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include "fivecal/dataset.h"
-#include "fivecal/design.h"
-#include "fivecal/machining_test.h"
-#include "fivecal/sphere_test.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/design/design.h"
+#include "fivecal/procedures/machining_test.h"
+#include "fivecal/procedures/sphere_test.h"
 
 namespace py = pybind11;
 using namespace fivecal;

@@ -3,10 +3,10 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include "fivecal/dataset.h"
-#include "fivecal/identify.h"
-#include "fivecal/priors.h"
-#include "fivecal/simulate.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/solve/priors.h"
+#include "fivecal/observations/simulate.h"
 #include "identify_options.h"
 
 namespace py = pybind11;

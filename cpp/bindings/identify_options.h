@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/identify.h"
+#include "fivecal/solve/identify.h"
 
 namespace fivecal {
 

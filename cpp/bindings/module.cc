@@ -6,9 +6,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include "fivecal/inverse.h"
-#include "fivecal/kinematics.h"
-#include "fivecal/machine.h"
+#include "fivecal/model/inverse.h"
+#include "fivecal/model/kinematics.h"
+#include "fivecal/model/machine.h"
 
 namespace py = pybind11;
 using namespace fivecal;

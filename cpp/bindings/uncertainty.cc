@@ -10,11 +10,11 @@
 #include <limits>
 #include <optional>
 
-#include "fivecal/gum.h"
-#include "fivecal/identify.h"
-#include "fivecal/monte_carlo.h"
-#include "fivecal/probing_stats.h"
-#include "fivecal/simulate.h"
+#include "fivecal/uncertainty/gum.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/uncertainty/monte_carlo.h"
+#include "fivecal/procedures/probing_stats.h"
+#include "fivecal/observations/simulate.h"
 #include "identify_options.h"
 
 namespace py = pybind11;

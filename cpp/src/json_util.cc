@@ -219,6 +219,10 @@ std::string DidYouMean(const std::string& name, const std::vector<std::string>& 
 }
 
 void CheckKeys(const json& obj, std::initializer_list<const char*> allowed, const std::string& where) {
+  CheckKeys(obj, std::vector<const char*>(allowed), where);
+}
+
+void CheckKeys(const json& obj, const std::vector<const char*>& allowed, const std::string& where) {
   for (auto it = obj.begin(); it != obj.end(); ++it) {
     const std::string& key = it.key();
     bool ok = false;

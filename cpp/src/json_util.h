@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/machine.h"
+#include "fivecal/model/machine.h"
 
 namespace fivecal::json_util {
 
@@ -58,6 +58,7 @@ std::string DidYouMean(const std::string& name, const std::vector<std::string>& 
 // Refuses a key of `obj` not in `allowed`: `where: unknown key "k" (did you
 // mean "x"?)`, listing the allowed keys when none is close.
 void CheckKeys(const json& obj, std::initializer_list<const char*> allowed, const std::string& where);
+void CheckKeys(const json& obj, const std::vector<const char*>& allowed, const std::string& where);
 
 // An integer field that files may write as 1 or 1.0: exact integral values
 // only, compared as JSON values (no truncation of 2^32+1 or 0.5).

@@ -4,8 +4,8 @@
 //
 //   compensate MACHINE.json ERRORS.json
 // ERRORS.json: {"EX0C": 0.01, ...} or a fivecal result file (mm, rad).
-#include <fivecal/inverse.h>
-#include <fivecal/kinematics.h>
+#include <fivecal/model/inverse.h>
+#include <fivecal/model/kinematics.h>
 
 #include <fstream>
 #include <iostream>

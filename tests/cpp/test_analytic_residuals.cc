@@ -6,9 +6,9 @@
 #include <algorithm>
 #include <random>
 
-#include "fivecal/identify.h"
-#include "fivecal/problem.h"
-#include "fivecal/simulate.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/solve/problem.h"
+#include "fivecal/observations/simulate.h"
 
 namespace fivecal {
 namespace {

@@ -21,14 +21,14 @@
 #include <tuple>
 #include <vector>
 
-#include "fivecal/circle_fit.h"
-#include "fivecal/circular_test.h"
-#include "fivecal/dataset.h"
-#include "fivecal/dbb_four_step.h"
-#include "fivecal/identify.h"
-#include "fivecal/machine.h"
-#include "fivecal/simulate.h"
-#include "fivecal/wang_path.h"
+#include "fivecal/procedures/circle_fit.h"
+#include "fivecal/procedures/circular_test.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/procedures/dbb_four_step.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/model/machine.h"
+#include "fivecal/observations/simulate.h"
+#include "fivecal/procedures/wang_path.h"
 
 namespace fivecal {
 namespace {

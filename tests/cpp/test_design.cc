@@ -22,14 +22,14 @@
 #include <random>
 #include <sstream>
 
-#include "fivecal/dataset.h"
-#include "fivecal/design.h"
-#include "fivecal/identify.h"
-#include "fivecal/kinematics.h"
-#include "fivecal/machine.h"
-#include "fivecal/machining_test.h"
-#include "fivecal/simulate.h"
-#include "fivecal/sphere_test.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/design/design.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/model/kinematics.h"
+#include "fivecal/model/machine.h"
+#include "fivecal/procedures/machining_test.h"
+#include "fivecal/observations/simulate.h"
+#include "fivecal/procedures/sphere_test.h"
 
 namespace fivecal {
 namespace {

@@ -19,11 +19,11 @@
 #include <stdexcept>
 #include <string>
 
-#include "fivecal/dataset.h"
-#include "fivecal/identify.h"
-#include "fivecal/machine.h"
-#include "fivecal/monte_carlo.h"
-#include "fivecal/simulate.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/model/machine.h"
+#include "fivecal/uncertainty/monte_carlo.h"
+#include "fivecal/observations/simulate.h"
 
 namespace fivecal {
 namespace {

@@ -6,8 +6,8 @@
 
 #include <random>
 
-#include "fivecal/kinematic_model.h"
-#include "fivecal/kinematics.h"
+#include "fivecal/model/kinematic_model.h"
+#include "fivecal/model/kinematics.h"
 
 namespace fivecal {
 namespace {

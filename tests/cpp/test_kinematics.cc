@@ -24,9 +24,9 @@
 #include <utility>
 #include <vector>
 
-#include "fivecal/inverse.h"
-#include "fivecal/kinematics.h"
-#include "fivecal/machine.h"
+#include "fivecal/model/inverse.h"
+#include "fivecal/model/kinematics.h"
+#include "fivecal/model/machine.h"
 
 namespace fivecal {
 namespace {

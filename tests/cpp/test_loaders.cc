@@ -12,11 +12,11 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/dataset.h"
-#include "fivecal/identify.h"
-#include "fivecal/machine.h"
-#include "fivecal/problem.h"
-#include "fivecal/simulate.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/model/machine.h"
+#include "fivecal/solve/problem.h"
+#include "fivecal/observations/simulate.h"
 
 namespace fivecal {
 namespace {

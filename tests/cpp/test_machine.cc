@@ -13,8 +13,8 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/kinematics.h"
-#include "fivecal/machine.h"
+#include "fivecal/model/kinematics.h"
+#include "fivecal/model/machine.h"
 
 namespace fivecal {
 namespace {

@@ -11,11 +11,11 @@
 #include <sstream>
 #include <string>
 
-#include "fivecal/identifiability.h"
-#include "fivecal/identify.h"
-#include "fivecal/priors.h"
-#include "fivecal/problem.h"
-#include "fivecal/simulate.h"
+#include "fivecal/solve/identifiability.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/solve/priors.h"
+#include "fivecal/solve/problem.h"
+#include "fivecal/observations/simulate.h"
 
 namespace fivecal {
 namespace {

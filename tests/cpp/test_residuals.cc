@@ -69,14 +69,14 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/dataset.h"
-#include "fivecal/identify.h"
-#include "fivecal/inverse.h"
-#include "fivecal/kinematics.h"
-#include "fivecal/machine.h"
-#include "fivecal/problem.h"
-#include "fivecal/residuals.h"
-#include "fivecal/simulate.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/model/inverse.h"
+#include "fivecal/model/kinematics.h"
+#include "fivecal/model/machine.h"
+#include "fivecal/solve/problem.h"
+#include "fivecal/observations/residuals.h"
+#include "fivecal/observations/simulate.h"
 
 namespace fivecal {
 namespace {

@@ -16,12 +16,12 @@
 #include <string>
 #include <vector>
 
-#include "fivecal/gum.h"
-#include "fivecal/identify.h"
-#include "fivecal/refit.h"
-#include "fivecal/monte_carlo.h"
-#include "fivecal/probing_stats.h"
-#include "fivecal/simulate.h"
+#include "fivecal/uncertainty/gum.h"
+#include "fivecal/solve/identify.h"
+#include "fivecal/solve/refit.h"
+#include "fivecal/uncertainty/monte_carlo.h"
+#include "fivecal/procedures/probing_stats.h"
+#include "fivecal/observations/simulate.h"
 
 namespace fivecal {
 namespace {

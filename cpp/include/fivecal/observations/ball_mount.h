@@ -1,0 +1,82 @@
+// What the ball-sample kinds (dbb, ball3d) share: a tool ball at tool_ball
+// (F at the zero pose) and a table ball or nest at table_ball (workpiece
+// frame), one mounting per setup id with the parameters
+// <kind>[.<setup>].tool.x|y|z and .table.x|y|z (and dbb's .length).
+#ifndef FIVECAL_OBSERVATIONS_BALL_MOUNT_H_
+#define FIVECAL_OBSERVATIONS_BALL_MOUNT_H_
+
+#include <memory>
+
+#include "fivecal/observations/kind.h"
+#include "fivecal/observations/residuals.h"
+
+namespace fivecal {
+
+// A mounting's setup parameters as a residual sees them: length offset
+// (dbb only), tool-ball and table-ball offsets.
+struct MountRefs {
+  SetupRef length;
+  SetupRef tool[3];
+  SetupRef table[3];
+};
+
+// The tool ball's centre P_ball minus the table ball's (workpiece frame), for
+// a tool whose tip is tool_ball + <kind>.tool (F at the zero pose) and a
+// table ball at table_ball + <kind>.table.
+template <typename T>
+Vec3<T> BallDistance(const ParameterAccess& access, const PoseData& pose, T const* const* p,
+                     const Eigen::Vector3d& tool_ball, const Eigen::Vector3d& table_ball, const MountRefs& refs) {
+  std::vector<T> theta;
+  access.Theta(p, &theta);
+  const Machine& m = access.machine();
+  Vec3<T> tip = tool_ball.template cast<T>(), table = table_ball.template cast<T>();
+  for (int i = 0; i < 3; ++i) {
+    tip[i] += access.Setup(p, refs.tool[i]);
+    table[i] += access.Setup(p, refs.table[i]);
+  }
+  Vec3<T> P;
+  ToolInWorkpiece<T>(m, theta.data(), pose.q.data(), pose.dir.data(), tip, &P);
+  return P - table;
+}
+
+class BallMountKind : public ObservationKind {
+ public:
+  void Validate(const Dataset& ds, const Observation& o,
+                const std::function<std::string()>& where) const final;
+  void Write(const Observation& o, nlohmann::json* out) const override;
+
+  void AddObservationParameters(const Observation& o, ParameterTable* t) const final;
+  std::vector<PriorClass> prior_classes() const override;
+  std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const final;
+  void AddResidual(ResidualBuilder& b, const Observation& o) const final;
+  void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                       AnalyticRow* r) const final;
+  void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
+                     Observation* ob, PlanSlot* slot) const final;
+  bool LengthReference() const final { return true; }
+  void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                    Eigen::Vector3d* vector) const final;
+
+ protected:
+  // Whether the mounting has a length parameter (<kind>[.<setup>].length).
+  virtual bool has_length() const = 0;
+  // Reads setup, tool_ball and table_ball (a kind's Read calls it).
+  static void ReadMount(const nlohmann::json& o, const std::string& where, Observation* ob);
+  // The kind's own fields (checked after the setup id, before the ball
+  // positions; written with them).
+  virtual void ValidateOwn(const Observation& o, const std::function<std::string()>& where) const = 0;
+  virtual void WriteOwn(const Observation& o, nlohmann::json* out) const = 0;
+  // Adds the kind's functor for observation `o` with its mounting `refs`.
+  virtual void AddFunctor(ResidualBuilder& b, const Observation& o, const MountRefs& refs) const = 0;
+  // The noise-free reading of a planned sample: P - table is the true ball
+  // distance vector, `prefix` the mounting's parameter prefix.
+  virtual void SimulateReading(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
+                               const std::string& prefix, const Eigen::Vector3d& distance,
+                               Observation* ob) const = 0;
+  // The report vector of rows r given the ball distance vector d.
+  virtual Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d& d) const = 0;
+};
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_OBSERVATIONS_BALL_MOUNT_H_

@@ -1,0 +1,106 @@
+// Dataset: a machine, the artefact it measured and the recorded observations
+// (docs/formats.md, "Dataset"). Validation happens here, once, with
+// messages naming the observation index and field; the residuals never check.
+#ifndef FIVECAL_DATASET_H_
+#define FIVECAL_DATASET_H_
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "fivecal/model/machine.h"
+
+namespace fivecal {
+
+struct Facet {
+  std::string id;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();   // a point of the nominal plane, mm
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // unit outward normal
+};
+
+struct Sphere {
+  std::string id;
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  double radius = 0.0;
+};
+
+struct ScaleBar {
+  std::string sphere1, sphere2;
+  double length = 0.0;  // calibrated centre distance, mm
+};
+
+struct Artefact {
+  std::vector<Facet> facets;
+  std::vector<Sphere> spheres;
+  std::vector<ScaleBar> scale_bars;
+  int FacetIndex(const std::string& id) const;   // -1 if absent
+  int SphereIndex(const std::string& id) const;  // -1 if absent
+};
+
+enum class ObservationType { kFacet, kSphere, kDbb, kBall3d };
+
+const char* ObservationTypeName(ObservationType t);
+
+// Residual rows one observation of a kind contributes (1, or 3 for ball3d).
+int ResidualRows(ObservationType t);
+
+// Default instrument noise (one sigma, mm) of a kind, used when a file
+// declares none: typical noise levels of the instrument class, not of one
+// particular instrument. Touch probe (facet, sphere) 0.001 mm (a good
+// kinematic touch-trigger probe's repeatability), ball bar 0.0005 mm (its
+// resolution-limited reading noise), ball3d 0.001 mm (R-test / CapBall
+// displacement sensors).
+double DefaultSigma(ObservationType t);
+
+struct Observation {
+  ObservationType type = ObservationType::kFacet;
+  std::string target;  // facet or sphere id
+  std::string setup;   // DBB / ball3d mounting id; "" = the default setup
+  Eigen::VectorXd axes;       // machine axis order, mm / degrees
+  Eigen::VectorXi direction;  // last move direction per axis: -1, 0, +1
+  double reading = 0.0;       // dbb: length change, mm
+  double length = 0.0;        // dbb: nominal bar length, mm
+  Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero();   // in F at the zero pose
+  Eigen::Vector3d table_ball = Eigen::Vector3d::Zero();  // workpiece frame
+  Eigen::Vector3d measured = Eigen::Vector3d::Zero();    // ball3d displacement
+  // Declared noise (one sigma, mm): empty = DefaultSigma(type); otherwise one
+  // value per residual row (ResidualRows(type)), finite and > 0. A file's
+  // single number is expanded to every row.
+  Eigen::VectorXd sigma;
+  std::string id;  // optional user label, kept through load and save
+};
+
+class Dataset {
+ public:
+  explicit Dataset(Machine machine) : machine_(std::move(machine)) {}
+  // require_observations=false accepts an empty observation list (a dataset
+  // being built, e.g. by the simulator).
+  static Dataset FromJson(const std::string& text, bool require_observations = true);
+  std::string ToJson() const;
+
+  const Machine& machine() const { return machine_; }
+  double tip_radius = 0.0;
+  Artefact artefact;
+  std::vector<Observation> observations;
+
+  // Throws std::invalid_argument naming the observation index and field.
+  void Validate() const;
+  // Appends N ball-bar (type kDbb: `values` N x 1 readings, `length` the bar)
+  // or ball3d (`values` N x 3 measured displacements) samples of one mounting
+  // from arrays: large traces (10^6 samples) without going through JSON.
+  // axes: N x num_axes (mm / degrees); dirs: optional N x num_axes.
+  // sigma: the declared noise of every sample's rows (mm); 0 = the default.
+  void AppendBallSamples(ObservationType type, const std::string& setup, const Eigen::MatrixXd& axes,
+                         const Eigen::MatrixXi* dirs, const Eigen::Vector3d& tool_ball,
+                         const Eigen::Vector3d& table_ball, double length,
+                         const Eigen::MatrixXd& values, double sigma = 0.0);
+  // A dataset with only the observations at `indices` (same machine and artefact).
+  Dataset Subset(const std::vector<int>& indices) const;
+
+ private:
+  Machine machine_;
+};
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_DATASET_H_

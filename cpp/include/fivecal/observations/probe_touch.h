@@ -1,0 +1,47 @@
+// What the probe-touch kinds (facet, sphere) share: a stylus tip of radius
+// dataset.probe.tip_radius touching an artefact surface. Simulated touches
+// approach along the nominal surface normal; the noise is the trigger
+// position along that approach line.
+#ifndef FIVECAL_OBSERVATIONS_PROBE_TOUCH_H_
+#define FIVECAL_OBSERVATIONS_PROBE_TOUCH_H_
+
+#include <functional>
+
+#include "fivecal/observations/kind.h"
+
+namespace fivecal {
+
+class ProbeTouchKind : public ObservationKind {
+ public:
+  // Touch probe noise: a good kinematic touch-trigger probe's repeatability.
+  double default_sigma() const override { return 0.001; }
+  bool probe_touch() const override { return true; }
+
+  void Validate(const Dataset& ds, const Observation& o,
+                const std::function<std::string()>& where) const final;
+  void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
+                     Observation* ob, PlanSlot* slot) const final;
+  double NoiseLevel(const NoiseLevels& n) const final;
+  void AddInputs(SimulationPlan* plan, int i, const PlanSlot* slot, const RecordedContext* rec) const final;
+  void ApplyInput(const SimulationPlan& plan, int i, int component, double x, Observation* o) const final;
+
+ protected:
+  // The target of `o` exists in the artefact.
+  virtual void ValidateTarget(const Dataset& ds, const Observation& o,
+                              const std::function<std::string()>& where) const = 0;
+  using Gap = std::function<double(const Eigen::Vector3d&)>;
+  // A planned touch on target ob->target: the surface normal n at the touch,
+  // the nominal tip-centre target c, and the signed distance of the true
+  // surface from a tip centre P (zero at the touch).
+  virtual void PlannedTouch(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
+                            const Observation& ob, Eigen::Vector3d* n, Eigen::Vector3d* c, Gap* gap) const = 0;
+  // A recorded touch: the nominal surface normal at the nominal tool point
+  // P0, and a function of the tip centre whose change along the approach is
+  // the sensitivity of the touch.
+  virtual void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d& P0,
+                             const std::string& where, Eigen::Vector3d* n, Gap* gap) const = 0;
+};
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_OBSERVATIONS_PROBE_TOUCH_H_

@@ -1,0 +1,38 @@
+// The observation kinds, in one table (observations/registry.cc). Generic
+// code asks the registry for the kind of an observation instead of
+// switching on its type.
+#ifndef FIVECAL_OBSERVATIONS_REGISTRY_H_
+#define FIVECAL_OBSERVATIONS_REGISTRY_H_
+
+#include <string>
+#include <vector>
+
+#include "fivecal/observations/dataset.h"
+#include "fivecal/observations/kind.h"
+
+namespace fivecal {
+
+// Every kind, in registration order (the order of the parameter table's
+// artefact parameters and of the names in messages).
+const std::vector<const ObservationKind*>& ObservationKinds();
+
+// The kind of a type (every ObservationType is registered).
+const ObservationKind& KindOf(ObservationType t);
+inline const ObservationKind& KindOf(const Observation& o) { return KindOf(o.type); }
+
+// The kind whose file name is `name`, or nullptr.
+const ObservationKind* FindKind(const std::string& name);
+
+// The file names of every kind ("facet", "sphere", ...).
+std::vector<std::string> KindNames();
+// "facet, sphere, dbb, ball3d": for messages.
+std::string KindList();
+
+// Whether the data fix the length scale: an observation of a kind that does
+// (ball bar, 3D ball displacement), or an artefact length (a scale bar whose
+// balls were probed).
+bool HasLengthReference(const Dataset& ds);
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_OBSERVATIONS_REGISTRY_H_

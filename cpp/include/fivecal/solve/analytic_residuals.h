@@ -1,0 +1,126 @@
+// AnalyticResiduals: every residual row of a dataset as ONE Ceres cost
+// function with analytic derivatives from KinematicModel. Same residual
+// definitions as the kinds' templated functors (observations/<kind>.h) and
+// the same row order (observations in order, then the artefact rows: the
+// scale bars whose balls were probed); the functors stay the reference the
+// tests compare against. One block lets the kinematic constants be prepared
+// once per evaluation instead of once per touch, and avoids Jets entirely.
+//
+// Each kind prepares its rows (ObservationKind::PrepareAnalytic) and
+// evaluates a run of consecutive rows of its own (EvaluateAnalytic), with
+// the chain rule through the tool point shared here (AnalyticEval): per row,
+// with P the tool point and J = dP/dtheta, a kind gives the gradients G of
+// its residual rows in P and the derivatives in its setup parameters.
+#ifndef FIVECAL_ANALYTIC_RESIDUALS_H_
+#define FIVECAL_ANALYTIC_RESIDUALS_H_
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Core>
+#include <utility>
+#include <vector>
+
+#include "fivecal/model/kinematic_model.h"
+#include "fivecal/observations/dataset.h"
+#include "fivecal/solve/problem.h"
+
+namespace fivecal {
+
+class ObservationKind;
+
+// One observation (or artefact constraint) prepared for the batch. The
+// fields mean what the kind that prepared it says.
+struct AnalyticRow {
+  const ObservationKind* kind = nullptr;
+  int variant = 0;         // 0: an observation; else an artefact row of the kind
+  std::vector<double> q;   // internal units
+  std::vector<int> dir;
+  Eigen::Vector3d a = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
+  Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero(), measured = Eigen::Vector3d::Zero();
+  double constant = 0;
+  int idx[8] = {-1, -1, -1, -1, -1, -1, -1, -1};  // setup parameter indices
+};
+
+// One evaluation of the batch, as the kinds see it.
+class AnalyticEval {
+ public:
+  AnalyticEval(const Machine& m, const Eigen::VectorXd& v, const KinematicModel& model,
+               const std::vector<int>& estimated, const std::vector<int>& block_of, double* residuals,
+               double** jacobians);
+
+  const Eigen::VectorXd& v;  // every parameter's value
+  double* const residuals;
+  double** const jacobians;  // null: residuals only
+  int row = 0;               // the current observation's first residual row
+
+  // d(row)/d(parameter index) += value, when that parameter is estimated.
+  void Put(int r, int index, double value) const {
+    if (!jacobians || index < 0) return;
+    const int b = block_of_[index];
+    if (b >= 0 && jacobians[b]) jacobians[b][r] += value;
+  }
+  // The tool point of a row's pose for a tool tip at `tip` (F, zero pose),
+  // with dP/dtheta kept for Chain when derivatives are wanted.
+  void ToolPoint(const AnalyticRow& r, const Eigen::Vector3d& tip, Eigen::Vector3d* P) {
+    if (jacobians) model_.ToolPointJacobian(r.q.data(), r.dir.data(), tip, P, J_.data());
+    else *P = model_.ToolPoint(r.q.data(), r.dir.data(), tip);
+  }
+  // The probe tip at the current values.
+  const Eigen::Vector3d& probe_tip() const { return model_.tip(); }
+  // Machine columns of the n rows from `row` on, with G (rows: gradients of
+  // the residual rows in P). `tool` (3 parameter indices) when the tool
+  // point is a ball at tool_ball + tool: those act like a tip, and the probe
+  // tip offsets tip.x|y|z do not enter.
+  void Chain(const Eigen::Matrix3d& G, int n, const int* tool) const {
+    if (!jacobians) return;
+    for (int k = 0; k < n; ++k) {
+      const Eigen::RowVector3d g = G.row(k);
+      for (const auto& [b, idx] : machine_blocks_) {
+        if (!jacobians[b]) continue;
+        const bool is_tip = idx >= tip0_ && idx < tip0_ + 3;
+        if (tool && is_tip) continue;  // the probe tip does not carry the ball
+        jacobians[b][row + k] += g.dot(J_.col(idx));
+      }
+      if (tool)  // the tool ball's offsets act like a tip: dP/dtip
+        for (int c = 0; c < 3; ++c) Put(row + k, tool[c], g.dot(J_.col(tip0_ + c)));
+    }
+  }
+
+ private:
+  const KinematicModel& model_;
+  const std::vector<int>& block_of_;
+  std::vector<std::pair<int, int>> machine_blocks_;  // (block, theta index)
+  int tip0_;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> J_;
+};
+
+class AnalyticResiduals : public ceres::CostFunction {
+ public:
+  // values: every parameter of the table (constants for the fixed ones);
+  // estimated: the table indices that are the parameter blocks, in order.
+  AnalyticResiduals(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
+                    const std::vector<int>& estimated);
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
+
+  // Per row: the observation index, or -(1 + scale bar index).
+  const std::vector<int>& row_source() const { return row_source_; }
+
+ private:
+  struct Run {  // consecutive rows of one kind and variant
+    const ObservationKind* kind;
+    int begin, end;
+  };
+  const Dataset& ds_;
+  Eigen::VectorXd values_;
+  std::vector<int> estimated_;
+  std::vector<int> block_of_;  // per table index: block or -1
+  std::vector<AnalyticRow> rows_;  // one per observation or artefact row
+  std::vector<Run> runs_;
+  std::vector<int> row_source_;
+};
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_ANALYTIC_RESIDUALS_H_

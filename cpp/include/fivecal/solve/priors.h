@@ -1,0 +1,75 @@
+// Priors: the plausible size (one sigma) of every parameter, by class.
+//
+// A prior scale s_j says "before any measurement, parameter j is 0 +- s_j".
+// It serves three things:
+//  * identifiability: the Jacobian, weighted by 1/(declared noise), is scaled
+//    by the priors, so a parameter counts as determined by the data only when
+//    its data-only standard deviation is well below its plausible size
+//    (kDeterminedRatio), whatever its unit;
+//  * the MAP fit of estimate="auto": one prior row (theta_j - 0) / s_j per
+//    estimated parameter;
+//  * plausibility: values beyond kImplausibleSigmas prior sigmas are flagged.
+//
+// Defaults (PriorClasses) follow ISO 230-1 style tolerances of a mid-size
+// machining centre (travels ~500 mm, rotary axes); setup parameters (facet
+// offsets, sphere centres, stylus, ball-bar mounts) get mm-sized priors since
+// a setup is poorly known before it is measured. Overrides: the machine
+// file's "priors" and IdentifyOptions::priors, each a map from a parameter
+// name or "class:<class name>" to a positive sigma; precedence (last wins):
+// default, machine class, machine name, call class, call name.
+#ifndef FIVECAL_PRIORS_H_
+#define FIVECAL_PRIORS_H_
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "fivecal/model/machine.h"
+
+namespace fivecal {
+
+struct PriorClass {
+  std::string name;         // used as "class:<name>"
+  double sigma;             // default one-sigma scale, in `unit`
+  std::string unit;
+  std::string description;  // what it covers and why this size
+};
+
+// The documented default table (docs/identification.md lists the same).
+const std::vector<PriorClass>& PriorClasses();
+
+// Reference travels that size the error-motion priors: a coefficient of
+// degree d has sigma = effect / travel^d, the effect being the class's size
+// over the reference travel (250 mm from the axis zero; 1 rad).
+constexpr double kLinearReferenceTravel = 250.0;  // mm
+constexpr double kRotaryReferenceTravel = 1.0;    // rad
+
+// A parameter is determined by the data when its data-only standard deviation
+// is below kDeterminedRatio x its prior sigma: the data then carry at least
+// 1/kDeterminedRatio^2 = 4 times the prior's information about it. With the
+// prior added, posterior sigma / prior sigma = 1 / sqrt(1 + 1/ratio^2), so the
+// same criterion on the MAP result is informed < kInformedThreshold.
+constexpr double kDeterminedRatio = 0.5;
+constexpr double kInformedThreshold = 0.4472135954999579;  // 1 / sqrt(5)
+// Values beyond this many prior sigmas are flagged as implausible.
+constexpr double kImplausibleSigmas = 5.0;
+
+// Class name of a parameter (machine parameter or setup parameter name as in
+// ParameterTable). Throws std::invalid_argument for a name of neither kind.
+std::string PriorClassOf(const Machine& m, const std::string& parameter);
+
+// Throws std::invalid_argument (naming `where` and the key, with a
+// did-you-mean for class names) unless every key is a known class
+// ("class:<name>") or a parameter `is_known` accepts, and every value is
+// finite and > 0.
+void ValidatePriors(const std::map<std::string, double>& priors, const std::string& where,
+                    const std::vector<std::string>& known_names);
+
+// Prior sigma of each of `names` after the overrides (machine file, then call).
+std::vector<double> PriorScales(const Machine& m, const std::vector<std::string>& names,
+                                const std::map<std::string, double>& machine_priors,
+                                const std::map<std::string, double>& call_priors);
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_PRIORS_H_

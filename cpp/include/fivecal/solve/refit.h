@@ -1,0 +1,48 @@
+// Refit: a fit prepared once and repeated on datasets that differ from a
+// reference only in their readings (Monte Carlo trials, repeated measurement
+// cycles). The estimated set, the fixed values and the robust scale are those
+// of `reference_fit` (a Result of Identify on `reference`); every fit starts
+// from its values and skips the identifiability checks of Identify. Fit() is
+// const and thread-safe (each call builds its own Ceres problem).
+#ifndef FIVECAL_REFIT_H_
+#define FIVECAL_REFIT_H_
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "fivecal/observations/dataset.h"
+#include "fivecal/solve/identify.h"
+
+namespace fivecal {
+
+struct RefitResult {
+  Eigen::VectorXd values;   // estimated parameters, in Result::estimated order
+  Eigen::VectorXd std;      // one-sigma as Identify reports it (only with_std)
+  double sigma = 0;         // residual standard deviation (only with_std)
+  bool converged = false;
+  int iterations = 0;
+  double final_cost = 0;
+};
+
+class Refit {
+ public:
+  Refit(const Dataset& reference, const IdentifyOptions& options, const Result& reference_fit);
+  ~Refit();
+  Refit(const Refit&) = delete;
+  Refit& operator=(const Refit&) = delete;
+
+  const std::vector<std::string>& estimated() const;
+  // Throws std::invalid_argument if `ds` does not have the reference's
+  // observation structure (count, types, targets, setups).
+  RefitResult Fit(const Dataset& ds, bool with_std = false) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_REFIT_H_

@@ -1,0 +1,98 @@
+#include "fivecal/observations/ball3d.h"
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/observations/simulate.h"
+#include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/solve/problem.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using namespace json_util;
+
+class Kind final : public BallMountKind {
+ public:
+  ObservationType type() const override { return ObservationType::kBall3d; }
+  const char* name() const override { return "ball3d"; }
+  const char* label() const override { return "3D ball displacement"; }
+  int rows() const override { return 3; }
+  // R-test / CapBall displacement sensors.
+  double default_sigma() const override { return 0.001; }
+
+  std::vector<const char*> json_keys() const override {
+    return {"type", "setup", "axes", "direction", "measured", "tool_ball", "table_ball", "sigma", "id"};
+  }
+  void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
+    ReadMount(o, w, ob);
+    ob->measured = ReadVector3(o.value("measured", json()), w + ".measured");
+  }
+
+  void DefaultSetup(const Dataset&, const ParameterTable&, const Observation&, std::set<int>*) const override {}
+  const char* PriorClassOfName(const std::string& n) const override {
+    return n.rfind("ball3d.", 0) == 0 ? "mount" : nullptr;
+  }
+
+  void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override {
+    const Eigen::VectorXd& v = e.v;
+    const Eigen::Matrix3d G = Eigen::Matrix3d::Identity();
+    for (const AnalyticRow* r = rows; r != rows + count; ++r) {
+      Eigen::Vector3d tip, target = r->a;
+      for (int c = 0; c < 3; ++c) {
+        tip[c] = r->tool_ball[c] + v[r->idx[1 + c]];
+        target[c] += v[r->idx[4 + c]];
+      }
+      Eigen::Vector3d P;
+      e.ToolPoint(*r, tip, &P);
+      const Eigen::Vector3d d = P - target - r->measured;
+      for (int k = 0; k < 3; ++k) {
+        e.residuals[e.row + k] = d[k];
+        e.Put(e.row + k, r->idx[4 + k], -1.0);
+      }
+      e.Chain(G, 3, r->idx + 1);
+      e.row += 3;
+    }
+  }
+
+  std::vector<const char*> plan_keys() const override {
+    return {"type", "setup", "axes", "tool_ball", "table_ball", "direction", "id"};
+  }
+  double NoiseLevel(const NoiseLevels& n) const override { return n.ball3d; }
+  void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
+    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, plan->noise.ball3d);
+  }
+  void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
+    o->measured[c] = plan.measured0[i][c] + x;
+  }
+
+ protected:
+  bool has_length() const override { return false; }
+  void ValidateOwn(const Observation& o, const std::function<std::string()>& w) const override {
+    for (int c = 0; c < 3; ++c)
+      if (!(std::abs(o.measured[c]) <= kMaxLinear))
+        RequireBounded(o.measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
+  }
+  void WriteOwn(const Observation& o, json* jo) const override { (*jo)["measured"] = Array3(o.measured); }
+  void AddFunctor(ResidualBuilder& b, const Observation& o, const MountRefs& refs) const override {
+    b.Add(new Ball3dResidual(b.context, o, refs), 3);
+  }
+  void SimulateReading(const json&, const std::string&, const PlanTruth&, const std::string&,
+                       const Eigen::Vector3d& d, Observation* ob) const override {
+    ob->measured = d;
+  }
+  Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d&) const override {
+    return Eigen::Vector3d(r[0], r[1], r[2]);
+  }
+};
+
+}  // namespace
+
+const ObservationKind& Ball3dKind() {
+  static const Kind kind;
+  return kind;
+}
+
+}  // namespace fivecal

@@ -1,0 +1,124 @@
+#include "fivecal/observations/ball_mount.h"
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/model/kinematic_model.h"
+#include "fivecal/observations/simulate.h"
+#include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/solve/problem.h"
+#include "json_util.h"
+
+namespace fivecal {
+
+using namespace json_util;
+
+namespace {
+const char* kXYZ[3] = {"x", "y", "z"};
+}  // namespace
+
+void BallMountKind::ReadMount(const json& o, const std::string& w, Observation* ob) {
+  ob->setup = ReadSetup(o, w);
+  ob->tool_ball = ReadVector3(o.value("tool_ball", json()), w + ".tool_ball");
+  ob->table_ball = ReadVector3(o.value("table_ball", json()), w + ".table_ball");
+}
+
+void BallMountKind::Validate(const Dataset&, const Observation& o,
+                             const std::function<std::string()>& w) const {
+  if (o.setup.find('.') != std::string::npos)
+    throw std::invalid_argument(w() + ".setup: " + Quote(o.setup) + " must not contain '.'");
+  ValidateOwn(o, w);
+  for (int c = 0; c < 3; ++c) {
+    if (!(std::abs(o.tool_ball[c]) <= kMaxLinear))
+      RequireBounded(o.tool_ball[c], kMaxLinear, w() + ".tool_ball[" + std::to_string(c) + "]");
+    if (!(std::abs(o.table_ball[c]) <= kMaxLinear))
+      RequireBounded(o.table_ball[c], kMaxLinear, w() + ".table_ball[" + std::to_string(c) + "]");
+  }
+}
+
+void BallMountKind::Write(const Observation& o, json* jo) const {
+  (*jo)["tool_ball"] = Array3(o.tool_ball);
+  (*jo)["table_ball"] = Array3(o.table_ball);
+  WriteOwn(o, jo);
+}
+
+void BallMountKind::AddObservationParameters(const Observation& o, ParameterTable* t) const {
+  if (t->has_group(type(), o.setup)) return;
+  const std::string base = name();
+  const std::string prefix = o.setup.empty() ? base : base + "." + o.setup;
+  // [length, tool x y z, table x y z]; length is -1 when the kind has none.
+  std::vector<int> idx;
+  idx.push_back(has_length() ? t->Add(prefix + ".length") : -1);
+  for (const char* c : kXYZ) idx.push_back(t->Add(prefix + ".tool." + c));
+  for (const char* c : kXYZ) idx.push_back(t->Add(prefix + ".table." + c));
+  t->AddGroup(type(), o.setup, idx);
+}
+
+std::vector<PriorClass> BallMountKind::prior_classes() const {
+  return {{"mount", 2.0, "mm",
+           "dbb/ball3d tool and table ball positions (dbb.tool.x, ball3d.R1.table.z ...): "
+           "a nest is placed to about a millimetre"}};
+}
+
+std::vector<int> BallMountKind::MountPositions(const ParameterTable& t, const Observation& o) const {
+  const auto& mt = t.group(type(), o.setup);
+  return std::vector<int>(mt.begin() + 1, mt.begin() + 7);
+}
+
+void BallMountKind::AddResidual(ResidualBuilder& b, const Observation& o) const {
+  const auto& mt = b.table.group(type(), o.setup);
+  MountRefs refs;
+  if (mt[0] >= 0) refs.length = b.Ref(mt[0]);
+  for (int c = 0; c < 3; ++c) refs.tool[c] = b.Ref(mt[1 + c]);
+  for (int c = 0; c < 3; ++c) refs.table[c] = b.Ref(mt[4 + c]);
+  AddFunctor(b, o, refs);
+}
+
+// a: table ball, tool_ball, measured (ball3d), constant: length + reading
+// (dbb), idx: the mounting's [length, tool x y z, table x y z].
+void BallMountKind::PrepareAnalytic(const Dataset&, const ParameterTable& t, const Observation& o,
+                                    AnalyticRow* r) const {
+  const auto& mt = t.group(type(), o.setup);
+  for (int c = 0; c < 7; ++c) r->idx[c] = mt[c];
+  r->a = o.table_ball;
+  r->tool_ball = o.tool_ball;
+  r->measured = o.measured;
+  r->constant = o.length + o.reading;
+}
+
+void BallMountKind::SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
+                                  PlanSlot*) const {
+  const Machine& m = t.dataset->machine();
+  ob->setup = ReadSetup(e, w);
+  ob->tool_ball = ReadVector3(e.value("tool_ball", json()), w + ".tool_ball");
+  ob->table_ball = ReadVector3(e.value("table_ball", json()), w + ".table_ball");
+  const std::string prefix = std::string(name()) + (ob->setup.empty() ? "" : "." + ob->setup);
+  const Eigen::Vector3d tool_true =
+      ob->tool_ball + Eigen::Vector3d(t.setup(prefix + ".tool.x"), t.setup(prefix + ".tool.y"),
+                                      t.setup(prefix + ".tool.z"));
+  const Eigen::Vector3d table_true =
+      ob->table_ball + Eigen::Vector3d(t.setup(prefix + ".table.x"), t.setup(prefix + ".table.y"),
+                                       t.setup(prefix + ".table.z"));
+  std::vector<int> dir(ob->direction.data(), ob->direction.data() + m.num_axes());
+  const Eigen::Vector3d P = ToolAtCommand(m, t.theta, ob->axes, dir, tool_true);
+  SimulateReading(e, w, t, prefix, P - table_true, ob);
+}
+
+void BallMountKind::ReportVector(const ReportContext& c, const Observation& o, const double* r,
+                                 Eigen::Vector3d* point, Eigen::Vector3d* vector) const {
+  const Dataset& ds = *c.dataset;
+  const Eigen::VectorXd& values = *c.values;
+  const PoseData pose(ds.machine(), o);
+  const auto& mt = c.table->group(type(), o.setup);
+  Eigen::Vector3d t = c.model->tip();
+  Eigen::Vector3d table_ball = o.table_ball;
+  for (int k = 0; k < 3; ++k) {
+    t[k] = o.tool_ball[k] + values[mt[1 + k]];
+    table_ball[k] += values[mt[4 + k]];
+  }
+  *point = c.model->ToolPoint(pose.q.data(), pose.dir.data(), t);
+  *vector = ReportRows(r, *point - table_ball);
+}
+
+}  // namespace fivecal

@@ -1,0 +1,127 @@
+#include "fivecal/observations/facet.h"
+
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/model/kinematic_model.h"
+#include "fivecal/observations/probe_touch.h"
+#include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/solve/problem.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using namespace json_util;
+
+class Kind final : public ProbeTouchKind {
+ public:
+  ObservationType type() const override { return ObservationType::kFacet; }
+  const char* name() const override { return "facet"; }
+  const char* label() const override { return "probe touch on a facet"; }
+
+  std::vector<const char*> json_keys() const override {
+    return {"type", "target", "axes", "direction", "sigma", "id"};
+  }
+  void Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const override {
+    ob->target = ReadString(o, "target", w);
+    if (ds.artefact.FacetIndex(ob->target) < 0)
+      throw std::invalid_argument(w + ".target: unknown facet " + Quote(ob->target) +
+                                  " (not in dataset.artefact.facets)");
+  }
+  void Write(const Observation&, json*) const override {}  // target: written by the dataset
+
+  void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
+    for (const Facet& f : ds.artefact.facets) t->AddGroup(type(), f.id, {t->Add("facet." + f.id)});
+  }
+  void DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                    std::set<int>* out) const override {
+    const int tip = ds.machine().tip_index();
+    for (int c = 0; c < 3; ++c) out->insert(tip + c);
+    out->insert(t.group(type(), o.target)[0]);
+  }
+  std::vector<PriorClass> prior_classes() const override {
+    return {{"facet", 1.0, "mm", "facet.<id>: offset of a facet from its nominal plane"}};
+  }
+  const char* PriorClassOfName(const std::string& n) const override {
+    return n.rfind("facet.", 0) == 0 ? "facet" : nullptr;
+  }
+
+  void AddResidual(ResidualBuilder& b, const Observation& o) const override {
+    const Dataset& ds = b.dataset;
+    const int fi = ds.artefact.FacetIndex(o.target);
+    const SetupRef off = b.Ref(b.table.group(type(), o.target)[0]);
+    b.Add(new FacetResidual(b.context, o, ds.artefact.facets[fi], ds.tip_radius, off), 1);
+  }
+  void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                       AnalyticRow* r) const override {
+    const Facet& f = ds.artefact.facets[ds.artefact.FacetIndex(o.target)];
+    r->a = f.point;
+    r->n = f.normal;
+    r->constant = ds.tip_radius;
+    r->idx[0] = t.group(type(), o.target)[0];
+  }
+  void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override {
+    Eigen::Matrix3d G;
+    for (const AnalyticRow* r = rows; r != rows + count; ++r) {
+      Eigen::Vector3d P;
+      e.ToolPoint(*r, e.probe_tip(), &P);
+      e.residuals[e.row] = r->n.dot(P - r->a) - r->constant - e.v[r->idx[0]];
+      G.row(0) = r->n.transpose();
+      e.Put(e.row, r->idx[0], -1.0);
+      e.Chain(G, 1, nullptr);
+      e.row += 1;
+    }
+  }
+
+  std::vector<const char*> plan_keys() const override {
+    return {"type", "target", "axes", "point", "direction", "id"};
+  }
+  void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                    Eigen::Vector3d* vector) const override {
+    const Dataset& ds = *c.dataset;
+    const PoseData pose(ds.machine(), o);
+    *point = c.model->ToolPoint(pose.q.data(), pose.dir.data(), c.model->tip());
+    *vector = r[0] * ds.artefact.facets[ds.artefact.FacetIndex(o.target)].normal;
+  }
+
+ protected:
+  void ValidateTarget(const Dataset& ds, const Observation& o,
+                      const std::function<std::string()>& where) const override {
+    if (ds.artefact.FacetIndex(o.target) < 0)
+      throw std::invalid_argument(where() + ".target: unknown facet " + Quote(o.target));
+  }
+  void PlannedTouch(const json& e, const std::string& w, const PlanTruth& t, const Observation& ob,
+                    Eigen::Vector3d* n_out, Eigen::Vector3d* c, Gap* gap) const override {
+    const Dataset& ds = *t.dataset;
+    const double r = ds.tip_radius;
+    const int fi = ds.artefact.FacetIndex(ob.target);
+    if (fi < 0) throw std::invalid_argument(w + ".target: unknown facet " + Quote(ob.target));
+    const Facet& f = ds.artefact.facets[fi];
+    const Eigen::Vector3d n = f.normal;
+    Eigen::Vector3d p = e.contains("point") ? ReadVector3(e["point"], w + ".point") : f.point;
+    p -= n * n.dot(p - f.point);  // onto the nominal plane
+    *c = p + r * n;
+    const Eigen::Vector3d a_true = f.point + t.setup("facet." + f.id) * n;
+    *gap = [=](const Eigen::Vector3d& P) { return n.dot(P - a_true) - r; };
+    *n_out = n;
+  }
+  void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d&,
+                     const std::string&, Eigen::Vector3d* n_out, Gap* gap) const override {
+    const Dataset& ds = *rec.dataset;
+    const Facet& f = ds.artefact.facets[ds.artefact.FacetIndex(o.target)];
+    const Eigen::Vector3d n = f.normal;
+    const double off = rec.values[rec.table->group(type(), o.target)[0]];
+    *gap = [=](const Eigen::Vector3d& P) { return n.dot(P - f.point) - off; };
+    *n_out = n;
+  }
+};
+
+}  // namespace
+
+const ObservationKind& FacetKind() {
+  static const Kind kind;
+  return kind;
+}
+
+}  // namespace fivecal

@@ -1,0 +1,66 @@
+#include "fivecal/observations/registry.h"
+
+#include <stdexcept>
+
+#include "fivecal/observations/ball3d.h"
+#include "fivecal/observations/dbb.h"
+#include "fivecal/observations/facet.h"
+#include "fivecal/observations/sphere.h"
+
+namespace fivecal {
+
+const std::vector<const ObservationKind*>& ObservationKinds() {
+  // THE list of observation kinds. A new kind: its file pair, one line here,
+  // one ObservationType value (docs/adding_an_observation_kind.md).
+  static const std::vector<const ObservationKind*> kinds = {
+      &FacetKind(),
+      &SphereKind(),
+      &DbbKind(),
+      &Ball3dKind(),
+  };
+  return kinds;
+}
+
+const ObservationKind& KindOf(ObservationType t) {
+  static const std::vector<const ObservationKind*> by_type = [] {
+    std::vector<const ObservationKind*> v;
+    for (const ObservationKind* k : ObservationKinds()) {
+      const size_t i = static_cast<size_t>(k->type());
+      if (v.size() <= i) v.resize(i + 1, nullptr);
+      v[i] = k;
+    }
+    return v;
+  }();
+  const size_t i = static_cast<size_t>(t);
+  if (i >= by_type.size() || !by_type[i])
+    throw std::logic_error("observation type " + std::to_string(i) + " is not registered");
+  return *by_type[i];
+}
+
+const ObservationKind* FindKind(const std::string& name) {
+  for (const ObservationKind* k : ObservationKinds())
+    if (name == k->name()) return k;
+  return nullptr;
+}
+
+std::vector<std::string> KindNames() {
+  std::vector<std::string> out;
+  for (const ObservationKind* k : ObservationKinds()) out.push_back(k->name());
+  return out;
+}
+
+std::string KindList() {
+  std::string out;
+  for (const ObservationKind* k : ObservationKinds()) out += (out.empty() ? "" : ", ") + std::string(k->name());
+  return out;
+}
+
+bool HasLengthReference(const Dataset& ds) {
+  for (const Observation& o : ds.observations)
+    if (KindOf(o).LengthReference()) return true;
+  for (const ObservationKind* k : ObservationKinds())
+    if (k->ArtefactLengthReference(ds)) return true;
+  return false;
+}
+
+}  // namespace fivecal

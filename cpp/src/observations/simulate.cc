@@ -1,0 +1,299 @@
+#include "fivecal/observations/simulate.h"
+
+#include <cmath>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <stdexcept>
+
+#include "fivecal/model/inverse.h"
+#include "fivecal/model/kinematics.h"
+#include "fivecal/solve/problem.h"
+#include "fivecal/observations/registry.h"
+#include "json_util.h"
+
+namespace fivecal {
+
+using namespace json_util;
+
+Eigen::Vector3d ToolAtCommand(const Machine& m, const Eigen::VectorXd& theta, const Eigen::VectorXd& cmd,
+                              const std::vector<int>& dir, const Eigen::Vector3d& tip) {
+  std::vector<double> q(m.num_axes());
+  AxisValuesToInternal(m, cmd.data(), q.data());
+  Eigen::Vector3d p;
+  ToolInWorkpiece<double>(m, theta.data(), q.data(), dir.data(), tip, &p);
+  return p;
+}
+
+void AddPlanInput(SimulationPlan* plan, int obs, int component, double sensitivity, double sigma) {
+  plan->input_observation.push_back(obs);
+  plan->input_component.push_back(component);
+  const int n = plan->num_inputs();
+  plan->sensitivity.conservativeResize(n);
+  plan->input_sigma.conservativeResize(n);
+  plan->sensitivity[n - 1] = sensitivity;
+  plan->input_sigma[n - 1] = sigma;
+}
+
+namespace {
+SimulationPlan PlanSpec(const json& spec);
+
+// Per-observation slots of a plan, filled with the dataset's own readings.
+void InitSlots(SimulationPlan* plan) {
+  const size_t n = plan->base.observations.size();
+  plan->start.resize(n);
+  plan->approach.assign(n, Eigen::VectorXd());
+  plan->s0.assign(n, 0.0);
+  plan->reading0.assign(n, 0.0);
+  plan->measured0.assign(n, Eigen::Vector3d::Zero());
+  for (size_t i = 0; i < n; ++i) {
+    const Observation& o = plan->base.observations[i];
+    plan->start[i] = o.axes;
+    plan->reading0[i] = o.reading;
+    plan->measured0[i] = o.measured;
+  }
+}
+
+// Observation i of `ds` with input values `x` (one per input of i, in the
+// input's own unit, added to the noise-free value).
+template <typename Draw>
+Dataset Realize(const SimulationPlan& plan, Draw&& draw) {
+  Dataset ds = plan.base;
+  const int n_in = plan.num_inputs();
+  for (int k = 0; k < n_in; ++k) {
+    const int i = plan.input_observation[k];
+    Observation& o = ds.observations[i];
+    KindOf(o).ApplyInput(plan, i, plan.input_component[k], draw(k), &o);
+  }
+  return ds;
+}
+}  // namespace
+
+SimulationPlan BuildSimulationPlan(const std::string& spec_text) {
+  return Guard("simulate", [&] { return PlanSpec(Parse(spec_text, "simulate")); });
+}
+
+Dataset Simulate(const std::string& spec_text) {
+  const SimulationPlan plan = BuildSimulationPlan(spec_text);
+  return AddNoise(plan, plan.seed);
+}
+
+Dataset AddNoise(const SimulationPlan& plan, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  // One draw per input, in input order (the order Simulate has always used).
+  return Realize(plan, [&](int k) { return plan.input_sigma[k] * normal(rng); });
+}
+
+Dataset ApplyInputDeviations(const SimulationPlan& plan, const Eigen::VectorXd& deviation) {
+  if (deviation.size() != plan.num_inputs())
+    throw std::invalid_argument("input deviations: " + std::to_string(deviation.size()) +
+                                " values for " + std::to_string(plan.num_inputs()) + " inputs");
+  return Realize(plan, [&](int k) { return deviation[k] / plan.sensitivity[k]; });
+}
+
+namespace {
+SimulationPlan PlanSpec(const json& spec) {
+  if (!spec.is_object()) throw std::invalid_argument("simulate: expected a JSON object");
+  CheckKeys(spec, {"machine", "errors", "setup", "probe", "artefact", "plan", "sigma", "seed", "$schema",
+                   "_comment", "observations"}, "simulate");
+  // A dataset skeleton turned into a spec may keep its empty observation list.
+  if (spec.contains("observations") && !(spec["observations"].is_array() && spec["observations"].empty()))
+    throw std::invalid_argument("simulate.observations: a spec plans its observations in \"plan\"; "
+                                "remove \"observations\"");
+  if (!spec.contains("machine")) throw std::invalid_argument("simulate.machine: missing");
+  json base = {{"machine", spec["machine"]},
+               {"probe", spec.value("probe", json::object())},
+               {"artefact", spec.value("artefact", json::object())},
+               {"observations", json::array()}};
+  Dataset ds = [&] {
+    try {
+      return Dataset::FromJson(base.dump(), false);
+    } catch (const std::invalid_argument& e) {
+      // The dataset parser's "dataset.<field>" is the spec's "simulate.<field>".
+      std::string msg = e.what();
+      if (msg.rfind("dataset.", 0) == 0) msg = "simulate." + msg.substr(8);
+      throw std::invalid_argument(msg);
+    }
+  }();
+  const Machine& m = ds.machine();
+  const int na = m.num_axes();
+
+  Eigen::VectorXd theta = Eigen::VectorXd::Zero(m.num_parameters());
+  if (spec.contains("errors")) {
+    if (!spec["errors"].is_object())
+      throw std::invalid_argument("simulate.errors: expected an object parameter name -> value");
+    ErrorModel e(m);
+    for (auto& [k, v] : spec["errors"].items()) {
+      if (!v.is_number()) throw std::invalid_argument("simulate.errors." + k + ": expected a number");
+      try {
+        e.Set(k, v.get<double>());
+      } catch (const std::invalid_argument& ex) {
+        std::string msg = ex.what();
+        if (msg.rfind("errors.", 0) == 0) msg = msg.substr(7 + k.size());  // ": ... implausible"
+        throw std::invalid_argument("simulate.errors." + k + (msg.rfind(":", 0) == 0 ? "" : ": ") + msg +
+                                    (k.find('.') != std::string::npos && k.rfind("tip.", 0) != 0
+                                         ? " (setup parameters go in simulate.setup)"
+                                         : ""));
+      }
+    }
+    theta = e.values();
+  }
+  std::map<std::string, double> setup;
+  if (spec.contains("setup")) {
+    if (!spec["setup"].is_object()) throw std::invalid_argument("simulate.setup: expected an object");
+    for (auto& [k, v] : spec["setup"].items()) {
+      if (!v.is_number()) throw std::invalid_argument("simulate.setup." + k + ": expected a number");
+      setup[k] = v.get<double>();
+      RequireBounded(setup[k], kMaxErrorValue, "simulate.setup." + k);
+    }
+  }
+  auto S = [&](const std::string& n) {
+    auto it = setup.find(n);
+    return it == setup.end() ? 0.0 : it->second;
+  };
+  NoiseLevels noise;
+  if (spec.contains("sigma")) {
+    const json& s = spec["sigma"];
+    auto level = [](const json& v, const std::string& where) {
+      if (!v.is_number()) throw std::invalid_argument(where + ": expected a number (mm)");
+      const double x = v.get<double>();
+      if (!(x >= 0 && x <= kMaxSigma)) throw std::invalid_argument(where + ": must be >= 0 and <= 1e3 mm");
+      return x;
+    };
+    if (s.is_number()) {
+      noise.probe = noise.dbb = noise.ball3d = level(s, "simulate.sigma");
+    } else if (s.is_object()) {
+      CheckKeys(s, {"probe", "dbb", "ball3d"}, "simulate.sigma");
+      if (s.contains("probe")) noise.probe = level(s["probe"], "simulate.sigma.probe");
+      if (s.contains("dbb")) noise.dbb = level(s["dbb"], "simulate.sigma.dbb");
+      if (s.contains("ball3d")) noise.ball3d = level(s["ball3d"], "simulate.sigma.ball3d");
+    } else {
+      throw std::invalid_argument("simulate.sigma: expected a number or an object {probe, dbb, ball3d}");
+    }
+    for (double x : {noise.probe, noise.dbb, noise.ball3d})
+      if (x > 0 && x < kMinSigma) throw std::invalid_argument("simulate.sigma: 0 (no noise) or >= 1e-9 mm");
+  }
+  const uint64_t seed = spec.contains("seed") ? ReadSeed(spec["seed"], "simulate.seed") : 0;
+  // Per observation: the noise directions.
+  std::vector<PlanSlot> slots;
+
+  if (!spec.contains("plan") || !spec["plan"].is_array() || spec["plan"].empty())
+    throw std::invalid_argument("simulate.plan: empty; give at least one planned touch or sample");
+  PlanTruth truth;
+  truth.dataset = &ds;
+  truth.theta = theta;
+  truth.tip = TipWithOffsets<double>(m, theta.data());
+  truth.setup = S;
+  const json& plan = spec["plan"];
+
+  for (size_t i = 0; i < plan.size(); ++i) {
+    const std::string w = "simulate.plan[" + std::to_string(i) + "]";
+    const json& e = plan[i];
+    if (!e.is_object()) throw std::invalid_argument(w + ": expected an object");
+    if (!e.contains("type") || !e["type"].is_string())
+      throw std::invalid_argument(w + ".type: missing (" + KindList() + ")");
+    const std::string type = e["type"].get<std::string>();
+    // The type first: an unknown one must be named as such, not reported
+    // as whatever the other checks trip on.
+    const ObservationKind* kind = FindKind(type);
+    if (!kind)
+      throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (" + KindList() + ")" +
+                                  DidYouMean(type, KindNames()));
+    CheckKeys(e, kind->plan_keys(), w);
+    Observation ob;
+    ob.type = kind->type();
+    ob.axes = Eigen::VectorXd::Zero(na);
+    ob.direction = Eigen::VectorXi::Zero(na);
+    if (e.contains("id")) ob.id = ReadString(e, "id", w);
+    std::vector<bool> given(na, false);
+    if (e.contains("axes")) ReadAxes(m, e["axes"], w + ".axes", &ob.axes, &given);
+    if (e.contains("direction")) ReadDirections(m, e["direction"], w + ".direction", &ob.direction);
+    // A touch's linear axes are the simulator's to find.
+    const bool probe = kind->probe_touch();
+    for (int k = 0; k < na; ++k)
+      if (!given[k] && m.axis(k).name != 'S' && (m.axis(k).rotary() || !probe))
+        throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
+                                    "' (machine axes " + m.axis_names() + ")");
+    PlanSlot slot;
+    kind->SimulateEntry(e, w, truth, &ob, &slot);
+    slots.push_back(slot);
+    ds.observations.push_back(ob);
+  }
+  for (ScaleBar& b : ds.artefact.scale_bars) {
+    auto true_center = [&](const std::string& id) {
+      const Sphere& s = ds.artefact.spheres.at(ds.artefact.SphereIndex(id));
+      return Eigen::Vector3d(s.center + Eigen::Vector3d(S("sphere." + id + ".x"), S("sphere." + id + ".y"),
+                                                        S("sphere." + id + ".z")));
+    };
+    b.length = (true_center(b.sphere1) - true_center(b.sphere2)).norm();
+  }
+  try {
+    ds.Validate();  // what load_dataset would refuse in the written dataset
+  } catch (const std::invalid_argument& e) {
+    // Observation i is plan entry i.
+    std::string msg = e.what();
+    if (msg.rfind("observations[", 0) == 0) msg = "simulate.plan[" + msg.substr(13);
+    throw std::invalid_argument(msg);
+  }
+  const ParameterTable table(ds);
+  for (const auto& kv : setup) {
+    const int idx = table.Index(kv.first);
+    if (idx < 0 || idx < table.num_machine()) {
+      std::vector<std::string> setup_names(table.names().begin() + table.num_machine(), table.names().end());
+      throw std::invalid_argument("simulate.setup." + kv.first + ": not a setup parameter of this plan" +
+                                  (idx >= 0 ? " (machine errors go in simulate.errors)"
+                                            : DidYouMean(kv.first, setup_names)));
+    }
+  }
+
+  SimulationPlan out(std::move(ds));
+  out.noise = noise;
+  out.seed = seed;
+  const Machine& mm = out.base.machine();  // `ds` (and `m`) moved into `out`
+  for (int i = 0; i < mm.num_parameters(); ++i)
+    if (theta[i] != 0.0) out.values[mm.parameters()[i].name] = theta[i];
+  for (const auto& kv : setup) out.values[kv.first] = kv.second;
+  InitSlots(&out);
+  for (size_t i = 0; i < out.base.observations.size(); ++i) {
+    Observation& o = out.base.observations[i];
+    const int oi = static_cast<int>(i);
+    // The noise drawn is the noise declared: a simulated dataset carries its
+    // sigma, so fitting it weighs the rows as they were made.
+    const ObservationKind& kind = KindOf(o);
+    const double declared = kind.NoiseLevel(noise);
+    if (declared > 0) o.sigma = Eigen::VectorXd::Constant(kind.rows(), declared);
+    kind.AddInputs(&out, oi, &slots[i], nullptr);
+  }
+  return out;
+}
+
+}  // namespace
+
+SimulationPlan PlanFromDataset(const Dataset& ds, const std::map<std::string, double>& values,
+                               const NoiseLevels& noise) {
+  ds.Validate();
+  const Machine& m = ds.machine();
+  const ParameterTable table(ds);
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  for (const auto& [name, value] : values) {
+    RequireFinite(value, "values." + name);
+    v[table.Require(name)] = value;
+  }
+  RecordedContext rec;
+  rec.dataset = &ds;
+  rec.table = &table;
+  rec.values = v;
+  rec.theta = v.head(m.num_parameters());
+  rec.tip = TipWithOffsets<double>(m, rec.theta.data());
+
+  SimulationPlan plan(ds);
+  plan.noise = noise;
+  plan.values = values;
+  InitSlots(&plan);
+  for (size_t i = 0; i < ds.observations.size(); ++i)
+    KindOf(ds.observations[i]).AddInputs(&plan, static_cast<int>(i), nullptr, &rec);
+  return plan;
+}
+
+}  // namespace fivecal

@@ -1,0 +1,227 @@
+#include "fivecal/observations/sphere.h"
+
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/model/kinematic_model.h"
+#include "fivecal/observations/probe_touch.h"
+#include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/solve/problem.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using namespace json_util;
+
+// The spheres probed in `ds`: a scale bar says something only about those.
+std::set<std::string> Probed(const Dataset& ds) {
+  std::set<std::string> probed;
+  for (const Observation& o : ds.observations)
+    if (o.type == ObservationType::kSphere) probed.insert(o.target);
+  return probed;
+}
+
+class Kind final : public ProbeTouchKind {
+ public:
+  ObservationType type() const override { return ObservationType::kSphere; }
+  const char* name() const override { return "sphere"; }
+  const char* label() const override { return "probe touch on a sphere"; }
+
+  std::vector<const char*> json_keys() const override {
+    return {"type", "target", "axes", "direction", "sigma", "id"};
+  }
+  void Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const override {
+    ob->target = ReadString(o, "target", w);
+    if (ds.artefact.SphereIndex(ob->target) < 0)
+      throw std::invalid_argument(w + ".target: unknown sphere " + Quote(ob->target) +
+                                  " (not in dataset.artefact.spheres)");
+  }
+  void Write(const Observation&, json*) const override {}  // target: written by the dataset
+
+  void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
+    for (const Sphere& s : ds.artefact.spheres) {
+      std::vector<int> idx;
+      for (const char* c : {"x", "y", "z", "r"}) idx.push_back(t->Add("sphere." + s.id + "." + c));
+      t->AddGroup(type(), s.id, idx);
+    }
+  }
+  void DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                    std::set<int>* out) const override {
+    const int tip = ds.machine().tip_index();
+    for (int c = 0; c < 3; ++c) out->insert(tip + c);
+    const auto& sp = t.group(type(), o.target);
+    for (int c = 0; c < 3; ++c) out->insert(sp[c]);
+  }
+  std::vector<PriorClass> prior_classes() const override {
+    return {{"sphere_center", 1.0, "mm", "sphere.<id>.x|y|z: where a sphere really sits"},
+            {"sphere_radius", 0.01, "mm", "sphere.<id>.r: a calibrated sphere's radius error"}};
+  }
+  const char* PriorClassOfName(const std::string& n) const override {
+    if (n.rfind("sphere.", 0) != 0) return nullptr;
+    return n.size() >= 2 && n.compare(n.size() - 2, 2, ".r") == 0 ? "sphere_radius" : "sphere_center";
+  }
+
+  void AddResidual(ResidualBuilder& b, const Observation& o) const override {
+    const Dataset& ds = b.dataset;
+    const int si = ds.artefact.SphereIndex(o.target);
+    const auto& sp = b.table.group(type(), o.target);
+    const SetupRef c[3] = {b.Ref(sp[0]), b.Ref(sp[1]), b.Ref(sp[2])};
+    const SetupRef r = b.Ref(sp[3]);
+    b.Add(new SphereResidual(b.context, o, ds.artefact.spheres[si], ds.tip_radius, c, r), 1);
+  }
+  void AddArtefactResiduals(ResidualBuilder& b) const override {
+    const Dataset& ds = b.dataset;
+    const std::set<std::string> probed = Probed(ds);
+    for (size_t i = 0; i < ds.artefact.scale_bars.size(); ++i) {
+      const ScaleBar& bar = ds.artefact.scale_bars[i];
+      // A bar whose balls were not probed in this dataset says nothing about it.
+      if (!probed.count(bar.sphere1) || !probed.count(bar.sphere2)) continue;
+      b.Start(-1 - static_cast<int>(i), false);
+      const auto &p1 = b.table.group(type(), bar.sphere1), &p2 = b.table.group(type(), bar.sphere2);
+      const SetupRef d1[3] = {b.Ref(p1[0]), b.Ref(p1[1]), b.Ref(p1[2])};
+      const SetupRef d2[3] = {b.Ref(p2[0]), b.Ref(p2[1]), b.Ref(p2[2])};
+      const Sphere& s1 = ds.artefact.spheres[ds.artefact.SphereIndex(bar.sphere1)];
+      const Sphere& s2 = ds.artefact.spheres[ds.artefact.SphereIndex(bar.sphere2)];
+      b.Add(new ScaleBarResidual(b.context, s1, s2, bar.length, d1, d2), 1);
+    }
+  }
+
+  // variant 0: a touch (a: centre, constant: R + r_tip, idx: x y z r);
+  // variant 1: a scale bar (a, n: the two centres, constant: L, idx: the
+  // centre offsets of sphere 1 then 2).
+  void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                       AnalyticRow* r) const override {
+    const int si = ds.artefact.SphereIndex(o.target);
+    r->a = ds.artefact.spheres[si].center;
+    r->constant = ds.artefact.spheres[si].radius + ds.tip_radius;
+    for (int c = 0; c < 4; ++c) r->idx[c] = t.group(type(), o.target)[c];
+  }
+  void AddArtefactAnalyticRows(const Dataset& ds, const ParameterTable& t, std::vector<AnalyticRow>* rows,
+                               std::vector<int>* source) const override {
+    const std::set<std::string> probed = Probed(ds);
+    for (size_t b = 0; b < ds.artefact.scale_bars.size(); ++b) {
+      const ScaleBar& bar = ds.artefact.scale_bars[b];
+      if (!probed.count(bar.sphere1) || !probed.count(bar.sphere2)) continue;  // as AddArtefactResiduals
+      AnalyticRow r;
+      r.kind = this;
+      r.variant = 1;
+      r.a = ds.artefact.spheres[ds.artefact.SphereIndex(bar.sphere1)].center;
+      r.n = ds.artefact.spheres[ds.artefact.SphereIndex(bar.sphere2)].center;
+      r.constant = bar.length;
+      for (int c = 0; c < 3; ++c) {
+        r.idx[c] = t.group(type(), bar.sphere1)[c];
+        r.idx[3 + c] = t.group(type(), bar.sphere2)[c];
+      }
+      rows->push_back(std::move(r));
+      source->push_back(-1 - static_cast<int>(b));
+    }
+  }
+  void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override {
+    const Eigen::VectorXd& v = e.v;
+    if (rows[0].variant == 1) {
+      for (const AnalyticRow* r = rows; r != rows + count; ++r) {
+        Eigen::Vector3d d = r->a - r->n;
+        for (int c = 0; c < 3; ++c) d[c] += v[r->idx[c]] - v[r->idx[3 + c]];
+        const double len = d.norm();
+        e.residuals[e.row] = len - r->constant;
+        if (e.jacobians) {
+          const Eigen::Vector3d u = d / len;
+          for (int c = 0; c < 3; ++c) {
+            e.Put(e.row, r->idx[c], u[c]);
+            e.Put(e.row, r->idx[3 + c], -u[c]);
+          }
+        }
+        e.row += 1;
+      }
+      return;
+    }
+    Eigen::Matrix3d G;
+    for (const AnalyticRow* r = rows; r != rows + count; ++r) {
+      Eigen::Vector3d P;
+      e.ToolPoint(*r, e.probe_tip(), &P);
+      const Eigen::Vector3d c = r->a + Eigen::Vector3d(v[r->idx[0]], v[r->idx[1]], v[r->idx[2]]);
+      const Eigen::Vector3d d = P - c;
+      const double len = d.norm();
+      e.residuals[e.row] = len - r->constant - v[r->idx[3]];
+      const Eigen::Vector3d u = d / len;
+      G.row(0) = u.transpose();
+      for (int k = 0; k < 3; ++k) e.Put(e.row, r->idx[k], -u[k]);
+      e.Put(e.row, r->idx[3], -1.0);
+      e.Chain(G, 1, nullptr);
+      e.row += 1;
+    }
+  }
+
+  std::vector<const char*> plan_keys() const override {
+    return {"type", "target", "axes", "normal", "direction", "id"};
+  }
+
+  bool ArtefactLengthReference(const Dataset& ds) const override {
+    const std::set<std::string> probed = Probed(ds);
+    for (const ScaleBar& b : ds.artefact.scale_bars)
+      if (probed.count(b.sphere1) && probed.count(b.sphere2)) return true;
+    return false;
+  }
+  void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                    Eigen::Vector3d* vector) const override {
+    const Dataset& ds = *c.dataset;
+    const PoseData pose(ds.machine(), o);
+    const Eigen::Vector3d P = c.model->ToolPoint(pose.q.data(), pose.dir.data(), c.model->tip());
+    const auto& sp = c.table->group(type(), o.target);
+    const Eigen::VectorXd& values = *c.values;
+    const Eigen::Vector3d centre = ds.artefact.spheres[ds.artefact.SphereIndex(o.target)].center +
+                                   Eigen::Vector3d(values[sp[0]], values[sp[1]], values[sp[2]]);
+    *point = P;
+    *vector = r[0] * (P - centre).normalized();
+  }
+
+ protected:
+  void ValidateTarget(const Dataset& ds, const Observation& o,
+                      const std::function<std::string()>& where) const override {
+    if (ds.artefact.SphereIndex(o.target) < 0)
+      throw std::invalid_argument(where() + ".target: unknown sphere " + Quote(o.target));
+  }
+  void PlannedTouch(const json& e, const std::string& w, const PlanTruth& t, const Observation& ob,
+                    Eigen::Vector3d* n_out, Eigen::Vector3d* c, Gap* gap) const override {
+    const Dataset& ds = *t.dataset;
+    const double r = ds.tip_radius;
+    const int si = ds.artefact.SphereIndex(ob.target);
+    if (si < 0) throw std::invalid_argument(w + ".target: unknown sphere " + Quote(ob.target));
+    const Sphere& s = ds.artefact.spheres[si];
+    if (!e.contains("normal")) throw std::invalid_argument(w + ".normal: missing (touch direction from the centre)");
+    Eigen::Vector3d n = ReadVector3(e["normal"], w + ".normal");
+    if (n.norm() < 1e-12) throw std::invalid_argument(w + ".normal: zero vector");
+    n.normalize();
+    *c = s.center + (s.radius + r) * n;
+    const std::string id = s.id;
+    const Eigen::Vector3d c_true = s.center + Eigen::Vector3d(t.setup("sphere." + id + ".x"),
+                                                              t.setup("sphere." + id + ".y"),
+                                                              t.setup("sphere." + id + ".z"));
+    const double R_true = s.radius + t.setup("sphere." + id + ".r");
+    *gap = [=](const Eigen::Vector3d& P) { return (P - c_true).norm() - (R_true + r); };
+    *n_out = n;
+  }
+  void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d& P0,
+                     const std::string& w, Eigen::Vector3d* n_out, Gap* gap) const override {
+    const Dataset& ds = *rec.dataset;
+    const int si = ds.artefact.SphereIndex(o.target);
+    const Sphere& sp = ds.artefact.spheres[si];
+    Eigen::Vector3d n = P0 - sp.center;
+    if (n.norm() < 1e-9) throw std::invalid_argument(w + ": touch at the sphere centre");
+    n.normalize();
+    const auto& ix = rec.table->group(type(), o.target);
+    const Eigen::Vector3d c = sp.center + Eigen::Vector3d(rec.values[ix[0]], rec.values[ix[1]], rec.values[ix[2]]);
+    *gap = [=](const Eigen::Vector3d& P) { return (P - c).norm(); };
+    *n_out = n;
+  }
+};
+
+}  // namespace
+
+const ObservationKind& SphereKind() {
+  static const Kind kind;
+  return kind;
+}
+
+}  // namespace fivecal

@@ -1,0 +1,68 @@
+#include "fivecal/solve/analytic_residuals.h"
+
+#include "fivecal/model/kinematics.h"
+#include "fivecal/observations/registry.h"
+
+namespace fivecal {
+
+AnalyticEval::AnalyticEval(const Machine& m, const Eigen::VectorXd& values, const KinematicModel& model,
+                           const std::vector<int>& estimated, const std::vector<int>& block_of,
+                           double* res, double** jac)
+    : v(values), residuals(res), jacobians(jac), model_(model), block_of_(block_of),
+      tip0_(m.tip_index()), J_(3, m.num_parameters()) {
+  const int np = m.num_parameters();
+  for (size_t b = 0; b < estimated.size(); ++b)
+    if (estimated[b] < np) machine_blocks_.emplace_back(static_cast<int>(b), estimated[b]);
+}
+
+AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& table,
+                                     const Eigen::VectorXd& values, const std::vector<int>& estimated)
+    : ds_(ds), values_(values), estimated_(estimated) {
+  block_of_.assign(table.size(), -1);
+  for (size_t b = 0; b < estimated_.size(); ++b) {
+    block_of_[estimated_[b]] = static_cast<int>(b);
+    mutable_parameter_block_sizes()->push_back(1);
+  }
+  const Machine& m = ds.machine();
+  rows_.reserve(ds.observations.size());
+  for (size_t i = 0; i < ds.observations.size(); ++i) {
+    const Observation& o = ds.observations[i];
+    const ObservationKind& kind = KindOf(o);
+    AnalyticRow r;
+    r.kind = &kind;
+    r.q.resize(m.num_axes());
+    AxisValuesToInternal(m, o.axes.data(), r.q.data());
+    r.dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
+    kind.PrepareAnalytic(ds, table, o, &r);
+    rows_.push_back(std::move(r));
+    for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(static_cast<int>(i));
+  }
+  for (const ObservationKind* kind : ObservationKinds())
+    kind->AddArtefactAnalyticRows(ds, table, &rows_, &row_source_);
+  for (int i = 0; i < static_cast<int>(rows_.size()); ++i) {
+    const AnalyticRow& r = rows_[i];
+    if (runs_.empty() || runs_.back().kind != r.kind || rows_[runs_.back().begin].variant != r.variant)
+      runs_.push_back({r.kind, i, i});
+    runs_.back().end = i + 1;
+  }
+  set_num_residuals(static_cast<int>(row_source_.size()));
+}
+
+bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residuals,
+                                 double** jacobians) const {
+  const Machine& m = ds_.machine();
+  const int nb = static_cast<int>(estimated_.size());
+  Eigen::VectorXd v = values_;
+  for (int b = 0; b < nb; ++b) v[estimated_[b]] = parameters[b][0];
+  KinematicModel model(m, v.data());
+  if (jacobians) model.RestrictJacobian(estimated_);
+  const int nr = num_residuals();
+  if (jacobians)
+    for (int b = 0; b < nb; ++b)
+      if (jacobians[b]) std::fill(jacobians[b], jacobians[b] + nr, 0.0);
+  AnalyticEval e(m, v, model, estimated_, block_of_, residuals, jacobians);
+  for (const Run& run : runs_) run.kind->EvaluateAnalytic(e, rows_.data() + run.begin, run.end - run.begin);
+  return true;
+}
+
+}  // namespace fivecal

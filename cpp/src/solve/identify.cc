@@ -1,0 +1,862 @@
+#include "fivecal/solve/identify.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <memory>
+#include <cmath>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+#include "fivecal/uncertainty/gum.h"
+#include "fivecal/solve/identifiability.h"
+#include "fivecal/model/kinematic_model.h"
+#include "fivecal/model/kinematics.h"
+#include "fivecal/solve/priors.h"
+#include "fivecal/solve/problem.h"
+#include "fivecal/observations/registry.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using namespace json_util;
+
+// The machine file's "priors" (name or class:<name> -> sigma).
+std::map<std::string, double> MachinePriors(const Machine& m) { return m.priors; }
+
+bool IsPreset(const std::string& s) {
+  return s == "S1" || s == "S2" || s == "S3" || s == "S4" || s == "location" || s == "auto";
+}
+
+Eigen::VectorXd InitialValues(const ParameterTable& table, const IdentifyOptions& opt) {
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  for (const auto& [name, value] : opt.initial) {
+    RequireFinite(value, "initial." + name);
+    v[table.Require(name)] = value;
+  }
+  return v;
+}
+
+std::string GroupText(std::vector<std::string> g) {
+  // Machine errors (what the user asked for) before the setup parameters.
+  std::stable_partition(g.begin(), g.end(), [](const std::string& n) { return n[0] == 'E'; });
+  std::string s = "{";
+  const size_t shown = std::min<size_t>(g.size(), 8);
+  for (size_t i = 0; i < shown; ++i) s += (i ? ", " : "") + g[i];
+  if (g.size() > shown) s += ", ... (" + std::to_string(g.size() - shown) + " more)";
+  return s + "}";
+}
+
+void ValidateOptions(const IdentifyOptions& o) {
+  if (o.max_iterations < 1 || o.max_iterations > 100000)
+    throw std::invalid_argument("identify: max_iterations must be in 1..100000, got " +
+                                std::to_string(o.max_iterations));
+  if (!(o.selection_tolerance > 0) || !(o.selection_tolerance < 1))
+    throw std::invalid_argument("identify: selection_tolerance must be in (0, 1), got " +
+                                std::to_string(o.selection_tolerance));
+  if (!(o.rank_tolerance > 0) || !(o.rank_tolerance < 1))
+    throw std::invalid_argument("identify: rank_tolerance must be in (0, 1), got " +
+                                std::to_string(o.rank_tolerance));
+  if (!o.robust.empty() && o.robust != "none" && o.robust != "huber" && o.robust != "cauchy")
+    throw std::invalid_argument("identify: robust must be 'huber', 'cauchy' or 'none', got '" +
+                                o.robust + "'");
+  if (!std::isfinite(o.robust_scale) || o.robust_scale < 0)
+    throw std::invalid_argument("identify: robust_scale must be finite and >= 0 mm");
+  if (o.num_threads < 1 || o.num_threads > 1024)
+    throw std::invalid_argument("identify: num_threads must be in 1..1024, got " +
+                                std::to_string(o.num_threads));
+}
+
+struct Request {
+  std::vector<int> forced;      // explicit names, presets, default setup
+  std::vector<int> candidates;  // "location" / "auto" candidates, in priority order
+  bool location = false, automatic = false;
+};
+
+Request Classify(const Dataset& ds, const ParameterTable& table, const IdentifyOptions& opt) {
+  Request q;
+  std::set<int> fixed;
+  for (const std::string& n : opt.fix) {
+    if (IsPreset(n)) {
+      for (const std::string& p : ThesisSubset(ds.machine(), n)) fixed.insert(table.Require(p));
+    } else {
+      fixed.insert(table.Require(n));
+    }
+  }
+  std::set<int> seen;
+  auto add = [&](int i, std::vector<int>* list) {
+    if (fixed.count(i) || seen.count(i)) return;
+    seen.insert(i);
+    list->push_back(i);
+  };
+  if (opt.include_default_setup)
+    for (int i : table.DefaultSetup(ds)) add(i, &q.forced);
+  for (const std::string& n : opt.estimate) {
+    if (n == "location") q.location = true;
+    else if (n == "auto") q.automatic = true;
+    else if (IsPreset(n))
+      for (const std::string& p : ThesisSubset(ds.machine(), n)) add(table.Require(p), &q.forced);
+    else add(table.Require(n), &q.forced);
+  }
+  if (q.location || q.automatic)
+    for (const std::string& n : LocationCandidates(ds.machine())) add(table.Require(n), &q.candidates);
+  if (q.automatic)
+    for (const std::string& n : MotionCandidates(ds.machine()))
+      if (table.Index(n) >= 0) add(table.Index(n), &q.candidates);
+  return q;
+}
+
+Eigen::VectorXd Gather(const Eigen::VectorXd& all, const std::vector<int>& idx) {
+  Eigen::VectorXd v(idx.size());
+  for (size_t i = 0; i < idx.size(); ++i) v[i] = all[idx[i]];
+  return v;
+}
+
+// Residuals (mm) and the Jacobian with rows divided by their declared noise.
+void WeightedJacobian(Problem* pr, Eigen::VectorXd* r, Eigen::MatrixXd* Jw) {
+  pr->Evaluate(r, Jw);
+  const Eigen::VectorXd w = pr->row_sigma().cwiseInverse();
+  *Jw = w.asDiagonal() * *Jw;
+}
+
+struct Solve {
+  Eigen::VectorXd values;
+  bool converged = false;
+  int iterations = 0;
+  std::string message;
+  double initial_cost = 0, final_cost = 0, robust_scale = 0;
+};
+
+// One fit of `est` from `values`: plain least squares, or MAP with
+// `prior_all` (per table index; empty = no prior rows); with the robust loss a
+// plain pass first sets the loss scale.
+Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
+             const std::vector<int>& est, const IdentifyOptions& opt, const Eigen::VectorXd& prior_all,
+             std::unique_ptr<Problem>* final_problem) {
+  const ceres::Solver::Options so = Problem::SolverOptions(opt.max_iterations, opt.num_threads);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(table.size());
+  Solve out;
+  out.values = values;
+  auto run = [&](Problem* pr) {
+    if (prior_all.size()) pr->AddPriors(prior_all, zero);
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &pr->ceres_problem(), &summary);
+    out.values = pr->values();
+    out.converged = summary.termination_type == ceres::CONVERGENCE;
+    out.iterations += std::max(0, static_cast<int>(summary.iterations.size()) - 1);
+    out.message = summary.message;
+    if (out.initial_cost == 0) out.initial_cost = summary.initial_cost;
+    out.final_cost = summary.final_cost;
+  };
+  auto problem = std::make_unique<Problem>(ds, table, values, est);
+  run(problem.get());
+  if (!opt.robust.empty() && opt.robust != "none") {
+    double scale = opt.robust_scale;
+    if (!(scale > 0)) {
+      Eigen::VectorXd r;
+      problem->Evaluate(&r, nullptr);
+      std::vector<double> a(r.data(), r.data() + r.size());
+      for (double& x : a) x = std::abs(x);
+      std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+      scale = 3.0 * 1.4826 * a[a.size() / 2];
+      if (!(scale > 0)) scale = 1e-6;
+    }
+    out.robust_scale = scale;
+    problem = std::make_unique<Problem>(ds, table, out.values, est, opt.robust, scale);
+    run(problem.get());
+  }
+  if (final_problem) *final_problem = std::move(problem);
+  return out;
+}
+
+// "location": the forced set, then each candidate in priority order while
+// every kept parameter stays determined (data-only sigma below
+// kDeterminedRatio x prior) and the candidate's unit-norm column is not
+// within selection_tolerance of the span of the kept ones.
+std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
+                                  int num_forced, double tolerance) {
+  const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
+  std::vector<int> kept;
+  for (int c = 0; c < num_forced; ++c) kept.push_back(c);
+  Eigen::VectorXd before = kept.empty() ? Eigen::VectorXd() : SubsetRatios(Js, kept);
+  Eigen::MatrixXd Q(Jw.rows(), 0);
+  auto unit_residual = [&](int c) {
+    const double norm = Jw.col(c).norm();
+    if (!(norm > 0)) return 0.0;
+    Eigen::VectorXd v = Jw.col(c) / norm;
+    for (int pass = 0; pass < 2; ++pass)
+      if (Q.cols()) v -= Q * (Q.transpose() * v);
+    return v.norm();
+  };
+  auto push_q = [&](int c) {
+    const double norm = Jw.col(c).norm();
+    if (!(norm > 0)) return;
+    Eigen::VectorXd v = Jw.col(c) / norm;
+    for (int pass = 0; pass < 2; ++pass)
+      if (Q.cols()) v -= Q * (Q.transpose() * v);
+    if (v.norm() > 1e-12) {
+      Q.conservativeResize(Eigen::NoChange, Q.cols() + 1);
+      Q.col(Q.cols() - 1) = v / v.norm();
+    }
+  };
+  for (int c = 0; c < num_forced; ++c) push_q(c);
+  for (int c = num_forced; c < Jw.cols(); ++c) {
+    if (unit_residual(c) < tolerance) continue;
+    std::vector<int> trial = kept;
+    trial.push_back(c);
+    const Eigen::VectorXd after = SubsetRatios(Js, trial);
+    bool ok = after[trial.size() - 1] < kDeterminedRatio;
+    for (size_t i = 0; ok && i < kept.size(); ++i)
+      if (before[i] < kDeterminedRatio && !(after[i] < kDeterminedRatio)) ok = false;
+    if (!ok) continue;
+    kept = trial;
+    before = after;
+    push_q(c);
+  }
+  return kept;
+}
+
+// Plain words for why a group of parameters is not determined.
+std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group) {
+  const Machine& m = ds.machine();
+  int gains = 0, setup = 0, machine = 0;
+  for (const std::string& n : group) {
+    const int i = m.ParameterIndex(n);
+    if (i < 0 || m.parameters()[i].kind == ParameterKind::kTip) ++setup;
+    else ++machine;
+    if (i >= 0 && PriorClassOf(m, n) == "scale_gain") ++gains;
+  }
+  if (gains > 0 && !HasLengthReference(ds))
+    return "no length reference (no scale bar or ball-bar length in the data): only relative "
+           "scale can be found";
+  if (machine > 0 && setup > 0)
+    return "confounded with the setup (stylus tip, facet offsets, sphere centres or mounts)";
+  if (machine > 0)
+    return "confounded with each other or too weakly seen at these poses for their plausible size";
+  return "setup parameters the data do not separate";
+}
+
+std::string UndeterminedMessage(const Dataset& ds, const std::vector<std::vector<std::string>>& groups) {
+  std::string msg =
+      "identify: not determined by this data (confounded, or seen more weakly than their "
+      "plausible size): ";
+  for (size_t i = 0; i < groups.size(); ++i)
+    msg += (i ? "; " : "") + GroupText(groups[i]) + ": " + GroupCause(ds, groups[i]);
+  return msg + ". Fix one parameter of each group, add measurements that separate them, or use "
+               "estimate 'auto' (every error under its prior, the undetermined ones listed).";
+}
+
+void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const ParameterTable& table,
+                   const Eigen::VectorXd& r, Result* res) {
+  const Machine& m = ds.machine();
+  const int n = static_cast<int>(ds.observations.size());
+  res->residual_vectors = Eigen::MatrixXd::Zero(n, 3);
+  res->points = Eigen::MatrixXd::Zero(n, 3);
+  const KinematicModel model(m, values.data());
+  const ReportContext ctx{&ds, &table, &values, &model};
+  int row = 0;
+  for (int i = 0; i < n; ++i) {
+    const Observation& o = ds.observations[i];
+    const ObservationKind& kind = KindOf(o);
+    Eigen::Vector3d P, v;
+    kind.ReportVector(ctx, o, r.data() + row, &P, &v);
+    res->points.row(i) = P.transpose();
+    res->residual_vectors.row(i) = v.transpose();
+    row += kind.rows();
+  }
+}
+
+}  // namespace
+
+namespace {
+
+struct Setup {
+  ParameterTable table;
+  Eigen::VectorXd values;  // initial, every table entry
+  Eigen::VectorXd prior;   // prior sigma, every table entry
+  Request request;
+  explicit Setup(const Dataset& ds, const IdentifyOptions& opt) : table(ds) {
+    ValidateOptions(opt);
+    values = InitialValues(table, opt);
+    std::vector<std::string> machine_names = ds.machine().parameter_names();
+    ValidatePriors(MachinePriors(ds.machine()), "machine priors", table.names());
+    ValidatePriors(opt.priors, "priors", table.names());
+    const std::vector<double> p =
+        PriorScales(ds.machine(), table.names(), MachinePriors(ds.machine()), opt.priors);
+    prior = Eigen::Map<const Eigen::VectorXd>(p.data(), static_cast<Eigen::Index>(p.size()));
+    request = Classify(ds, table, opt);
+  }
+};
+
+// The hierarchical prior of estimate "auto". Each class of machine errors
+// (location offsets, scale gains, rotary tilts of degree 2, ...) gets a scale
+// factor lambda in [kMinClassScale, 1] on its documented prior, found by
+// maximising the evidence (MacKay's fixed point, the type-II maximum
+// likelihood of sparse Bayesian learning):
+//   lambda_k^2 = sum_j (theta_j / s_j)^2 / sum_j gamma_j,
+//   gamma_j = 1 - posterior var_j / prior var_j   (j in class k),
+// theta at the MAP point of the current scales. A class the data show no sign
+// of shrinks towards zero, so it no longer spreads the noise over dozens of
+// weakly seen errors; this is what lets "auto" predict held-out poses as well
+// as the right hand-picked subset. The documented prior stays the ceiling
+// (lambda <= 1): the data may say an error class is smaller than plausible,
+// never larger. Only the point estimate uses the adapted scales; the
+// uncertainty and the informed/undetermined judgement use the documented
+// priors, so a class shrunk by the data of its siblings is never presented
+// as measured for a member the data cannot see.
+struct Hyper {
+  Eigen::VectorXd prior;                 // per table entry, after the class scales
+  std::map<std::string, double> scale;   // class -> lambda
+  Eigen::VectorXd values;                // MAP point under `prior` and `noise`
+  std::vector<VarianceComponent> noise;  // estimated instrument groups (variance components)
+  int rounds = 0;
+};
+
+constexpr double kMinClassScale = 1e-3;
+// A group needs this much redundancy (rows minus what the fit used of them)
+// before its noise is estimated from its residuals.
+constexpr double kMinRedundancy = 5.0;
+// An estimated noise beyond this many times the declared one is not taken
+// for noise (the plain chi-square test flags sqrt(2) x already).
+constexpr double kMaxNoiseFactor = 3.0;
+
+// The instrument group of an observation: the variance component it shares.
+std::string NoiseGroup(const Observation& o) {
+  const ObservationKind& k = KindOf(o);
+  return k.probe_touch() ? "probe" : k.name();
+}
+
+Eigen::VectorXd DeclaredSigma(const Observation& o) {
+  const int rows = KindOf(o).rows();
+  if (o.sigma.size() == rows) return o.sigma;
+  if (o.sigma.size() == 1) return Eigen::VectorXd::Constant(rows, o.sigma[0]);
+  return Eigen::VectorXd::Constant(rows, KindOf(o).default_sigma());
+}
+
+// Variance components (Helmert / Foerstner's iterative estimator, the REML
+// fixed point for independent groups): with the hat matrix H of the weighted
+// (and prior-augmented) problem, group g's redundancy is
+//   r_g = sum_{i in g} (1 - H_ii),
+// and its noise factor is updated by f_g^2 <- f_g^2 * sum_{i in g} (e_i/s_i)^2 / r_g,
+// e the residuals, s the current sigmas. At the fixed point every group's
+// weighted residuals have the chi-square their redundancy predicts, so a
+// probe declared at 1 um and a ball bar at 0.5 um are weighed by what the
+// data show, not by a guess.
+//
+// Both hyperparameters (class scales of "auto", noise factors) are
+// evidence maximisations of the same model; they are iterated together.
+Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTable& table,
+                           const Eigen::VectorXd& start, const std::vector<int>& est,
+                           const IdentifyOptions& opt, const Eigen::VectorXd& prior_all, bool classes) {
+  std::map<std::string, std::vector<int>> members;  // class -> positions in est
+  const Machine& m = ds.machine();
+  if (classes)
+    for (size_t j = 0; j < est.size(); ++j) {
+      const std::string& n = table.names()[est[j]];
+      if (m.ParameterIndex(n) < 0) continue;  // setup parameters keep their prior
+      const std::string cls = PriorClassOf(m, n);
+      if (cls != "tip") members[cls].push_back(static_cast<int>(j));
+    }
+  Hyper out;
+  out.prior = prior_all;
+  out.values = start;
+  for (const auto& kv : members) out.scale[kv.first] = 1.0;
+  // Noise groups: the observations and declared sigmas of each.
+  std::map<std::string, double> factor;
+  std::vector<std::string> group_of(ds.observations.size());
+  if (opt.variance_components)
+    for (size_t i = 0; i < ds.observations.size(); ++i) factor[group_of[i] = NoiseGroup(ds.observations[i])] = 1.0;
+  auto apply_noise = [&]() {
+    for (size_t i = 0; i < ds.observations.size(); ++i)
+      scaled->observations[i].sigma = DeclaredSigma(ds.observations[i]) * factor[group_of[i]];
+  };
+  std::map<std::string, VarianceComponent> comp;
+  if (members.empty() && factor.empty()) return out;
+  const bool map = prior_all.size() > 0;
+  for (int round = 0; round < 60; ++round) {
+    for (const auto& [cls, js] : members)
+      for (int j : js) out.prior[est[j]] = out.scale[cls] * prior_all[est[j]];
+    if (!factor.empty()) apply_noise();
+    std::unique_ptr<Problem> pr;
+    const Solve fit = RunFit(*scaled, table, out.values, est, opt, out.prior, &pr);
+    out.values = fit.values;
+    out.rounds = round + 1;
+    Eigen::VectorXd r;
+    Eigen::MatrixXd Jw;
+    WeightedJacobian(pr.get(), &r, &Jw);
+    const int p = static_cast<int>(est.size());
+    Eigen::MatrixXd Ninv;
+    Eigen::VectorXd cur;
+    if (map) {
+      cur = Gather(out.prior, est);
+      const Eigen::MatrixXd Js = Jw * cur.asDiagonal();
+      Eigen::MatrixXd N = Js.transpose() * Js;
+      N.diagonal().array() += 1.0;
+      const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+      Ninv = cur.asDiagonal() * Cs * cur.asDiagonal();
+    } else {
+      Ninv = AnalyzeJacobian(Jw, opt.rank_tolerance).inverse_normal;
+    }
+    double change = 0;
+    for (const auto& [cls, js] : members) {
+      double m2 = 0, gamma = 0;
+      for (int j : js) {
+        const double t = out.values[est[j]] / prior_all[est[j]];
+        m2 += t * t;
+        gamma += std::clamp(1.0 - Ninv(j, j) / (cur[j] * cur[j]), 0.0, 1.0);
+      }
+      double lambda = gamma > 1e-9 ? std::sqrt(m2 / gamma) : kMinClassScale;
+      if (!std::isfinite(lambda)) lambda = 1.0;
+      lambda = std::clamp(lambda, kMinClassScale, 1.0);
+      change = std::max(change, std::abs(std::log(lambda / out.scale[cls])));
+      out.scale[cls] = lambda;
+    }
+    if (!factor.empty()) {
+      const Eigen::VectorXd h = (Jw * Ninv).cwiseProduct(Jw).rowwise().sum();
+      const Eigen::VectorXd sig = pr->row_sigma();
+      const std::vector<int>& src = pr->row_source();
+      comp.clear();
+      std::map<std::string, double> declared2;
+      for (int i = 0; i < r.size(); ++i) {
+        if (src[i] < 0) continue;  // a scale bar's length: a reference, not an instrument group
+        const std::string& g = group_of[src[i]];
+        VarianceComponent& c = comp[g];
+        c.group = g;
+        c.rows += 1;
+        c.redundancy += std::clamp(1.0 - h[i], 0.0, 1.0);
+        c.chi2 += (r[i] / sig[i]) * (r[i] / sig[i]);
+        declared2[g] += (sig[i] / factor[g]) * (sig[i] / factor[g]);
+      }
+      for (auto& [g, c] : comp) {
+        c.declared = std::sqrt(declared2[g] / c.rows);
+        c.estimated = c.redundancy >= kMinRedundancy;
+        if (!c.estimated) continue;
+        double f = factor[g] * std::sqrt(c.chi2 / c.redundancy);
+        if (!std::isfinite(f) || !(f > 0)) f = factor[g];
+        change = std::max(change, std::abs(std::log(f / factor[g])));
+        factor[g] = f;
+      }
+    }
+    if (change < (factor.empty() ? 0.01 : 1e-3)) break;
+  }
+  for (const auto& [cls, js] : members)
+    for (int j : js) out.prior[est[j]] = out.scale[cls] * prior_all[est[j]];
+  if (!factor.empty()) {
+    apply_noise();
+    for (auto& [g, c] : comp) {
+      c.factor = factor[g];
+      c.sigma = c.declared * c.factor;
+      out.noise.push_back(c);
+    }
+  }
+  return out;
+}
+
+// The "location" selection at given values (no fit).
+std::vector<int> SelectAt(const Dataset& ds, const Setup& s, const Eigen::VectorXd& values,
+                          const IdentifyOptions& opt) {
+  std::vector<int> all = s.request.forced;
+  all.insert(all.end(), s.request.candidates.begin(), s.request.candidates.end());
+  Problem probe(ds, s.table, values, all);
+  Eigen::VectorXd r;
+  Eigen::MatrixXd Jw;
+  WeightedJacobian(&probe, &r, &Jw);
+  const std::vector<int> cols = SelectDetermined(Jw, Gather(s.prior, all),
+                                                 static_cast<int>(s.request.forced.size()),
+                                                 opt.selection_tolerance);
+  std::vector<int> out;
+  for (int c : cols) out.push_back(all[c]);
+  return out;
+}
+
+}  // namespace
+
+std::vector<std::string> ResolveEstimate(const Dataset& ds, const IdentifyOptions& options) {
+  ds.Validate();
+  const Setup s(ds, options);
+  std::vector<int> idx = s.request.forced;
+  if (s.request.automatic) idx.insert(idx.end(), s.request.candidates.begin(), s.request.candidates.end());
+  else if (s.request.location) idx = SelectAt(ds, s, s.values, options);
+  std::vector<std::string> out;
+  for (int i : idx) out.push_back(s.table.names()[i]);
+  return out;
+}
+
+Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
+  ds.Validate();
+  const Setup setup(ds, opt);
+  const ParameterTable& table = setup.table;
+  const Request& rq = setup.request;
+  Eigen::VectorXd values = setup.values;
+  const bool map = rq.automatic || opt.prior;
+  const Eigen::VectorXd no_prior;
+
+  std::vector<int> est;
+  if (rq.automatic) {
+    est = rq.forced;
+    est.insert(est.end(), rq.candidates.begin(), rq.candidates.end());
+  } else if (rq.location) {
+    // Judge the selection near the solution, not at a possibly rough
+    // nominal: a MAP fit over every candidate first (always well posed),
+    // then select, refit, and select again until the set is stable.
+    std::vector<int> all = rq.forced;
+    all.insert(all.end(), rq.candidates.begin(), rq.candidates.end());
+    const Solve pre = RunFit(ds, table, values, all, opt, setup.prior, nullptr);
+    Eigen::VectorXd at = setup.values;
+    for (int i : all) at[i] = pre.values[i];
+    est = SelectAt(ds, setup, at, opt);
+    for (int round = 0; round < 4; ++round) {
+      Eigen::VectorXd start = setup.values;
+      for (int i : est) start[i] = at[i];
+      const Solve fit = RunFit(ds, table, start, est, opt, map ? setup.prior : no_prior, nullptr);
+      std::vector<int> again = SelectAt(ds, setup, fit.values, opt);
+      at = fit.values;
+      if (again == est) break;
+      est = again;
+    }
+    for (int i : est) values[i] = at[i];
+  } else {
+    est = rq.forced;
+  }
+  if (est.empty())
+    throw std::invalid_argument("identify: nothing to estimate (every parameter is fixed)");
+
+  Result res;
+  res.names = table.names();
+  for (int i : est) res.estimated.push_back(table.names()[i]);
+  res.map_fit = map;
+  res.explicit_request = !rq.automatic;
+  const int p = static_cast<int>(est.size());
+  const Eigen::VectorXd prior = Gather(setup.prior, est);
+
+  auto undetermined_groups = [&](const Determination& d) {
+    std::vector<std::vector<std::string>> groups;
+    for (const auto& g : d.groups) {
+      std::vector<std::string> names;
+      for (int c : g) names.push_back(res.estimated[c]);
+      groups.push_back(names);
+    }
+    return groups;
+  };
+
+  if (!map) {
+    // A plain least-squares request must be determined by the data: judged
+    // at the start and, when the start says no, again near the solution
+    // (after a MAP fit, well posed whatever the start), so that a rough
+    // nominal neither drops nor admits parameters wrongly.
+    Problem start_problem(ds, table, values, est);
+    if (start_problem.num_rows() < p && !opt.allow_unidentifiable)
+      throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
+                                  std::to_string(start_problem.num_rows()) + " residuals");
+    Eigen::VectorXd r;
+    Eigen::MatrixXd Jw;
+    WeightedJacobian(&start_problem, &r, &Jw);
+    Determination d = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+    if (!d.undetermined.empty()) {
+      const Solve pre = RunFit(ds, table, values, est, opt, setup.prior, nullptr);
+      Problem at(ds, table, pre.values, est);
+      WeightedJacobian(&at, &r, &Jw);
+      const Determination d2 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+      if (d2.undetermined.empty()) {
+        values = pre.values;
+      } else if (!opt.allow_unidentifiable) {
+        // The MAP point may still sit where a weakly seen setup parameter
+        // (a sphere with few touches) looks free; the least-squares point
+        // decides. Refuse only when it too leaves the set undetermined.
+        const Solve ls = RunFit(ds, table, pre.values, est, opt, no_prior, nullptr);
+        Problem at_ls(ds, table, ls.values, est);
+        WeightedJacobian(&at_ls, &r, &Jw);
+        const Determination d3 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+        if (!d3.undetermined.empty())
+          throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(d2)));
+        values = ls.values;
+      }
+    }
+  }
+
+  // The prior rows of the fit: none (least squares), the documented priors
+  // (prior=true), or the hierarchical one of "auto".
+  Eigen::VectorXd fit_prior = map ? setup.prior : no_prior;
+  // With variance components the fit runs on a copy whose sigmas are the
+  // estimated ones; everything below (covariance, chi-square) uses them.
+  Dataset weighted = ds;
+  if (rq.automatic || opt.variance_components) {
+    const Hyper hy = AdaptHyperparameters(ds, &weighted, table, values, est, opt, fit_prior, rq.automatic);
+    fit_prior = hy.prior;
+    values = hy.values;
+    res.class_scales = hy.scale;
+    res.variance_components = hy.noise;
+  }
+  std::unique_ptr<Problem> problem;
+  const Solve fit = RunFit(weighted, table, values, est, opt, fit_prior, &problem);
+  values = fit.values;
+  res.converged = fit.converged;
+  res.iterations = fit.iterations;
+  res.message = fit.message;
+  res.initial_cost = fit.initial_cost;
+  res.final_cost = fit.final_cost;
+  res.robust_scale = fit.robust_scale;
+
+  Eigen::VectorXd r;
+  Eigen::MatrixXd Jw;
+  WeightedJacobian(problem.get(), &r, &Jw);
+  const Eigen::VectorXd sig = problem->row_sigma();
+  const Determination det = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+  if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable)
+    throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
+
+  res.values = values;
+  res.residuals = r;
+  res.residual_source = problem->row_source();
+  res.n_observations = problem->num_rows();
+  res.n_parameters = p;
+  res.rms = r.size() ? std::sqrt(r.squaredNorm() / r.size()) : 0.0;
+  res.max_abs = r.size() ? r.cwiseAbs().maxCoeff() : 0.0;
+  if (res.robust_scale > 0)
+    for (int i = 0; i < r.size(); ++i)
+      if (std::abs(r[i]) > res.robust_scale) res.outliers.push_back(i);
+
+  // chi^2 of the data rows against the declared noise (rows the robust loss
+  // flagged are left out: they are reported as outliers instead).
+  std::vector<bool> outlier(r.size(), false);
+  for (int i : res.outliers) outlier[i] = true;
+  double chi2 = 0;
+  int rows = 0;
+  for (int i = 0; i < r.size(); ++i)
+    if (!outlier[i]) chi2 += (r[i] / sig[i]) * (r[i] / sig[i]), ++rows;
+
+  const Identifiability id = AnalyzeJacobian(Jw, opt.rank_tolerance);
+  res.rank = id.rank;
+  if (map) {
+    // Posterior covariance (Jw^T Jw + P)^-1, P = diag(1 / prior^2), in the
+    // declared noise; inflated by chi2/dof when the residuals exceed it.
+    // The covariance uses the documented priors (see AdaptHyperparameters); the
+    // degrees of freedom those of the fit that made the residuals.
+    auto scaled_posterior = [&](const Eigen::VectorXd& s) {
+      const Eigen::MatrixXd Js = Jw * s.asDiagonal();
+      Eigen::MatrixXd N = Js.transpose() * Js;
+      N.diagonal().array() += 1.0;
+      return Eigen::MatrixXd(N.ldlt().solve(Eigen::MatrixXd::Identity(p, p)));
+    };
+    const Eigen::MatrixXd Cs = scaled_posterior(prior);
+    const Eigen::MatrixXd C = prior.asDiagonal() * Cs * prior.asDiagonal();
+    // Effective number of parameters: trace of the hat matrix = p - trace(Cs).
+    const Eigen::VectorXd used = Gather(fit_prior, est);
+    const double p_eff = p - (rq.automatic ? scaled_posterior(used).trace() : Cs.trace());
+    res.dof = std::max(1, rows - static_cast<int>(std::lround(p_eff)));
+    const double k2 = std::max(1.0, chi2 / res.dof);
+    res.covariance = k2 * C;
+    // Condition number of what the data determined (the rest is the prior's).
+    std::vector<int> informed_cols;
+    for (int j = 0; j < p; ++j)
+      if (std::sqrt(std::max(Cs(j, j), 0.0)) < kInformedThreshold) informed_cols.push_back(j);
+    Eigen::MatrixXd Ji(Jw.rows(), informed_cols.size());
+    for (size_t k = 0; k < informed_cols.size(); ++k) Ji.col(k) = Jw.col(informed_cols[k]);
+    res.condition_number = informed_cols.empty() ? 0.0 : AnalyzeJacobian(Ji, opt.rank_tolerance).condition_number;
+    res.sigma = res.dof > 0 ? std::sqrt(r.squaredNorm() / res.dof) : 0.0;
+  } else {
+    res.dof = std::max(0, rows - id.rank);
+    const double s2 = res.dof > 0 ? chi2 / res.dof : 0.0;
+    res.covariance = s2 * id.inverse_normal;
+    // The condition number of the column-scaled Jacobian in mm, as before the
+    // weighting and as the plan design reports it.
+    res.condition_number = AnalyzeJacobian(sig.asDiagonal() * Jw, opt.rank_tolerance).condition_number;
+    const int dof_mm = res.n_observations - id.rank;
+    res.sigma = dof_mm > 0 ? std::sqrt(r.squaredNorm() / dof_mm) : 0.0;
+  }
+  res.chi2 = chi2;
+  res.chi2_p = res.dof > 0 ? ChiSquareSurvival(chi2, res.dof) : 1.0;
+  res.std = res.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+  res.correlation = Eigen::MatrixXd::Zero(p, p);
+  for (int i = 0; i < p; ++i)
+    for (int j = 0; j < p; ++j) {
+      const double d = res.std[i] * res.std[j];
+      res.correlation(i, j) = d > 0 ? res.covariance(i, j) / d : (i == j ? 1.0 : 0.0);
+    }
+
+  // What the data determined.
+  for (const auto& g : undetermined_groups(det)) res.unidentifiable.push_back(g);
+  for (int j = 0; j < p; ++j) {
+    res.prior_std.push_back(prior[j]);
+    res.informed.push_back(res.std[j] / prior[j]);
+    const double v = values[est[j]];
+    if (std::abs(v) > kImplausibleSigmas * prior[j]) res.implausible.push_back(res.estimated[j]);
+  }
+  if (map) {
+    // The posterior ratio without the chi2 inflation: how much the data, at
+    // the declared noise, narrowed the prior.
+    Eigen::MatrixXd Js = Jw * prior.asDiagonal();
+    Eigen::MatrixXd N = Js.transpose() * Js;
+    N.diagonal().array() += 1.0;
+    const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+    for (int j = 0; j < p; ++j)
+      if (!(std::sqrt(std::max(Cs(j, j), 0.0)) < kInformedThreshold))
+        res.undetermined.push_back(res.estimated[j]);
+  } else {
+    for (int c : det.undetermined) res.undetermined.push_back(res.estimated[c]);
+  }
+
+  // Adequacy: residuals against the declared noise.
+  const double ratio = res.dof > 0 ? chi2 / res.dof : 0.0;
+  res.adequate = !(res.chi2_p < 1e-3 && ratio > 2.0);
+  bool mounts = false, mount_estimated = false;
+  for (const Observation& o : ds.observations)
+    for (int c : KindOf(o).MountPositions(table, o)) {
+      mounts = true;
+      if (std::find(est.begin(), est.end(), c) != est.end()) mount_estimated = true;
+    }
+  if (!res.adequate) {
+    const double x = std::sqrt(ratio);
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.3g", x);
+    if (mounts && !mount_estimated)
+      res.adequacy = "instrument setup not estimated (ball3d/dbb mount: estimate its tool and "
+                     "table ball positions, e.g. ball3d.<setup>.table.x|y|z); residuals are " +
+                     std::string(buf) + "x the declared noise";
+    else if (x > 200 && x < 5000)
+      res.adequacy = "unit mistake (residuals ~" + std::string(buf) +
+                     "x the declared noise: readings in um where mm are expected, or a wrong sigma)";
+    else if (!HasLengthReference(ds))
+      res.adequacy = "no length reference (no scale bar / dbb length) and residuals " +
+                     std::string(buf) + "x the declared noise: the model misses errors the data show";
+    else
+      res.adequacy = "residuals " + std::string(buf) +
+                     "x the declared noise: the model misses errors the data show (estimate more, "
+                     "e.g. 'auto') or the declared noise is too small";
+  }
+
+  // With the noise estimated the chi-square passes by construction; what is
+  // left to judge is how far each group's noise is from its declaration.
+  // Variance components would otherwise absorb any misfit as "noise": beyond
+  // kMaxNoiseFactor it is a misfit or a unit mistake, not the instrument.
+  for (const VarianceComponent& c : res.variance_components)
+    if (c.estimated && res.adequate && c.factor > kMaxNoiseFactor) {
+      char buf[200];
+      std::snprintf(buf, sizeof buf,
+                    "the %s residuals are %.3gx their declared noise even with the noise estimated "
+                    "(%.3g um against %.3g um declared): ",
+                    c.group.c_str(), c.factor, c.sigma * 1e3, c.declared * 1e3);
+      res.adequate = false;
+      res.adequacy = std::string(buf) +
+                     (c.group != "probe" && mounts && !mount_estimated
+                          ? "instrument setup not estimated (ball3d/dbb mount: estimate its tool and "
+                            "table ball positions, e.g. ball3d.<setup>.table.x|y|z)"
+                          : "the model misses errors this instrument sees, or its readings are in other "
+                            "units; if the noise really is this large, declare it (sigma)");
+    }
+
+  // Never hand out NaN or inf.
+  res.finite = values.allFinite() && res.std.allFinite() && res.covariance.allFinite();
+  if (!res.finite) {
+    for (int i = 0; i < res.values.size(); ++i)
+      if (!std::isfinite(res.values[i])) res.values[i] = setup.values[i];
+    for (int i = 0; i < res.std.size(); ++i)
+      if (!std::isfinite(res.std[i])) res.std[i] = 0.0;
+    res.covariance = res.covariance.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+    res.correlation = res.correlation.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+    for (double& x : res.informed)
+      if (!std::isfinite(x)) x = 0.0;
+  }
+  res.residuals = res.residuals.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+  if (!std::isfinite(res.rms)) res.rms = 0, res.finite = false;
+  if (!std::isfinite(res.max_abs)) res.max_abs = 0;
+  if (!std::isfinite(res.sigma)) res.sigma = 0;
+  FillResiduals(ds, res.values, table, res.residuals, &res);
+  return res;
+}
+
+std::string Result::verdict() const {
+  if (!finite) return "non_finite";
+  if (!converged) return "not_converged";
+  if (!adequate) return "inadequate";
+  if (explicit_request && !undetermined.empty()) return "undetermined";
+  return "ok";
+}
+
+Eigen::VectorXd PredictResiduals(const Dataset& ds, const std::map<std::string, double>& values,
+                                 std::vector<int>* source) {
+  ds.Validate();
+  const ParameterTable table(ds);
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  for (const auto& [name, value] : values) {
+    const int i = table.Index(name);
+    if (i >= 0) v[i] = value;  // other datasets' setup parameters do not apply here
+    else if (!json_util::IsSetupParameterName(name))
+      table.Require(name);  // throws: a machine name typo or a malformed dotted name
+  }
+  Problem problem(ds, table, v, {});
+  Eigen::VectorXd r;
+  problem.Evaluate(&r, nullptr);
+  if (source) *source = problem.row_source();
+  return r;
+}
+
+namespace {
+// JSON has no inf or NaN: such a number is written as null.
+json Finite(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
+}  // namespace
+
+std::string Result::ToJson() const {
+  json j;
+  json params = json::object();
+  for (size_t i = 0; i < estimated.size(); ++i) {
+    const auto it = std::find(names.begin(), names.end(), estimated[i]);
+    json entry = {{"value", Finite(values[it - names.begin()])}, {"std", Finite(this->std[i])}};
+    if (i < prior_std.size()) {
+      entry["prior_std"] = Finite(prior_std[i]);
+      entry["informed"] = Finite(informed[i]);
+    }
+    params[estimated[i]] = entry;
+  }
+  for (size_t i = 0; i < names.size(); ++i)
+    if (!params.contains(names[i]) && values[i] != 0.0)
+      params[names[i]] = {{"value", Finite(values[i])}, {"fixed", true}};
+  j["parameters"] = params;
+  j["residual_rms"] = Finite(rms);
+  j["residual_max"] = Finite(max_abs);
+  j["sigma"] = Finite(sigma);
+  j["n_observations"] = n_observations;
+  j["n_parameters"] = n_parameters;
+  j["condition_number"] = std::isfinite(condition_number) ? json(condition_number) : json(nullptr);
+  j["rank"] = rank;
+  j["unidentifiable"] = unidentifiable;
+  j["converged"] = converged;
+  j["iterations"] = iterations;
+  j["estimated"] = estimated;
+  j["undetermined"] = undetermined;
+  j["implausible"] = implausible;
+  j["map_fit"] = map_fit;
+  if (!variance_components.empty()) {
+    nlohmann::json vc = nlohmann::json::array();
+    for (const VarianceComponent& c : variance_components)
+      vc.push_back({{"group", c.group}, {"rows", c.rows}, {"redundancy", Finite(c.redundancy)},
+                    {"declared_sigma", Finite(c.declared)}, {"factor", Finite(c.factor)},
+                    {"sigma", Finite(c.sigma)}, {"estimated", c.estimated}});
+    j["variance_components"] = vc;
+  }
+  if (!class_scales.empty()) {
+    nlohmann::json cs = nlohmann::json::object();
+    for (const auto& [cls, v] : class_scales) cs[cls] = Finite(v);
+    j["class_scales"] = cs;
+  }
+  j["chi2"] = {{"value", Finite(chi2)}, {"dof", dof}, {"p", Finite(chi2_p)}};
+  j["adequate"] = adequate;
+  j["adequacy"] = adequacy;
+  j["finite"] = finite;
+  j["verdict"] = verdict();
+  json corr = json::array();
+  for (int i = 0; i < correlation.rows(); ++i) {
+    json row = json::array();
+    for (int k = 0; k < correlation.cols(); ++k) row.push_back(Finite(correlation(i, k)));
+    corr.push_back(row);
+  }
+  j["correlation"] = corr;
+  json res_rows = json::array();
+  for (int i = 0; i < residuals.size(); ++i) res_rows.push_back(Finite(residuals[i]));
+  j["residuals"] = res_rows;
+  j["outliers"] = outliers;
+  return j.dump(1);
+}
+
+}  // namespace fivecal
