@@ -215,7 +215,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
 
     ``estimate``: parameter names and/or presets (``S1``-``S4`` on ``wCBXfZYSt``,
     ``location``, ``auto``), as a list or a comma/space separated string. The
-    default setup set (tip, touched facets, touched sphere centres, DBB lengths) is
+    default setup set (tip, touched facets, touched sphere centres, DBB lengths, ball3d
+    nest positions) is
     added unless ``default_setup=False``. ``selection_tolerance``: for ``location``
     and ``auto``, the fraction of a candidate's (scaled) Jacobian column that must
     lie outside the span of the parameters already chosen. ``fix`` removes names. ``robust``:

@@ -70,7 +70,7 @@ def test_b_facets_without_scale_bar_refused_no_length_reference(subset):
 
 # ---- (c) ball3d without the instrument setup ---------------------------------------------------
 
-def test_c_ball3d_location_without_mount_is_inadequate_naming_the_setup():
+def test_c_ball3d_nest_comes_with_the_data_and_without_it_the_fit_is_inadequate():
     c600u = fivecal.Machine.load(example_machine_path("c600u"))
     plan = []
     for a in np.arange(-90, 91, 15.0):
@@ -81,7 +81,14 @@ def test_c_ball3d_location_without_mount_is_inadequate_naming_the_setup():
                          "tool_ball": [0, 0, 150.0], "table_ball": [50.0, 0, 80.0]})
     ds = fivecal.simulate(c600u, plan, errors={"EB0A": 30e-6, "EX0C": 0.03}, sigma={"ball3d": 0.001},
                           seed=5, setup={"ball3d.M1.table.x": 1.0})
-    r = fivecal.identify(ds, "location")
+    # The default setup estimates the nest position: the 1 mm nest error is
+    # recovered and does not turn into location errors.
+    d = fivecal.identify(ds, "location")
+    assert d.adequate and d.verdict == "ok", d.adequacy
+    assert abs(d.values["ball3d.M1.table.x"] - 1.0) < 3 * d.std["ball3d.M1.table.x"] + 1e-3
+    assert abs(d.values.get("EB0A", 30e-6) - 30e-6) < 3 * d.std.get("EB0A", 1.0)
+    # Switching the default setup off is refused as inadequate, naming the setup.
+    r = fivecal.identify(ds, "location", default_setup=False)
     assert not r.adequate
     assert r.verdict == "inadequate"
     assert "instrument setup not estimated" in r.adequacy

@@ -110,10 +110,12 @@ def test_coverage_over_200_simulations(scene):
 
 def test_misfit_is_not_absorbed_as_noise(scene):
     """Variance components must not turn a missing setup into 'noise': the
-    R-test nest 10 um off and not estimated is refused as inadequate, naming
-    the setup, even though its 'noise' could be raised to fit."""
+    R-test nest 10 um off and kept fixed (the default setup estimates it) is
+    refused as inadequate, naming the setup, even though its 'noise' could be
+    raised to fit."""
     ds, _ = _simulate(scene, seed=3, mount_error=0.01)
-    r = fivecal.identify(ds, tango.S3_NAMES, variance_components=True)
+    r = fivecal.identify(ds, tango.S3_NAMES, fix=[f"ball3d.R1.table.{c}" for c in "xyz"],
+                         variance_components=True)
     assert r.verdict == "inadequate"
     assert "ball3d" in r.adequacy and "setup not estimated" in r.adequacy
 
