@@ -216,21 +216,22 @@ def _expected(machine: Machine, kind: str) -> str:
 # Rows to observations
 # --------------------------------------------------------------------------
 def _approach(text: str, machine: Machine, where: str) -> dict:
-    """``-Z``, ``Z-``, ``+X-Y``: the axes that moved into the touch and their signs."""
-    out = {}
+    """``-Z``, ``Z-``, ``+X-Y``, ``X+Y-``: the axes that moved into the touch and their signs."""
     s = text.replace(" ", "")
-    for m in re.finditer(r"([+-])?([A-Za-z]1?)([+-])?", s):
-        sign = m.group(1) or m.group(3)
-        letter = m.group(2).upper()
-        letter = "S" if letter == "C1" else letter
-        if sign is None or (m.group(1) and m.group(3)):
-            raise ValueError(f"{where}: approach '{text}': write each axis with one sign, like -Z or X+")
+    pat = r"([+-])([A-Za-z]1?)" if s[:1] in "+-" else r"([A-Za-z]1?)([+-])"
+    parts = re.findall(pat, s)
+    if not parts or "".join("".join(p) for p in parts) != s:
+        raise ValueError(f"{where}: approach '{text}' is not like -Z, X+ or -X+Y-Z")
+    out = {}
+    for p in parts:
+        sign, letter = (p[0], p[1]) if s[:1] in "+-" else (p[1], p[0])
+        letter = "S" if letter.upper() == "C1" else letter.upper()
         if letter not in machine.axis_names:
             raise ValueError(f"{where}: approach '{text}': unknown axis letter '{letter}' "
                              f"(the machine's axes: {' '.join(machine.axis_names)})")
+        if letter in out:
+            raise ValueError(f"{where}: approach '{text}': axis {letter} given twice")
         out[letter] = 1 if sign == "+" else -1
-    if "".join(m.group(0) for m in re.finditer(r"([+-])?([A-Za-z]1?)([+-])?", s)) != s or not out:
-        raise ValueError(f"{where}: approach '{text}' is not like -Z, X+ or +X-Y")
     return out
 
 
@@ -377,15 +378,21 @@ def _is_number(cell: str) -> bool:
 
 def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mapping, decimal_comma: bool,
          where: str) -> dict:
-    axes, direction, vals, text = {}, {}, {}, {}
+    axes, direction, vals, text, empty = {}, {}, {}, {}, {}
     for c in cols:
         cw = f"{where}: column '{c.header}'"
         cell = cells[c.index]
         if c.field in _TEXT_FIELDS:
             s = cell.strip()
-            if not s and c.field != "approach":
+            if not s:
+                if kind == "fivecal" or c.field == "approach":
+                    continue
                 raise ValueError(f"{cw}: empty cell (a {c.field} is expected)")
-            text[c.field] = s
+            text[c.field] = s.lower() if c.field == "type" else s
+            continue
+        if kind == "fivecal" and not cell.strip() and len(c.field) > 1:
+            # mixed rows: a column another type uses stays empty; _value names it when needed
+            empty[c.field] = cw
             continue
         v = _number(cell, decimal_comma, cw)
         if c.field.startswith("dir_"):
@@ -410,6 +417,15 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
         typ = "ball3d"
     if typ not in ("facet", "sphere", "dbb", "ball3d"):
         raise ValueError(f"{where}: column 'type': '{typ}' is not facet, sphere, dbb or ball3d")
+    balls = set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"])
+    used = {"facet": {"sigma"}, "sphere": {"sigma"}, "dbb": {"reading", "length", "sigma"} | balls,
+            "ball3d": {"dx", "dy", "dz", "sigma"} | balls}[typ]
+    for f, (_, fw) in vals.items():
+        if f not in used:
+            raise ValueError(f"{fw}: a {typ} row has no {f} (leave the cell empty)")
+    for key in ("dir_" + a for a in machine.axis_names):
+        if key in empty:
+            raise ValueError(f"{empty[key]}: empty cell (a direction -1, 0 or +1 is expected)")
     o = {"type": typ, "axes": axes}
     if "id" in text:
         o["id"] = text["id"]
@@ -434,7 +450,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
                 raise ValueError(f"{where}: no {key} for this {typ} sample: give --{key.replace('_', '-')} "
                                  f"X,Y,Z (mm), '{key}' in the sidecar, or the columns {', '.join(comps)}")
         if typ == "dbb":
-            r, rw = _value(vals, "reading", where, typ)
+            r, rw = _value(vals, "reading", where, typ, empty)
             if abs(r) > plausibility.DBB_RANGE:
                 raise ValueError(f"{rw}: reading {r:.6g} mm is beyond a ballbar's range (about ±1 mm, refused "
                                  f"beyond ±{plausibility.DBB_RANGE:g} mm); readings look like µm: name the "
@@ -450,7 +466,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
         else:
             m = []
             for k in ("dx", "dy", "dz"):
-                v, vw = _value(vals, k, where, typ)
+                v, vw = _value(vals, k, where, typ, empty)
                 if abs(v) > plausibility.BALL3D_RANGE:
                     raise ValueError(f"{vw}: {v:.6g} mm is beyond an R-test / 3D ball sensor's range (a few mm, "
                                      f"refused beyond {plausibility.BALL3D_RANGE:g} mm); displacements look like "
@@ -484,7 +500,9 @@ def _touch_type(text, typ, targets, where, cols) -> str:
     return known
 
 
-def _value(vals, key, where, typ):
+def _value(vals, key, where, typ, empty=None):
+    if empty and key in empty:
+        raise ValueError(f"{empty[key]}: empty cell (a number is expected for a {typ} row)")
     if key not in vals:
         raise ValueError(f"{where}: no '{key}' for this {typ} row")
     return vals[key]
