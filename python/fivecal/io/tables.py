@@ -48,6 +48,12 @@ _SIDECAR_KEYS = {"probe", "artefact", "setup", "length", "tool_ball", "table_bal
 _ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
 
 
+def _axis_list(machine: Machine, skip_s: bool = False) -> str:
+    """The machine's axes in the usual X Y Z A B C S order."""
+    order = "XYZABCS"
+    return " ".join(a for a in sorted(machine.axis_names, key=order.index) if not (skip_s and a == "S"))
+
+
 class _Column:
     """One header cell: the fivecal field it feeds and its unit factor."""
 
@@ -139,14 +145,14 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
     if len(up) == 1 and up.isalpha():
         if up in axes:
             return up
-        raise ValueError(f"{where}: unknown axis letter '{name}' (the machine's axes: {' '.join(axes)})")
+        raise ValueError(f"{where}: unknown axis letter '{name}' (the machine's axes: {_axis_list(machine)})")
     m = re.match(r"^(?:dir_?([a-z]\d?)|([a-z]\d?)_?dir)$", low)
     if m:
         letter = (m.group(1) or m.group(2)).upper()
         letter = "S" if letter == "C1" else letter
         if letter not in axes:
             raise ValueError(f"{where}: direction column of unknown axis '{letter}' "
-                             f"(the machine's axes: {' '.join(axes)})")
+                             f"(the machine's axes: {_axis_list(machine)})")
         return "dir_" + letter
     if low in _FIELDS[kind]:
         return low
@@ -198,7 +204,7 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
     missing = [a for a in machine.axis_names if a != "S" and a not in seen]
     if missing:
         raise ValueError(f"{where}: no column for axis {', '.join(missing)} (expected a column per machine "
-                         f"axis: {' '.join(machine.axis_names)}; S may be left out)")
+                         f"axis: {_axis_list(machine)}; S may be left out)")
     for r in _REQUIRED[kind]:
         if r not in seen:
             raise ValueError(f"{where}: no '{r}' column; a {kind} import expects {_expected(machine, kind)}")
@@ -206,7 +212,7 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
 
 
 def _expected(machine: Machine, kind: str) -> str:
-    axes = " ".join(a for a in machine.axis_names if a != "S")
+    axes = _axis_list(machine, skip_s=True)
     rest = {"probing": "target [approach] [id]", "dbb": "reading_um [id]",
             "ball3d": "dx_um dy_um dz_um [id]", "fivecal": "type target|setup reading|dx dy dz [id]"}[kind]
     return f"the columns {axes} {rest}"
@@ -228,7 +234,7 @@ def _approach(text: str, machine: Machine, where: str) -> dict:
         letter = "S" if letter.upper() == "C1" else letter.upper()
         if letter not in machine.axis_names:
             raise ValueError(f"{where}: approach '{text}': unknown axis letter '{letter}' "
-                             f"(the machine's axes: {' '.join(machine.axis_names)})")
+                             f"(the machine's axes: {_axis_list(machine)})")
         if letter in out:
             raise ValueError(f"{where}: approach '{text}': axis {letter} given twice")
         out[letter] = 1 if sign == "+" else -1
