@@ -284,3 +284,28 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys):
     side.write_text(json.dumps({"tool_bal": [0, 0, 1]}))
     rc = cli.main(["import", "rtest", f, "--machine", C600U, "--sidecar", str(side), "--out", str(out)])
     assert rc == 2 and "did you mean 'tool_ball'" in capsys.readouterr().err
+
+
+def test_sidecar_and_option_values_are_named_where_given(tmp_path):
+    f = _write(tmp_path / "r.csv", [HEAD, GOOD])
+    side = tmp_path / "side.json"
+    side.write_text(json.dumps({**RTEST_SIDE, "table_ball": [1, 2]}))
+    with pytest.raises(ValueError, match=r"side\.json: table_ball: expected three"):
+        read_table(f, "ball3d", C600U, sidecar=side)
+    with pytest.raises(ValueError, match=r"--sigma: expected a finite number > 0"):
+        read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE, sigma=float("nan"))
+    probe = tmp_path / "probe.json"
+    probe.write_text(json.dumps({"probe": {"tip_radius": 3.0},
+                                 "artefact": {"spheres": [{"id": "S1", "center": [0, 0, 0], "radius": -2}]}}))
+    t = _write(tmp_path / "t.csv", ["X,Y,Z,A,C,target", "1,2,3,0,0,S1"])
+    with pytest.raises(ValueError, match=r"probe\.json: artefact\.spheres\[0\]\.radius: must be > 0"):
+        import_dataset(t, "probing", C600U, sidecar=probe)
+
+
+def test_rotary_columns_in_radians_warn_naming_the_column_and_the_option(tmp_path):
+    lines = ["X,Y,Z,A,C,dx,dy,dz"] + [f"0,0,0,0,{c:.5f},0.001,0,0" for c in np.linspace(0, 2 * np.pi, 13)[:-1]]
+    f = _write(tmp_path / "r.csv", lines)
+    with pytest.warns(fivecal.RadiansWarning, match=r"r\.csv: axis column C: .*C_rad or give --angle-units rad"):
+        import_dataset(f, "ball3d", C600U, sidecar=RTEST_SIDE)
+    ds = import_dataset(f, "ball3d", C600U, sidecar=RTEST_SIDE, angle_units="rad")
+    assert ds.observations[3]["axes"]["C"] == pytest.approx(90.0, abs=1e-3)

@@ -20,11 +20,13 @@ import difflib
 import math
 import os
 import re
+import sys
+import warnings
 from typing import Iterable, Mapping, Optional, Sequence, Union
 
 from .. import plausibility
 from .. import units as _units
-from ..machine import Machine
+from ..machine import Machine, RadiansWarning
 
 KINDS = ("probing", "dbb", "ball3d", "fivecal")
 ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal"}
@@ -309,11 +311,23 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     path = os.fspath(path)
     if not isinstance(machine, Machine):
         machine = Machine.load(machine) if isinstance(machine, (str, os.PathLike)) else Machine.from_dict(machine)
+    side_where = f"{os.fspath(sidecar)}: " if isinstance(sidecar, (str, os.PathLike)) else "sidecar "
     side = dict(read_sidecar(sidecar) if isinstance(sidecar, (str, os.PathLike)) else (sidecar or {}))
+    origin = {k: f"{side_where}{k}" for k in side}
     for key, value in (("setup", setup), ("length", length), ("tool_ball", tool_ball),
                        ("table_ball", table_ball), ("sigma", sigma)):
         if value is not None:
             side[key] = value
+            origin[key] = f"--{key.replace('_', '-')}"
+    # checked once here, so that a bad value is named where it was given
+    for key in ("tool_ball", "table_ball"):
+        if side.get(key) is not None:
+            side[key] = _vector3(side[key], origin[key])
+    for key in ("length", "sigma"):
+        if side.get(key) is not None:
+            side[key] = _positive(side[key], origin[key])
+    if side.get("setup") is not None and (not isinstance(side["setup"], str) or "." in side["setup"]):
+        raise ValueError(f"{origin['setup']}: expected a mounting name without '.', got {side['setup']!r}")
     if units is not None and units.lower() not in _units.LENGTH_SUFFIXES:
         raise ValueError(f"import: --units '{units}': expected um or mm")
     if angle_units is not None and angle_units.lower() not in _units.ANGLE_SUFFIXES:
@@ -451,7 +465,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
             elif any(k in vals for k in comps):
                 raise ValueError(f"{where}: {key} needs the three columns {', '.join(comps)}")
             elif side.get(key) is not None:
-                o[key] = _vector3(side[key], key)
+                o[key] = side[key]
             else:
                 raise ValueError(f"{where}: no {key} for this {typ} sample: give --{key.replace('_', '-')} "
                                  f"X,Y,Z (mm), '{key}' in the sidecar, or the columns {', '.join(comps)}")
@@ -465,7 +479,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
             if "length" in vals:
                 o["length"] = vals["length"][0]
             elif side.get("length") is not None:
-                o["length"] = _positive(side["length"], "length")
+                o["length"] = side["length"]
             else:
                 raise ValueError(f"{where}: no bar length: give --length MM, 'length' in the sidecar or a "
                                  "'length' column")
@@ -485,7 +499,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
             raise ValueError(f"{sw}: sigma {s:g} mm must be > 0")
         o["sigma"] = s
     elif side.get("sigma") is not None:
-        o["sigma"] = _positive(side["sigma"], "sigma")
+        o["sigma"] = side["sigma"]
     return o
 
 
@@ -534,15 +548,46 @@ def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options)
 
     d, lines = _read(path, kind, machine, **options)
     path = os.fspath(path)
+    sidecar = options.get("sidecar")
+    sidecar = os.fspath(sidecar) if isinstance(sidecar, (str, os.PathLike)) else "sidecar"
 
-    def at(m):
-        i = int(m.group(1))
-        return f"{path}:{lines[i]} ({m.group(0)})" if i < len(lines) else m.group(0)
+    def located(message: str) -> str:
+        """The dataset checks' message with the file (and line) the value came from."""
+        m = re.match(r"^dataset(?:\.|: )(.*)$", message, re.S)
+        if not m:
+            return message
+        rest = m.group(1)
+        if rest.startswith(("artefact", "probe")):
+            return f"{sidecar}: {rest}"
+        at = lambda k: (f"{path}:{lines[int(k.group(1))]} ({k.group(0)})"
+                        if int(k.group(1)) < len(lines) else k.group(0))
+        if _OBS.match(rest):
+            return _OBS.sub(at, rest, count=1)
+        return f"{path}: " + _OBS.sub(at, rest)
 
-    try:
-        return Dataset.from_dict(d)
-    except ValueError as e:
-        raise ValueError(_OBS.sub(at, str(e))) from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            ds = Dataset.from_dict(d)
+        except ValueError as e:
+            raise ValueError(located(str(e))) from None
+    for w in caught:
+        text = located(str(w.message))
+        m = re.search(r"observations\[\*\]\.axes\.(\w+)", text)
+        if issubclass(w.category, RadiansWarning) and m:
+            text = (text.replace(m.group(0), f"axis column {m.group(1)}")
+                    + f", name the column {m.group(1)}_rad or give --angle-units rad")
+        _warn(text, w.category)
+    return ds
+
+
+def _warn(message: str, category) -> None:
+    """Warn at the first caller outside the fivecal package (the user's line)."""
+    pkg = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    level, f = 2, sys._getframe(1)
+    while f is not None and os.path.abspath(f.f_code.co_filename).startswith(pkg + os.sep):
+        f, level = f.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
 
 
 def write_dataset(path: Union[str, os.PathLike], out: Union[str, os.PathLike], kind: str, machine, **options):
