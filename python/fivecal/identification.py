@@ -151,12 +151,18 @@ class Result:
         files.write_text(path, f.getvalue())
 
     def to_dict(self) -> dict:
-        """The result in the result format of docs/formats.md (values and std in mm / rad)."""
-        return json.loads(self._core.to_json())
+        """The result in the result format of docs/formats.md (values and std in mm / rad);
+        ``residual_ids`` gives each residual row's observation id when the dataset has ids."""
+        d = json.loads(self._core.to_json())
+        if any("id" in o for o in self.dataset.observations):
+            d["residual_ids"] = [r["id"] for r in self.residual_table()]
+        return d
 
     def to_json(self) -> str:
         """JSON text of :meth:`to_dict`."""
-        return self._core.to_json()
+        if not any("id" in o for o in self.dataset.observations):
+            return self._core.to_json()
+        return json.dumps(self.to_dict(), indent=1, sort_keys=True, ensure_ascii=False)
 
     def save(self, path) -> None:
         """Write :meth:`to_json` to ``path`` (the result file ``fivecal compensate`` reads)."""

@@ -174,6 +174,10 @@ def test_ids_survive_save_load_residual_table_and_report(tmp_path):
     assert [t["id"] for t in table] == [f"T{k}" for k in range(1, 15)]
     assert table[13]["type"] == "facet" and table[13]["target"] == "F1"
     assert [t["residual"] for t in table] == pytest.approx(list(r.residuals))
+    r.save(tmp_path / "result.json")
+    saved = fivecal.schema.validate(json.loads((tmp_path / "result.json").read_text()), "result")
+    assert saved["residual_ids"] == [f"T{k}" for k in range(1, 15)]
+    assert saved["residuals"] == pytest.approx(list(r.residuals))
     fivecal.write_report(r, tmp_path / "rep")
     rows = list(csv.DictReader(open(tmp_path / "rep" / "residuals.csv", encoding="utf-8")))
     assert [x["id"] for x in rows] == [f"T{k}" for k in range(1, 15)]
