@@ -294,15 +294,19 @@ def test_sidecar_and_option_values_are_named_where_given(tmp_path):
     f = _write(tmp_path / "r.csv", [HEAD, GOOD])
     side = tmp_path / "side.json"
     side.write_text(json.dumps({**RTEST_SIDE, "table_ball": [1, 2]}))
-    with pytest.raises(ValueError, match=r"side\.json: table_ball: expected three"):
+    with pytest.raises(ValueError, match=r"side\.json: sidecar\.table_ball: expected 3 values, got 2"):
         read_table(f, "ball3d", C600U, sidecar=side)
     with pytest.raises(ValueError, match=r"--sigma: expected a finite number > 0"):
         read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE, sigma=float("nan"))
+    # a sidecar given as a dict: the dataset checks name it
+    t = _write(tmp_path / "t.csv", ["X,Y,Z,A,C,target", "1,2,3,0,0,S1"])
+    bad = {"probe": {"tip_radius": 3.0}, "artefact": {"spheres": [{"id": "S1", "center": [0, 0, 0], "radius": -2}]}}
+    with pytest.raises(ValueError, match=r"^sidecar: artefact\.spheres\[0\]\.radius: must be > 0"):
+        import_dataset(t, "probing", C600U, sidecar=bad)
     probe = tmp_path / "probe.json"
     probe.write_text(json.dumps({"probe": {"tip_radius": 3.0},
                                  "artefact": {"spheres": [{"id": "S1", "center": [0, 0, 0], "radius": -2}]}}))
-    t = _write(tmp_path / "t.csv", ["X,Y,Z,A,C,target", "1,2,3,0,0,S1"])
-    with pytest.raises(ValueError, match=r"probe\.json: artefact\.spheres\[0\]\.radius: must be > 0"):
+    with pytest.raises(ValueError, match=r"probe\.json: sidecar\.artefact\.spheres\[0\]\.radius: must be > 0"):
         import_dataset(t, "probing", C600U, sidecar=probe)
 
 

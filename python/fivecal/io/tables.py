@@ -46,7 +46,6 @@ _FIELDS = {
 }
 _FIELDS["fivecal"] = set().union(*_FIELDS.values())
 _REQUIRED = {"probing": ("target",), "dbb": ("reading",), "ball3d": ("dx", "dy", "dz"), "fivecal": ("type",)}
-_SIDECAR_KEYS = {"probe", "artefact", "setup", "length", "tool_ball", "table_ball", "sigma", "$schema", "_comment"}
 _ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
 
 
@@ -258,19 +257,11 @@ def _vector3(value, what: str) -> list:
 def read_sidecar(path: Union[str, os.PathLike]) -> dict:
     """A small JSON file of what a table does not hold: ``probe``, ``artefact``
     (as in a dataset), ``setup``, ``length``, ``tool_ball``, ``table_ball``,
-    ``sigma`` (mm)."""
-    from .. import files
+    ``sigma`` (mm); checked against ``import.schema.json``."""
+    from .. import files, schema
 
     path = os.fspath(path)
-    d = files.read_json(path, "import sidecar")
-    if not isinstance(d, dict):
-        raise ValueError(f"{path}: expected a JSON object with {', '.join(sorted(_SIDECAR_KEYS - {'$schema', '_comment'}))}")
-    for k in d:
-        if k not in _SIDECAR_KEYS:
-            close = difflib.get_close_matches(k, sorted(_SIDECAR_KEYS), n=1)
-            raise ValueError(f"{path}: unknown key '{k}'" + (f"; did you mean '{close[0]}'?" if close else "")
-                             + f" (keys: {', '.join(sorted(_SIDECAR_KEYS - {'$schema', '_comment'}))})")
-    return d
+    return schema.validate(files.read_json(path, "import sidecar"), "import", path)
 
 
 def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine, Mapping, str], *,
