@@ -12,6 +12,10 @@ from .dataset import Dataset
 from .units import display_scale
 
 
+#: Result files list ``residual_ids`` for datasets of at most this many observations.
+RESIDUAL_IDS_LIMIT = 20000
+
+
 class Result:
     """Identified parameters (mm, rad), their one-sigma uncertainties,
     residuals and the identifiability diagnosis."""
@@ -150,17 +154,24 @@ class Result:
                         f"{r['residual'] * 1e3:.4f}"])
         files.write_text(path, f.getvalue())
 
+    def _with_ids(self) -> bool:
+        # Reading the ids builds the dataset's Python dicts (seconds per 10^5
+        # observations): beyond RESIDUAL_IDS_LIMIT the result file leaves them to
+        # write_residuals, so saving a big ball bar fit stays fast.
+        return len(self.dataset) <= RESIDUAL_IDS_LIMIT and any("id" in o for o in self.dataset.observations)
+
     def to_dict(self) -> dict:
         """The result in the result format of docs/formats.md (values and std in mm / rad);
-        ``residual_ids`` gives each residual row's observation id when the dataset has ids."""
+        ``residual_ids`` gives each residual row's observation id when the dataset has ids
+        (and at most :data:`RESIDUAL_IDS_LIMIT` observations)."""
         d = json.loads(self._core.to_json())
-        if any("id" in o for o in self.dataset.observations):
+        if self._with_ids():
             d["residual_ids"] = [r["id"] for r in self.residual_table()]
         return d
 
     def to_json(self) -> str:
         """JSON text of :meth:`to_dict`."""
-        if not any("id" in o for o in self.dataset.observations):
+        if not self._with_ids():
             return self._core.to_json()
         return json.dumps(self.to_dict(), indent=1, sort_keys=True, ensure_ascii=False)
 
