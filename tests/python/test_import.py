@@ -317,3 +317,13 @@ def test_rotary_columns_in_radians_warn_naming_the_column_and_the_option(tmp_pat
         import_dataset(f, "ball3d", C600U, sidecar=RTEST_SIDE)
     ds = import_dataset(f, "ball3d", C600U, sidecar=RTEST_SIDE, angle_units="rad")
     assert ds.observations[3]["axes"]["C"] == pytest.approx(90.0, abs=1e-3)
+
+
+def test_renamed_columns_keep_the_unit_of_their_header(tmp_path):
+    f = _write(tmp_path / "r.csv", ["# R-test export", "Xpos,Y,Z,a,c,dev [um],dy_um,DZ", "1,2,3,0,0,10,20,0.03"])
+    d = read_table(f, "rtest", C600U, sidecar=RTEST_SIDE, columns={"X": "Xpos", "dx": "dev [um]"})
+    o = d["observations"][0]
+    assert o["axes"]["X"] == 1.0 and o["measured"] == pytest.approx([0.01, 0.02, 0.03])
+    assert o["id"] == "r.csv:3"
+    with pytest.raises(ValueError, match=r"no column 'nope' in the header"):
+        read_table(f, "rtest", C600U, sidecar=RTEST_SIDE, columns={"X": "nope"})

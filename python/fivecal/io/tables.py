@@ -194,11 +194,14 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
             raise ValueError(f"{where}: columns '{seen[field]}' and '{h.strip()}' both give {field}")
         seen[field] = h.strip()
         c = _Column(i, h.strip(), field, unit)
-        if len(field) == 1 and machine.is_rotary(field):
-            c.factor, _ = _units.column_unit(f"{field}_{unit or angle_unit or 'deg'}", "angle", cw)
-        elif field in _LENGTH_FIELDS or len(field) == 1:
-            default = length_unit if field in _MEASURED else None
-            c.factor, _ = _units.column_unit(f"{field}_{unit or default or 'mm'}", "length", cw)
+        quantity = "angle" if len(field) == 1 and machine.is_rotary(field) else \
+            "length" if field in _LENGTH_FIELDS or len(field) == 1 else None
+        if quantity and unit is not None:
+            c.factor, _ = _units.column_unit(h, quantity, where)
+        elif quantity == "angle":
+            c.factor = _units.ANGLE_SUFFIXES[angle_unit or "deg"]
+        elif quantity == "length":
+            c.factor = _units.LENGTH_SUFFIXES[(length_unit if field in _MEASURED else None) or "mm"]
         elif unit is not None:
             raise ValueError(f"{cw}: {field} has no unit, got '{unit}'")
         cols.append(c)
@@ -423,7 +426,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
             vals[c.field] = (v, cw)
     typ = text.get("type", kind)
     if kind == "probing" or typ in ("facet", "sphere"):
-        typ = _touch_type(text, typ, targets, where, cols)
+        typ = _touch_type(text, typ, targets, where)
     elif typ == "rtest":
         typ = "ball3d"
     if typ not in ("facet", "sphere", "dbb", "ball3d"):
@@ -494,7 +497,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
     return o
 
 
-def _touch_type(text, typ, targets, where, cols) -> str:
+def _touch_type(text, typ, targets, where) -> str:
     t = text.get("target")
     if not t:
         raise ValueError(f"{where}: no target for a probe touch (a 'target' column naming a facet or sphere)")
