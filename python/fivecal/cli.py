@@ -1,4 +1,4 @@
-"""Command line: fivecal identify | simulate | compensate | design | sphere | demo.
+"""Command line: fivecal identify | simulate | compensate | design | sphere | demo | import.
 
 Errors are one clear line on stderr, never a traceback (set FIVECAL_DEBUG=1
 to see one). Exit status: 0 success, 1 the fit failed / did not converge / is
@@ -605,6 +605,10 @@ def main(argv=None) -> int:
     from .dbb_cli import register as _register_dbb
 
     _register_dbb(sub)
+
+    from .io.cli import register as _register_import
+
+    _register_import(sub)
 
     pc = sub.add_parser("compensate", help="compensated G-code and error tables from identified errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -12,6 +12,10 @@ from .dataset import Dataset
 from .units import display_scale
 
 
+#: Result files list ``residual_ids`` for datasets of at most this many observations.
+RESIDUAL_IDS_LIMIT = 20000
+
+
 class Result:
     """Identified parameters (mm, rad), their one-sigma uncertainties,
     residuals and the identifiability diagnosis."""
@@ -110,13 +114,66 @@ class Result:
         r, _ = _core.predict_residuals(dataset._core, self.values)
         return np.asarray(r)
 
+    def residual_table(self) -> list:
+        """One dict per residual row: ``row``, ``observation`` (its index in
+        the dataset, -1 for a scale bar), ``id`` (the observation's id, or
+        ``scale_bar``), ``type``, ``target`` (facet / sphere id or setup),
+        ``component`` (``x y z`` for ball3d rows, else empty) and
+        ``residual`` (mm, as :attr:`residuals`)."""
+        obs = self.dataset.observations
+        seen, rows = {}, []
+        src = np.asarray(self.residual_source)
+        counts = {}
+        for k in src:
+            counts[int(k)] = counts.get(int(k), 0) + 1
+        for row, (k, r) in enumerate(zip(src, np.asarray(self.residuals))):
+            k = int(k)
+            j = seen.get(k, 0)
+            seen[k] = j + 1
+            o = obs[k] if 0 <= k < len(obs) else {}
+            rows.append({"row": row, "observation": k,
+                         "id": o.get("id", "") if k >= 0 else "scale_bar",
+                         "type": o.get("type", "scale_bar"),
+                         "target": o.get("target", o.get("setup", "")),
+                         "component": "xyz"[j] if counts[k] == 3 and k >= 0 else "",
+                         "residual": float(r)})
+        return rows
+
+    def write_residuals(self, path) -> None:
+        """:meth:`residual_table` as CSV (``residual_um`` in µm), observation ids kept."""
+        import csv
+        import io
+
+        from . import files
+
+        f = io.StringIO(newline="")
+        w = csv.writer(f)
+        w.writerow(["row", "observation", "id", "type", "target", "component", "residual_um"])
+        for r in self.residual_table():
+            w.writerow([r["row"], r["observation"], r["id"], r["type"], r["target"], r["component"],
+                        f"{r['residual'] * 1e3:.4f}"])
+        files.write_text(path, f.getvalue())
+
+    def _with_ids(self) -> bool:
+        # Reading the ids builds the dataset's Python dicts (seconds per 10^5
+        # observations): beyond RESIDUAL_IDS_LIMIT the result file leaves them to
+        # write_residuals, so saving a big ball bar fit stays fast.
+        return len(self.dataset) <= RESIDUAL_IDS_LIMIT and any("id" in o for o in self.dataset.observations)
+
     def to_dict(self) -> dict:
-        """The result in the result format of docs/formats.md (values and std in mm / rad)."""
-        return json.loads(self._core.to_json())
+        """The result in the result format of docs/formats.md (values and std in mm / rad);
+        ``residual_ids`` gives each residual row's observation id when the dataset has ids
+        (and at most :data:`RESIDUAL_IDS_LIMIT` observations)."""
+        d = json.loads(self._core.to_json())
+        if self._with_ids():
+            d["residual_ids"] = [r["id"] for r in self.residual_table()]
+        return d
 
     def to_json(self) -> str:
         """JSON text of :meth:`to_dict`."""
-        return self._core.to_json()
+        if not self._with_ids():
+            return self._core.to_json()
+        return json.dumps(self.to_dict(), indent=1, sort_keys=True, ensure_ascii=False)
 
     def save(self, path) -> None:
         """Write :meth:`to_json` to ``path`` (the result file ``fivecal compensate`` reads)."""
@@ -171,7 +228,10 @@ class Result:
             for g in self.unidentifiable:
                 lines.append("    " + ", ".join(g))
         if self.outliers:
-            lines.append(f"  robust loss flagged {len(self.outliers)} outlier rows: {self.outliers[:20]}")
+            ids = self.residual_table()
+            lines.append(f"  robust loss flagged {len(self.outliers)} outlier rows: "
+                         + ", ".join(f"{i} ({ids[i]['id']})" if 0 <= i < len(ids) and ids[i]["id"] else str(i)
+                                     for i in self.outliers[:20]))
         if not a.usable:
             lines.append("  Not usable: compensation, error tables and G-code refuse this result "
                          "(force=True / --force only to inspect it).")

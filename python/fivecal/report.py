@@ -266,14 +266,29 @@ def _fit_section(result) -> str:
                      + ("adequate" if getattr(result, "adequate", True) else "INADEQUATE")
                      + (f" ({getattr(result, 'adequacy', '')})" if getattr(result, "adequacy", "") else "")))
     if result.outliers:
-        rows.append(("robust loss", f"{len(result.outliers)} outlier rows flagged: "
-                                    f"{', '.join(map(str, result.outliers[:30]))}"))
+        ids = result.residual_table()
+        rows.append(("robust loss", f"{len(result.outliers)} outlier rows flagged: " + ", ".join(
+            f"{i} ({ids[i]['id']})" if 0 <= i < len(ids) and ids[i]["id"] else str(i)
+            for i in result.outliers[:30])))
     verdict = ("The fit converged and every estimated parameter is identifiable from this data."
                if cls == "ok" else
                f"Not usable: {a.reason}." if cls == "bad" else
                "Some parameters cannot be separated with this data (see Identifiability).")
     return (f'<div class="box {cls}">{_e(verdict)}</div><table class="kv">'
             + "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in rows) + "</table>")
+
+
+def _largest_residuals(result, n: int = 10) -> str:
+    """The rows with the largest |residual|, named by observation id (all rows: residuals.csv)."""
+    rows = sorted(result.residual_table(), key=lambda r: -abs(r["residual"]))[:n]
+    if not rows:
+        return ""
+    return (f"<p>The {len(rows)} largest residuals (every row with its observation id: "
+            "<a href='residuals.csv'>residuals.csv</a>):</p>"
+            + table_html(["row", "id", "type", "target / setup", "component", "residual [µm]"],
+                         [(r["row"], r["id"], r["type"], r["target"], r["component"],
+                           f"{r['residual'] * 1e3:.3f}") for r in rows],
+                         numeric=[True, False, False, False, False, True]))
 
 
 def _strong_pairs(result, threshold: float = 0.9, limit: int = 20) -> List[Tuple[str, str, float]]:
@@ -539,6 +554,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     machine_names = set(machine.parameter_names())
     if write_result_json:
         result.save(os.path.join(out_dir, "result.json"))
+    result.write_residuals(os.path.join(out_dir, "residuals.csv"))
 
     figs: List[Figure] = []
     kind_figs, notes = _kind_figures(result, out_dir)
@@ -583,7 +599,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     body += ["<h2 id='findings'>What the data told</h2>", _findings_section(result, fd),
              "<h2 id='machine'>Machine</h2>", _machine_section(machine),
              "<h2 id='data'>Data</h2>", _data_section(ds, result),
-             "<h2 id='fit'>Fit</h2>", _fit_section(result),
+             "<h2 id='fit'>Fit</h2>", _fit_section(result), _largest_residuals(result),
              "<h2 id='identifiability'>Identifiability</h2>", _identifiability_section(result),
              "<h2 id='parameters'>Parameters</h2>", _parameter_section(result, machine, truth)]
     for i, (t, h) in enumerate(sections):

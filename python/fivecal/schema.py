@@ -36,7 +36,7 @@ __all__ = ["KINDS", "FULL_CHECK_LIMIT", "BIG_TEXT", "BIG_TEXT_SAMPLE", "schema_p
            "validate", "parse", "check_text", "check_file", "checked_dumps", "guess_kind"]
 
 #: The file kinds with a schema (``fivecal/schemas/<kind>.schema.json``).
-KINDS = ("machine", "dataset", "spec", "design", "result", "errors")
+KINDS = ("machine", "dataset", "spec", "design", "result", "errors", "import")
 
 #: Datasets with more observations are checked by shape (see the module docstring).
 FULL_CHECK_LIMIT = 200
@@ -45,7 +45,7 @@ _DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "schemas")
 _BASE = "https://fivecal.invalid/schemas/"
 # The name a path starts with in messages (the C++ loader's names).
 _ROOT = {"machine": "machine", "dataset": "dataset", "spec": "spec", "design": "spec", "result": "result",
-         "errors": "result"}
+         "errors": "result", "import": "sidecar"}
 
 
 def schema_path(kind: str) -> str:

@@ -107,6 +107,8 @@ def _kind_of_example(path):
         return "machine"
     if os.sep + "design" + os.sep in path:
         return "design"
+    if os.sep + "import" + os.sep in path:
+        return "import"
     if os.path.basename(path).startswith("errors"):
         return "errors"
     return "spec"
@@ -119,7 +121,7 @@ def test_every_example_file_validates(path):
 
 def test_examples_are_found():
     kinds = {_kind_of_example(p) for p in EXAMPLES}
-    assert kinds == {"machine", "design", "errors", "spec"}
+    assert kinds == {"machine", "design", "errors", "spec", "import"}
 
 
 def test_what_fivecal_writes_validates(dataset_doc, result_doc):

@@ -1,0 +1,6 @@
+"""fivecal.io: files in and out of fivecal's formats.
+
+:mod:`fivecal.io.tables` reads instrument tables (CSV or whitespace text:
+probing logs, ball bar traces, R-test triples, rows in fivecal's own columns)
+into datasets; docs/import.md describes the columns."""
+from .tables import KINDS, import_dataset, read_table, write_dataset

@@ -1,0 +1,66 @@
+"""``fivecal import KIND FILE --machine M.json --out dataset.json``."""
+from __future__ import annotations
+
+import argparse
+
+
+def _run(args) -> int:
+    from .. import files
+    from . import tables
+
+    files.check_outputs([("FILE", args.file), ("--machine", args.machine), ("--sidecar", args.sidecar)],
+                        [("--out", args.out)])
+    ds = tables.write_dataset(
+        args.file, args.out, args.kind, args.machine, sidecar=args.sidecar, units=args.units,
+        angle_units=args.angle_units, columns=tables.parse_columns(args.column), ignore=args.ignore or (),
+        delimiter=args.delimiter, decimal=args.decimal, setup=args.setup, length=args.length,
+        tool_ball=args.tool_ball, table_ball=args.table_ball, sigma=args.sigma)
+    counts = {}
+    for t in ds.observation_types:
+        counts[t] = counts.get(t, 0) + 1
+    print(f"{args.file}: {len(ds)} observations ({', '.join(f'{n} {t}' for t, n in counts.items())}) "
+          f"written to {args.out}")
+    return 0
+
+
+def register(sub) -> None:
+    from .tables import KINDS
+
+    p = sub.add_parser(
+        "import", help="turn an instrument table (CSV or text) into a dataset",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Read a table with a header row, one observation per row: a column per machine axis "
+        "(X Y Z A B C S, any case), the measured columns of KIND, and optionally id, sigma, setup, "
+        "dir_<axis>. Units come from the header (reading_um, B_rad, 'dx [um]') or the options. Separators "
+        "',' ';' tab or spaces; with ';', tab or spaces a decimal comma is read (1,234). Lines starting "
+        "with # are comments. Columns of each kind: docs/import.md.",
+        epilog="examples:\n"
+        "  fivecal import probing touches.csv --machine hu40t.json --sidecar artefact.json --out ds.json\n"
+        "  fivecal import dbb trace.csv --machine m.json --setup A1 --length 100 "
+        "--tool-ball 0,0,100 --table-ball 100,0,0 --column reading=dL --units um --out ds.json\n"
+        "  fivecal import rtest rtest.txt --machine m.json --sidecar rtest.json --out ds.json")
+    p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest"],
+                   help="probing | dbb | ball3d (rtest) | fivecal")
+    p.add_argument("file", metavar="FILE", help="the table (CSV or whitespace text)")
+    p.add_argument("--machine", required=True, help="machine JSON")
+    p.add_argument("--out", required=True, help="dataset JSON to write")
+    p.add_argument("--sidecar", help="JSON with what the table lacks: probe, artefact, setup, length, "
+                   "tool_ball, table_ball, sigma")
+    p.add_argument("--units", help="unit of measured columns (reading, dx dy dz, sigma) whose header names "
+                   "none: um or mm (default mm)")
+    p.add_argument("--angle-units", help="unit of rotary axis columns whose header names none: deg "
+                   "(default) or rad")
+    p.add_argument("--column", action="append", metavar="FIELD=HEADER",
+                   help="read FIELD from the column HEADER, e.g. reading=dL_um (repeatable)")
+    p.add_argument("--ignore", action="append", metavar="HEADER", help="skip this column (repeatable)")
+    p.add_argument("--delimiter", help="column separator: comma, semicolon, tab, space (default: from the "
+                   "header line)")
+    p.add_argument("--decimal", choices=["comma", "point"], help="decimal mark (default: comma unless it "
+                   "separates the columns)")
+    p.add_argument("--setup", help="dbb / ball3d: the mounting's name (no '.')")
+    p.add_argument("--length", type=float, help="dbb: nominal bar length, mm")
+    p.add_argument("--tool-ball", metavar="X,Y,Z", help="dbb / ball3d: tool ball centre, machine frame at "
+                   "the zero pose, mm")
+    p.add_argument("--table-ball", metavar="X,Y,Z", help="dbb / ball3d: table ball centre, workpiece frame, mm")
+    p.add_argument("--sigma", type=float, help="measurement standard deviation, mm (default: the kind's)")
+    p.set_defaults(func=_run)

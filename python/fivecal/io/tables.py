@@ -1,0 +1,607 @@
+"""Instrument tables (CSV or whitespace text) to fivecal datasets.
+
+One row per observation, a header row naming the columns. Four kinds:
+
+* ``probing``: a probing log, axis positions at the trigger, the ``target``
+  touched (a facet or sphere of the artefact) and the approach direction;
+* ``dbb``: a ball bar trace, axis positions and the ``reading``;
+* ``ball3d`` (alias ``rtest``): R-test / 3D ball triples, axes and ``dx dy dz``;
+* ``fivecal``: rows already in fivecal's terms, with a ``type`` column.
+
+Units come from the header (``reading_um``, ``B_rad``, ``dx [um]``) through
+:func:`fivecal.units.column_unit`, else from the options. Every bad cell is
+refused naming the file, the line and the column. The user documentation is
+docs/import.md.
+"""
+from __future__ import annotations
+
+import csv
+import difflib
+import math
+import os
+import re
+import sys
+import warnings
+from typing import Iterable, Mapping, Optional, Sequence, Union
+
+from .. import plausibility
+from .. import units as _units
+from ..machine import Machine, RadiansWarning
+
+KINDS = ("probing", "dbb", "ball3d", "fivecal")
+ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal"}
+
+_VECTORS = {"tool_ball": ("tool_ball_x", "tool_ball_y", "tool_ball_z"),
+            "table_ball": ("table_ball_x", "table_ball_y", "table_ball_z")}
+_LENGTH_FIELDS = {"reading", "length", "sigma", "dx", "dy", "dz"} | set(_VECTORS["tool_ball"]) | \
+    set(_VECTORS["table_ball"])
+#: lengths the ``units`` option applies to: what the instrument measured
+_MEASURED = {"reading", "sigma", "dx", "dy", "dz"}
+_TEXT_FIELDS = {"id", "type", "target", "setup", "approach"}
+_COMMON = {"id", "sigma", "setup"}
+_FIELDS = {
+    "probing": {"id", "sigma", "target", "type", "approach"},
+    "dbb": _COMMON | {"reading", "length"} | set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"]),
+    "ball3d": _COMMON | {"dx", "dy", "dz"} | set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"]),
+}
+_FIELDS["fivecal"] = set().union(*_FIELDS.values())
+_REQUIRED = {"probing": ("target",), "dbb": ("reading",), "ball3d": ("dx", "dy", "dz"), "fivecal": ("type",)}
+_ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
+
+
+def _axis_list(machine: Machine, skip_s: bool = False) -> str:
+    """The machine's axes in the usual X Y Z A B C S order."""
+    order = "XYZABCS"
+    return " ".join(a for a in sorted(machine.axis_names, key=order.index) if not (skip_s and a == "S"))
+
+
+class _Column:
+    """One header cell: the fivecal field it feeds and its unit factor."""
+
+    def __init__(self, index: int, header: str, field: str, unit: Optional[str]):
+        self.index, self.header, self.field, self.unit = index, header, field, unit
+        self.factor = 1.0
+
+
+def canonical_kind(kind: str) -> str:
+    k = ALIASES.get(kind.strip().lower(), kind.strip().lower())
+    if k not in KINDS:
+        raise ValueError(f"import: unknown kind '{kind}' (kinds: {', '.join(KINDS)}, rtest = ball3d)")
+    return k
+
+
+# --------------------------------------------------------------------------
+# Text to cells
+# --------------------------------------------------------------------------
+def _lines(text: str):
+    """(line number, text) of the lines that are neither blank nor ``#`` comments."""
+    for n, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if s and not s.startswith("#"):
+            yield n, line
+
+
+def _delimiter(header: str, option: Optional[str]) -> Optional[str]:
+    """None means runs of spaces or tabs (a text table)."""
+    if option:
+        o = {"tab": "\t", "\\t": "\t", "space": None, "whitespace": None, "comma": ",",
+             "semicolon": ";"}.get(option.lower(), option)
+        if o is not None and len(o) != 1:
+            raise ValueError(f"import: delimiter '{option}': expected one character, tab, space, comma or semicolon")
+        return o
+    for d in (";", "\t", ","):
+        if d in header:
+            return d
+    return None
+
+
+def _split(line: str, delim: Optional[str]) -> list:
+    if delim is None:
+        return line.split()
+    return [c.strip() for c in next(csv.reader([line], delimiter=delim))]
+
+
+def _number(cell: str, decimal_comma: bool, where: str) -> float:
+    s = cell.strip()
+    if not s:
+        raise ValueError(f"{where}: empty cell (a number is expected)")
+    if decimal_comma:
+        s = s.replace(",", ".")
+    try:
+        v = float(s)
+    except ValueError:
+        hint = ""
+        if "," in s and not decimal_comma:
+            hint = " (a decimal comma needs ';', tab or space separators, or --decimal comma)"
+        raise ValueError(f"{where}: '{cell.strip()}' is not a number{hint}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{where}: '{cell.strip()}' is not a finite number (NaN or infinity is not a measurement)")
+    return v
+
+
+def _split_unit(header: str):
+    """(name, unit or None): ``reading_um`` -> (reading, um), ``dx [um]`` -> (dx, um),
+    ``table_ball_x`` -> (table_ball_x, None)."""
+    h = header.strip().strip('"').strip("'")
+    m = re.match(r"^(.*?)\s*[\[(]\s*([^\])]*)\s*[\])]\s*$", h)
+    if m:
+        return m.group(1).strip(), m.group(2).strip()
+    if "_" in h:
+        base, suffix = h.rsplit("_", 1)
+        if suffix.lower() in _ALL_UNITS and base:
+            return base, suffix
+    return h, None
+
+
+# --------------------------------------------------------------------------
+# Header to columns
+# --------------------------------------------------------------------------
+def _field(name: str, machine: Machine, kind: str, where: str) -> str:
+    """The fivecal field of a column name (case-insensitive); ValueError when unknown."""
+    axes = machine.axis_names
+    low = name.strip().lower()
+    up = name.strip().upper()
+    if up == "C1":
+        up = "S"
+    if len(up) == 1 and up.isalpha():
+        if up in axes:
+            return up
+        raise ValueError(f"{where}: unknown axis letter '{name}' (the machine's axes: {_axis_list(machine)})")
+    m = re.match(r"^(?:dir_?([a-z]\d?)|([a-z]\d?)_?dir)$", low)
+    if m:
+        letter = (m.group(1) or m.group(2)).upper()
+        letter = "S" if letter == "C1" else letter
+        if letter not in axes:
+            raise ValueError(f"{where}: direction column of unknown axis '{letter}' "
+                             f"(the machine's axes: {_axis_list(machine)})")
+        return "dir_" + letter
+    if low in _FIELDS[kind]:
+        return low
+    known = sorted(_FIELDS[kind]) + list(axes) + [f"dir_{a}" for a in axes]
+    close = difflib.get_close_matches(low, known, n=1)
+    other = [k for k in KINDS if low in _FIELDS[k]]
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    if other and not close:
+        hint = f"; it belongs to a {other[0]} import"
+    raise ValueError(f"{where}: unknown column '{name}' for a {kind} import{hint} (rename it with "
+                     f"--column FIELD=HEADER or skip it with --ignore '{name}')")
+
+
+def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, rename: Mapping[str, str],
+             ignore: Iterable[str], length_unit: Optional[str], angle_unit: Optional[str]) -> list:
+    by_header = {}
+    for field, header in rename.items():
+        by_header.setdefault(header.strip().lower(), field.strip())
+    ignored = {i.strip().lower() for i in ignore}
+    known = {h.strip().lower() for h in headers}
+    for h in list(by_header) + sorted(ignored):
+        if h not in known:
+            raise ValueError(f"{where}: no column '{h}' in the header (columns: {', '.join(headers)})")
+    cols, seen = [], {}
+    for i, h in enumerate(headers):
+        key = h.strip().lower()
+        if key in ignored:
+            continue
+        if not key:
+            raise ValueError(f"{where}: column {i + 1} has no name")
+        cw = f"{where}: column '{h.strip()}'"
+        name, unit = _split_unit(h)
+        if key in by_header:
+            # --column reading=dL_um: the file's header names the unit when it ends in one
+            name = by_header[key]
+        field = _field(name, machine, kind, cw)
+        if field in seen:
+            raise ValueError(f"{where}: columns '{seen[field]}' and '{h.strip()}' both give {field}")
+        seen[field] = h.strip()
+        c = _Column(i, h.strip(), field, unit)
+        quantity = "angle" if len(field) == 1 and machine.is_rotary(field) else \
+            "length" if field in _LENGTH_FIELDS or len(field) == 1 else None
+        if quantity and unit is not None:
+            c.factor, _ = _units.column_unit(h, quantity, where)
+        elif quantity == "angle":
+            c.factor = _units.ANGLE_SUFFIXES[angle_unit or "deg"]
+        elif quantity == "length":
+            c.factor = _units.LENGTH_SUFFIXES[(length_unit if field in _MEASURED else None) or "mm"]
+        elif unit is not None:
+            raise ValueError(f"{cw}: {field} has no unit, got '{unit}'")
+        cols.append(c)
+    missing = [a for a in machine.axis_names if a != "S" and a not in seen]
+    if missing:
+        raise ValueError(f"{where}: no column for axis {', '.join(missing)} (expected a column per machine "
+                         f"axis: {_axis_list(machine)}; S may be left out)")
+    for r in _REQUIRED[kind]:
+        if r not in seen:
+            raise ValueError(f"{where}: no '{r}' column; a {kind} import expects {_expected(machine, kind)}")
+    return cols
+
+
+def _expected(machine: Machine, kind: str) -> str:
+    axes = _axis_list(machine, skip_s=True)
+    rest = {"probing": "target [approach] [id]", "dbb": "reading_um [id]",
+            "ball3d": "dx_um dy_um dz_um [id]", "fivecal": "type target|setup reading|dx dy dz [id]"}[kind]
+    return f"the columns {axes} {rest}"
+
+
+# --------------------------------------------------------------------------
+# Rows to observations
+# --------------------------------------------------------------------------
+def _approach(text: str, machine: Machine, where: str) -> dict:
+    """``-Z``, ``Z-``, ``+X-Y``, ``X+Y-``: the axes that moved into the touch and their signs."""
+    s = text.replace(" ", "")
+    pat = r"([+-])([A-Za-z]1?)" if s[:1] in "+-" else r"([A-Za-z]1?)([+-])"
+    parts = re.findall(pat, s)
+    if not parts or "".join("".join(p) for p in parts) != s:
+        raise ValueError(f"{where}: approach '{text}' is not like -Z, X+ or -X+Y-Z")
+    out = {}
+    for p in parts:
+        sign, letter = (p[0], p[1]) if s[:1] in "+-" else (p[1], p[0])
+        letter = "S" if letter.upper() == "C1" else letter.upper()
+        if letter not in machine.axis_names:
+            raise ValueError(f"{where}: approach '{text}': unknown axis letter '{letter}' "
+                             f"(the machine's axes: {_axis_list(machine)})")
+        if letter in out:
+            raise ValueError(f"{where}: approach '{text}': axis {letter} given twice")
+        out[letter] = 1 if sign == "+" else -1
+    return out
+
+
+def _vector3(value, what: str) -> list:
+    if isinstance(value, str):
+        value = [t for t in value.replace(";", ",").split(",") if t.strip()]
+    try:
+        v = [float(x) for x in value]
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected three numbers x,y,z (mm), got {value!r}") from None
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise ValueError(f"{what}: expected three finite numbers x,y,z (mm), got {value!r}")
+    return v
+
+
+def read_sidecar(path: Union[str, os.PathLike]) -> dict:
+    """A small JSON file of what a table does not hold: ``probe``, ``artefact``
+    (as in a dataset), ``setup``, ``length``, ``tool_ball``, ``table_ball``,
+    ``sigma`` (mm); checked against ``import.schema.json``."""
+    from .. import files, schema
+
+    path = os.fspath(path)
+    return schema.validate(files.read_json(path, "import sidecar"), "import", path)
+
+
+def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine, Mapping, str], *,
+               sidecar: Union[None, str, os.PathLike, Mapping] = None, units: Optional[str] = None,
+               angle_units: Optional[str] = None, columns: Optional[Mapping[str, str]] = None,
+               ignore: Sequence[str] = (), delimiter: Optional[str] = None, decimal: Optional[str] = None,
+               setup: Optional[str] = None, length: Optional[float] = None, tool_ball=None, table_ball=None,
+               sigma: Optional[float] = None) -> dict:
+    """Read an instrument table into a dataset dict (docs/formats.md); see
+    docs/import.md for each kind's columns.
+
+    ``kind``: ``probing``, ``dbb``, ``ball3d`` (or ``rtest``), ``fivecal``.
+    ``machine``: a :class:`fivecal.Machine`, a machine dict or a machine JSON
+    path. ``sidecar``: a dict or JSON path with ``probe``, ``artefact``,
+    ``setup``, ``length``, ``tool_ball``, ``table_ball``, ``sigma``; the
+    keyword arguments of the same names override it. ``units``: the unit of
+    measured columns whose header names none (``um`` or ``mm``, the
+    default); ``angle_units``: of rotary axis columns (``deg``, the default,
+    or ``rad``). ``columns``: field -> header, for headers that are not
+    fivecal names (``{"reading": "dL_um"}``); ``ignore``: headers to skip.
+    ``delimiter``: default from the header line (``;``, tab, ``,``, else
+    spaces); ``decimal``: ``comma`` or ``point`` (default: a comma is the
+    decimal mark unless it separates the columns).
+
+    Each observation's ``id`` is its ``id`` cell, or ``<file name>:<line>``.
+    ValueError names the file, line and column of the first bad cell."""
+    return _read(path, kind, machine, sidecar=sidecar, units=units, angle_units=angle_units, columns=columns,
+                 ignore=ignore, delimiter=delimiter, decimal=decimal, setup=setup, length=length,
+                 tool_ball=tool_ball, table_ball=table_ball, sigma=sigma)[0]
+
+
+def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, columns=None, ignore=(),
+          delimiter=None, decimal=None, setup=None, length=None, tool_ball=None, table_ball=None, sigma=None):
+    """(dataset dict, the line of each observation)."""
+    from .. import files
+
+    kind = canonical_kind(kind)
+    path = os.fspath(path)
+    if not isinstance(machine, Machine):
+        machine = Machine.load(machine) if isinstance(machine, (str, os.PathLike)) else Machine.from_dict(machine)
+    side_where = f"{os.fspath(sidecar)}: " if isinstance(sidecar, (str, os.PathLike)) else "sidecar "
+    side = dict(read_sidecar(sidecar) if isinstance(sidecar, (str, os.PathLike)) else (sidecar or {}))
+    origin = {k: f"{side_where}{k}" for k in side}
+    for key, value in (("setup", setup), ("length", length), ("tool_ball", tool_ball),
+                       ("table_ball", table_ball), ("sigma", sigma)):
+        if value is not None:
+            side[key] = value
+            origin[key] = f"--{key.replace('_', '-')}"
+    # checked once here, so that a bad value is named where it was given
+    for key in ("tool_ball", "table_ball"):
+        if side.get(key) is not None:
+            side[key] = _vector3(side[key], origin[key])
+    for key in ("length", "sigma"):
+        if side.get(key) is not None:
+            side[key] = _positive(side[key], origin[key])
+    if side.get("setup") is not None and (not isinstance(side["setup"], str) or "." in side["setup"]):
+        raise ValueError(f"{origin['setup']}: expected a mounting name without '.', got {side['setup']!r}")
+    if units is not None and units.lower() not in _units.LENGTH_SUFFIXES:
+        raise ValueError(f"import: --units '{units}': expected um or mm")
+    if angle_units is not None and angle_units.lower() not in _units.ANGLE_SUFFIXES:
+        raise ValueError(f"import: --angle-units '{angle_units}': expected deg or rad")
+    if decimal not in (None, "comma", "point"):
+        raise ValueError(f"import: decimal '{decimal}': expected comma or point")
+
+    text = files.read_text(path, f"{kind} table")
+    lines = list(_lines(text))
+    if not lines:
+        raise ValueError(f"{path}: no header and no data; a {kind} table needs a header row naming "
+                         f"{_expected(machine, kind)}")
+    hline, header = lines[0]
+    delim = _delimiter(header, delimiter)
+    headers = _split(header, delim)
+    if all(_is_number(h) for h in headers):
+        raise ValueError(f"{path}:{hline}: no header row (this line holds numbers); the first line must name "
+                         f"the columns: {_expected(machine, kind)}")
+    cols = _columns(headers, machine, kind, f"{path}:{hline}", columns or {}, ignore,
+                    units and units.lower(), angle_units and angle_units.lower())
+    decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
+    if decimal == "comma" and delim == ",":
+        raise ValueError(f"{path}: a decimal comma needs another column separator than ',' (';', tab or spaces)")
+    artefact = side.get("artefact") or {}
+    targets = {}
+    if isinstance(artefact, Mapping):
+        for key, typ in (("facets", "facet"), ("spheres", "sphere")):
+            for t in artefact.get(key) or []:
+                if isinstance(t, Mapping) and "id" in t:
+                    targets[str(t["id"])] = typ
+    base = os.path.basename(path)
+    obs, lineno_of, ids = [], [], {}
+    for lineno, line in lines[1:]:
+        cells = _split(line, delim)
+        if len(cells) != len(headers):
+            raise ValueError(f"{path}:{lineno}: {len(cells)} cells, the header (line {hline}) has "
+                             f"{len(headers)} columns ({', '.join(headers)})")
+        o = _row(cells, cols, machine, kind, side, targets, decimal_comma, f"{path}:{lineno}")
+        oid = o.get("id") or f"{base}:{lineno}"
+        if oid in ids:
+            raise ValueError(f"{path}:{lineno}: id '{oid}' already used on line {ids[oid]}")
+        ids[oid] = lineno
+        o["id"] = oid
+        obs.append(o)
+        lineno_of.append(lineno)
+    if not obs:
+        raise ValueError(f"{path}: a header but no data rows")
+    d = {"machine": machine.to_dict(), "observations": obs}
+    touches = any(o["type"] in ("facet", "sphere") for o in obs)
+    if touches and "probe" not in side:
+        raise ValueError(f"{path}: probe touches need the probe tip radius: give 'probe': "
+                         '{"tip_radius": R} (mm) in the sidecar')
+    if "probe" in side:
+        d["probe"] = side["probe"]
+    if artefact:
+        d["artefact"] = artefact
+    return d, lineno_of
+
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell.replace(",", "."))
+        return True
+    except ValueError:
+        return False
+
+
+def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mapping, decimal_comma: bool,
+         where: str) -> dict:
+    axes, direction, vals, text, empty = {}, {}, {}, {}, {}
+    for c in cols:
+        cw = f"{where}: column '{c.header}'"
+        cell = cells[c.index]
+        if c.field in _TEXT_FIELDS:
+            s = cell.strip()
+            if not s:
+                if kind == "fivecal" or c.field == "approach":
+                    continue
+                raise ValueError(f"{cw}: empty cell (a {c.field} is expected)")
+            text[c.field] = s.lower() if c.field == "type" else s
+            continue
+        if kind == "fivecal" and not cell.strip() and len(c.field) > 1:
+            # mixed rows: a column another type uses stays empty; _value names it when needed
+            empty[c.field] = cw
+            continue
+        v = _number(cell, decimal_comma, cw)
+        if c.field.startswith("dir_"):
+            if v not in (-1.0, 0.0, 1.0):
+                raise ValueError(f"{cw}: direction {cell.strip()} is not -1, 0 or +1")
+            if v:
+                direction[c.field[4:]] = int(v)
+            continue
+        v *= c.factor
+        if len(c.field) == 1:
+            if not machine.is_rotary(c.field) and abs(v) > plausibility.REFUSE_POSITION:
+                raise ValueError(f"{cw}: {v:.6g} mm is beyond any machine tool "
+                                 f"({plausibility.REFUSE_POSITION / 1e3:g} m); positions look like µm: "
+                                 f"name the column {c.field}_um")
+            axes[c.field] = v
+        else:
+            vals[c.field] = (v, cw)
+    typ = text.get("type", kind)
+    if kind == "probing" or typ in ("facet", "sphere"):
+        typ = _touch_type(text, typ, targets, where)
+    elif typ == "rtest":
+        typ = "ball3d"
+    if typ not in ("facet", "sphere", "dbb", "ball3d"):
+        raise ValueError(f"{where}: column 'type': '{typ}' is not facet, sphere, dbb or ball3d")
+    balls = set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"])
+    used = {"facet": {"sigma"}, "sphere": {"sigma"}, "dbb": {"reading", "length", "sigma"} | balls,
+            "ball3d": {"dx", "dy", "dz", "sigma"} | balls}[typ]
+    for f, (_, fw) in vals.items():
+        if f not in used:
+            raise ValueError(f"{fw}: a {typ} row has no {f} (leave the cell empty)")
+    for key in ("dir_" + a for a in machine.axis_names):
+        if key in empty:
+            raise ValueError(f"{empty[key]}: empty cell (a direction -1, 0 or +1 is expected)")
+    o = {"type": typ, "axes": axes}
+    if "id" in text:
+        o["id"] = text["id"]
+    if text.get("approach"):
+        direction.update(_approach(text["approach"], machine, f"{where}: column 'approach'"))
+    if direction:
+        o["direction"] = direction
+    if typ in ("facet", "sphere"):
+        o["target"] = text["target"]
+    else:
+        setup = text.get("setup", side.get("setup"))
+        if setup:
+            o["setup"] = str(setup)
+        for key, comps in _VECTORS.items():
+            if all(k in vals for k in comps):
+                o[key] = [vals[k][0] for k in comps]
+            elif any(k in vals for k in comps):
+                raise ValueError(f"{where}: {key} needs the three columns {', '.join(comps)}")
+            elif side.get(key) is not None:
+                o[key] = side[key]
+            else:
+                raise ValueError(f"{where}: no {key} for this {typ} sample: give --{key.replace('_', '-')} "
+                                 f"X,Y,Z (mm), '{key}' in the sidecar, or the columns {', '.join(comps)}")
+        if typ == "dbb":
+            r, rw = _value(vals, "reading", where, typ, empty)
+            if abs(r) > plausibility.DBB_RANGE:
+                raise ValueError(f"{rw}: reading {r:.6g} mm is beyond a ballbar's range (about ±1 mm, refused "
+                                 f"beyond ±{plausibility.DBB_RANGE:g} mm); readings look like µm: name the "
+                                 "column reading_um or give --units um")
+            o["reading"] = r
+            if "length" in vals:
+                o["length"] = vals["length"][0]
+            elif side.get("length") is not None:
+                o["length"] = side["length"]
+            else:
+                raise ValueError(f"{where}: no bar length: give --length MM, 'length' in the sidecar or a "
+                                 "'length' column")
+        else:
+            m = []
+            for k in ("dx", "dy", "dz"):
+                v, vw = _value(vals, k, where, typ, empty)
+                if abs(v) > plausibility.BALL3D_RANGE:
+                    raise ValueError(f"{vw}: {v:.6g} mm is beyond an R-test / 3D ball sensor's range (a few mm, "
+                                     f"refused beyond {plausibility.BALL3D_RANGE:g} mm); displacements look like "
+                                     f"µm: name the column {k}_um or give --units um")
+                m.append(v)
+            o["measured"] = m
+    if "sigma" in vals:
+        s, sw = vals["sigma"]
+        if not s > 0:
+            raise ValueError(f"{sw}: sigma {s:g} mm must be > 0")
+        o["sigma"] = s
+    elif side.get("sigma") is not None:
+        o["sigma"] = side["sigma"]
+    return o
+
+
+def _touch_type(text, typ, targets, where) -> str:
+    t = text.get("target")
+    if not t:
+        raise ValueError(f"{where}: no target for a probe touch (a 'target' column naming a facet or sphere)")
+    known = targets.get(t)
+    if known is None:
+        if not targets:
+            raise ValueError(f"{where}: target '{t}': no artefact given; a probing import needs the artefact's "
+                             "facets and spheres and the probe tip radius in a sidecar (--sidecar FILE)")
+        close = difflib.get_close_matches(t, sorted(targets), n=1)
+        raise ValueError(f"{where}: column 'target': '{t}' is not a facet or sphere of the artefact "
+                         f"({', '.join(sorted(targets))})" + (f"; did you mean '{close[0]}'?" if close else ""))
+    if typ in ("facet", "sphere") and typ != known:
+        raise ValueError(f"{where}: column 'type': '{typ}' but target '{t}' is a {known}")
+    return known
+
+
+def _value(vals, key, where, typ, empty=None):
+    if empty and key in empty:
+        raise ValueError(f"{empty[key]}: empty cell (a number is expected for a {typ} row)")
+    if key not in vals:
+        raise ValueError(f"{where}: no '{key}' for this {typ} row")
+    return vals[key]
+
+
+def _positive(value, what: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected a number (mm), got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{what}: expected a finite number > 0 (mm), got {value!r}")
+    return v
+
+
+_OBS = re.compile(r"observations\[(\d+)\]")
+
+
+def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options):
+    """:func:`read_table`, then validation as a :class:`fivecal.Dataset`; an
+    error the dataset checks find in an observation names its file and line."""
+    from ..dataset import Dataset
+
+    d, lines = _read(path, kind, machine, **options)
+    path = os.fspath(path)
+    sidecar = options.get("sidecar")
+    sidecar = os.fspath(sidecar) if isinstance(sidecar, (str, os.PathLike)) else "sidecar"
+
+    def located(message: str) -> str:
+        """The dataset checks' message with the file (and line) the value came from."""
+        m = re.match(r"^dataset(?:\.|: )(.*)$", message, re.S)
+        if not m:
+            return message
+        rest = m.group(1)
+        if rest.startswith(("artefact", "probe")):
+            return f"{sidecar}: {rest}"
+        at = lambda k: (f"{path}:{lines[int(k.group(1))]} ({k.group(0)})"
+                        if int(k.group(1)) < len(lines) else k.group(0))
+        if _OBS.match(rest):
+            return _OBS.sub(at, rest, count=1)
+        return f"{path}: " + _OBS.sub(at, rest)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            ds = Dataset.from_dict(d)
+        except ValueError as e:
+            raise ValueError(located(str(e))) from None
+    for w in caught:
+        text = located(str(w.message))
+        m = re.search(r"observations\[\*\]\.axes\.(\w+)", text)
+        if issubclass(w.category, RadiansWarning) and m:
+            text = (text.replace(m.group(0), f"axis column {m.group(1)}")
+                    + f", name the column {m.group(1)}_rad or give --angle-units rad")
+        _warn(text, w.category)
+    return ds
+
+
+def _warn(message: str, category) -> None:
+    """Warn at the first caller outside the fivecal package (the user's line)."""
+    pkg = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    level, f = 2, sys._getframe(1)
+    while f is not None and os.path.abspath(f.f_code.co_filename).startswith(pkg + os.sep):
+        f, level = f.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
+
+
+def write_dataset(path: Union[str, os.PathLike], out: Union[str, os.PathLike], kind: str, machine, **options):
+    """Import ``path`` and write the dataset JSON ``out`` (atomically); returns the Dataset."""
+    from .. import files
+
+    ds = import_dataset(path, kind, machine, **options)
+    files.write_json(out, ds.to_dict())
+    return ds
+
+
+def parse_columns(items: Iterable[str]) -> dict:
+    """``--column reading=dL_um`` options to {field: header}."""
+    out = {}
+    for item in items or ():
+        if "=" not in item:
+            raise ValueError(f"--column '{item}': expected FIELD=HEADER, like reading=dL_um")
+        k, v = item.split("=", 1)
+        if not k.strip() or not v.strip():
+            raise ValueError(f"--column '{item}': expected FIELD=HEADER, like reading=dL_um")
+        out[k.strip()] = v.strip()
+    return out
+
