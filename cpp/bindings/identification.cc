@@ -4,6 +4,7 @@
 #include <pybind11/stl.h>
 
 #include "fivecal/observations/dataset.h"
+#include "fivecal/observations/registry.h"
 #include "fivecal/solve/identify.h"
 #include "fivecal/solve/priors.h"
 #include "fivecal/observations/simulate.h"
@@ -45,6 +46,22 @@ void BindIdentification(py::module_& m) {
         for (const auto& o : d.observations) t.push_back(ObservationTypeName(o.type));
         return t;
       });
+
+  // The registered observation kinds (observations/registry.cc): what a
+  // report needs to label and scale their rows.
+  m.def("observation_kinds", [] {
+    py::list out;
+    for (const ObservationKind* k : ObservationKinds()) {
+      py::dict d;
+      d["name"] = k->name();
+      d["label"] = k->label();
+      d["unit"] = k->unit();
+      d["rows"] = k->rows();
+      d["default_sigma"] = k->default_sigma();
+      out.append(d);
+    }
+    return out;
+  });
 
   m.def("simulate", &Simulate, py::arg("spec_json"), py::call_guard<py::gil_scoped_release>());
 

@@ -1,5 +1,7 @@
 #include "json_util.h"
 
+#include "fivecal/observations/registry.h"
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -322,23 +324,7 @@ bool IsSetupParameterName(const std::string& name) {
   const size_t dot = name.find('.');
   if (dot == std::string::npos || dot + 1 >= name.size()) return false;
   const std::string kind = name.substr(0, dot), rest = name.substr(dot + 1);
-  auto ends_with = [&](const std::string& suffix) {
-    return rest.size() > suffix.size() && rest.compare(rest.size() - suffix.size(), suffix.size(), suffix) == 0;
-  };
-  if (kind == "facet") return rest.find('.') == std::string::npos;
-  if (kind == "sphere")
-    return rest.find('.') == rest.rfind('.') && rest.find('.') != std::string::npos &&
-           (ends_with(".x") || ends_with(".y") || ends_with(".z") || ends_with(".r"));
-  if (kind == "dbb" || kind == "ball3d") {
-    for (const std::string f : {"length", "tool.x", "tool.y", "tool.z", "table.x", "table.y", "table.z"}) {
-      if (kind == "ball3d" && f == "length") continue;
-      // <kind>.<field> (the default mounting) or <kind>.<setup>.<field> with
-      // a setup id free of dots.
-      if (rest == f) return true;
-      if (ends_with("." + f)) return rest.substr(0, rest.size() - f.size() - 1).find('.') == std::string::npos;
-    }
-    return false;
-  }
+  if (const ObservationKind* k = FindKind(kind)) return k->IsParameterName(rest);
   if (kind == "instrument") {
     const size_t d = rest.find('.');
     return d != std::string::npos && d > 0 && rest.find('.', d + 1) == std::string::npos;

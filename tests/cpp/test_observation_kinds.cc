@@ -14,6 +14,7 @@
 
 #include "fivecal/observations/registry.h"
 #include "fivecal/observations/simulate.h"
+#include "fivecal/solve/priors.h"
 #include "fivecal/solve/problem.h"
 
 namespace fivecal {
@@ -217,6 +218,31 @@ TEST_P(EveryKind, FileFieldsRoundTrip) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("dataset.observations[0]: unknown key \"bogus_field\""), std::string::npos)
         << e.what();
+  }
+}
+
+TEST_P(EveryKind, SetupParameterNamesHaveAShapeAndAPriorClass) {
+  const ObservationKind& k = *GetParam();
+  const Dataset ds = Simulate(SpecOf(k));
+  const ParameterTable table(ds);
+  ASSERT_GT(table.size(), table.num_machine()) << k.name() << " brings no setup parameter";
+  // A dataset of the same machine without these parameters.
+  const Dataset elsewhere(ds.machine());
+  const ParameterTable other_table(elsewhere);
+  std::set<std::string> classes;
+  for (const PriorClass& c : PriorClasses()) classes.insert(c.name);
+  for (int i = table.num_machine(); i < table.size(); ++i) {
+    const std::string& name = table.names()[i];
+    EXPECT_TRUE(classes.count(PriorClassOf(ds.machine(), name))) << name;
+    if (other_table.Index(name) >= 0) continue;
+    try {
+      other_table.Require(name);
+      ADD_FAILURE() << name;
+    } catch (const std::invalid_argument& e) {
+      // Named as a setup parameter of another dataset, not as a malformed name.
+      EXPECT_NE(std::string(e.what()).find("not a setup parameter of this dataset"), std::string::npos)
+          << name << ": " << e.what();
+    }
   }
 }
 

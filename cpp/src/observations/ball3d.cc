@@ -64,6 +64,12 @@ class Kind final : public BallMountKind {
     }
   }
 
+  bool has_length() const override { return false; }
+  void SetSample(const Eigen::MatrixXd& values, int r, double, Observation* o) const override {
+    o->measured = values.row(r).transpose();
+    for (int c = 0; c < 3; ++c) RequireFinite(o->measured[c], "ball samples: measured[" + std::to_string(r) + "]");
+  }
+
   std::vector<const char*> plan_keys() const override {
     return {"type", "setup", "axes", "tool_ball", "table_ball", "direction", "id"};
   }
@@ -76,7 +82,6 @@ class Kind final : public BallMountKind {
   }
 
  protected:
-  bool has_length() const override { return false; }
   void ValidateOwn(const Observation& o, const std::function<std::string()>& w) const override {
     for (int c = 0; c < 3; ++c)
       if (!(std::abs(o.measured[c]) <= kMaxLinear))

@@ -8,6 +8,7 @@
 #include "fivecal/observations/simulate.h"
 #include "fivecal/solve/analytic_residuals.h"
 #include "fivecal/solve/problem.h"
+#include "fivecal/observations/registry.h"
 #include "json_util.h"
 
 namespace fivecal {
@@ -53,6 +54,20 @@ void BallMountKind::AddObservationParameters(const Observation& o, ParameterTabl
   for (const char* c : kXYZ) idx.push_back(t->Add(prefix + ".tool." + c));
   for (const char* c : kXYZ) idx.push_back(t->Add(prefix + ".table." + c));
   t->AddGroup(type(), o.setup, idx);
+}
+
+bool BallMountKind::IsParameterName(const std::string& rest) const {
+  auto ends_with = [&](const std::string& suffix) {
+    return rest.size() > suffix.size() && rest.compare(rest.size() - suffix.size(), suffix.size(), suffix) == 0;
+  };
+  for (const std::string f : {"length", "tool.x", "tool.y", "tool.z", "table.x", "table.y", "table.z"}) {
+    if (!has_length() && f == "length") continue;
+    // <kind>.<field> (the default mounting) or <kind>.<setup>.<field> with
+    // a setup id free of dots.
+    if (rest == f) return true;
+    if (ends_with("." + f)) return rest.substr(0, rest.size() - f.size() - 1).find('.') == std::string::npos;
+  }
+  return false;
 }
 
 std::vector<PriorClass> BallMountKind::prior_classes() const {
@@ -119,6 +134,57 @@ void BallMountKind::ReportVector(const ReportContext& c, const Observation& o, c
   }
   *point = c.model->ToolPoint(pose.q.data(), pose.dir.data(), t);
   *vector = ReportRows(r, *point - table_ball);
+}
+
+// Here rather than in dataset.cc: array samples are the ball kinds' own.
+void Dataset::AppendBallSamples(ObservationType type, const std::string& setup,
+                                const Eigen::MatrixXd& axes, const Eigen::MatrixXi* dirs,
+                                const Eigen::Vector3d& tool_ball, const Eigen::Vector3d& table_ball,
+                                double length, const Eigen::MatrixXd& values, double sigma) {
+  const int n = static_cast<int>(axes.rows()), na = machine_.num_axes();
+  const auto* kind = dynamic_cast<const BallMountKind*>(&KindOf(type));
+  if (!kind) throw std::invalid_argument("ball samples: type must be dbb or ball3d");
+  const int width = kind->rows();
+  if (axes.cols() != na)
+    throw std::invalid_argument("ball samples: axes must have " + std::to_string(na) + " columns (" +
+                                machine_.axis_names() + ")");
+  if (values.rows() != n || values.cols() != width)
+    throw std::invalid_argument(std::string("ball samples: ") +
+                                (width == 1 ? "readings" : "measured") + " must be " +
+                                std::to_string(n) + " x " + std::to_string(width));
+  if (dirs && (dirs->rows() != n || dirs->cols() != na))
+    throw std::invalid_argument("ball samples: directions must match axes");
+  if (setup.find('.') != std::string::npos)
+    throw std::invalid_argument("ball samples: setup '" + setup + "' must not contain '.'");
+  for (int i = 0; i < 3; ++i) {
+    RequireFinite(tool_ball[i], "ball samples: tool_ball");
+    RequireFinite(table_ball[i], "ball samples: table_ball");
+  }
+  if (kind->has_length() && !(length > 0))
+    throw std::invalid_argument("ball samples: length must be > 0 mm");
+  if (sigma != 0.0 && !(sigma >= kMinSigma && sigma <= kMaxSigma))
+    throw std::invalid_argument("ball samples: sigma must be a finite number > 0 mm (0 = the default)");
+  const Eigen::VectorXd sig =
+      sigma > 0 ? Eigen::VectorXd::Constant(width, sigma) : Eigen::VectorXd();
+  observations.reserve(observations.size() + n);
+  for (int r = 0; r < n; ++r) {
+    Observation o;
+    o.type = type;
+    o.setup = setup;
+    o.axes = axes.row(r).transpose();
+    o.direction = dirs ? Eigen::VectorXi(dirs->row(r).transpose()) : Eigen::VectorXi::Zero(na);
+    for (int k = 0; k < na; ++k) {
+      RequireFinite(o.axes[k], "ball samples: axes." + std::string(1, machine_.axis(k).name) + "[" +
+                                   std::to_string(r) + "]");
+      if (std::abs(o.direction[k]) > 1)
+        throw std::invalid_argument("ball samples: directions must be -1, 0 or +1");
+    }
+    o.tool_ball = tool_ball;
+    o.table_ball = table_ball;
+    o.sigma = sig;
+    kind->SetSample(values, r, length, &o);
+    observations.push_back(std::move(o));
+  }
 }
 
 }  // namespace fivecal

@@ -254,63 +254,6 @@ void Dataset::Validate() const {
   }
 }
 
-void Dataset::AppendBallSamples(ObservationType type, const std::string& setup,
-                                const Eigen::MatrixXd& axes, const Eigen::MatrixXi* dirs,
-                                const Eigen::Vector3d& tool_ball, const Eigen::Vector3d& table_ball,
-                                double length, const Eigen::MatrixXd& values, double sigma) {
-  const int n = static_cast<int>(axes.rows()), na = machine_.num_axes();
-  if (type != ObservationType::kDbb && type != ObservationType::kBall3d)
-    throw std::invalid_argument("ball samples: type must be dbb or ball3d");
-  const int width = type == ObservationType::kDbb ? 1 : 3;
-  if (axes.cols() != na)
-    throw std::invalid_argument("ball samples: axes must have " + std::to_string(na) + " columns (" +
-                                machine_.axis_names() + ")");
-  if (values.rows() != n || values.cols() != width)
-    throw std::invalid_argument(std::string("ball samples: ") +
-                                (width == 1 ? "readings" : "measured") + " must be " +
-                                std::to_string(n) + " x " + std::to_string(width));
-  if (dirs && (dirs->rows() != n || dirs->cols() != na))
-    throw std::invalid_argument("ball samples: directions must match axes");
-  if (setup.find('.') != std::string::npos)
-    throw std::invalid_argument("ball samples: setup '" + setup + "' must not contain '.'");
-  for (int i = 0; i < 3; ++i) {
-    RequireFinite(tool_ball[i], "ball samples: tool_ball");
-    RequireFinite(table_ball[i], "ball samples: table_ball");
-  }
-  if (type == ObservationType::kDbb && !(length > 0))
-    throw std::invalid_argument("ball samples: length must be > 0 mm");
-  if (sigma != 0.0 && !(sigma >= kMinSigma && sigma <= kMaxSigma))
-    throw std::invalid_argument("ball samples: sigma must be a finite number > 0 mm (0 = the default)");
-  const Eigen::VectorXd sig =
-      sigma > 0 ? Eigen::VectorXd::Constant(width, sigma) : Eigen::VectorXd();
-  observations.reserve(observations.size() + n);
-  for (int r = 0; r < n; ++r) {
-    Observation o;
-    o.type = type;
-    o.setup = setup;
-    o.axes = axes.row(r).transpose();
-    o.direction = dirs ? Eigen::VectorXi(dirs->row(r).transpose()) : Eigen::VectorXi::Zero(na);
-    for (int k = 0; k < na; ++k) {
-      RequireFinite(o.axes[k], "ball samples: axes." + std::string(1, machine_.axis(k).name) + "[" +
-                                   std::to_string(r) + "]");
-      if (std::abs(o.direction[k]) > 1)
-        throw std::invalid_argument("ball samples: directions must be -1, 0 or +1");
-    }
-    o.tool_ball = tool_ball;
-    o.table_ball = table_ball;
-    o.sigma = sig;
-    if (type == ObservationType::kDbb) {
-      o.length = length;
-      o.reading = values(r, 0);
-      RequireFinite(o.reading, "ball samples: readings[" + std::to_string(r) + "]");
-    } else {
-      o.measured = values.row(r).transpose();
-      for (int c = 0; c < 3; ++c) RequireFinite(o.measured[c], "ball samples: measured[" + std::to_string(r) + "]");
-    }
-    observations.push_back(std::move(o));
-  }
-}
-
 Dataset Dataset::Subset(const std::vector<int>& indices) const {
   Dataset d(machine_);
   d.tip_radius = tip_radius;

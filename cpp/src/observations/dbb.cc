@@ -72,6 +72,13 @@ class Kind final : public BallMountKind {
     }
   }
 
+  bool has_length() const override { return true; }
+  void SetSample(const Eigen::MatrixXd& values, int r, double length, Observation* o) const override {
+    o->length = length;
+    o->reading = values(r, 0);
+    RequireFinite(o->reading, "ball samples: readings[" + std::to_string(r) + "]");
+  }
+
   std::vector<const char*> plan_keys() const override {
     return {"type", "setup", "axes", "length", "tool_ball", "table_ball", "direction", "id"};
   }
@@ -84,7 +91,6 @@ class Kind final : public BallMountKind {
   }
 
  protected:
-  bool has_length() const override { return true; }
   void ValidateOwn(const Observation& o, const std::function<std::string()>& w) const override {
     if (!(std::abs(o.reading) <= kMaxDbbReading)) RequireBounded(o.reading, kMaxDbbReading, w() + ".reading");
     if (!(o.length > 0 && o.length <= kMaxLinear))

@@ -40,6 +40,7 @@ class Kind final : public ProbeTouchKind {
     for (int c = 0; c < 3; ++c) out->insert(tip + c);
     out->insert(t.group(type(), o.target)[0]);
   }
+  bool IsParameterName(const std::string& rest) const override { return rest.find('.') == std::string::npos; }
   std::vector<PriorClass> prior_classes() const override {
     return {{"facet", 1.0, "mm", "facet.<id>: offset of a facet from its nominal plane"}};
   }

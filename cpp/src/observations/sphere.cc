@@ -53,6 +53,13 @@ class Kind final : public ProbeTouchKind {
     const auto& sp = t.group(type(), o.target);
     for (int c = 0; c < 3; ++c) out->insert(sp[c]);
   }
+  // sphere.<id>.x|y|z|r
+  bool IsParameterName(const std::string& rest) const override {
+    const size_t dot = rest.find('.');
+    if (dot == std::string::npos || dot != rest.rfind('.') || rest.size() <= 2) return false;
+    const std::string tail = rest.substr(rest.size() - 2);
+    return tail == ".x" || tail == ".y" || tail == ".z" || tail == ".r";
+  }
   std::vector<PriorClass> prior_classes() const override {
     return {{"sphere_center", 1.0, "mm", "sphere.<id>.x|y|z: where a sphere really sits"},
             {"sphere_radius", 0.01, "mm", "sphere.<id>.r: a calibrated sphere's radius error"}};

@@ -46,6 +46,7 @@ class BallMountKind : public ObservationKind {
   void Write(const Observation& o, nlohmann::json* out) const override;
 
   void AddObservationParameters(const Observation& o, ParameterTable* t) const final;
+  bool IsParameterName(const std::string& rest) const final;
   std::vector<PriorClass> prior_classes() const override;
   std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const final;
   void AddResidual(ResidualBuilder& b, const Observation& o) const final;
@@ -57,9 +58,14 @@ class BallMountKind : public ObservationKind {
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const final;
 
- protected:
-  // Whether the mounting has a length parameter (<kind>[.<setup>].length).
+  // Whether the mounting has a length parameter (<kind>[.<setup>].length)
+  // and samples a bar length.
   virtual bool has_length() const = 0;
+  // Sample r of Dataset::AppendBallSamples: its row of `values` (rows()
+  // wide) and the bar length.
+  virtual void SetSample(const Eigen::MatrixXd& values, int r, double length, Observation* o) const = 0;
+
+ protected:
   // Reads setup, tool_ball and table_ball (a kind's Read calls it).
   static void ReadMount(const nlohmann::json& o, const std::string& where, Observation* ob);
   // The kind's own fields (checked after the setup id, before the ball

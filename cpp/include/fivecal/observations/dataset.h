@@ -37,8 +37,12 @@ struct Artefact {
   int SphereIndex(const std::string& id) const;  // -1 if absent
 };
 
+// The observation kinds. Each has its file pair observations/<kind>.h|.cc
+// and one line in observations/registry.cc (ObservationKind, kind.h), which
+// say everything else about it.
 enum class ObservationType { kFacet, kSphere, kDbb, kBall3d };
 
+// The kind's name in files ("facet", "sphere", "dbb", "ball3d").
 const char* ObservationTypeName(ObservationType t);
 
 // Residual rows one observation of a kind contributes (1, or 3 for ball3d).
@@ -46,12 +50,10 @@ int ResidualRows(ObservationType t);
 
 // Default instrument noise (one sigma, mm) of a kind, used when a file
 // declares none: typical noise levels of the instrument class, not of one
-// particular instrument. Touch probe (facet, sphere) 0.001 mm (a good
-// kinematic touch-trigger probe's repeatability), ball bar 0.0005 mm (its
-// resolution-limited reading noise), ball3d 0.001 mm (R-test / CapBall
-// displacement sensors).
+// particular instrument (each kind's file says which).
 double DefaultSigma(ObservationType t);
 
+// One observation; the fields a kind does not use stay at their defaults.
 struct Observation {
   ObservationType type = ObservationType::kFacet;
   std::string target;  // facet or sphere id

@@ -115,6 +115,10 @@ class ObservationKind {
                             std::set<int>* out) const = 0;
   // The prior classes of the kind's setup parameters (priors.h), and the
   // class of one of its parameter names (nullptr: not a name of this kind).
+  // Whether "<name()>.<rest>" has the shape of one of the kind's setup
+  // parameter names, whatever dataset it belongs to (a dotted name of no
+  // kind's shape, EX0C.x, is a mistake worth saying so).
+  virtual bool IsParameterName(const std::string& rest) const = 0;
   virtual std::vector<PriorClass> prior_classes() const { return {}; }
   virtual const char* PriorClassOfName(const std::string& name) const = 0;
   // Instrument mounting position parameters of `o` (empty when the kind has
