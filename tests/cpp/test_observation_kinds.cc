@@ -68,6 +68,17 @@ const std::map<std::string, Sample> kSamples = {
           {"type": "ball3d", "setup": "R1", "axes": {"X": 20, "Y": -15, "Z": 0, "B": 25, "C": -60},
            "tool_ball": [0,0,100], "table_ball": [0,60,20]}])",
       R"({"ball3d.R1.tool.z": 0.004, "ball3d.R1.table.x": 0.001})"}},
+    {"point",
+     {R"([{"type": "point", "setup": "T1", "axes": {"X": -30, "Y": 5, "Z": 10, "B": -40, "C": 200},
+           "target": "TCP", "target_point": [0,0,100], "instrument_origin": [1500, -200, 300],
+           "instrument_angles": [1, -2, 30], "direction": {"Y": 1}},
+          {"type": "point", "setup": "T1", "axes": {"X": 20, "Y": -15, "Z": 0, "B": 25, "C": -60},
+           "target": "TCP", "target_point": [0,0,100], "instrument_origin": [1500, -200, 300],
+           "instrument_angles": [1, -2, 30]},
+          {"type": "point", "setup": "C2", "carrier": "workpiece", "axes": {"X": 0, "Y": 0, "Z": 0, "B": 30, "C": 45},
+           "target": "W1", "target_point": [80, 20, 40]}])",
+      R"({"instrument.T1.x": 0.05, "instrument.T1.c": 1e-3, "target.TCP.z": 0.02,
+          "instrument.C2.a": -2e-4, "target.W1.x": 0.01})"}},
 };
 
 std::string SpecOf(const ObservationKind& k) {

@@ -5,6 +5,7 @@
 #include "fivecal/observations/ball3d.h"
 #include "fivecal/observations/dbb.h"
 #include "fivecal/observations/facet.h"
+#include "fivecal/observations/point.h"
 #include "fivecal/observations/sphere.h"
 
 namespace fivecal {
@@ -17,6 +18,7 @@ const std::vector<const ObservationKind*>& ObservationKinds() {
       &SphereKind(),
       &DbbKind(),
       &Ball3dKind(),
+      &PointKind(),
   };
   return kinds;
 }

@@ -162,16 +162,17 @@ SimulationPlan PlanSpec(const json& spec) {
       return x;
     };
     if (s.is_number()) {
-      noise.probe = noise.dbb = noise.ball3d = level(s, "simulate.sigma");
+      noise.probe = noise.dbb = noise.ball3d = noise.point = level(s, "simulate.sigma");
     } else if (s.is_object()) {
-      CheckKeys(s, {"probe", "dbb", "ball3d"}, "simulate.sigma");
+      CheckKeys(s, {"probe", "dbb", "ball3d", "point"}, "simulate.sigma");
       if (s.contains("probe")) noise.probe = level(s["probe"], "simulate.sigma.probe");
       if (s.contains("dbb")) noise.dbb = level(s["dbb"], "simulate.sigma.dbb");
       if (s.contains("ball3d")) noise.ball3d = level(s["ball3d"], "simulate.sigma.ball3d");
+      if (s.contains("point")) noise.point = level(s["point"], "simulate.sigma.point");
     } else {
-      throw std::invalid_argument("simulate.sigma: expected a number or an object {probe, dbb, ball3d}");
+      throw std::invalid_argument("simulate.sigma: expected a number or an object {probe, dbb, ball3d, point}");
     }
-    for (double x : {noise.probe, noise.dbb, noise.ball3d})
+    for (double x : {noise.probe, noise.dbb, noise.ball3d, noise.point})
       if (x > 0 && x < kMinSigma) throw std::invalid_argument("simulate.sigma: 0 (no noise) or >= 1e-9 mm");
   }
   const uint64_t seed = spec.contains("seed") ? ReadSeed(spec["seed"], "simulate.seed") : 0;

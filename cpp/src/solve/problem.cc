@@ -255,6 +255,11 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
   if (!robust_.empty() && !(robust_scale > 0))
     throw std::invalid_argument("robust: the loss scale must be > 0 mm");
 
+  for (const Observation& o : ds.observations)
+    if (!KindOf(o).analytic()) {
+      analytic = false;
+      break;
+    }
   if (analytic && robust_.empty() && !estimated_.empty()) {
     auto* cost = new AnalyticResiduals(ds, table, values_, estimated_);
     analytic_ = cost;

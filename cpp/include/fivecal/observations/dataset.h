@@ -40,7 +40,7 @@ struct Artefact {
 // The observation kinds. Each has its file pair observations/<kind>.h|.cc
 // and one line in observations/registry.cc (ObservationKind, kind.h), which
 // say everything else about it.
-enum class ObservationType { kFacet, kSphere, kDbb, kBall3d };
+enum class ObservationType { kFacet, kSphere, kDbb, kBall3d, kPoint };
 
 // The kind's name in files ("facet", "sphere", "dbb", "ball3d").
 const char* ObservationTypeName(ObservationType t);
@@ -64,7 +64,14 @@ struct Observation {
   double length = 0.0;        // dbb: nominal bar length, mm
   Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero();   // in F at the zero pose
   Eigen::Vector3d table_ball = Eigen::Vector3d::Zero();  // workpiece frame
-  Eigen::Vector3d measured = Eigen::Vector3d::Zero();    // ball3d displacement
+  Eigen::Vector3d measured = Eigen::Vector3d::Zero();    // ball3d displacement; point: instrument frame
+  // point: the target (tool side: in F at the zero pose; workpiece side: in
+  // the workpiece frame), the side that carries it, and the instrument's
+  // nominal pose in F (origin mm, angles a b c rad: Rz(c) Ry(b) Rx(a)).
+  Eigen::Vector3d target_point = Eigen::Vector3d::Zero();
+  bool on_tool = true;
+  Eigen::Vector3d instrument_origin = Eigen::Vector3d::Zero();
+  Eigen::Vector3d instrument_angles = Eigen::Vector3d::Zero();
   // Declared noise (one sigma, mm): empty = DefaultSigma(type); otherwise one
   // value per residual row (ResidualRows(type)), finite and > 0. A file's
   // single number is expanded to every row.

@@ -126,6 +126,11 @@ class ObservationKind {
   virtual std::vector<int> MountPositions(const ParameterTable&, const Observation&) const { return {}; }
 
   // ---- residual ----
+  // Whether the kind has the analytic batch (PrepareAnalytic,
+  // EvaluateAnalytic). A kind without it is fitted through its templated
+  // functor (automatic derivatives) whenever a dataset holds one of its
+  // observations: correct, only slower.
+  virtual bool analytic() const { return true; }
   // Adds the templated (automatic-derivative) residual of observation `o`.
   virtual void AddResidual(ResidualBuilder& b, const Observation& o) const = 0;
   // Residual rows that belong to the artefact rather than to one observation

@@ -28,6 +28,7 @@ struct NoiseLevels {
   double probe = 0.0;   // mm, along the approach
   double dbb = 0.0;     // mm, on the reading
   double ball3d = 0.0;  // mm, per component
+  double point = 0.0;   // mm, per component (tracker, camera, CMM)
 };
 
 // spec JSON:

@@ -1,0 +1,200 @@
+#include "fivecal/observations/point.h"
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/observations/simulate.h"
+#include "fivecal/solve/problem.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using namespace json_util;
+
+constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+// Instrument group: position x y z, angles a b c (instrument.<setup>.*);
+// target group: x y z (target.<name>.*). One instrument may see several
+// targets (one on the tool, one on the table), each with its own offsets.
+const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
+const char* kXYZ[3] = {"x", "y", "z"};
+
+std::string Prefix(const Observation& o) { return "instrument." + o.setup; }
+std::string TargetPrefix(const Observation& o) { return "target." + o.target; }
+// The target group's key in the parameter table (a setup id has no '.').
+std::string TargetKey(const Observation& o) { return "." + o.target; }
+
+class Kind final : public ObservationKind {
+ public:
+  ObservationType type() const override { return ObservationType::kPoint; }
+  const char* name() const override { return "point"; }
+  const char* label() const override { return "fixed-frame 3D point (tracker, camera, CMM)"; }
+  int rows() const override { return 3; }
+  // A laser tracker over a machine-tool volume: a few micrometres.
+  double default_sigma() const override { return 0.005; }
+  bool analytic() const override { return false; }
+
+  std::vector<const char*> json_keys() const override {
+    return {"type", "setup", "axes", "direction", "measured", "target", "target_point", "carrier",
+            "instrument_origin", "instrument_angles", "sigma", "id"};
+  }
+  void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
+    ReadOwn(o, w, ob);
+    ob->measured = ReadVector3(o.value("measured", json()), w + ".measured");
+  }
+  void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
+    if (o.setup.empty() || o.setup.find('.') != std::string::npos)
+      throw std::invalid_argument(w() + ".setup: the instrument id must be a non-empty name without '.'");
+    auto bounded = [&](const Eigen::Vector3d& v, double bound, const char* field) {
+      for (int c = 0; c < 3; ++c)
+        if (!(std::abs(v[c]) <= bound)) RequireBounded(v[c], bound, w() + "." + field + "[" + std::to_string(c) + "]");
+    };
+    bounded(o.measured, kMaxLinear, "measured");
+    if (o.target.empty() || o.target.find('.') != std::string::npos)
+      throw std::invalid_argument(w() + ".target: the target name must be a non-empty name without '.'");
+    bounded(o.target_point, kMaxLinear, "target_point");
+    bounded(o.instrument_origin, kMaxLinear, "instrument_origin");
+    bounded(o.instrument_angles, 2 * 3.14159265358979323846, "instrument_angles");
+  }
+  void Write(const Observation& o, json* jo) const override {
+    (*jo)["setup"] = o.setup;
+    (*jo)["carrier"] = o.on_tool ? "tool" : "workpiece";
+    (*jo)["target_point"] = Array3(o.target_point);
+    (*jo)["measured"] = Array3(o.measured);
+    if (!o.instrument_origin.isZero()) (*jo)["instrument_origin"] = Array3(o.instrument_origin);
+    if (!o.instrument_angles.isZero()) (*jo)["instrument_angles"] = Array3(o.instrument_angles / kDegToRad);
+  }
+
+  // ---- setup: the instrument's pose and the target's offsets, always
+  // estimated (a tracker's pose in the machine frame is never known well
+  // enough to be fixed) ----
+  void AddObservationParameters(const Observation& o, ParameterTable* t) const override {
+    if (!t->has_group(type(), o.setup)) {
+      std::vector<int> idx;
+      for (const char* f : kFields) idx.push_back(t->Add(Prefix(o) + "." + f));
+      t->AddGroup(type(), o.setup, idx);
+    }
+    if (!t->has_group(type(), TargetKey(o))) {
+      std::vector<int> idx;
+      for (const char* f : kXYZ) idx.push_back(t->Add(TargetPrefix(o) + "." + f));
+      t->AddGroup(type(), TargetKey(o), idx);
+    }
+  }
+  void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
+                    std::set<int>* out) const override {
+    for (int i : t.group(type(), o.setup)) out->insert(i);
+    for (int i : t.group(type(), TargetKey(o))) out->insert(i);
+  }
+  bool IsParameterName(const std::string&) const override { return false; }  // instrument.* and target.*
+  std::vector<PriorClass> prior_classes() const override {
+    return {{"instrument_position", 2.0, "mm",
+             "instrument.<id>.x|y|z: correction of a tracker's or camera's nominal origin in the machine frame"},
+            {"instrument_angle", 0.01, "rad",
+             "instrument.<id>.a|b|c: correction of its nominal orientation (0.6 deg)"},
+            {"target", 1.0, "mm", "target.<name>.x|y|z: where a tracked target really sits on its carrier"}};
+  }
+  const char* PriorClassOfName(const std::string& n) const override {
+    if (n.rfind("target.", 0) == 0) return "target";
+    if (n.rfind("instrument.", 0) != 0) return nullptr;
+    const std::string f = n.substr(n.rfind('.') + 1);
+    return (f == "a" || f == "b" || f == "c") ? "instrument_angle" : "instrument_position";
+  }
+  std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const override {
+    return t.group(type(), o.setup);
+  }
+
+  void AddResidual(ResidualBuilder& b, const Observation& o) const override {
+    const auto& g = b.table.group(type(), o.setup);
+    const auto& tg = b.table.group(type(), TargetKey(o));
+    InstrumentRefs refs;
+    for (int c = 0; c < 3; ++c) {
+      refs.position[c] = b.Ref(g[c]);
+      refs.angle[c] = b.Ref(g[3 + c]);
+      refs.target[c] = b.Ref(tg[c]);
+    }
+    b.Add(new PointResidual(b.context, o, refs), 3);
+  }
+  void PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&, AnalyticRow*) const override {
+    throw std::logic_error("point: no analytic batch (analytic() is false)");
+  }
+  void EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const override {
+    throw std::logic_error("point: no analytic batch (analytic() is false)");
+  }
+
+  // ---- simulation ----
+  std::vector<const char*> plan_keys() const override {
+    return {"type", "setup", "axes", "direction", "target", "target_point", "carrier", "instrument_origin",
+            "instrument_angles", "id"};
+  }
+  void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
+                     PlanSlot*) const override {
+    ReadOwn(e, w, ob);
+    const std::string pre = Prefix(*ob) + ".", tpre = TargetPrefix(*ob) + ".";
+    Observation truth = *ob;
+    for (int c = 0; c < 3; ++c) {
+      truth.instrument_origin[c] += t.setup(pre + kFields[c]);
+      truth.instrument_angles[c] += t.setup(pre + kFields[3 + c]);
+      truth.target_point[c] += t.setup(tpre + kXYZ[c]);
+    }
+    const Machine& m = t.dataset->machine();
+    const PoseData pose(m, *ob);
+    const double ang[3] = {truth.instrument_angles[0], truth.instrument_angles[1], truth.instrument_angles[2]};
+    ob->measured = PointInInstrument<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), ob->on_tool,
+                                             truth.target_point, truth.instrument_origin, ang);
+  }
+  double NoiseLevel(const NoiseLevels& n) const override { return n.point; }
+  void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
+    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, plan->noise.point);
+  }
+  void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
+    o->measured[c] = plan.measured0[i][c] + x;
+  }
+
+  // ---- report: the residual turned into F, at the target's place ----
+  void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                    Eigen::Vector3d* vector) const override {
+    const Eigen::VectorXd& v = *c.values;
+    const auto& g = c.table->group(type(), o.setup);
+    Observation at = o;
+    for (int k = 0; k < 3; ++k) {
+      at.instrument_origin[k] += v[g[k]];
+      at.instrument_angles[k] += v[g[3 + k]];
+    }
+    const Eigen::Matrix3d R = RotZYX(at.instrument_angles[0], at.instrument_angles[1], at.instrument_angles[2]);
+    *vector = R * Eigen::Vector3d(r[0], r[1], r[2]);
+    *point = R * (o.measured + Eigen::Vector3d(r[0], r[1], r[2])) + at.instrument_origin;
+  }
+
+ private:
+  // setup, carrier, target and the nominal instrument pose (file angles in degrees).
+  static void ReadOwn(const json& o, const std::string& w, Observation* ob) {
+    if (!o.contains("setup"))
+      throw std::invalid_argument(w + ".setup: missing (the instrument id, e.g. \"T1\")");
+    ob->setup = ReadSetup(o, w);
+    if (ob->setup.empty()) throw std::invalid_argument(w + ".setup: the instrument id must not be empty");
+    const std::string carrier = o.contains("carrier") ? ReadString(o, "carrier", w) : "tool";
+    if (carrier != "tool" && carrier != "workpiece")
+      throw std::invalid_argument(w + ".carrier: " + Quote(carrier) + " is neither \"tool\" nor \"workpiece\"");
+    ob->on_tool = carrier == "tool";
+    if (!o.contains("target") || !o["target"].is_string())
+      throw std::invalid_argument(w + ".target: expected the target's name (a string such as \"TCP\")");
+    ob->target = o["target"].get<std::string>();
+    if (ob->target.empty() || ob->target.find('.') != std::string::npos)
+      throw std::invalid_argument(w + ".target: the target name must be a non-empty name without '.'");
+    ob->target_point = ReadVector3(o.value("target_point", json()), w + ".target_point");
+    if (o.contains("instrument_origin"))
+      ob->instrument_origin = ReadVector3(o["instrument_origin"], w + ".instrument_origin");
+    if (o.contains("instrument_angles"))
+      ob->instrument_angles = ReadVector3(o["instrument_angles"], w + ".instrument_angles", 360.0) * kDegToRad;
+  }
+};
+
+}  // namespace
+
+const ObservationKind& PointKind() {
+  static const Kind kind;
+  return kind;
+}
+
+}  // namespace fivecal

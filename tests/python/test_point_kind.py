@@ -1,0 +1,107 @@
+"""The fixed-frame point kind (laser tracker, camera, CMM): a machine with
+rotary axes on both sides (C on the table, B on the head) seen by one
+tracker that follows a target on the tool and one on the table. The
+tracker's pose in the machine frame is estimated with the machine errors."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import fivecal
+
+MACHINE = {"name": "table-head", "topology": "wCfXYZBt",
+           "axes": {"C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]},
+                    "X": {"type": "linear", "direction": [1, 0, 0]},
+                    "Y": {"type": "linear", "direction": [0, 1, 0]},
+                    "Z": {"type": "linear", "direction": [0, 0, 1]},
+                    "B": {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}},
+           "tool": {"tip": [0, 0, 150]}}
+ORIGIN, ANGLES = [2000.0, -500.0, 400.0], [0.5, -1.0, 155.0]  # tracker pose, mm / deg
+# Location errors of both rotary axes, a squareness and a scale gain. The
+# pivot positions of the head (EX0B, EZ0B) are not among them: with the
+# tracker's position free they move the whole tool side like the tracker
+# does (the machine frame is the linear axes'), and identify refuses them.
+TRUTH = {"EA0B": 3e-5, "EC0B": -4e-5, "EX0C": 0.03, "EY0C": -0.02, "EA0C": 2e-5, "EB0C": -3e-5,
+         "EB0Z": 5e-5, "EXX1": 2e-5}
+SETUP = {"instrument.T1.x": 0.3, "instrument.T1.y": -0.2, "instrument.T1.c": 2e-3, "instrument.T1.a": 1e-3,
+         "target.TCP.z": 0.05, "target.W1.x": 0.04, "target.W1.y": -0.03}
+# The target on the tool can only be told apart from the tracker's position
+# along what the head's rotation turns it; its y (along B) is fixed as known.
+FIXED = ["target.TCP.y"]
+
+
+def _plan(rng, n=60):
+    plan = []
+    for _ in range(n):
+        axes = {"X": float(rng.uniform(-200, 200)), "Y": float(rng.uniform(-200, 200)),
+                "Z": float(rng.uniform(-100, 100)), "B": float(rng.uniform(-60, 60)), "C": float(rng.uniform(0, 360))}
+        for target, point, carrier in (("TCP", [0, 0, 150], "tool"), ("W1", [120, 40, 20], "workpiece")):
+            plan.append({"type": "point", "setup": "T1", "target": target, "target_point": point, "carrier": carrier,
+                         "axes": axes, "instrument_origin": ORIGIN, "instrument_angles": ANGLES})
+    return plan
+
+
+@pytest.fixture(scope="module")
+def machine():
+    return fivecal.Machine.from_dict(MACHINE)
+
+
+def _fit(machine, seed):
+    rng = np.random.default_rng(seed)
+    ds = fivecal.simulate(machine, _plan(rng), errors=TRUTH, setup=SETUP, sigma={"point": 0.005}, seed=seed)
+    return ds, fivecal.identify(ds, list(TRUTH), fix=FIXED)
+
+
+def test_both_sides_and_the_tracker_pose_recovered_within_3_sigma(machine):
+    ds, r = _fit(machine, 3)
+    assert r.verdict == "ok", (r.verdict, r.adequacy)
+    full = {**TRUTH, **SETUP}
+    for n in r.estimated:
+        assert abs(r.values[n] - full.get(n, 0.0)) < 3 * r.std[n], (n, r.values[n], full.get(n, 0.0), r.std[n])
+    # The tracker pose is part of the default setup: estimated without being asked for.
+    assert {f"instrument.T1.{f}" for f in "xyzabc"} <= set(r.estimated)
+
+
+def test_coverage_of_the_point_fit_over_100_simulations(machine):
+    inside = total = 0
+    full = {**TRUTH, **SETUP}
+    for seed in range(100):
+        _, r = _fit(machine, 100 + seed)
+        for n in TRUTH:
+            total += 1
+            inside += abs(r.values[n] - full[n]) < 1.96 * r.std[n]
+    assert 0.92 <= inside / total <= 0.98, inside / total
+
+
+def test_head_pivot_with_a_free_tracker_is_refused_as_confounded(machine):
+    ds, _ = _fit(machine, 4)
+    with pytest.raises(ValueError, match=r"EX0B.*instrument\.T1\.x|instrument\.T1\.x.*EX0B"):
+        fivecal.identify(ds, list(TRUTH) + ["EX0B"], fix=FIXED)
+
+
+def test_tracker_pose_left_fixed_is_inadequate_naming_the_setup(machine):
+    rng = np.random.default_rng(5)
+    ds = fivecal.simulate(machine, _plan(rng), errors=TRUTH, setup=SETUP, sigma={"point": 0.005}, seed=5)
+    r = fivecal.identify(ds, list(TRUTH), fix=FIXED + [f"instrument.T1.{f}" for f in "xyzabc"])
+    assert r.verdict == "inadequate"
+    assert "setup not estimated" in r.adequacy
+
+
+def test_file_round_trip_and_bad_fields(machine):
+    rng = np.random.default_rng(1)
+    ds = fivecal.simulate(machine, _plan(rng, 3), errors=TRUTH, setup=SETUP, sigma={"point": 0.005}, seed=1)
+    doc = ds.to_dict()
+    o = doc["observations"][0]
+    assert o["type"] == "point" and o["target"] == "TCP" and o["carrier"] == "tool"
+    assert o["instrument_angles"] == pytest.approx(ANGLES)
+    again = fivecal.Dataset.from_dict(json.loads(json.dumps(doc)))
+    assert again.to_dict()["observations"] == doc["observations"]
+    for field, value, words in (("carrier", "table", "carrier"), ("target", 3, "target"),
+                                ("target_point", [0, 0], "target_point"), ("measured", [1, 2, float("nan")], "measured"),
+                                ("instrumnt_origin", [0, 0, 0], "instrumnt_origin")):
+        bad = json.loads(json.dumps(doc))
+        bad["observations"][1][field] = value
+        with pytest.raises(ValueError, match=words):
+            fivecal.Dataset.from_dict(bad)
