@@ -1,6 +1,8 @@
 #include "fivecal/dataset.h"
 
 #include <cmath>
+#include <exception>
+#include <memory>
 #include <set>
 #include <stdexcept>
 
@@ -48,8 +50,6 @@ int Artefact::SphereIndex(const std::string& id) const {
 }
 
 namespace {
-Dataset ParseDataset(const json& j, bool require_observations);
-
 void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::string& where) {
   if (sigma.size() == 0) return;
   if (sigma.size() != ResidualRows(t))
@@ -99,17 +99,15 @@ Eigen::VectorXd ReadSigma(const json& j, ObservationType t, const std::string& w
 }
 }  // namespace
 
-Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
-  return Guard("dataset", [&] { return ParseDataset(Parse(text, "dataset"), require_observations); });
-}
-
 namespace {
 const json* Find(const json& obj, const char* key) {
   auto it = obj.find(key);
   return it == obj.end() ? nullptr : &*it;
 }
 
-Dataset ParseDataset(const json& j, bool require_observations) {
+// Everything but the observations: machine, probe and artefact, checked in
+// the order the messages promise (unknown top-level keys first).
+Dataset ParseHead(const json& j) {
   if (!j.is_object()) throw std::invalid_argument("dataset: expected a JSON object");
   CheckKeys(j, {"machine", "probe", "artefact", "observations", "$schema", "_comment"}, "dataset");
   if (!j.contains("machine")) throw std::invalid_argument("dataset.machine: missing");
@@ -122,7 +120,6 @@ Dataset ParseDataset(const json& j, bool require_observations) {
       throw std::invalid_argument(std::string("dataset.") + e.what());
     }
   }();
-  const Machine& m = ds.machine();
 
   if (j.contains("probe")) {
     const json& p = j["probe"];
@@ -200,83 +197,277 @@ Dataset ParseDataset(const json& j, bool require_observations) {
       }
     }
   }
+  return ds;
+}
+
+// Observation i of a dataset on machine m; `artefact` resolves the targets
+// of probe touches. `given` is scratch space shared by the calls.
+Observation ParseObservation(const Machine& m, const Artefact& artefact, const json& o, size_t i,
+                             std::vector<bool>* given) {
+  const std::string w = "dataset.observations[" + std::to_string(i) + "]";
+  if (!o.is_object()) throw std::invalid_argument(w + ": expected an object");
+  Observation ob;
+  const json* tj = Find(o, "type");
+  if (!tj || !tj->is_string()) throw std::invalid_argument(w + ".type: missing (a string)");
+  const std::string& type = tj->get_ref<const std::string&>();
+  if (type == "facet") ob.type = ObservationType::kFacet;
+  else if (type == "sphere") ob.type = ObservationType::kSphere;
+  else if (type == "dbb") ob.type = ObservationType::kDbb;
+  else if (type == "ball3d") ob.type = ObservationType::kBall3d;
+  else throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (facet, sphere, dbb, ball3d)" +
+                                   DidYouMean(type, {"facet", "sphere", "dbb", "ball3d"}));
+  switch (ob.type) {
+    case ObservationType::kFacet:
+    case ObservationType::kSphere:
+      CheckKeys(o, {"type", "target", "axes", "direction", "sigma", "id"}, w);
+      break;
+    case ObservationType::kDbb:
+      CheckKeys(o, {"type", "setup", "axes", "direction", "reading", "length", "tool_ball", "table_ball",
+                    "sigma", "id"}, w);
+      break;
+    case ObservationType::kBall3d:
+      CheckKeys(o, {"type", "setup", "axes", "direction", "measured", "tool_ball", "table_ball", "sigma",
+                    "id"}, w);
+      break;
+  }
+  const json* axes = Find(o, "axes");
+  if (!axes || !axes->is_object())
+    throw std::invalid_argument(w + ".axes: missing (an object axis letter -> reading)");
+  ob.axes = Eigen::VectorXd::Zero(m.num_axes());
+  ob.direction = Eigen::VectorXi::Zero(m.num_axes());
+  ReadAxes(m, *axes, w + ".axes", &ob.axes, given);
+  for (int k = 0; k < m.num_axes(); ++k)
+    if (!(*given)[k] && m.axis(k).name != 'S')
+      throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
+                                  "' (machine axes " + m.axis_names() + ")");
+  if (const json* d = Find(o, "direction")) ReadDirections(m, *d, w + ".direction", &ob.direction);
+  switch (ob.type) {
+    case ObservationType::kFacet:
+    case ObservationType::kSphere: {
+      ob.target = ReadString(o, "target", w);
+      bool facet = ob.type == ObservationType::kFacet;
+      int idx = facet ? artefact.FacetIndex(ob.target) : artefact.SphereIndex(ob.target);
+      if (idx < 0)
+        throw std::invalid_argument(w + ".target: unknown " + type + " " + Quote(ob.target) +
+                                    " (not in dataset.artefact." + (facet ? "facets" : "spheres") + ")");
+      break;
+    }
+    case ObservationType::kDbb:
+      ob.reading = ReadBounded(o, "reading", w, kMaxDbbReading);
+      ob.length = ReadBounded(o, "length", w, kMaxLinear);
+      if (ob.length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
+      [[fallthrough]];
+    case ObservationType::kBall3d:
+      ob.setup = ReadSetup(o, w);
+      ob.tool_ball = ReadVector3(o.value("tool_ball", json()), w + ".tool_ball");
+      ob.table_ball = ReadVector3(o.value("table_ball", json()), w + ".table_ball");
+      if (ob.type == ObservationType::kBall3d)
+        ob.measured = ReadVector3(o.value("measured", json()), w + ".measured");
+      break;
+  }
+  if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w + ".sigma");
+  if (o.contains("id")) ob.id = ReadString(o, "id", w);
+  return ob;
+}
+
+void Finish(Dataset* ds, bool require_observations) {
+  if (require_observations || !ds->observations.empty()) ds->Validate();
+  else ValidateScaleBars(ds->artefact);
+}
+
+Dataset ParseDataset(const json& j, bool require_observations) {
+  Dataset ds = ParseHead(j);
   if (!j.contains("observations") || !j["observations"].is_array())
     throw std::invalid_argument("dataset.observations: missing (an array)");
   const json& obs = j["observations"];
   ds.observations.reserve(obs.size());
   std::vector<bool> given;
-  for (size_t i = 0; i < obs.size(); ++i) {
-    const std::string w = "dataset.observations[" + std::to_string(i) + "]";
-    const json& o = obs[i];
-    if (!o.is_object()) throw std::invalid_argument(w + ": expected an object");
-    Observation ob;
-    const json* tj = Find(o, "type");
-    if (!tj || !tj->is_string()) throw std::invalid_argument(w + ".type: missing (a string)");
-    const std::string& type = tj->get_ref<const std::string&>();
-    if (type == "facet") ob.type = ObservationType::kFacet;
-    else if (type == "sphere") ob.type = ObservationType::kSphere;
-    else if (type == "dbb") ob.type = ObservationType::kDbb;
-    else if (type == "ball3d") ob.type = ObservationType::kBall3d;
-    else throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (facet, sphere, dbb, ball3d)" +
-                                     DidYouMean(type, {"facet", "sphere", "dbb", "ball3d"}));
-    switch (ob.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere:
-        CheckKeys(o, {"type", "target", "axes", "direction", "sigma", "id"}, w);
-        break;
-      case ObservationType::kDbb:
-        CheckKeys(o, {"type", "setup", "axes", "direction", "reading", "length", "tool_ball", "table_ball",
-                      "sigma", "id"}, w);
-        break;
-      case ObservationType::kBall3d:
-        CheckKeys(o, {"type", "setup", "axes", "direction", "measured", "tool_ball", "table_ball", "sigma",
-                      "id"}, w);
-        break;
-    }
-    const json* axes = Find(o, "axes");
-    if (!axes || !axes->is_object())
-      throw std::invalid_argument(w + ".axes: missing (an object axis letter -> reading)");
-    ob.axes = Eigen::VectorXd::Zero(m.num_axes());
-    ob.direction = Eigen::VectorXi::Zero(m.num_axes());
-    ReadAxes(m, *axes, w + ".axes", &ob.axes, &given);
-    for (int k = 0; k < m.num_axes(); ++k)
-      if (!given[k] && m.axis(k).name != 'S')
-        throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
-                                    "' (machine axes " + m.axis_names() + ")");
-    if (const json* d = Find(o, "direction")) ReadDirections(m, *d, w + ".direction", &ob.direction);
-    switch (ob.type) {
-      case ObservationType::kFacet:
-      case ObservationType::kSphere: {
-        ob.target = ReadString(o, "target", w);
-        bool facet = ob.type == ObservationType::kFacet;
-        int idx = facet ? ds.artefact.FacetIndex(ob.target) : ds.artefact.SphereIndex(ob.target);
-        if (idx < 0)
-          throw std::invalid_argument(w + ".target: unknown " + type + " " + Quote(ob.target) +
-                                      " (not in dataset.artefact." + (facet ? "facets" : "spheres") + ")");
-        break;
-      }
-      case ObservationType::kDbb:
-        ob.reading = ReadBounded(o, "reading", w, kMaxDbbReading);
-        ob.length = ReadBounded(o, "length", w, kMaxLinear);
-        if (ob.length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
-        [[fallthrough]];
-      case ObservationType::kBall3d:
-        ob.setup = ReadSetup(o, w);
-        ob.tool_ball = ReadVector3(o.value("tool_ball", json()), w + ".tool_ball");
-        ob.table_ball = ReadVector3(o.value("table_ball", json()), w + ".table_ball");
-        if (ob.type == ObservationType::kBall3d)
-          ob.measured = ReadVector3(o.value("measured", json()), w + ".measured");
-        break;
-    }
-    if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w + ".sigma");
-    if (o.contains("id")) ob.id = ReadString(o, "id", w);
-    ds.observations.push_back(std::move(ob));
-  }
-  if (require_observations || !ds.observations.empty()) ds.Validate();
-  else ValidateScaleBars(ds.artefact);
+  for (size_t i = 0; i < obs.size(); ++i)
+    ds.observations.push_back(ParseObservation(ds.machine(), ds.artefact, obs[i], i, &given));
+  Finish(&ds, require_observations);
   return ds;
 }
+
+// One JSON value built from SAX events, as json::parse builds it (a repeated
+// key keeps its last value).
+class ValueBuilder {
+ public:
+  json root;
+  void Reset() {
+    root = json();
+    stack_.clear();
+  }
+  template <typename V>
+  void Put(V&& v) {
+    if (stack_.empty()) {
+      root = std::forward<V>(v);
+    } else if (stack_.back()->is_array()) {
+      stack_.back()->emplace_back(std::forward<V>(v));
+    } else {
+      *slot_ = std::forward<V>(v);
+    }
+  }
+  void Open(json empty) {
+    json* p;
+    if (stack_.empty()) {
+      root = std::move(empty);
+      p = &root;
+    } else if (stack_.back()->is_array()) {
+      p = &stack_.back()->emplace_back(std::move(empty));
+    } else {
+      *slot_ = std::move(empty);
+      p = slot_;
+    }
+    stack_.push_back(p);
+  }
+  void Key(const std::string& k) { slot_ = &(*stack_.back())[k]; }
+  void Close() { stack_.pop_back(); }
+
+ private:
+  std::vector<json*> stack_;
+  json* slot_ = nullptr;
+};
+
+// Reads a dataset text without building the JSON document of its
+// observations: each one is built alone, converted and dropped. A document of
+// 10^6 observations is ~10^7 heap nodes whose allocation and release cost more
+// than the rest of the load; streaming keeps memory flat and the load linear.
+// Only the common layout streams (machine, and artefact when probe touches
+// need it, before the observations; no repeated top-level key; valid JSON);
+// anything else returns with fallback set and the document parser decides, so
+// every message is the one the document path gives.
+class DatasetStream : public nlohmann::json_sax<json> {
+ public:
+  bool fallback = false;
+  bool streamed = false;  // an observations array went through the stream
+  json head = json::object();
+  std::vector<Observation> observations;
+  std::exception_ptr error;  // the first bad observation (reported after the head)
+
+  bool null() override { return Value(json(nullptr)); }
+  bool boolean(bool v) override { return Value(json(v)); }
+  bool number_integer(number_integer_t v) override { return Value(json(v)); }
+  bool number_unsigned(number_unsigned_t v) override { return Value(json(v)); }
+  bool number_float(number_float_t v, const string_t&) override { return Value(json(v)); }
+  bool string(string_t& v) override { return Value(json(v)); }
+  bool binary(binary_t&) override { return Abort(); }
+  bool start_object(std::size_t) override { return Open(json::object()); }
+  bool start_array(std::size_t) override {
+    if (depth_ == 1 && key_ == "observations") return StartObservations();
+    return Open(json::array());
+  }
+  bool end_object() override { return Close(); }
+  bool end_array() override {
+    if (in_observations_ && depth_ == 2) {
+      in_observations_ = false;
+      depth_ = 1;
+      return true;
+    }
+    return Close();
+  }
+  bool key(string_t& k) override {
+    if (depth_ == 1) {
+      if (head.contains(k) || (k == "observations" && streamed)) return Abort();  // repeated key
+      key_ = k;
+    } else {
+      b_.Key(k);
+    }
+    return true;
+  }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+    return Abort();
+  }
+
+ private:
+  bool Abort() {
+    fallback = true;
+    return false;
+  }
+  bool Open(json empty) {
+    if (depth_ == 0) {
+      if (!empty.is_object()) return Abort();
+      depth_ = 1;
+      return true;
+    }
+    if (Starts()) b_.Reset();
+    if (++depth_ > kMaxDepth) return Abort();
+    b_.Open(std::move(empty));
+    return true;
+  }
+  bool Close() {
+    if (--depth_ == 0) return true;
+    b_.Close();
+    return Completed();
+  }
+  bool Value(json v) {
+    if (depth_ == 0) return Abort();
+    if (Starts()) b_.Reset();
+    b_.Put(std::move(v));
+    return Completed();
+  }
+  // Whether a value at the current depth is a whole top-level member or a
+  // whole observation.
+  bool Starts() const { return depth_ == 1 || (in_observations_ && depth_ == 2); }
+  bool Completed() {
+    if (depth_ == 1) {
+      head[key_] = std::move(b_.root);
+    } else if (in_observations_ && depth_ == 2) {
+      Convert();
+    }
+    return !fallback;
+  }
+  bool StartObservations() {
+    if (!head.contains("machine")) return Abort();
+    try {
+      ds_ = std::make_unique<Dataset>(ParseHead(head));
+    } catch (...) {
+      return Abort();  // the document path names what is wrong, in order
+    }
+    artefact_known_ = head.contains("artefact");
+    streamed = in_observations_ = true;
+    depth_ = 2;
+    return true;
+  }
+  void Convert() {
+    const size_t i = index_++;
+    if (error) return;
+    try {
+      const json* tj = b_.root.is_object() ? Find(b_.root, "type") : nullptr;
+      if (!artefact_known_ && tj && tj->is_string() &&
+          (*tj == "facet" || *tj == "sphere")) {  // its target may be defined further on
+        fallback = true;
+        return;
+      }
+      observations.push_back(ParseObservation(ds_->machine(), ds_->artefact, b_.root, i, &given_));
+    } catch (...) {
+      error = std::current_exception();
+    }
+  }
+
+  int depth_ = 0;  // open containers, the document's object included
+  bool in_observations_ = false;
+  bool artefact_known_ = false;
+  std::string key_;
+  ValueBuilder b_;
+  size_t index_ = 0;
+  std::unique_ptr<Dataset> ds_;
+  std::vector<bool> given_;
+};
 }  // namespace
+
+Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
+  return Guard("dataset", [&] {
+    DatasetStream s;
+    const bool parsed = json::sax_parse(text, &s);
+    if (!parsed || s.fallback || !s.streamed)
+      return ParseDataset(Parse(text, "dataset"), require_observations);
+    Dataset ds = ParseHead(s.head);
+    if (s.error) std::rethrow_exception(s.error);
+    ds.observations = std::move(s.observations);
+    Finish(&ds, require_observations);
+    return ds;
+  });
+}
 
 void Dataset::Validate() const {
   if (observations.empty()) throw std::invalid_argument("dataset.observations: empty; nothing to fit");

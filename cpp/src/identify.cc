@@ -251,8 +251,22 @@ std::string UndeterminedMessage(const Dataset& ds, const std::vector<std::vector
   std::string msg =
       "identify: not determined by this data (confounded, or seen more weakly than their "
       "plausible size): ";
-  for (size_t i = 0; i < groups.size(); ++i)
+  // A refusal stays one readable line however many parameters it is about
+  // (a plan missing most of its touches leaves hundreds undetermined): the
+  // first groups, about kShownNames names, then how many more.
+  constexpr size_t kShownNames = 10;
+  size_t total = 0, listed = 0, shown = 0;
+  for (const auto& g : groups) total += g.size();
+  size_t i = 0;
+  for (; i < groups.size(); ++i) {
+    if (i > 0 && shown + std::min<size_t>(groups[i].size(), 8) > kShownNames) break;
     msg += (i ? "; " : "") + GroupText(groups[i]) + ": " + GroupCause(ds, groups[i]);
+    shown += std::min<size_t>(groups[i].size(), 8);
+    listed += groups[i].size();
+  }
+  if (i < groups.size())
+    msg += "; and " + std::to_string(total - listed) + " more parameter" + (total - listed == 1 ? "" : "s") +
+           " in " + std::to_string(groups.size() - i) + " more group" + (groups.size() - i == 1 ? "" : "s");
   return msg + ". Fix one parameter of each group, add measurements that separate them, or use "
                "estimate 'auto' (every error under its prior, the undetermined ones listed).";
 }

@@ -506,5 +506,74 @@ TEST(LoaderBoundary, SyntaxErrorsStillNameTheField) {
   ExpectInvalid([&] { Dataset::FromJson(text); }, {"dataset.observations[2].reading", "double range"});
 }
 
+// ---- Streaming load (observations converted one by one) ---------------------
+
+// The dataset text with its members in the given order.
+std::string InOrder(const json& d, const std::vector<std::string>& keys) {
+  std::string text = "{";
+  for (size_t i = 0; i < keys.size(); ++i)
+    text += (i ? "," : "") + json(keys[i]).dump() + ":" + d[keys[i]].dump();
+  return text + "}";
+}
+
+TEST(LoaderStreaming, EveryMemberOrderLoadsTheSameDataset) {
+  // The stream takes machine and artefact before the observations; any other
+  // order goes through the document parser; both give the same dataset.
+  const json d = SmallDataset();
+  const std::string expected = Load(d).ToJson();
+  for (const auto& order : std::vector<std::vector<std::string>>{
+           {"machine", "probe", "artefact", "observations"},
+           {"observations", "machine", "probe", "artefact"},
+           {"machine", "observations", "artefact", "probe"},
+           {"artefact", "observations", "probe", "machine"}})
+    EXPECT_EQ(Dataset::FromJson(InOrder(d, order)).ToJson(), expected) << order[0] << "," << order[1];
+  // Ball samples need no artefact: they stream with it given after them.
+  json balls = d;
+  balls["observations"] = json::array({d["observations"][2], d["observations"][3]});
+  EXPECT_EQ(Dataset::FromJson(InOrder(balls, {"machine", "observations", "artefact", "probe"})).ToJson(),
+            Load(balls).ToJson());
+}
+
+TEST(LoaderStreaming, MessagesAreThoseOfTheDocumentOrder) {
+  const std::vector<std::string> order = {"machine", "artefact", "observations", "probe"};
+  // A bad observation and, after the observations, an unknown member: the
+  // member is named first, as the document parser checks the top level first.
+  json d = SmallDataset();
+  d["observations"][1]["axes"]["Q"] = 1.0;
+  std::string text = InOrder(d, order);
+  text.insert(text.size() - 1, R"(,"probes":{})");
+  ExpectInvalid([&] { Dataset::FromJson(text); }, {"dataset: unknown key \"probes\"", "\"probe\""});
+  // ... a bad probe after the observations, likewise.
+  d = SmallDataset();
+  d["observations"][1]["axes"]["Q"] = 1.0;
+  d["probe"]["tip_radius"] = -1.0;
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, order)); }, {"dataset.probe.tip_radius"});
+  // With a valid head, the first bad observation.
+  d = SmallDataset();
+  d["observations"][1]["axes"]["Q"] = 1.0;
+  d["observations"][3]["measured"] = "x";
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, order)); }, {"dataset.observations[1].axes", "'Q'"});
+  // A syntax error behind a bad observation is the first thing said.
+  text = InOrder(d, order);
+  text.insert(text.size() - 1, ",");
+  ExpectInvalid([&] { Dataset::FromJson(text); }, {"invalid JSON"});
+  // A repeated member: the last one counts, as in the document parser.
+  d = SmallDataset();
+  text = InOrder(d, order);
+  json first = d["observations"];
+  first[0]["target"] = "nowhere";
+  text.insert(text.size() - 1, R"(,"observations":)" + json::array({d["observations"][1]}).dump());
+  text.insert(1, R"("observations":)" + first.dump() + ",");
+  EXPECT_EQ(Dataset::FromJson(text).observations.size(), 1u);
+  // An observation that is not an object, a target defined nowhere.
+  d = SmallDataset();
+  d["observations"][2] = 7;
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, order)); }, {"dataset.observations[2]: expected an object"});
+  d = SmallDataset();
+  d["observations"][1]["target"] = "S9";
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, {"machine", "observations", "artefact"})); },
+                {"dataset.observations[1].target: unknown sphere 'S9'"});
+}
+
 }  // namespace
 }  // namespace fivecal
