@@ -156,7 +156,8 @@ def _jiang(args) -> int:
         if args.save_dataset:
             save_dataset(ds, args.save_dataset)
     with _quiet_fit_warnings():  # judged once below, in one line
-        res = dbb.jiang_cripps(ds, setups=setups, a_pivot_offset=_vector(args.a_pivot_offset, 2, "--a-pivot-offset") or (0, 0),
+        res = dbb.jiang_cripps(ds, setups=setups,
+                               a_pivot_offset=_vector(args.a_pivot_offset, 2, "--a-pivot-offset") or (0, 0),
                                c_pivot_offset=_vector(args.c_pivot_offset, 2, "--c-pivot-offset") or (0, 0),
                                uniform_angles=args.uniform_angles, refer_positions=not args.no_refer,
                                a_removal=args.a_removal, engine=not args.no_engine)
