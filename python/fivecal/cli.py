@@ -361,7 +361,6 @@ def _design(args) -> int:
 def _sphere(args) -> int:
     from . import cmm
     from .dataset import load_dataset
-
     from .guards import require_usable
 
     ds = load_dataset(args.dataset)
@@ -371,7 +370,7 @@ def _sphere(args) -> int:
         # A result that did not converge, is not finite, inadequate or
         # undetermined would make the "identified model" column a confident
         # figure of nothing: refused as `fivecal compensate` refuses it.
-        require_usable(res, args.force, f"{args.values}")
+        require_usable(res, args.force, args.values)
         params = res.get("parameters", res) if isinstance(res, dict) else None
         if not isinstance(params, dict):
             raise ValueError(f"{args.values}: expected a result JSON with 'parameters'")
