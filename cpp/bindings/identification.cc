@@ -55,37 +55,47 @@ void BindIdentification(py::module_& m) {
       .def(
           "columns",
           // The observations as arrays (what the plausibility checks read):
-          // 10^6 observations without a JSON round trip.
+          // 10^6 observations without a JSON round trip. Every observation
+          // has axes, a type code (ObservationType order) and a target index
+          // (facet or sphere, else -1); the ball-bar and 3D ball fields only
+          // exist for the rows listed in "ball" (NaN where not of its type).
           [](const Dataset& d) {
             const Eigen::Index n = static_cast<Eigen::Index>(d.observations.size());
             const int na = d.machine().num_axes();
-            Eigen::MatrixXd axes(n, na), measured(n, 3), tool(n, 3), table(n, 3);
-            Eigen::VectorXd reading(n), length(n);
+            using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+            RowMajor axes(n, na);
             Eigen::VectorXi type(n), target(n);
-            const double nan = std::numeric_limits<double>::quiet_NaN();
+            std::vector<int> ball;
             for (Eigen::Index i = 0; i < n; ++i) {
               const Observation& o = d.observations[i];
               axes.row(i) = o.axes.transpose();
               type[i] = static_cast<int>(o.type);
-              const bool ball = o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d;
               target[i] = o.type == ObservationType::kFacet    ? d.artefact.FacetIndex(o.target)
                           : o.type == ObservationType::kSphere ? d.artefact.SphereIndex(o.target)
                                                                : -1;
-              reading[i] = o.type == ObservationType::kDbb ? o.reading : nan;
-              length[i] = o.type == ObservationType::kDbb ? o.length : nan;
-              measured.row(i).setConstant(nan);
-              tool.row(i).setConstant(nan);
-              table.row(i).setConstant(nan);
-              if (o.type == ObservationType::kBall3d) measured.row(i) = o.measured.transpose();
-              if (ball) {
-                tool.row(i) = o.tool_ball.transpose();
-                table.row(i) = o.table_ball.transpose();
+              if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d)
+                ball.push_back(static_cast<int>(i));
+            }
+            const Eigen::Index k = static_cast<Eigen::Index>(ball.size());
+            const double nan = std::numeric_limits<double>::quiet_NaN();
+            Eigen::VectorXd reading = Eigen::VectorXd::Constant(k, nan), length = reading;
+            RowMajor measured = RowMajor::Constant(k, 3, nan), tool(k, 3), table(k, 3);
+            for (Eigen::Index j = 0; j < k; ++j) {
+              const Observation& o = d.observations[ball[j]];
+              if (o.type == ObservationType::kDbb) {
+                reading[j] = o.reading;
+                length[j] = o.length;
+              } else {
+                measured.row(j) = o.measured.transpose();
               }
+              tool.row(j) = o.tool_ball.transpose();
+              table.row(j) = o.table_ball.transpose();
             }
             py::dict out;
             out["axes"] = axes;
             out["type"] = type;
             out["target"] = target;
+            out["ball"] = Eigen::VectorXi(Eigen::Map<const Eigen::VectorXi>(ball.data(), k));
             out["reading"] = reading;
             out["length"] = length;
             out["measured"] = measured;

@@ -133,8 +133,10 @@ def _optional_rows(entries, key: str) -> np.ndarray:
 
 def _dict_columns(machine: Machine, entries: Sequence, artefact) -> dict:
     """What ``Dataset.columns`` gives for a dataset, from a list of
-    observation (or plan) dicts: one row per entry, NaN / -1 where a field is
-    absent or not of that entry's type."""
+    observation (or plan) dicts: axes, type code and target index of every
+    entry; the ball fields (reading, length, measured, tool_ball, table_ball)
+    of the rows listed in ``ball``, here every entry (NaN where a field is
+    absent or not of that entry's type)."""
     types = np.array([_TYPES.index(e.get("type")) if isinstance(e, dict) and e.get("type") in _TYPES else -1
                       for e in entries], dtype=int)
     ids = {}
@@ -148,6 +150,7 @@ def _dict_columns(machine: Machine, entries: Sequence, artefact) -> dict:
     measured = _optional_rows(entries, "measured")
     measured[types != 3] = math.nan
     return {"axes": _axis_columns(machine, entries), "type": types, "target": target,
+            "ball": np.arange(len(entries)),
             "reading": np.where(types == 2, _optional_column(entries, "reading"), math.nan),
             "length": _optional_column(entries, "length"), "measured": measured,
             "tool_ball": _optional_rows(entries, "tool_ball"), "table_ball": _optional_rows(entries, "table_ball")}
@@ -169,9 +172,10 @@ def _positions(machine: Machine, cols: dict, where_list: str, ix=lambda i: i):
     for a in machine.axis_names:
         if not machine.is_rotary(a):
             _largest(cols["axes"][a], lambda i, j, a=a: f"{where_list}[{ix(i)}].axes.{a}", vals, fields)
-    _largest(cols["length"], lambda i, j: f"{where_list}[{ix(i)}].length", vals, fields)
+    ball = cols["ball"]
+    _largest(cols["length"], lambda i, j: f"{where_list}[{ix(ball[i])}].length", vals, fields)
     for key in ("tool_ball", "table_ball"):
-        _largest(cols[key], lambda i, j, key=key: f"{where_list}[{ix(i)}].{key}[{j}]", vals, fields)
+        _largest(cols[key], lambda i, j, key=key: f"{where_list}[{ix(ball[i])}].{key}[{j}]", vals, fields)
     return vals, fields
 
 
@@ -241,26 +245,28 @@ def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lamb
                 fields.append(f"artefact.scale_bars[{k}].length")
     _check_size(np.array(vals, dtype=float), fields, where, "the dataset's positions")
 
-    # Instrument ranges.
-    types = cols["type"]
-    dbb = np.flatnonzero(types == 2)
+    # Instrument ranges (rows of the ball fields: cols["ball"]).
+    ball_types = cols["type"][cols["ball"]]
+    dbb = np.flatnonzero(ball_types == 2)
     if dbb.size:
         r = cols["reading"][dbb]
         k = int(np.argmax(np.abs(np.nan_to_num(r))))
         if abs(r[k]) > DBB_RANGE:
             big = int((np.abs(r) > DBB_RANGE).sum())
-            raise ValueError(f"{where}: observations[{ix(dbb[k])}].reading = {r[k]:.6g} mm ({big} of the "
+            row = ix(cols["ball"][dbb[k]])
+            raise ValueError(f"{where}: observations[{row}].reading = {r[k]:.6g} mm ({big} of the "
                              f"{r.size} ball bar readings checked are beyond ±{DBB_RANGE:g} mm; a ballbar "
                              "measures about ±1 mm): "
                              "readings look like µm: divide by 1000 (a reading is the bar length minus "
                              "its nominal length, in mm)")
-    b3 = np.flatnonzero(types == 3)
+    b3 = np.flatnonzero(ball_types == 3)
     if b3.size:
         mv = cols["measured"][b3]
         a = np.abs(np.nan_to_num(mv)).max(axis=1)
         k = int(np.argmax(a))
         if a[k] > BALL3D_RANGE:
-            raise ValueError(f"{where}: observations[{ix(b3[k])}].measured = {mv[k].tolist()} mm is beyond "
+            row = ix(cols["ball"][b3[k]])
+            raise ValueError(f"{where}: observations[{row}].measured = {mv[k].tolist()} mm is beyond "
                              f"an R-test / 3D ball sensor's range (a few mm, {BALL3D_RANGE:g} mm here): "
                              "displacements look like µm: divide by 1000")
     _check_touches(machine, d, cols, where)
