@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import statistics
 import sys
 import tempfile
@@ -108,8 +109,11 @@ def main(argv):
             st = stages(path)
             print(f"load_dataset: {n:>9d} observations, {size / 1e6:7.1f} MB: {dt:6.2f} s wall, "
                   f"{statistics.median(cpus):6.2f} s CPU ({dt / n * 1e6:.2f} us per observation); "
-                  + ", ".join(f"{k[:-2].replace('_', ' ')} {v:.2f} s" for k, v in st.items()), flush=True)
+                  + ", ".join(f"{k[:-2].replace('_', ' ')} {v:.2f} s" for k, v in st.items())
+                  + f"; peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB", flush=True)
+            rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
             doc["results"].append({"observations": n, "file_mb": size / 1e6, "wall_s": dt,
+                                   "peak_rss_mb_so_far": rss,
                                    "cpu_s": statistics.median(cpus), "runs_wall_s": walls, "runs_cpu_s": cpus,
                                    "us_per_observation": dt / n * 1e6, "stages": st})
             os.remove(path)
