@@ -202,73 +202,164 @@ Dataset ParseHead(const json& j) {
   return ds;
 }
 
+// The name of observation i in messages, built only when one is needed: the
+// checks below run on every one of 10^6 observations, and on their common
+// path (a valid field) each does the test inline; only a field that fails it
+// goes through the json_util reader, which names what is wrong (or accepts a
+// rarer valid form).
+class ObservationName {
+ public:
+  explicit ObservationName(size_t i) : i_(i) {}
+  const std::string& operator()() {
+    if (s_.empty()) s_ = "dataset.observations[" + std::to_string(i_) + "]";
+    return s_;
+  }
+
+ private:
+  size_t i_;
+  std::string s_;
+};
+
+void CheckKeysOf(const json& o, std::initializer_list<const char*> allowed, ObservationName& w) {
+  for (auto it = o.begin(); it != o.end(); ++it) {
+    const std::string& key = it.key();
+    if (std::none_of(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }))
+      CheckKeys(o, allowed, w());  // throws, naming the key
+  }
+}
+
+double BoundedOf(const json& o, const char* key, double bound, ObservationName& w) {
+  const json* v = Find(o, key);
+  if (v && v->is_number()) {
+    const double x = v->get<double>();
+    if (std::abs(x) <= bound) return x;
+  }
+  return ReadBounded(o, key, w(), bound);
+}
+
+Eigen::Vector3d Vector3Of(const json& o, const char* key, ObservationName& w) {
+  const json* v = Find(o, key);
+  if (v && v->is_array() && v->size() == 3) {
+    Eigen::Vector3d x;
+    int k = 0;
+    for (; k < 3 && (*v)[k].is_number(); ++k) {
+      x[k] = (*v)[k].get<double>();
+      if (!(std::abs(x[k]) <= kMaxLinear)) break;
+    }
+    if (k == 3) return x;
+  }
+  return ReadVector3(o.value(key, json()), w() + "." + key);
+}
+
+std::string StringOf(const json& o, const char* key, ObservationName& w) {
+  const json* v = Find(o, key);
+  if (v && v->is_string()) return v->get<std::string>();
+  return ReadString(o, key, w());
+}
+
 // Observation i of a dataset on machine m; `artefact` resolves the targets
 // of probe touches. `given` is scratch space shared by the calls.
 Observation ParseObservation(const Machine& m, const Artefact& artefact, const json& o, size_t i,
                              std::vector<bool>* given) {
-  const std::string w = "dataset.observations[" + std::to_string(i) + "]";
-  if (!o.is_object()) throw std::invalid_argument(w + ": expected an object");
+  ObservationName w(i);
+  if (!o.is_object()) throw std::invalid_argument(w() + ": expected an object");
   Observation ob;
   const json* tj = Find(o, "type");
-  if (!tj || !tj->is_string()) throw std::invalid_argument(w + ".type: missing (a string)");
+  if (!tj || !tj->is_string()) throw std::invalid_argument(w() + ".type: missing (a string)");
   const std::string& type = tj->get_ref<const std::string&>();
   if (type == "facet") ob.type = ObservationType::kFacet;
   else if (type == "sphere") ob.type = ObservationType::kSphere;
   else if (type == "dbb") ob.type = ObservationType::kDbb;
   else if (type == "ball3d") ob.type = ObservationType::kBall3d;
-  else throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (facet, sphere, dbb, ball3d)" +
+  else throw std::invalid_argument(w() + ".type: unknown type " + Quote(type) + " (facet, sphere, dbb, ball3d)" +
                                    DidYouMean(type, {"facet", "sphere", "dbb", "ball3d"}));
   switch (ob.type) {
     case ObservationType::kFacet:
     case ObservationType::kSphere:
-      CheckKeys(o, {"type", "target", "axes", "direction", "sigma", "id"}, w);
+      CheckKeysOf(o, {"type", "target", "axes", "direction", "sigma", "id"}, w);
       break;
     case ObservationType::kDbb:
-      CheckKeys(o, {"type", "setup", "axes", "direction", "reading", "length", "tool_ball", "table_ball",
-                    "sigma", "id"}, w);
+      CheckKeysOf(o, {"type", "setup", "axes", "direction", "reading", "length", "tool_ball", "table_ball",
+                      "sigma", "id"}, w);
       break;
     case ObservationType::kBall3d:
-      CheckKeys(o, {"type", "setup", "axes", "direction", "measured", "tool_ball", "table_ball", "sigma",
-                    "id"}, w);
+      CheckKeysOf(o, {"type", "setup", "axes", "direction", "measured", "tool_ball", "table_ball", "sigma",
+                      "id"}, w);
       break;
   }
   const json* axes = Find(o, "axes");
   if (!axes || !axes->is_object())
-    throw std::invalid_argument(w + ".axes: missing (an object axis letter -> reading)");
-  ob.axes = Eigen::VectorXd::Zero(m.num_axes());
-  ob.direction = Eigen::VectorXi::Zero(m.num_axes());
-  ReadAxes(m, *axes, w + ".axes", &ob.axes, given);
-  for (int k = 0; k < m.num_axes(); ++k)
+    throw std::invalid_argument(w() + ".axes: missing (an object axis letter -> reading)");
+  const int na = m.num_axes();
+  ob.axes = Eigen::VectorXd::Zero(na);
+  ob.direction = Eigen::VectorXi::Zero(na);
+  given->assign(na, false);
+  bool plain = true;
+  for (auto it = axes->begin(); plain && it != axes->end(); ++it) {
+    const std::string& key = it.key();
+    const int k = key.size() == 1 ? m.AxisIndex(key[0]) : -1;  // "C1" and errors: ReadAxes
+    plain = k >= 0 && !(*given)[k] && it->is_number();
+    if (plain) {
+      const double x = it->get<double>();
+      plain = std::abs(x) <= (m.axis(k).rotary() ? kMaxRotaryDeg : kMaxLinear);
+      ob.axes[k] = x;
+      (*given)[k] = true;
+    }
+  }
+  if (!plain) ReadAxes(m, *axes, w() + ".axes", &ob.axes, given);
+  for (int k = 0; k < na; ++k)
     if (!(*given)[k] && m.axis(k).name != 'S')
-      throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
+      throw std::invalid_argument(w() + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
                                   "' (machine axes " + m.axis_names() + ")");
-  if (const json* d = Find(o, "direction")) ReadDirections(m, *d, w + ".direction", &ob.direction);
+  if (const json* d = Find(o, "direction")) {
+    plain = d->is_object();
+    std::vector<bool>& seen = *given;  // free again: the axes are read
+    seen.assign(na, false);
+    for (auto it = d->begin(); plain && it != d->end(); ++it) {
+      const std::string& key = it.key();
+      const int k = key.size() == 1 ? m.AxisIndex(key[0]) : -1;
+      int64_t x = 0;
+      plain = k >= 0 && !seen[k] && IntegralValue(*it, &x) && x >= -1 && x <= 1;
+      if (plain) {
+        ob.direction[k] = static_cast<int>(x);
+        seen[k] = true;
+      }
+    }
+    if (!plain) {
+      ob.direction.setZero();
+      ReadDirections(m, *d, w() + ".direction", &ob.direction);
+    }
+  }
   switch (ob.type) {
     case ObservationType::kFacet:
     case ObservationType::kSphere: {
-      ob.target = ReadString(o, "target", w);
+      ob.target = StringOf(o, "target", w);
       bool facet = ob.type == ObservationType::kFacet;
       int idx = facet ? artefact.FacetIndex(ob.target) : artefact.SphereIndex(ob.target);
       if (idx < 0)
-        throw std::invalid_argument(w + ".target: unknown " + type + " " + Quote(ob.target) +
+        throw std::invalid_argument(w() + ".target: unknown " + type + " " + Quote(ob.target) +
                                     " (not in dataset.artefact." + (facet ? "facets" : "spheres") + ")");
       break;
     }
     case ObservationType::kDbb:
-      ob.reading = ReadBounded(o, "reading", w, kMaxDbbReading);
-      ob.length = ReadBounded(o, "length", w, kMaxLinear);
-      if (ob.length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
+      ob.reading = BoundedOf(o, "reading", kMaxDbbReading, w);
+      ob.length = BoundedOf(o, "length", kMaxLinear, w);
+      if (ob.length <= 0) throw std::invalid_argument(w() + ".length: must be > 0 mm");
       [[fallthrough]];
-    case ObservationType::kBall3d:
-      ob.setup = ReadSetup(o, w);
-      ob.tool_ball = ReadVector3(o.value("tool_ball", json()), w + ".tool_ball");
-      ob.table_ball = ReadVector3(o.value("table_ball", json()), w + ".table_ball");
-      if (ob.type == ObservationType::kBall3d)
-        ob.measured = ReadVector3(o.value("measured", json()), w + ".measured");
+    case ObservationType::kBall3d: {
+      const json* sj = Find(o, "setup");
+      if (sj && sj->is_string() && sj->get_ref<const std::string&>().find('.') == std::string::npos)
+        ob.setup = sj->get<std::string>();
+      else if (sj)
+        ob.setup = ReadSetup(o, w());
+      ob.tool_ball = Vector3Of(o, "tool_ball", w);
+      ob.table_ball = Vector3Of(o, "table_ball", w);
+      if (ob.type == ObservationType::kBall3d) ob.measured = Vector3Of(o, "measured", w);
       break;
+    }
   }
-  if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w + ".sigma");
-  if (o.contains("id")) ob.id = ReadString(o, "id", w);
+  if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w() + ".sigma");
+  if (o.contains("id")) ob.id = StringOf(o, "id", w);
   return ob;
 }
 
