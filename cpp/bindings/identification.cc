@@ -1,4 +1,7 @@
 // Bindings of the identification engine: Dataset, Simulate, Identify, Result.
+#include <limits>
+#include <optional>
+
 #include <pybind11/eigen.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -24,19 +27,83 @@ void BindIdentification(py::module_& m) {
           [](const Machine& m, const std::string& type, const std::string& setup,
              const Eigen::MatrixXd& axes, const std::optional<Eigen::MatrixXi>& dirs,
              const Eigen::Vector3d& tool_ball, const Eigen::Vector3d& table_ball, double length,
-             const Eigen::MatrixXd& values) {
+             const Eigen::MatrixXd& values, const std::optional<Eigen::MatrixXd>& sigma) {
             Dataset d(m);
             ObservationType t = type == "dbb" ? ObservationType::kDbb : ObservationType::kBall3d;
             if (type != "dbb" && type != "ball3d")
               throw std::invalid_argument("ball samples: type must be 'dbb' or 'ball3d'");
             d.AppendBallSamples(t, setup, axes, dirs ? &*dirs : nullptr, tool_ball, table_ball,
                                 length, values);
-            d.Validate();
+            if (sigma) {
+              // The declared noise of each sample: N x rows (one value per
+              // residual row) or N x 1 (every row of the sample).
+              const Eigen::Index n = axes.rows(), rows = ResidualRows(t);
+              if (sigma->rows() != n || (sigma->cols() != 1 && sigma->cols() != rows))
+                throw std::invalid_argument("ball samples: sigma must be " + std::to_string(n) + " x " +
+                                            (rows == 1 ? "1" : "1 or " + std::to_string(rows)) + ", got " +
+                                            std::to_string(sigma->rows()) + " x " +
+                                            std::to_string(sigma->cols()));
+              for (Eigen::Index r = 0; r < n; ++r)
+                d.observations[r].sigma = sigma->cols() == rows ? Eigen::VectorXd(sigma->row(r).transpose())
+                                                                : Eigen::VectorXd::Constant(rows, (*sigma)(r, 0));
+            }
+            d.Validate();  // names the sample of a sigma out of range
             return d;
           },
           py::arg("machine"), py::arg("type"), py::arg("setup"), py::arg("axes"),
           py::arg("directions"), py::arg("tool_ball"), py::arg("table_ball"), py::arg("length"),
-          py::arg("values"))
+          py::arg("values"), py::arg("sigma") = std::nullopt)
+      .def(
+          "columns",
+          // The observations as arrays (what the plausibility checks read):
+          // 10^6 observations without a JSON round trip. Every observation
+          // has axes, a type code (ObservationType order) and a target index
+          // (facet or sphere, else -1); the ball-bar and 3D ball fields only
+          // exist for the rows listed in "ball" (NaN where not of its type).
+          [](const Dataset& d) {
+            const Eigen::Index n = static_cast<Eigen::Index>(d.observations.size());
+            const int na = d.machine().num_axes();
+            using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+            RowMajor axes(n, na);
+            Eigen::VectorXi type(n), target(n);
+            std::vector<int> ball;
+            for (Eigen::Index i = 0; i < n; ++i) {
+              const Observation& o = d.observations[i];
+              axes.row(i) = o.axes.transpose();
+              type[i] = static_cast<int>(o.type);
+              target[i] = o.type == ObservationType::kFacet    ? d.artefact.FacetIndex(o.target)
+                          : o.type == ObservationType::kSphere ? d.artefact.SphereIndex(o.target)
+                                                               : -1;
+              if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d)
+                ball.push_back(static_cast<int>(i));
+            }
+            const Eigen::Index k = static_cast<Eigen::Index>(ball.size());
+            const double nan = std::numeric_limits<double>::quiet_NaN();
+            Eigen::VectorXd reading = Eigen::VectorXd::Constant(k, nan), length = reading;
+            RowMajor measured = RowMajor::Constant(k, 3, nan), tool(k, 3), table(k, 3);
+            for (Eigen::Index j = 0; j < k; ++j) {
+              const Observation& o = d.observations[ball[j]];
+              if (o.type == ObservationType::kDbb) {
+                reading[j] = o.reading;
+                length[j] = o.length;
+              } else {
+                measured.row(j) = o.measured.transpose();
+              }
+              tool.row(j) = o.tool_ball.transpose();
+              table.row(j) = o.table_ball.transpose();
+            }
+            py::dict out;
+            out["axes"] = axes;
+            out["type"] = type;
+            out["target"] = target;
+            out["ball"] = Eigen::VectorXi(Eigen::Map<const Eigen::VectorXi>(ball.data(), k));
+            out["reading"] = reading;
+            out["length"] = length;
+            out["measured"] = measured;
+            out["tool_ball"] = tool;
+            out["table_ball"] = table;
+            return out;
+          })
       .def_property_readonly("machine", &Dataset::machine)
       .def_readonly("tip_radius", &Dataset::tip_radius)
       .def_property_readonly("num_observations",

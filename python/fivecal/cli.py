@@ -61,6 +61,35 @@ def _fit_warning():
     return FitWarning
 
 
+def _values_verdict(values, std=None, converged: bool = True, iterations=None):
+    """The :class:`fivecal.guards.Assessment` of a fit that gives plain
+    values (and standard uncertainties) rather than a Result: judged on
+    convergence and finiteness like ``identify``'s."""
+    from . import guards
+
+    params = {n: {"value": v, **({"std": std[n]} if std and n in std else {})} for n, v in values.items()}
+    return guards.assess({"parameters": params, "converged": bool(converged), "iterations": iterations})
+
+
+def fit_status(command: str, verdicts, force: bool = False, written=()) -> int:
+    """The exit status of a command that fits, judged as ``fivecal identify``
+    judges its fit: 0 when every verdict is usable; otherwise one line on
+    stderr saying why and 1 (the outputs are still written, to inspect) or,
+    with ``--force``, the same line as a warning and 0. ``verdicts``: pairs
+    (what, Assessment)."""
+    why = [f"{what}: {a.reason}" if what else a.reason for what, a in verdicts if not a.usable]
+    if not why:
+        return EXIT_OK
+    written = [x for x in written if x]
+    if force:
+        print(f"fivecal {command}: warning: not usable: {'; '.join(why)} (used anyway: --force)", file=sys.stderr)
+        return EXIT_OK
+    print(f"fivecal {command}: not usable: {'; '.join(why)}"
+          + (f" ({' and '.join(written)} written, to inspect)" if written else "")
+          + "; --force accepts it", file=sys.stderr)
+    return EXIT_FIT
+
+
 def _read_json(path: str, what: str):
     from .files import read_json
 
@@ -333,11 +362,16 @@ def _design(args) -> int:
 def _sphere(args) -> int:
     from . import cmm
     from .dataset import load_dataset
+    from .guards import require_usable
 
     ds = load_dataset(args.dataset)
     tests = {"nominal model": cmm.sphere_test(ds, None, args.sphere)}
     if args.values:
         res = _read_json(args.values, "result")
+        # A result that did not converge, is not finite, inadequate or
+        # undetermined would make the "identified model" column a confident
+        # figure of nothing: refused as `fivecal compensate` refuses it.
+        require_usable(res, args.force, args.values)
         params = res.get("parameters", res) if isinstance(res, dict) else None
         if not isinstance(params, dict):
             raise ValueError(f"{args.values}: expected a result JSON with 'parameters'")
@@ -354,7 +388,12 @@ def _sphere(args) -> int:
     if len(tests) == 2:
         a, b = (t.fit.out_of_sphericity for t in tests.values())
         print(f"\nout of sphericity reduced {a / b:.3g}-fold by the identified model" if b > 0 else "")
-    return 0
+    return fit_status("sphere", [(f"sphere fit ({name})",
+                                  _values_verdict({"center.x": t.fit.center[0], "center.y": t.fit.center[1],
+                                                   "center.z": t.fit.center[2], "radius": t.fit.radius,
+                                                   "out of sphericity": t.fit.out_of_sphericity},
+                                                  converged=t.fit.converged, iterations=t.fit.iterations))
+                                 for name, t in tests.items()], args.force)
 
 
 def _uncertainty(args) -> int:
@@ -371,12 +410,16 @@ def _uncertainty(args) -> int:
                                                      d["machine"])).to_dict()
         return d
 
+    import warnings
+
     inputs = [load(p) for p in args.inputs]
     if len(inputs) == 1:
-        mc = uncertainty.monte_carlo(inputs[0], args.estimate, trials=args.trials, threads=args.threads,
-                                     seed=args.seed, progress=not args.no_progress,
-                                     probability=args.probability, significant_digits=args.digits,
-                                     fix=args.fix, sigma=args.sigma)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", category=_fit_warning())  # judged below, in one line
+            mc = uncertainty.monte_carlo(inputs[0], args.estimate, trials=args.trials, threads=args.threads,
+                                         seed=args.seed, progress=not args.no_progress,
+                                         probability=args.probability, significant_digits=args.digits,
+                                         fix=args.fix, sigma=args.sigma)
         print(mc.report())
         if args.plot:
             mc.plot(args.plot)
@@ -384,7 +427,13 @@ def _uncertainty(args) -> int:
         if args.out:
             mc.save(args.out, include_samples=args.samples)
             print(f"result written to {args.out}")
-        return 0
+        verdicts = []
+        if mc.fit is not None:  # a dataset: the noise is drawn around its fit
+            verdicts.append(("the fit of the dataset", mc.fit.assessment()))
+        verdicts.append(("Monte Carlo", _values_verdict(mc.mean, mc.std, converged=mc.used > 0)))
+        if mc.used == 0:
+            verdicts[-1][1].reason = f"none of the {mc.trials} trials converged"
+        return fit_status("uncertainty", verdicts, args.force, (args.out, args.plot))
     try:
         days = [int(x) for x in args.days.split(",")] if args.days else None
     except ValueError:
@@ -398,7 +447,15 @@ def _uncertainty(args) -> int:
     if args.out:
         u.save(args.out)
         print(f"\nresult written to {args.out}")
-    return 0
+    # The sensitivities come from the fit of the first cycle: judged as
+    # `fivecal identify` would judge it.
+    from .identification import identify
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", category=_fit_warning())  # said once, in one line
+        reference = identify(inputs[0], args.estimate, fix=args.fix)
+    return fit_status("uncertainty", [(f"the fit of {args.inputs[0]}", reference.assessment()),
+                                      ("GUM", _values_verdict(u.values, u.std))], args.force, (args.out,))
 
 
 class _Terminated(BaseException):
@@ -539,6 +596,10 @@ def _one_line(e: BaseException) -> str:
         text = str(e) or type(e).__name__
     return " ".join(text.split())
 
+
+#: --help of --force for the commands that judge their own fit.
+_FORCE_HELP = ("exit 0 even when the fit is not usable (not converged, non-finite, inadequate or "
+               "undetermined); the reason is still printed. Only to inspect the values")
 
 #: Exit statuses of every command (README "Exit codes").
 EXIT_OK = 0        # success
@@ -692,6 +753,7 @@ def main(argv=None) -> int:
     pu.add_argument("--k", type=POSITIVE, default=None, help="cycles: coverage factor (default: Student t "
                     "with the pooled degrees of freedom)")
     pu.add_argument("--out", help="write the result JSON here")
+    pu.add_argument("--force", action="store_true", help=_FORCE_HELP)
     pu.set_defaults(func=_uncertainty)
 
     pg = sub.add_parser("design", help="choose K rotary indexations that minimise the condition number",
@@ -735,6 +797,8 @@ def main(argv=None) -> int:
     pp.add_argument("dataset", help="dataset JSON with sphere touches")
     pp.add_argument("--values", help="identification result JSON (the compensated model)")
     pp.add_argument("--sphere", default=None, help="sphere id (default: the only sphere touched)")
+    pp.add_argument("--force", action="store_true", help="use a --values result that is not usable and "
+                    "exit 0 on a sphere fit that is not (not converged or not finite); only to inspect them")
     pp.set_defaults(func=_sphere)
 
     old_stdout = sys.stdout

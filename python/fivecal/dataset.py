@@ -106,12 +106,15 @@ def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> 
 
 
 def ball_dataset(machine, type: str, axes: Mapping, tool_ball, table_ball, length: float = 0.0,
-                 readings=None, measured=None, setup: str = "", directions=None) -> Dataset:
+                 readings=None, measured=None, setup: str = "", directions=None, sigma=None) -> Dataset:
     """A dataset of ball-bar (``type="dbb"``, ``readings`` (N,) mm, bar ``length`` mm)
     or 3D ball (``type="ball3d"``, ``measured`` (N, 3) mm) samples of one mounting,
     built from arrays without JSON (fast for 10^5-10^6 samples). ``axes``: dict axis ->
     array (mm / degrees); ``tool_ball`` in F at the zero pose, ``table_ball`` in the
-    workpiece frame."""
+    workpiece frame. ``sigma``: the declared noise (one sigma, mm) that weights the
+    samples in the fit, as ``"sigma"`` in a dataset file: one number for every
+    sample, (N,) one per sample, or for ball3d (N, 3) one per component; None =
+    the instrument's default."""
     m = Machine.from_dict(machine)
     q = m.axes_matrix(axes)
     d = m.directions_matrix(directions, q.shape[0])
@@ -124,5 +127,17 @@ def ball_dataset(machine, type: str, axes: Mapping, tool_ball, table_ball, lengt
             raise ValueError("ball_dataset: 'measured' missing for type ball3d")
         values = np.asarray(measured, dtype=float).reshape(-1, 3)
     plausibility.check_balls(m, type, q, values, "ball_dataset")
+    sig = None
+    if sigma is not None:
+        try:
+            sig = np.asarray(sigma, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError("ball_dataset: sigma: expected a number or an array of numbers (mm)") from None
+        if sig.ndim == 0:
+            sig = np.full((q.shape[0], 1), float(sig))
+        elif sig.ndim == 1:
+            if sig.shape[0] != q.shape[0]:
+                raise ValueError(f"ball_dataset: sigma: {sig.shape[0]} values for {q.shape[0]} samples")
+            sig = sig.reshape(-1, 1)
     return Dataset(_core.Dataset.balls(m._core, type, setup, q, d, np.asarray(tool_ball, float),
-                                       np.asarray(table_ball, float), float(length), values))
+                                       np.asarray(table_ball, float), float(length), values, sig))

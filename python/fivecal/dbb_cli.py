@@ -10,6 +10,7 @@ Errors are one line on stderr (the caller, cli.main, prints them).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -107,6 +108,18 @@ def _check_step(step: float, sweep: float) -> None:
                          f"{MAX_TRACE_SAMPLES} per trace (use a larger step)")
 
 
+@contextlib.contextmanager
+def _quiet_fit_warnings():
+    """FitWarnings silenced: the command judges the fit itself, in one line."""
+    import warnings
+
+    from .guards import FitWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        yield
+
+
 # ---- jiang -----------------------------------------------------------------
 def _jiang(args) -> int:
     from . import dbb
@@ -142,10 +155,12 @@ def _jiang(args) -> int:
             raise ValueError("give a DATASET, or --machine with --simulate ERRORS or --csv SETUP=FILE,...")
         if args.save_dataset:
             save_dataset(ds, args.save_dataset)
-    res = dbb.jiang_cripps(ds, setups=setups, a_pivot_offset=_vector(args.a_pivot_offset, 2, "--a-pivot-offset") or (0, 0),
-                           c_pivot_offset=_vector(args.c_pivot_offset, 2, "--c-pivot-offset") or (0, 0),
-                           uniform_angles=args.uniform_angles, refer_positions=not args.no_refer,
-                           a_removal=args.a_removal, engine=not args.no_engine)
+    with _quiet_fit_warnings():  # judged once below, in one line
+        res = dbb.jiang_cripps(ds, setups=setups,
+                               a_pivot_offset=_vector(args.a_pivot_offset, 2, "--a-pivot-offset") or (0, 0),
+                               c_pivot_offset=_vector(args.c_pivot_offset, 2, "--c-pivot-offset") or (0, 0),
+                               uniform_angles=args.uniform_angles, refer_positions=not args.no_refer,
+                               a_removal=args.a_removal, engine=not args.no_engine)
     print(res.report())
     if args.out:
         _write_json(res.to_dict(), args.out)
@@ -155,7 +170,12 @@ def _jiang(args) -> int:
 
         plot_four_step(res, args.plot)
         print(f"polar plots written to {args.plot}")
-    return 0
+    from .cli import _values_verdict, fit_status
+
+    verdicts = [("four-step values", _values_verdict(res.values, res.std))]
+    if res.engine is not None:
+        verdicts.append(("general engine", res.engine.assessment()))
+    return fit_status("dbb jiang", verdicts, args.force, (args.out, args.plot))
 
 
 # ---- wang ------------------------------------------------------------------
@@ -187,7 +207,8 @@ def _wang(args) -> int:
             save_dataset(ds, args.save_dataset)
     if ds is not None:
         estimate = [s.strip() for s in args.estimate.split(",")] if args.estimate else list(dbb.WANG_ERRORS)
-        ident = dbb.wang_identify(ds, estimate=estimate, setup=args.setup)
+        with _quiet_fit_warnings():  # judged once below, in one line
+            ident = dbb.wang_identify(ds, estimate=estimate, setup=args.setup)
         print()
         print(ident.report())
         if args.out:
@@ -213,6 +234,9 @@ def _wang(args) -> int:
                        annotations=notes, plane=tuple(getattr(t, "plane", "XY")),
                        colors=["#d62728", "#222222"])
             print(f"polar plot written to {args.plot}")
+        from .cli import fit_status
+
+        return fit_status("dbb wang", [("", ident.result.assessment())], args.force, (args.out, args.plot))
     return 0
 
 
@@ -258,7 +282,15 @@ def _circular(args) -> int:
 
         plot_circular_test(res, args.plot)
         print(f"polar plot written to {args.plot}")
-    return 0
+    from .cli import _values_verdict, fit_status
+
+    # ISO 230-4 values of each run and the least-squares diagnosis: one
+    # non-finite number (a degenerate trace) makes the whole test unusable.
+    values = {f"run {i + 1} {k}": float(getattr(r, k)) for i, r in enumerate(res.runs)
+              for k in ("circular_deviation", "radial_deviation_max", "radial_deviation_min", "mean_radius")}
+    values.update({f"diagnosis {k}": v for k, v in res.diagnosis.items()})
+    std = {f"diagnosis {k}": v for k, v in res.diagnosis_std.items()}
+    return fit_status("dbb circular", [("", _values_verdict(values, std))], args.force, (args.out, args.plot))
 
 
 # ---- plot ------------------------------------------------------------------
@@ -315,7 +347,7 @@ def _plot(args) -> int:
 
 def register(sub) -> None:
     """Add the ``dbb`` subcommand group to the main parser's subparsers."""
-    from .cli import POSITIVE, SEED, SIGMA, _float_type
+    from .cli import _FORCE_HELP, POSITIVE, SEED, SIGMA, _float_type
 
     FINITE = _float_type()
     RD = argparse.RawDescriptionHelpFormatter
@@ -354,6 +386,7 @@ def register(sub) -> None:
     pj.add_argument("--save-dataset", help="write the simulated / imported dataset here")
     pj.add_argument("--out", help="write the result JSON here")
     pj.add_argument("--plot", help="write polar plots of the four steps (PNG)")
+    pj.add_argument("--force", action="store_true", help=_FORCE_HELP)
     pj.set_defaults(func=_jiang)
 
     pw = dsub.add_parser("wang", formatter_class=RD, help="Wang et al. simultaneous A/C test",
@@ -382,6 +415,7 @@ def register(sub) -> None:
     pw.add_argument("--save-dataset", help="write the simulated dataset here")
     pw.add_argument("--out", help="write the identification JSON here")
     pw.add_argument("--plot", help="write the polar plot of the trace (PNG)")
+    pw.add_argument("--force", action="store_true", help=_FORCE_HELP)
     pw.set_defaults(func=_wang)
 
     pc = dsub.add_parser("circular", formatter_class=RD, help="planar circular test (ISO 230-4, diagnosis)",
@@ -406,6 +440,7 @@ def register(sub) -> None:
     pc.add_argument("--step", type=POSITIVE, default=1.0, help="deg between simulated samples")
     pc.add_argument("--out", help="write the result JSON here")
     pc.add_argument("--plot", help="write the CW/CCW polar plot (PNG)")
+    pc.add_argument("--force", action="store_true", help=_FORCE_HELP)
     pc.set_defaults(func=_circular)
 
     pp = dsub.add_parser("plot", formatter_class=RD, help="polar plot of DBB traces",

@@ -21,6 +21,11 @@ Reading rules:
 * Every axis word is converted to machine units (mm) with the unit mode in
   force on its own line, and the modal positions are kept in machine units,
   so a G21 -> G20 switch never reinterprets a position already held.
+* Cutter radius compensation (G41, G42) and tool length compensation (G43,
+  G44) shift the path by the tool's radius or length in the controller's
+  offset table: a move while one is active is refused, naming the move and
+  the line that set it; a program that cancels them (G40, G49) before its
+  moves is read. Tool centre point control (G43.4, G43.5) is refused outright.
 * Every refusal is a ``ValueError`` of the form ``name:N: message (line N:
   text)`` with the 1-based line number.
 """
@@ -63,6 +68,17 @@ _REFUSED = {92.0: "G92 (set position) changes the coordinate system",
             10.0: "G10 (data setting) changes work or tool offsets",
             65.0: "G65 (macro call) moves the axes where the program does not say",
             66.0: "G66 (modal macro call) moves the axes where the program does not say"}
+# Cutter radius and tool length compensation: the controller moves the axes by
+# the radius or length of the tool in its offset table, which the program does
+# not hold, so the words are no longer the axis commands fivecal compensates.
+# Accepted while cancelled (G40, G49), as in the usual safety line of a
+# program head; a move while one is active is refused.
+_RADIUS_COMP = {41.0: "G41 (cutter radius compensation, left)", 42.0: "G42 (cutter radius compensation, right)",
+                41.1: "G41.1 (dynamic cutter radius compensation, left)",
+                42.1: "G42.1 (dynamic cutter radius compensation, right)"}
+_LENGTH_COMP = {43.0: "G43 (tool length compensation)", 44.0: "G44 (tool length compensation, negative)",
+                43.1: "G43.1 (dynamic tool length compensation)",
+                43.2: "G43.2 (additional tool length compensation)"}
 _REFUSED_M = {98.0: "M98 (subprogram call) moves the axes where the program does not say",
               99.0: "M99 (return / jump) changes the order of the blocks",
               198.0: "M198 (subprogram call) moves the axes where the program does not say"}
@@ -275,6 +291,8 @@ def read_program(program: str, axis_letters: Sequence[str], machine_name: str = 
     g91_line = 0
     inch = False
     wcs: Optional[Tuple[str, int]] = None
+    radius_comp: Optional[Tuple[float, int]] = None  # (G code, line) while active
+    length_comp: Optional[Tuple[float, int]] = None
 
     for li, raw in enumerate(prog.lines):
         ln = li + 1
@@ -308,6 +326,14 @@ def read_program(program: str, axis_letters: Sequence[str], machine_name: str = 
                 inch = True
             elif g in _MM:
                 inch = False
+            elif g in _RADIUS_COMP:
+                radius_comp = (g, ln)
+            elif g == 40.0:
+                radius_comp = None
+            elif g in _LENGTH_COMP:
+                length_comp = (g, ln)
+            elif g == 49.0:
+                length_comp = None
             elif g in _NONMODAL_AXIS_WORDS:
                 nonmodal_axis = True
             elif g == _DWELL:
@@ -337,6 +363,14 @@ def read_program(program: str, axis_letters: Sequence[str], machine_name: str = 
                 axis_words[w.letter] = w
         if not axis_words or dwell:
             continue
+        for comp, names, cancel, what in ((radius_comp, _RADIUS_COMP, "G40", "radius"),
+                                          (length_comp, _LENGTH_COMP, "G49", "length")):
+            if comp is not None:
+                since = "on this line" if comp[1] == ln else f"since line {comp[1]}"
+                raise _refuse(name, ln, text, f"move with {names[comp[0]]} active ({since}): the controller "
+                              f"shifts the path by the tool {what} from its offset table, which the "
+                              "compensation of the axis commands cannot take into account; cancel it "
+                              f"({cancel}) before the moves and give the cutting tool's tip instead (--tool-tip)")
         if nonmodal_axis:
             # G27/G28/G30 (via a point to home), G31/G38.x (stop at a touch), G53
             # (machine coordinates): left as written; the axes they move end where the

@@ -90,6 +90,19 @@ def _finite(x) -> bool:
         return False
 
 
+#: names a refusal lists before "and N more": a refusal about hundreds of
+#: parameters stays one readable line
+SHOWN_NAMES = 10
+
+
+def name_list(names, limit: int = SHOWN_NAMES) -> str:
+    """``a, b, c`` or, beyond ``limit`` names, the first ``limit`` and ``and N more``."""
+    names = list(names)
+    if len(names) <= limit:
+        return ", ".join(names)
+    return ", ".join(names[:limit]) + f" and {len(names) - limit} more"
+
+
 def _chi2_words(chi2: Optional[float], dof: Optional[float], p: Optional[float]) -> str:
     if chi2 is None or dof is None:
         return ""
@@ -182,7 +195,7 @@ def assess(source: Any) -> Assessment:
     reason = ""
     if verdict == "non_finite":
         reason = ("the fit produced values that are not finite numbers (NaN or infinity)"
-                  + (f" for {', '.join(bad[:8])}{' …' if len(bad) > 8 else ''}" if bad else ""))
+                  + (f" for {name_list(bad)}" if bad else ""))
     elif verdict == "not_converged":
         it = f["iterations"]
         reason = ("the fit did not converge" + (f" in {it} iterations" if it else "")
@@ -200,8 +213,7 @@ def assess(source: Any) -> Assessment:
     elif verdict == "undetermined":
         names = undetermined or confounded
         reason = ("the data did not determine "
-                  + (", ".join(names[:12]) + (" …" if len(names) > 12 else "") if names else
-                     "some of the requested parameters")
+                  + (name_list(names) if names else "some of the requested parameters")
                   + " (their values are arbitrary, not measured)")
     return Assessment(verdict, reason, undetermined, f["implausible"])
 

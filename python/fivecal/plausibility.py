@@ -117,6 +117,45 @@ def _axis_columns(machine: Machine, entries: Sequence[Mapping]):
             for a in machine.axis_names}
 
 
+#: Observation types in the order of the core's type codes (``Dataset.columns``).
+_TYPES = ("facet", "sphere", "dbb", "ball3d")
+
+
+def _optional_column(entries, key: str) -> np.ndarray:
+    """``entry[key]`` of every entry as floats, NaN where absent or not a number."""
+    return _column([e.get(key, math.nan) if isinstance(e, dict) else math.nan for e in entries])
+
+
+def _optional_rows(entries, key: str) -> np.ndarray:
+    return _rows([e.get(key, [math.nan] * 3) if isinstance(e, dict) else [math.nan] * 3
+                  for e in entries])
+
+
+def _dict_columns(machine: Machine, entries: Sequence, artefact) -> dict:
+    """What ``Dataset.columns`` gives for a dataset, from a list of
+    observation (or plan) dicts: axes, type code and target index of every
+    entry; the ball fields (reading, length, measured, tool_ball, table_ball)
+    of the rows listed in ``ball``, here every entry (NaN where a field is
+    absent or not of that entry's type)."""
+    types = np.array([_TYPES.index(e.get("type")) if isinstance(e, dict) and e.get("type") in _TYPES else -1
+                      for e in entries], dtype=int)
+    ids = {}
+    if isinstance(artefact, Mapping):
+        for code, key in ((0, "facets"), (1, "spheres")):
+            for k, x in enumerate(artefact.get(key) or []):
+                if isinstance(x, Mapping):
+                    ids.setdefault((code, str(x.get("id"))), k)
+    target = np.array([ids.get((int(t), str(e.get("target"))), -1) if t in (0, 1) else -1
+                       for t, e in zip(types, entries)], dtype=int)
+    measured = _optional_rows(entries, "measured")
+    measured[types != 3] = math.nan
+    return {"axes": _axis_columns(machine, entries), "type": types, "target": target,
+            "ball": np.arange(len(entries)),
+            "reading": np.where(types == 2, _optional_column(entries, "reading"), math.nan),
+            "length": _optional_column(entries, "length"), "measured": measured,
+            "tool_ball": _optional_rows(entries, "tool_ball"), "table_ball": _optional_rows(entries, "table_ball")}
+
+
 def _largest(values: np.ndarray, fields, out_vals: list, out_fields: list) -> None:
     if values.size:
         a = np.abs(np.nan_to_num(values, nan=0.0, posinf=np.inf, neginf=np.inf)).reshape(values.shape[0], -1)
@@ -126,18 +165,17 @@ def _largest(values: np.ndarray, fields, out_vals: list, out_fields: list) -> No
         out_fields.append(fields(i, j))
 
 
-def _positions(machine: Machine, entries, cols, where_list: str, ix=lambda i: i):
+def _positions(machine: Machine, cols: dict, where_list: str, ix=lambda i: i):
+    """The largest position or length of each kind and the field naming it:
+    vectorised over every row; only the winners get a name."""
     vals, fields = [], []
     for a in machine.axis_names:
         if not machine.is_rotary(a):
-            _largest(cols[a], lambda i, j, a=a: f"{where_list}[{ix(i)}].axes.{a}", vals, fields)
-    idx = [i for i, e in enumerate(entries) if isinstance(e, dict) and "length" in e]
-    _largest(_column([entries[i]["length"] for i in idx]),
-             lambda i, j: f"{where_list}[{ix(idx[i])}].length", vals, fields)
+            _largest(cols["axes"][a], lambda i, j, a=a: f"{where_list}[{ix(i)}].axes.{a}", vals, fields)
+    ball = cols["ball"]
+    _largest(cols["length"], lambda i, j: f"{where_list}[{ix(ball[i])}].length", vals, fields)
     for key in ("tool_ball", "table_ball"):
-        idx_k = [i for i, e in enumerate(entries) if isinstance(e, dict) and key in e]
-        _largest(_rows([entries[i][key] for i in idx_k]),
-                 lambda i, j, key=key, idx_k=idx_k: f"{where_list}[{ix(idx_k[i])}].{key}[{j}]", vals, fields)
+        _largest(cols[key], lambda i, j, key=key: f"{where_list}[{ix(ball[i])}].{key}[{j}]", vals, fields)
     return vals, fields
 
 
@@ -145,27 +183,23 @@ def check_plan(machine: Machine, plan: Sequence[Mapping], where: str = "plan") -
     """Rotary plan values in radians (warn), positions and lengths in µm."""
     if not isinstance(plan, (list, tuple)) or not plan:
         return
-    cols = _axis_columns(machine, plan)
-    check_rotary(machine, cols, f"{where}[*].axes")
-    vals, fields = _positions(machine, plan, cols, where)
+    cols = _dict_columns(machine, plan, None)
+    check_rotary(machine, cols["axes"], f"{where}[*].axes")
+    vals, fields = _positions(machine, cols, where)
     _check_size(np.array(vals, dtype=float), fields, where, "the plan's positions")
 
 
-#: Datasets with more observations are checked on this many evenly spaced ones
-#: (a unit error affects every observation; this keeps loading 10^6 fast).
-SAMPLE = 20000
-
-
 def check_loaded(ds, where: str = "dataset") -> None:
-    """:func:`check_dataset` of a validated :class:`fivecal.Dataset`; on more
-    than :data:`SAMPLE` observations, on SAMPLE evenly spaced ones (messages
-    keep the indices of the full dataset)."""
-    n = len(ds)
-    if n <= SAMPLE:
-        check_dataset(ds.to_dict(), ds.machine, where)
-        return
-    idx = np.unique(np.linspace(0, n - 1, SAMPLE).round().astype(int))
-    check_dataset(ds.subset(idx).to_dict(), ds.machine, where, indices=idx)
+    """All magnitude checks of a validated :class:`fivecal.Dataset`, on every
+    observation: the core hands the observations over as arrays (10^6 in a
+    fraction of a second) and a message names the first offending row."""
+    import json
+
+    head = json.loads(ds._core.subset([]).to_json())  # machine, probe, artefact: no observations
+    cols = ds._core.columns()
+    m = ds.machine
+    cols["axes"] = {a: cols["axes"][:, k] for k, a in enumerate(m.axis_names)}
+    _check_columns(m, head, cols, where)
 
 
 def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "dataset",
@@ -174,18 +208,23 @@ def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "d
     the index in the full dataset of each observation of ``d`` (a sample)."""
     if not isinstance(d, Mapping):
         return
-    ix = (lambda i: i) if indices is None else (lambda i: int(indices[i]))
     if machine is None:
         machine = Machine.from_dict(d["machine"])
     obs = d.get("observations") or []
     if not isinstance(obs, list):
         return
-    obs = [o for o in obs if isinstance(o, dict)]
-    cols = _axis_columns(machine, obs)
-    check_rotary(machine, cols, f"{where}: observations[*].axes")
+    _check_columns(machine, d, _dict_columns(machine, obs, d.get("artefact")), where,
+                   (lambda i: i) if indices is None else (lambda i: int(indices[i])))
+
+
+def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lambda i: i) -> None:
+    """The checks of :func:`check_dataset` on the columns of the observations
+    (``Dataset.columns`` or :func:`_dict_columns`); ``d`` gives the artefact
+    and the probe."""
+    check_rotary(machine, cols["axes"], f"{where}: observations[*].axes")
 
     # Positions and lengths: a dataset in µm.
-    vals, fields = _positions(machine, obs, cols, "observations", ix)
+    vals, fields = _positions(machine, cols, "observations", ix)
     art = d.get("artefact") or {}
     if isinstance(art, Mapping):
         for k, s in enumerate(art.get("spheres") or []):
@@ -206,32 +245,34 @@ def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "d
                 fields.append(f"artefact.scale_bars[{k}].length")
     _check_size(np.array(vals, dtype=float), fields, where, "the dataset's positions")
 
-    # Instrument ranges.
-    types = [o.get("type") for o in obs]
-    dbb = [i for i, t in enumerate(types) if t == "dbb"]
-    if dbb:
-        r = _column([obs[i].get("reading") for i in dbb])
+    # Instrument ranges (rows of the ball fields: cols["ball"]).
+    ball_types = cols["type"][cols["ball"]]
+    dbb = np.flatnonzero(ball_types == 2)
+    if dbb.size:
+        r = cols["reading"][dbb]
         k = int(np.argmax(np.abs(np.nan_to_num(r))))
         if abs(r[k]) > DBB_RANGE:
             big = int((np.abs(r) > DBB_RANGE).sum())
-            raise ValueError(f"{where}: observations[{ix(dbb[k])}].reading = {r[k]:.6g} mm ({big} of the "
+            row = ix(cols["ball"][dbb[k]])
+            raise ValueError(f"{where}: observations[{row}].reading = {r[k]:.6g} mm ({big} of the "
                              f"{r.size} ball bar readings checked are beyond ±{DBB_RANGE:g} mm; a ballbar "
                              "measures about ±1 mm): "
                              "readings look like µm: divide by 1000 (a reading is the bar length minus "
                              "its nominal length, in mm)")
-    b3 = [i for i, t in enumerate(types) if t == "ball3d"]
-    if b3:
-        mv = _rows([obs[i].get("measured") for i in b3])
+    b3 = np.flatnonzero(ball_types == 3)
+    if b3.size:
+        mv = cols["measured"][b3]
         a = np.abs(np.nan_to_num(mv)).max(axis=1)
         k = int(np.argmax(a))
         if a[k] > BALL3D_RANGE:
-            raise ValueError(f"{where}: observations[{ix(b3[k])}].measured = {mv[k].tolist()} mm is beyond "
+            row = ix(cols["ball"][b3[k]])
+            raise ValueError(f"{where}: observations[{row}].measured = {mv[k].tolist()} mm is beyond "
                              f"an R-test / 3D ball sensor's range (a few mm, {BALL3D_RANGE:g} mm here): "
                              "displacements look like µm: divide by 1000")
-    _check_touches(machine, d, obs, cols, where)
+    _check_touches(machine, d, cols, where)
 
 
-def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
+def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None:
     """Sphere and facet touches against the artefact, at the nominal machine."""
     art = d.get("artefact") or {}
     if not isinstance(art, Mapping):
@@ -240,10 +281,10 @@ def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
     r = _num(probe.get("tip_radius", 0.0)) if isinstance(probe, Mapping) else 0.0
     if not math.isfinite(r):
         return
-    idx = [i for i, o in enumerate(obs) if o.get("type") in ("sphere", "facet")]
-    if not idx:
+    idx = np.flatnonzero((cols["type"] == 0) | (cols["type"] == 1))
+    if not idx.size:
         return
-    sub = {a: c[idx] for a, c in cols.items()}
+    sub = {a: c[idx] for a, c in cols["axes"].items()}
     if any(not np.isfinite(c).all() for a, c in sub.items() if a != "S"):
         return
     with warnings.catch_warnings():
@@ -252,12 +293,12 @@ def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
             P = machine.tool_point(sub)
         except ValueError:
             return  # the loader names what is wrong with the poses
-    targets = np.array([str(obs[i].get("target")) for i in idx])
-    types = np.array([obs[i].get("type") for i in idx])
+    targets = cols["target"][idx]
+    types = cols["type"][idx]
     for k, s in enumerate(art.get("spheres") or []):
         if not isinstance(s, Mapping):
             continue
-        sel = (types == "sphere") & (targets == str(s.get("id")))
+        sel = (types == 1) & (targets == k)
         c, R = _vec(s.get("center")), _num(s.get("radius"))
         if sel.sum() < 3 or not np.isfinite(c).all() or not (math.isfinite(R) and R > 0):
             continue
@@ -277,7 +318,7 @@ def _check_touches(machine: Machine, d: Mapping, obs, cols, where: str) -> None:
     for k, f in enumerate(art.get("facets") or []):
         if not isinstance(f, Mapping):
             continue
-        sel = (types == "facet") & (targets == str(f.get("id")))
+        sel = (types == 0) & (targets == k)
         a, n = _vec(f.get("point")), _vec(f.get("normal"))
         if not sel.any() or not (np.isfinite(a).all() and np.isfinite(n).all()) or np.linalg.norm(n) == 0:
             continue

@@ -369,6 +369,31 @@ TEST(SphereTest, RigidErrorsLeaveTheSphereRound) {
   EXPECT_NEAR(rows[5].value, 2.5e-6, 1e-18);
 }
 
+TEST(SphereTest, ModelValuesRefuseUnknownNames) {
+  // A result's setup parameters are skipped; a misspelt machine parameter
+  // would otherwise leave the model nominal without a word.
+  const json m = MachineJson("hu40t");
+  const json art = {{"spheres", {{{"id", "P"}, {"center", {100.0, -50.0, 60.0}}, {"radius", 9.525}}}}};
+  const json obs = {{{"type", "sphere"}, {"target", "P"},
+                     {"axes", {{"X", 0.0}, {"Y", 0.0}, {"Z", 0.0}, {"B", 0.0}, {"C", 0.0}}}}};
+  const Dataset ds = Dataset::FromJson(
+      json({{"machine", m}, {"probe", {{"tip_radius", 3.0}}}, {"artefact", art}, {"observations", obs}}).dump());
+  EXPECT_NO_THROW(TablePoints(ds, {{"EX0C", 0.01}, {"tip.x", 0.1}, {"sphere.P.x", 0.2}, {"facet.F1", 0.3},
+                                   {"dbb.A1.length", 0.1}}, {0}));
+  for (const auto& [bad, hint] : std::vector<std::pair<std::string, std::string>>{
+           {"tpi.x", "did you mean \"tip.x\""}, {"EX0C.x", "unknown parameter"}, {"EXOC", "EX0C"}}) {
+    try {
+      TablePoints(ds, {{bad, 0.01}}, {0});
+      ADD_FAILURE() << bad << " was accepted";
+    } catch (const std::invalid_argument& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("values." + bad), std::string::npos) << what;
+      EXPECT_NE(what.find(hint), std::string::npos) << what;
+    }
+  }
+  EXPECT_THROW(SphereTest(ds, "", {{"tpi.z", 1.0}}), std::invalid_argument);
+}
+
 // ---- machining tests -------------------------------------------------------------
 
 Machine C600U() { return Machine::FromJson(MachineJson("c600u").dump()); }

@@ -506,5 +506,134 @@ TEST(LoaderBoundary, SyntaxErrorsStillNameTheField) {
   ExpectInvalid([&] { Dataset::FromJson(text); }, {"dataset.observations[2].reading", "double range"});
 }
 
+// ---- Streaming load (observations converted one by one) ---------------------
+
+// The dataset text with its members in the given order.
+std::string InOrder(const json& d, const std::vector<std::string>& keys) {
+  std::string text = "{";
+  for (size_t i = 0; i < keys.size(); ++i)
+    text += (i ? "," : "") + json(keys[i]).dump() + ":" + d[keys[i]].dump();
+  return text + "}";
+}
+
+TEST(LoaderStreaming, EveryMemberOrderLoadsTheSameDataset) {
+  // The stream takes machine and artefact before the observations; any other
+  // order goes through the document parser; both give the same dataset.
+  const json d = SmallDataset();
+  const std::string expected = Load(d).ToJson();
+  for (const auto& order : std::vector<std::vector<std::string>>{
+           {"machine", "probe", "artefact", "observations"},
+           {"observations", "machine", "probe", "artefact"},
+           {"machine", "observations", "artefact", "probe"},
+           {"artefact", "observations", "probe", "machine"}})
+    EXPECT_EQ(Dataset::FromJson(InOrder(d, order)).ToJson(), expected) << order[0] << "," << order[1];
+  // Ball samples need no artefact: they stream with it given after them.
+  json balls = d;
+  balls["observations"] = json::array({d["observations"][2], d["observations"][3]});
+  EXPECT_EQ(Dataset::FromJson(InOrder(balls, {"machine", "observations", "artefact", "probe"})).ToJson(),
+            Load(balls).ToJson());
+}
+
+TEST(LoaderStreaming, EveryFieldFormConvertsAsTheDocumentParserReadsIt) {
+  // The common observation converts straight from the parser's events, any
+  // other form through the document reader: both must give the same dataset.
+  json d = SmallDataset();
+  json& o = d["observations"];
+  o[0]["sigma"] = 0.002;
+  o[0]["id"] = "touch 1";
+  o[0]["direction"] = {{"X", 1.0}, {"Y", -1}, {"Z", 0}, {"B", -0.0}};  // integral floats
+  o[1]["axes"].erase("S");                                             // S may be left out
+  o[1]["axes"]["C1"] = 12.5;                                           // its alias
+  o[1]["axes"]["X"] = -7;                                              // a negative integer
+  o[2]["sigma"] = {0.0007};                                            // one per row
+  o[2]["setup"] = "A 1";
+  o[3]["sigma"] = {0.001, 0.002, 0.003};
+  o[3].erase("setup");                                                 // the default mounting
+  o.push_back({{"type", "ball3d"}, {"axes", Axes()}, {"measured", {1, 0, 0}}, {"tool_ball", {0, 0, 0}},
+               {"table_ball", {0, 0, 100}}, {"sigma", 1}, {"direction", {{"C", 1}}}});
+  o.push_back({{"type", "dbb"}, {"setup", "A1"}, {"axes", Axes()}, {"reading", -0.5}, {"length", 150},
+               {"tool_ball", {0.5, 0, 0}}, {"table_ball", {0, 0, 100}}, {"id", "last"}});
+  const std::string streamed = Dataset::FromJson(InOrder(d, {"machine", "artefact", "observations", "probe"})).ToJson();
+  const std::string document = Dataset::FromJson(InOrder(d, {"observations", "machine", "artefact", "probe"})).ToJson();
+  EXPECT_EQ(streamed, document);
+  const Dataset ds = Dataset::FromJson(InOrder(d, {"machine", "artefact", "observations", "probe"}));
+  const Machine& m = ds.machine();
+  EXPECT_EQ(ds.observations[0].sigma, Eigen::VectorXd::Constant(1, 0.002));
+  EXPECT_EQ(ds.observations[0].id, "touch 1");
+  EXPECT_EQ(ds.observations[0].direction[m.AxisIndex('X')], 1);
+  EXPECT_EQ(ds.observations[1].axes[m.AxisIndex('S')], 12.5);
+  EXPECT_EQ(ds.observations[1].axes[m.AxisIndex('X')], -7.0);
+  EXPECT_EQ(ds.observations[3].setup, "");
+  EXPECT_EQ(ds.observations[3].sigma, Eigen::Vector3d(0.001, 0.002, 0.003));
+  EXPECT_EQ(ds.observations[4].sigma, Eigen::Vector3d::Constant(1.0));
+  EXPECT_EQ(ds.observations[5].length, 150.0);
+  EXPECT_EQ(ds.observations[5].tool_ball, Eigen::Vector3d(0.5, 0, 0));
+}
+
+TEST(LoaderStreaming, MessagesAreThoseOfTheDocumentOrder) {
+  const std::vector<std::string> order = {"machine", "artefact", "observations", "probe"};
+  // A bad observation and, after the observations, an unknown member: the
+  // member is named first, as the document parser checks the top level first.
+  json d = SmallDataset();
+  d["observations"][1]["axes"]["Q"] = 1.0;
+  std::string text = InOrder(d, order);
+  text.insert(text.size() - 1, R"(,"probes":{})");
+  ExpectInvalid([&] { Dataset::FromJson(text); }, {"dataset: unknown key \"probes\"", "\"probe\""});
+  // ... a bad probe after the observations, likewise.
+  d = SmallDataset();
+  d["observations"][1]["axes"]["Q"] = 1.0;
+  d["probe"]["tip_radius"] = -1.0;
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, order)); }, {"dataset.probe.tip_radius"});
+  // With a valid head, the first bad observation.
+  d = SmallDataset();
+  d["observations"][1]["axes"]["Q"] = 1.0;
+  d["observations"][3]["measured"] = "x";
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, order)); }, {"dataset.observations[1].axes", "'Q'"});
+  // A syntax error behind a bad observation is the first thing said.
+  text = InOrder(d, order);
+  text.insert(text.size() - 1, ",");
+  ExpectInvalid([&] { Dataset::FromJson(text); }, {"invalid JSON"});
+  // A repeated member: the last one counts, as in the document parser.
+  d = SmallDataset();
+  text = InOrder(d, order);
+  json first = d["observations"];
+  first[0]["target"] = "nowhere";
+  text.insert(text.size() - 1, R"(,"observations":)" + json::array({d["observations"][1]}).dump());
+  text.insert(1, R"("observations":)" + first.dump() + ",");
+  EXPECT_EQ(Dataset::FromJson(text).observations.size(), 1u);
+  // Fields one by one: the message of the document parser, whatever the order.
+  for (const auto& [edit, needle] : std::vector<std::pair<std::function<void(json&)>, std::string>>{
+           {[](json& o) { o[0]["axes"]["X"] = 2e5; }, "observations[0].axes.X"},
+           {[](json& o) { o[0]["axes"].erase("Y"); }, "observations[0].axes: missing axis 'Y'"},
+           {[](json& o) { o[0]["direction"]["X"] = 2; }, "observations[0].direction.X"},
+           {[](json& o) { o[0]["sigma"] = 0.0; }, "observations[0].sigma"},
+           {[](json& o) { o[2]["reading"] = 101.0; }, "observations[2].reading"},
+           {[](json& o) { o[2]["length"] = 0; }, "observations[2].length: must be > 0 mm"},
+           {[](json& o) { o[2]["setup"] = "A.1"; }, "observations[2].setup"},
+           {[](json& o) { o[3]["measured"] = {1, 2}; }, "observations[3].measured"},
+           {[](json& o) { o[3]["tool_ball"] = {1, 2, "3"}; }, "observations[3].tool_ball[2]"},
+           {[](json& o) { o[3].erase("table_ball"); }, "observations[3].table_ball"},
+           {[](json& o) { o[1]["target"] = 5; }, "observations[1].target: missing (a string)"},
+           {[](json& o) { o[1]["type"] = "spere"; }, "did you mean \"sphere\""},
+           {[](json& o) { o[0]["id"] = 3; }, "observations[0].id"},
+           {[](json& o) { o[0]["axes"] = {{"X", {1}}}; }, "observations[0].axes.X: expected a number"}}) {
+    d = SmallDataset();
+    edit(d["observations"]);
+    const std::string streamed = MessageOf([&] { Dataset::FromJson(InOrder(d, order)); });
+    const std::string document =
+        MessageOf([&] { Dataset::FromJson(InOrder(d, {"observations", "machine", "artefact", "probe"})); });
+    EXPECT_EQ(streamed, document);
+    EXPECT_NE(streamed.find(needle), std::string::npos) << streamed;
+  }
+  // An observation that is not an object, a target defined nowhere.
+  d = SmallDataset();
+  d["observations"][2] = 7;
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, order)); }, {"dataset.observations[2]: expected an object"});
+  d = SmallDataset();
+  d["observations"][1]["target"] = "S9";
+  ExpectInvalid([&] { Dataset::FromJson(InOrder(d, {"machine", "observations", "artefact"})); },
+                {"dataset.observations[1].target: unknown sphere 'S9'"});
+}
+
 }  // namespace
 }  // namespace fivecal

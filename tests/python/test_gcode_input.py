@@ -276,3 +276,41 @@ def test_tokenizer_spans_and_decimals():
         ("Z", 3.25, 2, False)]
     text = "N5 G1X-.5 y+2. (X9) Z 3.25 ; X7"
     assert text[w[4].start:w[4].end] == "3.25"
+
+
+# ------------------------------------------- cutter radius / tool length compensation
+@pytest.mark.parametrize("program,line,fragments", [
+    # set on the line of the move
+    (HEAD + "G43 H1 Z100.\n", 2, ["G43 (tool length compensation)", "on this line", "G49"]),
+    (HEAD + "G1 G41 D1 X10. F500\n", 2, ["G41 (cutter radius compensation, left)", "G40"]),
+    # set before, the move refused names both lines
+    (HEAD + "G42 D3\nG1 Y5.\n", 3, ["G42 (cutter radius compensation, right)", "since line 2"]),
+    (HEAD + "T1 M6\nG44 H2\n(approach)\nG0 X10. Y10.\n", 5, ["G44", "since line 3"]),
+    (HEAD + "G43.1 Z50.\n", 2, ["G43.1 (dynamic tool length compensation)"]),
+    # a rotary move is a move too
+    (HEAD + "G43 H1\nG0 B30.\n", 3, ["G43", "since line 2"]),
+    # cancelling one of the two leaves the other active
+    (HEAD + "G41 D1 G43 H1\nG40\nG1 X5.\n", 4, ["G43", "since line 2"]),
+    # a G41 after the cancel (the last word of the line wins)
+    (HEAD + "G40 G41 D1\nG1 X5.\n", 3, ["G41", "since line 2"]),
+])
+def test_radius_and_length_compensation_at_a_move_are_refused(hu40t, program, line, fragments):
+    refusal(program, hu40t, line, "move with", *fragments)
+
+
+@pytest.mark.parametrize("program", [
+    "G17 G40 G49 G80\n" + HEAD + "G1 X10.\n",                 # the safety line of a program head
+    HEAD + "G43 H1\nG49\nG1 X10.\n",                           # set and cancelled before any move
+    HEAD + "G41 D1\nG40\nG1 X10. Y5.\n",
+    HEAD + "G42 D1 G40\nG1 X10.\n",                            # cancelled on the same line
+    HEAD + "G1 X10.\nG43 H1\nM30\n",                           # set after the last move
+])
+def test_compensation_cancelled_before_the_moves_is_read(hu40t, program):
+    res = compensate_gcode(program, hu40t, {"EX0C": 0.01})
+    assert res.moves >= 2
+
+
+def test_example_program_cancels_compensation_in_its_head(hu40t):
+    text = open(os.path.join(ROOT, "examples", "gcode", "hu40t_5axis.nc")).read()
+    assert "G40 G49" in text
+    assert compensate_gcode(text, hu40t, {"EX0C": 0.01}).moves > 0

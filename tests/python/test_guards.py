@@ -411,3 +411,46 @@ def test_identify_exits_1_when_the_fit_does_not_converge(files, monkeypatch, cap
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "did not converge in 1 iterations" in err[0], err
     assert guards.assess(str(out)).verdict == "not_converged"
+
+
+# --- refusals stay readable: hundreds of names are cut to the first ten and a count --------------------
+
+def test_refusal_about_hundreds_of_undetermined_parameters_is_capped(good):
+    d = good.to_dict()
+    names = [f"sphere.S{i}.y" for i in range(300)]
+    d.update(verdict="undetermined", undetermined=names)
+    a = guards.assess(d)
+    assert a.undetermined == names  # every one is still kept out of the tables
+    assert ", ".join(names[:10]) + " and 290 more" in a.reason and "S10." not in a.reason
+    with pytest.raises(fivecal.UnusableResultError) as e:
+        guards.require_usable(d)
+    assert len(str(e.value)) < 400 and "and 290 more" in str(e.value)
+    d = good.to_dict()
+    for n in list(d["parameters"])[:30]:
+        d["parameters"][n]["value"] = float("nan")
+    a = guards.assess(d)
+    assert a.verdict == "non_finite" and "and 20 more" in a.reason
+
+
+def test_identify_refusal_of_many_undetermined_groups_is_capped():
+    """120 spheres touched only in the XZ plane: 120 centres' y undetermined,
+    one group each; the refusal names the first groups and counts the rest."""
+    m = tango.hu40t_machine()
+    s2 = 0.5 ** 0.5
+    spheres = [{"id": f"S{i}", "center": [float(-200 + 13 * (i % 30)), float(-100 + 40 * (i // 30)), 30.0],
+                "radius": 5.0} for i in range(120)]
+    plan, pts = [], []
+    for s in spheres:
+        for n in ([0, 0, 1], [1, 0, 0], [-1, 0, 0], [s2, 0, s2], [-s2, 0, s2]):
+            pts.append(np.array(s["center"]) + 8.0 * np.array(n, float))
+            plan.append({"type": "sphere", "target": s["id"], "normal": n})
+    ax = m.inverse(np.array(pts), np.tile([0, 0, 1.0], (len(pts), 1)))
+    for i, e in enumerate(plan):
+        e["axes"] = {a: float(v[i]) for a, v in ax.items()}
+    ds = simulate(m, plan, artefact={"spheres": spheres}, tip_radius=3.0, sigma=0.001, seed=1)
+    with pytest.raises(ValueError, match="not determined by this data") as e:
+        fivecal.identify(ds, ["EX0C"])
+    msg = str(e.value)
+    assert len(msg) < 1000, msg
+    assert "{sphere.S0.y}" in msg and "sphere.S119.y" not in msg
+    assert re.search(r"and 11\d more parameters in 11\d more groups\. Fix one parameter", msg), msg

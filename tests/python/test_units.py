@@ -242,8 +242,8 @@ def test_column_unit():
     assert abs(column_unit("angle_rad", "angle")[0] - 180 / np.pi) < 1e-12
 
 
-def test_large_dataset_checked_on_a_sample_with_full_indices(c600u):
-    n = 25000  # above plausibility.SAMPLE: checked on evenly spaced observations
+def test_large_dataset_checked_on_every_observation(c600u, tmp_path):
+    n = 25000
     rng = np.random.default_rng(0)
     axes = {a: rng.uniform(-50, 50, n) for a in "XYZ"}
     axes.update({"A": rng.uniform(-20, 70, n), "C": rng.uniform(0, 359, n)})
@@ -253,5 +253,18 @@ def test_large_dataset_checked_on_a_sample_with_full_indices(c600u):
     for o in d["observations"]:
         o["reading"] *= 1000
     d["observations"][-1]["reading"] = 99.0
-    with pytest.raises(ValueError, match=rf"observations\[{n - 1}\]\.reading = 99 mm"):
+    with pytest.raises(ValueError, match=rf"observations\[{n - 1}\]\.reading = 99 mm \(\d+ of the {n} "):
         fivecal.Dataset.from_dict(d)
+    # One reading in µm among 25000 is found, also where a sample of 20000
+    # evenly spaced observations would not look (a unit slip in one file of a
+    # merged trace), and named by its index.
+    grid = set(np.linspace(0, n - 1, 20000).round().astype(int).tolist())
+    k = next(i for i in range(n // 2, n) if i not in grid)
+    d = copy.deepcopy(ds.to_dict())
+    d["observations"][k]["reading"] = 12.5
+    with pytest.raises(ValueError, match=rf"observations\[{k}\]\.reading = 12.5 mm \(1 of the {n} "):
+        fivecal.Dataset.from_dict(d)
+    p = tmp_path / "one_bad_row.json"
+    p.write_text(json.dumps(d))
+    with pytest.raises(ValueError, match=rf"one_bad_row.json: observations\[{k}\]\.reading = 12.5 mm"):
+        fivecal.load_dataset(p)

@@ -1,6 +1,10 @@
 #include "fivecal/observations/dataset.h"
 
 #include <cmath>
+#include <algorithm>
+#include <exception>
+#include <functional>
+#include <memory>
 #include <set>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -34,8 +38,6 @@ int Artefact::SphereIndex(const std::string& id) const {
 }
 
 namespace {
-Dataset ParseDataset(const json& j, bool require_observations);
-
 void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::string& where) {
   if (sigma.size() == 0) return;
   if (sigma.size() != ResidualRows(t))
@@ -85,17 +87,15 @@ Eigen::VectorXd ReadSigma(const json& j, ObservationType t, const std::string& w
 }
 }  // namespace
 
-Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
-  return Guard("dataset", [&] { return ParseDataset(Parse(text, "dataset"), require_observations); });
-}
-
 namespace {
 const json* Find(const json& obj, const char* key) {
   auto it = obj.find(key);
   return it == obj.end() ? nullptr : &*it;
 }
 
-Dataset ParseDataset(const json& j, bool require_observations) {
+// Everything but the observations: machine, probe and artefact, checked in
+// the order the messages promise (unknown top-level keys first).
+Dataset ParseHead(const json& j) {
   if (!j.is_object()) throw std::invalid_argument("dataset: expected a JSON object");
   CheckKeys(j, {"machine", "probe", "artefact", "observations", "$schema", "_comment"}, "dataset");
   if (!j.contains("machine")) throw std::invalid_argument("dataset.machine: missing");
@@ -108,7 +108,6 @@ Dataset ParseDataset(const json& j, bool require_observations) {
       throw std::invalid_argument(std::string("dataset.") + e.what());
     }
   }();
-  const Machine& m = ds.machine();
 
   if (j.contains("probe")) {
     const json& p = j["probe"];
@@ -186,46 +185,570 @@ Dataset ParseDataset(const json& j, bool require_observations) {
       }
     }
   }
+  return ds;
+}
+
+// The name of observation i in messages, built only when one is needed: the
+// checks below run on every one of 10^6 observations, and on their common
+// path (a valid field) each does the test inline; only a field that fails it
+// goes through the json_util reader, which names what is wrong (or accepts a
+// rarer valid form).
+class ObservationName {
+ public:
+  explicit ObservationName(size_t i) : i_(i) {}
+  const std::string& operator()() {
+    if (s_.empty()) s_ = "dataset.observations[" + std::to_string(i_) + "]";
+    return s_;
+  }
+
+ private:
+  size_t i_;
+  std::string s_;
+};
+
+void CheckKeysOf(const json& o, const std::vector<const char*>& allowed, ObservationName& w) {
+  for (auto it = o.begin(); it != o.end(); ++it) {
+    const std::string& key = it.key();
+    if (std::none_of(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }))
+      CheckKeys(o, allowed, w());  // throws, naming the key
+  }
+}
+
+std::string StringOf(const json& o, const char* key, ObservationName& w) {
+  const json* v = Find(o, key);
+  if (v && v->is_string()) return v->get<std::string>();
+  return ReadString(o, key, w());
+}
+
+// Observation i of dataset `ds` (its machine and artefact are read; the
+// artefact resolves the targets of probe touches). `given` is scratch space
+// shared by the calls. The common fields (axes, direction) take a fast path;
+// each kind reads its own fields (ObservationKind::Read).
+Observation ParseObservation(const Dataset& ds, const json& o, size_t i, std::vector<bool>* given) {
+  const Machine& m = ds.machine();
+  ObservationName w(i);
+  if (!o.is_object()) throw std::invalid_argument(w() + ": expected an object");
+  Observation ob;
+  const json* tj = Find(o, "type");
+  if (!tj || !tj->is_string()) throw std::invalid_argument(w() + ".type: missing (a string)");
+  const std::string& type = tj->get_ref<const std::string&>();
+  const ObservationKind* kind = FindKind(type);
+  if (!kind)
+    throw std::invalid_argument(w() + ".type: unknown type " + Quote(type) + " (" + KindList() + ")" +
+                                DidYouMean(type, KindNames()));
+  ob.type = kind->type();
+  CheckKeysOf(o, kind->json_keys(), w);
+  const json* axes = Find(o, "axes");
+  if (!axes || !axes->is_object())
+    throw std::invalid_argument(w() + ".axes: missing (an object axis letter -> reading)");
+  const int na = m.num_axes();
+  ob.axes = Eigen::VectorXd::Zero(na);
+  ob.direction = Eigen::VectorXi::Zero(na);
+  given->assign(na, false);
+  bool plain = true;
+  for (auto it = axes->begin(); plain && it != axes->end(); ++it) {
+    const std::string& key = it.key();
+    const int k = key.size() == 1 ? m.AxisIndex(key[0]) : -1;  // "C1" and errors: ReadAxes
+    plain = k >= 0 && !(*given)[k] && it->is_number();
+    if (plain) {
+      const double x = it->get<double>();
+      plain = std::abs(x) <= (m.axis(k).rotary() ? kMaxRotaryDeg : kMaxLinear);
+      ob.axes[k] = x;
+      (*given)[k] = true;
+    }
+  }
+  if (!plain) ReadAxes(m, *axes, w() + ".axes", &ob.axes, given);
+  for (int k = 0; k < na; ++k)
+    if (!(*given)[k] && m.axis(k).name != 'S')
+      throw std::invalid_argument(w() + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
+                                  "' (machine axes " + m.axis_names() + ")");
+  if (const json* d = Find(o, "direction")) {
+    plain = d->is_object();
+    std::vector<bool>& seen = *given;  // free again: the axes are read
+    seen.assign(na, false);
+    for (auto it = d->begin(); plain && it != d->end(); ++it) {
+      const std::string& key = it.key();
+      const int k = key.size() == 1 ? m.AxisIndex(key[0]) : -1;
+      int64_t x = 0;
+      plain = k >= 0 && !seen[k] && IntegralValue(*it, &x) && x >= -1 && x <= 1;
+      if (plain) {
+        ob.direction[k] = static_cast<int>(x);
+        seen[k] = true;
+      }
+    }
+    if (!plain) {
+      ob.direction.setZero();
+      ReadDirections(m, *d, w() + ".direction", &ob.direction);
+    }
+  }
+  kind->Read(o, w(), ds, &ob);
+  if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w() + ".sigma");
+  if (o.contains("id")) ob.id = StringOf(o, "id", w);
+  return ob;
+}
+
+void Finish(Dataset* ds, bool require_observations) {
+  if (require_observations || !ds->observations.empty()) ds->Validate();
+  else ValidateScaleBars(ds->artefact);
+}
+
+Dataset ParseDataset(const json& j, bool require_observations) {
+  Dataset ds = ParseHead(j);
   if (!j.contains("observations") || !j["observations"].is_array())
     throw std::invalid_argument("dataset.observations: missing (an array)");
   const json& obs = j["observations"];
   ds.observations.reserve(obs.size());
   std::vector<bool> given;
-  for (size_t i = 0; i < obs.size(); ++i) {
-    const std::string w = "dataset.observations[" + std::to_string(i) + "]";
-    const json& o = obs[i];
-    if (!o.is_object()) throw std::invalid_argument(w + ": expected an object");
-    Observation ob;
-    const json* tj = Find(o, "type");
-    if (!tj || !tj->is_string()) throw std::invalid_argument(w + ".type: missing (a string)");
-    const std::string& type = tj->get_ref<const std::string&>();
-    const ObservationKind* kind = FindKind(type);
-    if (!kind)
-      throw std::invalid_argument(w + ".type: unknown type " + Quote(type) + " (" + KindList() + ")" +
-                                  DidYouMean(type, KindNames()));
-    ob.type = kind->type();
-    CheckKeys(o, kind->json_keys(), w);
-    const json* axes = Find(o, "axes");
-    if (!axes || !axes->is_object())
-      throw std::invalid_argument(w + ".axes: missing (an object axis letter -> reading)");
-    ob.axes = Eigen::VectorXd::Zero(m.num_axes());
-    ob.direction = Eigen::VectorXi::Zero(m.num_axes());
-    ReadAxes(m, *axes, w + ".axes", &ob.axes, &given);
-    for (int k = 0; k < m.num_axes(); ++k)
-      if (!given[k] && m.axis(k).name != 'S')
-        throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
-                                    "' (machine axes " + m.axis_names() + ")");
-    if (const json* d = Find(o, "direction")) ReadDirections(m, *d, w + ".direction", &ob.direction);
-    kind->Read(o, w, ds, &ob);
-    if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w + ".sigma");
-    if (o.contains("id")) ob.id = ReadString(o, "id", w);
-    ds.observations.push_back(std::move(ob));
-  }
-  if (require_observations || !ds.observations.empty()) ds.Validate();
-  else ValidateScaleBars(ds.artefact);
+  for (size_t i = 0; i < obs.size(); ++i)
+    ds.observations.push_back(ParseObservation(ds, obs[i], i, &given));
+  Finish(&ds, require_observations);
   return ds;
 }
+
+// One JSON value built from SAX events, as json::parse builds it (a repeated
+// key keeps its last value).
+class ValueBuilder {
+ public:
+  json root;
+  void Reset() {
+    root = json();
+    stack_.clear();
+  }
+  template <typename V>
+  void Put(V&& v) {
+    if (stack_.empty()) {
+      root = std::forward<V>(v);
+    } else if (stack_.back()->is_array()) {
+      stack_.back()->emplace_back(std::forward<V>(v));
+    } else {
+      *slot_ = std::forward<V>(v);
+    }
+  }
+  void Open(json empty) {
+    json* p;
+    if (stack_.empty()) {
+      root = std::move(empty);
+      p = &root;
+    } else if (stack_.back()->is_array()) {
+      p = &stack_.back()->emplace_back(std::move(empty));
+    } else {
+      *slot_ = std::move(empty);
+      p = slot_;
+    }
+    stack_.push_back(p);
+  }
+  void Key(const std::string& k) { slot_ = &(*stack_.back())[k]; }
+  void Close() { stack_.pop_back(); }
+
+ private:
+  std::vector<json*> stack_;
+  json* slot_ = nullptr;
+};
+
+// Reads a dataset text without building the JSON document of its
+// observations: each one is built alone, converted and dropped. A document of
+// 10^6 observations is ~10^7 heap nodes whose allocation and release cost more
+// than the rest of the load; streaming keeps memory flat and the load linear.
+// Only the common layout streams (machine, and artefact when probe touches
+// need it, before the observations; no repeated top-level key; valid JSON);
+// anything else returns with fallback set and the document parser decides, so
+// every message is the one the document path gives.
+// The SAX events of one observation, recorded into reused storage (no heap
+// traffic once warm): the common observation converts straight from them;
+// any other is replayed into a JSON value for ParseObservation, whose checks
+// and messages are the reference.
+struct Event {
+  enum Kind : unsigned char { kNull, kBool, kInt, kUint, kFloat, kString, kKey, kObject, kEndObject, kArray, kEndArray };
+  Kind kind = kNull;
+  bool b = false;
+  int64_t i = 0;
+  uint64_t u = 0;
+  double d = 0;
+  std::string s;  // a key or a string value
+  bool number() const { return kind == kInt || kind == kUint || kind == kFloat; }
+  // As json::get<double> converts.
+  double value() const { return kind == kInt ? static_cast<double>(i) : kind == kUint ? static_cast<double>(u) : d; }
+};
+
+class EventList {
+ public:
+  Event& Add(Event::Kind k) {
+    if (n_ == ev_.size()) ev_.emplace_back();
+    Event& e = ev_[n_++];
+    e.kind = k;
+    return e;
+  }
+  void Clear() { n_ = 0; }
+  size_t size() const { return n_; }
+  const Event& operator[](size_t k) const { return ev_[k]; }
+  void Replay(ValueBuilder* b) const {
+    b->Reset();
+    for (size_t k = 0; k < n_; ++k) {
+      const Event& e = ev_[k];
+      switch (e.kind) {
+        case Event::kNull: b->Put(json(nullptr)); break;
+        case Event::kBool: b->Put(json(e.b)); break;
+        case Event::kInt: b->Put(json(e.i)); break;
+        case Event::kUint: b->Put(json(e.u)); break;
+        case Event::kFloat: b->Put(json(e.d)); break;
+        case Event::kString: b->Put(json(e.s)); break;
+        case Event::kKey: b->Key(e.s); break;
+        case Event::kObject: b->Open(json::object()); break;
+        case Event::kArray: b->Open(json::array()); break;
+        case Event::kEndObject:
+        case Event::kEndArray: b->Close(); break;
+      }
+    }
+  }
+
+ private:
+  std::vector<Event> ev_;
+  size_t n_ = 0;
+};
+
+// The observation the events describe, when it is of the common form every
+// check of ParseObservation and Dataset::Validate accepts outright: one flat
+// object of the known keys, each once, of its plain type (axes and direction
+// objects of single machine axis letters, vectors of three numbers, sigma a
+// number), within the bounds. Anything else (an error, "C1", a sigma per
+// row, a repeated key) returns false and goes the reference way.
+bool FastObservation(const EventList& ev, const Machine& m, const Artefact& artefact, Observation* ob) {
+  enum Key { kType, kTarget, kSetup, kId, kAxes, kDirection, kReading, kLength, kToolBall, kTableBall, kMeasured,
+             kSigma, kNumKeys };
+  static const char* const kNames[kNumKeys] = {"type", "target", "setup", "id", "axes", "direction", "reading",
+                                               "length", "tool_ball", "table_ball", "measured", "sigma"};
+  const size_t n = ev.size();
+  if (n < 2 || ev[0].kind != Event::kObject || ev[n - 1].kind != Event::kEndObject) return false;
+  const int na = m.num_axes();
+  unsigned seen = 0;
+  const std::string *type = nullptr, *target = nullptr, *setup = nullptr, *id = nullptr;
+  double reading = 0, length = 0, sigma = 0;
+  Eigen::Vector3d vec[3];  // tool_ball, table_ball, measured
+  ob->axes = Eigen::VectorXd::Zero(na);
+  ob->direction = Eigen::VectorXi::Zero(na);
+  unsigned given = 0, dir_given = 0;
+  size_t k = 1;
+  while (k < n - 1) {
+    if (ev[k].kind != Event::kKey) return false;
+    const std::string& name = ev[k++].s;
+    int key = 0;
+    while (key < kNumKeys && name != kNames[key]) ++key;
+    if (key == kNumKeys || (seen & (1u << key))) return false;
+    seen |= 1u << key;
+    const Event& v = ev[k];
+    switch (key) {
+      case kType:
+      case kTarget:
+      case kSetup:
+      case kId: {
+        if (v.kind != Event::kString) return false;
+        (key == kType ? type : key == kTarget ? target : key == kSetup ? setup : id) = &v.s;
+        ++k;
+        break;
+      }
+      case kReading:
+      case kLength:
+      case kSigma:
+        if (!v.number()) return false;
+        (key == kReading ? reading : key == kLength ? length : sigma) = v.value();
+        ++k;
+        break;
+      case kAxes:
+      case kDirection: {
+        if (v.kind != Event::kObject) return false;
+        unsigned& mask = key == kAxes ? given : dir_given;
+        for (++k; ev[k].kind == Event::kKey; k += 2) {
+          const std::string& a = ev[k].s;
+          const int ax = a.size() == 1 ? m.AxisIndex(a[0]) : -1;
+          if (ax < 0 || ax >= 32 || (mask & (1u << ax))) return false;
+          mask |= 1u << ax;
+          const Event& x = ev[k + 1];
+          if (key == kAxes) {
+            if (!x.number()) return false;
+            const double q = x.value();
+            if (!(std::abs(q) <= (m.axis(ax).rotary() ? kMaxRotaryDeg : kMaxLinear))) return false;
+            ob->axes[ax] = q;
+          } else {
+            // -1, 0 or +1, integral floats too (IntegralValue)
+            int dv;
+            if (x.kind == Event::kInt && x.i >= -1 && x.i <= 1) dv = static_cast<int>(x.i);
+            else if (x.kind == Event::kUint && x.u <= 1) dv = static_cast<int>(x.u);
+            else if (x.kind == Event::kFloat && (x.d == -1.0 || x.d == 0.0 || x.d == 1.0)) dv = static_cast<int>(x.d);
+            else return false;
+            ob->direction[ax] = dv;
+          }
+        }
+        if (ev[k].kind != Event::kEndObject) return false;
+        ++k;
+        break;
+      }
+      default: {  // the three vectors
+        if (v.kind != Event::kArray || k + 4 >= n || ev[k + 4].kind != Event::kEndArray) return false;
+        Eigen::Vector3d& x = vec[key - kToolBall];
+        for (int c = 0; c < 3; ++c) {
+          const Event& e = ev[k + 1 + c];
+          if (!e.number() || !(std::abs(e.value()) <= kMaxLinear)) return false;
+          x[c] = e.value();
+        }
+        k += 5;
+        break;
+      }
+    }
+  }
+  if (k != n - 1 || !type || !(seen & (1u << kAxes))) return false;
+  for (int a = 0; a < na; ++a)
+    if (!(given & (1u << a)) && m.axis(a).name != 'S') return false;
+  auto only = [&](std::initializer_list<int> keys) {
+    unsigned allowed = 0;
+    for (int key : keys) allowed |= 1u << key;
+    return (seen & ~allowed) == 0;
+  };
+  auto has = [&](int key) { return (seen & (1u << key)) != 0; };
+  if (*type == "facet" || *type == "sphere") {
+    const bool facet = *type == "facet";
+    if (!only({kType, kTarget, kAxes, kDirection, kSigma, kId}) || !target) return false;
+    if ((facet ? artefact.FacetIndex(*target) : artefact.SphereIndex(*target)) < 0) return false;
+    ob->type = facet ? ObservationType::kFacet : ObservationType::kSphere;
+    ob->target = *target;
+  } else if (*type == "dbb") {
+    if (!only({kType, kSetup, kAxes, kDirection, kReading, kLength, kToolBall, kTableBall, kSigma, kId}) ||
+        !has(kReading) || !has(kLength) || !has(kToolBall) || !has(kTableBall))
+      return false;
+    if (!(std::abs(reading) <= kMaxDbbReading) || !(length > 0 && length <= kMaxLinear)) return false;
+    ob->type = ObservationType::kDbb;
+    ob->reading = reading;
+    ob->length = length;
+  } else if (*type == "ball3d") {
+    if (!only({kType, kSetup, kAxes, kDirection, kMeasured, kToolBall, kTableBall, kSigma, kId}) ||
+        !has(kMeasured) || !has(kToolBall) || !has(kTableBall))
+      return false;
+    ob->type = ObservationType::kBall3d;
+    ob->measured = vec[2];
+  } else {
+    return false;
+  }
+  if (ob->type == ObservationType::kDbb || ob->type == ObservationType::kBall3d) {
+    if (setup) {
+      if (setup->find('.') != std::string::npos) return false;
+      ob->setup = *setup;
+    }
+    ob->tool_ball = vec[0];
+    ob->table_ball = vec[1];
+  }
+  if (has(kSigma)) {
+    if (!(sigma >= kMinSigma && sigma <= kMaxSigma)) return false;
+    ob->sigma = Eigen::VectorXd::Constant(ResidualRows(ob->type), sigma);
+  }
+  if (id) ob->id = *id;
+  return true;
+}
+
+// Reads a dataset text without building the JSON document of its
+// observations: each one is recorded alone, converted and dropped. A document
+// of 10^6 observations is ~10^7 heap nodes whose allocation and release cost
+// more than the rest of the load; streaming keeps memory flat and the load
+// linear. Only the common layout streams (machine, and artefact when probe
+// touches need it, before the observations; no repeated top-level key; valid
+// JSON); anything else returns with fallback set and the document parser
+// decides, so every message is the one the document path gives.
+class DatasetStream : public nlohmann::json_sax<json> {
+ public:
+  bool fallback = false;
+  bool streamed = false;  // an observations array went through the stream
+  json head = json::object();
+  std::vector<Observation> observations;
+  std::exception_ptr error;  // the first bad observation (reported after the head)
+
+  bool null() override {
+    if (InObservation()) return Scalar(ev_.Add(Event::kNull));
+    return Value(json(nullptr));
+  }
+  bool boolean(bool v) override {
+    if (InObservation()) return Scalar(ev_.Add(Event::kBool), [&](Event& e) { e.b = v; });
+    return Value(json(v));
+  }
+  bool number_integer(number_integer_t v) override {
+    if (InObservation()) return Scalar(ev_.Add(Event::kInt), [&](Event& e) { e.i = v; });
+    return Value(json(v));
+  }
+  bool number_unsigned(number_unsigned_t v) override {
+    if (InObservation()) return Scalar(ev_.Add(Event::kUint), [&](Event& e) { e.u = v; });
+    return Value(json(v));
+  }
+  bool number_float(number_float_t v, const string_t&) override {
+    if (InObservation()) return Scalar(ev_.Add(Event::kFloat), [&](Event& e) { e.d = v; });
+    return Value(json(v));
+  }
+  bool string(string_t& v) override {
+    if (InObservation()) return Scalar(ev_.Add(Event::kString), [&](Event& e) { e.s = v; });
+    return Value(json(v));
+  }
+  bool binary(binary_t&) override { return Abort(); }
+  bool start_object(std::size_t) override { return Open(true); }
+  bool start_array(std::size_t) override {
+    if (depth_ == 1 && key_ == "observations") return StartObservations();
+    return Open(false);
+  }
+  bool end_object() override { return Close(true); }
+  bool end_array() override {
+    if (in_observations_ && depth_ == 2) {
+      in_observations_ = false;
+      depth_ = 1;
+      return true;
+    }
+    return Close(false);
+  }
+  bool key(string_t& k) override {
+    if (depth_ == 1) {
+      if (head.contains(k) || (k == "observations" && streamed)) return Abort();  // repeated key
+      key_ = k;
+    } else if (InObservation()) {
+      ev_.Add(Event::kKey).s = k;
+    } else {
+      b_.Key(k);
+    }
+    return true;
+  }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+    return Abort();
+  }
+
+ private:
+  bool Abort() {
+    fallback = true;
+    return false;
+  }
+  // Inside the observations array: every event belongs to an observation.
+  bool InObservation() const { return in_observations_ && depth_ >= 2; }
+  template <typename F = void (*)(Event&)>
+  bool Scalar(Event& e, F set = [](Event&) {}) {
+    if (depth_ == 2) {  // a whole observation that is not an object
+      Event copy = e;
+      ev_.Clear();
+      set(ev_.Add(copy.kind));
+      Convert();
+      return !fallback;
+    }
+    set(e);
+    return true;
+  }
+  bool Open(bool object) {
+    if (depth_ == 0) {
+      if (!object) return Abort();
+      depth_ = 1;
+      return true;
+    }
+    if (InObservation()) {
+      if (depth_ == 2) ev_.Clear();
+      ev_.Add(object ? Event::kObject : Event::kArray);
+      return ++depth_ <= kMaxDepth || Abort();
+    }
+    if (depth_ == 1) b_.Reset();
+    if (++depth_ > kMaxDepth) return Abort();
+    b_.Open(object ? json::object() : json::array());
+    return true;
+  }
+  bool Close(bool object) {
+    if (--depth_ == 0) return true;
+    if (in_observations_ && depth_ >= 2) {
+      ev_.Add(object ? Event::kEndObject : Event::kEndArray);
+      if (depth_ == 2) Convert();
+      return !fallback;
+    }
+    b_.Close();
+    if (depth_ == 1) head[key_] = std::move(b_.root);
+    return true;
+  }
+  bool Value(json v) {
+    if (depth_ == 0) return Abort();
+    if (depth_ == 1) {
+      head[key_] = std::move(v);
+      return true;
+    }
+    b_.Put(std::move(v));
+    return true;
+  }
+  bool StartObservations() {
+    if (!head.contains("machine")) return Abort();
+    try {
+      ds_ = std::make_unique<Dataset>(ParseHead(head));
+    } catch (...) {
+      return Abort();  // the document path names what is wrong, in order
+    }
+    artefact_known_ = head.contains("artefact");
+    streamed = in_observations_ = true;
+    depth_ = 2;
+    return true;
+  }
+  void Convert() {
+    const size_t i = index_++;
+    if (error) return;
+    if (!artefact_known_) {
+      // A probe touch's target may be defined further on: the document decides.
+      for (size_t k = 1; k + 1 < ev_.size(); ++k)
+        if (ev_[k].kind == Event::kKey && ev_[k].s == "type" && ev_[k + 1].kind == Event::kString &&
+            (ev_[k + 1].s == "facet" || ev_[k + 1].s == "sphere")) {
+          fallback = true;
+          return;
+        }
+    }
+    Observation ob;
+    if (FastObservation(ev_, ds_->machine(), ds_->artefact, &ob)) {
+      observations.push_back(std::move(ob));
+      return;
+    }
+    try {
+      ev_.Replay(&b_);
+      observations.push_back(ParseObservation(*ds_, b_.root, i, &given_));
+    } catch (...) {
+      error = std::current_exception();
+    }
+  }
+
+  int depth_ = 0;  // open containers, the document's object included
+  bool in_observations_ = false;
+  bool artefact_known_ = false;
+  std::string key_;
+  ValueBuilder b_;
+  EventList ev_;
+  size_t index_ = 0;
+  std::unique_ptr<Dataset> ds_;
+  std::vector<bool> given_;
+};
+
+// About how many observations a text holds (every one has a "type"; the
+// machine's axes add a few): reserving them spares the copies and page faults
+// of a vector growing to 10^6 elements. No observation is shorter than 48
+// bytes, which bounds what a text of repeated keys can make us reserve
+// (untouched, the reserved pages cost address space only).
+size_t CountTypeKeys(const std::string& text) {
+  const size_t most = text.size() / 48;
+  static const std::string needle = "\"type\"";
+  const std::boyer_moore_horspool_searcher search(needle.begin(), needle.end());
+  size_t n = 0;
+  for (auto it = text.begin(); n < most; ++n) {
+    it = std::search(it, text.end(), search);
+    if (it == text.end()) return n;
+    it += static_cast<std::ptrdiff_t>(needle.size());
+  }
+  return most;
+}
 }  // namespace
+
+Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
+  return Guard("dataset", [&] {
+    DatasetStream s;
+    s.observations.reserve(CountTypeKeys(text));
+    const bool parsed = json::sax_parse(text, &s);
+    if (!parsed || s.fallback || !s.streamed)
+      return ParseDataset(Parse(text, "dataset"), require_observations);
+    Dataset ds = ParseHead(s.head);
+    if (s.error) std::rethrow_exception(s.error);
+    ds.observations = std::move(s.observations);
+    Finish(&ds, require_observations);
+    return ds;
+  });
+}
 
 void Dataset::Validate() const {
   if (observations.empty()) throw std::invalid_argument("dataset.observations: empty; nothing to fit");

@@ -15,14 +15,23 @@ namespace {
 
 using namespace json_util;
 
-// Machine parameter vector from a name -> value map; setup names (with a dot,
-// other than tip.*) are ignored.
+// Machine parameter vector from a name -> value map. Setup parameters of an
+// identification result (facet.F1, sphere.S1.x, dbb.A1.length, ...) are
+// ignored, so a result's values can be passed whole; any other name must be
+// a parameter of the machine: a typo (tpi.x, EX0C.x, EXOC) is refused with a
+// did-you-mean instead of leaving the model nominal without a word.
 Eigen::VectorXd MachineTheta(const Machine& m, const std::map<std::string, double>& values) {
   Eigen::VectorXd theta = Eigen::VectorXd::Zero(m.num_parameters());
   for (const auto& [name, v] : values) {
-    if (name.find('.') != std::string::npos && name.rfind("tip.", 0) != 0) continue;
+    if (m.ParameterIndex(name) < 0 && IsSetupParameterName(name)) continue;
+    int k;
+    try {
+      k = m.RequireParameter(name);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument("values." + name + ": " + e.what());
+    }
     RequireFinite(v, "values." + name);
-    theta[m.RequireParameter(name)] = v;
+    theta[k] = v;
   }
   return theta;
 }

@@ -237,12 +237,47 @@ std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group)
   return "setup parameters the data do not separate";
 }
 
-std::string UndeterminedMessage(const Dataset& ds, const std::vector<std::vector<std::string>>& groups) {
+std::string UndeterminedMessage(const Dataset& ds, std::vector<std::vector<std::string>> groups) {
+  // What the user asked for first: groups with machine errors; then the
+  // spheres' centres (the length reference rides on them), the stylus tip,
+  // and the facets and mounts, so that a capped message keeps the cause.
+  const Machine& m = ds.machine();
+  auto rank = [&](const std::vector<std::string>& g) {
+    int r = 3;
+    for (const std::string& n : g) {
+      const int i = m.ParameterIndex(n);
+      if (i >= 0 && m.parameters()[i].kind != ParameterKind::kTip) return 0;
+      if (n.rfind("sphere.", 0) == 0) r = std::min(r, 1);
+      else if (n.rfind("tip.", 0) == 0) r = std::min(r, 2);
+    }
+    return r;
+  };
+  std::stable_sort(groups.begin(), groups.end(),
+                   [&](const auto& a, const auto& b) { return rank(a) < rank(b); });
   std::string msg =
       "identify: not determined by this data (confounded, or seen more weakly than their "
       "plausible size): ";
-  for (size_t i = 0; i < groups.size(); ++i)
-    msg += (i ? "; " : "") + GroupText(groups[i]) + ": " + GroupCause(ds, groups[i]);
+  // A refusal stays one readable line however many parameters it is about
+  // (a plan missing most of its touches leaves hundreds undetermined): the
+  // first groups, about kShownNames names, then how many more.
+  constexpr size_t kShownNames = 10;
+  size_t total = 0, listed = 0, shown = 0;
+  for (const auto& g : groups) total += g.size();
+  size_t i = 0;
+  std::string cause;  // consecutive groups of one cause share it
+  for (; i < groups.size(); ++i) {
+    if (i > 0 && shown + std::min<size_t>(groups[i].size(), 8) > kShownNames) break;
+    const std::string c = GroupCause(ds, groups[i]);
+    if (i > 0) msg += c == cause ? ", " : ": " + cause + "; ";
+    msg += GroupText(groups[i]);
+    cause = c;
+    shown += std::min<size_t>(groups[i].size(), 8);
+    listed += groups[i].size();
+  }
+  msg += ": " + cause;
+  if (i < groups.size())
+    msg += "; and " + std::to_string(total - listed) + " more parameter" + (total - listed == 1 ? "" : "s") +
+           " in " + std::to_string(groups.size() - i) + " more group" + (groups.size() - i == 1 ? "" : "s");
   return msg + ". Fix one parameter of each group, add measurements that separate them, or use "
                "estimate 'auto' (every error under its prior, the undetermined ones listed).";
 }
