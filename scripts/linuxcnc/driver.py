@@ -1,0 +1,108 @@
+#!/usr/bin/python3
+"""Drives a running headless LinuxCNC through its ``linuxcnc`` Python module.
+
+Runs under Debian's /usr/bin/python3 (the interpreter the linuxcnc module is
+built for) as the simulator's user; fivecal's own interpreter talks to it
+through two JSON files only:
+
+    driver.py JOB.json OUT.json
+
+JOB: {"setup": ["M428", ...],                     MDI lines after homing
+      "moves": ["G1 X.. Y.. Z.. A.. C.. F..", ...],  one MDI line per pose
+      "probe": [...], "timeout": seconds per command}
+OUT: {"joints": [[j0..j4], ...] (commanded joint positions after each move),
+      "joints_actual": [...], "position": [...] (world, after each move),
+      "kinematics_type": ..., "errors": [...]}
+
+Every wait has a timeout, so a stuck controller fails the job instead of
+hanging the caller.
+"""
+import json
+import sys
+import time
+
+import linuxcnc
+
+
+def wait_for(pred, s, timeout, what):
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        s.poll()
+        if pred():
+            return
+        time.sleep(0.02)
+    raise TimeoutError(f"LinuxCNC: timed out after {timeout} s waiting for {what}")
+
+
+def main(job_path, out_path):
+    with open(job_path) as f:
+        job = json.load(f)
+    timeout = float(job.get("timeout", 30.0))
+    s = linuxcnc.stat()
+    c = linuxcnc.command()
+    e = linuxcnc.error_channel()
+    errors = []
+
+    def check_errors():
+        while True:
+            err = e.poll()
+            if not err:
+                return
+            kind, text = err
+            if kind in (linuxcnc.NML_ERROR, linuxcnc.OPERATOR_ERROR):
+                errors.append(text)
+
+    # The controller may still be starting: poll until task answers.
+    t0 = time.monotonic()
+    while True:
+        try:
+            s.poll()
+            break
+        except Exception:  # linuxcnc.error, or SystemError before task is up
+            if time.monotonic() - t0 > timeout:
+                raise TimeoutError("LinuxCNC: no status channel")
+            time.sleep(0.2)
+
+    c.state(linuxcnc.STATE_ESTOP_RESET)
+    c.state(linuxcnc.STATE_ON)
+    wait_for(lambda: s.task_state == linuxcnc.STATE_ON, s, timeout, "machine on")
+    c.mode(linuxcnc.MODE_MANUAL)
+    c.wait_complete(timeout)
+    c.teleop_enable(0)
+    c.wait_complete(timeout)
+    c.home(-1)
+    c.wait_complete(timeout)
+    njoints = s.joints
+    wait_for(lambda: all(s.homed[:njoints]), s, timeout, "homing")
+
+    def mdi(line):
+        c.mode(linuxcnc.MODE_MDI)
+        c.wait_complete(timeout)
+        c.mdi(line)
+        if c.wait_complete(timeout) == -1:
+            raise TimeoutError(f"LinuxCNC: MDI '{line}' did not complete in {timeout} s")
+        wait_for(lambda: s.interp_state == linuxcnc.INTERP_IDLE and s.inpos, s, timeout,
+                 f"MDI '{line}' to finish")
+        check_errors()
+        if errors:
+            raise RuntimeError(f"LinuxCNC refused '{line}': {errors[-1]}")
+
+    for line in job.get("setup", []):
+        mdi(line)
+    out = {"joints": [], "joints_actual": [], "position": [], "probed": []}
+    for line in job.get("moves", []):
+        mdi(line)
+        s.poll()
+        out["joints"].append(list(s.joint_position[:njoints]))
+        out["joints_actual"].append(list(s.joint_actual_position[:njoints]))
+        out["position"].append(list(s.position[:9]))
+        out["probed"].append(list(s.probed_position[:9]))
+    s.poll()
+    out["kinematics_type"] = s.kinematics_type
+    out["errors"] = errors
+    with open(out_path, "w") as f:
+        json.dump(out, f)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2])
