@@ -9,18 +9,23 @@ through two JSON files only:
 
 JOB: {"setup": ["M428", ...],                     MDI lines after homing
       "moves": ["G1 X.. Y.. Z.. A.. C.. F..", ...],  one MDI line per pose
-      "probe": [...], "timeout": seconds per command}
+      "hal_pins": ["joint.0.motor-pos-cmd", ...],   read after each move
+      "settle": seconds to wait after each move before reading,
+      "timeout": seconds per command}
 OUT: {"joints": [[j0..j4], ...] (commanded joint positions after each move),
       "joints_actual": [...], "position": [...] (world, after each move),
+      "hal": [[pin values], ...] (after each move), "hal_start": [pin values after homing],
       "kinematics_type": ..., "errors": [...]}
 
 Every wait has a timeout, so a stuck controller fails the job instead of
 hanging the caller.
 """
 import json
+import os
 import sys
 import time
 
+import hal
 import linuxcnc
 
 
@@ -87,12 +92,22 @@ def main(job_path, out_path):
         if errors:
             raise RuntimeError(f"LinuxCNC refused '{line}': {errors[-1]}")
 
+    pins = job.get("hal_pins", [])
+    if pins:
+        # hal.get_value needs a component of this process in HAL
+        comp = hal.component(f"fivecal-driver-{os.getpid()}")
+        comp.ready()
+    settle = float(job.get("settle", 0.0))
+    out = {"joints": [], "joints_actual": [], "position": [], "probed": [], "hal": [],
+           "hal_start": [hal.get_value(p) for p in pins]}
     for line in job.get("setup", []):
         mdi(line)
-    out = {"joints": [], "joints_actual": [], "position": [], "probed": []}
     for line in job.get("moves", []):
         mdi(line)
+        if settle:
+            time.sleep(settle)
         s.poll()
+        out["hal"].append([hal.get_value(p) for p in pins])
         out["joints"].append(list(s.joint_position[:njoints]))
         out["joints_actual"].append(list(s.joint_actual_position[:njoints]))
         out["position"].append(list(s.position[:9]))

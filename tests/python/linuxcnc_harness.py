@@ -206,7 +206,8 @@ class Sim:
 
     # ---- jobs ---------------------------------------------------------
     def run(self, moves: List[str], setup: Iterable[str] = ("M428",), timeout: float = 30.0,
-            total_timeout: Optional[float] = None) -> dict:
+            total_timeout: Optional[float] = None, hal_pins: Iterable[str] = (),
+            settle: float = 0.0) -> dict:
         """Homes, runs the setup MDI lines, then each move; returns the driver's
         output (joints after each move, world position, kinematics type)."""
         if self.proc is None or self.proc.poll() is not None:
@@ -214,12 +215,13 @@ class Sim:
         job = os.path.join(self.dir, "job.json")
         out = os.path.join(self.dir, "out.json")
         with open(job, "w") as f:
-            json.dump({"setup": list(setup), "moves": list(moves), "timeout": timeout}, f)
+            json.dump({"setup": list(setup), "moves": list(moves), "timeout": timeout,
+                       "hal_pins": list(hal_pins), "settle": settle}, f)
         if os.path.exists(out):
             os.remove(out)
         if os.geteuid() == 0:
             subprocess.run(["chown", CNC_USER, job], check=True)
-        limit = total_timeout or (60.0 + timeout * (len(moves) + 10))
+        limit = total_timeout or (60.0 + (timeout + settle) * (len(moves) + 10))
         r = subprocess.run(_as_user([SYSTEM_PYTHON, DRIVER, job, out]), cwd=self.dir,
                            capture_output=True, text=True, timeout=limit)
         if r.returncode != 0:

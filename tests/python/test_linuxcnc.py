@@ -1,0 +1,190 @@
+"""fivecal against a real LinuxCNC (Debian's linuxcnc-uspace, headless
+simulator started by linuxcnc_harness.py): the pins fivecal exports make
+LinuxCNC's tool-centre-point kinematics command exactly the joints of
+fivecal's inverse kinematics of the same model, and a compensation file
+fivecal writes makes it command the expected motor positions.
+
+The simulator tests are skipped only when LinuxCNC is not installed; CI
+installs it (scripts/install.sh). One simulator session per kinematics."""
+import numpy as np
+import pytest
+
+import fivecal
+from fivecal.io import linuxcnc as L
+
+import linuxcnc_harness as harness
+
+REASON = harness.unavailable_reason()
+needs_linuxcnc = pytest.mark.skipif(REASON is not None, reason=f"needs LinuxCNC: {REASON}")
+
+MACHINES = {
+    # LinuxCNC's own rotary directions (+x, +z), pivots off the table centre
+    "xyzac-trt": {"name": "trt-ac", "topology": "wCAfXYZSt", "axes": {
+        "C": {"type": "rotary", "direction": [0, 0, 1], "point": [12, -7, 0]},
+        "A": {"type": "rotary", "direction": [1, 0, 0], "point": [0, 20, -45]},
+        "X": {"type": "linear", "direction": [1, 0, 0]},
+        "Y": {"type": "linear", "direction": [0, 1, 0]},
+        "Z": {"type": "linear", "direction": [0, 0, 1]},
+        "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 150]}},
+    # ISO table C (about -z): LinuxCNC's C joint is fivecal's -C
+    "xyzbc-trt": {"name": "trt-bc", "topology": "wCBfXYZSt", "axes": {
+        "C": {"type": "rotary", "direction": [0, 0, -1], "point": [4, 9, 0]},
+        "B": {"type": "rotary", "direction": [0, 1, 0], "point": [-30, 0, -60]},
+        "X": {"type": "linear", "direction": [1, 0, 0]},
+        "Y": {"type": "linear", "direction": [0, 1, 0]},
+        "Z": {"type": "linear", "direction": [0, 0, 1]},
+        "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [1, 2, 100]}},
+}
+# Thesis-sized location errors of the rotary axes' positions (tens of um).
+ERRORS = {
+    "xyzac-trt": {"EX0C": 0.0312, "EY0C": -0.0187, "EY0A": 0.0241, "EZ0A": -0.0153},
+    "xyzbc-trt": {"EX0C": -0.0226, "EY0C": 0.0174, "EX0B": 0.0291, "EZ0B": -0.0138},
+}
+
+
+def _poses(kins, n=60, seed=11):
+    """World targets (LinuxCNC X Y Z) and joint angles across the rotary ranges."""
+    rng = np.random.default_rng(seed)
+    w = rng.uniform(-60, 60, (n, 3))
+    tilt = rng.uniform(-90, 90, n)
+    c = rng.uniform(-180, 180, n)
+    # not tilt 0 exactly: there the tool axis lies along C, C is free and an
+    # inverse may return any C (fivecal's does, by a few millidegrees)
+    tilt[:4] = [-90, 90, 20, 45]
+    c[:4] = [-180, 180, 0, -90]
+    return w, tilt, c
+
+
+def _mdi(kins, w, t, c):
+    r = L.TILT[kins]
+    return [f"G1 X{x!r} Y{y!r} Z{z!r} {r}{a!r} C{cc!r} F100000"
+            for (x, y, z), a, cc in zip(w.tolist(), t.tolist(), c.tolist())]
+
+
+def _fivecal_joints(m, kins, errors, ab, w, tilt, c):
+    """fivecal's inverse kinematics of the erroneous machine for the same
+    targets, as LinuxCNC joints."""
+    mp = L.match(m, kins)
+    s_t, s_c = mp["sign"][3], mp["sign"][4]
+    r = L.TILT[kins]
+    names = m.axis_names
+    out = []
+    for i in range(len(w)):
+        rot = {r: tilt[i] / s_t, "C": c[i] / s_c}
+        start = {a: 0.0 for a in names if a != "S"}
+        start.update(rot)
+        # the tool axis the erroneous machine has at these angles
+        _, axis = m.tool_pose(start, errors=errors)
+        target = w[i] + np.asarray(mp["origin"]) + ab.workpiece_shift
+        q = m.inverse(target[None, :], tool_axes=axis, start=start, errors=errors)
+        out.append(L.joints(m, kins, q)[0])
+    return np.array(out)
+
+
+@needs_linuxcnc
+@pytest.mark.parametrize("kins", ["xyzac-trt", "xyzbc-trt"])
+def test_round_trip_in_linuxcnc(kins):
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    errors = ERRORS[kins]
+    ab = L.absorb(m, kins, errors)
+    assert ab.max < 1e-9, "these location errors are exactly representable by the pins"
+    assert ab.max_old > 0.01
+    w, tilt, c = _poses(kins)
+    pins = [f"{kins}-kins.{n}" for n in L.pin_names(kins)]
+    with harness.Sim(kins, hal=L.hal_text(kins, ab.pins, ab.old_pins)) as sim:
+        out = sim.run(_mdi(kins, w, tilt, c), setup=["M428"], hal_pins=pins)
+    assert out["errors"] == []
+    # fivecal's pins are what LinuxCNC runs with
+    np.testing.assert_allclose(out["hal_start"], [ab.pins[n] for n in L.pin_names(kins)],
+                               rtol=0, atol=1e-12)
+    got = np.array(out["joints"])
+    assert got.shape == (60, 5)
+    want = _fivecal_joints(m, kins, errors, ab, w, tilt, c)
+    dlin = np.abs(got[:, :3] - want[:, :3]).max()
+    drot = np.abs(got[:, 3:] - want[:, 3:]).max()
+    assert dlin < 1e-6, f"linear joints differ by {dlin} mm"
+    assert drot < 1e-6, f"rotary joints differ by {drot} deg"
+    # and LinuxCNC's formulas as fivecal transcribes them
+    world = np.column_stack([w, tilt, c])
+    np.testing.assert_allclose(got, L.inverse(kins, ab.pins, world), rtol=0, atol=1e-9)
+    # TCP really was on: identity kinematics would command the world values
+    assert np.abs(got[:, :3] - w).max() > 10
+
+
+@needs_linuxcnc
+def test_compensation_file_loaded_by_linuxcnc():
+    kins = "xyzac-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    errors = {"EXX1": 2e-4, "EXX2": -1e-6, "EXXb": 0.004}
+    rows = L.comp_rows(m, kins, errors, "X", -100, 100, 10)
+    text = L.comp_text(rows)
+    # Approached upward at -50, 0 and 70, then downward at 30. LinuxCNC
+    # freezes the correction at the last servo cycle that still moved, so the
+    # last 10 um go at 1 mm/min: that cycle is then within 2e-5 mm of the point.
+    points = [(-50, 1), (0, 1), (70, 1), (30, -1)]
+    moves = ["G1 X-80 F100000"]
+    for x, d in points:
+        moves += [f"G1 X{x - 0.01 * d} F100000", f"G1 X{x} F1"]
+    with harness.Sim(kins, joint_ini={0: ["COMP_FILE = comp-X.txt", "COMP_FILE_TYPE = 0"]},
+                     files={"comp-X.txt": text}) as sim:
+        out = sim.run(moves, setup=[], hal_pins=["joint.0.motor-pos-cmd", "joint.0.pos-cmd"],
+                      settle=0.2)
+    hal = np.array(out["hal"])[2::2]
+    motor, joint = hal[:, 0], hal[:, 1]
+    np.testing.assert_allclose(joint, [x for x, _ in points], rtol=0, atol=1e-9)
+
+    def actual(x, direction):
+        # X on the tool side along +x: joint = command, error along itself
+        e = 2e-4 * x - 1e-6 * x ** 2
+        return x + e + direction * 0.004
+
+    # LinuxCNC commands the motor to nominal + (nominal - actual)
+    for i, (x, d) in enumerate(points):
+        expect = 2 * x - actual(x, d)
+        assert abs(motor[i] - expect) < 1e-6, (x, d, motor[i], expect)
+    assert abs(motor[2] - 70) > 0.01  # the file really was applied
+
+
+def test_hal_and_ini_lines_read_back():
+    kins = "xyzbc-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    ab = L.absorb(m, kins, ERRORS[kins])
+    text = L.hal_text(kins, ab.pins, ab.old_pins)
+    assert "setp xyzbc-trt-kins.x-offset" in text and "old" in text
+    assert "y-offset" not in text  # not a pin of xyzbc-trt-kins
+    import tempfile, os
+    with tempfile.TemporaryDirectory() as d:
+        p = os.path.join(d, "k.hal")
+        with open(p, "w") as f:
+            f.write(text)
+        back = L.read_hal_pins(p, kins)
+    assert back == ab.pins  # the decimal text is exact
+    ini, hal = L.ini_text(kins, ab.pins)
+    assert "X_ROT_POINT = " in ini and "setp xyzbc-trt-kins.x-rot-point [FIVECAL_KINS]X_ROT_POINT" in hal
+
+
+def test_tilts_are_not_absorbed_and_residual_reported():
+    kins = "xyzac-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    ab = L.absorb(m, kins, dict(ERRORS[kins], EB0C=5e-5, EA0A=-4e-5))
+    assert 1e-4 < ab.max < ab.max_old
+    assert ab.rms < ab.rms_old
+    regions = ab.by_region("A", bins=3)
+    assert len(regions) == 3 and all(r[3] <= ab.max + 1e-15 for r in regions)
+
+
+def test_plausibility_limit_refuses_large_change():
+    kins = "xyzac-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    ab = L.absorb(m, kins, {"EX0C": 0.8})
+    with pytest.raises(fivecal.guards.CorrectionLimitError, match="x-rot-point"):
+        L.check_change(ab.old_pins, ab.pins, 0.5)
+    L.check_change(ab.old_pins, ab.pins, 0.5, force=True)
+    L.check_change(ab.old_pins, ab.pins, 1.0)
+
+
+def test_machine_that_does_not_fit_is_refused():
+    with pytest.raises(ValueError, match="xyzac-trt"):
+        L.match(fivecal.Machine.load("examples/machines/hu40t.json"), "xyzac-trt")
+    with pytest.raises(ValueError, match="kins"):
+        L.match(fivecal.Machine.from_dict(MACHINES["xyzac-trt"]), "5axiskins")
