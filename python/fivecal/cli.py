@@ -601,6 +601,7 @@ def main(argv=None) -> int:
     from .dbb_cli import register as _register_dbb
 
     _register_dbb(sub)
+    from .io.linuxcnc_cli import register as _register_export; _register_export(sub)  # noqa: E702
 
     pc = sub.add_parser("compensate", help="compensated G-code and error tables from identified errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -120,6 +120,8 @@ class Sim:
         fcntl.flock(self._lock, fcntl.LOCK_EX)
         self.dir = tempfile.mkdtemp(prefix=f"fivecal-{self.kins}-")
         shutil.copytree(SIM_DIR, self.dir, dirs_exist_ok=True)
+        # the simulator user may not be able to read the checkout (/root/...)
+        shutil.copy(DRIVER, os.path.join(self.dir, "driver.py"))
         ini_path = os.path.join(self.dir, f"{self.kins}.ini")
         with open(ini_path) as f:
             ini = f.read()
@@ -222,7 +224,8 @@ class Sim:
         if os.geteuid() == 0:
             subprocess.run(["chown", CNC_USER, job], check=True)
         limit = total_timeout or (60.0 + (timeout + settle) * (len(moves) + 10))
-        r = subprocess.run(_as_user([SYSTEM_PYTHON, DRIVER, job, out]), cwd=self.dir,
+        r = subprocess.run(_as_user([SYSTEM_PYTHON, os.path.join(self.dir, "driver.py"), job, out]),
+                           cwd=self.dir,
                            capture_output=True, text=True, timeout=limit)
         if r.returncode != 0:
             raise RuntimeError(f"LinuxCNC driver failed ({r.returncode}):\n{r.stderr[-3000:]}\n"

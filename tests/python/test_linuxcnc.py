@@ -188,3 +188,60 @@ def test_machine_that_does_not_fit_is_refused():
         L.match(fivecal.Machine.load("examples/machines/hu40t.json"), "xyzac-trt")
     with pytest.raises(ValueError, match="kins"):
         L.match(fivecal.Machine.from_dict(MACHINES["xyzac-trt"]), "5axiskins")
+
+
+def _write_inputs(tmp_path, errors, result_extra=None):
+    import json
+
+    mp = tmp_path / "machine.json"
+    mp.write_text(json.dumps(MACHINES["xyzac-trt"]))
+    res = {"parameters": {k: {"value": v, "std": 1e-4} for k, v in errors.items()},
+           "converged": True, "residual_rms": 0.0005, "n_observations": 200,
+           "n_parameters": len(errors), "rank": len(errors), "condition_number": 10.0,
+           "unidentifiable": [], "iterations": 5}
+    res.update(result_extra or {})
+    rp = tmp_path / "result.json"
+    rp.write_text(json.dumps(res))
+    return str(mp), str(rp)
+
+
+def test_cli_export_linuxcnc(tmp_path):
+    from fivecal.cli import main
+
+    mp, rp = _write_inputs(tmp_path, dict(ERRORS["xyzac-trt"], EXX1=2e-5, EXXb=0.003, EB0C=3e-5))
+    out = tmp_path / "lcnc"
+    assert main(["export", "linuxcnc", rp, "--machine", mp, "--kins", "xyzac-trt",
+                 "--out", str(out), "--comp-step", "10"]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["comp-X.txt", "fivecal-kins-ini.hal", "fivecal-kins.hal", "fivecal-kins.ini",
+                     "linuxcnc-report.txt"]
+    pins = L.read_hal_pins(str(out / "fivecal-kins.hal"), "xyzac-trt")
+    m = fivecal.Machine.from_dict(MACHINES["xyzac-trt"])
+    nominal = L.nominal_pins(m, "xyzac-trt")
+    assert abs(pins["x-rot-point"] - nominal["x-rot-point"] - 0.0312) < 2e-3
+    rows = np.loadtxt(out / "comp-X.txt")
+    assert rows.shape == (21, 3) and rows[0, 0] == -100 and rows[-1, 0] == 100
+    report = (out / "linuxcnc-report.txt").read_text()
+    assert "EB0C" in report and "COMP_FILE = comp-X.txt" in report
+    # the old pins from a file: unchanged pins give a zero change
+    assert main(["export", "linuxcnc", rp, "--machine", mp, "--kins", "xyzac-trt", "--out",
+                 str(tmp_path / "again"), "--old", str(out / "fivecal-kins.hal")]) == 0
+    again = L.read_hal_pins(str(tmp_path / "again" / "fivecal-kins.hal"), "xyzac-trt")
+    assert max(abs(again[k] - pins[k]) for k in pins) < 1e-9
+
+
+def test_cli_export_refuses(tmp_path, capsys):
+    from fivecal.cli import main
+
+    mp, rp = _write_inputs(tmp_path, ERRORS["xyzac-trt"], {"converged": False})
+    args = ["export", "linuxcnc", rp, "--machine", mp, "--kins", "xyzac-trt", "--out", str(tmp_path / "o")]
+    assert main(args) == 2
+    assert "refusing" in capsys.readouterr().err
+    assert not (tmp_path / "o" / "fivecal-kins.hal").exists()
+    mp, rp = _write_inputs(tmp_path, {"EX0C": 0.8})
+    args = ["export", "linuxcnc", rp, "--machine", mp, "--kins", "xyzac-trt", "--out", str(tmp_path / "o")]
+    assert main(args) == 2
+    assert "x-rot-point" in capsys.readouterr().err
+    assert main(args + ["--max-change", "1.0"]) == 0
+    assert main(["export", "linuxcnc", rp, "--machine", "examples/machines/hu40t.json", "--kins",
+                 "xyzac-trt", "--out", str(tmp_path / "p")]) == 2

@@ -147,7 +147,7 @@ class Absorption:
                  pins_table(self.old_pins, self.pins),
                  "workpiece shift (probe the part again into the work offset): "
                  + ", ".join(f"{a} {1000 * v:+.1f} um" for a, v in zip("XYZ", self.workpiece_shift)),
-                 f"tool point error over {len(self.residual)} poses: old pins rms "
+                 f"tool point error the pins leave over {len(self.residual)} poses: old pins rms "
                  f"{1000 * self.rms_old:.2f} um, max {1000 * self.max_old:.2f} um; new pins rms "
                  f"{1000 * self.rms:.2f} um, max {1000 * self.max:.2f} um",
                  "what the pins cannot absorb (axis tilts, error motions, backlash) is left: "
