@@ -245,3 +245,49 @@ def test_cli_export_refuses(tmp_path, capsys):
     assert main(args + ["--max-change", "1.0"]) == 0
     assert main(["export", "linuxcnc", rp, "--machine", "examples/machines/hu40t.json", "--kins",
                  "xyzac-trt", "--out", str(tmp_path / "p")]) == 2
+
+
+# Thesis-sized location errors of both rotary axes, tilts included: the pins
+# absorb the positions, not the tilts.
+FULL_ERRORS = {"EX0C": 0.0312, "EY0C": -0.0187, "EA0C": 2.1e-5, "EB0C": -1.6e-5,
+               "EY0A": 0.0241, "EZ0A": -0.0153, "EB0A": 1.2e-5, "EC0A": -2.4e-5}
+
+
+@needs_linuxcnc
+def test_absorption_and_gcode_compensation_in_linuxcnc():
+    """LinuxCNC with the absorbing pins leaves exactly the error map fivecal
+    predicts; fivecal's compensation (inverse kinematics on the identified
+    model, sent as TCP world moves) brings the tool point below 1 um."""
+    kins = "xyzac-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    ab = L.absorb(m, kins, FULL_ERRORS)
+    assert 1e-3 < ab.max < ab.max_old
+    n = 50
+    w, tilt, c = _poses(kins, n, seed=5)
+    world = np.column_stack([w, tilt, c])
+    mp = L.match(m, kins)
+    target = w + np.asarray(mp["origin"]) + ab.workpiece_shift
+    # compensated moves: the commands that put the erroneous machine's tool at
+    # the target with the nominal tool axis, as LinuxCNC world moves
+    comp = []
+    for i in range(n):
+        start = {"X": 0.0, "Y": 0.0, "Z": 0.0, "A": tilt[i], "C": c[i]}
+        _, axis = m.tool_pose(start)
+        q = m.inverse(target[i][None, :], tool_axes=axis, start=start, errors=FULL_ERRORS)
+        j = L.joints(m, kins, q)
+        comp.append(np.concatenate([L.forward(kins, ab.pins, j)[0], j[0, 3:]]))
+    comp = np.array(comp)
+    moves = _mdi(kins, w, tilt, c) + _mdi(kins, comp[:, :3], comp[:, 3], comp[:, 4])
+    with harness.Sim(kins, hal=L.hal_text(kins, ab.pins)) as sim:
+        out = sim.run(moves, setup=["M428"])
+    got = np.array(out["joints"])
+    plain, compensated = got[:n], got[n:]
+    err = L.tool_point_error(m, kins, FULL_ERRORS, ab.pins, ab.workpiece_shift, plain, w)
+    predicted = L.tool_point_error(m, kins, FULL_ERRORS, ab.pins, ab.workpiece_shift,
+                                   L.inverse(kins, ab.pins, world), w)
+    assert np.abs(err - predicted).max() < 1e-9
+    size = np.linalg.norm(err, axis=1)
+    assert size.max() > 1e-3  # the tilts leave micrometres
+    assert size.max() <= 1.5 * ab.max  # within what the volume fit reported
+    left = L.tool_point_error(m, kins, FULL_ERRORS, ab.pins, ab.workpiece_shift, compensated, w)
+    assert np.linalg.norm(left, axis=1).max() < 1e-3

@@ -155,6 +155,21 @@ class Absorption:
         return "\n".join(lines)
 
 
+def tool_point_error(machine: Machine, kins: str, errors, pins: Mapping[str, float],
+                     workpiece_shift, joint_values, world) -> np.ndarray:
+    """(N, 3) mm: where the erroneous machine puts the tool when LinuxCNC
+    commands ``joint_values`` (N, 5) for the world targets ``world`` (N, 3),
+    minus the target in the workpiece frame (world + tool tip + workpiece shift).
+    With ``joint_values = inverse(kins, pins, ...)`` this is the error fivecal
+    predicts the controller leaves."""
+    j = np.atleast_2d(np.asarray(joint_values, dtype=float))
+    mp = match(machine, kins)
+    p = machine.tool_point(commands(machine, kins, j), errors=errors)
+    target = np.atleast_2d(np.asarray(world, dtype=float))[:, :3] + np.asarray(mp["origin"]) \
+        + np.asarray(workpiece_shift, dtype=float)
+    return p - target
+
+
 def nominal_pins(machine: Machine, kins: str, held: Optional[Mapping[str, float]] = None,
                  poses: Optional[Mapping] = None) -> Dict[str, float]:
     """The pins of the machine's nominal geometry (z-offset and tool-offset
