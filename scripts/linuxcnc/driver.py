@@ -11,7 +11,14 @@ JOB: {"setup": ["M428", ...],                     MDI lines after homing
       "moves": ["G1 X.. Y.. Z.. A.. C.. F..", ...],  one MDI line per pose
       "hal_pins": ["joint.0.motor-pos-cmd", ...],   read after each move
       "settle": seconds to wait after each move before reading,
+      "program": "file.ngc" (run in AUTO mode after the moves),
+      "program_timeout": seconds,
+      "probe_sim": [{"rot": [tilt, c], "g": [[gx, gy, gz], ...], "h": [...]}, ...],
       "timeout": seconds per command}
+
+probe_sim drives motion.probe-input while the job runs: the input is on when
+the rotary joints are at one of the listed poses and every g . (joint X, Y, Z)
++ h <= 0 there (the stylus ball touches a convex artefact).
 OUT: {"joints": [[j0..j4], ...] (commanded joint positions after each move),
       "joints_actual": [...], "position": [...] (world, after each move),
       "hal": [[pin values], ...] (after each move), "hal_start": [pin values after homing],
@@ -23,6 +30,7 @@ hanging the caller.
 import json
 import os
 import sys
+import threading
 import time
 
 import hal
@@ -37,6 +45,35 @@ def wait_for(pred, s, timeout, what):
             return
         time.sleep(0.02)
     raise TimeoutError(f"LinuxCNC: timed out after {timeout} s waiting for {what}")
+
+
+class ProbeSim(threading.Thread):
+    """A simulated touch probe: polls the joint feedback and sets
+    motion.probe-input (about every 0.2 ms)."""
+
+    def __init__(self, poses, tol=1e-6):
+        super().__init__(daemon=True)
+        self.poses, self.tol = poses, tol
+        self.stop = threading.Event()
+        self.error = None
+
+    def run(self):
+        try:
+            state = None
+            while not self.stop.is_set():
+                j = [hal.get_value(f"joint.{i}.pos-fb") for i in range(5)]
+                on = False
+                for p in self.poses:
+                    if abs(j[3] - p["rot"][0]) < self.tol and abs(j[4] - p["rot"][1]) < self.tol:
+                        on = all(g[0] * j[0] + g[1] * j[1] + g[2] * j[2] + h <= 0.0
+                                 for g, h in zip(p["g"], p["h"]))
+                        break
+                if on != state:
+                    hal.set_p("motion.probe-input", "1" if on else "0")
+                    state = on
+                time.sleep(0.0002)
+        except Exception as e:  # reported by the main thread
+            self.error = e
 
 
 def main(job_path, out_path):
@@ -93,13 +130,17 @@ def main(job_path, out_path):
             raise RuntimeError(f"LinuxCNC refused '{line}': {errors[-1]}")
 
     pins = job.get("hal_pins", [])
-    if pins:
+    probe = None
+    if pins or job.get("probe_sim"):
         # hal.get_value needs a component of this process in HAL
         comp = hal.component(f"fivecal-driver-{os.getpid()}")
         comp.ready()
     settle = float(job.get("settle", 0.0))
     out = {"joints": [], "joints_actual": [], "position": [], "probed": [], "hal": [],
            "hal_start": [hal.get_value(p) for p in pins]}
+    if job.get("probe_sim"):
+        probe = ProbeSim(job["probe_sim"])
+        probe.start()
     for line in job.get("setup", []):
         mdi(line)
     for line in job.get("moves", []):
@@ -112,6 +153,33 @@ def main(job_path, out_path):
         out["joints_actual"].append(list(s.joint_actual_position[:njoints]))
         out["position"].append(list(s.position[:9]))
         out["probed"].append(list(s.probed_position[:9]))
+    if job.get("program"):
+        ptimeout = float(job.get("program_timeout", 600))
+        c.mode(linuxcnc.MODE_AUTO)
+        c.wait_complete(timeout)
+        c.program_open(os.path.abspath(job["program"]))
+        c.wait_complete(timeout)
+        c.auto(linuxcnc.AUTO_RUN, 0)
+        t0 = time.monotonic()
+        started = False
+        while True:
+            s.poll()
+            check_errors()
+            if errors:
+                raise RuntimeError(f"LinuxCNC stopped the program: {errors[-1]}")
+            if s.interp_state != linuxcnc.INTERP_IDLE:
+                started = True
+            elif started or time.monotonic() - t0 > 5:
+                break
+            if time.monotonic() - t0 > ptimeout:
+                c.abort()
+                raise TimeoutError(f"LinuxCNC: program did not finish in {ptimeout} s")
+            if probe is not None and probe.error:
+                raise probe.error
+            time.sleep(0.05)
+    if probe is not None:
+        probe.stop.set()
+        probe.join(2)
     s.poll()
     out["kinematics_type"] = s.kinematics_type
     out["errors"] = errors

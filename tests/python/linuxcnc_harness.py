@@ -209,7 +209,8 @@ class Sim:
     # ---- jobs ---------------------------------------------------------
     def run(self, moves: List[str], setup: Iterable[str] = ("M428",), timeout: float = 30.0,
             total_timeout: Optional[float] = None, hal_pins: Iterable[str] = (),
-            settle: float = 0.0) -> dict:
+            settle: float = 0.0, program: Optional[str] = None, probe_sim=None,
+            program_timeout: float = 600.0) -> dict:
         """Homes, runs the setup MDI lines, then each move; returns the driver's
         output (joints after each move, world position, kinematics type)."""
         if self.proc is None or self.proc.poll() is not None:
@@ -218,12 +219,14 @@ class Sim:
         out = os.path.join(self.dir, "out.json")
         with open(job, "w") as f:
             json.dump({"setup": list(setup), "moves": list(moves), "timeout": timeout,
-                       "hal_pins": list(hal_pins), "settle": settle}, f)
+                       "hal_pins": list(hal_pins), "settle": settle, "program": program,
+                       "probe_sim": probe_sim, "program_timeout": program_timeout}, f)
         if os.path.exists(out):
             os.remove(out)
         if os.geteuid() == 0:
             subprocess.run(["chown", CNC_USER, job], check=True)
-        limit = total_timeout or (60.0 + (timeout + settle) * (len(moves) + 10))
+        limit = total_timeout or (60.0 + (timeout + settle) * (len(moves) + 10)
+                                  + (program_timeout + 10 if program else 0))
         r = subprocess.run(_as_user([SYSTEM_PYTHON, os.path.join(self.dir, "driver.py"), job, out]),
                            cwd=self.dir,
                            capture_output=True, text=True, timeout=limit)
@@ -232,3 +235,8 @@ class Sim:
                                f"--- linuxcnc log ---\n{self.log_text()}")
         with open(out) as f:
             return json.load(f)
+
+    def read(self, name: str) -> str:
+        """A file the controller wrote in its configuration folder (a probe log)."""
+        with open(os.path.join(self.dir, name)) as f:
+            return f.read()

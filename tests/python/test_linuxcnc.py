@@ -291,3 +291,88 @@ def test_absorption_and_gcode_compensation_in_linuxcnc():
     assert size.max() <= 1.5 * ab.max  # within what the volume fit reported
     left = L.tool_point_error(m, kins, FULL_ERRORS, ab.pins, ab.workpiece_shift, compensated, w)
     assert np.linalg.norm(left, axis=1).max() < 1e-3
+
+
+def _octagon():
+    """A convex octagonal prism on the table: the top face and eight sides."""
+    facets = [{"id": "TOP", "point": [0, 0, 60], "normal": [0, 0, 1]}]
+    for k in range(8):
+        a = np.radians(45 * k)
+        n = [float(np.cos(a)), float(np.sin(a)), 0.0]
+        facets.append({"id": f"S{k}", "point": [80 * n[0], 80 * n[1], 30.0], "normal": n})
+    return {"facets": facets}
+
+
+def _probe_plan(m, art):
+    """Touches at 16 indexations (A -60..30, C every 90 deg) on the facets
+    facing the probe."""
+    out = []
+    for a in (-60, -30, 0.5, 30):
+        for c in (0, 90, 180, 270):
+            axes = {"A": a, "C": c, "X": 0, "Y": 0, "Z": 0}
+            _, v = m.tool_pose(axes)
+            for f in art["facets"]:
+                n = np.array(f["normal"])
+                if n @ v[0] < -0.05:
+                    continue
+                pts = [f["point"]]
+                if f["id"] == "TOP":
+                    pts = [[40, 0, 60.0], [0, 40, 60.0], [-40, -20, 60.0]]
+                out += [{"type": "facet", "target": f["id"], "axes": {"A": a, "C": c},
+                         "point": list(map(float, p))} for p in pts]
+    return out
+
+
+TRUE_LOCATION = {"EX0C": 0.0312, "EY0C": -0.0187, "EA0C": 2.1e-5, "EB0C": -1.6e-5,
+                 "EY0A": 0.0241, "EZ0A": -0.0153, "EB0A": 1.2e-5, "EC0A": -2.4e-5}
+
+
+def test_probing_program_and_log_reader_offline():
+    kins = "xyzac-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    art = _octagon()
+    plan = _probe_plan(m, art)
+    pins = L.nominal_pins(m, kins)
+    prog = L.probing_program(m, kins, plan, art, 3.0)
+    assert prog.count("G38.2") == len(plan) and "(PROBEOPEN probe-log.txt)" in prog
+    # a log of the nominal contact points reads back as the planned indexations
+    geo = L._touch_geometry(m, kins, plan, art, 3.0)
+    log = "".join(f"{w[0]:f} {w[1]:f} {w[2]:f} {t:f} 0 {c:f} 0 0 0\n" for t, c, w, _, _ in geo)
+    obs = L.read_probe_log(log, m, kins, plan, pins)
+    assert len(obs) == len(plan)
+    assert all(abs(o["axes"]["A"] - p["axes"]["A"]) < 1e-6 for o, p in zip(obs, plan))
+    with pytest.raises(ValueError, match="planned touches"):
+        L.read_probe_log(log.split("\n", 1)[1], m, kins, plan, pins)
+    with pytest.raises(ValueError, match=":2: expected 9"):
+        L.read_probe_log(log.replace("\n", "\n1 2\n", 1), m, kins, plan, pins)
+
+
+@needs_linuxcnc
+def test_probing_program_runs_in_linuxcnc_and_identifies():
+    """A generated G38.2 program runs in the simulator with a simulated probe
+    input that trips at the erroneous machine's artefact surface; LinuxCNC's
+    probe log goes back through fivecal's reader into an identification that
+    recovers the injected location errors."""
+    kins = "xyzac-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    art = _octagon()
+    plan = _probe_plan(m, art)
+    pins = L.nominal_pins(m, kins)  # the controller does not know the errors
+    # 30 mm/min: the simulated probe polls the joints about every 0.2-1 ms, so
+    # its trip point scatters by about feed x latency (0.5 um here)
+    prog = L.probing_program(m, kins, plan, art, 3.0, clearance=0.1, overtravel=0.3, feed=30)
+    trigger = L.probe_trigger_model(m, kins, plan, art, 3.0, errors=TRUE_LOCATION)
+    with harness.Sim(kins, hal=L.hal_text(kins, pins), files={"probe.ngc": prog}) as sim:
+        out = sim.run([], setup=[], program="probe.ngc", probe_sim=trigger, program_timeout=400)
+        log = sim.read("probe-log.txt")
+    assert out["errors"] == []
+    obs = L.read_probe_log(log, m, kins, plan, pins)
+    for o in obs:
+        o["sigma"] = 0.001
+    ds = fivecal.Dataset.from_dict({"machine": m.to_dict(), "probe": {"tip_radius": 3.0},
+                                    "artefact": art, "observations": obs})
+    # the stylus is calibrated separately: its offsets are not in this plan's reach
+    r = fivecal.identify(ds, estimate=list(TRUE_LOCATION), fix=["tip.x", "tip.y", "tip.z"])
+    assert r.converged and r.rms < 0.002
+    for name, truth in TRUE_LOCATION.items():
+        assert abs(r.values[name] - truth) < 4 * r.std[name], (name, r.values[name], truth, r.std[name])

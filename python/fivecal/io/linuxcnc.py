@@ -427,3 +427,157 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     write("linuxcnc-report.txt", "\n".join(report) + "\n")
     exp.files = files
     return exp
+
+
+# ---- probing programs (G38.2) and LinuxCNC's probe log ---------------------
+
+def _facets(artefact: Mapping) -> Dict[str, dict]:
+    facets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
+    if not facets:
+        raise ValueError("artefact: no facets (a probing program needs facet targets)")
+    return facets
+
+
+def _touch_geometry(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                    tip_radius: float, workpiece_shift=(0.0, 0.0, 0.0)):
+    """Per touch: (joint tilt, joint C, contact world point, facet normal,
+    tool axis in world coordinates)."""
+    k = _kins(kins)
+    mp = match(machine, k)
+    tilt = TILT[k]
+    facets = _facets(artefact)
+    origin = np.asarray(mp["origin"], dtype=float) + np.asarray(workpiece_shift, dtype=float)
+    out = []
+    for i, t in enumerate(plan):
+        if t.get("type") != "facet":
+            raise ValueError(f"plan[{i}]: type '{t.get('type')}': only facet touches become G38.2 moves")
+        f = facets.get(t.get("target"))
+        if f is None:
+            raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a facet of the artefact")
+        axes = t.get("axes", {})
+        if tilt not in axes or "C" not in axes:
+            raise ValueError(f"plan[{i}].axes: needs {tilt} and C (degrees)")
+        n = np.asarray(f["normal"], dtype=float)
+        n = n / np.linalg.norm(n)
+        p = np.asarray(t.get("point", f["point"]), dtype=float)
+        world = p + tip_radius * n - origin
+        q = {a: 0.0 for a in machine.axis_names if a != "S"}
+        q.update({tilt: float(axes[tilt]), "C": float(axes["C"])})
+        v = machine.tool_pose(q)[1][0]
+        out.append((mp["sign"][3] * float(axes[tilt]), mp["sign"][4] * float(axes["C"]), world, n, v))
+    return out
+
+
+def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                    tip_radius: float, clearance: float = 1.0, overtravel: float = 1.0,
+                    feed: float = 60.0, retract: float = 10.0, safe: float = 300.0,
+                    log: str = "probe-log.txt",
+                    tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+    """An ISO G-code program for LinuxCNC that runs a fivecal facet plan
+    (``{"type": "facet", "target": id, "axes": {tilt, C}, "point": [...]}``)
+    with tool centre point kinematics: per touch, index the table, go to
+    ``clearance`` mm off the contact point along the facet normal, ``G38.2``
+    towards it (``overtravel`` mm beyond) at ``feed`` mm/min and back off.
+    Between touches the probe leaves ``retract`` mm along the facet normal and
+    then ``safe`` mm along the tool axis, re-indexes there and comes back the
+    same way (straight G0 moves: check them against your fixtures).
+    The probed positions go to ``log`` (``PROBEOPEN``); read them back with
+    :func:`read_probe_log`. Coordinates: workpiece point - tool tip at the zero
+    pose (the pins' convention); ``tcp_on`` is the line that switches the
+    controller to its tool-centre-point kinematics (``M428`` in LinuxCNC's
+    sample configs)."""
+    k = _kins(kins)
+    tilt = TILT[k]
+    touches = _touch_geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    if not (clearance > 0 and overtravel > 0 and feed > 0 and retract >= 0):
+        raise ValueError("probing_program: clearance, overtravel and feed must be positive")
+    f = lambda v: f"{v:.6f}"  # noqa: E731
+    out = [f"(fivecal probing program: {len(touches)} touches, machine {machine.name}, {k}-kins)",
+           "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
+           "G21 G90 G94 G17 G40 G49 G54"]
+    if tcp_on:
+        out.append(f"{tcp_on} (tool centre point kinematics on)")
+    out.append(f"(PROBEOPEN {log})")
+    xyz = lambda p: f"X{f(p[0])} Y{f(p[1])} Z{f(p[2])}"  # noqa: E731
+    for i, (t, c, w, n, v) in enumerate(touches):
+        start, end = w + clearance * n, w - overtravel * n
+        off = start + retract * n
+        up = off + safe * v
+        out.append(f"(touch {i + 1}: {plan[i]['target']})")
+        out.append(f"G0 {xyz(up)} {tilt}{f(t)} C{f(c)}")
+        out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}",
+                f"G38.2 {xyz(end)} F{feed:g}",
+                f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
+    out += ["(PROBECLOSE)", "M2"]
+    return "\n".join(out) + "\n"
+
+
+def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapping],
+                   pins: Mapping[str, float]) -> List[dict]:
+    """Facet observations (dataset JSON) from LinuxCNC's probe log (the
+    ``PROBEOPEN`` file: one line 'x y z a b c u v w' per probe, in program
+    coordinates) of a program :func:`probing_program` wrote for ``plan``:
+    each world position goes through LinuxCNC's inverse kinematics with the
+    ``pins`` the controller ran with to the joints, then to fivecal's axis
+    readings. ``source`` is a path or the log text."""
+    k = _kins(kins)
+    if "\n" not in source and os.path.exists(source):
+        with open(source, encoding="utf-8") as fh:
+            text, where = fh.read(), source
+    else:
+        text, where = source, "probe log"
+    rows = []
+    for no, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        parts = line.split()
+        try:
+            vals = [float(v) for v in parts]
+        except ValueError:
+            raise ValueError(f"{where}:{no}: expected 9 numbers 'x y z a b c u v w', got '{line.strip()}'") from None
+        if len(vals) != 9 or not all(math.isfinite(v) for v in vals):
+            raise ValueError(f"{where}:{no}: expected 9 finite numbers 'x y z a b c u v w', got {len(vals)}")
+        rows.append(vals)
+    if len(rows) != len(plan):
+        raise ValueError(f"{where}: {len(rows)} probed positions for {len(plan)} planned touches "
+                         "(LinuxCNC skips a position equal to the previous one; a touch that did "
+                         "not trip stops the program)")
+    r = np.array(rows)
+    ti = 3 if TILT[k] == "A" else 4
+    world = np.column_stack([r[:, :3], r[:, ti], r[:, 5]])
+    j = inverse(k, pins, world)
+    q = commands(machine, k, j)
+    obs = []
+    for i, t in enumerate(plan):
+        axes = {a: float(q[a][i]) for a in machine.axis_names}
+        obs.append({"type": "facet", "target": t["target"], "axes": axes, "id": f"touch{i + 1}"})
+    return obs
+
+
+def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                        tip_radius: float, errors=None) -> List[dict]:
+    """For a simulated probe input (scripts/linuxcnc/driver.py): per rotary
+    pose of the plan, the rows g, h with the stylus ball touching or inside
+    the (convex) artefact when every g . (joint X, Y, Z) + h <= 0, on the
+    machine with ``errors``. At fixed rotary joints the ball centre is affine
+    in the linear joints, so four evaluations give it exactly (location
+    errors; error motions make it only nearly affine)."""
+    k = _kins(kins)
+    facets = list(_facets(artefact).values())
+    poses = []
+    for t, c, _, _, _ in _touch_geometry(machine, k, plan, artefact, tip_radius):
+        if (t, c) not in poses:
+            poses.append((t, c))
+    out = []
+    for t, c in poses:
+        jj = np.array([[0, 0, 0, t, c], [1, 0, 0, t, c], [0, 1, 0, t, c], [0, 0, 1, t, c]], float)
+        p = machine.tool_point(commands(machine, k, jj), errors=errors)
+        M = (p[1:] - p[0]).T  # d(ball centre)/d(joint xyz)
+        g, h = [], []
+        for fct in facets:
+            n = np.asarray(fct["normal"], dtype=float)
+            n = n / np.linalg.norm(n)
+            g.append((n @ M).tolist())
+            h.append(float(n @ (p[0] - np.asarray(fct["point"], dtype=float)) - tip_radius))
+        out.append({"rot": [t, c], "g": g, "h": h})
+    return out
