@@ -376,3 +376,41 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     assert r.converged and r.rms < 0.002
     for name, truth in TRUE_LOCATION.items():
         assert abs(r.values[name] - truth) < 4 * r.std[name], (name, r.values[name], truth, r.std[name])
+
+
+@pytest.mark.parametrize("topology,axis,direction", [
+    ("wCAfXYZSt", "X", [-1, 0, 0]),   # tool side, reversed: joint = -command
+    ("wCAYfXZSt", "Y", [0, -1, 0]),   # table side: the tool moves the other way
+])
+def test_comp_rows_match_the_kinematics(topology, axis, direction):
+    d = {k: dict(v) for k, v in MACHINES["xyzac-trt"]["axes"].items()}
+    d[axis]["direction"] = direction
+    m = fivecal.Machine.from_dict({"name": "c", "topology": topology, "axes": d,
+                                   "tool": {"tip": [0, 0, 150]}})
+    kins = "xyzac-trt"
+    errors = {f"E{axis}{axis}1": 3e-4, f"E{axis}{axis}2": 2e-6, f"E{axis}{axis}b": 0.005}
+    rows = L.comp_rows(m, kins, errors, axis, -100, 100, 25)
+    k = "XYZ".index(axis)
+    for nominal, fwd, rev in rows:
+        for col, jdir in ((fwd, 1), (rev, -1)):
+            q = L.commands(m, kins, [[nominal if i == k else 0.0 for i in range(5)]])
+            qdir = int(np.sign(L.match(m, kins)["sign"][k])) * jdir
+            p = m.tool_point(q, errors=errors, directions={axis: [qdir]})[0]
+            # the joint value at which the error-free machine puts the tool there
+            j_of = lambda j: m.tool_point(L.commands(m, kins, [[j if i == k else 0.0 for i in range(5)]]))[0][k]
+            slope = j_of(1.0) - j_of(0.0)
+            actual = (p[k] - j_of(0.0)) / slope
+            assert abs(actual - col) < 1e-9, (nominal, jdir, actual, col)
+
+
+def test_bindings_refuse_bad_input():
+    with pytest.raises(ValueError, match="joints"):
+        L.forward("xyzac-trt", {}, np.zeros((2, 4)))
+    with pytest.raises(ValueError, match="x-offset"):
+        L.inverse("xyzac-trt", {"x-offset": 1.0}, np.zeros((1, 5)))
+    with pytest.raises(ValueError, match="not finite|finite"):
+        L.inverse("xyzac-trt", {"x-rot-point": float("nan")}, np.zeros((1, 5)))
+    m = fivecal.Machine.from_dict(MACHINES["xyzac-trt"])
+    q = L.pose_grid(m, "xyzac-trt", {"A": (0, 0)})
+    with pytest.raises(ValueError, match="rotary angles"):
+        L.absorb(m, "xyzac-trt", {}, poses=q, old_pins={})

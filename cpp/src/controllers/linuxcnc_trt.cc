@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "fivecal/kinematics.h"
