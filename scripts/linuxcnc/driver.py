@@ -16,9 +16,10 @@ JOB: {"setup": ["M428", ...],                     MDI lines after homing
       "probe_sim": [{"rot": [tilt, c], "g": [[gx, gy, gz], ...], "h": [...]}, ...],
       "timeout": seconds per command}
 
-probe_sim drives motion.probe-input while the job runs: the input is on when
+probe_sim loads, per rotary pose, the gains of the HAL probe chain
+(fivecal.io.linuxcnc.probe_sim_hal) in which motion.probe-input is on when
 the rotary joints are at one of the listed poses and every g . (joint X, Y, Z)
-+ h <= 0 there (the stylus ball touches a convex artefact).
++ h < 0 there (the stylus ball touches a convex artefact).
 OUT: {"joints": [[j0..j4], ...] (commanded joint positions after each move),
       "joints_actual": [...], "position": [...] (world, after each move),
       "hal": [[pin values], ...] (after each move), "hal_start": [pin values after homing],
@@ -48,8 +49,10 @@ def wait_for(pred, s, timeout, what):
 
 
 class ProbeSim(threading.Thread):
-    """A simulated touch probe: polls the joint feedback and sets
-    motion.probe-input (about every 0.2 ms)."""
+    """A simulated touch probe. The trip test runs in the servo thread (the
+    sum2/comp/and2 chain of fivecal.io.linuxcnc.probe_sim_hal); this thread
+    only loads the chain's gains for the rotary pose the table is at and
+    enables it there, so its own timing does not matter while probing."""
 
     def __init__(self, poses, tol=1e-6):
         super().__init__(daemon=True)
@@ -59,19 +62,28 @@ class ProbeSim(threading.Thread):
 
     def run(self):
         try:
-            state = None
+            current = -2
             while not self.stop.is_set():
-                j = [hal.get_value(f"joint.{i}.pos-fb") for i in range(5)]
-                on = False
-                for p in self.poses:
-                    if abs(j[3] - p["rot"][0]) < self.tol and abs(j[4] - p["rot"][1]) < self.tol:
-                        on = all(g[0] * j[0] + g[1] * j[1] + g[2] * j[2] + h <= 0.0
-                                 for g, h in zip(p["g"], p["h"]))
+                a, c = hal.get_value("joint.3.pos-fb"), hal.get_value("joint.4.pos-fb")
+                found = -1
+                for k, p in enumerate(self.poses):
+                    if abs(a - p["rot"][0]) < self.tol and abs(c - p["rot"][1]) < self.tol:
+                        found = k
                         break
-                if on != state:
-                    hal.set_p("motion.probe-input", "1" if on else "0")
-                    state = on
-                time.sleep(0.0002)
+                if found != current and found >= 0:
+                    # the windows still hold the previous pose, so the chain
+                    # is off here until they move with the new gains
+                    p = self.poses[found]
+                    for i, (g, h) in enumerate(zip(p["g"], p["h"])):
+                        hal.set_p(f"fcs{2 * i}.gain0", repr(g[0]))
+                        hal.set_p(f"fcs{2 * i}.gain1", repr(g[1]))
+                        hal.set_p(f"fcs{2 * i}.offset", repr(h))
+                        hal.set_p(f"fcs{2 * i + 1}.gain1", repr(g[2]))
+                    for w, v in (("fcwa", p["rot"][0]), ("fcwc", p["rot"][1])):
+                        hal.set_p(f"{w}.min", repr(v - self.tol))
+                        hal.set_p(f"{w}.max", repr(v + self.tol))
+                    current = found
+                time.sleep(0.001)
         except Exception as e:  # reported by the main thread
             self.error = e
 
@@ -166,7 +178,9 @@ def main(job_path, out_path):
             s.poll()
             check_errors()
             if errors:
-                raise RuntimeError(f"LinuxCNC stopped the program: {errors[-1]}")
+                where = [round(v, 4) for v in s.joint_actual_position[:5]]
+                raise RuntimeError(f"LinuxCNC stopped the program at line {s.motion_line} "
+                                   f"(interpreter at {s.current_line}, joints {where}): {errors[-1]}")
             if s.interp_state != linuxcnc.INTERP_IDLE:
                 started = True
             elif started or time.monotonic() - t0 > 5:

@@ -228,11 +228,18 @@ def _number(v: float) -> str:
     return repr(float(v))  # shortest text that reads back as the same double
 
 
+#: pins the fit holds at their old values: hal_text and ini_text leave them to
+#: the machine's own configuration (tool-offset is usually netted to
+#: motion.tooloffset.z, and a netted pin cannot be setp)
+HELD = ("z-offset", "tool-offset")
+
+
 def hal_text(kins: str, pins: Mapping[str, float], old: Optional[Mapping[str, float]] = None,
-             header: str = "") -> str:
-    """``setp`` lines for the pins (a HAL file), each with the old value in
-    its comment. Load it after the kinematics module (a HALFILE after the
-    motion module); remove any other ``setp``/``sets``/``net`` of these pins."""
+             header: str = "", held: Sequence[str] = HELD) -> str:
+    """``setp`` lines for the fitted pins (a HAL file), each with the old value
+    in its comment; the ``held`` pins are listed as comments only. Load it
+    after the kinematics module (a HALFILE after the motion module); remove
+    any other ``setp``/``sets``/``net`` of the pins it sets."""
     k = _kins(kins)
     out = [f"# fivecal: {k}-kins pins (mm){(' - ' + header) if header else ''}"]
     if old is not None:
@@ -240,19 +247,23 @@ def hal_text(kins: str, pins: Mapping[str, float], old: Optional[Mapping[str, fl
     for n in pin_names(k):
         if n not in pins:
             continue
+        if n in held:
+            out.append(f"# {k}-kins.{n} = {pins[n]:.6f} is held (set where your configuration sets it)")
+            continue
         c = "" if old is None else f"  # old {float(old.get(n, 0.0)):.6f}"
         out.append(f"setp {k}-kins.{n} {_number(pins[n])}{c}")
     return "\n".join(out) + "\n"
 
 
-def ini_text(kins: str, pins: Mapping[str, float], section: str = "FIVECAL_KINS") -> Tuple[str, str]:
+def ini_text(kins: str, pins: Mapping[str, float], section: str = "FIVECAL_KINS",
+             held: Sequence[str] = HELD) -> Tuple[str, str]:
     """The same values as an INI section plus the HAL lines that read it
     (``setp <kins>-kins.x-rot-point [FIVECAL_KINS]X_ROT_POINT``)."""
     k = _kins(kins)
     ini = [f"[{section}]", f"# fivecal: {k}-kins pins (mm)"]
     hal = [f"# fivecal: {k}-kins pins from the INI section [{section}]"]
     for n in pin_names(k):
-        if n in pins:
+        if n in pins and n not in held:
             key = n.upper().replace("-", "_")
             ini.append(f"{key} = {_number(pins[n])}")
             hal.append(f"setp {k}-kins.{n} [{section}]{key}")
@@ -471,6 +482,7 @@ def _touch_geometry(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
 def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
                     tip_radius: float, clearance: float = 1.0, overtravel: float = 1.0,
                     feed: float = 60.0, retract: float = 10.0, safe: float = 300.0,
+                    dwell: float = 0.0, arm: str = "", disarm: str = "",
                     log: str = "probe-log.txt",
                     tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0)) -> str:
     """An ISO G-code program for LinuxCNC that runs a fivecal facet plan
@@ -480,7 +492,12 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     towards it (``overtravel`` mm beyond) at ``feed`` mm/min and back off.
     Between touches the probe leaves ``retract`` mm along the facet normal and
     then ``safe`` mm along the tool axis, re-indexes there and comes back the
-    same way (straight G0 moves: check them against your fixtures).
+    same way (straight G0 moves: check them against your fixtures); ``dwell``
+    seconds (G4) after each re-indexing let the table settle; ``arm`` and
+    ``disarm`` are lines that switch the probe on before each G38.2 and off
+    after it: ``M62 P0`` / ``M63 P0``, which act with the next move (LinuxCNC
+    checks the probe input when it queues a G38.2, while the stylus may still
+    sit on the previous contact; an immediate M64 would arm it there).
     The probed positions go to ``log`` (``PROBEOPEN``); read them back with
     :func:`read_probe_log`. Coordinates: workpiece point - tool tip at the zero
     pose (the pins' convention); ``tcp_on`` is the line that switches the
@@ -499,15 +516,21 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         out.append(f"{tcp_on} (tool centre point kinematics on)")
     out.append(f"(PROBEOPEN {log})")
     xyz = lambda p: f"X{f(p[0])} Y{f(p[1])} Z{f(p[2])}"  # noqa: E731
+    last = None
     for i, (t, c, w, n, v) in enumerate(touches):
         start, end = w + clearance * n, w - overtravel * n
         off = start + retract * n
         up = off + safe * v
         out.append(f"(touch {i + 1}: {plan[i]['target']})")
         out.append(f"G0 {xyz(up)} {tilt}{f(t)} C{f(c)}")
-        out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}",
-                f"G38.2 {xyz(end)} F{feed:g}",
-                f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
+        if dwell > 0 and last != (t, c):
+            out.append(f"G4 P{dwell:g}")
+        last = (t, c)
+        out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}"]
+        out += [arm] if arm else []
+        out.append(f"G38.2 {xyz(end)} F{feed:g}")
+        out += [disarm] if disarm else []
+        out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
     out += ["(PROBECLOSE)", "M2"]
     return "\n".join(out) + "\n"
 
@@ -552,6 +575,52 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
         axes = {a: float(q[a][i]) for a in machine.axis_names}
         obs.append({"type": "facet", "target": t["target"], "axes": axes, "id": f"touch{i + 1}"})
     return obs
+
+
+def probe_sim_hal(n_facets: int) -> str:
+    """HAL lines of a simulated touch probe for the headless simulator: per
+    facet i two ``sum2`` (s = gx*X + gy*Y + gz*Z + h of the joint feedback)
+    and a ``comp`` (s < 0), all ANDed with an enable bit into
+    ``motion.probe-input``, in the servo thread, so the probe trips in the
+    first servo cycle the stylus ball reaches the artefact whatever the load,
+    and only while the program arms it (``motion.digital-out-00``:
+    ``probing_program(..., arm="M62 P0", disarm="M63 P0")``).
+    scripts/linuxcnc/driver.py sets the gains per rotary pose from
+    :func:`probe_trigger_model` (``fcs<2i>.gain0|gain1|offset``,
+    ``fcs<2i+1>.gain1``) and the rotary windows ``fcwa|fcwc.min|max``."""
+    if n_facets < 1:
+        raise ValueError("probe_sim_hal: needs at least one facet")
+    n = n_facets
+    sums = ",".join(f"fcs{i}" for i in range(2 * n))
+    out = ["# fivecal simulated touch probe (see fivecal.io.linuxcnc.probe_sim_hal)",
+           f"loadrt sum2 names={sums}",
+           f"loadrt comp names={','.join(f'fcc{i}' for i in range(n))}",
+           f"loadrt and2 names={','.join(f'fca{i}' for i in range(n))},fcwe,fcwm"]
+    for i in range(n):
+        out += [f"addf fcs{2 * i} servo-thread", f"addf fcs{2 * i + 1} servo-thread",
+                f"addf fcc{i} servo-thread", f"addf fca{i} servo-thread",
+                f"setp fcs{2 * i + 1}.gain0 1", f"setp fcc{i}.hyst 0",
+                f"net fcp-s{i}a fcs{2 * i}.out => fcs{2 * i + 1}.in0",
+                # comp.out = in1 > in0: 0 > s, the ball inside facet i's plane
+                f"net fcp-s{i} fcs{2 * i + 1}.out => fcc{i}.in0",
+                f"net fcp-c{i} fcc{i}.out => fca{i}.in1"]
+    out += ["net fcp-x joint.0.pos-fb => " + " ".join(f"fcs{2 * i}.in0" for i in range(n)),
+            "net fcp-y joint.1.pos-fb => " + " ".join(f"fcs{2 * i}.in1" for i in range(n)),
+            "net fcp-z joint.2.pos-fb => " + " ".join(f"fcs{2 * i + 1}.in1" for i in range(n)),
+            # enabled only at the rotary pose the gains are for (windows set
+            # with the gains), so a late update can never trip it elsewhere
+            "loadrt wcomp names=fcwa,fcwc",
+            "addf fcwa servo-thread", "addf fcwc servo-thread", "addf fcwe servo-thread",
+            "setp fcwa.min 1e9", "setp fcwa.max -1e9", "setp fcwc.min 1e9", "setp fcwc.max -1e9",
+            "net fcp-a joint.3.pos-fb => fcwa.in", "net fcp-c joint.4.pos-fb => fcwc.in",
+            "net fcp-wa fcwa.out => fcwe.in0", "net fcp-wc fcwc.out => fcwe.in1",
+            # armed by the program (M62 P0 / M63 P0 around each G38.2)
+            "addf fcwm servo-thread", "net fcp-window fcwe.out => fcwm.in0",
+            "net fcp-arm motion.digital-out-00 => fcwm.in1",
+            "net fcp-enable fcwm.out => fca0.in0"]
+    out += [f"net fcp-a{i} fca{i - 1}.out => fca{i}.in0" for i in range(1, n)]
+    out.append(f"net fcp-probe fca{n - 1}.out => motion.probe-input")
+    return "\n".join(out) + "\n"
 
 
 def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
