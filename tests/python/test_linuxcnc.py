@@ -378,8 +378,12 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     # the stylus is calibrated separately: its offsets are not in this plan's reach
     r = fivecal.identify(ds, estimate=list(TRUE_LOCATION), fix=["tip.x", "tip.y", "tip.z"])
     assert r.converged and r.rms < 0.002
+    # the trip point is quantised by the 1 ms servo cycle (0.5 um at 30 mm/min),
+    # a deterministic error the fit's sigma does not describe: compare with
+    # absolute bounds far below the injected 15-31 um and 12-24 urad
     for name, truth in TRUE_LOCATION.items():
-        assert abs(r.values[name] - truth) < 4 * r.std[name], (name, r.values[name], truth, r.std[name])
+        tol = 2e-6 if name[1] in "ABC" else 1e-3  # rad / mm
+        assert abs(r.values[name] - truth) < tol, (name, r.values[name], truth, r.std[name])
 
 
 @pytest.mark.parametrize("topology,axis,direction", [
