@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
 # chromium: headless browser the report test renders the HTML report with
-DEB_PACKAGES=(libeigen3-dev libceres-dev nlohmann-json3-dev libgtest-dev chromium)
+DEB_PACKAGES=(libeigen3-dev libceres-dev nlohmann-json3-dev libgtest-dev chromium linuxcnc-uspace)
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

@@ -34,6 +34,7 @@ void BindIdentification(py::module_& m);
 void BindUncertainty(py::module_& m);
 void BindDbb(py::module_& m);
 void BindDesign(py::module_& m);
+void BindControllers(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "fivecal C++ core: machine model, kinematics, identification";
@@ -127,4 +128,5 @@ PYBIND11_MODULE(_core, m) {
   BindUncertainty(m);
   BindDbb(m);
   BindDesign(m);
+  BindControllers(m);
 }

@@ -666,6 +666,7 @@ def main(argv=None) -> int:
     from .dbb_cli import register as _register_dbb
 
     _register_dbb(sub)
+    from .io.linuxcnc_cli import register as _register_export; _register_export(sub)  # noqa: E702
 
     from .io.cli import register as _register_import
 

@@ -1,0 +1,652 @@
+"""From identified errors to a LinuxCNC machine (docs/linuxcnc.md).
+
+* ``absorb``: the values of the ``xyzac-trt-kins`` / ``xyzbc-trt-kins`` HAL
+  pins (``x|y|z-rot-point``, ``x|y-offset``, ``z-offset``, ``tool-offset``)
+  that best absorb the identified errors over a working volume, and the
+  volumetric error LinuxCNC leaves after them (the kinematics model itself is
+  in the C++ core: ``cpp/include/fivecal/controllers/linuxcnc_trt.h``).
+* ``hal_text`` / ``ini_text``: the lines that set those pins, old and new side
+  by side; ``check_change`` refuses implausibly large changes.
+* ``comp_rows`` / ``comp_text``: joint compensation files (``COMP_FILE``,
+  type 0: nominal, forward, reverse) for a linear axis's positioning error
+  along itself (``EXX1..3`` for X) and its backlash (``EXXb``).
+* ``export``: all of it into a folder, behind the usable-result guard.
+
+Units: mm, degrees for rotary joints; error parameters in mm and rad.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .. import _core
+from ..guards import CorrectionLimitError
+from ..machine import Machine
+
+KINS = ("xyzac-trt", "xyzbc-trt")
+TILT = {"xyzac-trt": "A", "xyzbc-trt": "B"}
+#: default plausibility limit on a pin change (mm): rotary pivots of a built
+#: machine are off by tens of micrometres; a millimetre is a unit or sign slip
+DEFAULT_MAX_CHANGE = 0.5
+#: default working volume of the absorption fit
+DEFAULT_VOLUME = {"linear": (-100.0, 100.0), "tilt": (-90.0, 90.0), "C": (-180.0, 180.0)}
+
+
+def _kins(kins: str) -> str:
+    k = kins[:-5] if kins.endswith("-kins") else kins
+    if k not in KINS:
+        raise ValueError(f"kins: '{kins}' (expected {' or '.join(KINS)})")
+    return k
+
+
+def pin_names(kins: str) -> List[str]:
+    """The HAL input pins of ``<kins>-kins`` fivecal sets, in a fixed order."""
+    return list(_core.trt_pin_names(_kins(kins)))
+
+
+def match(machine: Machine, kins: str) -> dict:
+    """How ``machine`` drives LinuxCNC's joints X Y Z tilt C: ``axes`` (the
+    fivecal axis letters), ``sign`` (joint = sign * fivecal command) and
+    ``origin`` (LinuxCNC world = workpiece point - origin - workpiece shift).
+    ValueError says why when the machine does not fit the kinematics."""
+    return dict(_core.trt_match(machine._core, _kins(kins)))
+
+
+def joints(machine: Machine, kins: str, axes: Mapping) -> np.ndarray:
+    """LinuxCNC joint values (N, 5: X Y Z tilt C) for fivecal axis commands."""
+    return np.asarray(_core.trt_joints(machine._core, _kins(kins), machine.axes_matrix(axes)))
+
+
+def commands(machine: Machine, kins: str, joint_values) -> dict:
+    """fivecal axis commands (dict axis -> array) for LinuxCNC joint values (N, 5)."""
+    j = np.atleast_2d(np.asarray(joint_values, dtype=float))
+    return machine.axes_dict(np.asarray(_core.trt_commands(machine._core, _kins(kins), j)))
+
+
+def inverse(kins: str, pins: Mapping[str, float], world) -> np.ndarray:
+    """LinuxCNC's own inverse kinematics (LinuxCNC 2.9 trtfuncs.c): world rows
+    (X Y Z mm, tilt C degrees) -> joint rows."""
+    w = np.atleast_2d(np.asarray(world, dtype=float))
+    return np.asarray(_core.trt_inverse(_kins(kins), dict(pins), w))
+
+
+def forward(kins: str, pins: Mapping[str, float], joint_values) -> np.ndarray:
+    """LinuxCNC's forward kinematics: joint rows -> world X Y Z rows (mm)."""
+    j = np.atleast_2d(np.asarray(joint_values, dtype=float))
+    return np.asarray(_core.trt_forward(_kins(kins), dict(pins), j))
+
+
+def pose_grid(machine: Machine, kins: str, volume: Optional[Mapping[str, Tuple[float, float]]] = None,
+              n_linear: int = 3, n_tilt: int = 7, n_c: int = 12) -> dict:
+    """Poses over a working volume: a grid of linear positions times a grid of
+    tilt and C angles (fivecal commands, dict axis -> array). ``volume`` maps
+    axis letters to (min, max) in mm / degrees; missing axes take
+    DEFAULT_VOLUME (linear +-100 mm, tilt -90..90 deg, C a full turn)."""
+    k = _kins(kins)
+    volume = dict(volume or {})
+    tilt = TILT[k]
+    unknown = [a for a in volume if a not in ("X", "Y", "Z", tilt, "C")]
+    if unknown:
+        raise ValueError(f"volume: axis {', '.join(unknown)} is not an axis of {k} (X Y Z {tilt} C)")
+
+    def rng(a, default, n):
+        lo, hi = (float(v) for v in volume.get(a, default))
+        if not (math.isfinite(lo) and math.isfinite(hi)) or hi < lo:
+            raise ValueError(f"volume.{a}: expected min <= max, got {lo}..{hi}")
+        if a == "C" and hi - lo >= 360.0:
+            return np.linspace(lo, hi, n, endpoint=False)
+        return np.linspace(lo, hi, n)
+
+    grids = [rng(a, DEFAULT_VOLUME["linear"], n_linear) for a in "XYZ"]
+    grids.append(rng(tilt, DEFAULT_VOLUME["tilt"], n_tilt))
+    grids.append(rng("C", DEFAULT_VOLUME["C"], n_c))
+    mesh = [g.ravel() for g in np.meshgrid(*grids, indexing="ij")]
+    return dict(zip(("X", "Y", "Z", tilt, "C"), mesh))
+
+
+@dataclass
+class Absorption:
+    """What LinuxCNC's trt kinematics absorbs of identified errors."""
+
+    kins: str
+    pins: Dict[str, float]               # new pin values (mm)
+    old_pins: Dict[str, float]           # the pins before (the nominal geometry by default)
+    solved: List[str]                    # pins fitted; the others are held at their old values
+    workpiece_shift: np.ndarray          # (3,) mm: the part frame's offset; the work offset absorbs it
+    residual: np.ndarray                 # (N, 3) mm: tool point error left with the new pins
+    residual_old: np.ndarray             # (N, 3) mm: the same with the old pins
+    poses: dict = field(repr=False)      # the fivecal commands the fit used
+    rms: float = 0.0
+    max: float = 0.0
+    rms_old: float = 0.0
+    max_old: float = 0.0
+
+    def changes(self) -> Dict[str, float]:
+        return {n: self.pins[n] - self.old_pins.get(n, 0.0) for n in self.pins}
+
+    def by_region(self, axis: str, bins: int = 4) -> List[Tuple[float, float, float, float]]:
+        """Residual |e| by region of one axis: (lo, hi, rms, max) per bin, mm."""
+        q = np.asarray(self.poses[axis], dtype=float)
+        e = np.linalg.norm(self.residual, axis=1)
+        edges = np.linspace(q.min(), q.max(), bins + 1)
+        out = []
+        for i in range(bins):
+            sel = (q >= edges[i]) & ((q < edges[i + 1]) if i < bins - 1 else (q <= edges[i + 1]))
+            if sel.any():
+                out.append((edges[i], edges[i + 1], float(np.sqrt(np.mean(e[sel] ** 2))),
+                            float(e[sel].max())))
+        return out
+
+    def report(self) -> str:
+        lines = [f"LinuxCNC {self.kins}-kins: pins that best absorb the identified errors",
+                 pins_table(self.old_pins, self.pins),
+                 "workpiece shift (probe the part again into the work offset): "
+                 + ", ".join(f"{a} {1000 * v:+.1f} um" for a, v in zip("XYZ", self.workpiece_shift)),
+                 f"tool point error the pins leave over {len(self.residual)} poses: old pins rms "
+                 f"{1000 * self.rms_old:.2f} um, max {1000 * self.max_old:.2f} um; new pins rms "
+                 f"{1000 * self.rms:.2f} um, max {1000 * self.max:.2f} um",
+                 "what the pins cannot absorb (axis tilts, error motions, backlash) is left: "
+                 "fivecal compensate removes it from a program"]
+        return "\n".join(lines)
+
+
+def tool_point_error(machine: Machine, kins: str, errors, pins: Mapping[str, float],
+                     workpiece_shift, joint_values, world) -> np.ndarray:
+    """(N, 3) mm: where the erroneous machine puts the tool when LinuxCNC
+    commands ``joint_values`` (N, 5) for the world targets ``world`` (N, 3),
+    minus the target in the workpiece frame (world + tool tip + workpiece shift).
+    With ``joint_values = inverse(kins, pins, ...)`` this is the error fivecal
+    predicts the controller leaves."""
+    j = np.atleast_2d(np.asarray(joint_values, dtype=float))
+    mp = match(machine, kins)
+    p = machine.tool_point(commands(machine, kins, j), errors=errors)
+    target = np.atleast_2d(np.asarray(world, dtype=float))[:, :3] + np.asarray(mp["origin"]) \
+        + np.asarray(workpiece_shift, dtype=float)
+    return p - target
+
+
+def nominal_pins(machine: Machine, kins: str, held: Optional[Mapping[str, float]] = None,
+                 poses: Optional[Mapping] = None) -> Dict[str, float]:
+    """The pins of the machine's nominal geometry (z-offset and tool-offset
+    held at ``held``, default 0)."""
+    k = _kins(kins)
+    poses = poses if poses is not None else pose_grid(machine, k)
+    q = machine.axes_matrix(poses)
+    fit = _core.trt_fit(machine._core, k, machine.theta(None), q, dict(held or {}))
+    return {n: float(fit["pins"][n]) for n in pin_names(k)}
+
+
+def absorb(machine: Machine, kins: str, errors=None, poses: Optional[Mapping] = None,
+           old_pins: Optional[Mapping[str, float]] = None) -> Absorption:
+    """Pins of ``<kins>-kins`` that best absorb ``errors`` (dict name -> mm/rad
+    or a Result) over ``poses`` (fivecal commands; default :func:`pose_grid`).
+    ``old_pins`` are the controller's current values (default: the machine's
+    nominal geometry); z-offset and tool-offset keep their old values."""
+    k = _kins(kins)
+    poses = poses if poses is not None else pose_grid(machine, k)
+    q = machine.axes_matrix(poses)
+    if old_pins is None:
+        old_pins = nominal_pins(machine, k, poses=poses)
+    old = {n: float(old_pins.get(n, 0.0)) for n in pin_names(k)}
+    fit = _core.trt_fit(machine._core, k, machine.theta(errors), q, old)
+    pins = {n: float(fit["pins"][n]) for n in pin_names(k)}
+    return Absorption(kins=k, pins=pins, old_pins=old, solved=list(fit["solved"]),
+                      workpiece_shift=np.asarray(fit["workpiece_shift"]),
+                      residual=np.asarray(fit["residual"]), residual_old=np.asarray(fit["residual_held"]),
+                      poses=machine.axes_dict(q), rms=fit["rms"], max=fit["max"],
+                      rms_old=fit["rms_held"], max_old=fit["max_held"])
+
+
+# ---- pins: text, comparison, plausibility ---------------------------------
+
+def pins_table(old: Mapping[str, float], new: Mapping[str, float]) -> str:
+    """Old and new values side by side (mm)."""
+    rows = [f"{'pin':<14}{'old mm':>16}{'new mm':>16}{'change um':>12}"]
+    for n in new:
+        o = float(old.get(n, 0.0))
+        rows.append(f"{n:<14}{o:>16.6f}{new[n]:>16.6f}{1000 * (new[n] - o):>+12.2f}")
+    return "\n".join(rows)
+
+
+def check_change(old: Mapping[str, float], new: Mapping[str, float],
+                 limit: Optional[float] = DEFAULT_MAX_CHANGE, force: bool = False) -> None:
+    """CorrectionLimitError for the largest pin change beyond ``limit`` (mm),
+    unless ``force`` or ``limit`` is None."""
+    if force or limit is None:
+        return
+    worst = max(((abs(new[n] - float(old.get(n, 0.0))), n) for n in new), default=(0.0, ""))
+    if worst[0] > limit:
+        raise CorrectionLimitError("LinuxCNC pins", 0, worst[1], worst[0], limit, "mm")
+
+
+def _number(v: float) -> str:
+    return repr(float(v))  # shortest text that reads back as the same double
+
+
+#: pins the fit holds at their old values: hal_text and ini_text leave them to
+#: the machine's own configuration (tool-offset is usually netted to
+#: motion.tooloffset.z, and a netted pin cannot be setp)
+HELD = ("z-offset", "tool-offset")
+
+
+def hal_text(kins: str, pins: Mapping[str, float], old: Optional[Mapping[str, float]] = None,
+             header: str = "", held: Sequence[str] = HELD) -> str:
+    """``setp`` lines for the fitted pins (a HAL file), each with the old value
+    in its comment; the ``held`` pins are listed as comments only. Load it
+    after the kinematics module (a HALFILE after the motion module); remove
+    any other ``setp``/``sets``/``net`` of the pins it sets."""
+    k = _kins(kins)
+    out = [f"# fivecal: {k}-kins pins (mm){(' - ' + header) if header else ''}"]
+    if old is not None:
+        out += ["# " + line for line in pins_table(old, pins).splitlines()]
+    for n in pin_names(k):
+        if n not in pins:
+            continue
+        if n in held:
+            out.append(f"# {k}-kins.{n} = {pins[n]:.6f} is held (set where your configuration sets it)")
+            continue
+        c = "" if old is None else f"  # old {float(old.get(n, 0.0)):.6f}"
+        out.append(f"setp {k}-kins.{n} {_number(pins[n])}{c}")
+    return "\n".join(out) + "\n"
+
+
+def ini_text(kins: str, pins: Mapping[str, float], section: str = "FIVECAL_KINS",
+             held: Sequence[str] = HELD) -> Tuple[str, str]:
+    """The same values as an INI section plus the HAL lines that read it
+    (``setp <kins>-kins.x-rot-point [FIVECAL_KINS]X_ROT_POINT``)."""
+    k = _kins(kins)
+    ini = [f"[{section}]", f"# fivecal: {k}-kins pins (mm)"]
+    hal = [f"# fivecal: {k}-kins pins from the INI section [{section}]"]
+    for n in pin_names(k):
+        if n in pins and n not in held:
+            key = n.upper().replace("-", "_")
+            ini.append(f"{key} = {_number(pins[n])}")
+            hal.append(f"setp {k}-kins.{n} [{section}]{key}")
+    return "\n".join(ini) + "\n", "\n".join(hal) + "\n"
+
+
+_SETP = re.compile(r"^\s*setp\s+(xyz[ab]c-trt)-kins\.([a-z\-]+)\s+(\S+)", re.I)
+
+
+def read_hal_pins(path: str, kins: str) -> Dict[str, float]:
+    """Current pin values from a HAL file's ``setp <kins>-kins.<pin> VALUE``
+    lines (the controller's old values)."""
+    k = _kins(kins)
+    names = pin_names(k)
+    out: Dict[str, float] = {}
+    with open(path, encoding="utf-8") as f:
+        for no, line in enumerate(f, 1):
+            m = _SETP.match(line.split("#", 1)[0])
+            if not m or m.group(1).lower() != k:
+                continue
+            name = m.group(2).lower()
+            if name not in names:
+                raise ValueError(f"{path}:{no}: '{name}' is not a pin fivecal sets on {k}-kins "
+                                 f"({', '.join(names)})")
+            try:
+                v = float(m.group(3))
+            except ValueError:
+                raise ValueError(f"{path}:{no}: {name}: '{m.group(3)}' is not a number (an INI "
+                                 "reference like [SECTION]KEY cannot be read here; give the values)") from None
+            if not math.isfinite(v):
+                raise ValueError(f"{path}:{no}: {name}: value is not finite")
+            out[name] = v
+    if not out:
+        raise ValueError(f"{path}: no 'setp {k}-kins.<pin> <value>' lines")
+    return out
+
+
+# ---- joint compensation files ---------------------------------------------
+
+def _joint_of(machine: Machine, kins: str, axis: str):
+    m = match(machine, kins)
+    if axis not in m["axes"]:
+        raise ValueError(f"comp: axis {axis} drives no joint of {_kins(kins)} ({m['axes']})")
+    j = m["axes"].index(axis)
+    return j, m["sign"][j]
+
+
+def comp_rows(machine: Machine, kins: str, errors: Mapping[str, float], axis: str,
+              lo: float, hi: float, step: float) -> np.ndarray:
+    """Rows (nominal, forward, reverse) of a LinuxCNC type-0 compensation file
+    for the joint driven by ``axis``: where the joint really is when commanded
+    to ``nominal`` approaching upward (forward) and downward (reverse), from the
+    axis's error motion along itself (EXX1..3 for X, ECC1..3 for C) and its
+    backlash (EXXb), in joint units (mm, degrees). LinuxCNC then commands the
+    motor to nominal + (nominal - actual)."""
+    if not (math.isfinite(lo) and math.isfinite(hi) and math.isfinite(step)) or step <= 0 or hi <= lo:
+        raise ValueError(f"comp {axis}: expected min < max and a positive step, got {lo}:{hi}:{step}")
+    n = int(math.floor((hi - lo) / step + 1e-9)) + 1
+    if n > 10000:
+        raise ValueError(f"comp {axis}: {n} points; LinuxCNC holds at most about 256 per joint")
+    _, sign = _joint_of(machine, kins, axis)
+    rotary = machine.is_rotary(axis)
+    on_tool = axis in machine.tool_chain
+    # The joint's own error along its direction: a workpiece-side linear axis
+    # moves the table, so its error moves the tool the other way (-1).
+    sigma = -1.0 if (not rotary and not on_tool) else 1.0
+    coef = [float(errors.get(f"E{axis}{axis}{d}", 0.0)) for d in (1, 2, 3)]
+    back = float(errors.get(f"E{axis}{axis}b", 0.0))
+    nominal = lo + step * np.arange(n)
+    q = nominal / sign  # fivecal command
+    qv = np.radians(q) if rotary else q  # the polynomial's variable: mm or rad
+    e = sigma * (coef[0] * qv + coef[1] * qv ** 2 + coef[2] * qv ** 3)
+    scale = math.degrees(1.0) if rotary else 1.0
+    fwd = nominal + scale * (e + back)
+    rev = nominal + scale * (e - back)
+    return np.column_stack([nominal, fwd, rev])
+
+
+def comp_text(rows: np.ndarray, header: str = "") -> str:
+    """A LinuxCNC COMP_FILE (COMP_FILE_TYPE = 0): 'nominal forward reverse' lines.
+    LinuxCNC stops reading at the first line that is not three numbers, so the
+    description goes into the INI, not into this file."""
+    del header  # kept out of the file on purpose (see above)
+    return "".join(f"{a:.9f} {b:.9f} {c:.9f}\n" for a, b, c in rows)
+
+
+def comp_axes(errors: Mapping[str, float], machine: Machine, kins: str) -> List[str]:
+    """Axes of the kinematics whose along-axis error motion or backlash is non-zero."""
+    out = []
+    for a in match(machine, kins)["axes"]:
+        names = [f"E{a}{a}{d}" for d in (1, 2, 3)] + [f"E{a}{a}b"]
+        if any(abs(float(errors.get(n, 0.0))) > 0 for n in names):
+            out.append(a)
+    return out
+
+
+# ---- everything into a folder ---------------------------------------------
+
+@dataclass
+class Export:
+    absorption: Absorption
+    files: List[str]
+    comp: Dict[str, str]        # axis -> file name
+    not_exported: List[str]     # non-zero errors neither the pins nor a comp file carry
+
+    def summary(self) -> str:
+        lines = [self.absorption.report()]
+        for a, f in self.comp.items():
+            lines.append(f"joint compensation for {a}: {f} (COMP_FILE_TYPE = 0)")
+        if self.not_exported:
+            lines.append("left to G-code compensation (no LinuxCNC parameter holds them): "
+                         + ", ".join(self.not_exported))
+        lines.append("written: " + ", ".join(self.files))
+        return "\n".join(lines)
+
+
+def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional[Mapping] = None,
+           max_change: Optional[float] = DEFAULT_MAX_CHANGE, force: bool = False,
+           volume: Optional[Mapping] = None, comp_step: float = 5.0,
+           comp_range: Optional[Mapping[str, Tuple[float, float]]] = None,
+           what: str = "this identification result") -> Export:
+    """Write the LinuxCNC files for an identification ``result`` (path, dict
+    or Result) into ``out_dir``: fivecal-kins.hal (setp lines, old values in
+    comments), fivecal-kins.ini + fivecal-kins-ini.hal (the same through an INI
+    section), comp-<axis>.txt per axis with an along-axis error motion or
+    backlash, and linuxcnc-report.txt. Refuses a result that is not usable and
+    pin changes beyond ``max_change`` mm unless ``force``."""
+    from ..compensation import usable_errors
+
+    k = _kins(kins)
+    errors = usable_errors(result, machine, force, what)
+    match(machine, k)  # a clear refusal before any work
+    poses = pose_grid(machine, k, volume)
+    ab = absorb(machine, k, errors, poses=poses, old_pins=old_pins)
+    check_change(ab.old_pins, ab.pins, max_change, force)
+    os.makedirs(out_dir, exist_ok=True)
+    files = []
+
+    def write(name, text):
+        with open(os.path.join(out_dir, name), "w", encoding="utf-8") as f:
+            f.write(text)
+        files.append(name)
+
+    write("fivecal-kins.hal", hal_text(k, ab.pins, ab.old_pins, header=f"machine {machine.name}"))
+    ini, ini_hal = ini_text(k, ab.pins)
+    write("fivecal-kins.ini", ini)
+    write("fivecal-kins-ini.hal", ini_hal)
+    comp = {}
+    for a in comp_axes(errors, machine, k):
+        j, sign = _joint_of(machine, k, a)
+        if comp_range and a in comp_range:
+            lo, hi = comp_range[a]
+        elif volume and a in volume:
+            lo, hi = sorted(sign * float(v) for v in volume[a])
+        else:
+            lo, hi = (-180.0, 180.0) if machine.is_rotary(a) else DEFAULT_VOLUME["linear"]
+        name = f"comp-{a}.txt"
+        write(name, comp_text(comp_rows(machine, k, errors, a, lo, hi, comp_step)))
+        comp[a] = name
+    # pivot positions go into the pins, constant offsets into the work offset
+    absorbed = {f"E{c}0{a}" for a in ("C", TILT[k], "X", "Y", "Z") for c in "XYZ"}
+    carried = set(absorbed)
+    for a in comp:
+        carried |= {f"E{a}{a}{d}" for d in (1, 2, 3)} | {f"E{a}{a}b"}
+    not_exported = sorted(n for n, v in errors.items() if abs(float(v)) > 0 and n not in carried
+                          and not n.startswith("tip."))
+    exp = Export(ab, files, comp, not_exported)
+    report = [exp.summary(), "", "INI lines for the compensation files:"]
+    for a, name in comp.items():
+        j, _ = _joint_of(machine, k, a)
+        report += [f"[JOINT_{j}]", f"COMP_FILE = {name}", "COMP_FILE_TYPE = 0"]
+    write("linuxcnc-report.txt", "\n".join(report) + "\n")
+    exp.files = files
+    return exp
+
+
+# ---- probing programs (G38.2) and LinuxCNC's probe log ---------------------
+
+def _facets(artefact: Mapping) -> Dict[str, dict]:
+    facets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
+    if not facets:
+        raise ValueError("artefact: no facets (a probing program needs facet targets)")
+    return facets
+
+
+def _touch_geometry(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                    tip_radius: float, workpiece_shift=(0.0, 0.0, 0.0)):
+    """Per touch: (joint tilt, joint C, contact world point, facet normal,
+    tool axis in world coordinates)."""
+    k = _kins(kins)
+    mp = match(machine, k)
+    tilt = TILT[k]
+    facets = _facets(artefact)
+    origin = np.asarray(mp["origin"], dtype=float) + np.asarray(workpiece_shift, dtype=float)
+    out = []
+    for i, t in enumerate(plan):
+        if t.get("type") != "facet":
+            raise ValueError(f"plan[{i}]: type '{t.get('type')}': only facet touches become G38.2 moves")
+        f = facets.get(t.get("target"))
+        if f is None:
+            raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a facet of the artefact")
+        axes = t.get("axes", {})
+        if tilt not in axes or "C" not in axes:
+            raise ValueError(f"plan[{i}].axes: needs {tilt} and C (degrees)")
+        n = np.asarray(f["normal"], dtype=float)
+        n = n / np.linalg.norm(n)
+        p = np.asarray(t.get("point", f["point"]), dtype=float)
+        world = p + tip_radius * n - origin
+        q = {a: 0.0 for a in machine.axis_names if a != "S"}
+        q.update({tilt: float(axes[tilt]), "C": float(axes["C"])})
+        v = machine.tool_pose(q)[1][0]
+        out.append((mp["sign"][3] * float(axes[tilt]), mp["sign"][4] * float(axes["C"]), world, n, v))
+    return out
+
+
+def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                    tip_radius: float, clearance: float = 1.0, overtravel: float = 1.0,
+                    feed: float = 60.0, retract: float = 10.0, safe: float = 300.0,
+                    dwell: float = 0.0, arm: str = "", disarm: str = "",
+                    log: str = "probe-log.txt",
+                    tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+    """An ISO G-code program for LinuxCNC that runs a fivecal facet plan
+    (``{"type": "facet", "target": id, "axes": {tilt, C}, "point": [...]}``)
+    with tool centre point kinematics: per touch, index the table, go to
+    ``clearance`` mm off the contact point along the facet normal, ``G38.2``
+    towards it (``overtravel`` mm beyond) at ``feed`` mm/min and back off.
+    Between touches the probe leaves ``retract`` mm along the facet normal and
+    then ``safe`` mm along the tool axis, re-indexes there and comes back the
+    same way (straight G0 moves: check them against your fixtures); ``dwell``
+    seconds (G4) after each re-indexing let the table settle; ``arm`` and
+    ``disarm`` are lines that switch the probe on before each G38.2 and off
+    after it: ``M62 P0`` / ``M63 P0``, which act with the next move (LinuxCNC
+    checks the probe input when it queues a G38.2, while the stylus may still
+    sit on the previous contact; an immediate M64 would arm it there).
+    The probed positions go to ``log`` (``PROBEOPEN``); read them back with
+    :func:`read_probe_log`. Coordinates: workpiece point - tool tip at the zero
+    pose (the pins' convention); ``tcp_on`` is the line that switches the
+    controller to its tool-centre-point kinematics (``M428`` in LinuxCNC's
+    sample configs)."""
+    k = _kins(kins)
+    tilt = TILT[k]
+    touches = _touch_geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    if not (clearance > 0 and overtravel > 0 and feed > 0 and retract >= 0):
+        raise ValueError("probing_program: clearance, overtravel and feed must be positive")
+    f = lambda v: f"{v:.6f}"  # noqa: E731
+    out = [f"(fivecal probing program: {len(touches)} touches, machine {machine.name}, {k}-kins)",
+           "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
+           "G21 G90 G94 G17 G40 G49 G54"]
+    if tcp_on:
+        out.append(f"{tcp_on} (tool centre point kinematics on)")
+    out.append(f"(PROBEOPEN {log})")
+    xyz = lambda p: f"X{f(p[0])} Y{f(p[1])} Z{f(p[2])}"  # noqa: E731
+    last = None
+    for i, (t, c, w, n, v) in enumerate(touches):
+        start, end = w + clearance * n, w - overtravel * n
+        off = start + retract * n
+        up = off + safe * v
+        out.append(f"(touch {i + 1}: {plan[i]['target']})")
+        out.append(f"G0 {xyz(up)} {tilt}{f(t)} C{f(c)}")
+        if dwell > 0 and last != (t, c):
+            out.append(f"G4 P{dwell:g}")
+        last = (t, c)
+        out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}"]
+        out += [arm] if arm else []
+        out.append(f"G38.2 {xyz(end)} F{feed:g}")
+        out += [disarm] if disarm else []
+        out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
+    out += ["(PROBECLOSE)", "M2"]
+    return "\n".join(out) + "\n"
+
+
+def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapping],
+                   pins: Mapping[str, float]) -> List[dict]:
+    """Facet observations (dataset JSON) from LinuxCNC's probe log (the
+    ``PROBEOPEN`` file: one line 'x y z a b c u v w' per probe, in program
+    coordinates) of a program :func:`probing_program` wrote for ``plan``:
+    each world position goes through LinuxCNC's inverse kinematics with the
+    ``pins`` the controller ran with to the joints, then to fivecal's axis
+    readings. ``source`` is a path or the log text."""
+    k = _kins(kins)
+    if "\n" not in source and os.path.exists(source):
+        with open(source, encoding="utf-8") as fh:
+            text, where = fh.read(), source
+    else:
+        text, where = source, "probe log"
+    rows = []
+    for no, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        parts = line.split()
+        try:
+            vals = [float(v) for v in parts]
+        except ValueError:
+            raise ValueError(f"{where}:{no}: expected 9 numbers 'x y z a b c u v w', got '{line.strip()}'") from None
+        if len(vals) != 9 or not all(math.isfinite(v) for v in vals):
+            raise ValueError(f"{where}:{no}: expected 9 finite numbers 'x y z a b c u v w', got {len(vals)}")
+        rows.append(vals)
+    if len(rows) != len(plan):
+        raise ValueError(f"{where}: {len(rows)} probed positions for {len(plan)} planned touches "
+                         "(LinuxCNC skips a position equal to the previous one; a touch that did "
+                         "not trip stops the program)")
+    r = np.array(rows)
+    ti = 3 if TILT[k] == "A" else 4
+    world = np.column_stack([r[:, :3], r[:, ti], r[:, 5]])
+    j = inverse(k, pins, world)
+    q = commands(machine, k, j)
+    obs = []
+    for i, t in enumerate(plan):
+        axes = {a: float(q[a][i]) for a in machine.axis_names}
+        obs.append({"type": "facet", "target": t["target"], "axes": axes, "id": f"touch{i + 1}"})
+    return obs
+
+
+def probe_sim_hal(n_facets: int) -> str:
+    """HAL lines of a simulated touch probe for the headless simulator: per
+    facet i two ``sum2`` (s = gx*X + gy*Y + gz*Z + h of the joint feedback)
+    and a ``comp`` (s < 0), all ANDed with an enable bit into
+    ``motion.probe-input``, in the servo thread, so the probe trips in the
+    first servo cycle the stylus ball reaches the artefact whatever the load,
+    and only while the program arms it (``motion.digital-out-00``:
+    ``probing_program(..., arm="M62 P0", disarm="M63 P0")``).
+    scripts/linuxcnc/driver.py sets the gains per rotary pose from
+    :func:`probe_trigger_model` (``fcs<2i>.gain0|gain1|offset``,
+    ``fcs<2i+1>.gain1``) and the rotary windows ``fcwa|fcwc.min|max``."""
+    if n_facets < 1:
+        raise ValueError("probe_sim_hal: needs at least one facet")
+    n = n_facets
+    sums = ",".join(f"fcs{i}" for i in range(2 * n))
+    out = ["# fivecal simulated touch probe (see fivecal.io.linuxcnc.probe_sim_hal)",
+           f"loadrt sum2 names={sums}",
+           f"loadrt comp names={','.join(f'fcc{i}' for i in range(n))}",
+           f"loadrt and2 names={','.join(f'fca{i}' for i in range(n))},fcwe,fcwm"]
+    for i in range(n):
+        out += [f"addf fcs{2 * i} servo-thread", f"addf fcs{2 * i + 1} servo-thread",
+                f"addf fcc{i} servo-thread", f"addf fca{i} servo-thread",
+                f"setp fcs{2 * i + 1}.gain0 1", f"setp fcc{i}.hyst 0",
+                f"net fcp-s{i}a fcs{2 * i}.out => fcs{2 * i + 1}.in0",
+                # comp.out = in1 > in0: 0 > s, the ball inside facet i's plane
+                f"net fcp-s{i} fcs{2 * i + 1}.out => fcc{i}.in0",
+                f"net fcp-c{i} fcc{i}.out => fca{i}.in1"]
+    out += ["net fcp-x joint.0.pos-fb => " + " ".join(f"fcs{2 * i}.in0" for i in range(n)),
+            "net fcp-y joint.1.pos-fb => " + " ".join(f"fcs{2 * i}.in1" for i in range(n)),
+            "net fcp-z joint.2.pos-fb => " + " ".join(f"fcs{2 * i + 1}.in1" for i in range(n)),
+            # enabled only at the rotary pose the gains are for (windows set
+            # with the gains), so a late update can never trip it elsewhere
+            "loadrt wcomp names=fcwa,fcwc",
+            "addf fcwa servo-thread", "addf fcwc servo-thread", "addf fcwe servo-thread",
+            "setp fcwa.min 1e9", "setp fcwa.max -1e9", "setp fcwc.min 1e9", "setp fcwc.max -1e9",
+            "net fcp-a joint.3.pos-fb => fcwa.in", "net fcp-c joint.4.pos-fb => fcwc.in",
+            "net fcp-wa fcwa.out => fcwe.in0", "net fcp-wc fcwc.out => fcwe.in1",
+            # armed by the program (M62 P0 / M63 P0 around each G38.2)
+            "addf fcwm servo-thread", "net fcp-window fcwe.out => fcwm.in0",
+            "net fcp-arm motion.digital-out-00 => fcwm.in1",
+            "net fcp-enable fcwm.out => fca0.in0"]
+    out += [f"net fcp-a{i} fca{i - 1}.out => fca{i}.in0" for i in range(1, n)]
+    out.append(f"net fcp-probe fca{n - 1}.out => motion.probe-input")
+    return "\n".join(out) + "\n"
+
+
+def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                        tip_radius: float, errors=None) -> List[dict]:
+    """For a simulated probe input (scripts/linuxcnc/driver.py): per rotary
+    pose of the plan, the rows g, h with the stylus ball touching or inside
+    the (convex) artefact when every g . (joint X, Y, Z) + h <= 0, on the
+    machine with ``errors``. At fixed rotary joints the ball centre is affine
+    in the linear joints, so four evaluations give it exactly (location
+    errors; error motions make it only nearly affine)."""
+    k = _kins(kins)
+    facets = list(_facets(artefact).values())
+    poses = []
+    for t, c, _, _, _ in _touch_geometry(machine, k, plan, artefact, tip_radius):
+        if (t, c) not in poses:
+            poses.append((t, c))
+    out = []
+    for t, c in poses:
+        jj = np.array([[0, 0, 0, t, c], [1, 0, 0, t, c], [0, 1, 0, t, c], [0, 0, 1, t, c]], float)
+        p = machine.tool_point(commands(machine, k, jj), errors=errors)
+        M = (p[1:] - p[0]).T  # d(ball centre)/d(joint xyz)
+        g, h = [], []
+        for fct in facets:
+            n = np.asarray(fct["normal"], dtype=float)
+            n = n / np.linalg.norm(n)
+            g.append((n @ M).tolist())
+            h.append(float(n @ (p[0] - np.asarray(fct["point"], dtype=float)) - tip_radius))
+        out.append({"rot": [t, c], "g": g, "h": h})
+    return out
