@@ -3,7 +3,7 @@ precision sphere at many rotary indexations, express the touches in the table
 frame with the nominal and with the identified model, fit a sphere
 (Gauss-Newton) and compare the out-of-sphericity; and the one-error-at-a-time
 sensitivity table (Table 6-1).  The algorithms are in the C++ core
-(``cpp/include/fivecal/sphere_test.h``)::
+(``cpp/include/fivecal/procedures/sphere_test.h``)::
 
     from fivecal import cmm, tango
     m = tango.hu40t_machine()

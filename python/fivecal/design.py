@@ -1,6 +1,6 @@
 """Test design: how well a plan identifies a parameter set, plan comparison
 (thesis Table 8-4) and the search for K rotary indexations that minimise the
-condition number (C++ core: ``cpp/include/fivecal/design.h``).
+condition number (C++ core: ``cpp/include/fivecal/design/design.h``).
 
 A *plan* is a list of plan entries in the format :func:`fivecal.simulate`
 takes (``{"type": "facet", "target": "F3", "axes": {"B": 30, "C": -90, "S": 0},

@@ -2,7 +2,7 @@
 ``shared/seeds/004_*``): the test poses and sensitive directions, the
 machining errors the full machine model predicts, and the identification of
 the tilt-axis errors from measured machining errors.  The algorithms are in
-the C++ core (``cpp/include/fivecal/machining_test.h``, where the model and
+the C++ core (``cpp/include/fivecal/procedures/machining_test.h``, where the model and
 the paper's first-order equations are written out)::
 
     from fivecal import machining

@@ -2,7 +2,7 @@
 7-1): total variability, repeatability (pooled over windows), surface and
 drift, per probing direction, as in Tables 4-3, 7-1, 7-2, 7-4 and 7-5.
 
-The computations are in C++ (``cpp/include/fivecal/probing_stats.h``); this
+The computations are in C++ (``cpp/include/fivecal/procedures/probing_stats.h``); this
 module converts arrays and formats the tables::
 
     from fivecal import probing_stats

@@ -63,7 +63,7 @@ def simulate(machine: Union[Machine, Mapping], plan: Sequence[Mapping], errors: 
              setup: Optional[Mapping[str, float]] = None) -> Dataset:
     """Simulate a measurement on a machine with known errors.
 
-    ``plan`` lists the touches and samples (see ``cpp/include/fivecal/simulate.h``):
+    ``plan`` lists the touches and samples (see ``docs/formats.md, "Simulation spec"``):
     ``{"type": "facet", "target": "F3", "axes": {"B": 30, "C": -90, "S": 0}}``,
     ``{"type": "sphere", "target": "S1", "axes": {...}, "normal": [0, 0, 1]}``,
     ``{"type": "dbb", "axes": {...all axes...}, "length": 100, "tool_ball": [...],

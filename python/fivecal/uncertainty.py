@@ -1,7 +1,7 @@
 """Uncertainty of identified parameters: Monte Carlo (JCGM 101/102) and the
 GUM framework with an input covariance (thesis ch. 5 and 8).
 
-The algorithms are in C++ (``cpp/include/fivecal/monte_carlo.h``, ``gum.h``);
+The algorithms are in C++ (``cpp/include/fivecal/uncertainty/monte_carlo.h``, ``gum.h``);
 this module builds their inputs, shows a progress bar, formats and plots.
 
 Monte Carlo on a simulated TANGO experiment::
@@ -55,7 +55,7 @@ def make_spec(machine, plan: Sequence[Mapping], errors: Optional[Mapping] = None
               sigma: Union[float, Mapping] = 0.0, seed: int = 0,
               setup: Optional[Mapping[str, float]] = None) -> dict:
     """The simulation spec :func:`fivecal.simulate` builds from the same
-    arguments (``cpp/include/fivecal/simulate.h``), as a dict."""
+    arguments (``docs/formats.md, "Simulation spec"``), as a dict."""
     from .simulation import seed_value
 
     machine = Machine.from_dict(machine)
