@@ -325,9 +325,6 @@ bool IsSetupParameterName(const std::string& name) {
   if (dot == std::string::npos || dot + 1 >= name.size()) return false;
   const std::string kind = name.substr(0, dot), rest = name.substr(dot + 1);
   if (const ObservationKind* k = FindKind(kind)) return k->IsParameterName(rest);
-  if (kind == "target") return rest.find('.') != std::string::npos && rest.find('.') == rest.rfind('.') &&
-                               (rest.back() == 'x' || rest.back() == 'y' || rest.back() == 'z') &&
-                               rest[rest.size() - 2] == '.';
   if (kind == "instrument") {
     const size_t d = rest.find('.');
     return d != std::string::npos && d > 0 && rest.find('.', d + 1) == std::string::npos;

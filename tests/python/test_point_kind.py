@@ -26,10 +26,10 @@ ORIGIN, ANGLES = [2000.0, -500.0, 400.0], [0.5, -1.0, 155.0]  # tracker pose, mm
 TRUTH = {"EA0B": 3e-5, "EC0B": -4e-5, "EX0C": 0.03, "EY0C": -0.02, "EA0C": 2e-5, "EB0C": -3e-5,
          "EB0Z": 5e-5, "EXX1": 2e-5}
 SETUP = {"instrument.T1.x": 0.3, "instrument.T1.y": -0.2, "instrument.T1.c": 2e-3, "instrument.T1.a": 1e-3,
-         "target.TCP.z": 0.05, "target.W1.x": 0.04, "target.W1.y": -0.03}
+         "instrument.T1.tool_z": 0.05, "instrument.T1.work_x": 0.04, "instrument.T1.work_y": -0.03}
 # The target on the tool can only be told apart from the tracker's position
 # along what the head's rotation turns it; its y (along B) is fixed as known.
-FIXED = ["target.TCP.y"]
+FIXED = ["instrument.T1.tool_y"]
 
 
 def _plan(rng, n=60):
@@ -37,8 +37,8 @@ def _plan(rng, n=60):
     for _ in range(n):
         axes = {"X": float(rng.uniform(-200, 200)), "Y": float(rng.uniform(-200, 200)),
                 "Z": float(rng.uniform(-100, 100)), "B": float(rng.uniform(-60, 60)), "C": float(rng.uniform(0, 360))}
-        for target, point, carrier in (("TCP", [0, 0, 150], "tool"), ("W1", [120, 40, 20], "workpiece")):
-            plan.append({"type": "point", "setup": "T1", "target": target, "target_point": point, "carrier": carrier,
+        for target, point in (("tool", [0, 0, 150]), ("work", [120, 40, 20])):
+            plan.append({"type": "point", "instrument": "T1", "target": target, "target_point": point,
                          "axes": axes, "instrument_origin": ORIGIN, "instrument_angles": ANGLES})
     return plan
 
@@ -94,11 +94,11 @@ def test_file_round_trip_and_bad_fields(machine):
     ds = fivecal.simulate(machine, _plan(rng, 3), errors=TRUTH, setup=SETUP, sigma={"point": 0.005}, seed=1)
     doc = ds.to_dict()
     o = doc["observations"][0]
-    assert o["type"] == "point" and o["target"] == "TCP" and o["carrier"] == "tool"
+    assert o["type"] == "point" and o["target"] == "tool" and o["instrument"] == "T1" and "setup" not in o
     assert o["instrument_angles"] == pytest.approx(ANGLES)
     again = fivecal.Dataset.from_dict(json.loads(json.dumps(doc)))
     assert again.to_dict()["observations"] == doc["observations"]
-    for field, value, words in (("carrier", "table", "carrier"), ("target", 3, "target"),
+    for field, value, words in (("target", "table", "target"), ("instrument", 3, "instrument"),
                                 ("target_point", [0, 0], "target_point"), ("measured", [1, 2, float("nan")], "measured"),
                                 ("instrumnt_origin", [0, 0, 0], "instrumnt_origin")):
         bad = json.loads(json.dumps(doc))

@@ -14,16 +14,19 @@ namespace {
 using namespace json_util;
 
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
-// Instrument group: position x y z, angles a b c (instrument.<setup>.*);
-// target group: x y z (target.<name>.*). One instrument may see several
-// targets (one on the tool, one on the table), each with its own offsets.
+// The file names the instrument ("instrument", kept in Observation::setup)
+// and the side that carries the target ("target": "tool" or "work", kept in
+// Observation::target). Parameters, per instrument: its pose
+// instrument.<id>.x|y|z|a|b|c, and the offsets of the target it follows on
+// each side, instrument.<id>.tool_x|y|z and .work_x|y|z (one tracker may
+// follow a target on the tool and one on the table).
 const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
 const char* kXYZ[3] = {"x", "y", "z"};
 
 std::string Prefix(const Observation& o) { return "instrument." + o.setup; }
-std::string TargetPrefix(const Observation& o) { return "target." + o.target; }
-// The target group's key in the parameter table (a setup id has no '.').
-std::string TargetKey(const Observation& o) { return "." + o.target; }
+std::string TargetPrefix(const Observation& o) { return Prefix(o) + "." + o.target + "_"; }
+// The target group's key in the parameter table (an instrument id has no '.').
+std::string TargetKey(const Observation& o) { return o.setup + "." + o.target; }
 
 class Kind final : public ObservationKind {
  public:
@@ -36,7 +39,7 @@ class Kind final : public ObservationKind {
   bool analytic() const override { return false; }
 
   std::vector<const char*> json_keys() const override {
-    return {"type", "setup", "axes", "direction", "measured", "target", "target_point", "carrier",
+    return {"type", "instrument", "axes", "direction", "measured", "target", "target_point",
             "instrument_origin", "instrument_angles", "sigma", "id"};
   }
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
@@ -45,21 +48,23 @@ class Kind final : public ObservationKind {
   }
   void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
     if (o.setup.empty() || o.setup.find('.') != std::string::npos)
-      throw std::invalid_argument(w() + ".setup: the instrument id must be a non-empty name without '.'");
+      throw std::invalid_argument(w() + ".instrument: the instrument id must be a non-empty name without '.'");
     auto bounded = [&](const Eigen::Vector3d& v, double bound, const char* field) {
       for (int c = 0; c < 3; ++c)
         if (!(std::abs(v[c]) <= bound)) RequireBounded(v[c], bound, w() + "." + field + "[" + std::to_string(c) + "]");
     };
     bounded(o.measured, kMaxLinear, "measured");
-    if (o.target.empty() || o.target.find('.') != std::string::npos)
-      throw std::invalid_argument(w() + ".target: the target name must be a non-empty name without '.'");
+    if (o.target != "tool" && o.target != "work")
+      throw std::invalid_argument(w() + ".target: " + Quote(o.target) + " is neither \"tool\" nor \"work\"");
     bounded(o.target_point, kMaxLinear, "target_point");
     bounded(o.instrument_origin, kMaxLinear, "instrument_origin");
     bounded(o.instrument_angles, 2 * 3.14159265358979323846, "instrument_angles");
   }
   void Write(const Observation& o, json* jo) const override {
-    (*jo)["setup"] = o.setup;
-    (*jo)["carrier"] = o.on_tool ? "tool" : "workpiece";
+    // The generic writer put the instrument id under "setup" and the side
+    // under "target"; the file calls the id "instrument".
+    jo->erase("setup");
+    (*jo)["instrument"] = o.setup;
     (*jo)["target_point"] = Array3(o.target_point);
     (*jo)["measured"] = Array3(o.measured);
     if (!o.instrument_origin.isZero()) (*jo)["instrument_origin"] = Array3(o.instrument_origin);
@@ -77,7 +82,7 @@ class Kind final : public ObservationKind {
     }
     if (!t->has_group(type(), TargetKey(o))) {
       std::vector<int> idx;
-      for (const char* f : kXYZ) idx.push_back(t->Add(TargetPrefix(o) + "." + f));
+      for (const char* f : kXYZ) idx.push_back(t->Add(TargetPrefix(o) + f));
       t->AddGroup(type(), TargetKey(o), idx);
     }
   }
@@ -92,12 +97,13 @@ class Kind final : public ObservationKind {
              "instrument.<id>.x|y|z: correction of a tracker's or camera's nominal origin in the machine frame"},
             {"instrument_angle", 0.01, "rad",
              "instrument.<id>.a|b|c: correction of its nominal orientation (0.6 deg)"},
-            {"target", 1.0, "mm", "target.<name>.x|y|z: where a tracked target really sits on its carrier"}};
+            {"target", 1.0, "mm",
+             "instrument.<id>.tool_x|y|z, .work_x|y|z: where the target it follows really sits"}};
   }
   const char* PriorClassOfName(const std::string& n) const override {
-    if (n.rfind("target.", 0) == 0) return "target";
     if (n.rfind("instrument.", 0) != 0) return nullptr;
     const std::string f = n.substr(n.rfind('.') + 1);
+    if (f.rfind("tool_", 0) == 0 || f.rfind("work_", 0) == 0) return "target";
     return (f == "a" || f == "b" || f == "c") ? "instrument_angle" : "instrument_position";
   }
   std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const override {
@@ -124,13 +130,13 @@ class Kind final : public ObservationKind {
 
   // ---- simulation ----
   std::vector<const char*> plan_keys() const override {
-    return {"type", "setup", "axes", "direction", "target", "target_point", "carrier", "instrument_origin",
+    return {"type", "instrument", "axes", "direction", "target", "target_point", "instrument_origin",
             "instrument_angles", "id"};
   }
   void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
                      PlanSlot*) const override {
     ReadOwn(e, w, ob);
-    const std::string pre = Prefix(*ob) + ".", tpre = TargetPrefix(*ob) + ".";
+    const std::string pre = Prefix(*ob) + ".", tpre = TargetPrefix(*ob);
     Observation truth = *ob;
     for (int c = 0; c < 3; ++c) {
       truth.instrument_origin[c] += t.setup(pre + kFields[c]);
@@ -167,27 +173,26 @@ class Kind final : public ObservationKind {
   }
 
  private:
-  // setup, carrier, target and the nominal instrument pose (file angles in degrees).
+  // instrument, target side, target point and the nominal instrument pose (file angles in degrees).
   static void ReadOwn(const json& o, const std::string& w, Observation* ob) {
-    if (!o.contains("setup"))
-      throw std::invalid_argument(w + ".setup: missing (the instrument id, e.g. \"T1\")");
-    ob->setup = ReadSetup(o, w);
-    if (ob->setup.empty()) throw std::invalid_argument(w + ".setup: the instrument id must not be empty");
-    const std::string carrier = o.contains("carrier") ? ReadString(o, "carrier", w) : "tool";
-    if (carrier != "tool" && carrier != "workpiece")
-      throw std::invalid_argument(w + ".carrier: " + Quote(carrier) + " is neither \"tool\" nor \"workpiece\"");
-    ob->on_tool = carrier == "tool";
+    if (!o.contains("instrument") || !o["instrument"].is_string())
+      throw std::invalid_argument(w + ".instrument: missing (the instrument's name, a string such as \"T1\")");
+    ob->setup = o["instrument"].get<std::string>();
+    if (ob->setup.empty() || ob->setup.find('.') != std::string::npos)
+      throw std::invalid_argument(w + ".instrument: " + Quote(ob->setup) + " must be a non-empty name without '.'");
     if (!o.contains("target") || !o["target"].is_string())
-      throw std::invalid_argument(w + ".target: expected the target's name (a string such as \"TCP\")");
+      throw std::invalid_argument(w + ".target: missing (\"tool\" or \"work\": the side that carries the target)");
     ob->target = o["target"].get<std::string>();
-    if (ob->target.empty() || ob->target.find('.') != std::string::npos)
-      throw std::invalid_argument(w + ".target: the target name must be a non-empty name without '.'");
+    if (ob->target != "tool" && ob->target != "work")
+      throw std::invalid_argument(w + ".target: " + Quote(ob->target) + " is neither \"tool\" nor \"work\"");
+    ob->on_tool = ob->target == "tool";
     ob->target_point = ReadVector3(o.value("target_point", json()), w + ".target_point");
     if (o.contains("instrument_origin"))
       ob->instrument_origin = ReadVector3(o["instrument_origin"], w + ".instrument_origin");
     if (o.contains("instrument_angles"))
       ob->instrument_angles = ReadVector3(o["instrument_angles"], w + ".instrument_angles", 360.0) * kDegToRad;
   }
+
 };
 
 }  // namespace

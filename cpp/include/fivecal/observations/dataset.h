@@ -56,8 +56,8 @@ double DefaultSigma(ObservationType t);
 // One observation; the fields a kind does not use stay at their defaults.
 struct Observation {
   ObservationType type = ObservationType::kFacet;
-  std::string target;  // facet or sphere id
-  std::string setup;   // DBB / ball3d mounting id; "" = the default setup
+  std::string target;  // facet or sphere id; point: "tool" or "work", the side carrying the target
+  std::string setup;   // DBB / ball3d mounting id ("" = the default setup); point: the instrument id
   Eigen::VectorXd axes;       // machine axis order, mm / degrees
   Eigen::VectorXi direction;  // last move direction per axis: -1, 0, +1
   double reading = 0.0;       // dbb: length change, mm

@@ -12,7 +12,7 @@ namespace fivecal {
 
 // The instrument's parameters as a residual sees them: pose corrections
 // (instrument.<id>.x|y|z mm, .a|b|c rad) and the target offset
-// (target.<name>.x|y|z mm).
+// (instrument.<id>.tool_x|y|z or .work_x|y|z mm).
 struct InstrumentRefs {
   SetupRef position[3];
   SetupRef angle[3];
