@@ -187,17 +187,23 @@ def _limits(text: str) -> tuple:
     return (out[0], out[1] if len(out) == 2 else (MAX_CORRECTION_DEG if out[0] is not None else None))
 
 
-def _compensate(args) -> int:
-    from .compensation import compensate_gcode_file, usable_errors, write_error_table
+def _read_machine(path):
+    """The machine of a machine file, or of a dataset file (its "machine")."""
     from .machine import Machine
 
-    doc = _read_json(args.machine, "the machine")
+    doc = _read_json(path, "the machine")
     if isinstance(doc, dict) and "observations" in doc and isinstance(doc.get("machine"), dict):
         doc = doc["machine"]  # a dataset file: use its machine
     try:
-        machine = Machine.from_dict(doc)
+        return Machine.from_dict(doc)
     except ValueError as e:
-        raise ValueError(f"{args.machine}: {e}") from None
+        raise ValueError(f"{path}: {e}") from None
+
+
+def _compensate(args) -> int:
+    from .compensation import compensate_gcode_file, usable_errors, write_error_table
+
+    machine = _read_machine(args.machine)
     max_mm, max_deg = _limits(args.max_correction)
     # Refuses a result that did not converge, is not finite, failed the chi-square
     # test or left requested parameters undetermined, unless --force.

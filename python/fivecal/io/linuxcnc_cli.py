@@ -22,16 +22,9 @@ def _volume(text: str) -> dict:
 
 
 def _run(args) -> int:
-    from ..cli import _read_json
-    from ..machine import Machine
+    from ..cli import _read_machine
 
-    doc = _read_json(args.machine, "the machine")
-    if isinstance(doc, dict) and "observations" in doc and isinstance(doc.get("machine"), dict):
-        doc = doc["machine"]  # a dataset file: use its machine
-    try:
-        machine = Machine.from_dict(doc)
-    except ValueError as e:
-        raise ValueError(f"{args.machine}: {e}") from None
+    machine = _read_machine(args.machine)
     limit = None
     if str(args.max_change).lower() != "off":
         try:
