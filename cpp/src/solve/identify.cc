@@ -120,6 +120,15 @@ void WeightedJacobian(Problem* pr, Eigen::VectorXd* r, Eigen::MatrixXd* Jw) {
   *Jw = w.asDiagonal() * *Jw;
 }
 
+// (Js^T Js + I)^-1 with Js = Jw diag(s): the posterior covariance of a MAP
+// fit with prior sigmas s, in units of those priors.
+Eigen::MatrixXd ScaledPosterior(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& s) {
+  const Eigen::MatrixXd Js = Jw * s.asDiagonal();
+  Eigen::MatrixXd N = Js.transpose() * Js;
+  N.diagonal().array() += 1.0;
+  return N.ldlt().solve(Eigen::MatrixXd::Identity(N.rows(), N.cols()));
+}
+
 struct Solve {
   Eigen::VectorXd values;
   bool converged = false;
@@ -420,16 +429,11 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
     Eigen::VectorXd r;
     Eigen::MatrixXd Jw;
     WeightedJacobian(pr.get(), &r, &Jw);
-    const int p = static_cast<int>(est.size());
     Eigen::MatrixXd Ninv;
     Eigen::VectorXd cur;
     if (map) {
       cur = Gather(out.prior, est);
-      const Eigen::MatrixXd Js = Jw * cur.asDiagonal();
-      Eigen::MatrixXd N = Js.transpose() * Js;
-      N.diagonal().array() += 1.0;
-      const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
-      Ninv = cur.asDiagonal() * Cs * cur.asDiagonal();
+      Ninv = cur.asDiagonal() * ScaledPosterior(Jw, cur) * cur.asDiagonal();
     } else {
       Ninv = AnalyzeJacobian(Jw, opt.rank_tolerance).inverse_normal;
     }
@@ -663,22 +667,18 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
 
   const Identifiability id = AnalyzeJacobian(Jw, opt.rank_tolerance);
   res.rank = id.rank;
+  // MAP: the posterior in prior units under the documented priors; it gives
+  // the covariance and how far the data narrowed each prior.
+  const Eigen::MatrixXd Cs = map ? ScaledPosterior(Jw, prior) : Eigen::MatrixXd();
   if (map) {
     // Posterior covariance (Jw^T Jw + P)^-1, P = diag(1 / prior^2), in the
     // declared noise; inflated by chi2/dof when the residuals exceed it.
     // The covariance uses the documented priors (see AdaptHyperparameters); the
     // degrees of freedom those of the fit that made the residuals.
-    auto scaled_posterior = [&](const Eigen::VectorXd& s) {
-      const Eigen::MatrixXd Js = Jw * s.asDiagonal();
-      Eigen::MatrixXd N = Js.transpose() * Js;
-      N.diagonal().array() += 1.0;
-      return Eigen::MatrixXd(N.ldlt().solve(Eigen::MatrixXd::Identity(p, p)));
-    };
-    const Eigen::MatrixXd Cs = scaled_posterior(prior);
     const Eigen::MatrixXd C = prior.asDiagonal() * Cs * prior.asDiagonal();
     // Effective number of parameters: trace of the hat matrix = p - trace(Cs).
     const Eigen::VectorXd used = Gather(fit_prior, est);
-    const double p_eff = p - (rq.automatic ? scaled_posterior(used).trace() : Cs.trace());
+    const double p_eff = p - (rq.automatic ? ScaledPosterior(Jw, used).trace() : Cs.trace());
     res.dof = std::max(1, rows - static_cast<int>(std::lround(p_eff)));
     const double k2 = std::max(1.0, chi2 / res.dof);
     res.covariance = k2 * C;
@@ -721,10 +721,6 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   if (map) {
     // The posterior ratio without the chi2 inflation: how much the data, at
     // the declared noise, narrowed the prior.
-    Eigen::MatrixXd Js = Jw * prior.asDiagonal();
-    Eigen::MatrixXd N = Js.transpose() * Js;
-    N.diagonal().array() += 1.0;
-    const Eigen::MatrixXd Cs = N.ldlt().solve(Eigen::MatrixXd::Identity(p, p));
     for (int j = 0; j < p; ++j)
       if (!(std::sqrt(std::max(Cs(j, j), 0.0)) < kInformedThreshold))
         res.undetermined.push_back(res.estimated[j]);
