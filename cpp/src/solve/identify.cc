@@ -371,11 +371,11 @@ std::string NoiseGroup(const Observation& o) {
   return k.probe_touch() ? "probe" : k.name();
 }
 
+// Every residual row's declared sigma (ObservationSigma, as the problem weighs it).
 Eigen::VectorXd DeclaredSigma(const Observation& o) {
-  const int rows = KindOf(o).rows();
-  if (o.sigma.size() == rows) return o.sigma;
-  if (o.sigma.size() == 1) return Eigen::VectorXd::Constant(rows, o.sigma[0]);
-  return Eigen::VectorXd::Constant(rows, KindOf(o).default_sigma());
+  Eigen::VectorXd s(KindOf(o).rows());
+  for (int k = 0; k < s.size(); ++k) s[k] = ObservationSigma(o, k);
+  return s;
 }
 
 // Variance components (Helmert / Foerstner's iterative estimator, the REML
