@@ -24,7 +24,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 import fivecal  # noqa: E402
-from fivecal import tango  # noqa: E402
+from fivecal.procedures import tango  # noqa: E402
 
 import baseline_numpy as base  # noqa: E402
 

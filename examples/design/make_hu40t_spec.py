@@ -4,13 +4,13 @@ HU40T-like machine as a simulation spec, the candidate pool of
 import json
 import pathlib
 
-from fivecal import tango
+from fivecal.procedures import tango
 
 m, art = tango.hu40t_machine(), tango.octagonal_table()
 plan = tango.hu40t_plan(art, m)
 errors = dict(tango.thesis_s3_errors())
 errors.update(tango.STYLUS_OFFSETS)
-spec = {"_comment": "Thesis Table 4-2 TANGO plan on the HU40T-like machine (fivecal.tango.hu40t_plan): "
+spec = {"_comment": "Thesis Table 4-2 TANGO plan on the HU40T-like machine (fivecal.procedures.tango.hu40t_plan): "
                     "28 visits, the candidate pool of `fivecal design`; also a simulation spec (Table 4-5 "
                     "sized S3 errors, stylus offsets, facet offsets, 0.6 um probing noise). Regenerate with "
                     "examples/design/make_hu40t_spec.py.",

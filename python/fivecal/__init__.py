@@ -11,9 +11,9 @@ from .units import UnitsWarning
 from .simulation import simulate
 from .compensation import compensate_gcode, compensate_poses, write_error_table
 from .report import write_report
-from . import dbb
-from .dbb import Trace, circular_test, jiang_cripps, read_trace_csv, wang_identify, wang_path
-from . import probing_stats, uncertainty
+from .procedures import dbb, probing_stats
+from .procedures.dbb import Trace, circular_test, jiang_cripps, read_trace_csv, wang_identify, wang_path
+from . import uncertainty
 from .uncertainty import gum_input_covariance, monte_carlo
 
 __version__ = "0.1.0"

@@ -39,7 +39,7 @@ def _identify(args) -> int:
         result.save(args.out)
         print(f"\nresult written to {args.out}")
     if args.report:
-        from .report import write_report
+        from .report.document import write_report
 
         path = write_report(result, args.report, title=f"fivecal identification — {os.path.basename(args.dataset)}",
                             summary=f"dataset {args.dataset}, estimate {args.estimate}"
@@ -366,12 +366,12 @@ def _design(args) -> int:
 
 
 def _sphere(args) -> int:
-    from . import cmm
+    from .procedures.sphere_test import format_sphere_tests, sphere_test
     from .dataset import load_dataset
     from .guards import require_usable
 
     ds = load_dataset(args.dataset)
-    tests = {"nominal model": cmm.sphere_test(ds, None, args.sphere)}
+    tests = {"nominal model": sphere_test(ds, None, args.sphere)}
     if args.values:
         res = _read_json(args.values, "result")
         # A result that did not converge, is not finite, inadequate or
@@ -387,10 +387,10 @@ def _sphere(args) -> int:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"{args.values}: parameters.{k}: expected a finite number as the value")
             values[k] = v
-        tests["identified model"] = cmm.sphere_test(ds, values, args.sphere)
+        tests["identified model"] = sphere_test(ds, values, args.sphere)
     t0 = next(iter(tests.values()))
     print(f"fivecal sphere test: sphere {t0.sphere}, {len(t0.observations)} touches on {ds.machine.name}")
-    print(cmm.format_sphere_tests(tests))
+    print(format_sphere_tests(tests))
     if len(tests) == 2:
         a, b = (t.fit.out_of_sphericity for t in tests.values())
         print(f"\nout of sphericity reduced {a / b:.3g}-fold by the identified model" if b > 0 else "")
@@ -669,7 +669,7 @@ def main(argv=None) -> int:
                     "held-out indexations (default: 1)")
     pd.set_defaults(func=_demo)
 
-    from .dbb_cli import register as _register_dbb
+    from .procedures.dbb_cli import register as _register_dbb
 
     _register_dbb(sub)
     from .io.linuxcnc_cli import register as _register_export; _register_export(sub)  # noqa: E702

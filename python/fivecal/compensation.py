@@ -29,7 +29,8 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _core, gcode, guards, schema
+from . import _core, guards, schema
+from .io import gcode
 from .guards import CorrectionLimitError, UnusableResultError
 from .machine import Machine
 from .progress import Progress

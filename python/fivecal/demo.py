@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from . import tango
+from .procedures import tango
 from .dataset import save_dataset
 from .guards import FitWarning
 from .identification import identify
@@ -106,8 +106,8 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
 
     write_text(os.path.join(out, "report.txt"), text + "\n")
 
-    from .plots import plot_residual_vectors
-    from .report import table_html, write_report
+    from .report.plots import plot_residual_vectors
+    from .report.document import table_html, write_report
 
     s1_png = plot_residual_vectors(nominal, os.path.join(out, "residuals_S1.png"),
                                    title="Unexplained residuals, subset S1 (setup only)")

@@ -8,7 +8,8 @@ takes (``{"type": "facet", "target": "F3", "axes": {"B": 30, "C": -90, "S": 0},
 (simulated noise-free on the nominal machine, or at ``values``), over the
 parameters :func:`fivecal.identify` would estimate on them::
 
-    from fivecal import design, tango
+    from fivecal import design
+    from fivecal.procedures import tango
     m, art = tango.hu40t_machine(), tango.octagonal_table()
     pool = tango.hu40t_plan(art, m)                      # Table 4-2, 28 visits
     q = design.plan_quality(pool, "S3", machine=m, artefact=art, tip_radius=3.0)
@@ -221,10 +222,10 @@ def candidate_plan(machine, artefact: Mapping, indexations: Sequence[Mapping[str
     the probe (normal . tool axis >= ``min_dot``) with all axis commands within
     ``limits`` (axis -> (min, max), mm / degrees).  Sphere touches go along
     ``sphere_normals`` (default: the ISO 230-10-like 33 points of
-    :func:`fivecal.cmm.sphere_points`).  ``directions``: ``"visit"`` records the
+    :func:`fivecal.procedures.sphere_test.sphere_points`).  ``directions``: ``"visit"`` records the
     last-move directions of the rotary axes for the indexations visited in
     order, ``None`` records none, or a list of dicts.  ``accessible(point,
-    normal, tool_axis)`` (e.g. :func:`fivecal.tango.facet_accessible` with the
+    normal, tool_axis)`` (e.g. :func:`fivecal.procedures.tango.facet_accessible` with the
     fixture obstacles) can veto touches further (collisions).
 
     Returns ``(plan, groups)``: plan entries and the indexation index of each."""

@@ -6,7 +6,8 @@ this module builds their inputs, shows a progress bar, formats and plots.
 
 Monte Carlo on a simulated TANGO experiment::
 
-    from fivecal import tango, uncertainty
+    from fivecal import uncertainty
+    from fivecal.procedures import tango
     spec = uncertainty.make_spec(tango.hu40t_machine(), tango.hu40t_plan(),
                                  errors={**tango.STYLUS_OFFSETS, **tango.thesis_s3_errors()},
                                  artefact=tango.octagonal_table(), tip_radius=3.0,
@@ -269,7 +270,7 @@ class MonteCarloResult:
     def plot(self, path: str, names: Optional[Iterable[str]] = None, bins: int = 40) -> str:
         """Histograms of the trial values with the GUM normal density, the
         shortest interval (solid) and the GUM interval (dashed); PNG at ``path``."""
-        from .plots import _pyplot
+        from .report.plots import _pyplot
         plt = _pyplot()
         names = list(names) if names is not None else self.ordered_names()[:12]
         cols = min(4, len(names))

@@ -2,7 +2,7 @@
 octagonal TANGO table and the Table 4-2 plan (built once per session)."""
 import pytest
 
-from fivecal import tango
+from fivecal.procedures import tango
 
 
 @pytest.fixture(scope="session")

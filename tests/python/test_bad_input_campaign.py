@@ -16,7 +16,7 @@ import random
 import pytest
 
 import fivecal
-from fivecal import tango
+from fivecal.procedures import tango
 
 HOSTILE = [math.nan, math.inf, 1e308, "x", None, {"a": 1}, -1.0, [1, 2]]
 

@@ -11,7 +11,8 @@ import sys
 import pytest
 
 import fivecal
-from fivecal import dbb, simulation, uncertainty
+from fivecal import simulation, uncertainty
+from fivecal.procedures import dbb
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 MACHINES = os.path.join(ROOT, "examples", "machines")

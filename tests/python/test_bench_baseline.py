@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import tango
+from fivecal.procedures import tango
 
 ROOT = os.path.join(os.path.dirname(__file__), "..", "..")
 sys.path.insert(0, os.path.join(ROOT, "bench"))

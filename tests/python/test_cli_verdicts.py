@@ -80,7 +80,7 @@ def test_dbb_wang(work):
 
 def test_dbb_circular(work, monkeypatch, capsys):
     from fivecal import cli as fivecal_cli
-    from fivecal import dbb
+    from fivecal.procedures import dbb
 
     args = ["dbb", "circular", "--machine", os.path.join(MACHINES, "c600u.json"), "--simulate",
             "EXX1=2e-5,EC0Y=3e-5", "--radius", "100"]
@@ -113,7 +113,7 @@ def test_sphere(work, monkeypatch, capsys):
                "--force").returncode == 0
     # The sphere fit itself stopped before converging.
     from fivecal import cli as fivecal_cli
-    from fivecal import cmm
+    from fivecal.procedures import sphere_test as cmm
 
     real = cmm.sphere_test
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import tango
+from fivecal.procedures import tango
 from fivecal.compensation import (SIGN_CONVENTION, compensate_gcode, compensate_gcode_file,
                                   compensate_poses, error_table, load_errors, write_error_table)
 

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import dbb, polar
+from fivecal.procedures import dbb
+from fivecal.report import polar
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 MACHINES = os.path.join(HERE, "..", "..", "examples", "machines")

@@ -27,7 +27,8 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import design, tango
+from fivecal import design
+from fivecal.procedures import tango
 from fivecal.cli import main
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]

@@ -248,7 +248,8 @@ def test_plots_leave_the_matplotlib_backend_alone(tmp_path):
         matplotlib.use("svg")
         import sys
         import numpy as np
-        from fivecal import dbb, polar, plots
+        from fivecal.procedures import dbb
+        from fivecal.report import polar, plots
         t = dbb.Trace(np.arange(0.0, 360.0, 5.0), 0.001 * np.sin(np.radians(np.arange(0.0, 360.0, 5.0))),
                       label="CCW")
         polar.plot_polar([t], {str(tmp_path / 'p.png')!r}, 100.0, "trace")

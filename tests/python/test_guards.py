@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import guards, tango
+from fivecal import guards
+from fivecal.procedures import tango
 from fivecal.compensation import compensate_gcode, compensate_gcode_file, error_table
 from fivecal.simulation import simulate
 

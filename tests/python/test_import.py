@@ -104,7 +104,7 @@ def test_rtest_round_trip_in_um_recovers_the_same_errors(m, tmp_path, style):
 
 
 def test_dbb_trace_in_um_with_renamed_column_and_options(m, tmp_path):
-    plan = [e for e in fivecal.dbb.four_step_plan(m, step=10.0) if e["setup"] == "C1"]
+    plan = [e for e in fivecal.procedures.dbb.four_step_plan(m, step=10.0) if e["setup"] == "C1"]
     ds = fivecal.simulate(m, plan, errors=TRUE, sigma={"dbb": 0.0002}, seed=4)
     lines = ["time\tX\tY\tZ\tA\tC\tdL"]
     for k, o in enumerate(ds.observations):

@@ -6,7 +6,7 @@ from measured machining errors.
 The paper's eqs. (6), (11), (16) against the kinematic model are checked in
 test_machine.py (``_zz_case``: exact F_W differences, the corrected eq. (11),
 the printed eq. (11)'s (H - L) A_xi_x slip); here the same case is reused to
-check that ``fivecal.machining`` predicts those differences (to second order)
+check that ``fivecal.procedures.machining`` predicts those differences (to second order)
 and encodes the same closed forms.
 
 Must show: the identification recovers the three tilt-axis errors (EA0C,
@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import machining
+from fivecal.procedures import machining
 
 from test_machine import ZZ_A_DELTA, ZZ_A_XI, ZZ_C_DELTA, ZZ_C_XI, ZZ_H, ZZ_L, _zz_case, _zz_machine
 
@@ -61,7 +61,7 @@ def test_zhang_tests_poses_and_directions(c600u):
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_prediction_is_the_papers_machining_error(kind):
-    """fivecal.machining.predict (cut-point deviation in the table frame) equals
+    """fivecal.procedures.machining.predict (cut-point deviation in the table frame) equals
     test_machine's exact F_W differences to second order, and first_order is
     the paper's eqs. (6), (11) corrected, (16)."""
     m, *_, model, paper, _ = _zz_case(kind, 1.0)

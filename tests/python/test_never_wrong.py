@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import tango
+from fivecal.procedures import tango
 from fivecal.demo import example_machine_path
 from fivecal.identification import INFORMED_THRESHOLD
 

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import dbb, plots, polar
+from fivecal.procedures import dbb
+from fivecal.report import plots, polar
 from fivecal.demo import example_machine_path
 from fivecal.report import write_report
 
@@ -349,7 +350,7 @@ def _cli(*args):
 
 
 def test_dbb_plot_cli_one_panel_per_setup(results, tmp_path, monkeypatch):
-    from fivecal import dbb_cli
+    from fivecal.procedures import dbb_cli
     from fivecal.dataset import save_dataset
 
     save_dataset(results["dbb"].dataset, tmp_path / "ds.json")

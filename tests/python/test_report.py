@@ -185,7 +185,7 @@ def _dbb_result():
 
 
 def test_dbb_polar_hook(tmp_path, monkeypatch):
-    """With DBB traces the report calls fivecal.polar.report_figures when the
+    """With DBB traces the report calls fivecal.report.polar.report_figures when the
     module exists and shows a note otherwise; the guarded import never breaks
     the report."""
     try:
@@ -210,10 +210,10 @@ def test_dbb_polar_hook(tmp_path, monkeypatch):
         plt.close(fig)
         return [(p, "test polar plot")]
 
-    fake = types.ModuleType("fivecal.polar")
+    fake = types.ModuleType("fivecal.report.polar")
     fake.report_figures = report_figures
-    monkeypatch.setitem(sys.modules, "fivecal.polar", fake)
-    monkeypatch.setattr(fivecal, "polar", fake, raising=False)
+    monkeypatch.setitem(sys.modules, "fivecal.report.polar", fake)
+    monkeypatch.setattr(fivecal.report, "polar", fake, raising=False)
     path = write_report(result, tmp_path / "with_polar")
     assert calls and "test polar plot" in open(path, encoding="utf-8").read()
     found = render_check(path, tmp_path)
@@ -228,13 +228,13 @@ def test_dbb_polar_hook(tmp_path, monkeypatch):
 
 
 def test_dbb_polar_plots_through_the_real_polar_module(tmp_path):
-    """fivecal.polar (the ball bar plotting module) draws the report's ball
+    """fivecal.report.polar (the ball bar plotting module) draws the report's ball
     bar figures: residuals per setup against the sample index, and polar
     panels only for setups whose balls sweep a circle. In this data the
     table ball sits on the C axis, so the balls keep their relative angle:
     the report says why there is no polar plot instead of drawing a
     degenerate one (tests/python/test_plots_kinds.py covers real circles)."""
-    from fivecal import polar  # noqa: F401  (must exist: the report relies on it for DBB data)
+    from fivecal.report import polar  # noqa: F401  (must exist: the report relies on it for DBB data)
 
     result = _dbb_result()
     path = write_report(result, tmp_path / "dbb")
@@ -252,7 +252,7 @@ def test_unusable_fit_renders_with_a_red_banner_and_no_green(tmp_path):
     a red banner, and nothing in its text part is green (issue 13, item 5)."""
     import warnings
 
-    from fivecal import tango
+    from fivecal.procedures import tango
     from fivecal.simulation import simulate
 
     m = fivecal.Machine.load(os.path.join(os.path.dirname(__file__), "..", "..", "examples", "machines",

@@ -1,6 +1,6 @@
 """End-to-end tests of the thesis experiments (Rahman 2016, shared/seeds/002_*):
 TANGO on the HU40T octagonal table (ch. 4) and the KX8 cylindrical table (ch. 5),
-built by fivecal.tango, simulated with known errors and 0.6 µm probing noise,
+built by fivecal.procedures.tango, simulated with known errors and 0.6 µm probing noise,
 identified, and checked against the truth and against the thesis' patterns
 (Tables 4-5, 4-6, 4-9, 5-1, 5-2).
 
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import tango
+from fivecal.procedures import tango
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SIGMA = tango.PROBE_SIGMA  # 0.6 µm

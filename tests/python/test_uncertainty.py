@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import _core, probing_stats, tango, uncertainty
+from fivecal import _core, uncertainty
+from fivecal.procedures import probing_stats, tango
 
 SIGMA = tango.PROBE_SIGMA
 S3 = tango.S3_NAMES

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import dbb, tango
+from fivecal.procedures import dbb, tango
 from fivecal.units import column_unit, looks_like_radians
 
 ROOT = os.path.join(os.path.dirname(__file__), "..", "..")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import tango
+from fivecal.procedures import tango
 
 TOOL = [0.0, 0.0, 100.0]
 TABLE_BALL = np.array([60.0, 0.0, 80.0])

@@ -21,10 +21,10 @@ from typing import Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _core
-from .dataset import Dataset
-from .machine import Machine, RadiansWarning
-from .units import column_unit, display_scale, looks_like_radians, radians_message
+from .. import _core
+from ..dataset import Dataset
+from ..machine import Machine, RadiansWarning
+from ..units import column_unit, display_scale, looks_like_radians, radians_message
 
 FOUR_STEP_SETUPS = ("A1", "A2", "C1", "C2")
 FOUR_STEP_PARAMETERS = tuple(_core.four_step_parameter_names())
@@ -101,7 +101,7 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
     radians give one :class:`fivecal.RadiansWarning`.
     """
     path = os.fspath(path)
-    from . import files
+    from .. import files
 
     text = files.read_text(path, "trace CSV")
     rows = []
@@ -160,7 +160,7 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
 def write_trace_csv(trace: Trace, path: Union[str, os.PathLike]) -> None:
     import io
 
-    from . import files
+    from .. import files
 
     f = io.StringIO(newline="")
     w = csv.writer(f)
@@ -370,7 +370,7 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Sequence[str] = FOUR_
                "length_offsets": dict(length_offsets or {})}
     eng, err = None, None
     if engine:
-        from .identification import identify
+        from ..identification import identify
 
         m = ds.machine
         initial = {}
@@ -550,7 +550,7 @@ def wang_patterns(machine: Union[Machine, Mapping], errors: Mapping[str, float],
                   capture=(90.0, 450.0), **path_options) -> dict:
     """Noise-free traces of the Wang path for each error alone (name -> value),
     with their harmonics: the patterns of Wang et al. Section 4."""
-    from .simulation import simulate
+    from ..simulation import simulate
 
     m = Machine.from_dict(machine)
     plan = wang_plan(m, capture=capture, **path_options)
@@ -613,8 +613,8 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
     the engine say whether this path separates it from the fitted set."""
     import warnings
 
-    from .guards import FitWarning
-    from .identification import identify
+    from ..guards import FitWarning
+    from ..identification import identify
 
     ds = Dataset.from_dict(dataset)
     _dbb_rows(ds, setup)

@@ -5,13 +5,13 @@ frame with the nominal and with the identified model, fit a sphere
 sensitivity table (Table 6-1).  The algorithms are in the C++ core
 (``cpp/include/fivecal/procedures/sphere_test.h``)::
 
-    from fivecal import cmm, tango
+    from fivecal.procedures import sphere_test, tango
     m = tango.hu40t_machine()
     ball = {"id": "P", "center": [120, -60, 80], "radius": 9.525}   # phi 19.05 mm
-    plan = cmm.sphere_plan(m, ball, [{"B": b, "C": c} for b, c in ...], tip_radius=3.0)
+    plan = sphere_test.sphere_plan(m, ball, [{"B": b, "C": c} for b, c in ...], tip_radius=3.0)
     ds = fivecal.simulate(m, plan, errors=..., artefact={"spheres": [ball]}, tip_radius=3.0)
-    print(cmm.format_sphere_tests({"nominal": cmm.sphere_test(ds),
-                                   "identified": cmm.sphere_test(ds, result)}))
+    print(sphere_test.format_sphere_tests({"nominal": sphere_test.sphere_test(ds),
+                                           "identified": sphere_test.sphere_test(ds, result)}))
 
 Units: mm, degrees for rotary commands, rad for angular errors; reports in µm.
 """
@@ -23,10 +23,10 @@ from typing import Iterable, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from . import _core
-from .dataset import Dataset, dumps
-from .machine import Machine
-from .units import display_scale
+from .. import _core
+from ..dataset import Dataset, dumps
+from ..machine import Machine
+from ..units import display_scale
 
 __all__ = ["THESIS_RINGS", "sphere_points", "sphere_plan", "SphereFit", "fit_sphere", "table_points",
            "SphereTest", "sphere_test", "format_sphere_tests", "sensitivity_table", "format_sensitivity"]
@@ -58,7 +58,7 @@ def sphere_plan(machine, sphere: Mapping, indexations: Sequence[Mapping[str, flo
     at each indexation along every :func:`sphere_points` direction that faces
     the probe (normal . tool axis >= ``min_dot``: at or above the sphere's
     equator as seen from the spindle) and keeps the axes within ``limits``."""
-    from .design import candidate_plan
+    from ..design import candidate_plan
     art = {"spheres": [dict(sphere)]}
     plan, _ = candidate_plan(machine, art, indexations, tip_radius=tip_radius, limits=limits, min_dot=min_dot,
                              sphere_normals=sphere_points(rings, pole), directions=directions)

@@ -5,8 +5,8 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-from .files import save_figure
-from .units import display_scale
+from ..files import save_figure
+from ..units import display_scale
 
 
 def _pyplot():
@@ -376,7 +376,7 @@ def dbb_residual_figure(result, title: str = "Double ball bar: residuals after t
     """Residuals of the DBB observations against the sample index (recording
     order), one panel per setup, plane and bar length; the plane named in
     each panel's title. None without DBB data."""
-    from .dbb import trace_from_dataset
+    from ..procedures.dbb import trace_from_dataset
     from .polar import MIN_SWEEP, dbb_groups
 
     plt = _pyplot()

@@ -5,7 +5,7 @@ the tilt-axis errors from measured machining errors.  The algorithms are in
 the C++ core (``cpp/include/fivecal/procedures/machining_test.h``, where the model and
 the paper's first-order equations are written out)::
 
-    from fivecal import machining
+    from fivecal.procedures import machining
     m = fivecal.Machine.load("examples/machines/c600u.json")
     tests = machining.zhang_tests(m, L=150.0, H=60.0)         # T1, T2, T3
     e = machining.predict(m, tests, errors={"EA0C": 30e-6, "EY0C": 0.02})
@@ -32,9 +32,9 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from . import _core
-from .machine import Machine
-from .units import display_scale
+from .. import _core
+from ..machine import Machine
+from ..units import display_scale
 
 __all__ = ["TILT_AXIS_ERRORS", "WORKPIECE_SETUP", "zhang_tests", "poses", "predict", "sensitivity", "first_order",
            "identify", "MachiningResult"]

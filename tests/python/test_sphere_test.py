@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import cmm, tango
+from fivecal.procedures import sphere_test as st, tango
 from fivecal.cli import main
 
 BALL = {"id": "P", "center": [100.0, -50.0, 60.0], "radius": 19.05 / 2}   # position assumed
@@ -46,43 +46,43 @@ def calibration(hu40t):
 
 
 def sphere_data(machine, indexations, seed):
-    plan = cmm.sphere_plan(machine, BALL, indexations, tip_radius=tango.TIP_RADIUS)
+    plan = st.sphere_plan(machine, BALL, indexations, tip_radius=tango.TIP_RADIUS)
     return fivecal.simulate(machine, plan, errors=machine_truth(), artefact={"spheres": [BALL]},
                             tip_radius=tango.TIP_RADIUS, sigma=tango.PROBE_SIGMA, seed=seed)
 
 
 def test_sphere_points_are_the_thesis_distribution():
-    p = cmm.sphere_points()
+    p = st.sphere_points()
     assert p.shape == (33, 3)
     assert np.allclose(np.linalg.norm(p, axis=1), 1.0)
     lat = np.degrees(np.arcsin(np.clip(p[:, 2], -1, 1))).round(6)
     values, counts = np.unique(lat, return_counts=True)
     assert dict(zip(values, counts)) == {-30.0: 8, 0.0: 12, 30.0: 8, 60.0: 4, 90.0: 1}
-    q = cmm.sphere_points([(45, 6), (-90, 1)], pole=(1, 0, 0))
+    q = st.sphere_points([(45, 6), (-90, 1)], pole=(1, 0, 0))
     assert q.shape == (7, 3) and np.allclose(q[-1], [-1, 0, 0])
     with pytest.raises(ValueError, match="latitude"):
-        cmm.sphere_points([(120, 3)])
+        st.sphere_points([(120, 3)])
 
 
 def test_fit_sphere():
     rng = np.random.default_rng(0)
-    d = cmm.sphere_points()
+    d = st.sphere_points()
     c, R = np.array([10.0, -20.0, 30.0]), 12.5
-    exact = cmm.fit_sphere(c + R * d)
+    exact = st.fit_sphere(c + R * d)
     assert exact.converged and np.allclose(exact.center, c, atol=1e-10)
     assert exact.radius == pytest.approx(R, abs=1e-10) and exact.out_of_sphericity < 1e-10
-    noisy = cmm.fit_sphere(c + (R + rng.normal(0, 0.001, len(d)))[:, None] * d)
+    noisy = st.fit_sphere(c + (R + rng.normal(0, 0.001, len(d)))[:, None] * d)
     assert np.allclose(noisy.center, c, atol=1e-3)
     assert noisy.out_of_sphericity == pytest.approx(noisy.max_residual - noisy.min_residual)
     assert noisy.std_residual == pytest.approx(np.std(noisy.residuals, ddof=1))
     with pytest.raises(ValueError, match="at least 4"):
-        cmm.fit_sphere(d[:3])
+        st.fit_sphere(d[:3])
     with pytest.raises(ValueError, match="degenerate"):
-        cmm.fit_sphere(np.c_[d[:12, :2], np.zeros(12)])
+        st.fit_sphere(np.c_[d[:12, :2], np.zeros(12)])
 
 
 def test_sphere_plan_touches_what_faces_the_probe(hu40t):
-    plan = cmm.sphere_plan(hu40t, BALL, STRATEGY_I, tip_radius=3.0)
+    plan = st.sphere_plan(hu40t, BALL, STRATEGY_I, tip_radius=3.0)
     axes = {a: np.array([e["axes"].get(a, 0.0) for e in plan]) for a in "BCS"}
     axes.update({a: np.zeros(len(plan)) for a in "XYZ"})
     _, tool_axis = hu40t.tool_pose(axes)
@@ -94,20 +94,20 @@ def test_sphere_plan_touches_what_faces_the_probe(hu40t):
 
 
 def test_table_points_with_the_true_model_lie_on_the_sphere(hu40t):
-    plan = cmm.sphere_plan(hu40t, BALL, STRATEGY_I[:6], tip_radius=3.0)
+    plan = st.sphere_plan(hu40t, BALL, STRATEGY_I[:6], tip_radius=3.0)
     ds = fivecal.simulate(hu40t, plan, errors=machine_truth(), artefact={"spheres": [BALL]}, tip_radius=3.0)
-    P = cmm.table_points(ds, machine_truth())
+    P = st.table_points(ds, machine_truth())
     r = np.linalg.norm(P - BALL["center"], axis=1)
     np.testing.assert_allclose(r, BALL["radius"] + 3.0, atol=1e-9)
-    assert np.abs(np.linalg.norm(cmm.table_points(ds) - BALL["center"], axis=1) - 12.525).max() > 0.05
+    assert np.abs(np.linalg.norm(st.table_points(ds) - BALL["center"], axis=1) - 12.525).max() > 0.05
 
 
 @pytest.mark.parametrize("strategy, indexations, seed", [("I", STRATEGY_I, 7), ("II", STRATEGY_II, 8)])
 def test_out_of_sphericity_shrinks_with_the_identified_model(hu40t, calibration, strategy, indexations, seed):
     ds = sphere_data(hu40t, indexations, seed)
-    nominal = cmm.sphere_test(ds)
-    identified = cmm.sphere_test(ds, calibration)
-    true = cmm.sphere_test(ds, machine_truth())
+    nominal = st.sphere_test(ds)
+    identified = st.sphere_test(ds, calibration)
+    true = st.sphere_test(ds, machine_truth())
     # thesis Table 6-3: 268 µm nominal, 61 / 71 µm compensated
     assert nominal.out_of_sphericity > 0.1                     # > 100 µm
     assert identified.out_of_sphericity < nominal.out_of_sphericity / 3
@@ -116,15 +116,15 @@ def test_out_of_sphericity_shrinks_with_the_identified_model(hu40t, calibration,
     assert true.out_of_sphericity < 8 * tango.PROBE_SIGMA
     assert identified.out_of_sphericity > true.out_of_sphericity
     assert abs(identified.size_error) < abs(nominal.size_error) + 1e-3
-    text = cmm.format_sphere_tests({"nominal": nominal, "identified": identified})
+    text = st.format_sphere_tests({"nominal": nominal, "identified": identified})
     assert "Out of sphericity" in text and "identified" in text
 
 
 def test_table_6_1_sensitivity(hu40t):
-    plan = cmm.sphere_plan(hu40t, BALL, STRATEGY_I, tip_radius=3.0)
+    plan = st.sphere_plan(hu40t, BALL, STRATEGY_I, tip_radius=3.0)
     names = ["EA0B", "EA0C", "EA0Y", "EB0C", "EB0Z", "EC0B", "EC0Y", "EX0C", "EY0S", "EX0S",
              "EXX1", "EYY1", "EZZ1", "EC0C", "EZ0C"]
-    rows = cmm.sensitivity_table(hu40t, BALL, plan, names, tip_radius=3.0)
+    rows = st.sensitivity_table(hu40t, BALL, plan, names, tip_radius=3.0)
     by = {r["name"]: r for r in rows}
     assert rows[0]["name"] == "" and rows[0]["out_of_sphericity"] < 1e-10     # "No parameters"
     assert by["EX0C"]["value"] == 1e-3 and by["EA0B"]["value"] == pytest.approx(2.5e-6)
@@ -138,7 +138,7 @@ def test_table_6_1_sensitivity(hu40t):
     assert min(strong) > max(others)
     assert all(1e-3 < s < 5e-3 for s in strong)
     assert all(1e-4 < o < 2e-3 for o in others)
-    text = cmm.format_sensitivity(rows)
+    text = st.format_sensitivity(rows)
     assert "EX0C" in text and "none" in text
 
 

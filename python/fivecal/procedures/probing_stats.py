@@ -5,7 +5,7 @@ drift, per probing direction, as in Tables 4-3, 7-1, 7-2, 7-4 and 7-5.
 The computations are in C++ (``cpp/include/fivecal/procedures/probing_stats.h``); this
 module converts arrays and formats the tables::
 
-    from fivecal import probing_stats
+    from fivecal.procedures import probing_stats
     # P[i, j]: grid point i, cycle j (mm along the approach), per direction
     stats = probing_stats.grid_table({"X": Px, "Y": Py, "Z": Pz}, window=5)
     print(probing_stats.format_table(stats))
@@ -20,7 +20,7 @@ from typing import Dict, Mapping, Sequence
 
 import numpy as np
 
-from . import _core
+from .. import _core
 
 __all__ = ["GridStatistics", "grid_statistics", "grid_table", "format_table", "pooled_std",
            "pooled_std_groups"]

@@ -14,7 +14,7 @@ parameter bars with ±2σ error bars and the correlation matrix.
     from fivecal.report import write_report
     path = write_report(result, "report_dir")        # -> report_dir/report.html
 
-Ball bar plots come from ``fivecal.polar.report_figures(result, out_dir)``,
+Ball bar plots come from ``fivecal.report.polar.report_figures(result, out_dir)``,
 called when the dataset has ``dbb`` observations; it returns a list of PNG
 paths or ``(path, caption)`` pairs written inside ``out_dir``. A failure
 there (or in the R-test plots) is shown in the report, not raised.
@@ -30,8 +30,8 @@ from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
-from .units import display_scale
+from ..guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
+from ..units import display_scale
 
 __all__ = ["write_report", "Section"]
 
@@ -126,7 +126,7 @@ def _dbb_setup_text(dataset) -> str:
     """Each DBB setup with its sample count, plane and bar length."""
     try:
         from .polar import MIN_SWEEP, dbb_groups
-        from .dbb import trace_from_dataset
+        from ..procedures.dbb import trace_from_dataset
     except ImportError:  # pragma: no cover - polar is part of the package
         return ", ".join(f"{k} ({n})" for k, n in _setup_counts(dataset.observations, "dbb").items())
     parts = []
@@ -180,7 +180,7 @@ def _verdict_banner(result, fd) -> str:
     """The verdict at the top of the report: red when the fit is not usable
     (never green then), amber when usable with reservations, green only for a
     usable fit with nothing left undetermined or inseparable."""
-    from .identification import verdict_lines
+    from ..identification import verdict_lines
 
     a = fd.assessment
     if not a.usable:
@@ -243,7 +243,7 @@ def _findings_section(result, fd) -> str:
 
 
 def _fit_section(result) -> str:
-    from . import guards
+    from .. import guards
 
     fd = guards.findings(result)
     a = fd.assessment
@@ -255,7 +255,7 @@ def _fit_section(result) -> str:
             ("condition number", f"{result.condition_number:.4g} (of the scaled Jacobian)"),
             ("solver", f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} "
                        "iterations")]
-    from .identification import noise_lines
+    from ..identification import noise_lines
     for line in noise_lines(result):
         rows.append(("instrument noise", line))
     if chi2 is not None and np.isfinite(chi2):
@@ -312,7 +312,7 @@ def _identifiability_section(result) -> str:
         for g in result.unidentifiable:
             parts.append("<li>{" + ", ".join(f"<code>{_e(n)}</code>" for n in g) + "}</li>")
         parts.append("</ul>")
-    from . import guards
+    from .. import guards
 
     fd = guards.findings(result)
     group = {n: i for i, g in enumerate(result.unidentifiable) for n in g}
@@ -378,7 +378,7 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
     mach = sorted([n for n in est if n in machine_names and not n.startswith("tip.")], key=order.get)
     other = [n for n in est if n not in mach]
 
-    from . import guards
+    from .. import guards
 
     fd = guards.findings(result)
     und, part, impl = set(fd.undetermined), set(fd.partly), set(fd.implausible)
@@ -467,16 +467,16 @@ vectors are these distances along the surface normal, drawn in the workpiece (ta
 
 
 def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
-    """Polar plots from fivecal.polar when the data has DBB traces."""
+    """Polar plots from fivecal.report.polar when the data has DBB traces."""
     if "dbb" not in set(result.dataset.observation_types):
         return [], None
     try:
         from . import polar  # optional here: the report must come out without it
     except ImportError:
         return [], ("The data holds double ball bar traces; polar plots appear here once the "
-                    "<code>fivecal.polar</code> module is installed.")
+                    "<code>fivecal.report.polar</code> module is installed.")
     if not hasattr(polar, "report_figures"):
-        return [], "fivecal.polar has no report_figures()."
+        return [], "fivecal.report.polar has no report_figures()."
     try:
         out = []
         for f in list(polar.report_figures(result, out_dir) or []):
@@ -543,10 +543,11 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     why; it then opens with a red "NOT USABLE" banner giving the reason, the
     page title says so, and no box on the page is green.
     """
-    from . import __version__, plots
+    from .. import __version__
+    from . import plots
 
     out_dir = os.fspath(out_dir)
-    from .files import make_dirs
+    from ..files import make_dirs
 
     make_dirs(out_dir)
     ds = result.dataset
@@ -577,7 +578,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
                         "parameters omitted; strongly correlated pairs are listed under Identifiability)."))
     figs += list(figures)
 
-    from . import guards
+    from .. import guards
 
     fd = guards.findings(result)
     title = title or f"fivecal identification report — {machine.name}"
@@ -625,7 +626,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
            f"<title>{_e(title)}</title><style>{_CSS}</style></head><body><main>\n"
            + "\n".join(body) + "\n</main></body></html>\n")
     path = os.path.join(out_dir, "report.html")
-    from .files import write_text
+    from ..files import write_text
 
     write_text(path, doc)
     return path

@@ -20,7 +20,7 @@ plot by :func:`angle_convention`): the angle of a sample is measured in the
 plane of the trace, counter-clockwise from the first axis of the plane
 towards the second, seen from the positive normal (XY: from +X towards +Y,
 seen from +Z; YZ: from +Y, seen from +X; ZX: from +Z, seen from +Y). Traces
-of a dataset get it from :func:`fivecal.dbb.trace_from_dataset` (the
+of a dataset get it from :func:`fivecal.procedures.dbb.trace_from_dataset` (the
 geometric angle of the moving ball about the fixed one), never from a
 rotary axis command, whose sign depends on the axis direction.
 """
@@ -31,8 +31,8 @@ from typing import Iterable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from .dbb import Trace
-from .files import save_figure
+from ..procedures.dbb import Trace
+from ..files import save_figure
 
 _NICE = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0)
 CW_COLOR, CCW_COLOR = "#1f5fbf", "#d62728"
@@ -191,7 +191,7 @@ def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = 
                plane: Sequence[str] = ("X", "Y"), arc="auto", colors=None) -> str:
     """One polar plot with an annotation panel; writes a PNG and returns its path.
 
-    ``traces``: :class:`fivecal.dbb.Trace` objects (labels starting with CW /
+    ``traces``: :class:`fivecal.procedures.dbb.Trace` objects (labels starting with CW /
     CCW get the ballbar colours), ``scale``: ring spacing in µm (default:
     chosen from the data), ``annotations``: lines printed beside the plot,
     ``plane``: the plane of the traces (angles as :func:`angle_convention`
@@ -268,7 +268,7 @@ def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols
 
 
 def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
-    """CW/CCW polar plot of a :class:`fivecal.dbb.CircularResult` with the
+    """CW/CCW polar plot of a :class:`fivecal.procedures.dbb.CircularResult` with the
     ISO 230-4 values and the diagnosis beside it."""
     traces = []
     for t in result.traces:
@@ -303,8 +303,8 @@ def plot_four_step(result, path: str) -> str:
     sweeps (the package's angle convention, not the rotary command: an axis
     whose direction is a negative basis vector turns the other way), with
     each step's fitted centre, and the PIGEs of both methods underneath."""
-    from .dbb import trace_from_dataset
-    from .units import display_scale
+    from ..procedures.dbb import trace_from_dataset
+    from ..units import display_scale
 
     ds = result.dataset
     panels = []
@@ -339,7 +339,7 @@ def plot_wang_patterns(patterns: Mapping, path: str, wang_path=None) -> str:
     """Polar plots of single-error traces along the Wang path (tracking angle
     90-450 deg), with their Fourier content: centre shift (1st harmonic),
     size change (mean), 2nd and 3rd harmonic amplitudes."""
-    from .units import display_scale
+    from ..units import display_scale
 
     panels = []
     for name, p in patterns.items():
@@ -385,7 +385,7 @@ def dbb_panels(result) -> tuple:
     ``(panels, skipped)``; ``skipped`` names groups too short for a trace
     (fewer than 3 samples: no plane) or sweeping less than
     :data:`MIN_SWEEP` degrees."""
-    from .dbb import trace_from_dataset
+    from ..procedures.dbb import trace_from_dataset
 
     ds = result.dataset
     resid = {}

@@ -34,7 +34,7 @@ def _values(text, what: str, paper=None) -> dict:
     if text == "paper" and paper is not None:
         return dict(paper)
     if os.path.exists(text):
-        from .files import read_json
+        from ..files import read_json
 
         d = read_json(text, "errors")
         if not isinstance(d, dict):
@@ -77,7 +77,7 @@ def _vector(text, n: int, what: str):
 
 
 def _machine(path):
-    from .machine import Machine
+    from ..machine import Machine
 
     if path is None:
         raise ValueError("--machine is required here (a machine JSON file)")
@@ -91,7 +91,7 @@ def _machine(path):
 
 
 def _write_json(d: dict, path: str) -> None:
-    from .files import write_text
+    from ..files import write_text
 
     write_text(path, json.dumps(d, indent=1, default=float) + "\n")
 
@@ -113,7 +113,7 @@ def _quiet_fit_warnings():
     """FitWarnings silenced: the command judges the fit itself, in one line."""
     import warnings
 
-    from .guards import FitWarning
+    from ..guards import FitWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
@@ -123,8 +123,8 @@ def _quiet_fit_warnings():
 # ---- jiang -----------------------------------------------------------------
 def _jiang(args) -> int:
     from . import dbb
-    from .dataset import load_dataset, save_dataset
-    from .simulation import simulate
+    from ..dataset import load_dataset, save_dataset
+    from ..simulation import simulate
 
     setups = [s.strip() for s in args.setups.split(",")]
     if len(setups) != 4:
@@ -166,11 +166,11 @@ def _jiang(args) -> int:
         _write_json(res.to_dict(), args.out)
         print(f"\nresult written to {args.out}")
     if args.plot:
-        from .polar import plot_four_step
+        from ..report.polar import plot_four_step
 
         plot_four_step(res, args.plot)
         print(f"polar plots written to {args.plot}")
-    from .cli import _values_verdict, fit_status
+    from ..cli import _values_verdict, fit_status
 
     verdicts = [("four-step values", _values_verdict(res.values, res.std))]
     if res.engine is not None:
@@ -181,8 +181,8 @@ def _jiang(args) -> int:
 # ---- wang ------------------------------------------------------------------
 def _wang(args) -> int:
     from . import dbb
-    from .dataset import load_dataset, save_dataset
-    from .simulation import simulate
+    from ..dataset import load_dataset, save_dataset
+    from ..simulation import simulate
 
     geometry = {"table_ball": _vector(args.table_ball, 3, "--table-ball") or (0.0, 150.0, 130.0),
                 "radius": args.radius, "height": args.height}
@@ -191,7 +191,7 @@ def _wang(args) -> int:
     path = dbb.wang_path(m, **geometry)
     print(path.format_table(args.every))
     if args.patterns:
-        from .polar import plot_wang_patterns
+        from ..report.polar import plot_wang_patterns
 
         sizes = _values(args.pattern_errors, "--pattern-errors") or {"EX0C": 0.01, "EY0C": 0.01,
                                                                      "EZ0C": 0.01, "EA0C": 50e-6}
@@ -216,7 +216,7 @@ def _wang(args) -> int:
                          "separable": ident.separable}, args.out)
             print(f"\nresult written to {args.out}")
         if args.plot:
-            from .polar import plot_polar
+            from ..report.polar import plot_polar
 
             t = dbb.trace_from_dataset(ds, args.setup)
             t.label = f"measured ({args.setup})"
@@ -234,7 +234,7 @@ def _wang(args) -> int:
                        annotations=notes, plane=tuple(getattr(t, "plane", "XY")),
                        colors=["#d62728", "#222222"])
             print(f"polar plot written to {args.plot}")
-        from .cli import fit_status
+        from ..cli import fit_status
 
         return fit_status("dbb wang", [("", ident.result.assessment())], args.force, (args.out, args.plot))
     return 0
@@ -243,8 +243,8 @@ def _wang(args) -> int:
 # ---- circular --------------------------------------------------------------
 def _circular(args) -> int:
     from . import dbb
-    from .dataset import load_dataset
-    from .simulation import simulate
+    from ..dataset import load_dataset
+    from ..simulation import simulate
 
     traces = []
     if args.simulate is not None:
@@ -278,11 +278,11 @@ def _circular(args) -> int:
         _write_json(res.to_dict(), args.out)
         print(f"\nresult written to {args.out}")
     if args.plot:
-        from .polar import plot_circular_test
+        from ..report.polar import plot_circular_test
 
         plot_circular_test(res, args.plot)
         print(f"polar plot written to {args.plot}")
-    from .cli import _values_verdict, fit_status
+    from ..cli import _values_verdict, fit_status
 
     # ISO 230-4 values of each run and the least-squares diagnosis: one
     # non-finite number (a degenerate trace) makes the whole test unusable.
@@ -299,8 +299,8 @@ def _plot(args) -> int:
     plane), and one for the CSV traces (the plane of --plane): planes and bar
     lengths are never mixed on one chart."""
     from . import dbb
-    from .dataset import load_dataset
-    from .polar import dbb_groups, plane_name, plot_polar, plot_polar_grid
+    from ..dataset import load_dataset
+    from ..report.polar import dbb_groups, plane_name, plot_polar, plot_polar_grid
 
     panels, csv_traces = [], []
     csv_plane = plane_name(args.plane) if args.plane else "XY"
@@ -347,7 +347,7 @@ def _plot(args) -> int:
 
 def register(sub) -> None:
     """Add the ``dbb`` subcommand group to the main parser's subparsers."""
-    from .cli import _FORCE_HELP, POSITIVE, SEED, SIGMA, _float_type
+    from ..cli import _FORCE_HELP, POSITIVE, SEED, SIGMA, _float_type
 
     FINITE = _float_type()
     RD = argparse.RawDescriptionHelpFormatter
