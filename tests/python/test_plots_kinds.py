@@ -96,7 +96,7 @@ def figures_of(result):
     if kinds & set(plots.PROBING):
         figs["residual_vectors"] = plots.residual_vectors_figure(result, kinds=plots.PROBING)
     if "ball3d" in kinds:
-        figs["ball3d_components"] = plots.ball3d_figure(result)
+        figs["ball3d_components"] = plots.component_figure(result, "ball3d")
     if "dbb" in kinds:
         figs["dbb_polar"] = polar.dbb_figure(result)
         figs["dbb_residuals"] = plots.dbb_residual_figure(result)
@@ -268,7 +268,7 @@ def test_many_indexations_get_a_colour_bar_few_get_a_legend(results, c600u):
     fig = plots.residual_vectors_figure(few)
     assert legend_sizes(fig) == [12]
     assert_data_inside(fig)
-    b3 = plots.ball3d_figure(results["ball3d"])  # 13 A positions
+    b3 = plots.component_figure(results["ball3d"], "ball3d")  # 13 A positions
     assert legend_sizes(b3) == [] and any("13 groups" in ax.get_ylabel() for ax in all_axes(b3))
 
 

@@ -105,3 +105,30 @@ def test_file_round_trip_and_bad_fields(machine):
         bad["observations"][1][field] = value
         with pytest.raises(ValueError, match=words):
             fivecal.Dataset.from_dict(bad)
+
+
+def test_report_plots_the_machine_signature_not_the_tracker_placement(machine, tmp_path):
+    """The point figure's top row is what the tracker saw beyond the nominal
+    machine, taken through the fitted tracker pose: with a perfect machine
+    it is noise (µm) although the tracker stands 0.3 mm and 0.1° off its
+    nominal pose; with the machine's errors it shows their tens of µm."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from fivecal.report import plots
+
+    rng = np.random.default_rng(5)
+    plan = _plan(rng, 40)
+    for errors, low, high in (({}, 0.0, 0.02), (TRUTH, 0.02, 1.0)):
+        ds = fivecal.simulate(machine, plan, errors=errors, setup=SETUP, sigma={"point": 0.001}, seed=5)
+        r = fivecal.identify(ds, list(TRUTH), fix=FIXED)
+        fig = plots.component_figure(r, "point")
+        top = np.concatenate([np.abs(ln.get_ydata()) for ax in fig.axes[:3] for ln in ax.get_lines()[:-1]])
+        bottom = np.concatenate([np.abs(ln.get_ydata()) for ax in fig.axes[3:6] for ln in ax.get_lines()[:-1]])
+        assert low * 1e3 <= np.nanmax(top) <= high * 1e3, (errors, np.nanmax(top))
+        assert np.nanmax(bottom) < 6.0  # residual after the fit: noise, µm
+        assert "instrument frame" in fig._suptitle.get_text() and "T1" in fig._suptitle.get_text()
+    path = fivecal.write_report(r, tmp_path / "rep")
+    assert (tmp_path / "rep" / "point_components.png").is_file()
+    assert "Tracker / camera points" in open(path, encoding="utf-8").read()
+    plots.plot_components(r, str(tmp_path / "point.png"), "point")

@@ -505,15 +505,24 @@ def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[str]]:
                          "one colour per rotary indexation (Rahman 2016, Figure 4-7 style). Systematic "
                          "patterns (arrows of one colour pointing the same way) mean unmodelled errors; "
                          "random directions mean probing noise."))
-    if "ball3d" in types:
-        p = os.path.join(out_dir, "ball3d_components.png")
+    captions = {
+        "ball3d": "R-test / 3D ball: recorded deviation and residual after the fit per component (dx, dy, dz, "
+                  "workpiece frame) against the rotary angle, one line per setup / indexation group.",
+        "point": "Tracker / camera points: deviation from the nominal machine (seen through the fitted "
+                 "instrument pose) and residual after the fit per component (instrument frame) against the "
+                 "rotary angle, one line per instrument / indexation group.",
+        "pose": "6D poses, position part: deviation from the nominal machine (fitted instrument pose) and "
+                "residual after the fit per component (instrument frame) against the rotary angle.",
+    }
+    for kind, caption in captions.items():
+        if kind not in types:
+            continue
+        p = os.path.join(out_dir, f"{kind}_components.png")
         try:
-            plots.plot_ball3d(result, p)
-            first.append((p, "R-test / 3D ball: recorded deviation and residual after the fit per component "
-                             "(dx, dy, dz, workpiece frame) against the rotary angle, one line per setup / "
-                             "indexation group."))
+            plots.plot_components(result, p, kind)
+            first.append((p, caption))
         except Exception as e:  # a plotting problem must not lose the rest of the report
-            notes.append(f"R-test plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}")
+            notes.append(f"{kind} plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}")
     dbb_figs, dbb_note = _dbb_figures(result, out_dir)
     first += dbb_figs
     if dbb_note:

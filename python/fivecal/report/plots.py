@@ -292,59 +292,115 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
     return path
 
 
-# ---- R-test / 3D ball data -----------------------------------------------------------------------
-def ball3d_groups(dataset) -> tuple:
-    """How the ball3d (R-test, 3D point) observations are plotted: the rotary
-    axis on the horizontal axis (the one taking the most distinct positions)
-    and, per observation, its group (setup and the other rotary axes'
-    positions). Returns ``(rows, angle axis or None, angles, group labels)``."""
+# ---- R-test / 3D ball and fixed-frame point data -------------------------------------------------
+# The kinds whose first three residual rows are a 3D deviation, the key that
+# names their setup or instrument, and the frame those components are in.
+COMPONENT_KINDS = {
+    "ball3d": ("setup", "R-test / 3D ball", "workpiece (table) frame"),
+    "point": ("instrument", "tracker / camera point", "instrument frame"),
+    "pose": ("instrument", "6D pose, position part", "instrument frame"),
+}
+
+
+def _natural(label: str) -> tuple:
+    """Sort key that orders "B -30°" before "B 5°" and "B 5°" before "B 45°"."""
+    import re
+
+    out = []
+    for part in re.split(r"(-?\d+(?:\.\d+)?)", label):
+        try:
+            out.append((0, float(part), ""))
+        except ValueError:
+            out.append((1, 0.0, part))
+    return tuple(out)
+
+
+def component_groups(dataset, kind: str = "ball3d") -> tuple:
+    """How the 3D observations of ``kind`` (``ball3d``, ``point``, ``pose``)
+    are plotted: the rotary axis on the horizontal axis (the one taking the
+    most distinct positions) and, per observation, its group (setup or
+    instrument, and the other rotary axes' positions). Returns ``(rows,
+    angle axis or None, angles, group labels)``."""
+    who = COMPONENT_KINDS[kind][0]
     obs = dataset.observations
-    rows = [i for i, o in enumerate(obs) if o.get("type") == "ball3d"]
+    rows = [i for i, o in enumerate(obs) if o.get("type") == kind]
     rot = [a for a in dataset.machine.axis_names if a in "ABC"]
     pos = {a: np.array([float(obs[i]["axes"].get(a, 0.0)) for i in rows]) for a in rot}
     moving = [a for a in rot if rows and np.ptp(pos[a]) > 1e-9]
     key = max(moving, key=lambda a: (len(np.unique(np.round(pos[a], 3))), np.ptp(pos[a]))) if moving else None
     angles = pos[key] if key else np.arange(len(rows), dtype=float)
-    setups = {obs[i].get("setup", "") for i in rows}
+    setups = {obs[i].get(who, "") for i in rows}
+    sides = {obs[i].get("target", "") for i in rows} if who == "instrument" else set()
     labels = []
     for n, i in enumerate(rows):
-        parts = [obs[i].get("setup", "") or "(no setup)"] if len(setups) > 1 else []
+        parts = [obs[i].get(who, "") or f"(no {who})"] if len(setups) > 1 else []
+        parts += [f"{obs[i]['target']} target"] if len(sides) > 1 else []
         parts += [f"{a} {pos[a][n]:g}°" for a in moving if a != key]
-        labels.append(", ".join(parts) or (obs[i].get("setup", "") or "all"))
+        labels.append(", ".join(parts) or (obs[i].get(who, "") or "all"))
     return rows, key, angles, labels
 
 
-def ball3d_figure(result, title: str = "R-test / 3D ball: deviation per component"):
-    """Per-component (dx, dy, dz) deviation of the ball3d observations
-    against the rotary angle: the recorded deviation (top row) and the
-    residual the fit leaves (bottom row), one panel per component, one line
-    per setup / indexation group (legend up to 12 groups, colour bar beyond).
-    None without ball3d data."""
+def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
+    """What the instrument saw beyond the nominal machine, µm. An R-test
+    records deviations itself. A tracker records absolute positions in its own
+    frame, so its deviation is taken against the nominal machine seen through
+    the fitted instrument pose and target (every setup value of the fit, no
+    machine error): the machine's error signature, not the tracker's placement."""
+    obs = result.dataset.observations
+    if kind == "ball3d":
+        return np.array([obs[i]["measured"] for i in rows], float) * 1e3
+    from .. import _core
+
+    machine = set(result.dataset.machine.parameter_names())
+    setup = {k: v for k, v in result.values.items() if k not in machine}
+    res, src = _core.predict_residuals(result.dataset._core, setup)
+    out = np.full((len(rows), 3), np.nan)
+    src = np.asarray(src)
+    for n, i in enumerate(rows):
+        r = np.asarray(res)[src == i]
+        if r.size >= 3:
+            out[n] = -r[:3] * 1e3
+    return out
+
+
+def component_figure(result, kind: str = "ball3d", title: Optional[str] = None):
+    """Per-component deviation of the 3D observations of ``kind`` against the
+    rotary angle: what was recorded (top row; for a tracker, against the
+    nominal machine) and the residual the fit leaves (bottom row), one panel
+    per component, one line per setup / indexation group (legend up to 12
+    groups, colour bar beyond). None without such data."""
     plt = _pyplot()
     ds = result.dataset
-    rows, key, angles, labels = ball3d_groups(ds)
+    rows, key, angles, labels = component_groups(ds, kind)
     if not rows:
         return None
+    who, what_kind, frame = COMPONENT_KINDS[kind]
+    title = title or f"{what_kind}: deviation per component"
     obs = ds.observations
-    rec = np.array([obs[i]["measured"] for i in rows], float) * 1e3
+    rec = _recorded_deviation(result, kind, rows)
     src = np.asarray(result.residual_source)
     res_all = np.asarray(result.residuals)
     left = np.full((len(rows), 3), np.nan)
     for n, i in enumerate(rows):
         r = res_all[src == i]
-        if r.size == 3:
-            left[n] = r * 1e3
-    uniq = list(dict.fromkeys(labels))
+        if r.size >= 3:
+            left[n] = r[:3] * 1e3
+    uniq = sorted(dict.fromkeys(labels), key=_natural)
     colors = group_colors(len(uniq))
     gi = np.array([uniq.index(l) for l in labels])
+    comps = ("dx", "dy", "dz") if kind == "ball3d" else ("x", "y", "z")
+    top = "recorded" if kind == "ball3d" else "recorded − nominal machine"
     fig, axes = plt.subplots(2, 3, figsize=(14.5, 7.6), sharex=True, squeeze=False, layout="constrained")
-    for row, (data, what) in enumerate(((rec, "recorded"), (left, "residual after the fit"))):
-        for c, comp in enumerate(("dx", "dy", "dz")):
+    for row, (data, what) in enumerate(((rec, top), (left, "residual after the fit"))):
+        for c, comp in enumerate(comps):
             ax = axes[row][c]
             for g in range(len(uniq)):
                 sel = np.flatnonzero(gi == g)
                 sel = sel[np.argsort(angles[sel], kind="stable")]
-                ax.plot(angles[sel], data[sel, c], "-o", ms=2.5, lw=1.1, color=colors[g])
+                # A line only where the group sweeps the angle: two scattered
+                # poses joined by a line would read as a trend.
+                style = "-o" if len(np.unique(np.round(angles[sel], 6))) >= 3 else "o"
+                ax.plot(angles[sel], data[sel, c], style, ms=2.5 if style == "-o" else 3.5, lw=1.1, color=colors[g])
             _limits(ax, angles, data[:, c], margin=0.05)
             ax.axhline(0, color="#888", lw=0.7)
             ax.set_title(f"{comp} {what}", fontsize=11)
@@ -353,25 +409,24 @@ def ball3d_figure(result, title: str = "R-test / 3D ball: deviation per componen
                 ax.set_ylabel("deviation (µm)")
             if row == 1:
                 ax.set_xlabel(f"{key} axis command (deg)" if key else "sample")
-    n_setups = len({obs[i].get("setup", "") for i in rows})
+    names = sorted({obs[i].get(who, "") or "(none)" for i in rows})
     add_group_key(fig, axes.ravel().tolist(), uniq, colors,
-                  "group" if n_setups > 1 else ("indexation" if key else "setup"))
-    fig.suptitle(f"{title}: {len(rows)} samples, {n_setups} setup{'s' if n_setups != 1 else ''} "
-                 f"({', '.join(sorted({obs[i].get('setup', '') or '(none)' for i in rows}))}); "
-                 "components in the workpiece (table) frame", fontsize=12)
+                  "group" if len(names) > 1 else ("indexation" if key else who))
+    plural = "s" if len(names) != 1 else ""
+    fig.suptitle(f"{title}: {len(rows)} samples, {len(names)} {who}{plural} ({', '.join(names)}); "
+                 f"components in the {frame}", fontsize=12)
     return fig
 
 
-def plot_ball3d(result, path: str, title: str = "R-test / 3D ball: deviation per component") -> Optional[str]:
-    """Write :func:`ball3d_figure` as a PNG; returns the path (None without ball3d data)."""
-    fig = ball3d_figure(result, title)
+def plot_components(result, path: str, kind: str = "ball3d", title: Optional[str] = None) -> Optional[str]:
+    """Write :func:`component_figure` as a PNG; returns the path (None without such data)."""
+    fig = component_figure(result, kind, title)
     if fig is None:
         return None
     save_figure(fig, path, dpi=110)
     return path
 
 
-# ---- double ball bar ------------------------------------------------------------------------------
 def dbb_residual_figure(result, title: str = "Double ball bar: residuals after the fit"):
     """Residuals of the DBB observations against the sample index (recording
     order), one panel per setup, plane and bar length; the plane named in
