@@ -240,4 +240,6 @@ def test_sscanss_fit_without_the_noise_estimate_says_inadequate(sscanss):
     with pytest.warns(UserWarning, match="not usable"):
         r = fivecal.identify(fivecal.Dataset.from_dict(ds), ESTIMATE, fix="instrument.T1.work_z")
     assert "the model misses errors the data show" in r.adequacy
+    # the instrument measures lengths: its data are a length reference, unlike a probe's
+    assert "no length reference" not in r.adequacy
     assert r.verdict == "inadequate" and r.converged
