@@ -181,7 +181,7 @@ def test_bad_joint_layouts_are_refused(tmp_path, row, side, match):
 def test_header_option_refuses_a_file_that_has_one(tmp_path):
     f = tmp_path / "t.txt"
     f.write_text("joint measured_x measured_y measured_z position joint_type home\n1 0 0 0 0 prismatic 0\n")
-    with pytest.raises(ValueError, match=r"t\.txt:1: this line starts with a name.*needs no 'header'"):
+    with pytest.raises(ValueError, match=r"t\.txt:1: this line holds names, not numbers.*needs no 'header'"):
         read_table(f, "point", os.path.join(EX, "machine.json"), sidecar=JOINT_SIDE)
 
 
@@ -243,3 +243,52 @@ def test_sscanss_fit_without_the_noise_estimate_says_inadequate(sscanss):
     # the instrument measures lengths: its data are a length reference, unlike a probe's
     assert "no length reference" not in r.adequacy
     assert r.verdict == "inadequate" and r.converged
+
+
+def test_sscanss_fit_does_not_depend_on_where_the_instrument_stood(sscanss, tmp_path):
+    """The same measurement seen from a tracker 3 m away and turned by 120° about z, 20° and
+    -10° about x and y: the aligned import gives the same fit; started from the identity
+    pose (--no-align) the fit cannot get there, and identify refuses it."""
+    _, _, res = sscanss
+    r = rotation_zyx(*np.radians([20.0, -10.0, 120.0]))
+    t = np.array([2500.0, -1200.0, 800.0])
+    rows = []
+    with open(os.path.join(EX, "table.txt"), encoding="utf-8") as f:
+        for line in f:
+            c = line.split()
+            c[1:4] = [f"{v:.9f}" for v in r @ np.array([float(x) for x in c[1:4]]) + t]
+            rows.append("\t".join(c))
+    moved = tmp_path / "moved.txt"
+    moved.write_text("\n".join(rows) + "\n")
+    machine, side = os.path.join(EX, "machine.json"), os.path.join(EX, "import.json")
+    ds = import_dataset(moved, "point", machine, sidecar=side)
+    fit = fivecal.identify(ds, ESTIMATE, fix="instrument.T1.work_z", variance_components=True)
+    assert fit.verdict == "ok"
+    errors = _model_error_module().model_errors(fit.to_dict(), ds.to_dict())
+    assert errors["all"] == pytest.approx(_model_error_module().model_errors(res, sscanss[1])["all"], rel=1e-4)
+    ds = import_dataset(moved, "point", machine, sidecar=side, align=False)
+    assert "identity" in ds.import_note
+    with pytest.raises(ValueError, match="not determined"):
+        fivecal.identify(ds, ESTIMATE, fix="instrument.T1.work_z", variance_components=True)
+
+
+def test_joint_layout_with_axis_letters_and_a_header_option_for_another_kind(tmp_path):
+    f = tmp_path / "cpa.txt"
+    # the nominal table seen by an instrument aligned with the machine frame: the target 50 mm from
+    # the rotation axis along y; the rotation stage turns clockwise seen from +z (direction -z)
+    f.write_text("# joint, position, target seen by the tracker\n"
+                 "Z 0 0 50 0\nZ 100 0 50 100\nC 90 50 0 0\nY 50 0 100 0\nX 50 50 50 0\n")
+    d = read_table(f, "point", os.path.join(EX, "machine.json"), header="joint,position,mx,my,mz",
+                   target_point=[0, 50, 0])
+    axes = [o["axes"] for o in d["observations"]]
+    assert axes[1] == {"X": 0.0, "Y": 0.0, "C": 0.0, "Z": 100.0} and axes[2]["C"] == 90.0
+    assert d["observations"][2]["measured"] == [50.0, 0.0, 0.0]
+    # the nominal machine predicts these points exactly: the alignment finds the identity
+    assert d["observations"][0]["instrument_origin"] == pytest.approx([0, 0, 0], abs=1e-6)
+    assert d["observations"][0]["instrument_angles"] == pytest.approx([0, 0, 0], abs=1e-6)
+    # --header is not only for point tables
+    r = tmp_path / "r.txt"
+    r.write_text("50 -40 -80.7 -30 0 -29.6 7.2 23.0\n")
+    got = read_table(r, "rtest", C600U, header="X,Y,Z,A,C,dx_um,dy_um,dz_um", setup="R1",
+                     tool_ball=[0, 0, 150], table_ball=[50, 0, 80])
+    assert got["observations"][0]["measured"] == pytest.approx([-0.0296, 0.0072, 0.023])

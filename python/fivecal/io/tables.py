@@ -407,9 +407,10 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         hline, first = lines[0]
         delim = _delimiter(first, delimiter)
         headers = given
-        if not all(_is_number(h) for h in _split(first, delim)[:1]):
-            raise ValueError(f"{path}:{hline}: this line starts with a name, not a number, but the column names "
-                             f"were given ({origin['header']}); a file with a header row needs no 'header'")
+        if not any(_is_number(h) for h in _split(first, delim)):
+            raise ValueError(f"{path}:{hline}: this line holds names, not numbers, like a header row, but the "
+                             f"column names were given ({origin['header']}); a file with a header row needs no "
+                             "'header'")
         hwhere, hdesc = origin["header"], origin["header"]
         lines = [(None, "")] + lines
     else:
