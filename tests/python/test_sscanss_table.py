@@ -292,3 +292,11 @@ def test_joint_layout_with_axis_letters_and_a_header_option_for_another_kind(tmp
     got = read_table(r, "rtest", C600U, header="X,Y,Z,A,C,dx_um,dy_um,dz_um", setup="R1",
                      tool_ball=[0, 0, 150], table_ball=[50, 0, 80])
     assert got["observations"][0]["measured"] == pytest.approx([-0.0296, 0.0072, 0.023])
+
+
+def test_instrument_angles_are_reported_in_microradians(sscanss):
+    from fivecal.units import display_scale
+
+    assert display_scale("instrument.T1.a") == (1e6, "µrad")
+    assert display_scale("instrument.T1.x") == (1e3, "µm")
+    assert display_scale("instrument.T1.work_x") == (1e3, "µm")
