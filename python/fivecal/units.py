@@ -7,6 +7,8 @@ import re
 _MOTION = re.compile(r"^E([XYZABC])([XYZABCS])([123])$")
 _LOCATION = re.compile(r"^E([XYZABC])0([XYZABCS])$")
 _BACKLASH = re.compile(r"^E([XYZABC])([XYZABCS])b$")
+#: a fixed instrument's orientation corrections are angles (rad)
+_INSTRUMENT_ANGLE = re.compile(r"^instrument\.[^.]+\.[abc]$")
 
 
 def display_scale(name: str) -> tuple[float, str]:
@@ -25,7 +27,9 @@ def display_scale(name: str) -> tuple[float, str]:
     m = _BACKLASH.match(name)
     if m:
         return (1e6, "µrad") if m.group(2) in "ABC" else (1e3, "µm")
-    return 1e3, "µm"  # tip, facet, sphere, dbb, ball3d setup parameters
+    if _INSTRUMENT_ANGLE.match(name):
+        return 1e6, "µrad"
+    return 1e3, "µm"  # tip, facet, sphere, dbb, ball3d setup parameters, instrument positions
 
 
 def format_value(name: str, value: float) -> str:

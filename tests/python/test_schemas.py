@@ -103,11 +103,12 @@ EXAMPLES = sorted(glob.glob(os.path.join(ROOT, "examples", "**", "*.json"), recu
 
 
 def _kind_of_example(path):
-    if os.sep + "machines" + os.sep in path:
+    # an example folder of its own (examples/sscanss_table/) names its files by kind
+    if os.sep + "machines" + os.sep in path or os.path.basename(path) == "machine.json":
         return "machine"
     if os.sep + "design" + os.sep in path:
         return "design"
-    if os.sep + "import" + os.sep in path:
+    if os.sep + "import" + os.sep in path or os.path.basename(path) == "import.json":
         return "import"
     if os.path.basename(path).startswith("errors"):
         return "errors"

@@ -37,6 +37,9 @@ class Kind final : public ObservationKind {
   // A laser tracker over a machine-tool volume: a few micrometres.
   double default_sigma() const override { return 0.005; }
   bool analytic() const override { return false; }
+  // The instrument reports coordinates in its calibrated length unit, so its
+  // data fix the machine's scale (EXX1 ...) like a scale bar does.
+  bool LengthReference() const override { return true; }
 
   std::vector<const char*> json_keys() const override {
     return {"type", "instrument", "axes", "direction", "measured", "target", "target_point",

@@ -14,12 +14,16 @@ def _run(args) -> int:
         args.file, args.out, args.kind, args.machine, sidecar=args.sidecar, units=args.units,
         angle_units=args.angle_units, columns=tables.parse_columns(args.column), ignore=args.ignore or (),
         delimiter=args.delimiter, decimal=args.decimal, setup=args.setup, length=args.length,
-        tool_ball=args.tool_ball, table_ball=args.table_ball, sigma=args.sigma)
+        tool_ball=args.tool_ball, table_ball=args.table_ball, sigma=args.sigma, header=args.header,
+        instrument=args.instrument, target=args.target, target_point=args.target_point,
+        instrument_origin=args.instrument_origin, instrument_angles=args.instrument_angles, align=args.align)
     counts = {}
     for t in ds.observation_types:
         counts[t] = counts.get(t, 0) + 1
     print(f"{args.file}: {len(ds)} observations ({', '.join(f'{n} {t}' for t, n in counts.items())}) "
           f"written to {args.out}")
+    if ds.import_note:
+        print(ds.import_note)
     return 0
 
 
@@ -38,9 +42,11 @@ def register(sub) -> None:
         "  fivecal import probing touches.csv --machine hu40t.json --sidecar artefact.json --out ds.json\n"
         "  fivecal import dbb trace.csv --machine m.json --setup A1 --length 100 "
         "--tool-ball 0,0,100 --table-ball 100,0,0 --column reading=dL --units um --out ds.json\n"
-        "  fivecal import rtest rtest.txt --machine m.json --sidecar rtest.json --out ds.json")
-    p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest"],
-                   help="probing | dbb | ball3d (rtest) | fivecal")
+        "  fivecal import rtest rtest.txt --machine m.json --sidecar rtest.json --out ds.json\n"
+        "  fivecal import point tracker.csv --machine table.json --target work --target-point 0,50,0 "
+        "--out ds.json")
+    p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest", "tracker"],
+                   help="probing | dbb | ball3d (rtest) | point (tracker) | fivecal")
     p.add_argument("file", metavar="FILE", help="the table (CSV or whitespace text)")
     p.add_argument("--machine", required=True, help="machine JSON")
     p.add_argument("--out", required=True, help="dataset JSON to write")
@@ -63,4 +69,20 @@ def register(sub) -> None:
                    "the zero pose, mm")
     p.add_argument("--table-ball", metavar="X,Y,Z", help="dbb / ball3d: table ball centre, workpiece frame, mm")
     p.add_argument("--sigma", type=float, help="measurement standard deviation, mm (default: the kind's)")
+    p.add_argument("--header", metavar="NAMES", help="the column names, comma separated, of a file without a "
+                   "header row")
+    g = p.add_argument_group("point (tracker, camera, CMM)")
+    g.add_argument("--instrument", help="the instrument's name (default T1); its pose parameters are "
+                   "instrument.<name>.x|y|z|a|b|c")
+    g.add_argument("--target", choices=["tool", "work"], help="the machine side carrying the target (default: "
+                   "the only side with axes)")
+    g.add_argument("--target-point", metavar="X,Y,Z", help="nominal target, mm: machine frame at the zero pose "
+                   "(tool; default the tool tip) or workpiece frame (work; default 0,0,0)")
+    g.add_argument("--instrument-origin", metavar="X,Y,Z", help="nominal instrument origin in the machine "
+                   "frame, mm")
+    g.add_argument("--instrument-angles", metavar="A,B,C", help="nominal instrument orientation, degrees, "
+                   "Rz(c)Ry(b)Rx(a)")
+    g.add_argument("--align", action=argparse.BooleanOptionalAction, default=None,
+                   help="set the nominal instrument pose by a rigid alignment of the measured points to the "
+                   "nominal machine's (default: when no pose is given); --no-align keeps the identity")
     p.set_defaults(func=_run)

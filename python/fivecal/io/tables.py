@@ -6,6 +6,11 @@ One row per observation, a header row naming the columns. Four kinds:
   touched (a facet or sphere of the artefact) and the approach direction;
 * ``dbb``: a ball bar trace, axis positions and the ``reading``;
 * ``ball3d`` (alias ``rtest``): R-test / 3D ball triples, axes and ``dx dy dz``;
+* ``point`` (alias ``tracker``): a fixed instrument (laser tracker, camera,
+  CMM) measuring a target on the machine, axes and ``measured_x|y|z``; the
+  axes may also come as a joint layout (``joint``, ``position``: one joint
+  moved, the others at home), and the instrument's nominal pose from a rigid
+  alignment (:mod:`fivecal.io.alignment`) when none is given;
 * ``fivecal``: rows already in fivecal's terms, with a ``type`` column.
 
 Units come from the header (``reading_um``, ``B_rad``, ``dx [um]``) through
@@ -28,8 +33,9 @@ from .. import plausibility
 from .. import units as _units
 from ..machine import Machine, RadiansWarning
 
-KINDS = ("probing", "dbb", "ball3d", "fivecal")
-ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal"}
+KINDS = ("probing", "dbb", "ball3d", "point", "fivecal")
+ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal",
+           "tracker": "point"}
 
 _VECTORS = {"tool_ball": ("tool_ball_x", "tool_ball_y", "tool_ball_z"),
             "table_ball": ("table_ball_x", "table_ball_y", "table_ball_z")}
@@ -46,6 +52,18 @@ _FIELDS = {
 }
 _FIELDS["fivecal"] = set().union(*_FIELDS.values())
 _REQUIRED = {"probing": ("target",), "dbb": ("reading",), "ball3d": ("dx", "dy", "dz"), "fivecal": ("type",)}
+# point: after "fivecal", whose rows are facet, sphere, dbb and ball3d only.
+# The measured coordinates are not named x y z: those are axis letters.
+_MEASURED_XYZ = ("measured_x", "measured_y", "measured_z")
+_SHORT = {"mx": "measured_x", "my": "measured_y", "mz": "measured_z"}
+#: a circle-point-analysis layout: one joint moved per row, the others at home
+_JOINT_FIELDS = {"joint", "position", "home", "joint_type"}
+_FIELDS["point"] = {"id", "sigma"} | set(_MEASURED_XYZ) | _JOINT_FIELDS
+_REQUIRED["point"] = _MEASURED_XYZ
+_LENGTH_FIELDS |= set(_MEASURED_XYZ)
+_MEASURED |= set(_MEASURED_XYZ)
+_JOINT_TYPES = {"prismatic": "linear", "linear": "linear", "translational": "linear",
+                "revolute": "rotary", "rotary": "rotary", "rotational": "rotary"}
 _ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
 
 
@@ -155,6 +173,8 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
             raise ValueError(f"{where}: direction column of unknown axis '{letter}' "
                              f"(the machine's axes: {_axis_list(machine)})")
         return "dir_" + letter
+    if kind == "point" and low in _SHORT:
+        return _SHORT[low]
     if low in _FIELDS[kind]:
         return low
     known = sorted(_FIELDS[kind]) + list(axes) + [f"dir_{a}" for a in axes]
@@ -202,10 +222,25 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
             c.factor = _units.ANGLE_SUFFIXES[angle_unit or "deg"]
         elif quantity == "length":
             c.factor = _units.LENGTH_SUFFIXES[(length_unit if field in _MEASURED else None) or "mm"]
+        elif unit is not None and field in ("position", "home"):
+            raise ValueError(f"{cw}: {field} takes the unit of the moving joint (mm for a linear one, degrees "
+                             "or --angle-units for a rotary one); name the column without a unit")
         elif unit is not None:
             raise ValueError(f"{cw}: {field} has no unit, got '{unit}'")
         cols.append(c)
-    missing = [a for a in machine.axis_names if a != "S" and a not in seen]
+    joint_fields = sorted(f for f in _JOINT_FIELDS if f in seen)
+    if joint_fields:
+        # one joint per row: the axis values come from joint and position
+        if "joint" not in seen or "position" not in seen:
+            raise ValueError(f"{where}: column '{seen[joint_fields[0]]}' belongs to a joint layout, which needs "
+                             "both a 'joint' column (the moving joint) and a 'position' column (its position)")
+        axis_cols = [seen[a] for a in machine.axis_names if a in seen]
+        if axis_cols:
+            raise ValueError(f"{where}: column '{axis_cols[0]}': axis columns and a joint layout (joint, "
+                             "position) cannot be mixed; give one or the other")
+        missing = []
+    else:
+        missing = [a for a in machine.axis_names if a != "S" and a not in seen]
     if missing:
         raise ValueError(f"{where}: no column for axis {', '.join(missing)} (expected a column per machine "
                          f"axis: {_axis_list(machine)}; S may be left out)")
@@ -218,7 +253,8 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
 def _expected(machine: Machine, kind: str) -> str:
     axes = _axis_list(machine, skip_s=True)
     rest = {"probing": "target [approach] [id]", "dbb": "reading_um [id]",
-            "ball3d": "dx_um dy_um dz_um [id]", "fivecal": "type target|setup reading|dx dy dz [id]"}[kind]
+            "ball3d": "dx_um dy_um dz_um [id]", "point": "measured_x measured_y measured_z [id] [sigma]",
+            "fivecal": "type target|setup reading|dx dy dz [id]"}[kind]
     return f"the columns {axes} {rest}"
 
 
@@ -267,37 +303,57 @@ def read_sidecar(path: Union[str, os.PathLike]) -> dict:
     return schema.validate(files.read_json(path, "import sidecar"), "import", path)
 
 
+_POINT_OPTIONS = ("instrument", "target", "target_point", "instrument_origin", "instrument_angles", "align",
+                  "header", "joints")
+
+
 def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine, Mapping, str], *,
                sidecar: Union[None, str, os.PathLike, Mapping] = None, units: Optional[str] = None,
                angle_units: Optional[str] = None, columns: Optional[Mapping[str, str]] = None,
                ignore: Sequence[str] = (), delimiter: Optional[str] = None, decimal: Optional[str] = None,
                setup: Optional[str] = None, length: Optional[float] = None, tool_ball=None, table_ball=None,
-               sigma: Optional[float] = None) -> dict:
+               sigma: Optional[float] = None, header: Optional[Sequence[str]] = None,
+               instrument: Optional[str] = None, target: Optional[str] = None, target_point=None,
+               instrument_origin=None, instrument_angles=None, align: Optional[bool] = None) -> dict:
     """Read an instrument table into a dataset dict (docs/formats.md); see
     docs/import.md for each kind's columns.
 
-    ``kind``: ``probing``, ``dbb``, ``ball3d`` (or ``rtest``), ``fivecal``.
+    ``kind``: ``probing``, ``dbb``, ``ball3d`` (or ``rtest``), ``point`` (or
+    ``tracker``), ``fivecal``.
     ``machine``: a :class:`fivecal.Machine`, a machine dict or a machine JSON
     path. ``sidecar``: a dict or JSON path with ``probe``, ``artefact``,
-    ``setup``, ``length``, ``tool_ball``, ``table_ball``, ``sigma``; the
-    keyword arguments of the same names override it. ``units``: the unit of
+    ``setup``, ``length``, ``tool_ball``, ``table_ball``, ``sigma``,
+    ``header``, and for ``point`` ``instrument``, ``target``,
+    ``target_point``, ``instrument_origin``, ``instrument_angles`` (deg),
+    ``align`` and ``joints``; the keyword arguments of the same names
+    override it. ``units``: the unit of
     measured columns whose header names none (``um`` or ``mm``, the
     default); ``angle_units``: of rotary axis columns (``deg``, the default,
     or ``rad``). ``columns``: field -> header, for headers that are not
     fivecal names (``{"reading": "dL_um"}``); ``ignore``: headers to skip.
     ``delimiter``: default from the header line (``;``, tab, ``,``, else
     spaces); ``decimal``: ``comma`` or ``point`` (default: a comma is the
-    decimal mark unless it separates the columns).
+    decimal mark unless it separates the columns). ``header``: the column
+    names of a file without a header row.
+
+    ``point``: without ``instrument_origin`` / ``instrument_angles`` (or with
+    ``align=True``) the instrument's nominal pose is the rigid alignment of
+    the measured points to the nominal machine's; ``align=False`` keeps the
+    identity. The returned dict's ``_comment`` says which was done.
 
     Each observation's ``id`` is its ``id`` cell, or ``<file name>:<line>``.
     ValueError names the file, line and column of the first bad cell."""
     return _read(path, kind, machine, sidecar=sidecar, units=units, angle_units=angle_units, columns=columns,
                  ignore=ignore, delimiter=delimiter, decimal=decimal, setup=setup, length=length,
-                 tool_ball=tool_ball, table_ball=table_ball, sigma=sigma)[0]
+                 tool_ball=tool_ball, table_ball=table_ball, sigma=sigma, header=header, instrument=instrument,
+                 target=target, target_point=target_point, instrument_origin=instrument_origin,
+                 instrument_angles=instrument_angles, align=align)[0]
 
 
 def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, columns=None, ignore=(),
-          delimiter=None, decimal=None, setup=None, length=None, tool_ball=None, table_ball=None, sigma=None):
+          delimiter=None, decimal=None, setup=None, length=None, tool_ball=None, table_ball=None, sigma=None,
+          header=None, instrument=None, target=None, target_point=None, instrument_origin=None,
+          instrument_angles=None, align=None):
     """(dataset dict, the line of each observation)."""
     from .. import files
 
@@ -309,12 +365,19 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     side = dict(read_sidecar(sidecar) if isinstance(sidecar, (str, os.PathLike)) else (sidecar or {}))
     origin = {k: f"{side_where}{k}" for k in side}
     for key, value in (("setup", setup), ("length", length), ("tool_ball", tool_ball),
-                       ("table_ball", table_ball), ("sigma", sigma)):
+                       ("table_ball", table_ball), ("sigma", sigma), ("header", header),
+                       ("instrument", instrument), ("target", target), ("target_point", target_point),
+                       ("instrument_origin", instrument_origin), ("instrument_angles", instrument_angles),
+                       ("align", align)):
         if value is not None:
             side[key] = value
             origin[key] = f"--{key.replace('_', '-')}"
+    if kind != "point":
+        for key in _POINT_OPTIONS:
+            if key in side and key != "header":
+                raise ValueError(f"{origin[key]}: {key} belongs to a point import, not {kind}")
     # checked once here, so that a bad value is named where it was given
-    for key in ("tool_ball", "table_ball"):
+    for key in ("tool_ball", "table_ball", "target_point", "instrument_origin", "instrument_angles"):
         if side.get(key) is not None:
             side[key] = _vector3(side[key], origin[key])
     for key in ("length", "sigma"):
@@ -328,19 +391,38 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         raise ValueError(f"import: --angle-units '{angle_units}': expected deg or rad")
     if decimal not in (None, "comma", "point"):
         raise ValueError(f"import: decimal '{decimal}': expected comma or point")
+    if kind == "point":
+        _point_setup(side, origin, machine)
 
     text = files.read_text(path, f"{kind} table")
     lines = list(_lines(text))
+    given = side.get("header")
+    if given is not None:
+        given = _header_names(given, origin["header"])
     if not lines:
         raise ValueError(f"{path}: no header and no data; a {kind} table needs a header row naming "
                          f"{_expected(machine, kind)}")
-    hline, header = lines[0]
-    delim = _delimiter(header, delimiter)
-    headers = _split(header, delim)
+    if given is not None:
+        # the names come from the option: every line of the file is data
+        hline, first = lines[0]
+        delim = _delimiter(first, delimiter)
+        headers = given
+        if not any(_is_number(h) for h in _split(first, delim)):
+            raise ValueError(f"{path}:{hline}: this line holds names, not numbers, like a header row, but the "
+                             f"column names were given ({origin['header']}); a file with a header row needs no "
+                             "'header'")
+        hwhere, hdesc = origin["header"], origin["header"]
+        lines = [(None, "")] + lines
+    else:
+        hline, first = lines[0]
+        delim = _delimiter(first, delimiter)
+        headers = _split(first, delim)
+        hwhere, hdesc = f"{path}:{hline}", f"line {hline}"
     if all(_is_number(h) for h in headers):
-        raise ValueError(f"{path}:{hline}: no header row (this line holds numbers); the first line must name "
-                         f"the columns: {_expected(machine, kind)}")
-    cols = _columns(headers, machine, kind, f"{path}:{hline}", columns or {}, ignore,
+        raise ValueError(f"{hwhere}: no header row (this line holds numbers); the first line must name "
+                         f"the columns: {_expected(machine, kind)}, or give the names with --header / "
+                         "'header' in the sidecar")
+    cols = _columns(headers, machine, kind, hwhere, columns or {}, ignore,
                     units and units.lower(), angle_units and angle_units.lower())
     decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
     if decimal == "comma" and delim == ",":
@@ -357,9 +439,12 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     for lineno, line in lines[1:]:
         cells = _split(line, delim)
         if len(cells) != len(headers):
-            raise ValueError(f"{path}:{lineno}: {len(cells)} cells, the header (line {hline}) has "
+            raise ValueError(f"{path}:{lineno}: {len(cells)} cells, the header ({hdesc}) has "
                              f"{len(headers)} columns ({', '.join(headers)})")
-        o = _row(cells, cols, machine, kind, side, targets, decimal_comma, f"{path}:{lineno}")
+        if kind == "point":
+            o = _point_row(cells, cols, machine, side, decimal_comma, angle_units, f"{path}:{lineno}")
+        else:
+            o = _row(cells, cols, machine, kind, side, targets, decimal_comma, f"{path}:{lineno}")
         oid = o.get("id") or f"{base}:{lineno}"
         if oid in ids:
             raise ValueError(f"{path}:{lineno}: id '{oid}' already used on line {ids[oid]}")
@@ -370,6 +455,9 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     if not obs:
         raise ValueError(f"{path}: a header but no data rows")
     d = {"machine": machine.to_dict(), "observations": obs}
+    if kind == "point":
+        _joint_homes(obs, machine, side, origin)
+        d["_comment"] = _place_instrument(obs, machine, side, origin, path)
     touches = any(o["type"] in ("facet", "sphere") for o in obs)
     if touches and "probe" not in side:
         raise ValueError(f"{path}: probe touches need the probe tip radius: give 'probe': "
@@ -380,6 +468,234 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         d["artefact"] = artefact
     return d, lineno_of
 
+
+
+# --------------------------------------------------------------------------
+# point: a fixed instrument following a target
+# --------------------------------------------------------------------------
+def _header_names(value, where: str) -> list:
+    if isinstance(value, str):
+        value = [t.strip() for t in value.split(",")]
+    if not isinstance(value, Sequence) or not value or not all(isinstance(h, str) and h.strip() for h in value):
+        raise ValueError(f"{where}: expected the column names, like joint,measured_x,measured_y,measured_z,"
+                         f"position, got {value!r}")
+    return [h.strip() for h in value]
+
+
+def _point_setup(side: dict, origin: dict, machine: Machine) -> None:
+    """Check and complete the point options in ``side`` (instrument, target,
+    target_point, pose, align, joints), naming where a bad value was given."""
+    inst = side.get("instrument", "T1")
+    if not isinstance(inst, str) or not inst.strip() or "." in inst:
+        raise ValueError(f"{origin.get('instrument', 'instrument')}: expected an instrument name without '.', "
+                         f"got {inst!r}")
+    side["instrument"] = inst.strip()
+    target = side.get("target")
+    if target is None:
+        if not machine.tool_chain:
+            target = "work"
+        elif not machine.workpiece_chain:
+            target = "tool"
+        else:
+            raise ValueError(f"point import: machine {machine.topology} has axes on both sides; say which side "
+                             "carries the target: --target tool|work or 'target' in the sidecar")
+    if target not in ("tool", "work"):
+        raise ValueError(f"{origin.get('target', 'target')}: expected tool or work, got {target!r}")
+    side["target"] = target
+    if side.get("target_point") is None:
+        side["target_point"] = [float(x) for x in machine.tip] if target == "tool" else [0.0, 0.0, 0.0]
+    align = side.get("align")
+    if align is not None and not isinstance(align, bool):
+        raise ValueError(f"{origin['align']}: expected true or false, got {align!r}")
+    posed = [k for k in ("instrument_origin", "instrument_angles") if side.get(k) is not None]
+    if align and posed:
+        raise ValueError(f"{origin['align']}: align asks for the pose from the data, but {origin[posed[0]]} "
+                         "gives it; keep one")
+    joints = side.get("joints")
+    if joints is not None:
+        jw = origin.get("joints", "joints")
+        if not isinstance(joints, Mapping) or set(joints) - {"axes", "home"}:
+            raise ValueError(f"{jw}: expected {{\"axes\": [axis letter of joint 1, 2, ...], \"home\": "
+                             f"{{axis: position}}}}, got {joints!r}")
+        axes = joints.get("axes") or []
+        if not isinstance(axes, Sequence) or isinstance(axes, str):
+            raise ValueError(f"{jw}.axes: expected a list of axis letters, joint 1 first, got {axes!r}")
+        for i, a in enumerate(axes):
+            if a not in machine.axis_names:
+                raise ValueError(f"{jw}.axes[{i}]: {a!r} is not an axis of the machine "
+                                 f"({_axis_list(machine)})")
+            if list(axes).index(a) != i:
+                raise ValueError(f"{jw}.axes[{i}]: axis {a} given twice")
+        home = joints.get("home") or {}
+        if not isinstance(home, Mapping):
+            raise ValueError(f"{jw}.home: expected {{axis letter: home position}}, got {home!r}")
+        for a, v in home.items():
+            if a not in machine.axis_names:
+                raise ValueError(f"{jw}.home.{a}: not an axis of the machine ({_axis_list(machine)})")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{jw}.home.{a}: expected a number (mm or degrees), got {v!r}")
+
+
+def _point_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: bool, angle_units, where: str) -> dict:
+    axes, direction, vals, text = {}, {}, {}, {}
+    for c in cols:
+        cw = f"{where}: column '{c.header}'"
+        cell = cells[c.index]
+        if c.field in ("id", "joint", "joint_type"):
+            s = cell.strip()
+            if not s:
+                raise ValueError(f"{cw}: empty cell (a {c.field.replace('_', ' ')} is expected)")
+            text[c.field] = (s, cw)
+            continue
+        v = _number(cell, decimal_comma, cw)
+        if c.field.startswith("dir_"):
+            if v not in (-1.0, 0.0, 1.0):
+                raise ValueError(f"{cw}: direction {cell.strip()} is not -1, 0 or +1")
+            if v:
+                direction[c.field[4:]] = int(v)
+            continue
+        if c.field in ("position", "home"):
+            vals[c.field] = (v, cw)  # the unit is the moving joint's, known below
+            continue
+        v *= c.factor
+        if len(c.field) == 1:
+            if not machine.is_rotary(c.field) and abs(v) > plausibility.REFUSE_POSITION:
+                raise ValueError(f"{cw}: {v:.6g} mm is beyond any machine tool "
+                                 f"({plausibility.REFUSE_POSITION / 1e3:g} m); positions look like µm: "
+                                 f"name the column {c.field}_um")
+            axes[c.field] = v
+        else:
+            vals[c.field] = (v, cw)
+    measured = []
+    for k in _MEASURED_XYZ:
+        v, vw = vals[k]
+        if abs(v) > plausibility.REFUSE_POSITION:
+            raise ValueError(f"{vw}: {v:.6g} mm is beyond any instrument's range "
+                             f"({plausibility.REFUSE_POSITION / 1e3:g} m); coordinates look like µm: name the "
+                             f"column {k}_um or give --units um")
+        measured.append(v)
+    o = {"type": "point", "instrument": side["instrument"], "target": side["target"],
+         "target_point": list(side["target_point"]), "axes": axes, "measured": measured}
+    if "id" in text:
+        o["id"] = text["id"][0]
+    if direction:
+        o["direction"] = direction
+    if "sigma" in vals:
+        s, sw = vals["sigma"]
+        if not s > 0:
+            raise ValueError(f"{sw}: sigma {s:g} mm must be > 0")
+        o["sigma"] = s
+    elif side.get("sigma") is not None:
+        o["sigma"] = side["sigma"]
+    if "joint" in text:
+        o["_joint"] = _joint_of(text, vals, machine, side, angle_units)
+    return o
+
+
+def _joint_of(text, vals, machine: Machine, side: Mapping, angle_units) -> tuple:
+    """(axis, position, home or None, where) of a joint-layout row."""
+    j, jw = text["joint"]
+    listed = list((side.get("joints") or {}).get("axes") or [])
+    letter = "S" if j.upper() == "C1" else j.upper()
+    if letter in machine.axis_names:
+        axis = letter
+    else:
+        try:
+            k = int(float(j.replace(",", ".")))
+        except ValueError:
+            k = None
+        if k is None or float(j.replace(",", ".")) != k:
+            raise ValueError(f"{jw}: '{j}' is neither an axis letter ({_axis_list(machine)}) nor a joint number")
+        if not listed:
+            raise ValueError(f"{jw}: joint {k}: which axis is it? give the axes of joints 1, 2, ... as "
+                             "'joints': {\"axes\": [...]} in the sidecar (or write axis letters in the column)")
+        if not 1 <= k <= len(listed):
+            raise ValueError(f"{jw}: joint {k}: the sidecar's joints.axes names joints 1 to {len(listed)}")
+        axis = listed[k - 1]
+    if "joint_type" in text:
+        t, tw = text["joint_type"]
+        kind = _JOINT_TYPES.get(t.lower())
+        if kind is None:
+            raise ValueError(f"{tw}: '{t}' is not a joint type (prismatic, revolute, linear, rotary)")
+        actual = "rotary" if machine.is_rotary(axis) else "linear"
+        if kind != actual:
+            raise ValueError(f"{tw}: '{t}', but joint {j} is axis {axis} of the machine, which is {actual}")
+    factor = _units.ANGLE_SUFFIXES[(angle_units or "deg").lower()] if machine.is_rotary(axis) else 1.0
+    pos, pw = vals["position"]
+    pos *= factor
+    if not machine.is_rotary(axis) and abs(pos) > plausibility.REFUSE_POSITION:
+        raise ValueError(f"{pw}: {pos:.6g} mm is beyond any machine ({plausibility.REFUSE_POSITION / 1e3:g} m)")
+    home = None
+    if "home" in vals:
+        home = (vals["home"][0] * factor, vals["home"][1])
+    return axis, pos, home, jw
+
+
+def _joint_homes(obs: list, machine: Machine, side: Mapping, origin: Mapping) -> None:
+    """Axis values of joint-layout rows: the moving joint at its position, every
+    other axis at its home (the home cells of its own rows, the sidecar's
+    joints.home, else 0)."""
+    if not any("_joint" in o for o in obs):
+        return
+    given = dict((side.get("joints") or {}).get("home") or {})
+    home, seen = {}, {}
+    for o in obs:
+        axis, _, h, jw = o["_joint"]
+        if h is None:
+            continue
+        value, hw = h
+        if axis in home and abs(home[axis] - value) > 1e-9 * max(1.0, abs(value)):
+            raise ValueError(f"{hw}: home {value:g} of axis {axis}, but {seen[axis]} gives {home[axis]:g}; "
+                             "an axis has one home")
+        if axis in given and abs(given[axis] - value) > 1e-9 * max(1.0, abs(value)):
+            raise ValueError(f"{hw}: home {value:g} of axis {axis}, but {origin['joints']}.home gives "
+                             f"{given[axis]:g}")
+        home.setdefault(axis, value)
+        seen.setdefault(axis, hw)
+    for a, v in given.items():
+        home.setdefault(a, float(v))
+    for o in obs:
+        axis, pos, _, _ = o.pop("_joint")
+        o["axes"] = {a: float(home.get(a, 0.0)) for a in machine.axis_names if a != "S" or a in home}
+        o["axes"][axis] = pos
+
+
+def _place_instrument(obs: list, machine: Machine, side: Mapping, origin: Mapping, path: str) -> str:
+    """Set each observation's instrument_origin / instrument_angles and say how
+    they were found (the dataset's ``_comment``, printed by ``fivecal import``)."""
+    from .. import simulation
+    from . import alignment
+
+    inst = side["instrument"]
+    pose = [side.get("instrument_origin"), side.get("instrument_angles")]
+    if any(v is not None for v in pose):
+        o_, a_ = [list(v) if v is not None else [0.0, 0.0, 0.0] for v in pose]
+        note = (f"instrument {inst}: nominal pose as given: origin {_fmt(o_)} mm, angles a b c {_fmt(a_)} deg")
+    elif side.get("align") is False:
+        o_, a_ = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        note = (f"instrument {inst}: nominal pose the identity (align off): its frame is taken as the machine "
+                "frame, the fit must find the whole pose")
+    else:
+        plan = [{"type": "point", "instrument": inst, "target": o["target"], "target_point": o["target_point"],
+                 "axes": o["axes"], "instrument_origin": [0.0, 0.0, 0.0], "instrument_angles": [0.0, 0.0, 0.0]}
+                for o in obs]
+        nominal = [p["measured"] for p in simulation.simulate(machine, plan).to_dict()["observations"]]
+        try:
+            o_, a_, rms = alignment.instrument_pose([o["measured"] for o in obs], nominal)
+        except ValueError as e:
+            raise ValueError(f"{path}: instrument {inst}: no pose given, and {e}") from None
+        o_, a_ = [round(x, 6) for x in o_], [round(x, 6) for x in a_]
+        why = "align on" if side.get("align") else "no pose given"
+        note = (f"instrument {inst}: nominal pose from a rigid alignment ({why}) of the {len(obs)} measured "
+                f"points to the nominal machine's (rms {rms:.3g} mm): origin {_fmt(o_)} mm, angles a b c "
+                f"{_fmt(a_)} deg")
+    for o in obs:
+        o["instrument_origin"], o["instrument_angles"] = list(o_), list(a_)
+    return note
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(f"{x:.6g}" for x in v) + "]"
 
 
 def _is_number(cell: str) -> bool:
@@ -537,7 +853,9 @@ _OBS = re.compile(r"observations\[(\d+)\]")
 
 def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options):
     """:func:`read_table`, then validation as a :class:`fivecal.Dataset`; an
-    error the dataset checks find in an observation names its file and line."""
+    error the dataset checks find in an observation names its file and line.
+    ``dataset.import_note`` says how a point import set the instrument's
+    nominal pose (empty for other kinds)."""
     from ..dataset import Dataset
 
     d, lines = _read(path, kind, machine, **options)
@@ -572,6 +890,8 @@ def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options)
             text = (text.replace(m.group(0), f"axis column {m.group(1)}")
                     + f", name the column {m.group(1)}_rad or give --angle-units rad")
         _warn(text, w.category)
+    # how a point import placed the instrument: the user must be able to see it
+    ds.import_note = d.get("_comment", "")
     return ds
 
 
@@ -589,7 +909,10 @@ def write_dataset(path: Union[str, os.PathLike], out: Union[str, os.PathLike], k
     from .. import files
 
     ds = import_dataset(path, kind, machine, **options)
-    files.write_json(out, ds.to_dict())
+    doc = ds.to_dict()
+    if ds.import_note:
+        doc = {"_comment": ds.import_note, **doc}
+    files.write_json(out, doc)
     return ds
 
 
