@@ -118,6 +118,15 @@ def test_out_of_sphericity_shrinks_with_the_identified_model(hu40t, calibration,
     assert abs(identified.size_error) < abs(nominal.size_error) + 1e-3
     text = st.format_sphere_tests({"nominal": nominal, "identified": identified})
     assert "Out of sphericity" in text and "identified" in text
+    # Table 6-3 prints the ball's diameter (19.04 / 19.045 mm for the 19.05 mm
+    # ball), not the stylus-centre sphere's (ball + 2 x tip radius)
+    assert identified.tip_radius == tango.TIP_RADIUS
+    assert abs(true.ball_diameter - 19.05) < 0.002
+    assert abs(identified.ball_diameter - 19.05) < 0.01
+    assert abs(2 * identified.radius - identified.ball_diameter - 2 * tango.TIP_RADIUS) < 1e-12
+    row = next(ln for ln in text.splitlines() if ln.startswith("Diameter of the sphere (mm)"))
+    assert abs(float(row.split()[-1]) - 19.05) < 0.01
+    assert "Stylus-centre sphere diameter (mm)" in text
 
 
 def test_table_6_1_sensitivity(hu40t):

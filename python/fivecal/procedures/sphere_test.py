@@ -110,14 +110,21 @@ class SphereTest:
     points: np.ndarray
     fit: SphereFit
     size_error: float
+    #: the stylus ball radius the touches were taken with (mm)
+    tip_radius: float = 0.0
     center: np.ndarray = field(init=False)
+    #: radius of the sphere through the stylus-ball centres (ball radius + tip radius)
     radius: float = field(init=False)
     out_of_sphericity: float = field(init=False)
+    #: diameter of the probed ball itself, as thesis Table 6-3 prints it
+    #: ("Diameter of the sphere"): 2 (fitted radius - tip radius)
+    ball_diameter: float = field(init=False)
 
     def __post_init__(self):
         self.center = self.fit.center
         self.radius = self.fit.radius
         self.out_of_sphericity = self.fit.out_of_sphericity
+        self.ball_diameter = 2.0 * (self.fit.radius - self.tip_radius)
 
 
 def sphere_test(dataset: Dataset, values=None, sphere: Optional[str] = None) -> SphereTest:
@@ -126,24 +133,28 @@ def sphere_test(dataset: Dataset, values=None, sphere: Optional[str] = None) -> 
     or an identification Result: the compensated model)."""
     r = _core.sphere_test(dataset._core, sphere or "", _values(values))
     return SphereTest(r.sphere, list(r.observations), np.asarray(r.points), SphereFit._from_core(r.fit),
-                      r.size_error)
+                      r.size_error, float(dataset._core.tip_radius))
 
 
 def format_sphere_tests(tests: Mapping[str, SphereTest]) -> str:
     """Thesis Table 6-3: out of sphericity, max / min residual, standard
-    deviation of the residuals (µm) and diameter (mm) per model."""
+    deviation of the residuals (µm) and the diameter of the probed ball (mm)
+    per model; the stylus-centre sphere (ball + 2 × tip radius), which is what
+    the touches' centres lie on, is labelled as such."""
     names = list(tests)
     w = max(14, *(len(n) + 2 for n in names))
-    lines = [f"{'':<34}" + "".join(f"{n:>{w}}" for n in names)]
+    lines = [f"{'':<36}" + "".join(f"{n:>{w}}" for n in names)]
     rows = [("Out of sphericity (µm)", lambda t: t.fit.out_of_sphericity * 1e3),
             ("Maximum residual (µm)", lambda t: t.fit.max_residual * 1e3),
             ("Minimum residual (µm)", lambda t: t.fit.min_residual * 1e3),
             ("Std of the residuals (µm)", lambda t: t.fit.std_residual * 1e3),
-            ("Diameter of the fit (mm)", lambda t: 2 * t.fit.radius),
+            ("Diameter of the sphere (mm)", lambda t: t.ball_diameter, ".4f"),
+            ("Stylus-centre sphere diameter (mm)", lambda t: 2 * t.fit.radius, ".4f"),
             ("Size error (µm)", lambda t: t.size_error * 1e3),
             ("Points", lambda t: len(t.observations))]
-    for label, f in rows:
-        lines.append(f"{label:<34}" + "".join(f"{f(tests[n]):>{w}.4g}" for n in names))
+    for label, f, *spec in rows:
+        fmt = spec[0] if spec else ".4g"  # diameters to the µm, as Table 6-3
+        lines.append(f"{label:<36}" + "".join(f"{f(tests[n]):>{w}{fmt}}" for n in names))
     return "\n".join(lines)
 
 
