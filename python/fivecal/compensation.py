@@ -268,6 +268,20 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
                             orientation=oriented)
 
 
+def origin_shift(machine: Union[Machine, Mapping], errors, axes: Mapping[str, Sequence[float]],
+                 directions: Optional[Mapping[str, Sequence[float]]] = None, **options) -> CompensatedPoses:
+    """Compensation by shifting the work origin, pose by pose, as Wang et al.
+    (2013, Section 5.2) do through the controller's external origin shift:
+    the rotary commands stay as programmed and only the linear axes move, by
+    the shift that puts the tool point back on its nominal place. The tool
+    axis keeps the rotary axes' angular errors (``axis_error_remaining``);
+    :func:`compensate_poses` corrects both. The shift of pose i is
+    ``axes[a][i] - nominal[a][i]`` for the linear axes a. Options as
+    :func:`compensate_poses` (guards, limits, tool tip)."""
+    options.pop("orientation", None)
+    return compensate_poses(machine, errors, axes, directions, orientation=False, **options)
+
+
 # ---------------------------------------------------------------------------
 # G-code (reader and writer in gcode.py)
 # ---------------------------------------------------------------------------

@@ -340,3 +340,68 @@ def test_cli_errors_are_one_line(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "wCAf" in r.stderr
     r = _cli("wang", "--machine", os.path.join(MACHINES, "vmc0656.json"), "--simulate", "EX0C")
     assert r.returncode == 2 and r.stderr.count("\n") == 1
+
+
+def test_wang_four_point_extraction_is_singular_and_says_what_it_cannot_see(vmc):
+    """The paper extracts its four errors from the readings at the four
+    diagonal angles. EY0C, EZ0C and EA0C give patterns symmetric about the Y
+    axis, so each reads the same at 135° and 405° (45°) and at 225° and 315°:
+    three unknowns in two equations. The analysis finds rank 3, the invisible
+    combination, that only EX0C is determined, and gives no values."""
+    a = dbb.wang_four_point(vmc)
+    assert a.rank == 3 and a.singular_values[-1] < 1e-9
+    assert a.estimable == ["EX0C"]
+    null = a.null_space[:, 0]
+    assert abs(null[0]) < 1e-9 and min(abs(null[1:])) > 0.05  # EY0C, EZ0C, EA0C all in it
+    # the symmetry itself: equal readings at the mirrored diagonal points
+    S = a.sensitivity
+    np.testing.assert_allclose(S[0, 1:], S[3, 1:], rtol=1e-6)
+    np.testing.assert_allclose(S[1, 1:], S[2, 1:], rtol=1e-6)
+    truth = {"EX0C": 0.007, "EY0C": -0.005, "EZ0C": 0.006, "EA0C": 30e-6}
+    plan = dbb.wang_plan(vmc)
+    ds = _sim(vmc, [{k: v for k, v in e.items() if k != "tracking"} for e in plan], truth)
+    readings = {e["tracking"]: o["reading"] for e, o in zip(plan, ds.observations)}
+    solved = dbb.wang_four_point(vmc, readings)
+    assert solved.values is None and "singular" in solved.report()
+    # Three of the errors are regular in the four points: right when the
+    # fourth is truly zero, aliased when it is not (EA0C leaks into EY0C and
+    # EZ0C along the invisible combination).
+    three = ("EX0C", "EY0C", "EZ0C")
+    assert dbb.wang_four_point(vmc, errors=three).rank == 3
+    no_ea = _sim(vmc, [{k: v for k, v in e.items() if k != "tracking"} for e in plan],
+                 {n: truth[n] for n in three})
+    clean = dbb.wang_four_point(vmc, {e["tracking"]: o["reading"] for e, o in zip(plan, no_ea.observations)},
+                                errors=three)
+    assert all(abs(clean.values[n] - truth[n]) < 1e-6 for n in three)  # linearised: nm
+    aliased = dbb.wang_four_point(vmc, readings, errors=three)
+    assert abs(aliased.values["EZ0C"] - truth["EZ0C"]) > 0.002
+    # The whole-trace fit (wang_identify) separates all four: the second and
+    # third harmonics it sees break the symmetry's tie.
+    r = dbb.wang_identify(ds).result
+    assert all(abs(r.values[n] - v) < 1e-6 for n, v in truth.items())
+
+
+def test_wang_origin_shift_compensation_flattens_the_trace(vmc):
+    """Section 5.2: the paper compensates by shifting the work origin with the
+    rotary commands as programmed. Replayed on the erroneous machine, the
+    origin-shifted path reads the nominal bar length everywhere (the DBB sees
+    only the tool point), while the rotary commands are untouched; the tool
+    axis keeps the A-C angular error, which pose-by-pose compensation removes."""
+    from fivecal.compensation import compensate_poses, origin_shift
+
+    truth = {"EX0C": 0.007, "EY0C": -0.005, "EZ0C": 0.006, "EA0C": 30e-6}
+    plan = [{k: v for k, v in e.items() if k != "tracking"} for e in dbb.wang_plan(vmc)]
+    before = _sim(vmc, plan, truth)
+    axes = {a: np.array([e["axes"][a] for e in plan]) for a in plan[0]["axes"]}
+    dirs = {a: np.array([e["direction"].get(a, 0) for e in plan]) for a in plan[0]["direction"]}
+    shifted = origin_shift(vmc, truth, axes, dirs)
+    for a in "AC":
+        np.testing.assert_array_equal(shifted.axes[a], axes[a])
+    moved = [dict(e, axes={a: float(shifted.axes[a][i]) for a in e["axes"]}) for i, e in enumerate(plan)]
+    after = _sim(vmc, moved, truth)
+    r0 = np.array([o["reading"] for o in before.observations])
+    r1 = np.array([o["reading"] for o in after.observations])
+    assert np.abs(r0).max() > 0.005 and np.abs(r1).max() < 1e-6
+    assert shifted.axis_error_remaining.max() > 20e-6  # EA0C stays in the tool axis
+    full = compensate_poses(vmc, truth, axes, dirs)
+    assert full.axis_error_remaining.max() < 1e-9 and full.max_remaining() < 1e-9

@@ -642,6 +642,77 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
     return WangIdentification(result, verdicts)
 
 
+@dataclass
+class FourPointAnalysis:
+    """The paper's four-point extraction (Section 5.1: the readings where the
+    trace crosses the two diagonals, four equations for the four errors),
+    analysed instead of trusted. ``sensitivity`` (4 x 4): reading change (mm)
+    per unit error at each diagonal angle; ``singular_values`` of it with its
+    columns scaled by ``scale`` (a plausible size of each error);
+    ``rank``; ``null_space``: error combinations (per unit of ``scale``)
+    the four readings cannot see; ``estimable``: the errors the four points
+    do determine; ``values``: the four-point solution, or None when the system
+    is singular (then nothing but ``estimable`` is reported)."""
+
+    angles: np.ndarray
+    errors: tuple
+    sensitivity: np.ndarray
+    scale: np.ndarray
+    singular_values: np.ndarray
+    rank: int
+    null_space: np.ndarray
+    estimable: list
+    values: Optional[dict] = None
+
+    def report(self) -> str:
+        L = ["Wang et al. four-point extraction (readings at tracking angles "
+             + ", ".join(f"{a:g}" for a in self.angles) + " deg)",
+             "  scaled singular values: " + ", ".join(f"{v:.3g}" for v in self.singular_values),
+             f"  rank {self.rank} of {len(self.errors)}"]
+        for v in self.null_space.T:
+            terms = " ".join(f"{c:+.3f} {n}" for c, n in zip(v, self.errors) if abs(c) > 1e-6)
+            L.append(f"  invisible to the four points: {terms} (per prior size)")
+        L.append("  determined by the four points: " + (", ".join(self.estimable) or "none"))
+        if self.values is None:
+            L.append("  the four equations are singular: no values (use the whole-trace fit, wang_identify)")
+        return "\n".join(L)
+
+
+def wang_four_point(machine: Union[Machine, Mapping], readings: Optional[Mapping[float, float]] = None,
+                    angles=(135.0, 225.0, 315.0, 405.0), errors: Sequence[str] = WANG_ERRORS,
+                    scale: Optional[Mapping[str, float]] = None, **path_options) -> FourPointAnalysis:
+    """Analyse (and, where it is regular, solve) the paper's four-point
+    extraction on this machine's Wang path. The readings are linear in the
+    errors (the patterns of :func:`wang_patterns`), so the four equations are
+    ``S e = r`` with ``S`` the patterns at the diagonal angles. ``readings``:
+    tracking angle (deg) -> DBB reading (mm) at those angles; without them
+    only the analysis is returned. ``scale``: plausible size of each error
+    (default 10 µm, 50 µrad) to make the rank judgement unit-free."""
+    angles = np.asarray(angles, float)
+    scale = dict(scale or {})
+    sc = np.array([scale.get(n, 50e-6 if n.startswith(("EA", "EB", "EC")) else 0.01) for n in errors])
+    pats = wang_patterns(machine, {n: float(v) for n, v in zip(errors, sc)}, **path_options)
+    S = np.empty((len(angles), len(errors)))
+    for j, n in enumerate(errors):
+        p = pats[n]
+        for i, a in enumerate(angles):
+            k = np.flatnonzero(np.abs(p.tracking - a) < 1e-6)
+            if k.size == 0:
+                raise ValueError(f"wang_four_point: tracking angle {a:g} deg is not on the sampled path "
+                                 f"({p.tracking[0]:g}-{p.tracking[-1]:g} deg, step of the path)")
+            S[i, j] = p.readings[k[0]] / sc[j]
+    _, sv, vt = np.linalg.svd(S * sc)
+    tol = max(S.shape) * np.finfo(float).eps * 1e6 * sv[0]
+    rank = int((sv > tol).sum())
+    null = vt[rank:].T
+    estimable = [n for j, n in enumerate(errors) if np.abs(null[j]).max(initial=0.0) < 1e-6]
+    values = None
+    if readings is not None and rank == len(errors):
+        r = np.array([float(readings[a]) for a in angles])
+        values = dict(zip(errors, np.linalg.lstsq(S, r, rcond=None)[0].tolist()))
+    return FourPointAnalysis(angles, tuple(errors), S, sc, sv / sv[0], rank, null, estimable, values)
+
+
 # --------------------------------------------------------------------------
 # Planar circular tests
 # --------------------------------------------------------------------------
