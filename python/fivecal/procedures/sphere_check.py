@@ -1,0 +1,265 @@
+"""Quick sphere check, in the style of the controller cycles (Heidenhain
+KinematicsOpt, Siemens CYCLE996, AxiSet): one calibrated sphere on the table,
+a calibrated stylus, a few positions of each rotary axis in turn, each
+position approached from both sides. The general engine fits each rotary
+axis' pivot (its line's position across the axis and its tilt) and its
+reversal error; the check reports them with their uncertainty, their change
+since the previous check, the dispersion of the sphere positions before and
+after, and how well the positions determine the pivots.
+
+    from fivecal.procedures import sphere_check
+    m = fivecal.Machine.load("examples/machines/c600u.json")
+    ball = {"id": "S1", "center": [80, 50, 60], "radius": 12.5}
+    plan = sphere_check.plan(m, ball, tip_radius=3.0)           # positions, both sides
+    ds = ...  # the touches, recorded (or fivecal.simulate(m, plan, ...))
+    check = sphere_check.evaluate(ds, previous="last_check.json")
+    print(check.report())
+
+Units: mm, degrees for commands, rad for angular errors; reports in µm / µrad.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Dict, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from ..dataset import Dataset
+from ..machine import Machine
+from . import sphere_test
+
+#: default range of a rotary axis (degrees) when the caller gives none: a
+#: full turn for an axis that can (a table C, a spindle-side C), ±90° for a
+#: tilting axis. Real limits come from the caller (``limits``).
+FULL_TURN_AXES = ("C",)
+
+
+def _rotary_axes(machine: Machine) -> List[str]:
+    return [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+
+
+def pivot_parameters(machine: Machine, axis: str, backlash: bool = True) -> List[str]:
+    """The error parameters a sphere check estimates for rotary ``axis``: the
+    position of its line across the axis (two ``E<X|Y|Z>0<axis>``), its tilt
+    (two ``E<A|B|C>0<axis>``) and, with ``backlash``, its reversal error
+    ``E<axis><axis>b``. The position along the axis and the zero angle are
+    left out: a sphere check cannot tell them from the sphere's own place.
+    For an inclined axis the pair of machine directions most across it is
+    used (fivecal's parameters are along the machine axes)."""
+    d = np.abs(np.asarray(machine.to_dict()["axes"][axis]["direction"], float))
+    # The two machine directions most across the axis (for an axis along X:
+    # Y and Z; for an inclined one, the pair with the smallest components):
+    # their position and tilt errors move the axis line; the third is along it.
+    pick = sorted(np.argsort(d, kind="stable")[:2])
+    names = [f"E{'XYZ'[k]}0{axis}" for k in pick] + [f"E{'ABC'[k]}0{axis}" for k in pick]
+    return names + ([f"E{axis}{axis}b"] if backlash else [])
+
+
+def positions(machine: Machine, n: int = 5, limits: Optional[Mapping[str, Sequence[float]]] = None
+              ) -> Dict[str, List[float]]:
+    """``n`` positions of each rotary axis spread over its range (``limits``
+    axis -> (min, max) degrees; default a full turn for C, ±90° otherwise)."""
+    if n < 3:
+        raise ValueError(f"sphere check: {n} positions per axis; a pivot needs at least 3")
+    out = {}
+    for a in _rotary_axes(machine):
+        lo, hi = (limits or {}).get(a, (-180.0, 180.0) if a in FULL_TURN_AXES else (-90.0, 90.0))
+        lo, hi = float(lo), float(hi)
+        if not hi > lo:
+            raise ValueError(f"limits.{a}: ({lo:g}, {hi:g}) is not a range")
+        full = hi - lo >= 360.0 - 1e-9
+        out[a] = [float(v) for v in (np.linspace(lo, hi, n, endpoint=False) if full else np.linspace(lo, hi, n))]
+    return out
+
+
+def plan(machine: Union[Machine, Mapping], sphere: Mapping, *, tip_radius: float, n: int = 5,
+         axis_positions: Optional[Mapping[str, Sequence[float]]] = None,
+         limits: Optional[Mapping[str, Sequence[float]]] = None, both_sides: bool = True,
+         min_dot: float = 0.0) -> list:
+    """Plan of a sphere check: each rotary axis in turn through its positions
+    (the others at 0), upwards then, with ``both_sides``, downwards, so every
+    position is reached from both directions (the reversal error); at each
+    position the touches of the thesis' sphere distribution that face the
+    probe. ``axis_positions`` (axis -> degrees) replaces the ``n`` spread
+    positions of :func:`positions`."""
+    m = Machine.from_dict(machine)
+    pos = dict(axis_positions) if axis_positions is not None else positions(m, n, limits)
+    unknown = [a for a in pos if a not in _rotary_axes(m)]
+    if unknown:
+        raise ValueError(f"axis_positions: machine {m.name!r} has no rotary axis {unknown[0]!r} "
+                         f"(rotary axes: {', '.join(_rotary_axes(m))})")
+    visits = []
+    for a, vals in pos.items():
+        vals = [float(v) for v in vals]
+        if len(vals) < 3:
+            raise ValueError(f"axis_positions.{a}: {len(vals)} positions; a pivot needs at least 3")
+        visits += [{a: v} for v in vals]
+        if both_sides:
+            visits += [{a: v} for v in vals[::-1]]
+    return sphere_test.sphere_plan(m, sphere, visits, tip_radius=tip_radius, min_dot=min_dot,
+                                   limits=limits)
+
+
+def _centre(points: np.ndarray, start: np.ndarray, radius: float) -> np.ndarray:
+    """Least-squares centre of a sphere of known radius through ``points``
+    (Gauss-Newton from ``start``): a position's few touches on a cap leave a
+    free radius undetermined, the stylus-centre radius is known."""
+    c = start.astype(float).copy()
+    for _ in range(20):
+        d = points - c
+        r = np.linalg.norm(d, axis=1)
+        J = -d / r[:, None]
+        step = np.linalg.lstsq(J, -(r - radius), rcond=None)[0]
+        c += step
+        if np.abs(step).max() < 1e-12:
+            break
+    return c
+
+
+@dataclass
+class SphereCheck:
+    """Result of :func:`evaluate` (mm, rad)."""
+
+    result: object                       #: the fivecal.Result of the fit
+    axes: List[str]
+    pivots: Dict[str, Dict[str, tuple]]  #: axis -> parameter -> (value, std)
+    backlash: Dict[str, tuple]           #: axis -> (value, std) rad
+    change: Dict[str, tuple] = field(default_factory=dict)  #: parameter -> (change, std of the change)
+    centres_before: np.ndarray = None    #: per position, sphere centre with the nominal model
+    centres_after: np.ndarray = None     #: ... with the identified model
+    groups: List[str] = field(default_factory=list)
+    dispersion_before: float = 0.0       #: max |centre - mean centre|, nominal model
+    dispersion_after: float = 0.0        #: the same with the identified model
+    condition_number: float = 0.0
+    informed: Dict[str, float] = field(default_factory=dict)  #: parameter -> posterior / prior sigma
+
+    def values(self) -> Dict[str, float]:
+        return {n: v for ax in self.pivots.values() for n, (v, _) in ax.items()} | \
+               {f"E{a}{a}b": v for a, (v, _) in self.backlash.items()}
+
+    def report(self) -> str:
+        r = self.result
+        L = [f"Sphere check on {r.dataset.machine.name}: {len(self.groups)} positions, "
+             f"{r.n_observations} touches, rms {r.rms * 1e3:.2f} µm, verdict {r.verdict}", ""]
+        L.append(f"  {'parameter':<10}{'value':>12}{'± 1σ':>10}{'change':>12}{'± 1σ':>10}")
+        for a in self.axes:
+            L.append(f"  axis {a}: pivot")
+            for n, (v, s) in self.pivots[a].items():
+                unit, k = ("µrad", 1e6) if n[1] in "ABC" else ("µm", 1e3)
+                ch = self.change.get(n)
+                chs = f"{ch[0] * k:>12.2f}{ch[1] * k:>10.2f}" if ch else f"{'':>22}"
+                L.append(f"  {n:<10}{v * k:>12.2f}{s * k:>10.2f}{chs}  {unit}")
+            if a in self.backlash:
+                v, s = self.backlash[a]
+                L.append(f"  E{a}{a}b{'':<5}{v * 1e6:>12.2f}{s * 1e6:>10.2f}{'':>22}  µrad reversal")
+        L += ["", f"  dispersion of the sphere positions: {self.dispersion_before * 1e3:.2f} µm with the nominal "
+                  f"model, {self.dispersion_after * 1e3:.2f} µm with the checked pivots",
+              f"  quality of the positions: condition number {self.condition_number:.3g}; "
+              "posterior/prior sigma " + ", ".join(f"{n} {v:.2g}" for n, v in self.informed.items())]
+        und = list(getattr(r, "undetermined", []) or [])
+        if und:
+            L.append("  NOT determined by these positions: " + ", ".join(und))
+        return "\n".join(L)
+
+
+def _previous_values(previous) -> Dict[str, tuple]:
+    if previous is None:
+        return {}
+    if isinstance(previous, SphereCheck):
+        return {n: (v, s) for ax in previous.pivots.values() for n, (v, s) in ax.items()}
+    if hasattr(previous, "values") and hasattr(previous, "std") and not isinstance(previous, (str, dict)):
+        return {n: (v, previous.std.get(n, 0.0)) for n, v in previous.values.items()}
+    if not isinstance(previous, Mapping):
+        from ..files import read_json
+        previous = read_json(previous, "previous check")
+    params = previous.get("parameters", previous)
+    out = {}
+    for n, p in params.items():
+        if isinstance(p, Mapping):
+            out[n] = (float(p["value"]), float(p.get("std") or 0.0))
+        else:
+            out[n] = (float(p), 0.0)
+    return out
+
+
+def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_stylus: bool = True,
+             backlash: Optional[bool] = None, sphere: Optional[str] = None) -> SphereCheck:
+    """Evaluate a sphere check: fit the pivot parameters of every rotary axis
+    that moved (:func:`pivot_parameters`) with the stylus known
+    (``calibrated_stylus``: ``tip.*`` fixed) and the sphere's place free.
+    ``backlash``: estimate each axis' reversal error (default: when its
+    positions were reached from both directions). ``previous``: the last
+    check (a SphereCheck, a Result, or a result file / dict) for the change of
+    each pivot, with the σ of the change from both checks (independent
+    checks). Raises ValueError when the data cannot determine a pivot."""
+    from ..identification import identify
+
+    ds = Dataset.from_dict(dataset)
+    m = ds.machine
+    obs = ds.observations
+    spheres = sorted({o["target"] for o in obs if o.get("type") == "sphere"})
+    if not spheres:
+        raise ValueError("sphere check: the dataset has no sphere touches")
+    sid = sphere or spheres[0]
+    if sid not in spheres:
+        raise ValueError(f"sphere check: no touches of sphere {sid!r} (touched: {', '.join(spheres)})")
+    moved = [a for a in _rotary_axes(m) if np.ptp([float(o["axes"].get(a, 0.0)) for o in obs]) > 1e-6]
+    if not moved:
+        raise ValueError("sphere check: no rotary axis moved between the touches; nothing to check")
+    names = []
+    for a in moved:
+        dirs = {int(o.get("direction", {}).get(a, 0)) for o in obs}
+        both = {1, -1} <= dirs
+        names += pivot_parameters(m, a, backlash=both if backlash is None else backlash)
+    fix = ["tip.x", "tip.y", "tip.z"] if calibrated_stylus else []
+    r = identify(ds, names, fix=fix)
+    std = r.std
+    pivots, lash = {}, {}
+    for a in moved:
+        pivots[a] = {n: (r.values.get(n, 0.0), std.get(n, float("nan")))
+                     for n in pivot_parameters(m, a, backlash=False)}
+        b = f"E{a}{a}b"
+        if b in r.estimated:
+            lash[a] = (r.values.get(b, 0.0), std.get(b, float("nan")))
+    prev = _previous_values(previous)
+    change = {}
+    for a in moved:
+        for n, (v, s) in pivots[a].items():
+            if n in prev:
+                change[n] = (v - prev[n][0], float(np.hypot(s, prev[n][1])))
+    # per position: the sphere centre from its touches, nominal and checked model
+    key = [tuple(round(float(o["axes"].get(a, 0.0)), 6) for a in moved) for o in obs]
+    order = list(dict.fromkeys(key))
+    art = {s["id"]: s for s in ds.to_dict()["artefact"].get("spheres", [])}
+    R = float(art[sid]["radius"]) + float(ds._core.tip_radius)
+    c0 = np.asarray(art[sid]["center"], float)
+    before, after, labels = [], [], []
+    Pn, Pi = sphere_test.table_points(ds), sphere_test.table_points(ds, r)
+    for k in order:
+        idx = [i for i, kk in enumerate(key) if kk == k and obs[i].get("target") == sid]
+        if len(idx) < 3:
+            continue
+        before.append(_centre(Pn[idx], c0, R))
+        after.append(_centre(Pi[idx], c0, R))
+        labels.append(", ".join(f"{a} {v:g}°" for a, v in zip(moved, k)))
+    before, after = np.array(before), np.array(after)
+
+    def spread(c):
+        return float(np.linalg.norm(c - c.mean(axis=0), axis=1).max()) if len(c) else 0.0
+
+    informed = {n: float(v) for n, v in (getattr(r, "informed", {}) or {}).items() if n in names}
+    return SphereCheck(r, moved, pivots, lash, change, before, after, labels, spread(before), spread(after),
+                       float(r.condition_number), informed)
+
+
+def to_json(check: SphereCheck) -> str:
+    """The check as a result-format JSON (parameters with value and std), so
+    that the next check can take it as ``previous``."""
+    params = {n: {"value": v, "std": s} for ax in check.pivots.values() for n, (v, s) in ax.items()}
+    params.update({f"E{a}{a}b": {"value": v, "std": s} for a, (v, s) in check.backlash.items()})
+    return json.dumps({"parameters": params, "dispersion_before": check.dispersion_before,
+                       "dispersion_after": check.dispersion_after}, indent=1)
+
+
+__all__ = ["plan", "positions", "pivot_parameters", "evaluate", "SphereCheck", "to_json"]
