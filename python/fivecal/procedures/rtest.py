@@ -1,0 +1,187 @@
+"""R-test tests of the rotary axes (ISO 10791-6 style), on any topology: the
+precision ball and the three-sensor nest, one on the spindle and one on the
+table; a rotary axis turns while the linear axes follow so that, on the
+nominal machine, the ball stays centred in the nest (tool-centre-point
+motion). The nest records the ball's 3D displacement; the test's figure is
+its range in each direction, and the same data identify the location errors
+of the rotary axes through the ``ball3d`` observation.
+
+Which tests (named as ISO 10791-6:2014 does for five-axis machining centres;
+the standard's text is not public, so each test is defined here in full):
+
+* ``K1``: the axis that turns the table about its normal (C on a table-table
+  machine) through a full turn, the other rotary axes at 0;
+* ``K2``: the tilting axis (A or B) over its range, the other at 0;
+* ``K3``: as K1 with the tilting axis at ``tilt`` degrees (the C-axis test at
+  a tilted table, which separates the C pivot from the tilting axis');
+* ``K4``: both rotary axes together, C through a full turn while the tilt
+  follows ``tilt * sin(C)`` (a five-axis path).
+
+On a head-head or table-head machine the same tests turn the head's axes; the
+ball then sits on the tool side and the nest on the table, as a real R-test
+is set up. Units: mm, degrees for commands; deviations in µm in reports.
+
+    from fivecal.procedures import rtest
+    plan = rtest.plan(machine, "K1", table_ball=[150, 0, 100])
+    ds = fivecal.simulate(machine, plan, errors=..., sigma={"ball3d": 0.0005})
+    print(rtest.evaluate(ds).report())
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from ..dataset import Dataset
+from ..machine import Machine
+
+TESTS = ("K1", "K2", "K3", "K4")
+
+
+def _rotary(machine: Machine) -> List[str]:
+    return [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+
+
+def _roles(machine: Machine) -> Dict[str, str]:
+    """The turning axis (the one nearest the table normal / tool axis, +Z at
+    the zero pose) and the tilting axis of the machine."""
+    rot = _rotary(machine)
+    if len(rot) != 2:
+        raise ValueError(f"R-test K tests: machine {machine.name!r} has {len(rot)} rotary axes "
+                         f"({', '.join(rot) or 'none'}); the tests are defined for two")
+    axes = machine.to_dict()["axes"]
+    z = [abs(float(np.asarray(axes[a]["direction"], float)[2])) for a in rot]
+    turn = rot[int(np.argmax(z))]
+    return {"turn": turn, "tilt": [a for a in rot if a != turn][0]}
+
+
+def _sequence(machine: Machine, test: str, step: float, tilt: float, tilt_range) -> List[Dict[str, float]]:
+    r = _roles(machine)
+    turn, tl = r["turn"], r["tilt"]
+    full = list(np.arange(0.0, 360.0 + 1e-9, step))
+    if test == "K1":
+        return [{turn: float(c), tl: 0.0} for c in full]
+    if test == "K2":
+        lo, hi = tilt_range
+        return [{turn: 0.0, tl: float(a)} for a in np.arange(lo, hi + 1e-9, step)]
+    if test == "K3":
+        return [{turn: float(c), tl: float(tilt)} for c in full]
+    if test == "K4":
+        return [{turn: float(c), tl: float(tilt * np.sin(np.radians(c)))} for c in full]
+    raise ValueError(f"test: {test!r} is not an R-test K test (tests: {', '.join(TESTS)})")
+
+
+def plan(machine: Union[Machine, Mapping], test: str, *, table_ball: Sequence[float],
+         tool_ball: Optional[Sequence[float]] = None, step: float = 15.0, tilt: float = -45.0,
+         tilt_range: Sequence[float] = (-90.0, 90.0), setup: Optional[str] = None) -> list:
+    """ball3d plan entries of one K test (:data:`TESTS`). ``table_ball``: the
+    table-side sphere or nest centre in the workpiece frame (mm; off the
+    turning axis, or the test sees no pivot); ``tool_ball``: the tool-side
+    centre in the machine frame at the zero pose (default the machine's tool
+    tip). ``step`` (deg) between samples, ``tilt`` (deg) the tilting axis'
+    position of K3 and amplitude of K4, ``tilt_range`` that of K2. The linear
+    axes come from the nominal inverse, so on a perfect machine every reading
+    is zero. ``setup`` names the mounting (default the test's name): one
+    mounting per test, or the same name for tests run without re-mounting."""
+    m = Machine.from_dict(machine)
+    if not step > 0:
+        raise ValueError(f"step: {step} deg; expected > 0")
+    seq = _sequence(m, test, float(step), float(tilt), tilt_range)
+    tb = np.asarray(table_ball, float)
+    if tb.shape != (3,) or not np.isfinite(tb).all():
+        raise ValueError(f"table_ball: expected [x, y, z] mm, got {table_ball!r}")
+    tool = np.asarray(tool_ball if tool_ball is not None else m.tip, float)
+    shift = m.tip - tool  # the inverse places the tool tip: place the tool ball instead
+    entries = []
+    prev = {a: 0.0 for a in m.axis_names}
+    for k, rot in enumerate(seq):
+        start = dict(prev)
+        start.update(rot)
+        lin = m.inverse([tb + shift], start=start)
+        axes = {a: float(v[0]) for a, v in lin.items()}
+        axes.update(rot)
+        direction = {a: (1 if rot[a] >= prev.get(a, 0.0) else -1) for a in rot}
+        entries.append({"type": "ball3d", "setup": setup or test, "axes": axes, "direction": direction,
+                        "tool_ball": [float(x) for x in tool], "table_ball": [float(x) for x in tb],
+                        "id": f"{test}-{k}"})
+        prev = axes
+    return entries
+
+
+@dataclass
+class KTest:
+    """One test's deviation ranges (mm) in X, Y, Z of the workpiece frame."""
+    name: str
+    samples: int
+    ranges: np.ndarray
+    deviations: np.ndarray  #: (samples, 3) recorded deviation, mm
+
+    def passes(self, tolerance: Optional[float]) -> Optional[bool]:
+        return None if tolerance is None else bool((self.ranges <= tolerance).all())
+
+
+@dataclass
+class RTestResult:
+    tests: Dict[str, KTest]
+    result: object = None                   #: the fivecal.Result when identified
+    estimated: List[str] = field(default_factory=list)
+
+    def report(self, tolerance: Optional[float] = None) -> str:
+        L = ["R-test: deviation range per direction (workpiece frame, µm)",
+             f"  {'test':<6}{'samples':>8}{'X':>10}{'Y':>10}{'Z':>10}" + ("   verdict" if tolerance else "")]
+        for t in self.tests.values():
+            v = t.passes(tolerance)
+            L.append(f"  {t.name:<6}{t.samples:>8}" + "".join(f"{x * 1e3:>10.2f}" for x in t.ranges)
+                     + ("" if v is None else ("   pass" if v else f"   FAIL (> {tolerance * 1e3:g} µm)")))
+        if self.result is not None:
+            r = self.result
+            L += ["", f"  location errors from the same data ({r.verdict}, rms {r.rms * 1e3:.2f} µm):"]
+            for n in self.estimated:
+                unit, k = ("µrad", 1e6) if n[1] in "ABC" else ("µm", 1e3)
+                L.append(f"    {n:<8}{r.values.get(n, 0.0) * k:>10.2f} ± {r.std.get(n, float('nan')) * k:.2f} {unit}")
+            und = list(getattr(r, "undetermined", []) or [])
+            if und:
+                L.append("    not determined by these tests: " + ", ".join(und))
+        return "\n".join(L)
+
+
+def location_errors(machine: Machine) -> List[str]:
+    """The location errors (ISO 230-7 position and orientation errors of an
+    axis line) an R-test of both rotary axes can see: for each rotary axis the
+    two positions across it and the two tilts."""
+    from .sphere_check import pivot_parameters
+
+    return [n for a in _rotary(machine) for n in pivot_parameters(machine, a, backlash=False)]
+
+
+def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
+             estimate: Optional[Sequence[str]] = None) -> RTestResult:
+    """The deviation range of each test (observations grouped by ``setup``)
+    in X, Y and Z, and, with ``identify``, the location errors of the rotary
+    axes fitted to all tests at once (``estimate``: default
+    :func:`location_errors`; each mounting's ball positions are part of the
+    fit, as for any ball3d data). Raises ValueError without ball3d data."""
+    ds = Dataset.from_dict(dataset)
+    obs = ds.observations
+    groups: Dict[str, list] = {}
+    for o in obs:
+        if o.get("type") == "ball3d":
+            groups.setdefault(o.get("setup", "") or "(no setup)", []).append(o["measured"])
+    if not groups:
+        raise ValueError("R-test: the dataset has no ball3d observations")
+    tests = {}
+    for name, rows in groups.items():
+        d = np.asarray(rows, float)
+        tests[name] = KTest(name, len(d), d.max(axis=0) - d.min(axis=0), d)
+    out = RTestResult(tests)
+    if identify:
+        from ..identification import identify as fit
+
+        est = list(estimate or location_errors(ds.machine))
+        out.result = fit(ds, est)
+        out.estimated = est
+    return out
+
+
+__all__ = ["TESTS", "plan", "evaluate", "location_errors", "KTest", "RTestResult"]
