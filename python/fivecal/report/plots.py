@@ -315,29 +315,45 @@ def _natural(label: str) -> tuple:
     return tuple(out)
 
 
-def component_groups(dataset, kind: str = "ball3d") -> tuple:
-    """How the 3D observations of ``kind`` (``ball3d``, ``point``, ``pose``)
-    are plotted: the rotary axis on the horizontal axis (the one taking the
-    most distinct positions) and, per observation, its group (setup or
-    instrument, and the other rotary axes' positions). Returns ``(rows,
-    angle axis or None, angles, group labels)``."""
-    who = COMPONENT_KINDS[kind][0]
+def _setup_groups(dataset, rows, who: str, sides: bool) -> tuple:
+    """For the observations ``rows`` of one setup: the rotary axis on the
+    horizontal axis (the one taking the most distinct positions), its angles,
+    and each observation's group label (target side, and the positions of
+    another moving rotary axis when it steps through a few values, as
+    indexations, each holding several samples; an axis that moves along with
+    the key, K4-like, is part of the path, not a group)."""
     obs = dataset.observations
-    rows = [i for i, o in enumerate(obs) if o.get("type") == kind]
     rot = [a for a in dataset.machine.axis_names if a in "ABC"]
     pos = {a: np.array([float(obs[i]["axes"].get(a, 0.0)) for i in rows]) for a in rot}
     moving = [a for a in rot if rows and np.ptp(pos[a]) > 1e-9]
     key = max(moving, key=lambda a: (len(np.unique(np.round(pos[a], 3))), np.ptp(pos[a]))) if moving else None
     angles = pos[key] if key else np.arange(len(rows), dtype=float)
-    setups = {obs[i].get(who, "") for i in rows}
-    sides = {obs[i].get("target", "") for i in rows} if who == "instrument" else set()
+    # indexations: values that repeat (three samples or more per value on average)
+    steps = [a for a in moving if a != key and 3 * len(np.unique(np.round(pos[a], 3))) <= len(rows)]
     labels = []
     for n, i in enumerate(rows):
-        parts = [obs[i].get(who, "") or f"(no {who})"] if len(setups) > 1 else []
-        parts += [f"{obs[i]['target']} target"] if len(sides) > 1 else []
-        parts += [f"{a} {pos[a][n]:g}°" for a in moving if a != key]
-        labels.append(", ".join(parts) or (obs[i].get(who, "") or "all"))
-    return rows, key, angles, labels
+        parts = [f"{obs[i]['target']} target"] if sides else []
+        parts += [f"{a} {pos[a][n]:g}°" for a in steps]
+        labels.append(", ".join(parts))
+    return key, angles, labels
+
+
+def component_groups(dataset, kind: str = "ball3d") -> tuple:
+    """How the 3D observations of ``kind`` (``ball3d``, ``point``, ``pose``)
+    are plotted: per setup or instrument, ``(name, rows, angle axis or None,
+    angles, group labels)`` (see :func:`_setup_groups`)."""
+    who = COMPONENT_KINDS[kind][0]
+    obs = dataset.observations
+    rows = [i for i, o in enumerate(obs) if o.get("type") == kind]
+    by = {}
+    for i in rows:
+        by.setdefault(obs[i].get(who, "") or f"(no {who})", []).append(i)
+    out = []
+    for name, rs in by.items():
+        sides = who == "instrument" and len({obs[i].get("target", "") for i in rs}) > 1
+        key, angles, labels = _setup_groups(dataset, rs, who, sides)
+        out.append((name, rs, key, angles, labels))
+    return out
 
 
 def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
@@ -365,55 +381,62 @@ def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
 
 def component_figure(result, kind: str = "ball3d", title: Optional[str] = None):
     """Per-component deviation of the 3D observations of ``kind`` against the
-    rotary angle: what was recorded (top row; for a tracker, against the
-    nominal machine) and the residual the fit leaves (bottom row), one panel
-    per component, one line per setup / indexation group (legend up to 12
-    groups, colour bar beyond). None without such data."""
+    rotary angle: for each setup (instrument) a row of what was recorded (for
+    a tracker, against the nominal machine) and a row of the residual the fit
+    leaves, one panel per component, each setup against its own moving axis;
+    one line per indexation group (legend up to 12 groups, colour bar
+    beyond). None without such data."""
     plt = _pyplot()
     ds = result.dataset
-    rows, key, angles, labels = component_groups(ds, kind)
-    if not rows:
+    setups = component_groups(ds, kind)
+    if not setups:
         return None
     who, what_kind, frame = COMPONENT_KINDS[kind]
     title = title or f"{what_kind}: deviation per component"
-    obs = ds.observations
-    rec = _recorded_deviation(result, kind, rows)
+    all_rows = [i for _, rs, *_ in setups for i in rs]
+    rec_all = dict(zip(all_rows, _recorded_deviation(result, kind, all_rows)))
     src = np.asarray(result.residual_source)
     res_all = np.asarray(result.residuals)
-    left = np.full((len(rows), 3), np.nan)
-    for n, i in enumerate(rows):
-        r = res_all[src == i]
-        if r.size >= 3:
-            left[n] = r[:3] * 1e3
-    uniq = sorted(dict.fromkeys(labels), key=_natural)
-    colors = group_colors(len(uniq))
-    gi = np.array([uniq.index(l) for l in labels])
     comps = ("dx", "dy", "dz") if kind == "ball3d" else ("x", "y", "z")
     top = "recorded" if kind == "ball3d" else "recorded − nominal machine"
-    fig, axes = plt.subplots(2, 3, figsize=(14.5, 7.6), sharex=True, squeeze=False, layout="constrained")
-    for row, (data, what) in enumerate(((rec, top), (left, "residual after the fit"))):
-        for c, comp in enumerate(comps):
-            ax = axes[row][c]
-            for g in range(len(uniq)):
-                sel = np.flatnonzero(gi == g)
-                sel = sel[np.argsort(angles[sel], kind="stable")]
-                # A line only where the group sweeps the angle: two scattered
-                # poses joined by a line would read as a trend.
-                style = "-o" if len(np.unique(np.round(angles[sel], 6))) >= 3 else "o"
-                ax.plot(angles[sel], data[sel, c], style, ms=2.5 if style == "-o" else 3.5, lw=1.1, color=colors[g])
-            _limits(ax, angles, data[:, c], margin=0.05)
-            ax.axhline(0, color="#888", lw=0.7)
-            ax.set_title(f"{comp} {what}", fontsize=11)
-            ax.grid(alpha=0.3)
-            if c == 0:
-                ax.set_ylabel("deviation (µm)")
-            if row == 1:
-                ax.set_xlabel(f"{key} axis command (deg)" if key else "sample")
-    names = sorted({obs[i].get(who, "") or "(none)" for i in rows})
-    add_group_key(fig, axes.ravel().tolist(), uniq, colors,
-                  "group" if len(names) > 1 else ("indexation" if key else who))
-    plural = "s" if len(names) != 1 else ""
-    fig.suptitle(f"{title}: {len(rows)} samples, {len(names)} {who}{plural} ({', '.join(names)}); "
+    labels_all = sorted({l for *_, labels in setups for l in labels if l}, key=_natural)
+    colors = group_colors(max(len(labels_all), 1))
+    n = len(setups)
+    fig, axes = plt.subplots(2 * n, 3, figsize=(14.5, 1.4 + 3.1 * n), squeeze=False, layout="constrained")
+    for s_i, (name, rows, key, angles, labels) in enumerate(setups):
+        rec = np.array([rec_all[i] for i in rows])
+        left = np.full((len(rows), 3), np.nan)
+        for k, i in enumerate(rows):
+            r = res_all[src == i]
+            if r.size >= 3:
+                left[k] = r[:3] * 1e3
+        groups = list(dict.fromkeys(labels))
+        for row, (data, what) in enumerate(((rec, top), (left, "residual after the fit"))):
+            for c, comp in enumerate(comps):
+                ax = axes[2 * s_i + row][c]
+                for g in groups:
+                    sel = np.flatnonzero(np.array(labels) == g)
+                    sel = sel[np.argsort(angles[sel], kind="stable")]
+                    color = colors[labels_all.index(g)] if g else "#1f4e9a"
+                    # a line only where the group sweeps the angle: two
+                    # scattered poses joined by a line would read as a trend
+                    style = "-o" if len(np.unique(np.round(angles[sel], 6))) >= 3 else "o"
+                    ax.plot(angles[sel], data[sel, c], style, ms=2.5 if style == "-o" else 3.5, lw=1.1,
+                            color=color)
+                _limits(ax, angles, data[:, c], margin=0.05)
+                ax.axhline(0, color="#888", lw=0.7)
+                ax.set_title(f"{name}: {comp} {what}" if n > 1 else f"{comp} {what}", fontsize=10)
+                ax.grid(alpha=0.3)
+                if c == 0:
+                    ax.set_ylabel("deviation (µm)")
+                if row == 1 or n > 1:
+                    ax.set_xlabel(f"{key} axis command (deg)" if key else "sample", fontsize=9)
+    if labels_all:
+        add_group_key(fig, axes.ravel().tolist(), labels_all, colors, "group")
+    names = [name for name, *_ in setups]
+    plural = "s" if n != 1 else ""
+    samples = sum(len(rs) for _, rs, *_ in setups)
+    fig.suptitle(f"{title}: {samples} samples, {n} {who}{plural} ({', '.join(names)}); "
                  f"components in the {frame}", fontsize=12)
     return fig
 
