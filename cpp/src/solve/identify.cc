@@ -372,9 +372,9 @@ std::string NoiseGroup(const Observation& o) {
 }
 
 // Every residual row's declared sigma (ObservationSigma, as the problem weighs it).
-Eigen::VectorXd DeclaredSigma(const Observation& o) {
+Eigen::VectorXd DeclaredSigma(const Dataset& ds, const Observation& o) {
   Eigen::VectorXd s(KindOf(o).rows());
-  for (int k = 0; k < s.size(); ++k) s[k] = ObservationSigma(o, k);
+  for (int k = 0; k < s.size(); ++k) s[k] = ObservationSigma(ds, o, k);
   return s;
 }
 
@@ -413,7 +413,7 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
     for (size_t i = 0; i < ds.observations.size(); ++i) factor[group_of[i] = NoiseGroup(ds.observations[i])] = 1.0;
   auto apply_noise = [&]() {
     for (size_t i = 0; i < ds.observations.size(); ++i)
-      scaled->observations[i].sigma = DeclaredSigma(ds.observations[i]) * factor[group_of[i]];
+      scaled->observations[i].sigma = DeclaredSigma(ds, ds.observations[i]) * factor[group_of[i]];
   };
   std::map<std::string, VarianceComponent> comp;
   if (members.empty() && factor.empty()) return out;
