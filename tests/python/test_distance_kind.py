@@ -91,7 +91,9 @@ def test_coverage_of_the_distance_fit_over_100_simulations(machine):
 
 def test_one_station_is_reported_undetermined_not_a_confident_number(machine):
     rng = np.random.default_rng(5)
-    ds = fivecal.simulate(machine, _plan(rng, stations=["L1"]), errors=TRUTH, setup=SETUP, sigma=NOISE, seed=5)
+    setup = {k: v for k, v in SETUP.items() if not k.startswith(("instrument.L2", "instrument.L3", "instrument.L4",
+                                                                    "instrument.L5"))}
+    ds = fivecal.simulate(machine, _plan(rng, stations=["L1"]), errors=TRUTH, setup=setup, sigma=NOISE, seed=5)
     with pytest.raises(ValueError, match=r"not determined"):
         fivecal.identify(ds, list(TRUTH), fix=FIXED)
     r = fivecal.identify(ds, list(TRUTH), fix=FIXED, allow_unidentifiable=True)
@@ -127,5 +129,5 @@ def test_a_station_named_like_a_tracker_is_refused(machine):
     doc["observations"].append({"type": "point", "instrument": "L1", "target": "tool", "target_point": [0, 0, 150],
                                 "axes": doc["observations"][0]["axes"], "measured": [0, 0, 0]})
     ds = fivecal.Dataset.from_dict(doc)
-    with pytest.raises(ValueError, match=r"\"L1\" names both a distance station and a point/pose instrument"):
+    with pytest.raises(ValueError, match=r"L1. names both a distance station and a point/pose instrument"):
         fivecal.identify(ds, [])

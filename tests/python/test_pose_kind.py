@@ -96,7 +96,8 @@ def test_a_single_pose_cannot_place_the_tracker_and_says_so(machine):
     # offset and orientation trade off exactly; identify names them.
     rng = np.random.default_rng(7)
     plan = _plan(rng, 1, targets=("tool",)) * 8
-    ds = fivecal.simulate(machine, plan, errors=TRUTH, setup=SETUP, sigma=NOISE, seed=7)
+    setup = {k: v for k, v in SETUP.items() if "work" not in k}
+    ds = fivecal.simulate(machine, plan, errors=TRUTH, setup=setup, sigma=NOISE, seed=7)
     with pytest.raises(ValueError, match=r"not determined.*instrument\.T1\."):
         fivecal.identify(ds, [], fix=FIXED)
 
@@ -110,7 +111,8 @@ def test_orientation_rows_alone_leave_positions_undetermined(machine):
     for o in doc["observations"]:
         o["sigma"] = [1e3, 1e3, 1e3, 5e-5, 5e-5, 5e-5]
     ds = fivecal.Dataset.from_dict(doc)
-    r = fivecal.identify(ds, ["EA0B", "EC0B", "EA0C", "EB0C"], fix=FIXED, allow_unidentifiable=True)
+    with pytest.warns(Warning, match="did not determine"):
+        r = fivecal.identify(ds, ["EA0B", "EC0B", "EA0C", "EB0C"], fix=FIXED, allow_unidentifiable=True)
     undetermined = {n for g in r.unidentifiable for n in g}
     assert {"instrument.T1.x", "instrument.T1.y", "instrument.T1.z"} & undetermined, r.unidentifiable
 
