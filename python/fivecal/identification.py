@@ -58,8 +58,9 @@ class Result:
         #: estimate "auto": factor (0.001-1) the data put on each machine-error class's
         #: prior for the point estimate (small: the data show no sign of that class)
         self.class_scales: dict = dict(core.class_scales)
-        #: variance_components=True: per instrument group ("probe", "dbb", "ball3d") a dict
-        #: with rows, redundancy, declared_sigma, factor, sigma (mm) and estimated
+        #: variance_components=True: per instrument group ("probe", "dbb", "ball3d", "point", "pose",
+        #: "pose_rad" (a pose's rotation rows, rad), "distance") a dict with rows, redundancy,
+        #: declared_sigma, factor, sigma (mm, or rad) and estimated
         self.variance_components: dict = {
             c.group: {"rows": c.rows, "redundancy": c.redundancy, "declared_sigma": c.declared,
                       "factor": c.factor, "sigma": c.sigma, "estimated": c.estimated}

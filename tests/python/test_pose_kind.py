@@ -91,6 +91,30 @@ def test_coverage_of_the_pose_fit_over_100_simulations(machine):
     assert 0.92 <= inside2 / total <= 0.98, inside2 / total
 
 
+def test_variance_components_scale_position_and_rotation_rows_apart(machine):
+    # Declared twice the true position noise and half the true rotation
+    # noise (through the instrument's sigma): each row group gets its own
+    # factor, in its own unit.
+    doc = _data(machine, 21, n=60).to_dict()
+    for o in doc["observations"]:
+        del o["sigma"]
+    doc["instruments"] = {"T1": {"sigma": [0.02, 0.02, 0.02, 2.5e-5, 2.5e-5, 2.5e-5]}}
+    r = fivecal.identify(fivecal.Dataset.from_dict(doc), list(TRUTH), fix=FIXED, variance_components=True)
+    vc = r.variance_components
+    assert set(vc) == {"pose", "pose_rad"}, vc
+    assert vc["pose"]["declared_sigma"] == pytest.approx(0.02)
+    assert vc["pose_rad"]["declared_sigma"] == pytest.approx(2.5e-5)
+    assert vc["pose"]["sigma"] == pytest.approx(NOISE["pose"], rel=0.15), vc
+    assert vc["pose_rad"]["sigma"] == pytest.approx(NOISE["pose_angle"], rel=0.15), vc
+    assert r.verdict == "ok", r.adequacy
+    # Five times too small: refused as a misfit, the group's noise in urad.
+    doc["instruments"] = {"T1": {"sigma": [0.01, 0.01, 0.01, 1e-5, 1e-5, 1e-5]}}
+    with pytest.warns(Warning, match="not usable"):
+        r = fivecal.identify(fivecal.Dataset.from_dict(doc), list(TRUTH), fix=FIXED, variance_components=True)
+    assert r.verdict == "inadequate"
+    assert "pose_rad residuals" in r.adequacy and "10 urad declared" in r.adequacy, r.adequacy
+
+
 def test_a_single_pose_cannot_place_the_tracker_and_says_so(machine):
     # One axis position repeated: the tracker's pose and the fiducial's
     # offset and orientation trade off exactly; identify names them.
