@@ -119,8 +119,9 @@ class Result:
         """One dict per residual row: ``row``, ``observation`` (its index in
         the dataset, -1 for a scale bar), ``id`` (the observation's id, or
         ``scale_bar``), ``type``, ``target`` (facet / sphere id or setup),
-        ``component`` (``x y z`` for ball3d rows, else empty) and
-        ``residual`` (mm, as :attr:`residuals`)."""
+        ``component`` (``x y z`` for ball3d and point rows, ``x y z rx ry rz``
+        for pose rows, else empty) and ``residual`` (mm, rad for a pose's
+        ``rx ry rz``, as :attr:`residuals`)."""
         obs = self.dataset.observations
         seen, rows = {}, []
         src = np.asarray(self.residual_source)
@@ -136,7 +137,8 @@ class Result:
                          "id": o.get("id", "") if k >= 0 else "scale_bar",
                          "type": o.get("type", "scale_bar"),
                          "target": o.get("target", o.get("setup", "")),
-                         "component": "xyz"[j] if counts[k] == 3 and k >= 0 else "",
+                         "component": ("xyz"[j] if counts[k] == 3 and k >= 0 else
+                                       ("x", "y", "z", "rx", "ry", "rz")[j] if counts[k] == 6 and k >= 0 else ""),
                          "residual": float(r)})
         return rows
 

@@ -165,3 +165,20 @@ def test_file_round_trip_sigma_rows_and_bad_fields(machine):
     del bad["observations"][2]["measured_rotation"]
     with pytest.raises(ValueError, match=r"observations\[2\]\.measured_rotation"):
         fivecal.Dataset.from_dict(bad)
+
+
+def test_a_recorded_pose_dataset_gets_noise_on_every_row_for_monte_carlo(machine):
+    from fivecal import uncertainty
+
+    ds = _data(machine, 2, n=20)
+    plan, fit = uncertainty.simulation_plan(ds, estimate=list(TRUTH), fix=FIXED)
+    s = np.asarray(plan.input_sigma).reshape(-1, 6)
+    # The position inputs at the fit's residual sigma (mm), the rotation
+    # inputs at the rms of the fit's rotation rows (rad): never zero.
+    assert np.all(s[:, :3] == pytest.approx(fit.sigma))
+    assert np.all((s[:, 3:] > 2e-5) & (s[:, 3:] < 1e-4)), s[0]
+    plan, _ = uncertainty.simulation_plan(ds, estimate=list(TRUTH), fix=FIXED,
+                                          sigma={"pose": 0.01, "pose_angle": 5e-5})
+    assert np.asarray(plan.input_sigma).reshape(-1, 6)[0] == pytest.approx([0.01] * 3 + [5e-5] * 3)
+    with pytest.raises(ValueError, match="sigma.pose_angel"):
+        uncertainty.simulation_plan(ds, estimate=list(TRUTH), fix=FIXED, sigma={"pose_angel": 1e-4})
