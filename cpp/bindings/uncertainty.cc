@@ -34,15 +34,20 @@ void BindUncertainty(py::module_& m) {
       .def_static(
           "from_dataset",
           [](const Dataset& ds, const std::map<std::string, double>& values, double probe, double dbb,
-             double ball3d) {
+             double ball3d, double point, double pose, double pose_angle, double distance) {
             NoiseLevels n;
             n.probe = probe;
             n.dbb = dbb;
             n.ball3d = ball3d;
+            n.point = point;
+            n.pose = pose;
+            n.pose_angle = pose_angle;
+            n.distance = distance;
             py::gil_scoped_release release;
             return PlanFromDataset(ds, values, n);
           },
-          py::arg("dataset"), py::arg("values"), py::arg("probe"), py::arg("dbb"), py::arg("ball3d"))
+          py::arg("dataset"), py::arg("values"), py::arg("probe"), py::arg("dbb"), py::arg("ball3d"),
+          py::arg("point") = 0.0, py::arg("pose") = 0.0, py::arg("pose_angle") = 0.0, py::arg("distance") = 0.0)
       .def_readonly("base", &SimulationPlan::base)
       .def_readonly("seed", &SimulationPlan::seed)
       .def_readonly("values", &SimulationPlan::values)

@@ -58,8 +58,9 @@ class Result:
         #: estimate "auto": factor (0.001-1) the data put on each machine-error class's
         #: prior for the point estimate (small: the data show no sign of that class)
         self.class_scales: dict = dict(core.class_scales)
-        #: variance_components=True: per instrument group ("probe", "dbb", "ball3d") a dict
-        #: with rows, redundancy, declared_sigma, factor, sigma (mm) and estimated
+        #: variance_components=True: per instrument group ("probe", "dbb", "ball3d", "point", "pose",
+        #: "pose_rad" (a pose's rotation rows, rad), "distance") a dict with rows, redundancy,
+        #: declared_sigma, factor, sigma (mm, or rad) and estimated
         self.variance_components: dict = {
             c.group: {"rows": c.rows, "redundancy": c.redundancy, "declared_sigma": c.declared,
                       "factor": c.factor, "sigma": c.sigma, "estimated": c.estimated}
@@ -118,8 +119,9 @@ class Result:
         """One dict per residual row: ``row``, ``observation`` (its index in
         the dataset, -1 for a scale bar), ``id`` (the observation's id, or
         ``scale_bar``), ``type``, ``target`` (facet / sphere id or setup),
-        ``component`` (``x y z`` for ball3d rows, else empty) and
-        ``residual`` (mm, as :attr:`residuals`)."""
+        ``component`` (``x y z`` for ball3d and point rows, ``x y z rx ry rz``
+        for pose rows, else empty) and ``residual`` (mm, rad for a pose's
+        ``rx ry rz``, as :attr:`residuals`)."""
         obs = self.dataset.observations
         seen, rows = {}, []
         src = np.asarray(self.residual_source)
@@ -135,7 +137,8 @@ class Result:
                          "id": o.get("id", "") if k >= 0 else "scale_bar",
                          "type": o.get("type", "scale_bar"),
                          "target": o.get("target", o.get("setup", "")),
-                         "component": "xyz"[j] if counts[k] == 3 and k >= 0 else "",
+                         "component": ("xyz"[j] if counts[k] == 3 and k >= 0 else
+                                       ("x", "y", "z", "rx", "ry", "rz")[j] if counts[k] == 6 and k >= 0 else ""),
                          "residual": float(r)})
         return rows
 

@@ -70,7 +70,8 @@ def simulate(machine: Union[Machine, Mapping], plan: Sequence[Mapping], errors: 
     "table_ball": [...], "setup": "A1"}``, ``{"type": "ball3d", ...}``.
     ``errors``: true machine errors (mm, rad); ``setup``: true setup parameters
     (``facet.F3``, ``sphere.S1.x``, ``dbb.length`` ...); ``sigma`` (mm): probing
-    repeatability along the approach, or a dict with ``probe``, ``dbb``, ``ball3d``.
+    repeatability along the approach, or a dict with ``probe``, ``dbb``, ``ball3d``,
+    ``point``, ``pose`` (mm), ``pose_angle`` (rad) and ``distance``.
     ``seed``: an integer 0 <= seed < 2^64 (integral floats such as 3.0 too).
     """
     machine = Machine.from_dict(machine)

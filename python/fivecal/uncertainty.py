@@ -65,26 +65,40 @@ def make_spec(machine, plan: Sequence[Mapping], errors: Optional[Mapping] = None
             "plan": list(plan), "sigma": sigma, "seed": seed_value(seed)}
 
 
-def _noise_levels(sigma, default: float) -> tuple:
-    if sigma is None:
-        return default, default, default
+_MM_LEVELS = ("probe", "dbb", "ball3d", "point", "pose", "distance")
+_LEVELS = _MM_LEVELS + ("pose_angle",)
 
-    def level(v, name):
+
+def _noise_levels(sigma, default: float, default_angle: float = 0.0) -> dict:
+    """The simulator's noise levels: mm ones, and ``pose_angle`` (rad)."""
+    if sigma is None:
+        return {**{k: default for k in _MM_LEVELS}, "pose_angle": default_angle}
+
+    def level(v, name, unit="mm"):
         try:
             x = float(v)
         except (TypeError, ValueError):
             x = float("nan")
         if isinstance(v, bool) or not (math.isfinite(x) and x >= 0):
-            raise ValueError(f"{name}: must be a finite number >= 0 mm, got {v!r}")
+            raise ValueError(f"{name}: must be a finite number >= 0 {unit}, got {v!r}")
         return x
 
     if isinstance(sigma, Mapping):
-        unknown = sorted(set(map(str, sigma)) - {"probe", "dbb", "ball3d"})
+        unknown = sorted(set(map(str, sigma)) - set(_LEVELS))
         if unknown:
-            raise ValueError(f"sigma.{unknown[0]}: unknown key (probe, dbb, ball3d)")
-        return tuple(level(sigma.get(k, default), f"sigma.{k}") for k in ("probe", "dbb", "ball3d"))
+            raise ValueError(f"sigma.{unknown[0]}: unknown key ({', '.join(_LEVELS)})")
+        out = {k: level(sigma.get(k, default), f"sigma.{k}") for k in _MM_LEVELS}
+        out["pose_angle"] = level(sigma.get("pose_angle", default_angle), "sigma.pose_angle", "rad")
+        return out
     x = level(sigma, "sigma")
-    return x, x, x
+    # A number is in mm: a pose's rotation rows keep their own default.
+    return {**{k: x for k in _MM_LEVELS}, "pose_angle": default_angle}
+
+
+def _rotation_rms(fit) -> float:
+    """The rms of a fit's pose rotation rows (rad), 0 without any."""
+    r = [row["residual"] for row in fit.residual_table() if row["component"] in ("rx", "ry", "rz")]
+    return float(np.sqrt(np.mean(np.square(r)))) if r else 0.0
 
 
 def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
@@ -92,8 +106,9 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
     ``plan``, or the path of one), or from a dataset (a :class:`Dataset`, a
     dataset dict or path): then the readings are the centre of the noise, the
     parameter values are those of ``identify(dataset, estimate)`` and the
-    noise is ``sigma`` (mm; a number or ``{"probe", "dbb", "ball3d"}``),
-    default the fit's residual standard deviation.  Returns ``(plan, fit)``
+    noise is ``sigma`` (mm; a number or ``{"probe", "dbb", "ball3d", "point",
+    "pose", "pose_angle" (rad), "distance"}``), default the fit's residual
+    standard deviation (for a pose's rotation rows, their rms, rad).  Returns ``(plan, fit)``
     (``fit`` is None for a spec)."""
     if isinstance(source, _core.SimulationPlan):
         return source, None
@@ -111,9 +126,9 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
         return _core.SimulationPlan.from_spec(dumps(spec, "spec")), None
     ds = Dataset.from_dict(source)
     fit = identify(ds, estimate if estimate is not None else "auto", fix=fix, initial=initial)
-    probe, dbb, ball3d = _noise_levels(sigma, fit.sigma)
+    levels = _noise_levels(sigma, fit.sigma, _rotation_rms(fit))
     values = dict(zip(fit._core.names, np.asarray(fit._core.values, float)))
-    return _core.SimulationPlan.from_dataset(ds._core, values, probe, dbb, ball3d), fit
+    return _core.SimulationPlan.from_dataset(ds._core, values, **levels), fit
 
 
 # --------------------------------------------------------------------------

@@ -5,13 +5,17 @@
 // these by adding a sample plan entry below (the test fails without one).
 #include <gtest/gtest.h>
 
+#include <ceres/gradient_checker.h>
+
 #include <algorithm>
 #include <cmath>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <set>
+#include <sstream>
 
+#include "fivecal/observations/pose.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/observations/simulate.h"
 #include "fivecal/solve/priors.h"
@@ -79,6 +83,28 @@ const std::map<std::string, Sample> kSamples = {
            "target": "work", "target_point": [80, 20, 40]}])",
       R"({"instrument.T1.x": 0.05, "instrument.T1.c": 1e-3, "instrument.T1.tool_z": 0.02,
           "instrument.C2.a": -2e-4, "instrument.C2.work_x": 0.01})"}},
+    {"pose",
+     {R"([{"type": "pose", "instrument": "T1", "axes": {"X": -30, "Y": 5, "Z": 10, "B": -40, "C": 200},
+           "target": "tool", "target_point": [0,0,100], "target_rotation": [0.1, -0.2, 0.3],
+           "instrument_origin": [1500, -200, 300], "instrument_angles": [1, -2, 30], "direction": {"Y": 1}},
+          {"type": "pose", "instrument": "T1", "axes": {"X": 20, "Y": -15, "Z": 0, "B": 25, "C": -60},
+           "target": "tool", "target_point": [0,0,100], "target_rotation": [0.1, -0.2, 0.3],
+           "instrument_origin": [1500, -200, 300], "instrument_angles": [1, -2, 30]},
+          {"type": "pose", "instrument": "C2", "axes": {"X": 0, "Y": 0, "Z": 0, "B": 30, "C": 45},
+           "target": "work", "target_point": [80, 20, 40], "id": "w1"}])",
+      R"({"instrument.T1.x": 0.05, "instrument.T1.c": 1e-3, "instrument.T1.tool_z": 0.02,
+          "instrument.T1.tool_a": 2e-3, "instrument.T1.tool_c": -1e-3,
+          "instrument.C2.a": -2e-4, "instrument.C2.work_x": 0.01, "instrument.C2.work_b": 5e-4})"}},
+    {"distance",
+     {R"([{"type": "distance", "station": "L1", "axes": {"X": -30, "Y": 5, "Z": 10, "B": -40, "C": 200},
+           "target": "tool", "target_point": [0,0,100], "station_position": [800, -300, 200],
+           "dead_length": 150, "direction": {"Y": 1}},
+          {"type": "distance", "station": "L2", "axes": {"X": 20, "Y": -15, "Z": 0, "B": 25, "C": -60},
+           "target": "tool", "target_point": [0,0,100], "station_position": [-600, 500, 400]},
+          {"type": "distance", "station": "L1", "instrument": "LT2", "axes": {"X": 0, "Y": 0, "Z": 0, "B": 30, "C": 45},
+           "target": "work", "target_point": [80, 20, 40], "station_position": [800, -300, 200], "id": "w1"}])",
+      R"({"instrument.L1.x": 0.05, "instrument.L1.length": 0.02, "instrument.L2.z": -0.03,
+          "instrument.tracer.tool_z": 0.02, "instrument.LT2.work_x": 0.01})"}},
 };
 
 std::string SpecOf(const ObservationKind& k) {
@@ -255,6 +281,222 @@ TEST_P(EveryKind, SetupParameterNamesHaveAShapeAndAPriorClass) {
           << name << ": " << e.what();
     }
   }
+}
+
+// ---- pose and distance: their own checks ---------------------------------
+
+// The kBase machine with the given observations (no plan: recorded data).
+json FixedFrameDataset(const json& observations) {
+  json d = json::parse(kBase);
+  d.erase("errors");
+  d["observations"] = observations;
+  return d;
+}
+
+json PoseAtZero(const Eigen::Vector3d& measured_rotation) {
+  // Every rotary axis at 0, nominal instrument and target orientations 0:
+  // with every parameter 0 the predicted orientation is exactly the identity.
+  json o = {{"type", "pose"}, {"instrument", "T1"}, {"target", "tool"}, {"target_point", {0, 0, 100}},
+            {"axes", {{"X", 10}, {"Y", -20}, {"Z", 5}, {"B", 0}, {"C", 0}}},
+            {"measured", {10, -20, 105}},
+            {"measured_rotation", {measured_rotation[0], measured_rotation[1], measured_rotation[2]}}};
+  return o;
+}
+
+// GradientChecker on every residual block of `ds` at `values`, all setup
+// parameters and the location errors estimated (their natural scale is 1: mm
+// and rad), entry by entry: |J - numeric| <= 1e-6 |J| + 1e-9 x the row's largest.
+void CheckGradients(const Dataset& ds, const Eigen::VectorXd& values, const std::string& what) {
+  const ParameterTable table(ds);
+  const Machine& m = ds.machine();
+  std::vector<int> est;
+  for (int i = 0; i < table.size(); ++i)
+    if (i >= table.num_machine() || m.parameters()[i].kind == ParameterKind::kLocation) est.push_back(i);
+  Problem problem(ds, table, values, est, "", 0.0, false);
+  std::vector<ceres::ResidualBlockId> blocks;
+  problem.ceres_problem().GetResidualBlocks(&blocks);
+  ASSERT_EQ(blocks.size(), ds.observations.size()) << what;
+  ceres::NumericDiffOptions nd;
+  nd.ridders_relative_initial_step_size = 1e-3;
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    const ceres::CostFunction* cost = problem.ceres_problem().GetCostFunctionForResidualBlock(blocks[b]);
+    std::vector<double*> params;
+    problem.ceres_problem().GetParameterBlocksForResidualBlock(blocks[b], &params);
+    const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;  // all Euclidean
+    ceres::GradientChecker checker(cost, no_manifolds, nd);
+    ceres::GradientChecker::ProbeResults res;
+    std::vector<const double*> cp(params.begin(), params.end());
+    checker.Probe(cp.data(), 1e-6, &res);
+    ASSERT_EQ(res.local_jacobians.size(), params.size()) << what << res.error_log;
+    ASSERT_TRUE(res.residuals.allFinite()) << what;
+    const int nr = cost->num_residuals();
+    Eigen::VectorXd row_max = Eigen::VectorXd::Zero(nr);
+    for (const auto& J : res.local_jacobians) row_max = row_max.cwiseMax(J.col(0).cwiseAbs());
+    for (int i = 0; i < nr; ++i) EXPECT_GT(row_max[i], 0.0) << what << " row " << i << " sees no parameter";
+    for (size_t k = 0; k < params.size(); ++k) {
+      const int index = static_cast<int>(params[k] - problem.values().data());
+      for (int i = 0; i < nr; ++i) {
+        const double a = res.local_jacobians[k](i, 0), n = res.local_numeric_jacobians[k](i, 0);
+        ASSERT_TRUE(std::isfinite(a)) << what << " row " << i << " " << table.names()[index];
+        EXPECT_LE(std::abs(a - n), 1e-6 * std::max(std::abs(a), std::abs(n)) + 1e-9 * row_max[i])
+            << what << " row " << i << " " << table.names()[index] << ": jet " << a << " numeric " << n;
+      }
+    }
+  }
+}
+
+TEST(PoseKind, RotationRowsHaveRightDerivativesAtAndNearZeroRotation) {
+  for (const Eigen::Vector3d& rot : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1e-9, -2e-9, 5e-10),
+                                     Eigen::Vector3d(1e-4, 3e-5, -2e-4), Eigen::Vector3d(0.4, -1.2, 2.0)}) {
+    const Dataset ds = Dataset::FromJson(FixedFrameDataset(json::array({PoseAtZero(rot)})).dump());
+    const ParameterTable table(ds);
+    Eigen::VectorXd values = Eigen::VectorXd::Zero(table.size());
+    std::ostringstream what;
+    what << "measured rotation " << rot.transpose();
+    if (rot.isZero()) {
+      // The residual's rotation rows are exactly zero here: the small-angle
+      // branch of the logarithm is the one differentiated.
+      Problem p(ds, table, values, All(table.size()), "", 0.0, false);
+      Eigen::VectorXd r;
+      p.Evaluate(&r, nullptr);
+      ASSERT_EQ(r.size(), 6);
+      EXPECT_EQ(r.tail(3), Eigen::Vector3d::Zero());
+    }
+    CheckGradients(ds, values, what.str());
+  }
+}
+
+TEST(PoseKind, JacobianIsContinuousThroughZeroRotation) {
+  // The Jet Jacobian at exactly zero misfit (the Taylor branch) equals the
+  // one a nanoradian away (the general branch).
+  Eigen::MatrixXd J[2];
+  const Eigen::Vector3d rots[2] = {Eigen::Vector3d::Zero(), Eigen::Vector3d(1e-9, 1e-9, -1e-9)};
+  for (int k = 0; k < 2; ++k) {
+    const Dataset ds = Dataset::FromJson(FixedFrameDataset(json::array({PoseAtZero(rots[k])})).dump());
+    const ParameterTable table(ds);
+    Problem p(ds, table, Eigen::VectorXd::Zero(table.size()), All(table.size()), "", 0.0, false);
+    Eigen::VectorXd r;
+    p.Evaluate(&r, &J[k]);
+  }
+  EXPECT_LT((J[0] - J[1]).cwiseAbs().maxCoeff(), 1e-6 * J[0].cwiseAbs().maxCoeff());
+}
+
+TEST(DistanceKind, ResidualHasRightDerivatives) {
+  json obs = json::array();
+  const double stations[3][3] = {{800, -300, 200}, {-600, 500, 400}, {100, 900, -300}};
+  for (int s = 0; s < 3; ++s)
+    obs.push_back({{"type", "distance"}, {"station", "L" + std::to_string(s)}, {"target", s == 2 ? "work" : "tool"},
+                   {"target_point", {10, 20, 100}}, {"reading", 12.5}, {"dead_length", 300},
+                   {"station_position", {stations[s][0], stations[s][1], stations[s][2]}},
+                   {"axes", {{"X", 30}, {"Y", -20}, {"Z", 5}, {"B", 25}, {"C", 140}}}});
+  const Dataset ds = Dataset::FromJson(FixedFrameDataset(obs).dump());
+  const ParameterTable table(ds);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0.0, 1e-3);
+  Eigen::VectorXd values(table.size());
+  for (int i = 0; i < table.size(); ++i) values[i] = i < table.num_machine() ? 0.0 : n(rng);
+  for (int i = 0; i < table.num_machine(); ++i)
+    if (ds.machine().parameters()[i].kind == ParameterKind::kLocation) values[i] = 0.01 * n(rng);
+  CheckGradients(ds, values, "distance");
+}
+
+TEST(FixedFrameKinds, BadFieldsAreNamed) {
+  auto refused = [](json o, const std::vector<std::string>& words) {
+    try {
+      Dataset::FromJson(FixedFrameDataset(json::array({o})).dump());
+      ADD_FAILURE() << o.dump() << " accepted";
+    } catch (const std::invalid_argument& e) {
+      for (const std::string& w : words)
+        EXPECT_NE(std::string(e.what()).find(w), std::string::npos) << e.what() << " lacks " << w;
+    }
+  };
+  const json pose = PoseAtZero(Eigen::Vector3d(0.1, 0.2, 0.3));
+  json o = pose;
+  o.erase("measured_rotation");
+  refused(o, {"observations[0].measured_rotation"});
+  o = pose;
+  o["measured_rotation"] = {0, 0, 7};
+  refused(o, {"observations[0].measured_rotation"});
+  o = pose;
+  o["target_rotation"] = {0, 0};
+  refused(o, {"observations[0].target_rotation"});
+  o = pose;
+  o["sigma"] = 0.01;  // rows in mm and rad: one number cannot be both
+  refused(o, {"observations[0].sigma", "mm, mm, mm, rad, rad, rad", "6 values"});
+  o = pose;
+  o["sigma"] = {0.01, 0.01, 0.01, 1e-4, 1e-4, 0};
+  refused(o, {"observations[0].sigma[5]", "rad"});
+  const json dist = {{"type", "distance"}, {"station", "L1"}, {"target", "tool"}, {"target_point", {0, 0, 100}},
+                     {"reading", 1.0}, {"station_position", {500, 0, 0}},
+                     {"axes", {{"X", 0}, {"Y", 0}, {"Z", 0}, {"B", 0}, {"C", 0}}}};
+  for (const char* key : {"station", "reading", "station_position", "target", "target_point"}) {
+    o = dist;
+    o.erase(key);
+    refused(o, {std::string("observations[0].") + key});
+  }
+  o = dist;
+  o["dead_length"] = "300";
+  refused(o, {"observations[0].dead_length"});
+  o = dist;
+  o["station"] = "L.1";
+  refused(o, {"observations[0].station"});
+  o = dist;
+  o["setup"] = "L1";  // a distance names its station, not a mounting
+  refused(o, {"observations[0]: unknown key \"setup\""});
+}
+
+TEST(FixedFrameKinds, InstrumentSigmaIsTheDefaultOfItsObservations) {
+  json d = FixedFrameDataset(json::array({PoseAtZero(Eigen::Vector3d(0.1, 0.2, 0.3)), PoseAtZero(Eigen::Vector3d::Zero())}));
+  d["observations"][1]["sigma"] = {1, 2, 3, 4e-3, 5e-3, 6e-3};
+  Dataset ds = Dataset::FromJson(d.dump());
+  // No declaration: the kind's per-row default, mm then rad.
+  EXPECT_EQ(ObservationSigma(ds, ds.observations[0], 0), PoseKind().default_sigma_row(0));
+  EXPECT_EQ(ObservationSigma(ds, ds.observations[0], 4), PoseKind().default_sigma_row(4));
+  EXPECT_LT(PoseKind().default_sigma_row(4), PoseKind().default_sigma_row(0));
+  d["instruments"] = {{"T1", {{"sigma", {0.1, 0.2, 0.3, 1e-4, 2e-4, 3e-4}}}}};
+  ds = Dataset::FromJson(d.dump());
+  EXPECT_EQ(ObservationSigma(ds, ds.observations[0], 2), 0.3);
+  EXPECT_EQ(ObservationSigma(ds, ds.observations[0], 5), 3e-4);
+  EXPECT_EQ(ObservationSigma(ds, ds.observations[1], 5), 6e-3);  // its own wins
+  EXPECT_EQ(Dataset::FromJson(ds.ToJson()).instrument_sigma, ds.instrument_sigma);
+  EXPECT_EQ(ds.Subset({1}).instrument_sigma, ds.instrument_sigma);
+  d["instruments"] = {{"T1", {{"sigma", 0.01}}}};  // one number for mm and rad rows
+  try {
+    Dataset::FromJson(d.dump());
+    ADD_FAILURE() << "one number for a pose instrument accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("dataset.instruments.T1.sigma: 1 value for a pose instrument"),
+              std::string::npos) << e.what();
+  }
+}
+
+TEST(FixedFrameKinds, SimulatedPoseNoiseIsWhatItDeclares) {
+  // A rotation input is a rotation of the reading about a target axis: at
+  // the truth its residual row moves by exactly minus the input, whatever the
+  // measured orientation.
+  json spec = json::parse(kBase);
+  spec["plan"] = json::parse(kSamples.at("pose").plan);
+  spec["setup"] = json::parse(kSamples.at("pose").setup);
+  spec["sigma"] = {{"pose", 0.01}, {"pose_angle", 1e-4}};
+  const SimulationPlan plan = BuildSimulationPlan(spec.dump());
+  ASSERT_EQ(plan.num_inputs(), 18);
+  EXPECT_EQ(plan.base.observations[0].sigma, (Eigen::VectorXd(6) << 0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-4).finished());
+  Eigen::VectorXd dev = Eigen::VectorXd::Zero(18);
+  dev[4] = 3e-4;   // observation 0, rotation row 1
+  dev[15] = -2e-4; // observation 2, rotation row 0
+  const Dataset noisy = ApplyInputDeviations(plan, dev);
+  const ParameterTable table(noisy);
+  Eigen::VectorXd truth = Eigen::VectorXd::Zero(table.size());
+  for (const auto& [name, value] : plan.values) truth[table.Require(name)] = value;
+  Problem p(noisy, table, truth, All(table.size()), "", 0.0, false);
+  Eigen::VectorXd r;
+  p.Evaluate(&r, nullptr);
+  EXPECT_LT((r - dev).cwiseAbs().maxCoeff(), 1e-10) << r.transpose();
+  // A number sets the mm levels only.
+  spec["sigma"] = 0.002;
+  const SimulationPlan mm = BuildSimulationPlan(spec.dump());
+  EXPECT_EQ(mm.base.observations[0].sigma[0], 0.002);
+  EXPECT_EQ(mm.base.observations[0].sigma[3], PoseKind().default_sigma_row(3));
 }
 
 INSTANTIATE_TEST_SUITE_P(Registry, EveryKind, ::testing::ValuesIn(ObservationKinds()),

@@ -37,17 +37,37 @@ int Artefact::SphereIndex(const std::string& id) const {
   return -1;
 }
 
+const std::string* InstrumentId(const Observation& o) {
+  return KindOf(o).has_instrument() ? &o.setup : nullptr;
+}
+
 namespace {
+// Whether every residual row of a kind has the same unit (then one number
+// may declare the noise of all of them).
+bool OneUnit(const ObservationKind& k) {
+  for (int r = 1; r < k.rows(); ++r)
+    if (std::string(k.unit_row(r)) != k.unit_row(0)) return false;
+  return true;
+}
+
+std::string RowUnits(const ObservationKind& k) {
+  if (OneUnit(k)) return k.unit_row(0);
+  std::string u;
+  for (int r = 0; r < k.rows(); ++r) u += (r ? ", " : "") + std::string(k.unit_row(r));
+  return "[" + u + "]";
+}
+
 void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::string& where) {
   if (sigma.size() == 0) return;
-  if (sigma.size() != ResidualRows(t))
-    throw std::invalid_argument(where + ": expected a number or " + std::to_string(ResidualRows(t)) +
-                                " values (one per residual row of a " + ObservationTypeName(t) +
-                                " observation), got " + std::to_string(sigma.size()));
+  const ObservationKind& k = KindOf(t);
+  if (sigma.size() != k.rows())
+    throw std::invalid_argument(where + ": expected " + (OneUnit(k) ? "a number or " : "") +
+                                std::to_string(k.rows()) + " values (one per residual row of a " + k.name() +
+                                " observation, " + RowUnits(k) + "), got " + std::to_string(sigma.size()));
   for (int r = 0; r < sigma.size(); ++r)
     if (!(sigma[r] >= kMinSigma && sigma[r] <= kMaxSigma))
       throw std::invalid_argument(where + (sigma.size() > 1 ? "[" + std::to_string(r) + "]" : "") +
-                                  ": must be a finite number > 0 mm (1e-9 to 1e3 mm)");
+                                  ": must be a finite number > 0 " + k.unit_row(r) + " (1e-9 to 1e3)");
 }
 
 void ValidateScaleBars(const Artefact& artefact) {
@@ -66,24 +86,99 @@ void ValidateScaleBars(const Artefact& artefact) {
 }
 
 Eigen::VectorXd ReadSigma(const json& j, ObservationType t, const std::string& where) {
-  const int rows = ResidualRows(t);
+  const ObservationKind& k = KindOf(t);
+  const int rows = k.rows();
   Eigen::VectorXd s;
   if (j.is_number()) {
+    if (!OneUnit(k))
+      throw std::invalid_argument(where + ": a " + std::string(k.name()) + " observation's rows are in " +
+                                  RowUnits(k) + ": give " + std::to_string(rows) + " values, not one number");
     s = Eigen::VectorXd::Constant(rows, j.get<double>());
     if (!(s[0] >= kMinSigma && s[0] <= kMaxSigma))
-      throw std::invalid_argument(where + ": must be a finite number > 0 mm (1e-9 to 1e3 mm)");
+      throw std::invalid_argument(where + ": must be a finite number > 0 " + k.unit_row(0) + " (1e-9 to 1e3)");
     return s;
   }
   if (!j.is_array())
-    throw std::invalid_argument(where + ": expected a number (mm) or an array of " + std::to_string(rows));
+    throw std::invalid_argument(where + ": expected " + (OneUnit(k) ? "a number (" + RowUnits(k) + ") or " : "") +
+                                "an array of " + std::to_string(rows) + " (" + RowUnits(k) + ")");
   s.resize(static_cast<Eigen::Index>(j.size()));
   for (size_t r = 0; r < j.size(); ++r) {
     if (!j[r].is_number())
-      throw std::invalid_argument(where + "[" + std::to_string(r) + "]: expected a number (mm)");
+      throw std::invalid_argument(where + "[" + std::to_string(r) + "]: expected a number");
     s[static_cast<Eigen::Index>(r)] = j[r].get<double>();
   }
   CheckSigma(s, t, where);
   return s;
+}
+
+// "instruments": {"<id>": {"sigma": number | [per row]}}. Read raw here (the
+// observations decide which kind, hence how many rows, each id has) and
+// checked once they are read (CheckInstruments).
+std::map<std::string, Eigen::VectorXd> ReadInstruments(const json& j) {
+  const std::string w = "dataset.instruments";
+  if (!j.is_object()) throw std::invalid_argument(w + ": expected an object (instrument id -> {\"sigma\": ...})");
+  std::map<std::string, Eigen::VectorXd> out;
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    const std::string wi = w + "." + it.key();
+    if (!it->is_object()) throw std::invalid_argument(wi + ": expected an object {\"sigma\": ...}");
+    CheckKeys(*it, {"sigma"}, wi);
+    if (!it->contains("sigma")) throw std::invalid_argument(wi + ".sigma: missing");
+    const json& sj = (*it)["sigma"];
+    Eigen::VectorXd s;
+    if (sj.is_number()) {
+      s = Eigen::VectorXd::Constant(1, sj.get<double>());
+    } else if (sj.is_array() && !sj.empty()) {
+      s.resize(static_cast<Eigen::Index>(sj.size()));
+      for (size_t r = 0; r < sj.size(); ++r) {
+        if (!sj[r].is_number())
+          throw std::invalid_argument(wi + ".sigma[" + std::to_string(r) + "]: expected a number");
+        s[static_cast<Eigen::Index>(r)] = sj[r].get<double>();
+      }
+    } else {
+      throw std::invalid_argument(wi + ".sigma: expected a number or an array (one per residual row)");
+    }
+    for (int r = 0; r < s.size(); ++r)
+      if (!(s[r] >= kMinSigma && s[r] <= kMaxSigma))
+        throw std::invalid_argument(wi + ".sigma" + (sj.is_array() ? "[" + std::to_string(r) + "]" : "") +
+                                    ": must be a finite number > 0 (1e-9 to 1e3)");
+    out[it.key()] = s;
+  }
+  return out;
+}
+
+// Every instrument sigma fits the kinds of the observations naming it: one
+// value per row (or one number when the rows share a unit). `loaded`: also
+// refuse an id no observation names (a typo in a file would otherwise leave
+// the instrument at its kind's default without a word).
+void CheckInstruments(const Dataset& ds, bool loaded) {
+  if (ds.instrument_sigma.empty()) return;
+  std::map<std::string, std::set<const ObservationKind*>> kinds;
+  std::vector<std::string> ids;
+  for (const Observation& o : ds.observations)
+    if (const std::string* id = InstrumentId(o))
+      if (kinds[*id].insert(&KindOf(o)).second && kinds[*id].size() == 1) ids.push_back(*id);
+  for (const auto& [id, s] : ds.instrument_sigma) {
+    const std::string w = "dataset.instruments." + id + ".sigma";
+    auto it = kinds.find(id);
+    if (it == kinds.end()) {
+      if (!loaded) continue;
+      throw std::invalid_argument("dataset.instruments." + id + ": no observation names this instrument" +
+                                  (ids.empty() ? std::string(" (no observation has an instrument or station)")
+                                               : " (instruments and stations: " + [&] {
+                                                   std::string l;
+                                                   for (const std::string& x : ids) l += (l.empty() ? "" : ", ") + x;
+                                                   return l;
+                                                 }() + ")" + DidYouMean(id, ids)));
+    }
+    for (const ObservationKind* k : it->second) {
+      if (s.size() == 1 && OneUnit(*k)) continue;
+      if (s.size() != k->rows())
+        throw std::invalid_argument(w + ": " + std::to_string(s.size()) + " value" + (s.size() == 1 ? "" : "s") +
+                                    " for a " + k->name() + " instrument, whose observations have " +
+                                    std::to_string(k->rows()) + " residual rows (" + RowUnits(*k) + ")" +
+                                    (OneUnit(*k) ? ": give one number or one per row" : ": give one per row"));
+    }
+  }
 }
 }  // namespace
 
@@ -97,7 +192,7 @@ const json* Find(const json& obj, const char* key) {
 // the order the messages promise (unknown top-level keys first).
 Dataset ParseHead(const json& j) {
   if (!j.is_object()) throw std::invalid_argument("dataset: expected a JSON object");
-  CheckKeys(j, {"machine", "probe", "artefact", "observations", "$schema", "_comment"}, "dataset");
+  CheckKeys(j, {"machine", "probe", "artefact", "instruments", "observations", "$schema", "_comment"}, "dataset");
   if (!j.contains("machine")) throw std::invalid_argument("dataset.machine: missing");
   Dataset ds = [&] {
     try {
@@ -185,6 +280,7 @@ Dataset ParseHead(const json& j) {
       }
     }
   }
+  if (j.contains("instruments")) ds.instrument_sigma = ReadInstruments(j["instruments"]);
   return ds;
 }
 
@@ -290,6 +386,7 @@ Observation ParseObservation(const Dataset& ds, const json& o, size_t i, std::ve
 void Finish(Dataset* ds, bool require_observations) {
   if (require_observations || !ds->observations.empty()) ds->Validate();
   else ValidateScaleBars(ds->artefact);
+  CheckInstruments(*ds, !ds->observations.empty());
 }
 
 Dataset ParseDataset(const json& j, bool require_observations) {
@@ -777,12 +874,14 @@ void Dataset::Validate() const {
     KindOf(o).Validate(*this, o, w);
     if (o.sigma.size() > 0) CheckSigma(o.sigma, o.type, w() + ".sigma");
   }
+  CheckInstruments(*this, false);
 }
 
 Dataset Dataset::Subset(const std::vector<int>& indices) const {
   Dataset d(machine_);
   d.tip_radius = tip_radius;
   d.artefact = artefact;
+  d.instrument_sigma = instrument_sigma;
   for (int i : indices) {
     if (i < 0 || i >= static_cast<int>(observations.size()))
       throw std::invalid_argument("subset: observation index " + std::to_string(i) + " out of range");
@@ -803,6 +902,19 @@ std::string Dataset::ToJson() const {
   for (const ScaleBar& b : artefact.scale_bars)
     bars.push_back({{"spheres", {b.sphere1, b.sphere2}}, {"length", b.length}});
   j["artefact"] = {{"facets", facets}, {"spheres", spheres}, {"scale_bars", bars}};
+  if (!instrument_sigma.empty()) {
+    json ins = json::object();
+    for (const auto& [id, s] : instrument_sigma) {
+      if (s.size() == 1) {
+        ins[id] = {{"sigma", s[0]}};
+      } else {
+        json a = json::array();
+        for (int r = 0; r < s.size(); ++r) a.push_back(s[r]);
+        ins[id] = {{"sigma", a}};
+      }
+    }
+    j["instruments"] = ins;
+  }
   json obs = json::array();
   for (const Observation& o : observations) {
     json jo;

@@ -14,19 +14,11 @@ namespace {
 using namespace json_util;
 
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
-// The file names the instrument ("instrument", kept in Observation::setup)
-// and the side that carries the target ("target": "tool" or "work", kept in
-// Observation::target). Parameters, per instrument: its pose
-// instrument.<id>.x|y|z|a|b|c, and the offsets of the target it follows on
-// each side, instrument.<id>.tool_x|y|z and .work_x|y|z (one tracker may
-// follow a target on the tool and one on the table).
 const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
 const char* kXYZ[3] = {"x", "y", "z"};
 
 std::string Prefix(const Observation& o) { return "instrument." + o.setup; }
 std::string TargetPrefix(const Observation& o) { return Prefix(o) + "." + o.target + "_"; }
-// The target group's key in the parameter table (an instrument id has no '.').
-std::string TargetKey(const Observation& o) { return o.setup + "." + o.target; }
 
 class Kind final : public ObservationKind {
  public:
@@ -36,6 +28,7 @@ class Kind final : public ObservationKind {
   int rows() const override { return 3; }
   // A laser tracker over a machine-tool volume: a few micrometres.
   double default_sigma() const override { return 0.005; }
+  bool has_instrument() const override { return true; }
   bool analytic() const override { return false; }
   // The instrument reports coordinates in its calibrated length unit, so its
   // data fix the machine's scale (EXX1 ...) like a scale bar does.
@@ -46,53 +39,34 @@ class Kind final : public ObservationKind {
             "instrument_origin", "instrument_angles", "sigma", "id"};
   }
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
-    ReadOwn(o, w, ob);
+    fixed_frame::ReadInstrument(o, w, ob);
+    fixed_frame::ReadTarget(o, w, ob);
     ob->measured = ReadVector3(o.value("measured", json()), w + ".measured");
   }
   void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
-    if (o.setup.empty() || o.setup.find('.') != std::string::npos)
-      throw std::invalid_argument(w() + ".instrument: the instrument id must be a non-empty name without '.'");
-    auto bounded = [&](const Eigen::Vector3d& v, double bound, const char* field) {
-      for (int c = 0; c < 3; ++c)
-        if (!(std::abs(v[c]) <= bound)) RequireBounded(v[c], bound, w() + "." + field + "[" + std::to_string(c) + "]");
-    };
-    bounded(o.measured, kMaxLinear, "measured");
-    if (o.target != "tool" && o.target != "work")
-      throw std::invalid_argument(w() + ".target: " + Quote(o.target) + " is neither \"tool\" nor \"work\"");
-    bounded(o.target_point, kMaxLinear, "target_point");
-    bounded(o.instrument_origin, kMaxLinear, "instrument_origin");
-    bounded(o.instrument_angles, 2 * 3.14159265358979323846, "instrument_angles");
+    fixed_frame::ValidateInstrument(o, w);
+    for (int c = 0; c < 3; ++c)
+      if (!(std::abs(o.measured[c]) <= kMaxLinear))
+        RequireBounded(o.measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
+    fixed_frame::ValidateTarget(o, w);
   }
   void Write(const Observation& o, json* jo) const override {
-    // The generic writer put the instrument id under "setup" and the side
-    // under "target"; the file calls the id "instrument".
-    jo->erase("setup");
-    (*jo)["instrument"] = o.setup;
+    fixed_frame::WriteInstrument(o, jo);
     (*jo)["target_point"] = Array3(o.target_point);
     (*jo)["measured"] = Array3(o.measured);
-    if (!o.instrument_origin.isZero()) (*jo)["instrument_origin"] = Array3(o.instrument_origin);
-    if (!o.instrument_angles.isZero()) (*jo)["instrument_angles"] = Array3(o.instrument_angles / kDegToRad);
   }
 
   // ---- setup: the instrument's pose and the target's offsets, always
   // estimated (a tracker's pose in the machine frame is never known well
   // enough to be fixed) ----
   void AddObservationParameters(const Observation& o, ParameterTable* t) const override {
-    if (!t->has_group(type(), o.setup)) {
-      std::vector<int> idx;
-      for (const char* f : kFields) idx.push_back(t->Add(Prefix(o) + "." + f));
-      t->AddGroup(type(), o.setup, idx);
-    }
-    if (!t->has_group(type(), TargetKey(o))) {
-      std::vector<int> idx;
-      for (const char* f : kXYZ) idx.push_back(t->Add(TargetPrefix(o) + f));
-      t->AddGroup(type(), TargetKey(o), idx);
-    }
+    fixed_frame::AddInstrumentPose(o.setup, t);
+    fixed_frame::AddTargetOffsets(o.setup, o.target, t);
   }
   void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
                     std::set<int>* out) const override {
-    for (int i : t.group(type(), o.setup)) out->insert(i);
-    for (int i : t.group(type(), TargetKey(o))) out->insert(i);
+    for (int i : fixed_frame::InstrumentPose(t, o.setup)) out->insert(i);
+    for (int i : fixed_frame::TargetOffsets(t, o.setup, o.target)) out->insert(i);
   }
   bool IsParameterName(const std::string&) const override { return false; }  // instrument.* and target.*
   std::vector<PriorClass> prior_classes() const override {
@@ -103,19 +77,14 @@ class Kind final : public ObservationKind {
             {"target", 1.0, "mm",
              "instrument.<id>.tool_x|y|z, .work_x|y|z: where the target it follows really sits"}};
   }
-  const char* PriorClassOfName(const std::string& n) const override {
-    if (n.rfind("instrument.", 0) != 0) return nullptr;
-    const std::string f = n.substr(n.rfind('.') + 1);
-    if (f.rfind("tool_", 0) == 0 || f.rfind("work_", 0) == 0) return "target";
-    return (f == "a" || f == "b" || f == "c") ? "instrument_angle" : "instrument_position";
-  }
+  const char* PriorClassOfName(const std::string& n) const override { return fixed_frame::PriorClassOfName(n); }
   std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const override {
-    return t.group(type(), o.setup);
+    return fixed_frame::InstrumentPose(t, o.setup);
   }
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
-    const auto& g = b.table.group(type(), o.setup);
-    const auto& tg = b.table.group(type(), TargetKey(o));
+    const auto& g = fixed_frame::InstrumentPose(b.table, o.setup);
+    const auto& tg = fixed_frame::TargetOffsets(b.table, o.setup, o.target);
     InstrumentRefs refs;
     for (int c = 0; c < 3; ++c) {
       refs.position[c] = b.Ref(g[c]);
@@ -138,7 +107,8 @@ class Kind final : public ObservationKind {
   }
   void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
                      PlanSlot*) const override {
-    ReadOwn(e, w, ob);
+    fixed_frame::ReadInstrument(e, w, ob);
+    fixed_frame::ReadTarget(e, w, ob);
     const std::string pre = Prefix(*ob) + ".", tpre = TargetPrefix(*ob);
     Observation truth = *ob;
     for (int c = 0; c < 3; ++c) {
@@ -163,39 +133,8 @@ class Kind final : public ObservationKind {
   // ---- report: the residual turned into F, at the target's place ----
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
-    const Eigen::VectorXd& v = *c.values;
-    const auto& g = c.table->group(type(), o.setup);
-    Observation at = o;
-    for (int k = 0; k < 3; ++k) {
-      at.instrument_origin[k] += v[g[k]];
-      at.instrument_angles[k] += v[g[3 + k]];
-    }
-    const Eigen::Matrix3d R = RotZYX(at.instrument_angles[0], at.instrument_angles[1], at.instrument_angles[2]);
-    *vector = R * Eigen::Vector3d(r[0], r[1], r[2]);
-    *point = R * (o.measured + Eigen::Vector3d(r[0], r[1], r[2])) + at.instrument_origin;
+    fixed_frame::ReportPoint(c, o, r, point, vector);
   }
-
- private:
-  // instrument, target side, target point and the nominal instrument pose (file angles in degrees).
-  static void ReadOwn(const json& o, const std::string& w, Observation* ob) {
-    if (!o.contains("instrument") || !o["instrument"].is_string())
-      throw std::invalid_argument(w + ".instrument: missing (the instrument's name, a string such as \"T1\")");
-    ob->setup = o["instrument"].get<std::string>();
-    if (ob->setup.empty() || ob->setup.find('.') != std::string::npos)
-      throw std::invalid_argument(w + ".instrument: " + Quote(ob->setup) + " must be a non-empty name without '.'");
-    if (!o.contains("target") || !o["target"].is_string())
-      throw std::invalid_argument(w + ".target: missing (\"tool\" or \"work\": the side that carries the target)");
-    ob->target = o["target"].get<std::string>();
-    if (ob->target != "tool" && ob->target != "work")
-      throw std::invalid_argument(w + ".target: " + Quote(ob->target) + " is neither \"tool\" nor \"work\"");
-    ob->on_tool = ob->target == "tool";
-    ob->target_point = ReadVector3(o.value("target_point", json()), w + ".target_point");
-    if (o.contains("instrument_origin"))
-      ob->instrument_origin = ReadVector3(o["instrument_origin"], w + ".instrument_origin");
-    if (o.contains("instrument_angles"))
-      ob->instrument_angles = ReadVector3(o["instrument_angles"], w + ".instrument_angles", 360.0) * kDegToRad;
-  }
-
 };
 
 }  // namespace
@@ -204,5 +143,121 @@ const ObservationKind& PointKind() {
   static const Kind kind;
   return kind;
 }
+
+namespace fixed_frame {
+
+void ReadTarget(const json& o, const std::string& w, Observation* ob) {
+  if (!o.contains("target") || !o["target"].is_string())
+    throw std::invalid_argument(w + ".target: missing (\"tool\" or \"work\": the side that carries the target)");
+  ob->target = o["target"].get<std::string>();
+  if (ob->target != "tool" && ob->target != "work")
+    throw std::invalid_argument(w + ".target: " + Quote(ob->target) + " is neither \"tool\" nor \"work\"");
+  ob->on_tool = ob->target == "tool";
+  ob->target_point = ReadVector3(o.value("target_point", json()), w + ".target_point");
+}
+
+void ValidateTarget(const Observation& o, const std::function<std::string()>& w) {
+  if (o.target != "tool" && o.target != "work")
+    throw std::invalid_argument(w() + ".target: " + Quote(o.target) + " is neither \"tool\" nor \"work\"");
+  for (int c = 0; c < 3; ++c)
+    if (!(std::abs(o.target_point[c]) <= kMaxLinear))
+      RequireBounded(o.target_point[c], kMaxLinear, w() + ".target_point[" + std::to_string(c) + "]");
+}
+
+void ReadInstrument(const json& o, const std::string& w, Observation* ob) {
+  if (!o.contains("instrument") || !o["instrument"].is_string())
+    throw std::invalid_argument(w + ".instrument: missing (the instrument's name, a string such as \"T1\")");
+  ob->setup = o["instrument"].get<std::string>();
+  if (ob->setup.empty() || ob->setup.find('.') != std::string::npos)
+    throw std::invalid_argument(w + ".instrument: " + Quote(ob->setup) + " must be a non-empty name without '.'");
+  if (o.contains("instrument_origin"))
+    ob->instrument_origin = ReadVector3(o["instrument_origin"], w + ".instrument_origin");
+  if (o.contains("instrument_angles"))
+    ob->instrument_angles = ReadVector3(o["instrument_angles"], w + ".instrument_angles", 360.0) * kDegToRad;
+}
+
+void ValidateInstrument(const Observation& o, const std::function<std::string()>& w) {
+  if (o.setup.empty() || o.setup.find('.') != std::string::npos)
+    throw std::invalid_argument(w() + ".instrument: the instrument id must be a non-empty name without '.'");
+  auto bounded = [&](const Eigen::Vector3d& v, double bound, const char* field) {
+    for (int c = 0; c < 3; ++c)
+      if (!(std::abs(v[c]) <= bound)) RequireBounded(v[c], bound, w() + "." + field + "[" + std::to_string(c) + "]");
+  };
+  bounded(o.instrument_origin, kMaxLinear, "instrument_origin");
+  bounded(o.instrument_angles, 2 * 3.14159265358979323846, "instrument_angles");
+}
+
+void WriteInstrument(const Observation& o, json* jo) {
+  // The generic writer put the instrument id under "setup" and the side
+  // under "target"; the file calls the id "instrument".
+  jo->erase("setup");
+  (*jo)["instrument"] = o.setup;
+  if (!o.instrument_origin.isZero()) (*jo)["instrument_origin"] = Array3(o.instrument_origin);
+  if (!o.instrument_angles.isZero()) (*jo)["instrument_angles"] = Array3(o.instrument_angles / kDegToRad);
+}
+
+// Both groups live under kPoint whichever kind adds them, so that a point and
+// a pose observation of one instrument share its pose and target offsets.
+const std::vector<int>& AddInstrumentPose(const std::string& id, ParameterTable* t) {
+  if (!t->has_group(ObservationType::kPoint, id)) {
+    if (t->Index("instrument." + id + ".x") >= 0) IdClash(id);
+    std::vector<int> idx;
+    for (const char* f : kFields) idx.push_back(t->Add("instrument." + id + "." + f));
+    t->AddGroup(ObservationType::kPoint, id, idx);
+  }
+  return t->group(ObservationType::kPoint, id);
+}
+
+const std::vector<int>& InstrumentPose(const ParameterTable& t, const std::string& id) {
+  return t.group(ObservationType::kPoint, id);
+}
+
+// The group key: an id has no '.', so "<id>.<side>" is never an id.
+const std::vector<int>& AddTargetOffsets(const std::string& id, const std::string& side, ParameterTable* t) {
+  const std::string key = id + "." + side;
+  if (!t->has_group(ObservationType::kPoint, key)) {
+    std::vector<int> idx;
+    for (const char* f : kXYZ) idx.push_back(t->Add("instrument." + id + "." + side + "_" + f));
+    t->AddGroup(ObservationType::kPoint, key, idx);
+  }
+  return t->group(ObservationType::kPoint, key);
+}
+
+const std::vector<int>& TargetOffsets(const ParameterTable& t, const std::string& id, const std::string& side) {
+  return t.group(ObservationType::kPoint, id + "." + side);
+}
+
+void ReportPoint(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                 Eigen::Vector3d* vector) {
+  const Eigen::VectorXd& v = *c.values;
+  const auto& g = InstrumentPose(*c.table, o.setup);
+  Observation at = o;
+  for (int k = 0; k < 3; ++k) {
+    at.instrument_origin[k] += v[g[k]];
+    at.instrument_angles[k] += v[g[3 + k]];
+  }
+  const Eigen::Matrix3d R = RotZYX(at.instrument_angles[0], at.instrument_angles[1], at.instrument_angles[2]);
+  *vector = R * Eigen::Vector3d(r[0], r[1], r[2]);
+  *point = R * (o.measured + Eigen::Vector3d(r[0], r[1], r[2])) + at.instrument_origin;
+}
+
+const char* PriorClassOfName(const std::string& n) {
+  if (n.rfind("instrument.", 0) != 0) return nullptr;
+  const std::string f = n.substr(n.rfind('.') + 1);
+  if (f.rfind("tool_", 0) == 0 || f.rfind("work_", 0) == 0) {
+    const std::string c = f.substr(5);
+    return (c == "a" || c == "b" || c == "c") ? "target_angle" : "target";
+  }
+  if (f == "length") return "dead_length";
+  return (f == "a" || f == "b" || f == "c") ? "instrument_angle" : "instrument_position";
+}
+
+void IdClash(const std::string& id) {
+  throw std::invalid_argument("dataset: " + Quote(id) +
+                              " names both a distance station and a point/pose instrument; their parameters "
+                              "instrument." + id + ".* would mean different things: give them different names");
+}
+
+}  // namespace fixed_frame
 
 }  // namespace fivecal

@@ -4,8 +4,10 @@
 
 #include "fivecal/observations/ball3d.h"
 #include "fivecal/observations/dbb.h"
+#include "fivecal/observations/distance.h"
 #include "fivecal/observations/facet.h"
 #include "fivecal/observations/point.h"
+#include "fivecal/observations/pose.h"
 #include "fivecal/observations/sphere.h"
 
 namespace fivecal {
@@ -19,6 +21,7 @@ const std::vector<const ObservationKind*>& ObservationKinds() {
       &DbbKind(),
       &Ball3dKind(),
       &PointKind(),
+      &PoseKind(), &DistanceKind(),
   };
   return kinds;
 }

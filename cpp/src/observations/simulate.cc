@@ -162,17 +162,27 @@ SimulationPlan PlanSpec(const json& spec) {
       return x;
     };
     if (s.is_number()) {
-      noise.probe = noise.dbb = noise.ball3d = noise.point = level(s, "simulate.sigma");
+      // mm levels only: a number in mm is no rotation noise.
+      noise.probe = noise.dbb = noise.ball3d = noise.point = noise.pose = noise.distance = level(s, "simulate.sigma");
     } else if (s.is_object()) {
-      CheckKeys(s, {"probe", "dbb", "ball3d", "point"}, "simulate.sigma");
+      CheckKeys(s, {"probe", "dbb", "ball3d", "point", "pose", "pose_angle", "distance"}, "simulate.sigma");
       if (s.contains("probe")) noise.probe = level(s["probe"], "simulate.sigma.probe");
       if (s.contains("dbb")) noise.dbb = level(s["dbb"], "simulate.sigma.dbb");
       if (s.contains("ball3d")) noise.ball3d = level(s["ball3d"], "simulate.sigma.ball3d");
       if (s.contains("point")) noise.point = level(s["point"], "simulate.sigma.point");
+      if (s.contains("pose")) noise.pose = level(s["pose"], "simulate.sigma.pose");
+      if (s.contains("pose_angle")) {
+        if (!s["pose_angle"].is_number()) throw std::invalid_argument("simulate.sigma.pose_angle: expected a number (rad)");
+        noise.pose_angle = s["pose_angle"].get<double>();
+        if (!(noise.pose_angle >= 0 && noise.pose_angle <= 1.0))
+          throw std::invalid_argument("simulate.sigma.pose_angle: must be >= 0 and <= 1 rad");
+      }
+      if (s.contains("distance")) noise.distance = level(s["distance"], "simulate.sigma.distance");
     } else {
-      throw std::invalid_argument("simulate.sigma: expected a number or an object {probe, dbb, ball3d, point}");
+      throw std::invalid_argument("simulate.sigma: expected a number or an object {probe, dbb, ball3d, point, "
+                                  "pose, pose_angle, distance}");
     }
-    for (double x : {noise.probe, noise.dbb, noise.ball3d, noise.point})
+    for (double x : {noise.probe, noise.dbb, noise.ball3d, noise.point, noise.pose, noise.pose_angle, noise.distance})
       if (x > 0 && x < kMinSigma) throw std::invalid_argument("simulate.sigma: 0 (no noise) or >= 1e-9 mm");
   }
   const uint64_t seed = spec.contains("seed") ? ReadSeed(spec["seed"], "simulate.seed") : 0;
@@ -262,8 +272,14 @@ SimulationPlan PlanSpec(const json& spec) {
     // The noise drawn is the noise declared: a simulated dataset carries its
     // sigma, so fitting it weighs the rows as they were made.
     const ObservationKind& kind = KindOf(o);
-    const double declared = kind.NoiseLevel(noise);
-    if (declared > 0) o.sigma = Eigen::VectorXd::Constant(kind.rows(), declared);
+    // A row without a noise level declares its kind's default.
+    Eigen::VectorXd declared(kind.rows());
+    for (int k = 0; k < kind.rows(); ++k) declared[k] = kind.NoiseLevelRow(noise, k);
+    if (declared.maxCoeff() > 0) {
+      for (int k = 0; k < kind.rows(); ++k)
+        if (!(declared[k] > 0)) declared[k] = kind.default_sigma_row(k);
+      o.sigma = declared;
+    }
     kind.AddInputs(&out, oi, &slots[i], nullptr);
   }
   return out;

@@ -365,16 +365,29 @@ constexpr double kMinRedundancy = 5.0;
 // for noise (the plain chi-square test flags sqrt(2) x already).
 constexpr double kMaxNoiseFactor = 3.0;
 
-// The instrument group of an observation: the variance component it shares.
-std::string NoiseGroup(const Observation& o) {
+// The instrument group of residual row `row` of an observation: the variance
+// component it shares. Rows in another unit than the kind's first row (a
+// pose's rotation rows, rad) form their own group, "<kind>_<unit>": one
+// factor cannot scale micrometres and microradians alike.
+std::string NoiseGroup(const Observation& o, int row) {
   const ObservationKind& k = KindOf(o);
-  return k.probe_touch() ? "probe" : k.name();
+  if (k.probe_touch()) return "probe";
+  const std::string unit = k.unit_row(row);
+  return unit == k.unit_row(0) ? k.name() : std::string(k.name()) + "_" + unit;
 }
 
+// A group's sigma x 1e3 is in um; a group of rad rows (NoiseGroup) is shown
+// in urad, x 1e6.
+bool RadGroup(const std::string& group) {
+  return group.size() > 4 && group.compare(group.size() - 4, 4, "_rad") == 0;
+}
+const char* MicroUnit(const std::string& group) { return RadGroup(group) ? "urad" : "um"; }
+double MicroScale(const std::string& group) { return RadGroup(group) ? 1e3 : 1.0; }
+
 // Every residual row's declared sigma (ObservationSigma, as the problem weighs it).
-Eigen::VectorXd DeclaredSigma(const Observation& o) {
+Eigen::VectorXd DeclaredSigma(const Dataset& ds, const Observation& o) {
   Eigen::VectorXd s(KindOf(o).rows());
-  for (int k = 0; k < s.size(); ++k) s[k] = ObservationSigma(o, k);
+  for (int k = 0; k < s.size(); ++k) s[k] = ObservationSigma(ds, o, k);
   return s;
 }
 
@@ -408,12 +421,19 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
   for (const auto& kv : members) out.scale[kv.first] = 1.0;
   // Noise groups: the observations and declared sigmas of each.
   std::map<std::string, double> factor;
-  std::vector<std::string> group_of(ds.observations.size());
+  // Per observation, the group of each of its rows.
+  std::vector<std::vector<std::string>> group_of(ds.observations.size());
   if (opt.variance_components)
-    for (size_t i = 0; i < ds.observations.size(); ++i) factor[group_of[i] = NoiseGroup(ds.observations[i])] = 1.0;
+    for (size_t i = 0; i < ds.observations.size(); ++i) {
+      const Observation& o = ds.observations[i];
+      for (int k = 0; k < KindOf(o).rows(); ++k) factor[group_of[i].emplace_back(NoiseGroup(o, k))] = 1.0;
+    }
   auto apply_noise = [&]() {
-    for (size_t i = 0; i < ds.observations.size(); ++i)
-      scaled->observations[i].sigma = DeclaredSigma(ds.observations[i]) * factor[group_of[i]];
+    for (size_t i = 0; i < ds.observations.size(); ++i) {
+      Eigen::VectorXd s = DeclaredSigma(ds, ds.observations[i]);
+      for (int k = 0; k < s.size(); ++k) s[k] *= factor[group_of[i][k]];
+      scaled->observations[i].sigma = s;
+    }
   };
   std::map<std::string, VarianceComponent> comp;
   if (members.empty() && factor.empty()) return out;
@@ -457,9 +477,11 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
       const std::vector<int>& src = pr->row_source();
       comp.clear();
       std::map<std::string, double> declared2;
+      int k = 0;  // row of its observation: an observation's rows are consecutive
       for (int i = 0; i < r.size(); ++i) {
+        k = i > 0 && src[i] == src[i - 1] ? k + 1 : 0;
         if (src[i] < 0) continue;  // a scale bar's length: a reference, not an instrument group
-        const std::string& g = group_of[src[i]];
+        const std::string& g = group_of[src[i]][k];
         VarianceComponent& c = comp[g];
         c.group = g;
         c.rows += 1;
@@ -766,8 +788,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
       char buf[200];
       std::snprintf(buf, sizeof buf,
                     "the %s residuals are %.3gx their declared noise even with the noise estimated "
-                    "(%.3g um against %.3g um declared): ",
-                    c.group.c_str(), c.factor, c.sigma * 1e3, c.declared * 1e3);
+                    "(%.3g %s against %.3g %s declared): ",
+                    c.group.c_str(), c.factor, c.sigma * 1e3 * MicroScale(c.group), MicroUnit(c.group),
+                    c.declared * 1e3 * MicroScale(c.group), MicroUnit(c.group));
       res.adequate = false;
       res.adequacy = std::string(buf) +
                      (c.group != "probe" && mounts && !mount_estimated

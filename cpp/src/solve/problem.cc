@@ -62,10 +62,15 @@ PoseData::PoseData(const Machine& m, const Observation& o)
   AxisValuesToInternal(m, o.axes.data(), q.data());
 }
 
-double ObservationSigma(const Observation& o, int k) {
+double ObservationSigma(const Dataset& ds, const Observation& o, int k) {
   if (o.sigma.size() > k) return o.sigma[k];
   if (o.sigma.size() == 1) return o.sigma[0];
-  return DefaultSigma(o.type);
+  if (!ds.instrument_sigma.empty())
+    if (const std::string* id = InstrumentId(o)) {
+      auto it = ds.instrument_sigma.find(*id);
+      if (it != ds.instrument_sigma.end()) return it->second[it->second.size() > k ? k : 0];
+    }
+  return KindOf(o).default_sigma_row(k);
 }
 
 // ---- ParameterTable ---------------------------------------------------------
@@ -376,7 +381,7 @@ void Problem::Evaluate(Eigen::VectorXd* residuals, Eigen::MatrixXd* jacobian) {
 
 double Problem::SigmaOfRow(int source, int k) const {
   if (source < 0) return kScaleBarSigma;
-  return ObservationSigma(ds_.observations[source], k);
+  return ObservationSigma(ds_, ds_.observations[source], k);
 }
 
 void Problem::AddPriors(const Eigen::VectorXd& prior_sigma, const Eigen::VectorXd& prior_mean) {

@@ -5,6 +5,7 @@
 #define FIVECAL_DATASET_H_
 
 #include <Eigen/Core>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -40,7 +41,7 @@ struct Artefact {
 // The observation kinds. Each has its file pair observations/<kind>.h|.cc
 // and one line in observations/registry.cc (ObservationKind, kind.h), which
 // say everything else about it.
-enum class ObservationType { kFacet, kSphere, kDbb, kBall3d, kPoint };
+enum class ObservationType { kFacet, kSphere, kDbb, kBall3d, kPoint, kPose, kDistance };
 
 // The kind's name in files ("facet", "sphere", "dbb", "ball3d").
 const char* ObservationTypeName(ObservationType t);
@@ -72,12 +73,26 @@ struct Observation {
   bool on_tool = true;
   Eigen::Vector3d instrument_origin = Eigen::Vector3d::Zero();
   Eigen::Vector3d instrument_angles = Eigen::Vector3d::Zero();
+  // pose: the measured orientation of the target frame in the instrument
+  // frame, and the target frame's nominal orientation on its carrying side
+  // (rotation vectors, rad).
+  Eigen::Vector3d measured_rotation = Eigen::Vector3d::Zero();
+  Eigen::Vector3d target_rotation = Eigen::Vector3d::Zero();
+  // distance: `setup` is the station id, `instrument_origin` its nominal
+  // position in F, `length` its nominal dead length, `reading` the distance
+  // reading; `instrument` names the tracer whose target offsets every one of
+  // its stations shares.
+  std::string instrument;
   // Declared noise (one sigma, mm): empty = DefaultSigma(type); otherwise one
   // value per residual row (ResidualRows(type)), finite and > 0. A file's
   // single number is expanded to every row.
   Eigen::VectorXd sigma;
   std::string id;  // optional user label, kept through load and save
 };
+
+// The instrument id of an observation whose kind has one (point and pose:
+// "instrument", distance: "station"), else nullptr.
+const std::string* InstrumentId(const Observation& o);
 
 class Dataset {
  public:
@@ -91,6 +106,10 @@ class Dataset {
   double tip_radius = 0.0;
   Artefact artefact;
   std::vector<Observation> observations;
+  // Declared noise per instrument id ("instruments" in the file): what an
+  // observation of that instrument without its own sigma declares; one value
+  // per residual row of its kind, or one for all when its rows share a unit.
+  std::map<std::string, Eigen::VectorXd> instrument_sigma;
 
   // Throws std::invalid_argument naming the observation index and field.
   void Validate() const;

@@ -85,6 +85,14 @@ class ObservationKind {
   virtual int rows() const { return 1; }
   // Instrument noise (one sigma, mm) when a file declares none.
   virtual double default_sigma() const = 0;
+  // Unit and default noise of residual row k, for a kind whose rows differ
+  // (pose: 3 rows mm, 3 rows rad); a number given for all rows is refused
+  // when their units differ.
+  virtual const char* unit_row(int) const { return unit(); }
+  virtual double default_sigma_row(int) const { return default_sigma(); }
+  // The observation names an instrument (Observation::setup) whose declared
+  // noise the dataset's "instruments" may give.
+  virtual bool has_instrument() const { return false; }
   // A probe touch: needs dataset.probe.tip_radius, and a plan entry may leave
   // the linear axes to the simulator.
   virtual bool probe_touch() const { return false; }
@@ -155,6 +163,9 @@ class ObservationKind {
                              Observation* ob, PlanSlot* slot) const = 0;
   // The noise level of the kind among the simulator's levels.
   virtual double NoiseLevel(const NoiseLevels& n) const = 0;
+  // The level of residual row k (a kind whose rows differ in unit; 0: the
+  // row's declared noise is the kind's default).
+  virtual double NoiseLevelRow(const NoiseLevels& n, int) const { return NoiseLevel(n); }
   // The noise inputs of observation i of a plan (SimulationPlan), from a
   // simulated entry (`slot`) or from a recorded observation (`rec`, `slot`
   // null).

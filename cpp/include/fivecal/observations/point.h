@@ -8,6 +8,11 @@
 #include "fivecal/observations/kind.h"
 #include "fivecal/observations/residuals.h"
 
+#include <functional>
+#include <nlohmann/json_fwd.hpp>
+#include <string>
+#include <vector>
+
 namespace fivecal {
 
 // The instrument's parameters as a residual sees them: pose corrections
@@ -44,6 +49,39 @@ Vec3<T> PointInInstrument(const Machine& m, const T* theta, const double* q, con
   const Vec3<T> P = F * Vec3<T>(target - p_last.template cast<T>());
   return RotZYX(angles[0], angles[1], angles[2]).transpose() * (P - origin);
 }
+
+// What the fixed-frame kinds (point, pose, distance) share: an instrument
+// id (Observation::setup) whose parameters are named instrument.<id>.*, and
+// a target on the tool or the workpiece side whose offsets
+// instrument.<id>.tool_x|y|z / .work_x|y|z are one group per id and side,
+// whichever kind brings it (a tracker's point and pose observations of one
+// target share them).
+namespace fixed_frame {
+// "target" ("tool" or "work", into Observation::target and on_tool) and
+// "target_point" of a file's observation; `where` names it.
+void ReadTarget(const nlohmann::json& o, const std::string& where, Observation* ob);
+void ValidateTarget(const Observation& o, const std::function<std::string()>& where);
+// "instrument" (a name without '.') into Observation::setup, and the nominal
+// pose "instrument_origin" (mm) and "instrument_angles" (degrees in the file).
+void ReadInstrument(const nlohmann::json& o, const std::string& where, Observation* ob);
+void ValidateInstrument(const Observation& o, const std::function<std::string()>& where);
+void WriteInstrument(const Observation& o, nlohmann::json* out);
+// The instrument pose instrument.<id>.x|y|z|a|b|c (one group per id).
+const std::vector<int>& AddInstrumentPose(const std::string& id, ParameterTable* t);
+const std::vector<int>& InstrumentPose(const ParameterTable& t, const std::string& id);
+// The target offsets instrument.<id>.<side>_x|y|z.
+const std::vector<int>& AddTargetOffsets(const std::string& id, const std::string& side, ParameterTable* t);
+const std::vector<int>& TargetOffsets(const ParameterTable& t, const std::string& id, const std::string& side);
+// The point kind's report: residual rows r[0..2] (instrument frame) turned
+// into F, at the measured target's place.
+void ReportPoint(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                 Eigen::Vector3d* vector);
+// The prior class of any instrument.<id>.<field> name (nullptr otherwise).
+const char* PriorClassOfName(const std::string& name);
+// The refusal of an id two kinds would give different parameters under one
+// name (a station and a tracker both called "L1").
+[[noreturn]] void IdClash(const std::string& id);
+}  // namespace fixed_frame
 
 class PointResidual {
  public:

@@ -29,6 +29,9 @@ struct NoiseLevels {
   double dbb = 0.0;     // mm, on the reading
   double ball3d = 0.0;  // mm, per component
   double point = 0.0;   // mm, per component (tracker, camera, CMM)
+  double pose = 0.0;        // mm, per position component of a 6D pose
+  double pose_angle = 0.0;  // rad, per orientation component of a 6D pose
+  double distance = 0.0;    // mm, on a distance reading (interferometer, laser tracer)
 };
 
 // spec JSON:
@@ -41,7 +44,9 @@ struct NoiseLevels {
 //           {"type": "dbb", "setup": "A1", "axes": {...}, "length": 100,
 //            "tool_ball": [...], "table_ball": [...]},
 //           {"type": "ball3d", "setup": "R1", "axes": {...}, "tool_ball": [...], "table_ball": [...]}],
-//  "sigma": 0.0006 | {"probe": .., "dbb": .., "ball3d": ..}, "seed": 1}
+//  "sigma": 0.0006 | {"probe": .., "dbb": .., "ball3d": .., "point": .., "pose": ..,
+//                     "pose_angle": .. (rad), "distance": ..}, "seed": 1}
+// A number sets every level in mm; pose_angle (rad) only the object sets.
 // Scale bar lengths are set to the true distance of the true sphere centres.
 Dataset Simulate(const std::string& spec_json);
 

@@ -83,8 +83,10 @@ class AnalyticResiduals;
 // uncertainty, of the order of a probe touch.
 constexpr double kScaleBarSigma = 0.001;
 
-// Declared noise of residual row k of an observation (mm).
-double ObservationSigma(const Observation& o, int k);
+// Declared noise of residual row k of an observation (mm, or rad for a
+// rotation row): its own sigma, else its instrument's (Dataset::
+// instrument_sigma), else its kind's default.
+double ObservationSigma(const Dataset& ds, const Observation& o, int k);
 
 class Problem {
  public:

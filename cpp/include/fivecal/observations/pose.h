@@ -1,0 +1,111 @@
+// Pose (docs/formats.md, observation type "pose"): a fixed-frame 6D
+// measurement -- a camera seeing a fiducial, a 6D tracker probe -- of a
+// target frame carried by the machine: the point kind's position plus the
+// target frame's orientation in the instrument frame.
+#ifndef FIVECAL_OBSERVATIONS_POSE_H_
+#define FIVECAL_OBSERVATIONS_POSE_H_
+
+#include <ceres/rotation.h>
+
+#include "fivecal/observations/point.h"
+
+namespace fivecal {
+
+// Residual (6 rows, instrument frame): rows 0-2 as the point kind's (mm),
+//
+//     r_p = R_I^T (P_F - o_I) - measured,
+//
+// rows 3-5 the rotation vector (rad) of the orientation misfit,
+//
+//     r_R = log(R_m^T R_p),   R_p = R_I^T R_F R_t,
+//
+//   R_F  the rotation of the carrying chain frame (tool or workpiece side) at
+//        the pose, as the point kind's T_t, T_w;
+//   R_t  the target frame on its side: exp(target_rotation) Rz(c) Ry(b) Rx(a),
+//        the nominal orientation of the file and the corrections
+//        instrument.<id>.tool_a|b|c (or work_a|b|c) in the target's frame;
+//   R_m  exp(measured_rotation), the instrument's reading;
+//   R_I  the instrument orientation as the point kind's.
+// log is ceres::RotationMatrixToAngleAxis, whose small-angle branch keeps
+// the value and the Jet derivatives right at and near zero rotation (the fit
+// ends there). Only the templated form exists (analytic() is false).
+struct PoseRefs {
+  InstrumentRefs point;
+  SetupRef target_angle[3];
+};
+
+template <typename T>
+void PoseInInstrument(const Machine& m, const T* theta, const double* q, const int* dir, bool on_tool,
+                      const Vec3<T>& target, const Mat3<T>& target_R, const Vec3<T>& origin, const T* angles,
+                      Vec3<T>* position, Mat3<T>* R) {
+  Eigen::Vector3d p_last;
+  const Frame<T> F = ChainFrame<T>(m, on_tool ? m.tool_chain() : m.workpiece_chain(), theta, q, dir, &p_last);
+  const Mat3<T> RIt = RotZYX(angles[0], angles[1], angles[2]).transpose();
+  *position = RIt * (F * Vec3<T>(target - p_last.template cast<T>()) - origin);
+  *R = RIt * F.R * target_R;
+}
+
+// exp(v) of a rotation vector (rad).
+template <typename T>
+Mat3<T> RotationOfVector(const Vec3<T>& v) {
+  Mat3<T> R;
+  ceres::AngleAxisToRotationMatrix(v.data(), R.data());  // column-major, as Eigen's default
+  return R;
+}
+
+// log(R) as a rotation vector (rad).
+template <typename T>
+Vec3<T> VectorOfRotation(const Mat3<T>& R) {
+  Vec3<T> v;
+  ceres::RotationMatrixToAngleAxis(R.data(), v.data());
+  return v;
+}
+
+class PoseResidual {
+ public:
+  PoseResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const PoseRefs& refs)
+      : access_(ctx), pose_(*ctx->machine, o), o_(o), refs_(refs),
+        measured_RT_(RotationOfVector<double>(o.measured_rotation).transpose()),
+        target_R0_(RotationOfVector<double>(o.target_rotation)) {}
+
+  template <typename T>
+  bool operator()(T const* const* p, T* residual) const {
+    std::vector<T> theta;
+    access_.Theta(p, &theta);
+    Vec3<T> target = o_.target_point.template cast<T>();
+    Vec3<T> origin = o_.instrument_origin.template cast<T>();
+    T ang[3], tang[3];
+    for (int i = 0; i < 3; ++i) {
+      target[i] += access_.Setup(p, refs_.point.target[i]);
+      origin[i] += access_.Setup(p, refs_.point.position[i]);
+      ang[i] = T(o_.instrument_angles[i]) + access_.Setup(p, refs_.point.angle[i]);
+      tang[i] = access_.Setup(p, refs_.target_angle[i]);
+    }
+    const Mat3<T> target_R = target_R0_.template cast<T>() * RotZYX(tang[0], tang[1], tang[2]);
+    Vec3<T> P;
+    Mat3<T> R;
+    PoseInInstrument<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(), o_.on_tool, target,
+                        target_R, origin, ang, &P, &R);
+    const Vec3<T> rp = P - o_.measured.template cast<T>();
+    const Mat3<T> misfit = measured_RT_.template cast<T>() * R;
+    const Vec3<T> rr = VectorOfRotation<T>(misfit);
+    for (int i = 0; i < 3; ++i) {
+      residual[i] = rp[i];
+      residual[3 + i] = rr[i];
+    }
+    return true;
+  }
+
+ private:
+  const ParameterAccess access_;
+  const PoseData pose_;
+  const Observation o_;
+  const PoseRefs refs_;
+  const Eigen::Matrix3d measured_RT_, target_R0_;
+};
+
+const ObservationKind& PoseKind();
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_OBSERVATIONS_POSE_H_

@@ -1,0 +1,188 @@
+#include "fivecal/observations/pose.h"
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/observations/simulate.h"
+#include "fivecal/solve/problem.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using namespace json_util;
+
+constexpr double kTwoPi = 2 * 3.14159265358979323846;
+const char* kXYZ[3] = {"x", "y", "z"};
+const char* kABC[3] = {"a", "b", "c"};
+
+// The target frame's orientation corrections instrument.<id>.<side>_a|b|c,
+// one group per id and side (a point observation of the same target has no
+// use for them).
+std::string AngleKey(const Observation& o) { return o.setup + "." + o.target; }
+std::string AnglePrefix(const Observation& o) { return "instrument." + o.setup + "." + o.target + "_"; }
+
+class Kind final : public ObservationKind {
+ public:
+  ObservationType type() const override { return ObservationType::kPose; }
+  const char* name() const override { return "pose"; }
+  const char* label() const override { return "fixed-frame 6D pose (camera fiducial, 6D tracker)"; }
+  int rows() const override { return 6; }
+  const char* unit_row(int k) const override { return k < 3 ? "mm" : "rad"; }
+  // A 6D tracker or a camera over a machine-tool volume: ten micrometres in
+  // position, about 50 microradians (10 arc seconds) in orientation.
+  double default_sigma() const override { return 0.01; }
+  double default_sigma_row(int k) const override { return k < 3 ? 0.01 : 5e-5; }
+  bool has_instrument() const override { return true; }
+  bool analytic() const override { return false; }
+
+  std::vector<const char*> json_keys() const override {
+    return {"type", "instrument", "axes", "direction", "measured", "measured_rotation", "target", "target_point",
+            "target_rotation", "instrument_origin", "instrument_angles", "sigma", "id"};
+  }
+  void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
+    ReadOwn(o, w, ob);
+    ob->measured = ReadVector3(o.value("measured", json()), w + ".measured");
+    ob->measured_rotation = ReadVector3(o.value("measured_rotation", json()), w + ".measured_rotation", kTwoPi);
+  }
+  void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
+    fixed_frame::ValidateInstrument(o, w);
+    auto bounded = [&](const Eigen::Vector3d& v, double bound, const char* field) {
+      for (int c = 0; c < 3; ++c)
+        if (!(std::abs(v[c]) <= bound)) RequireBounded(v[c], bound, w() + "." + field + "[" + std::to_string(c) + "]");
+    };
+    bounded(o.measured, kMaxLinear, "measured");
+    bounded(o.measured_rotation, kTwoPi, "measured_rotation");
+    bounded(o.target_rotation, kTwoPi, "target_rotation");
+    fixed_frame::ValidateTarget(o, w);
+  }
+  void Write(const Observation& o, json* jo) const override {
+    fixed_frame::WriteInstrument(o, jo);
+    (*jo)["target_point"] = Array3(o.target_point);
+    (*jo)["measured"] = Array3(o.measured);
+    (*jo)["measured_rotation"] = Array3(o.measured_rotation);
+    if (!o.target_rotation.isZero()) (*jo)["target_rotation"] = Array3(o.target_rotation);
+  }
+
+  // ---- setup: the instrument's pose, the target's offsets (shared with the
+  // point kind) and the target frame's orientation, all estimated by default:
+  // a fiducial's orientation on a spindle or a table is never known exactly ----
+  void AddObservationParameters(const Observation& o, ParameterTable* t) const override {
+    fixed_frame::AddInstrumentPose(o.setup, t);
+    fixed_frame::AddTargetOffsets(o.setup, o.target, t);
+    if (!t->has_group(type(), AngleKey(o))) {
+      std::vector<int> idx;
+      for (const char* f : kABC) idx.push_back(t->Add(AnglePrefix(o) + f));
+      t->AddGroup(type(), AngleKey(o), idx);
+    }
+  }
+  void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
+                    std::set<int>* out) const override {
+    for (int i : fixed_frame::InstrumentPose(t, o.setup)) out->insert(i);
+    for (int i : fixed_frame::TargetOffsets(t, o.setup, o.target)) out->insert(i);
+    for (int i : t.group(type(), AngleKey(o))) out->insert(i);
+  }
+  bool IsParameterName(const std::string&) const override { return false; }  // instrument.*
+  std::vector<PriorClass> prior_classes() const override {
+    return {{"target_angle", 0.05, "rad",
+             "instrument.<id>.tool_a|b|c, .work_a|b|c: correction of a pose target's nominal orientation (3 deg)"}};
+  }
+  const char* PriorClassOfName(const std::string& n) const override { return fixed_frame::PriorClassOfName(n); }
+  std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const override {
+    return fixed_frame::InstrumentPose(t, o.setup);
+  }
+
+  void AddResidual(ResidualBuilder& b, const Observation& o) const override {
+    const auto& g = fixed_frame::InstrumentPose(b.table, o.setup);
+    const auto& tg = fixed_frame::TargetOffsets(b.table, o.setup, o.target);
+    const auto& ag = b.table.group(type(), AngleKey(o));
+    PoseRefs refs;
+    for (int c = 0; c < 3; ++c) {
+      refs.point.position[c] = b.Ref(g[c]);
+      refs.point.angle[c] = b.Ref(g[3 + c]);
+      refs.point.target[c] = b.Ref(tg[c]);
+      refs.target_angle[c] = b.Ref(ag[c]);
+    }
+    b.Add(new PoseResidual(b.context, o, refs), 6);
+  }
+  void PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&, AnalyticRow*) const override {
+    throw std::logic_error("pose: no analytic batch (analytic() is false)");
+  }
+  void EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const override {
+    throw std::logic_error("pose: no analytic batch (analytic() is false)");
+  }
+
+  // ---- simulation ----
+  std::vector<const char*> plan_keys() const override {
+    return {"type", "instrument", "axes", "direction", "target", "target_point", "target_rotation",
+            "instrument_origin", "instrument_angles", "id"};
+  }
+  void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
+                     PlanSlot*) const override {
+    ReadOwn(e, w, ob);
+    const std::string pre = "instrument." + ob->setup + ".", tpre = AnglePrefix(*ob);
+    Observation truth = *ob;
+    double tang[3];
+    for (int c = 0; c < 3; ++c) {
+      truth.instrument_origin[c] += t.setup(pre + kXYZ[c]);
+      truth.instrument_angles[c] += t.setup(pre + kABC[c]);
+      truth.target_point[c] += t.setup(tpre + kXYZ[c]);
+      tang[c] = t.setup(tpre + kABC[c]);
+    }
+    const Machine& m = t.dataset->machine();
+    const PoseData pose(m, *ob);
+    const double ang[3] = {truth.instrument_angles[0], truth.instrument_angles[1], truth.instrument_angles[2]};
+    const Eigen::Matrix3d target_R =
+        RotationOfVector<double>(truth.target_rotation) * RotZYX(tang[0], tang[1], tang[2]);
+    Eigen::Matrix3d R;
+    PoseInInstrument<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), ob->on_tool, truth.target_point,
+                             target_R, truth.instrument_origin, ang, &ob->measured, &R);
+    ob->measured_rotation = VectorOfRotation<double>(R);
+  }
+  double NoiseLevel(const NoiseLevels& n) const override { return n.pose; }
+  double NoiseLevelRow(const NoiseLevels& n, int k) const override { return k < 3 ? n.pose : n.pose_angle; }
+  // Rotation noise is a small rotation of the reading in the target frame,
+  // R_m exp(x e_k), so that it enters the residual row k as -x exactly (a
+  // noise added to the rotation vector's components would reach the rows
+  // through the non-orthogonal Jacobian of exp at large rotations).
+  void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
+    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, plan->noise.pose);
+    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, 3 + c, -1.0, plan->noise.pose_angle);
+  }
+  void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
+    if (c < 3) {
+      o->measured[c] = plan.measured0[i][c] + x;
+      return;
+    }
+    // Composed onto the reading's current orientation: each rotation input
+    // is applied once, in input order, starting from the noise-free one.
+    Eigen::Vector3d e = Eigen::Vector3d::Zero();
+    e[c - 3] = x;
+    o->measured_rotation =
+        VectorOfRotation<double>(RotationOfVector<double>(o->measured_rotation) * RotationOfVector<double>(e));
+  }
+
+  // ---- report: the position rows, as the point kind's ----
+  void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                    Eigen::Vector3d* vector) const override {
+    fixed_frame::ReportPoint(c, o, r, point, vector);
+  }
+
+ private:
+  static void ReadOwn(const json& o, const std::string& w, Observation* ob) {
+    fixed_frame::ReadInstrument(o, w, ob);
+    fixed_frame::ReadTarget(o, w, ob);
+    if (o.contains("target_rotation"))
+      ob->target_rotation = ReadVector3(o["target_rotation"], w + ".target_rotation", kTwoPi);
+  }
+};
+
+}  // namespace
+
+const ObservationKind& PoseKind() {
+  static const Kind kind;
+  return kind;
+}
+
+}  // namespace fivecal

@@ -1,0 +1,134 @@
+"""The distance kind (tracking interferometer, laser tracer): multilateration
+of a reflector on the tool and one on the table of a machine with rotary
+axes on both sides (C on the table, B on the head) from several stations.
+The stations' positions, their dead lengths and the reflectors' offsets are
+estimated with the machine errors."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import fivecal
+
+MACHINE = {"name": "table-head", "topology": "wCfXYZBt",
+           "axes": {"C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]},
+                    "X": {"type": "linear", "direction": [1, 0, 0]},
+                    "Y": {"type": "linear", "direction": [0, 1, 0]},
+                    "Z": {"type": "linear", "direction": [0, 0, 1]},
+                    "B": {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}},
+           "tool": {"tip": [0, 0, 150]}}
+# Five stations around and above the machine, not in one plane; each
+# station's dead length (the distance at reading 0) is roughly known.
+STATIONS = {"L1": [900, -700, 150], "L2": [-800, -600, 650], "L3": [700, 800, 900], "L4": [-900, 700, 100],
+            "L5": [50, -50, 1400]}
+DEAD = {"L1": 200.0, "L2": 180.0, "L3": 220.0, "L4": 190.0, "L5": 210.0}
+TRUTH = {"EA0B": 3e-5, "EC0B": -4e-5, "EX0C": 0.03, "EY0C": -0.02, "EA0C": 2e-5, "EB0C": -3e-5,
+         "EB0Z": 5e-5, "EXX1": 2e-5}
+SETUP = {"instrument.L1.x": 0.3, "instrument.L1.length": 0.05, "instrument.L2.y": -0.2, "instrument.L2.length": -0.03,
+         "instrument.L3.z": 0.15, "instrument.L4.x": -0.1, "instrument.L4.length": 0.02, "instrument.L5.y": 0.1,
+         "instrument.tracer.tool_z": 0.05, "instrument.tracer.tool_x": -0.02,
+         "instrument.tracer.work_x": 0.04, "instrument.tracer.work_y": -0.03}
+# As with a free tracker pose (the point kind): the tool reflector's y, along
+# B, moves every tool point the way the stations' y do.
+FIXED = ["instrument.tracer.tool_y"]
+NOISE = {"distance": 0.001}
+
+
+def _plan(rng, n=30, stations=STATIONS):
+    plan = []
+    for _ in range(n):
+        axes = {"X": float(rng.uniform(-200, 200)), "Y": float(rng.uniform(-200, 200)),
+                "Z": float(rng.uniform(-100, 100)), "B": float(rng.uniform(-60, 60)), "C": float(rng.uniform(0, 360))}
+        for target, point in (("tool", [0, 0, 150]), ("work", [120, 40, 20])):
+            for s in stations:
+                plan.append({"type": "distance", "station": s, "target": target, "target_point": point,
+                             "axes": axes, "station_position": STATIONS[s], "dead_length": DEAD[s]})
+    return plan
+
+
+@pytest.fixture(scope="module")
+def machine():
+    return fivecal.Machine.from_dict(MACHINE)
+
+
+def _data(machine, seed, **kw):
+    rng = np.random.default_rng(seed)
+    return fivecal.simulate(machine, _plan(rng, **kw), errors=TRUTH, setup=SETUP, sigma=NOISE, seed=seed)
+
+
+def _fit(machine, seed):
+    ds = _data(machine, seed)
+    return ds, fivecal.identify(ds, list(TRUTH), fix=FIXED)
+
+
+def test_multilateration_recovers_machine_stations_and_dead_lengths_within_3_sigma(machine):
+    ds, r = _fit(machine, 3)
+    assert r.verdict == "ok", (r.verdict, r.adequacy)
+    full = {**TRUTH, **SETUP}
+    for n in r.estimated:
+        assert abs(r.values[n] - full.get(n, 0.0)) < 3 * r.std[n], (n, r.values[n], full.get(n, 0.0), r.std[n])
+    # Station positions, dead lengths and reflector offsets: the default setup.
+    want = {f"instrument.{s}.{f}" for s in STATIONS for f in ("x", "y", "z", "length")}
+    want |= {"instrument.tracer.tool_x", "instrument.tracer.tool_z"} | {f"instrument.tracer.work_{f}" for f in "xyz"}
+    assert want <= set(r.estimated)
+
+
+def test_coverage_of_the_distance_fit_over_100_simulations(machine):
+    inside1 = inside2 = total = 0
+    full = {**TRUTH, **SETUP}
+    for seed in range(100):
+        _, r = _fit(machine, 300 + seed)
+        for n in list(TRUTH) + list(SETUP):
+            z = abs(r.values[n] - full[n]) / r.std[n]
+            total += 1
+            inside1 += z < 1.0
+            inside2 += z < 1.96
+    assert 0.62 <= inside1 / total <= 0.74, inside1 / total
+    assert 0.92 <= inside2 / total <= 0.98, inside2 / total
+
+
+def test_one_station_is_reported_undetermined_not_a_confident_number(machine):
+    rng = np.random.default_rng(5)
+    setup = {k: v for k, v in SETUP.items() if not k.startswith(("instrument.L2", "instrument.L3", "instrument.L4",
+                                                                    "instrument.L5"))}
+    ds = fivecal.simulate(machine, _plan(rng, stations=["L1"]), errors=TRUTH, setup=setup, sigma=NOISE, seed=5)
+    with pytest.raises(ValueError, match=r"not determined"):
+        fivecal.identify(ds, list(TRUTH), fix=FIXED)
+    with pytest.warns(Warning, match="did not determine"):
+        r = fivecal.identify(ds, list(TRUTH), fix=FIXED, allow_unidentifiable=True)
+    assert r.unidentifiable, "one station cannot fix a 3D point, let alone the machine"
+
+
+def test_file_round_trip_and_bad_fields(machine):
+    doc = _data(machine, 1, n=2).to_dict()
+    o = doc["observations"][0]
+    assert o["type"] == "distance" and o["station"] == "L1" and "setup" not in o
+    assert o["station_position"] == STATIONS["L1"] and o["dead_length"] == DEAD["L1"]
+    assert "instrument" not in o  # the default tracer
+    again = fivecal.Dataset.from_dict(json.loads(json.dumps(doc)))
+    assert again.to_dict()["observations"] == doc["observations"]
+    for field, value, words in (("station", "L.1", "station"), ("reading", "x", "reading"),
+                                ("station_position", [0, 0], "station_position"),
+                                ("dead_length", float("nan"), "dead_length"),
+                                ("instrument", "", "instrument"), ("stations", "L1", "stations"),
+                                ("sigma", [0.001, 0.001], "sigma")):
+        bad = json.loads(json.dumps(doc))
+        bad["observations"][1][field] = value
+        with pytest.raises(ValueError, match=words):
+            fivecal.Dataset.from_dict(bad)
+    for missing in ("reading", "station_position", "station"):
+        bad = json.loads(json.dumps(doc))
+        del bad["observations"][1][missing]
+        with pytest.raises(ValueError, match=r"observations\[1\]\." + missing):
+            fivecal.Dataset.from_dict(bad)
+
+
+def test_a_station_named_like_a_tracker_is_refused(machine):
+    doc = _data(machine, 1, n=2).to_dict()
+    doc["observations"].append({"type": "point", "instrument": "L1", "target": "tool", "target_point": [0, 0, 150],
+                                "axes": doc["observations"][0]["axes"], "measured": [0, 0, 0]})
+    ds = fivecal.Dataset.from_dict(doc)
+    with pytest.raises(ValueError, match=r"L1. names both a distance station and a point/pose instrument"):
+        fivecal.identify(ds, [])
