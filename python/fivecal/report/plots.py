@@ -416,11 +416,15 @@ def component_figure(result, kind: str = "ball3d", title: Optional[str] = None):
                 ax = axes[2 * s_i + row][c]
                 for g in groups:
                     sel = np.flatnonzero(np.array(labels) == g)
+                    # a line only where the group was recorded as a sweep of
+                    # the angle (monotonic in recording order): scattered
+                    # poses joined by a line would read as a trend
+                    steps = np.diff(angles[sel])
+                    sweep = len(np.unique(np.round(angles[sel], 6))) >= 3 and \
+                        ((steps >= -1e-9).all() or (steps <= 1e-9).all())
                     sel = sel[np.argsort(angles[sel], kind="stable")]
                     color = colors[labels_all.index(g)] if g else "#1f4e9a"
-                    # a line only where the group sweeps the angle: two
-                    # scattered poses joined by a line would read as a trend
-                    style = "-o" if len(np.unique(np.round(angles[sel], 6))) >= 3 else "o"
+                    style = "-o" if sweep else "o"
                     ax.plot(angles[sel], data[sel, c], style, ms=2.5 if style == "-o" else 3.5, lw=1.1,
                             color=color)
                 _limits(ax, angles, data[:, c], margin=0.05)
