@@ -64,9 +64,11 @@ def make_spec(machine, plan: Sequence[Mapping], errors: Optional[Mapping] = None
             "plan": list(plan), "sigma": sigma, "seed": seed_value(seed)}
 
 
-def _noise_levels(sigma, default: float) -> tuple:
+def _noise_levels(sigma, default: float) -> dict:
+    # One level per noise class of the registered kinds (probe, dbb, ball3d, point, ...).
+    classes = list(_core.noise_classes())
     if sigma is None:
-        return default, default, default
+        return {c: default for c in classes}
 
     def level(v, name):
         try:
@@ -78,12 +80,12 @@ def _noise_levels(sigma, default: float) -> tuple:
         return x
 
     if isinstance(sigma, Mapping):
-        unknown = sorted(set(map(str, sigma)) - {"probe", "dbb", "ball3d"})
+        unknown = sorted(set(map(str, sigma)) - set(classes))
         if unknown:
-            raise ValueError(f"sigma.{unknown[0]}: unknown key (probe, dbb, ball3d)")
-        return tuple(level(sigma.get(k, default), f"sigma.{k}") for k in ("probe", "dbb", "ball3d"))
+            raise ValueError(f"sigma.{unknown[0]}: unknown key ({', '.join(classes)})")
+        return {k: level(sigma.get(k, default), f"sigma.{k}") for k in classes}
     x = level(sigma, "sigma")
-    return x, x, x
+    return {c: x for c in classes}
 
 
 def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
@@ -91,7 +93,8 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
     ``plan``, or the path of one), or from a dataset (a :class:`Dataset`, a
     dataset dict or path): then the readings are the centre of the noise, the
     parameter values are those of ``identify(dataset, estimate)`` and the
-    noise is ``sigma`` (mm; a number or ``{"probe", "dbb", "ball3d"}``),
+    noise is ``sigma`` (mm; a number or ``{"probe", "dbb", "ball3d", ...}``, one per
+    noise class of ``fivecal._core.noise_classes()``),
     default the fit's residual standard deviation.  Returns ``(plan, fit)``
     (``fit`` is None for a spec)."""
     if isinstance(source, _core.SimulationPlan):
@@ -110,9 +113,9 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
         return _core.SimulationPlan.from_spec(dumps(spec, "spec")), None
     ds = Dataset.from_dict(source)
     fit = identify(ds, estimate if estimate is not None else "auto", fix=fix, initial=initial)
-    probe, dbb, ball3d = _noise_levels(sigma, fit.sigma)
+    noise = _noise_levels(sigma, fit.sigma)
     values = dict(zip(fit._core.names, np.asarray(fit._core.values, float)))
-    return _core.SimulationPlan.from_dataset(ds._core, values, probe, dbb, ball3d), fit
+    return _core.SimulationPlan.from_dataset(ds._core, values, noise), fit
 
 
 # --------------------------------------------------------------------------

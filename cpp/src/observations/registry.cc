@@ -1,11 +1,13 @@
 #include "fivecal/observations/registry.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "fivecal/observations/ball3d.h"
 #include "fivecal/observations/dbb.h"
 #include "fivecal/observations/facet.h"
 #include "fivecal/observations/point.h"
+#include "fivecal/observations/simulate.h"
 #include "fivecal/observations/sphere.h"
 
 namespace fivecal {
@@ -56,6 +58,15 @@ std::string KindList() {
   for (const ObservationKind* k : ObservationKinds()) out += (out.empty() ? "" : ", ") + std::string(k->name());
   return out;
 }
+
+std::vector<std::string> NoiseClasses() {
+  std::vector<std::string> out;
+  for (const ObservationKind* k : ObservationKinds())
+    if (std::find(out.begin(), out.end(), k->noise_class()) == out.end()) out.push_back(k->noise_class());
+  return out;
+}
+
+double ObservationKind::NoiseLevel(const NoiseLevels& n) const { return n.Of(noise_class()); }
 
 bool HasLengthReference(const Dataset& ds) {
   for (const Observation& o : ds.observations)

@@ -365,11 +365,9 @@ constexpr double kMinRedundancy = 5.0;
 // for noise (the plain chi-square test flags sqrt(2) x already).
 constexpr double kMaxNoiseFactor = 3.0;
 
-// The instrument group of an observation: the variance component it shares.
-std::string NoiseGroup(const Observation& o) {
-  const ObservationKind& k = KindOf(o);
-  return k.probe_touch() ? "probe" : k.name();
-}
+// The instrument group of an observation: the variance component it shares
+// (the simulator's noise class).
+std::string NoiseGroup(const Observation& o) { return KindOf(o).noise_class(); }
 
 // Every residual row's declared sigma (ObservationSigma, as the problem weighs it).
 Eigen::VectorXd DeclaredSigma(const Observation& o) {

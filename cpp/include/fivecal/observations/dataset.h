@@ -5,6 +5,7 @@
 #define FIVECAL_DATASET_H_
 
 #include <Eigen/Core>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -72,6 +73,10 @@ struct Observation {
   bool on_tool = true;
   Eigen::Vector3d instrument_origin = Eigen::Vector3d::Zero();
   Eigen::Vector3d instrument_angles = Eigen::Vector3d::Zero();
+  // A kind's own numbers that no field above holds, by a name of the kind's
+  // choosing (its file key, say): a new kind keeps them here, so that it
+  // adds no field to this struct. Read, validated and written by the kind.
+  std::map<std::string, Eigen::VectorXd> own;
   // Declared noise (one sigma, mm): empty = DefaultSigma(type); otherwise one
   // value per residual row (ResidualRows(type)), finite and > 0. A file's
   // single number is expanded to every row.
