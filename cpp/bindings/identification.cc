@@ -125,10 +125,20 @@ void BindIdentification(py::module_& m) {
       d["unit"] = k->unit();
       d["rows"] = k->rows();
       d["default_sigma"] = k->default_sigma();
+      d["noise_class"] = k->noise_class();
+      d["noise_classes"] = k->noise_classes();
+      // The keys of a dataset observation and of a plan entry: the schemas
+      // of a kind no schema file describes are built from them.
+      const auto keys = k->json_keys();
+      d["json_keys"] = std::vector<std::string>(keys.begin(), keys.end());
+      const auto plan = k->plan_keys();
+      d["plan_keys"] = std::vector<std::string>(plan.begin(), plan.end());
       out.append(d);
     }
     return out;
   });
+
+  m.def("noise_classes", &NoiseClasses);
 
   m.def("simulate", &Simulate, py::arg("spec_json"), py::call_guard<py::gil_scoped_release>());
 

@@ -33,21 +33,15 @@ void BindUncertainty(py::module_& m) {
                   py::call_guard<py::gil_scoped_release>())
       .def_static(
           "from_dataset",
-          [](const Dataset& ds, const std::map<std::string, double>& values, double probe, double dbb,
-             double ball3d, double point, double pose, double pose_angle, double distance) {
+          // noise: one sigma (mm) per noise class (fivecal._core.noise_classes()).
+          [](const Dataset& ds, const std::map<std::string, double>& values,
+             const std::map<std::string, double>& noise) {
             NoiseLevels n;
-            n.probe = probe;
-            n.dbb = dbb;
-            n.ball3d = ball3d;
-            n.point = point;
-            n.pose = pose;
-            n.pose_angle = pose_angle;
-            n.distance = distance;
+            n.level = noise;
             py::gil_scoped_release release;
             return PlanFromDataset(ds, values, n);
           },
-          py::arg("dataset"), py::arg("values"), py::arg("probe"), py::arg("dbb"), py::arg("ball3d"),
-          py::arg("point") = 0.0, py::arg("pose") = 0.0, py::arg("pose_angle") = 0.0, py::arg("distance") = 0.0)
+          py::arg("dataset"), py::arg("values"), py::arg("noise"))
       .def_readonly("base", &SimulationPlan::base)
       .def_readonly("seed", &SimulationPlan::seed)
       .def_readonly("values", &SimulationPlan::values)

@@ -57,13 +57,59 @@ def schema_path(kind: str) -> str:
 
 @lru_cache(maxsize=None)
 def load_schema(kind: str) -> dict:
-    """The schema of ``kind`` as a dict."""
+    """The schema of ``kind`` as a dict (dataset and spec: with every
+    registered observation kind, see :func:`_with_registered_kinds`)."""
     if kind == "common":
         path = os.path.join(_DIR, "common.schema.json")
     else:
         path = schema_path(kind)
     with open(path, encoding="utf-8") as f:
-        return json.load(f)
+        s = json.load(f)
+    return _with_registered_kinds(kind, s) if kind in _KIND_ITEMS else s
+
+
+# Where a file lists observation kinds: the $defs entry of one observation
+# (plan entry) and the registry field with its keys.
+_KIND_ITEMS = {"dataset": ("observation", "json_keys"), "spec": ("plan_item", "plan_keys")}
+_KEY_SCHEMAS = {"axes": {"$ref": "common.schema.json#/$defs/axes"},
+                "direction": {"$ref": "common.schema.json#/$defs/direction"},
+                "id": {"type": "string"},
+                "sigma": {"description": "mm (rad for rotation rows): one number or one per residual row",
+                          "anyOf": [{"type": "number", "exclusiveMinimum": 0},
+                                    {"type": "array", "minItems": 1,
+                                     "items": {"type": "number", "exclusiveMinimum": 0}}]}}
+
+
+def _with_registered_kinds(kind: str, s: dict) -> dict:
+    """The observation kinds of a dataset or spec schema follow the C++
+    registry (``_core.observation_kinds()``), so a new kind needs no schema
+    edit: the type enum lists every registered kind, a kind the file does not
+    describe gets a block made of its keys (an unknown key is refused here;
+    the C++ loader checks the values, naming the field), and the spec's
+    ``sigma`` object takes every noise class."""
+    try:
+        from . import _core
+
+        kinds, classes = _core.observation_kinds(), _core.noise_classes()
+    except (ImportError, AttributeError):  # a module built before the registry said so
+        return s
+    item_def, keys_field = _KIND_ITEMS[kind]
+    item = s["$defs"][item_def]
+    enum = item["properties"]["type"]["enum"]
+    for k in kinds:
+        if k["name"] in enum:
+            continue
+        enum.append(k["name"])
+        props = {key: dict(_KEY_SCHEMAS.get(key, {})) for key in k[keys_field]}
+        props["type"] = {"const": k["name"]}
+        item.setdefault("allOf", []).append(
+            {"if": {"properties": {"type": {"const": k["name"]}}, "required": ["type"]},
+             "then": {"type": "object", "additionalProperties": False, "required": ["type"], "properties": props}})
+    if kind == "spec":
+        levels = s["properties"]["sigma"]["then"]["properties"]
+        for c in classes:
+            levels.setdefault(c, {"type": "number", "minimum": 0})
+    return s
 
 
 def _finite_number(checker, instance) -> bool:

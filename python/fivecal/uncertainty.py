@@ -65,14 +65,17 @@ def make_spec(machine, plan: Sequence[Mapping], errors: Optional[Mapping] = None
             "plan": list(plan), "sigma": sigma, "seed": seed_value(seed)}
 
 
-_MM_LEVELS = ("probe", "dbb", "ball3d", "point", "pose", "distance")
-_LEVELS = _MM_LEVELS + ("pose_angle",)
+def _angular(noise_class: str) -> bool:
+    # "<kind>_angle" classes are rotation noise in rad (a pose's orientation rows)
+    return noise_class.endswith("_angle")
 
 
 def _noise_levels(sigma, default: float, default_angle: float = 0.0) -> dict:
-    """The simulator's noise levels: mm ones, and ``pose_angle`` (rad)."""
+    """One simulator noise level per noise class of the registered kinds
+    (``fivecal._core.noise_classes()``): mm, rad for the ``*_angle`` ones."""
+    classes = list(_core.noise_classes())
     if sigma is None:
-        return {**{k: default for k in _MM_LEVELS}, "pose_angle": default_angle}
+        return {c: default_angle if _angular(c) else default for c in classes}
 
     def level(v, name, unit="mm"):
         try:
@@ -84,15 +87,14 @@ def _noise_levels(sigma, default: float, default_angle: float = 0.0) -> dict:
         return x
 
     if isinstance(sigma, Mapping):
-        unknown = sorted(set(map(str, sigma)) - set(_LEVELS))
+        unknown = sorted(set(map(str, sigma)) - set(classes))
         if unknown:
-            raise ValueError(f"sigma.{unknown[0]}: unknown key ({', '.join(_LEVELS)})")
-        out = {k: level(sigma.get(k, default), f"sigma.{k}") for k in _MM_LEVELS}
-        out["pose_angle"] = level(sigma.get("pose_angle", default_angle), "sigma.pose_angle", "rad")
-        return out
+            raise ValueError(f"sigma.{unknown[0]}: unknown key ({', '.join(classes)})")
+        return {c: level(sigma.get(c, default_angle if _angular(c) else default), f"sigma.{c}",
+                         "rad" if _angular(c) else "mm") for c in classes}
     x = level(sigma, "sigma")
     # A number is in mm: a pose's rotation rows keep their own default.
-    return {**{k: x for k in _MM_LEVELS}, "pose_angle": default_angle}
+    return {c: default_angle if _angular(c) else x for c in classes}
 
 
 def _rotation_rms(fit) -> float:
@@ -106,9 +108,10 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
     ``plan``, or the path of one), or from a dataset (a :class:`Dataset`, a
     dataset dict or path): then the readings are the centre of the noise, the
     parameter values are those of ``identify(dataset, estimate)`` and the
-    noise is ``sigma`` (mm; a number or ``{"probe", "dbb", "ball3d", "point",
-    "pose", "pose_angle" (rad), "distance"}``), default the fit's residual
-    standard deviation (for a pose's rotation rows, their rms, rad).  Returns ``(plan, fit)``
+    noise is ``sigma`` (mm; a number or ``{"probe", "dbb", "ball3d", ...}``, one per
+    noise class of ``fivecal._core.noise_classes()``; ``pose_angle`` in rad),
+    default the fit's residual standard deviation (for a pose's rotation rows,
+    their rms, rad).  Returns ``(plan, fit)``
     (``fit`` is None for a spec)."""
     if isinstance(source, _core.SimulationPlan):
         return source, None
@@ -126,9 +129,9 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
         return _core.SimulationPlan.from_spec(dumps(spec, "spec")), None
     ds = Dataset.from_dict(source)
     fit = identify(ds, estimate if estimate is not None else "auto", fix=fix, initial=initial)
-    levels = _noise_levels(sigma, fit.sigma, _rotation_rms(fit))
+    noise = _noise_levels(sigma, fit.sigma, _rotation_rms(fit))
     values = dict(zip(fit._core.names, np.asarray(fit._core.values, float)))
-    return _core.SimulationPlan.from_dataset(ds._core, values, **levels), fit
+    return _core.SimulationPlan.from_dataset(ds._core, values, noise), fit
 
 
 # --------------------------------------------------------------------------

@@ -245,6 +245,12 @@ TEST_P(EveryKind, FileFieldsRoundTrip) {
     EXPECT_EQ(a.table_ball, b.table_ball);
     EXPECT_EQ(a.measured, b.measured);
     EXPECT_EQ(a.sigma, b.sigma);
+    ASSERT_EQ(a.own.size(), b.own.size());
+    for (const auto& [key, v] : a.own) {
+      ASSERT_TRUE(b.own.count(key)) << key;
+      EXPECT_EQ(v.size(), b.own.at(key).size()) << key;
+      if (v.size() == b.own.at(key).size()) EXPECT_EQ(v, b.own.at(key)) << key;
+    }
   }
   // An unknown key is refused, naming the observation and the kind's keys.
   json bad = j;

@@ -97,7 +97,7 @@ TEST(SimulationPlan, FromDatasetKeepsTheReadingsAndAddsNoiseAlongTheNormals) {
   const Dataset ds = Simulate(TangoSpec());
   const SimulationPlan truth_plan = BuildSimulationPlan(TangoSpec());
   NoiseLevels noise;
-  noise.probe = 0.001;
+  noise.level["probe"] = 0.001;
   const SimulationPlan plan = PlanFromDataset(ds, truth_plan.values, noise);
   EXPECT_EQ(plan.num_inputs(), truth_plan.num_inputs());
   ExpectSameReadings(plan.base, ds);

@@ -73,9 +73,8 @@ class Kind final : public BallMountKind {
   std::vector<const char*> plan_keys() const override {
     return {"type", "setup", "axes", "tool_ball", "table_ball", "direction", "id"};
   }
-  double NoiseLevel(const NoiseLevels& n) const override { return n.ball3d; }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
-    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, plan->noise.ball3d);
+    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
     o->measured[c] = plan.measured0[i][c] + x;

@@ -930,6 +930,7 @@ std::string Dataset::ToJson() const {
     jo["axes"] = ax;
     if (!dir.empty()) jo["direction"] = dir;
     KindOf(o).Write(o, &jo);
+    KindOf(o).WriteOnMachine(machine_, o, &jo);
     if (o.sigma.size() > 0) {
       // One number when every row shares it (the usual file form).
       if ((o.sigma.array() == o.sigma[0]).all()) {

@@ -82,9 +82,8 @@ class Kind final : public BallMountKind {
   std::vector<const char*> plan_keys() const override {
     return {"type", "setup", "axes", "length", "tool_ball", "table_ball", "direction", "id"};
   }
-  double NoiseLevel(const NoiseLevels& n) const override { return n.dbb; }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
-    AddPlanInput(plan, i, 0, -1.0, plan->noise.dbb);
+    AddPlanInput(plan, i, 0, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int, double x, Observation* o) const override {
     o->reading = plan.reading0[i] + x;

@@ -130,9 +130,8 @@ class Kind final : public ObservationKind {
                                                 target);
     ob->reading = (P - station).norm() - ob->length - t.setup(pre + "length");
   }
-  double NoiseLevel(const NoiseLevels& n) const override { return n.distance; }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
-    AddPlanInput(plan, i, 0, -1.0, plan->noise.distance);
+    AddPlanInput(plan, i, 0, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int, double x, Observation* o) const override {
     o->reading = plan.reading0[i] + x;

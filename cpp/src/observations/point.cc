@@ -122,9 +122,8 @@ class Kind final : public ObservationKind {
     ob->measured = PointInInstrument<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), ob->on_tool,
                                              truth.target_point, truth.instrument_origin, ang);
   }
-  double NoiseLevel(const NoiseLevels& n) const override { return n.point; }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
-    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, plan->noise.point);
+    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
     o->measured[c] = plan.measured0[i][c] + x;

@@ -140,15 +140,14 @@ class Kind final : public ObservationKind {
                              target_R, truth.instrument_origin, ang, &ob->measured, &R);
     ob->measured_rotation = VectorOfRotation<double>(R);
   }
-  double NoiseLevel(const NoiseLevels& n) const override { return n.pose; }
-  double NoiseLevelRow(const NoiseLevels& n, int k) const override { return k < 3 ? n.pose : n.pose_angle; }
+  std::vector<std::string> noise_classes() const override { return {"pose", "pose_angle"}; }
+  double NoiseLevelRow(const NoiseLevels& n, int k) const override { return n.Of(k < 3 ? "pose" : "pose_angle"); }
   // Rotation noise is a small rotation of the reading in the target frame,
   // R_m exp(x e_k), so that it enters the residual row k as -x exactly (a
   // noise added to the rotation vector's components would reach the rows
   // through the non-orthogonal Jacobian of exp at large rotations).
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
-    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, plan->noise.pose);
-    for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, 3 + c, -1.0, plan->noise.pose_angle);
+    for (int c = 0; c < 6; ++c) AddPlanInput(plan, i, c, -1.0, NoiseLevelRow(plan->noise, c));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
     if (c < 3) {

@@ -19,7 +19,6 @@ void ProbeTouchKind::Validate(const Dataset& ds, const Observation& o,
   ValidateTarget(ds, o, where);
 }
 
-double ProbeTouchKind::NoiseLevel(const NoiseLevels& n) const { return n.probe; }
 
 void ProbeTouchKind::SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
                                    PlanSlot* slot) const {
@@ -72,7 +71,7 @@ void ProbeTouchKind::AddInputs(SimulationPlan* plan, int i, const PlanSlot* slot
     plan->start[i] = slot->start;
     plan->approach[i] = slot->approach;
     plan->s0[i] = slot->s0;
-    AddPlanInput(plan, i, 0, slot->sensitivity, plan->noise.probe);
+    AddPlanInput(plan, i, 0, slot->sensitivity, NoiseLevel(plan->noise));
     return;
   }
   // Nominal approach: along minus the nominal surface normal at the nominal
@@ -103,7 +102,7 @@ void ProbeTouchKind::AddInputs(SimulationPlan* plan, int i, const PlanSlot* slot
                        gap(ToolAtCommand(m, rec->theta, o.axes - h * d, dir, rec->tip))) / (2 * h);
   if (!(std::abs(sens) > 1e-6))
     throw std::invalid_argument(w + ": the nominal approach does not move the tip off the surface");
-  AddPlanInput(plan, i, 0, sens, plan->noise.probe);
+  AddPlanInput(plan, i, 0, sens, NoiseLevel(plan->noise));
 }
 
 void ProbeTouchKind::ApplyInput(const SimulationPlan& plan, int i, int, double x, Observation* o) const {

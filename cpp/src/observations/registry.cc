@@ -1,5 +1,6 @@
 #include "fivecal/observations/registry.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "fivecal/observations/ball3d.h"
@@ -8,6 +9,7 @@
 #include "fivecal/observations/facet.h"
 #include "fivecal/observations/point.h"
 #include "fivecal/observations/pose.h"
+#include "fivecal/observations/simulate.h"
 #include "fivecal/observations/sphere.h"
 
 namespace fivecal {
@@ -59,6 +61,16 @@ std::string KindList() {
   for (const ObservationKind* k : ObservationKinds()) out += (out.empty() ? "" : ", ") + std::string(k->name());
   return out;
 }
+
+std::vector<std::string> NoiseClasses() {
+  std::vector<std::string> out;
+  for (const ObservationKind* k : ObservationKinds())
+    for (const std::string& c : k->noise_classes())
+      if (std::find(out.begin(), out.end(), c) == out.end()) out.push_back(c);
+  return out;
+}
+
+double ObservationKind::NoiseLevel(const NoiseLevels& n) const { return n.Of(noise_class()); }
 
 bool HasLengthReference(const Dataset& ds) {
   for (const Observation& o : ds.observations)

@@ -161,28 +161,37 @@ SimulationPlan PlanSpec(const json& spec) {
       if (!(x >= 0 && x <= kMaxSigma)) throw std::invalid_argument(where + ": must be >= 0 and <= 1e3 mm");
       return x;
     };
+    // The noise classes come from the registered kinds (NoiseClasses()).
+    const std::vector<std::string> classes = NoiseClasses();
+    std::string list;
+    for (const std::string& c : classes) list += (list.empty() ? "" : ", ") + c;
+    // Classes named "<kind>_angle" are rotation noise in rad (a pose's
+    // orientation rows): a number in mm does not set them.
+    auto angular = [](const std::string& c) { return c.size() > 6 && c.compare(c.size() - 6, 6, "_angle") == 0; };
     if (s.is_number()) {
-      // mm levels only: a number in mm is no rotation noise.
-      noise.probe = noise.dbb = noise.ball3d = noise.point = noise.pose = noise.distance = level(s, "simulate.sigma");
+      const double x = level(s, "simulate.sigma");
+      for (const std::string& c : classes)
+        if (!angular(c)) noise.level[c] = x;
     } else if (s.is_object()) {
-      CheckKeys(s, {"probe", "dbb", "ball3d", "point", "pose", "pose_angle", "distance"}, "simulate.sigma");
-      if (s.contains("probe")) noise.probe = level(s["probe"], "simulate.sigma.probe");
-      if (s.contains("dbb")) noise.dbb = level(s["dbb"], "simulate.sigma.dbb");
-      if (s.contains("ball3d")) noise.ball3d = level(s["ball3d"], "simulate.sigma.ball3d");
-      if (s.contains("point")) noise.point = level(s["point"], "simulate.sigma.point");
-      if (s.contains("pose")) noise.pose = level(s["pose"], "simulate.sigma.pose");
-      if (s.contains("pose_angle")) {
-        if (!s["pose_angle"].is_number()) throw std::invalid_argument("simulate.sigma.pose_angle: expected a number (rad)");
-        noise.pose_angle = s["pose_angle"].get<double>();
-        if (!(noise.pose_angle >= 0 && noise.pose_angle <= 1.0))
-          throw std::invalid_argument("simulate.sigma.pose_angle: must be >= 0 and <= 1 rad");
+      std::vector<const char*> keys;
+      for (const std::string& c : classes) keys.push_back(c.c_str());
+      CheckKeys(s, keys, "simulate.sigma");
+      for (const std::string& c : classes) {
+        if (!s.contains(c)) continue;
+        if (!angular(c)) {
+          noise.level[c] = level(s[c], "simulate.sigma." + c);
+          continue;
+        }
+        const std::string w = "simulate.sigma." + c;
+        if (!s[c].is_number()) throw std::invalid_argument(w + ": expected a number (rad)");
+        const double x = s[c].get<double>();
+        if (!(x >= 0 && x <= 1.0)) throw std::invalid_argument(w + ": must be >= 0 and <= 1 rad");
+        noise.level[c] = x;
       }
-      if (s.contains("distance")) noise.distance = level(s["distance"], "simulate.sigma.distance");
     } else {
-      throw std::invalid_argument("simulate.sigma: expected a number or an object {probe, dbb, ball3d, point, "
-                                  "pose, pose_angle, distance}");
+      throw std::invalid_argument("simulate.sigma: expected a number or an object {" + list + "}");
     }
-    for (double x : {noise.probe, noise.dbb, noise.ball3d, noise.point, noise.pose, noise.pose_angle, noise.distance})
+    for (const auto& [c, x] : noise.level)
       if (x > 0 && x < kMinSigma) throw std::invalid_argument("simulate.sigma: 0 (no noise) or >= 1e-9 mm");
   }
   const uint64_t seed = spec.contains("seed") ? ReadSeed(spec["seed"], "simulate.seed") : 0;
@@ -220,10 +229,10 @@ SimulationPlan PlanSpec(const json& spec) {
     std::vector<bool> given(na, false);
     if (e.contains("axes")) ReadAxes(m, e["axes"], w + ".axes", &ob.axes, &given);
     if (e.contains("direction")) ReadDirections(m, e["direction"], w + ".direction", &ob.direction);
-    // A touch's linear axes are the simulator's to find.
-    const bool probe = kind->probe_touch();
+    // A touch's linear axes (and those of any kind that says so) are the simulator's to find.
+    const bool linear_optional = kind->plan_finds_linear_axes();
     for (int k = 0; k < na; ++k)
-      if (!given[k] && m.axis(k).name != 'S' && (m.axis(k).rotary() || !probe))
+      if (!given[k] && m.axis(k).name != 'S' && (m.axis(k).rotary() || !linear_optional))
         throw std::invalid_argument(w + ".axes: missing axis '" + std::string(1, m.axis(k).name) +
                                     "' (machine axes " + m.axis_names() + ")");
     PlanSlot slot;

@@ -366,14 +366,14 @@ constexpr double kMinRedundancy = 5.0;
 constexpr double kMaxNoiseFactor = 3.0;
 
 // The instrument group of residual row `row` of an observation: the variance
-// component it shares. Rows in another unit than the kind's first row (a
-// pose's rotation rows, rad) form their own group, "<kind>_<unit>": one
-// factor cannot scale micrometres and microradians alike.
+// component it shares, the simulator's noise class (every probe touch:
+// "probe"). Rows in another unit than the kind's first row (a pose's
+// rotation rows, rad) form their own group, "<class>_<unit>": one factor
+// cannot scale micrometres and microradians alike.
 std::string NoiseGroup(const Observation& o, int row) {
   const ObservationKind& k = KindOf(o);
-  if (k.probe_touch()) return "probe";
   const std::string unit = k.unit_row(row);
-  return unit == k.unit_row(0) ? k.name() : std::string(k.name()) + "_" + unit;
+  return unit == k.unit_row(0) ? k.noise_class() : std::string(k.noise_class()) + "_" + unit;
 }
 
 // A group's sigma x 1e3 is in um; a group of rad rows (NoiseGroup) is shown

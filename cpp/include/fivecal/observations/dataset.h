@@ -83,6 +83,10 @@ struct Observation {
   // reading; `instrument` names the tracer whose target offsets every one of
   // its stations shares.
   std::string instrument;
+  // A kind's own numbers that no field above holds, by a name of the kind's
+  // choosing (its file key, say): a new kind keeps them here, so that it
+  // adds no field to this struct. Read, validated and written by the kind.
+  std::map<std::string, Eigen::VectorXd> own;
   // Declared noise (one sigma, mm): empty = DefaultSigma(type); otherwise one
   // value per residual row (ResidualRows(type)), finite and > 0. A file's
   // single number is expanded to every row.

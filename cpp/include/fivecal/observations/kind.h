@@ -96,6 +96,9 @@ class ObservationKind {
   // A probe touch: needs dataset.probe.tip_radius, and a plan entry may leave
   // the linear axes to the simulator.
   virtual bool probe_touch() const { return false; }
+  // A plan entry may leave the linear axes to SimulateEntry (the probe
+  // touches; a kind whose commands follow from a nominal point).
+  virtual bool plan_finds_linear_axes() const { return probe_touch(); }
 
   // ---- dataset file (docs/formats.md) ----
   // Every key an observation of this kind may have, in the order the
@@ -111,6 +114,9 @@ class ObservationKind {
                         const std::function<std::string()>& where) const = 0;
   // Writes the kind's own fields.
   virtual void Write(const Observation& o, nlohmann::json* out) const = 0;
+  // Writes the own fields that need the machine (the axis letters of a
+  // second pose); called after Write.
+  virtual void WriteOnMachine(const Machine&, const Observation&, nlohmann::json* /*out*/) const {}
 
   // ---- setup parameters ----
   // Parameters that belong to the artefact (one per facet, ...), added in
@@ -161,10 +167,16 @@ class ObservationKind {
   // probe touch in `slot`.
   virtual void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
                              Observation* ob, PlanSlot* slot) const = 0;
-  // The noise level of the kind among the simulator's levels.
-  virtual double NoiseLevel(const NoiseLevels& n) const = 0;
-  // The level of residual row k (a kind whose rows differ in unit; 0: the
-  // row's declared noise is the kind's default).
+  // The kind's key among the simulator's noise levels (a spec's "sigma"
+  // object, NoiseLevels): its name unless it shares an instrument's noise
+  // with other kinds (every probe touch: "probe").
+  virtual const char* noise_class() const { return name(); }
+  // The kind's noise level among the simulator's levels.
+  double NoiseLevel(const NoiseLevels& n) const;
+  // The noise classes the kind draws on: its noise_class(), and more for a
+  // kind whose rows differ in unit (a pose's rotation rows: "pose_angle").
+  virtual std::vector<std::string> noise_classes() const { return {noise_class()}; }
+  // The level of residual row k (default: the kind's level).
   virtual double NoiseLevelRow(const NoiseLevels& n, int) const { return NoiseLevel(n); }
   // The noise inputs of observation i of a plan (SimulationPlan), from a
   // simulated entry (`slot`) or from a recorded observation (`rec`, `slot`

@@ -21,7 +21,7 @@ class ProbeTouchKind : public ObservationKind {
                 const std::function<std::string()>& where) const final;
   void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
                      Observation* ob, PlanSlot* slot) const final;
-  double NoiseLevel(const NoiseLevels& n) const final;
+  const char* noise_class() const final { return "probe"; }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot* slot, const RecordedContext* rec) const final;
   void ApplyInput(const SimulationPlan& plan, int i, int component, double x, Observation* o) const final;
 

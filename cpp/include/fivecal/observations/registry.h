@@ -28,6 +28,10 @@ std::vector<std::string> KindNames();
 // "facet, sphere, dbb, ball3d": for messages.
 std::string KindList();
 
+// The simulator's noise classes (ObservationKind::noise_class()), each
+// once, in registration order: the keys of a spec's "sigma" object.
+std::vector<std::string> NoiseClasses();
+
 // Whether the data fix the length scale: an observation of a kind that does
 // (ball bar, 3D ball displacement), or an artefact length (a scale bar whose
 // balls were probed).

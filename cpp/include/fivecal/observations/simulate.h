@@ -24,14 +24,17 @@
 
 namespace fivecal {
 
+// The simulator's noise (one sigma, mm, per noise input) by noise class:
+// "probe" for every probe-touch kind (along the approach), otherwise the
+// kind's own name (ObservationKind::noise_class(); NoiseClasses() lists them).
+// Keyed by name so that a new kind needs no field here; a class not named
+// has no noise.
 struct NoiseLevels {
-  double probe = 0.0;   // mm, along the approach
-  double dbb = 0.0;     // mm, on the reading
-  double ball3d = 0.0;  // mm, per component
-  double point = 0.0;   // mm, per component (tracker, camera, CMM)
-  double pose = 0.0;        // mm, per position component of a 6D pose
-  double pose_angle = 0.0;  // rad, per orientation component of a 6D pose
-  double distance = 0.0;    // mm, on a distance reading (interferometer, laser tracer)
+  std::map<std::string, double> level;
+  double Of(const std::string& noise_class) const {
+    const auto it = level.find(noise_class);
+    return it == level.end() ? 0.0 : it->second;
+  }
 };
 
 // spec JSON:
@@ -44,9 +47,7 @@ struct NoiseLevels {
 //           {"type": "dbb", "setup": "A1", "axes": {...}, "length": 100,
 //            "tool_ball": [...], "table_ball": [...]},
 //           {"type": "ball3d", "setup": "R1", "axes": {...}, "tool_ball": [...], "table_ball": [...]}],
-//  "sigma": 0.0006 | {"probe": .., "dbb": .., "ball3d": .., "point": .., "pose": ..,
-//                     "pose_angle": .. (rad), "distance": ..}, "seed": 1}
-// A number sets every level in mm; pose_angle (rad) only the object sets.
+//  "sigma": 0.0006 | {"probe": .., "dbb": .., "ball3d": .., <any noise class>: ..}, "seed": 1}
 // Scale bar lengths are set to the true distance of the true sphere centres.
 Dataset Simulate(const std::string& spec_json);
 
