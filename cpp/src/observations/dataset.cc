@@ -62,7 +62,8 @@ void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::stri
   const ObservationKind& k = KindOf(t);
   if (sigma.size() != k.rows())
     throw std::invalid_argument(where + ": expected " + (OneUnit(k) ? "a number or " : "") +
-                                std::to_string(k.rows()) + " values (one per residual row of a " + k.name() +
+                                std::to_string(k.rows()) + (k.rows() == 1 ? " value" : " values") +
+                                " (one per residual row of a " + k.name() +
                                 " observation, " + RowUnits(k) + "), got " + std::to_string(sigma.size()));
   for (int r = 0; r < sigma.size(); ++r)
     if (!(sigma[r] >= kMinSigma && sigma[r] <= kMaxSigma))
