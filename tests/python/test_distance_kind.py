@@ -134,3 +134,22 @@ def test_a_station_named_like_a_tracker_is_refused(machine):
     ds = fivecal.Dataset.from_dict(doc)
     with pytest.raises(ValueError, match=r"L1. names both a distance station and a point/pose instrument"):
         fivecal.identify(ds, [])
+
+
+def test_bad_input_campaign_on_pose_distance_and_instruments(machine):
+    # Every leaf of a dataset of pose and distance observations with an
+    # "instruments" declaration replaced in turn by hostile values: refused
+    # with a ValueError naming the field, or accepted.
+    from test_bad_input_campaign import _campaign, _check
+
+    from test_pose_kind import _plan as pose_plan, NOISE as POSE_NOISE, SETUP as POSE_SETUP
+
+    rng = np.random.default_rng(4)
+    plan = _plan(rng, n=1) + pose_plan(rng, n=1)
+    doc = fivecal.simulate(machine, plan, errors=TRUTH, setup={**SETUP, **POSE_SETUP},
+                           sigma={**NOISE, **POSE_NOISE}, seed=4).to_dict()
+    for o in doc["observations"][:3]:
+        del o["sigma"]
+    doc["instruments"] = {"L1": {"sigma": 0.002}, "T1": {"sigma": [0.01, 0.01, 0.02, 1e-4, 1e-4, 2e-4]}}
+    fivecal.Dataset.from_dict(doc)
+    _check(*_campaign(doc, fivecal.Dataset.from_dict, sample=60, seed=5))
