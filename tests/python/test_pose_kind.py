@@ -91,6 +91,17 @@ def test_coverage_of_the_pose_fit_over_100_simulations(machine):
     assert 0.92 <= inside2 / total <= 0.98, inside2 / total
 
 
+def test_residual_table_names_rotation_rows_and_writes_them_in_urad(machine, tmp_path):
+    ds, r = _fit(machine, 3)
+    table = r.residual_table()
+    assert [t["component"] for t in table[:6]] == ["x", "y", "z", "rx", "ry", "rz"]
+    r.write_residuals(tmp_path / "res.csv")
+    lines = (tmp_path / "res.csv").read_text().splitlines()
+    assert lines[0].endswith("component,residual_um")
+    assert float(lines[4].split(",")[-1]) == pytest.approx(table[3]["residual"] * 1e6, abs=1e-4)
+    assert float(lines[1].split(",")[-1]) == pytest.approx(table[0]["residual"] * 1e3, abs=1e-4)
+
+
 def test_variance_components_scale_position_and_rotation_rows_apart(machine):
     # Declared twice the true position noise and half the true rotation
     # noise (through the instrument's sigma): each row group gets its own
