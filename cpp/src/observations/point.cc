@@ -14,6 +14,11 @@ namespace {
 using namespace json_util;
 
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+// Parameters, per instrument (Observation::setup): its pose
+// instrument.<id>.x|y|z|a|b|c, and the offsets of the target it follows on
+// each side (Observation::target), instrument.<id>.tool_x|y|z and
+// .work_x|y|z: one tracker may follow a target on the tool and one on the
+// table. The pose kind shares both groups (fixed_frame, point.h).
 const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
 const char* kXYZ[3] = {"x", "y", "z"};
 
