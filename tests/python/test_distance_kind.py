@@ -128,12 +128,15 @@ def test_file_round_trip_and_bad_fields(machine):
 
 
 def test_a_station_named_like_a_tracker_is_refused(machine):
+    # Its parameters instrument.L1.x|y|z would be a station's position and a
+    # tracker's origin at once.
     doc = _data(machine, 1, n=2).to_dict()
+    n = len(doc["observations"])
     doc["observations"].append({"type": "point", "instrument": "L1", "target": "tool", "target_point": [0, 0, 150],
                                 "axes": doc["observations"][0]["axes"], "measured": [0, 0, 0]})
-    ds = fivecal.Dataset.from_dict(doc)
-    with pytest.raises(ValueError, match=r"L1. names both a distance station and a point/pose instrument"):
-        fivecal.identify(ds, [])
+    with pytest.raises(ValueError, match=rf"observations\[{n}\]\.instrument: .L1. is also the station of "
+                                         r"observations\[0\]"):
+        fivecal.Dataset.from_dict(doc)
 
 
 def test_bad_input_campaign_on_pose_distance_and_instruments(machine):

@@ -33,7 +33,7 @@ class Kind final : public ObservationKind {
   int rows() const override { return 3; }
   // A laser tracker over a machine-tool volume: a few micrometres.
   double default_sigma() const override { return 0.005; }
-  bool has_instrument() const override { return true; }
+  const char* instrument_key() const override { return "instrument"; }
   bool analytic() const override { return false; }
 
   std::vector<const char*> json_keys() const override {

@@ -35,7 +35,7 @@ class Kind final : public ObservationKind {
   // orientation -- between a tracker probe's ~0.01 deg and a camera's.
   double default_sigma() const override { return 0.01; }
   double default_sigma_row(int k) const override { return k < 3 ? 0.01 : 1e-4; }
-  bool has_instrument() const override { return true; }
+  const char* instrument_key() const override { return "instrument"; }
   bool analytic() const override { return false; }
 
   std::vector<const char*> json_keys() const override {
