@@ -670,8 +670,9 @@ def main(argv=None) -> int:
     pi.add_argument("--allow-unidentifiable", action="store_true",
                     help="fit even when parameters are confounded (they are named in the report)")
     pi.add_argument("--variance-components", action="store_true",
-                    help="estimate the noise of each instrument group (probe, dbb, ball3d) from the "
-                    "residuals instead of trusting the declared sigmas (docs/identification.md)")
+                    help="estimate the noise of each instrument group (probe, dbb, ball3d, point, pose, "
+                    "pose_rad, distance) from the residuals instead of trusting the declared sigmas "
+                    "(docs/identification.md)")
     pi.add_argument("--out", help="write the result JSON here")
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")

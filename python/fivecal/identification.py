@@ -143,7 +143,8 @@ class Result:
         return rows
 
     def write_residuals(self, path) -> None:
-        """:meth:`residual_table` as CSV (``residual_um`` in µm), observation ids kept."""
+        """:meth:`residual_table` as CSV (``residual_um`` in µm; µrad for the
+        ``rx ry rz`` rows of a pose), observation ids kept."""
         import csv
         import io
 
@@ -153,8 +154,10 @@ class Result:
         w = csv.writer(f)
         w.writerow(["row", "observation", "id", "type", "target", "component", "residual_um"])
         for r in self.residual_table():
+            # mm -> um; a rotation row's rad -> urad (same small-number scale).
+            scale = 1e6 if r["component"] in ("rx", "ry", "rz") else 1e3
             w.writerow([r["row"], r["observation"], r["id"], r["type"], r["target"], r["component"],
-                        f"{r['residual'] * 1e3:.4f}"])
+                        f"{r['residual'] * scale:.4f}"])
         files.write_text(path, f.getvalue())
 
     def _with_ids(self) -> bool:

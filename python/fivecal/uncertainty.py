@@ -97,10 +97,20 @@ def _noise_levels(sigma, default: float, default_angle: float = 0.0) -> dict:
     return {c: default_angle if _angular(c) else x for c in classes}
 
 
-def _rotation_rms(fit) -> float:
-    """The rms of a fit's pose rotation rows (rad), 0 without any."""
-    r = [row["residual"] for row in fit.residual_table() if row["component"] in ("rx", "ry", "rz")]
-    return float(np.sqrt(np.mean(np.square(r)))) if r else 0.0
+def _default_levels(fit) -> tuple:
+    """The noise a recorded dataset's plan assumes by default: the fit's
+    residual standard deviation (mm), and for a pose's rotation rows (rad)
+    their own. With rotation rows, the fit's sigma mixes mm and rad rows: then
+    each kind of row gets the rms of its own rows, both inflated by the fit's
+    rows / degrees of freedom as the sigma is."""
+    table = fit.residual_table()
+    rot = [t["residual"] for t in table if t["component"] in ("rx", "ry", "rz")]
+    if not rot:
+        return fit.sigma, 0.0
+    mm = [t["residual"] for t in table if t["component"] not in ("rx", "ry", "rz")]
+    inflate = np.sqrt(len(table) / fit.dof) if fit.dof > 0 else 1.0
+    rms = lambda r: float(np.sqrt(np.mean(np.square(r)))) * inflate if r else 0.0  # noqa: E731
+    return rms(mm), rms(rot)
 
 
 def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
@@ -110,8 +120,8 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
     parameter values are those of ``identify(dataset, estimate)`` and the
     noise is ``sigma`` (mm; a number or ``{"probe", "dbb", "ball3d", ...}``, one per
     noise class of ``fivecal._core.noise_classes()``; ``pose_angle`` in rad),
-    default the fit's residual standard deviation (for a pose's rotation rows,
-    their rms, rad).  Returns ``(plan, fit)``
+    default the fit's residual standard deviation (with a pose's rotation
+    rows, the rad rows and the mm rows each their own).  Returns ``(plan, fit)``
     (``fit`` is None for a spec)."""
     if isinstance(source, _core.SimulationPlan):
         return source, None
@@ -129,7 +139,7 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
         return _core.SimulationPlan.from_spec(dumps(spec, "spec")), None
     ds = Dataset.from_dict(source)
     fit = identify(ds, estimate if estimate is not None else "auto", fix=fix, initial=initial)
-    noise = _noise_levels(sigma, fit.sigma, _rotation_rms(fit))
+    noise = _noise_levels(sigma, *_default_levels(fit))
     values = dict(zip(fit._core.names, np.asarray(fit._core.values, float)))
     return _core.SimulationPlan.from_dataset(ds._core, values, noise), fit
 

@@ -449,6 +449,16 @@ TEST(FixedFrameKinds, BadFieldsAreNamed) {
   o = dist;
   o["setup"] = "L1";  // a distance names its station, not a mounting
   refused(o, {"observations[0]: unknown key \"setup\""});
+  // One id for a station and a tracker: instrument.T1.x would be both.
+  o = dist;
+  o["station"] = "T1";
+  try {
+    Dataset::FromJson(FixedFrameDataset(json::array({pose, o})).dump());
+    ADD_FAILURE() << "station named like a tracker accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("observations[1].station: 'T1' is also the instrument of observations[0]"),
+              std::string::npos) << e.what();
+  }
 }
 
 TEST(FixedFrameKinds, InstrumentSigmaIsTheDefaultOfItsObservations) {

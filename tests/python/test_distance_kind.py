@@ -89,16 +89,18 @@ def test_coverage_of_the_distance_fit_over_100_simulations(machine):
     assert 0.92 <= inside2 / total <= 0.98, inside2 / total
 
 
-def test_one_station_is_reported_undetermined_not_a_confident_number(machine):
+@pytest.mark.parametrize("stations", [["L1"], ["L1", "L2"]])
+def test_too_few_stations_are_reported_undetermined_not_a_confident_number(machine, stations):
     rng = np.random.default_rng(5)
-    setup = {k: v for k, v in SETUP.items() if not k.startswith(("instrument.L2", "instrument.L3", "instrument.L4",
-                                                                    "instrument.L5"))}
-    ds = fivecal.simulate(machine, _plan(rng, stations=["L1"]), errors=TRUTH, setup=setup, sigma=NOISE, seed=5)
-    with pytest.raises(ValueError, match=r"not determined"):
+    setup = {k: v for k, v in SETUP.items()
+             if not k.startswith(tuple(f"instrument.{s}." for s in STATIONS if s not in stations))}
+    ds = fivecal.simulate(machine, _plan(rng, stations=stations), errors=TRUTH, setup=setup, sigma=NOISE, seed=5)
+    with pytest.raises(ValueError, match=r"not determined.*confounded with the setup"):
         fivecal.identify(ds, list(TRUTH), fix=FIXED)
     with pytest.warns(Warning, match="did not determine"):
         r = fivecal.identify(ds, list(TRUTH), fix=FIXED, allow_unidentifiable=True)
-    assert r.unidentifiable, "one station cannot fix a 3D point, let alone the machine"
+    assert r.unidentifiable, "too few stations cannot fix the table side's errors"
+    assert any(n.startswith("instrument.tracer.work_") for g in r.unidentifiable for n in g), r.unidentifiable
 
 
 def test_file_round_trip_and_bad_fields(machine):
@@ -126,9 +128,31 @@ def test_file_round_trip_and_bad_fields(machine):
 
 
 def test_a_station_named_like_a_tracker_is_refused(machine):
+    # Its parameters instrument.L1.x|y|z would be a station's position and a
+    # tracker's origin at once.
     doc = _data(machine, 1, n=2).to_dict()
+    n = len(doc["observations"])
     doc["observations"].append({"type": "point", "instrument": "L1", "target": "tool", "target_point": [0, 0, 150],
                                 "axes": doc["observations"][0]["axes"], "measured": [0, 0, 0]})
-    ds = fivecal.Dataset.from_dict(doc)
-    with pytest.raises(ValueError, match=r"L1. names both a distance station and a point/pose instrument"):
-        fivecal.identify(ds, [])
+    with pytest.raises(ValueError, match=rf"observations\[{n}\]\.instrument: .L1. is also the station of "
+                                         r"observations\[0\]"):
+        fivecal.Dataset.from_dict(doc)
+
+
+def test_bad_input_campaign_on_pose_distance_and_instruments(machine):
+    # Every leaf of a dataset of pose and distance observations with an
+    # "instruments" declaration replaced in turn by hostile values: refused
+    # with a ValueError naming the field, or accepted.
+    from test_bad_input_campaign import _campaign, _check
+
+    from test_pose_kind import _plan as pose_plan, NOISE as POSE_NOISE, SETUP as POSE_SETUP
+
+    rng = np.random.default_rng(4)
+    plan = _plan(rng, n=1) + pose_plan(rng, n=1)
+    doc = fivecal.simulate(machine, plan, errors=TRUTH, setup={**SETUP, **POSE_SETUP},
+                           sigma={**NOISE, **POSE_NOISE}, seed=4).to_dict()
+    for o in doc["observations"][:3]:
+        del o["sigma"]
+    doc["instruments"] = {"L1": {"sigma": 0.002}, "T1": {"sigma": [0.01, 0.01, 0.02, 1e-4, 1e-4, 2e-4]}}
+    fivecal.Dataset.from_dict(doc)
+    _check(*_campaign(doc, fivecal.Dataset.from_dict, sample=60, seed=5))

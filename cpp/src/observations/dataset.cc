@@ -38,7 +38,7 @@ int Artefact::SphereIndex(const std::string& id) const {
 }
 
 const std::string* InstrumentId(const Observation& o) {
-  return KindOf(o).has_instrument() ? &o.setup : nullptr;
+  return KindOf(o).instrument_key() ? &o.setup : nullptr;
 }
 
 namespace {
@@ -62,7 +62,8 @@ void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::stri
   const ObservationKind& k = KindOf(t);
   if (sigma.size() != k.rows())
     throw std::invalid_argument(where + ": expected " + (OneUnit(k) ? "a number or " : "") +
-                                std::to_string(k.rows()) + " values (one per residual row of a " + k.name() +
+                                std::to_string(k.rows()) + (k.rows() == 1 ? " value" : " values") +
+                                " (one per residual row of a " + k.name() +
                                 " observation, " + RowUnits(k) + "), got " + std::to_string(sigma.size()));
   for (int r = 0; r < sigma.size(); ++r)
     if (!(sigma[r] >= kMinSigma && sigma[r] <= kMaxSigma))
@@ -855,6 +856,8 @@ void Dataset::Validate() const {
   if (!(std::isfinite(tip_radius) && tip_radius >= 0 && tip_radius <= kMaxLinear))
     throw std::invalid_argument("dataset.probe.tip_radius: must be >= 0 and <= 1e5 mm");
   const int na = machine_.num_axes();
+  // Per instrument id: the file key that named it first, and where.
+  std::map<std::string, std::pair<const char*, size_t>> instrument_ids;
   for (size_t i = 0; i < observations.size(); ++i) {
     const Observation& o = observations[i];
     // Built only for a message: this loop runs over every sample of a trace.
@@ -873,6 +876,14 @@ void Dataset::Validate() const {
     }
     KindOf(o).Validate(*this, o, w);
     if (o.sigma.size() > 0) CheckSigma(o.sigma, o.type, w() + ".sigma");
+    if (const char* key = KindOf(o).instrument_key()) {
+      const auto first = instrument_ids.emplace(o.setup, std::make_pair(key, i)).first->second;
+      if (std::string(first.first) != key)
+        throw std::invalid_argument(w() + "." + key + ": " + Quote(o.setup) + " is also the " + first.first +
+                                    " of observations[" + std::to_string(first.second) +
+                                    "]; its parameters instrument." + o.setup +
+                                    ".* would mean two things: give them different names");
+    }
   }
   CheckInstruments(*this, false);
 }

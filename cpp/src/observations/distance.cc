@@ -29,7 +29,7 @@ class Kind final : public ObservationKind {
   // A laser tracer or tracking interferometer: about a micrometre over a
   // machine-tool volume.
   double default_sigma() const override { return 0.001; }
-  bool has_instrument() const override { return true; }
+  const char* instrument_key() const override { return "station"; }
   bool analytic() const override { return false; }
 
   std::vector<const char*> json_keys() const override {

@@ -14,6 +14,11 @@ namespace {
 using namespace json_util;
 
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+// Parameters, per instrument (Observation::setup): its pose
+// instrument.<id>.x|y|z|a|b|c, and the offsets of the target it follows on
+// each side (Observation::target), instrument.<id>.tool_x|y|z and
+// .work_x|y|z: one tracker may follow a target on the tool and one on the
+// table. The pose kind shares both groups (fixed_frame, point.h).
 const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
 const char* kXYZ[3] = {"x", "y", "z"};
 
@@ -28,7 +33,7 @@ class Kind final : public ObservationKind {
   int rows() const override { return 3; }
   // A laser tracker over a machine-tool volume: a few micrometres.
   double default_sigma() const override { return 0.005; }
-  bool has_instrument() const override { return true; }
+  const char* instrument_key() const override { return "instrument"; }
   bool analytic() const override { return false; }
   // The instrument reports coordinates in its calibrated length unit, so its
   // data fix the machine's scale (EXX1 ...) like a scale bar does.

@@ -30,11 +30,12 @@ class Kind final : public ObservationKind {
   const char* label() const override { return "fixed-frame 6D pose (camera fiducial, 6D tracker)"; }
   int rows() const override { return 6; }
   const char* unit_row(int k) const override { return k < 3 ? "mm" : "rad"; }
-  // A 6D tracker or a camera over a machine-tool volume: ten micrometres in
-  // position, about 50 microradians (10 arc seconds) in orientation.
+  // A 6D tracker probe or a camera seeing a fiducial over a machine-tool
+  // volume: ten micrometres in position, 0.1 mrad (20 arc seconds) in
+  // orientation -- between a tracker probe's ~0.01 deg and a camera's.
   double default_sigma() const override { return 0.01; }
-  double default_sigma_row(int k) const override { return k < 3 ? 0.01 : 5e-5; }
-  bool has_instrument() const override { return true; }
+  double default_sigma_row(int k) const override { return k < 3 ? 0.01 : 1e-4; }
+  const char* instrument_key() const override { return "instrument"; }
   bool analytic() const override { return false; }
 
   std::vector<const char*> json_keys() const override {

@@ -240,7 +240,7 @@ std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group)
     return "no length reference (no scale bar or ball-bar length in the data): only relative "
            "scale can be found";
   if (machine > 0 && setup > 0)
-    return "confounded with the setup (stylus tip, facet offsets, sphere centres or mounts)";
+    return "confounded with the setup (stylus tip, facet offsets, sphere centres, mounts, instrument poses or stations)";
   if (machine > 0)
     return "confounded with each other or too weakly seen at these poses for their plausible size";
   return "setup parameters the data do not separate";

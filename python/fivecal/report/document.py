@@ -172,6 +172,21 @@ def _data_section(dataset, result) -> str:
         c = _setup_counts(obs, "ball3d")
         rows.append((f"R-test / 3D ball setups ({len(c)})",
                      ", ".join(f"{k} ({_count(v, 'sample')})" for k, v in c.items())))
+    fixed = {}
+    for o in obs:
+        if o["type"] in ("point", "pose"):
+            fixed.setdefault(o.get("instrument", ""), {}).setdefault(o["type"], 0)
+            fixed[o.get("instrument", "")][o["type"]] += 1
+    if fixed:
+        rows.append((f"fixed instruments ({len(fixed)})",
+                     ", ".join(f"{k} ({', '.join(_count(n, t) for t, n in v.items())})" for k, v in fixed.items())))
+    stations: dict = {}
+    for o in obs:
+        if o["type"] == "distance":
+            stations[o.get("station", "")] = stations.get(o.get("station", ""), 0) + 1
+    if stations:
+        rows.append((f"distance stations ({len(stations)})",
+                     ", ".join(f"{k} ({_count(v, 'reading')})" for k, v in stations.items())))
     return '<table class="kv">' + "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in rows) \
         + "</table>"
 

@@ -90,9 +90,11 @@ class ObservationKind {
   // when their units differ.
   virtual const char* unit_row(int) const { return unit(); }
   virtual double default_sigma_row(int) const { return default_sigma(); }
-  // The observation names an instrument (Observation::setup) whose declared
-  // noise the dataset's "instruments" may give.
-  virtual bool has_instrument() const { return false; }
+  // The file key naming the instrument of an observation (Observation::
+  // setup), or nullptr: the id the dataset's "instruments" may declare a
+  // noise for. Kinds with different keys ("instrument", "station") give an
+  // id parameters of different meaning, so one id may not serve both.
+  virtual const char* instrument_key() const { return nullptr; }
   // A probe touch: needs dataset.probe.tip_radius, and a plan entry may leave
   // the linear axes to the simulator.
   virtual bool probe_touch() const { return false; }
