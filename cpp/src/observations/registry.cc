@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "fivecal/observations/ball3d.h"
+#include "fivecal/observations/cylinder.h"
 #include "fivecal/observations/dbb.h"
 #include "fivecal/observations/facet.h"
 #include "fivecal/observations/point.h"
@@ -19,6 +20,7 @@ const std::vector<const ObservationKind*>& ObservationKinds() {
       &DbbKind(),
       &Ball3dKind(),
       &PointKind(),
+      &CylinderKind(),
   };
   return kinds;
 }

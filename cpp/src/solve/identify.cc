@@ -236,6 +236,12 @@ std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group)
     else ++machine;
     if (i >= 0 && PriorClassOf(m, n) == "scale_gain") ++gains;
   }
+  // Isotropic pretravel shortens every touch alike, as a smaller tip radius
+  // would: the facet offsets and the cylinder and sphere radii absorb it.
+  if (std::find(group.begin(), group.end(), "probe.pretravel") != group.end() && machine == 0)
+    return "probe.pretravel acts exactly like a tip radius error, which the facet offsets and the "
+           "cylinder and sphere radii also absorb: fix probe.pretravel (or qualify the probe on a "
+           "calibrated sphere with its radius fixed)";
   if (gains > 0 && !HasLengthReference(ds))
     return "no length reference (no scale bar or ball-bar length in the data): only relative "
            "scale can be found";
