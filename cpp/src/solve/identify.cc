@@ -262,6 +262,8 @@ std::string UndeterminedMessage(const Dataset& ds, std::vector<std::vector<std::
     for (const std::string& n : g) {
       const int i = m.ParameterIndex(n);
       if (i >= 0 && m.parameters()[i].kind != ParameterKind::kTip) return 0;
+      // probe.* are only estimated on request: say first why they cannot be
+      if (n.rfind("probe.", 0) == 0) return 0;
       if (n.rfind("sphere.", 0) == 0) r = std::min(r, 1);
       else if (n.rfind("tip.", 0) == 0) r = std::min(r, 2);
     }
