@@ -204,3 +204,29 @@ def test_a_bore_is_touched_from_inside():
     r = fivecal.identify(ds, ["EX0C"], fix=["tip.x", "tip.y", "tip.z"])
     assert r.values["cylinder.B.r"] == pytest.approx(0.02, abs=1e-7)
     assert r.values["cylinder.B.x"] == pytest.approx(-0.01, abs=1e-7)
+
+
+def test_a_spec_file_with_cylinders_runs_through_the_cli(tmp_path):
+    """The shipped schemas take cylinder artefacts and plan entries; a
+    misspelt key is named with its path."""
+    import json
+    import subprocess
+    import sys
+    from fivecal import schema
+    art = {"cylinders": [{"id": TABLE, "point": [0, 0, 100], "axis": [0, 0, 1], "radius": 250.0}]}
+    plan = [{"type": "cylinder", "target": TABLE, "axes": {"A": 0, "C": c, "S": 0}, "point": [250, 0, 90]}
+            for c in (0, 90, 180, 270)]
+    spec = {"machine": tango.KX8_MACHINE, "probe": {"tip_radius": 3.0}, "artefact": art, "plan": plan,
+            "setup": {"cylinder.K1.r": 0.01, "probe.lobe.c3": 0.002}, "sigma": 0.0, "seed": 1}
+    schema.validate(spec, "spec")
+    bad = copy.deepcopy(spec)
+    bad["artefact"]["cylinders"][0]["raduis"] = 1
+    with pytest.raises(ValueError, match=r"artefact\.cylinders\[0\].*raduis"):
+        schema.validate(bad, "spec")
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    p = subprocess.run([sys.executable, "-m", "fivecal", "simulate", tmp_path / "spec.json", "--out",
+                        tmp_path / "ds.json"], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    d = json.loads((tmp_path / "ds.json").read_text())
+    assert [o["type"] for o in d["observations"]] == ["cylinder"] * 4
+    schema.validate(d, "dataset")

@@ -143,3 +143,18 @@ def test_simulation_refuses_probe_terms_without_probe_touches():
              "tool_ball": [0, 0, 100], "table_ball": [100, 0, 0]}]
     with pytest.raises(ValueError, match=r"simulate\.setup\.probe\.lobe\.c3: not a setup parameter"):
         fivecal.simulate(m, plan, setup={"probe.lobe.c3": 0.001})
+
+
+def test_the_lobing_turns_with_the_spindle():
+    """The probe frame turns with the spindle axis S: at S = 60 deg a
+    three-fold lobing c3 touches exactly like -c3 at S = 0."""
+    spec = spheres_spec()
+
+    def run(s_deg, c3):
+        plan = [dict(e, axes=dict(e["axes"], S=s_deg)) for e in spec["plan"][:60]]
+        ds = fivecal.simulate(spec["machine"], plan, artefact=spec["artefact"], tip_radius=3.0, sigma=0.0,
+                              setup={"probe.lobe.c3": c3, "probe.axial": 0.002})
+        return np.array([[o["axes"][a] for a in "XYZBC"] for o in ds.observations])
+
+    assert np.allclose(run(60.0, 0.003), run(0.0, -0.003), atol=1e-9)
+    assert not np.allclose(run(0.0, 0.003), run(0.0, -0.003), atol=1e-4)

@@ -288,7 +288,7 @@ def test_cli_refuses_unknown_keys_in_spec_design_spec_machine_and_result(docs, t
     (lambda d: d["observations"][0]["axes"].__setitem__("B", "30"),
      "dataset.observations[0].axes.B: expected a number, got a string"),
     (lambda d: d["observations"][1].__setitem__("type", "sphre"),
-     "dataset.observations[1].type: \"sphre\" is not one of \"facet\", \"sphere\", \"dbb\", \"ball3d\", \"point\"; "
+     "dataset.observations[1].type: \"sphre\" is not one of \"facet\", \"sphere\", \"dbb\", \"ball3d\", \"point\", \"cylinder\"; "
      "did you mean 'sphere'?"),
     (lambda d: d["observations"][2]["direction"].__setitem__("X", 2),
      "dataset.observations[2].direction.X: must be -1, 0 or +1 (got 2)"),
