@@ -230,3 +230,14 @@ def test_a_spec_file_with_cylinders_runs_through_the_cli(tmp_path):
     d = json.loads((tmp_path / "ds.json").read_text())
     assert [o["type"] for o in d["observations"]] == ["cylinder"] * 4
     schema.validate(d, "dataset")
+
+
+def test_monte_carlo_agrees_with_the_covariance_on_cylinder_touches(experiment, fits):
+    """The simulator re-runs recorded cylinder touches along their nominal
+    radial approach: the Monte Carlo spread matches the fit's covariance."""
+    from fivecal import uncertainty
+    ds, _, _ = experiment
+    cyl, _ = fits
+    mc = uncertainty.monte_carlo(ds, tango.TABLE_5_1_NAMES, trials=200)
+    for k in ("EA0C", "EB0Z", "EYY1", f"cylinder.{TABLE}.r", f"cylinder.{TABLE}.x"):
+        assert mc.std[k] == pytest.approx(cyl.std[k], rel=0.25), k
