@@ -231,3 +231,14 @@ def test_lobing_on_the_kx8_table_is_recovered_with_table_5_1():
     print(f"\nKX8 lobing: c3 {r.values['probe.lobe.c3'] * 1e3:.2f} ± {r.std['probe.lobe.c3'] * 1e3:.2f} µm (true 3.00), "
           f"s3 {r.values['probe.lobe.s3'] * 1e3:.2f} ± {r.std['probe.lobe.s3'] * 1e3:.2f} µm (true -2.70); "
           f"unmodelled: rms {plain.rms * 1e3:.2f} µm")
+
+
+def test_isotropic_pretravel_with_the_cylinder_radius_is_refused(experiment):
+    """probe.pretravel moves every touch like a smaller tip radius: the
+    cylinder radius (and the top facets' offsets) absorb it."""
+    ds, _, _ = experiment
+    with pytest.raises(ValueError, match=r"probe\.pretravel acts exactly like a tip radius error"):
+        fivecal.identify(ds, tango.TABLE_5_1_NAMES + ["probe.pretravel"])
+    # known from a qualification, it is a fixed value, not an estimate
+    r = fivecal.identify(ds, tango.TABLE_5_1_NAMES, initial={"probe.pretravel": 0.0})
+    assert "probe.pretravel" not in r.estimated
