@@ -242,3 +242,20 @@ def test_isotropic_pretravel_with_the_cylinder_radius_is_refused(experiment):
     # known from a qualification, it is a fixed value, not an estimate
     r = fivecal.identify(ds, tango.TABLE_5_1_NAMES, initial={"probe.pretravel": 0.0})
     assert "probe.pretravel" not in r.estimated
+
+
+def test_a_cylinder_radius_given_as_its_diameter_is_refused(experiment):
+    """The load-time magnitude check: touches 253 mm from the axis of a
+    'radius 500' table mean the diameter was given."""
+    ds, _, _ = experiment
+    d = copy.deepcopy(ds.to_dict())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the right radius loads without a warning
+        fivecal.Dataset.from_dict(d)
+    d["artefact"]["cylinders"][0]["radius"] = 2 * tango.KX8_TABLE_RADIUS
+    with pytest.raises(ValueError, match=r"cylinders\[0\] \('K1'\).*the radius looks like the diameter; "
+                                         r"give radius 250"):
+        fivecal.Dataset.from_dict(d)
+    d["artefact"]["cylinders"][0]["radius"] = 150.0
+    with pytest.warns(fivecal.UnitsWarning, match=r"cylinders\[0\].*from its axis"):
+        fivecal.Dataset.from_dict(d)
