@@ -158,3 +158,13 @@ def test_the_lobing_turns_with_the_spindle():
 
     assert np.allclose(run(60.0, 0.003), run(0.0, -0.003), atol=1e-9)
     assert not np.allclose(run(0.0, 0.003), run(0.0, -0.003), atol=1e-4)
+
+
+def test_a_known_lobing_is_applied_as_fixed_values():
+    """A probe qualified elsewhere: its lobing given as fixed values
+    (``initial`` without estimating) corrects the touches."""
+    ds, truth, machine = simulate(pretravel=0.0)
+    known = {k: truth[k] for k in LOBING}
+    r = fivecal.identify(ds, machine, initial=known)
+    assert r.verdict == "ok" and r.rms == pytest.approx(SIGMA, rel=0.2)
+    assert not set(known) & set(r.estimated)
