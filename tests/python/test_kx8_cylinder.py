@@ -259,3 +259,15 @@ def test_a_cylinder_radius_given_as_its_diameter_is_refused(experiment):
     d["artefact"]["cylinders"][0]["radius"] = 150.0
     with pytest.warns(fivecal.UnitsWarning, match=r"cylinders\[0\].*from its axis"):
         fivecal.Dataset.from_dict(d)
+
+
+def test_a_plan_of_cylinder_touches_can_be_designed():
+    """fivecal.design picks indexations from a pool of cylinder touches like
+    from any plan (the pool: the curved KX8 plan)."""
+    from fivecal import design
+    m = tango.kx8_machine()
+    art, plan = tango.kx8_curved(machine=m)
+    d = design.design_plan(plan, 12, tango.TABLE_5_1_NAMES, machine=m, artefact=art, tip_radius=tango.TIP_RADIUS)
+    assert len({(e["axes"]["A"], e["axes"]["C"]) for e in d.plan}) == 12
+    assert any(e["type"] == "cylinder" for e in d.plan)
+    assert d.quality.condition_number < 100
