@@ -271,3 +271,32 @@ def test_a_plan_of_cylinder_touches_can_be_designed():
     assert len({(e["axes"]["A"], e["axes"]["C"]) for e in d.plan}) == 12
     assert any(e["type"] == "cylinder" for e in d.plan)
     assert d.quality.condition_number < 100
+
+
+def test_candidate_plans_touch_cylinders_radially():
+    """candidate_plan offers cylinder touches at the section through the
+    cylinder's point, one per radial direction of the sphere normals, facing
+    the probe; the accessibility veto sees the radial normal."""
+    from fivecal import design
+    m = tango.kx8_machine()
+    art, _ = tango.kx8_curved(machine=m)
+    art["cylinders"][0]["point"] = [0.0, 0.0, tango.KX8_TABLE_TOP - 10.0]
+    normals = [[np.cos(t), np.sin(t), 0.0] for t in np.radians(np.arange(0, 360, 45))] + [[0, 0, 1]]
+    ix = [{"A": 0.0, "C": 0.0, "S": 0.0}, {"A": 90.0, "C": 30.0, "S": 0.0}]
+    plan, groups = design.candidate_plan(m, art, ix, tip_radius=3.0, sphere_normals=normals,
+                                         targets=[TABLE], directions=None)
+    assert plan and all(e["type"] == "cylinder" for e in plan)
+    at0 = [e for e, g in zip(plan, groups) if g == 0]
+    assert len(at0) == 8  # horizontal normals at A = 0 all face a vertical probe (dot 0 >= min_dot)
+    for e in plan:
+        p = np.asarray(e["point"])
+        assert np.hypot(p[0], p[1]) == pytest.approx(tango.KX8_TABLE_RADIUS)
+        assert p[2] == pytest.approx(tango.KX8_TABLE_TOP - 10.0)
+    seen = []
+    design.candidate_plan(m, art, ix, tip_radius=3.0, sphere_normals=normals, targets=[TABLE],
+                          accessible=lambda p, n, a: seen.append(np.dot(n, np.asarray(p)[:2].tolist() + [0])) or True)
+    assert seen and all(s > 0 for s in seen)  # outward radial normals
+    ds = fivecal.simulate(m, plan, artefact=art, tip_radius=3.0, sigma=0.0)
+    assert len(ds) == len(plan)
+    with pytest.raises(ValueError, match="no facet, sphere or cylinder 'K9'"):
+        design.candidate_plan(m, art, ix, tip_radius=3.0, targets=["K9"])
