@@ -58,7 +58,7 @@ void BindIdentification(py::module_& m) {
           // The observations as arrays (what the plausibility checks read):
           // 10^6 observations without a JSON round trip. Every observation
           // has axes, a type code (ObservationType order) and a target index
-          // (facet or sphere, else -1); the ball-bar and 3D ball fields only
+          // (facet, sphere or cylinder, else -1); the ball-bar and 3D ball fields only
           // exist for the rows listed in "ball" (NaN where not of its type).
           [](const Dataset& d) {
             const Eigen::Index n = static_cast<Eigen::Index>(d.observations.size());
@@ -71,9 +71,10 @@ void BindIdentification(py::module_& m) {
               const Observation& o = d.observations[i];
               axes.row(i) = o.axes.transpose();
               type[i] = static_cast<int>(o.type);
-              target[i] = o.type == ObservationType::kFacet    ? d.artefact.FacetIndex(o.target)
-                          : o.type == ObservationType::kSphere ? d.artefact.SphereIndex(o.target)
-                                                               : -1;
+              target[i] = o.type == ObservationType::kFacet      ? d.artefact.FacetIndex(o.target)
+                          : o.type == ObservationType::kSphere   ? d.artefact.SphereIndex(o.target)
+                          : o.type == ObservationType::kCylinder ? d.artefact.CylinderIndex(o.target)
+                                                                 : -1;
               if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d)
                 ball.push_back(static_cast<int>(i));
             }
@@ -121,6 +122,7 @@ void BindIdentification(py::module_& m) {
     for (const ObservationKind* k : ObservationKinds()) {
       py::dict d;
       d["name"] = k->name();
+      d["code"] = static_cast<int>(k->type());  // the type code of Dataset.columns
       d["label"] = k->label();
       d["unit"] = k->unit();
       d["rows"] = k->rows();

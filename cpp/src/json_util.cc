@@ -1,6 +1,7 @@
 #include "json_util.h"
 
 #include "fivecal/observations/registry.h"
+#include "fivecal/observations/probe_trigger.h"
 
 #include <algorithm>
 #include <cctype>
@@ -325,6 +326,7 @@ bool IsSetupParameterName(const std::string& name) {
   if (dot == std::string::npos || dot + 1 >= name.size()) return false;
   const std::string kind = name.substr(0, dot), rest = name.substr(dot + 1);
   if (const ObservationKind* k = FindKind(kind)) return k->IsParameterName(rest);
+  if (kind == "probe") return IsProbeParameterName(name);
   if (kind == "instrument") {
     const size_t d = rest.find('.');
     return d != std::string::npos && d > 0 && rest.find('.', d + 1) == std::string::npos;

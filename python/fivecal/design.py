@@ -218,11 +218,13 @@ def candidate_plan(machine, artefact: Mapping, indexations: Sequence[Mapping[str
                    sphere_normals=None, directions="visit",
                    accessible: Optional[Callable] = None) -> tuple:
     """Candidate touches: at each rotary indexation (dicts like ``{"B": 30,
-    "C": -90, "S": 0}``) every facet or sphere touch of ``artefact`` that faces
+    "C": -90, "S": 0}``) every facet, sphere or cylinder touch of ``artefact`` that faces
     the probe (normal . tool axis >= ``min_dot``) with all axis commands within
     ``limits`` (axis -> (min, max), mm / degrees).  Sphere touches go along
     ``sphere_normals`` (default: the ISO 230-10-like 33 points of
-    :func:`fivecal.procedures.sphere_test.sphere_points`).  ``directions``: ``"visit"`` records the
+    :func:`fivecal.procedures.sphere_test.sphere_points`); cylinder touches at the section
+    through the cylinder's ``point``, in the radial directions of those
+    normals.  ``directions``: ``"visit"`` records the
     last-move directions of the rotary axes for the indexations visited in
     order, ``None`` records none, or a list of dicts.  ``accessible(point,
     normal, tool_axis)`` (e.g. :func:`fivecal.procedures.tango.facet_accessible` with the
@@ -259,12 +261,20 @@ def candidate_plan(machine, artefact: Mapping, indexations: Sequence[Mapping[str
     if accessible is not None:
         facets = {f["id"]: f for f in artefact.get("facets", [])}
         spheres = {s["id"]: s for s in artefact.get("spheres", [])}
+        cylinders = {c["id"]: c for c in artefact.get("cylinders", [])}
         _, axis = m.tool_pose({a: q[:, i] for i, a in enumerate(m.axis_names)})
         keep_plan, keep_groups = [], []
         for e, g in zip(plan, groups):
             if e["type"] == "facet":
                 f = facets[e["target"]]
                 ok = accessible(e["point"], f["normal"], axis[g])
+            elif e["type"] == "cylinder":
+                c = cylinders[e["target"]]
+                ax = np.asarray(c["axis"], float)
+                w = np.asarray(e["point"], float) - np.asarray(c["point"], float)
+                radial = w - ax * (w @ ax)
+                n = radial / np.linalg.norm(radial) * (-1.0 if c.get("inside") else 1.0)
+                ok = accessible(e["point"], n, axis[g])
             else:
                 s = spheres[e["target"]]
                 n = np.asarray(e["normal"], float)

@@ -9,11 +9,13 @@ and give a confident wrong answer. These checks run where data comes in
 * **refuse** (ValueError naming the field) when the evidence does not depend
   on the nominal model: a ball bar reading beyond ±2 mm (a QC20 ballbar
   measures about ±1 mm), an R-test displacement beyond 5 mm, a position or
-  length beyond 100 m, a sphere whose touches at the nominal machine lie
-  consistently at R/2 + r from its centre (the radius is the diameter);
+  length beyond 100 m, a sphere (or cylinder) whose touches at the nominal
+  machine lie consistently at R/2 + r from its centre (axis): the radius is
+  the diameter;
 * **warn** (:class:`fivecal.UnitsWarning`) when a rough nominal model could
   explain it: positions or lengths beyond 10 m, sphere touches far from
-  R + r, facet touches more than 5 mm from their facet;
+  R + r, cylinder touches far from R ± r of its axis, facet touches more
+  than 5 mm from their facet;
 * **warn** (:class:`fivecal.RadiansWarning`) once per rotary axis whose
   values look like radians (:func:`fivecal.units.looks_like_radians`).
 """
@@ -121,6 +123,13 @@ def _axis_columns(machine: Machine, entries: Sequence[Mapping]):
 _TYPES = ("facet", "sphere", "dbb", "ball3d")
 
 
+def _cylinder_code() -> int:
+    """The core's type code of cylinder touches (after the first four kinds,
+    its place depends on the registry)."""
+    from . import _core
+    return next((int(k["code"]) for k in _core.observation_kinds() if k["name"] == "cylinder"), -2)
+
+
 def _optional_column(entries, key: str) -> np.ndarray:
     """``entry[key]`` of every entry as floats, NaN where absent or not a number."""
     return _column([e.get(key, math.nan) if isinstance(e, dict) else math.nan for e in entries])
@@ -137,15 +146,17 @@ def _dict_columns(machine: Machine, entries: Sequence, artefact) -> dict:
     entry; the ball fields (reading, length, measured, tool_ball, table_ball)
     of the rows listed in ``ball``, here every entry (NaN where a field is
     absent or not of that entry's type)."""
-    types = np.array([_TYPES.index(e.get("type")) if isinstance(e, dict) and e.get("type") in _TYPES else -1
+    cyl = _cylinder_code()
+    types = np.array([_TYPES.index(e.get("type")) if isinstance(e, dict) and e.get("type") in _TYPES
+                      else cyl if isinstance(e, dict) and e.get("type") == "cylinder" else -1
                       for e in entries], dtype=int)
     ids = {}
     if isinstance(artefact, Mapping):
-        for code, key in ((0, "facets"), (1, "spheres")):
+        for code, key in ((0, "facets"), (1, "spheres"), (cyl, "cylinders")):
             for k, x in enumerate(artefact.get(key) or []):
                 if isinstance(x, Mapping):
                     ids.setdefault((code, str(x.get("id"))), k)
-    target = np.array([ids.get((int(t), str(e.get("target"))), -1) if t in (0, 1) else -1
+    target = np.array([ids.get((int(t), str(e.get("target"))), -1) if t in (0, 1, cyl) else -1
                        for t, e in zip(types, entries)], dtype=int)
     measured = _optional_rows(entries, "measured")
     measured[types != 3] = math.nan
@@ -243,6 +254,13 @@ def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lamb
             if isinstance(b, Mapping):
                 vals.append(_num(b.get("length")))
                 fields.append(f"artefact.scale_bars[{k}].length")
+        for k, c in enumerate(art.get("cylinders") or []):
+            if isinstance(c, Mapping):
+                for j, v in enumerate(_vec(c.get("point"))):
+                    vals.append(v)
+                    fields.append(f"artefact.cylinders[{k}].point[{j}]")
+                vals.append(_num(c.get("radius")))
+                fields.append(f"artefact.cylinders[{k}].radius")
     _check_size(np.array(vals, dtype=float), fields, where, "the dataset's positions")
 
     # Instrument ranges (rows of the ball fields: cols["ball"]).
@@ -273,7 +291,7 @@ def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lamb
 
 
 def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None:
-    """Sphere and facet touches against the artefact, at the nominal machine."""
+    """Sphere, cylinder and facet touches against the artefact, at the nominal machine."""
     art = d.get("artefact") or {}
     if not isinstance(art, Mapping):
         return
@@ -281,7 +299,8 @@ def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None
     r = _num(probe.get("tip_radius", 0.0)) if isinstance(probe, Mapping) else 0.0
     if not math.isfinite(r):
         return
-    idx = np.flatnonzero((cols["type"] == 0) | (cols["type"] == 1))
+    cyl = _cylinder_code()
+    idx = np.flatnonzero((cols["type"] == 0) | (cols["type"] == 1) | (cols["type"] == cyl))
     if not idx.size:
         return
     sub = {a: c[idx] for a, c in cols["axes"].items()}
@@ -315,6 +334,31 @@ def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None
             _warn(f"{where}: {name}: its touches lie {med:.4g} mm (median) from its centre at the "
                           f"nominal machine, radius + tip radius = {expected:.4g} mm expected; check the "
                           "radius (not the diameter), the centre, probe.tip_radius and their units", UnitsWarning)
+    for k, c in enumerate(art.get("cylinders") or []):
+        if not isinstance(c, Mapping):
+            continue
+        sel = (types == cyl) & (targets == k)
+        p, a, R = _vec(c.get("point")), _vec(c.get("axis")), _num(c.get("radius"))
+        if (sel.sum() < 3 or not (np.isfinite(p).all() and np.isfinite(a).all()) or np.linalg.norm(a) == 0
+                or not (math.isfinite(R) and R > 0)):
+            continue
+        a = a / np.linalg.norm(a)
+        w = P[sel] - p
+        rho = np.linalg.norm(w - np.outer(w @ a, a), axis=1)
+        med = float(np.median(rho))
+        spread = float(np.median(np.abs(rho - med)))
+        s = -1.0 if c.get("inside") is True else 1.0
+        expected, half = R + s * r, R / 2 + s * r
+        name = f"artefact.cylinders[{k}] ('{c.get('id')}')"
+        if abs(med - half) < 0.05 * R and spread < 0.05 * R and abs(med - expected) > 0.25 * R:
+            raise ValueError(f"{where}: {name}: its {int(sel.sum())} touches lie {med:.4g} mm from its "
+                             f"axis at the nominal machine, {expected:.4g} mm expected (radius "
+                             f"{'-' if s < 0 else '+'} tip radius): the radius looks like the diameter; "
+                             f"give radius {R / 2:g}")
+        if abs(med - expected) > 0.25 * R + 1.0:
+            _warn(f"{where}: {name}: its touches lie {med:.4g} mm (median) from its axis at the nominal "
+                  f"machine, {expected:.4g} mm expected; check the radius (not the diameter), the axis, "
+                  "\"inside\", probe.tip_radius and their units", UnitsWarning)
     for k, f in enumerate(art.get("facets") or []):
         if not isinstance(f, Mapping):
             continue

@@ -44,22 +44,35 @@ const char* kBase = R"({
             "EXXb": 0.003, "ECCb": -4e-5, "EBBb": 3e-5, "tip.x": 0.01, "tip.z": -0.02, "EX0S": -0.13}
 })";
 
-// Per kind: plan entries and the true values of the setup parameters they bring.
+// Per kind: plan entries and the true values of the setup parameters they
+// bring; `artefact`: entries the kind adds to the base artefact.
 struct Sample {
   const char* plan;
   const char* setup;
+  const char* artefact = nullptr;
 };
 const std::map<std::string, Sample> kSamples = {
     {"facet",
      {R"([{"type": "facet", "target": "T", "axes": {"B": 0, "C": 0, "S": 0}, "direction": {"B": 1, "C": -1}},
           {"type": "facet", "target": "T", "axes": {"B": 0, "C": 90, "S": 90}, "id": "t2"},
           {"type": "facet", "target": "E", "axes": {"B": 30, "C": 0}, "direction": {"B": -1, "C": 1}}])",
-      R"({"facet.T": 0.01, "facet.E": -0.004})"}},
+      R"({"facet.T": 0.01, "facet.E": -0.004, "probe.pretravel": 0.002, "probe.axial": -0.001,
+          "probe.lobe.c3": 0.004, "probe.lobe.s2": 0.001})"}},
     {"sphere",
      {R"([{"type": "sphere", "target": "S1", "axes": {"B": 0, "C": 0}, "normal": [0,0,1]},
           {"type": "sphere", "target": "S1", "axes": {"B": 0, "C": 0}, "normal": [1,0,1]},
           {"type": "sphere", "target": "S2", "axes": {"B": 0, "C": 30}, "normal": [-1,1,1]}])",
-      R"({"sphere.S1.x": 0.002, "sphere.S2.z": -0.003, "sphere.S1.r": 0.001})"}},
+      R"({"sphere.S1.x": 0.002, "sphere.S2.z": -0.003, "sphere.S1.r": 0.001, "probe.lobe.c3": 0.004,
+          "probe.lobe.s3": -0.003, "probe.axial": 0.002, "probe.lobe.c2": -0.001})"}},
+    {"cylinder",
+     {R"([{"type": "cylinder", "target": "K", "axes": {"B": 0, "C": 0}, "point": [180, 0, -40]},
+          {"type": "cylinder", "target": "K", "axes": {"B": 20, "C": 90}, "point": [10, -170, -45], "id": "k2"},
+          {"type": "cylinder", "target": "H", "axes": {"B": -10, "C": 30}, "point": [40, -20, 0],
+           "direction": {"B": 1}}])",
+      R"({"cylinder.K.r": 0.02, "cylinder.K.x": 0.01, "cylinder.H.y": -0.003, "cylinder.H.rx": 1e-4,
+          "cylinder.H.ry": -2e-4, "probe.lobe.c3": 0.004, "probe.pretravel": 0.001})",
+      R"({"cylinders": [{"id": "K", "point": [0,0,-30], "axis": [0,0,1], "radius": 180},
+                        {"id": "H", "point": [40,-30,0], "axis": [0.6,0,0.8], "radius": 10, "inside": true}]})"}},
     {"dbb",
      {R"([{"type": "dbb", "axes": {"X": 10, "Y": 20, "Z": -50, "B": 20, "C": 40}, "length": 100,
            "tool_ball": [0,0,100], "table_ball": [50,0,0], "direction": {"C": 1, "X": -1}},
@@ -112,6 +125,7 @@ std::string SpecOf(const ObservationKind& k) {
   const Sample& s = kSamples.at(k.name());
   spec["plan"] = json::parse(s.plan);
   spec["setup"] = json::parse(s.setup);
+  if (s.artefact) spec["artefact"].update(json::parse(s.artefact));
   return spec.dump();
 }
 

@@ -1059,8 +1059,9 @@ std::string CandidatePlan(const Dataset& setup, const Eigen::MatrixXd& indexatio
   }
   std::set<std::string> wanted(access.targets.begin(), access.targets.end());
   for (const std::string& t : wanted)
-    if (setup.artefact.FacetIndex(t) < 0 && setup.artefact.SphereIndex(t) < 0)
-      throw std::invalid_argument("candidate_plan.targets: no facet or sphere '" + t + "'");
+    if (setup.artefact.FacetIndex(t) < 0 && setup.artefact.SphereIndex(t) < 0 &&
+        setup.artefact.CylinderIndex(t) < 0)
+      throw std::invalid_argument("candidate_plan.targets: no facet, sphere or cylinder '" + t + "'");
   auto use = [&](const std::string& id) { return wanted.empty() || wanted.count(id); };
   std::vector<Eigen::Vector3d> normals;
   for (size_t i = 0; i < sphere_normals.size(); ++i) {
@@ -1123,6 +1124,28 @@ std::string CandidatePlan(const Dataset& setup, const Eigen::MatrixXd& indexatio
         json e = {{"type", "sphere"}, {"target", s.id}, {"axes", axes}, {"normal", Array3(nrm)}};
         if (!dir.empty()) e["direction"] = dir;
         plan.push_back(e);
+        if (group) group->push_back(row);
+      }
+    }
+    // A cylinder: touches at its point's section, in the radial directions
+    // of the sphere normals (those not nearly along its axis), once each.
+    for (const Cylinder& c : setup.artefact.cylinders) {
+      if (!use(c.id)) continue;
+      std::vector<Eigen::Vector3d> done;
+      for (const Eigen::Vector3d& nrm : normals) {
+        Eigen::Vector3d e = nrm - c.axis * c.axis.dot(nrm);
+        if (e.norm() < 0.5) continue;
+        e.normalize();
+        if (std::any_of(done.begin(), done.end(), [&](const Eigen::Vector3d& d) { return d.dot(e) > 1 - 1e-9; }))
+          continue;
+        done.push_back(e);
+        const Eigen::Vector3d n = c.inside ? Eigen::Vector3d(-e) : e;  // into the free space
+        if (n.dot(a) < access.min_dot) continue;
+        const Eigen::Vector3d point = c.point + c.radius * e;
+        if (!reachable(point + r * n)) continue;
+        json j = {{"type", "cylinder"}, {"target", c.id}, {"axes", axes}, {"point", Array3(point)}};
+        if (!dir.empty()) j["direction"] = dir;
+        plan.push_back(j);
         if (group) group->push_back(row);
       }
     }

@@ -41,6 +41,12 @@ const std::string* InstrumentId(const Observation& o) {
   return KindOf(o).instrument_key() ? &o.setup : nullptr;
 }
 
+int Artefact::CylinderIndex(const std::string& id) const {
+  for (size_t i = 0; i < cylinders.size(); ++i)
+    if (cylinders[i].id == id) return static_cast<int>(i);
+  return -1;
+}
+
 namespace {
 // Whether every residual row of a kind has the same unit (then one number
 // may declare the noise of all of them).
@@ -215,7 +221,7 @@ Dataset ParseHead(const json& j) {
   if (j.contains("artefact")) {
     const json& a = j["artefact"];
     if (!a.is_object()) throw std::invalid_argument("dataset.artefact: expected an object");
-    CheckKeys(a, {"facets", "spheres", "scale_bars"}, "dataset.artefact");
+    CheckKeys(a, {"facets", "spheres", "scale_bars", "cylinders"}, "dataset.artefact");
     std::set<std::string> ids;
     auto item = [&](const json& list, size_t i, const char* what) -> const json& {
       const json& x = list[i];
@@ -258,6 +264,32 @@ Dataset ParseHead(const json& j) {
         s.radius = ReadBounded(sj, "radius", w, kMaxLinear);
         if (s.radius <= 0) throw std::invalid_argument(w + ".radius: must be > 0 mm");
         ds.artefact.spheres.push_back(s);
+      }
+    }
+    if (a.contains("cylinders")) {
+      const json& cs = a["cylinders"];
+      if (!cs.is_array()) throw std::invalid_argument("dataset.artefact.cylinders: expected an array");
+      for (size_t i = 0; i < cs.size(); ++i) {
+        const std::string w = "dataset.artefact.cylinders[" + std::to_string(i) + "]";
+        const json& cj = item(cs, i, "cylinders");
+        CheckKeys(cj, {"id", "point", "axis", "radius", "inside"}, w);
+        Cylinder c;
+        c.id = ReadString(cj, "id", w);
+        if (!ids.insert(c.id).second) throw std::invalid_argument(w + ".id: duplicate id " + Quote(c.id));
+        c.point = ReadVector3(cj.value("point", json()), w + ".point");
+        c.axis = ReadVector3(cj.value("axis", json()), w + ".axis");
+        const double n = c.axis.stableNorm();
+        if (n < 1e-12) throw std::invalid_argument(w + ".axis: zero vector");
+        if (std::abs(n - 1.0) > 1e-6)
+          throw std::invalid_argument(w + ".axis: not a unit vector (norm " + std::to_string(n) + ")");
+        c.axis /= n;
+        c.radius = ReadBounded(cj, "radius", w, kMaxLinear);
+        if (c.radius <= 0) throw std::invalid_argument(w + ".radius: must be > 0 mm");
+        if (cj.contains("inside")) {
+          if (!cj["inside"].is_boolean()) throw std::invalid_argument(w + ".inside: expected true or false");
+          c.inside = cj["inside"].get<bool>();
+        }
+        ds.artefact.cylinders.push_back(c);
       }
     }
     if (a.contains("scale_bars")) {
@@ -925,6 +957,15 @@ std::string Dataset::ToJson() const {
       }
     }
     j["instruments"] = ins;
+  }
+  if (!artefact.cylinders.empty()) {
+    json cyls = json::array();
+    for (const Cylinder& c : artefact.cylinders) {
+      json jc = {{"id", c.id}, {"point", Array3(c.point)}, {"axis", Array3(c.axis)}, {"radius", c.radius}};
+      if (c.inside) jc["inside"] = true;
+      cyls.push_back(jc);
+    }
+    j["artefact"]["cylinders"] = cyls;
   }
   json obs = json::array();
   for (const Observation& o : observations) {

@@ -42,17 +42,18 @@ class Kind final : public ProbeTouchKind {
   }
   bool IsParameterName(const std::string& rest) const override { return rest.find('.') == std::string::npos; }
   std::vector<PriorClass> prior_classes() const override {
-    return {{"facet", 1.0, "mm", "facet.<id>: offset of a facet from its nominal plane"}};
+    return {{"facet", 1.0, "mm", "facet.<id>: offset of a facet from its nominal plane"}, ProbeClass()};
   }
   const char* PriorClassOfName(const std::string& n) const override {
-    return n.rfind("facet.", 0) == 0 ? "facet" : nullptr;
+    return n.rfind("facet.", 0) == 0 ? "facet" : ProbeTouchKind::PriorClassOfName(n);
   }
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
     const Dataset& ds = b.dataset;
     const int fi = ds.artefact.FacetIndex(o.target);
     const SetupRef off = b.Ref(b.table.group(type(), o.target)[0]);
-    b.Add(new FacetResidual(b.context, o, ds.artefact.facets[fi], ds.tip_radius, off), 1);
+    const ProbeTrigger trigger = MakeProbeTrigger(b, o);
+    b.Add(new FacetResidual(b.context, o, ds.artefact.facets[fi], ds.tip_radius, off, trigger), 1);
   }
   void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
                        AnalyticRow* r) const override {
@@ -61,13 +62,14 @@ class Kind final : public ProbeTouchKind {
     r->n = f.normal;
     r->constant = ds.tip_radius;
     r->idx[0] = t.group(type(), o.target)[0];
+    PrepareProbeTrigger(ds, t, o, r);
   }
   void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override {
     Eigen::Matrix3d G;
     for (const AnalyticRow* r = rows; r != rows + count; ++r) {
       Eigen::Vector3d P;
       e.ToolPoint(*r, e.probe_tip(), &P);
-      e.residuals[e.row] = r->n.dot(P - r->a) - r->constant - e.v[r->idx[0]];
+      e.residuals[e.row] = r->n.dot(P - r->a) - r->constant - e.v[r->idx[0]] + ProbePretravel(e, *r, -r->n, nullptr);
       G.row(0) = r->n.transpose();
       e.Put(e.row, r->idx[0], -1.0);
       e.Chain(G, 1, nullptr);

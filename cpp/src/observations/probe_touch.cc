@@ -6,11 +6,117 @@
 #include "fivecal/model/inverse.h"
 #include "fivecal/model/kinematics.h"
 #include "fivecal/observations/simulate.h"
+#include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/solve/problem.h"
 #include "json_util.h"
 
 namespace fivecal {
 
 using namespace json_util;
+
+// ---- trigger model (probe_trigger.h) ------------------------------------------
+
+const char* const kProbeParameterNames[kProbeTerms] = {"probe.pretravel", "probe.axial",   "probe.lobe.c2",
+                                                       "probe.lobe.s2",   "probe.lobe.c3", "probe.lobe.s3"};
+
+bool IsProbeParameterName(const std::string& name) {
+  for (const char* n : kProbeParameterNames)
+    if (name == n) return true;
+  return false;
+}
+
+void ProbeBasisGradient(const Eigen::Vector3d& u, double* b, Eigen::Matrix<double, kProbeTerms, 3>* g) {
+  ProbeBasis<double>(u, b);
+  const double x = u[0], y = u[1], z = u[2];
+  *g << 0, 0, 0,                                   //
+      0, 0, 2 * z,                                 //
+      2 * x, -2 * y, 0,                            //
+      2 * y, 2 * x, 0,                             //
+      3 * x * x - 3 * y * y, -6 * x * y, 0,        //
+      6 * x * y, 3 * x * x - 3 * y * y, 0;
+}
+
+namespace {
+
+// Rows: the probe frame's x, y, z in F at the zero pose.
+Eigen::Matrix3d ProbeAxes(const Machine& m) {
+  const Eigen::Vector3d z = m.tool_axis().normalized();
+  Eigen::Vector3d x = Eigen::Vector3d::UnitX() - z * z.x();
+  if (x.norm() < 0.1) x = Eigen::Vector3d::UnitY() - z * z.y();
+  x.normalize();
+  Eigen::Matrix3d B;
+  B.row(0) = x.transpose();
+  B.row(1) = z.cross(x).transpose();
+  B.row(2) = z.transpose();
+  return B;
+}
+
+}  // namespace
+
+Eigen::Matrix3d ProbeFrameRotation(const Machine& m, const Observation& o) {
+  const PoseData pose(m, o);
+  const Eigen::VectorXd theta = Eigen::VectorXd::Zero(m.num_parameters());
+  Eigen::Vector3d pt, pw;
+  const Frame<double> Ft = ChainFrame<double>(m, m.tool_chain(), theta.data(), pose.q.data(), nullptr, &pt);
+  const Frame<double> Fw = ChainFrame<double>(m, m.workpiece_chain(), theta.data(), pose.q.data(), nullptr, &pw);
+  // A direction v of the probe (F at the zero pose) is Fw.R^T Ft.R v in the
+  // workpiece frame (ToolInWorkpiece).
+  const Eigen::Matrix3d probe_to_work = Fw.R.transpose() * Ft.R;
+  return ProbeAxes(m) * probe_to_work.transpose();
+}
+
+int ProbeParameterIndex(const ParameterTable& t) { return t.Index(kProbeParameterNames[0]); }
+
+ProbeTrigger MakeProbeTrigger(ResidualBuilder& b, const Observation& o) {
+  ProbeTrigger tr;
+  const int i0 = ProbeParameterIndex(b.table);
+  if (i0 < 0) return tr;
+  tr.rotation = ProbeFrameRotation(b.dataset.machine(), o);
+  for (int k = 0; k < kProbeTerms; ++k) tr.ref[k] = b.Ref(i0 + k);
+  return tr;
+}
+
+void PrepareProbeTrigger(const Dataset& ds, const ParameterTable& t, const Observation& o, AnalyticRow* r) {
+  r->probe0 = ProbeParameterIndex(t);
+  if (r->probe0 >= 0) r->probe_rotation = ProbeFrameRotation(ds.machine(), o);
+}
+
+double ProbePretravel(const AnalyticEval& e, const AnalyticRow& r, const Eigen::Vector3d& u_work,
+                      Eigen::Vector3d* grad) {
+  if (grad) grad->setZero();
+  if (r.probe0 < 0) return 0.0;
+  const Eigen::Vector3d u = r.probe_rotation * u_work;
+  double b[kProbeTerms];
+  Eigen::Matrix<double, kProbeTerms, 3> G;
+  ProbeBasisGradient(u, b, &G);
+  double p = 0.0;
+  Eigen::RowVector3d gu = Eigen::RowVector3d::Zero();
+  for (int k = 0; k < kProbeTerms; ++k) {
+    const double c = e.v[r.probe0 + k];
+    p += b[k] * c;
+    gu += c * G.row(k);
+    e.Put(e.row, r.probe0 + k, b[k]);
+  }
+  if (grad) *grad = (gu * r.probe_rotation).transpose();
+  return p;
+}
+
+// ---- ProbeTouchKind -------------------------------------------------------------
+
+void ProbeTouchKind::AddObservationParameters(const Observation&, ParameterTable* t) const {
+  if (ProbeParameterIndex(*t) >= 0) return;
+  for (const char* n : kProbeParameterNames) t->Add(n);
+}
+
+PriorClass ProbeTouchKind::ProbeClass() {
+  return {"probe", 0.01, "mm",
+          "probe.pretravel|axial|lobe.*: a touch probe's pretravel and its variation with the approach "
+          "direction (lobing): up to about 10 um"};
+}
+
+const char* ProbeTouchKind::PriorClassOfName(const std::string& n) const {
+  return IsProbeParameterName(n) ? "probe" : nullptr;
+}
 
 void ProbeTouchKind::Validate(const Dataset& ds, const Observation& o,
                               const std::function<std::string()>& where) const {
@@ -43,7 +149,36 @@ void ProbeTouchKind::SimulateEntry(const json& e, const std::string& w, const Pl
   std::vector<int> dir(ob->direction.data(), ob->direction.data() + na);
   for (int k = 0; k < na; ++k)
     if (!m.axis(k).rotary()) dir[k] = d[k] > 1e-12 ? 1 : (d[k] < -1e-12 ? -1 : 0);
-  auto g = [&](double s) { return gap(ToolAtCommand(m, t.theta, c0 + s * d, dir, t.tip)); };
+  // The true trigger: the tip centre is recorded p(u) beyond the contact, u
+  // the inward normal of the true surface (minus the gap's gradient), which
+  // the residual sees as gap + p(u) (probe_trigger.h).
+  double coef[kProbeTerms];
+  bool trigger = false;
+  for (int k = 0; k < kProbeTerms; ++k) trigger |= (coef[k] = t.setup(kProbeParameterNames[k])) != 0.0;
+  Eigen::Matrix3d M = Eigen::Matrix3d::Identity();
+  if (trigger) {
+    Observation at = *ob;
+    at.axes = c0;
+    M = ProbeFrameRotation(m, at);
+  }
+  auto pretravel = [&](const Eigen::Vector3d& P) {
+    if (!trigger) return 0.0;
+    const double h = 1e-4;
+    Eigen::Vector3d grad;
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector3d e = Eigen::Vector3d::Unit(c) * h;
+      grad[c] = (gap(P + e) - gap(P - e)) / (2 * h);
+    }
+    double b[kProbeTerms];
+    ProbeBasis<double>(Eigen::Vector3d(M * (-grad.normalized())), b);
+    double p = 0;
+    for (int k = 0; k < kProbeTerms; ++k) p += b[k] * coef[k];
+    return p;
+  };
+  auto g = [&](double s) {
+    const Eigen::Vector3d P = ToolAtCommand(m, t.theta, c0 + s * d, dir, t.tip);
+    return gap(P) + pretravel(P);
+  };
   double s = 0;
   for (int it = 0; it < 60; ++it) {
     const double h = 1e-4;

@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "fivecal/observations/ball3d.h"
+#include "fivecal/observations/cylinder.h"
 #include "fivecal/observations/dbb.h"
 #include "fivecal/observations/distance.h"
 #include "fivecal/observations/facet.h"
@@ -24,6 +25,7 @@ const std::vector<const ObservationKind*>& ObservationKinds() {
       &Ball3dKind(),
       &PointKind(),
       &PoseKind(), &DistanceKind(),
+      &CylinderKind(),
   };
   return kinds;
 }

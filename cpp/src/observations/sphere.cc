@@ -62,10 +62,11 @@ class Kind final : public ProbeTouchKind {
   }
   std::vector<PriorClass> prior_classes() const override {
     return {{"sphere_center", 1.0, "mm", "sphere.<id>.x|y|z: where a sphere really sits"},
-            {"sphere_radius", 0.01, "mm", "sphere.<id>.r: a calibrated sphere's radius error"}};
+            {"sphere_radius", 0.01, "mm", "sphere.<id>.r: a calibrated sphere's radius error"},
+            ProbeClass()};
   }
   const char* PriorClassOfName(const std::string& n) const override {
-    if (n.rfind("sphere.", 0) != 0) return nullptr;
+    if (n.rfind("sphere.", 0) != 0) return ProbeTouchKind::PriorClassOfName(n);
     return n.size() >= 2 && n.compare(n.size() - 2, 2, ".r") == 0 ? "sphere_radius" : "sphere_center";
   }
 
@@ -75,7 +76,8 @@ class Kind final : public ProbeTouchKind {
     const auto& sp = b.table.group(type(), o.target);
     const SetupRef c[3] = {b.Ref(sp[0]), b.Ref(sp[1]), b.Ref(sp[2])};
     const SetupRef r = b.Ref(sp[3]);
-    b.Add(new SphereResidual(b.context, o, ds.artefact.spheres[si], ds.tip_radius, c, r), 1);
+    const ProbeTrigger trigger = MakeProbeTrigger(b, o);
+    b.Add(new SphereResidual(b.context, o, ds.artefact.spheres[si], ds.tip_radius, c, r, trigger), 1);
   }
   void AddArtefactResiduals(ResidualBuilder& b) const override {
     const Dataset& ds = b.dataset;
@@ -103,6 +105,7 @@ class Kind final : public ProbeTouchKind {
     r->a = ds.artefact.spheres[si].center;
     r->constant = ds.artefact.spheres[si].radius + ds.tip_radius;
     for (int c = 0; c < 4; ++c) r->idx[c] = t.group(type(), o.target)[c];
+    PrepareProbeTrigger(ds, t, o, r);
   }
   void AddArtefactAnalyticRows(const Dataset& ds, const ParameterTable& t, std::vector<AnalyticRow>* rows,
                                std::vector<int>* source) const override {
@@ -150,10 +153,14 @@ class Kind final : public ProbeTouchKind {
       const Eigen::Vector3d c = r->a + Eigen::Vector3d(v[r->idx[0]], v[r->idx[1]], v[r->idx[2]]);
       const Eigen::Vector3d d = P - c;
       const double len = d.norm();
-      e.residuals[e.row] = len - r->constant - v[r->idx[3]];
       const Eigen::Vector3d u = d / len;
-      G.row(0) = u.transpose();
-      for (int k = 0; k < 3; ++k) e.Put(e.row, r->idx[k], -u[k]);
+      Eigen::Vector3d gp;  // dp/du_work at u_work = -u
+      const double p = ProbePretravel(e, *r, -u, &gp);
+      e.residuals[e.row] = len - r->constant - v[r->idx[3]] + p;
+      // d(-u)/dP = -(I - u u^T) / len
+      const Eigen::Vector3d grad = u - (gp - u * u.dot(gp)) / len;
+      G.row(0) = grad.transpose();
+      for (int k = 0; k < 3; ++k) e.Put(e.row, r->idx[k], -grad[k]);
       e.Put(e.row, r->idx[3], -1.0);
       e.Chain(G, 1, nullptr);
       e.row += 1;

@@ -236,6 +236,12 @@ std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group)
     else ++machine;
     if (i >= 0 && PriorClassOf(m, n) == "scale_gain") ++gains;
   }
+  // Isotropic pretravel shortens every touch alike, as a smaller tip radius
+  // would: the facet offsets and the cylinder and sphere radii absorb it.
+  if (std::find(group.begin(), group.end(), "probe.pretravel") != group.end() && machine == 0)
+    return "probe.pretravel acts exactly like a tip radius error, which the facet offsets and the "
+           "cylinder and sphere radii also absorb: fix probe.pretravel (or qualify the probe on a "
+           "calibrated sphere with its radius fixed)";
   if (gains > 0 && !HasLengthReference(ds))
     return "no length reference (no scale bar or ball-bar length in the data): only relative "
            "scale can be found";
@@ -256,6 +262,8 @@ std::string UndeterminedMessage(const Dataset& ds, std::vector<std::vector<std::
     for (const std::string& n : g) {
       const int i = m.ParameterIndex(n);
       if (i >= 0 && m.parameters()[i].kind != ParameterKind::kTip) return 0;
+      // probe.* are only estimated on request: say first why they cannot be
+      if (n.rfind("probe.", 0) == 0) return 0;
       if (n.rfind("sphere.", 0) == 0) r = std::min(r, 1);
       else if (n.rfind("tip.", 0) == 0) r = std::min(r, 2);
     }

@@ -102,7 +102,8 @@ int ParameterTable::Require(const std::string& name) const {
   if (name.find('.') != std::string::npos && name.rfind("tip.", 0) != 0 &&
       !json_util::IsSetupParameterName(name))
     msg += ": not a parameter name (machine errors have no '.', setup parameters are facet.<id>, "
-           "sphere.<id>.x|y|z|r, dbb[.<setup>].length|tool.x|..., ball3d.<setup>.tool.x|..., tip.x|y|z)";
+           "sphere.<id>.x|y|z|r, cylinder.<id>.r|x|y|rx|ry, probe.pretravel|axial|lobe.c2|..., "
+           "dbb[.<setup>].length|tool.x|..., ball3d.<setup>.tool.x|..., tip.x|y|z)";
   else
     msg += ": not a machine parameter and not a setup parameter of this dataset (facet.<id>, "
            "sphere.<id>.x|y|z|r, dbb.length, ...)";

@@ -26,6 +26,7 @@ facet coordinates are a plausible reconstruction, not the real tables.
 """
 from __future__ import annotations
 
+import json
 import math
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
@@ -39,6 +40,7 @@ __all__ = [
     "indexation_of", "indexation_groups", "rotary_directions", "facet_accessible",
     "kx8_cylinder_table", "kx8_cylinder_obstacles", "KX8_INDEXATIONS", "kx8_plan", "kx8_errors",
     "kx8_setup", "TABLE_5_1_NAMES", "STYLUS_OFFSETS", "hu40t_dataset", "kx8_dataset",
+    "KX8_TABLE_CYLINDER", "kx8_curved", "kx8_as_facets", "kx8_curved_setup", "kx8_curved_dataset",
 ]
 
 # --------------------------------------------------------------------------
@@ -733,6 +735,73 @@ def kx8_setup(artefact: Optional[Mapping] = None, seed: int = 2015) -> Dict[str,
     return setup
 
 
+#: Id of the table periphery as a cylinder target (:func:`kx8_curved`).
+KX8_TABLE_CYLINDER = "K1"
+
+
+def _on_periphery(f) -> bool:
+    """A facet of :func:`kx8_cylinder_table` on the cylindrical periphery (not
+    the top, not the slot wall)."""
+    p = np.asarray(f["point"], float)
+    return abs(f["normal"][2]) < 1e-9 and abs(math.hypot(p[0], p[1]) - KX8_TABLE_RADIUS) < 1e-6
+
+
+def kx8_curved(artefact: Optional[Mapping] = None, plan: Optional[Sequence[Mapping]] = None,
+               machine=None) -> Tuple[dict, List[dict]]:
+    """The KX8 table with its periphery as one cylinder target instead of
+    planar facets (observation type ``"cylinder"``, docs/formats.md).
+
+    Returns ``(artefact, plan)``: the artefact keeps the top and slot facets
+    and gains the cylinder :data:`KX8_TABLE_CYLINDER` (axis along the C axis,
+    radius :data:`KX8_TABLE_RADIUS`); each planned touch of a periphery facet
+    becomes a cylinder touch at the same point, its ``id`` ``"<facet>#<k>"``
+    keeping the facet (for :func:`kx8_as_facets`)."""
+    if artefact is None:
+        artefact = kx8_cylinder_table()
+    if plan is None:
+        plan = kx8_plan(artefact, machine)
+    curved = {f["id"] for f in artefact.get("facets", []) if _on_periphery(f)}
+    art = {k: [dict(x) for x in v] for k, v in artefact.items()}
+    art["facets"] = [f for f in art.get("facets", []) if f["id"] not in curved]
+    art["cylinders"] = [{"id": KX8_TABLE_CYLINDER, "point": [0.0, 0.0, KX8_TABLE_TOP], "axis": [0.0, 0.0, 1.0],
+                         "radius": KX8_TABLE_RADIUS}]
+    out = []
+    for k, e in enumerate(plan):
+        e = dict(e)
+        if e.get("type") == "facet" and e.get("target") in curved:
+            e.update(type="cylinder", target=KX8_TABLE_CYLINDER, id=f"{e['target']}#{k}")
+        out.append(e)
+    return art, out
+
+
+def kx8_as_facets(dataset, artefact: Optional[Mapping] = None) -> dict:
+    """A dataset of :func:`kx8_curved` touches with every cylinder touch
+    assigned back to its thesis facet (a plane through the facet's target
+    point, §5.3), as a dataset dict: what the planar-facet model of the
+    thesis fits."""
+    d = json.loads(json.dumps(dataset.to_dict() if hasattr(dataset, "to_dict") else dataset))
+    d["artefact"] = json.loads(json.dumps(artefact if artefact is not None else kx8_cylinder_table()))
+    for o in d["observations"]:
+        if o["type"] == "cylinder":
+            o["type"] = "facet"
+            o["target"] = o["id"].split("#")[0]
+    return d
+
+
+def kx8_curved_setup(artefact: Optional[Mapping] = None, seed: int = 2015) -> Dict[str, float]:
+    """True setup of the curved KX8 simulation: :func:`kx8_setup` for the top
+    and slot facets, and a table periphery 30 µm over its nominal radius
+    with its axis 15 µm / -10 µm off the C axis (assumed)."""
+    if artefact is None:
+        artefact = kx8_cylinder_table()
+    curved = {f["id"] for f in artefact.get("facets", []) if _on_periphery(f)}
+    setup = {k: v for k, v in kx8_setup(artefact, seed).items() if k.split(".", 1)[1] not in curved}
+    c = KX8_TABLE_CYLINDER
+    setup.update({f"cylinder.{c}.r": 30 * _UM, f"cylinder.{c}.x": 15 * _UM, f"cylinder.{c}.y": -10 * _UM})
+    return setup
+
+
+
 # --------------------------------------------------------------------------
 # Ready-made simulated datasets
 # --------------------------------------------------------------------------
@@ -757,6 +826,23 @@ def hu40t_dataset(errors: Optional[Mapping[str, float]] = None, seed: int = 1,
                     errors=_with_stylus(errors, thesis_s3_errors()), artefact=art,
                     tip_radius=TIP_RADIUS, sigma=sigma, seed=seed,
                     setup=hu40t_setup(art) if setup is None else setup)
+
+
+def kx8_curved_dataset(strategy: str = "S1+S2", top: bool = True,
+                       errors: Optional[Mapping[str, float]] = None, seed: int = 1,
+                       sigma: float = PROBE_SIGMA, setup: Optional[Mapping[str, float]] = None):
+    """Simulate the KX8 experiment of chapter 5 on a table whose periphery is
+    a true cylinder (:func:`kx8_curved`, :func:`kx8_curved_setup` unless
+    ``setup`` is given): the thesis' touches spread over 3 mm along the
+    curved surface. Fit it with the cylinder target, or with the thesis'
+    planar facets through :func:`kx8_as_facets`."""
+    from ..simulation import simulate
+    machine = kx8_machine()
+    art, plan = kx8_curved(kx8_cylinder_table(), kx8_plan(kx8_cylinder_table(), machine, strategy=strategy,
+                                                         top=top), machine)
+    return simulate(machine, plan, errors=_with_stylus(errors, kx8_errors()), artefact=art,
+                    tip_radius=TIP_RADIUS, sigma=sigma, seed=seed,
+                    setup=kx8_curved_setup() if setup is None else setup)
 
 
 def kx8_dataset(strategy: str = "S1+S2", top: bool = True,

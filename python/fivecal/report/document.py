@@ -159,9 +159,10 @@ def _data_section(dataset, result) -> str:
             ]
     if set(types) - {"dbb"}:  # a ball bar sweeps the axes: its poses are no indexations
         rows.append(("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"))
-    if "facet" in types or "sphere" in types:
+    if "facet" in types or "sphere" in types or "cylinder" in types:
         rows += [("artefact", ", ".join(_count(len(art.get(k, [])), w) for k, w in
-                                        (("facets", "facet"), ("spheres", "sphere"), ("scale_bars", "scale bar")))),
+                                        (("facets", "facet"), ("spheres", "sphere"), ("scale_bars", "scale bar"),
+                                         ("cylinders", "cylinder")))),
                  ("targets touched", f"{len(targets)}" + (f": {', '.join(map(str, targets[:40]))}"
                                                            + (" …" if len(targets) > 40 else "") if targets else "")),
                  ("probe tip radius", f"{tip_r:g} mm" if tip_r is not None else "–")]

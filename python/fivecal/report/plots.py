@@ -92,7 +92,7 @@ def _nice_floor(x: float) -> float:
 MAX_LEGEND = 12
 
 #: Observation types of touch probing (the residual-vector figure's data).
-PROBING = ("facet", "sphere")
+PROBING = ("facet", "sphere", "cylinder")
 
 
 def indexation_labels(dataset, rows=None) -> tuple:
@@ -187,7 +187,7 @@ def residual_vectors_figure(result, magnification: Optional[float] = None,
     """The Figure of :func:`plot_residual_vectors` (not saved).
 
     ``kinds``: observation types drawn (default: the touch-probing ones,
-    facet and sphere, when the data has any, else every observation)."""
+    facet, sphere and cylinder, when the data has any, else every observation)."""
     plt = _pyplot()
     ds = result.dataset
     types = list(ds.observation_types)

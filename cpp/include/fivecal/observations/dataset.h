@@ -25,6 +25,17 @@ struct Sphere {
   double radius = 0.0;
 };
 
+// A cylinder section (observation type "cylinder"): the axis line through
+// `point` along unit `axis`, workpiece frame. inside: a bore, touched from
+// inside; otherwise a boss or a table periphery, touched from outside.
+struct Cylinder {
+  std::string id;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+  double radius = 0.0;
+  bool inside = false;
+};
+
 struct ScaleBar {
   std::string sphere1, sphere2;
   double length = 0.0;  // calibrated centre distance, mm
@@ -34,14 +45,16 @@ struct Artefact {
   std::vector<Facet> facets;
   std::vector<Sphere> spheres;
   std::vector<ScaleBar> scale_bars;
+  std::vector<Cylinder> cylinders;
   int FacetIndex(const std::string& id) const;   // -1 if absent
   int SphereIndex(const std::string& id) const;  // -1 if absent
+  int CylinderIndex(const std::string& id) const;  // -1 if absent
 };
 
 // The observation kinds. Each has its file pair observations/<kind>.h|.cc
 // and one line in observations/registry.cc (ObservationKind, kind.h), which
 // say everything else about it.
-enum class ObservationType { kFacet, kSphere, kDbb, kBall3d, kPoint, kPose, kDistance };
+enum class ObservationType { kFacet, kSphere, kDbb, kBall3d, kPoint, kPose, kDistance, kCylinder };
 
 // The kind's name in files ("facet", "sphere", "dbb", "ball3d").
 const char* ObservationTypeName(ObservationType t);

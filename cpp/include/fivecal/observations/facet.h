@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "fivecal/observations/kind.h"
+#include "fivecal/observations/probe_trigger.h"
 #include "fivecal/observations/residuals.h"
 
 namespace fivecal {
@@ -13,16 +14,18 @@ namespace fivecal {
 // The probe tip centre P (tool point, workpiece frame) sits one tip radius r
 // off the facet plane, which may be offset along its normal:
 //
-//     n^ . (P - a) - r - facet.<id> = 0
+//     n^ . (P - a) - r - facet.<id> + p(-n^) = 0
 //
-//   a: nominal facet point, n^: unit outward normal (workpiece frame).
-// Derivatives (analytic batch): dr/dtheta = n^T dP/dtheta, dr/dfacet = -1.
+//   a: nominal facet point, n^: unit outward normal (workpiece frame),
+//   p: the probe's pretravel along the inward normal -n^ (probe_trigger.h).
+// Derivatives (analytic batch): dr/dtheta = n^T dP/dtheta, dr/dfacet = -1,
+// dr/dprobe_k = b_k(M (-n^)).
 class FacetResidual {
  public:
   FacetResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const Facet& f,
-                double tip_radius, SetupRef offset)
+                double tip_radius, SetupRef offset, const ProbeTrigger& trigger)
       : access_(ctx), pose_(*ctx->machine, o), point_(f.point), normal_(f.normal),
-        tip_radius_(tip_radius), offset_(offset) {}
+        tip_radius_(tip_radius), offset_(offset), trigger_(trigger) {}
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {
@@ -33,7 +36,7 @@ class FacetResidual {
     ToolInWorkpiece<T>(m, theta.data(), pose_.q.data(), pose_.dir.data(),
                        TipWithOffsets<T>(m, theta.data()), &P);
     residual[0] = normal_.template cast<T>().dot(P - point_.template cast<T>()) - T(tip_radius_) -
-                  access_.Setup(p, offset_);
+                  access_.Setup(p, offset_) + trigger_.Pretravel<T>(access_, p, (-normal_).template cast<T>());
     return true;
   }
 
@@ -43,6 +46,7 @@ class FacetResidual {
   const Eigen::Vector3d point_, normal_;
   const double tip_radius_;
   const SetupRef offset_;
+  const ProbeTrigger trigger_;
 };
 
 const ObservationKind& FacetKind();

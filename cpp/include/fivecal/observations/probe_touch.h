@@ -1,13 +1,17 @@
-// What the probe-touch kinds (facet, sphere) share: a stylus tip of radius
-// dataset.probe.tip_radius touching an artefact surface. Simulated touches
-// approach along the nominal surface normal; the noise is the trigger
-// position along that approach line.
+// What the probe-touch kinds (facet, sphere, cylinder) share: a stylus tip of
+// radius dataset.probe.tip_radius touching an artefact surface, and the
+// probe's trigger model (pretravel and lobing, probe_trigger.h) with its
+// setup parameters probe.*, which the first probe touch brings into the
+// parameter table. Simulated touches approach along the nominal surface
+// normal and trigger the true pretravel beyond the contact; the noise is the
+// trigger position along that approach line.
 #ifndef FIVECAL_OBSERVATIONS_PROBE_TOUCH_H_
 #define FIVECAL_OBSERVATIONS_PROBE_TOUCH_H_
 
 #include <functional>
 
 #include "fivecal/observations/kind.h"
+#include "fivecal/observations/probe_trigger.h"
 
 namespace fivecal {
 
@@ -24,8 +28,13 @@ class ProbeTouchKind : public ObservationKind {
   const char* noise_class() const final { return "probe"; }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot* slot, const RecordedContext* rec) const final;
   void ApplyInput(const SimulationPlan& plan, int i, int component, double x, Observation* o) const final;
+  // probe.pretravel ... probe.lobe.s3, on the first probe touch.
+  void AddObservationParameters(const Observation& o, ParameterTable* t) const override;
+  std::vector<PriorClass> prior_classes() const override { return {ProbeClass()}; }
+  const char* PriorClassOfName(const std::string& n) const override;
 
  protected:
+  static PriorClass ProbeClass();
   // The target of `o` exists in the artefact.
   virtual void ValidateTarget(const Dataset& ds, const Observation& o,
                               const std::function<std::string()>& where) const = 0;
@@ -41,6 +50,14 @@ class ProbeTouchKind : public ObservationKind {
   virtual void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d& P0,
                              const std::string& where, Eigen::Vector3d* n, Gap* gap) const = 0;
 };
+
+// The trigger term in the analytic batch: PrepareProbeTrigger fills the
+// row's probe0 and M; ProbePretravel returns p(M u_work) at the current
+// values, puts its derivatives in the probe parameters into the current row,
+// and gives dp/du_work in `grad` (workpiece frame) when wanted.
+void PrepareProbeTrigger(const Dataset& ds, const ParameterTable& t, const Observation& o, AnalyticRow* r);
+double ProbePretravel(const AnalyticEval& e, const AnalyticRow& r, const Eigen::Vector3d& u_work,
+                      Eigen::Vector3d* grad);
 
 }  // namespace fivecal
 

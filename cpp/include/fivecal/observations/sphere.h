@@ -7,22 +7,27 @@
 #include <memory>
 
 #include "fivecal/observations/kind.h"
+#include "fivecal/observations/probe_trigger.h"
 #include "fivecal/observations/residuals.h"
 
 namespace fivecal {
 
 // The tip centre P is R + r from the true sphere centre c + dc:
 //
-//     |P - (c + dc)| - (R + sphere.<id>.r + r) = 0
+//     |P - (c + dc)| - (R + sphere.<id>.r + r) + p(-u) = 0
 //
-// Derivatives (analytic batch), u = (P - c - dc) / |P - c - dc|:
-//   dr/dtheta = u^T dP/dtheta,  dr/ddc = -u^T,  dr/dR = -1.
+// with u = (P - c - dc) / |P - c - dc| and p the probe's pretravel along the
+// inward normal -u (probe_trigger.h). Derivatives (analytic batch), with
+// g = dp/du (the trigger model's gradient in the workpiece frame, zero when
+// the probe terms are all zero) and D = (I - u u^T) / |P - c - dc|:
+//   dr/dtheta = (u^T - g^T D) dP/dtheta,  dr/ddc = -(u^T - g^T D),
+//   dr/dR = -1,  dr/dprobe_k = b_k(M (-u)).
 class SphereResidual {
  public:
   SphereResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const Sphere& s,
-                 double tip_radius, const SetupRef (&center)[3], SetupRef radius)
+                 double tip_radius, const SetupRef (&center)[3], SetupRef radius, const ProbeTrigger& trigger)
       : access_(ctx), pose_(*ctx->machine, o), center_(s.center), radius_(s.radius),
-        tip_radius_(tip_radius), dc_{center[0], center[1], center[2]}, dr_(radius) {}
+        tip_radius_(tip_radius), dc_{center[0], center[1], center[2]}, dr_(radius), trigger_(trigger) {}
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {
@@ -35,7 +40,9 @@ class SphereResidual {
     const Vec3<T> c = center_.template cast<T>() +
                       Vec3<T>(access_.Setup(p, dc_[0]), access_.Setup(p, dc_[1]), access_.Setup(p, dc_[2]));
     using std::sqrt;
-    residual[0] = sqrt((P - c).squaredNorm()) - (T(radius_ + tip_radius_) + access_.Setup(p, dr_));
+    const T len = sqrt((P - c).squaredNorm());
+    residual[0] = len - (T(radius_ + tip_radius_) + access_.Setup(p, dr_)) +
+                  trigger_.Pretravel<T>(access_, p, Vec3<T>((c - P) / len));
     return true;
   }
 
@@ -46,6 +53,7 @@ class SphereResidual {
   const double radius_, tip_radius_;
   const SetupRef dc_[3];
   const SetupRef dr_;
+  const ProbeTrigger trigger_;
 };
 
 // Scale bar: the distance between the two estimated sphere centres equals

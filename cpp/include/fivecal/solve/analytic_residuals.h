@@ -39,6 +39,10 @@ struct AnalyticRow {
   Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero(), measured = Eigen::Vector3d::Zero();
   double constant = 0;
   int idx[8] = {-1, -1, -1, -1, -1, -1, -1, -1};  // setup parameter indices
+  // Probe touches: the trigger model (observations/probe_trigger.h), the
+  // table index of probe.pretravel (-1: none) and the rotation M.
+  int probe0 = -1;
+  Eigen::Matrix3d probe_rotation = Eigen::Matrix3d::Identity();
 };
 
 // One evaluation of the batch, as the kinds see it.
