@@ -6,6 +6,7 @@
 #include "fivecal/observations/ball3d.h"
 #include "fivecal/observations/dbb.h"
 #include "fivecal/observations/facet.h"
+#include "fivecal/observations/machined.h"
 #include "fivecal/observations/point.h"
 #include "fivecal/observations/simulate.h"
 #include "fivecal/observations/sphere.h"
@@ -21,6 +22,7 @@ const std::vector<const ObservationKind*>& ObservationKinds() {
       &DbbKind(),
       &Ball3dKind(),
       &PointKind(),
+      &MachinedKind(),
   };
   return kinds;
 }
