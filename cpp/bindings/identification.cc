@@ -196,6 +196,15 @@ void BindIdentification(py::module_& m) {
     }
     return out;
   });
+  // The unit of a setup parameter's prior class ("mm", "rad"; "" for a name
+  // of no kind): how reports show it, whatever kind it belongs to.
+  m.def("setup_parameter_unit", [](const std::string& name) {
+    for (const ObservationKind* k : ObservationKinds())
+      if (const char* cls = k->PriorClassOfName(name))
+        for (const PriorClass& c : k->prior_classes())
+          if (c.name == cls) return c.unit;
+    return std::string();
+  });
   m.def("informed_threshold", []() { return kInformedThreshold; });
 
   m.def(

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import re
+from functools import lru_cache
 
 _MOTION = re.compile(r"^E([XYZABC])([XYZABCS])([123])$")
 _LOCATION = re.compile(r"^E([XYZABC])0([XYZABCS])$")
 _BACKLASH = re.compile(r"^E([XYZABC])([XYZABCS])b$")
-#: a fixed instrument's orientation corrections are angles (rad)
-_INSTRUMENT_ANGLE = re.compile(r"^instrument\.[^.]+\.[abc]$")
 
 
 def display_scale(name: str) -> tuple[float, str]:
@@ -27,9 +26,20 @@ def display_scale(name: str) -> tuple[float, str]:
     m = _BACKLASH.match(name)
     if m:
         return (1e6, "µrad") if m.group(2) in "ABC" else (1e3, "µm")
-    if _INSTRUMENT_ANGLE.match(name):
+    if _setup_unit(name) == "rad":  # an instrument's or a part's angle
         return 1e6, "µrad"
-    return 1e3, "µm"  # tip, facet, sphere, dbb, ball3d setup parameters, instrument positions
+    return 1e3, "µm"  # tip, facet, sphere, dbb, ball3d setup parameters
+
+
+@lru_cache(maxsize=None)
+def _setup_unit(name: str) -> str:
+    # The unit the setup parameter's kind declares (its prior class).
+    try:
+        from . import _core
+
+        return _core.setup_parameter_unit(name)
+    except (ImportError, AttributeError):
+        return ""
 
 
 def format_value(name: str, value: float) -> str:

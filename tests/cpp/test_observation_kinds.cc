@@ -118,6 +118,15 @@ const std::map<std::string, Sample> kSamples = {
            "target": "work", "target_point": [80, 20, 40], "station_position": [800, -300, 200], "id": "w1"}])",
       R"({"instrument.L1.x": 0.05, "instrument.L1.length": 0.02, "instrument.L2.z": -0.03,
           "instrument.tracer.tool_z": 0.02, "instrument.LT2.work_x": 0.01})"}},
+    {"machined",
+     {R"([{"type": "machined", "part": "P1", "feature": "face", "axes": {"B": 30, "C": 45}, "point": [40, 60, 20],
+           "normal": [0, 1, 0], "direction": {"C": 1}},
+          {"type": "machined", "part": "P1", "feature": "step", "axes": {"B": 90, "C": 180}, "point": [0, 80, 30],
+           "normal": [0, 0, 1], "reference_axes": {"B": 90, "C": 0}},
+          {"type": "machined", "part": "P2", "feature": "step", "axes": {"B": -30, "C": 90}, "point": [50, 0, 10],
+           "normal": [1, 0, 0.2], "reference_axes": {"X": 20, "Y": -10, "Z": -60, "B": 0, "C": 0},
+           "reference_point": [50, 10, 25], "reference_normal": [0, 0, 1], "id": "s3"}])",
+      R"({"machined.P1.x": 0.01, "machined.P1.c": 2e-4, "machined.P2.a": -1e-4, "machined.P2.z": 0.005})"}},
 };
 
 std::string SpecOf(const ObservationKind& k) {

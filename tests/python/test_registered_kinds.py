@@ -91,3 +91,14 @@ def test_a_kind_no_schema_file_describes_gets_its_keys_from_the_registry():
     assert then["additionalProperties"] is False
     assert set(then["properties"]) == set(point["json_keys"])
     assert "point" in out["$defs"]["observation"]["properties"]["type"]["enum"]
+
+
+def test_setup_angles_are_shown_in_microradians():
+    # Every setup parameter used to be shown in µm, the tracker's angles too.
+    from fivecal.units import display_scale
+
+    assert display_scale("instrument.T1.a") == (1e6, "µrad")
+    assert display_scale("instrument.T1.x") == (1e3, "µm")
+    assert display_scale("instrument.T1.work_x") == (1e3, "µm")
+    assert display_scale("sphere.S1.x") == (1e3, "µm")
+    assert display_scale("tip.z") == (1e3, "µm")

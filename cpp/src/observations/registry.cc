@@ -8,6 +8,7 @@
 #include "fivecal/observations/dbb.h"
 #include "fivecal/observations/distance.h"
 #include "fivecal/observations/facet.h"
+#include "fivecal/observations/machined.h"
 #include "fivecal/observations/point.h"
 #include "fivecal/observations/pose.h"
 #include "fivecal/observations/simulate.h"
@@ -26,6 +27,7 @@ const std::vector<const ObservationKind*>& ObservationKinds() {
       &PointKind(),
       &PoseKind(), &DistanceKind(),
       &CylinderKind(),
+      &MachinedKind(),
   };
   return kinds;
 }

@@ -722,7 +722,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     res.sigma = res.dof > 0 ? std::sqrt(r.squaredNorm() / res.dof) : 0.0;
   } else {
     res.dof = std::max(0, rows - id.rank);
-    const double s2 = res.dof > 0 ? chi2 / res.dof : 0.0;
+    // Without redundancy the residuals (zero) say nothing about the noise:
+    // the declared noise stands, an exactly determined fit is not exact.
+    const double s2 = res.dof > 0 ? chi2 / res.dof : 1.0;
     res.covariance = s2 * id.inverse_normal;
     // The condition number of the column-scaled Jacobian in mm, as before the
     // weighting and as the plan design reports it.

@@ -54,7 +54,7 @@ struct Artefact {
 // The observation kinds. Each has its file pair observations/<kind>.h|.cc
 // and one line in observations/registry.cc (ObservationKind, kind.h), which
 // say everything else about it.
-enum class ObservationType { kFacet, kSphere, kDbb, kBall3d, kPoint, kPose, kDistance, kCylinder };
+enum class ObservationType { kFacet, kSphere, kDbb, kBall3d, kPoint, kPose, kDistance, kCylinder, kMachined };
 
 // The kind's name in files ("facet", "sphere", "dbb", "ball3d").
 const char* ObservationTypeName(ObservationType t);

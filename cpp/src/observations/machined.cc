@@ -1,0 +1,301 @@
+#include "fivecal/observations/machined.h"
+
+#include <cmath>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/model/inverse.h"
+#include "fivecal/observations/simulate.h"
+#include "fivecal/solve/problem.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using namespace json_util;
+
+// The file names the part ("part", kept in Observation::setup) and the
+// feature ("feature", kept in Observation::target); the point is
+// Observation::target_point, the measured deviation Observation::reading.
+// The rest lives in Observation::own under these names:
+const char* kNormal = "normal";
+const char* kRefAxes = "reference_axes";    // step: machine axis order, mm / degrees
+const char* kRefPoint = "reference_point";  // step
+const char* kRefNormal = "reference_normal";  // step
+const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
+// A measured deviation beyond this is no machining error but a wrong nominal.
+constexpr double kMaxDeviation = 100.0;  // mm
+
+bool IsStep(const Observation& o) { return o.target == "step"; }
+std::string Prefix(const Observation& o) { return "machined." + o.setup; }
+
+const Eigen::VectorXd& Own(const Observation& o, const char* key, const std::function<std::string()>& w,
+                           int size) {
+  const auto it = o.own.find(key);
+  if (it == o.own.end() || it->second.size() != size)
+    throw std::invalid_argument(w() + "." + key + ": missing (" + std::to_string(size) + " numbers)");
+  return it->second;
+}
+
+// A face of observation `o` in internal units: the cut at `axes` (reference
+// = false) or at `reference_axes`.
+MachinedFace FaceOf(const Machine& m, const Observation& o, bool reference) {
+  MachinedFace f;
+  const auto own = [&](const char* key) -> const Eigen::VectorXd& { return o.own.at(key); };
+  const Eigen::VectorXd& axes = reference ? own(kRefAxes) : o.axes;
+  f.q.resize(m.num_axes());
+  AxisValuesToInternal(m, axes.data(), f.q.data());
+  // The reference cut was reached the same way as the first (its own approach directions are not recorded).
+  f.dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
+  f.point = reference ? Eigen::Vector3d(own(kRefPoint)) : o.target_point;
+  f.normal = Eigen::Vector3d(own(reference ? kRefNormal : kNormal)).normalized();
+  return f;
+}
+
+// Whether the part's datum matters to first order: a face, or a step whose
+// two faces differ in point or normal.
+bool SeesDatum(const Observation& o) {
+  if (!IsStep(o)) return true;
+  return !(Eigen::Vector3d(o.own.at(kRefPoint)) - o.target_point).isZero(1e-9) ||
+         !(Eigen::Vector3d(o.own.at(kRefNormal)).normalized() - Eigen::Vector3d(o.own.at(kNormal)).normalized())
+              .isZero(1e-12);
+}
+
+Eigen::Vector3d ReadNormal(const json& o, const char* key, const std::string& w) {
+  const Eigen::Vector3d n = ReadVector3(o.value(key, json()), w + "." + key);
+  // Kept as written (a file round trip changes no bit); normalised where used.
+  if (!(n.norm() > 1e-9)) throw std::invalid_argument(w + "." + key + ": zero vector (the face's outward normal)");
+  return n;
+}
+
+// Every axis of the machine (S may be left out), or with `linear_optional`
+// the rotary ones; returns whether every linear axis was given.
+bool ReadPose(const Machine& m, const json& axes, const std::string& w, bool linear_optional,
+              Eigen::VectorXd* out) {
+  if (!axes.is_object()) throw std::invalid_argument(w + ": missing (an object axis letter -> reading)");
+  *out = Eigen::VectorXd::Zero(m.num_axes());
+  std::vector<bool> given(m.num_axes(), false);
+  ReadAxes(m, axes, w, out, &given);
+  bool linear = true;
+  for (int k = 0; k < m.num_axes(); ++k) {
+    if (given[k] || m.axis(k).name == 'S') continue;
+    if (m.axis(k).rotary() || !linear_optional)
+      throw std::invalid_argument(w + ": missing axis '" + std::string(1, m.axis(k).name) + "' (machine axes " +
+                                  m.axis_names() + ")");
+    linear = false;
+  }
+  return linear;
+}
+
+// The linear commands that put the nominal tool point on `point` at the
+// rotary commands of `pose` (the machining programme of the test).
+Eigen::VectorXd CutCommands(const Machine& m, const Eigen::Vector3d& point, Eigen::VectorXd pose) {
+  for (int k = 0; k < m.num_axes(); ++k)
+    if (!m.axis(k).rotary()) pose[k] = 0;
+  const Eigen::MatrixXd target = point.transpose();
+  return InverseKinematics(m, Eigen::VectorXd::Zero(m.num_parameters()), target, nullptr, pose)
+      .row(0)
+      .transpose();
+}
+
+class Kind final : public ObservationKind {
+ public:
+  ObservationType type() const override { return ObservationType::kMachined; }
+  const char* name() const override { return "machined"; }
+  const char* label() const override { return "machined feature (machining test, part measured on a CMM)"; }
+  // A finished face measured on a CMM: the cut's own scatter (tool deflection,
+  // surface finish) dominates the CMM's probing.
+  double default_sigma() const override { return 0.003; }
+  bool analytic() const override { return false; }
+  bool plan_finds_linear_axes() const override { return true; }
+
+  std::vector<const char*> json_keys() const override {
+    return {"type", "part", "feature", "axes", "direction", "point", "normal", "measured", "reference_axes",
+            "reference_point", "reference_normal", "sigma", "id"};
+  }
+  void Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const override {
+    ReadOwn(ds.machine(), o, w, false, ob);
+    ob->reading = ReadBounded(o, "measured", w, kMaxDeviation);
+  }
+  void Validate(const Dataset& ds, const Observation& o, const std::function<std::string()>& w) const override {
+    if (o.setup.empty() || o.setup.find('.') != std::string::npos)
+      throw std::invalid_argument(w() + ".part: the part id must be a non-empty name without '.'");
+    if (o.target != "face" && o.target != "step")
+      throw std::invalid_argument(w() + ".feature: " + Quote(o.target) + " is neither \"face\" nor \"step\"");
+    if (!(std::abs(o.reading) <= kMaxDeviation)) RequireBounded(o.reading, kMaxDeviation, w() + ".measured");
+    auto vec = [&](const Eigen::Vector3d& v, const char* field, bool unit) {
+      for (int c = 0; c < 3; ++c)
+        if (!(std::abs(v[c]) <= kMaxLinear)) RequireBounded(v[c], kMaxLinear, w() + "." + field);
+      if (unit && !(v.norm() > 1e-9)) throw std::invalid_argument(w() + "." + field + ": zero vector");
+    };
+    vec(o.target_point, "point", false);
+    vec(Own(o, kNormal, w, 3), kNormal, true);
+    const bool step = IsStep(o);
+    for (const char* key : {kRefAxes, kRefPoint, kRefNormal})
+      if (!step && o.own.count(key))
+        throw std::invalid_argument(w() + "." + key + ": only a step has a reference cut");
+    if (!step) return;
+    const Machine& m = ds.machine();
+    const Eigen::VectorXd& ref = Own(o, kRefAxes, w, m.num_axes());
+    for (int k = 0; k < m.num_axes(); ++k)
+      RequireBounded(ref[k], m.axis(k).rotary() ? kMaxRotaryDeg : kMaxLinear,
+                     w() + "." + kRefAxes + "." + std::string(1, m.axis(k).name));
+    vec(Own(o, kRefPoint, w, 3), kRefPoint, false);
+    vec(Own(o, kRefNormal, w, 3), kRefNormal, true);
+  }
+  void Write(const Observation& o, json* jo) const override {
+    // The generic writer put the part under "setup" and the feature under "target".
+    jo->erase("setup");
+    jo->erase("target");
+    (*jo)["part"] = o.setup;
+    (*jo)["feature"] = o.target;
+    (*jo)["point"] = Array3(o.target_point);
+    (*jo)["normal"] = Array3(o.own.at(kNormal));
+    (*jo)["measured"] = o.reading;
+    if (!IsStep(o)) return;
+    (*jo)["reference_point"] = Array3(o.own.at(kRefPoint));
+    (*jo)["reference_normal"] = Array3(o.own.at(kRefNormal));
+  }
+  void WriteOnMachine(const Machine& m, const Observation& o, json* jo) const override {
+    if (!IsStep(o)) return;
+    json ax = json::object();
+    const Eigen::VectorXd& ref = o.own.at(kRefAxes);
+    for (int k = 0; k < m.num_axes(); ++k) ax[std::string(1, m.axis(k).name)] = ref[k];
+    (*jo)[kRefAxes] = ax;
+  }
+
+  // ---- setup: the part's datum in the workpiece frame ----
+  void AddObservationParameters(const Observation& o, ParameterTable* t) const override {
+    if (t->has_group(type(), o.setup)) return;
+    std::vector<int> idx;
+    for (const char* f : kFields) idx.push_back(t->Add(Prefix(o) + "." + f));
+    t->AddGroup(type(), o.setup, idx);
+  }
+  // Where the CMM's datum sits on the machine is never known to the
+  // micrometre: estimated whenever a feature sees it (a face; a step between
+  // faces of different points or normals). A step of one point and normal,
+  // Zhang & Zhang's own kind of measurement, does not need it.
+  void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
+                    std::set<int>* out) const override {
+    if (!SeesDatum(o)) return;
+    for (int i : t.group(type(), o.setup)) out->insert(i);
+  }
+  bool IsParameterName(const std::string& rest) const override {
+    const size_t dot = rest.find('.');
+    if (dot == std::string::npos || dot == 0 || rest.find('.', dot + 1) != std::string::npos) return false;
+    const std::string f = rest.substr(dot + 1);
+    for (const char* k : kFields)
+      if (f == k) return true;
+    return false;
+  }
+  std::vector<PriorClass> prior_classes() const override {
+    return {{"part_position", 1.0, "mm",
+             "machined.<part>.x|y|z: where a machined test part's measuring datum sits on the table"},
+            {"part_angle", 1e-3, "rad", "machined.<part>.a|b|c: how that datum is turned (1 mm over 1 m)"}};
+  }
+  const char* PriorClassOfName(const std::string& n) const override {
+    if (n.rfind("machined.", 0) != 0) return nullptr;
+    const std::string f = n.substr(n.rfind('.') + 1);
+    return (f == "a" || f == "b" || f == "c") ? "part_angle" : "part_position";
+  }
+
+  void AddResidual(ResidualBuilder& b, const Observation& o) const override {
+    const auto& g = b.table.group(type(), o.setup);
+    PartRefs refs;
+    for (int c = 0; c < 3; ++c) {
+      refs.position[c] = b.Ref(g[c]);
+      refs.angle[c] = b.Ref(g[3 + c]);
+    }
+    const Machine& m = b.dataset.machine();
+    std::shared_ptr<const MachinedFace> reference;
+    if (IsStep(o)) reference = std::make_shared<const MachinedFace>(FaceOf(m, o, true));
+    b.Add(new MachinedResidual(b.context, FaceOf(m, o, false), reference, o.reading, refs), 1);
+  }
+  void PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&, AnalyticRow*) const override {
+    throw std::logic_error("machined: no analytic batch (analytic() is false)");
+  }
+  void EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const override {
+    throw std::logic_error("machined: no analytic batch (analytic() is false)");
+  }
+
+  // ---- simulation: the plan gives the rotary axes of each cut; the linear
+  // ones follow from the nominal point (the test's programme) unless given ----
+  std::vector<const char*> plan_keys() const override {
+    return {"type", "part", "feature", "axes", "direction", "point", "normal", "reference_axes",
+            "reference_point", "reference_normal", "id"};
+  }
+  void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
+                     PlanSlot*) const override {
+    const Machine& m = t.dataset->machine();
+    ReadOwn(m, e, w, true, ob);
+    Eigen::VectorXd given;
+    if (!ReadPose(m, e.at("axes"), w + ".axes", true, &given)) ob->axes = CutCommands(m, ob->target_point, ob->axes);
+    if (IsStep(*ob) && !ReadPose(m, e.at(kRefAxes), w + "." + kRefAxes, true, &given))
+      ob->own[kRefAxes] = CutCommands(m, Eigen::Vector3d(ob->own[kRefPoint]), ob->own[kRefAxes]);
+    const std::string pre = Prefix(*ob) + ".";
+    Eigen::Vector3d d;
+    for (int c = 0; c < 3; ++c) d[c] = t.setup(pre + kFields[c]);
+    const Eigen::Matrix3d R = RotZYX(t.setup(pre + "a"), t.setup(pre + "b"), t.setup(pre + "c"));
+    double u = MachinedDeviation<double>(m, t.theta.data(), FaceOf(m, *ob, false), d, R);
+    if (IsStep(*ob)) u -= MachinedDeviation<double>(m, t.theta.data(), FaceOf(m, *ob, true), d, R);
+    ob->reading = u;
+  }
+  void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
+    AddPlanInput(plan, i, 0, -1.0, NoiseLevel(plan->noise));
+  }
+  void ApplyInput(const SimulationPlan& plan, int i, int, double x, Observation* o) const override {
+    o->reading = plan.reading0[i] + x;
+  }
+
+  // ---- report: the deviation along the face's normal, at the cut's tool point ----
+  void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
+                    Eigen::Vector3d* vector) const override {
+    const Machine& m = c.dataset->machine();
+    const Eigen::VectorXd theta = c.values->head(m.num_parameters());
+    const MachinedFace f = FaceOf(m, o, false);
+    *point = ToolAtCommand(m, theta, o.axes, f.dir, m.tip());
+    *vector = r[0] * f.normal;
+  }
+
+ private:
+  // part, feature, point, normal and (a step) the reference cut; `plan`: the
+  // axes of the reference cut may leave the linear axes to the simulator.
+  static void ReadOwn(const Machine& m, const json& o, const std::string& w, bool plan, Observation* ob) {
+    if (!o.contains("part") || !o["part"].is_string())
+      throw std::invalid_argument(w + ".part: missing (the test part's name, a string such as \"P1\")");
+    ob->setup = o["part"].get<std::string>();
+    if (ob->setup.empty() || ob->setup.find('.') != std::string::npos)
+      throw std::invalid_argument(w + ".part: " + Quote(ob->setup) + " must be a non-empty name without '.'");
+    if (!o.contains("feature") || !o["feature"].is_string())
+      throw std::invalid_argument(w + ".feature: missing (\"face\" or \"step\")");
+    ob->target = o["feature"].get<std::string>();
+    if (ob->target != "face" && ob->target != "step")
+      throw std::invalid_argument(w + ".feature: " + Quote(ob->target) + " is neither \"face\" nor \"step\"" +
+                                  DidYouMean(ob->target, {"face", "step"}));
+    ob->target_point = ReadVector3(o.value("point", json()), w + ".point");
+    ob->own[kNormal] = ReadNormal(o, kNormal, w);
+    if (!IsStep(*ob)) {
+      for (const char* key : {kRefAxes, kRefPoint, kRefNormal})
+        if (o.contains(key)) throw std::invalid_argument(w + "." + key + ": only a step has a reference cut");
+      return;
+    }
+    if (!o.contains(kRefAxes))
+      throw std::invalid_argument(w + "." + kRefAxes + ": missing (the axes of the step's other cut)");
+    Eigen::VectorXd ref;
+    ReadPose(m, o[kRefAxes], w + "." + kRefAxes, plan, &ref);
+    ob->own[kRefAxes] = ref;
+    ob->own[kRefPoint] = o.contains(kRefPoint) ? ReadVector3(o[kRefPoint], w + "." + kRefPoint)
+                                               : Eigen::Vector3d(ob->target_point);
+    ob->own[kRefNormal] = o.contains(kRefNormal) ? ReadNormal(o, kRefNormal, w) : Eigen::Vector3d(ob->own[kNormal]);
+  }
+};
+
+}  // namespace
+
+const ObservationKind& MachinedKind() {
+  static const Kind kind;
+  return kind;
+}
+
+}  // namespace fivecal
