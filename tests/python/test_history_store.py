@@ -163,24 +163,23 @@ def test_cli_add_list_show_export(tmp_path, result, capsys):
     pytest.importorskip("pyarrow")
     result.save(tmp_path / "r.json")
     db = str(tmp_path / "s.fcdb")
-    assert main(["history", "add", db, str(tmp_path / "r.json"), "--machine-id", "M9", "--procedure", "sphere",
+    assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9", "--procedure", "sphere",
                  "--time", "2026-03-01T02:00:00Z", "--machine", str(tmp_path / "m.json")]) == 2
-    fivecal.Machine.to_dict  # the machine file is optional; a missing one is bad input
-    assert main(["history", "add", db, str(tmp_path / "r.json"), "--machine-id", "M9", "--procedure", "sphere",
+    assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9", "--procedure", "sphere",
                  "--time", "2026-03-01T02:00:00Z"]) == 0
-    assert main(["history", "add", db, str(tmp_path / "r.json"), "--machine-id", "M9",
+    assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9",
                  "--time", "2026-03-02T02:00:00Z"]) == 0
     capsys.readouterr()
-    assert main(["history", "list", db]) == 0
+    assert main(["history", "list", "--store", db]) == 0
     out = capsys.readouterr().out
     assert "M9" in out and "2026-03-01T02:00:00Z" in out and "2026-03-02" in out
-    assert main(["history", "show", db, "1", "--json"]) == 0
+    assert main(["history", "show", "--store", db, "1", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["parameters"]["EX0C"]["value"] == result.values["EX0C"]
-    assert main(["history", "compare", db, "1", "2"]) == 0
+    assert main(["history", "compare", "--store", db, "1", "2"]) == 0
     out = capsys.readouterr().out
     assert "EX0C" in out and "covariance term is 0" in out
-    assert main(["history", "export", db, str(tmp_path / "o.parquet")]) == 0
+    assert main(["history", "export", "--store", db, str(tmp_path / "o.parquet")]) == 0
     assert len(history.read_parquet(tmp_path / "o.parquet")) == 2
-    assert main(["history", "show", db, "7"]) == 2
+    assert main(["history", "show", "--store", db, "7"]) == 2
     assert "no calibration with id 7" in capsys.readouterr().err

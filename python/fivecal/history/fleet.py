@@ -178,7 +178,9 @@ def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: O
         else:
             own_client = False
         try:
-            done_f = client.scatter(frozenset(done), broadcast=True) if done else frozenset()
+            # one copy of the finished digests on every worker (a list: scatter
+            # would split a set into one future per element)
+            done_f = client.scatter([frozenset(done)], broadcast=True)[0] if done else frozenset()
             futures = client.map(identify_one, jobs, estimate=estimate, done=done_f, options=options,
                                  key=[f"fivecal-identify-{i}-{os.path.basename(j.path)}" for i, j in enumerate(jobs)],
                                  pure=False)

@@ -12,6 +12,7 @@ per night, so a 2 µm step is some 10 σ.
 from __future__ import annotations
 
 import datetime
+import json
 import os
 from typing import List, Optional
 
@@ -60,7 +61,7 @@ def fleet_truth(machines: int, nights: int, drift_fraction: float = 0.05, seed: 
     after), half steps, half ramps, up or down."""
     rng = np.random.default_rng(seed)
     out = []
-    drifting = set(rng.choice(machines, size=max(1, round(drift_fraction * machines)), replace=False).tolist())
+    drifting = set(rng.choice(machines, size=max(1 if drift_fraction > 0 else 0, round(drift_fraction * machines)), replace=False).tolist())
     for i in range(machines):
         errors = {n: float(rng.normal(0, s)) for n, s in SPREAD.items()}
         drift = None
@@ -77,12 +78,19 @@ def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigm
     ``folder/<machine_id>/<YYYY-MM-DD>.json`` (the layout ``fivecal fleet
     identify`` reads: machine id from the folder, time from the file name);
     returns the paths."""
-    from .. import simulate
-    from ..dataset import save_dataset
+    from .. import _core, simulate
     from ..procedures import tango
 
     m = machine()
     plan = sphere_check_plan(m)
+    # the first night goes through fivecal.simulate (validated); the others reuse
+    # its checked spec with new errors and seed straight in the core, which
+    # keeps simulating a fleet of thousands of nights affordable
+    simulate(m, plan, errors=truth[0]["errors"] if truth else {}, artefact={"spheres": [SPHERE]},
+             tip_radius=tango.TIP_RADIUS, sigma=tango.PROBE_SIGMA if sigma is None else sigma, seed=seed)
+    spec = {"machine": m.to_dict(), "setup": {}, "probe": {"tip_radius": tango.TIP_RADIUS},
+            "artefact": {"spheres": [SPHERE]}, "plan": plan,
+            "sigma": tango.PROBE_SIGMA if sigma is None else sigma}
     paths = []
     for k, mach in enumerate(truth):
         d = os.path.join(folder, mach["machine_id"])
@@ -92,10 +100,10 @@ def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigm
             if mach["drift"]:
                 p = mach["drift"]["parameter"]
                 errors[p] = errors.get(p, 0.0) + drift_at(night, mach["drift"])
-            ds = simulate(m, plan, errors=errors, artefact={"spheres": [SPHERE]}, tip_radius=tango.TIP_RADIUS,
-                          sigma=tango.PROBE_SIGMA if sigma is None else sigma,
-                          seed=(seed * 1_000_003 + k) * 1000 + night)
+            text = json.dumps({**spec, "errors": errors, "seed": (seed * 1_000_003 + k) * 1000 + night})
+            core = _core.simulate(text)
             path = os.path.join(d, night_time(night)[:10] + ".json")
-            save_dataset(ds, path)
+            with open(path, "w", encoding="utf-8") as f:
+                f.write(core.to_json())
             paths.append(path)
     return paths

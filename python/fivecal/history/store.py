@@ -287,7 +287,8 @@ class Store:
         if not os.path.isdir(d):
             raise ValueError(f"{self.path}: folder {d} does not exist")
         try:
-            self._db = sqlite3.connect(self.path, timeout=timeout, isolation_level=None)
+            # check_same_thread off: a fleet run writes from its collector thread (one user at a time)
+            self._db = sqlite3.connect(self.path, timeout=timeout, isolation_level=None, check_same_thread=False)
             self._db.execute(f"PRAGMA busy_timeout = {int(timeout * 1000)}")
             self._db.execute("PRAGMA journal_mode = WAL")
             self._migrate()
