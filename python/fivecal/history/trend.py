@@ -372,10 +372,12 @@ def detect(calibrations: Sequence[Calibration], names: Optional[Sequence[str]] =
         names = [n for n in machine_error_names(cals[0]) if n in common]
     design = design or ChartDesign.for_rate(false_alarm_rate, max(1, len(names)), k)
     out = {}
+    rows = [({m: i for i, m in enumerate(c.names)}, c.values, c.std) for c in cals]
+    times = [c.time for c in cals]
     for n in names:
-        v = [c.values[c.names.index(n)] if n in c.names else math.nan for c in cals]
-        s = [c.std[c.names.index(n)] if n in c.names else math.nan for c in cals]
-        out[n] = cusum(v, s, design.h, design.k, n, [c.time for c in cals])
+        v = [vals[ix[n]] if n in ix else math.nan for ix, vals, _ in rows]
+        s = [std[ix[n]] if n in ix else math.nan for ix, _, std in rows]
+        out[n] = cusum(v, s, design.h, design.k, n, times)
     return out
 
 
