@@ -493,10 +493,20 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
         s = np.array([cals[i].std[cals[i].names.index(n)] for i in idx]) * f
         ax.fill_between(tt, v - 2 * s, v + 2 * s, color="#4c78a8", alpha=0.25, lw=0, label="±2σ")
         ax.plot(tt, v, "o-", color="#4c78a8", ms=3, lw=1, label="value")
+        lo, hi = float(np.nanmin(v - 2 * s)), float(np.nanmax(v + 2 * s))
         if tolerances and n in tolerances:
+            tol = tolerances[n] * f
             for sgn in (1, -1):
-                ax.axhline(sgn * tolerances[n] * f, color="#e45756", ls="--", lw=1,
-                           label="tolerance" if sgn == 1 else None)
+                ax.axhline(sgn * tol, color="#e45756", ls="--", lw=1, label="tolerance" if sgn == 1 else None)
+            # the view holds the data and the tolerance line on their side, not
+            # the far one: a change of a few µm stays visible next to ±30 µm
+            near = tol if np.nanmean(v) >= 0 else -tol
+            lo, hi = min(lo, near), max(hi, near)
+            below = near <= float(np.nanmin(v))      # the note goes to the side away from the line
+            ax.text(0.99, 0.9 if below else 0.05, f"tolerance ±{tol:g} {unit}", transform=ax.transAxes,
+                    ha="right", fontsize=7, color="#e45756")
+        pad = 0.08 * (hi - lo) if hi > lo else 1.0
+        ax.set_ylim(lo - pad, hi + pad)
         if charts and n in charts and charts[n].alarms:
             ch = charts[n]
             at = [ch.times[i] for i in ch.alarms]
@@ -505,11 +515,17 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
                     color="#e45756", ms=8, label="CUSUM alarm")
         ax.set_ylabel(f"{n} ({unit})")
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="best", fontsize=7, ncol=4)
+    handles = {}
+    for ax in axes[:, 0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(lab, h)
     axes[-1, 0].set_xlabel("calibration time (UTC)")
     fig.autofmt_xdate()
     fig.suptitle(title or f"{cals[0].machine_id}: calibration history")
-    fig.tight_layout()
+    top = 1 - 0.62 / fig.get_figheight()
+    fig.legend(list(handles.values()), list(handles), loc="upper center", ncol=len(handles), fontsize=8,
+               bbox_to_anchor=(0.5, top + 0.3 / fig.get_figheight()), frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, top))
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
