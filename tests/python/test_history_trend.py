@@ -141,3 +141,27 @@ def test_compare_two_result_files_on_the_command_line(tmp_path, capsys):
     assert "EX0C" in d["significant"] and d["volumetric"]["max_change"] > 0.002
     assert main(["history", "compare", "1", "2"]) == 2
     assert "needs --store" in capsys.readouterr().err
+
+
+def test_gum_from_the_stored_history_is_the_pooled_cycles_gum(tmp_path):
+    m = fleetsim.machine()
+    plan = fleetsim.sphere_check_plan(m)
+    paths, times = [], ["2026-01-01T02:00:00Z", "2026-01-01T04:00:00Z", "2026-01-02T02:00:00Z",
+                        "2026-01-02T04:00:00Z"]
+    with history.Store(tmp_path / "s.fcdb") as s:
+        for i, t in enumerate(times):
+            ds = fivecal.simulate(m, plan, errors={"EX0C": 0.01 + 0.001 * (i >= 2)},
+                                  artefact={"spheres": [fleetsim.SPHERE]}, tip_radius=3.0, sigma=0.0006, seed=i)
+            p = str(tmp_path / f"d{i}.json")
+            fivecal.save_dataset(ds, p)
+            paths.append(p)
+            s.add(fivecal.identify(ds, "location"), machine_id="M", time=t, source=p)
+        cals = s.list("M")
+    g = history.gum_from_history(cals, "location", by="days")
+    ref = uncertainty.gum_input_covariance([fivecal.load_dataset(p) for p in paths], "location",
+                                           day=[0, 0, 1, 1], pooling="days")
+    assert g.pooling == "days" and g.dof == ref.dof
+    assert g.std["EX0C"] == ref.std["EX0C"] and g.day == [0, 0, 1, 1]
+    cals[0].source = str(tmp_path / "gone.json")
+    with pytest.raises(ValueError, match="not available"):
+        history.gum_from_history(cals)

@@ -529,3 +529,27 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def gum_from_history(calibrations: Sequence[Calibration], estimate="location", by: str = "days",
+                     probability: float = 0.95, k: Optional[float] = None):
+    """GUM U_y = C U_x Cᵀ (thesis eq. 8-3) with U_x pooled over the stored
+    calibrations' own datasets (their ``source`` files, which must exist and
+    share one plan) by ``days`` (UTC date) or ``cycles`` (k-th of each day):
+    :func:`fivecal.uncertainty.gum_input_covariance`, day labels from the
+    stored times. Returns its :class:`fivecal.uncertainty.CyclesUncertainty`."""
+    import os
+
+    from .. import uncertainty
+    from ..dataset import load_dataset
+
+    cals = list(calibrations)
+    missing = [c.source or f"#{c.id}" for c in cals if not c.source or not os.path.isfile(c.source)]
+    if missing:
+        raise ValueError(f"GUM from the history: the dataset of {missing[0]} is not available (its source file)")
+    days = [_day(c.time) for c in cals]
+    labels = {d: i for i, d in enumerate(dict.fromkeys(days))}
+    return uncertainty.gum_input_covariance([load_dataset(c.source) for c in cals], estimate,
+                                            day=[labels[d] for d in days],
+                                            pooling={"days": "days", "cycles": "cycles"}[by],
+                                            probability=probability, k=k)
