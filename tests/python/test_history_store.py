@@ -183,3 +183,23 @@ def test_cli_add_list_show_export(tmp_path, result, capsys):
     assert len(history.read_parquet(tmp_path / "o.parquet")) == 2
     assert main(["history", "show", "--store", db, "7"]) == 2
     assert "no calibration with id 7" in capsys.readouterr().err
+
+
+def test_cli_trend_grades_and_failures(tmp_path, result, capsys):
+    db = str(tmp_path / "s.fcdb")
+    with history.Store(db) as s:
+        for night in range(4):
+            s.add(result, machine_id="M1", time=f"2026-01-0{night + 1}T02:00:00Z")
+        s.add_failure("abc", "ValueError: broken", "x/2026-01-05.json", "M1")
+    ex = result.values["EX0C"]
+    assert main(["history", "trend", "--store", db, "--machine-id", "M1", "--tolerance", f"EX0C={ex * 2}",
+                 "--plot", str(tmp_path / "t.png")]) == 0
+    out = capsys.readouterr().out
+    assert "EX0C        no alarm" in out and "PASS" in out and (tmp_path / "t.png").exists()
+    assert main(["history", "trend", "--store", db, "--machine-id", "M1", "--tolerance", f"EX0C={ex / 2}"]) == 1
+    assert "FAIL" in capsys.readouterr().out
+    assert main(["history", "trend", "--store", db, "--machine-id", "M1", "--tolerance", "EX0C=-1"]) == 2
+    assert main(["history", "failures", "--store", db]) == 0
+    assert "x/2026-01-05.json: ValueError: broken" in capsys.readouterr().out
+    assert main(["history", "list", "--store", str(tmp_path / "none.fcdb")]) == 2
+    assert not (tmp_path / "none.fcdb").exists()      # reading never creates a store

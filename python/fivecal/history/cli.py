@@ -107,6 +107,15 @@ def _compare(args) -> int:
     return 0
 
 
+def _failures(args) -> int:
+    with _store(args) as s:
+        rows = s.failures()
+    for r in rows:
+        print(f"{r['time']}  {r['machine_id']:<14}{r['source']}: {r['error']}")
+    print(f"{len(rows)} failed datasets (a fleet re-run tries them again)")
+    return 0
+
+
 def _export(args) -> int:
     with _store(args) as s:
         cals = s.list(args.machine_id)
@@ -163,7 +172,8 @@ def _fleet(args) -> int:
     for path, err in run.failures[:20]:
         print(f"  failed: {path}: {err}", file=sys.stderr)
     if len(run.failures) > 20:
-        print(f"  ... {len(run.failures) - 20} more failures (fivecal history failures in the store)", file=sys.stderr)
+        print(f"  ... {len(run.failures) - 20} more" + (f" (fivecal history failures --store {args.store})"
+                                                         if args.store else ""), file=sys.stderr)
     return 0
 
 
@@ -224,6 +234,10 @@ def register(sub) -> None:
     e.add_argument("out", help="Parquet file to write")
     e.add_argument("--machine-id")
     e.set_defaults(func=_export)
+
+    fl = hs.add_parser("failures", help="datasets a fleet run could not identify, with the reason")
+    common(fl)
+    fl.set_defaults(func=_failures)
 
     t = hs.add_parser("trend", help="CUSUM change detection, grade against tolerances, pooled statistics, plot")
     common(t)
