@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import json
+import logging
 import os
 import pstats
 import sys
@@ -57,7 +58,8 @@ def throughput(source, workers, tmp):
 
     from fivecal.history.fleet import fleet_identify
 
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as c, \
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.CRITICAL) as c, \
             Client(c) as client:
         t = time.perf_counter()
         run = fleet_identify(source, store=os.path.join(tmp, f"tp{workers}.fcdb"), client=client)

@@ -190,3 +190,15 @@ def test_missing_dask_names_the_extra(monkeypatch, tmp_path):
     monkeypatch.setattr(builtins, "__import__", no_dask)
     with pytest.raises(ValueError, match=r"fivecal\[fleet\]"):
         history.fleet.fleet_identify(str(tmp_path), store=str(tmp_path / "s.fcdb"))
+
+
+def test_monte_carlo_covariance_option(fleet):
+    d, truth, store, run = fleet
+    (job,) = history.fleet.jobs_from([str(d / "data" / "M0002" / "2026-01-01.json")])
+    ok, gum, _, _ = history.fleet.identify_one(job)
+    ok, mc, _, _ = history.fleet.identify_one(job, trials=200)
+    assert gum.uncertainty == "gum" and mc.uncertainty == "monte_carlo:200"
+    assert mc.values.tobytes() == gum.values.tobytes()
+    k = mc.names.index("EX0C")
+    assert mc.covariance.tobytes() != gum.covariance.tobytes()
+    assert 0.8 < mc.std[k] / gum.std[k] < 1.25            # 200 trials: within ~10 % of the GUM

@@ -105,16 +105,17 @@ def test_a_store_of_the_previous_schema_opens_and_is_migrated(tmp_path):
     db.commit()
     db.close()
     with history.Store(path) as s:
-        assert s.schema_version == 2
+        assert s.schema_version == history.SCHEMA_VERSION == 3
         (c,) = s.list("M7")
         assert c.values.tobytes() == v.tobytes() and c.covariance.tobytes() == C.tobytes()
         assert c.prior_std is None and c.dof is None and c.fivecal_version == "0.0.9"
+        assert c.uncertainty == "gum"                   # v3's default for older rows
         assert s.failures() == []                       # the v2 table exists
         s.add_many([history.Calibration("M7", "2026-01-02", ["EX0C"], np.array([0.0124]), np.eye(1) * 1e-8,
                                         prior_std=np.array([0.1]), dof=3)])
         assert [c.dof for c in s.list("M7")] == [None, 3]
     versions = [r[0] for r in sqlite3.connect(path).execute("SELECT version FROM schema_version ORDER BY version")]
-    assert versions == [1, 2]
+    assert versions == [1, 2, 3]
 
 
 def test_a_store_of_a_newer_fivecal_is_refused(tmp_path):

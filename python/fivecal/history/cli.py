@@ -167,7 +167,7 @@ def _fleet(args) -> int:
     est = args.estimate.split(",") if "," in args.estimate else args.estimate
     run = fleet_identify(args.source, store=args.store, parquet=args.parquet, estimate=est,
                          procedure=args.procedure or "", machine_id=args.machine_id, scheduler=args.scheduler,
-                         workers=args.workers, progress=not args.no_progress)
+                         workers=args.workers, progress=not args.no_progress, trials=args.trials)
     print(run.summary())
     for path, err in run.failures[:20]:
         print(f"  failed: {path}: {err}", file=sys.stderr)
@@ -273,5 +273,7 @@ def register(sub) -> None:
     fi.add_argument("--machine-id", help="one machine id for every dataset")
     fi.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (default: a LocalCluster)")
     fi.add_argument("--workers", type=int, help="LocalCluster worker processes (default: min(2, cores))")
+    fi.add_argument("--trials", type=int, default=0, help="also a Monte Carlo (JCGM 101) of this many trials "
+                    "per dataset; its covariance is recorded (default 0: the fit's)")
     fi.add_argument("--no-progress", action="store_true", help="no Dask progress bar")
     fi.set_defaults(func=_fleet)

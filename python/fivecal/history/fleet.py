@@ -20,12 +20,15 @@ from __future__ import annotations
 
 import datetime
 import glob
+import logging
 import os
 import re
 import threading
 import time as _time
 from dataclasses import dataclass, field
 from typing import Iterable, List, Optional, Sequence, Union
+
+import numpy as np
 
 from .store import Calibration, Store, calibration_from_result, dataset_digest, utc_time
 
@@ -108,9 +111,13 @@ def _manifest(path: str, procedure: str, machine_id: Optional[str]) -> List[Job]
     return jobs
 
 
-def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), options: Optional[dict] = None):
-    """Worker side: ``("skipped", digest)``, ``("ok", Calibration, seconds in
-    the core fit)`` or ``("failed", digest, error text)``."""
+def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), options: Optional[dict] = None,
+                 trials: int = 0):
+    """Worker side: ``("skipped", digest, job)``, ``("ok", Calibration, seconds
+    in the fit, machine)`` or ``("failed", digest, job, error text)``.
+    ``trials`` > 0: the covariance is that of a JCGM 101 Monte Carlo of
+    ``trials`` trials around this dataset (one thread: the cluster is the
+    parallelism), recorded as ``uncertainty = "monte_carlo:N"``."""
     from ..dataset import load_dataset
     from ..identification import identify
 
@@ -124,6 +131,14 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
         r = identify(ds, estimate=estimate, **(options or {}))
         fit = _time.perf_counter() - t0
         cal = calibration_from_result(r, job.machine_id, job.time, job.procedure, digest=digest, source=job.path)
+        if trials:
+            from ..uncertainty import monte_carlo
+
+            mc = monte_carlo(ds, estimate, trials=trials, threads=1, progress=False, keep_samples=False,
+                             **{k: v for k, v in (options or {}).items() if k in ("fix", "initial", "robust")})
+            idx = [mc.names.index(n) for n in cal.names]
+            cal.covariance = np.asarray(mc.covariance, float)[np.ix_(idx, idx)]
+            cal.uncertainty = f"monte_carlo:{trials}"
         return ("ok", cal, fit, ds.machine.to_dict())
     except Exception as e:      # a bad dataset is recorded, the run goes on
         return ("failed", digest, job, f"{type(e).__name__}: {e}")
@@ -148,12 +163,13 @@ class FleetRun:
 def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: Optional[str] = None,
                    estimate="location", procedure: str = "", machine_id: Optional[str] = None,
                    scheduler: Optional[str] = None, workers: Optional[int] = None, progress: bool = False,
-                   options: Optional[dict] = None, batch: int = 200, client=None) -> FleetRun:
+                   options: Optional[dict] = None, batch: int = 200, client=None, trials: int = 0) -> FleetRun:
     """Identify every dataset of ``source`` on Dask (``scheduler``: address of
     an existing cluster; default a ``LocalCluster`` of ``workers`` processes,
     one thread each). Results go to ``store`` (path or :class:`Store`) and/or
-    ``parquet`` (a folder, partitioned by machine_id). Returns counts and, when
-    neither output is given, the calibrations."""
+    ``parquet`` (a folder, partitioned by machine_id). ``trials``: also a
+    Monte Carlo of that many trials per dataset for the covariance. Returns
+    counts and, when neither output is given, the calibrations."""
     require_dask()
     from distributed import Client, LocalCluster, as_completed
 
@@ -171,8 +187,10 @@ def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: O
             if scheduler:
                 client = Client(scheduler)
             else:
+                # silence_logs: the workers' heartbeat complaints while the cluster
+                # shuts down are not the user's concern
                 cluster = LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,
-                                       processes=True, dashboard_address=None)
+                                       processes=True, dashboard_address=None, silence_logs=logging.CRITICAL)
                 client = Client(cluster)
             own_client = True
         else:
@@ -181,7 +199,7 @@ def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: O
             # one copy of the finished digests on every worker (a list: scatter
             # would split a set into one future per element)
             done_f = client.scatter([frozenset(done)], broadcast=True)[0] if done else frozenset()
-            futures = client.map(identify_one, jobs, estimate=estimate, done=done_f, options=options,
+            futures = client.map(identify_one, jobs, estimate=estimate, done=done_f, options=options, trials=trials,
                                  key=[f"fivecal-identify-{i}-{os.path.basename(j.path)}" for i, j in enumerate(jobs)],
                                  pure=False)
             writer = threading.Thread(target=_collect, args=(as_completed(futures), st, parquet, run, batch,

@@ -76,8 +76,14 @@ CREATE TABLE failures (
 CREATE INDEX failures_digest ON failures (digest);
 """
 
+# v3: how the covariance was obtained: "gum" (the fit's linearised covariance)
+# or "monte_carlo:N" (JCGM 101 with N trials, fleet runs with trials)
+_V3 = """
+ALTER TABLE calibrations ADD COLUMN uncertainty TEXT NOT NULL DEFAULT 'gum';
+"""
+
 #: (version, SQL) in order; the store's ``schema_version`` table holds the last applied
-MIGRATIONS = [(1, _V1), (2, _V2)]
+MIGRATIONS = [(1, _V1), (2, _V2), (3, _V3)]
 SCHEMA_VERSION = MIGRATIONS[-1][0]
 
 
@@ -160,6 +166,8 @@ class Calibration:
     undetermined: List[str] = field(default_factory=list)
     fivecal_version: str = ""
     source: str = ""
+    #: how ``covariance`` was obtained: "gum" (the fit's) or "monte_carlo:N"
+    uncertainty: str = "gum"
     id: Optional[int] = None
 
     @property
@@ -189,7 +197,7 @@ class Calibration:
                 "fixed": self.fixed, "covariance": [[_num(x) for x in row] for row in self.covariance],
                 "rms": _num(self.rms), "chi2": {"value": _num(self.chi2), "dof": self.dof, "p": _num(self.chi2_p)},
                 "verdict": self.verdict, "converged": self.converged, "undetermined": self.undetermined,
-                "fivecal_version": self.fivecal_version}
+                "uncertainty": self.uncertainty, "fivecal_version": self.fivecal_version}
 
     @property
     def usable(self) -> bool:
@@ -269,7 +277,7 @@ def _machine_id(m) -> str:
 
 
 _COLUMNS = ("id, machine_id, time, procedure, digest, names, \"values\", covariance, fixed, rms, chi2, verdict, "
-            "converged, undetermined, fivecal_version, prior_std, dof, chi2_p, source")
+            "converged, undetermined, fivecal_version, prior_std, dof, chi2_p, source, uncertainty")
 
 
 class Store:
@@ -367,12 +375,12 @@ class Store:
                 cur = db.execute(
                     "INSERT INTO calibrations (machine_id, time, procedure, digest, names, \"values\", covariance, "
                     "fixed, rms, chi2, verdict, converged, undetermined, fivecal_version, prior_std, dof, chi2_p, "
-                    "source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "source, uncertainty) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (_machine_id(c.machine_id), utc_time(c.time), c.procedure, c.digest, json.dumps(list(c.names)),
                      _blob(v), _blob(C), json.dumps(c.fixed), _nullable(c.rms), _nullable(c.chi2), c.verdict,
                      int(bool(c.converged)), json.dumps(list(c.undetermined)), c.fivecal_version or _version(),
                      None if c.prior_std is None else _blob(np.asarray(c.prior_std, float).reshape(n)),
-                     None if c.dof is None else int(c.dof), _nullable(c.chi2_p), c.source))
+                     None if c.dof is None else int(c.dof), _nullable(c.chi2_p), c.source, c.uncertainty))
                 ids.append(cur.lastrowid)
             db.execute("COMMIT")
         except BaseException:
@@ -475,14 +483,14 @@ def _machine_json(machine) -> str:
 
 def _row(r) -> Calibration:
     (id_, machine_id, time, procedure, digest, names, values, cov, fixed, rms, chi2, verdict, converged,
-     undetermined, version, prior, dof, chi2_p, source) = r
+     undetermined, version, prior, dof, chi2_p, source, unc) = r
     names = json.loads(names)
     n = len(names)
     return Calibration(machine_id=machine_id, time=time, names=names, values=_array(values),
                        covariance=_array(cov, (n, n)), procedure=procedure, digest=digest, fixed=json.loads(fixed),
                        prior_std=_array(prior), rms=_f(rms), chi2=_f(chi2), dof=dof, chi2_p=_f(chi2_p),
                        verdict=verdict, converged=bool(converged), undetermined=json.loads(undetermined),
-                       fivecal_version=version, source=source or "", id=id_)
+                       fivecal_version=version, source=source or "", uncertainty=unc, id=id_)
 
 
 # ---------------------------------------------------------------------------
@@ -502,10 +510,11 @@ def arrow_table(calibrations: Sequence[Calibration]):
     pa = require_pyarrow()
     cols = {k: [] for k in ("id", "machine_id", "time", "procedure", "digest", "source", "names", "values", "std",
                             "covariance", "prior_std", "fixed", "rms", "chi2", "dof", "chi2_p", "verdict",
-                            "converged", "undetermined", "fivecal_version")}
+                            "converged", "undetermined", "uncertainty", "fivecal_version")}
     for c in calibrations:
         cols["id"].append(c.id)
-        for k in ("machine_id", "time", "procedure", "digest", "source", "verdict", "fivecal_version"):
+        for k in ("machine_id", "time", "procedure", "digest", "source", "verdict", "uncertainty",
+                  "fivecal_version"):
             cols[k].append(getattr(c, k))
         cols["names"].append(list(c.names))
         cols["values"].append(np.asarray(c.values, float))
@@ -526,7 +535,7 @@ def arrow_table(calibrations: Sequence[Calibration]):
                         ("prior_std", f64), ("fixed", pa.string()), ("rms", pa.float64()), ("chi2", pa.float64()),
                         ("dof", pa.int64()), ("chi2_p", pa.float64()), ("verdict", pa.string()),
                         ("converged", pa.bool_()), ("undetermined", pa.list_(pa.string())),
-                        ("fivecal_version", pa.string())])
+                        ("uncertainty", pa.string()), ("fivecal_version", pa.string())])
     return pa.table(cols, schema=schema)
 
 
@@ -554,5 +563,5 @@ def read_parquet(path) -> List[Calibration]:
                                rms=_f(r["rms"]), chi2=_f(r["chi2"]), dof=r["dof"], chi2_p=_f(r["chi2_p"]),
                                verdict=r["verdict"], converged=bool(r["converged"]),
                                undetermined=list(r["undetermined"]), fivecal_version=r["fivecal_version"],
-                               source=r["source"], id=r["id"]))
+                               source=r["source"], uncertainty=r.get("uncertainty") or "gum", id=r["id"]))
     return out
