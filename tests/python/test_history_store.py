@@ -46,7 +46,9 @@ def test_digest_ignores_layout_not_content(tmp_path, result):
     (tmp_path / "a.json").write_text(json.dumps(d, indent=4))
     (tmp_path / "b.json").write_text(json.dumps(d, sort_keys=True, separators=(",", ":")))
     assert history.dataset_digest(tmp_path / "a.json") == history.dataset_digest(tmp_path / "b.json")
-    d["observations"][0]["reading"] = d["observations"][0].get("reading", 0.0) + 1e-6
+    (tmp_path / "c.json").write_text(json.dumps({k: d[k] for k in reversed(list(d))}))   # key order
+    assert history.dataset_digest(tmp_path / "c.json") == history.dataset_digest(result.dataset)
+    d["observations"][0]["axes"]["X"] += 1e-6
     assert history.dataset_digest(d) != history.dataset_digest(tmp_path / "a.json")
 
 

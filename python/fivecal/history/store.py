@@ -127,19 +127,17 @@ def utc_time(t=None) -> str:
 
 
 def dataset_digest(dataset) -> str:
-    """sha256 (hex) of the canonical JSON of a dataset (a :class:`fivecal.Dataset`,
-    its dict, or a path): keys sorted, no spaces, so the same data give the same
-    digest whatever the file's layout."""
-    if isinstance(dataset, (str, os.PathLike)):
-        from ..files import read_json
+    """sha256 (hex) of a dataset's canonical JSON (a :class:`fivecal.Dataset`,
+    its dict, or a path): the JSON the core writes for the loaded dataset,
+    keys sorted and no spaces, so the same data give the same digest whatever
+    the file's layout, key order or number formatting."""
+    from ..dataset import Dataset, load_dataset
 
-        d = read_json(os.fspath(dataset), "dataset")
-    elif hasattr(dataset, "to_dict"):
-        d = dataset.to_dict()
-    else:
-        d = dataset
-    text = json.dumps(d, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=True)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+    if isinstance(dataset, (str, os.PathLike)):
+        dataset = load_dataset(os.fspath(dataset))
+    elif not isinstance(dataset, Dataset):
+        dataset = Dataset.from_dict(dataset)
+    return hashlib.sha256(dataset._core.to_json().encode("utf-8")).hexdigest()
 
 
 @dataclass
