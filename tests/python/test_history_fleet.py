@@ -14,7 +14,6 @@ bench/fleet.py.
 """
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys

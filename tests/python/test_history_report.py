@@ -1,9 +1,6 @@
 """Trend, compare and pass/fail in the HTML report when a history exists (issue 18, item 5)."""
 from __future__ import annotations
 
-import numpy as np
-import pytest
-
 import fivecal
 from fivecal import history
 from fivecal.history import fleetsim

@@ -12,7 +12,7 @@ import pytest
 import fivecal
 from fivecal import history
 from fivecal.cli import main
-from fivecal.history import fleetsim, store as hs
+from fivecal.history import fleetsim
 
 
 @pytest.fixture(scope="module")

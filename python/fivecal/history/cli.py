@@ -81,7 +81,10 @@ def _resolve(s, ref: str, what: str):
     from .store import calibration_from_result
 
     if os.path.isfile(ref):
-        return calibration_from_result(ref, "file", time="1970-01-01", source=ref)
+        import datetime
+
+        mtime = datetime.datetime.fromtimestamp(os.path.getmtime(ref), datetime.timezone.utc)
+        return calibration_from_result(ref, os.path.basename(ref), time=mtime, source=ref)
     try:
         i = int(ref)
     except ValueError:

@@ -26,7 +26,7 @@ import re
 import threading
 import time as _time
 from dataclasses import dataclass, field
-from typing import Iterable, List, Optional, Sequence, Union
+from typing import List, Optional, Sequence, Union
 
 import numpy as np
 
@@ -219,8 +219,9 @@ def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: O
             futures = client.map(identify_one, jobs, estimate=estimate, done=done_f, options=options, trials=trials,
                                  key=[f"fivecal-identify-{i}-{os.path.basename(j.path)}" for i, j in enumerate(jobs)],
                                  pure=False)
+            job_of = {f.key: j for f, j in zip(futures, jobs)}
             writer = threading.Thread(target=_collect, args=(as_completed(futures), st, parquet, run, batch,
-                                                             st is None and not parquet))
+                                                             st is None and not parquet, job_of))
             writer.start()
             if progress:
                 from distributed import progress as dask_progress
@@ -241,7 +242,7 @@ def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: O
     return run
 
 
-def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool) -> None:
+def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, job_of: dict) -> None:
     pending: List[Calibration] = []
     machines = {}
 
@@ -259,7 +260,10 @@ def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool) -> N
 
     try:
         for fut in completed:
-            r = fut.result()
+            try:
+                r = fut.result()
+            except Exception as e:   # the task itself died (a worker killed by it): recorded like a failure
+                r = ("failed", "", job_of[fut.key], f"{type(e).__name__}: {e}")
             if r[0] == "skipped":
                 run.skipped += 1
             elif r[0] == "ok":

@@ -5,13 +5,12 @@ tolerances."""
 from __future__ import annotations
 
 import html
-import math
 import os
 from dataclasses import dataclass
 from typing import List, Mapping, Optional, Tuple, Union
 
 from ..units import display_scale
-from .store import Calibration, Store, calibration_from_result, dataset_digest
+from .store import Store, calibration_from_result, dataset_digest
 
 
 @dataclass
@@ -58,7 +57,6 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
             cals.append(cur)
         if machine is None:
             machine = result.dataset.machine
-    cals = [c for c in cals]
     if not cals:
         return []
     out = []

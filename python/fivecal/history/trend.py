@@ -18,7 +18,7 @@ Units: mm and rad in, display units (µm, µrad) in tables and plots.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
@@ -124,8 +124,10 @@ class Comparison:
         return [p.name for p in self.parameters if math.isfinite(p.z) and abs(p.z) > lim]
 
     def report(self) -> str:
-        lines = [f"fivecal history compare: {self.a.machine_id} #{self.a.id} ({self.a.time}) -> "
-                 f"{self.b.machine_id} #{self.b.id} ({self.b.time})",
+        def label(c):
+            return f"{c.machine_id}" + (f" #{c.id}" if c.id else "") + f" ({c.time})"
+
+        lines = [f"fivecal history compare: {label(self.a)} -> {label(self.b)}",
                  "  z = (B - A) / sqrt(u_A^2 + u_B^2): the calibrations are independent (separate datasets), "
                  "so their covariance term is 0",
                  f"  {'parameter':<12}{'A':>11}{'B':>11}{'B-A':>10}{'u(B-A)':>9}{'z':>8}  unit"]
