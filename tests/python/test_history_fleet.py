@@ -166,6 +166,17 @@ def test_manifest(fleet, cluster, tmp_path):
     r = history.fleet.fleet_identify(str(tmp_path / "m.csv"), client=cluster[1])
     assert r.done == 3 and sorted(c.time for c in r.calibrations)[0] == "2027-02-01T01:00:00Z"
     assert {c.machine_id for c in r.calibrations} == {"X-3"} and {c.procedure for c in r.calibrations} == {"probe"}
+    pa = pytest.importorskip("pyarrow")
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.table({"path": [str(d / "data" / "M0004" / "2026-01-02.json")], "machine_id": ["X-4"]}),
+                   tmp_path / "m.parquet")
+    r = history.fleet.fleet_identify(str(tmp_path / "m.parquet"), client=cluster[1])
+    (c,) = r.calibrations
+    assert c.machine_id == "X-4" and c.time == "2026-01-02T00:00:00Z"     # time from the file name
+    (tmp_path / "nopath.csv").write_text("file,machine_id\na.json,M\n")
+    with pytest.raises(ValueError, match="no 'path' column"):
+        history.fleet.fleet_identify(str(tmp_path / "nopath.csv"), client=cluster[1])
 
 
 def test_core_import_stays_light():

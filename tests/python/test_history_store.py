@@ -184,6 +184,15 @@ def test_cli_add_list_show_export(tmp_path, result, capsys):
     assert "EX0C" in out and "covariance term is 0" in out
     assert main(["history", "export", "--store", db, str(tmp_path / "o.parquet")]) == 0
     assert len(history.read_parquet(tmp_path / "o.parquet")) == 2
+    fivecal.save_dataset(result.dataset, tmp_path / "ds.json")
+    assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9",
+                 "--dataset", str(tmp_path / "ds.json")]) == 0
+    capsys.readouterr()
+    assert main(["history", "list", "--store", db, "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["digest"] for r in rows] == ["", "", history.dataset_digest(result.dataset)]
+    with history.Store(db) as s:      # the dataset's machine is kept for volumetric comparisons
+        assert s.machine("M9").to_dict() == result.dataset.machine.to_dict()
     assert main(["history", "show", "--store", db, "7"]) == 2
     assert "no calibration with id 7" in capsys.readouterr().err
 
