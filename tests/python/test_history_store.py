@@ -2,6 +2,7 @@
 once, versioned migrations, result.json input, Parquet export, CLI."""
 from __future__ import annotations
 
+import copy
 import json
 import multiprocessing as mp
 import sqlite3
@@ -42,7 +43,7 @@ def test_round_trip_is_bit_exact(tmp_path, result):
 
 
 def test_digest_ignores_layout_not_content(tmp_path, result):
-    d = result.dataset.to_dict()
+    d = copy.deepcopy(result.dataset.to_dict())     # to_dict hands out the dataset's own cached dict
     (tmp_path / "a.json").write_text(json.dumps(d, indent=4))
     (tmp_path / "b.json").write_text(json.dumps(d, sort_keys=True, separators=(",", ":")))
     assert history.dataset_digest(tmp_path / "a.json") == history.dataset_digest(tmp_path / "b.json")
