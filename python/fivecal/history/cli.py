@@ -167,6 +167,10 @@ def _fleet(args) -> int:
 
     if not args.store and not args.parquet:
         raise ValueError("fleet identify: give --store FILE and/or --parquet DIR for the results")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers: expected an integer >= 1, got {args.workers}")
+    if args.trials < 0:
+        raise ValueError(f"--trials: expected an integer >= 0, got {args.trials}")
     est = args.estimate.split(",") if "," in args.estimate else args.estimate
     run = fleet_identify(args.source, store=args.store, parquet=args.parquet, estimate=est,
                          procedure=args.procedure or "", machine_id=args.machine_id, scheduler=args.scheduler,
