@@ -21,6 +21,7 @@ fi
 PY=${PYTHON:-python3}
 command -v cmake >/dev/null 2>&1 || $PY -m pip install -q cmake
 command -v ninja >/dev/null 2>&1 || $PY -m pip install -q ninja
-$PY -m pip install -q --disable-pip-version-check ".[test]"
+# fleet: Dask and pyarrow, which the calibration history tests use
+$PY -m pip install -q --disable-pip-version-check ".[test,fleet]"
 command -v pyenv >/dev/null 2>&1 && pyenv rehash || true
 echo "fivecal: installed ($($PY -c 'import fivecal; print(fivecal.__version__)'))"

@@ -704,6 +704,7 @@ def main(argv=None) -> int:
     _register_dbb(sub)
     from .io.linuxcnc_cli import register as _register_export; _register_export(sub)  # noqa: E702
 
+    from .history.cli import register as _register_history; _register_history(sub)  # noqa: E702
     from .io.cli import register as _register_import
 
     _register_import(sub)

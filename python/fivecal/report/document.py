@@ -550,7 +550,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
                  truth: Optional[Mapping[str, float]] = None,
                  sections: Sequence[Section] = (), figures: Sequence[Figure] = (),
                  embed_images: bool = True, write_result_json: bool = True,
-                 summary: Optional[str] = None) -> str:
+                 summary: Optional[str] = None, history=None, machine_id: Optional[str] = None) -> str:
     """Write ``out_dir/report.html`` (plus PNGs and ``result.json``) for an
     identification :class:`fivecal.Result`; returns the HTML path.
 
@@ -561,6 +561,10 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     plots. ``embed_images``: embed the plots as base64 so the HTML file stands
     alone (default); otherwise it references the PNG files next to it.
     ``summary``: a line of text shown under the title.
+    ``history``: a calibration store (path or :class:`fivecal.history.Store`)
+    or a :class:`fivecal.history.report.History` with tolerances; with
+    ``machine_id`` it adds the machine's trend, the comparison with the
+    previous calibration and pass / fail (docs/history.md).
 
     A result that is not usable (not converged, non-finite, inadequate against
     the declared noise, or with requested parameters the data did not
@@ -602,6 +606,10 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
         figs.append((p, "Correlation coefficients between the estimated machine parameters (setup "
                         "parameters omitted; strongly correlated pairs are listed under Identifiability)."))
     figs += list(figures)
+    if history is not None:
+        from ..history.report import sections as _history_sections
+
+        sections = list(sections) + _history_sections(history, machine_id, out_dir, result, embed_images)
 
     from .. import guards
 

@@ -1,0 +1,118 @@
+"""History sections of the HTML report (``write_report(..., history=store,
+machine_id=...)``): the trend of every machine error with CUSUM alarms, the
+comparison with the previous calibration, and pass / fail against the
+tolerances."""
+from __future__ import annotations
+
+import html
+import os
+from dataclasses import dataclass
+from typing import List, Mapping, Optional, Tuple, Union
+
+from ..units import display_scale
+from .store import Store, calibration_from_result, dataset_digest
+
+
+@dataclass
+class History:
+    """What the report needs: a store (or its path), the machine, and
+    optionally tolerances (name -> mm / rad) and a volumetric tolerance (mm)."""
+    store: Union[str, Store]
+    machine_id: str
+    tolerances: Optional[Mapping[str, float]] = None
+    volumetric_tolerance: Optional[float] = None
+    false_alarm_rate: float = 0.001
+
+
+def _e(x) -> str:
+    return html.escape(str(x))
+
+
+def sections(history, machine_id: Optional[str], out_dir: str, result=None,
+             embed: bool = True) -> List[Tuple[str, str]]:
+    """(title, HTML) sections for the report; empty when the store holds no
+    calibration of the machine. ``result``: the identification the report is
+    about; when it is not in the store it is shown as the newest entry."""
+    from ..report.document import _img_tag, table_html
+    from .trend import compare, detect, grade, plot_trend
+
+    h = history if isinstance(history, History) else History(history, machine_id)
+    if machine_id:
+        h.machine_id = machine_id
+    if not h.machine_id:
+        raise ValueError("report history: machine_id is required")
+    own = not isinstance(h.store, Store)
+    st = Store(h.store, create=False) if own else h.store
+    try:
+        cals = st.list(h.machine_id)
+        machine = st.machine(h.machine_id)
+    finally:
+        if own:
+            st.close()
+    if result is not None:
+        digest = dataset_digest(result.dataset)
+        if not any(c.digest == digest for c in cals):
+            cur = calibration_from_result(result, h.machine_id, digest=digest, source="this report")
+            cur.id = 0
+            cals.append(cur)
+        if machine is None:
+            machine = result.dataset.machine
+    if not cals:
+        return []
+    out = []
+    usable = [c for c in cals if c.usable]
+    charts = detect(usable, false_alarm_rate=h.false_alarm_rate) if len(usable) >= 2 else {}
+    parts = [f"<p>{len(cals)} calibrations of <b>{_e(h.machine_id)}</b> from {_e(cals[0].time)} to "
+             f"{_e(cals[-1].time)} ({len(cals) - len(usable)} not usable, left out of the trend).</p>"]
+    if charts:
+        alarmed = {n: [c.times[i] for i in c.alarms] for n, c in charts.items() if c.alarms}
+        d = next(iter(charts.values()))
+        parts.append(f"<div class='box {'warn' if alarmed else 'ok'}'>Change detection (self-starting CUSUM, "
+                     f"k = {d.k:g}, h = {d.h:.2f}, designed for {h.false_alarm_rate:g} false alarms per "
+                     f"calibration over {len(charts)} parameters): "
+                     + ("; ".join(f"{_e(n)} changed at {', '.join(map(_e, t))}" for n, t in alarmed.items())
+                        if alarmed else "no change detected") + ".</div>")
+    if usable:
+        p = os.path.join(out_dir, "history_trend.png")
+        plot_trend(usable, p, tolerances=h.tolerances, charts=charts)
+        parts.append(f"<figure>{_img_tag(p, out_dir, embed, 'trend')}<figcaption>Each machine error against "
+                     "calibration time with its ±2σ band, tolerance lines (dashed) and CUSUM alarms "
+                     "(triangles).</figcaption></figure>")
+    out.append(("Calibration history", "\n".join(parts)))
+
+    if len(usable) >= 2:
+        cmp = compare(usable[-2], usable[-1], machine=machine, tolerances=h.tolerances)
+        rows = []
+        for q in cmp.parameters:
+            f, unit = display_scale(q.name)
+            rows.append([q.name, f"{q.a * f:.3f}", f"{q.b * f:.3f}", f"{q.delta * f:.3f}", f"{q.std_delta * f:.3f}",
+                         f"{q.z:.2f}", unit, "" if q.passed is None else ("pass" if q.passed else "FAIL")])
+        html_ = [f"<p>{_e(usable[-2].time)} → {_e(usable[-1].time)}. z = Δ / √(u_A² + u_B²): the two "
+                 "calibrations come from separate datasets, so their covariance term is 0. Changes beyond "
+                 f"{cmp.z_limit:g}σ: <b>{_e(', '.join(cmp.significant()) or 'none')}</b>.</p>",
+                 table_html(["parameter", "before", "now", "change", "u(change)", "z", "unit", "tolerance"], rows,
+                            [False, True, True, True, True, True, False, False])]
+        v = cmp.volumetric
+        if v is not None:
+            html_.append(f"<p>Predicted volumetric error over {v.poses} poses: largest {v.max_a * 1e3:.2f} → "
+                         f"{v.max_b * 1e3:.2f} µm, rms {v.rms_a * 1e3:.2f} → {v.rms_b * 1e3:.2f} µm; the "
+                         f"tool point moved by up to {v.max_change * 1e3:.2f} µm (rms {v.rms_change * 1e3:.2f} µm)."
+                         "</p>")
+        out.append(("Compared with the previous calibration", "\n".join(html_)))
+
+    if h.tolerances or h.volumetric_tolerance is not None:
+        g = grade(cals[-1], h.tolerances or {}, h.volumetric_tolerance, machine=machine)
+        rows = []
+        for n, p in g.parameters.items():
+            f, unit = display_scale(n)
+            rows.append([n, f"{p['value'] * f:.3f}", f"{p['expanded'] * f:.3f}", f"{p['tolerance'] * f:g}", unit,
+                         p["grade"]])
+        if g.volumetric:
+            rows.append(["volumetric (largest)", f"{g.volumetric['max'] * 1e3:.3f}", "",
+                         f"{g.volumetric['tolerance'] * 1e3:g}", "µm", g.volumetric["grade"]])
+        cls = {"pass": "ok", "fail": "bad"}.get(g.verdict, "warn")
+        out.append(("Pass / fail", f"<div class='box {cls}'>Latest calibration: <b>{g.verdict.upper()}</b>"
+                    "(pass: |value| + 2u within the tolerance; fail: |value| − 2u beyond it; otherwise "
+                    "undecided).</div>" + table_html(["item", "value", "U = 2u", "tolerance", "unit", "grade"],
+                                                     rows, [False, True, True, True, False, False])))
+    return out
