@@ -347,6 +347,23 @@ def test_probing_program_and_log_reader_offline():
         L.read_probe_log(log.split("\n", 1)[1], m, kins, plan, pins)
     with pytest.raises(ValueError, match=":2: expected 9"):
         L.read_probe_log(log.replace("\n", "\n1 2\n", 1), m, kins, plan, pins)
+    # the depth check finds a touch that tripped late (0.1 mm into the facet)
+    d = L.probe_depths(m, kins, plan, art, 3.0, log, pins)
+    assert np.abs(d).max() < 1e-5
+    t, c, w, n, _ = geo[5]
+    late = log.splitlines()
+    late[5] = " ".join(f"{v:f}" for v in (*(w - 0.1 * n), t, 0, c, 0, 0, 0))
+    d = L.probe_depths(m, kins, plan, art, 3.0, "\n".join(late) + "\n", pins)
+    assert abs(d[5] + 0.1) < 1e-5 and np.abs(np.delete(d, 5)).max() < 1e-5
+    # the simulator's probe planes go in right before each arming line
+    planes = L.probe_sim_lines(m, kins, plan, art, 3.0)
+    prog = L.probing_program(m, kins, plan, art, 3.0, arm="M62 P0", before_probe=planes)
+    lines = prog.splitlines()
+    arms = [i for i, x in enumerate(lines) if x == "M62 P0"]
+    assert len(arms) == len(plan)
+    assert all(lines[i - 4].startswith("M67 E4 Q") and lines[i - 1].startswith("M67 E7 Q") for i in arms)
+    with pytest.raises(ValueError, match="before_probe"):
+        L.probing_program(m, kins, plan, art, 3.0, before_probe=planes[1:])
 
 
 @needs_linuxcnc
@@ -360,16 +377,21 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     art = _octagon()
     plan = _probe_plan(m, art)
     pins = L.nominal_pins(m, kins)  # the controller does not know the errors
-    # 30 mm/min: the simulated probe trips in the first 1 ms servo cycle
-    # inside the artefact, so its trip point scatters by up to 0.5 um
+    # the simulated probe trips in the first 1 ms servo cycle inside the
+    # touched facet's plane (loaded by M67 with the G38.2, so no process
+    # outside the servo thread takes part): at 30 mm/min 0..0.5 um deep
+    planes = L.probe_sim_lines(m, kins, plan, art, 3.0, errors=TRUE_LOCATION)
     prog = L.probing_program(m, kins, plan, art, 3.0, clearance=0.1, overtravel=0.3, feed=30,
-                               dwell=0.5, arm="M62 P0", disarm="M63 P0")
-    trigger = L.probe_trigger_model(m, kins, plan, art, 3.0, errors=TRUE_LOCATION)
-    hal = L.hal_text(kins, pins) + L.probe_sim_hal(len(art["facets"]))
+                             arm="M62 P0", disarm="M63 P0", before_probe=planes)
+    hal = L.hal_text(kins, pins) + L.probe_sim_hal()
     with harness.Sim(kins, hal=hal, files={"probe.ngc": prog}) as sim:
-        out = sim.run([], setup=[], program="probe.ngc", probe_sim=trigger, program_timeout=400)
+        out = sim.run([], setup=[], program="probe.ngc", program_timeout=400)
         log = sim.read("probe-log.txt")
     assert out["errors"] == []
+    depth = L.probe_depths(m, kins, plan, art, 3.0, log, pins, errors=TRUE_LOCATION)
+    bad = [(i + 1, plan[i]["target"], round(1000 * d, 2)) for i, d in enumerate(depth)
+           if not -0.6e-3 <= d <= 1e-6]
+    assert not bad, f"touches (number, facet, depth um) not tripped at the surface: {bad}"
     obs = L.read_probe_log(log, m, kins, plan, pins)
     for o in obs:
         o["sigma"] = 0.001

@@ -484,7 +484,8 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
                     feed: float = 60.0, retract: float = 10.0, safe: float = 300.0,
                     dwell: float = 0.0, arm: str = "", disarm: str = "",
                     log: str = "probe-log.txt",
-                    tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+                    tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0),
+                    before_probe: Optional[Sequence[Sequence[str]]] = None) -> str:
     """An ISO G-code program for LinuxCNC that runs a fivecal facet plan
     (``{"type": "facet", "target": id, "axes": {tilt, C}, "point": [...]}``)
     with tool centre point kinematics: per touch, index the table, go to
@@ -502,10 +503,13 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     :func:`read_probe_log`. Coordinates: workpiece point - tool tip at the zero
     pose (the pins' convention); ``tcp_on`` is the line that switches the
     controller to its tool-centre-point kinematics (``M428`` in LinuxCNC's
-    sample configs)."""
+    sample configs). ``before_probe``: per touch, lines written just before
+    its ``arm`` line (the simulator's probe planes: :func:`probe_sim_lines`)."""
     k = _kins(kins)
     tilt = TILT[k]
     touches = _touch_geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    if before_probe is not None and len(before_probe) != len(touches):
+        raise ValueError(f"before_probe: {len(before_probe)} entries for {len(touches)} touches")
     if not (clearance > 0 and overtravel > 0 and feed > 0 and retract >= 0):
         raise ValueError("probing_program: clearance, overtravel and feed must be positive")
     f = lambda v: f"{v:.6f}"  # noqa: E731
@@ -527,6 +531,7 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
             out.append(f"G4 P{dwell:g}")
         last = (t, c)
         out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}"]
+        out += list(before_probe[i]) if before_probe is not None else []
         out += [arm] if arm else []
         out.append(f"G38.2 {xyz(end)} F{feed:g}")
         out += [disarm] if disarm else []
@@ -577,55 +582,86 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
     return obs
 
 
-def probe_sim_hal(n_facets: int) -> str:
-    """HAL lines of a simulated touch probe for the headless simulator: per
-    facet i two ``sum2`` (s = gx*X + gy*Y + gz*Z + h of the joint feedback)
-    and a ``comp`` (s < 0), all ANDed with an enable bit into
-    ``motion.probe-input``, in the servo thread, so the probe trips in the
-    first servo cycle the stylus ball reaches the artefact whatever the load,
-    and only while the program arms it (``motion.digital-out-00``:
-    ``probing_program(..., arm="M62 P0", disarm="M63 P0")``).
-    scripts/linuxcnc/driver.py sets the gains per rotary pose from
-    :func:`probe_trigger_model` (``fcs<2i>.gain0|gain1|offset``,
-    ``fcs<2i+1>.gain1``) and the rotary windows ``fcwa|fcwc.min|max``."""
-    if n_facets < 1:
-        raise ValueError("probe_sim_hal: needs at least one facet")
-    n = n_facets
-    sums = ",".join(f"fcs{i}" for i in range(2 * n))
+def probe_sim_hal() -> str:
+    """HAL lines of a simulated touch probe for the headless simulator:
+    ``motion.probe-input`` is on while the program arms it
+    (``motion.digital-out-00``) and gx*X + gy*Y + gz*Z + h < 0 for the joint
+    feedback X Y Z, i.e. the stylus ball is inside the plane of the facet
+    being touched. The program itself loads gx gy gz and -h into
+    ``motion.analog-out-04..07`` with ``M67`` (synchronised with the G38.2
+    move, like the ``M62 P0`` that arms it): :func:`probe_sim_lines`. Every
+    part of the trigger thus runs in the servo thread and changes only at
+    segment starts, so the trip point does not depend on how fast any
+    non-realtime process (task, a Python helper) keeps up with the motion.
+    The configuration needs 8 analog outputs (``[EMCMOT] EMCMOT = motmod
+    num_aio=8``; 00-03 are often taken, e.g. 03 by the kinematics switch)."""
     out = ["# fivecal simulated touch probe (see fivecal.io.linuxcnc.probe_sim_hal)",
-           f"loadrt sum2 names={sums}",
-           f"loadrt comp names={','.join(f'fcc{i}' for i in range(n))}",
-           f"loadrt and2 names={','.join(f'fca{i}' for i in range(n))},fcwe,fcwm"]
-    for i in range(n):
-        out += [f"addf fcs{2 * i} servo-thread", f"addf fcs{2 * i + 1} servo-thread",
-                f"addf fcc{i} servo-thread", f"addf fca{i} servo-thread",
-                f"setp fcs{2 * i + 1}.gain0 1", f"setp fcc{i}.hyst 0",
-                f"net fcp-s{i}a fcs{2 * i}.out => fcs{2 * i + 1}.in0",
-                # comp.out = in1 > in0: 0 > s, the ball inside facet i's plane
-                f"net fcp-s{i} fcs{2 * i + 1}.out => fcc{i}.in0",
-                f"net fcp-c{i} fcc{i}.out => fca{i}.in1"]
-    out += ["net fcp-x joint.0.pos-fb => " + " ".join(f"fcs{2 * i}.in0" for i in range(n)),
-            "net fcp-y joint.1.pos-fb => " + " ".join(f"fcs{2 * i}.in1" for i in range(n)),
-            "net fcp-z joint.2.pos-fb => " + " ".join(f"fcs{2 * i + 1}.in1" for i in range(n)),
-            # enabled only at the rotary pose the gains are for (windows set
-            # with the gains), so a late update can never trip it elsewhere
-            "loadrt wcomp names=fcwa,fcwc",
-            "addf fcwa servo-thread", "addf fcwc servo-thread", "addf fcwe servo-thread",
-            "setp fcwa.min 1e9", "setp fcwa.max -1e9", "setp fcwc.min 1e9", "setp fcwc.max -1e9",
-            "net fcp-a joint.3.pos-fb => fcwa.in", "net fcp-c joint.4.pos-fb => fcwc.in",
-            "net fcp-wa fcwa.out => fcwe.in0", "net fcp-wc fcwc.out => fcwe.in1",
-            # armed by the program (M62 P0 / M63 P0 around each G38.2)
-            "addf fcwm servo-thread", "net fcp-window fcwe.out => fcwm.in0",
-            "net fcp-arm motion.digital-out-00 => fcwm.in1",
-            "net fcp-enable fcwm.out => fca0.in0"]
-    out += [f"net fcp-a{i} fca{i - 1}.out => fca{i}.in0" for i in range(1, n)]
-    out.append(f"net fcp-probe fca{n - 1}.out => motion.probe-input")
+           "loadrt mult2 names=fcm0,fcm1,fcm2",
+           "loadrt sum2 names=fcs0,fcs1",
+           "loadrt comp names=fcc0",
+           "loadrt and2 names=fca0"]
+    for f in ("fcm0", "fcm1", "fcm2", "fcs0", "fcs1", "fcc0", "fca0"):
+        out.append(f"addf {f} servo-thread")
+    out += ["setp fcc0.hyst 0",
+            "net fcp-x joint.0.pos-fb => fcm0.in0",
+            "net fcp-y joint.1.pos-fb => fcm1.in0",
+            "net fcp-z joint.2.pos-fb => fcm2.in0",
+            "net fcp-gx motion.analog-out-04 => fcm0.in1",
+            "net fcp-gy motion.analog-out-05 => fcm1.in1",
+            "net fcp-gz motion.analog-out-06 => fcm2.in1",
+            "net fcp-mx fcm0.out => fcs0.in0",
+            "net fcp-my fcm1.out => fcs0.in1",
+            "net fcp-mxy fcs0.out => fcs1.in0",
+            "net fcp-mz fcm2.out => fcs1.in1",
+            # comp.out = in1 > in0: -h > g.X, the ball inside the facet's plane
+            "net fcp-s fcs1.out => fcc0.in0",
+            "net fcp-h motion.analog-out-07 => fcc0.in1",
+            "net fcp-inside fcc0.out => fca0.in0",
+            "net fcp-arm motion.digital-out-00 => fca0.in1",
+            "net fcp-probe fca0.out => motion.probe-input"]
     return "\n".join(out) + "\n"
+
+
+def probe_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                    tip_radius: float, errors=None) -> List[List[str]]:
+    """Per touch of ``plan``, the ``M67`` lines that load the simulated probe
+    of :func:`probe_sim_hal` with the plane of the touched facet on the
+    machine with ``errors`` (``probing_program(..., before_probe=...)``)."""
+    k = _kins(kins)
+    model = probe_trigger_model(machine, k, plan, artefact, tip_radius, errors=errors)
+    index = {tuple(p["rot"]): p for p in model}
+    ids = list(_facets(artefact))
+    out = []
+    for t, (tt, c, _, _, _) in zip(plan, _touch_geometry(machine, k, plan, artefact, tip_radius)):
+        p = index[(tt, c)]
+        i = ids.index(t["target"])
+        g, h = p["g"][i], p["h"][i]
+        out.append([f"M67 E{e} Q{v:.12f}" for e, v in enumerate((g[0], g[1], g[2], -h), 4)])
+    return out
+
+
+def probe_depths(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                 tip_radius: float, log: str, pins: Mapping[str, float], errors=None) -> np.ndarray:
+    """(N,) mm: for each logged probe position, how far the stylus ball was
+    outside (> 0) or inside (< 0) the touched facet on the machine with
+    ``errors``. A simulated probe that tripped on time gives 0 to -(one servo
+    cycle's feed); anything else means the trip was early or late."""
+    obs = read_probe_log(log, machine, kins, plan, pins)
+    facets = _facets(artefact)
+    out = []
+    for o in obs:
+        f = facets[o["target"]]
+        n = np.asarray(f["normal"], dtype=float)
+        n = n / np.linalg.norm(n)
+        p = machine.tool_point({a: np.array([o["axes"][a]]) for a in machine.axis_names},
+                               errors=errors)[0]
+        out.append(float(n @ (p - np.asarray(f["point"], dtype=float)) - tip_radius))
+    return np.array(out)
 
 
 def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
                         tip_radius: float, errors=None) -> List[dict]:
-    """For a simulated probe input (scripts/linuxcnc/driver.py): per rotary
+    """For a simulated probe input (:func:`probe_sim_lines`): per rotary
     pose of the plan, the rows g, h with the stylus ball touching or inside
     the (convex) artefact when every g . (joint X, Y, Z) + h <= 0, on the
     machine with ``errors``. At fixed rotary joints the ball centre is affine
