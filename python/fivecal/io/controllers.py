@@ -514,3 +514,89 @@ def table_rows(old: Mapping, new: Mapping) -> List[dict]:
             rows.append({"axis": "tool", "chain": "tool", "value": f"{what}.{'xyz'[c]}",
                          "old": float(old[what][c]), "new": float(new[what][c])})
     return rows
+
+
+# ---- names the values carry in vendor documentation -------------------------
+
+SIGN_CONVENTION = ("machine frame at the zero pose (= workpiece frame there); a positive linear "
+                   "command moves its carriage by +direction, a positive rotary command turns its "
+                   "carriage right-handed about +direction; points are on the rotary axis line, "
+                   "nearest the nominal pivot; mm")
+
+
+def vendor_names(machine: Machine, axis: str, value: str) -> Tuple[str, str]:
+    """(Siemens, Heidenhain) names of a table value, from the public manuals
+    cited in docs/controllers.md. Siemens numbers the rotary axes of a swivel
+    data record (CYCLE800 / TRAORI, $TC_CARR) 1 and 2, 1 nearer the machine
+    base (for mixed kinematics 1 is the head axis); I-vectors are differences
+    of the points given here, V-vectors the directions. Heidenhain's
+    KinematicsOpt (Cycle 451) saves the rotary axes' positions in the
+    kinematics description of the machine; its internal names are the
+    machine builder's, so only the quantity is named."""
+    rot = [a["name"] for a in _rotaries(machine)]
+    if axis not in rot:
+        if axis == "tool" and value.startswith("tool_tip"):
+            return ("tool length / I3 (head) or tool adapter reference", "tool length (tool table)")
+        return ("", "")
+    order = sorted(rot, key=lambda r: (0 if _side(machine, r) == "tool" else 1,
+                                       (machine.tool_chain if _side(machine, r) == "tool"
+                                        else machine.workpiece_chain).index(r)))
+    sides = {_side(machine, r) for r in rot}
+    if sides == {"workpiece"}:  # swivel table: 1 nearer the base
+        order = sorted(rot, key=machine.workpiece_chain.index)
+    n = order.index(axis) + 1
+    if value.startswith("direction"):
+        return (f"V{n} (rotary axis {n} vector)", f"rotary axis {axis} orientation (Cycle 451, angular)")
+    if sides == {"workpiece"}:
+        s = "I2 = point (from the machine reference)" if n == 1 else "I3 = point - point of rotary axis 1"
+    elif sides == {"tool"}:
+        s = "I2 = point of rotary axis 1 - this point" if n == 2 else "I1 closes the chain (-(I2+I3))"
+        if n == 2:
+            s = "I3 = this point - tool adapter; I2 = point of axis 1 - this point"
+    else:
+        s = "I2 = point - tool adapter" if n == 1 else "I3 = point (from the machine reference)"
+    return (f"{s} ($TC_CARR, swivel data record)", f"rotary axis {axis} position (Cycle 451)")
+
+
+def export_rows(machine: Machine, ab: Absorption) -> List[dict]:
+    """Old (nominal) and new (absorbed) table rows with vendor names."""
+    rows = table_rows(kinematics_table(machine), kinematics_table(machine, ab.theta))
+    for r in rows:
+        r["change"] = r["new"] - r["old"]
+        r["siemens"], r["heidenhain"] = vendor_names(machine, r["axis"], r["value"])
+    return rows
+
+
+def export_dict(machine: Machine, ab: Absorption) -> dict:
+    by = {a: [{"lo": lo, "hi": hi, "rms_mm": r, "max_mm": mx} for lo, hi, r, mx in ab.by_region(a)]
+          for a in ab.poses if a != "S" and np.ptp(ab.poses[a]) > 0}
+    return {"machine": machine.name, "model": ab.model, "sign_convention": SIGN_CONVENTION,
+            "parameters": {p.label: {"value": float(v), "unit": p.unit}
+                           for p, v in zip(ab.parameters, ab.values)},
+            "held": ab.held, "absorbable": [n for n in absorbable(machine, ab.model)],
+            "workpiece_shift_mm": [float(v) for v in ab.workpiece_shift],
+            "residual": {"poses": len(ab.residual), "rms_old_mm": ab.rms_old, "max_old_mm": ab.max_old,
+                         "rms_mm": ab.rms, "max_mm": ab.max, "rms_compensated_mm": ab.rms_compensated,
+                         "max_compensated_mm": ab.max_compensated, "by_region": by},
+            "table": export_rows(machine, ab)}
+
+
+def export_text(machine: Machine, ab: Absorption) -> str:
+    lines = [ab.report(), "", "kinematics table, " + SIGN_CONVENTION + ":",
+             f"{'axis':<5}{'value':<14}{'old':>14}{'new':>14}{'change um':>11}  Siemens / Heidenhain"]
+    for r in export_rows(machine, ab):
+        lines.append(f"{r['axis']:<5}{r['value']:<14}{r['old']:>14.6f}{r['new']:>14.6f}"
+                     f"{1000 * r['change']:>+11.3f}  {r['siemens']} / {r['heidenhain']}")
+    return "\n".join(lines) + "\n"
+
+
+def export_csv(machine: Machine, ab: Absorption) -> str:
+    import csv
+    import io
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["axis", "chain", "value", "old", "new", "change", "siemens", "heidenhain"])
+    for r in export_rows(machine, ab):
+        w.writerow([r["axis"], r["chain"], r["value"], repr(r["old"]), repr(r["new"]), repr(r["change"]),
+                    r["siemens"], r["heidenhain"]])
+    return buf.getvalue()
