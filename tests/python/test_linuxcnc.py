@@ -403,7 +403,9 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     obs = [o for o, good in zip(L.read_probe_log(log, m, kins, plan, pins), ok) if good]
     for o in obs:
         o["sigma"] = 0.001
-    ds = fivecal.Dataset.from_dict({"machine": m.to_dict(), "probe": {"tip_radius": 3.0},
+    # the effective stylus radius, as a calibration on a reference sphere
+    # gives it, includes the mean trip depth (1.5 servo cycles of feed)
+    ds = fivecal.Dataset.from_dict({"machine": m.to_dict(), "probe": {"tip_radius": 3.0 - 0.00075},
                                     "artefact": art, "observations": obs})
     # the stylus is calibrated separately: its offsets are not in this plan's reach
     r = fivecal.identify(ds, estimate=list(TRUE_LOCATION), fix=["tip.x", "tip.y", "tip.z"])

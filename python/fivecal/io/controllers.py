@@ -417,8 +417,10 @@ def kinematics_table(machine: Machine, theta=None) -> dict:
     per axis its chain (``workpiece``: carries the part, ``tool``: carries the
     spindle; each listed from the foundation outward), unit direction and, for
     a rotary axis, the point of its line nearest the nominal pivot, all in the
-    machine frame at the zero pose (the workpiece frame there); ``tool_tip``
-    and ``tool_axis`` at the zero pose. Sign convention: a positive linear
+    machine frame at the zero pose; ``tool_tip`` and ``tool_axis`` at the
+    zero pose; ``part_origin`` / ``part_rotation``: where the part frame sits
+    at the zero pose (moved by the table axes' location errors; probing the
+    part into the work offset measures it). Sign convention: a positive linear
     command moves the axis's carriage by +direction; a positive rotary command
     turns its carriage right-handed about +direction (ISO 841 for a part-side
     table axis is the opposite rotation of the part: use a direction reversed
@@ -445,25 +447,23 @@ def kinematics_table(machine: Machine, theta=None) -> dict:
                              "nominal_point": p})
         frames[chain_name] = (R, t, parent)
     Rw, tw, pw = frames["workpiece"]
-    W_t = tw - Rw @ pw             # W0 = F_last . Trans(-p_last)
+    W_t = tw - Rw @ pw             # the part frame at the zero pose: W0 = F_last . Trans(-p_last)
     Rt, tt, pt = frames["tool"]
     tip = machine.tip + np.array([val.get(f"tip.{c}", 0.0) for c in "xyz"])
-    tip_f = tt + Rt @ (tip - pt)
-    inv = lambda x: Rw.T @ (x - W_t)  # noqa: E731  machine frame -> workpiece frame at zero pose
     out_rows = []
     for r in rows:
-        d = Rw.T @ r["direction"]
+        d = r["direction"]
         row = {"axis": r["axis"], "chain": r["chain"], "type": r["type"], "direction": d}
         if r["type"] == "rotary":
-            o = inv(r["point"])
-            o = o + ((r["nominal_point"] - o) @ d) * d  # the line's point nearest the nominal pivot
-            row["point"] = o
+            o = r["point"]
+            row["point"] = o + ((r["nominal_point"] - o) @ d) * d  # nearest the nominal pivot
         out_rows.append(row)
     zero = {n: 0.0 for n in machine.axis_names}
     _, v = machine.tool_pose(zero, errors={n: float(x) for n, x in zip(names, th - machine.theta(None))
                                            if x != 0.0})
     return {"machine": machine.name, "topology": machine.topology, "axes": out_rows,
-            "tool_tip": inv(tip_f), "tool_axis": np.asarray(v[0])}
+            "tool_tip": tt + Rt @ (tip - pt), "tool_axis": Rw @ np.asarray(v[0]),
+            "part_origin": W_t, "part_rotation": Rw}
 
 
 def _axis_angle(u: np.ndarray, q: float) -> np.ndarray:
@@ -475,11 +475,14 @@ def _axis_angle(u: np.ndarray, q: float) -> np.ndarray:
 def table_tool_points(table: Mapping, axes: Mapping) -> np.ndarray:
     """(N, 3) mm: the tool points in the workpiece frame that a kinematics
     table describes, for axis commands ``axes`` (mm, degrees): each axis a
-    screw about its line, tool = S_tool(q) tip, part = S_workpiece(q)."""
+    screw about its line, tool = S_tool(q) tip, part = S_workpiece(q), in the
+    part frame (``part_origin``, ``part_rotation``)."""
     names = [r["axis"] for r in table["axes"]]
     qs = {n: np.atleast_1d(np.asarray(axes.get(n, 0.0), dtype=float)) for n in names}
     n = max(len(v) for v in qs.values())
     out = np.zeros((n, 3))
+    Rw = np.asarray(table.get("part_rotation", np.eye(3)), dtype=float)
+    Wt = np.asarray(table.get("part_origin", np.zeros(3)), dtype=float)
     rows = {c: [r for r in table["axes"] if r["chain"] == c] for c in ("workpiece", "tool")}
     for i in range(n):
         def apply(chain, x, inverse):
@@ -495,7 +498,7 @@ def table_tool_points(table: Mapping, axes: Mapping) -> np.ndarray:
                     x = o + R @ (x - o)
             return x
         p = apply(rows["tool"], np.asarray(table["tool_tip"], float), False)
-        out[i] = apply(rows["workpiece"], p, True)
+        out[i] = Rw.T @ (apply(rows["workpiece"], p, True) - Wt)
     return out
 
 
