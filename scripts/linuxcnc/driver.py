@@ -13,6 +13,7 @@ JOB: {"setup": ["M428", ...],                     MDI lines after homing
       "settle": seconds to wait after each move before reading,
       "program": "file.ngc" (run in AUTO mode after the moves),
       "program_timeout": seconds,
+      "trace": true to record [motion line, commanded joints...] every 50 ms of the program,
       "timeout": seconds per command}
 
 A simulated probe (fivecal.io.linuxcnc.probe_sim_hal) needs nothing from
@@ -103,7 +104,7 @@ def main(job_path, out_path):
         comp = hal.component(f"fivecal-driver-{os.getpid()}")
         comp.ready()
     settle = float(job.get("settle", 0.0))
-    out = {"joints": [], "joints_actual": [], "position": [], "probed": [], "hal": [],
+    out = {"joints": [], "joints_actual": [], "position": [], "probed": [], "hal": [], "trace": [],
            "hal_start": [hal.get_value(p) for p in pins]}
     for line in job.get("setup", []):
         mdi(line)
@@ -135,6 +136,8 @@ def main(job_path, out_path):
                                    f"(interpreter at {s.current_line}, joints {where}): {errors[-1]}")
             if s.interp_state != linuxcnc.INTERP_IDLE:
                 started = True
+                if job.get("trace"):
+                    out["trace"].append([s.motion_line] + list(s.joint_position[:njoints]))
             elif started or time.monotonic() - t0 > 30:
                 # a loaded machine may take seconds to start the program: the
                 # driver must not read the log of a program still to come

@@ -210,7 +210,7 @@ class Sim:
     def run(self, moves: List[str], setup: Iterable[str] = ("M428",), timeout: float = 30.0,
             total_timeout: Optional[float] = None, hal_pins: Iterable[str] = (),
             settle: float = 0.0, program: Optional[str] = None,
-            program_timeout: float = 600.0) -> dict:
+            program_timeout: float = 600.0, trace: bool = False) -> dict:
         """Homes, runs the setup MDI lines, then each move; returns the driver's
         output (joints after each move, world position, kinematics type)."""
         if self.proc is None or self.proc.poll() is not None:
@@ -220,7 +220,7 @@ class Sim:
         with open(job, "w") as f:
             json.dump({"setup": list(setup), "moves": list(moves), "timeout": timeout,
                        "hal_pins": list(hal_pins), "settle": settle, "program": program,
-                       "program_timeout": program_timeout}, f)
+                       "program_timeout": program_timeout, "trace": trace}, f)
         if os.path.exists(out):
             os.remove(out)
         if os.geteuid() == 0:
