@@ -224,6 +224,12 @@ def test_cli_export_linuxcnc(tmp_path):
     assert rows.shape == (21, 3) and rows[0, 0] == -100 and rows[-1, 0] == 100
     report = (out / "linuxcnc-report.txt").read_text()
     assert "EB0C" in report and "COMP_FILE = comp-X.txt" in report
+    # what fivecal's G-code compensation removes on top of the pins: all of it
+    line = next(x for x in report.splitlines() if "G-code compensation on top" in x)
+    left = float(line.split("max ")[1].split()[0])
+    assert left < 0.01, line
+    pins_max = float(next(x for x in report.splitlines() if "new pins rms" in x).split("max ")[-1].split()[0])
+    assert pins_max > 1.0  # um: the tilt EB0C is left by the pins
     # the old pins from a file: unchanged pins give a zero change
     assert main(["export", "linuxcnc", rp, "--machine", mp, "--kins", "xyzac-trt", "--out",
                  str(tmp_path / "again"), "--old", str(out / "fivecal-kins.hal")]) == 0

@@ -125,6 +125,8 @@ class Absorption:
     max: float = 0.0
     rms_old: float = 0.0
     max_old: float = 0.0
+    rms_compensated: Optional[float] = None   # with fivecal's G-code compensation on top
+    max_compensated: Optional[float] = None
 
     def changes(self) -> Dict[str, float]:
         return {n: self.pins[n] - self.old_pins.get(n, 0.0) for n in self.pins}
@@ -150,6 +152,9 @@ class Absorption:
                  f"tool point error the pins leave over {len(self.residual)} poses: old pins rms "
                  f"{1000 * self.rms_old:.2f} um, max {1000 * self.max_old:.2f} um; new pins rms "
                  f"{1000 * self.rms:.2f} um, max {1000 * self.max:.2f} um",
+                 *([f"with fivecal's G-code compensation on top (fivecal compensate): rms "
+                    f"{1000 * self.rms_compensated:.3f} um, max {1000 * self.max_compensated:.3f} um"]
+                   if self.rms_compensated is not None else []),
                  "what the pins cannot absorb (axis tilts, error motions, backlash) is left: "
                  "fivecal compensate removes it from a program"]
         return "\n".join(lines)
@@ -399,6 +404,11 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     poses = pose_grid(machine, k, volume)
     ab = absorb(machine, k, errors, poses=poses, old_pins=old_pins)
     check_change(ab.old_pins, ab.pins, max_change, force)
+    # the same model in fivecal's parameters leaves the same map (tested), so
+    # its G-code-compensated residual is this controller's
+    from . import controllers as K
+    kab = K.absorb(machine, k, errors, poses=poses, compensation=True)
+    ab.rms_compensated, ab.max_compensated = kab.rms_compensated, kab.max_compensated
     os.makedirs(out_dir, exist_ok=True)
     files = []
 
