@@ -505,10 +505,12 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     then ``safe`` mm along the tool axis, re-indexes there and comes back the
     same way (straight G0 moves: check them against your fixtures); ``dwell``
     seconds (G4) after each re-indexing let the table settle; ``arm`` and
-    ``disarm`` are lines that switch the probe on before each G38.2 and off
-    after it: ``M62 P0`` / ``M63 P0``, which act with the next move (LinuxCNC
-    checks the probe input when it queues a G38.2, while the stylus may still
-    sit on the previous contact; an immediate M64 would arm it there).
+    ``disarm`` are lines that switch the probe on for the last approach move
+    and the G38.2 and off after it: ``M62 P0`` / ``M63 P0``, which act with
+    the next move (LinuxCNC checks the probe input when it queues a G38.2,
+    while the stylus may still sit on the previous contact, so an immediate
+    M64 would arm it there; and an output synchronised with the G38.2 itself
+    comes on late, once the probe move already runs).
     The probed positions go to ``log`` (``PROBEOPEN``); read them back with
     :func:`read_probe_log`. Coordinates: workpiece point - tool tip at the zero
     pose (the pins' convention); ``tcp_on`` is the line that switches the
@@ -540,9 +542,15 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         if dwell > 0 and last != (t, c):
             out.append(f"G4 P{dwell:g}")
         last = (t, c)
-        out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}"]
+        out.append(f"G0 {xyz(off)}")
+        # armed with the last approach move, not with the G38.2: LinuxCNC
+        # queues a G38.2 only once the interpreter has synchronised, and an
+        # output "synchronised with the next move" then comes on while the
+        # probe move already runs, later the busier the computer; by the
+        # contact the stylus may be past the surface (a late trip)
         out += list(before_probe[i]) if before_probe is not None else []
         out += [arm] if arm else []
+        out.append(f"G0 {xyz(start)}")
         out.append(f"G38.2 {xyz(end)} F{feed:g}")
         out += [disarm] if disarm else []
         out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
@@ -598,8 +606,8 @@ def probe_sim_hal() -> str:
     (``motion.digital-out-00``) and gx*X + gy*Y + gz*Z + h < 0 for the joint
     feedback X Y Z, i.e. the stylus ball is inside the plane of the facet
     being touched. The program itself loads gx gy gz and -h into
-    ``motion.analog-out-04..07`` with ``M67`` (synchronised with the G38.2
-    move, like the ``M62 P0`` that arms it): :func:`probe_sim_lines`. Every
+    ``motion.analog-out-04..07`` with ``M67`` (synchronised with the last
+    approach move, like the ``M62 P0`` that arms it): :func:`probe_sim_lines`. Every
     part of the trigger thus runs in the servo thread and changes only at
     segment starts, so the trip point does not depend on how fast any
     non-realtime process (task, a Python helper) keeps up with the motion.
