@@ -133,16 +133,8 @@ class Absorption:
 
     def by_region(self, axis: str, bins: int = 4) -> List[Tuple[float, float, float, float]]:
         """Residual |e| by region of one axis: (lo, hi, rms, max) per bin, mm."""
-        q = np.asarray(self.poses[axis], dtype=float)
-        e = np.linalg.norm(self.residual, axis=1)
-        edges = np.linspace(q.min(), q.max(), bins + 1)
-        out = []
-        for i in range(bins):
-            sel = (q >= edges[i]) & ((q < edges[i + 1]) if i < bins - 1 else (q <= edges[i + 1]))
-            if sel.any():
-                out.append((edges[i], edges[i + 1], float(np.sqrt(np.mean(e[sel] ** 2))),
-                            float(e[sel].max())))
-        return out
+        from .controllers import region_stats
+        return region_stats(self.poses, self.residual, axis, bins)
 
     def report(self) -> str:
         lines = [f"LinuxCNC {self.kins}-kins: pins that best absorb the identified errors",
