@@ -521,7 +521,7 @@ def table_rows(old: Mapping, new: Mapping) -> List[dict]:
 
 # ---- names the values carry in vendor documentation -------------------------
 
-SIGN_CONVENTION = ("machine frame at the zero pose (= workpiece frame there); a positive linear "
+SIGN_CONVENTION = ("machine frame at the zero pose (the part frame: part_origin, part_rotation); a positive linear "
                    "command moves its carriage by +direction, a positive rotary command turns its "
                    "carriage right-handed about +direction; points are on the rotary axis line, "
                    "nearest the nominal pivot; mm")

@@ -74,7 +74,7 @@ def _run_kinematics(args) -> int:
 def register(sub) -> None:
     """Add ``export`` (with ``export linuxcnc``) to the main parser's subparsers."""
     RD = argparse.RawDescriptionHelpFormatter
-    pe = sub.add_parser("export", help="controller files from identified errors (LinuxCNC)",
+    pe = sub.add_parser("export", help="controller files from identified errors (LinuxCNC; kinematics tables)",
                         formatter_class=RD, description="Write what a controller needs from an "
                         "identification result.",
                         epilog="example:\n  fivecal export linuxcnc result.json --machine machine.json "
