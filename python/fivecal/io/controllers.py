@@ -571,6 +571,7 @@ def export_rows(machine: Machine, ab: Absorption) -> List[dict]:
 
 
 def export_dict(machine: Machine, ab: Absorption) -> dict:
+    new_table = kinematics_table(machine, ab.theta)
     by = {a: [{"lo": lo, "hi": hi, "rms_mm": r, "max_mm": mx} for lo, hi, r, mx in ab.by_region(a)]
           for a in ab.poses if a != "S" and np.ptp(ab.poses[a]) > 0}
     return {"machine": machine.name, "model": ab.model, "sign_convention": SIGN_CONVENTION,
@@ -581,7 +582,9 @@ def export_dict(machine: Machine, ab: Absorption) -> dict:
             "residual": {"poses": len(ab.residual), "rms_old_mm": ab.rms_old, "max_old_mm": ab.max_old,
                          "rms_mm": ab.rms, "max_mm": ab.max, "rms_compensated_mm": ab.rms_compensated,
                          "max_compensated_mm": ab.max_compensated, "by_region": by},
-            "table": export_rows(machine, ab)}
+            "table": export_rows(machine, ab),
+            "part_frame": {"origin_mm": [float(v) for v in new_table["part_origin"]],
+                           "rotation": [[float(v) for v in r] for r in new_table["part_rotation"]]}}
 
 
 def export_text(machine: Machine, ab: Absorption) -> str:
