@@ -361,15 +361,17 @@ def test_probing_program_and_log_reader_offline():
     late[5] = " ".join(f"{v:f}" for v in (*(w - 0.1 * n), t, 0, c, 0, 0, 0))
     d = L.probe_depths(m, kins, plan, art, 3.0, "\n".join(late) + "\n", pins)
     assert abs(d[5] + 0.1) < 1e-5 and np.abs(np.delete(d, 5)).max() < 1e-5
-    # the simulator's probe planes go in right before each arming line
+    # the simulator's probe planes go in at the start point: after the sync
+    # line that stops the read-ahead there, before the arming line
     planes = L.probe_sim_lines(m, kins, plan, art, 3.0)
-    prog = L.probing_program(m, kins, plan, art, 3.0, arm="M62 P0", before_probe=planes)
+    prog = L.probing_program(m, kins, plan, art, 3.0, sync="M66 E0 L0", arm="M64 P0",
+                             before_probe=planes)
     lines = prog.splitlines()
-    arms = [i for i, x in enumerate(lines) if x == "M62 P0"]
+    arms = [i for i, x in enumerate(lines) if x == "M64 P0"]
     assert len(arms) == len(plan)
-    assert all(lines[i - 4].startswith("M67 E4 Q") and lines[i - 1].startswith("M67 E7 Q") for i in arms)
-    # armed with the approach move before the G38.2, not with the G38.2 itself
-    assert all(lines[i + 1].startswith("G0 ") and lines[i + 2].startswith("G38.2") for i in arms)
+    assert all(lines[i - 5] == "M66 E0 L0" and lines[i - 4].startswith("M68 E4 Q")
+               and lines[i - 1].startswith("M68 E7 Q") and lines[i + 1].startswith("G38.2")
+               and lines[i - 6].startswith("G0 ") for i in arms)
     with pytest.raises(ValueError, match="before_probe"):
         L.probing_program(m, kins, plan, art, 3.0, before_probe=planes[1:])
 
@@ -386,11 +388,11 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     plan = _probe_plan(m, art)
     pins = L.nominal_pins(m, kins)  # the controller does not know the errors
     # the simulated probe trips in the first 1 ms servo cycle inside the
-    # touched facet's plane (loaded by M67 with the G38.2, so no process
-    # outside the servo thread takes part): at 30 mm/min 0..0.5 um deep
+    # touched facet's plane (loaded by M68 and armed by M64 while the machine
+    # stands at the start point; the trigger itself runs in the servo thread)
     planes = L.probe_sim_lines(m, kins, plan, art, 3.0, errors=TRUE_LOCATION)
     prog = L.probing_program(m, kins, plan, art, 3.0, clearance=0.1, overtravel=0.3, feed=30,
-                             arm="M62 P0", disarm="M63 P0", before_probe=planes)
+                             sync="M66 E0 L0", arm="M64 P0", disarm="M65 P0", before_probe=planes)
     hal = L.hal_text(kins, pins) + L.probe_sim_hal()
     with harness.Sim(kins, hal=hal, files={"probe.ngc": prog}) as sim:
         out = sim.run([], setup=[], program="probe.ngc", program_timeout=400)
@@ -398,8 +400,8 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     assert out["errors"] == []
     # each trip against the simulated surface: 0 to 2 servo cycles of feed
     # deep (the chain's output reaches motion one cycle later); a late arm
-    # (before the fix: the arm synchronised with the G38.2 itself came on
-    # while it already ran, up to 0.5 s late on a busy machine) shows here
+    # (before the fix: M62 synchronised with the G38.2 came on while the
+    # probe move already ran, up to 0.5 s late on a busy machine) shows here
     depth = L.probe_depths(m, kins, plan, art, 3.0, log, pins, errors=TRUE_LOCATION)
     late = [(i + 1, plan[i]["target"], round(1000 * d, 2)) for i, d in enumerate(depth)
             if not -1.1e-3 <= d <= 1e-6]

@@ -487,7 +487,7 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
                     dwell: float = 0.0, arm: str = "", disarm: str = "",
                     log: str = "probe-log.txt",
                     tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0),
-                    before_probe: Optional[Sequence[Sequence[str]]] = None) -> str:
+                    before_probe: Optional[Sequence[Sequence[str]]] = None, sync: str = "") -> str:
     """An ISO G-code program for LinuxCNC that runs a fivecal facet plan
     (``{"type": "facet", "target": id, "axes": {tilt, C}, "point": [...]}``)
     with tool centre point kinematics: per touch, index the table, go to
@@ -496,13 +496,16 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     Between touches the probe leaves ``retract`` mm along the facet normal and
     then ``safe`` mm along the tool axis, re-indexes there and comes back the
     same way (straight G0 moves: check them against your fixtures); ``dwell``
-    seconds (G4) after each re-indexing let the table settle; ``arm`` and
-    ``disarm`` are lines that switch the probe on for the last approach move
-    and the G38.2 and off after it: ``M62 P0`` / ``M63 P0``, which act with
-    the next move (LinuxCNC checks the probe input when it queues a G38.2,
-    while the stylus may still sit on the previous contact, so an immediate
-    M64 would arm it there; and an output synchronised with the G38.2 itself
-    comes on late, once the probe move already runs).
+    seconds (G4) after each re-indexing let the table settle; ``sync``, ``arm``
+    and ``disarm`` are lines written at the start point before the G38.2 and
+    after it: ``sync="M66 E0 L0"`` (an immediate input read, which makes the
+    interpreter wait until the machine stands at the start point),
+    ``arm="M64 P0"`` and ``disarm="M65 P0"`` switch a probe interface on only
+    for the probing move, right there. (LinuxCNC checks the probe input when
+    it queues a G38.2, so arming while the stylus still sits on the previous
+    contact fails; and an output "synchronised with the next move", M62,
+    written before a G38.2 comes on while the probe move already runs, late
+    on a busy computer.)
     The probed positions go to ``log`` (``PROBEOPEN``); read them back with
     :func:`read_probe_log`. Coordinates: workpiece point - tool tip at the zero
     pose (the pins' convention); ``tcp_on`` is the line that switches the
@@ -534,15 +537,15 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         if dwell > 0 and last != (t, c):
             out.append(f"G4 P{dwell:g}")
         last = (t, c)
-        out.append(f"G0 {xyz(off)}")
-        # armed with the last approach move, not with the G38.2: LinuxCNC
-        # queues a G38.2 only once the interpreter has synchronised, and an
-        # output "synchronised with the next move" then comes on while the
-        # probe move already runs, later the busier the computer; by the
-        # contact the stylus may be past the surface (a late trip)
+        out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}"]
+        # ``sync`` stops the read-ahead at the start point, so immediate
+        # outputs (M64, M68) act there, before the G38.2 is queued. Outputs
+        # "synchronised with the next move" (M62, M67) written before a G38.2
+        # came on while the probe move already ran, later the busier the
+        # computer: the stylus could be past the surface when armed
+        out += [sync] if sync else []
         out += list(before_probe[i]) if before_probe is not None else []
         out += [arm] if arm else []
-        out.append(f"G0 {xyz(start)}")
         out.append(f"G38.2 {xyz(end)} F{feed:g}")
         out += [disarm] if disarm else []
         out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
@@ -598,8 +601,8 @@ def probe_sim_hal() -> str:
     (``motion.digital-out-00``) and gx*X + gy*Y + gz*Z + h < 0 for the joint
     feedback X Y Z, i.e. the stylus ball is inside the plane of the facet
     being touched. The program itself loads gx gy gz and -h into
-    ``motion.analog-out-04..07`` with ``M67`` (synchronised with the last
-    approach move, like the ``M62 P0`` that arms it): :func:`probe_sim_lines`. Every
+    ``motion.analog-out-04..07`` with ``M68`` at the start point, after
+    ``sync`` and before the ``M64 P0`` that arms it: :func:`probe_sim_lines`. Every
     part of the trigger thus runs in the servo thread and changes only at
     segment starts, so the trip point does not depend on how fast any
     non-realtime process (task, a Python helper) keeps up with the motion.
@@ -634,9 +637,10 @@ def probe_sim_hal() -> str:
 
 def probe_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
                     tip_radius: float, errors=None) -> List[List[str]]:
-    """Per touch of ``plan``, the ``M67`` lines that load the simulated probe
+    """Per touch of ``plan``, the ``M68`` lines that load the simulated probe
     of :func:`probe_sim_hal` with the plane of the touched facet on the
-    machine with ``errors`` (``probing_program(..., before_probe=...)``)."""
+    machine with ``errors`` (``probing_program(..., before_probe=..., sync="M66 E0 L0")``:
+    immediate outputs, acting where the program stands)."""
     k = _kins(kins)
     model = probe_trigger_model(machine, k, plan, artefact, tip_radius, errors=errors)
     index = {tuple(p["rot"]): p for p in model}
@@ -646,7 +650,7 @@ def probe_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         p = index[(tt, c)]
         i = ids.index(t["target"])
         g, h = p["g"][i], p["h"][i]
-        out.append([f"M67 E{e} Q{v:.12f}" for e, v in enumerate((g[0], g[1], g[2], -h), 4)])
+        out.append([f"M68 E{e} Q{v:.12f}" for e, v in enumerate((g[0], g[1], g[2], -h), 4)])
     return out
 
 
