@@ -522,7 +522,9 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     f = lambda v: f"{v:.6f}"  # noqa: E731
     out = [f"(fivecal probing program: {len(touches)} touches, machine {machine.name}, {k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
-           "G21 G90 G94 G17 G40 G49 G54"]
+           # G61 exact stop: no move blends into the next, so every G38.2
+           # starts from its start point at rest
+           "G21 G90 G94 G17 G40 G49 G54 G61"]
     if tcp_on:
         out.append(f"{tcp_on} (tool centre point kinematics on)")
     out.append(f"(PROBEOPEN {log})")
