@@ -81,7 +81,7 @@ def _comm(pid: int) -> str:
 
 
 class Sim:
-    """A headless LinuxCNC session of ``kins`` ('xyzac-trt' or 'xyzbc-trt').
+    """A headless LinuxCNC session of ``kins`` ('xyzac-trt', 'xyzbc-trt' or '5axiskins').
 
     hal: the text of fivecal-kins.hal (the pins fivecal exports);
     joint_ini: extra INI lines per joint number (e.g. COMP_FILE);
@@ -90,8 +90,8 @@ class Sim:
 
     def __init__(self, kins: str, hal: str = "", joint_ini: Optional[Dict[int, Iterable[str]]] = None,
                  files: Optional[Dict[str, str]] = None, timeout: float = 60.0):
-        if kins not in ("xyzac-trt", "xyzbc-trt"):
-            raise ValueError(f"kins: expected 'xyzac-trt' or 'xyzbc-trt', got {kins!r}")
+        if kins not in ("xyzac-trt", "xyzbc-trt", "5axiskins"):
+            raise ValueError(f"kins: expected 'xyzac-trt', 'xyzbc-trt' or '5axiskins', got {kins!r}")
         self.kins, self.hal, self.timeout = kins, hal, timeout
         self.joint_ini = joint_ini or {}
         self.files = files or {}

@@ -184,3 +184,53 @@ def test_cli_export_kinematics(tmp_path):
     assert r.returncode == 0 and r.stdout.splitlines()[0].startswith("axis,chain,value,old,new")
     r = subprocess.run(base[:-1] + ["--model", "head-head", "--force"], capture_output=True, text=True)
     assert r.returncode == 2 and "is table-table" in r.stderr
+
+
+@pytest.mark.skipif(__import__("linuxcnc_harness").unavailable_reason() is not None,
+                    reason="needs LinuxCNC")
+def test_5axiskins_round_trip_in_linuxcnc():
+    """Debian's 5axiskins, headless: the joints LinuxCNC commands for world
+    moves equal fivecal's inverse kinematics of the head-head machine (its B
+    along -y is LinuxCNC's +B); with a pivot-length error the absorbed
+    pivot-length makes LinuxCNC put the erroneous machine's tool on the
+    target, up to the constant work offset."""
+    import linuxcnc_harness as harness
+    m = HEAD_HEAD()
+    mp = K._match_5axis(m)
+    err = {"EZ0S": -0.02}
+    ab = K.absorb(m, "5axiskins", err)
+    rng = np.random.default_rng(4)
+    n = 50
+    w = rng.uniform(-60, 60, (n, 3))
+    b = rng.uniform(-90, 90, n)
+    c = rng.uniform(-180, 180, n)
+    b[:3] = [-90, 90, 45]
+    moves = [f"G1 X{x!r} Y{y!r} Z{z!r} B{bb!r} C{cc!r} F100000" for (x, y, z), bb, cc in
+             zip(w.tolist(), b.tolist(), c.tolist())]
+    L_new = mp["pivot_length"] + ab.value("tool length")
+    for L, errors in ((mp["pivot_length"], None), (L_new, err)):
+        with harness.Sim("5axiskins", hal=f"setp 5axiskins.pivot-length {L!r}\n") as sim:
+            out = sim.run(moves, setup=[])
+        j = np.array(out["joints"])[:, :5]
+        assert np.abs(j - K.fiveaxis_inverse(L, np.column_stack([w, b, c]))).max() < 1e-6
+        q = {"X": j[:, 0] * mp["sign"]["X"], "Y": j[:, 1] * mp["sign"]["Y"], "Z": j[:, 2] * mp["sign"]["Z"],
+             "B": j[:, 3] * mp["sign"]["B"], "C": j[:, 4] * mp["sign"]["C"], "S": np.zeros(n)}
+        if errors is None:
+            # fivecal's nominal tool point at LinuxCNC's joints is the world target
+            assert np.abs(m.tool_point(q) - mp["origin"] - w).max() < 1e-6
+            # and fivecal's inverse gives LinuxCNC's joints
+            for i in range(5):
+                start = {"X": 0.0, "Y": 0.0, "Z": 0.0, "B": b[i] * mp["sign"]["B"], "C": c[i] * mp["sign"]["C"],
+                         "S": 0.0}
+                _, axis = m.tool_pose(start)
+                qi = m.inverse((w[i] + mp["origin"])[None, :], tool_axes=axis, start=start)
+                assert np.abs(K.fiveaxis_joints(m, qi)[0] - j[i]).max() < 1e-6
+        else:
+            left = m.tool_point(q, errors=errors) - mp["origin"] - w
+            assert np.abs(left - left.mean(axis=0)).max() < 1e-6
+            # the nominal pivot-length leaves the error
+            j0 = K.fiveaxis_inverse(mp["pivot_length"], np.column_stack([w, b, c]))
+            q0 = {a: j0[:, k] * mp["sign"][a] for k, a in enumerate("XYZBC")}
+            q0["S"] = np.zeros(n)
+            l0 = m.tool_point(q0, errors=errors) - mp["origin"] - w
+            assert np.abs(l0 - l0.mean(axis=0)).max() > 0.01
