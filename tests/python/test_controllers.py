@@ -234,3 +234,20 @@ def test_5axiskins_round_trip_in_linuxcnc():
             q0["S"] = np.zeros(n)
             l0 = m.tool_point(q0, errors=errors) - mp["origin"] - w
             assert np.abs(l0 - l0.mean(axis=0)).max() > 0.01
+
+
+def test_cli_export_kinematics_5axiskins_pin(tmp_path):
+    m = HEAD_HEAD()
+    mf = tmp_path / "m.json"
+    mf.write_text(json.dumps(m.to_dict()))
+    res = tmp_path / "errors.json"
+    res.write_text(json.dumps({"EZ0S": -0.02, "EX0B": 0.005}))
+    r = subprocess.run([sys.executable, "-m", "fivecal", "export", "kinematics", str(res), "--machine",
+                        str(mf), "--model", "5axiskins", "--force"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    line = next(x for x in r.stdout.splitlines() if x.startswith("setp 5axiskins.pivot-length"))
+    assert abs(float(line.split()[2]) - 250.02) < 1e-6
+    # B off the C axis (EX0B) is left: the error after absorption is reported
+    assert "after absorption rms" in r.stdout
+    ab = K.absorb(m, "5axiskins", {"EZ0S": -0.02, "EX0B": 0.005})
+    assert ab.max > 4e-3

@@ -578,6 +578,7 @@ def export_dict(machine: Machine, ab: Absorption) -> dict:
             "parameters": {p.label: {"value": float(v), "unit": p.unit}
                            for p, v in zip(ab.parameters, ab.values)},
             "held": ab.held, "absorbable": [n for n in absorbable(machine, ab.model)],
+            "linuxcnc": linuxcnc_lines(machine, ab),
             "workpiece_shift_mm": [float(v) for v in ab.workpiece_shift],
             "residual": {"poses": len(ab.residual), "rms_old_mm": ab.rms_old, "max_old_mm": ab.max_old,
                          "rms_mm": ab.rms, "max_mm": ab.max, "rms_compensated_mm": ab.rms_compensated,
@@ -587,8 +588,26 @@ def export_dict(machine: Machine, ab: Absorption) -> dict:
                            "rotation": [[float(v) for v in r] for r in new_table["part_rotation"]]}}
 
 
+def linuxcnc_lines(machine: Machine, ab: Absorption) -> List[str]:
+    """For the LinuxCNC models, what to set: the 5axiskins pin line, or where
+    the trt pins come from."""
+    if ab.model == "5axiskins":
+        mp = _match_5axis(machine)
+        old, new = mp["pivot_length"], mp["pivot_length"] + ab.value("tool length")
+        return [f"setp 5axiskins.pivot-length {new!r}  # old {old!r} (mm; 5axiskins.c: add the "
+                "tool's z offset, motion.tooloffset.z, where your configuration nets the pin)"]
+    if ab.model in ("xyzac-trt", "xyzbc-trt"):
+        return [f"LinuxCNC {ab.model}-kins pins, COMP_FILEs and the recipe: fivecal export linuxcnc "
+                f"--kins {ab.model}"]
+    return []
+
+
 def export_text(machine: Machine, ab: Absorption) -> str:
-    lines = [ab.report(), "", "kinematics table, " + SIGN_CONVENTION + ":",
+    lines = [ab.report()]
+    extra = linuxcnc_lines(machine, ab)
+    if extra:
+        lines += [""] + extra
+    lines += ["", "kinematics table, " + SIGN_CONVENTION + ":",
              f"{'axis':<5}{'value':<14}{'old':>14}{'new':>14}{'change um':>11}  Siemens / Heidenhain"]
     for r in export_rows(machine, ab):
         lines.append(f"{r['axis']:<5}{r['value']:<14}{r['old']:>14.6f}{r['new']:>14.6f}"
