@@ -177,6 +177,8 @@ def test_cli_export_kinematics(tmp_path):
     ab = K.absorb(fivecal.Machine.load("examples/machines/hu40t.json"), "table-table",
                   {"EX0C": 0.03, "EY0C": -0.02, "EX0B": 0.01, "EA0C": 3e-5})
     assert abs(d["residual"]["max_mm"] - ab.max) < 1e-9
+    assert np.abs(np.array(d["map"]["residual_mm"]) - ab.residual).max() < 1e-12
+    assert len(d["map"]["axes"]["C"]) == len(ab.residual)
     assert d["residual"]["max_compensated_mm"] < 1e-5 < d["residual"]["max_mm"]
     cx = next(r for r in d["table"] if r["axis"] == "C" and r["value"] == "point.x")
     assert abs(cx["new"] - 0.04) < 2e-3  # B carries C: EX0B + EX0C

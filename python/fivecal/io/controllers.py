@@ -584,6 +584,8 @@ def export_dict(machine: Machine, ab: Absorption) -> dict:
                          "rms_mm": ab.rms, "max_mm": ab.max, "rms_compensated_mm": ab.rms_compensated,
                          "max_compensated_mm": ab.max_compensated, "by_region": by},
             "table": export_rows(machine, ab),
+            "map": {"axes": {a: [float(v) for v in ab.poses[a]] for a in ab.poses if a != "S"},
+                    "residual_mm": [[float(v) for v in r] for r in ab.residual]},
             "part_frame": {"origin_mm": [float(v) for v in new_table["part_origin"]],
                            "rotation": [[float(v) for v in r] for r in new_table["part_rotation"]]}}
 
