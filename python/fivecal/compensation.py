@@ -204,7 +204,8 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
                      progress: Optional[bool] = None,
                      max_correction: Optional[float] = MAX_CORRECTION,
                      max_correction_deg: Optional[float] = MAX_CORRECTION_DEG,
-                     force: bool = False) -> CompensatedPoses:
+                     force: bool = False, reference_theta: Optional[np.ndarray] = None,
+                     reference_shift: Optional[Sequence[float]] = None) -> CompensatedPoses:
     """Compensated axis commands for a list of nominal poses.
 
     ``axes``: nominal commands, dict axis letter -> array (mm, rotary in
@@ -227,6 +228,12 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
     axes, default 0.5) or ``max_correction_deg`` degrees (rotary axes,
     default 0.5) raises :class:`fivecal.CorrectionLimitError` naming the pose,
     the axis and the size (None switches a limit off).
+
+    ``reference_theta`` (a full parameter vector) and ``reference_shift``
+    (mm): the targets are where a machine with those parameters puts the tool
+    (and its axis), shifted by ``reference_shift``, instead of the nominal
+    machine: a controller that already runs a corrected kinematic model
+    (fivecal.io.controllers).
     """
     machine = _with_tool_tip(Machine.from_dict(machine), tool_tip)
     errs = usable_errors(errors, machine, force)
@@ -236,7 +243,10 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
     theta = machine.theta(errs)
     zero = machine.theta(None)
     core = machine._core
-    P, A = _core.tool_poses(core, zero, q, None)
+    ref = zero if reference_theta is None else np.asarray(reference_theta, dtype=float)
+    P, A = _core.tool_poses(core, ref, q, None)
+    if reference_shift is not None:
+        P = P + np.asarray(reference_shift, dtype=float).reshape(1, 3)
     P0, A0 = _core.tool_poses(core, theta, q, d)
     rot = np.array([a in ROTARY for a in machine.axis_names])
     out = np.empty_like(q)

@@ -13,13 +13,11 @@ JOB: {"setup": ["M428", ...],                     MDI lines after homing
       "settle": seconds to wait after each move before reading,
       "program": "file.ngc" (run in AUTO mode after the moves),
       "program_timeout": seconds,
-      "probe_sim": [{"rot": [tilt, c], "g": [[gx, gy, gz], ...], "h": [...]}, ...],
+      "trace": true to record [motion line, commanded joints...] every 50 ms of the program,
       "timeout": seconds per command}
 
-probe_sim loads, per rotary pose, the gains of the HAL probe chain
-(fivecal.io.linuxcnc.probe_sim_hal) in which motion.probe-input is on when
-the rotary joints are at one of the listed poses and every g . (joint X, Y, Z)
-+ h < 0 there (the stylus ball touches a convex artefact).
+A simulated probe (fivecal.io.linuxcnc.probe_sim_hal) needs nothing from
+this driver: the program loads its plane with M67 and arms it with M62.
 OUT: {"joints": [[j0..j4], ...] (commanded joint positions after each move),
       "joints_actual": [...], "position": [...] (world, after each move),
       "hal": [[pin values], ...] (after each move), "hal_start": [pin values after homing],
@@ -31,7 +29,6 @@ hanging the caller.
 import json
 import os
 import sys
-import threading
 import time
 
 import hal
@@ -46,46 +43,6 @@ def wait_for(pred, s, timeout, what):
             return
         time.sleep(0.02)
     raise TimeoutError(f"LinuxCNC: timed out after {timeout} s waiting for {what}")
-
-
-class ProbeSim(threading.Thread):
-    """A simulated touch probe. The trip test runs in the servo thread (the
-    sum2/comp/and2 chain of fivecal.io.linuxcnc.probe_sim_hal); this thread
-    only loads the chain's gains for the rotary pose the table is at and
-    enables it there, so its own timing does not matter while probing."""
-
-    def __init__(self, poses, tol=1e-6):
-        super().__init__(daemon=True)
-        self.poses, self.tol = poses, tol
-        self.stop = threading.Event()
-        self.error = None
-
-    def run(self):
-        try:
-            current = -2
-            while not self.stop.is_set():
-                a, c = hal.get_value("joint.3.pos-fb"), hal.get_value("joint.4.pos-fb")
-                found = -1
-                for k, p in enumerate(self.poses):
-                    if abs(a - p["rot"][0]) < self.tol and abs(c - p["rot"][1]) < self.tol:
-                        found = k
-                        break
-                if found != current and found >= 0:
-                    # the windows still hold the previous pose, so the chain
-                    # is off here until they move with the new gains
-                    p = self.poses[found]
-                    for i, (g, h) in enumerate(zip(p["g"], p["h"])):
-                        hal.set_p(f"fcs{2 * i}.gain0", repr(g[0]))
-                        hal.set_p(f"fcs{2 * i}.gain1", repr(g[1]))
-                        hal.set_p(f"fcs{2 * i}.offset", repr(h))
-                        hal.set_p(f"fcs{2 * i + 1}.gain1", repr(g[2]))
-                    for w, v in (("fcwa", p["rot"][0]), ("fcwc", p["rot"][1])):
-                        hal.set_p(f"{w}.min", repr(v - self.tol))
-                        hal.set_p(f"{w}.max", repr(v + self.tol))
-                    current = found
-                time.sleep(0.001)
-        except Exception as e:  # reported by the main thread
-            self.error = e
 
 
 def main(job_path, out_path):
@@ -142,17 +99,13 @@ def main(job_path, out_path):
             raise RuntimeError(f"LinuxCNC refused '{line}': {errors[-1]}")
 
     pins = job.get("hal_pins", [])
-    probe = None
-    if pins or job.get("probe_sim"):
+    if pins:
         # hal.get_value needs a component of this process in HAL
         comp = hal.component(f"fivecal-driver-{os.getpid()}")
         comp.ready()
     settle = float(job.get("settle", 0.0))
-    out = {"joints": [], "joints_actual": [], "position": [], "probed": [], "hal": [],
+    out = {"joints": [], "joints_actual": [], "position": [], "probed": [], "hal": [], "trace": [],
            "hal_start": [hal.get_value(p) for p in pins]}
-    if job.get("probe_sim"):
-        probe = ProbeSim(job["probe_sim"])
-        probe.start()
     for line in job.get("setup", []):
         mdi(line)
     for line in job.get("moves", []):
@@ -183,17 +136,16 @@ def main(job_path, out_path):
                                    f"(interpreter at {s.current_line}, joints {where}): {errors[-1]}")
             if s.interp_state != linuxcnc.INTERP_IDLE:
                 started = True
-            elif started or time.monotonic() - t0 > 5:
+                if job.get("trace"):
+                    out["trace"].append([s.motion_line] + list(s.joint_position[:njoints]))
+            elif started or time.monotonic() - t0 > 30:
+                # a loaded machine may take seconds to start the program: the
+                # driver must not read the log of a program still to come
                 break
             if time.monotonic() - t0 > ptimeout:
                 c.abort()
                 raise TimeoutError(f"LinuxCNC: program did not finish in {ptimeout} s")
-            if probe is not None and probe.error:
-                raise probe.error
             time.sleep(0.05)
-    if probe is not None:
-        probe.stop.set()
-        probe.join(2)
     s.poll()
     out["kinematics_type"] = s.kinematics_type
     out["errors"] = errors

@@ -81,7 +81,7 @@ def _comm(pid: int) -> str:
 
 
 class Sim:
-    """A headless LinuxCNC session of ``kins`` ('xyzac-trt' or 'xyzbc-trt').
+    """A headless LinuxCNC session of ``kins`` ('xyzac-trt', 'xyzbc-trt' or '5axiskins').
 
     hal: the text of fivecal-kins.hal (the pins fivecal exports);
     joint_ini: extra INI lines per joint number (e.g. COMP_FILE);
@@ -90,8 +90,8 @@ class Sim:
 
     def __init__(self, kins: str, hal: str = "", joint_ini: Optional[Dict[int, Iterable[str]]] = None,
                  files: Optional[Dict[str, str]] = None, timeout: float = 60.0):
-        if kins not in ("xyzac-trt", "xyzbc-trt"):
-            raise ValueError(f"kins: expected 'xyzac-trt' or 'xyzbc-trt', got {kins!r}")
+        if kins not in ("xyzac-trt", "xyzbc-trt", "5axiskins"):
+            raise ValueError(f"kins: expected 'xyzac-trt', 'xyzbc-trt' or '5axiskins', got {kins!r}")
         self.kins, self.hal, self.timeout = kins, hal, timeout
         self.joint_ini = joint_ini or {}
         self.files = files or {}
@@ -209,8 +209,8 @@ class Sim:
     # ---- jobs ---------------------------------------------------------
     def run(self, moves: List[str], setup: Iterable[str] = ("M428",), timeout: float = 30.0,
             total_timeout: Optional[float] = None, hal_pins: Iterable[str] = (),
-            settle: float = 0.0, program: Optional[str] = None, probe_sim=None,
-            program_timeout: float = 600.0) -> dict:
+            settle: float = 0.0, program: Optional[str] = None,
+            program_timeout: float = 600.0, trace: bool = False) -> dict:
         """Homes, runs the setup MDI lines, then each move; returns the driver's
         output (joints after each move, world position, kinematics type)."""
         if self.proc is None or self.proc.poll() is not None:
@@ -220,7 +220,7 @@ class Sim:
         with open(job, "w") as f:
             json.dump({"setup": list(setup), "moves": list(moves), "timeout": timeout,
                        "hal_pins": list(hal_pins), "settle": settle, "program": program,
-                       "probe_sim": probe_sim, "program_timeout": program_timeout}, f)
+                       "program_timeout": program_timeout, "trace": trace}, f)
         if os.path.exists(out):
             os.remove(out)
         if os.geteuid() == 0:

@@ -224,6 +224,12 @@ def test_cli_export_linuxcnc(tmp_path):
     assert rows.shape == (21, 3) and rows[0, 0] == -100 and rows[-1, 0] == 100
     report = (out / "linuxcnc-report.txt").read_text()
     assert "EB0C" in report and "COMP_FILE = comp-X.txt" in report
+    # what fivecal's G-code compensation removes on top of the pins: all of it
+    line = next(x for x in report.splitlines() if "G-code compensation on top" in x)
+    left = float(line.split("max ")[1].split()[0])
+    assert left < 0.01, line
+    pins_max = float(next(x for x in report.splitlines() if "new pins rms" in x).split("max ")[-1].split()[0])
+    assert pins_max > 1.0  # um: the tilt EB0C is left by the pins
     # the old pins from a file: unchanged pins give a zero change
     assert main(["export", "linuxcnc", rp, "--machine", mp, "--kins", "xyzac-trt", "--out",
                  str(tmp_path / "again"), "--old", str(out / "fivecal-kins.hal")]) == 0
@@ -347,6 +353,27 @@ def test_probing_program_and_log_reader_offline():
         L.read_probe_log(log.split("\n", 1)[1], m, kins, plan, pins)
     with pytest.raises(ValueError, match=":2: expected 9"):
         L.read_probe_log(log.replace("\n", "\n1 2\n", 1), m, kins, plan, pins)
+    # the depth check finds a touch that tripped late (0.1 mm into the facet)
+    d = L.probe_depths(m, kins, plan, art, 3.0, log, pins)
+    assert np.abs(d).max() < 1e-5
+    t, c, w, n, _ = geo[5]
+    late = log.splitlines()
+    late[5] = " ".join(f"{v:f}" for v in (*(w - 0.1 * n), t, 0, c, 0, 0, 0))
+    d = L.probe_depths(m, kins, plan, art, 3.0, "\n".join(late) + "\n", pins)
+    assert abs(d[5] + 0.1) < 1e-5 and np.abs(np.delete(d, 5)).max() < 1e-5
+    # the simulator's probe planes go in at the start point: after the sync
+    # line that stops the read-ahead there, before the arming line
+    planes = L.probe_sim_lines(m, kins, plan, art, 3.0)
+    prog = L.probing_program(m, kins, plan, art, 3.0, sync="M66 E0 L0", arm="M64 P0",
+                             before_probe=planes)
+    lines = prog.splitlines()
+    arms = [i for i, x in enumerate(lines) if x == "M64 P0"]
+    assert len(arms) == len(plan)
+    assert all(lines[i - 5] == "M66 E0 L0" and lines[i - 4].startswith("M68 E4 Q")
+               and lines[i - 1].startswith("M68 E7 Q") and lines[i + 1].startswith("G38.2")
+               and lines[i - 6].startswith("G0 ") for i in arms)
+    with pytest.raises(ValueError, match="before_probe"):
+        L.probing_program(m, kins, plan, art, 3.0, before_probe=planes[1:])
 
 
 @needs_linuxcnc
@@ -360,16 +387,28 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     art = _octagon()
     plan = _probe_plan(m, art)
     pins = L.nominal_pins(m, kins)  # the controller does not know the errors
-    # 30 mm/min: the simulated probe trips in the first 1 ms servo cycle
-    # inside the artefact, so its trip point scatters by up to 0.5 um
-    prog = L.probing_program(m, kins, plan, art, 3.0, clearance=0.1, overtravel=0.3, feed=30,
-                               dwell=0.5, arm="M62 P0", disarm="M63 P0")
-    trigger = L.probe_trigger_model(m, kins, plan, art, 3.0, errors=TRUE_LOCATION)
-    hal = L.hal_text(kins, pins) + L.probe_sim_hal(len(art["facets"]))
+    # the simulated probe trips in the first 1 ms servo cycle inside the
+    # touched facet's plane (loaded by M68 and armed by M64 while the machine
+    # stands at the start point; the trigger itself runs in the servo thread)
+    planes = L.probe_sim_lines(m, kins, plan, art, 3.0, errors=TRUE_LOCATION)
+    # 10 mm/min: 0.17 um per 1 ms servo cycle. The trip depth's quantisation
+    # depends on where the surface falls in the cycle grid, i.e. on the
+    # errors themselves: at 30 mm/min (0.5 um) that biased EB0C by 3 urad
+    prog = L.probing_program(m, kins, plan, art, 3.0, clearance=0.05, overtravel=0.3, feed=10,
+                             sync="M66 E0 L0", arm="M64 P0", disarm="M65 P0", before_probe=planes)
+    hal = L.hal_text(kins, pins) + L.probe_sim_hal()
     with harness.Sim(kins, hal=hal, files={"probe.ngc": prog}) as sim:
-        out = sim.run([], setup=[], program="probe.ngc", probe_sim=trigger, program_timeout=400)
+        out = sim.run([], setup=[], program="probe.ngc", program_timeout=400)
         log = sim.read("probe-log.txt")
     assert out["errors"] == []
+    # each trip against the simulated surface: 1 to 2 servo cycles of feed
+    # deep (the chain's output reaches motion one cycle later); a late arm
+    # (before the fix: M62 synchronised with the G38.2 came on while the
+    # probe move already ran, up to 0.5 s late on a busy machine) shows here
+    depth = L.probe_depths(m, kins, plan, art, 3.0, log, pins, errors=TRUE_LOCATION)
+    late = [(i + 1, plan[i]["target"], round(1000 * d, 2)) for i, d in enumerate(depth)
+            if not -0.4e-3 <= d <= 1e-6]
+    assert not late, f"touches (number, facet, depth um) not tripped at the surface: {late}"
     obs = L.read_probe_log(log, m, kins, plan, pins)
     for o in obs:
         o["sigma"] = 0.001
@@ -378,7 +417,7 @@ def test_probing_program_runs_in_linuxcnc_and_identifies():
     # the stylus is calibrated separately: its offsets are not in this plan's reach
     r = fivecal.identify(ds, estimate=list(TRUE_LOCATION), fix=["tip.x", "tip.y", "tip.z"])
     assert r.converged and r.rms < 0.002
-    # the trip point is quantised by the 1 ms servo cycle (0.5 um at 30 mm/min),
+    # the trip point is quantised by the 1 ms servo cycle (0.17 um at 10 mm/min),
     # a deterministic error the fit's sigma does not describe: compare with
     # absolute bounds far below the injected 15-31 um and 12-24 urad
     for name, truth in TRUE_LOCATION.items():

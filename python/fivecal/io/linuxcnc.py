@@ -125,22 +125,16 @@ class Absorption:
     max: float = 0.0
     rms_old: float = 0.0
     max_old: float = 0.0
+    rms_compensated: Optional[float] = None   # with fivecal's G-code compensation on top
+    max_compensated: Optional[float] = None
 
     def changes(self) -> Dict[str, float]:
         return {n: self.pins[n] - self.old_pins.get(n, 0.0) for n in self.pins}
 
     def by_region(self, axis: str, bins: int = 4) -> List[Tuple[float, float, float, float]]:
         """Residual |e| by region of one axis: (lo, hi, rms, max) per bin, mm."""
-        q = np.asarray(self.poses[axis], dtype=float)
-        e = np.linalg.norm(self.residual, axis=1)
-        edges = np.linspace(q.min(), q.max(), bins + 1)
-        out = []
-        for i in range(bins):
-            sel = (q >= edges[i]) & ((q < edges[i + 1]) if i < bins - 1 else (q <= edges[i + 1]))
-            if sel.any():
-                out.append((edges[i], edges[i + 1], float(np.sqrt(np.mean(e[sel] ** 2))),
-                            float(e[sel].max())))
-        return out
+        from .controllers import region_stats
+        return region_stats(self.poses, self.residual, axis, bins)
 
     def report(self) -> str:
         lines = [f"LinuxCNC {self.kins}-kins: pins that best absorb the identified errors",
@@ -150,6 +144,9 @@ class Absorption:
                  f"tool point error the pins leave over {len(self.residual)} poses: old pins rms "
                  f"{1000 * self.rms_old:.2f} um, max {1000 * self.max_old:.2f} um; new pins rms "
                  f"{1000 * self.rms:.2f} um, max {1000 * self.max:.2f} um",
+                 *([f"with fivecal's G-code compensation on top (fivecal compensate): rms "
+                    f"{1000 * self.rms_compensated:.3f} um, max {1000 * self.max_compensated:.3f} um"]
+                   if self.rms_compensated is not None else []),
                  "what the pins cannot absorb (axis tilts, error motions, backlash) is left: "
                  "fivecal compensate removes it from a program"]
         return "\n".join(lines)
@@ -399,6 +396,11 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     poses = pose_grid(machine, k, volume)
     ab = absorb(machine, k, errors, poses=poses, old_pins=old_pins)
     check_change(ab.old_pins, ab.pins, max_change, force)
+    # the same model in fivecal's parameters leaves the same map (tested), so
+    # its G-code-compensated residual is this controller's
+    from . import controllers as K
+    kab = K.absorb(machine, k, errors, poses=poses, compensation=True)
+    ab.rms_compensated, ab.max_compensated = kab.rms_compensated, kab.max_compensated
     os.makedirs(out_dir, exist_ok=True)
     files = []
 
@@ -484,7 +486,8 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
                     feed: float = 60.0, retract: float = 10.0, safe: float = 300.0,
                     dwell: float = 0.0, arm: str = "", disarm: str = "",
                     log: str = "probe-log.txt",
-                    tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+                    tcp_on: str = "M428", workpiece_shift=(0.0, 0.0, 0.0),
+                    before_probe: Optional[Sequence[Sequence[str]]] = None, sync: str = "") -> str:
     """An ISO G-code program for LinuxCNC that runs a fivecal facet plan
     (``{"type": "facet", "target": id, "axes": {tilt, C}, "point": [...]}``)
     with tool centre point kinematics: per touch, index the table, go to
@@ -493,25 +496,35 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     Between touches the probe leaves ``retract`` mm along the facet normal and
     then ``safe`` mm along the tool axis, re-indexes there and comes back the
     same way (straight G0 moves: check them against your fixtures); ``dwell``
-    seconds (G4) after each re-indexing let the table settle; ``arm`` and
-    ``disarm`` are lines that switch the probe on before each G38.2 and off
-    after it: ``M62 P0`` / ``M63 P0``, which act with the next move (LinuxCNC
-    checks the probe input when it queues a G38.2, while the stylus may still
-    sit on the previous contact; an immediate M64 would arm it there).
+    seconds (G4) after each re-indexing let the table settle; ``sync``, ``arm``
+    and ``disarm`` are lines written at the start point before the G38.2 and
+    after it: ``sync="M66 E0 L0"`` (an immediate input read, which makes the
+    interpreter wait until the machine stands at the start point),
+    ``arm="M64 P0"`` and ``disarm="M65 P0"`` switch a probe interface on only
+    for the probing move, right there. (LinuxCNC checks the probe input when
+    it queues a G38.2, so arming while the stylus still sits on the previous
+    contact fails; and an output "synchronised with the next move", M62,
+    written before a G38.2 comes on while the probe move already runs, late
+    on a busy computer.)
     The probed positions go to ``log`` (``PROBEOPEN``); read them back with
     :func:`read_probe_log`. Coordinates: workpiece point - tool tip at the zero
     pose (the pins' convention); ``tcp_on`` is the line that switches the
     controller to its tool-centre-point kinematics (``M428`` in LinuxCNC's
-    sample configs)."""
+    sample configs). ``before_probe``: per touch, lines written just before
+    its ``arm`` line (the simulator's probe planes: :func:`probe_sim_lines`)."""
     k = _kins(kins)
     tilt = TILT[k]
     touches = _touch_geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    if before_probe is not None and len(before_probe) != len(touches):
+        raise ValueError(f"before_probe: {len(before_probe)} entries for {len(touches)} touches")
     if not (clearance > 0 and overtravel > 0 and feed > 0 and retract >= 0):
         raise ValueError("probing_program: clearance, overtravel and feed must be positive")
     f = lambda v: f"{v:.6f}"  # noqa: E731
     out = [f"(fivecal probing program: {len(touches)} touches, machine {machine.name}, {k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
-           "G21 G90 G94 G17 G40 G49 G54"]
+           # G61 exact stop: no move blends into the next, so every G38.2
+           # starts from its start point at rest
+           "G21 G90 G94 G17 G40 G49 G54 G61"]
     if tcp_on:
         out.append(f"{tcp_on} (tool centre point kinematics on)")
     out.append(f"(PROBEOPEN {log})")
@@ -527,6 +540,13 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
             out.append(f"G4 P{dwell:g}")
         last = (t, c)
         out += [f"G0 {xyz(off)}", f"G0 {xyz(start)}"]
+        # ``sync`` stops the read-ahead at the start point, so immediate
+        # outputs (M64, M68) act there, before the G38.2 is queued. Outputs
+        # "synchronised with the next move" (M62, M67) written before a G38.2
+        # came on while the probe move already ran, later the busier the
+        # computer: the stylus could be past the surface when armed
+        out += [sync] if sync else []
+        out += list(before_probe[i]) if before_probe is not None else []
         out += [arm] if arm else []
         out.append(f"G38.2 {xyz(end)} F{feed:g}")
         out += [disarm] if disarm else []
@@ -577,55 +597,87 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
     return obs
 
 
-def probe_sim_hal(n_facets: int) -> str:
-    """HAL lines of a simulated touch probe for the headless simulator: per
-    facet i two ``sum2`` (s = gx*X + gy*Y + gz*Z + h of the joint feedback)
-    and a ``comp`` (s < 0), all ANDed with an enable bit into
-    ``motion.probe-input``, in the servo thread, so the probe trips in the
-    first servo cycle the stylus ball reaches the artefact whatever the load,
-    and only while the program arms it (``motion.digital-out-00``:
-    ``probing_program(..., arm="M62 P0", disarm="M63 P0")``).
-    scripts/linuxcnc/driver.py sets the gains per rotary pose from
-    :func:`probe_trigger_model` (``fcs<2i>.gain0|gain1|offset``,
-    ``fcs<2i+1>.gain1``) and the rotary windows ``fcwa|fcwc.min|max``."""
-    if n_facets < 1:
-        raise ValueError("probe_sim_hal: needs at least one facet")
-    n = n_facets
-    sums = ",".join(f"fcs{i}" for i in range(2 * n))
+def probe_sim_hal() -> str:
+    """HAL lines of a simulated touch probe for the headless simulator:
+    ``motion.probe-input`` is on while the program arms it
+    (``motion.digital-out-00``) and gx*X + gy*Y + gz*Z + h < 0 for the joint
+    feedback X Y Z, i.e. the stylus ball is inside the plane of the facet
+    being touched. The program itself loads gx gy gz and -h into
+    ``motion.analog-out-04..07`` with ``M68`` at the start point, after
+    ``sync`` and before the ``M64 P0`` that arms it: :func:`probe_sim_lines`. Every
+    part of the trigger thus runs in the servo thread and changes only at
+    segment starts, so the trip point does not depend on how fast any
+    non-realtime process (task, a Python helper) keeps up with the motion.
+    The configuration needs 8 analog outputs (``[EMCMOT] EMCMOT = motmod
+    num_aio=8``; 00-03 are often taken, e.g. 03 by the kinematics switch)."""
     out = ["# fivecal simulated touch probe (see fivecal.io.linuxcnc.probe_sim_hal)",
-           f"loadrt sum2 names={sums}",
-           f"loadrt comp names={','.join(f'fcc{i}' for i in range(n))}",
-           f"loadrt and2 names={','.join(f'fca{i}' for i in range(n))},fcwe,fcwm"]
-    for i in range(n):
-        out += [f"addf fcs{2 * i} servo-thread", f"addf fcs{2 * i + 1} servo-thread",
-                f"addf fcc{i} servo-thread", f"addf fca{i} servo-thread",
-                f"setp fcs{2 * i + 1}.gain0 1", f"setp fcc{i}.hyst 0",
-                f"net fcp-s{i}a fcs{2 * i}.out => fcs{2 * i + 1}.in0",
-                # comp.out = in1 > in0: 0 > s, the ball inside facet i's plane
-                f"net fcp-s{i} fcs{2 * i + 1}.out => fcc{i}.in0",
-                f"net fcp-c{i} fcc{i}.out => fca{i}.in1"]
-    out += ["net fcp-x joint.0.pos-fb => " + " ".join(f"fcs{2 * i}.in0" for i in range(n)),
-            "net fcp-y joint.1.pos-fb => " + " ".join(f"fcs{2 * i}.in1" for i in range(n)),
-            "net fcp-z joint.2.pos-fb => " + " ".join(f"fcs{2 * i + 1}.in1" for i in range(n)),
-            # enabled only at the rotary pose the gains are for (windows set
-            # with the gains), so a late update can never trip it elsewhere
-            "loadrt wcomp names=fcwa,fcwc",
-            "addf fcwa servo-thread", "addf fcwc servo-thread", "addf fcwe servo-thread",
-            "setp fcwa.min 1e9", "setp fcwa.max -1e9", "setp fcwc.min 1e9", "setp fcwc.max -1e9",
-            "net fcp-a joint.3.pos-fb => fcwa.in", "net fcp-c joint.4.pos-fb => fcwc.in",
-            "net fcp-wa fcwa.out => fcwe.in0", "net fcp-wc fcwc.out => fcwe.in1",
-            # armed by the program (M62 P0 / M63 P0 around each G38.2)
-            "addf fcwm servo-thread", "net fcp-window fcwe.out => fcwm.in0",
-            "net fcp-arm motion.digital-out-00 => fcwm.in1",
-            "net fcp-enable fcwm.out => fca0.in0"]
-    out += [f"net fcp-a{i} fca{i - 1}.out => fca{i}.in0" for i in range(1, n)]
-    out.append(f"net fcp-probe fca{n - 1}.out => motion.probe-input")
+           "loadrt mult2 names=fcm0,fcm1,fcm2",
+           "loadrt sum2 names=fcs0,fcs1",
+           "loadrt comp names=fcc0",
+           "loadrt and2 names=fca0"]
+    for f in ("fcm0", "fcm1", "fcm2", "fcs0", "fcs1", "fcc0", "fca0"):
+        out.append(f"addf {f} servo-thread")
+    out += ["setp fcc0.hyst 0",
+            "net fcp-x joint.0.pos-fb => fcm0.in0",
+            "net fcp-y joint.1.pos-fb => fcm1.in0",
+            "net fcp-z joint.2.pos-fb => fcm2.in0",
+            "net fcp-gx motion.analog-out-04 => fcm0.in1",
+            "net fcp-gy motion.analog-out-05 => fcm1.in1",
+            "net fcp-gz motion.analog-out-06 => fcm2.in1",
+            "net fcp-mx fcm0.out => fcs0.in0",
+            "net fcp-my fcm1.out => fcs0.in1",
+            "net fcp-mxy fcs0.out => fcs1.in0",
+            "net fcp-mz fcm2.out => fcs1.in1",
+            # comp.out = in1 > in0: -h > g.X, the ball inside the facet's plane
+            "net fcp-s fcs1.out => fcc0.in0",
+            "net fcp-h motion.analog-out-07 => fcc0.in1",
+            "net fcp-inside fcc0.out => fca0.in0",
+            "net fcp-arm motion.digital-out-00 => fca0.in1",
+            "net fcp-probe fca0.out => motion.probe-input"]
     return "\n".join(out) + "\n"
+
+
+def probe_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                    tip_radius: float, errors=None) -> List[List[str]]:
+    """Per touch of ``plan``, the ``M68`` lines that load the simulated probe
+    of :func:`probe_sim_hal` with the plane of the touched facet on the
+    machine with ``errors`` (``probing_program(..., before_probe=..., sync="M66 E0 L0")``:
+    immediate outputs, acting where the program stands)."""
+    k = _kins(kins)
+    model = probe_trigger_model(machine, k, plan, artefact, tip_radius, errors=errors)
+    index = {tuple(p["rot"]): p for p in model}
+    ids = list(_facets(artefact))
+    out = []
+    for t, (tt, c, _, _, _) in zip(plan, _touch_geometry(machine, k, plan, artefact, tip_radius)):
+        p = index[(tt, c)]
+        i = ids.index(t["target"])
+        g, h = p["g"][i], p["h"][i]
+        out.append([f"M68 E{e} Q{v:.12f}" for e, v in enumerate((g[0], g[1], g[2], -h), 4)])
+    return out
+
+
+def probe_depths(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                 tip_radius: float, log: str, pins: Mapping[str, float], errors=None) -> np.ndarray:
+    """(N,) mm: for each logged probe position, how far the stylus ball was
+    outside (> 0) or inside (< 0) the touched facet on the machine with
+    ``errors``. A simulated probe that tripped on time gives 0 to -(one servo
+    cycle's feed); anything else means the trip was early or late."""
+    obs = read_probe_log(log, machine, kins, plan, pins)
+    facets = _facets(artefact)
+    out = []
+    for o in obs:
+        f = facets[o["target"]]
+        n = np.asarray(f["normal"], dtype=float)
+        n = n / np.linalg.norm(n)
+        p = machine.tool_point({a: np.array([o["axes"][a]]) for a in machine.axis_names},
+                               errors=errors)[0]
+        out.append(float(n @ (p - np.asarray(f["point"], dtype=float)) - tip_radius))
+    return np.array(out)
 
 
 def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
                         tip_radius: float, errors=None) -> List[dict]:
-    """For a simulated probe input (scripts/linuxcnc/driver.py): per rotary
+    """For a simulated probe input (:func:`probe_sim_lines`): per rotary
     pose of the plan, the rows g, h with the stylus ball touching or inside
     the (convex) artefact when every g . (joint X, Y, Z) + h <= 0, on the
     machine with ``errors``. At fixed rotary joints the ball centre is affine

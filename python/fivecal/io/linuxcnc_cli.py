@@ -44,10 +44,37 @@ def _run(args) -> int:
     return 0
 
 
+def _run_kinematics(args) -> int:
+    import json
+
+    from ..cli import _read_machine
+    from ..compensation import usable_errors
+    from . import controllers as K
+
+    machine = _read_machine(args.machine)
+    errors = usable_errors(args.result, machine, args.force, args.result)
+    volume = _volume(args.volume) if args.volume else None
+    ab = K.absorb(machine, args.model, errors, poses=K.pose_grid(machine, volume),
+                  directions=args.directions, compensation=True)
+    if args.format == "json":
+        text = json.dumps(K.export_dict(machine, ab), indent=1) + "\n"
+    elif args.format == "csv":
+        text = K.export_csv(machine, ab)
+    else:
+        text = K.export_text(machine, ab)
+    if args.out:
+        with open(args.out, "w", encoding="utf-8") as f:
+            f.write(text)
+        print(f"written: {args.out}")
+    else:
+        print(text, end="")
+    return 0
+
+
 def register(sub) -> None:
     """Add ``export`` (with ``export linuxcnc``) to the main parser's subparsers."""
     RD = argparse.RawDescriptionHelpFormatter
-    pe = sub.add_parser("export", help="controller files from identified errors (LinuxCNC)",
+    pe = sub.add_parser("export", help="controller files from identified errors (LinuxCNC; kinematics tables)",
                         formatter_class=RD, description="Write what a controller needs from an "
                         "identification result.",
                         epilog="example:\n  fivecal export linuxcnc result.json --machine machine.json "
@@ -80,3 +107,29 @@ def register(sub) -> None:
     pl.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
                     "--max-change; only to inspect the values")
     pl.set_defaults(func=_run)
+    from . import controllers as K
+    pk = esub.add_parser(
+        "kinematics", formatter_class=RD,
+        help="what a controller's kinematic model absorbs; a neutral kinematics table",
+        description="Fit a controller model (generic table-table / head-head / table-head pivot "
+        "model, or LinuxCNC xyzac-trt / xyzbc-trt / 5axiskins) to the identified errors over the "
+        "working volume (least squares): its parameters, the tool-point error left (rms, max, by "
+        "region), the error left when fivecal's G-code compensation runs on top, and the model as "
+        "pivot points and axis directions in the machine frame, old and new, with the names the "
+        "values carry in Siemens and Heidenhain documentation (docs/controllers.md). No vendor "
+        "file format is written.",
+        epilog="example:\n  fivecal export kinematics result.json --machine machine.json "
+        "--model table-table --directions --format csv --out kinematics.csv")
+    pk.add_argument("result", help="result JSON of fivecal identify (or a JSON object name -> value)")
+    pk.add_argument("--machine", required=True, help="machine definition JSON (or a dataset JSON)")
+    pk.add_argument("--model", required=True, choices=list(K.MODELS), help="controller model")
+    pk.add_argument("--directions", action="store_true", help="the model also holds the rotary "
+                    "axes' directions (generic models only)")
+    pk.add_argument("--volume", metavar="RANGES", help="working volume of the fit, e.g. "
+                    "X=-200:200,B=-90:30 (mm, degrees; default linear +-100, a rotary axis along z a "
+                    "full turn, other rotary axes -90:90)")
+    pk.add_argument("--format", choices=("text", "csv", "json"), default="text")
+    pk.add_argument("--out", help="file to write (default: standard output)")
+    pk.add_argument("--force", action="store_true", help="use a result that is not usable; only to "
+                    "inspect the values")
+    pk.set_defaults(func=_run_kinematics)

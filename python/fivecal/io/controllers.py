@@ -1,0 +1,629 @@
+"""What a controller's kinematic model can absorb of identified errors
+(docs/controllers.md).
+
+A controller model is the set of machine parameters a controller's own
+kinematics can represent. Generic pivot models (what a 5-axis kinematics
+table holds):
+
+* ``table-table``, ``head-head``, ``table-head``: for each rotary axis the
+  pivot (where its line runs: the two position components perpendicular to
+  its direction), with ``directions=True`` also its direction (two small
+  rotations perpendicular to it), and the tool length (along the tool axis).
+  Linear axes stay ideal (no squareness, no error motions).
+
+LinuxCNC modules (sources: src/emc/kinematics/trtfuncs.c and 5axiskins.c,
+LinuxCNC 2.9 as packaged in Debian 12):
+
+* ``xyzac-trt``, ``xyzbc-trt``: the rotary pivots only (the ``x|y|z-rot-point``
+  and ``x|y-offset`` pins; tool-offset is held), the same fit as
+  :func:`fivecal.io.linuxcnc.absorb`, whose residual it reproduces.
+* ``5axiskins`` (a B-on-C spindle head whose axes meet at the pivot): only
+  ``pivot-length``, i.e. the tool length.
+
+Every model also takes a constant shift of the workpiece frame (probing the
+part into the work offset absorbs it). :func:`absorb` fits the model's
+parameters and that shift by least squares over a pose grid; what is left is
+the tool-point error the controller leaves (:class:`Absorption`).
+:func:`kinematics_table` gives the model as pivot points and axis directions
+in the machine frame, and :func:`table_tool_points` is the kinematics such a
+table describes (independent of fivecal's chain code), so the table's values
+can be checked against the tool points they must reproduce.
+
+Units: mm, degrees for rotary commands, rad for angular parameters.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .. import _core
+from ..machine import Machine
+
+GENERIC = ("table-table", "head-head", "table-head")
+LINUXCNC = ("xyzac-trt", "xyzbc-trt", "5axiskins")
+MODELS = GENERIC + LINUXCNC
+#: default working volume: linear axes +-100 mm, a rotary axis along z a full
+#: turn, any other rotary axis -90..90 degrees
+DEFAULT_LINEAR = (-100.0, 100.0)
+DEFAULT_TILT = (-90.0, 90.0)
+DEFAULT_TURN = (-180.0, 180.0)
+
+
+def _rotaries(machine: Machine) -> List[dict]:
+    return [a for a in machine.axes if a["type"] == "rotary" and a["name"] != "S"]
+
+
+def _side(machine: Machine, axis: str) -> str:
+    return "workpiece" if axis in machine.workpiece_chain else "tool"
+
+
+def _perpendicular(u: np.ndarray) -> List[np.ndarray]:
+    """Two unit vectors perpendicular to u: the machine axes least along u,
+    made orthogonal to it (exactly x and y for u along z)."""
+    u = u / np.linalg.norm(u)
+    order = np.argsort(np.abs(u), kind="stable")[:2]
+    out = []
+    for i in sorted(order):
+        e = np.eye(3)[i] - (np.eye(3)[i] @ u) * u
+        for f in out:
+            e = e - (e @ f) * f
+        out.append(e / np.linalg.norm(e))
+    return out
+
+
+def _check_topology(machine: Machine, model: str) -> None:
+    rot = _rotaries(machine)
+    if len(rot) != 2:
+        raise ValueError(f"machine '{machine.name}' ({machine.topology}): a 5-axis controller model "
+                         f"needs two rotary axes, found {len(rot)}")
+    sides = sorted(_side(machine, a["name"]) for a in rot)
+    want = {"table-table": ["workpiece", "workpiece"], "head-head": ["tool", "tool"],
+            "table-head": ["tool", "workpiece"]}
+    if model in want and sides != want[model]:
+        kind = {("workpiece", "workpiece"): "table-table", ("tool", "tool"): "head-head"}.get(
+            tuple(sides), "table-head")
+        raise ValueError(f"model {model}: machine '{machine.name}' ({machine.topology}) is {kind} "
+                         f"(rotary axes {', '.join(a['name'] for a in rot)} on the "
+                         f"{' and '.join(sides)} side)")
+    if model in ("xyzac-trt", "xyzbc-trt"):
+        from . import linuxcnc as L
+        L.match(machine, model)
+    if model == "5axiskins":
+        _match_5axis(machine)
+
+
+@dataclass
+class Parameter:
+    """One controller parameter: a direction in fivecal's parameter space."""
+
+    label: str           # e.g. "C pivot x", "A direction about z", "tool length"
+    unit: str            # "mm" or "rad"
+    column: np.ndarray = field(repr=False)   # (n_theta,) per unit of the parameter
+
+
+def parameters(machine: Machine, model: str, directions: bool = False,
+               tool_length: bool = True) -> List[Parameter]:
+    """The parameters of ``model`` on ``machine`` (see the module text).
+    ValueError when the machine's topology does not fit the model."""
+    if model not in MODELS:
+        raise ValueError(f"model: '{model}' (expected one of {', '.join(MODELS)})")
+    _check_topology(machine, model)
+    names = machine.parameter_names()
+    idx = {n: i for i, n in enumerate(names)}
+    nt = len(names)
+    out: List[Parameter] = []
+
+    def col(entries):
+        c = np.zeros(nt)
+        for n, v in entries:
+            c[idx[n]] = v
+        return c
+
+    if model == "5axiskins":
+        directions, pivots = False, False
+        tool_length = True
+    elif model in ("xyzac-trt", "xyzbc-trt"):
+        directions, pivots, tool_length = False, True, False
+    else:
+        pivots = True
+    for a in _rotaries(machine) if pivots else []:
+        r = a["name"]
+        for e in _perpendicular(np.asarray(a["direction"], float)):
+            lab = "xyz"[int(np.argmax(np.abs(e)))]
+            out.append(Parameter(f"{r} pivot {lab}", "mm",
+                                 col([(f"E{c}0{r}", v) for c, v in zip("XYZ", e)])))
+    for a in _rotaries(machine) if directions else []:
+        r = a["name"]
+        for e in _perpendicular(np.asarray(a["direction"], float)):
+            lab = "xyz"[int(np.argmax(np.abs(e)))]
+            out.append(Parameter(f"{r} direction about {lab}", "rad",
+                                 col([(f"E{c}0{r}", v) for c, v in zip("ABC", e)])))
+    if tool_length:
+        zero = {n: 0.0 for n in machine.axis_names}
+        _, v = machine.tool_pose(zero)
+        out.append(Parameter("tool length", "mm",
+                             col([(f"tip.{c}", -float(x)) for c, x in zip("xyz", v[0])])))
+    return out
+
+
+def absorbable(machine: Machine, model: str, directions: bool = False,
+               tool_length: bool = True) -> List[str]:
+    """fivecal error parameters the model can represent (fully or in part)."""
+    names = machine.parameter_names()
+    cols = [p.column for p in parameters(machine, model, directions, tool_length)]
+    used = np.any(np.abs(np.array(cols)) > 1e-12, axis=0) if cols else np.zeros(len(names), bool)
+    return [n for n, u in zip(names, used) if u]
+
+
+def pose_grid(machine: Machine, volume: Optional[Mapping[str, Tuple[float, float]]] = None,
+              n_linear: int = 3, n_tilt: int = 7, n_turn: int = 12) -> dict:
+    """Poses over a working volume (dict axis -> array): a grid of the linear
+    axes times the rotary axes. ``volume`` maps axis letters to (min, max);
+    missing axes take +-100 mm, -90..90 degrees, or a full turn for a rotary
+    axis along z."""
+    volume = dict(volume or {})
+    axes = [a for a in machine.axes if a["name"] != "S"]
+    unknown = [k for k in volume if k not in [a["name"] for a in axes]]
+    if unknown:
+        raise ValueError(f"volume: {', '.join(unknown)} is not an axis of {machine.name} "
+                         f"({' '.join(a['name'] for a in axes)})")
+    grids = []
+    for a in axes:
+        n = a["name"]
+        if a["type"] == "linear":
+            default, count = DEFAULT_LINEAR, n_linear
+        elif abs(abs(a["direction"][2]) - 1) < 1e-9:
+            default, count = DEFAULT_TURN, n_turn
+        else:
+            default, count = DEFAULT_TILT, n_tilt
+        lo, hi = (float(v) for v in volume.get(n, default))
+        if not (math.isfinite(lo) and math.isfinite(hi)) or hi < lo:
+            raise ValueError(f"volume.{n}: expected min <= max, got {lo}..{hi}")
+        full = a["type"] == "rotary" and hi - lo >= 360.0
+        grids.append(np.linspace(lo, hi, count, endpoint=not full))
+    mesh = [g.ravel() for g in np.meshgrid(*grids, indexing="ij")]
+    out = dict(zip([a["name"] for a in axes], mesh))
+    if "S" in machine.axis_names:
+        out["S"] = np.zeros_like(mesh[0])
+    return out
+
+
+def region_stats(poses: Mapping, residual: np.ndarray, axis: str,
+                 bins: int = 4) -> List[Tuple[float, float, float, float]]:
+    """|residual| by region of one axis: (lo, hi, rms, max) per bin, mm."""
+    q = np.asarray(poses[axis], dtype=float)
+    e = np.linalg.norm(residual, axis=1)
+    edges = np.linspace(q.min(), q.max(), bins + 1)
+    out = []
+    for i in range(bins):
+        sel = (q >= edges[i]) & ((q < edges[i + 1]) if i < bins - 1 else (q <= edges[i + 1]))
+        if sel.any():
+            out.append((float(edges[i]), float(edges[i + 1]), float(np.sqrt(np.mean(e[sel] ** 2))),
+                        float(e[sel].max())))
+    return out
+
+
+def _stats(r: np.ndarray) -> Tuple[float, float]:
+    n = np.linalg.norm(r, axis=1)
+    return (float(np.sqrt(np.mean(n ** 2))), float(n.max())) if len(n) else (0.0, 0.0)
+
+
+@dataclass
+class Absorption:
+    """What a controller model absorbs of identified errors over a pose grid."""
+
+    model: str
+    parameters: List[Parameter]
+    values: np.ndarray                 # fitted parameter values (mm, rad)
+    held: List[str]                    # labels the poses cannot tell from others (held at 0)
+    theta: np.ndarray = field(repr=False)   # fivecal parameter vector of the controller's model
+    workpiece_shift: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    residual: np.ndarray = field(default=None, repr=False)      # (N, 3) mm, after
+    residual_old: np.ndarray = field(default=None, repr=False)  # (N, 3) mm, nominal model
+    poses: dict = field(default=None, repr=False)
+    rms: float = 0.0
+    max: float = 0.0
+    rms_old: float = 0.0
+    max_old: float = 0.0
+    rms_compensated: Optional[float] = None   # after absorption + fivecal's G-code compensation
+    max_compensated: Optional[float] = None
+
+    def value(self, label: str) -> float:
+        return float(self.values[[p.label for p in self.parameters].index(label)])
+
+    def by_region(self, axis: str, bins: int = 4):
+        return region_stats(self.poses, self.residual, axis, bins)
+
+    def report(self) -> str:
+        um = lambda v: f"{1000 * v:.2f} um"  # noqa: E731
+        lines = [f"controller model {self.model}: parameters that best absorb the identified errors"]
+        for p, v in zip(self.parameters, self.values):
+            s = f"{1000 * v:+.3f} um" if p.unit == "mm" else f"{1e6 * v:+.2f} urad"
+            lines.append(f"  {p.label:<24}{s}{'  (held: not determined by the poses)' if p.label in self.held else ''}")
+        lines.append("  workpiece shift (into the work offset): "
+                     + ", ".join(f"{a} {1000 * v:+.1f} um" for a, v in zip("XYZ", self.workpiece_shift)))
+        lines.append(f"tool point error over {len(self.residual)} poses: nominal model rms {um(self.rms_old)}, "
+                     f"max {um(self.max_old)}; after absorption rms {um(self.rms)}, max {um(self.max)}")
+        if self.rms_compensated is not None:
+            lines.append(f"after absorption + fivecal G-code compensation: rms {um(self.rms_compensated)}, "
+                         f"max {um(self.max_compensated)}")
+        for a in [n for n in self.poses if n != "S" and np.ptp(self.poses[n]) > 0]:
+            lines.append(f"  by {a}: " + "; ".join(f"{lo:g}..{hi:g} rms {um(r)} max {um(m)}"
+                                                   for lo, hi, r, m in self.by_region(a)))
+        return "\n".join(lines)
+
+
+def _points(machine: Machine, theta: np.ndarray, q: np.ndarray) -> np.ndarray:
+    return np.asarray(_core.tool_poses(machine._core, theta, q, None, None, False)[0])
+
+
+def absorb(machine: Machine, model: str, errors=None, poses: Optional[Mapping] = None,
+           directions: bool = False, tool_length: bool = True,
+           compensation: bool = False) -> Absorption:
+    """Least-squares values of ``model``'s parameters (and a workpiece shift)
+    that best reproduce the tool points of the machine with ``errors`` over
+    ``poses`` (default :func:`pose_grid`). With ``compensation`` also the
+    error left when fivecal's G-code compensation runs on top of the absorbed
+    model (inverse kinematics of the identified machine, targets the absorbed
+    model's tool points: :func:`fivecal.compensation.compensate_poses`)."""
+    params = parameters(machine, model, directions, tool_length)
+    poses = poses if poses is not None else pose_grid(machine)
+    q = machine.axes_matrix(poses)
+    th_true = machine.theta(errors)
+    th0 = machine.theta(None)
+    truth = _points(machine, th_true, q)
+    n, k = len(q), len(params)
+    B = np.array([p.column for p in params]).T if k else np.zeros((len(th0), 0))
+    steps = np.array([1e-3 if p.unit == "mm" else 1e-6 for p in params])
+
+    def jac(phi):
+        J = np.zeros((3 * n, k + 3))
+        for c in range(k):
+            d = np.zeros(k)
+            d[c] = steps[c]
+            J[:, c] = ((_points(machine, th0 + B @ (phi + d), q)
+                        - _points(machine, th0 + B @ (phi - d), q)) / (2 * steps[c])).ravel()
+        J[:, k:] = np.tile(np.eye(3), (n, 1))
+        return J
+
+    # columns the poses cannot tell apart from earlier ones (the shift first,
+    # then the parameters in order) are held at 0: sequential projection
+    phi = np.zeros(k)
+    J = jac(phi)
+    order = list(range(k, k + 3)) + list(range(k))
+    keep, basis = [], []
+    for c in order:
+        v = J[:, c].copy()
+        for b in basis:
+            v -= (b @ v) * b
+        if np.linalg.norm(v) > 1e-8 * max(np.linalg.norm(J[:, c]), 1e-300):
+            keep.append(c)
+            basis.append(v / np.linalg.norm(v))
+    held = [params[c].label for c in range(k) if c not in keep]
+    shift = np.zeros(3)
+    for _ in range(4):
+        r = (truth - _points(machine, th0 + B @ phi, q) - shift).ravel()
+        x = np.linalg.lstsq(J[:, keep], r, rcond=None)[0]
+        step = np.zeros(k + 3)
+        step[keep] = x
+        phi = phi + step[:k]
+        shift = shift + step[k:]
+        if np.abs(step).max() < 1e-12:
+            break
+        J = jac(phi)
+    theta = th0 + B @ phi
+    residual = truth - _points(machine, theta, q) - shift
+    r0 = truth - _points(machine, th0, q)
+    r0 = r0 - r0.mean(axis=0)
+    rms, mx = _stats(residual)
+    rms0, mx0 = _stats(r0)
+    ab = Absorption(model=model, parameters=params, values=phi, held=held, theta=theta,
+                    workpiece_shift=shift, residual=residual, residual_old=r0,
+                    poses=machine.axes_dict(q), rms=rms, max=mx, rms_old=rms0, max_old=mx0)
+    if compensation:
+        left = compensated_residual(machine, errors, ab)
+        ab.rms_compensated, ab.max_compensated = _stats(left)
+    return ab
+
+
+def compensated_residual(machine: Machine, errors, ab: Absorption) -> np.ndarray:
+    """(N, 3) mm: tool point error left at ``ab.poses`` when the controller
+    runs the absorbed model and the program is compensated by fivecal on top
+    (targets: the absorbed model's tool points plus the workpiece shift)."""
+    from ..compensation import compensate_poses
+
+    names = machine.parameter_names()
+    errs = {n: float(v) for n, v in zip(names, machine.theta(errors) - machine.theta(None)) if v != 0.0}
+    cp = compensate_poses(machine, errs, ab.poses, reference_theta=ab.theta,
+                          reference_shift=ab.workpiece_shift,
+                          progress=False, max_correction=None, max_correction_deg=None, force=True)
+    return cp.remaining
+
+
+# ---- LinuxCNC 5axiskins ----------------------------------------------------
+
+def _match_5axis(machine: Machine) -> dict:
+    """How ``machine`` drives 5axiskins's joints X Y Z B C: the spindle head
+    carries C (about z) and on it B (about y); LinuxCNC's B turns the tool
+    about -y and C about +z (5axiskins.c, note 10 on the tilt direction)."""
+    rot = {a["name"]: a for a in _rotaries(machine)}
+    if set(rot) != {"B", "C"} or any(_side(machine, r) != "tool" for r in rot):
+        raise ValueError(f"model 5axiskins: machine '{machine.name}' ({machine.topology}) needs a "
+                         "spindle head with C and, on it, B (topology like w X Y f Z C B S t)")
+    tc = machine.tool_chain
+    if tc.index("C") > tc.index("B"):
+        raise ValueError("model 5axiskins: C must carry B (C nearer the foundation in the tool chain)")
+    uc, ub = (np.asarray(rot[r]["direction"], float) for r in "CB")
+    if abs(abs(uc[2]) - 1) > 1e-9 or abs(abs(ub[1]) - 1) > 1e-9:
+        raise ValueError("model 5axiskins: C must be along +-z and B along +-y")
+    pc, pb = (np.asarray(rot[r]["point"], float) for r in "CB")
+    tip = machine.tip
+    if abs(pb[0] - pc[0]) > 1e-9 or abs(pb[1] - pc[1]) > 1e-9 or \
+            abs(tip[0] - pc[0]) > 1e-9 or abs(tip[1] - pc[1]) > 1e-9:
+        raise ValueError("model 5axiskins: B must cross the C axis and the tool tip lie on it "
+                         "(5axiskins has a single pivot and pivot-length only)")
+    sign = {}
+    for n in "XYZ":
+        a = next(x for x in machine.axes if x["name"] == n)
+        s = float(np.asarray(a["direction"], float)["XYZ".index(n)])
+        if abs(abs(s) - 1) > 1e-9:
+            raise ValueError(f"model 5axiskins: axis {n} is not along {n.lower()}")
+        sign[n] = s if _side(machine, n) == "tool" else -s
+    sign["C"] = float(np.sign(uc[2]))
+    sign["B"] = -float(np.sign(ub[1]))
+    return {"sign": sign, "pivot_length": float(pb[2] - tip[2]), "origin": tip}
+
+
+def fiveaxis_forward(pivot_length: float, joints) -> np.ndarray:
+    """5axiskins.c forward kinematics (W = 0): joints (N, 5: X Y Z B C, mm and
+    degrees) -> world X Y Z."""
+    j = np.atleast_2d(np.asarray(joints, dtype=float))
+    b, c = np.radians(j[:, 3]), np.radians(j[:, 4])
+    p = np.radians(180.0) - b  # s2r(pivot_length, C, 180 - B)
+    L = pivot_length
+    r = np.column_stack([L * np.sin(p) * np.cos(c), L * np.sin(p) * np.sin(c), L * np.cos(p)])
+    return j[:, :3] + r + np.array([0.0, 0.0, L])
+
+
+def fiveaxis_inverse(pivot_length: float, world) -> np.ndarray:
+    """5axiskins.c inverse kinematics: world rows (X Y Z B C) -> joints."""
+    w = np.atleast_2d(np.asarray(world, dtype=float))
+    zero = np.column_stack([np.zeros((len(w), 3)), w[:, 3:5]])
+    return np.column_stack([w[:, :3] - fiveaxis_forward(pivot_length, zero), w[:, 3:5]])
+
+
+def fiveaxis_joints(machine: Machine, axes: Mapping) -> np.ndarray:
+    """5axiskins joints (N, 5) for fivecal axis commands."""
+    m = _match_5axis(machine)
+    q = machine.axes_dict(machine.axes_matrix(axes))
+    return np.column_stack([m["sign"][a] * np.asarray(q[a], float) for a in "XYZBC"])
+
+
+# ---- neutral kinematics table ------------------------------------------------
+
+def _rot_zyx(a: float, b: float, c: float) -> np.ndarray:
+    ca, sa, cb, sb, cc, sc = math.cos(a), math.sin(a), math.cos(b), math.sin(b), math.cos(c), math.sin(c)
+    return np.array([[cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
+                     [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
+                     [-sb, cb * sa, cb * ca]])
+
+
+def kinematics_table(machine: Machine, theta=None) -> dict:
+    """The machine (with the location errors and tip offsets in ``theta``, a
+    parameter vector or dict; default nominal) as a neutral kinematics table:
+    per axis its chain (``workpiece``: carries the part, ``tool``: carries the
+    spindle; each listed from the foundation outward), unit direction and, for
+    a rotary axis, the point of its line nearest the nominal pivot, all in the
+    machine frame at the zero pose; ``tool_tip`` and ``tool_axis`` at the
+    zero pose; ``part_origin`` / ``part_rotation``: where the part frame sits
+    at the zero pose (moved by the table axes' location errors; probing the
+    part into the work offset measures it). Sign convention: a positive linear
+    command moves the axis's carriage by +direction; a positive rotary command
+    turns its carriage right-handed about +direction (ISO 841 for a part-side
+    table axis is the opposite rotation of the part: use a direction reversed
+    against the nominal machine axis there). Error motions are not in a table."""
+    th = machine.theta(theta) if not isinstance(theta, np.ndarray) else theta
+    names = machine.parameter_names()
+    val = dict(zip(names, th))
+    axes = {a["name"]: a for a in machine.axes}
+    rows = []
+    frames = {}
+    for chain_name, chain in (("workpiece", machine.workpiece_chain), ("tool", machine.tool_chain)):
+        R, t, parent = np.eye(3), np.zeros(3), np.zeros(3)
+        for n in chain:
+            a = axes[n]
+            keep = n != "S"  # the spindle's frame counts, its row does not
+            p = np.asarray(a.get("point") or [0.0, 0.0, 0.0], float)
+            loc = [val.get(f"E{c}0{n}", 0.0) for c in "XYZABC"]
+            t = t + R @ (np.asarray(loc[:3]) + p - parent)
+            R = R @ _rot_zyx(*loc[3:])
+            parent = p
+            if keep:
+                rows.append({"axis": n, "chain": chain_name, "type": a["type"],
+                             "direction": R @ np.asarray(a["direction"], float), "point": t.copy(),
+                             "nominal_point": p})
+        frames[chain_name] = (R, t, parent)
+    Rw, tw, pw = frames["workpiece"]
+    W_t = tw - Rw @ pw             # the part frame at the zero pose: W0 = F_last . Trans(-p_last)
+    Rt, tt, pt = frames["tool"]
+    tip = machine.tip + np.array([val.get(f"tip.{c}", 0.0) for c in "xyz"])
+    out_rows = []
+    for r in rows:
+        d = r["direction"]
+        row = {"axis": r["axis"], "chain": r["chain"], "type": r["type"], "direction": d}
+        if r["type"] == "rotary":
+            o = r["point"]
+            row["point"] = o + ((r["nominal_point"] - o) @ d) * d  # nearest the nominal pivot
+        out_rows.append(row)
+    zero = {n: 0.0 for n in machine.axis_names}
+    _, v = machine.tool_pose(zero, errors={n: float(x) for n, x in zip(names, th - machine.theta(None))
+                                           if x != 0.0})
+    return {"machine": machine.name, "topology": machine.topology, "axes": out_rows,
+            "tool_tip": tt + Rt @ (tip - pt), "tool_axis": Rw @ np.asarray(v[0]),
+            "part_origin": W_t, "part_rotation": Rw}
+
+
+def _axis_angle(u: np.ndarray, q: float) -> np.ndarray:
+    u = u / np.linalg.norm(u)
+    K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    return np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * K @ K
+
+
+def table_tool_points(table: Mapping, axes: Mapping) -> np.ndarray:
+    """(N, 3) mm: the tool points in the workpiece frame that a kinematics
+    table describes, for axis commands ``axes`` (mm, degrees): each axis a
+    screw about its line, tool = S_tool(q) tip, part = S_workpiece(q), in the
+    part frame (``part_origin``, ``part_rotation``)."""
+    names = [r["axis"] for r in table["axes"]]
+    qs = {n: np.atleast_1d(np.asarray(axes.get(n, 0.0), dtype=float)) for n in names}
+    n = max(len(v) for v in qs.values())
+    out = np.zeros((n, 3))
+    Rw = np.asarray(table.get("part_rotation", np.eye(3)), dtype=float)
+    Wt = np.asarray(table.get("part_origin", np.zeros(3)), dtype=float)
+    rows = {c: [r for r in table["axes"] if r["chain"] == c] for c in ("workpiece", "tool")}
+    for i in range(n):
+        def apply(chain, x, inverse):
+            seq = chain if inverse else list(reversed(chain))
+            for r in seq:  # forward: innermost first
+                qv = float(np.broadcast_to(qs[r["axis"]], (n,))[i])
+                d = np.asarray(r["direction"], float)
+                if r["type"] == "linear":
+                    x = x - qv * d if inverse else x + qv * d
+                else:
+                    R = _axis_angle(d, math.radians(-qv if inverse else qv))
+                    o = np.asarray(r["point"], float)
+                    x = o + R @ (x - o)
+            return x
+        p = apply(rows["tool"], np.asarray(table["tool_tip"], float), False)
+        out[i] = Rw.T @ (apply(rows["workpiece"], p, True) - Wt)
+    return out
+
+
+def table_rows(old: Mapping, new: Mapping) -> List[dict]:
+    """Old and new table side by side, one row per value (CSV/JSON export)."""
+    rows = []
+    for ro, rn in zip(old["axes"], new["axes"]):
+        for what in ("point", "direction"):
+            if what not in rn:
+                continue
+            for c in range(3):
+                rows.append({"axis": rn["axis"], "chain": rn["chain"], "value": f"{what}.{'xyz'[c]}",
+                             "old": float(ro[what][c]), "new": float(rn[what][c])})
+    for what in ("tool_tip", "tool_axis"):
+        for c in range(3):
+            rows.append({"axis": "tool", "chain": "tool", "value": f"{what}.{'xyz'[c]}",
+                         "old": float(old[what][c]), "new": float(new[what][c])})
+    return rows
+
+
+# ---- names the values carry in vendor documentation -------------------------
+
+SIGN_CONVENTION = ("machine frame at the zero pose (the part frame: part_origin, part_rotation); a positive linear "
+                   "command moves its carriage by +direction, a positive rotary command turns its "
+                   "carriage right-handed about +direction; points are on the rotary axis line, "
+                   "nearest the nominal pivot; mm")
+
+
+def vendor_names(machine: Machine, axis: str, value: str) -> Tuple[str, str]:
+    """(Siemens, Heidenhain) names of a table value, from the public manuals
+    cited in docs/controllers.md. Siemens numbers the rotary axes of a swivel
+    data record (CYCLE800 / TRAORI, $TC_CARR) 1 and 2, 1 nearer the machine
+    base (for mixed kinematics 1 is the head axis); I-vectors are differences
+    of the points given here, V-vectors the directions. Heidenhain's
+    KinematicsOpt (Cycle 451) saves the rotary axes' positions in the
+    kinematics description of the machine; its internal names are the
+    machine builder's, so only the quantity is named."""
+    rot = [a["name"] for a in _rotaries(machine)]
+    if axis not in rot:
+        if axis == "tool" and value.startswith("tool_tip"):
+            return ("tool length / I3 (head) or tool adapter reference", "tool length (tool table)")
+        return ("", "")
+    order = sorted(rot, key=lambda r: (0 if _side(machine, r) == "tool" else 1,
+                                       (machine.tool_chain if _side(machine, r) == "tool"
+                                        else machine.workpiece_chain).index(r)))
+    sides = {_side(machine, r) for r in rot}
+    if sides == {"workpiece"}:  # swivel table: 1 nearer the base
+        order = sorted(rot, key=machine.workpiece_chain.index)
+    n = order.index(axis) + 1
+    if value.startswith("direction"):
+        return (f"V{n} (rotary axis {n} vector)", f"rotary axis {axis} orientation (Cycle 451, angular)")
+    if sides == {"workpiece"}:
+        s = "I2 = point (from the machine reference)" if n == 1 else "I3 = point - point of rotary axis 1"
+    elif sides == {"tool"}:
+        s = "I2 = point of rotary axis 1 - this point" if n == 2 else "I1 closes the chain (-(I2+I3))"
+        if n == 2:
+            s = "I3 = this point - tool adapter; I2 = point of axis 1 - this point"
+    else:
+        s = "I2 = point - tool adapter" if n == 1 else "I3 = point (from the machine reference)"
+    return (f"{s} ($TC_CARR, swivel data record)", f"rotary axis {axis} position (Cycle 451)")
+
+
+def export_rows(machine: Machine, ab: Absorption) -> List[dict]:
+    """Old (nominal) and new (absorbed) table rows with vendor names."""
+    rows = table_rows(kinematics_table(machine), kinematics_table(machine, ab.theta))
+    for r in rows:
+        r["change"] = r["new"] - r["old"]
+        r["siemens"], r["heidenhain"] = vendor_names(machine, r["axis"], r["value"])
+    return rows
+
+
+def export_dict(machine: Machine, ab: Absorption) -> dict:
+    new_table = kinematics_table(machine, ab.theta)
+    by = {a: [{"lo": lo, "hi": hi, "rms_mm": r, "max_mm": mx} for lo, hi, r, mx in ab.by_region(a)]
+          for a in ab.poses if a != "S" and np.ptp(ab.poses[a]) > 0}
+    return {"machine": machine.name, "model": ab.model, "sign_convention": SIGN_CONVENTION,
+            "parameters": {p.label: {"value": float(v), "unit": p.unit}
+                           for p, v in zip(ab.parameters, ab.values)},
+            "held": ab.held, "absorbable": [n for n in absorbable(machine, ab.model)],
+            "linuxcnc": linuxcnc_lines(machine, ab),
+            "workpiece_shift_mm": [float(v) for v in ab.workpiece_shift],
+            "residual": {"poses": len(ab.residual), "rms_old_mm": ab.rms_old, "max_old_mm": ab.max_old,
+                         "rms_mm": ab.rms, "max_mm": ab.max, "rms_compensated_mm": ab.rms_compensated,
+                         "max_compensated_mm": ab.max_compensated, "by_region": by},
+            "table": export_rows(machine, ab),
+            "map": {"axes": {a: [float(v) for v in ab.poses[a]] for a in ab.poses if a != "S"},
+                    "residual_mm": [[float(v) for v in r] for r in ab.residual]},
+            "part_frame": {"origin_mm": [float(v) for v in new_table["part_origin"]],
+                           "rotation": [[float(v) for v in r] for r in new_table["part_rotation"]]}}
+
+
+def linuxcnc_lines(machine: Machine, ab: Absorption) -> List[str]:
+    """For the LinuxCNC models, what to set: the 5axiskins pin line, or where
+    the trt pins come from."""
+    if ab.model == "5axiskins":
+        mp = _match_5axis(machine)
+        old, new = mp["pivot_length"], mp["pivot_length"] + ab.value("tool length")
+        return [f"setp 5axiskins.pivot-length {new!r}  # old {old!r} (mm; 5axiskins.c: add the "
+                "tool's z offset, motion.tooloffset.z, where your configuration nets the pin)"]
+    if ab.model in ("xyzac-trt", "xyzbc-trt"):
+        return [f"LinuxCNC {ab.model}-kins pins, COMP_FILEs and the recipe: fivecal export linuxcnc "
+                f"--kins {ab.model}"]
+    return []
+
+
+def export_text(machine: Machine, ab: Absorption) -> str:
+    lines = [ab.report()]
+    extra = linuxcnc_lines(machine, ab)
+    if extra:
+        lines += [""] + extra
+    lines += ["", "kinematics table, " + SIGN_CONVENTION + ":",
+             f"{'axis':<5}{'value':<14}{'old':>14}{'new':>14}{'change um':>11}  Siemens / Heidenhain"]
+    for r in export_rows(machine, ab):
+        lines.append(f"{r['axis']:<5}{r['value']:<14}{r['old']:>14.6f}{r['new']:>14.6f}"
+                     f"{1000 * r['change']:>+11.3f}  {r['siemens']} / {r['heidenhain']}")
+    return "\n".join(lines) + "\n"
+
+
+def export_csv(machine: Machine, ab: Absorption) -> str:
+    import csv
+    import io
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["axis", "chain", "value", "old", "new", "change", "siemens", "heidenhain"])
+    for r in export_rows(machine, ab):
+        w.writerow([r["axis"], r["chain"], r["value"], repr(r["old"]), repr(r["new"]), repr(r["change"]),
+                    r["siemens"], r["heidenhain"]])
+    return buf.getvalue()
