@@ -486,6 +486,21 @@ std::string FourStepPlanJson(const Machine& m, const FourStepPlanOptions& o_in) 
   };
   default_range(t.carrier, &o.a_start, &o.a_end);
   default_range(t.carried, &o.c_start, &o.c_end);
+  // The extended spindle ball goes up (towards the tool) along an axis
+  // parallel to the tool axis, and along -n for a tilting axis ("X driven
+  // negative"), so it stays above a rotary table.
+  auto default_sign = [&](int k, double* sign) {
+    if (!std::isnan(*sign)) return;
+    const Eigen::Vector3d& n = k == t.carrier ? t.n_carrier : t.n_carried;
+    const double along = n.dot(m.tool_axis());
+    *sign = std::abs(std::abs(along) - 1.0) < 1e-9 ? (along > 0 ? 1.0 : -1.0) : -1.0;
+    // On a head pair the fixed ball is the table ball: it goes further from
+    // the head, past the tool-ball pivot.
+    const double to_tip = n.dot(m.tip() - m.axis(k).point);
+    if (t.tool_side && std::abs(to_tip) > 1e-9) *sign = to_tip > 0 ? 1.0 : -1.0;
+  };
+  default_sign(t.carrier, &o.a_extension_sign);
+  default_sign(t.carried, &o.c_extension_sign);
   const std::vector<std::string> def = t.DefaultSetups(m);
   if (o.a_setup.empty()) o.a_setup = def[0];
   if (o.a_extended_setup.empty()) o.a_extended_setup = def[1];
@@ -516,9 +531,28 @@ std::string FourStepPlanJson(const Machine& m, const FourStepPlanOptions& o_in) 
   Eigen::Vector3d e1A, e2A, e1C, e2C;
   PlaneBasis(t.n_carrier, &e1A, &e2A);
   PlaneBasis(t.n_carried, &e1C, &e2C);
+  // Default pivots: on a table pair the paper's (100 mm along the carrier,
+  // one bar length along the first plane axis). On a head pair the pivot is
+  // the tool ball, so it is put on the side of the tool tip: along the axis
+  // towards the tip and across it towards the tip where the tip is off the axis.
+  auto default_pivot = [&](const Eigen::Vector3d& p, const Eigen::Vector3d& n, const Eigen::Vector3d& e1,
+                           const Eigen::Vector3d& e2, double along) {
+    Eigen::Vector3d across = e1;
+    if (t.tool_side) {
+      const Eigen::Vector3d to_tip = m.tip() - p;
+      if (along != 0.0 && std::abs(n.dot(to_tip)) > 1e-9) along = std::copysign(along, n.dot(to_tip));
+      double best = 1e-9;
+      for (const Eigen::Vector3d& c : {e1, e2, Eigen::Vector3d(-e1), Eigen::Vector3d(-e2)})
+        if (c.dot(to_tip) > best) {
+          best = c.dot(to_tip);
+          across = c;
+        }
+    }
+    return Eigen::Vector3d(p + along * n + o.length * across);
+  };
   const Eigen::Vector3d a_pivot =
-      o.a_pivot.allFinite() ? o.a_pivot : Eigen::Vector3d(pA + 100.0 * t.n_carrier + o.length * e1A);
-  const Eigen::Vector3d c_pivot = o.c_pivot.allFinite() ? o.c_pivot : Eigen::Vector3d(pC + o.length * e1C);
+      o.a_pivot.allFinite() ? o.a_pivot : default_pivot(pA, t.n_carrier, e1A, e2A, 100.0);
+  const Eigen::Vector3d c_pivot = o.c_pivot.allFinite() ? o.c_pivot : default_pivot(pC, t.n_carried, e1C, e2C, 0.0);
   auto check = [&](const Eigen::Vector3d& piv, const Eigen::Vector3d& p, const Eigen::Vector3d& n,
                    const char* name) {
     const double r = InPlane(piv - p, n).norm();

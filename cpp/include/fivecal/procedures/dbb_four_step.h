@@ -162,15 +162,19 @@ struct FourStepPlanOptions {
   // Pivots (the moving balls: table balls in the workpiece frame on the
   // table side, tool balls in F at the zero pose on the spindle side). NaN =
   // defaults: carrier pivot at p + 100 n + L e1 (one bar length along the
-  // first plane axis, 100 mm along the axis), carried pivot at p + L e1.
+  // first plane axis, 100 mm along the axis), carried pivot at p + L e1; on a
+  // head pair both turned towards the tool tip (+-n, +-e1 or +-e2).
   Eigen::Vector3d a_pivot = Eigen::Vector3d::Constant(kNaN);
   Eigen::Vector3d c_pivot = Eigen::Vector3d::Constant(kNaN);
   // The fixed ball: on the table side the spindle ball in F at the zero pose
   // (NaN = the machine tip); on the spindle side the table ball in the
   // workpiece frame (NaN = on the axis at the step without extension).
   Eigen::Vector3d tool_ball = Eigen::Vector3d::Constant(kNaN);
-  double a_extension_sign = -1.0;  // S' = S + sign |S'O'| n   ("X driven negative")
-  double c_extension_sign = +1.0;  // S' = S + sign |S'O'| n   (above the table)
+  // S' = S + sign |S'O'| n. NaN = defaults: towards the tool along an axis
+  // parallel to the tool axis (above the table), -1 for a tilting axis ("X
+  // driven negative"); the paper's A: -1, C: +1.
+  double a_extension_sign = kNaN;
+  double c_extension_sign = kNaN;
   std::string a_setup, a_extended_setup, c_setup, c_extended_setup;  // empty = defaults
 };
 
