@@ -61,6 +61,17 @@ def head_cb():
     return fivecal.Machine.from_dict(d)
 
 
+def head_bc():
+    # Head with a C axis carried by a tilting B axis, off the B pivot.
+    d = {"name": "head B/C", "topology": "wXYfZBCSt",
+         "axes": {a: {"type": "linear", "direction": v} for a, v in LIN.items()},
+         "tool": {"tip": [0, 0, 100]}}
+    d["axes"]["B"] = {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}
+    d["axes"]["C"] = {"type": "rotary", "direction": [0, 0, 1], "point": [30, 0, 250]}
+    d["axes"]["S"] = {"type": "rotary", "direction": [0, 0, 1], "point": [30, 0, 250]}
+    return fivecal.Machine.from_dict(d)
+
+
 def _truth(m):
     return dict(zip(dbb.four_step_pair(m)["names"], ROLE_TRUTH))
 
@@ -98,7 +109,8 @@ def test_plans_sweep_the_tilting_axis_a_quarter_turn_and_the_table_a_full_turn()
     assert max(abs(o["reading"]) for o in ds.observations) < 1e-9
 
 
-MACHINE_CASES = [("hu40t C on B", hu40t), ("A on C", a_on_c), ("B on C", b_on_c), ("head B on C", head_cb)]
+MACHINE_CASES = [("hu40t C on B", hu40t), ("A on C", a_on_c), ("B on C", b_on_c), ("head B on C", head_cb),
+                 ("head C on B", head_bc)]
 
 
 @pytest.mark.parametrize("label,make", MACHINE_CASES, ids=[c[0] for c in MACHINE_CASES])
