@@ -1,5 +1,6 @@
-"""Double ball bar (DBB) tests: the Jiang & Cripps four-step test of the A
-and C axes, the Wang et al. simultaneous A/C path, planar circular tests
+"""Double ball bar (DBB) tests: the Jiang & Cripps four-step test of a pair
+of rotary axes (the paper's A and C, B/C trunnions, either order, table or
+head), the Wang et al. simultaneous A/C path, planar circular tests
 (ISO 230-4 and ballbar diagnosis) and reading import.
 
 The algorithms live in the C++ core (``dbb_four_step.h``, ``wang_path.h``,
@@ -26,6 +27,8 @@ from ..dataset import Dataset
 from ..machine import Machine, RadiansWarning
 from ..units import column_unit, display_scale, looks_like_radians, radians_message
 
+#: Setup ids and PIGEs of the four-step test on the paper's machine (C on A);
+#: other pairs: :func:`four_step_pair`.
 FOUR_STEP_SETUPS = ("A1", "A2", "C1", "C2")
 FOUR_STEP_PARAMETERS = tuple(_core.four_step_parameter_names())
 #: The four errors Wang et al. (2013) study: the C axis relative to the A axis.
