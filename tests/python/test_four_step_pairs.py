@@ -20,7 +20,6 @@ from fivecal.procedures import dbb
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 MACHINES = os.path.join(HERE, "..", "..", "examples", "machines")
-ARCSEC = math.pi / (180 * 3600)
 # test_dbb.TRUTH: Jiang & Cripps Tables 2-3 positions, tens of µrad orientations.
 ROLE_TRUTH = (0.0342, -0.0353, 45e-6, -30e-6, 0.0013, -0.0525, -108e-6, 25e-6)
 
@@ -51,9 +50,8 @@ def b_on_c():
 
 def head_cb():
     # Fork head: B (about Y) carried by C (about Z); the table moves in X, Y.
-    axes = {"X": ([1, 0, 0]), "Y": ([0, 1, 0]), "Z": ([0, 0, 1])}
     d = {"name": "head C/B", "topology": "wXYfZCBSt",
-         "axes": {a: {"type": "linear", "direction": v} for a, v in axes.items()},
+         "axes": {a: {"type": "linear", "direction": v} for a, v in LIN.items()},
          "tool": {"tip": [0, 0, 100]}}
     d["axes"]["C"] = {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 300]}
     d["axes"]["B"] = {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 250]}
@@ -231,7 +229,7 @@ def test_cli_jiang_on_other_pairs_with_plot(tmp_path, which):
     else:
         path = str(tmp_path / "ac.json")
         with open(path, "w") as f:
-            f.write(a_on_c().to_json() if hasattr(a_on_c(), "to_json") else json.dumps(a_on_c().to_dict()))
+            f.write(json.dumps(a_on_c().to_dict()))
         expect = ["EX0C", "EB0A", "C1", "A2"]
     png, out = tmp_path / "jiang.png", tmp_path / "r.json"
     r = _cli("dbb", "jiang", "--machine", path, "--simulate", "paper", "--sigma", "0.0003",
