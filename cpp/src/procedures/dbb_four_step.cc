@@ -352,8 +352,9 @@ FourStepPair RequireFourStepPair(const Machine& m, const std::string& what) {
   if (w0 != w1)
     fail(std::string("one rotary axis on the table (") + m.axis(w0 ? rot[0] : rot[1]).name +
          ") and one on the spindle head (" + m.axis(w0 ? rot[1] : rot[0]).name +
-         "): the pivot of the head steps would ride on the table axis, whose errors the paper's "
-         "removal step does not cover; test each axis with the general engine (fivecal identify)");
+         "): each axis' fixed ball rides on the other axis, so the two axis lines are measured only "
+         "relative to each other (a common shift is the linear axes' zero) and the paper's removal of "
+         "a carrier does not apply; fit both with the general engine (fivecal identify)");
   t.tool_side = !w0;
   const std::vector<int>& chain = t.tool_side ? m.tool_chain() : m.workpiece_chain();
   std::vector<int> pos;
