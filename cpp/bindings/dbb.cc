@@ -72,6 +72,9 @@ void BindDbb(py::module_& m) {
       .def_readonly("centre_covariance", &FourStepStep::centre_covariance)
       .def_readonly("observations", &FourStepStep::observations);
   py::class_<FourStepResult>(m, "FourStepResult")
+      .def_readonly("carrier", &FourStepResult::carrier)
+      .def_readonly("carried", &FourStepResult::carried)
+      .def_readonly("tool_side", &FourStepResult::tool_side)
       .def_readonly("steps", &FourStepResult::steps)
       .def_readonly("a_oe", &FourStepResult::a_oe)
       .def_readonly("c_oe", &FourStepResult::c_oe)
@@ -92,12 +95,15 @@ void BindDbb(py::module_& m) {
          const Eigen::Vector2d& c_pivot_offset, bool uniform_angles, bool refer_positions,
          const std::string& a_removal) {
         FourStepOptions o;
-        if (setups.size() != 4)
-          throw std::invalid_argument("setups: expected four ids (A, A extended, C, C extended)");
-        o.a_setup = setups[0];
-        o.a_extended_setup = setups[1];
-        o.c_setup = setups[2];
-        o.c_extended_setup = setups[3];
+        if (!setups.empty() && setups.size() != 4)
+          throw std::invalid_argument(
+              "setups: expected four ids (carrier, carrier extended, carried, carried extended)");
+        if (!setups.empty()) {
+          o.a_setup = setups[0];
+          o.a_extended_setup = setups[1];
+          o.c_setup = setups[2];
+          o.c_extended_setup = setups[3];
+        }
         o.length_offsets = length_offsets;
         o.a_pivot_offset = a_pivot_offset;
         o.c_pivot_offset = c_pivot_offset;
@@ -110,7 +116,20 @@ void BindDbb(py::module_& m) {
       py::arg("dataset"), py::arg("setups"), py::arg("length_offsets"), py::arg("a_pivot_offset"),
       py::arg("c_pivot_offset"), py::arg("uniform_angles"), py::arg("refer_positions"),
       py::arg("a_removal"));
-  m.def("four_step_parameter_names", &FourStepParameterNames);
+  m.def("four_step_parameter_names", [] { return FourStepParameterNames(); });
+  m.def(
+      "four_step_pair",
+      [](const Machine& mc) {
+        const FourStepPair t = RequireFourStepPair(mc, "four-step");
+        py::dict d;
+        d["carrier"] = std::string(1, mc.axis(t.carrier).name);
+        d["carried"] = std::string(1, mc.axis(t.carried).name);
+        d["tool_side"] = t.tool_side;
+        d["setups"] = t.DefaultSetups(mc);
+        d["names"] = FourStepParameterNames(mc);
+        return d;
+      },
+      py::arg("machine"));
   m.def(
       "four_step_plan",
       [](const Machine& mc, double length, double extended_length, double a_start, double a_end,
@@ -130,12 +149,15 @@ void BindDbb(py::module_& m) {
         o.tool_ball = OptionalVector(tool_ball);
         o.a_extension_sign = a_extension_sign;
         o.c_extension_sign = c_extension_sign;
-        if (setups.size() != 4)
-          throw std::invalid_argument("setups: expected four ids (A, A extended, C, C extended)");
-        o.a_setup = setups[0];
-        o.a_extended_setup = setups[1];
-        o.c_setup = setups[2];
-        o.c_extended_setup = setups[3];
+        if (!setups.empty() && setups.size() != 4)
+          throw std::invalid_argument(
+              "setups: expected four ids (carrier, carrier extended, carried, carried extended)");
+        if (!setups.empty()) {
+          o.a_setup = setups[0];
+          o.a_extended_setup = setups[1];
+          o.c_setup = setups[2];
+          o.c_extended_setup = setups[3];
+        }
         return FourStepPlanJson(mc, o);
       },
       py::arg("machine"), py::arg("length"), py::arg("extended_length"), py::arg("a_start"),

@@ -249,12 +249,62 @@ TEST(FourStep, RejectsSetupsTheEquationsDoNotDescribe) {
   p.a_pivot = Eigen::Vector3d(100, 90, 0);  // 90 mm from the A axis with a 100 mm bar
   const Machine m = Machine::FromJson(MachineJson("c600u.json").dump());
   EXPECT_THROW(FourStepPlanJson(m, p), std::invalid_argument);
-  const Machine hu = Machine::FromJson(MachineJson("hu40t.json").dump());
+  // The KX8-like A axis is at 45 deg: no plane basis of the method.
+  const Machine kx8 = Machine::FromJson(MachineJson("kx8.json").dump());
   try {
-    FourStepPlanJson(hu);
+    FourStepPlanJson(kx8);
     ADD_FAILURE();
   } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("wCAf"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("not along X, Y or Z"), std::string::npos) << e.what();
+  }
+  // Parallel rotary axes.
+  json par = MachineJson("c600u.json");
+  par["axes"]["A"]["direction"] = {0, 0, 1};
+  try {
+    FourStepPlanJson(Machine::FromJson(par.dump()));
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("parallel"), std::string::npos) << e.what();
+  }
+}
+
+// Other pairs: the paper's sizes given by role (carrier = the paper's A,
+// carried = its C); noise-free error within the per-configuration
+// approximation of docs/dbb.md, and with noise within 3 sigma, as the engine.
+TEST(FourStep, OtherPairsRecoverTheTruth) {
+  json ac = MachineJson("c600u.json");  // A tilting table carried by a C table
+  ac["topology"] = "wACfXYZSt";
+  ac["axes"]["C"]["direction"] = {0, 0, 1};
+  ac["axes"]["A"]["direction"] = {1, 0, 0};
+  ac["axes"]["A"]["point"] = {0, 0, 80};
+  for (const json& mj : {MachineJson("hu40t.json"), ac}) {
+    const Machine m = Machine::FromJson(mj.dump());
+    const std::vector<std::string> names = FourStepParameterNames(m);
+    const std::vector<double> role = {0.0342, -0.0353, 45e-6, -30e-6, 0.0013, -0.0525, -108e-6, 25e-6};
+    std::map<std::string, double> truth;
+    for (int i = 0; i < 8; ++i) truth[names[i]] = role[i];
+    for (double sigma : {0.0, 0.0003}) {
+      json spec = {{"machine", mj}, {"errors", truth}, {"plan", json::parse(FourStepPlanJson(m))},
+                   {"sigma", {{"dbb", sigma}}}, {"seed", 5}};
+      const Dataset ds = Simulate(spec.dump());
+      const FourStepResult r = AnalyzeFourStep(ds);
+      ASSERT_EQ(r.names, names);
+      IdentifyOptions opt;
+      opt.estimate = names;
+      const Result e = Identify(ds, opt);
+      ASSERT_TRUE(e.converged);
+      for (int i = 0; i < 8; ++i) {
+        const std::string& n = names[i];
+        const bool ang = n[1] == 'A' || n[1] == 'B' || n[1] == 'C';
+        if (sigma == 0.0) {
+          EXPECT_NEAR(r.values[i], truth[n], ang ? 0.3 * kUrad : 0.05 * kUm) << m.name() << " " << n;
+        } else {
+          EXPECT_LT(std::abs(r.values[i] - truth[n]), 3 * r.std[i]) << m.name() << " " << n;
+          const int j = static_cast<int>(std::find(e.names.begin(), e.names.end(), n) - e.names.begin());
+          EXPECT_LT(std::abs(r.values[i] - e.values[j]), r.std[i]) << m.name() << " engine " << n;
+        }
+      }
+    }
   }
 }
 

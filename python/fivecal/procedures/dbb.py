@@ -1,5 +1,6 @@
-"""Double ball bar (DBB) tests: the Jiang & Cripps four-step test of the A
-and C axes, the Wang et al. simultaneous A/C path, planar circular tests
+"""Double ball bar (DBB) tests: the Jiang & Cripps four-step test of a pair
+of rotary axes (the paper's A and C, B/C trunnions, either order, table or
+head), the Wang et al. simultaneous A/C path, planar circular tests
 (ISO 230-4 and ballbar diagnosis) and reading import.
 
 The algorithms live in the C++ core (``dbb_four_step.h``, ``wang_path.h``,
@@ -26,6 +27,8 @@ from ..dataset import Dataset
 from ..machine import Machine, RadiansWarning
 from ..units import column_unit, display_scale, looks_like_radians, radians_message
 
+#: Setup ids and PIGEs of the four-step test on the paper's machine (C on A);
+#: other pairs: :func:`four_step_pair`.
 FOUR_STEP_SETUPS = ("A1", "A2", "C1", "C2")
 FOUR_STEP_PARAMETERS = tuple(_core.four_step_parameter_names())
 #: The four errors Wang et al. (2013) study: the C axis relative to the A axis.
@@ -219,22 +222,48 @@ def trace_from_dataset(ds: Union[Dataset, Mapping], setup: str) -> Trace:
 # --------------------------------------------------------------------------
 # Jiang & Cripps four-step test
 # --------------------------------------------------------------------------
+def four_step_pair(machine: Union[Machine, Mapping]) -> dict:
+    """The rotary pair the four-step test runs on: ``carrier`` (the axis
+    nearer the foundation, tested first; the paper's A), ``carried`` (the
+    paper's C), ``tool_side``, the default ``setups`` and the eight PIGE
+    ``names``. Raises ValueError saying why a machine's geometry does not
+    allow the test (parallel axes, a nutating axis, one axis on each side...)."""
+    return dict(_core.four_step_pair(Machine.from_dict(machine)._core))
+
+
 def four_step_plan(machine: Union[Machine, Mapping], length: float = 100.0,
-                   extended_length: float = 150.0, a_range=(-20.0, 70.0), c_range=(0.0, 359.0),
+                   extended_length: float = 150.0, a_range=None, c_range=None,
                    step: float = 1.0, a_pivot=None, c_pivot=None, tool_ball=None,
-                   a_extension_sign: float = -1.0, c_extension_sign: float = 1.0,
-                   setups: Sequence[str] = FOUR_STEP_SETUPS) -> list:
+                   a_extension_sign: Optional[float] = None, c_extension_sign: Optional[float] = None,
+                   setups: Optional[Sequence[str]] = None) -> list:
     """Plan entries of the four steps for :func:`fivecal.simulate` (and the axis
-    commands of a real test). Defaults follow Jiang & Cripps Section 3.1 and
-    Table 1: A from -20 to 70 deg, C over a full turn, 100 mm bar and 150 mm
-    with the extension; pivots one bar length from the axes."""
+    commands of a real test), on any rotary pair :func:`four_step_pair`
+    accepts. ``a_*`` is the carrier (tested first, the paper's A), ``c_*`` the
+    carried axis (the paper's C). Defaults follow Jiang & Cripps Section 3.1
+    and Table 1: a tilting axis from -20 to 70 deg, an axis along the tool
+    axis over a full turn, 100 mm bar and 150 mm with the extension; pivots
+    (the moving balls) one bar length from the axes. ``tool_ball``: the fixed
+    ball (the spindle ball, F at the zero pose, on a table pair; the table
+    ball, workpiece frame, on a head pair). Extension signs (+1/-1 along
+    the positive axis direction) default to "towards the tool" for an axis
+    along the tool axis and -1 for a tilting axis. Setup ids default to
+    ``<carrier>1 <carrier>2 <carried>1 <carried>2``."""
     m = Machine.from_dict(machine)
     opt = lambda v: None if v is None else np.asarray(v, float)  # noqa: E731
+    nan = float("nan")
+    a_range = a_range if a_range is not None else (nan, nan)
+    c_range = c_range if c_range is not None else (nan, nan)
     return json.loads(_core.four_step_plan(m._core, float(length), float(extended_length),
                                            float(a_range[0]), float(a_range[1]), float(c_range[0]),
                                            float(c_range[1]), float(step), opt(a_pivot), opt(c_pivot),
-                                           opt(tool_ball), float(a_extension_sign),
-                                           float(c_extension_sign), list(setups)))
+                                           opt(tool_ball), nan if a_extension_sign is None else float(a_extension_sign),
+                                           nan if c_extension_sign is None else float(c_extension_sign),
+                                           list(setups or [])))
+
+
+def _step_plane(step) -> tuple:
+    """Names of a step's plane axes (e1, e2), e.g. ('Y', 'Z')."""
+    return tuple("XYZ"[int(np.argmax(np.abs(np.asarray(e))))] for e in (step.e1, step.e2))
 
 
 class FourStepResult:
@@ -252,6 +281,19 @@ class FourStepResult:
         self.engine = engine
         self.engine_error = engine_error
         self.options = options or {}
+
+    @property
+    def carrier(self) -> str:
+        """The axis tested first (the paper's A): it carries the other."""
+        return self._core.carrier
+
+    @property
+    def carried(self) -> str:
+        return self._core.carried
+
+    @property
+    def tool_side(self) -> bool:
+        return bool(self._core.tool_side)
 
     @property
     def a_oe(self) -> np.ndarray:
@@ -275,14 +317,16 @@ class FourStepResult:
 
     def to_dict(self) -> dict:
         d = {"method": "Jiang & Cripps 2015 four-step DBB test",
+             "carrier": self.carrier, "carried": self.carried,
+             "side": "spindle" if self.tool_side else "table",
              "parameters": {n: {"value": self.values[n], "std": self.std[n]} for n in self.names},
              "steps": [{"setup": s.setup, "axis": s.axis, "extended": bool(s.extended),
                         "samples": int(len(s.residuals)), "centre": list(map(float, s.centre)),
                         "radius": float(s.radius), "fit_rms": float(s.rms),
                         "start_angle_error": float(s.start_angle_error), "arm": float(s.arm)}
                        for s in self.steps],
-             "O'E": {"A": list(map(float, self.a_oe)), "C": list(map(float, self.c_oe))},
-             "delta_eq20": {"A": float(self._core.a_delta), "C": float(self._core.c_delta)},
+             "O'E": {self.carrier: list(map(float, self.a_oe)), self.carried: list(map(float, self.c_oe))},
+             "delta_eq20": {self.carrier: float(self._core.a_delta), self.carried: float(self._core.c_delta)},
              "options": self.options}
         if self.engine is not None:
             d["engine"] = json.loads(self.engine.to_json())
@@ -292,19 +336,23 @@ class FourStepResult:
 
     def report(self) -> str:
         m = self.dataset.machine
-        L = [f"Jiang & Cripps four-step DBB test: {m.name} ({m.topology})", ""]
+        side = "spindle head" if self.tool_side else "table"
+        L = [f"Jiang & Cripps four-step DBB test: {m.name} ({m.topology})",
+             f"  {self.carried} carried by {self.carrier} on the {side}; {self.carrier} tested first", ""]
         L.append("  step  axis  extension  samples   centre (µm, plane axes)   radius (mm)  "
                  "fit rms (µm)  d_e (µrad)  |S'O'| (mm)")
-        planes = {"A": "Y,Z", "C": "X,Y"}
+        planes = {s.axis: _step_plane(s) for s in self.steps}
         for s in self.steps:
             c = np.asarray(s.centre) * 1e3
             L.append(f"  {s.setup:<5} {s.axis:<5} {'yes' if s.extended else 'no':<10} {len(s.residuals):>6}  "
-                     f"({planes[s.axis]}) {c[0]:9.3f} {c[1]:9.3f}   {s.radius:11.4f}  {s.rms * 1e3:11.3f}  "
-                     f"{s.start_angle_error * 1e6:10.2f}  {s.arm:10.3f}")
-        L.append(f"  O'E (eqs. 18-19): A (Y,Z) = ({self.a_oe[0] * 1e3:.3f}, {self.a_oe[1] * 1e3:.3f}) µm, "
-                 f"C (X,Y) = ({self.c_oe[0] * 1e3:.3f}, {self.c_oe[1] * 1e3:.3f}) µm")
-        L.append(f"  eq. 20 substitution error Delta: A {self._core.a_delta:.2e} mm, "
-                 f"C {self._core.c_delta:.2e} mm")
+                     f"({','.join(planes[s.axis])}) {c[0]:9.3f} {c[1]:9.3f}   {s.radius:11.4f}  "
+                     f"{s.rms * 1e3:11.3f}  {s.start_angle_error * 1e6:10.2f}  {s.arm:10.3f}")
+        pa, pc = planes[self.carrier], planes[self.carried]
+        L.append(f"  O'E (eqs. 18-19): {self.carrier} ({','.join(pa)}) = ({self.a_oe[0] * 1e3:.3f}, "
+                 f"{self.a_oe[1] * 1e3:.3f}) µm, {self.carried} ({','.join(pc)}) = ({self.c_oe[0] * 1e3:.3f}, "
+                 f"{self.c_oe[1] * 1e3:.3f}) µm")
+        L.append(f"  eq. 20 substitution error Delta: {self.carrier} {self._core.a_delta:.2e} mm, "
+                 f"{self.carried} {self._core.c_delta:.2e} mm")
         L.append("")
         eng = self.engine
         head = f"  {'parameter':<10}{'four-step':>16}{'± std':>10}"
@@ -325,42 +373,53 @@ class FourStepResult:
                      f"rms {eng.rms * 1e3:.3f} µm")
         if self.engine_error:
             L.append(f"  general engine: not run ({self.engine_error})")
-        L.append("  signs: fivecal's (E = Trans.Rz.Ry.Rx); the paper's eq. 18 gives E_B0A with the "
-                 "opposite sign.")
+        L.append("  signs: fivecal's (E = Trans.Rz.Ry.Rx); on the paper's machine its eq. 18 gives "
+                 "E_B0A with the opposite sign.")
         return "\n".join(L)
 
     def __repr__(self) -> str:
         return "FourStepResult(" + ", ".join(f"{n}={self.values[n]:.4g}" for n in self.names) + ")"
 
 
-def _workpiece_offset(m: Machine, axes: Mapping, offset_f: np.ndarray) -> np.ndarray:
-    """A vector given in F at pose `axes`, expressed in the workpiece frame."""
+def _moving_ball_offset(m: Machine, axes: Mapping, offset_f: np.ndarray, tool_side: bool) -> np.ndarray:
+    """A displacement of the moving ball given in F at pose `axes`, expressed
+    where that ball is defined: the workpiece frame for a table ball, F at the
+    zero pose for a tool ball (the ball's chain is rigid apart from its axes,
+    so the map is linear)."""
     q = np.array([[axes.get(a, 0.0) for a in m.axis_names]])
-    _, b0 = _core.dbb_ball_positions(m._core, q, np.zeros(3), np.zeros(3))
+    k = 0 if tool_side else 1
+    z = np.zeros(3)
+    b0 = np.asarray(_core.dbb_ball_positions(m._core, q, z, z)[k])[0]
     R = np.zeros((3, 3))
-    for k in range(3):
-        _, bk = _core.dbb_ball_positions(m._core, q, np.zeros(3), np.eye(3)[k])
-        R[:, k] = np.asarray(bk)[0] - np.asarray(b0)[0]
+    for j in range(3):
+        e = np.eye(3)[j]
+        bj = np.asarray(_core.dbb_ball_positions(m._core, q, e if tool_side else z, z if tool_side else e)[k])[0]
+        R[:, j] = bj - b0
     return R.T @ offset_f
 
 
-def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Sequence[str] = FOUR_STEP_SETUPS,
+def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Optional[Sequence[str]] = None,
                  length_offsets: Optional[Mapping[str, float]] = None,
                  a_pivot_offset=(0.0, 0.0), c_pivot_offset=(0.0, 0.0), uniform_angles: bool = False,
                  refer_positions: bool = True, a_removal: str = "full", engine: bool = True,
                  engine_estimate: Optional[Sequence[str]] = None) -> FourStepResult:
     """Run the four-step analysis (C++ core) on the DBB observations of the
-    setups ``A1 A2 C1 C2`` and, with ``engine=True``, fit the same readings
-    with the general engine (the eight PIGEs plus every setup's bar length).
+    four setups (default ``<carrier>1 <carrier>2 <carried>1 <carried>2``,
+    ``A1 A2 C1 C2`` on the paper's machine; see :func:`four_step_pair`) and,
+    with ``engine=True``, fit the same readings with the general engine (the
+    eight PIGEs plus every setup's bar length).
 
-    ``a_pivot_offset`` (Y, Z) and ``c_pivot_offset`` (X, Y): the pivot's start
-    position error P0P0' (mm) from the planar test around it (eq. 1); the
-    engine gets them as known table-ball offsets. ``length_offsets``:
+    ``a_*`` refers to the carrier (the paper's A), ``c_*`` to the carried
+    axis (the paper's C). ``a_pivot_offset`` / ``c_pivot_offset``: the pivot's
+    start position error P0P0' (mm) in the step's plane axes (the report
+    names them; A: Y, Z; C: X, Y; B: Z, X), from the planar test around it
+    (eq. 1); the engine gets them as known ball offsets. ``length_offsets``:
     calibrated minus nominal bar length per setup (mm). ``a_removal``:
-    ``full`` | ``position`` | ``none`` (see ``dbb_four_step.h``).
+    ``full`` | ``position`` | ``none``: how the carrier's errors are removed
+    from the carried axis (see ``dbb_four_step.h``).
     """
     ds = Dataset.from_dict(dataset)
-    setups = list(setups)
+    setups = list(setups) if setups else list(four_step_pair(ds.machine)["setups"])
     core = _core.four_step(ds._core, setups, {k: float(v) for k, v in (length_offsets or {}).items()},
                            np.asarray(a_pivot_offset, float), np.asarray(c_pivot_offset, float),
                            bool(uniform_angles), bool(refer_positions), str(a_removal))
@@ -373,6 +432,7 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Sequence[str] = FOUR_
         from ..identification import identify
 
         m = ds.machine
+        ball = "tool" if core.tool_side else "table"
         initial = {}
         for k, (setup_ids, off) in enumerate(((setups[:2], a_pivot_offset), (setups[2:], c_pivot_offset))):
             off = np.asarray(off, float)
@@ -381,15 +441,15 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Sequence[str] = FOUR_
             step = core.steps[2 * k]
             off_f = off[0] * np.asarray(step.e1) + off[1] * np.asarray(step.e2)
             first = ds.observations[step.observations[0]]["axes"]
-            w = _workpiece_offset(m, first, off_f)
+            w = _moving_ball_offset(m, first, off_f, bool(core.tool_side))
             for sid in setup_ids:
                 for c, v in zip("xyz", w):
-                    initial[f"dbb.{sid}.table.{c}"] = float(v)
+                    initial[f"dbb.{sid}.{ball}.{c}"] = float(v)
         for sid in setups:
             if length_offsets and sid in length_offsets:
                 initial[f"dbb.{sid}.length"] = float(length_offsets[sid])
         try:
-            eng = identify(ds, list(engine_estimate or FOUR_STEP_PARAMETERS), initial=initial)
+            eng = identify(ds, list(engine_estimate or core.names), initial=initial)
         except ValueError as e:
             err = str(e)
     return FourStepResult(core, ds, eng, err, options)

@@ -1,6 +1,6 @@
 """``fivecal dbb ...``: double ball bar tests from the command line.
 
-  jiang     Jiang & Cripps four-step test of A and C (and the general engine)
+  jiang     Jiang & Cripps four-step test of a rotary pair (and the general engine)
   wang      Wang et al. simultaneous A/C path: Table 1, patterns, identification
   circular  planar circular test: ISO 230-4 values and diagnosis
   plot      polar plot of traces (CSV or a dataset setup)
@@ -24,6 +24,19 @@ PAPER_JIANG = {"EY0A": 0.0342, "EZ0A": -0.0353, "EB0A": 6.62 * _ARCSEC, "EC0A": 
                "EX0C": 0.0013, "EY0C": -0.0525, "EA0C": -22.32 * _ARCSEC, "EB0C": -3.75 * _ARCSEC}
 #: Wang et al. Section 5.1: 7, -5, 6 um before compensation; the angular value did
 #: not survive in the text, 20 urad is assumed.
+
+
+def paper_jiang(machine) -> dict:
+    """The paper's Tables 2-3 by role on any rotary pair: the carrier gets
+    A's values, the carried axis C's, in the order of the pair's PIGE names
+    (positions along the first and second plane axes, then the tilts about
+    them)."""
+    from . import dbb
+
+    names = dbb.four_step_pair(machine)["names"]
+    return dict(zip(names, PAPER_JIANG.values()))
+
+
 PAPER_WANG = {"EX0C": 0.007, "EY0C": -0.005, "EZ0C": 0.006, "EA0C": 20e-6}
 
 
@@ -126,14 +139,17 @@ def _jiang(args) -> int:
     from ..dataset import load_dataset, save_dataset
     from ..simulation import simulate
 
-    setups = [s.strip() for s in args.setups.split(",")]
-    if len(setups) != 4:
-        raise ValueError("--setups: four ids (A, A extended, C, C extended), e.g. A1,A2,C1,C2")
+    setups = None
+    if args.setups:
+        setups = [s.strip() for s in args.setups.split(",")]
+        if len(setups) != 4:
+            raise ValueError("--setups: four ids (carrier, carrier extended, carried, carried extended), "
+                             "e.g. A1,A2,C1,C2")
     if args.dataset:
         ds = load_dataset(args.dataset)
     else:
         m = _machine(args.machine)
-        _check_step(args.step, 359.0)  # the C step of the default plan sweeps 0..359 deg
+        _check_step(args.step, 359.0)  # a rotary-table step of the default plan sweeps 0..359 deg
         try:
             plan = dbb.four_step_plan(m, step=args.step, setups=setups)
         except ValueError as e:
@@ -144,12 +160,13 @@ def _jiang(args) -> int:
             traces = {}
             for part in args.csv.split(","):
                 if "=" not in part:
-                    raise ValueError("--csv: expected SETUP=FILE pairs, e.g. A1=a1.csv,A2=a2.csv,...")
+                    raise ValueError("--csv: expected SETUP=FILE pairs, e.g. A1=a1.csv,A2=a2.csv,... "
+                                     "(setups: " + ",".join(setups or dbb.four_step_pair(m)["setups"]) + ")")
                 sid, path = part.split("=", 1)
                 traces[sid.strip()] = dbb.read_trace_csv(path.strip())
             ds = dbb.four_step_dataset(m, traces, plan)
         elif args.simulate is not None:
-            errors = _values(args.simulate, "--simulate", PAPER_JIANG)
+            errors = _values(args.simulate, "--simulate", paper_jiang(m))
             ds = simulate(m, plan, errors=errors, sigma={"dbb": args.sigma}, seed=args.seed)
         else:
             raise ValueError("give a DATASET, or --machine with --simulate ERRORS or --csv SETUP=FILE,...")
@@ -357,29 +374,38 @@ def register(sub) -> None:
     dsub = pd.add_subparsers(dest="dbb_command", required=True)
 
     pj = dsub.add_parser("jiang", formatter_class=RD,
-                         help="Jiang & Cripps four-step test of the A and C axes",
-                         description="Four-step DBB test (A and C, without and with the 50 mm extension): "
-                         "eqs. 1-20 of Jiang & Cripps 2015, then the same readings through the general "
-                         "engine. Input: a dataset with DBB setups A1 A2 C1 C2, four CSV traces "
-                         "(angle = axis command in deg, reading in mm) or a simulation.",
+                         help="Jiang & Cripps four-step test of a pair of rotary axes",
+                         description="Four-step DBB test of the two rotary axes (table or head pair: A/C, "
+                         "B/C, either order), each without and with the 50 mm extension: eqs. 1-20 of Jiang & "
+                         "Cripps 2015, then the same readings through the general engine. The axis nearer the "
+                         "foundation (the carrier, the paper's A) is tested first. Input: a dataset with the "
+                         "four DBB setups (default <carrier>1 <carrier>2 <carried>1 <carried>2, e.g. A1 A2 C1 "
+                         "C2, B1 B2 C1 C2), four CSV traces (angle = axis command in deg, reading in mm) or a "
+                         "simulation.",
                          epilog="examples:\n"
                          "  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003 --plot jiang.png\n"
+                         "  fivecal dbb jiang --machine hu40t.json --simulate paper --plot bc.png   (B/C trunnion)\n"
                          "  fivecal dbb jiang dataset.json --c-pivot-offset 0,0.8 --out result.json\n"
                          "  fivecal dbb jiang --machine c600u.json --csv A1=a1.csv,A2=a2.csv,C1=c1.csv,C2=c2.csv")
     pj.add_argument("dataset", nargs="?", help="dataset JSON with the four DBB setups")
     pj.add_argument("--machine", help="machine JSON (with --simulate or --csv)")
     pj.add_argument("--simulate", metavar="ERRORS",
-                    help="simulate the test: NAME=VALUE,... (mm, rad), a JSON file, or 'paper' (Tables 2-3)")
+                    help="simulate the test: NAME=VALUE,... (mm, rad), a JSON file, or 'paper' (Tables 2-3; "
+                    "on another pair the carrier gets A's values and the carried axis C's)")
     pj.add_argument("--csv", metavar="SETUP=FILE,...", help="readings of the four steps from CSV files")
     pj.add_argument("--sigma", type=SIGMA, default=0.0003, help="simulated reading noise, mm (default 0.0003)")
     pj.add_argument("--seed", type=SEED, default=1, help="random seed, 0 <= seed < 2^64 (default 1)")
     pj.add_argument("--step", type=POSITIVE, default=1.0, help="deg between samples of a planned test")
-    pj.add_argument("--setups", default="A1,A2,C1,C2", help="setup ids of the four steps")
-    pj.add_argument("--a-pivot-offset", metavar="DY,DZ", help="A pivot start-position error P0P0' (mm), eq. 1")
-    pj.add_argument("--c-pivot-offset", metavar="DX,DY", help="C pivot start-position error P0P0' (mm), eq. 1")
+    pj.add_argument("--setups", help="setup ids of the four steps (default <carrier>1,<carrier>2,"
+                    "<carried>1,<carried>2, e.g. A1,A2,C1,C2)")
+    pj.add_argument("--a-pivot-offset", metavar="D1,D2",
+                    help="carrier (A) pivot start-position error P0P0' (mm) in its plane axes (A: Y,Z; B: Z,X; "
+                    "C: X,Y), eq. 1")
+    pj.add_argument("--c-pivot-offset", metavar="D1,D2",
+                    help="carried (C) pivot start-position error P0P0' (mm) in its plane axes, eq. 1")
     pj.add_argument("--uniform-angles", action="store_true", help="angles from eq. 2 instead of the commands")
     pj.add_argument("--a-removal", choices=["full", "position", "none"], default="full",
-                    help="how A's errors are removed from C (default full)")
+                    help="how the carrier's (A's) errors are removed from the carried axis (default full)")
     pj.add_argument("--no-refer", action="store_true",
                     help="keep the positions in the pivot plane (do not refer them to the axis points)")
     pj.add_argument("--no-engine", action="store_true", help="skip the general engine")

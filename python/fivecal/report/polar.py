@@ -308,12 +308,11 @@ def plot_four_step(result, path: str) -> str:
 
     ds = result.dataset
     panels = []
-    planes = {"A": ("Y", "Z"), "C": ("X", "Y")}  # coordinates of the fitted centre
     for s in result.steps:
         obs = ds.observations
         length = obs[s.observations[0]]["length"]
         c = np.asarray(s.centre) * 1e3
-        e1, e2 = planes[s.axis]
+        e1, e2 = ("XYZ"[int(np.argmax(np.abs(np.asarray(e))))] for e in (s.e1, s.e2))  # centre coordinates
         t = trace_from_dataset(ds, s.setup)
         panels.append({"traces": [Trace(t.angles, t.readings, label=s.setup)],
                        "nominal_radius": length, "plane": t.plane,
@@ -331,7 +330,9 @@ def plot_four_step(result, path: str) -> str:
             t += f" ({eng.values[n] * f:+.2f})"
         parts.append(t + f" {unit}")
     footer = ("four-step (engine):  " + ",  ".join(parts[:4]) + "\n" + " " * 21 + ",  ".join(parts[4:]))
-    return plot_polar_grid(panels, path, f"Jiang & Cripps four-step DBB test: {ds.machine.name}",
+    side = "head" if getattr(result, "tool_side", False) else "table"
+    return plot_polar_grid(panels, path, f"Jiang & Cripps four-step DBB test: {ds.machine.name} "
+                           f"({result.carried} on {result.carrier}, {side})",
                            footer=footer)
 
 
