@@ -164,8 +164,10 @@ def _arc(traces) -> Optional[tuple]:
 
 def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale: Optional[float] = None,
                  annotations: Sequence[str] = (), plane: Sequence[str] = ("X", "Y"), arc="auto",
-                 colors=None):
-    """The matplotlib Figure of :func:`plot_polar` (not saved)."""
+                 colors=None, header: str = ""):
+    """The matplotlib Figure of :func:`plot_polar` (not saved). ``header``:
+    a line under the title (the circular test's machine, date, feed, radius
+    and sample count)."""
     plt = _pyplot()
     name = plane_name(plane)
     traces = [_as_trace(t) for t in traces]
@@ -174,6 +176,10 @@ def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale
     s = draw_polar(ax, traces, nominal_radius, scale, name, "", _arc(traces) if arc == "auto" else arc, colors)
     M = magnification(nominal_radius, s)
     fig.suptitle(title, fontsize=13, x=0.03, ha="left", y=0.98)
+    if header:
+        # the ballbar report's test header; the figure keeps it for readers and tests
+        fig.fivecal_header = header
+        fig.text(0.03, 0.945, header, fontsize=9.5, weight="bold", color="#222")
     fig.text(0.03, 0.915, f"plane {name}  ·  scale {s:g} µm/div  ·  deviations magnified ×{M:,.0f}  ·  "
              f"nominal radius {nominal_radius:g} mm", fontsize=9, color="#333")
     fig.text(0.03, 0.88, angle_convention(name), fontsize=9, color="#333")
@@ -188,7 +194,7 @@ def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale
 
 def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = "",
                scale: Optional[float] = None, annotations: Sequence[str] = (),
-               plane: Sequence[str] = ("X", "Y"), arc="auto", colors=None) -> str:
+               plane: Sequence[str] = ("X", "Y"), arc="auto", colors=None, header: str = "") -> str:
     """One polar plot with an annotation panel; writes a PNG and returns its path.
 
     ``traces``: :class:`fivecal.procedures.dbb.Trace` objects (labels starting with CW /
@@ -197,7 +203,7 @@ def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = 
     ``plane``: the plane of the traces (angles as :func:`angle_convention`
     states, which the plot prints).
     """
-    fig = polar_figure(traces, nominal_radius, title, scale, annotations, plane, arc, colors)
+    fig = polar_figure(traces, nominal_radius, title, scale, annotations, plane, arc, colors, header)
     save_figure(fig, path, dpi=110)
     return path
 
@@ -267,9 +273,15 @@ def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols
     return path
 
 
-def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
-    """CW/CCW polar plot of a :class:`fivecal.procedures.dbb.CircularResult` with the
-    ISO 230-4 values and the diagnosis beside it."""
+def circular_test_figure(result, title: Optional[str] = None):
+    """The matplotlib Figure of :func:`plot_circular_test` (not saved)."""
+    traces, notes, a1, a2 = _circular_parts(result)
+    return polar_figure(traces, result.nominal_radius,
+                        title or f"Circular test {result.plane}, R {result.nominal_radius:g} mm",
+                        annotations=notes, plane=(a1, a2), header=result.header_line())
+
+
+def _circular_parts(result):
     traces = []
     for t in result.traces:
         label = t.label or ("CCW" if t.direction > 0 else "CW")
@@ -292,9 +304,44 @@ def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
             if n == "servo_mismatch" and result.servo_mismatch_ms is not None:
                 notes.append(f"  {'  = lag difference':<18}{result.servo_mismatch_ms:+8.3f} ms")
     notes.append(f"  residual rms {result.diagnosis_rms * 1e3:.2f} µm")
-    return plot_polar(traces, path, result.nominal_radius,
-                      title or f"Circular test {result.plane}, R {result.nominal_radius:g} mm",
-                      annotations=notes, plane=(a1, a2))
+    ranking = getattr(result, "ranking", [])
+    if ranking:
+        notes += ["", "contribution to circularity:"] + ["  " + l for l in result.ranking_lines(top=5)]
+    for t in getattr(result, "trimmed", []):
+        notes.append(f"  overshoot removed: {t.arc_start:.0f}° + {t.arc_end:.0f}°")
+    return traces, notes, a1, a2
+
+
+def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
+    """CW/CCW polar plot of a :class:`fivecal.procedures.dbb.CircularResult`: a
+    header with machine, date, feed, radius and sample count, the ISO 230-4
+    values, the diagnosis and the five largest contributions beside it."""
+    fig = circular_test_figure(result, title)
+    save_figure(fig, path, dpi=110)
+    return path
+
+
+def plot_volumetric(vol, path: str, title: str = "Volumetric evaluation: three-plane circular tests") -> str:
+    """One panel per plane of a :class:`fivecal.procedures.dbb.VolumetricResult`
+    (common ring spacing, so the planes compare at a glance) and the combined
+    values underneath."""
+    panels = []
+    big = 0.0
+    for p, r in vol.planes.items():
+        for t in r.traces:
+            big = max(big, float(np.nanmax(np.abs(t.readings))) * 1e3)
+    s = nice_scale(big)
+    for p, r in vol.planes.items():
+        traces, _, a1, a2 = _circular_parts(r)
+        g = max(float(run.circular_deviation) for run in r.runs)
+        notes = [f"G {g * 1e3:.2f} µm" + (f", H {r.hysteresis * 1e3:.2f} µm" if r.hysteresis is not None else "")]
+        notes += r.ranking_lines(top=3)
+        panels.append({"traces": traces, "nominal_radius": r.nominal_radius, "plane": (a1, a2), "scale": s,
+                       "title": f"{p}", "annotations": notes})
+    first = next(iter(vol.planes.values()))
+    footer = (f"{first.header_line()}\ncombined circularity {vol.circularity * 1e3:.2f} µm (largest G)  ·  "
+              f"volumetric {vol.volumetric * 1e3:.2f} µm (shell holding every plane's trace)")
+    return plot_polar_grid(panels, path, title, ncols=3, footer=footer)
 
 
 def plot_four_step(result, path: str) -> str:
