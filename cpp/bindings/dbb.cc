@@ -195,6 +195,7 @@ void BindDbb(py::module_& m) {
       .def_readonly("values", &CircularDiagnosis::values)
       .def_readonly("std", &CircularDiagnosis::std)
       .def_readonly("not_fitted", &CircularDiagnosis::not_fitted)
+      .def_readonly("not_significant", &CircularDiagnosis::not_significant)
       .def_readonly("rms", &CircularDiagnosis::rms)
       .def_readonly("ranking", &CircularDiagnosis::ranking)
       .def_readonly("contribution", &CircularDiagnosis::contribution);
@@ -208,7 +209,7 @@ void BindDbb(py::module_& m) {
       "circular_test",
       [](const std::vector<std::tuple<Eigen::VectorXd, Eigen::VectorXd, int>>& runs, double radius,
          double feed, bool reversal_spikes, double spike_width, bool lateral_play, bool straightness,
-         bool radial_play, double cyclic_pitch1, double cyclic_pitch2) {
+         bool radial_play, double cyclic_pitch1, double cyclic_pitch2, double significance) {
         std::vector<CircularRun> rs;
         for (const auto& t : runs) {
           CircularRun r;
@@ -225,11 +226,13 @@ void BindDbb(py::module_& m) {
         o.radial_play = radial_play;
         o.cyclic_pitch1 = cyclic_pitch1;
         o.cyclic_pitch2 = cyclic_pitch2;
+        o.significance = significance;
         return AnalyzeCircularTest(rs, radius, feed, o);
       },
       py::arg("runs"), py::arg("radius"), py::arg("feed") = 0.0, py::arg("reversal_spikes") = true,
       py::arg("spike_width") = 3.0, py::arg("lateral_play") = true, py::arg("straightness") = true,
-      py::arg("radial_play") = true, py::arg("cyclic_pitch1") = 0.0, py::arg("cyclic_pitch2") = 0.0);
+      py::arg("radial_play") = true, py::arg("cyclic_pitch1") = 0.0, py::arg("cyclic_pitch2") = 0.0,
+      py::arg("significance") = 3.0);
   m.def(
       "trim_overshoot",
       [](const Eigen::VectorXd& angles, const Eigen::VectorXd& readings, int direction, double data_arc,

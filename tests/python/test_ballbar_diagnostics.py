@@ -245,3 +245,63 @@ def test_three_plane_volumetric_evaluation(three_planes, tmp_path):
     assert (tmp_path / "vol.png").stat().st_size > 20000
     with pytest.raises(ValueError, match="plane"):
         dbb.volumetric_evaluation({"XY": res["YZ"], "YZ": res["YZ"]})
+
+
+def test_terms_the_machine_does_not_show_are_left_out():
+    """Only the classic errors: every extended diagnosis is below 3 sigma and
+    left out, so the scale mismatch keeps the precision of the classic fit
+    (radial play would share its cos 2phi harmonic)."""
+    runs = [run(-1, base, 11), run(+1, base, 12)]
+    res = dbb.circular_test(runs, R, cyclic_pitch=PITCH)
+    classic = dbb.circular_test(runs, R, reversal_spikes=False, lateral_play=False, straightness=False,
+                                radial_play=False)
+    kept = [n for n in res.diagnosis if n not in classic.diagnosis]
+    # at 3 sigma a noise-only term survives 0.3 % of the time; these seeds keep none
+    assert kept == [], kept
+    assert len(res.not_significant) == 10, res.not_significant
+    assert res.diagnosis_std["scale_mismatch"] == pytest.approx(classic.diagnosis_std["scale_mismatch"])
+    everything = dbb.circular_test(runs, R, cyclic_pitch=PITCH, significance=0)
+    assert everything.not_significant == []
+    assert "radial_play.1" in everything.diagnosis
+    # radial play costs scale mismatch precision: what the elimination avoids
+    assert everything.diagnosis_std["scale_mismatch"] > 3 * classic.diagnosis_std["scale_mismatch"]
+    assert "not significant, left out" in res.report()
+
+
+def _cli(*args):
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ)
+    return subprocess.run([sys.executable, "-m", "fivecal", "dbb", *args], capture_output=True, text=True,
+                          env=env)
+
+
+def test_cli_circular_and_volumetric(tmp_path):
+    import json
+    import os
+    err = with_base(straight2)
+    cw_full, _ = overshoot_run(-1, err, 21)
+    ccw_full, _ = overshoot_run(+1, err, 22)
+    dbb.write_trace_csv(cw_full, tmp_path / "cw.csv")
+    dbb.write_trace_csv(ccw_full, tmp_path / "ccw.csv")
+    r = _cli("circular", str(tmp_path / "cw.csv"), str(tmp_path / "ccw.csv"), "--radius", "100", "--feed", "1000",
+             "--machine-name", "VMC-7", "--date", "2026-11-24", "--cyclic-pitch", "10",
+             "--plot", str(tmp_path / "c.png"), "--out", str(tmp_path / "c.json"))
+    assert r.returncode == 0, r.stderr
+    assert "machine VMC-7  ·  date 2026-11-24  ·  feed 1000 mm/min" in r.stdout
+    assert "feed-in 180.0°" in r.stdout
+    d = json.load(open(tmp_path / "c.json"))
+    assert d["ranking"][0]["diagnosis"] == "straightness.2"
+    assert d["overshoot_removed"][0]["removed_start"] == 360
+    assert os.path.getsize(tmp_path / "c.png") > 20000
+    r = _cli("circular", str(tmp_path / "cw.csv"), "--radius", "100", "--cyclic-pitch", "ten")
+    assert r.returncode == 2 and "--cyclic-pitch" in r.stderr
+    r = _cli("volumetric", "--help")
+    assert r.returncode == 0 and "fivecal dbb volumetric" in r.stdout
+    machine = example_machine_path("c600u")
+    r = _cli("volumetric", "--machine", machine, "--simulate", "EXX1=2e-5,EZZb=0.002", "--radius", "100",
+             "--step", "2", "--plot", str(tmp_path / "v.png"), "--out", str(tmp_path / "v.json"))
+    assert r.returncode == 0, r.stderr
+    assert "combined circularity" in r.stdout and os.path.getsize(tmp_path / "v.png") > 20000
+    assert set(json.load(open(tmp_path / "v.json"))["planes"]) == {"XY", "YZ", "ZX"}

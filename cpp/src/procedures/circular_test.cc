@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <sstream>
 #include <stdexcept>
@@ -240,6 +241,8 @@ CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, dou
   int total = 0;
   for (const CircularRun& r : runs) total += static_cast<int>(r.angles.size());
   const CircularDiagnosisOptions& o = options;
+  if (!(o.significance >= 0) || !std::isfinite(o.significance))
+    throw std::invalid_argument("circular test: significance must be >= 0 (0 = keep every diagnosis)");
   if (o.reversal_spikes && !(o.spike_width > 0 && std::isfinite(o.spike_width)))
     throw std::invalid_argument("circular test: spike_width must be > 0 deg");
   for (double p : {o.cyclic_pitch1, o.cyclic_pitch2})
@@ -254,9 +257,6 @@ CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, dou
   if (o.radial_play) names.insert(names.end(), {"radial_play.1", "radial_play.2"});
   if (o.cyclic_pitch1 > 0) names.insert(names.end(), {"cyclic_error.1.cos", "cyclic_error.1.sin"});
   if (o.cyclic_pitch2 > 0) names.insert(names.end(), {"cyclic_error.2.cos", "cyclic_error.2.sin"});
-  auto col_of = [&](const std::string& nm) {
-    return static_cast<int>(std::find(names.begin(), names.end(), nm) - names.begin());
-  };
   const double two_pi = 2.0 * 3.14159265358979323846;
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(total, names.size());
   // Motion signs of both axes per row: a reversal-dependent term needs both
@@ -376,15 +376,56 @@ CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, dou
     }
     keep = trial;
   }
-  Eigen::MatrixXd Ak(total, keep.size());
-  for (size_t j = 0; j < keep.size(); ++j) Ak.col(j) = A.col(keep[j]);
-  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Ak);
-  const Eigen::VectorXd x = qr.solve(y);
-  const Eigen::VectorXd res_v = y - Ak * x;
+  Eigen::MatrixXd Ak;
+  Eigen::VectorXd x, res_v;
+  Eigen::MatrixXd cov;
+  auto fit = [&]() {
+    Ak.resize(total, keep.size());
+    for (size_t j = 0; j < keep.size(); ++j) Ak.col(j) = A.col(keep[j]);
+    x = Ak.colPivHouseholderQr().solve(y);
+    res_v = y - Ak * x;
+    const int dof = std::max(1, total - static_cast<int>(keep.size()));
+    cov = res_v.squaredNorm() / dof * (Ak.transpose() * Ak).inverse();
+  };
+  fit();
+  // Backward elimination of the extended diagnoses that the data do not
+  // show: each costs the classic ones precision (radial play shares cos 2phi
+  // with scale mismatch), so one below the threshold is dropped, the least
+  // significant first, and the fit repeated. A cyclic error is judged by its
+  // two components together (Mahalanobis norm).
+  if (o.significance > 0) {
+    for (;;) {
+      double worst = std::numeric_limits<double>::infinity();
+      int at = -1;
+      for (size_t j = 0; j < keep.size(); ++j) {
+        if (keep[j] < n_base) continue;
+        const std::string& nm = names[keep[j]];
+        double z;
+        if (nm.rfind("cyclic_error", 0) == 0) {
+          if (nm.back() == 'n') continue;
+          const Eigen::Vector2d v(x[j], x[j + 1]);
+          const Eigen::Matrix2d c = cov.block<2, 2>(j, j);
+          z = std::sqrt(std::max(0.0, v.dot(c.ldlt().solve(v))));
+        } else {
+          z = std::abs(x[j]) / std::max(std::sqrt(std::max(cov(j, j), 0.0)), 1e-300);
+        }
+        if (z < worst) {
+          worst = z;
+          at = static_cast<int>(j);
+        }
+      }
+      if (at < 0 || worst >= o.significance) break;
+      const std::string& nm = names[keep[at]];
+      const bool is_cyc = nm.rfind("cyclic_error", 0) == 0;
+      std::ostringstream m;
+      m.precision(2);
+      m << (is_cyc ? nm.substr(0, nm.size() - 4) : nm) << " (" << worst << " sigma)";
+      d.not_significant.push_back(m.str());
+      keep.erase(keep.begin() + at, keep.begin() + at + (is_cyc ? 2 : 1));
+      fit();
+    }
+  }
   d.rms = std::sqrt(res_v.squaredNorm() / total);
-  const int dof = std::max(1, total - static_cast<int>(keep.size()));
-  const double s2 = res_v.squaredNorm() / dof;
-  const Eigen::MatrixXd cov = s2 * (Ak.transpose() * Ak).inverse();
   for (size_t j = 0; j < keep.size(); ++j) d.names.push_back(names[keep[j]]);
   d.values = x;
   d.std = cov.diagonal().cwiseMax(0.0).cwiseSqrt();

@@ -797,6 +797,8 @@ class CircularResult:
         self.diagnosis: dict = {n: float(v) for n, v in zip(d.names, np.asarray(d.values))}
         self.diagnosis_std: dict = {n: float(s) for n, s in zip(d.names, np.asarray(d.std))}
         self.not_fitted: list = list(d.not_fitted)
+        #: extended diagnoses left out as below the significance threshold ("name (z sigma)")
+        self.not_significant: list = list(d.not_significant)
         self.diagnosis_rms: float = d.rms
         #: (diagnosis, contribution to circularity in mm), largest first
         self.ranking: list = [(n, float(c)) for n, c in zip(d.ranking, np.asarray(d.contribution))]
@@ -886,6 +888,8 @@ class CircularResult:
                 L.append(f"    {f'cyclic error {ax} amplitude':<52}{amp[0] * 1e3:>10.3f} ± {amp[1] * 1e3:.3f} µm")
         for nf in self.not_fitted:
             L.append(f"    not fitted: {nf}")
+        if self.not_significant:
+            L.append("    not significant, left out: " + ", ".join(self.not_significant))
         L.append(f"    residual rms after the diagnosis {self.diagnosis_rms * 1e3:.3f} µm")
         L += ["", "  ranking by contribution to circularity (circular deviation of the term alone):"]
         L += ["    " + line for line in self.ranking_lines()]
@@ -902,6 +906,7 @@ class CircularResult:
                 "hysteresis": self.hysteresis,
                 "diagnosis": {n: {"value": v, "std": self.diagnosis_std[n]} for n, v in self.diagnosis.items()},
                 "servo_mismatch_ms": self.servo_mismatch_ms, "not_fitted": self.not_fitted,
+                "not_significant": self.not_significant,
                 "diagnosis_rms": self.diagnosis_rms,
                 "ranking": [{"diagnosis": n, "contribution": c} for n, c in self.ranking],
                 "overshoot_removed": [vars(t) for t in self.trimmed],
@@ -912,14 +917,16 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
                   feed: Optional[float] = None, *, trim: bool = True, data_arc: float = 360.0,
                   feed_in: Optional[float] = None, reversal_spikes: bool = True, spike_width: float = 3.0,
                   lateral_play: bool = True, straightness: bool = True, radial_play: bool = True,
-                  cyclic_pitch=None, machine=None, date: Optional[str] = None) -> CircularResult:
+                  cyclic_pitch=None, significance: float = 3.0, machine=None,
+                  date: Optional[str] = None) -> CircularResult:
     """ISO 230-4 circular deviation, radial deviation, LSC centre and radius per
     run, hysteresis of a CW/CCW pair, and the least-squares diagnosis of
     centre offset, scale mismatch, squareness, backlash per axis, servo
     mismatch, reversal spikes, lateral play, straightness, radial play and
     (with ``cyclic_pitch``, mm, one value or one per plane axis) cyclic
     error, ranked by contribution to circularity (C++ ``circular_test.h``;
-    formulas in docs/dbb.md). ``feed`` (mm/min) converts the servo mismatch
+    formulas in docs/dbb.md). Those five are kept only when above
+    ``significance`` standard uncertainties (0 keeps them all). ``feed`` (mm/min) converts the servo mismatch
     to a lag difference in ms. ``trim``: runs sweeping more than
     ``data_arc`` have their feed-in and feed-out arcs removed first
     (:func:`trim_overshoot`). ``machine`` (a name or a Machine) and ``date``
@@ -959,7 +966,8 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
                                float(feed or 0.0), reversal_spikes=bool(reversal_spikes),
                                spike_width=float(spike_width), lateral_play=bool(lateral_play),
                                straightness=bool(straightness), radial_play=bool(radial_play),
-                               cyclic_pitch1=pitches[0], cyclic_pitch2=pitches[1])
+                               cyclic_pitch1=pitches[0], cyclic_pitch2=pitches[1],
+                               significance=float(significance))
     name = machine.name if isinstance(machine, Machine) else machine
     return CircularResult(core, plane, feed, runs, trimmed, name, date)
 

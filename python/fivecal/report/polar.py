@@ -179,16 +179,19 @@ def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale
     if header:
         # the ballbar report's test header; the figure keeps it for readers and tests
         fig.fivecal_header = header
-        fig.text(0.03, 0.945, header, fontsize=9.5, weight="bold", color="#222")
-    fig.text(0.03, 0.915, f"plane {name}  ·  scale {s:g} µm/div  ·  deviations magnified ×{M:,.0f}  ·  "
+        fig.text(0.03, 0.928, header, fontsize=9.5, weight="bold", color="#222")
+    top = 0.895 if header else 0.915
+    fig.text(0.03, top, f"plane {name}  ·  scale {s:g} µm/div  ·  deviations magnified ×{M:,.0f}  ·  "
              f"nominal radius {nominal_radius:g} mm", fontsize=9, color="#333")
-    fig.text(0.03, 0.88, angle_convention(name), fontsize=9, color="#333")
+    fig.text(0.03, top - 0.035, angle_convention(name), fontsize=9, color="#333")
     y = 0.80
+    # long panels (the full ballbar diagnosis) close up rather than run off the page
+    dy = min(0.031, 0.78 / max(len(annotations), 1))
     for line in annotations:
         bold = line.endswith(":") or line.startswith("## ")
         fig.text(0.62, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
                  weight="bold" if bold else "normal")
-        y -= 0.031
+        y -= dy
     return fig
 
 
@@ -288,7 +291,12 @@ def _circular_parts(result):
         if not label.upper().startswith(("CW", "CCW")):
             label = ("CCW " if t.direction > 0 else "CW ") + label
         traces.append(Trace(t.angles, t.readings, t.direction, label))
-    notes = ["ISO 230-4:"] + ["  " + l for l in result.summary_lines()]
+    notes = []
+    trimmed = getattr(result, "trimmed", [])
+    if trimmed:
+        notes += ["overshoot removed: " + ", ".join(f"{t.label or 'run'} {t.arc_start:.0f}°+{t.arc_end:.0f}°"
+                                                     for t in trimmed), ""]
+    notes += ["ISO 230-4:"] + ["  " + l for l in result.summary_lines()]
     notes += ["", "diagnosis (least squares):"]
     a1, a2 = result.plane[0], result.plane[1]
     rows = [("scale_mismatch", f"scale mismatch {a1}-{a2}", 1e6, "µm/m"),
@@ -307,8 +315,6 @@ def _circular_parts(result):
     ranking = getattr(result, "ranking", [])
     if ranking:
         notes += ["", "contribution to circularity:"] + ["  " + l for l in result.ranking_lines(top=5)]
-    for t in getattr(result, "trimmed", []):
-        notes.append(f"  overshoot removed: {t.arc_start:.0f}° + {t.arc_end:.0f}°")
     return traces, notes, a1, a2
 
 

@@ -70,6 +70,9 @@
 //  * radial play along axis k (rho_k): play taken up in the direction of the
 //    outward (centrifugal) load: e1 = rho1 sgn(x1) -> d = rho1 |cos phi|,
 //    e2 = rho2 sgn(x2) -> d = rho2 |sin phi|; the same in both directions.
+// Extended diagnoses below options.significance standard uncertainties are
+// dropped one by one (backward elimination), so a term the machine does not
+// show does not cost the others precision.
 // Ranking: each diagnosis' contribution to circularity is the circular
 // deviation (range about its own least-squares circle, as G) of the fitted
 // term's radial deviation alone, the largest over the runs; centre and radius
@@ -105,6 +108,10 @@ struct CircularDiagnosisOptions {
   bool radial_play = true;
   // Cyclic error pitch per axis (mm); 0 = not fitted.
   double cyclic_pitch1 = 0.0, cyclic_pitch2 = 0.0;
+  // An extended diagnosis whose value is below this many standard
+  // uncertainties is dropped (least significant first, refitting after
+  // each) and listed in not_significant; 0 keeps every one.
+  double significance = 3.0;
 };
 
 // Feed-in and feed-out (overshoot) arcs removed from a recorded run.
@@ -143,6 +150,7 @@ struct CircularDiagnosis {
                                    // (k = 1, 2; those fitted)
   Eigen::VectorXd values, std;     // mm, mm/mm, rad
   std::vector<std::string> not_fitted;  // with the reason in the text
+  std::vector<std::string> not_significant;  // extended diagnoses dropped below options.significance
   double rms = 0.0;                // residual after the fit (mm)
   // Diagnoses (a name, or the group "cyclic_error.k" of its .cos/.sin
   // parameters) in decreasing contribution to circularity (mm).
