@@ -1006,6 +1006,15 @@ class VolumetricResult:
                 lo, hi = min(lo, float(dev.min())), max(hi, float(dev.max()))
         return hi - lo
 
+    def header_line(self) -> str:
+        """Machine, date, feed, radius and the sample count of each plane."""
+        r = next(iter(self.planes.values()))
+        feeds = sorted({x.feed for x in self.planes.values() if x.feed})
+        feed = ", ".join(f"{f:g}" for f in feeds) + " mm/min" if feeds else "not given"
+        n = ", ".join(f"{p} {x.samples}" for p, x in self.planes.items())
+        return (f"machine {r.machine or 'not given'}  ·  date {r.date or 'not given'}  ·  feed {feed}  ·  "
+                f"radius {r.nominal_radius:g} mm  ·  samples {n}")
+
     def scale_closure(self) -> Optional[float]:
         """(X-Y) + (Y-Z) + (Z-X) of the fitted scale mismatches: zero within
         noise when the three planes are consistent (mm/mm); None unless all
@@ -1028,7 +1037,7 @@ class VolumetricResult:
         return out
 
     def report(self) -> str:
-        L = ["Volumetric evaluation of the planar circular tests", "",
+        L = ["Volumetric evaluation of the planar circular tests", f"  {self.header_line()}", "",
              f"  {'plane':<6}{'circularity G':>16}{'hysteresis H':>15}   largest contribution"]
         for row in self.plane_rows():
             p = row["plane"]

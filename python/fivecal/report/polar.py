@@ -189,7 +189,7 @@ def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale
     dy = min(0.031, 0.78 / max(len(annotations), 1))
     for line in annotations:
         bold = line.endswith(":") or line.startswith("## ")
-        fig.text(0.62, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
+        fig.text(0.665, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
                  weight="bold" if bold else "normal")
         y -= dy
     return fig
@@ -341,11 +341,11 @@ def plot_volumetric(vol, path: str, title: str = "Volumetric evaluation: three-p
         traces, _, a1, a2 = _circular_parts(r)
         g = max(float(run.circular_deviation) for run in r.runs)
         notes = [f"G {g * 1e3:.2f} µm" + (f", H {r.hysteresis * 1e3:.2f} µm" if r.hysteresis is not None else "")]
-        notes += r.ranking_lines(top=3)
+        notes += r.ranking_lines(top=2)
         panels.append({"traces": traces, "nominal_radius": r.nominal_radius, "plane": (a1, a2), "scale": s,
-                       "title": f"{p}", "annotations": notes})
-    first = next(iter(vol.planes.values()))
-    footer = (f"{first.header_line()}\ncombined circularity {vol.circularity * 1e3:.2f} µm (largest G)  ·  "
+                       "annotations": notes})
+    # the leading blank line keeps the panels' notes clear of the footer
+    footer = (f"\n{vol.header_line()}\ncombined circularity {vol.circularity * 1e3:.2f} µm (largest G)  ·  "
               f"volumetric {vol.volumetric * 1e3:.2f} µm (shell holding every plane's trace)")
     return plot_polar_grid(panels, path, title, ncols=3, footer=footer)
 
