@@ -305,3 +305,21 @@ def test_cli_circular_and_volumetric(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "combined circularity" in r.stdout and os.path.getsize(tmp_path / "v.png") > 20000
     assert set(json.load(open(tmp_path / "v.json"))["planes"]) == {"XY", "YZ", "ZX"}
+
+
+def test_cyclic_pitch_is_found_when_not_given():
+    def cyc(deg, s, pitch=8.0):
+        x2 = R * np.sin(np.radians(deg))
+        return 0.0 * deg, 0.003 * np.cos(2 * np.pi * x2 / pitch + 0.7)
+    err = with_base(cyc)
+    runs = [run(-1, err, 31), run(+1, err, 32)]
+    res = dbb.circular_test(runs, R, cyclic_pitch=(0, "auto"))
+    assert res.cyclic_pitch[1] == pytest.approx(8.0, rel=2e-3)
+    amp, sd = res.cyclic_amplitude(2)
+    assert abs(amp - 0.003) < 3 * sd + 3e-5
+    assert res.ranking[0][0] == "cyclic_error.2"
+    assert "found" in res.report()
+    # nothing periodic: the search claims nothing (the threshold allows for the pitches tried)
+    quiet = dbb.circular_test([run(-1, base, 33), run(+1, base, 34)], R, cyclic_pitch="auto")
+    assert quiet.cyclic_amplitude(1) is None and quiet.cyclic_amplitude(2) is None
+    assert any(s.startswith("cyclic_error.1 (pitch") and "needed" in s for s in quiet.not_significant)

@@ -802,7 +802,9 @@ class CircularResult:
         self.diagnosis_rms: float = d.rms
         #: (diagnosis, contribution to circularity in mm), largest first
         self.ranking: list = [(n, float(c)) for n, c in zip(d.ranking, np.asarray(d.contribution))]
-        self._cov_cyclic = {}
+        #: pitches (mm) the cyclic errors were fitted with (0 = none), and those found by the search
+        self.cyclic_pitch: tuple = (0.0, 0.0)
+        self.cyclic_pitch_searched: dict = {}
 
     @property
     def samples(self) -> int:
@@ -885,7 +887,9 @@ class CircularResult:
         for k, ax in ((1, a1), (2, a2)):
             amp = self.cyclic_amplitude(k)
             if amp is not None:
-                L.append(f"    {f'cyclic error {ax} amplitude':<52}{amp[0] * 1e3:>10.3f} ± {amp[1] * 1e3:.3f} µm")
+                how = "found" if k in self.cyclic_pitch_searched else "given"
+                L.append(f"    {f'cyclic error {ax} amplitude':<52}{amp[0] * 1e3:>10.3f} ± {amp[1] * 1e3:.3f} µm "
+                         f"(pitch {self.cyclic_pitch[k - 1]:.4g} mm, {how})")
         for nf in self.not_fitted:
             L.append(f"    not fitted: {nf}")
         if self.not_significant:
@@ -906,7 +910,7 @@ class CircularResult:
                 "hysteresis": self.hysteresis,
                 "diagnosis": {n: {"value": v, "std": self.diagnosis_std[n]} for n, v in self.diagnosis.items()},
                 "servo_mismatch_ms": self.servo_mismatch_ms, "not_fitted": self.not_fitted,
-                "not_significant": self.not_significant,
+                "not_significant": self.not_significant, "cyclic_pitch": list(self.cyclic_pitch),
                 "diagnosis_rms": self.diagnosis_rms,
                 "ranking": [{"diagnosis": n, "contribution": c} for n, c in self.ranking],
                 "overshoot_removed": [vars(t) for t in self.trimmed],
@@ -923,8 +927,8 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
     run, hysteresis of a CW/CCW pair, and the least-squares diagnosis of
     centre offset, scale mismatch, squareness, backlash per axis, servo
     mismatch, reversal spikes, lateral play, straightness, radial play and
-    (with ``cyclic_pitch``, mm, one value or one per plane axis) cyclic
-    error, ranked by contribution to circularity (C++ ``circular_test.h``;
+    (with ``cyclic_pitch``, mm, one value or one per plane axis, or
+    ``"auto"`` to search the pitch) cyclic error, ranked by contribution to circularity (C++ ``circular_test.h``;
     formulas in docs/dbb.md). Those five are kept only when above
     ``significance`` standard uncertainties (0 keeps them all). ``feed`` (mm/min) converts the servo mismatch
     to a lag difference in ms. ``trim``: runs sweeping more than
@@ -955,21 +959,103 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
     if plane not in ("XY", "YZ", "ZX", "YX", "ZY", "XZ"):
         raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")
     if cyclic_pitch is None:
-        pitches = (0.0, 0.0)
-    elif np.ndim(cyclic_pitch) == 0:
-        pitches = (float(cyclic_pitch),) * 2
+        pitches = [0.0, 0.0]
+    elif isinstance(cyclic_pitch, str) or np.ndim(cyclic_pitch) == 0:
+        pitches = [cyclic_pitch] * 2
     else:
-        pitches = tuple(float(p or 0.0) for p in cyclic_pitch)
+        pitches = list(cyclic_pitch)
         if len(pitches) != 2:
             raise ValueError(f"cyclic_pitch: one pitch or one per plane axis (2), got {len(pitches)}")
-    core = _core.circular_test([(r.angles, r.readings, int(r.direction)) for r in runs], float(radius),
-                               float(feed or 0.0), reversal_spikes=bool(reversal_spikes),
-                               spike_width=float(spike_width), lateral_play=bool(lateral_play),
-                               straightness=bool(straightness), radial_play=bool(radial_play),
-                               cyclic_pitch1=pitches[0], cyclic_pitch2=pitches[1],
-                               significance=float(significance))
+    for i, p in enumerate(pitches):
+        if isinstance(p, str):
+            if p.strip().lower() != "auto":
+                raise ValueError(f"cyclic_pitch: {p!r}; give mm or 'auto'")
+            pitches[i] = "auto"
+        else:
+            pitches[i] = float(p or 0.0)
+    opts = dict(reversal_spikes=bool(reversal_spikes), spike_width=float(spike_width),
+                lateral_play=bool(lateral_play), straightness=bool(straightness), radial_play=bool(radial_play))
+    packed = [(r.angles, r.readings, int(r.direction)) for r in runs]
+
+    def fit(p1, p2, sig):
+        return _core.circular_test(packed, float(radius), float(feed or 0.0), cyclic_pitch1=p1, cyclic_pitch2=p2,
+                                   significance=sig, **opts)
+
+    searched = {}
+    for k in (1, 2):
+        if pitches[k - 1] == "auto":
+            pitches[k - 1], searched[k] = _search_cyclic_pitch(runs, float(radius), k, fit)
+    core = fit(pitches[0], pitches[1], float(significance))
+    dropped = []
+    if searched and significance > 0:
+        # The best of many pitches passes a fixed threshold by chance far more
+        # often than one pitch given in advance: Bonferroni over the pitches tried.
+        # z of the searched term with every diagnosis in (the thresholded fit may have dropped it)
+        d = fit(pitches[0], pitches[1], 0.0).diagnosis
+        vals = dict(zip(d.names, np.asarray(d.values)))
+        sds = dict(zip(d.names, np.asarray(d.std)))
+        for k, n_tried in searched.items():
+            c, sn = f"cyclic_error.{k}.cos", f"cyclic_error.{k}.sin"
+            tail = math.erfc(significance / math.sqrt(2.0))
+            need = math.sqrt(-2.0 * math.log(tail / n_tried))
+            z = math.hypot(vals[c] / sds[c], vals[sn] / sds[sn]) if c in vals else 0.0
+            if z < need:
+                dropped.append(f"cyclic_error.{k} (pitch {pitches[k - 1]:.4g} mm searched among {n_tried}: "
+                               f"{z:.2g} sigma, {need:.2g} needed)")
+                pitches[k - 1] = 0.0
+        if dropped:
+            core = fit(pitches[0], pitches[1], float(significance))
     name = machine.name if isinstance(machine, Machine) else machine
-    return CircularResult(core, plane, feed, runs, trimmed, name, date)
+    res = CircularResult(core, plane, feed, runs, trimmed, name, date)
+    res.not_significant += dropped
+    res.cyclic_pitch = tuple(pitches)
+    res.cyclic_pitch_searched = {k: (pitches[k - 1] or None) for k in searched}
+    return res
+
+
+def _search_cyclic_pitch(runs, radius: float, axis: int, fit) -> tuple:
+    """The pitch (mm) of the strongest periodic error of plane axis ``axis``
+    and the number of pitches tried. A periodogram of the readings, with the
+    low harmonics of the trace (the shape terms) removed, over pitches from
+    four sample spacings of the axis to R/2, evenly in 1/pitch at a step that
+    keeps the phase error over the diameter under a quarter turn; then the
+    full C++ fit refines the best one (least residual)."""
+    phis, resid, steps = [], [], []
+    for r in runs:
+        phi = np.radians(r.angles)
+        cols = [np.ones_like(phi)]
+        for k in range(1, 9):
+            cols += [np.cos(k * phi), np.sin(k * phi)]
+        B = np.column_stack(cols)
+        coef, *_ = np.linalg.lstsq(B, r.readings, rcond=None)
+        phis.append(phi)
+        resid.append(r.readings - B @ coef)
+        x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
+        steps.append(np.max(np.abs(np.diff(x))) if x.size > 1 else radius)
+    phi, res = np.concatenate(phis), np.concatenate(resid)
+    x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
+    proj = np.cos(phi) if axis == 1 else np.sin(phi)
+    p_min, p_max = 4.0 * max(steps), radius / 2.0
+    if not p_min < p_max:
+        raise ValueError(f"cyclic_pitch auto: the samples are {max(steps):.3g} mm apart along the axis; too "
+                         f"sparse to find a pitch below R/2 = {p_max:g} mm (sample more densely or give the pitch)")
+    dinv = 1.0 / (16.0 * radius)
+    inv = np.arange(1.0 / p_max, 1.0 / p_min + dinv, dinv)
+    best, power = None, -1.0
+    for chunk in np.array_split(inv, max(1, inv.size // 64)):
+        arg = 2 * np.pi * np.outer(chunk, x)
+        C, S = proj * np.cos(arg), proj * np.sin(arg)
+        cc, ss, cs = (C * C).sum(1), (S * S).sum(1), (C * S).sum(1)
+        cr, sr = C @ res, S @ res
+        det = cc * ss - cs * cs
+        pw = (ss * cr * cr - 2 * cs * cr * sr + cc * sr * sr) / np.where(det > 0, det, np.inf)
+        j = int(np.argmax(pw))
+        if pw[j] > power:
+            power, best = float(pw[j]), float(chunk[j])
+    fine = np.linspace(best - dinv, best + dinv, 9)
+    fine = fine[fine > 0]
+    rms = [fit(1.0 / f if axis == 1 else 0.0, 1.0 / f if axis == 2 else 0.0, 0.0).diagnosis.rms for f in fine]
+    return 1.0 / float(fine[int(np.argmin(rms))]), int(inv.size)
 
 
 @dataclass

@@ -247,11 +247,12 @@ def _diagnosis_options(args) -> dict:
     if args.cyclic_pitch:
         parts = [p.strip() for p in args.cyclic_pitch.split(",")]
         try:
-            vals = [float(p) if p else 0.0 for p in parts]
+            vals = ["auto" if p.lower() == "auto" else (float(p) if p else 0.0) for p in parts]
         except ValueError:
-            raise ValueError(f"--cyclic-pitch: {args.cyclic_pitch!r}; give mm, one value or two (axis 1,axis 2)")
-        if len(vals) not in (1, 2) or any(not (v >= 0) or v != v or v == float("inf") for v in vals):
-            raise ValueError(f"--cyclic-pitch: {args.cyclic_pitch!r}; one or two pitches >= 0 mm")
+            raise ValueError(f"--cyclic-pitch: {args.cyclic_pitch!r}; give mm or 'auto', one value or two "
+                             "(axis 1,axis 2)")
+        if len(vals) not in (1, 2) or any(v != "auto" and (not (v >= 0) or v == float("inf")) for v in vals):
+            raise ValueError(f"--cyclic-pitch: {args.cyclic_pitch!r}; one or two pitches >= 0 mm or 'auto'")
         pitch = vals[0] if len(vals) == 1 else vals
     machine = args.machine_name
     if machine is None and getattr(args, "machine", None):
@@ -266,7 +267,7 @@ def _add_diagnosis_options(p) -> None:
 
     p.add_argument("--cyclic-pitch", metavar="MM[,MM]",
                    help="pitch of the cyclic error to fit (ball-screw or scale pitch), one for both plane axes "
-                   "or one per axis; default: not fitted")
+                   "or one per axis; 'auto' searches it; default: not fitted")
     p.add_argument("--spike-width", type=POSITIVE, default=3.0,
                    help="decay of a reversal spike, deg of path angle (default 3)")
     p.add_argument("--all-diagnoses", action="store_true",
