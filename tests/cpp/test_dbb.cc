@@ -478,6 +478,37 @@ TEST(CircularTest, ExtendedDiagnosesAreRecoveredAndRankedFirst) {
   }
 }
 
+TEST(CircularTest, TermsTheDataDoNotShowAreDropped) {
+  // Only scale, squareness and backlash: every extended term is below 3
+  // sigma and dropped, and the classic values keep the classic precision.
+  std::vector<CircularRun> runs = {
+      SyntheticRun(-1, 100, 25e-6, -5e-6, 40e-6, 0.002, -0.003, 0, 0, 10, Eigen::Vector2d::Zero(), 0.0003, 3),
+      SyntheticRun(+1, 100, 25e-6, -5e-6, 40e-6, 0.002, -0.003, 0, 0, 10, Eigen::Vector2d::Zero(), 0.0003, 4)};
+  CircularDiagnosisOptions o;
+  o.cyclic_pitch1 = o.cyclic_pitch2 = 10.0;
+  const CircularDiagnosis d = AnalyzeCircularTest(runs, 100, 0, o).diagnosis;
+  EXPECT_EQ(d.names.size(), 8u);
+  EXPECT_EQ(d.not_significant.size(), 10u);
+  CircularDiagnosisOptions none;
+  none.reversal_spikes = none.lateral_play = none.straightness = none.radial_play = false;
+  const CircularDiagnosis classic = AnalyzeCircularTest(runs, 100, 0, none).diagnosis;
+  const int i = static_cast<int>(std::find(d.names.begin(), d.names.end(), "scale_mismatch") - d.names.begin());
+  EXPECT_NEAR(d.std[i], classic.std[i], 1e-15);
+  // everything kept: radial play shares cos 2phi with scale mismatch
+  o.significance = 0;
+  const CircularDiagnosis all = AnalyzeCircularTest(runs, 100, 0, o).diagnosis;
+  EXPECT_EQ(all.names.size(), 20u);
+  EXPECT_GT(all.std[i], 3 * classic.std[i]);
+  // a quarter arc, one direction: what it cannot carry is named, nothing throws
+  CircularRun arc;
+  arc.angles = Eigen::VectorXd::LinSpaced(181, 10, 100);
+  arc.readings = Eigen::VectorXd::Zero(181);
+  const CircularDiagnosis q = AnalyzeCircularTest({arc}, 100, 0, o).diagnosis;
+  EXPECT_FALSE(q.Has("backlash.1"));
+  EXPECT_FALSE(q.Has("reversal_spike.1"));
+  EXPECT_FALSE(q.Has("lateral_play.1"));
+}
+
 TEST(CircularTest, OvershootArcsAreRemoved) {
   // 180 deg of feed-in and of feed-out around the 360 deg data arc, with the
   // angles printed modulo 360 as a recorder may.
