@@ -893,7 +893,10 @@ class CircularResult:
         for nf in self.not_fitted:
             L.append(f"    not fitted: {nf}")
         if self.not_significant:
-            L.append("    not significant, left out: " + ", ".join(self.not_significant))
+            import textwrap
+
+            L += textwrap.wrap("not significant, left out: " + ", ".join(self.not_significant), 100,
+                               initial_indent="    ", subsequent_indent="      ")
         L.append(f"    residual rms after the diagnosis {self.diagnosis_rms * 1e3:.3f} µm")
         L += ["", "  ranking by contribution to circularity (circular deviation of the term alone):"]
         L += ["    " + line for line in self.ranking_lines()]

@@ -306,11 +306,22 @@ def _circular_parts(result):
             ("servo_mismatch", "servo mismatch", 1e3, "µm"),
             ("centre.1", f"centre offset {a1}", 1e3, "µm"),
             ("centre.2", f"centre offset {a2}", 1e3, "µm")]
+    # the extended diagnoses that survived the significance test (few, usually none)
+    for k, ax, other in ((1, a1, a2), (2, a2, a1)):
+        rows += [(f"reversal_spike.{k}", f"reversal spike {ax}", 1e3, "µm"),
+                 (f"lateral_play.{k}", f"lateral play {ax}", 1e3, "µm"),
+                 (f"straightness.{k}", f"straightness {ax}", 1e3, "µm"),
+                 (f"radial_play.{k}", f"radial play {ax}", 1e3, "µm")]
     for n, label, f, unit in rows:
         if n in result.diagnosis:
             notes.append(f"  {label:<18}{result.diagnosis[n] * f:+8.2f} ±{result.diagnosis_std[n] * f:5.2f} {unit}")
             if n == "servo_mismatch" and result.servo_mismatch_ms is not None:
                 notes.append(f"  {'  = lag difference':<18}{result.servo_mismatch_ms:+8.3f} ms")
+    for k, ax in ((1, a1), (2, a2)):
+        amp = result.cyclic_amplitude(k) if hasattr(result, "cyclic_amplitude") else None
+        if amp is not None:
+            notes.append(f"  {f'cyclic error {ax}':<18}{amp[0] * 1e3:8.2f} ±{amp[1] * 1e3:5.2f} µm "
+                         f"({result.cyclic_pitch[k - 1]:.3g} mm)")
     notes.append(f"  residual rms {result.diagnosis_rms * 1e3:.2f} µm")
     ranking = getattr(result, "ranking", [])
     if ranking:
