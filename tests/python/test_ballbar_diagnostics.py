@@ -323,3 +323,17 @@ def test_cyclic_pitch_is_found_when_not_given():
     quiet = dbb.circular_test([run(-1, base, 33), run(+1, base, 34)], R, cyclic_pitch="auto")
     assert quiet.cyclic_amplitude(1) is None and quiet.cyclic_amplitude(2) is None
     assert any(s.startswith("cyclic_error.1 (pitch") and "needed" in s for s in quiet.not_significant)
+
+
+def test_a_cw_trace_printed_modulo_360_is_read_as_cw():
+    """0, 359.5, ..., 0.5: first minus last says CCW; the unwrapped angles say CW."""
+    err = with_base(spike1)
+    cw, ccw = run(-1, err, 41), run(+1, err, 42)
+    wrapped = dbb.Trace(np.mod(cw.angles, 360.0), cw.readings, label="CW")
+    assert wrapped.direction == +1  # what the angles alone suggest
+    a = dbb.circular_test([wrapped, ccw], R)
+    b = dbb.circular_test([cw, ccw], R)
+    assert sorted(r.direction for r in a.runs) == [-1, 1]
+    assert a.trimmed == []
+    for n in b.diagnosis:
+        assert a.diagnosis[n] == pytest.approx(b.diagnosis[n], abs=1e-11), n

@@ -764,13 +764,19 @@ class Trimmed:
                 f"feed-out {self.arc_end:.1f}° ({self.removed_end} samples) removed")
 
 
-def trim_overshoot(trace: Trace, data_arc: float = 360.0, feed_in: Optional[float] = None):
+def trim_overshoot(trace: Trace, data_arc: float = 360.0, feed_in: Optional[float] = None,
+                   direction: Optional[int] = None):
     """The data arc of a run recorded with feed-in and feed-out (overshoot)
     arcs, and what was removed (C++ ``TrimOvershoot``): angles unwrapped,
     samples going against the run at either end dropped, the sweep beyond
     ``data_arc`` removed, ``feed_in`` deg at the start (default half of it,
-    the symmetric arcs ballbar programs use). Returns (trace, Trimmed)."""
-    t = _core.trim_overshoot(trace.angles, trace.readings, int(trace.direction), float(data_arc),
+    the symmetric arcs ballbar programs use). ``direction``: +1/-1, or 0 to
+    take it from the unwrapped angles (default: the trace's). Returns
+    (trace, Trimmed)."""
+    if trace.angles.size < 2:
+        return trace, Trimmed(trace.label, 0, 0, 0.0, 0.0)
+    d = trace.direction if direction is None else direction
+    t = _core.trim_overshoot(trace.angles, trace.readings, int(d), float(data_arc),
                              float("nan") if feed_in is None else float(feed_in))
     out = Trace(np.asarray(t["angles"]), np.asarray(t["readings"]), int(t["direction"]), trace.label)
     return out, Trimmed(trace.label, int(t["removed_start"]), int(t["removed_end"]), float(t["arc_start"]),
@@ -939,17 +945,6 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
     (:func:`trim_overshoot`). ``machine`` (a name or a Machine) and ``date``
     go into the report and plot header."""
     runs = [r for r in runs if r is not None]
-    trimmed = []
-    if trim:
-        cut = []
-        for r in runs:
-            if r.angles.size >= 2:
-                t, info = trim_overshoot(r, data_arc, feed_in)
-                if info.removed_start or info.removed_end:
-                    trimmed.append(info)
-                    r = t
-            cut.append(r)
-        runs = cut
     for i, r in enumerate(runs):
         span = float(r.angles.max() - r.angles.min()) if r.angles.size else 0.0
         if span < MIN_CIRCLE_SWEEP:
@@ -958,6 +953,17 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
             raise ValueError(f"run {i + 1} ({r.label or 'no label'}): angles sweep {span:.4g} degrees; a "
                              f"circular test needs a full circle (at least {MIN_CIRCLE_SWEEP:g} degrees "
                              f"here){hint}")
+    trimmed = []
+    if trim:
+        cut = []
+        for r in runs:
+            # The unwrapped angles decide the direction: a trace printed modulo
+            # 360 fools first-minus-last (a CW turn 0, 359.5, ..., 0.5 "rises").
+            t, info = trim_overshoot(r, data_arc, feed_in, direction=0)
+            if info.removed_start or info.removed_end:
+                trimmed.append(info)
+            cut.append(t)
+        runs = cut
     plane = plane.upper()
     if plane not in ("XY", "YZ", "ZX", "YX", "ZY", "XZ"):
         raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")
