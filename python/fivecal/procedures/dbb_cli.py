@@ -364,6 +364,9 @@ def _volumetric(args) -> int:
                 traces.append(t)
             if traces:
                 results[plane] = dbb.circular_test(traces, args.radius, plane, args.feed, **opts)
+    if len(results) < 2:
+        raise ValueError(f"{len(results)} plane(s) given; give the runs of two or three planes (--xy, --yz, --zx "
+                         "CSV files) or --simulate with --machine")
     vol = dbb.volumetric_evaluation(results)
     print(vol.report())
     if args.out:
