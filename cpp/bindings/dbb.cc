@@ -217,7 +217,10 @@ void BindDbb(py::module_& m) {
       .def_readonly("values", &CircularDiagnosis::values)
       .def_readonly("std", &CircularDiagnosis::std)
       .def_readonly("not_fitted", &CircularDiagnosis::not_fitted)
-      .def_readonly("rms", &CircularDiagnosis::rms);
+      .def_readonly("not_significant", &CircularDiagnosis::not_significant)
+      .def_readonly("rms", &CircularDiagnosis::rms)
+      .def_readonly("ranking", &CircularDiagnosis::ranking)
+      .def_readonly("contribution", &CircularDiagnosis::contribution);
   py::class_<CircularTestResult>(m, "CircularTestResult")
       .def_readonly("nominal_radius", &CircularTestResult::nominal_radius)
       .def_readonly("runs", &CircularTestResult::runs)
@@ -227,7 +230,8 @@ void BindDbb(py::module_& m) {
   m.def(
       "circular_test",
       [](const std::vector<std::tuple<Eigen::VectorXd, Eigen::VectorXd, int>>& runs, double radius,
-         double feed) {
+         double feed, bool reversal_spikes, double spike_width, bool lateral_play, bool straightness,
+         bool radial_play, double cyclic_pitch1, double cyclic_pitch2, double significance) {
         std::vector<CircularRun> rs;
         for (const auto& t : runs) {
           CircularRun r;
@@ -236,9 +240,45 @@ void BindDbb(py::module_& m) {
           r.direction = std::get<2>(t);
           rs.push_back(r);
         }
-        return AnalyzeCircularTest(rs, radius, feed);
+        CircularDiagnosisOptions o;
+        o.reversal_spikes = reversal_spikes;
+        o.spike_width = spike_width;
+        o.lateral_play = lateral_play;
+        o.straightness = straightness;
+        o.radial_play = radial_play;
+        o.cyclic_pitch1 = cyclic_pitch1;
+        o.cyclic_pitch2 = cyclic_pitch2;
+        o.significance = significance;
+        return AnalyzeCircularTest(rs, radius, feed, o);
       },
-      py::arg("runs"), py::arg("radius"), py::arg("feed") = 0.0);
+      py::arg("runs"), py::arg("radius"), py::arg("feed") = 0.0, py::arg("reversal_spikes") = true,
+      py::arg("spike_width") = 3.0, py::arg("lateral_play") = true, py::arg("straightness") = true,
+      py::arg("radial_play") = true, py::arg("cyclic_pitch1") = 0.0, py::arg("cyclic_pitch2") = 0.0,
+      py::arg("significance") = 3.0);
+  m.def(
+      "trim_overshoot",
+      [](const Eigen::VectorXd& angles, const Eigen::VectorXd& readings, int direction, double data_arc,
+         double feed_in) {
+        CircularRun r;
+        r.angles = angles;
+        r.readings = readings;
+        r.direction = direction;
+        const TrimmedRun t = TrimOvershoot(r, data_arc, feed_in);
+        py::dict d;
+        d["angles"] = t.run.angles;
+        d["readings"] = t.run.readings;
+        d["direction"] = t.run.direction;
+        d["removed_start"] = t.removed_start;
+        d["removed_end"] = t.removed_end;
+        d["arc_start"] = t.arc_start;
+        d["arc_end"] = t.arc_end;
+        d["data_first"] = t.data_first;
+        d["data_last"] = t.data_last;
+        return d;
+      },
+      py::arg("angles"), py::arg("readings"), py::arg("direction"), py::arg("data_arc") = 360.0,
+      py::arg("feed_in") = std::numeric_limits<double>::quiet_NaN(),
+      "Feed-in and feed-out arcs removed from a run (circular_test.h TrimOvershoot).");
   m.def(
       "dbb_ball_positions",
       [](const Machine& mc, const Eigen::MatrixXd& axes, const Eigen::Vector3d& tool_ball,

@@ -14,6 +14,7 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <stdexcept>
@@ -429,7 +430,9 @@ TEST(CircularTest, IsoValuesOfAnOffsetCircle) {
   EXPECT_NEAR(res.runs[0].radial_deviation_min, -0.005, 1e-6);
   EXPECT_NEAR(res.runs[0].centre.x(), -0.005, 1e-6);
   EXPECT_FALSE(res.diagnosis.Has("servo_mismatch"));  // one direction only
-  ASSERT_EQ(res.diagnosis.not_fitted.size(), 1u);
+  // one direction: servo mismatch and both lateral plays are left out
+  ASSERT_EQ(res.diagnosis.not_fitted.size(), 3u);
+  EXPECT_FALSE(res.diagnosis.Has("lateral_play.1"));
   EXPECT_FALSE(res.has_hysteresis);
 }
 
@@ -441,6 +444,160 @@ TEST(CircularTest, RejectsBadRuns) {
   r.readings = Eigen::VectorXd::Zero(10);
   EXPECT_THROW(AnalyzeCircularTest({r}, -1), std::invalid_argument);
   EXPECT_THROW(AnalyzeCircularTest({r, r}, 100), std::invalid_argument);  // both CCW
+}
+
+// A run whose axes carry the position errors e(phi, s, x) given, computed
+// exactly (the reading is the distance to the pivot), 0.5 deg sampling.
+CircularRun ErrorRun(int dir, double R, const std::function<Eigen::Vector2d(double, int)>& err,
+                     double sigma, int seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, sigma);
+  CircularRun r;
+  r.direction = dir;
+  const int n = 720;
+  r.angles.resize(n);
+  r.readings.resize(n);
+  for (int i = 0; i < n; ++i) {
+    const double deg = dir * 0.5 * i, phi = deg * kPi / 180;
+    const Eigen::Vector2d p = R * Eigen::Vector2d(std::cos(phi), std::sin(phi)) + err(deg, dir);
+    r.angles[i] = deg;
+    r.readings[i] = p.norm() - R + noise(rng);
+  }
+  return r;
+}
+
+int SgnD(double x) { return x > 1e-12 ? 1 : (x < -1e-12 ? -1 : 0); }
+
+TEST(CircularTest, ExtendedDiagnosesAreRecoveredAndRankedFirst) {
+  const double R = 100, sigma = 0.0003;
+  // A little of the base errors everywhere, so each injected term must be
+  // told from them.
+  auto base = [&](double deg, int s) {
+    const double phi = deg * kPi / 180, x1 = R * std::cos(phi), x2 = R * std::sin(phi);
+    const double v1 = -s * SgnD(std::sin(phi)), v2 = s * SgnD(std::cos(phi));
+    return Eigen::Vector2d(5e-6 * x1 - 4e-6 * x2 + 0.0005 * v1, 0.0004 * v2);
+  };
+  struct Case {
+    std::string name;  // diagnosis (group) expected first
+    std::vector<std::pair<std::string, double>> truth;
+    std::function<Eigen::Vector2d(double, int)> err;
+  };
+  const double p = 0.006, w = 3.0, pitch = 10.0;
+  std::vector<Case> cases = {
+      {"reversal_spike.1", {{"reversal_spike.1", p}}, [&](double deg, int s) {
+         // stick after the reversal of axis 1 at 0 / 180 deg, decaying over w deg
+         double t = s * deg;
+         const double dphi = t - 180.0 * std::floor(t / 180.0);
+         const double rev = (deg - s * dphi) * kPi / 180;
+         return Eigen::Vector2d(p * SgnD(std::cos(rev)) * std::exp(-dphi / w), 0.0);
+       }},
+      {"lateral_play.1", {{"lateral_play.1", 0.004}}, [&](double deg, int s) {
+         // axis-2 carriage shifts along axis 1 with the sign of its motion
+         return Eigen::Vector2d(0.004 * s * SgnD(std::cos(deg * kPi / 180)), 0.0);
+       }},
+      {"cyclic_error.2", {{"cyclic_error.2.cos", 0.003}, {"cyclic_error.2.sin", -0.002}},
+       [&](double deg, int) {
+         const double x2 = R * std::sin(deg * kPi / 180), a = 2 * kPi * x2 / pitch;
+         return Eigen::Vector2d(0.0, 0.003 * std::cos(a) - 0.002 * std::sin(a));
+       }},
+      {"straightness.1", {{"straightness.1", 0.008}}, [&](double deg, int) {
+         const double x1 = R * std::cos(deg * kPi / 180);
+         return Eigen::Vector2d(0.0, 0.008 * (x1 / R) * (x1 / R));
+       }},
+      {"radial_play.2", {{"radial_play.2", 0.005}}, [&](double deg, int) {
+         return Eigen::Vector2d(0.0, 0.005 * SgnD(std::sin(deg * kPi / 180)));
+       }},
+  };
+  CircularDiagnosisOptions o;
+  o.cyclic_pitch1 = pitch;
+  o.cyclic_pitch2 = pitch;
+  int seed = 10;
+  for (const Case& c : cases) {
+    auto err = [&](double deg, int s) { return Eigen::Vector2d(base(deg, s) + c.err(deg, s)); };
+    std::vector<CircularRun> runs = {ErrorRun(-1, R, err, sigma, ++seed), ErrorRun(+1, R, err, sigma, ++seed)};
+    const CircularDiagnosis d = AnalyzeCircularTest(runs, R, 1000, o).diagnosis;
+    for (const auto& [n, v] : c.truth) {
+      ASSERT_TRUE(d.Has(n)) << n;
+      const int i = static_cast<int>(std::find(d.names.begin(), d.names.end(), n) - d.names.begin());
+      EXPECT_LT(std::abs(d.values[i] - v), 3 * d.std[i] + 0.01 * std::abs(v)) << c.name << " " << n << " "
+                                                                              << d.values[i];
+    }
+    ASSERT_FALSE(d.ranking.empty());
+    EXPECT_EQ(d.ranking[0], c.name);
+    EXPECT_LT(d.rms, 1.2 * sigma) << c.name;
+  }
+}
+
+TEST(CircularTest, TermsTheDataDoNotShowAreDropped) {
+  // Only scale, squareness and backlash: every extended term is below 3
+  // sigma and dropped, and the classic values keep the classic precision.
+  std::vector<CircularRun> runs = {
+      SyntheticRun(-1, 100, 25e-6, -5e-6, 40e-6, 0.002, -0.003, 0, 0, 10, Eigen::Vector2d::Zero(), 0.0003, 3),
+      SyntheticRun(+1, 100, 25e-6, -5e-6, 40e-6, 0.002, -0.003, 0, 0, 10, Eigen::Vector2d::Zero(), 0.0003, 4)};
+  CircularDiagnosisOptions o;
+  o.cyclic_pitch1 = o.cyclic_pitch2 = 10.0;
+  const CircularDiagnosis d = AnalyzeCircularTest(runs, 100, 0, o).diagnosis;
+  EXPECT_EQ(d.names.size(), 8u);
+  EXPECT_EQ(d.not_significant.size(), 10u);
+  CircularDiagnosisOptions none;
+  none.reversal_spikes = none.lateral_play = none.straightness = none.radial_play = false;
+  const CircularDiagnosis classic = AnalyzeCircularTest(runs, 100, 0, none).diagnosis;
+  const int i = static_cast<int>(std::find(d.names.begin(), d.names.end(), "scale_mismatch") - d.names.begin());
+  EXPECT_NEAR(d.std[i], classic.std[i], 1e-15);
+  // everything kept: radial play shares cos 2phi with scale mismatch
+  o.significance = 0;
+  const CircularDiagnosis all = AnalyzeCircularTest(runs, 100, 0, o).diagnosis;
+  EXPECT_EQ(all.names.size(), 20u);
+  EXPECT_GT(all.std[i], 3 * classic.std[i]);
+  // a quarter arc, one direction: what it cannot carry is named, nothing throws
+  CircularRun arc;
+  arc.angles = Eigen::VectorXd::LinSpaced(181, 10, 100);
+  arc.readings = Eigen::VectorXd::Zero(181);
+  const CircularDiagnosis q = AnalyzeCircularTest({arc}, 100, 0, o).diagnosis;
+  EXPECT_FALSE(q.Has("backlash.1"));
+  EXPECT_FALSE(q.Has("reversal_spike.1"));
+  EXPECT_FALSE(q.Has("lateral_play.1"));
+}
+
+TEST(CircularTest, OvershootArcsAreRemoved) {
+  // 180 deg of feed-in and of feed-out around the 360 deg data arc, with the
+  // angles printed modulo 360 as a recorder may.
+  auto err = [](double deg, int) {
+    const double phi = deg * kPi / 180;
+    return Eigen::Vector2d(0.003 * std::cos(phi) * std::cos(phi), 0.001);
+  };
+  // 0.5 deg steps from -180 to 540 deg: 1441 samples.
+  CircularRun full;
+  full.direction = +1;
+  const int m = 1441;
+  full.angles.resize(m);
+  full.readings.resize(m);
+  CircularRun data;
+  data.direction = +1;
+  data.angles.resize(721);
+  data.readings.resize(721);
+  for (int i = 0, j = 0; i < m; ++i) {
+    const double deg = -180.0 + 0.5 * i, phi = deg * kPi / 180;
+    const Eigen::Vector2d p = 100 * Eigen::Vector2d(std::cos(phi), std::sin(phi)) + err(deg, 1);
+    full.angles[i] = deg - 360.0 * std::floor(deg / 360.0);
+    full.readings[i] = p.norm() - 100;
+    if (deg >= 0 && deg <= 360) {
+      data.angles[j] = deg;
+      data.readings[j++] = p.norm() - 100;
+    }
+  }
+  const TrimmedRun t = TrimOvershoot(full);
+  EXPECT_EQ(t.removed_start, 360);
+  EXPECT_EQ(t.removed_end, 360);
+  EXPECT_NEAR(t.arc_start, 180.0, 1e-9);
+  EXPECT_NEAR(t.arc_end, 180.0, 1e-9);
+  ASSERT_EQ(t.run.angles.size(), 721);
+  const CircularTestResult a = AnalyzeCircularTest({t.run}, 100), b = AnalyzeCircularTest({data}, 100);
+  EXPECT_NEAR(a.runs[0].circular_deviation, b.runs[0].circular_deviation, 1e-12);
+  for (size_t i = 0; i < b.diagnosis.names.size(); ++i)
+    EXPECT_NEAR(a.diagnosis.Get(b.diagnosis.names[i]), b.diagnosis.values[i], 1e-12) << b.diagnosis.names[i];
+  // A run without overshoot is kept whole.
+  EXPECT_EQ(TrimOvershoot(data).removed_start + TrimOvershoot(data).removed_end, 0);
 }
 
 TEST(TraceHarmonics, RecoversCoefficients) {

@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <sstream>
 #include <stdexcept>
@@ -104,6 +105,75 @@ struct Interpolator {
 
 }  // namespace
 
+TrimmedRun TrimOvershoot(const CircularRun& run, double data_arc, double feed_in, double tolerance) {
+  const std::string w = "overshoot trimming";
+  if (run.angles.size() != run.readings.size())
+    throw std::invalid_argument(w + ": angles and readings differ in length");
+  if (!(data_arc > 0 && data_arc <= 360.0))
+    throw std::invalid_argument(w + ": data_arc must be in (0, 360] deg");
+  if (!(tolerance >= 0)) throw std::invalid_argument(w + ": tolerance must be >= 0 deg");
+  const int n = static_cast<int>(run.angles.size());
+  TrimmedRun out;
+  out.run = run;
+  if (n < 2) return out;
+  for (int i = 0; i < n; ++i)
+    if (!std::isfinite(run.angles[i]))
+      throw std::invalid_argument(w + ": angles[" + std::to_string(i) + "] is not finite");
+  // Unwrap: a recorder may print the angle modulo 360.
+  Eigen::VectorXd u(n);
+  u[0] = run.angles[0];
+  for (int i = 1; i < n; ++i) {
+    double step = run.angles[i] - run.angles[i - 1];
+    step -= 360.0 * std::round(step / 360.0);
+    u[i] = u[i - 1] + step;
+  }
+  int dir = run.direction;
+  if (dir == 0) dir = Sgn(u[n - 1] - u[0]);
+  if (dir == 0) throw std::invalid_argument(w + ": cannot tell CW from CCW; give the direction");
+  // Samples at either end going against the run (the bar settling, a
+  // back-off) are not part of the circle.
+  int first = 0, last = n - 1;
+  while (first + 1 < n && dir * (u[first + 1] - u[first]) <= 0) ++first;
+  while (last - 1 > first && dir * (u[last] - u[last - 1]) <= 0) --last;
+  const double sweep = dir * (u[last] - u[first]);
+  double lo = dir * u[first], hi = dir * u[last];  // in the direction of travel
+  if (sweep > data_arc + tolerance) {
+    const double excess = sweep - data_arc;
+    double fi = std::isnan(feed_in) ? 0.5 * excess : feed_in;
+    if (!(fi >= 0) || fi > excess + tolerance) {
+      std::ostringstream m;
+      m << w << ": feed_in " << feed_in << " deg; the run sweeps " << sweep << " deg, so the feed-in arc "
+        << "must be between 0 and " << excess << " deg";
+      throw std::invalid_argument(m.str());
+    }
+    fi = std::min(fi, excess);
+    lo += fi;
+    hi = lo + data_arc;
+  }
+  // A tolerance on the angle keeps the sample that sits on the arc's end.
+  const double eps = std::max(tolerance, 1e-9);
+  std::vector<int> idx;
+  for (int i = first; i <= last; ++i) {
+    const double a = dir * u[i];
+    if (a >= lo - eps && a <= hi + eps) idx.push_back(i);
+  }
+  if (idx.empty()) throw std::invalid_argument(w + ": no sample left in the data arc");
+  out.run.angles.resize(idx.size());
+  out.run.readings.resize(idx.size());
+  for (size_t j = 0; j < idx.size(); ++j) {
+    out.run.angles[j] = u[idx[j]];
+    out.run.readings[j] = run.readings[idx[j]];
+  }
+  out.run.direction = dir;
+  out.removed_start = idx.front();
+  out.removed_end = n - 1 - idx.back();
+  out.arc_start = std::abs(u[idx.front()] - u[0]);
+  out.arc_end = std::abs(u[n - 1] - u[idx.back()]);
+  out.data_first = u[idx.front()];
+  out.data_last = u[idx.back()];
+  return out;
+}
+
 double CircularDiagnosis::Get(const std::string& name) const {
   for (size_t i = 0; i < names.size(); ++i)
     if (names[i] == name) return values[i];
@@ -114,7 +184,8 @@ bool CircularDiagnosis::Has(const std::string& name) const {
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
-CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, double R, double feed) {
+CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, double R, double feed,
+                                       const CircularDiagnosisOptions& options) {
   if (runs.empty() || runs.size() > 2)
     throw std::invalid_argument("circular test: give one or two runs (CW and CCW), got " +
                                 std::to_string(runs.size()));
@@ -164,65 +235,234 @@ CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, dou
     }
   }
 
-  // Diagnosis: columns as documented in the header.
+  // Diagnosis: columns as documented in the header. The base set first (its
+  // rank is required), then each extended diagnosis only if the samples can
+  // separate it from what is already in.
   int total = 0;
   for (const CircularRun& r : runs) total += static_cast<int>(r.angles.size());
+  const CircularDiagnosisOptions& o = options;
+  if (!(o.significance >= 0) || !std::isfinite(o.significance))
+    throw std::invalid_argument("circular test: significance must be >= 0 (0 = keep every diagnosis)");
+  if (o.reversal_spikes && !(o.spike_width > 0 && std::isfinite(o.spike_width)))
+    throw std::invalid_argument("circular test: spike_width must be > 0 deg");
+  for (double p : {o.cyclic_pitch1, o.cyclic_pitch2})
+    if (!(p >= 0) || !std::isfinite(p))
+      throw std::invalid_argument("circular test: cyclic_pitch must be >= 0 mm (0 = not fitted)");
   std::vector<std::string> names = {"radius", "centre.1", "centre.2", "scale_mismatch", "squareness",
                                     "servo_mismatch", "backlash.1", "backlash.2"};
-  Eigen::MatrixXd A(total, names.size());
+  const int n_base = static_cast<int>(names.size());
+  if (o.reversal_spikes) names.insert(names.end(), {"reversal_spike.1", "reversal_spike.2"});
+  if (o.lateral_play) names.insert(names.end(), {"lateral_play.1", "lateral_play.2"});
+  if (o.straightness) names.insert(names.end(), {"straightness.1", "straightness.2"});
+  if (o.radial_play) names.insert(names.end(), {"radial_play.1", "radial_play.2"});
+  if (o.cyclic_pitch1 > 0) names.insert(names.end(), {"cyclic_error.1.cos", "cyclic_error.1.sin"});
+  if (o.cyclic_pitch2 > 0) names.insert(names.end(), {"cyclic_error.2.cos", "cyclic_error.2.sin"});
+  const double two_pi = 2.0 * 3.14159265358979323846;
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(total, names.size());
+  // Motion signs of both axes per row: a reversal-dependent term needs both
+  // signs inside the data.
+  Eigen::MatrixXi motion(total, 2);
   Eigen::VectorXd y(total);
+  std::vector<int> run_of(total);
   int row = 0;
   for (size_t k = 0; k < runs.size(); ++k) {
     const double s = dirs[k];
     for (int i = 0; i < runs[k].angles.size(); ++i, ++row) {
-      const double phi = runs[k].angles[i] * kRad, c = std::cos(phi), sn = std::sin(phi);
+      const double deg = runs[k].angles[i], phi = deg * kRad, c = std::cos(phi), sn = std::sin(phi);
       // Motion signs on the circle x1 = R cos phi, x2 = R sin phi traversed in direction s.
       const double v1 = -s * Sgn(sn), v2 = s * Sgn(c);
-      A.row(row) << 1.0, c, sn, 0.5 * R * std::cos(2 * phi), -0.5 * R * std::sin(2 * phi),
+      motion(row, 0) = static_cast<int>(v1);
+      motion(row, 1) = static_cast<int>(v2);
+      A.row(row).head(n_base) << 1.0, c, sn, 0.5 * R * std::cos(2 * phi), -0.5 * R * std::sin(2 * phi),
           0.5 * s * std::sin(2 * phi), c * v1, sn * v2;
+      for (size_t j = n_base; j < names.size(); ++j) {
+        const std::string& nm = names[j];
+        const int ax = nm[nm.find('.') + 1] == '1' ? 1 : 2;
+        double v = 0.0;
+        if (nm.rfind("reversal_spike", 0) == 0) {
+          // Angle travelled since the last reversal of the axis (axis 1 at
+          // 0/180 deg, axis 2 at 90/270 deg) and where that reversal was.
+          const double phi0 = ax == 1 ? 0.0 : 90.0;
+          double t = s * (deg - phi0);
+          const double dphi = t - 180.0 * std::floor(t / 180.0);
+          const double rev = (deg - s * dphi) * kRad;
+          const double decay = std::exp(-dphi / o.spike_width);
+          v = ax == 1 ? c * Sgn(std::cos(rev)) * decay : sn * Sgn(std::sin(rev)) * decay;
+        } else if (nm.rfind("lateral_play", 0) == 0) {
+          v = ax == 1 ? c * v2 : sn * v1;
+        } else if (nm.rfind("straightness", 0) == 0) {
+          v = ax == 1 ? sn * c * c : c * sn * sn;
+        } else if (nm.rfind("radial_play", 0) == 0) {
+          v = ax == 1 ? std::abs(c) : std::abs(sn);
+        } else if (nm.rfind("cyclic_error", 0) == 0) {
+          const double pitch = ax == 1 ? o.cyclic_pitch1 : o.cyclic_pitch2;
+          const double x = R * (ax == 1 ? c : sn), proj = ax == 1 ? c : sn;
+          const double arg = two_pi * x / pitch;
+          v = proj * (nm.compare(nm.size() - 3, 3, "cos") == 0 ? std::cos(arg) : std::sin(arg));
+        }
+        A(row, j) = v;
+      }
       y[row] = runs[k].readings[i];
+      run_of[row] = static_cast<int>(k);
     }
   }
   CircularDiagnosis& d = res.diagnosis;
+  auto reverses = [&](int axis) {
+    bool pos = false, neg = false;
+    for (int i = 0; i < total; ++i) {
+      pos |= motion(i, axis - 1) > 0;
+      neg |= motion(i, axis - 1) < 0;
+    }
+    return pos && neg;
+  };
   std::vector<int> keep;
-  for (size_t j = 0; j < names.size(); ++j) {
+  for (int j = 0; j < n_base; ++j) {
     if (names[j] == "servo_mismatch" && runs.size() < 2) {
       d.not_fitted.push_back("servo_mismatch (needs a CW and a CCW run: with one direction it cannot be told from squareness)");
       continue;
     }
-    if (names[j].rfind("backlash", 0) == 0) {
-      // The motion sign must take both values inside the data.
-      const int col = static_cast<int>(j);
-      bool pos = false, neg = false;
-      for (int i = 0; i < total; ++i) {
-        const double basis = names[j] == "backlash.1" ? A(i, 1) : A(i, 2);  // cos / sin phi
-        if (std::abs(basis) < 1e-9) continue;
-        const double sign = A(i, col) / basis;
-        pos |= sign > 0.5;
-        neg |= sign < -0.5;
+    if (names[j].rfind("backlash", 0) == 0 && !reverses(names[j].back() - '0')) {
+      d.not_fitted.push_back(names[j] + " (the axis never reverses inside the data)");
+      continue;
+    }
+    keep.push_back(j);
+  }
+  auto full_rank = [&](const std::vector<int>& cols) {
+    // Columns scaled to unit norm: the rank test must not depend on R.
+    Eigen::MatrixXd M(total, cols.size());
+    for (size_t j = 0; j < cols.size(); ++j) {
+      const double nrm = A.col(cols[j]).norm();
+      if (nrm < 1e-300) return false;
+      M.col(j) = A.col(cols[j]) / nrm;
+    }
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> q(M);
+    q.setThreshold(1e-8);
+    return q.rank() == static_cast<int>(cols.size());
+  };
+  if (!full_rank(keep))
+    throw std::invalid_argument("circular test: the samples cover too little of the circle to separate "
+                                "centre offset, scale mismatch, squareness and backlash");
+  for (size_t j = n_base; j < names.size(); ++j) {
+    const std::string& nm = names[j];
+    const int ax = nm[nm.find('.') + 1] == '1' ? 1 : 2;
+    const bool is_cyc = nm.rfind("cyclic_error", 0) == 0;
+    if (is_cyc && nm.back() == 'n') continue;  // the .sin column goes in with its .cos
+    std::vector<int> cols = {static_cast<int>(j)};
+    if (is_cyc) cols.push_back(static_cast<int>(j) + 1);
+    const std::string label = is_cyc ? nm.substr(0, nm.size() - 4) : nm;
+    if (nm.rfind("lateral_play", 0) == 0) {
+      if (runs.size() < 2) {
+        d.not_fitted.push_back(label + " (needs a CW and a CCW run: with one direction it cannot be told from radial play)");
+        continue;
       }
-      if (!(pos && neg)) {
-        d.not_fitted.push_back(names[j] + " (the axis never reverses inside the data)");
+      if (!reverses(3 - ax)) {
+        d.not_fitted.push_back(label + " (the other axis never reverses inside the data)");
         continue;
       }
     }
-    keep.push_back(static_cast<int>(j));
+    if (nm.rfind("reversal_spike", 0) == 0) {
+      int near = 0;
+      for (int i = 0; i < total; ++i) near += std::abs(A(i, j)) > 0.05;
+      if (near < 2) {
+        d.not_fitted.push_back(label + " (no reversal of the axis inside the data)");
+        continue;
+      }
+    }
+    std::vector<int> trial = keep;
+    trial.insert(trial.end(), cols.begin(), cols.end());
+    if (!full_rank(trial)) {
+      d.not_fitted.push_back(label + " (the samples cannot separate it from the other diagnoses)");
+      continue;
+    }
+    keep = trial;
   }
-  Eigen::MatrixXd Ak(total, keep.size());
-  for (size_t j = 0; j < keep.size(); ++j) Ak.col(j) = A.col(keep[j]);
-  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Ak);
-  if (qr.rank() < static_cast<int>(keep.size()))
-    throw std::invalid_argument("circular test: the samples cover too little of the circle to separate "
-                                "centre offset, scale mismatch, squareness and backlash");
-  const Eigen::VectorXd x = qr.solve(y);
-  const Eigen::VectorXd res_v = y - Ak * x;
+  Eigen::MatrixXd Ak;
+  Eigen::VectorXd x, res_v;
+  Eigen::MatrixXd cov;
+  auto fit = [&]() {
+    Ak.resize(total, keep.size());
+    for (size_t j = 0; j < keep.size(); ++j) Ak.col(j) = A.col(keep[j]);
+    x = Ak.colPivHouseholderQr().solve(y);
+    res_v = y - Ak * x;
+    const int dof = std::max(1, total - static_cast<int>(keep.size()));
+    cov = res_v.squaredNorm() / dof * (Ak.transpose() * Ak).inverse();
+  };
+  fit();
+  // Backward elimination of the extended diagnoses that the data do not
+  // show: each costs the classic ones precision (radial play shares cos 2phi
+  // with scale mismatch), so one below the threshold is dropped, the least
+  // significant first, and the fit repeated. A cyclic error is judged by its
+  // two components together (Mahalanobis norm).
+  if (o.significance > 0) {
+    for (;;) {
+      double worst = std::numeric_limits<double>::infinity();
+      int at = -1;
+      for (size_t j = 0; j < keep.size(); ++j) {
+        if (keep[j] < n_base) continue;
+        const std::string& nm = names[keep[j]];
+        double z;
+        if (nm.rfind("cyclic_error", 0) == 0) {
+          if (nm.back() == 'n') continue;
+          const Eigen::Vector2d v(x[j], x[j + 1]);
+          const Eigen::Matrix2d c = cov.block<2, 2>(j, j);
+          z = std::sqrt(std::max(0.0, v.dot(c.ldlt().solve(v))));
+        } else {
+          z = std::abs(x[j]) / std::max(std::sqrt(std::max(cov(j, j), 0.0)), 1e-300);
+        }
+        if (z < worst) {
+          worst = z;
+          at = static_cast<int>(j);
+        }
+      }
+      if (at < 0 || worst >= o.significance) break;
+      const std::string& nm = names[keep[at]];
+      const bool is_cyc = nm.rfind("cyclic_error", 0) == 0;
+      std::ostringstream m;
+      m.precision(2);
+      m << (is_cyc ? nm.substr(0, nm.size() - 4) : nm) << " (" << worst << " sigma)";
+      d.not_significant.push_back(m.str());
+      keep.erase(keep.begin() + at, keep.begin() + at + (is_cyc ? 2 : 1));
+      fit();
+    }
+  }
   d.rms = std::sqrt(res_v.squaredNorm() / total);
-  const int dof = std::max(1, total - static_cast<int>(keep.size()));
-  const double s2 = res_v.squaredNorm() / dof;
-  const Eigen::MatrixXd cov = s2 * (Ak.transpose() * Ak).inverse();
   for (size_t j = 0; j < keep.size(); ++j) d.names.push_back(names[keep[j]]);
   d.values = x;
   d.std = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+
+  // Ranking: the circular deviation of each fitted term alone.
+  std::vector<std::pair<double, std::string>> contrib;
+  for (size_t j = 0; j < keep.size(); ++j) {
+    const std::string& nm = names[keep[j]];
+    if (nm == "radius" || nm.rfind("centre", 0) == 0) continue;
+    const bool is_cyc = nm.rfind("cyclic_error", 0) == 0;
+    if (is_cyc && nm.back() == 'n') continue;
+    Eigen::VectorXd t = Ak.col(j) * x[j];
+    if (is_cyc) t += Ak.col(j + 1) * x[j + 1];
+    double worst = 0.0;
+    for (size_t k = 0; k < runs.size(); ++k) {
+      std::vector<int> rows;
+      for (int i = 0; i < total; ++i)
+        if (run_of[i] == static_cast<int>(k)) rows.push_back(i);
+      Eigen::MatrixXd B(rows.size(), 3);
+      Eigen::VectorXd tk(rows.size());
+      for (size_t i = 0; i < rows.size(); ++i) {
+        B.row(i) << A(rows[i], 0), A(rows[i], 1), A(rows[i], 2);
+        tk[i] = t[rows[i]];
+      }
+      // About the term's own least-squares circle (first order), as G is.
+      const Eigen::VectorXd r = tk - B * B.colPivHouseholderQr().solve(tk);
+      worst = std::max(worst, r.maxCoeff() - r.minCoeff());
+    }
+    contrib.emplace_back(worst, is_cyc ? nm.substr(0, nm.size() - 4) : nm);
+  }
+  std::stable_sort(contrib.begin(), contrib.end(),
+                   [](const auto& a, const auto& b) { return a.first > b.first; });
+  d.contribution.resize(contrib.size());
+  for (size_t j = 0; j < contrib.size(); ++j) {
+    d.ranking.push_back(contrib[j].second);
+    d.contribution[j] = contrib[j].first;
+  }
   (void)feed;  // the feed only converts servo_mismatch to a time (dtau = l / v), done by callers
   return res;
 }

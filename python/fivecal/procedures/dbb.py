@@ -785,17 +785,77 @@ _DIAG_LABELS = {
     "servo_mismatch": ("servo mismatch (lag {a1} - lag {a2}) x feed", 1e3, "µm"),
     "backlash.1": ("backlash {a1} (offset in the direction of motion)", 1e3, "µm"),
     "backlash.2": ("backlash {a2} (offset in the direction of motion)", 1e3, "µm"),
+    "reversal_spike.1": ("reversal spike {a1} (height, outward > 0)", 1e3, "µm"),
+    "reversal_spike.2": ("reversal spike {a2} (height, outward > 0)", 1e3, "µm"),
+    "lateral_play.1": ("lateral play along {a1} (at {a2} reversals)", 1e3, "µm"),
+    "lateral_play.2": ("lateral play along {a2} (at {a1} reversals)", 1e3, "µm"),
+    "straightness.1": ("straightness {a1} (bow along {a2}, peak-valley)", 1e3, "µm"),
+    "straightness.2": ("straightness {a2} (bow along {a1}, peak-valley)", 1e3, "µm"),
+    "radial_play.1": ("radial play along {a1}", 1e3, "µm"),
+    "radial_play.2": ("radial play along {a2}", 1e3, "µm"),
+    "cyclic_error.1.cos": ("cyclic error {a1}, cos component", 1e3, "µm"),
+    "cyclic_error.1.sin": ("cyclic error {a1}, sin component", 1e3, "µm"),
+    "cyclic_error.2.cos": ("cyclic error {a2}, cos component", 1e3, "µm"),
+    "cyclic_error.2.sin": ("cyclic error {a2}, sin component", 1e3, "µm"),
 }
+#: Short names of the ranked diagnoses (a cyclic error is ranked by its amplitude).
+_RANK_LABELS = {
+    "scale_mismatch": "scale mismatch {a1}-{a2}", "squareness": "squareness {a1}{a2}",
+    "servo_mismatch": "servo mismatch", "backlash.1": "backlash {a1}", "backlash.2": "backlash {a2}",
+    "reversal_spike.1": "reversal spikes {a1}", "reversal_spike.2": "reversal spikes {a2}",
+    "lateral_play.1": "lateral play {a1}", "lateral_play.2": "lateral play {a2}",
+    "straightness.1": "straightness {a1}", "straightness.2": "straightness {a2}",
+    "radial_play.1": "radial play {a1}", "radial_play.2": "radial play {a2}",
+    "cyclic_error.1": "cyclic error {a1}", "cyclic_error.2": "cyclic error {a2}",
+}
+
+
+@dataclass
+class Trimmed:
+    """What overshoot trimming removed from one run."""
+    label: str
+    removed_start: int
+    removed_end: int
+    arc_start: float  # deg of feed-in removed
+    arc_end: float  # deg of feed-out removed
+
+    def line(self) -> str:
+        return (f"{self.label or 'run'}: feed-in {self.arc_start:.1f}° ({self.removed_start} samples) and "
+                f"feed-out {self.arc_end:.1f}° ({self.removed_end} samples) removed")
+
+
+def trim_overshoot(trace: Trace, data_arc: float = 360.0, feed_in: Optional[float] = None,
+                   direction: Optional[int] = None):
+    """The data arc of a run recorded with feed-in and feed-out (overshoot)
+    arcs, and what was removed (C++ ``TrimOvershoot``): angles unwrapped,
+    samples going against the run at either end dropped, the sweep beyond
+    ``data_arc`` removed, ``feed_in`` deg at the start (default half of it,
+    the symmetric arcs ballbar programs use). ``direction``: +1/-1, or 0 to
+    take it from the unwrapped angles (default: the trace's). Returns
+    (trace, Trimmed)."""
+    if trace.angles.size < 2:
+        return trace, Trimmed(trace.label, 0, 0, 0.0, 0.0)
+    d = trace.direction if direction is None else direction
+    t = _core.trim_overshoot(trace.angles, trace.readings, int(d), float(data_arc),
+                             float("nan") if feed_in is None else float(feed_in))
+    out = Trace(np.asarray(t["angles"]), np.asarray(t["readings"]), int(t["direction"]), trace.label)
+    return out, Trimmed(trace.label, int(t["removed_start"]), int(t["removed_end"]), float(t["arc_start"]),
+                        float(t["arc_end"]))
 
 
 class CircularResult:
     """ISO 230-4 values per run and the least-squares diagnosis."""
 
-    def __init__(self, core, plane: str, feed: Optional[float], traces: list):
+    def __init__(self, core, plane: str, feed: Optional[float], traces: list, trimmed: Sequence = (),
+                 machine: Optional[str] = None, date: Optional[str] = None):
         self._core = core
         self.plane = plane
         self.feed = feed
         self.traces = traces
+        #: what overshoot trimming removed, per run that had feed-in/out arcs
+        self.trimmed: list = list(trimmed)
+        self.machine = machine
+        self.date = date
         self.nominal_radius: float = core.nominal_radius
         self.runs = list(core.runs)
         self.hysteresis: Optional[float] = core.hysteresis if core.has_hysteresis else None
@@ -803,7 +863,42 @@ class CircularResult:
         self.diagnosis: dict = {n: float(v) for n, v in zip(d.names, np.asarray(d.values))}
         self.diagnosis_std: dict = {n: float(s) for n, s in zip(d.names, np.asarray(d.std))}
         self.not_fitted: list = list(d.not_fitted)
+        #: extended diagnoses left out as below the significance threshold ("name (z sigma)")
+        self.not_significant: list = list(d.not_significant)
         self.diagnosis_rms: float = d.rms
+        #: (diagnosis, contribution to circularity in mm), largest first
+        self.ranking: list = [(n, float(c)) for n, c in zip(d.ranking, np.asarray(d.contribution))]
+        #: pitches (mm) the cyclic errors were fitted with (0 = none), and those found by the search
+        self.cyclic_pitch: tuple = (0.0, 0.0)
+        self.cyclic_pitch_searched: dict = {}
+
+    @property
+    def samples(self) -> int:
+        return int(sum(t.angles.size for t in self.traces))
+
+    def header_line(self) -> str:
+        """Machine, date, feed, radius and sample count: the plot header."""
+        feed = f"{self.feed:g} mm/min" if self.feed else "not given"
+        return (f"machine {self.machine or 'not given'}  ·  date {self.date or 'not given'}  ·  feed {feed}  ·  "
+                f"radius {self.nominal_radius:g} mm  ·  {self.samples} samples")
+
+    def cyclic_amplitude(self, axis: int):
+        """(amplitude, std) in mm of the cyclic error of plane axis 1 or 2, or None."""
+        c, s = f"cyclic_error.{axis}.cos", f"cyclic_error.{axis}.sin"
+        if c not in self.diagnosis:
+            return None
+        a, b = self.diagnosis[c], self.diagnosis[s]
+        amp = math.hypot(a, b)
+        # first order; the two components are nearly uncorrelated (orthogonal sampling)
+        sd = math.hypot(a * self.diagnosis_std[c], b * self.diagnosis_std[s]) / amp if amp > 0 else \
+            max(self.diagnosis_std[c], self.diagnosis_std[s])
+        return amp, sd
+
+    def ranking_lines(self, top: Optional[int] = None) -> list:
+        a1, a2 = self.plane[0], self.plane[1]
+        rows = self.ranking[:top] if top else self.ranking
+        return [f"{i + 1:2d}. {_RANK_LABELS.get(n, n).format(a1=a1, a2=a2):<22}{c * 1e3:7.2f} µm"
+                for i, (n, c) in enumerate(rows)]
 
     @property
     def servo_mismatch_ms(self) -> Optional[float]:
@@ -834,7 +929,10 @@ class CircularResult:
     def report(self) -> str:
         a1, a2 = self.plane[0], self.plane[1]
         L = [f"Circular test in the {self.plane} plane, nominal radius {self.nominal_radius:g} mm "
-             f"(angles from +{a1} towards +{a2})", "", "  ISO 230-4:"]
+             f"(angles from +{a1} towards +{a2})", f"  {self.header_line()}"]
+        for t in self.trimmed:
+            L.append(f"  overshoot: {t.line()}")
+        L += ["", "  ISO 230-4:"]
         for r in self.runs:
             name = "CCW" if r.direction > 0 else "CW "
             L.append(f"    {name} circular deviation G {r.circular_deviation * 1e3:8.3f} µm   radial "
@@ -852,9 +950,22 @@ class CircularResult:
         if self.servo_mismatch_ms is not None:
             L.append(f"    {'servo mismatch as a lag difference':<52}{self.servo_mismatch_ms:>10.4f} ms "
                      f"(feed {self.feed:g} mm/min)")
+        for k, ax in ((1, a1), (2, a2)):
+            amp = self.cyclic_amplitude(k)
+            if amp is not None:
+                how = "found" if k in self.cyclic_pitch_searched else "given"
+                L.append(f"    {f'cyclic error {ax} amplitude':<52}{amp[0] * 1e3:>10.3f} ± {amp[1] * 1e3:.3f} µm "
+                         f"(pitch {self.cyclic_pitch[k - 1]:.4g} mm, {how})")
         for nf in self.not_fitted:
             L.append(f"    not fitted: {nf}")
+        if self.not_significant:
+            import textwrap
+
+            L += textwrap.wrap("not significant, left out: " + ", ".join(self.not_significant), 100,
+                               initial_indent="    ", subsequent_indent="      ")
         L.append(f"    residual rms after the diagnosis {self.diagnosis_rms * 1e3:.3f} µm")
+        L += ["", "  ranking by contribution to circularity (circular deviation of the term alone):"]
+        L += ["    " + line for line in self.ranking_lines()]
         return "\n".join(L)
 
     def to_dict(self) -> dict:
@@ -868,16 +979,31 @@ class CircularResult:
                 "hysteresis": self.hysteresis,
                 "diagnosis": {n: {"value": v, "std": self.diagnosis_std[n]} for n, v in self.diagnosis.items()},
                 "servo_mismatch_ms": self.servo_mismatch_ms, "not_fitted": self.not_fitted,
-                "diagnosis_rms": self.diagnosis_rms}
+                "not_significant": self.not_significant, "cyclic_pitch": list(self.cyclic_pitch),
+                "diagnosis_rms": self.diagnosis_rms,
+                "ranking": [{"diagnosis": n, "contribution": c} for n, c in self.ranking],
+                "overshoot_removed": [vars(t) for t in self.trimmed],
+                "machine": self.machine, "date": self.date, "samples": self.samples}
 
 
 def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
-                  feed: Optional[float] = None) -> CircularResult:
+                  feed: Optional[float] = None, *, trim: bool = True, data_arc: float = 360.0,
+                  feed_in: Optional[float] = None, reversal_spikes: bool = True, spike_width: float = 3.0,
+                  lateral_play: bool = True, straightness: bool = True, radial_play: bool = True,
+                  cyclic_pitch=None, significance: float = 3.0, machine=None,
+                  date: Optional[str] = None) -> CircularResult:
     """ISO 230-4 circular deviation, radial deviation, LSC centre and radius per
     run, hysteresis of a CW/CCW pair, and the least-squares diagnosis of
-    centre offset, scale mismatch, squareness, backlash per axis and servo
-    mismatch (C++ ``circular_test.h``). ``feed`` (mm/min) converts the servo
-    mismatch to a lag difference in ms."""
+    centre offset, scale mismatch, squareness, backlash per axis, servo
+    mismatch, reversal spikes, lateral play, straightness, radial play and
+    (with ``cyclic_pitch``, mm, one value or one per plane axis, or
+    ``"auto"`` to search the pitch) cyclic error, ranked by contribution to circularity (C++ ``circular_test.h``;
+    formulas in docs/dbb.md). Those five are kept only when above
+    ``significance`` standard uncertainties (0 keeps them all). ``feed`` (mm/min) converts the servo mismatch
+    to a lag difference in ms. ``trim``: runs sweeping more than
+    ``data_arc`` have their feed-in and feed-out arcs removed first
+    (:func:`trim_overshoot`). ``machine`` (a name or a Machine) and ``date``
+    go into the report and plot header."""
     runs = [r for r in runs if r is not None]
     for i, r in enumerate(runs):
         span = float(r.angles.max() - r.angles.min()) if r.angles.size else 0.0
@@ -887,12 +1013,228 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
             raise ValueError(f"run {i + 1} ({r.label or 'no label'}): angles sweep {span:.4g} degrees; a "
                              f"circular test needs a full circle (at least {MIN_CIRCLE_SWEEP:g} degrees "
                              f"here){hint}")
+    trimmed = []
+    if trim:
+        cut = []
+        for r in runs:
+            # The unwrapped angles decide the direction: a trace printed modulo
+            # 360 fools first-minus-last (a CW turn 0, 359.5, ..., 0.5 "rises").
+            t, info = trim_overshoot(r, data_arc, feed_in, direction=0)
+            if info.removed_start or info.removed_end:
+                trimmed.append(info)
+            cut.append(t)
+        runs = cut
     plane = plane.upper()
     if plane not in ("XY", "YZ", "ZX", "YX", "ZY", "XZ"):
         raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")
-    core = _core.circular_test([(r.angles, r.readings, int(r.direction)) for r in runs], float(radius),
-                               float(feed or 0.0))
-    return CircularResult(core, plane, feed, runs)
+    if cyclic_pitch is None:
+        pitches = [0.0, 0.0]
+    elif isinstance(cyclic_pitch, str) or np.ndim(cyclic_pitch) == 0:
+        pitches = [cyclic_pitch] * 2
+    else:
+        pitches = list(cyclic_pitch)
+        if len(pitches) != 2:
+            raise ValueError(f"cyclic_pitch: one pitch or one per plane axis (2), got {len(pitches)}")
+    for i, p in enumerate(pitches):
+        if isinstance(p, str):
+            if p.strip().lower() != "auto":
+                raise ValueError(f"cyclic_pitch: {p!r}; give mm or 'auto'")
+            pitches[i] = "auto"
+        else:
+            pitches[i] = float(p or 0.0)
+    opts = dict(reversal_spikes=bool(reversal_spikes), spike_width=float(spike_width),
+                lateral_play=bool(lateral_play), straightness=bool(straightness), radial_play=bool(radial_play))
+    packed = [(r.angles, r.readings, int(r.direction)) for r in runs]
+
+    def fit(p1, p2, sig):
+        return _core.circular_test(packed, float(radius), float(feed or 0.0), cyclic_pitch1=p1, cyclic_pitch2=p2,
+                                   significance=sig, **opts)
+
+    searched = {}
+    for k in (1, 2):
+        if pitches[k - 1] == "auto":
+            pitches[k - 1], searched[k] = _search_cyclic_pitch(runs, float(radius), k, fit)
+    core = fit(pitches[0], pitches[1], float(significance))
+    dropped = []
+    if searched and significance > 0:
+        # The best of many pitches passes a fixed threshold by chance far more
+        # often than one pitch given in advance: Bonferroni over the pitches tried.
+        # z of the searched term with every diagnosis in (the thresholded fit may have dropped it)
+        d = fit(pitches[0], pitches[1], 0.0).diagnosis
+        vals = dict(zip(d.names, np.asarray(d.values)))
+        sds = dict(zip(d.names, np.asarray(d.std)))
+        for k, n_tried in searched.items():
+            c, sn = f"cyclic_error.{k}.cos", f"cyclic_error.{k}.sin"
+            tail = math.erfc(significance / math.sqrt(2.0))
+            need = math.sqrt(-2.0 * math.log(tail / n_tried))
+            z = math.hypot(vals[c] / sds[c], vals[sn] / sds[sn]) if c in vals else 0.0
+            if z < need:
+                dropped.append(f"cyclic_error.{k} (pitch {pitches[k - 1]:.4g} mm searched among {n_tried}: "
+                               f"{z:.2g} sigma, {need:.2g} needed)")
+                pitches[k - 1] = 0.0
+        if dropped:
+            core = fit(pitches[0], pitches[1], float(significance))
+    name = machine.name if isinstance(machine, Machine) else machine
+    res = CircularResult(core, plane, feed, runs, trimmed, name, date)
+    res.not_significant += dropped
+    res.cyclic_pitch = tuple(pitches)
+    res.cyclic_pitch_searched = {k: (pitches[k - 1] or None) for k in searched}
+    return res
+
+
+def _search_cyclic_pitch(runs, radius: float, axis: int, fit) -> tuple:
+    """The pitch (mm) of the strongest periodic error of plane axis ``axis``
+    and the number of pitches tried. A periodogram of the readings, with the
+    low harmonics of the trace (the shape terms) removed, over pitches from
+    four sample spacings of the axis to R/2, evenly in 1/pitch at a step that
+    keeps the phase error over the diameter under a quarter turn; then the
+    full C++ fit refines the best one (least residual)."""
+    phis, resid, steps = [], [], []
+    for r in runs:
+        phi = np.radians(r.angles)
+        cols = [np.ones_like(phi)]
+        for k in range(1, 9):
+            cols += [np.cos(k * phi), np.sin(k * phi)]
+        B = np.column_stack(cols)
+        coef, *_ = np.linalg.lstsq(B, r.readings, rcond=None)
+        phis.append(phi)
+        resid.append(r.readings - B @ coef)
+        x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
+        steps.append(np.max(np.abs(np.diff(x))) if x.size > 1 else radius)
+    phi, res = np.concatenate(phis), np.concatenate(resid)
+    x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
+    proj = np.cos(phi) if axis == 1 else np.sin(phi)
+    p_min, p_max = 4.0 * max(steps), radius / 2.0
+    if not p_min < p_max:
+        raise ValueError(f"cyclic_pitch auto: the samples are {max(steps):.3g} mm apart along the axis; too "
+                         f"sparse to find a pitch below R/2 = {p_max:g} mm (sample more densely or give the pitch)")
+    dinv = 1.0 / (16.0 * radius)
+    inv = np.arange(1.0 / p_max, 1.0 / p_min + dinv, dinv)
+    best, power = None, -1.0
+    for chunk in np.array_split(inv, max(1, inv.size // 64)):
+        arg = 2 * np.pi * np.outer(chunk, x)
+        C, S = proj * np.cos(arg), proj * np.sin(arg)
+        cc, ss, cs = (C * C).sum(1), (S * S).sum(1), (C * S).sum(1)
+        cr, sr = C @ res, S @ res
+        det = cc * ss - cs * cs
+        pw = (ss * cr * cr - 2 * cs * cr * sr + cc * sr * sr) / np.where(det > 0, det, np.inf)
+        j = int(np.argmax(pw))
+        if pw[j] > power:
+            power, best = float(pw[j]), float(chunk[j])
+    fine = np.linspace(best - dinv, best + dinv, 9)
+    fine = fine[fine > 0]
+    rms = [fit(1.0 / f if axis == 1 else 0.0, 1.0 / f if axis == 2 else 0.0, 0.0).diagnosis.rms for f in fine]
+    return 1.0 / float(fine[int(np.argmin(rms))]), int(inv.size)
+
+
+@dataclass
+class VolumetricResult:
+    """Three planar circular tests (XY, YZ, ZX) evaluated together.
+
+    ``planes``: the :class:`CircularResult` per plane. Combined values:
+    ``circularity`` = the largest circular deviation G of any run of any
+    plane; ``volumetric`` = the width of the spherical shell, about each
+    plane's least-squares centre, that holds every sample of every plane
+    (max - min over all runs of |P - c| - R, R the nominal radius); and the
+    per-axis values that two planes share (each axis' backlash is seen in two
+    planes, the scale mismatches of the three planes close to zero)."""
+    planes: dict
+
+    def plane_rows(self) -> list:
+        rows = []
+        for p, r in self.planes.items():
+            g = max(float(run.circular_deviation) for run in r.runs)
+            rows.append({"plane": p, "circularity": g, "hysteresis": r.hysteresis,
+                         "top": r.ranking[0] if r.ranking else None, "samples": r.samples})
+        return rows
+
+    @property
+    def circularity(self) -> float:
+        return max(row["circularity"] for row in self.plane_rows())
+
+    @property
+    def volumetric(self) -> float:
+        lo, hi = math.inf, -math.inf
+        for r in self.planes.values():
+            for run in r.runs:
+                dev = np.asarray(run.radial) + (float(run.mean_radius) - r.nominal_radius)
+                lo, hi = min(lo, float(dev.min())), max(hi, float(dev.max()))
+        return hi - lo
+
+    def header_line(self) -> str:
+        """Machine, date, feed, radius and the sample count of each plane."""
+        r = next(iter(self.planes.values()))
+        feeds = sorted({x.feed for x in self.planes.values() if x.feed})
+        feed = ", ".join(f"{f:g}" for f in feeds) + " mm/min" if feeds else "not given"
+        n = ", ".join(f"{p} {x.samples}" for p, x in self.planes.items())
+        return (f"machine {r.machine or 'not given'}  ·  date {r.date or 'not given'}  ·  feed {feed}  ·  "
+                f"radius {r.nominal_radius:g} mm  ·  samples {n}")
+
+    def scale_closure(self) -> Optional[float]:
+        """(X-Y) + (Y-Z) + (Z-X) of the fitted scale mismatches: zero within
+        noise when the three planes are consistent (mm/mm); None unless all
+        three planes have it."""
+        total, n = 0.0, 0
+        for p, r in self.planes.items():
+            if "scale_mismatch" in r.diagnosis:
+                total += r.diagnosis["scale_mismatch"]
+                n += 1
+        return total if n == 3 else None
+
+    def axis_values(self) -> dict:
+        """Backlash of each linear axis from every plane that sees it: {axis: [(plane, value, std)]}."""
+        out: dict = {}
+        for p, r in self.planes.items():
+            for k in (1, 2):
+                n = f"backlash.{k}"
+                if n in r.diagnosis:
+                    out.setdefault(p[k - 1], []).append((p, r.diagnosis[n], r.diagnosis_std[n]))
+        return out
+
+    def report(self) -> str:
+        L = ["Volumetric evaluation of the planar circular tests", f"  {self.header_line()}", "",
+             f"  {'plane':<6}{'circularity G':>16}{'hysteresis H':>15}   largest contribution"]
+        for row in self.plane_rows():
+            p = row["plane"]
+            top = (f"{_RANK_LABELS.get(row['top'][0], row['top'][0]).format(a1=p[0], a2=p[1])} "
+                   f"{row['top'][1] * 1e3:.2f} µm") if row["top"] else "-"
+            h = f"{row['hysteresis'] * 1e3:12.2f} µm" if row["hysteresis"] is not None else f"{'-':>15}"
+            L.append(f"  {p:<6}{row['circularity'] * 1e3:13.2f} µm{h}   {top}")
+        L += ["", f"  combined circularity (largest G of any plane)   {self.circularity * 1e3:8.2f} µm",
+              f"  volumetric (shell holding every plane's trace)   {self.volumetric * 1e3:8.2f} µm"]
+        c = self.scale_closure()
+        if c is not None:
+            L.append(f"  scale mismatch closure (X-Y)+(Y-Z)+(Z-X)         {c * 1e6:8.2f} µm/m (0 when consistent)")
+        for ax, vals in sorted(self.axis_values().items()):
+            L.append(f"  backlash {ax}: " + ", ".join(f"{v * 1e3:+.2f} ± {s * 1e3:.2f} µm ({p})"
+                                                   for p, v, s in vals))
+        return "\n".join(L)
+
+    def to_dict(self) -> dict:
+        return {"planes": {p: r.to_dict() for p, r in self.planes.items()},
+                "circularity": self.circularity, "volumetric": self.volumetric,
+                "scale_closure": self.scale_closure()}
+
+
+def volumetric_evaluation(results: Mapping[str, CircularResult]) -> VolumetricResult:
+    """Combine circular tests of the XY, YZ and ZX planes (keys: the planes).
+    The planes must share the nominal radius: the volumetric shell compares
+    their radial deviations."""
+    planes = {}
+    for p, r in results.items():
+        key = str(p).upper()
+        if key not in ("XY", "YZ", "ZX"):
+            raise ValueError(f"volumetric evaluation: plane {p!r}; give XY, YZ and ZX")
+        if r.plane.upper() != key:
+            raise ValueError(f"volumetric evaluation: the result given for {key} is of plane {r.plane}")
+        planes[key] = r
+    if len(planes) < 2:
+        raise ValueError(f"volumetric evaluation: {len(planes)} plane(s); give at least two of XY, YZ, ZX")
+    radii = {r.nominal_radius for r in planes.values()}
+    if max(radii) - min(radii) > 1e-9:
+        raise ValueError(f"volumetric evaluation: the planes were run with different radii {sorted(radii)}; "
+                         "the volumetric shell needs one radius")
+    return VolumetricResult(planes)
 
 
 def planar_plan(machine: Union[Machine, Mapping], plane: str = "XY", radius: float = 100.0,

@@ -3,6 +3,7 @@
   jiang     Jiang & Cripps four-step test of a rotary pair (and the general engine)
   wang      Wang et al. simultaneous A/C path: Table 1, patterns, identification
   circular  planar circular test: ISO 230-4 values and diagnosis
+  volumetric  circular tests of the XY, YZ and ZX planes, by plane and combined
   plot      polar plot of traces (CSV or a dataset setup)
 
 Errors are one line on stderr (the caller, cli.main, prints them).
@@ -258,6 +259,44 @@ def _wang(args) -> int:
 
 
 # ---- circular --------------------------------------------------------------
+def _diagnosis_options(args) -> dict:
+    pitch = None
+    if args.cyclic_pitch:
+        parts = [p.strip() for p in args.cyclic_pitch.split(",")]
+        try:
+            vals = ["auto" if p.lower() == "auto" else (float(p) if p else 0.0) for p in parts]
+        except ValueError:
+            raise ValueError(f"--cyclic-pitch: {args.cyclic_pitch!r}; give mm or 'auto', one value or two "
+                             "(axis 1,axis 2)")
+        if len(vals) not in (1, 2) or any(v != "auto" and (not (v >= 0) or v == float("inf")) for v in vals):
+            raise ValueError(f"--cyclic-pitch: {args.cyclic_pitch!r}; one or two pitches >= 0 mm or 'auto'")
+        pitch = vals[0] if len(vals) == 1 else vals
+    machine = args.machine_name
+    if machine is None and getattr(args, "machine", None):
+        machine = _machine(args.machine).name
+    return {"trim": not args.no_trim, "feed_in": args.feed_in, "spike_width": args.spike_width,
+            "cyclic_pitch": pitch, "significance": 0.0 if args.all_diagnoses else 3.0,
+            "machine": machine, "date": args.date}
+
+
+def _add_diagnosis_options(p) -> None:
+    from ..cli import POSITIVE, _float_type
+
+    p.add_argument("--cyclic-pitch", metavar="MM[,MM]",
+                   help="pitch of the cyclic error to fit (ball-screw or scale pitch), one for both plane axes "
+                   "or one per axis; 'auto' searches it; default: not fitted")
+    p.add_argument("--spike-width", type=POSITIVE, default=3.0,
+                   help="decay of a reversal spike, deg of path angle (default 3)")
+    p.add_argument("--all-diagnoses", action="store_true",
+                   help="keep every diagnosis, also those below 3 standard uncertainties")
+    p.add_argument("--no-trim", action="store_true",
+                   help="keep feed-in/feed-out (overshoot) arcs beyond 360 deg instead of removing them")
+    p.add_argument("--feed-in", type=_float_type(0.0), default=None,
+                   help="deg of feed-in arc to remove at the start (default: half the sweep beyond 360 deg)")
+    p.add_argument("--machine-name", help="machine name for the report and plot header")
+    p.add_argument("--date", help="test date for the report and plot header")
+
+
 def _circular(args) -> int:
     from . import dbb
     from ..dataset import load_dataset
@@ -289,7 +328,7 @@ def _circular(args) -> int:
             traces.append(t)
     if len(traces) > 2:
         raise ValueError(f"{len(traces)} runs; give one or two (CW and CCW)")
-    res = dbb.circular_test(traces, args.radius, args.plane, args.feed)
+    res = dbb.circular_test(traces, args.radius, args.plane, args.feed, **_diagnosis_options(args))
     print(res.report())
     if args.out:
         _write_json(res.to_dict(), args.out)
@@ -308,6 +347,58 @@ def _circular(args) -> int:
     values.update({f"diagnosis {k}": v for k, v in res.diagnosis.items()})
     std = {f"diagnosis {k}": v for k, v in res.diagnosis_std.items()}
     return fit_status("dbb circular", [("", _values_verdict(values, std))], args.force, (args.out, args.plot))
+
+
+# ---- volumetric --------------------------------------------------------------
+def _volumetric(args) -> int:
+    from . import dbb
+    from ..simulation import simulate
+
+    results = {}
+    opts = _diagnosis_options(args)
+    if args.simulate is not None:
+        m = _machine(args.machine)
+        _check_step(args.step, 360.0)
+        for plane in ("XY", "YZ", "ZX"):
+            plan = dbb.planar_plan(m, plane, args.radius, step=args.step, setup_prefix=plane)
+            ds = simulate(m, plan, errors=_values(args.simulate, "--simulate"), sigma={"dbb": args.sigma},
+                          seed=args.seed)
+            traces = []
+            for sid, label in ((f"{plane}-", "CW"), (f"{plane}+", "CCW")):
+                t = dbb.trace_from_dataset(ds, sid)
+                t.label = label
+                traces.append(t)
+            results[plane] = dbb.circular_test(traces, args.radius, plane, args.feed, **opts)
+    else:
+        for plane in ("XY", "YZ", "ZX"):
+            paths = getattr(args, plane.lower()) or []
+            if len(paths) > 2:
+                raise ValueError(f"--{plane.lower()}: {len(paths)} files; give one or two (CW and CCW)")
+            traces = []
+            for path in paths:
+                t = dbb.read_trace_csv(path)
+                t.label = ("CCW" if t.direction > 0 else "CW") + f" ({os.path.basename(path)})"
+                traces.append(t)
+            if traces:
+                results[plane] = dbb.circular_test(traces, args.radius, plane, args.feed, **opts)
+    if len(results) < 2:
+        raise ValueError(f"{len(results)} plane(s) given; give the runs of two or three planes (--xy, --yz, --zx "
+                         "CSV files) or --simulate with --machine")
+    vol = dbb.volumetric_evaluation(results)
+    print(vol.report())
+    if args.out:
+        _write_json(vol.to_dict(), args.out)
+        print(f"\nresult written to {args.out}")
+    if args.plot:
+        from ..report.polar import plot_volumetric
+
+        plot_volumetric(vol, args.plot)
+        print(f"polar plot written to {args.plot}")
+    from ..cli import _values_verdict, fit_status
+
+    values = {f"{p} diagnosis {k}": v for p, r in results.items() for k, v in r.diagnosis.items()}
+    std = {f"{p} diagnosis {k}": r.diagnosis_std[k] for p, r in results.items() for k in r.diagnosis}
+    return fit_status("dbb volumetric", [("", _values_verdict(values, std))], args.force, (args.out, args.plot))
 
 
 # ---- plot ------------------------------------------------------------------
@@ -368,7 +459,7 @@ def register(sub) -> None:
 
     FINITE = _float_type()
     RD = argparse.RawDescriptionHelpFormatter
-    pd = sub.add_parser("dbb", help="double ball bar tests: jiang, wang, circular, plot", formatter_class=RD,
+    pd = sub.add_parser("dbb", help="double ball bar tests: jiang, wang, circular, volumetric, plot", formatter_class=RD,
                         description="Double ball bar tests (docs/dbb.md).",
                         epilog="example:\n  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003")
     dsub = pd.add_subparsers(dest="dbb_command", required=True)
@@ -447,7 +538,9 @@ def register(sub) -> None:
     pc = dsub.add_parser("circular", formatter_class=RD, help="planar circular test (ISO 230-4, diagnosis)",
                          description="ISO 230-4 circular deviation G, radial deviation F, hysteresis H, "
                          "least-squares centre and radius, and a least-squares diagnosis of centre offset, "
-                         "scale mismatch, squareness, backlash per axis and servo mismatch. Input: CSV "
+                         "scale mismatch, squareness, backlash per axis, servo mismatch, reversal spikes, "
+                         "lateral play, straightness, radial play and cyclic error, ranked by contribution "
+                         "to circularity. Feed-in/feed-out arcs beyond 360 deg are removed first. Input: CSV "
                          "files (angle deg, reading mm; CW and/or CCW), a dataset, or a simulation.",
                          epilog="examples:\n"
                          "  fivecal dbb circular cw.csv ccw.csv --radius 100 --plane XY --feed 1000 --plot xy.png\n"
@@ -467,7 +560,35 @@ def register(sub) -> None:
     pc.add_argument("--out", help="write the result JSON here")
     pc.add_argument("--plot", help="write the CW/CCW polar plot (PNG)")
     pc.add_argument("--force", action="store_true", help=_FORCE_HELP)
+    _add_diagnosis_options(pc)
     pc.set_defaults(func=_circular)
+
+    pv = dsub.add_parser("volumetric", formatter_class=RD,
+                         help="three-plane circular tests (XY, YZ, ZX): results by plane and combined",
+                         description="Circular tests of two or three planes with one radius, each analysed "
+                         "as 'dbb circular' does, then combined: the largest circular deviation, the width of "
+                         "the shell holding every plane's centred trace (volumetric), the scale mismatch "
+                         "closure and each axis' backlash from the planes that see it.",
+                         epilog="examples:\n"
+                         "  fivecal dbb volumetric --xy xy_cw.csv xy_ccw.csv --yz yz_cw.csv yz_ccw.csv "
+                         "--zx zx_cw.csv zx_ccw.csv --radius 100 --plot vol.png\n"
+                         "  fivecal dbb volumetric --machine c600u.json --simulate EXX1=2e-5,EZZb=0.002 "
+                         "--radius 100")
+    for plane in ("xy", "yz", "zx"):
+        pv.add_argument(f"--{plane}", nargs="+", metavar="CSV",
+                        help=f"{plane.upper()} runs (angle, reading): one or two CSV files")
+    pv.add_argument("--radius", type=POSITIVE, required=True, help="nominal radius = bar length (mm)")
+    pv.add_argument("--feed", type=POSITIVE, default=None, help="feed (mm/min)")
+    pv.add_argument("--machine", help="machine JSON for --simulate")
+    pv.add_argument("--simulate", metavar="ERRORS", help="simulate CW and CCW runs in the three planes")
+    pv.add_argument("--sigma", type=SIGMA, default=0.0003, help="simulated reading noise, mm")
+    pv.add_argument("--seed", type=SEED, default=1, help="random seed, 0 <= seed < 2^64 (default 1)")
+    pv.add_argument("--step", type=POSITIVE, default=1.0, help="deg between simulated samples")
+    pv.add_argument("--out", help="write the result JSON here")
+    pv.add_argument("--plot", help="write the three polar plots (PNG)")
+    pv.add_argument("--force", action="store_true", help=_FORCE_HELP)
+    _add_diagnosis_options(pv)
+    pv.set_defaults(func=_volumetric)
 
     pp = dsub.add_parser("plot", formatter_class=RD, help="polar plot of DBB traces",
                          description="Polar plot of one or more traces: CSV files (angle deg, reading mm) "

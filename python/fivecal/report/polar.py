@@ -164,8 +164,10 @@ def _arc(traces) -> Optional[tuple]:
 
 def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale: Optional[float] = None,
                  annotations: Sequence[str] = (), plane: Sequence[str] = ("X", "Y"), arc="auto",
-                 colors=None):
-    """The matplotlib Figure of :func:`plot_polar` (not saved)."""
+                 colors=None, header: str = ""):
+    """The matplotlib Figure of :func:`plot_polar` (not saved). ``header``:
+    a line under the title (the circular test's machine, date, feed, radius
+    and sample count)."""
     plt = _pyplot()
     name = plane_name(plane)
     traces = [_as_trace(t) for t in traces]
@@ -174,21 +176,28 @@ def polar_figure(traces: Iterable, nominal_radius: float, title: str = "", scale
     s = draw_polar(ax, traces, nominal_radius, scale, name, "", _arc(traces) if arc == "auto" else arc, colors)
     M = magnification(nominal_radius, s)
     fig.suptitle(title, fontsize=13, x=0.03, ha="left", y=0.98)
-    fig.text(0.03, 0.915, f"plane {name}  ·  scale {s:g} µm/div  ·  deviations magnified ×{M:,.0f}  ·  "
+    if header:
+        # the ballbar report's test header; the figure keeps it for readers and tests
+        fig.fivecal_header = header
+        fig.text(0.03, 0.928, header, fontsize=9.5, weight="bold", color="#222")
+    top = 0.895 if header else 0.915
+    fig.text(0.03, top, f"plane {name}  ·  scale {s:g} µm/div  ·  deviations magnified ×{M:,.0f}  ·  "
              f"nominal radius {nominal_radius:g} mm", fontsize=9, color="#333")
-    fig.text(0.03, 0.88, angle_convention(name), fontsize=9, color="#333")
+    fig.text(0.03, top - 0.035, angle_convention(name), fontsize=9, color="#333")
     y = 0.80
+    # long panels (the full ballbar diagnosis) close up rather than run off the page
+    dy = min(0.031, 0.78 / max(len(annotations), 1))
     for line in annotations:
         bold = line.endswith(":") or line.startswith("## ")
-        fig.text(0.62, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
+        fig.text(0.665, y, line[3:] if line.startswith("## ") else line, fontsize=8.8, family="monospace",
                  weight="bold" if bold else "normal")
-        y -= 0.031
+        y -= dy
     return fig
 
 
 def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = "",
                scale: Optional[float] = None, annotations: Sequence[str] = (),
-               plane: Sequence[str] = ("X", "Y"), arc="auto", colors=None) -> str:
+               plane: Sequence[str] = ("X", "Y"), arc="auto", colors=None, header: str = "") -> str:
     """One polar plot with an annotation panel; writes a PNG and returns its path.
 
     ``traces``: :class:`fivecal.procedures.dbb.Trace` objects (labels starting with CW /
@@ -197,7 +206,7 @@ def plot_polar(traces: Iterable, path: str, nominal_radius: float, title: str = 
     ``plane``: the plane of the traces (angles as :func:`angle_convention`
     states, which the plot prints).
     """
-    fig = polar_figure(traces, nominal_radius, title, scale, annotations, plane, arc, colors)
+    fig = polar_figure(traces, nominal_radius, title, scale, annotations, plane, arc, colors, header)
     save_figure(fig, path, dpi=110)
     return path
 
@@ -267,16 +276,27 @@ def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols
     return path
 
 
-def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
-    """CW/CCW polar plot of a :class:`fivecal.procedures.dbb.CircularResult` with the
-    ISO 230-4 values and the diagnosis beside it."""
+def circular_test_figure(result, title: Optional[str] = None):
+    """The matplotlib Figure of :func:`plot_circular_test` (not saved)."""
+    traces, notes, a1, a2 = _circular_parts(result)
+    return polar_figure(traces, result.nominal_radius,
+                        title or f"Circular test {result.plane}, R {result.nominal_radius:g} mm",
+                        annotations=notes, plane=(a1, a2), header=result.header_line())
+
+
+def _circular_parts(result):
     traces = []
     for t in result.traces:
         label = t.label or ("CCW" if t.direction > 0 else "CW")
         if not label.upper().startswith(("CW", "CCW")):
             label = ("CCW " if t.direction > 0 else "CW ") + label
         traces.append(Trace(t.angles, t.readings, t.direction, label))
-    notes = ["ISO 230-4:"] + ["  " + l for l in result.summary_lines()]
+    notes = []
+    trimmed = getattr(result, "trimmed", [])
+    if trimmed:
+        notes += ["overshoot removed: " + ", ".join(f"{t.label or 'run'} {t.arc_start:.0f}°+{t.arc_end:.0f}°"
+                                                     for t in trimmed), ""]
+    notes += ["ISO 230-4:"] + ["  " + l for l in result.summary_lines()]
     notes += ["", "diagnosis (least squares):"]
     a1, a2 = result.plane[0], result.plane[1]
     rows = [("scale_mismatch", f"scale mismatch {a1}-{a2}", 1e6, "µm/m"),
@@ -286,15 +306,59 @@ def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
             ("servo_mismatch", "servo mismatch", 1e3, "µm"),
             ("centre.1", f"centre offset {a1}", 1e3, "µm"),
             ("centre.2", f"centre offset {a2}", 1e3, "µm")]
+    # the extended diagnoses that survived the significance test (few, usually none)
+    for k, ax, other in ((1, a1, a2), (2, a2, a1)):
+        rows += [(f"reversal_spike.{k}", f"reversal spike {ax}", 1e3, "µm"),
+                 (f"lateral_play.{k}", f"lateral play {ax}", 1e3, "µm"),
+                 (f"straightness.{k}", f"straightness {ax}", 1e3, "µm"),
+                 (f"radial_play.{k}", f"radial play {ax}", 1e3, "µm")]
     for n, label, f, unit in rows:
         if n in result.diagnosis:
             notes.append(f"  {label:<18}{result.diagnosis[n] * f:+8.2f} ±{result.diagnosis_std[n] * f:5.2f} {unit}")
             if n == "servo_mismatch" and result.servo_mismatch_ms is not None:
                 notes.append(f"  {'  = lag difference':<18}{result.servo_mismatch_ms:+8.3f} ms")
+    for k, ax in ((1, a1), (2, a2)):
+        amp = result.cyclic_amplitude(k) if hasattr(result, "cyclic_amplitude") else None
+        if amp is not None:
+            notes.append(f"  {f'cyclic error {ax}':<18}{amp[0] * 1e3:8.2f} ±{amp[1] * 1e3:5.2f} µm "
+                         f"({result.cyclic_pitch[k - 1]:.3g} mm)")
     notes.append(f"  residual rms {result.diagnosis_rms * 1e3:.2f} µm")
-    return plot_polar(traces, path, result.nominal_radius,
-                      title or f"Circular test {result.plane}, R {result.nominal_radius:g} mm",
-                      annotations=notes, plane=(a1, a2))
+    ranking = getattr(result, "ranking", [])
+    if ranking:
+        notes += ["", "contribution to circularity:"] + ["  " + l for l in result.ranking_lines(top=5)]
+    return traces, notes, a1, a2
+
+
+def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
+    """CW/CCW polar plot of a :class:`fivecal.procedures.dbb.CircularResult`: a
+    header with machine, date, feed, radius and sample count, the ISO 230-4
+    values, the diagnosis and the five largest contributions beside it."""
+    fig = circular_test_figure(result, title)
+    save_figure(fig, path, dpi=110)
+    return path
+
+
+def plot_volumetric(vol, path: str, title: str = "Volumetric evaluation: three-plane circular tests") -> str:
+    """One panel per plane of a :class:`fivecal.procedures.dbb.VolumetricResult`
+    (common ring spacing, so the planes compare at a glance) and the combined
+    values underneath."""
+    panels = []
+    big = 0.0
+    for p, r in vol.planes.items():
+        for t in r.traces:
+            big = max(big, float(np.nanmax(np.abs(t.readings))) * 1e3)
+    s = nice_scale(big)
+    for p, r in vol.planes.items():
+        traces, _, a1, a2 = _circular_parts(r)
+        g = max(float(run.circular_deviation) for run in r.runs)
+        notes = [f"G {g * 1e3:.2f} µm" + (f", H {r.hysteresis * 1e3:.2f} µm" if r.hysteresis is not None else "")]
+        notes += r.ranking_lines(top=2)
+        panels.append({"traces": traces, "nominal_radius": r.nominal_radius, "plane": (a1, a2), "scale": s,
+                       "annotations": notes})
+    # the leading blank line keeps the panels' notes clear of the footer
+    footer = (f"\n{vol.header_line()}\ncombined circularity {vol.circularity * 1e3:.2f} µm (largest G)  ·  "
+              f"volumetric {vol.volumetric * 1e3:.2f} µm (shell holding every plane's trace)")
+    return plot_polar_grid(panels, path, title, ncols=3, footer=footer)
 
 
 def plot_four_step(result, path: str) -> str:

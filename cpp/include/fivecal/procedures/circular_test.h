@@ -46,13 +46,47 @@
 //    b1 ahead of its command in the direction it moves; the step seen at the
 //    reversal is 2 b1; b < 0 is the usual lagging lost motion). The motion
 //    signs come from the recorded order of the samples.
-// Parameters the data cannot carry (servo mismatch from one direction only;
-// a backlash whose axis never reverses) are left out of the fit and flagged.
+// The diagnoses ballbar users know beyond these (docs/dbb.md, "Planar
+// circular tests"), each a linear term of the same fit; e_k is the position
+// error of axis k, x1 = R cos phi, x2 = R sin phi about the pivot, and the
+// radial deviation is d = e1 cos phi + e2 sin phi to first order:
+//  * reversal spike of axis k (height p_k, outward > 0): after axis k
+//    reverses at phi_r (axis 1: 0/180 deg, axis 2: 90/270 deg) it sticks
+//    and catches up with a decay over the path angle w (spike_width):
+//    e1 = p1 sgn(cos phi_r) exp(-dphi / w), dphi = angle travelled since
+//    phi_r; column cos phi sgn(cos phi_r) exp(-dphi/w) (sin for axis 2).
+//  * lateral play of axis k (L_k): the carriage of the other axis shifts
+//    along axis k (perpendicular to its own travel) when that other axis
+//    reverses: e1 = L1 sgn(dx2/dt) -> d = s L1 |cos phi|,
+//    e2 = L2 sgn(dx1/dt) -> d = -s L2 |sin phi|. (A shift along the
+//    reversing axis itself would be backlash.) Needs both directions: with
+//    one, s|cos| is radial play.
+//  * cyclic error of axis k with pitch p (cyclic_pitch, mm):
+//    e1 = a1 cos(2 pi x1 / p) + b1 sin(2 pi x1 / p); amplitude sqrt(a^2+b^2).
+//  * straightness of axis k (quadratic bow, peak to valley S_k over the
+//    test diameter, the ends of the travel towards + of the other axis):
+//    e2 = S1 (x1 / R)^2 -> d = S1 sin phi cos^2 phi; e1 = S2 (x2/R)^2 ->
+//    d = S2 cos phi sin^2 phi (the constant part is a centre offset).
+//  * radial play along axis k (rho_k): play taken up in the direction of the
+//    outward (centrifugal) load: e1 = rho1 sgn(x1) -> d = rho1 |cos phi|,
+//    e2 = rho2 sgn(x2) -> d = rho2 |sin phi|; the same in both directions.
+// Extended diagnoses below options.significance standard uncertainties are
+// dropped one by one (backward elimination), so a term the machine does not
+// show does not cost the others precision.
+// Ranking: each diagnosis' contribution to circularity is the circular
+// deviation (range about its own least-squares circle, as G) of the fitted
+// term's radial deviation alone, the largest over the runs; centre and radius
+// are set-up and are not ranked.
+// Parameters the data cannot carry (servo mismatch and lateral play from one
+// direction only; a backlash, lateral play or spike whose axis never reverses
+// inside the data; any term the samples cannot separate from the others) are
+// left out of the fit and flagged.
 // Standard uncertainties: s^2 (A^T A)^-1 with s^2 = RSS / (n - p).
 #ifndef FIVECAL_CIRCULAR_TEST_H_
 #define FIVECAL_CIRCULAR_TEST_H_
 
 #include <Eigen/Core>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -63,6 +97,42 @@ struct CircularRun {
   Eigen::VectorXd readings;  // bar length - R (mm)
   int direction = 0;         // +1 CCW, -1 CW, 0 = from the angles
 };
+
+// Which diagnoses to fit beyond the ISO/base set (centre, radius, scale
+// mismatch, squareness, servo mismatch, backlash).
+struct CircularDiagnosisOptions {
+  bool reversal_spikes = true;
+  double spike_width = 3.0;  // deg of path angle: the decay of a reversal spike
+  bool lateral_play = true;
+  bool straightness = true;
+  bool radial_play = true;
+  // Cyclic error pitch per axis (mm); 0 = not fitted.
+  double cyclic_pitch1 = 0.0, cyclic_pitch2 = 0.0;
+  // An extended diagnosis whose value is below this many standard
+  // uncertainties is dropped (least significant first, refitting after
+  // each) and listed in not_significant; 0 keeps every one.
+  double significance = 3.0;
+};
+
+// Feed-in and feed-out (overshoot) arcs removed from a recorded run.
+struct TrimmedRun {
+  CircularRun run;           // the data arc
+  int removed_start = 0;     // samples of the feed-in arc
+  int removed_end = 0;       // samples of the feed-out arc
+  double arc_start = 0.0;    // deg swept by the removed feed-in / feed-out
+  double arc_end = 0.0;
+  double data_first = 0.0, data_last = 0.0;  // unwrapped angles kept (deg)
+};
+
+// Detects the overshoot arcs by the sweep beyond data_arc (deg, 360 for a full
+// circle): the angles are unwrapped (steps under 180 deg), samples going
+// against the run's direction at either end are removed, and what the sweep
+// exceeds data_arc by is removed from both ends, feed_in deg at the start
+// (NaN = half the excess each side, the symmetric arcs ballbar programs
+// use). A run sweeping no more than data_arc + tolerance is returned as is.
+TrimmedRun TrimOvershoot(const CircularRun& run, double data_arc = 360.0,
+                         double feed_in = std::numeric_limits<double>::quiet_NaN(),
+                         double tolerance = 1e-6);
 
 struct CircularRunResult {
   int direction = 0;
@@ -75,10 +145,17 @@ struct CircularRunResult {
 
 struct CircularDiagnosis {
   std::vector<std::string> names;  // radius, centre.1, centre.2, scale_mismatch, squareness,
-                                   // servo_mismatch, backlash.1, backlash.2 (those fitted)
+                                   // servo_mismatch, backlash.k, reversal_spike.k, lateral_play.k,
+                                   // straightness.k, radial_play.k, cyclic_error.k.cos|sin
+                                   // (k = 1, 2; those fitted)
   Eigen::VectorXd values, std;     // mm, mm/mm, rad
   std::vector<std::string> not_fitted;  // with the reason in the text
+  std::vector<std::string> not_significant;  // extended diagnoses dropped below options.significance
   double rms = 0.0;                // residual after the fit (mm)
+  // Diagnoses (a name, or the group "cyclic_error.k" of its .cos/.sin
+  // parameters) in decreasing contribution to circularity (mm).
+  std::vector<std::string> ranking;
+  Eigen::VectorXd contribution;
   double Get(const std::string& name) const;
   bool Has(const std::string& name) const;
 };
@@ -94,7 +171,8 @@ struct CircularTestResult {
 // runs: one or two (CW and CCW); throws std::invalid_argument naming the run
 // and field on bad input.
 CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, double nominal_radius,
-                                       double feed = 0.0 /* mm/min, 0 = unknown */);
+                                       double feed = 0.0 /* mm/min, 0 = unknown */,
+                                       const CircularDiagnosisOptions& options = CircularDiagnosisOptions());
 
 // Fourier coefficients of a trace by least squares on
 // [1, cos phi, sin phi, ..., cos K phi, sin K phi] (works for uneven sampling;
