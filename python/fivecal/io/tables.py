@@ -11,6 +11,9 @@ One row per observation, a header row naming the columns. Four kinds:
   axes may also come as a joint layout (``joint``, ``position``: one joint
   moved, the others at home), and the instrument's nominal pose from a rigid
   alignment (:mod:`fivecal.io.alignment`) when none is given;
+* ``pose`` (alias ``6d``): a 6D tracker or camera fiducial, as ``point``
+  plus the measured orientation ``measured_rx|ry|rz`` (rotation vector, rad
+  unless the header names ``deg``);
 * ``fivecal``: rows already in fivecal's terms, with a ``type`` column.
 
 Units come from the header (``reading_um``, ``B_rad``, ``dx [um]``) through
@@ -33,9 +36,11 @@ from .. import plausibility
 from .. import units as _units
 from ..machine import Machine, RadiansWarning
 
-KINDS = ("probing", "dbb", "ball3d", "point", "fivecal")
+KINDS = ("probing", "dbb", "ball3d", "point", "pose", "fivecal")
 ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal",
-           "tracker": "point"}
+           "tracker": "point", "6d": "pose"}
+#: the fixed-instrument kinds: a target followed by an instrument standing in F
+_FIXED = ("point", "pose")
 
 _VECTORS = {"tool_ball": ("tool_ball_x", "tool_ball_y", "tool_ball_z"),
             "table_ball": ("table_ball_x", "table_ball_y", "table_ball_z")}
@@ -62,6 +67,14 @@ _FIELDS["point"] = {"id", "sigma"} | set(_MEASURED_XYZ) | _JOINT_FIELDS
 _REQUIRED["point"] = _MEASURED_XYZ
 _LENGTH_FIELDS |= set(_MEASURED_XYZ)
 _MEASURED |= set(_MEASURED_XYZ)
+# pose: the point's columns and the measured orientation, a rotation vector
+# (rad unless the header says otherwise). A pose's rows differ in unit, so a
+# single sigma column cannot weigh them: its noise is the kind's default or
+# the dataset's instruments entry.
+_MEASURED_ROT = ("measured_rx", "measured_ry", "measured_rz")
+_SHORT.update({"mrx": "measured_rx", "mry": "measured_ry", "mrz": "measured_rz"})
+_FIELDS["pose"] = (_FIELDS["point"] - {"sigma"}) | set(_MEASURED_ROT)
+_REQUIRED["pose"] = _MEASURED_XYZ + _MEASURED_ROT
 _JOINT_TYPES = {"prismatic": "linear", "linear": "linear", "translational": "linear",
                 "revolute": "rotary", "rotary": "rotary", "rotational": "rotary"}
 _ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
@@ -173,7 +186,7 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
             raise ValueError(f"{where}: direction column of unknown axis '{letter}' "
                              f"(the machine's axes: {_axis_list(machine)})")
         return "dir_" + letter
-    if kind == "point" and low in _SHORT:
+    if kind in _FIXED and low in _SHORT and _SHORT[low] in _FIELDS[kind]:
         return _SHORT[low]
     if low in _FIELDS[kind]:
         return low
@@ -214,10 +227,14 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
             raise ValueError(f"{where}: columns '{seen[field]}' and '{h.strip()}' both give {field}")
         seen[field] = h.strip()
         c = _Column(i, h.strip(), field, unit)
-        quantity = "angle" if len(field) == 1 and machine.is_rotary(field) else \
+        quantity = "angle" if (len(field) == 1 and machine.is_rotary(field)) or field in _MEASURED_ROT else \
             "length" if field in _LENGTH_FIELDS or len(field) == 1 else None
         if quantity and unit is not None:
             c.factor, _ = _units.column_unit(h, quantity, where)
+            if field in _MEASURED_ROT:
+                c.factor *= math.pi / 180.0  # angle columns scale to degrees; a rotation vector is in rad
+        elif field in _MEASURED_ROT:
+            c.factor = 1.0  # a rotation vector is in rad unless its header says otherwise
         elif quantity == "angle":
             c.factor = _units.ANGLE_SUFFIXES[angle_unit or "deg"]
         elif quantity == "length":
@@ -254,6 +271,7 @@ def _expected(machine: Machine, kind: str) -> str:
     axes = _axis_list(machine, skip_s=True)
     rest = {"probing": "target [approach] [id]", "dbb": "reading_um [id]",
             "ball3d": "dx_um dy_um dz_um [id]", "point": "measured_x measured_y measured_z [id] [sigma]",
+            "pose": "measured_x measured_y measured_z measured_rx measured_ry measured_rz [id]",
             "fivecal": "type target|setup reading|dx dy dz [id]"}[kind]
     return f"the columns {axes} {rest}"
 
@@ -304,7 +322,7 @@ def read_sidecar(path: Union[str, os.PathLike]) -> dict:
 
 
 _POINT_OPTIONS = ("instrument", "target", "target_point", "instrument_origin", "instrument_angles", "align",
-                  "header", "joints")
+                  "header", "joints", "target_rotation")
 
 
 def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine, Mapping, str], *,
@@ -314,7 +332,8 @@ def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine,
                setup: Optional[str] = None, length: Optional[float] = None, tool_ball=None, table_ball=None,
                sigma: Optional[float] = None, header: Optional[Sequence[str]] = None,
                instrument: Optional[str] = None, target: Optional[str] = None, target_point=None,
-               instrument_origin=None, instrument_angles=None, align: Optional[bool] = None) -> dict:
+               instrument_origin=None, instrument_angles=None, align: Optional[bool] = None,
+               target_rotation=None) -> dict:
     """Read an instrument table into a dataset dict (docs/formats.md); see
     docs/import.md for each kind's columns.
 
@@ -325,7 +344,8 @@ def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine,
     ``setup``, ``length``, ``tool_ball``, ``table_ball``, ``sigma``,
     ``header``, and for ``point`` ``instrument``, ``target``,
     ``target_point``, ``instrument_origin``, ``instrument_angles`` (deg),
-    ``align`` and ``joints``; the keyword arguments of the same names
+    ``align`` and ``joints``, for ``pose`` also ``target_rotation`` (rad);
+    the keyword arguments of the same names
     override it. ``units``: the unit of
     measured columns whose header names none (``um`` or ``mm``, the
     default); ``angle_units``: of rotary axis columns (``deg``, the default,
@@ -347,13 +367,13 @@ def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine,
                  ignore=ignore, delimiter=delimiter, decimal=decimal, setup=setup, length=length,
                  tool_ball=tool_ball, table_ball=table_ball, sigma=sigma, header=header, instrument=instrument,
                  target=target, target_point=target_point, instrument_origin=instrument_origin,
-                 instrument_angles=instrument_angles, align=align)[0]
+                 instrument_angles=instrument_angles, align=align, target_rotation=target_rotation)[0]
 
 
 def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, columns=None, ignore=(),
           delimiter=None, decimal=None, setup=None, length=None, tool_ball=None, table_ball=None, sigma=None,
           header=None, instrument=None, target=None, target_point=None, instrument_origin=None,
-          instrument_angles=None, align=None):
+          instrument_angles=None, align=None, target_rotation=None):
     """(dataset dict, the line of each observation)."""
     from .. import files
 
@@ -368,16 +388,19 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
                        ("table_ball", table_ball), ("sigma", sigma), ("header", header),
                        ("instrument", instrument), ("target", target), ("target_point", target_point),
                        ("instrument_origin", instrument_origin), ("instrument_angles", instrument_angles),
-                       ("align", align)):
+                       ("align", align), ("target_rotation", target_rotation)):
         if value is not None:
             side[key] = value
             origin[key] = f"--{key.replace('_', '-')}"
-    if kind != "point":
+    if kind not in _FIXED:
         for key in _POINT_OPTIONS:
             if key in side and key != "header":
-                raise ValueError(f"{origin[key]}: {key} belongs to a point import, not {kind}")
+                raise ValueError(f"{origin[key]}: {key} belongs to a point or pose import, not {kind}")
+    if kind == "point" and "target_rotation" in side:
+        raise ValueError(f"{origin['target_rotation']}: target_rotation belongs to a pose import, not point")
     # checked once here, so that a bad value is named where it was given
-    for key in ("tool_ball", "table_ball", "target_point", "instrument_origin", "instrument_angles"):
+    for key in ("tool_ball", "table_ball", "target_point", "instrument_origin", "instrument_angles",
+                "target_rotation"):
         if side.get(key) is not None:
             side[key] = _vector3(side[key], origin[key])
     for key in ("length", "sigma"):
@@ -391,7 +414,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         raise ValueError(f"import: --angle-units '{angle_units}': expected deg or rad")
     if decimal not in (None, "comma", "point"):
         raise ValueError(f"import: decimal '{decimal}': expected comma or point")
-    if kind == "point":
+    if kind in _FIXED:
         _point_setup(side, origin, machine)
 
     text = files.read_text(path, f"{kind} table")
@@ -441,8 +464,8 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         if len(cells) != len(headers):
             raise ValueError(f"{path}:{lineno}: {len(cells)} cells, the header ({hdesc}) has "
                              f"{len(headers)} columns ({', '.join(headers)})")
-        if kind == "point":
-            o = _point_row(cells, cols, machine, side, decimal_comma, angle_units, f"{path}:{lineno}")
+        if kind in _FIXED:
+            o = _point_row(cells, cols, machine, kind, side, decimal_comma, angle_units, f"{path}:{lineno}")
         else:
             o = _row(cells, cols, machine, kind, side, targets, decimal_comma, f"{path}:{lineno}")
         oid = o.get("id") or f"{base}:{lineno}"
@@ -455,7 +478,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     if not obs:
         raise ValueError(f"{path}: a header but no data rows")
     d = {"machine": machine.to_dict(), "observations": obs}
-    if kind == "point":
+    if kind in _FIXED:
         _joint_homes(obs, machine, side, origin)
         d["_comment"] = _place_instrument(obs, machine, side, origin, path)
     touches = any(o["type"] in ("facet", "sphere") for o in obs)
@@ -536,7 +559,8 @@ def _point_setup(side: dict, origin: dict, machine: Machine) -> None:
                 raise ValueError(f"{jw}.home.{a}: expected a number (mm or degrees), got {v!r}")
 
 
-def _point_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: bool, angle_units, where: str) -> dict:
+def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_comma: bool, angle_units,
+               where: str) -> dict:
     axes, direction, vals, text = {}, {}, {}, {}
     for c in cols:
         cw = f"{where}: column '{c.header}'"
@@ -574,8 +598,18 @@ def _point_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: bool
                              f"({plausibility.REFUSE_POSITION / 1e3:g} m); coordinates look like µm: name the "
                              f"column {k}_um or give --units um")
         measured.append(v)
-    o = {"type": "point", "instrument": side["instrument"], "target": side["target"],
+    o = {"type": kind, "instrument": side["instrument"], "target": side["target"],
          "target_point": list(side["target_point"]), "axes": axes, "measured": measured}
+    if kind == "pose":
+        rot = [vals[k][0] for k in _MEASURED_ROT]
+        if math.sqrt(sum(v * v for v in rot)) > math.pi + 1e-9:
+            # a rotation vector is at most half a turn long: longer ones are degrees read as rad
+            raise ValueError(f"{vals[_MEASURED_ROT[0]][1].rsplit(': column', 1)[0]}: measured rotation "
+                             f"{_fmt(rot)} is longer than π rad, which no rotation vector is; degrees? name "
+                             "the columns measured_rx_deg ... or convert to rad")
+        o["measured_rotation"] = rot
+        if side.get("target_rotation") is not None:
+            o["target_rotation"] = list(side["target_rotation"])
     if "id" in text:
         o["id"] = text["id"][0]
     if direction:
