@@ -816,13 +816,16 @@ class DatasetStream : public nlohmann::json_sax<json> {
     const size_t i = index_++;
     if (error) return;
     if (!artefact_known_) {
-      // A probe touch's target may be defined further on: the document decides.
-      for (size_t k = 1; k + 1 < ev_.size(); ++k)
-        if (ev_[k].kind == Event::kKey && ev_[k].s == "type" && ev_[k + 1].kind == Event::kString &&
-            (ev_[k + 1].s == "facet" || ev_[k + 1].s == "sphere")) {
+      // A probe touch's target (a facet, sphere, cylinder: any probe-touch
+      // kind) may be defined further on: the document decides.
+      for (size_t k = 1; k + 1 < ev_.size(); ++k) {
+        if (ev_[k].kind != Event::kKey || ev_[k].s != "type" || ev_[k + 1].kind != Event::kString) continue;
+        const ObservationKind* kind = FindKind(ev_[k + 1].s);
+        if (kind && kind->probe_touch()) {
           fallback = true;
           return;
         }
+      }
     }
     Observation ob;
     if (FastObservation(ev_, ds_->machine(), ds_->artefact, &ob)) {

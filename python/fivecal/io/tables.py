@@ -41,6 +41,8 @@ ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "
            "tracker": "point", "6d": "pose"}
 #: the fixed-instrument kinds: a target followed by an instrument standing in F
 _FIXED = ("point", "pose")
+#: the probe-touch observation types a probing log's targets name
+_TOUCHES = ("facet", "sphere", "cylinder")
 
 _VECTORS = {"tool_ball": ("tool_ball_x", "tool_ball_y", "tool_ball_z"),
             "table_ball": ("table_ball_x", "table_ball_y", "table_ball_z")}
@@ -453,7 +455,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     artefact = side.get("artefact") or {}
     targets = {}
     if isinstance(artefact, Mapping):
-        for key, typ in (("facets", "facet"), ("spheres", "sphere")):
+        for key, typ in (("facets", "facet"), ("spheres", "sphere"), ("cylinders", "cylinder")):
             for t in artefact.get(key) or []:
                 if isinstance(t, Mapping) and "id" in t:
                     targets[str(t["id"])] = typ
@@ -481,7 +483,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     if kind in _FIXED:
         _joint_homes(obs, machine, side, origin)
         d["_comment"] = _place_instrument(obs, machine, side, origin, path)
-    touches = any(o["type"] in ("facet", "sphere") for o in obs)
+    touches = any(o["type"] in _TOUCHES for o in obs)
     if touches and "probe" not in side:
         raise ValueError(f"{path}: probe touches need the probe tip radius: give 'probe': "
                          '{"tip_radius": R} (mm) in the sidecar')
@@ -775,14 +777,14 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
         else:
             vals[c.field] = (v, cw)
     typ = text.get("type", kind)
-    if kind == "probing" or typ in ("facet", "sphere"):
+    if kind == "probing" or typ in _TOUCHES:
         typ = _touch_type(text, typ, targets, where)
     elif typ == "rtest":
         typ = "ball3d"
-    if typ not in ("facet", "sphere", "dbb", "ball3d"):
-        raise ValueError(f"{where}: column 'type': '{typ}' is not facet, sphere, dbb or ball3d")
+    if typ not in _TOUCHES + ("dbb", "ball3d"):
+        raise ValueError(f"{where}: column 'type': '{typ}' is not facet, sphere, cylinder, dbb or ball3d")
     balls = set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"])
-    used = {"facet": {"sigma"}, "sphere": {"sigma"}, "dbb": {"reading", "length", "sigma"} | balls,
+    used = {"facet": {"sigma"}, "sphere": {"sigma"}, "cylinder": {"sigma"}, "dbb": {"reading", "length", "sigma"} | balls,
             "ball3d": {"dx", "dy", "dz", "sigma"} | balls}[typ]
     for f, (_, fw) in vals.items():
         if f not in used:
@@ -797,7 +799,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
         direction.update(_approach(text["approach"], machine, f"{where}: column 'approach'"))
     if direction:
         o["direction"] = direction
-    if typ in ("facet", "sphere"):
+    if typ in _TOUCHES:
         o["target"] = text["target"]
     else:
         setup = text.get("setup", side.get("setup"))
@@ -850,16 +852,17 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
 def _touch_type(text, typ, targets, where) -> str:
     t = text.get("target")
     if not t:
-        raise ValueError(f"{where}: no target for a probe touch (a 'target' column naming a facet or sphere)")
+        raise ValueError(f"{where}: no target for a probe touch (a 'target' column naming a facet, sphere or "
+                         "cylinder)")
     known = targets.get(t)
     if known is None:
         if not targets:
             raise ValueError(f"{where}: target '{t}': no artefact given; a probing import needs the artefact's "
-                             "facets and spheres and the probe tip radius in a sidecar (--sidecar FILE)")
+                             "facets, spheres or cylinders and the probe tip radius in a sidecar (--sidecar FILE)")
         close = difflib.get_close_matches(t, sorted(targets), n=1)
-        raise ValueError(f"{where}: column 'target': '{t}' is not a facet or sphere of the artefact "
+        raise ValueError(f"{where}: column 'target': '{t}' is not a facet, sphere or cylinder of the artefact "
                          f"({', '.join(sorted(targets))})" + (f"; did you mean '{close[0]}'?" if close else ""))
-    if typ in ("facet", "sphere") and typ != known:
+    if typ in _TOUCHES and typ != known:
         raise ValueError(f"{where}: column 'type': '{typ}' but target '{t}' is a {known}")
     return known
 
