@@ -17,7 +17,7 @@ def _run(args) -> int:
         tool_ball=args.tool_ball, table_ball=args.table_ball, sigma=args.sigma, header=args.header,
         instrument=args.instrument, target=args.target, target_point=args.target_point,
         instrument_origin=args.instrument_origin, instrument_angles=args.instrument_angles, align=args.align,
-        target_rotation=args.target_rotation)
+        target_rotation=args.target_rotation, station=args.station)
     counts = {}
     for t in ds.observation_types:
         counts[t] = counts.get(t, 0) + 1
@@ -72,7 +72,7 @@ def register(sub) -> None:
     p.add_argument("--sigma", type=float, help="measurement standard deviation, mm (default: the kind's)")
     p.add_argument("--header", metavar="NAMES", help="the column names, comma separated, of a file without a "
                    "header row")
-    g = p.add_argument_group("point and pose (tracker, camera, CMM)")
+    g = p.add_argument_group("point, pose and distance (tracker, camera, CMM, interferometer)")
     g.add_argument("--instrument", help="the instrument's name (default T1); its pose parameters are "
                    "instrument.<name>.x|y|z|a|b|c")
     g.add_argument("--target", choices=["tool", "work"], help="the machine side carrying the target (default: "
@@ -85,6 +85,8 @@ def register(sub) -> None:
                    "Rz(c)Ry(b)Rx(a)")
     g.add_argument("--target-rotation", metavar="RX,RY,RZ", help="pose: nominal orientation of the target frame "
                    "on its side, rotation vector, rad (default 0)")
+    g.add_argument("--station", help="distance: the station of every row of a file without a station column "
+                   "(the stations' places are in the sidecar's 'stations')")
     g.add_argument("--align", action=argparse.BooleanOptionalAction, default=None,
                    help="set the nominal instrument pose by a rigid alignment of the measured points to the "
                    "nominal machine's (default: when no pose is given); --no-align keeps the identity")

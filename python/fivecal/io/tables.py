@@ -14,6 +14,9 @@ One row per observation, a header row naming the columns. Four kinds:
 * ``pose`` (alias ``6d``): a 6D tracker or camera fiducial, as ``point``
   plus the measured orientation ``measured_rx|ry|rz`` (rotation vector, rad
   unless the header names ``deg``);
+* ``distance`` (alias ``tracer``): a tracking interferometer or laser
+  tracer at one or more stations, axes, ``reading`` and ``station``; each
+  station's nominal position and dead length from the sidecar;
 * ``fivecal``: rows already in fivecal's terms, with a ``type`` column.
 
 Units come from the header (``reading_um``, ``B_rad``, ``dx [um]``) through
@@ -36,9 +39,9 @@ from .. import plausibility
 from .. import units as _units
 from ..machine import Machine, RadiansWarning
 
-KINDS = ("probing", "dbb", "ball3d", "point", "pose", "fivecal")
+KINDS = ("probing", "dbb", "ball3d", "point", "pose", "distance", "fivecal")
 ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal",
-           "tracker": "point", "6d": "pose"}
+           "tracker": "point", "6d": "pose", "tracer": "distance", "multilateration": "distance"}
 #: the fixed-instrument kinds: a target followed by an instrument standing in F
 _FIXED = ("point", "pose")
 #: the probe-touch observation types a probing log's targets name
@@ -77,6 +80,10 @@ _MEASURED_ROT = ("measured_rx", "measured_ry", "measured_rz")
 _SHORT.update({"mrx": "measured_rx", "mry": "measured_ry", "mrz": "measured_rz"})
 _FIELDS["pose"] = (_FIELDS["point"] - {"sigma"}) | set(_MEASURED_ROT)
 _REQUIRED["pose"] = _MEASURED_XYZ + _MEASURED_ROT
+# distance: one reading per row from the station the row names (or the only one)
+_FIELDS["distance"] = {"id", "sigma", "reading", "station"}
+_REQUIRED["distance"] = ("reading",)
+_TEXT_FIELDS.add("station")
 _JOINT_TYPES = {"prismatic": "linear", "linear": "linear", "translational": "linear",
                 "revolute": "rotary", "rotary": "rotary", "rotational": "rotary"}
 _ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
@@ -274,6 +281,7 @@ def _expected(machine: Machine, kind: str) -> str:
     rest = {"probing": "target [approach] [id]", "dbb": "reading_um [id]",
             "ball3d": "dx_um dy_um dz_um [id]", "point": "measured_x measured_y measured_z [id] [sigma]",
             "pose": "measured_x measured_y measured_z measured_rx measured_ry measured_rz [id]",
+            "distance": "reading [station] [id] [sigma]",
             "fivecal": "type target|setup reading|dx dy dz [id]"}[kind]
     return f"the columns {axes} {rest}"
 
@@ -325,6 +333,8 @@ def read_sidecar(path: Union[str, os.PathLike]) -> dict:
 
 _POINT_OPTIONS = ("instrument", "target", "target_point", "instrument_origin", "instrument_angles", "align",
                   "header", "joints", "target_rotation")
+#: a distance import's own options (its target options are the point's)
+_DISTANCE_OPTIONS = ("stations", "station")
 
 
 def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine, Mapping, str], *,
@@ -335,7 +345,7 @@ def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine,
                sigma: Optional[float] = None, header: Optional[Sequence[str]] = None,
                instrument: Optional[str] = None, target: Optional[str] = None, target_point=None,
                instrument_origin=None, instrument_angles=None, align: Optional[bool] = None,
-               target_rotation=None) -> dict:
+               target_rotation=None, station: Optional[str] = None) -> dict:
     """Read an instrument table into a dataset dict (docs/formats.md); see
     docs/import.md for each kind's columns.
 
@@ -347,6 +357,8 @@ def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine,
     ``header``, and for ``point`` ``instrument``, ``target``,
     ``target_point``, ``instrument_origin``, ``instrument_angles`` (deg),
     ``align`` and ``joints``, for ``pose`` also ``target_rotation`` (rad);
+    for ``distance`` ``stations`` (name -> ``{"position", "dead_length"}``),
+    ``station``, ``instrument`` (the tracer), ``target``, ``target_point``;
     the keyword arguments of the same names
     override it. ``units``: the unit of
     measured columns whose header names none (``um`` or ``mm``, the
@@ -369,13 +381,14 @@ def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine,
                  ignore=ignore, delimiter=delimiter, decimal=decimal, setup=setup, length=length,
                  tool_ball=tool_ball, table_ball=table_ball, sigma=sigma, header=header, instrument=instrument,
                  target=target, target_point=target_point, instrument_origin=instrument_origin,
-                 instrument_angles=instrument_angles, align=align, target_rotation=target_rotation)[0]
+                 instrument_angles=instrument_angles, align=align, target_rotation=target_rotation,
+                 station=station)[0]
 
 
 def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, columns=None, ignore=(),
           delimiter=None, decimal=None, setup=None, length=None, tool_ball=None, table_ball=None, sigma=None,
           header=None, instrument=None, target=None, target_point=None, instrument_origin=None,
-          instrument_angles=None, align=None, target_rotation=None):
+          instrument_angles=None, align=None, target_rotation=None, station=None):
     """(dataset dict, the line of each observation)."""
     from .. import files
 
@@ -390,14 +403,22 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
                        ("table_ball", table_ball), ("sigma", sigma), ("header", header),
                        ("instrument", instrument), ("target", target), ("target_point", target_point),
                        ("instrument_origin", instrument_origin), ("instrument_angles", instrument_angles),
-                       ("align", align), ("target_rotation", target_rotation)):
+                       ("align", align), ("target_rotation", target_rotation), ("station", station)):
         if value is not None:
             side[key] = value
             origin[key] = f"--{key.replace('_', '-')}"
-    if kind not in _FIXED:
-        for key in _POINT_OPTIONS:
+    if kind not in _FIXED + ("distance",):
+        for key in _POINT_OPTIONS + _DISTANCE_OPTIONS:
             if key in side and key != "header":
-                raise ValueError(f"{origin[key]}: {key} belongs to a point or pose import, not {kind}")
+                raise ValueError(f"{origin[key]}: {key} belongs to a point, pose or distance import, not {kind}")
+    if kind == "distance":
+        for key in ("instrument_origin", "instrument_angles", "align", "joints", "target_rotation"):
+            if key in side:
+                raise ValueError(f"{origin[key]}: {key} belongs to a point or pose import; a distance "
+                                 "station's place is 'stations' in the sidecar")
+    elif "stations" in side or "station" in side:
+        key = "stations" if "stations" in side else "station"
+        raise ValueError(f"{origin[key]}: {key} belongs to a distance import, not {kind}")
     if kind == "point" and "target_rotation" in side:
         raise ValueError(f"{origin['target_rotation']}: target_rotation belongs to a pose import, not point")
     # checked once here, so that a bad value is named where it was given
@@ -418,6 +439,8 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         raise ValueError(f"import: decimal '{decimal}': expected comma or point")
     if kind in _FIXED:
         _point_setup(side, origin, machine)
+    if kind == "distance":
+        _distance_setup(side, origin, machine)
 
     text = files.read_text(path, f"{kind} table")
     lines = list(_lines(text))
@@ -468,6 +491,8 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
                              f"{len(headers)} columns ({', '.join(headers)})")
         if kind in _FIXED:
             o = _point_row(cells, cols, machine, kind, side, decimal_comma, angle_units, f"{path}:{lineno}")
+        elif kind == "distance":
+            o = _distance_row(cells, cols, machine, side, decimal_comma, f"{path}:{lineno}")
         else:
             o = _row(cells, cols, machine, kind, side, targets, decimal_comma, f"{path}:{lineno}")
         oid = o.get("id") or f"{base}:{lineno}"
@@ -625,6 +650,100 @@ def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_
         o["sigma"] = side["sigma"]
     if "joint" in text:
         o["_joint"] = _joint_of(text, vals, machine, side, angle_units)
+    return o
+
+
+# --------------------------------------------------------------------------
+# distance: a tracking interferometer or laser tracer at its stations
+# --------------------------------------------------------------------------
+def _distance_setup(side: dict, origin: dict, machine: Machine) -> None:
+    """Check the distance options: the target as for a point import, and
+    ``stations``: id -> {"position": [x, y, z] mm in F, "dead_length": mm}."""
+    tracer = side.get("instrument")
+    side["instrument"] = "T1" if tracer is None else tracer
+    _point_setup(side, origin, machine)
+    if tracer is None:
+        del side["instrument"]  # the kind's own default tracer name
+    stations = side.get("stations")
+    sw = origin.get("stations", "stations")
+    if not isinstance(stations, Mapping) or not stations:
+        raise ValueError(f"{sw}: a distance import needs each station's nominal place: 'stations': "
+                         '{"L1": {"position": [x, y, z], "dead_length": d}, ...} (mm) in the sidecar')
+    for sid, st in stations.items():
+        w = f"{sw}.{sid}"
+        if not isinstance(sid, str) or not sid or "." in sid:
+            raise ValueError(f"{w}: a station name without '.' is expected")
+        if not isinstance(st, Mapping) or set(st) - {"position", "dead_length"} or "position" not in st:
+            raise ValueError(f"{w}: expected {{\"position\": [x, y, z], \"dead_length\": d}} (mm), got {st!r}")
+        st = dict(st)
+        st["position"] = _vector3(st["position"], f"{w}.position")
+        if st.get("dead_length") is not None:
+            d = st["dead_length"]
+            if isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d):
+                raise ValueError(f"{w}.dead_length: expected a number (mm), got {d!r}")
+        stations[sid] = st
+    if side.get("station") is not None and side["station"] not in stations:
+        raise ValueError(f"{origin['station']}: station {side['station']!r} is not in 'stations' "
+                         f"({', '.join(stations)})")
+
+
+def _distance_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: bool, where: str) -> dict:
+    axes, direction, vals, text = {}, {}, {}, {}
+    for c in cols:
+        cw = f"{where}: column '{c.header}'"
+        cell = cells[c.index]
+        if c.field in ("id", "station"):
+            s = cell.strip()
+            if not s:
+                raise ValueError(f"{cw}: empty cell (a {c.field} is expected)")
+            text[c.field] = (s, cw)
+            continue
+        v = _number(cell, decimal_comma, cw)
+        if c.field.startswith("dir_"):
+            if v not in (-1.0, 0.0, 1.0):
+                raise ValueError(f"{cw}: direction {cell.strip()} is not -1, 0 or +1")
+            if v:
+                direction[c.field[4:]] = int(v)
+            continue
+        v *= c.factor
+        if len(c.field) == 1:
+            axes[c.field] = v
+        else:
+            vals[c.field] = (v, cw)
+    stations = side["stations"]
+    if "station" in text:
+        sid, sw = text["station"]
+        if sid not in stations:
+            close = difflib.get_close_matches(sid, sorted(stations), n=1)
+            raise ValueError(f"{sw}: station '{sid}' is not in the sidecar's stations ({', '.join(stations)})"
+                             + (f"; did you mean '{close[0]}'?" if close else ""))
+    elif side.get("station") is not None or len(stations) == 1:
+        sid = side.get("station") or next(iter(stations))
+    else:
+        raise ValueError(f"{where}: no station column and {len(stations)} stations in the sidecar; add a "
+                         "'station' column or give --station")
+    r, rw = vals["reading"]
+    if abs(r) > plausibility.REFUSE_POSITION:
+        raise ValueError(f"{rw}: {r:.6g} mm is beyond any interferometer's range; readings look like µm: "
+                         "name the column reading_um or give --units um")
+    st = stations[sid]
+    o = {"type": "distance", "station": sid, "target": side["target"], "target_point": list(side["target_point"]),
+         "axes": axes, "reading": r, "station_position": list(st["position"])}
+    if st.get("dead_length") is not None:
+        o["dead_length"] = float(st["dead_length"])
+    if side.get("instrument") is not None:
+        o["instrument"] = side["instrument"]
+    if "id" in text:
+        o["id"] = text["id"][0]
+    if direction:
+        o["direction"] = direction
+    if "sigma" in vals:
+        s_, sw_ = vals["sigma"]
+        if not s_ > 0:
+            raise ValueError(f"{sw_}: sigma {s_:g} mm must be > 0")
+        o["sigma"] = s_
+    elif side.get("sigma") is not None:
+        o["sigma"] = side["sigma"]
     return o
 
 
