@@ -586,13 +586,16 @@ def _point_setup(side: dict, origin: dict, machine: Machine) -> None:
                 raise ValueError(f"{jw}.home.{a}: expected a number (mm or degrees), got {v!r}")
 
 
-def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_comma: bool, angle_units,
-               where: str) -> dict:
+def _instrument_cells(cells, cols, machine: Machine, decimal_comma: bool, where: str) -> tuple:
+    """The cells of a point, pose or distance row: ``(axes, direction, vals,
+    text)``; ``vals`` and ``text`` map a field to ``(value, where)``. Axis
+    positions that look like µm are refused; a joint layout's ``position`` and
+    ``home`` stay in the moving joint's unit, known only later."""
     axes, direction, vals, text = {}, {}, {}, {}
     for c in cols:
         cw = f"{where}: column '{c.header}'"
         cell = cells[c.index]
-        if c.field in ("id", "joint", "joint_type"):
+        if c.field in ("id", "joint", "joint_type", "station"):
             s = cell.strip()
             if not s:
                 raise ValueError(f"{cw}: empty cell (a {c.field.replace('_', ' ')} is expected)")
@@ -617,6 +620,12 @@ def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_
             axes[c.field] = v
         else:
             vals[c.field] = (v, cw)
+    return axes, direction, vals, text
+
+
+def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_comma: bool, angle_units,
+               where: str) -> dict:
+    axes, direction, vals, text = _instrument_cells(cells, cols, machine, decimal_comma, where)
     measured = []
     for k in _MEASURED_XYZ:
         v, vw = vals[k]
@@ -688,28 +697,7 @@ def _distance_setup(side: dict, origin: dict, machine: Machine) -> None:
 
 
 def _distance_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: bool, where: str) -> dict:
-    axes, direction, vals, text = {}, {}, {}, {}
-    for c in cols:
-        cw = f"{where}: column '{c.header}'"
-        cell = cells[c.index]
-        if c.field in ("id", "station"):
-            s = cell.strip()
-            if not s:
-                raise ValueError(f"{cw}: empty cell (a {c.field} is expected)")
-            text[c.field] = (s, cw)
-            continue
-        v = _number(cell, decimal_comma, cw)
-        if c.field.startswith("dir_"):
-            if v not in (-1.0, 0.0, 1.0):
-                raise ValueError(f"{cw}: direction {cell.strip()} is not -1, 0 or +1")
-            if v:
-                direction[c.field[4:]] = int(v)
-            continue
-        v *= c.factor
-        if len(c.field) == 1:
-            axes[c.field] = v
-        else:
-            vals[c.field] = (v, cw)
+    axes, direction, vals, text = _instrument_cells(cells, cols, machine, decimal_comma, where)
     stations = side["stations"]
     if "station" in text:
         sid, sw = text["station"]
