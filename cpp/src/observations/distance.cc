@@ -103,12 +103,6 @@ class Kind final : public ObservationKind {
     refs.length = b.Ref(g[3]);
     b.Add(new DistanceResidual(b.context, o, refs), 1);
   }
-  void PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&, AnalyticRow*) const override {
-    throw std::logic_error("distance: no analytic batch (analytic() is false)");
-  }
-  void EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const override {
-    throw std::logic_error("distance: no analytic batch (analytic() is false)");
-  }
 
   // ---- simulation ----
   std::vector<const char*> plan_keys() const override {

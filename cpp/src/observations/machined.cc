@@ -212,12 +212,6 @@ class Kind final : public ObservationKind {
     if (IsStep(o)) reference = std::make_shared<const MachinedFace>(FaceOf(m, o, true));
     b.Add(new MachinedResidual(b.context, FaceOf(m, o, false), reference, o.reading, refs), 1);
   }
-  void PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&, AnalyticRow*) const override {
-    throw std::logic_error("machined: no analytic batch (analytic() is false)");
-  }
-  void EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const override {
-    throw std::logic_error("machined: no analytic batch (analytic() is false)");
-  }
 
   // ---- simulation: the plan gives the rotary axes of each cut; the linear
   // ones follow from the nominal point (the test's programme) unless given ----

@@ -98,12 +98,6 @@ class Kind final : public ObservationKind {
     }
     b.Add(new PointResidual(b.context, o, refs), 3);
   }
-  void PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&, AnalyticRow*) const override {
-    throw std::logic_error("point: no analytic batch (analytic() is false)");
-  }
-  void EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const override {
-    throw std::logic_error("point: no analytic batch (analytic() is false)");
-  }
 
   // ---- simulation ----
   std::vector<const char*> plan_keys() const override {

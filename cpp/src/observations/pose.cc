@@ -107,12 +107,6 @@ class Kind final : public ObservationKind {
     }
     b.Add(new PoseResidual(b.context, o, refs), 6);
   }
-  void PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&, AnalyticRow*) const override {
-    throw std::logic_error("pose: no analytic batch (analytic() is false)");
-  }
-  void EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const override {
-    throw std::logic_error("pose: no analytic batch (analytic() is false)");
-  }
 
   // ---- simulation ----
   std::vector<const char*> plan_keys() const override {

@@ -76,6 +76,15 @@ std::vector<std::string> NoiseClasses() {
 
 double ObservationKind::NoiseLevel(const NoiseLevels& n) const { return n.Of(noise_class()); }
 
+void ObservationKind::PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&,
+                                      AnalyticRow*) const {
+  throw std::logic_error(std::string(name()) + ": no analytic batch (analytic() is false)");
+}
+
+void ObservationKind::EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) const {
+  throw std::logic_error(std::string(name()) + ": no analytic batch (analytic() is false)");
+}
+
 bool HasLengthReference(const Dataset& ds) {
   for (const Observation& o : ds.observations)
     if (KindOf(o).LengthReference()) return true;

@@ -154,12 +154,13 @@ class ObservationKind {
   virtual void AddArtefactResiduals(ResidualBuilder&) const {}
   // The analytic batch: one prepared row per observation, then the artefact
   // rows; EvaluateAnalytic gets a run of consecutive rows of this kind with
-  // the same `variant`.
+  // the same `variant`. A kind whose analytic() is false leaves both to the
+  // defaults, which throw std::logic_error: nothing may call them.
   virtual void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
-                               AnalyticRow* r) const = 0;
+                               AnalyticRow* r) const;
   virtual void AddArtefactAnalyticRows(const Dataset&, const ParameterTable&,
                                        std::vector<AnalyticRow>*, std::vector<int>* /*source*/) const {}
-  virtual void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const = 0;
+  virtual void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const;
 
   // ---- simulation ----
   // Every key of a plan entry of this kind (Simulate spec), in message order.
