@@ -377,17 +377,36 @@ constexpr double kMaxNoiseFactor = 3.0;
 // component it shares, the simulator's noise class (every probe touch:
 // "probe"). Rows in another unit than the kind's first row (a pose's
 // rotation rows, rad) form their own group, "<class>_<unit>": one factor
-// cannot scale micrometres and microradians alike.
-std::string NoiseGroup(const Observation& o, int row) {
+// cannot scale micrometres and microradians alike. Two trackers of one kind
+// are two instruments of their own noise: when a class holds observations of
+// more than one instrument id (`several`), each id is its own group,
+// "<class>.<id>" ("point.T1", "pose_rad.CAM"); a single instrument keeps the
+// plain class name, and kinds without an id are grouped by class alone.
+std::string NoiseGroup(const Observation& o, int row, const std::set<std::string>& several) {
   const ObservationKind& k = KindOf(o);
   const std::string unit = k.unit_row(row);
-  return unit == k.unit_row(0) ? k.noise_class() : std::string(k.noise_class()) + "_" + unit;
+  std::string g = unit == k.unit_row(0) ? k.noise_class() : std::string(k.noise_class()) + "_" + unit;
+  const std::string* id = InstrumentId(o);
+  if (id && several.count(k.noise_class())) g += "." + *id;
+  return g;
 }
 
-// A group's sigma x 1e3 is in um; a group of rad rows (NoiseGroup) is shown
-// in urad, x 1e6.
+// The noise classes whose observations name more than one instrument id.
+std::set<std::string> ClassesOfSeveralInstruments(const Dataset& ds) {
+  std::map<std::string, std::set<std::string>> ids;
+  for (const Observation& o : ds.observations)
+    if (const std::string* id = InstrumentId(o)) ids[KindOf(o).noise_class()].insert(*id);
+  std::set<std::string> out;
+  for (const auto& [cls, set] : ids)
+    if (set.size() > 1) out.insert(cls);
+  return out;
+}
+
+// A group's sigma x 1e3 is in um; a group of rad rows (NoiseGroup: its class
+// part, before any ".<id>", ends in "_rad") is shown in urad, x 1e6.
 bool RadGroup(const std::string& group) {
-  return group.size() > 4 && group.compare(group.size() - 4, 4, "_rad") == 0;
+  const std::string cls = group.substr(0, group.find('.'));
+  return cls.size() > 4 && cls.compare(cls.size() - 4, 4, "_rad") == 0;
 }
 const char* MicroUnit(const std::string& group) { return RadGroup(group) ? "urad" : "um"; }
 double MicroScale(const std::string& group) { return RadGroup(group) ? 1e3 : 1.0; }
@@ -431,11 +450,14 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
   std::map<std::string, double> factor;
   // Per observation, the group of each of its rows.
   std::vector<std::vector<std::string>> group_of(ds.observations.size());
-  if (opt.variance_components)
+  if (opt.variance_components) {
+    const std::set<std::string> several = ClassesOfSeveralInstruments(ds);
     for (size_t i = 0; i < ds.observations.size(); ++i) {
       const Observation& o = ds.observations[i];
-      for (int k = 0; k < KindOf(o).rows(); ++k) factor[group_of[i].emplace_back(NoiseGroup(o, k))] = 1.0;
+      for (int k = 0; k < KindOf(o).rows(); ++k)
+        factor[group_of[i].emplace_back(NoiseGroup(o, k, several))] = 1.0;
     }
+  }
   auto apply_noise = [&]() {
     for (size_t i = 0; i < ds.observations.size(); ++i) {
       Eigen::VectorXd s = DeclaredSigma(ds, ds.observations[i]);

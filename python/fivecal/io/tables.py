@@ -623,6 +623,18 @@ def _instrument_cells(cells, cols, machine: Machine, decimal_comma: bool, where:
     return axes, direction, vals, text
 
 
+def _row_sigma(o: dict, vals: Mapping, side: Mapping) -> None:
+    """The row's declared noise: its ``sigma`` cell (> 0), else the sidecar's or
+    option's, else none (the kind's or instrument's default)."""
+    if "sigma" in vals:
+        s, sw = vals["sigma"]
+        if not s > 0:
+            raise ValueError(f"{sw}: sigma {s:g} mm must be > 0")
+        o["sigma"] = s
+    elif side.get("sigma") is not None:
+        o["sigma"] = side["sigma"]
+
+
 def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_comma: bool, angle_units,
                where: str) -> dict:
     axes, direction, vals, text = _instrument_cells(cells, cols, machine, decimal_comma, where)
@@ -650,13 +662,7 @@ def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_
         o["id"] = text["id"][0]
     if direction:
         o["direction"] = direction
-    if "sigma" in vals:
-        s, sw = vals["sigma"]
-        if not s > 0:
-            raise ValueError(f"{sw}: sigma {s:g} mm must be > 0")
-        o["sigma"] = s
-    elif side.get("sigma") is not None:
-        o["sigma"] = side["sigma"]
+    _row_sigma(o, vals, side)
     if "joint" in text:
         o["_joint"] = _joint_of(text, vals, machine, side, angle_units)
     return o
@@ -725,13 +731,7 @@ def _distance_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: b
         o["id"] = text["id"][0]
     if direction:
         o["direction"] = direction
-    if "sigma" in vals:
-        s_, sw_ = vals["sigma"]
-        if not s_ > 0:
-            raise ValueError(f"{sw_}: sigma {s_:g} mm must be > 0")
-        o["sigma"] = s_
-    elif side.get("sigma") is not None:
-        o["sigma"] = side["sigma"]
+    _row_sigma(o, vals, side)
     return o
 
 
@@ -946,13 +946,7 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
                                      f"µm: name the column {k}_um or give --units um")
                 m.append(v)
             o["measured"] = m
-    if "sigma" in vals:
-        s, sw = vals["sigma"]
-        if not s > 0:
-            raise ValueError(f"{sw}: sigma {s:g} mm must be > 0")
-        o["sigma"] = s
-    elif side.get("sigma") is not None:
-        o["sigma"] = side["sigma"]
+    _row_sigma(o, vals, side)
     return o
 
 
