@@ -39,9 +39,10 @@ from .. import plausibility
 from .. import units as _units
 from ..machine import Machine, RadiansWarning
 
-KINDS = ("probing", "dbb", "ball3d", "point", "pose", "distance", "fivecal")
+KINDS = ("probing", "dbb", "ball3d", "point", "pose", "distance", "machined", "fivecal")
 ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal",
-           "tracker": "point", "6d": "pose", "tracer": "distance", "multilateration": "distance"}
+           "tracker": "point", "6d": "pose", "tracer": "distance", "multilateration": "distance",
+           "machining": "machined", "cmm": "machined"}
 #: the fixed-instrument kinds: a target followed by an instrument standing in F
 _FIXED = ("point", "pose")
 #: the probe-touch observation types a probing log's targets name
@@ -201,7 +202,7 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
         return low
     known = sorted(_FIELDS[kind]) + list(axes) + [f"dir_{a}" for a in axes]
     close = difflib.get_close_matches(low, known, n=1)
-    other = [k for k in KINDS if low in _FIELDS[k]]
+    other = [k for k in KINDS if low in _FIELDS.get(k, ())]
     hint = f"; did you mean '{close[0]}'?" if close else ""
     if other and not close:
         hint = f"; it belongs to a {other[0]} import"
@@ -282,7 +283,9 @@ def _expected(machine: Machine, kind: str) -> str:
             "ball3d": "dx_um dy_um dz_um [id]", "point": "measured_x measured_y measured_z [id] [sigma]",
             "pose": "measured_x measured_y measured_z measured_rx measured_ry measured_rz [id]",
             "distance": "reading [station] [id] [sigma]",
-            "fivecal": "type target|setup reading|dx dy dz [id]"}[kind]
+            "machined": "point_x point_y point_z normal_x normal_y normal_z measured [part] [feature] "
+                        "[reference_<axis> ...] [id] [sigma]",
+            "fivecal": "type and the keys of each row's type (target, setup, reading, measured_x ...) [id]"}[kind]
     return f"the columns {axes} {rest}"
 
 
@@ -419,6 +422,10 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     elif "stations" in side or "station" in side:
         key = "stations" if "stations" in side else "station"
         raise ValueError(f"{origin[key]}: {key} belongs to a distance import, not {kind}")
+    if kind == "machined":
+        for key in ("length", "tool_ball", "table_ball"):
+            if side.get(key) is not None:
+                raise ValueError(f"{origin[key]}: {key} belongs to a ball bar or R-test import, not machined")
     if kind == "point" and "target_rotation" in side:
         raise ValueError(f"{origin['target_rotation']}: target_rotation belongs to a pose import, not point")
     # checked once here, so that a bad value is named where it was given
@@ -470,8 +477,14 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         raise ValueError(f"{hwhere}: no header row (this line holds numbers); the first line must name "
                          f"the columns: {_expected(machine, kind)}, or give the names with --header / "
                          "'header' in the sidecar")
-    cols = _columns(headers, machine, kind, hwhere, columns or {}, ignore,
-                    units and units.lower(), angle_units and angle_units.lower())
+    generic = kind in ("fivecal", "machined")
+    if generic:
+        registry, text_keys = _registered(), _text_keys()
+        cols = _generic_columns(headers, machine, kind, hwhere, columns or {}, ignore, units and units.lower(),
+                                angle_units and angle_units.lower(), registry, text_keys)
+    else:
+        cols = _columns(headers, machine, kind, hwhere, columns or {}, ignore,
+                        units and units.lower(), angle_units and angle_units.lower())
     decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
     if decimal == "comma" and delim == ",":
         raise ValueError(f"{path}: a decimal comma needs another column separator than ',' (';', tab or spaces)")
@@ -493,6 +506,9 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
             o = _point_row(cells, cols, machine, kind, side, decimal_comma, angle_units, f"{path}:{lineno}")
         elif kind == "distance":
             o = _distance_row(cells, cols, machine, side, decimal_comma, f"{path}:{lineno}")
+        elif generic:
+            o = _generic_row(cells, cols, machine, kind, side, decimal_comma, f"{path}:{lineno}", registry,
+                             text_keys)
         else:
             o = _row(cells, cols, machine, kind, side, targets, decimal_comma, f"{path}:{lineno}")
         oid = o.get("id") or f"{base}:{lineno}"
@@ -504,6 +520,8 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         lineno_of.append(lineno)
     if not obs:
         raise ValueError(f"{path}: a header but no data rows")
+    if generic:
+        _angle_checks(obs, cols, machine, path, lineno_of)
     d = {"machine": machine.to_dict(), "observations": obs}
     if kind in _FIXED:
         _joint_homes(obs, machine, side, origin)
@@ -984,6 +1002,425 @@ def _positive(value, what: str) -> float:
     if not (math.isfinite(v) and v > 0):
         raise ValueError(f"{what}: expected a finite number > 0 (mm), got {value!r}")
     return v
+
+
+
+# --------------------------------------------------------------------------
+# fivecal (generic) and machined: columns named after the dataset file's keys
+# --------------------------------------------------------------------------
+# The generic table's columns come from the registered observation kinds'
+# file keys (``_core.observation_kinds()``), so a new kind is read and written
+# without an edit here. A key's columns follow its value's shape:
+#   a number or text        -> the key itself (``reading``, ``setup``);
+#   a list of three         -> ``<key>_x _y _z`` (``tool_ball_x``);
+#   a list of another length -> ``<key>_1 ... _n`` (``sigma_1`` .. ``sigma_6``);
+#   ``axes``                -> the axis letters; ``direction`` -> ``dir_<letter>``;
+#   another axes object ``<p>_axes`` -> ``<p>_<letter>`` (``reference_A``).
+#: the ball3d displacement's names of the first fivecal tables
+_GENERIC_ALIASES = {"dx": ("measured", 0), "dy": ("measured", 1), "dz": ("measured", 2)}
+_TYPE_ALIASES = {"rtest": "ball3d", "r-test": "ball3d"}
+#: keys whose numbers are what the instrument measured: ``--units`` applies to them
+_GENERIC_MEASURED = {"reading", "measured", "sigma"}
+_XYZ = "xyz"
+#: a machined-feature (CMM) report: other names of its columns
+_MACHINED_ALIASES = {"deviation": "measured", "dev": "measured"}
+_MACHINED_RANGE = 2.0  # mm: a machined face this far from nominal is a unit mistake, not a machining error
+
+
+def _registered() -> dict:
+    """name -> the registry's record of each observation kind."""
+    from .. import _core
+
+    return {k["name"]: k for k in _core.observation_kinds()}
+
+
+class _Keys(set):
+    """The file keys whose values are text in the dataset schema (names, ids,
+    sides); ``typed``: the keys the schema describes at all. A key of a kind
+    the schema file does not describe is text when its cell is not a number."""
+    typed: set
+
+
+def _text_keys() -> _Keys:
+    from .. import schema
+
+    s = schema.load_schema("dataset")
+    common = schema.load_schema("common")["$defs"]
+    out = _Keys({"id", "type"})
+    out.typed = set(out)
+    for block in s["$defs"]["observation"].get("allOf", []):
+        for key, prop in block["then"].get("properties", {}).items():
+            ref = prop.get("$ref", "")
+            if ref.startswith("common.schema.json#/$defs/"):
+                prop = common.get(ref.rsplit("/", 1)[1], {})
+            if prop:
+                out.typed.add(key)
+            if prop.get("type") == "string" or (prop.get("enum") and all(isinstance(e, str) for e in prop["enum"])):
+                out.add(key)
+    return out
+
+
+class _GColumn:
+    """One column of a generic table: the key it feeds, its place in the
+    key's value (None: the value; int: a list index; letter: an axes-object
+    entry), and its unit factor."""
+
+    def __init__(self, index: int, header: str, key: str, part, factor: float = 1.0):
+        self.index, self.header, self.key, self.part, self.factor = index, header, key, part, factor
+
+
+def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: Mapping[str, str],
+                     ignore: Iterable[str], length_unit: Optional[str], angle_unit: Optional[str],
+                     registry: Mapping, text_keys: set) -> list:
+    keys = set()
+    for k in (registry.values() if kind == "fivecal" else [registry[kind]]):
+        keys |= set(k["json_keys"])
+    keys -= {"axes", "direction"}
+    axes = machine.axis_names
+    by_header = {}
+    for field, header in rename.items():
+        by_header.setdefault(header.strip().lower(), field.strip())
+    ignored = {i.strip().lower() for i in ignore}
+    known_headers = {h.strip().lower() for h in headers}
+    for h in list(by_header) + sorted(ignored):
+        if h not in known_headers:
+            raise ValueError(f"{where}: no column '{h}' in the header (columns: {', '.join(headers)})")
+
+    def resolve(name: str, cw: str):
+        low, up = name.strip().lower(), name.strip().upper()
+        up = "S" if up == "C1" else up
+        if len(up) == 1 and up.isalpha():
+            if up in axes:
+                return "axes", up
+            raise ValueError(f"{cw}: unknown axis letter '{name}' (the machine's axes: {_axis_list(machine)})")
+        m = re.match(r"^(?:dir_?([a-z]\d?)|([a-z]\d?)_?dir)$", low)
+        if m:
+            letter = (m.group(1) or m.group(2)).upper()
+            letter = "S" if letter == "C1" else letter
+            if letter not in axes:
+                raise ValueError(f"{cw}: direction column of unknown axis '{letter}' "
+                                 f"(the machine's axes: {_axis_list(machine)})")
+            return "direction", letter
+        if low == "approach":
+            return "approach", None
+        if kind == "machined":
+            low = _MACHINED_ALIASES.get(low, low)
+            if low.startswith("ref_"):
+                low = "reference_" + low[4:]
+        if low in keys or (kind == "fivecal" and low == "type"):
+            return low, None
+        if low in _GENERIC_ALIASES and _GENERIC_ALIASES[low][0] in keys:
+            return _GENERIC_ALIASES[low]
+        if "_" in low:
+            base, suffix = low.rsplit("_", 1)
+            if base in keys and len(suffix) == 1 and suffix in _XYZ:
+                return base, _XYZ.index(suffix)
+            if base in keys and suffix.isdigit() and int(suffix) >= 1:
+                return base, int(suffix) - 1
+            letter = "S" if suffix.upper() == "C1" else suffix.upper()
+            if base + "_axes" in keys and letter in axes:
+                return base + "_axes", letter
+        names = sorted(keys | ({"type"} if kind == "fivecal" else set())) + list(axes) + \
+            [f"dir_{a}" for a in axes]
+        close = difflib.get_close_matches(low, names, n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        what = "a fivecal table (a key of a registered observation kind)" if kind == "fivecal" else \
+            f"a {kind} import"
+        raise ValueError(f"{cw}: unknown column '{name}' for {what}{hint} (rename it with --column FIELD=HEADER "
+                         f"or skip it with --ignore '{name}')")
+
+    cols, seen = [], {}
+    for i, h in enumerate(headers):
+        key = h.strip().lower()
+        if key in ignored:
+            continue
+        if not key:
+            raise ValueError(f"{where}: column {i + 1} has no name")
+        cw = f"{where}: column '{h.strip()}'"
+        name, unit = _split_unit(h)
+        if key in by_header:
+            name = by_header[key]
+        field, part = resolve(name, cw)
+        if (field, part) in seen:
+            raise ValueError(f"{where}: columns '{seen[(field, part)]}' and '{h.strip()}' both give "
+                             f"{field}{'' if part is None else f' {part}'}")
+        seen[(field, part)] = h.strip()
+        factor = 1.0
+        letter = part if field == "axes" or field.endswith("_axes") else None
+        if letter is not None and machine.is_rotary(letter):
+            factor = _units.column_unit(h, "angle", where)[0] if unit is not None else \
+                _units.ANGLE_SUFFIXES[angle_unit or "deg"]
+        elif letter is not None:
+            factor = _units.column_unit(h, "length", where)[0] if unit is not None else 1.0
+        elif field in text_keys or field in ("type", "approach", "direction"):
+            if unit is not None:
+                raise ValueError(f"{cw}: {field} has no unit, got '{unit}'")
+        elif kind == "machined" and field in ("normal", "reference_normal"):
+            if unit is not None:
+                raise ValueError(f"{cw}: a face normal is a direction and has no unit, got '{unit}'")
+        elif unit is not None:
+            try:
+                factor = _units.column_unit(h, "length", where)[0]
+            except ValueError:
+                raise ValueError(f"{cw}: only axis columns take an angle unit here; give {field} in the unit "
+                                 "of the dataset file (docs/formats.md)") from None
+        elif field in _GENERIC_MEASURED:
+            factor = _units.LENGTH_SUFFIXES[length_unit or "mm"]
+        cols.append(_GColumn(i, h.strip(), field, part, factor))
+    fields = {f for f, _ in seen}
+    missing = [a for a in axes if a != "S" and ("axes", a) not in seen]
+    if missing:
+        raise ValueError(f"{where}: no column for axis {', '.join(missing)} (expected a column per machine "
+                         f"axis: {_axis_list(machine)}; S may be left out)")
+    if kind == "fivecal" and "type" not in fields:
+        raise ValueError(f"{where}: no 'type' column; a fivecal import expects {_expected(machine, kind)}")
+    if kind == "machined":
+        for r in ("point", "normal", "measured"):
+            if r not in fields:
+                raise ValueError(f"{where}: no '{r}' column; a machined import expects "
+                                 f"{_expected(machine, kind)}")
+    return cols
+
+
+def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_comma: bool, where: str,
+                 registry: Mapping, text_keys: set) -> dict:
+    """One observation of a generic (``fivecal``) or ``machined`` table."""
+    text, parts, empty = {}, {}, {}
+    for c in cols:
+        cw = f"{where}: column '{c.header}'"
+        cell = cells[c.index].strip()
+        if not cell:
+            empty[(c.key, c.part)] = cw
+            continue
+        if c.key in text_keys or c.key in ("type", "approach") or (
+                c.part is None and c.key not in text_keys.typed and not _is_number(cell)):
+            text[c.key] = (cell.lower() if c.key == "type" else cell, cw)
+            continue
+        v = _number(cell, decimal_comma, cw)
+        if c.key == "direction":
+            if v not in (-1.0, 0.0, 1.0):
+                raise ValueError(f"{cw}: direction {cell} is not -1, 0 or +1")
+            v = int(v)
+        else:
+            v *= c.factor
+        parts.setdefault(c.key, {})[c.part] = (v, cw)
+    # the row's kind
+    if kind == "fivecal":
+        if "type" not in text:
+            raise ValueError(f"{empty.get(('type', None), where)}: empty cell (the row's observation type is "
+                             f"expected: {', '.join(registry)})")
+        typ, tw = text.pop("type")
+        typ = _TYPE_ALIASES.get(typ, typ)
+        if typ not in registry:
+            close = difflib.get_close_matches(typ, sorted(registry), n=1)
+            raise ValueError(f"{tw}: '{typ}' is not an observation type ({', '.join(registry)})"
+                             + (f"; did you mean '{close[0]}'?" if close else ""))
+    else:
+        typ = kind
+    keys = set(registry[typ]["json_keys"])
+    for key, (_, cw) in list(text.items()):
+        if key not in keys and key != "approach":
+            raise ValueError(f"{cw}: a {typ} row has no {key} (leave the cell empty)")
+    for key, got in parts.items():
+        if key not in keys:
+            raise ValueError(f"{next(iter(got.values()))[1]}: a {typ} row has no {key} (leave the cell empty)")
+    # every axis of the machine but S in every row; an empty direction cell is an axis not recorded
+    for (key, part), cw in empty.items():
+        if key == "axes" and part != "S":
+            raise ValueError(f"{cw}: empty cell (a number is expected)")
+    o = {"type": typ}
+    for key, got in parts.items():
+        if key == "axes" or key == "direction" or key.endswith("_axes"):
+            o[key] = {p: v for p, (v, _) in got.items()}
+            if key == "axes":
+                for a, v in o[key].items():
+                    if not machine.is_rotary(a) and abs(v) > plausibility.REFUSE_POSITION:
+                        cw = got[a][1]
+                        raise ValueError(f"{cw}: {v:.6g} mm is beyond any machine tool "
+                                         f"({plausibility.REFUSE_POSITION / 1e3:g} m); positions look like µm: "
+                                         f"name the column {a}_um")
+            continue
+        if None in got and len(got) > 1:
+            other = next(cw for p, (_, cw) in got.items() if p is not None)
+            raise ValueError(f"{other}: {key} is given whole by column '{got[None][1].split(chr(39))[1]}' and "
+                             "in parts; leave one empty")
+        if None in got:
+            o[key] = got[None][0]
+            continue
+        n = max(got) + 1
+        for i in range(n):
+            if i not in got:
+                cw = empty.get((key, i))
+                raise ValueError(f"{cw or where}: " + ("empty cell " if cw else f"no column for {key} entry {i + 1} ")
+                                 + f"(a number is expected for a {typ} row)")
+        o[key] = [got[i][0] for i in range(n)]
+    # an axes object given in part (a step's reference cut): name the empty cell
+    for key in [k for k in o if k.endswith("_axes")]:
+        for (k, part), cw in empty.items():
+            if k == key and part != "S":
+                raise ValueError(f"{cw}: empty cell ({key} needs every axis: {_axis_list(machine, skip_s=True)})")
+    if "axes" not in o:
+        o["axes"] = {}
+    for key, (value, _) in text.items():
+        if key != "approach":
+            o[key] = value
+    if "approach" in text:
+        o.setdefault("direction", {}).update(_approach(text["approach"][0], machine, text["approach"][1]))
+    # what the table does not hold, from the sidecar or the options
+    for key in registry[typ]["json_keys"]:
+        if key not in o and side.get(key) is not None:
+            o[key] = list(side[key]) if isinstance(side[key], (list, tuple)) else side[key]
+    if isinstance(o.get("sigma"), (int, float)) and not o["sigma"] > 0:
+        raise ValueError(f"{parts['sigma'][None][1]}: sigma {o['sigma']:g} mm must be > 0")
+    if typ == "machined":
+        _machined_checks(o, parts, text, empty, side, machine, where)
+    return o
+
+
+def _machined_checks(o: dict, parts, text, empty, side: Mapping, machine: Machine, where: str) -> None:
+    """A CMM report's feature: the part (column, else --setup / the sidecar's
+    setup, else P1), the feature (default: a step when the row has a reference
+    cut, else a face), and the sizes that betray a unit mistake."""
+    if "part" not in o:
+        part = side.get("setup") or "P1"
+        if "." in str(part):
+            raise ValueError(f"{where}: part '{part}': a part name has no '.'")
+        o["part"] = str(part)
+    elif "." in o["part"]:
+        raise ValueError(f"{text['part'][1]}: part '{o['part']}': a part name has no '.'")
+    reference = [k for k in ("reference_axes", "reference_point", "reference_normal") if k in o]
+    if "feature" not in o:
+        o["feature"] = "step" if "reference_axes" in o else "face"
+    feature = o["feature"]
+    if feature not in ("face", "step"):
+        close = difflib.get_close_matches(feature, ["face", "step"], n=1)
+        raise ValueError(f"{text['feature'][1]}: '{feature}' is neither face nor step"
+                         + (f"; did you mean '{close[0]}'?" if close else ""))
+    if feature == "face" and reference:
+        cw = next(iter(parts[reference[0]].values()))[1]
+        raise ValueError(f"{cw}: a face has no reference cut (leave the cell empty, or say 'step' in the "
+                         "feature column)")
+    if feature == "step" and "reference_axes" not in o:
+        raise ValueError(f"{where}: a step needs the axes of its reference cut: columns reference_<axis> "
+                         f"(or ref_<axis>) for {_axis_list(machine, skip_s=True)}")
+    for key in ("point", "normal", "reference_point", "reference_normal"):
+        if key in o and len(o[key]) != 3:
+            raise ValueError(f"{where}: {key} needs the three columns {key}_x {key}_y {key}_z")
+    for key in ("normal", "reference_normal"):
+        if key in o and not math.sqrt(sum(v * v for v in o[key])) > 1e-9:
+            raise ValueError(f"{parts[key][0][1]}: the face normal {_fmt(o[key])} is zero (the outward normal "
+                             "of the face, part frame)")
+    for key in ("point", "reference_point"):
+        for i, v in enumerate(o.get(key, ())):
+            if abs(v) > plausibility.REFUSE_POSITION:
+                raise ValueError(f"{parts[key][i][1]}: {v:.6g} mm is beyond any machine tool; coordinates "
+                                 f"look like µm: name the column {key}_{_XYZ[i]}_um")
+    for a, v in (o.get("reference_axes") or {}).items():
+        if not machine.is_rotary(a) and abs(v) > plausibility.REFUSE_POSITION:
+            raise ValueError(f"{parts['reference_axes'][a][1]}: {v:.6g} mm is beyond any machine tool; "
+                             f"positions look like µm: name the column reference_{a}_um")
+    if "measured" in o and not isinstance(o["measured"], list) and abs(o["measured"]) > _MACHINED_RANGE:
+        raise ValueError(f"{parts['measured'][None][1]}: deviation {o['measured']:.6g} mm: a machined face is "
+                         f"not that far from nominal (refused beyond ±{_MACHINED_RANGE:g} mm); deviations look "
+                         "like µm: name the column measured_um or give --units um")
+
+
+def _angle_checks(obs: list, cols, machine: Machine, path: str, lines: list) -> None:
+    """Rotary columns of an axes object other than ``axes`` (a step's
+    reference cut) that look like radians warn as the axes do; a column
+    declared in rad whose values pass a turn many times is refused as degrees."""
+    from ..units import looks_like_radians, radians_message
+
+    for c in cols:
+        if not (c.key == "axes" or c.key.endswith("_axes")) or not machine.is_rotary(c.part):
+            continue
+        values = [(o[c.key][c.part], n) for o, n in zip(obs, lines) if c.part in (o.get(c.key) or {})]
+        if not values:
+            continue
+        rad = c.factor == _units.ANGLE_SUFFIXES["rad"]
+        big = [(v, n) for v, n in values if abs(v) / c.factor > 4 * math.pi]
+        if rad and big:
+            v, n = big[0]
+            raise ValueError(f"{path}:{n}: column '{c.header}': {v / c.factor:.6g} rad is {v:.6g} degrees, more "
+                             f"than two turns; the values look like degrees: name the column {c.part}_deg "
+                             f"(or reference_{c.part}_deg)")
+        if c.key != "axes" and looks_like_radians([v for v, _ in values]):
+            _warn(radians_message(f"{path}: column '{c.header}'", [v for v, _ in values])
+                  + f", name the column {c.header}_rad or give --angle-units rad", RadiansWarning)
+
+
+def write_table(dataset, path: Union[str, os.PathLike], *, delimiter: str = ",") -> dict:
+    """Write ``dataset``'s observations as a ``fivecal`` table (one row per
+    observation, the columns of every key they use; see docs/formats.md) that
+    ``fivecal import fivecal`` reads back to the same observations; returns
+    the sidecar (probe, artefact) that goes with it. Numbers are written to
+    round trip exactly."""
+    from .. import files
+
+    doc = dataset.to_dict() if hasattr(dataset, "to_dict") else dict(dataset)
+    registry = _registered()
+    machine = Machine.from_dict(doc["machine"])
+    order = [a for a in machine.axis_names]
+    columns, cells = [], []
+
+    def add(col):
+        if col not in columns:
+            columns.append(col)
+
+    def flatten(key, value, where) -> list:
+        if key == "axes":
+            return [(a, value[a]) for a in order if a in value]
+        if key == "direction":
+            return [(f"dir_{a}", value[a]) for a in order if a in value]
+        if isinstance(value, Mapping):
+            if not key.endswith("_axes"):
+                raise ValueError(f"{where}.{key}: an object other than an axes object has no table columns")
+            return [(f"{key[:-5]}_{a}", value[a]) for a in order if a in value]
+        if isinstance(value, (list, tuple)):
+            names = [f"{key}_{_XYZ[i]}" for i in range(3)] if key not in numbered else \
+                [f"{key}_{i + 1}" for i in range(len(value))]
+            return list(zip(names, value))
+        return [(key, value)]
+
+    # a key that is a list of other than three numbers in any row is numbered in every row
+    numbered = {k for o in doc["observations"] for k, v in o.items()
+                if isinstance(v, (list, tuple)) and len(v) != 3}
+
+    for i, o in enumerate(doc["observations"]):
+        typ = o["type"]
+        if typ not in registry:
+            raise ValueError(f"observations[{i}].type: '{typ}' is not a registered observation type")
+        row = {"type": typ}
+        for key in ["id", "axes", "direction"] + [k for k in registry[typ]["json_keys"]
+                                                   if k not in ("type", "id", "axes", "direction")]:
+            if key in o:
+                row.update(flatten(key, o[key], f"observations[{i}]"))
+        unknown = set(o) - set(registry[typ]["json_keys"])
+        if unknown:
+            raise ValueError(f"observations[{i}]: {', '.join(sorted(unknown))}: not a key of a {typ} observation")
+        for col in row:
+            add(col)
+        cells.append(row)
+    front = ["type", "id"] + [a for a in order] + [f"dir_{a}" for a in order]
+    columns = [c for c in front if c in columns] + [c for c in columns if c not in front]
+
+    def fmt(v):
+        if isinstance(v, bool):
+            raise ValueError(f"a table cell cannot hold {v!r}")
+        if isinstance(v, int):
+            return str(v)
+        if isinstance(v, float):
+            return repr(v)
+        return str(v)
+
+    import io as _io
+    buf = _io.StringIO()
+    w = csv.writer(buf, delimiter=delimiter, lineterminator="\n")
+    w.writerow(columns)
+    for row in cells:
+        w.writerow([fmt(row[c]) if c in row else "" for c in columns])
+    files.write_text(path, buf.getvalue())
+    return {k: doc[k] for k in ("probe", "artefact") if doc.get(k)}
 
 
 _OBS = re.compile(r"observations\[(\d+)\]")
