@@ -45,9 +45,11 @@ def register(sub) -> None:
         "--tool-ball 0,0,100 --table-ball 100,0,0 --column reading=dL --units um --out ds.json\n"
         "  fivecal import rtest rtest.txt --machine m.json --sidecar rtest.json --out ds.json\n"
         "  fivecal import point tracker.csv --machine table.json --target work --target-point 0,50,0 "
-        "--out ds.json")
-    p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest", "tracker"],
-                   help="probing | dbb | ball3d (rtest) | point (tracker) | fivecal")
+        "--out ds.json\n"
+        "  fivecal import machined cmm_report.csv --machine c600u.json --setup P1 --out ds.json")
+    p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest", "tracker", "6d", "tracer"],
+                   help="probing | dbb | ball3d (rtest) | point (tracker) | pose (6d) | distance (tracer) | "
+                   "machined (a CMM report of a machined test part) | fivecal (a type column, any kind)")
     p.add_argument("file", metavar="FILE", help="the table (CSV or whitespace text)")
     p.add_argument("--machine", required=True, help="machine JSON")
     p.add_argument("--out", required=True, help="dataset JSON to write")
@@ -64,7 +66,8 @@ def register(sub) -> None:
                    "header line)")
     p.add_argument("--decimal", choices=["comma", "point"], help="decimal mark (default: comma unless it "
                    "separates the columns)")
-    p.add_argument("--setup", help="dbb / ball3d: the mounting's name (no '.')")
+    p.add_argument("--setup", help="dbb / ball3d: the mounting's name; machined: the test part's name when the "
+                   "table has no part column (default P1); no '.'")
     p.add_argument("--length", type=float, help="dbb: nominal bar length, mm")
     p.add_argument("--tool-ball", metavar="X,Y,Z", help="dbb / ball3d: tool ball centre, machine frame at "
                    "the zero pose, mm")
