@@ -59,7 +59,8 @@ class Result:
         #: prior for the point estimate (small: the data show no sign of that class)
         self.class_scales: dict = dict(core.class_scales)
         #: variance_components=True: per instrument group ("probe", "dbb", "ball3d", "point", "pose",
-        #: "pose_rad" (a pose's rotation rows, rad), "distance") a dict with rows, redundancy,
+        #: "pose_rad" (a pose's rotation rows, rad), "distance"; "point.T1", "point.T2" ... when a
+        #: kind's observations come from several instruments) a dict with rows, redundancy,
         #: declared_sigma, factor, sigma (mm, or rad) and estimated
         self.variance_components: dict = {
             c.group: {"rows": c.rows, "redundancy": c.redundancy, "declared_sigma": c.declared,
@@ -295,7 +296,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     ``priors``: prior sigma overrides, a parameter name or ``"class:<name>"`` ->
     sigma (see docs/identification.md for the classes and defaults).
     ``variance_components``: estimate the noise of each instrument group (probe
-    touches, ball bar, ball3d) from its residuals (Helmert / REML variance
+    touches, ball bar, ball3d, ...; one group per instrument id when a kind's
+    observations come from several trackers or stations) from its residuals (Helmert / REML variance
     components) instead of trusting the declared sigmas; mixed data are then
     weighed by what they show, :attr:`Result.variance_components` reports each
     group's sigma, and the covariance uses them.
@@ -331,11 +333,13 @@ def noise_lines(result) -> list:
     """The instrument noise the fit estimated (variance components), one line per group."""
     out = []
     for g, c in sorted((getattr(result, "variance_components", None) or {}).items()):
+        # a group of rotation rows (pose_rad, pose_rad.<id>) is in rad
+        f, unit = (1e6, "µrad") if g.split(".", 1)[0].endswith("_rad") else (1e3, "µm")
         if c["estimated"]:
-            out.append(f"noise of {g}: {c['sigma'] * 1e3:.3f} µm estimated from {c['rows']} rows "
-                       f"(declared {c['declared_sigma'] * 1e3:.3f} µm, x{c['factor']:.2f})")
+            out.append(f"noise of {g}: {c['sigma'] * f:.3f} {unit} estimated from {c['rows']} rows "
+                       f"(declared {c['declared_sigma'] * f:.3f} {unit}, x{c['factor']:.2f})")
         else:
-            out.append(f"noise of {g}: declared {c['declared_sigma'] * 1e3:.3f} µm kept "
+            out.append(f"noise of {g}: declared {c['declared_sigma'] * f:.3f} {unit} kept "
                        f"(redundancy {c['redundancy']:.1f} of {c['rows']} rows is too little to estimate it)")
     return out
 

@@ -126,3 +126,15 @@ def test_one_tracker_keeps_the_plain_group_name(machine):
     ds = fivecal.simulate(machine, _plan(rng, "T1"), errors=TRUTH, setup=setup, sigma={"point": 0.005}, seed=5)
     r = fivecal.identify(ds, ESTIMATE, fix=FIXED[:1], variance_components=True)
     assert set(r.variance_components) == {"point"}
+
+
+def test_noise_lines_give_rotation_groups_in_microradians():
+    """A pose's rotation rows (pose_rad, or pose_rad.<camera> with several
+    cameras) are in rad: their noise line says µrad, not µm."""
+    from types import SimpleNamespace
+
+    c = {"rows": 90, "redundancy": 80.0, "declared_sigma": 2.5e-5, "factor": 0.4, "sigma": 1e-5, "estimated": True}
+    lines = fivecal.identification.noise_lines(SimpleNamespace(variance_components={
+        "pose_rad.CAM": c, "pose.CAM": {**c, "declared_sigma": 0.02, "sigma": 0.008}}))
+    assert lines == ["noise of pose.CAM: 8.000 µm estimated from 90 rows (declared 20.000 µm, x0.40)",
+                     "noise of pose_rad.CAM: 10.000 µrad estimated from 90 rows (declared 25.000 µrad, x0.40)"]
