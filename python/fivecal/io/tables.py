@@ -1,6 +1,6 @@
 """Instrument tables (CSV or whitespace text) to fivecal datasets.
 
-One row per observation, a header row naming the columns. Four kinds:
+One row per observation, a header row naming the columns. The kinds:
 
 * ``probing``: a probing log, axis positions at the trigger, the ``target``
   touched (a facet or sphere of the artefact) and the approach direction;
@@ -17,12 +17,17 @@ One row per observation, a header row naming the columns. Four kinds:
 * ``distance`` (alias ``tracer``): a tracking interferometer or laser
   tracer at one or more stations, axes, ``reading`` and ``station``; each
   station's nominal position and dead length from the sidecar;
-* ``fivecal``: rows already in fivecal's terms, with a ``type`` column.
+* ``machined`` (alias ``cmm``): a CMM report of a machined test part, one
+  face per row: the axes of the cut, ``point_x|y|z``, ``normal_x|y|z``,
+  ``measured`` (the deviation), optionally the reference cut of a step;
+* ``fivecal``: rows already in fivecal's terms, with a ``type`` column: any
+  registered kind, its columns named after its dataset keys (the registry's
+  ``json_keys``); :func:`write_table` writes such a table.
 
 Units come from the header (``reading_um``, ``B_rad``, ``dx [um]``) through
 :func:`fivecal.units.column_unit`, else from the options. Every bad cell is
 refused naming the file, the line and the column. The user documentation is
-docs/import.md.
+docs/import.md (machined reports and the generic table: docs/formats.md).
 """
 from __future__ import annotations
 
@@ -61,9 +66,8 @@ _FIELDS = {
     "dbb": _COMMON | {"reading", "length"} | set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"]),
     "ball3d": _COMMON | {"dx", "dy", "dz"} | set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"]),
 }
-_FIELDS["fivecal"] = set().union(*_FIELDS.values())
-_REQUIRED = {"probing": ("target",), "dbb": ("reading",), "ball3d": ("dx", "dy", "dz"), "fivecal": ("type",)}
-# point: after "fivecal", whose rows are facet, sphere, dbb and ball3d only.
+_REQUIRED = {"probing": ("target",), "dbb": ("reading",), "ball3d": ("dx", "dy", "dz")}
+# (the fivecal and machined tables take their columns from the registry: see _generic_columns)
 # The measured coordinates are not named x y z: those are axis letters.
 _MEASURED_XYZ = ("measured_x", "measured_y", "measured_z")
 _SHORT = {"mx": "measured_x", "my": "measured_y", "mz": "measured_z"}
@@ -876,14 +880,10 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
         if c.field in _TEXT_FIELDS:
             s = cell.strip()
             if not s:
-                if kind == "fivecal" or c.field == "approach":
+                if c.field == "approach":
                     continue
                 raise ValueError(f"{cw}: empty cell (a {c.field} is expected)")
             text[c.field] = s.lower() if c.field == "type" else s
-            continue
-        if kind == "fivecal" and not cell.strip() and len(c.field) > 1:
-            # mixed rows: a column another type uses stays empty; _value names it when needed
-            empty[c.field] = cw
             continue
         v = _number(cell, decimal_comma, cw)
         if c.field.startswith("dir_"):
