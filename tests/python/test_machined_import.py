@@ -155,3 +155,10 @@ def test_cli_refuses_a_bad_report_with_status_2(machine, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "r.csv:3: column 'measured_um': 'abc' is not a number" in err
     assert not (tmp_path / "o.json").exists()
+
+
+def test_a_type_column_must_say_machined(machine, tmp_path):
+    ok = tables.read_table(_report(tmp_path, [HEAD + ",type", GOOD + ",machined"]), "machined", machine)
+    assert ok["observations"][0]["type"] == "machined"
+    with pytest.raises(ValueError, match=r"r\.csv:2: column 'type': 'face' in a machined import"):
+        tables.read_table(_report(tmp_path, [HEAD + ",type", GOOD + ",face"]), "machined", machine)

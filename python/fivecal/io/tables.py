@@ -1217,6 +1217,10 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
                              + (f"; did you mean '{close[0]}'?" if close else ""))
     else:
         typ = kind
+        if "type" in text and _TYPE_ALIASES.get(text["type"][0], text["type"][0]) != kind:
+            raise ValueError(f"{text['type'][1]}: '{text['type'][0]}' in a {kind} import (a table of several "
+                             "kinds is a fivecal import)")
+        text.pop("type", None)
     keys = set(registry[typ]["json_keys"])
     for key, (_, cw) in list(text.items()):
         if key not in keys and key != "approach":
