@@ -15,11 +15,29 @@ Words are the machine's axis commands (what fivecal's G-code reader and
 compensation read): the circle's centre and points go through the nominal
 inverse kinematics at the plan's rotary pose, so a reversed or table-side
 linear axis mirrors the circle and flips G2/G3 as the machine needs.
+
+:func:`rotary_dbb_program` writes the setups in which a rotary axis moves
+(:func:`fivecal.procedures.dbb.four_step_plan`, :func:`~fivecal.procedures.dbb.wang_plan`):
+
+1. rapid to the approach point: the first planned pose with the linear axes
+   moved so that the bar is ``feed_in`` mm short (the bar is fitted there);
+2. feed-in: ``G1`` along the bar onto the first planned pose;
+3. the path: ``G1`` blocks through the planned poses, in inverse time
+   (``G93``, so ``feed`` is the speed of one ball relative to the other
+   whichever axes move). Where the straight line in axis commands between two
+   poses would change the bar length by more than ``tolerance``, poses are
+   added in between, each with the linear axes moved along the bar so that its
+   nominal length is exact (synchronous linear-axis moves);
+4. feed-out: ``G1`` along the bar ``feed_in`` mm short again.
+
+With ``kins`` (``xyzac-trt`` / ``xyzbc-trt``) the words are LinuxCNC's joint
+values, for its identity kinematics (``M429`` in fivecal's sample configs).
+:func:`bar_length` replays axis commands through the nominal model.
 """
 from __future__ import annotations
 
 import math
-from typing import Dict, List, Mapping, Sequence
+from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -80,8 +98,10 @@ def circle_of(machine: Machine, entries: Sequence[Mapping]) -> dict:
 
 def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
                 feed_in: float = 1.5, turns: int = 1) -> str:
-    """ISO G-code for the planar ball bar setups of ``plan`` (module text);
-    ``feed`` mm/min for feed-in, arc and feed-out."""
+    """ISO G-code for the ball bar setups of ``plan`` (module text):
+    planar circles as arcs, setups in which a rotary axis moves as in
+    :func:`rotary_dbb_program`; ``feed`` mm/min for feed-in, path and
+    feed-out."""
     if not (feed > 0 and math.isfinite(feed)):
         raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
     if not (0 < feed_in and math.isfinite(feed_in)):
@@ -92,6 +112,9 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
     out = [f"(fivecal ball bar program, machine {machine.name}: feed-in, arc, feed-out per setup)",
            "G21 G90 G94 G40 G49 G54"]
     for setup, entries in _setups(plan).items():
+        if _rotary_moves(machine, entries):
+            out += _rotary_setup(machine, setup, entries, feed, feed_in, None, 1e-5, "G61")
+            continue
         c = circle_of(machine, entries)
         if feed_in >= c["radius"]:
             raise ValueError(f"feed_in: {feed_in} mm is not less than the radius {c['radius']:g} mm")
@@ -111,5 +134,168 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
         for _ in range(int(turns)):
             out.append(f"{arc} {a1}{f(st[a1])} {a2}{f(st[a2])} {ij[0]}{f(off[a1])} {ij[1]}{f(off[a2])}")
         out.append(f"G1 {a1}{f(approach[a1])} {a2}{f(approach[a2])} (feed-out)")
+    out.append("M2")
+    return "\n".join(out) + "\n"
+
+
+# ---- setups in which a rotary axis moves ------------------------------------
+
+def _rotary(machine: Machine) -> List[str]:
+    return [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+
+
+def _rotary_moves(machine: Machine, entries: Sequence[Mapping]) -> bool:
+    return any(np.ptp([float(e["axes"].get(a, 0.0)) for e in entries]) > 1e-9 for a in _rotary(machine))
+
+
+def _rows(machine: Machine, qs: Sequence[Mapping[str, float]]) -> Dict[str, np.ndarray]:
+    return {a: np.array([float(q.get(a, 0.0)) for q in qs]) for a in machine.axis_names}
+
+
+def bar_length(machine: Machine, axes: Sequence[Mapping[str, float]], tool_ball, table_ball,
+               errors=None) -> np.ndarray:
+    """(N,) mm: the distance between the tool ball (machine frame at the zero
+    pose) and the table ball (workpiece frame) at each of the axis commands
+    ``axes`` (a list of dicts), on the nominal machine or with ``errors``."""
+    p = machine.tool_point(_rows(machine, axes), errors=errors, tip=np.asarray(tool_ball, float))
+    return np.linalg.norm(p - np.asarray(table_ball, float), axis=1)
+
+
+class _Bar:
+    """The nominal bar of one setup: ball positions and the linear-axis moves
+    that change them (exact: at fixed rotary axes the tool ball is affine in
+    the linear commands)."""
+
+    def __init__(self, machine: Machine, entry: Mapping):
+        self.m = machine
+        self.tool = np.asarray(entry["tool_ball"], float)
+        self.table = np.asarray(entry["table_ball"], float)
+        self.length = float(entry["length"])
+        self.lin = [a for a in "XYZ" if a in machine.axis_names]
+
+    def ball(self, qs: Sequence[Mapping[str, float]]) -> np.ndarray:
+        return self.m.tool_point(_rows(self.m, qs), errors=None, tip=self.tool)
+
+    def move(self, q: Mapping[str, float], dp: np.ndarray) -> Dict[str, float]:
+        """q with the linear axes moved so that the tool ball moves by dp."""
+        qs = [dict(q)] + [{**q, a: q[a] + 1.0} for a in self.lin]
+        p = self.ball(qs)
+        J = (p[1:] - p[0]).T
+        d = np.linalg.lstsq(J, dp, rcond=None)[0]
+        return {**q, **{a: q[a] + float(v) for a, v in zip(self.lin, d)}}
+
+    def restore(self, q: Mapping[str, float], short: float = 0.0) -> Dict[str, float]:
+        """q with the linear axes moved along the bar so that it is ``short``
+        mm shorter than nominal."""
+        for _ in range(4):
+            d = self.ball([q])[0] - self.table
+            r = float(np.linalg.norm(d))
+            err = r - (self.length - short)
+            if abs(err) < 1e-12:
+                break
+            q = self.move(q, -err * d / r)
+        return q
+
+
+def _path(bar: _Bar, qs: List[Dict[str, float]], tolerance: float) -> List[Dict[str, float]]:
+    """The planned poses with poses added where the straight line in axis
+    commands between two would leave the nominal bar length by more than
+    ``tolerance`` (checked at 7 points of each step)."""
+    s = np.linspace(0.0, 1.0, 9)[1:-1]
+    out = [qs[0]]
+
+    def seg(a, b, depth):
+        mid = [{k: a[k] + t * (b[k] - a[k]) for k in a} for t in s]
+        dev = np.abs(np.linalg.norm(bar.ball(mid) - bar.table, axis=1) - bar.length).max()
+        if dev <= tolerance or depth > 30:
+            if depth > 30:
+                raise ValueError("the path cannot be split finely enough to keep the bar length "
+                                 f"within {tolerance} mm")
+            out.append(b)
+            return
+        m = bar.restore({k: 0.5 * (a[k] + b[k]) for k in a})
+        seg(a, m, depth + 1)
+        seg(m, b, depth + 1)
+
+    for a, b in zip(qs[:-1], qs[1:]):
+        seg(a, b, 0)
+    return out
+
+
+def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed: float, feed_in: float,
+                  kins: Optional[str], tolerance: float, path_mode: str, pins=None) -> List[str]:
+    letters = [a for a in machine.axis_names if a != "S"]
+    bar = _Bar(machine, entries[0])
+    if feed_in >= bar.length:
+        raise ValueError(f"feed_in: {feed_in} mm is not less than the bar length {bar.length:g} mm")
+    for i, e in enumerate(entries):
+        if (np.abs(np.asarray(e["tool_ball"], float) - bar.tool).max() > 1e-12
+                or np.abs(np.asarray(e["table_ball"], float) - bar.table).max() > 1e-12
+                or float(e["length"]) != bar.length):
+            raise ValueError(f"setup {setup}: entry {i} has other balls or another bar length than the "
+                             "first; one setup is one mounting of the bar")
+    qs = [{a: float(e["axes"].get(a, 0.0)) for a in letters} for e in entries]
+    lengths = np.linalg.norm(bar.ball(qs) - bar.table, axis=1)
+    k = int(np.argmax(np.abs(lengths - bar.length)))
+    if abs(lengths[k] - bar.length) > 1e-6:
+        raise ValueError(f"setup {setup}: at planned pose {k + 1} the nominal balls are {lengths[k]:.6f} mm "
+                         f"apart, the bar is {bar.length:g} mm (not a constant-length path)")
+    pts = _path(bar, qs, tolerance)
+    if kins:
+        from . import linuxcnc as L
+        kk = L._kins(kins)
+        names = ["X", "Y", "Z", L.TILT[kk], "C"]
+
+        def words(q):
+            j = L.joints(machine, kk, _rows(machine, [q]))[0]
+            return " ".join(f"{a}{v:.6f}" for a, v in zip(names, j))
+    else:
+        def words(q):
+            return " ".join(f"{a}{q[a]:.6f}" for a in letters)
+    approach = bar.restore(pts[0], feed_in)
+    leave = bar.restore(pts[-1], feed_in)
+    moving = [a for a in _rotary(machine) if np.ptp([q[a] for q in qs]) > 1e-9]
+    out = [f"(setup {setup}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
+           f"poses, {len(pts)} path points, bar length within {tolerance * 1e3:g} um between them)",
+           path_mode, "G94", f"G0 {words(approach)}", f"G1 {words(pts[0])} F{feed:g} (feed-in)", "G93"]
+    balls = bar.ball(pts)
+    rel = np.linalg.norm(np.diff(balls, axis=0), axis=1)
+    for q, dist in zip(pts[1:], rel):
+        # inverse time: 1 / minutes for the block at ``feed`` mm/min of the balls' relative motion
+        out.append(f"G1 {words(q)} F{feed / max(dist, 1e-6):.6f}")
+    out += ["G94", f"G1 {words(leave)} F{feed:g} (feed-out)"]
+    return out
+
+
+def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
+                       feed_in: float = 1.5, kins: Optional[str] = None, tolerance: float = 1e-5,
+                       path_mode: str = "G61", tcp_off: str = "M429") -> str:
+    """ISO G-code for the ball bar setups of ``plan`` in which a rotary axis
+    moves (module text). ``feed``: mm/min of the balls' relative motion on the
+    path (inverse time) and of the feed-in and feed-out; ``tolerance`` (mm):
+    largest change of the nominal bar length along the straight blocks;
+    ``path_mode``: ``G61`` (exact stop: the controller runs the blocks as
+    written) or e.g. ``G64 P0.0001`` (blending within 0.1 µm, continuous);
+    ``kins``: write LinuxCNC joint values (``tcp_off`` switches its identity
+    kinematics on first)."""
+    if not (feed > 0 and math.isfinite(feed)):
+        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
+    if not (0 < feed_in and math.isfinite(feed_in)):
+        raise ValueError(f"feed_in: expected a positive distance in mm, got {feed_in}")
+    if not (tolerance > 0 and math.isfinite(tolerance)):
+        raise ValueError(f"tolerance: expected a positive length in mm, got {tolerance}")
+    setups = _setups(plan)
+    fixed = [s for s, e in setups.items() if not _rotary_moves(machine, e)]
+    if fixed:
+        raise ValueError(f"setup {fixed[0]}: no rotary axis moves (a planar circle: dbb_program)")
+    out = [f"(fivecal ball bar program, machine {machine.name}: rotary-axis paths, feed-in, path, "
+           "feed-out per setup)",
+           f"(words: {'LinuxCNC ' + kins + ' joint values' if kins else 'axis commands'}; path feed in "
+           "inverse time for the balls' relative speed " + f"{feed:g} mm/min)",
+           "G21 G90 G94 G40 G49 G54"]
+    if kins and tcp_off:
+        out.append(f"{tcp_off} (identity kinematics: words are joint values)")
+    for setup, entries in setups.items():
+        out += _rotary_setup(machine, setup, entries, feed, feed_in, kins, tolerance, path_mode)
     out.append("M2")
     return "\n".join(out) + "\n"
