@@ -37,11 +37,12 @@ values, for its identity kinematics (``M429`` in fivecal's sample configs).
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..machine import Machine
+from ..machine import Machine, RadiansWarning
 
 _PLANES = {"XY": ("G17", "X", "Y", "IJ"), "ZX": ("G18", "Z", "X", "KI"), "YZ": ("G19", "Y", "Z", "JK")}
 
@@ -113,7 +114,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
            "G21 G90 G94 G40 G49 G54"]
     for setup, entries in _setups(plan).items():
         if _rotary_moves(machine, entries):
-            out += _rotary_setup(machine, setup, entries, feed, feed_in, None, 1e-5, "G61")
+            out += _rotary_setup(machine, setup, entries, feed, feed_in, None, 2e-5, "G61")
             continue
         c = circle_of(machine, entries)
         if feed_in >= c["radius"]:
@@ -173,57 +174,74 @@ class _Bar:
         self.length = float(entry["length"])
         self.lin = [a for a in "XYZ" if a in machine.axis_names]
 
-    def ball(self, qs: Sequence[Mapping[str, float]]) -> np.ndarray:
-        return self.m.tool_point(_rows(self.m, qs), errors=None, tip=self.tool)
+    def ball(self, Q: Dict[str, np.ndarray]) -> np.ndarray:
+        with warnings.catch_warnings():
+            # a few small rotary commands of a path look like radians to the
+            # heuristic; they are the plan's degrees
+            warnings.simplefilter("ignore", RadiansWarning)
+            return self.m.tool_point(Q, errors=None, tip=self.tool)
 
-    def move(self, q: Mapping[str, float], dp: np.ndarray) -> Dict[str, float]:
-        """q with the linear axes moved so that the tool ball moves by dp."""
-        qs = [dict(q)] + [{**q, a: q[a] + 1.0} for a in self.lin]
-        p = self.ball(qs)
-        J = (p[1:] - p[0]).T
-        d = np.linalg.lstsq(J, dp, rcond=None)[0]
-        return {**q, **{a: q[a] + float(v) for a, v in zip(self.lin, d)}}
+    def deviation(self, Q: Dict[str, np.ndarray]) -> np.ndarray:
+        return np.linalg.norm(self.ball(Q) - self.table, axis=1) - self.length
 
-    def restore(self, q: Mapping[str, float], short: float = 0.0) -> Dict[str, float]:
-        """q with the linear axes moved along the bar so that it is ``short``
-        mm shorter than nominal."""
+    def restore(self, Q: Dict[str, np.ndarray], short: float = 0.0) -> Dict[str, np.ndarray]:
+        """Q (axis -> array) with the linear axes moved along the bar so that
+        it is ``short`` mm shorter than nominal at every pose."""
+        Q = {a: np.array(v, float) for a, v in Q.items()}
         for _ in range(4):
-            d = self.ball([q])[0] - self.table
-            r = float(np.linalg.norm(d))
+            p = self.ball(Q)
+            cols = [self.ball({**Q, a: Q[a] + 1.0}) - p for a in self.lin]
+            J = np.stack(cols, axis=2)  # (N, 3, n_lin): d ball / d linear command
+            d = p - self.table
+            r = np.linalg.norm(d, axis=1)
             err = r - (self.length - short)
-            if abs(err) < 1e-12:
+            if np.abs(err).max() < 1e-12:
                 break
-            q = self.move(q, -err * d / r)
-        return q
+            dp = -(err / r)[:, None] * d
+            step = np.einsum("nij,nj->ni", np.linalg.pinv(J), dp)
+            for k, a in enumerate(self.lin):
+                Q[a] = Q[a] + step[:, k]
+        return Q
 
 
-def _path(bar: _Bar, qs: List[Dict[str, float]], tolerance: float) -> List[Dict[str, float]]:
-    """The planned poses with poses added where the straight line in axis
+def _interp(Q: Dict[str, np.ndarray], i: np.ndarray, t: np.ndarray) -> Dict[str, np.ndarray]:
+    return {a: v[i] + t * (v[i + 1] - v[i]) for a, v in Q.items()}
+
+
+def _path(bar: _Bar, Q: Dict[str, np.ndarray], tolerance: float) -> Dict[str, np.ndarray]:
+    """The planned poses, with poses added where the straight line in axis
     commands between two would leave the nominal bar length by more than
-    ``tolerance`` (checked at 7 points of each step)."""
-    s = np.linspace(0.0, 1.0, 9)[1:-1]
-    out = [qs[0]]
-
-    def seg(a, b, depth):
-        mid = [{k: a[k] + t * (b[k] - a[k]) for k in a} for t in s]
-        dev = np.abs(np.linalg.norm(bar.ball(mid) - bar.table, axis=1) - bar.length).max()
-        if dev <= tolerance or depth > 30:
-            if depth > 30:
-                raise ValueError("the path cannot be split finely enough to keep the bar length "
-                                 f"within {tolerance} mm")
-            out.append(b)
-            return
-        m = bar.restore({k: 0.5 * (a[k] + b[k]) for k in a})
-        seg(a, m, depth + 1)
-        seg(m, b, depth + 1)
-
-    for a, b in zip(qs[:-1], qs[1:]):
-        seg(a, b, 0)
-    return out
+    ``tolerance`` (checked at 7 points of each step). The added poses are
+    spread evenly in the step (the deviation of a chord falls with the square
+    of its length), each with its linear axes restored to the nominal bar."""
+    check = np.linspace(0.0, 1.0, 9)[1:-1]
+    for _ in range(6):
+        n = len(next(iter(Q.values())))
+        if n < 2:
+            return Q
+        i = np.repeat(np.arange(n - 1), len(check))
+        t = np.tile(check, n - 1)
+        dev = np.abs(bar.deviation(_interp(Q, i, t))).reshape(n - 1, len(check)).max(axis=1)
+        if dev.max() <= tolerance:
+            return Q
+        parts = np.where(dev > tolerance, np.ceil(np.sqrt(dev / tolerance) * 1.1), 1).astype(int)
+        idx, tt = [], []
+        for k, m in enumerate(parts):
+            idx += [k] * m
+            tt += list(np.arange(m) / m)
+        idx.append(n - 2)
+        tt.append(1.0)
+        new = _interp(Q, np.array(idx), np.array(tt))
+        keep = np.isclose(np.array(tt), 0.0) | (np.arange(len(tt)) == len(tt) - 1)
+        added = bar.restore({a: v[~keep] for a, v in new.items()})
+        for a in new:
+            new[a][~keep] = added[a]
+        Q = new
+    raise ValueError(f"the path cannot be split finely enough to keep the bar length within {tolerance} mm")
 
 
 def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed: float, feed_in: float,
-                  kins: Optional[str], tolerance: float, path_mode: str, pins=None) -> List[str]:
+                  kins: Optional[str], tolerance: float, path_mode: str) -> List[str]:
     letters = [a for a in machine.axis_names if a != "S"]
     bar = _Bar(machine, entries[0])
     if feed_in >= bar.length:
@@ -234,41 +252,45 @@ def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed
                 or float(e["length"]) != bar.length):
             raise ValueError(f"setup {setup}: entry {i} has other balls or another bar length than the "
                              "first; one setup is one mounting of the bar")
-    qs = [{a: float(e["axes"].get(a, 0.0)) for a in letters} for e in entries]
-    lengths = np.linalg.norm(bar.ball(qs) - bar.table, axis=1)
-    k = int(np.argmax(np.abs(lengths - bar.length)))
-    if abs(lengths[k] - bar.length) > 1e-6:
-        raise ValueError(f"setup {setup}: at planned pose {k + 1} the nominal balls are {lengths[k]:.6f} mm "
-                         f"apart, the bar is {bar.length:g} mm (not a constant-length path)")
-    pts = _path(bar, qs, tolerance)
+    Q = {a: np.array([float(e["axes"].get(a, 0.0)) for e in entries]) for a in machine.axis_names}
+    dev = bar.deviation(Q)
+    k = int(np.argmax(np.abs(dev)))
+    if abs(dev[k]) > 1e-6:
+        raise ValueError(f"setup {setup}: at planned pose {k + 1} the nominal balls are "
+                         f"{bar.length + dev[k]:.6f} mm apart, the bar is {bar.length:g} mm (not a "
+                         "constant-length path)")
+    P = _path(bar, Q, tolerance)
+    npts = len(P[letters[0]])
     if kins:
         from . import linuxcnc as L
         kk = L._kins(kins)
         names = ["X", "Y", "Z", L.TILT[kk], "C"]
 
-        def words(q):
-            j = L.joints(machine, kk, _rows(machine, [q]))[0]
-            return " ".join(f"{a}{v:.6f}" for a, v in zip(names, j))
+        def rows(R):
+            return [" ".join(f"{a}{v:.6f}" for a, v in zip(names, j)) for j in L.joints(machine, kk, R)]
     else:
-        def words(q):
-            return " ".join(f"{a}{q[a]:.6f}" for a in letters)
-    approach = bar.restore(pts[0], feed_in)
-    leave = bar.restore(pts[-1], feed_in)
-    moving = [a for a in _rotary(machine) if np.ptp([q[a] for q in qs]) > 1e-9]
+        def rows(R):
+            n = len(R[letters[0]])
+            return [" ".join(f"{a}{float(R[a][i]):.6f}" for a in letters) for i in range(n)]
+    first = {a: v[:1] for a, v in P.items()}
+    last = {a: v[-1:] for a, v in P.items()}
+    approach = bar.restore(first, feed_in)
+    leave = bar.restore(last, feed_in)
+    moving = [a for a in _rotary(machine) if np.ptp(Q[a]) > 1e-9]
+    path = rows(P)
     out = [f"(setup {setup}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
-           f"poses, {len(pts)} path points, bar length within {tolerance * 1e3:g} um between them)",
-           path_mode, "G94", f"G0 {words(approach)}", f"G1 {words(pts[0])} F{feed:g} (feed-in)", "G93"]
-    balls = bar.ball(pts)
-    rel = np.linalg.norm(np.diff(balls, axis=0), axis=1)
-    for q, dist in zip(pts[1:], rel):
+           f"poses, {npts} path points, bar length within {tolerance * 1e3:g} um between them)",
+           path_mode, "G94", f"G0 {rows(approach)[0]}", f"G1 {path[0]} F{feed:g} (feed-in)", "G93"]
+    rel = np.linalg.norm(np.diff(bar.ball(P), axis=0), axis=1)
+    for i in range(1, npts):
         # inverse time: 1 / minutes for the block at ``feed`` mm/min of the balls' relative motion
-        out.append(f"G1 {words(q)} F{feed / max(dist, 1e-6):.6f}")
-    out += ["G94", f"G1 {words(leave)} F{feed:g} (feed-out)"]
+        out.append(f"G1 {path[i]} F{feed / max(rel[i - 1], 1e-6):.6f}")
+    out += ["G94", f"G1 {rows(leave)[0]} F{feed:g} (feed-out)"]
     return out
 
 
 def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
-                       feed_in: float = 1.5, kins: Optional[str] = None, tolerance: float = 1e-5,
+                       feed_in: float = 1.5, kins: Optional[str] = None, tolerance: float = 2e-5,
                        path_mode: str = "G61", tcp_off: str = "M429") -> str:
     """ISO G-code for the ball bar setups of ``plan`` in which a rotary axis
     moves (module text). ``feed``: mm/min of the balls' relative motion on the

@@ -33,6 +33,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 
 from ..machine import Machine
+from ..procedures.rtest import tip_offset
 from . import linuxcnc as L
 
 
@@ -298,10 +299,10 @@ def rtest_points(machine: Machine, entries: Sequence[Mapping], subdivide: int = 
         if i and subdivide:
             q0 = pts[-1]["axes"]
             tb = np.asarray(e["table_ball"], float)
-            shift = machine.tip - np.asarray(e["tool_ball"], float)
             for s in np.arange(1, subdivide + 1) / (subdivide + 1):
                 r = {a: q0[a] + s * (q[a] - q0[a]) for a in rot}
-                lin = machine.inverse([tb + shift], start={**q0, **r})
+                at = {**q0, **r}
+                lin = machine.inverse([tb + tip_offset(machine, at, e["tool_ball"])], start=at)
                 pts.append({"axes": {**{a: float(v[0]) for a, v in lin.items() if a != "S"}, **r},
                             "sample": None})
         pts.append({"axes": q, "sample": i, "id": e.get("id")})
