@@ -340,3 +340,60 @@ def test_rtest_plan_puts_a_tool_ball_off_the_tip_into_the_nest(test, tool_ball):
     p = rtest.plan(m, test, table_ball=[60, 20, 30], tool_ball=tool_ball, step=30, tilt=-30)
     q = {a: np.array([e["axes"].get(a, 0.0) for e in p]) for a in m.axis_names}
     assert np.abs(m.tool_point(q, tip=np.array(tool_ball, float)) - [60, 20, 30]).max() < 1e-9
+
+
+# ---- command line -------------------------------------------------------------
+
+def _spec(tmp_path, name, machine, plan, **extra):
+    import json
+    p = tmp_path / name
+    p.write_text(json.dumps({"machine": machine, "plan": plan, **extra}))
+    return str(p)
+
+
+def test_cli_export_program(tmp_path, capsys):
+    from fivecal.cli import main
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=art, probe={"tip_radius": 3.0})
+    out = str(tmp_path / "sphere.ngc")
+    assert main(["export", "program", spec, "--kins", KINS, "--out", out, "--clearance", "0.5",
+                 "--overshoot", "2"]) == 0
+    assert open(out).read() == N.sphere_program(m, KINS, plan, art, 3.0, clearance=0.5, overshoot=2.0,
+                                                 retract=5.0, safe=100.0)
+    assert "sphere program, 96 plan entries" in capsys.readouterr().out
+    # R-test in TCP mode to standard output
+    rplan = rtest.plan(m, "K4", table_ball=[60, 20, 30], step=30, tilt=-30)
+    spec = _spec(tmp_path, "rtest.json", m.to_dict(), rplan)
+    assert main(["export", "program", spec, "--mode", "tcp", "--kins", KINS]) == 0
+    assert capsys.readouterr().out == N.rtest_program(m, rplan, mode="tcp", kins=KINS, dwell=1.0)
+    # ball bar: a machine file path relative to the spec, four-step rotary paths
+    c6 = fivecal.Machine.load("examples/machines/c600u.json")
+    fplan = dbb.four_step_plan(c6, step=10.0)
+    import os
+    spec = _spec(tmp_path, "fs.json", os.path.abspath("examples/machines/c600u.json"), fplan)
+    assert main(["export", "program", spec, "--feed", "500"]) == 0
+    assert capsys.readouterr().out == dbb_program(c6, fplan, feed=500.0)
+    # refusals: exit 2, one line naming the cause
+    assert main(["export", "program", spec.replace("fs", "sphere")]) == 2
+    assert "--kins" in capsys.readouterr().err
+    mixed = _spec(tmp_path, "mixed.json", m.to_dict(), plan[:2] + rplan[:2], artefact=art)
+    assert main(["export", "program", mixed, "--kins", KINS]) == 2
+    assert "ball3d, sphere" in capsys.readouterr().err
+    assert main(["export", "program", spec, "--tolerance", "0"]) == 2
+    assert "--tolerance" in capsys.readouterr().err
+
+
+def test_vendor_names_cite_the_public_sources():
+    """The neutral table's Siemens column pairs each swivel data record vector
+    with its $TC_CARR components and the TRAORI machine data; the Heidenhain
+    column names the kinematics description's row kind."""
+    from fivecal.io import controllers as K
+    m = fivecal.Machine.load("examples/machines/c600u.json")  # swivel table, A then C
+    s, h = K.vendor_names(m, "A", "direction")
+    assert "V1" in s and "$TC_CARR7..9" in s and "MD24570 $MC_TRAFO5_AXIS1_1" in s
+    assert "MachAxis A" in h and "AXIS A/B/C" in h
+    s, h = K.vendor_names(m, "A", "point")
+    assert "I2" in s and "$TC_CARR4..6" in s and "MD24550 $MC_TRAFO5_BASE_TOOL_1" in s and "KEY Trans" in h
+    s, _ = K.vendor_names(m, "C", "point")
+    assert "I3" in s and "$TC_CARR15..17" in s and "MD24558" in s

@@ -98,11 +98,11 @@ def circle_of(machine: Machine, entries: Sequence[Mapping]) -> dict:
 
 
 def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
-                feed_in: float = 1.5, turns: int = 1) -> str:
+                feed_in: float = 1.5, turns: int = 1, tolerance: float = 2e-5) -> str:
     """ISO G-code for the ball bar setups of ``plan`` (module text):
     planar circles as arcs, setups in which a rotary axis moves as in
-    :func:`rotary_dbb_program`; ``feed`` mm/min for feed-in, path and
-    feed-out."""
+    :func:`rotary_dbb_program` (with ``tolerance``, exact stop); ``feed``
+    mm/min for feed-in, path and feed-out."""
     if not (feed > 0 and math.isfinite(feed)):
         raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
     if not (0 < feed_in and math.isfinite(feed_in)):
@@ -114,7 +114,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
            "G21 G90 G94 G40 G49 G54"]
     for setup, entries in _setups(plan).items():
         if _rotary_moves(machine, entries):
-            out += _rotary_setup(machine, setup, entries, feed, feed_in, None, 2e-5, "G61")
+            out += _rotary_setup(machine, setup, entries, feed, feed_in, None, tolerance, "G61")
             continue
         c = circle_of(machine, entries)
         if feed_in >= c["radius"]:
