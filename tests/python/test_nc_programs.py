@@ -79,27 +79,58 @@ def test_sphere_cycle_touches_along_the_sphere_normal():
         prev = None if g == 38.2 else p
 
 
-def test_sphere_cycle_reaches_each_position_from_the_planned_side():
-    m = _machine()
-    art, plan = _sphere_cycle(m)
-    prog = N.sphere_program(m, KINS, plan, art, 3.0, overshoot=2.0)
+def _sphere_cycle_bc(m):
+    from fivecal.procedures import sphere_test
+    ball = {"id": "S1", "center": [50.0, -20.0, 30.0], "radius": 12.5}
+    visits = []
+    for a, vals in (("B", [-60.0, -15.0, 30.0]), ("C", [-120.0, 0.0, 120.0])):
+        visits += [{a: v} for v in vals] + [{a: v} for v in vals[::-1]]
+    plan = sphere_test.sphere_plan(m, ball, visits, tip_radius=3.0, rings=[(0.0, 4), (45.0, 4), (90.0, 1)])
+    return {"spheres": [ball]}, plan
+
+
+@pytest.mark.parametrize("kins", ["xyzac-trt", "xyzbc-trt"])
+def test_sphere_cycle_reaches_each_position_from_the_planned_side(kins):
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    art, plan = (_sphere_cycle if kins == KINS else _sphere_cycle_bc)(m)
+    tilt = L.TILT[kins]
+    sign = L.match(m, kins)["sign"]  # xyzbc-trt machine: ISO table C, LinuxCNC's C is -C
+    prog = N.sphere_program(m, kins, plan, art, 3.0, overshoot=2.0)
     blocks = _blocks(prog)
     probes = [b for b in blocks if b[1] == 38.2]
-    rot = [(b[2]["A"], b[2]["C"]) for b in blocks]
+    rot = [(b[2][tilt] * sign[3], b[2]["C"] * sign[4]) for b in blocks]  # back to fivecal commands
     checked = 0
     for k, b in enumerate(probes):
         d = plan[k].get("direction", {})
         i = blocks.index(b)
         # the last rotary move before this touch
         j = max(j for j in range(i) if rot[j] != rot[i]) if any(r != rot[i] for r in rot[:i]) else None
-        for axis, col in (("A", 0), ("C", 1)):
+        for axis, col in ((tilt, 0), ("C", 1)):
             if d.get(axis) and j is not None:
-                # LinuxCNC joint = fivecal command for this machine (signs +1)
+                assert abs(rot[i][col] - plan[k]["axes"][axis]) < 1e-6
+                # the last move of the axis into the position went the planned way
+                # (an axis that did not move came there the planned way before)
                 assert (rot[i][col] - rot[j][col]) * d[axis] > 0 or rot[i][col] == rot[j][col], (k, axis)
                 checked += 1
     assert checked > 50
     # with overshoot 0 the turning points of the up-down sequence are not re-approached
-    assert "(overshoot)" in prog and "(overshoot)" not in N.sphere_program(m, KINS, plan, art, 3.0, overshoot=0)
+    assert "(overshoot)" in prog and "(overshoot)" not in N.sphere_program(m, kins, plan, art, 3.0, overshoot=0)
+
+
+def test_sphere_cycle_log_round_trip_on_xyzbc_trt():
+    """The same model round trip on the B-C table with an ISO C (LinuxCNC's C
+    joint is fivecal's -C): the C reversal error comes back with its sign."""
+    kins = "xyzbc-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    art, plan = _sphere_cycle_bc(m)
+    pins = L.nominal_pins(m, kins)
+    errors = {"EX0C": -0.0226, "EY0C": 0.0174, "EX0B": 0.0291, "EZ0B": -0.0138, "ECCb": -4e-5}
+    obs = L.read_probe_log(N.sphere_log(m, kins, plan, art, 3.0, pins, errors=errors), m, kins, plan, pins)
+    ds = fivecal.Dataset.from_dict({"machine": m.to_dict(), "probe": {"tip_radius": 3.0},
+                                    "artefact": art, "observations": obs})
+    got = sphere_check.evaluate(ds).values()
+    for name, truth in errors.items():
+        assert abs(got[name] - truth) < (1e-8 if name[1] in "ABC" else 1e-6), (name, got[name], truth)
 
 
 def test_sphere_cycle_log_reads_back_into_a_check_that_fits():
