@@ -192,4 +192,4 @@ def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
     return out
 
 
-__all__ = ["TESTS", "plan", "evaluate", "location_errors", "KTest", "RTestResult"]
+__all__ = ["TESTS", "plan", "tip_offset", "evaluate", "location_errors", "KTest", "RTestResult"]
