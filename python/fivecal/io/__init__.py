@@ -6,7 +6,5 @@ rows in fivecal's own columns) into datasets; docs/import.md describes the
 columns. :mod:`fivecal.io.alignment` finds a fixed instrument's nominal pose
 by a rigid alignment of its points to the nominal machine's. :mod:`fivecal.io.linuxcnc`
 exports to LinuxCNC's kinematics and compensation files and reads its probe
-logs (docs/linuxcnc.md); :mod:`fivecal.io.nc_programs` and
-:mod:`fivecal.io.dbb_program` write the NC programs of the test plans (sphere
-cycle, R-test paths, ball bar circles and rotary-axis paths)."""
+logs (docs/linuxcnc.md)."""
 from .tables import KINDS, import_dataset, read_table, write_dataset
