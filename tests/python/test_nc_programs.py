@@ -262,7 +262,8 @@ def _replay(m, prog, entries, kins=None, between=25):
     words = np.array([[b[2][a] for a in ("XYZAC" if kins else [x for x in m.axis_names if x != "S"])]
                       for b in blocks])
     s = np.linspace(0, 1, between)
-    seg = (words[start:stop - 1, None, :] + s[None, :, None] * (words[start + 1:stop, None, :] - words[start:stop - 1, None, :]))
+    a, b = words[start:stop - 1, None, :], words[start + 1:stop, None, :]
+    seg = a + s[None, :, None] * (b - a)
     seg = seg.reshape(-1, words.shape[1])
 
     def axes(rows):

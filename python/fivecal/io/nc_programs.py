@@ -148,14 +148,15 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
         start, end = w + clearance * n, w - overtravel * n
         off = w + retract * n
         rot = (t, c)
+        nd = np.asarray(plan[i]["normal"], float)
         out.append(f"(touch {i + 1}: {plan[i]['target']} direction "
-                   f"{' '.join(_f(x) for x in np.asarray(plan[i]['normal'], float) / np.linalg.norm(plan[i]['normal']))})")
+                   f"{' '.join(_f(x) for x in nd / np.linalg.norm(nd))})")
         if rot != last_rot or dirs[i] != last_dir:
             up = off + safe * v
             if hold is not None:
                 out.append(f"G0 {xyz(hold + safe * v_prev)}")
-            out.append(f"(position {tilt} {_f(t)} C {_f(c)}, approached "
-                       f"{'+-'[dirs[i][0] < 0] if dirs[i][0] else '.'}{tilt} {'+-'[dirs[i][1] < 0] if dirs[i][1] else '.'}C)")
+            side = ["+-"[d < 0] if d else "." for d in dirs[i]]
+            out.append(f"(position {tilt} {_f(t)} C {_f(c)}, approached {side[0]}{tilt} {side[1]}C)")
             if overshoot > 0 and any(dirs[i]):
                 pre = []
                 for val, d, prev in ((t, dirs[i][0], None if last_rot is None else last_rot[0]),
@@ -232,7 +233,8 @@ def sphere_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], a
         q = ps + sc * d
         nc = (q - centre) / np.linalg.norm(q - centre)
         M = (p[3:] - p[2]).T
-        out.append({"world": (ws + sc * (we - ws)).tolist(), "rot": [t, c], "joints": (js[0] + sc * (js[1] - js[0])).tolist(),
+        out.append({"world": (ws + sc * (we - ws)).tolist(), "rot": [t, c],
+                    "joints": (js[0] + sc * (js[1] - js[0])).tolist(),
                     "g": (nc @ M).tolist(), "h": float(nc @ (p[2] - q))})
     return out
 
