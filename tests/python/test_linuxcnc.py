@@ -461,3 +461,55 @@ def test_bindings_refuse_bad_input():
     q = L.pose_grid(m, "xyzac-trt", {"A": (0, 0)})
     with pytest.raises(ValueError, match="rotary angles"):
         L.absorb(m, "xyzac-trt", {}, poses=q, old_pins={})
+
+
+def _sphere_cycle(m):
+    """A sphere check's plan on a small point set: A and C at three
+    positions each, up and down (both sides of every position)."""
+    from fivecal.procedures import sphere_test
+    ball = {"id": "S1", "center": [60.0, 30.0, 40.0], "radius": 12.5}
+    visits = []
+    for a, vals in (("A", [-60.0, -15.0, 30.0]), ("C", [-120.0, 0.0, 120.0])):
+        visits += [{a: v} for v in vals] + [{a: v} for v in vals[::-1]]
+    plan = sphere_test.sphere_plan(m, ball, visits, tip_radius=3.0,
+                                   rings=[(0.0, 4), (45.0, 4), (90.0, 1)])
+    return {"spheres": [ball]}, plan
+
+
+@needs_linuxcnc
+def test_sphere_cycle_runs_in_linuxcnc_and_identifies():
+    """The G38.2 sphere cycle fivecal writes for a sphere check runs in the
+    simulator; the simulated probe trips where each probe line meets the
+    sphere on the erroneous machine (tangent plane there, reversal error of C
+    included); the log, read back, gives the pivots and the reversal error."""
+    from fivecal.io import nc_programs as N
+    from fivecal.procedures import sphere_check
+    kins = "xyzac-trt"
+    m = fivecal.Machine.from_dict(MACHINES[kins])
+    art, plan = _sphere_cycle(m)
+    pins = L.nominal_pins(m, kins)
+    errors = dict(TRUE_LOCATION, ECCb=3e-5)
+    opts = dict(clearance=0.05, overtravel=0.3)
+    planes = N.sphere_sim_lines(m, kins, plan, art, 3.0, pins, errors=errors, **opts)
+    prog = N.sphere_program(m, kins, plan, art, 3.0, feed=10, sync="M66 E0 L0", arm="M64 P0",
+                            disarm="M65 P0", before_probe=planes, **opts)
+    with harness.Sim(kins, hal=L.hal_text(kins, pins) + L.probe_sim_hal(),
+                     files={"sphere.ngc": prog}) as sim:
+        out = sim.run([], setup=[], program="sphere.ngc", program_timeout=400)
+        log = sim.read("probe-log.txt")
+    assert out["errors"] == []
+    # every trip 0 to 2 servo cycles (0.17 um each at 10 mm/min) past the
+    # crossing fivecal's model predicts, along the probe line
+    model = N.sphere_trigger_model(m, kins, plan, art, 3.0, pins, errors=errors, **opts)
+    got = np.array([[float(v) for v in ln.split()[:3]] for ln in log.splitlines() if ln.strip()])
+    assert got.shape == (len(plan), 3)
+    lag = np.linalg.norm(got - np.array([p["world"] for p in model]), axis=1)
+    assert lag.max() < 0.5e-3, f"touches off the modelled crossing: {np.flatnonzero(lag >= 0.5e-3) + 1}"
+    obs = L.read_probe_log(log, m, kins, plan, pins)
+    ds = fivecal.Dataset.from_dict({"machine": m.to_dict(), "probe": {"tip_radius": 3.0},
+                                    "artefact": art, "observations": obs})
+    chk = sphere_check.evaluate(ds)
+    got = chk.values()
+    for name, truth in errors.items():
+        tol = 3e-6 if name[1] in "ABC" else 1e-3  # rad / mm; servo-cycle quantisation
+        assert abs(got[name] - truth) < tol, (name, got[name], truth)

@@ -532,10 +532,12 @@ def vendor_names(machine: Machine, axis: str, value: str) -> Tuple[str, str]:
     cited in docs/controllers.md. Siemens numbers the rotary axes of a swivel
     data record (CYCLE800 / TRAORI, $TC_CARR) 1 and 2, 1 nearer the machine
     base (for mixed kinematics 1 is the head axis); I-vectors are differences
-    of the points given here, V-vectors the directions. Heidenhain's
-    KinematicsOpt (Cycle 451) saves the rotary axes' positions in the
-    kinematics description of the machine; its internal names are the
-    machine builder's, so only the quantity is named."""
+    of the points given here, V-vectors the directions; with the TRAORI
+    machine data each replaces. Heidenhain's KinematicsOpt (Cycle 451) saves
+    the rotary axes' positions in the kinematics description, whose rows
+    shift (KEY Trans, AXIS X/Y/Z) or rotate (AXIS A/B/C) by COORD before an
+    axis becomes effective (KEY MachAxis); which rows a machine builder uses
+    is his, so the row kind is named, not a row."""
     rot = [a["name"] for a in _rotaries(machine)]
     if axis not in rot:
         if axis == "tool" and value.startswith("tool_tip"):
@@ -548,17 +550,32 @@ def vendor_names(machine: Machine, axis: str, value: str) -> Tuple[str, str]:
     if sides == {"workpiece"}:  # swivel table: 1 nearer the base
         order = sorted(rot, key=machine.workpiece_chain.index)
     n = order.index(axis) + 1
+    kind = "table" if sides == {"workpiece"} else "head" if sides == {"tool"} else "mixed"
+    # The commissioning manual's table of swivel data record components and
+    # the TRAORI machine data each replaces (docs/controllers.md)
+    md = {("table", 2): "MD24550 $MC_TRAFO5_BASE_TOOL_1", ("table", 3): "MD24558",
+          ("head", 2): "MD24560 $MC_TRAFO5_JOINT_OFFSET_1", ("head", 3): "MD24550 $MC_TRAFO5_BASE_TOOL_1",
+          ("mixed", 2): "MD24550 $MC_TRAFO5_BASE_TOOL_1", ("mixed", 3): "MD24558 $MC_TRAFO5_JOINT_OFFSET_PART_1"}
+    carr = {2: "$TC_CARR4..6", 3: "$TC_CARR15..17"}
+    hh = (f"KEY Trans rows (AXIS X/Y/Z, COORD mm) before the MachAxis {axis} row of the kinematics "
+          "description; Cycle 451")
     if value.startswith("direction"):
-        return (f"V{n} (rotary axis {n} vector)", f"rotary axis {axis} orientation (Cycle 451, angular)")
-    if sides == {"workpiece"}:
+        return (f"V{n} (rotary axis {n} vector, $TC_CARR{7 + 3 * (n - 1)}..{9 + 3 * (n - 1)}; TRAORI "
+                f"MD{24570 + 2 * (n - 1)} $MC_TRAFO5_AXIS{n}_1)",
+                f"rotary axis {axis} orientation: KEY Trans rows (AXIS A/B/C, COORD deg) before the "
+                f"MachAxis {axis} row; Cycle 451")
+    if kind == "table":
         s = "I2 = point (from the machine reference)" if n == 1 else "I3 = point - point of rotary axis 1"
-    elif sides == {"tool"}:
-        s = "I2 = point of rotary axis 1 - this point" if n == 2 else "I1 closes the chain (-(I2+I3))"
-        if n == 2:
-            s = "I3 = this point - tool adapter; I2 = point of axis 1 - this point"
+        i = 2 if n == 1 else 3
+    elif kind == "head":
+        s = "I3 = this point - tool adapter; I2 = point of axis 1 - this point" if n == 2 else \
+            "I1 closes the chain (-(I2+I3))"
+        i = 3 if n == 2 else None
     else:
         s = "I2 = point - tool adapter" if n == 1 else "I3 = point (from the machine reference)"
-    return (f"{s} ($TC_CARR, swivel data record)", f"rotary axis {axis} position (Cycle 451)")
+        i = 2 if n == 1 else 3
+    where = f", {carr[i]}; TRAORI {md[(kind, i)]}" if i else ""
+    return (f"{s} ($TC_CARR, swivel data record{where})", f"rotary axis {axis} position: {hh}")
 
 
 def export_rows(machine: Machine, ab: Absorption) -> List[dict]:

@@ -15,15 +15,34 @@ Words are the machine's axis commands (what fivecal's G-code reader and
 compensation read): the circle's centre and points go through the nominal
 inverse kinematics at the plan's rotary pose, so a reversed or table-side
 linear axis mirrors the circle and flips G2/G3 as the machine needs.
+
+:func:`rotary_dbb_program` writes the setups in which a rotary axis moves
+(:func:`fivecal.procedures.dbb.four_step_plan`, :func:`~fivecal.procedures.dbb.wang_plan`):
+
+1. rapid to the approach point: the first planned pose with the linear axes
+   moved so that the bar is ``feed_in`` mm short (the bar is fitted there);
+2. feed-in: ``G1`` along the bar onto the first planned pose;
+3. the path: ``G1`` blocks through the planned poses, in inverse time
+   (``G93``, so ``feed`` is the speed of one ball relative to the other
+   whichever axes move). Where the straight line in axis commands between two
+   poses would change the bar length by more than ``tolerance``, poses are
+   added in between, each with the linear axes moved along the bar so that its
+   nominal length is exact (synchronous linear-axis moves);
+4. feed-out: ``G1`` along the bar ``feed_in`` mm short again.
+
+With ``kins`` (``xyzac-trt`` / ``xyzbc-trt``) the words are LinuxCNC's joint
+values, for its identity kinematics (``M429`` in fivecal's sample configs).
+:func:`bar_length` replays axis commands through the nominal model.
 """
 from __future__ import annotations
 
 import math
-from typing import Dict, List, Mapping, Sequence
+import warnings
+from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..machine import Machine
+from ..machine import Machine, RadiansWarning
 
 _PLANES = {"XY": ("G17", "X", "Y", "IJ"), "ZX": ("G18", "Z", "X", "KI"), "YZ": ("G19", "Y", "Z", "JK")}
 
@@ -79,9 +98,11 @@ def circle_of(machine: Machine, entries: Sequence[Mapping]) -> dict:
 
 
 def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
-                feed_in: float = 1.5, turns: int = 1) -> str:
-    """ISO G-code for the planar ball bar setups of ``plan`` (module text);
-    ``feed`` mm/min for feed-in, arc and feed-out."""
+                feed_in: float = 1.5, turns: int = 1, tolerance: float = 2e-5) -> str:
+    """ISO G-code for the ball bar setups of ``plan`` (module text):
+    planar circles as arcs, setups in which a rotary axis moves as in
+    :func:`rotary_dbb_program` (with ``tolerance``, exact stop); ``feed``
+    mm/min for feed-in, path and feed-out."""
     if not (feed > 0 and math.isfinite(feed)):
         raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
     if not (0 < feed_in and math.isfinite(feed_in)):
@@ -92,6 +113,9 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
     out = [f"(fivecal ball bar program, machine {machine.name}: feed-in, arc, feed-out per setup)",
            "G21 G90 G94 G40 G49 G54"]
     for setup, entries in _setups(plan).items():
+        if _rotary_moves(machine, entries):
+            out += _rotary_setup(machine, setup, entries, feed, feed_in, None, tolerance, "G61")
+            continue
         c = circle_of(machine, entries)
         if feed_in >= c["radius"]:
             raise ValueError(f"feed_in: {feed_in} mm is not less than the radius {c['radius']:g} mm")
@@ -111,5 +135,189 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
         for _ in range(int(turns)):
             out.append(f"{arc} {a1}{f(st[a1])} {a2}{f(st[a2])} {ij[0]}{f(off[a1])} {ij[1]}{f(off[a2])}")
         out.append(f"G1 {a1}{f(approach[a1])} {a2}{f(approach[a2])} (feed-out)")
+    out.append("M2")
+    return "\n".join(out) + "\n"
+
+
+# ---- setups in which a rotary axis moves ------------------------------------
+
+def _rotary(machine: Machine) -> List[str]:
+    return [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+
+
+def _rotary_moves(machine: Machine, entries: Sequence[Mapping]) -> bool:
+    return any(np.ptp([float(e["axes"].get(a, 0.0)) for e in entries]) > 1e-9 for a in _rotary(machine))
+
+
+def _rows(machine: Machine, qs: Sequence[Mapping[str, float]]) -> Dict[str, np.ndarray]:
+    return {a: np.array([float(q.get(a, 0.0)) for q in qs]) for a in machine.axis_names}
+
+
+def bar_length(machine: Machine, axes: Sequence[Mapping[str, float]], tool_ball, table_ball,
+               errors=None) -> np.ndarray:
+    """(N,) mm: the distance between the tool ball (machine frame at the zero
+    pose) and the table ball (workpiece frame) at each of the axis commands
+    ``axes`` (a list of dicts), on the nominal machine or with ``errors``."""
+    p = machine.tool_point(_rows(machine, axes), errors=errors, tip=np.asarray(tool_ball, float))
+    return np.linalg.norm(p - np.asarray(table_ball, float), axis=1)
+
+
+class _Bar:
+    """The nominal bar of one setup: ball positions and the linear-axis moves
+    that change them (exact: at fixed rotary axes the tool ball is affine in
+    the linear commands)."""
+
+    def __init__(self, machine: Machine, entry: Mapping):
+        self.m = machine
+        self.tool = np.asarray(entry["tool_ball"], float)
+        self.table = np.asarray(entry["table_ball"], float)
+        self.length = float(entry["length"])
+        self.lin = [a for a in "XYZ" if a in machine.axis_names]
+
+    def ball(self, Q: Dict[str, np.ndarray]) -> np.ndarray:
+        with warnings.catch_warnings():
+            # a few small rotary commands of a path look like radians to the
+            # heuristic; they are the plan's degrees
+            warnings.simplefilter("ignore", RadiansWarning)
+            return self.m.tool_point(Q, errors=None, tip=self.tool)
+
+    def deviation(self, Q: Dict[str, np.ndarray]) -> np.ndarray:
+        return np.linalg.norm(self.ball(Q) - self.table, axis=1) - self.length
+
+    def restore(self, Q: Dict[str, np.ndarray], short: float = 0.0) -> Dict[str, np.ndarray]:
+        """Q (axis -> array) with the linear axes moved along the bar so that
+        it is ``short`` mm shorter than nominal at every pose."""
+        Q = {a: np.array(v, float) for a, v in Q.items()}
+        for _ in range(4):
+            p = self.ball(Q)
+            cols = [self.ball({**Q, a: Q[a] + 1.0}) - p for a in self.lin]
+            J = np.stack(cols, axis=2)  # (N, 3, n_lin): d ball / d linear command
+            d = p - self.table
+            r = np.linalg.norm(d, axis=1)
+            err = r - (self.length - short)
+            if np.abs(err).max() < 1e-12:
+                break
+            dp = -(err / r)[:, None] * d
+            step = np.einsum("nij,nj->ni", np.linalg.pinv(J), dp)
+            for k, a in enumerate(self.lin):
+                Q[a] = Q[a] + step[:, k]
+        return Q
+
+
+def _interp(Q: Dict[str, np.ndarray], i: np.ndarray, t: np.ndarray) -> Dict[str, np.ndarray]:
+    return {a: v[i] + t * (v[i + 1] - v[i]) for a, v in Q.items()}
+
+
+def _path(bar: _Bar, Q: Dict[str, np.ndarray], tolerance: float) -> Dict[str, np.ndarray]:
+    """The planned poses, with poses added where the straight line in axis
+    commands between two would leave the nominal bar length by more than
+    ``tolerance`` (checked at 7 points of each step). The added poses are
+    spread evenly in the step (the deviation of a chord falls with the square
+    of its length), each with its linear axes restored to the nominal bar."""
+    check = np.linspace(0.0, 1.0, 9)[1:-1]
+    for _ in range(6):
+        n = len(next(iter(Q.values())))
+        if n < 2:
+            return Q
+        i = np.repeat(np.arange(n - 1), len(check))
+        t = np.tile(check, n - 1)
+        dev = np.abs(bar.deviation(_interp(Q, i, t))).reshape(n - 1, len(check)).max(axis=1)
+        if dev.max() <= tolerance:
+            return Q
+        parts = np.where(dev > tolerance, np.ceil(np.sqrt(dev / tolerance) * 1.1), 1).astype(int)
+        idx, tt = [], []
+        for k, m in enumerate(parts):
+            idx += [k] * m
+            tt += list(np.arange(m) / m)
+        idx.append(n - 2)
+        tt.append(1.0)
+        new = _interp(Q, np.array(idx), np.array(tt))
+        keep = np.isclose(np.array(tt), 0.0) | (np.arange(len(tt)) == len(tt) - 1)
+        added = bar.restore({a: v[~keep] for a, v in new.items()})
+        for a in new:
+            new[a][~keep] = added[a]
+        Q = new
+    raise ValueError(f"the path cannot be split finely enough to keep the bar length within {tolerance} mm")
+
+
+def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed: float, feed_in: float,
+                  kins: Optional[str], tolerance: float, path_mode: str) -> List[str]:
+    letters = [a for a in machine.axis_names if a != "S"]
+    bar = _Bar(machine, entries[0])
+    if feed_in >= bar.length:
+        raise ValueError(f"feed_in: {feed_in} mm is not less than the bar length {bar.length:g} mm")
+    for i, e in enumerate(entries):
+        if (np.abs(np.asarray(e["tool_ball"], float) - bar.tool).max() > 1e-12
+                or np.abs(np.asarray(e["table_ball"], float) - bar.table).max() > 1e-12
+                or float(e["length"]) != bar.length):
+            raise ValueError(f"setup {setup}: entry {i} has other balls or another bar length than the "
+                             "first; one setup is one mounting of the bar")
+    Q = {a: np.array([float(e["axes"].get(a, 0.0)) for e in entries]) for a in machine.axis_names}
+    dev = bar.deviation(Q)
+    k = int(np.argmax(np.abs(dev)))
+    if abs(dev[k]) > 1e-6:
+        raise ValueError(f"setup {setup}: at planned pose {k + 1} the nominal balls are "
+                         f"{bar.length + dev[k]:.6f} mm apart, the bar is {bar.length:g} mm (not a "
+                         "constant-length path)")
+    P = _path(bar, Q, tolerance)
+    npts = len(P[letters[0]])
+    if kins:
+        from . import linuxcnc as L
+        kk = L._kins(kins)
+        names = ["X", "Y", "Z", L.TILT[kk], "C"]
+
+        def rows(R):
+            return [" ".join(f"{a}{v:.6f}" for a, v in zip(names, j)) for j in L.joints(machine, kk, R)]
+    else:
+        def rows(R):
+            n = len(R[letters[0]])
+            return [" ".join(f"{a}{float(R[a][i]):.6f}" for a in letters) for i in range(n)]
+    first = {a: v[:1] for a, v in P.items()}
+    last = {a: v[-1:] for a, v in P.items()}
+    approach = bar.restore(first, feed_in)
+    leave = bar.restore(last, feed_in)
+    moving = [a for a in _rotary(machine) if np.ptp(Q[a]) > 1e-9]
+    path = rows(P)
+    out = [f"(setup {setup}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
+           f"poses, {npts} path points, bar length within {tolerance * 1e3:g} um between them)",
+           path_mode, "G94", f"G0 {rows(approach)[0]}", f"G1 {path[0]} F{feed:g} (feed-in)", "G93"]
+    rel = np.linalg.norm(np.diff(bar.ball(P), axis=0), axis=1)
+    for i in range(1, npts):
+        # inverse time: 1 / minutes for the block at ``feed`` mm/min of the balls' relative motion
+        out.append(f"G1 {path[i]} F{feed / max(rel[i - 1], 1e-6):.6f}")
+    out += ["G94", f"G1 {rows(leave)[0]} F{feed:g} (feed-out)"]
+    return out
+
+
+def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
+                       feed_in: float = 1.5, kins: Optional[str] = None, tolerance: float = 2e-5,
+                       path_mode: str = "G61", tcp_off: str = "M429") -> str:
+    """ISO G-code for the ball bar setups of ``plan`` in which a rotary axis
+    moves (module text). ``feed``: mm/min of the balls' relative motion on the
+    path (inverse time) and of the feed-in and feed-out; ``tolerance`` (mm):
+    largest change of the nominal bar length along the straight blocks;
+    ``path_mode``: ``G61`` (exact stop: the controller runs the blocks as
+    written) or e.g. ``G64 P0.0001`` (blending within 0.1 µm, continuous);
+    ``kins``: write LinuxCNC joint values (``tcp_off`` switches its identity
+    kinematics on first)."""
+    if not (feed > 0 and math.isfinite(feed)):
+        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
+    if not (0 < feed_in and math.isfinite(feed_in)):
+        raise ValueError(f"feed_in: expected a positive distance in mm, got {feed_in}")
+    if not (tolerance > 0 and math.isfinite(tolerance)):
+        raise ValueError(f"tolerance: expected a positive length in mm, got {tolerance}")
+    setups = _setups(plan)
+    fixed = [s for s, e in setups.items() if not _rotary_moves(machine, e)]
+    if fixed:
+        raise ValueError(f"setup {fixed[0]}: no rotary axis moves (a planar circle: dbb_program)")
+    out = [f"(fivecal ball bar program, machine {machine.name}: rotary-axis paths, feed-in, path, "
+           "feed-out per setup)",
+           f"(words: {'LinuxCNC ' + kins + ' joint values' if kins else 'axis commands'}; path feed in "
+           "inverse time for the balls' relative speed " + f"{feed:g} mm/min)",
+           "G21 G90 G94 G40 G49 G54"]
+    if kins and tcp_off:
+        out.append(f"{tcp_off} (identity kinematics: words are joint values)")
+    for setup, entries in setups.items():
+        out += _rotary_setup(machine, setup, entries, feed, feed_in, kins, tolerance, path_mode)
     out.append("M2")
     return "\n".join(out) + "\n"

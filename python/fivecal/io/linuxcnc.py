@@ -557,9 +557,11 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
 
 def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapping],
                    pins: Mapping[str, float]) -> List[dict]:
-    """Facet observations (dataset JSON) from LinuxCNC's probe log (the
+    """Facet or sphere observations (dataset JSON, the type and target of
+    each plan entry) from LinuxCNC's probe log (the
     ``PROBEOPEN`` file: one line 'x y z a b c u v w' per probe, in program
-    coordinates) of a program :func:`probing_program` wrote for ``plan``:
+    coordinates) of a program :func:`probing_program` (or
+    :func:`fivecal.io.nc_programs.sphere_program`) wrote for ``plan``:
     each world position goes through LinuxCNC's inverse kinematics with the
     ``pins`` the controller ran with to the joints, then to fivecal's axis
     readings. ``source`` is a path or the log text."""
@@ -593,7 +595,10 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
     obs = []
     for i, t in enumerate(plan):
         axes = {a: float(q[a][i]) for a in machine.axis_names}
-        obs.append({"type": "facet", "target": t["target"], "axes": axes, "id": f"touch{i + 1}"})
+        o = {"type": t.get("type", "facet"), "target": t["target"], "axes": axes, "id": f"touch{i + 1}"}
+        if t.get("direction"):  # the side each rotary axis was approached from (reversal errors)
+            o["direction"] = dict(t["direction"])
+        obs.append(o)
     return obs
 
 

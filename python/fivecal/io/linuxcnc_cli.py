@@ -1,4 +1,5 @@
-"""``fivecal export linuxcnc``: the command-line face of fivecal.io.linuxcnc."""
+"""``fivecal export linuxcnc | kinematics | program``: the command-line face of
+fivecal.io.linuxcnc, fivecal.io.controllers and the NC programs of the test plans."""
 from __future__ import annotations
 
 import argparse
@@ -71,6 +72,87 @@ def _run_kinematics(args) -> int:
     return 0
 
 
+_PLAN_KINDS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb": "dbb"}
+
+
+def _read_spec(path: str):
+    """machine, plan, artefact and stylus radius of a simulation spec (or a
+    dataset whose observations are the plan)."""
+    import os
+
+    from ..cli import _read_json
+    from ..machine import Machine
+
+    spec = _read_json(path, "the plan (a simulation spec)")
+    if not isinstance(spec, dict):
+        raise ValueError(f"{path}: expected a JSON object with machine, plan, artefact, probe")
+    machine = spec.get("machine")
+    if isinstance(machine, str):  # a path relative to the spec file
+        machine = Machine.load(os.path.join(os.path.dirname(os.path.abspath(path)), machine))
+    elif isinstance(machine, dict):
+        machine = Machine.from_dict(machine)
+    else:
+        raise ValueError(f"{path}: 'machine' missing (a machine object or a path)")
+    plan = spec.get("plan", spec.get("observations"))
+    if not isinstance(plan, list) or not plan or not all(isinstance(e, dict) for e in plan):
+        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, docs/formats.md)")
+    probe = spec.get("probe") or {}
+    if not isinstance(probe, dict):
+        raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")
+    return machine, plan, spec.get("artefact") or {}, float(probe.get("tip_radius", 0.0))
+
+
+def _run_program(args) -> int:
+    from . import dbb_program as D
+    from . import nc_programs as N
+
+    machine, plan, artefact, tip = _read_spec(args.spec)
+    types = sorted({str(e.get("type")) for e in plan})
+    kind = args.kind
+    if kind == "auto":
+        kinds = {_PLAN_KINDS.get(t) for t in types}
+        if len(kinds) != 1 or None in kinds:
+            raise ValueError(f"{args.spec}: plan entries of type {', '.join(types)}; a program runs one "
+                             "kind (facet, sphere, ball3d or dbb): give --kind or split the plan")
+        kind = kinds.pop()
+    need_kins = kind in ("probing", "sphere") or (kind == "rtest" and args.mode == "tcp")
+    if need_kins and not args.kins:
+        raise ValueError(f"--kins: a {kind} program{' in tcp mode' if kind == 'rtest' else ''} runs with "
+                         "LinuxCNC's tool-centre-point kinematics; give xyzac-trt or xyzbc-trt")
+    if kind in ("probing", "sphere") and not tip > 0:
+        raise ValueError(f"{args.spec}: probe.tip_radius: the stylus ball radius (mm) is needed for the "
+                         "contact points")
+    feed = args.feed
+    if kind == "probing":
+        text = L.probing_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
+                                 overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
+                                 safe=args.safe, dwell=args.dwell, log=args.log)
+    elif kind == "sphere":
+        text = N.sphere_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
+                                overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
+                                safe=args.safe, overshoot=args.overshoot, dwell=args.dwell, log=args.log)
+    elif kind == "rtest":
+        text = N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=feed or 500.0,
+                               dwell=args.dwell if args.dwell > 0 else 1.0, subdivide=args.subdivide)
+    else:
+        if not (args.tolerance > 0):
+            raise ValueError(f"--tolerance: expected a positive number of µm, got {args.tolerance}")
+        if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
+            text = D.rotary_dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
+                                        kins=args.kins, tolerance=args.tolerance * 1e-3)
+        else:
+            text = D.dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
+                                 tolerance=args.tolerance * 1e-3)
+    blocks = sum(1 for ln in text.splitlines() if ln[:1] in "GM")
+    if args.out:
+        with open(args.out, "w", encoding="utf-8") as f:
+            f.write(text)
+        print(f"{kind} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
+    else:
+        print(text, end="")
+    return 0
+
+
 def register(sub) -> None:
     """Add ``export`` (with ``export linuxcnc``) to the main parser's subparsers."""
     RD = argparse.RawDescriptionHelpFormatter
@@ -133,3 +215,43 @@ def register(sub) -> None:
     pk.add_argument("--force", action="store_true", help="use a result that is not usable; only to "
                     "inspect the values")
     pk.set_defaults(func=_run_kinematics)
+    pp = esub.add_parser(
+        "program", formatter_class=RD,
+        help="ISO G-code that runs a test plan: probing, sphere cycle, R-test, ball bar",
+        description="Write the NC program of a fivecal plan (the 'plan' of a simulation spec, "
+        "docs/formats.md): facet touches and sphere touches as G38.2 probing cycles for LinuxCNC "
+        "with its tool-centre-point kinematics (--kins; probe log with PROBEOPEN, read back by "
+        "fivecal.io.linuxcnc.read_probe_log), R-test K tests with a G4 dwell at each sample (axis "
+        "commands, LinuxCNC joint values with --kins, or world moves with --mode tcp), ball bar "
+        "circles and rotary-axis paths with feed-in and feed-out (docs/linuxcnc.md). Check every "
+        "program's clearance moves against your fixtures before running it on a machine.",
+        epilog="examples:\n  fivecal export program sphere_spec.json --kins xyzac-trt --out sphere.ngc\n"
+        "  fivecal export program rtest_spec.json --mode tcp --kins xyzac-trt --out k4.ngc\n"
+        "  fivecal export program fourstep_spec.json --feed 500 --out fourstep.ngc")
+    pp.add_argument("spec", help="simulation spec JSON: machine (object or path), plan, artefact, probe")
+    pp.add_argument("--kind", default="auto", choices=["auto", "probing", "sphere", "rtest", "dbb"],
+                    help="program kind (default: from the plan's entry types)")
+    pp.add_argument("--kins", choices=list(L.KINS), help="LinuxCNC kinematics (needed for probing, "
+                    "sphere and --mode tcp; for rtest / dbb: write LinuxCNC joint values, for dbb rotary "
+                    "paths only)")
+    pp.add_argument("--out", help="file to write (default: standard output)")
+    pp.add_argument("--feed", type=float, help="mm/min: probing moves (default 60), R-test path (500), "
+                    "ball bar path (1000; rotary paths in inverse time for the balls' relative speed)")
+    g = pp.add_argument_group("probing and sphere cycles")
+    g.add_argument("--clearance", type=float, default=1.0, help="start of each G38.2 off the contact, mm")
+    g.add_argument("--overtravel", type=float, default=1.0, help="end of each G38.2 beyond the contact, mm")
+    g.add_argument("--retract", type=float, default=5.0, help="retract along the touch direction, mm")
+    g.add_argument("--safe", type=float, default=100.0, help="lift along the tool axis for indexing, mm")
+    g.add_argument("--overshoot", type=float, default=1.0, help="sphere: degrees beyond a position to "
+                   "reach it from the side the plan asks for (0: off)")
+    g.add_argument("--dwell", type=float, default=0.0, help="seconds: after each indexing; R-test: at "
+                   "each sample (default 1)")
+    g.add_argument("--log", default="probe-log.txt", help="probe log file name (PROBEOPEN)")
+    g = pp.add_argument_group("R-test and ball bar")
+    g.add_argument("--mode", choices=["axes", "tcp"], default="axes", help="R-test words: axis commands "
+                   "(joint values with --kins) or world coordinates with TCP on")
+    g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two samples")
+    g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, mm")
+    g.add_argument("--tolerance", type=float, default=0.02, help="ball bar rotary paths: largest change "
+                   "of the nominal bar length between two blocks, µm (default 0.02)")
+    pp.set_defaults(func=_run_program)

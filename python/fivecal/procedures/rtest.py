@@ -72,6 +72,15 @@ def _sequence(machine: Machine, test: str, step: float, tilt: float, tilt_range)
     raise ValueError(f"test: {test!r} is not an R-test K test (tests: {', '.join(TESTS)})")
 
 
+def tip_offset(machine: Machine, axes: Mapping[str, float], tool_ball) -> np.ndarray:
+    """Tool tip minus tool ball in the workpiece frame at the rotary pose of
+    ``axes`` (mm): what to add to a target of the tool ball to get the target
+    of the tip, which the inverse kinematics places. A table axis turns this
+    offset with the part, so it is not the machine-frame tip - ball."""
+    q = {a: np.array([float(v)]) for a, v in axes.items()}
+    return machine.tool_point(q)[0] - machine.tool_point(q, tip=np.asarray(tool_ball, float))[0]
+
+
 def plan(machine: Union[Machine, Mapping], test: str, *, table_ball: Sequence[float],
          tool_ball: Optional[Sequence[float]] = None, step: float = 15.0, tilt: float = -45.0,
          tilt_range: Sequence[float] = (-90.0, 90.0), setup: Optional[str] = None) -> list:
@@ -92,13 +101,12 @@ def plan(machine: Union[Machine, Mapping], test: str, *, table_ball: Sequence[fl
     if tb.shape != (3,) or not np.isfinite(tb).all():
         raise ValueError(f"table_ball: expected [x, y, z] mm, got {table_ball!r}")
     tool = np.asarray(tool_ball if tool_ball is not None else m.tip, float)
-    shift = m.tip - tool  # the inverse places the tool tip: place the tool ball instead
     entries = []
     prev = {a: 0.0 for a in m.axis_names}
     for k, rot in enumerate(seq):
         start = dict(prev)
         start.update(rot)
-        lin = m.inverse([tb + shift], start=start)
+        lin = m.inverse([tb + tip_offset(m, start, tool)], start=start)
         axes = {a: float(v[0]) for a, v in lin.items()}
         axes.update(rot)
         direction = {a: (1 if rot[a] >= prev.get(a, 0.0) else -1) for a in rot}
@@ -184,4 +192,4 @@ def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
     return out
 
 
-__all__ = ["TESTS", "plan", "evaluate", "location_errors", "KTest", "RTestResult"]
+__all__ = ["TESTS", "plan", "tip_offset", "evaluate", "location_errors", "KTest", "RTestResult"]

@@ -1,0 +1,390 @@
+"""ISO G-code for fivecal's sphere and R-test plans (docs/linuxcnc.md).
+
+* :func:`sphere_program`: the touches of a sphere plan
+  (:func:`fivecal.procedures.sphere_check.plan`,
+  :func:`fivecal.procedures.sphere_test.sphere_plan`) as a ``G38.2`` cycle for
+  LinuxCNC with tool-centre-point kinematics: per rotary position the table is
+  indexed (from the side the plan's ``direction`` asks for, with an
+  ``overshoot``), then per touch the stylus comes in along the touch
+  direction, probes through the surface and backs off the same way. The
+  probed positions go to a ``PROBEOPEN`` log, which
+  :func:`fivecal.io.linuxcnc.read_probe_log` reads back into sphere
+  observations.
+* :func:`sphere_trigger_model` / :func:`sphere_sim_lines` /
+  :func:`sphere_log`: where a touch trips on a machine with given errors
+  (the exact crossing of the probe line with the sphere), as the plane the
+  simulator's probe input (:func:`fivecal.io.linuxcnc.probe_sim_hal`) needs,
+  or as the log a perfect probe would write.
+* :func:`rtest_program`: the path of an R-test K test
+  (:func:`fivecal.procedures.rtest.plan`) with a dwell at each of the plan's
+  samples, either as axis commands (joint positions from fivecal's nominal
+  inverse kinematics; no tool-centre-point function needed) or, for
+  LinuxCNC, as world coordinates with ``xyzac-trt-kins`` / ``xyzbc-trt-kins``
+  switched on.
+
+Units: mm, degrees, mm/min; world coordinates are LinuxCNC's (workpiece point
+- tool tip at the zero pose, the pins' convention).
+"""
+from __future__ import annotations
+
+import math
+from typing import Dict, List, Mapping, Optional, Sequence
+
+import numpy as np
+
+from ..machine import Machine
+from ..procedures.rtest import tip_offset
+from . import linuxcnc as L
+
+
+def _f(v: float) -> str:
+    s = f"{v:.6f}"
+    return "0.000000" if float(s) == 0.0 else s
+
+
+def _spheres(artefact: Mapping) -> Dict[str, dict]:
+    sp = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
+    if not sp:
+        raise ValueError("artefact: no spheres (a sphere cycle needs the sphere's centre and radius)")
+    return sp
+
+
+def _as_facets(plan: Sequence[Mapping], artefact: Mapping):
+    """Each sphere touch as a touch of the tangent plane at its nominal
+    contact point: what the facet probing geometry of fivecal.io.linuxcnc
+    works with (approach and retract along the touch direction)."""
+    spheres = _spheres(artefact)
+    fplan, facets = [], []
+    for i, t in enumerate(plan):
+        if t.get("type") != "sphere":
+            raise ValueError(f"plan[{i}]: type '{t.get('type')}': a sphere cycle needs sphere touches")
+        s = spheres.get(t.get("target"))
+        if s is None:
+            raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a sphere of the artefact")
+        n = np.asarray(t.get("normal", ()), dtype=float)
+        if n.shape != (3,) or not np.isfinite(n).all() or np.linalg.norm(n) < 1e-12:
+            raise ValueError(f"plan[{i}].normal: expected the touch direction [x, y, z], got {t.get('normal')!r}")
+        n = n / np.linalg.norm(n)
+        fid = f"{t['target']}#{i + 1}"
+        p = np.asarray(s["center"], dtype=float) + float(s["radius"]) * n
+        facets.append({"id": fid, "point": p.tolist(), "normal": n.tolist()})
+        fplan.append({"type": "facet", "target": fid, "axes": t.get("axes", {})})
+    return fplan, {"facets": facets}
+
+
+def _geometry(machine, kins, plan, artefact, tip_radius, workpiece_shift=(0.0, 0.0, 0.0)):
+    fplan, fart = _as_facets(plan, artefact)
+    return L._touch_geometry(machine, kins, fplan, fart, tip_radius, workpiece_shift)
+
+
+def _joint_directions(machine: Machine, kins: str, plan: Sequence[Mapping]):
+    """Per touch, the planned approach direction (+1/-1/0) of the tilt and C
+    joints: fivecal's ``direction`` times the joint's sign."""
+    k = L._kins(kins)
+    mp = L.match(machine, k)
+    tilt = L.TILT[k]
+    out = []
+    for t in plan:
+        d = t.get("direction", {}) or {}
+        out.append((int(np.sign(d.get(tilt, 0))) * int(mp["sign"][3]),
+                    int(np.sign(d.get("C", 0))) * int(mp["sign"][4])))
+    return out
+
+
+def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                   tip_radius: float, clearance: float = 1.0, overtravel: float = 1.0,
+                   feed: float = 60.0, retract: float = 5.0, safe: float = 100.0,
+                   overshoot: float = 1.0, dwell: float = 0.0, arm: str = "", disarm: str = "",
+                   sync: str = "", log: str = "probe-log.txt", tcp_on: str = "M428",
+                   workpiece_shift=(0.0, 0.0, 0.0),
+                   before_probe: Optional[Sequence[Sequence[str]]] = None) -> str:
+    """An ISO G-code program for LinuxCNC running the sphere touches of
+    ``plan`` (``{"type": "sphere", "target": id, "axes": {tilt, C},
+    "normal": [...], "direction": {...}}``) on ``artefact["spheres"]``.
+
+    Per rotary position: up to ``safe`` mm along the tool axis above the
+    first touch's retract point, index the rotary axes there. When the plan
+    asks for a position to be reached from one side (``direction``, for the
+    reversal error) and the previous position does not already lie on that
+    side, the axis first goes ``overshoot`` degrees beyond it (``overshoot
+    0``: no pre-positioning). ``dwell`` s (G4) after each indexing.
+    Per touch: G0 to ``retract`` mm and then ``clearance`` mm off the contact
+    point along the touch direction (the sphere's normal there), ``G38.2``
+    to ``overtravel`` mm inside at ``feed`` mm/min, back to the start and
+    retract points. Between touches of one position the stylus goes from one
+    retract point to the next lifted along the tool axis by the sphere's
+    radius plus the stylus radius plus ``retract``, so the straight move does
+    not cut across the sphere (for touches at or above its equator as seen
+    from the spindle; check the moves against your fixtures). ``sync``, ``arm``,
+    ``disarm``, ``before_probe``, ``log`` and ``tcp_on`` as in
+    :func:`fivecal.io.linuxcnc.probing_program`."""
+    k = L._kins(kins)
+    tilt = L.TILT[k]
+    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    if before_probe is not None and len(before_probe) != len(geo):
+        raise ValueError(f"before_probe: {len(before_probe)} entries for {len(geo)} touches")
+    for name, v, lo in (("clearance", clearance, 0), ("overtravel", overtravel, 0), ("feed", feed, 0)):
+        if not (v > lo and math.isfinite(v)):
+            raise ValueError(f"{name}: expected a positive number, got {v}")
+    for name, v in (("retract", retract), ("safe", safe), ("overshoot", overshoot), ("dwell", dwell)):
+        if not (v >= 0 and math.isfinite(v)):
+            raise ValueError(f"{name}: expected a number >= 0, got {v}")
+    if retract < clearance:
+        raise ValueError(f"retract: {retract} mm is less than the clearance {clearance} mm")
+    dirs = _joint_directions(machine, k, plan)
+    xyz = lambda p: f"X{_f(p[0])} Y{_f(p[1])} Z{_f(p[2])}"  # noqa: E731
+    targets = sorted({str(t.get("target")) for t in plan})
+    out = [f"(fivecal sphere cycle: {len(geo)} touches on {', '.join(targets)}, machine {machine.name}, {k}-kins)",
+           "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
+           f"(stylus ball radius {tip_radius:g} mm; touches approach and retract along the sphere normal)",
+           "G21 G90 G94 G17 G40 G49 G54 G61"]
+    if tcp_on:
+        out.append(f"{tcp_on} (tool centre point kinematics on)")
+    out.append(f"(PROBEOPEN {log})")
+    last_rot = None   # (tilt, C) joint values the table stands at
+    last_dir = None
+    hold = None       # the retract point of the previous touch at this position
+    for i, (t, c, w, n, v) in enumerate(geo):
+        start, end = w + clearance * n, w - overtravel * n
+        off = w + retract * n
+        rot = (t, c)
+        nd = np.asarray(plan[i]["normal"], float)
+        out.append(f"(touch {i + 1}: {plan[i]['target']} direction "
+                   f"{' '.join(_f(x) for x in nd / np.linalg.norm(nd))})")
+        if rot != last_rot or dirs[i] != last_dir:
+            up = off + safe * v
+            if hold is not None:
+                out.append(f"G0 {xyz(hold + safe * v_prev)}")
+            side = ["+-"[d < 0] if d else "." for d in dirs[i]]
+            out.append(f"(position {tilt} {_f(t)} C {_f(c)}, approached {side[0]}{tilt} {side[1]}C)")
+            if overshoot > 0 and any(dirs[i]):
+                pre = []
+                for val, d, prev in ((t, dirs[i][0], None if last_rot is None else last_rot[0]),
+                                     (c, dirs[i][1], None if last_rot is None else last_rot[1])):
+                    # the move into the position already comes from the planned side
+                    ok = d == 0 or (prev is not None and (val - prev) * d > 1e-9)
+                    pre.append(val if ok else val - d * overshoot)
+                if tuple(pre) != rot:
+                    out.append(f"G0 {xyz(up)} {tilt}{_f(pre[0])} C{_f(pre[1])} (overshoot)")
+            out.append(f"G0 {xyz(up)} {tilt}{_f(t)} C{_f(c)}")
+            if dwell > 0:
+                out.append(f"G4 P{dwell:g}")
+            last_rot, last_dir = rot, dirs[i]
+            out.append(f"G0 {xyz(off)}")
+        else:
+            # to the next touch of this position over the sphere: both retract
+            # points lifted by the sphere's stylus-centre radius along the tool
+            # axis, so the straight move between them stays outside it
+            s = _spheres(artefact)[plan[i]["target"]]
+            lift = float(s["radius"]) + tip_radius + retract
+            out += [f"G0 {xyz(hold + lift * v)}", f"G0 {xyz(off + lift * v)}", f"G0 {xyz(off)}"]
+        out.append(f"G0 {xyz(start)}")
+        out += [sync] if sync else []
+        out += list(before_probe[i]) if before_probe is not None else []
+        out += [arm] if arm else []
+        out.append(f"G38.2 {xyz(end)} F{feed:g}")
+        out += [disarm] if disarm else []
+        out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}"]
+        hold, v_prev = off, v
+    if hold is not None:
+        out.append(f"G0 {xyz(hold + safe * v_prev)}")
+    out += ["(PROBECLOSE)", "M2"]
+    return "\n".join(out) + "\n"
+
+
+def sphere_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                         tip_radius: float, pins: Mapping[str, float], errors=None,
+                         clearance: float = 1.0, overtravel: float = 1.0,
+                         workpiece_shift=(0.0, 0.0, 0.0)) -> List[dict]:
+    """Per touch of :func:`sphere_program` (same ``clearance`` and
+    ``overtravel``): where the probe move, run by a controller with ``pins``
+    on the machine with ``errors``, first puts the stylus ball on the sphere.
+    ``world``: that position in program coordinates (what a perfect probe
+    logs); ``g``, ``h``: the plane tangent to the sphere there in the linear
+    joints (g . joint XYZ + h < 0 inside), for the simulated probe. At fixed
+    rotary joints the ball centre is affine in the linear joints and the
+    G38.2 runs a straight joint line, so the crossing is exact (location
+    errors)."""
+    k = L._kins(kins)
+    spheres = _spheres(artefact)
+    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    out = []
+    for i, (t, c, w, n, _) in enumerate(geo):
+        s = spheres[plan[i]["target"]]
+        centre = np.asarray(s["center"], dtype=float)
+        rr = float(s["radius"]) + float(tip_radius)
+        ws, we = w + clearance * n, w - overtravel * n
+        js = L.inverse(k, pins, np.array([[*ws, t, c], [*we, t, c]]))
+        jj = np.array([js[0], js[1], [0, 0, 0, t, c], [1, 0, 0, t, c], [0, 1, 0, t, c], [0, 0, 1, t, c]], float)
+        # the side each rotary axis came from, for a reversal error in ``errors``
+        dirs = {a: np.full(len(jj), float(v)) for a, v in (plan[i].get("direction") or {}).items()}
+        p = machine.tool_point(L.commands(machine, k, jj), errors=errors, directions=dirs or None)
+        ps, d = p[0], p[1] - p[0]
+        # |ps + s d - centre| = rr, the first crossing from outside
+        a, b, cc = float(d @ d), float(2 * d @ (ps - centre)), float((ps - centre) @ (ps - centre) - rr * rr)
+        disc = b * b - 4 * a * cc
+        if cc <= 0:
+            raise ValueError(f"touch {i + 1}: the stylus is already on or in sphere {s['id']} at the "
+                             f"start of the probe move (clearance {clearance} mm too small for the errors)")
+        if disc < 0 or (-b - math.sqrt(disc)) / (2 * a) > 1:
+            raise ValueError(f"touch {i + 1}: the probe move misses sphere {s['id']} on this machine "
+                             f"(overtravel {overtravel} mm too small for the errors)")
+        sc = (-b - math.sqrt(disc)) / (2 * a)
+        q = ps + sc * d
+        nc = (q - centre) / np.linalg.norm(q - centre)
+        M = (p[3:] - p[2]).T
+        out.append({"world": (ws + sc * (we - ws)).tolist(), "rot": [t, c],
+                    "joints": (js[0] + sc * (js[1] - js[0])).tolist(),
+                    "g": (nc @ M).tolist(), "h": float(nc @ (p[2] - q))})
+    return out
+
+
+def sphere_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                     tip_radius: float, pins: Mapping[str, float], errors=None, clearance: float = 1.0,
+                     overtravel: float = 1.0, workpiece_shift=(0.0, 0.0, 0.0)) -> List[List[str]]:
+    """Per touch, the ``M68`` lines that load the simulated probe
+    (:func:`fivecal.io.linuxcnc.probe_sim_hal`) with the plane tangent to the
+    sphere where that touch meets it on the machine with ``errors``
+    (``sphere_program(..., before_probe=..., sync="M66 E0 L0", arm="M64 P0",
+    disarm="M65 P0")``)."""
+    model = sphere_trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance,
+                                 overtravel, workpiece_shift)
+    return [[f"M68 E{e} Q{v:.12f}" for e, v in enumerate((*m["g"], -m["h"]), 4)] for m in model]
+
+
+def sphere_log(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping, tip_radius: float,
+               pins: Mapping[str, float], errors=None, clearance: float = 1.0, overtravel: float = 1.0,
+               workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+    """The probe log (LinuxCNC's ``PROBEOPEN`` format, 'x y z a b c u v w')
+    a perfect probe writes running :func:`sphere_program` on the machine with
+    ``errors``: fivecal's own model of the trigger positions, for checking a
+    program without a controller."""
+    k = L._kins(kins)
+    ti = 3 if L.TILT[k] == "A" else 4
+    rows = []
+    for m in sphere_trigger_model(machine, k, plan, artefact, tip_radius, pins, errors, clearance,
+                                  overtravel, workpiece_shift):
+        r = [*m["world"], 0.0, 0.0, m["rot"][1], 0.0, 0.0, 0.0]
+        r[ti] = m["rot"][0]
+        rows.append(" ".join(f"{x:.6f}" for x in r))
+    return "\n".join(rows) + "\n"
+
+
+# ---- R-test K tests ---------------------------------------------------------
+
+def _rtest_setups(plan: Sequence[Mapping]) -> Dict[str, List[Mapping]]:
+    out: Dict[str, List[Mapping]] = {}
+    for i, p in enumerate(plan):
+        if p.get("type") != "ball3d":
+            raise ValueError(f"plan[{i}]: type '{p.get('type')}': an R-test program needs ball3d entries")
+        out.setdefault(str(p.get("setup", "")), []).append(p)
+    if not out:
+        raise ValueError("plan: no ball3d entries")
+    return out
+
+
+def _full(machine: Machine, axes: Mapping) -> Dict[str, float]:
+    return {a: float(axes.get(a, 0.0)) for a in machine.axis_names if a != "S"}
+
+
+def rtest_points(machine: Machine, entries: Sequence[Mapping], subdivide: int = 0) -> List[dict]:
+    """The commanded points of one R-test setup: the plan's samples
+    (``sample``: its index) and, with ``subdivide`` = n, n points between two
+    samples with the rotary commands interpolated and the linear ones from
+    the nominal inverse kinematics (the ball stays in the nest there too)."""
+    if int(subdivide) != subdivide or subdivide < 0:
+        raise ValueError(f"subdivide: expected a whole number >= 0, got {subdivide}")
+    rot = [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+    pts = []
+    for i, e in enumerate(entries):
+        q = _full(machine, e["axes"])
+        if i and subdivide:
+            q0 = pts[-1]["axes"]
+            tb = np.asarray(e["table_ball"], float)
+            for s in np.arange(1, subdivide + 1) / (subdivide + 1):
+                r = {a: q0[a] + s * (q[a] - q0[a]) for a in rot}
+                at = {**q0, **r}
+                lin = machine.inverse([tb + tip_offset(machine, at, e["tool_ball"])], start=at)
+                pts.append({"axes": {**{a: float(v[0]) for a, v in lin.items() if a != "S"}, **r},
+                            "sample": None})
+        pts.append({"axes": q, "sample": i, "id": e.get("id")})
+    return pts
+
+
+def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes", kins: Optional[str] = None,
+                  pins: Optional[Mapping[str, float]] = None, feed: float = 500.0, dwell: float = 1.0,
+                  subdivide: int = 0, tcp_on: str = "M428", tcp_off: str = "M429",
+                  workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+    """ISO G-code of the R-test setups of ``plan``
+    (:func:`fivecal.procedures.rtest.plan`): per setup, ``G0`` to the first
+    sample, then ``G1`` from sample to sample at ``feed`` with a ``G4 P<dwell>``
+    at each (the nest is read during the dwell; the samples are numbered in
+    the comments as the plan's ids, so a reading per dwell lines up with the
+    plan's entries). ``subdivide``: intermediate points per step
+    (:func:`rtest_points`).
+
+    ``mode="axes"``: the words are axis commands from fivecal's nominal
+    inverse kinematics (the plan's own axes), as fivecal's machine file names
+    the axes; with ``kins`` (``xyzac-trt`` / ``xyzbc-trt``) they are
+    LinuxCNC's joint values (signs and origin of that kinematics), to run with
+    its identity kinematics (``tcp_off``, ``M429`` in the sample configs).
+    ``mode="tcp"`` (needs ``kins``): world coordinates of the tool tip for
+    LinuxCNC's tool-centre-point kinematics (``tcp_on``) with ``pins``
+    (default the machine's nominal pins); the controller keeps the tool point
+    still between the samples itself. In this mode the rotary moves are
+    straight lines in the rotary joints and the tool tip's world point, so
+    ``subdivide`` is not needed; ``feed`` is then the speed of the (nearly
+    still) tool point and LinuxCNC limits the rotary axes by their own
+    maximum speeds: use ``G93`` or a lower rotary speed on a real machine."""
+    if mode not in ("axes", "tcp"):
+        raise ValueError(f"mode: expected 'axes' or 'tcp', got {mode!r}")
+    if mode == "tcp" and not kins:
+        raise ValueError("mode 'tcp': give kins (xyzac-trt or xyzbc-trt), the kinematics whose "
+                         "tool-centre-point function runs the path")
+    if not (feed > 0 and math.isfinite(feed)):
+        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
+    if not (dwell >= 0 and math.isfinite(dwell)):
+        raise ValueError(f"dwell: expected a number of seconds >= 0, got {dwell}")
+    k = L._kins(kins) if kins else None
+    if k and pins is None:
+        pins = L.nominal_pins(machine, k)
+    letters = [a for a in machine.axis_names if a != "S"]
+    head = (f"(fivecal R-test program, machine {machine.name}: "
+            + ("axis commands from the nominal inverse kinematics" if mode == "axes" and not k else
+               f"LinuxCNC {k}-kins joint values, identity kinematics" if mode == "axes" else
+               f"world coordinates, {k}-kins tool centre point on") + ")")
+    out = [head, "(a G4 dwell at each planned sample: read the nest there, one reading per sample)",
+           "G21 G90 G94 G17 G40 G49 G54 G61"]
+    if k and mode == "tcp" and tcp_on:
+        out.append(f"{tcp_on} (tool centre point kinematics on)")
+    if k and mode == "axes" and tcp_off:
+        out.append(f"{tcp_off} (identity kinematics: words are joint values)")
+    origin = None
+    if k:
+        mp = L.match(machine, k)
+        tilt = L.TILT[k]
+        origin = np.asarray(mp["origin"], float) + np.asarray(workpiece_shift, float)
+        names = ["X", "Y", "Z", tilt, "C"]
+
+    def words(q: Mapping[str, float]) -> str:
+        if not k:
+            return " ".join(f"{a}{_f(q[a])}" for a in letters)
+        j = L.joints(machine, k, {a: np.array([q.get(a, 0.0)]) for a in machine.axis_names})[0]
+        if mode == "axes":
+            return " ".join(f"{a}{_f(v)}" for a, v in zip(names, j))
+        wxyz = L.forward(k, pins, j[None, :])[0]
+        return " ".join(f"{a}{_f(v)}" for a, v in zip(names, [*wxyz, j[3], j[4]]))
+
+    for setup, entries in _rtest_setups(plan).items():
+        pts = rtest_points(machine, entries, 0 if mode == "tcp" else subdivide)
+        out.append(f"(setup {setup}: {len(entries)} samples, table ball "
+                   f"{' '.join(_f(x) for x in entries[0]['table_ball'])}, tool ball "
+                   f"{' '.join(_f(x) for x in entries[0]['tool_ball'])})")
+        for n, p in enumerate(pts):
+            g = "G0" if n == 0 else "G1"
+            fw = f" F{feed:g}" if n == 1 else ""
+            out.append(f"{g} {words(p['axes'])}{fw}")
+            if p["sample"] is not None:
+                out.append(f"G4 P{dwell:g} (sample {p['sample'] + 1}: {p.get('id') or ''})")
+    out.append("M2")
+    return "\n".join(out) + "\n"
