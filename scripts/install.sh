@@ -7,7 +7,9 @@ cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
 # chromium: headless browser the report test renders the HTML report with
-DEB_PACKAGES=(libeigen3-dev libceres-dev nlohmann-json3-dev libgtest-dev chromium linuxcnc-uspace)
+# ccache: the wheel build and scripts/test.sh compile the same core with the same
+# flags; the second build takes the first one's objects from the cache.
+DEB_PACKAGES=(libeigen3-dev libceres-dev nlohmann-json3-dev libgtest-dev chromium linuxcnc-uspace ccache)
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
@@ -19,6 +21,7 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 PY=${PYTHON:-python3}
+source scripts/ccache_env.sh
 command -v cmake >/dev/null 2>&1 || $PY -m pip install -q cmake
 command -v ninja >/dev/null 2>&1 || $PY -m pip install -q ninja
 # fleet: Dask and pyarrow, which the calibration history tests use

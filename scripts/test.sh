@@ -6,6 +6,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 JOBS=${JOBS:-2}
+source scripts/ccache_env.sh
 
 cmake -S . -B build/ctest -G Ninja -DFIVECAL_BUILD_PYTHON=OFF -DFIVECAL_BUILD_TESTS=ON >/dev/null
 cmake --build build/ctest -j "$JOBS"
