@@ -308,8 +308,8 @@ def register(sub) -> None:
                    "(default the machine's tool tip)")
     p.add_argument("--step", type=POSITIVE, default=15.0, help="degrees between samples (default 15)")
     p.add_argument("--tilt", type=_float_type(), default=-45.0, help="K3 tilt and K4 amplitude, degrees "
-                   "(default -45)")
-    p.add_argument("--tilt-range", default="-90:90", metavar="LO:HI", help="K2 range, degrees (default -90:90)")
+                   "(default -45; a negative value with '=': --tilt=-30)")
+    p.add_argument("--tilt-range", default="-90:90", metavar="LO:HI", help="K2 range, degrees (default -90:90; a negative LO with '=': --tilt-range=-90:60)")
     p.add_argument("--setup", help="one mounting name for all tests (default: one mounting per test, named "
                    "after it)")
     p.set_defaults(func=_rtest)
@@ -324,7 +324,7 @@ def register(sub) -> None:
     p.add_argument("--extended-length", type=POSITIVE, default=150.0, help="bar with the extension, mm "
                    "(default 150)")
     p.add_argument("--step", type=POSITIVE, default=1.0, help="degrees between samples (default 1)")
-    p.add_argument("--carrier-range", metavar="LO:HI", help="carrier (first) axis range, degrees")
+    p.add_argument("--carrier-range", metavar="LO:HI", help="carrier (first) axis range, degrees (a negative LO with '=': --carrier-range=-20:70)")
     p.add_argument("--carried-range", metavar="LO:HI", help="carried (second) axis range, degrees")
     p.add_argument("--tool-ball", metavar="X,Y,Z", help="the fixed ball, mm (default: the machine's choice)")
     p.add_argument("--setups", help="names of the four steps, comma separated")
