@@ -54,6 +54,18 @@ def test_plan_commands_write_specs_export_program_accepts(tmp_path, machine_file
         assert spec["plan"] and fivecal.Machine.from_dict(spec["machine"]).name == m.name
         rc, text, err = run(capsys, "export", "program", out, "--kins", KINS, "--out", tmp_path / f"{name}.ngc")
         assert rc == 0, (name, err)
+    # Wang's path needs intersecting A and C axes
+    d = dict(MACHINES[KINS])
+    d["axes"] = {**d["axes"], "C": {**d["axes"]["C"], "point": [12, 20, 0]}}
+    wm = tmp_path / "wang_machine.json"
+    wm.write_text(json.dumps(d))
+    assert run(capsys, "plan", "wang", wm, "--step", "5", "--out", tmp_path / "w.json")[0] == 0
+    w = json.loads((tmp_path / "w.json").read_text())["plan"]
+    assert w and all(e["type"] == "dbb" and "tracking" not in e for e in w)
+    rc, _, err = run(capsys, "export", "program", tmp_path / "w.json", "--kins", KINS, "--out", tmp_path / "w.ngc")
+    assert rc == 0, err
+    rc, _, err = run(capsys, "plan", "wang", machine_file, "--out", tmp_path / "w2.json")
+    assert rc == 2 and "miss each other" in err
     # the sphere check plan is the one the Python call makes, both sides of each position
     from fivecal.procedures import sphere_check
     spec = json.loads((tmp_path / "chk.json").read_text())
