@@ -102,6 +102,7 @@ def test_plan_commands_write_specs_export_program_accepts(tmp_path, machine_file
     (["four-step", "--setups", "a,b,c"], "--setups"),
     (["four-step", "--extended-length", "50"], "--extended-length"),
     (["wang", "--setup", "W.1"], "--setup"),
+    (["four-step", "--errors", "EX0C"], "--errors"),
 ])
 def test_plan_errors_name_the_option(tmp_path, machine_file, capsys, argv, option):
     try:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 
 
 def _vector(text: str, option: str, n: int = 3) -> list:
@@ -122,6 +123,8 @@ def _write(args, machine, plan, what: str, artefact=None, tip_radius=None) -> in
     if args.errors:
         from .dbb_cli import _values
 
+        if not os.path.exists(args.errors) and any("=" not in t for t in args.errors.split(",") if t.strip()):
+            raise ValueError(f"--errors: expected NAME=VALUE pairs (mm, rad) or a JSON file, got '{args.errors}'")
         spec["errors"] = _values(args.errors, "--errors")
     write_json(args.out, plain(spec, "plan"))
     groups = {}
