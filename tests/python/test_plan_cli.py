@@ -115,11 +115,12 @@ def test_plan_errors_name_the_option(tmp_path, machine_file, capsys, argv, optio
 
 # ---- R-test: plan -> program -> nest readings -> import -> K-test analysis --
 
-def _dwells(prog, machine, kins=None):
+def _dwells(prog, machine, kins=None, tcp=False):
     """What an R-test logger sees of the program: per G4 dwell, the commanded
     axis position (fivecal's command names; joint values with ``kins``
-    converted back), the sample id of the dwell's comment and the balls of
-    the setup comment."""
+    converted back, world coordinates with ``tcp`` through LinuxCNC's inverse
+    kinematics with the nominal pins), the sample id of the dwell's comment
+    and the balls of the setup comment."""
     pos, balls, out = {}, None, []
     for ln, line in enumerate(gcode.split_lines(prog), 1):
         m = re.match(r"\(setup (\S+): \d+ samples, table ball (\S+) (\S+) (\S+), tool ball (\S+) (\S+) (\S+)\)",
@@ -131,6 +132,8 @@ def _dwells(prog, machine, kins=None):
             sid = re.search(r"\(sample \d+: (\S+)\)", line).group(1)
             if kins:
                 j = np.array([[pos[a] for a in ("X", "Y", "Z", L.TILT[kins], "C")]])
+                if tcp:
+                    j = L.inverse(kins, L.nominal_pins(machine, kins), j)
                 axes = {a: float(v[0]) for a, v in L.commands(machine, kins, j).items()}
             else:
                 axes = dict(pos)
@@ -152,7 +155,7 @@ def _nest_readings(machine, dwells, errors, sigma, seed):
 R_ERRORS = {k: v for k, v in TRUE_LOCATION.items()}
 
 
-@pytest.mark.parametrize("layout", ["program-order", "ids"])
+@pytest.mark.parametrize("layout", ["program-order", "ids", "tcp"])
 def test_rtest_plan_program_readings_import_and_ktests(tmp_path, machine_file, capsys, layout):
     m = fivecal.Machine.from_dict(MACHINES[KINS])
     plan_file = tmp_path / "rtest_plan.json"
@@ -161,16 +164,17 @@ def test_rtest_plan_program_readings_import_and_ktests(tmp_path, machine_file, c
                      "--out", plan_file)
     assert rc == 0, err
     prog_file = tmp_path / "rtest.ngc"
-    kins = KINS if layout == "ids" else None  # LinuxCNC joint values in one of the two
+    # axis commands, LinuxCNC joint values, LinuxCNC world moves with TCP on
+    kins = KINS if layout in ("ids", "tcp") else None
     assert run(capsys, "export", "program", plan_file, *(["--kins", kins] if kins else []),
-               "--out", prog_file)[0] == 0
-    dwells = _dwells(prog_file.read_text(), m, kins)
+               *(["--mode", "tcp"] if layout == "tcp" else []), "--out", prog_file)[0] == 0
+    dwells = _dwells(prog_file.read_text(), m, kins, tcp=layout == "tcp")
     plan = json.loads(plan_file.read_text())["plan"]
     assert len(dwells) == len(plan)
     sigma = 0.0005
     d = _nest_readings(m, dwells, R_ERRORS, sigma, seed=5) * 1e3  # the logger writes µm
     readings = tmp_path / "nest.csv"
-    if layout == "ids":  # a CSV with the dwell's plan id per row, in any order
+    if layout != "program-order":  # a CSV with the dwell's plan id per row, in any order
         rows = [f"{w['id']},{x:.4f},{y:.4f},{z:.4f}" for w, (x, y, z) in zip(dwells, d)][::-1]
         readings.write_text("id,dx_um,dy_um,dz_um\n" + "\n".join(rows) + "\n")
     else:  # a plain log, one line per dwell in program order
@@ -178,7 +182,7 @@ def test_rtest_plan_program_readings_import_and_ktests(tmp_path, machine_file, c
                             + "".join(f"{x:.4f} {y:.4f} {z:.4f}\n" for x, y, z in d))
     ds_file = tmp_path / "rtest_ds.json"
     argv = ["import", "rtest", readings, "--plan", plan_file, "--out", ds_file]
-    rc, out, err = run(capsys, *argv, *(["--units", "um"] if layout != "ids" else []))
+    rc, out, err = run(capsys, *argv, *(["--units", "um"] if layout == "program-order" else []))
     assert rc == 0, err
     ds = fivecal.load_dataset(str(ds_file))
     obs = ds.to_dict()["observations"]
@@ -279,6 +283,13 @@ def test_sphere_check_plan_program_log_import_and_check(tmp_path, machine_file, 
     rc, out, err = run(capsys, "import", "probe-log", log, "--plan", plan_file, "--kins", KINS, "--out", ds_file)
     assert rc == 0, err
     assert f"{len(plan)} sphere observations" in out
+    # the pins the controller ran with, as a HAL file: here the nominal ones, the same dataset
+    hal = tmp_path / "kins.hal"
+    hal.write_text(L.hal_text(KINS, pins))
+    rc, _, err = run(capsys, "import", "probe-log", log, "--plan", plan_file, "--kins", KINS, "--pins", hal,
+                     "--out", tmp_path / "check_ds2.json")
+    assert rc == 0, err
+    assert json.loads((tmp_path / "check_ds2.json").read_text()) == json.loads(ds_file.read_text())
     check_file = tmp_path / "check.json"
     rc, out, err = run(capsys, "sphere-check", ds_file, "--out", check_file)
     assert rc == 0, err
