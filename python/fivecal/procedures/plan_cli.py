@@ -312,7 +312,8 @@ def register(sub) -> None:
     p.add_argument("--step", type=POSITIVE, default=15.0, help="degrees between samples (default 15)")
     p.add_argument("--tilt", type=_float_type(), default=-45.0, help="K3 tilt and K4 amplitude, degrees "
                    "(default -45; a negative value with '=': --tilt=-30)")
-    p.add_argument("--tilt-range", default="-90:90", metavar="LO:HI", help="K2 range, degrees (default -90:90; a negative LO with '=': --tilt-range=-90:60)")
+    p.add_argument("--tilt-range", default="-90:90", metavar="LO:HI",
+                   help="K2 range, degrees (default -90:90; a negative LO with '=': --tilt-range=-90:60)")
     p.add_argument("--setup", help="one mounting name for all tests (default: one mounting per test, named "
                    "after it)")
     p.set_defaults(func=_rtest)
@@ -327,7 +328,8 @@ def register(sub) -> None:
     p.add_argument("--extended-length", type=POSITIVE, default=150.0, help="bar with the extension, mm "
                    "(default 150)")
     p.add_argument("--step", type=POSITIVE, default=1.0, help="degrees between samples (default 1)")
-    p.add_argument("--carrier-range", metavar="LO:HI", help="carrier (first) axis range, degrees (a negative LO with '=': --carrier-range=-20:70)")
+    p.add_argument("--carrier-range", metavar="LO:HI", help="carrier (first) axis range, degrees (a negative "
+                   "LO with '=': --carrier-range=-20:70)")
     p.add_argument("--carried-range", metavar="LO:HI", help="carried (second) axis range, degrees")
     p.add_argument("--tool-ball", metavar="X,Y,Z", help="the fixed ball, mm (default: the machine's choice)")
     p.add_argument("--setups", help="names of the four steps, comma separated")
@@ -337,7 +339,8 @@ def register(sub) -> None:
                         description="DBB samples along the path that keeps the table ball on a horizontal "
                         "circle around the still spindle ball (both rotary axes move). Evaluated by "
                         "`fivecal dbb wang`.",
-                        epilog="example:\n  fivecal plan wang machine.json --radius 80 --height 60 --out wang_plan.json")
+                        epilog="example:\n  fivecal plan wang machine.json --radius 80 --height 60 "
+                        "--out wang_plan.json")
     common(p)
     p.add_argument("--table-ball", metavar="X,Y,Z", help="table ball, workpiece frame, mm (default 0,150,130)")
     p.add_argument("--radius", type=POSITIVE, default=80.0, help="circle radius, mm (default 80)")
