@@ -276,9 +276,16 @@ def test_sphere_check_plan_program_log_import_and_check(tmp_path, machine_file, 
         rows.append(" ".join(f"{x:.6f}" for x in r))
     log = tmp_path / "probe-log.txt"
     log.write_text("\n".join(rows) + "\n")
-    # the commanded probe lines of the program pass through the logged points
-    g38 = [ln for ln in prog.splitlines() if ln.startswith("G38.2")]
+    # each modelled trip lies on the probe move the program commands, between
+    # its start (the G0 before it) and its end, at the position's rotary pose
+    lines = prog.splitlines()
+    xyz = lambda ln: np.array([float(re.search(a + r"(-?[\d.]+)", ln).group(1)) for a in "XYZ"])  # noqa: E731
+    g38 = [i for i, ln in enumerate(lines) if ln.startswith("G38.2")]
     assert len(g38) == len(model)
+    for i, t in zip(g38, model):
+        a, b, w = xyz(lines[i - 1]), xyz(lines[i]), np.asarray(t["world"])
+        s = (w - a) @ (b - a) / ((b - a) @ (b - a))
+        assert 0 < s < 1 and np.linalg.norm(a + s * (b - a) - w) < 1e-6, (lines[i], t["world"])
     ds_file = tmp_path / "check_ds.json"
     rc, out, err = run(capsys, "import", "probe-log", log, "--plan", plan_file, "--kins", KINS, "--out", ds_file)
     assert rc == 0, err
