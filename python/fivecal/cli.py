@@ -702,6 +702,7 @@ def main(argv=None) -> int:
     from .procedures.dbb_cli import register as _register_dbb
 
     _register_dbb(sub)
+    from .procedures.plan_cli import register as _register_plan; _register_plan(sub)  # noqa: E702
     from .io.linuxcnc_cli import register as _register_export; _register_export(sub)  # noqa: E702
 
     from .history.cli import register as _register_history; _register_history(sub)  # noqa: E702

@@ -4,10 +4,49 @@ from __future__ import annotations
 import argparse
 
 
+def _run_planned(args) -> int:
+    """Readings lined up with a plan: R-test dwell readings, LinuxCNC probe log."""
+    from .. import files
+    from . import plan_readings as P
+
+    files.check_outputs([("FILE", args.file), ("--plan", args.plan), ("--pins", args.pins)], [("--out", args.out)])
+    if args.kind == "probe-log":
+        for opt in ("machine", "sidecar", "column", "setup", "length", "tool_ball", "table_ball", "header"):
+            if getattr(args, opt, None):
+                raise ValueError(f"--{opt.replace('_', '-')}: not used by a probe-log import (the plan gives "
+                                 "the machine, the touches and the artefact)")
+        d = P.probe_log_dataset(args.file, args.plan, args.kins, args.pins)
+    else:
+        for opt in ("machine", "sidecar", "column", "setup", "length", "tool_ball", "table_ball"):
+            if getattr(args, opt, None):
+                raise ValueError(f"--{opt.replace('_', '-')}: not used with --plan (the plan gives the machine, "
+                                 "the axes, the balls and the mounting of each reading)")
+        if args.kins or args.pins:
+            raise ValueError(f"--{'kins' if args.kins else 'pins'}: belongs to a probe-log import")
+        d = P.rtest_readings(args.file, args.plan, units=args.units, delimiter=args.delimiter,
+                             decimal=args.decimal, header=args.header, sigma=args.sigma, ignore=args.ignore or ())
+    ds = P.write(d, args.out)
+    n = sum(1 for e in P.read_plan(args.plan)[1] if e.get("type") in {o["type"] for o in d["observations"]})
+    print(f"{args.file}: {len(ds)} {d['observations'][0]['type']} observations of the {n} planned "
+          f"(plan {args.plan}) written to {args.out}")
+    return 0
+
+
 def _run(args) -> int:
     from .. import files
     from . import tables
 
+    if args.kind == "probe-log" and not args.plan:
+        raise ValueError("--plan: a probe-log import needs the plan the program was written from")
+    if args.plan:
+        if args.kind not in ("rtest", "ball3d", "probe-log"):
+            raise ValueError(f"--plan: lines up R-test readings (rtest) or a LinuxCNC probe log (probe-log), "
+                             f"not a {args.kind} table")
+        return _run_planned(args)
+    if args.kins or args.pins:
+        raise ValueError(f"--{'kins' if args.kins else 'pins'}: belongs to a probe-log import")
+    if not args.machine:
+        raise ValueError("--machine: the machine JSON is required (or --plan for R-test readings)")
     files.check_outputs([("FILE", args.file), ("--machine", args.machine), ("--sidecar", args.sidecar)],
                         [("--out", args.out)])
     ds = tables.write_dataset(
@@ -44,14 +83,17 @@ def register(sub) -> None:
         "  fivecal import dbb trace.csv --machine m.json --setup A1 --length 100 "
         "--tool-ball 0,0,100 --table-ball 100,0,0 --column reading=dL --units um --out ds.json\n"
         "  fivecal import rtest rtest.txt --machine m.json --sidecar rtest.json --out ds.json\n"
+        "  fivecal import rtest nest_readings.csv --plan rtest_plan.json --out ds.json\n"
+        "  fivecal import probe-log probe-log.txt --plan check_plan.json --kins xyzac-trt --out ds.json\n"
         "  fivecal import point tracker.csv --machine table.json --target work --target-point 0,50,0 "
         "--out ds.json\n"
         "  fivecal import machined cmm_report.csv --machine c600u.json --setup P1 --out ds.json")
-    p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest", "tracker", "6d", "tracer"],
+    p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest", "tracker", "6d", "tracer", "probe-log"],
                    help="probing | dbb | ball3d (rtest) | point (tracker) | pose (6d) | distance (tracer) | "
-                   "machined (a CMM report of a machined test part) | fivecal (a type column, any kind)")
+                   "machined (a CMM report of a machined test part) | fivecal (a type column, any kind) | "
+                   "probe-log (LinuxCNC's PROBEOPEN log of a program of `fivecal export program`, with --plan)")
     p.add_argument("file", metavar="FILE", help="the table (CSV or whitespace text)")
-    p.add_argument("--machine", required=True, help="machine JSON")
+    p.add_argument("--machine", help="machine JSON (not with --plan: the plan's machine is used)")
     p.add_argument("--out", required=True, help="dataset JSON to write")
     p.add_argument("--sidecar", help="JSON with what the table lacks: probe, artefact, setup, length, "
                    "tool_ball, table_ball, sigma")
@@ -75,6 +117,14 @@ def register(sub) -> None:
     p.add_argument("--sigma", type=float, help="measurement standard deviation, mm (default: the kind's)")
     p.add_argument("--header", metavar="NAMES", help="the column names, comma separated, of a file without a "
                    "header row")
+    g = p.add_argument_group("readings of a planned test (`fivecal plan`, `fivecal export program`)")
+    g.add_argument("--plan", help="the plan the program was written from: rtest: the readings (dx dy dz, one "
+                   "per dwell) line up with its samples by an id column or in program order; probe-log: with "
+                   "its touches")
+    g.add_argument("--kins", choices=["xyzac-trt", "xyzbc-trt"], help="probe-log: the LinuxCNC kinematics "
+                   "the program ran with")
+    g.add_argument("--pins", metavar="HAL", help="probe-log: HAL file with the kinematics pins the controller "
+                   "ran with (default: the machine's nominal geometry)")
     g = p.add_argument_group("point, pose and distance (tracker, camera, CMM, interferometer)")
     g.add_argument("--instrument", help="the instrument's name (default T1); its pose parameters are "
                    "instrument.<name>.x|y|z|a|b|c")
