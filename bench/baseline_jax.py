@@ -118,58 +118,50 @@ def forward_kinematics(machine, names):
 
 def lm(fun, x0, max_iterations=100, ftol=1e-12, xtol=1e-12):
     """Levenberg-Marquardt on fun: x -> residual vector, inside lax.while_loop
-    (so it jits and vmaps). Each iteration is one forward-mode pass giving the
-    residuals and their exact Jacobian (jacfwd) at the trial point; the step
-    solves (J^T J + lam diag(J^T J)) dx = -J^T r in column-scaled form (the
-    Marquardt scaling, as SciPy's x_scale="jac"). A step is taken when it
+    (so it jits and vmaps). Each pass is one forward-mode evaluation giving the
+    residuals and their exact Jacobian (jacfwd) at the trial point x + dx; the
+    step solves (J^T J + lam diag(J^T J)) dx = -J^T r in column-scaled form
+    (the Marquardt scaling, as SciPy's x_scale="jac"). A step is taken when it
     lowers the cost; the solve stops when the cost falls by less than ftol
-    relatively or the scaled step is below xtol relatively.
+    relatively (or its linear model predicts so: near the optimum a step can
+    lose to rounding, and raising lam then would only spin) or the scaled step
+    is below xtol relatively. The first pass evaluates x0 itself, so the
+    Jacobian is traced and compiled once.
 
-    Returns (x, iterations, cost, converged)."""
+    Returns (x, Jacobian evaluations, cost, converged)."""
     jac = jax.jacfwd(lambda x: (fun(x), fun(x)), has_aux=True)
-    J0, r0 = jac(x0)
     p = x0.shape[0]
+    m = jax.eval_shape(fun, x0).shape[0]
 
-    def step(x, r, J, lam):
+    def step(r, J, lam):
         d = jnp.sum(J * J, axis=0)
         s = 1.0 / jnp.sqrt(jnp.where(d > 0, d, 1.0))
         Js = J * s
-        A = Js.T @ Js + lam * jnp.eye(p)
-        dx = -s * jnp.linalg.solve(A, Js.T @ r)
-        return dx, s
-
-    def cond(state):
-        return ~state[5]
+        return -s * jnp.linalg.solve(Js.T @ Js + lam * jnp.eye(p), Js.T @ r), s
 
     def body(state):
-        x, r, J, lam, it, _, ok = state
-        dx, s = step(x, r, J, lam)
+        x, r, J, c, lam, dx, s, it, _, _ = state
         J1, r1 = jac(x + dx)
-        c, c1 = r @ r, r1 @ r1
+        c1 = r1 @ r1
+        first = it == 0
+        accept = first | (c1 < c)
         lin = r + J @ dx
-        accept = c1 < c
         small = jnp.linalg.norm(dx / s) <= xtol * (xtol + jnp.linalg.norm(x / s))
-        # Converged when the step gained (or its linear model predicts) less
-        # than ftol of the cost: near the optimum a step can lose to rounding,
-        # and raising lam after that would only spin.
-        conv = (accept & (c - c1 <= ftol * c)) | (c - lin @ lin <= ftol * c) | small
+        conv = ~first & ((accept & (c - c1 <= ftol * c)) | (c - lin @ lin <= ftol * c) | small)
         x = jnp.where(accept, x + dx, x)
         r = jnp.where(accept, r1, r)
         J = jnp.where(accept, J1, J)
-        lam = jnp.where(accept, jnp.maximum(lam * 0.1, 1e-12), lam * 10.0)
+        c = jnp.where(accept, c1, c)
+        lam = jnp.where(first, lam, jnp.where(accept, jnp.maximum(lam * 0.1, 1e-12), lam * 10.0))
+        dx, s = step(r, J, lam)
         it = it + 1
-        done = conv | (it >= max_iterations) | (lam > 1e16)
-        return x, r, J, lam, it, done, conv
+        return x, r, J, c, lam, dx, s, it, conv | (it >= max_iterations) | (lam > 1e16), conv
 
-    state = (x0, r0, J0, jnp.asarray(1e-3), jnp.asarray(0), jnp.asarray(False), jnp.asarray(False))
-    x, r, _, _, it, _, ok = lax.while_loop(cond, body, state)
-    return x, it, 0.5 * (r @ r), ok
-
-
-def covariance(fun, x):
-    """(J^T J)^-1 of the weighted residuals at x: the std the fits are compared in."""
-    J = jax.jacfwd(fun)(x)
-    return jnp.linalg.pinv(J.T @ J)
+    zero = jnp.zeros(p)
+    state = (x0, jnp.zeros(m), jnp.zeros((m, p)), jnp.asarray(jnp.inf), jnp.asarray(1e-3), zero, zero + 1.0,
+             jnp.asarray(0), jnp.asarray(False), jnp.asarray(False))
+    x, _, _, c, _, _, _, it, _, ok = lax.while_loop(lambda st: ~st[8], body, state)
+    return x, it, 0.5 * c, ok
 
 
 # ---- the fits of bench/run.py ---------------------------------------------------
@@ -248,9 +240,6 @@ class JaxProblem:
         """A jitted () -> (x, iterations, cost, converged) from zero."""
         x0 = jnp.zeros(len(self.names))
         return jax.jit(lambda: lm(self.weighted_residuals, x0))
-
-    def std(self, x):
-        return np.sqrt(np.diag(np.asarray(jax.jit(lambda x: covariance(self.weighted_residuals, x))(x))))
 
     def monte_carlo_function(self, batch=64):
         """A jitted (x_start, key, trials) -> fitted values (trials, p):

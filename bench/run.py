@@ -149,7 +149,7 @@ def case_tango(subset, repeat, baseline_repeat):
         z_j = max(abs(float(x_j[i]) - r.values[n]) / r.std[n] for i, n in enumerate(names)
                   if n not in r.undetermined and r.std[n] > 0)
         assert z_j < 0.1, f"JAX fit off fivecal's by {z_j} sigma"
-        jx = jax_result(t_f, first, t_j, runs_j, jax_iterations=int(it_j), jax_max_difference_in_sigma=float(z_j))
+        jx = jax_result(t_f, first, t_j, runs_j, jax_jacobian_evaluations=int(it_j), jax_max_difference_in_sigma=float(z_j))
     return {**jx, "case": f"tango_{subset}", "size": {"touches": len(ds), "unknowns": len(names),
                                                 "rows": r.n_observations},
             "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
@@ -213,7 +213,7 @@ def case_ball3d(n, repeat, baseline):
         assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
         z_j = max(abs(float(x_j[i]) - r.values[k]) / r.std[k] for i, k in enumerate(names))
         assert z_j < 0.1, f"JAX ball3d fit off fivecal's by {z_j} sigma"
-        out.update(jax_result(t_f, first, t_j, runs_j, jax_iterations=int(it_j),
+        out.update(jax_result(t_f, first, t_j, runs_j, jax_jacobian_evaluations=int(it_j),
                               jax_max_difference_in_sigma=float(z_j)))
     return out
 
@@ -436,7 +436,7 @@ def core_choices(repeat):
 # ---- output ------------------------------------------------------------------
 
 def _ms(s, digits=1):
-    return f"{s * 1e3:.{digits}f} ms" if s < 10 else f"{s:.1f} s"
+    return f"{s * 1e3:.{digits}f} ms" if s < 1 else f"{s:.2f} s"
 
 
 def _ratio(x, times="x"):
