@@ -153,3 +153,31 @@ def test_bench_runs_and_says_so_without_jax(monkeypatch):
     doc = {"machine": {"cpu": "test cpu", "cores": 2, "date": "today"}, "results": [r]}
     assert "| not measured: jax not installed |" in bench.readme_section(doc)
     assert "not measured: jax not installed" in bench.table([r])
+
+
+@pytest.mark.parametrize("kind", ["ball3d", "dbb"])
+def test_jax_ball_rows_are_fivecal_s(kind):
+    """JaxProblem's ball rows (a prefix per mounting, gathered setup offsets,
+    one row per DBB reading or three per 3D sample) are fivecal's residuals."""
+    pytest.importorskip("jax")
+    import baseline_jax as jbase
+
+    m = fivecal.Machine.load(os.path.join(ROOT, "examples", "machines", "c600u.json"))
+    rng = np.random.default_rng(1)
+    n = 40
+    rot = {"X": np.zeros(n), "Y": np.zeros(n), "Z": np.zeros(n), "A": rng.uniform(-90, 90, n),
+           "C": rng.uniform(0, 360, n)}
+    tool, table = [0.0, 0.0, 150.0], [50.0, 0.0, 80.0]
+    _, tool_axes = m.tool_pose(rot, tip=tool)
+    axes = m.inverse(np.tile(table, (n, 1)), tool_axes=tool_axes, start={k: v[0] for k, v in rot.items()})
+    if kind == "ball3d":
+        ds = fivecal.ball_dataset(m, kind, axes, tool, table, measured=rng.normal(0, 5e-3, (n, 3)), setup="R1")
+    else:
+        ds = fivecal.ball_dataset(m, kind, axes, tool, table, length=100.0, readings=rng.normal(0, 5e-3, n),
+                                  setup="R1")
+    values = {"EB0A": 3e-5, "EY0C": -0.01, f"{kind}.R1.tool.x": 0.003, f"{kind}.R1.table.z": -0.002}
+    if kind == "dbb":
+        values["dbb.R1.length"] = 0.004
+    ours, _ = fivecal._core.predict_residuals(ds._core, values)
+    theirs = np.asarray(jbase.JaxProblem(ds, list(values)).residuals(np.array(list(values.values()))))
+    assert ours.shape == theirs.shape and np.abs(ours - theirs).max() < 1e-9
