@@ -6,7 +6,13 @@
 
 Every case runs fivecal and the numpy/SciPy baseline (bench/baseline_numpy.py)
 in this process on the same data, checks they agree, and records medians of
-at least 5 runs, the problem sizes and the ratio baseline / fivecal.
+at least 5 runs, the problem sizes and the ratio baseline / fivecal. A second
+baseline, the same model and fits in JAX (bench/baseline_jax.py: jit, exact
+jacfwd Jacobians, Levenberg-Marquardt in lax.while_loop, vmap over Monte Carlo
+trials), runs beside it when jax is installed (the ``bench`` extra): its first
+call (trace, compile and one run) is recorded apart as ``jax_compile_s``, its
+warm median as ``jax_s``, and ``ratio_jax`` = jax_s / fivecal_s. Without jax
+the JAX columns say so and everything else runs.
 """
 from __future__ import annotations
 
@@ -28,6 +34,12 @@ from fivecal.procedures import tango  # noqa: E402
 
 import baseline_numpy as base  # noqa: E402
 
+try:
+    import baseline_jax as jbase  # noqa: E402
+    JAX_MISSING = None
+except ImportError:   # jax is a bench extra: without it the JAX columns say so
+    jbase, JAX_MISSING = None, "jax not installed"
+
 
 def timed(fn, repeat=5):
     """Median wall time (s) of `repeat` runs and the last return value."""
@@ -37,6 +49,21 @@ def timed(fn, repeat=5):
         out = fn()
         times.append(time.perf_counter() - t)
     return statistics.median(times), times, out
+
+
+def timed_jax(fn, repeat):
+    """JAX timing: the first call (trace + XLA compile + one run) apart, then
+    the median of `repeat` warm runs, each waiting for the device result."""
+    t = time.perf_counter()
+    jbase.block(fn())
+    first = time.perf_counter() - t
+    t_w, runs, out = timed(lambda: jbase.block(fn()), repeat)
+    return first, t_w, runs, out
+
+
+def jax_result(t_f, first, t_w, runs, **agreement):
+    """The JAX keys of a case (ratio_jax = warm JAX / fivecal)."""
+    return {"jax_s": t_w, "jax_compile_s": first, "ratio_jax": t_w / t_f, "runs_jax_s": runs, **agreement}
 
 
 def machine_info():
@@ -53,6 +80,7 @@ def machine_info():
 
     return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
             "numpy": np.__version__, "scipy": scipy.__version__, "fivecal": fivecal.__version__,
+            "jax": jbase.jax.__version__ if jbase else JAX_MISSING,
             "platform": platform.platform(), "date": time.strftime("%Y-%m-%d %H:%M:%S")}
 
 
@@ -81,7 +109,16 @@ def case_forward_kinematics(n, repeat):
     t_b, runs_b, p_b = timed(lambda: nm.tool_points(qi, errors), repeat)
     diff = float(np.abs(p_f - p_b).max())
     assert diff < 1e-9, f"forward kinematics disagree by {diff} mm"
-    return {"case": "forward_kinematics", "size": {"poses": n, "parameters_nonzero": len(errors)},
+    if jbase is None:
+        jx = {"jax_skipped": JAX_MISSING}
+    else:
+        fk = jbase.forward_kinematics(m, list(errors))
+        x = np.array(list(errors.values()))
+        first, t_j, runs_j, p_j = timed_jax(lambda: fk(qi, x), repeat)
+        d_j = float(np.abs(p_f - np.asarray(p_j)).max())
+        assert d_j < 1e-9, f"JAX forward kinematics disagree by {d_j} mm"
+        jx = jax_result(t_f, first, t_j, runs_j, jax_poses_per_s=n / t_j, jax_max_difference_mm=d_j)
+    return {**jx, "case": "forward_kinematics", "size": {"poses": n, "parameters_nonzero": len(errors)},
             "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
             "fivecal_poses_per_s": n / t_f, "baseline_poses_per_s": n / t_b,
             "api_s": t_api, "api_poses_per_s": n / t_api, "runs_api_s": runs_api,
@@ -103,7 +140,18 @@ def case_tango(subset, repeat, baseline_repeat):
     # The baseline must find the same optimum (the fivecal values are its reference).
     fitted = dict(zip(names, sol.x))
     z = max(abs(fitted[n] - r.values[n]) / r.std[n] for n in names if n not in r.undetermined and r.std[n] > 0)
-    return {"case": f"tango_{subset}", "size": {"touches": len(ds), "unknowns": len(names),
+    if jbase is None:
+        jx = {"jax_skipped": JAX_MISSING}
+    else:
+        fit = jbase.JaxProblem(ds, names).fit_function()
+        first, t_j, runs_j, (x_j, it_j, _, ok_j) = timed_jax(fit, baseline_repeat)
+        assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
+        z_j = max(abs(float(x_j[i]) - r.values[n]) / r.std[n] for i, n in enumerate(names)
+                  if n not in r.undetermined and r.std[n] > 0)
+        assert z_j < 0.1, f"JAX fit off fivecal's by {z_j} sigma"
+        jx = jax_result(t_f, first, t_j, runs_j, jax_jacobian_evaluations=int(it_j),
+                        jax_max_difference_in_sigma=float(z_j))
+    return {**jx, "case": f"tango_{subset}", "size": {"touches": len(ds), "unknowns": len(names),
                                                 "rows": r.n_observations},
             "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
             "fivecal_iterations": r.iterations, "baseline_function_evaluations": int(sol.nfev),
@@ -153,12 +201,31 @@ def case_ball3d(n, repeat, baseline):
         z = max(abs(sol.x[i] - r.values[k]) / r.std[k] for i, k in enumerate(names))
         out.update({"baseline_s": t_b, "ratio": t_b / t_f, "runs_baseline_s": runs_b,
                     "max_difference_in_sigma": float(z)})
+    if jbase is None:
+        out["jax_skipped"] = JAX_MISSING
+    else:
+        qj = m.axes_matrix(axes)
+        for i, a in enumerate(m.axis_names):
+            if m.is_rotary(a):
+                qj[:, i] = np.deg2rad(qj[:, i])
+        fit = jbase.ball3d_fit_function(m, names)
+        tool_a, table_a = np.asarray(tool, float), np.asarray(table, float)
+        first, t_j, runs_j, (x_j, it_j, _, ok_j) = timed_jax(lambda: fit(qj, tool_a, table_a, meas), repeat)
+        assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
+        z_j = max(abs(float(x_j[i]) - r.values[k]) / r.std[k] for i, k in enumerate(names))
+        assert z_j < 0.1, f"JAX ball3d fit off fivecal's by {z_j} sigma"
+        out.update(jax_result(t_f, first, t_j, runs_j, jax_jacobian_evaluations=int(it_j),
+                              jax_max_difference_in_sigma=float(z_j)))
     return out
 
 
-def case_monte_carlo(trials, threads, repeat, baseline_trials=0):
+def case_monte_carlo(trials, threads, repeat, baseline_trials=0, jax_trials=0):
     """Monte Carlo re-fits of the TANGO S3 problem (issue 5). The baseline
-    figure is the per-trial cost of the SciPy fit times the trial count."""
+    figure is the per-trial cost of the SciPy fit times the trial count.
+    ``jax_trials``: run that many JAX trials (one vmapped Levenberg-Marquardt
+    solve per trial, from the reference fit, on the weighted rows plus N(0, 1)
+    noise on the observation rows) and scale the time to ``trials`` when fewer; their spread is checked
+    against fivecal's Monte Carlo of the same size."""
     from fivecal import uncertainty
 
     ds = tango.hu40t_dataset(seed=5)
@@ -175,7 +242,63 @@ def case_monte_carlo(trials, threads, repeat, baseline_trials=0):
         out.update({"baseline_s": t_b * trials, "ratio": t_b * trials / t_f,
                     "baseline_s_per_trial": t_b, "runs_baseline_s": runs_b,
                     "note": "baseline extrapolated from single SciPy re-fits, one thread"})
+    if not jax_trials:
+        out["jax_skipped"] = "no JAX run for this case (see the one-thread cases)"
+    elif jbase is None:
+        out["jax_skipped"] = JAX_MISSING
+    else:
+        out.update(jax_monte_carlo(ds, trials, jax_trials, t_f))
     return out
+
+
+_JAX_MC = {}     # jax_trials -> the measured run (every Monte Carlo case re-fits the same dataset)
+
+
+def jax_monte_carlo(ds, trials, jax_trials, t_f):
+    """The JAX Monte Carlo: ``jax_trials`` vmapped LM re-fits (timed once
+    warm: one run already takes seconds), scaled to ``trials``. Agreement:
+    the reference fit within sigma of fivecal's, and the trials' mean and
+    standard deviation those of fivecal's Monte Carlo with as many trials,
+    within five times their sampling error."""
+    if jax_trials not in _JAX_MC:
+        _JAX_MC[jax_trials] = _jax_monte_carlo_run(ds, jax_trials)
+    run = _JAX_MC[jax_trials]
+    t_j, scale = run["jax_s_per_trial"] * jax_trials, trials / jax_trials
+    return {**run, "jax_s": t_j * scale, "ratio_jax": t_j * scale / t_f,
+            "jax_note": ("JAX: vmap of the LM re-fit over trials (lax.map, 64 at a time), one warm run of "
+                         f"{jax_trials} trials" + (f" scaled to {trials}" if scale != 1 else "") +
+                         "; its first call (compile + the same run) is jax_compile_s")}
+
+
+def _jax_monte_carlo_run(ds, jax_trials):
+    import jax
+    from fivecal import uncertainty
+
+    r = fivecal.identify(ds, "S3")
+    names = r.estimated
+    prob = jbase.JaxProblem(ds, names)
+    x_ref, _, _, ok = jbase.block(prob.fit_function()())
+    assert bool(ok), "JAX reference fit did not converge"
+    z = max(abs(float(x_ref[i]) - r.values[n]) / r.std[n] for i, n in enumerate(names))
+    assert z < 0.1, f"JAX reference fit off fivecal's by {z} sigma"
+    mc = prob.monte_carlo_function()
+    keys = iter(range(1, 1000))
+    first, t_j, runs_j, X = timed_jax(lambda: mc(x_ref, jax.random.PRNGKey(next(keys)), jax_trials), 1)
+    X = np.asarray(X)
+    ref = uncertainty.monte_carlo(ds, "S3", trials=jax_trials, threads=0, seed=1, progress=False,
+                                  keep_samples=False)
+    sf = np.array([ref.std[n] for n in names])
+    mean_z = float(np.max(np.abs(X.mean(0) - np.array([ref.mean[n] for n in names])) / sf))
+    std_ratio = X.std(0, ddof=1) / sf
+    tol_mean = 5 * np.sqrt(2.0 / jax_trials)
+    tol_std = 5 * np.sqrt(1.0 / jax_trials)     # relative sampling error of a std: 1/sqrt(2n), two of them
+    assert mean_z < tol_mean, f"JAX Monte Carlo mean off fivecal's by {mean_z} sigma"
+    assert np.all(np.abs(std_ratio - 1) < tol_std), \
+        f"JAX Monte Carlo std ratios {std_ratio.min()}..{std_ratio.max()}"
+    return {"jax_compile_s": first, "runs_jax_s": runs_j, "jax_trials_run": jax_trials,
+            "jax_s_per_trial": t_j / jax_trials, "jax_max_difference_in_sigma": z,
+            "jax_mean_difference_in_sigma": mean_z,
+            "jax_std_ratio_range": [float(std_ratio.min()), float(std_ratio.max())]}
 
 
 def design_pool(n, seed=7):
@@ -219,6 +342,11 @@ def design_pool(n, seed=7):
     return m, art, plan, [label[g] for g in groups]
 
 
+JAX_DESIGN = ("no JAX baseline: the greedy + exchange search is a data-dependent loop of discrete choices "
+              "whose numpy version already scores each step in one batched eigvalsh; a JAX version would "
+              "differ mainly in the Jacobian (jacfwd for central differences) and was not written")
+
+
 def case_design_search(n, repeat, baseline_repeat, k=14):
     """Test design (issue 7): pick k of the candidate indexations of a pool of
     n candidate touches, S3 set, D-optimality (Ds, setup eliminated), greedy
@@ -246,7 +374,7 @@ def case_design_search(n, repeat, baseline_repeat, k=14):
     assert abs(fd_diff) < 1e-6, f"baseline criterion off fivecal's by {fd_diff}"
     assert abs(d_diff) < 0.05, f"designed D-criteria differ by {d_diff}"
     G = len(set(groups))
-    return {"case": f"design_search_{n}",
+    return {"jax_skipped": JAX_DESIGN, "case": f"design_search_{n}",
             "size": {"candidate_touches": n, "candidate_indexations": G, "k": k,
                      "unknowns": ref.n_parameters},
             "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
@@ -269,6 +397,11 @@ def case_design_search(n, repeat, baseline_repeat, k=14):
                      "the baseline's own criterion matches fivecal's assessment of it within 1e-6")}
 
 
+# JAX Monte Carlo trials actually run (then scaled to the case's count): every
+# trial costs several forward-mode Jacobians of the 389-row problem.
+JAX_MC_TRIALS = 256
+
+
 def optional_cases(quick, repeat):
     """Monte Carlo when fivecal.uncertainty is present; the design search."""
     out = []
@@ -278,11 +411,11 @@ def optional_cases(quick, repeat):
         out.append({"case": "monte_carlo", "skipped": "fivecal.uncertainty not available"})
     else:
         if quick:
-            out.append(case_monte_carlo(100, 2, repeat))
+            out.append(case_monte_carlo(100, 2, repeat, jax_trials=64))
         else:
-            out.append(case_monte_carlo(1000, 1, repeat, baseline_trials=3))
+            out.append(case_monte_carlo(1000, 1, repeat, baseline_trials=3, jax_trials=JAX_MC_TRIALS))
             out.append(case_monte_carlo(1000, 2, repeat))
-            out.append(case_monte_carlo(10000, 1, repeat))
+            out.append(case_monte_carlo(10000, 1, repeat, jax_trials=JAX_MC_TRIALS))
             out.append(case_monte_carlo(10000, 2, repeat))
     out.append(case_design_search(500 if quick else 10_000, repeat, repeat))
     return out
@@ -314,42 +447,75 @@ def core_choices(repeat):
 
 # ---- output ------------------------------------------------------------------
 
+def _ms(s, digits=1):
+    return f"{s * 1e3:.{digits}f} ms" if s < 1 else f"{s:.2f} s"
+
+
+def _ratio(x, times="x"):
+    return f"{x:.0f}{times}" if x >= 10 else f"{x:.2g}{times}"
+
+
+def jax_cells(r, times="x", dash="-"):
+    """(JAX warm, JAX first call, ratio JAX / fivecal) as printed, or the
+    reason there is no JAX figure in the first cell."""
+    if "jax_s" in r:
+        return _ms(r["jax_s"]), _ms(r["jax_compile_s"]), _ratio(r["ratio_jax"], times)
+    why = r.get("jax_skipped", "")
+    if why and not why.startswith("no "):      # "no JAX ...": the case has no JAX version
+        return f"not measured: {why}", "", ""
+    return dash, dash, dash
+
+
 def table(results):
-    lines = [f"{'case':<26}{'size':<34}{'fivecal':>12}{'baseline':>12}{'ratio':>9}"]
+    lines = [f"{'case':<26}{'size':<34}{'fivecal':>12}{'baseline':>12}{'ratio':>9}"
+             f"{'jax':>12}{'jax 1st':>12}{'ratio':>9}"]
     for r in results:
         if "skipped" in r:
             lines.append(f"{r['case']:<26}skipped: {r['skipped']}")
             continue
         size = ", ".join(f"{k} {v}" for k, v in r["size"].items())
         f = f"{r['fivecal_s'] * 1e3:.2f} ms"
-        b = f"{r['baseline_s'] * 1e3:.1f} ms" if "baseline_s" in r else "-"
-        ratio = f"{r['ratio']:.0f}x" if "ratio" in r else "-"
-        lines.append(f"{r['case']:<26}{size:<34}{f:>12}{b:>12}{ratio:>9}")
+        b = _ms(r["baseline_s"]) if "baseline_s" in r else "-"
+        ratio = _ratio(r["ratio"]) if "ratio" in r else "-"
+        j, jc, jr = jax_cells(r)
+        jax_part = f"  {j}" if not jc else f"{j:>12}{jc:>12}{jr:>9}"
+        lines.append(f"{r['case']:<26}{size:<34}{f:>12}{b:>12}{ratio:>9}{jax_part}")
     return "\n".join(lines)
 
 
 def readme_section(doc):
     res = {r["case"]: r for r in doc["results"]}
+    jax_measured = any("jax_s" in r for r in doc["results"])
+    jax_words = ("and the JAX baseline (`bench/baseline_jax.py`: the same model jit-compiled in double "
+                 "precision, exact `jax.jacfwd` Jacobians, Levenberg–Marquardt in `lax.while_loop`, `vmap` "
+                 "over Monte Carlo trials) " if jax_measured else "")
     lines = ["<!-- performance:begin (generated by python3 bench/run.py --readme) -->",
              f"Measured on {doc['machine']['cpu']} ({doc['machine']['cores']} cores), "
              f"{doc['machine']['date']}; medians of at least 5 runs, the numpy/SciPy baseline "
              "(`bench/baseline_numpy.py`: vectorised numpy transforms, `scipy.optimize.least_squares` "
-             "with a finite-difference Jacobian) run in the same process on the same data.", "",
-             "| case | size | fivecal | numpy/SciPy | ratio |", "|---|---|---|---|---|"]
+             "with a finite-difference Jacobian) " + jax_words + "run in the same process on the same data"
+             + ("; JAX's first call (trace, XLA compile and one run) is shown apart from its warm median "
+                "and left out of its ratio, and XLA picks its own threads (it may use every core)"
+                if jax_measured else "") + ".", "",
+             "| case | size | fivecal | numpy/SciPy | ratio | JAX (warm) | JAX first call | ratio JAX |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in doc["results"]:
         if "skipped" in r:
-            lines.append(f"| {r['case']} | – | not measured: {r['skipped']} | | |")
+            lines.append(f"| {r['case']} | – | not measured: {r['skipped']} | | | | | |")
             continue
         size = ", ".join(f"{k} {v}" for k, v in r["size"].items())
-        b = f"{r['baseline_s'] * 1e3:.1f} ms" if "baseline_s" in r else "–"
-        ratio = f"{r['ratio']:.0f}×" if "ratio" in r else "–"
-        lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} |")
+        b = _ms(r["baseline_s"]) if "baseline_s" in r else "–"
+        ratio = _ratio(r["ratio"], "×") if "ratio" in r else "–"
+        j, jc, jr = jax_cells(r, "×", "–")
+        lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} | {j} | {jc} | {jr} |")
     fk = res.get("forward_kinematics")
     if fk:
         api = (f"; {fk['api_poses_per_s'] / 1e6:.2f} M poses/s through `Machine.tool_point` from a dict "
                "of axis arrays" if "api_poses_per_s" in fk else "")
         lines += ["", f"Forward kinematics: {fk['fivecal_poses_per_s'] / 1e6:.2f} M poses/s on one core "
-                  f"in the C++ batch call{api} (baseline {fk['baseline_poses_per_s'] / 1e6:.2f} M poses/s)."]
+                  f"in the C++ batch call{api} (baseline {fk['baseline_poses_per_s'] / 1e6:.2f} M poses/s"
+                  + (f", JAX {fk['jax_poses_per_s'] / 1e6:.2f} M poses/s" if "jax_poses_per_s" in fk else "")
+                  + ")."]
     for r in doc["results"]:
         if r["case"].startswith("design_search_") and "fivecal_s" in r:
             sz = r["size"]
@@ -362,6 +528,14 @@ def readme_section(doc):
     if extrapolated:
         lines += ["", "Extrapolated baseline (one SciPy re-fit on one thread times the trial count; a "
                   "full run would take hours): " + ", ".join(extrapolated) + "."]
+    scaled = [r for r in doc["results"] if "jax_trials_run" in r and r["jax_trials_run"] < r["size"]["trials"]]
+    if scaled:
+        lines += ["", "JAX Monte Carlo scaled from one run of " + ", ".join(
+            f"{r['jax_trials_run']} vmapped trials ({r['case']})" for r in scaled) + " to the case's trial count."]
+    no_jax = sorted({r["jax_skipped"] for r in doc["results"] if r.get("jax_skipped", "").startswith("no JAX")})
+    for reason in no_jax:
+        cases = [r["case"] for r in doc["results"] if r.get("jax_skipped") == reason]
+        lines += ["", f"{', '.join(cases)}: {reason}."]
     scaling = [r for r in doc["results"] if r["case"].startswith("ball3d_fit_")]
     if scaling:
         lines += ["", "Fit cost per 3D ball sample: " + ", ".join(

@@ -80,6 +80,11 @@ def test_readme_section_is_generated_from_the_json():
     assert text.startswith("<!-- performance:begin") and text.endswith("<!-- performance:end -->")
     assert "| forward_kinematics | poses 10 | 1.00 ms | 20.0 ms | 20× |" in text
     assert "not measured: not here" in text
+    # The JAX columns: warm time, first call (compile) apart, ratio against fivecal.
+    doc["results"][0].update({"jax_s": 4e-3, "jax_compile_s": 2.5, "ratio_jax": 4.0, "jax_poses_per_s": 2.5e3})
+    text = bench.readme_section(doc)
+    assert "| forward_kinematics | poses 10 | 1.00 ms | 20.0 ms | 20× | 4.0 ms | 2.50 s | 4× |" in text
+    assert "JAX 0.00 M poses/s" in text
     json.dumps(doc)  # the harness writes this document as JSON
 
 
@@ -93,3 +98,86 @@ def test_core_choices_measure_the_used_paths_faster():
         assert c["jacobian_ms"]["analytic"] * 10 < c["jacobian_ms"]["autodiff"]
         assert c["solve_iterations"]["dense_normal_cholesky"] == c["solve_iterations"]["dense_qr"]
         assert c["analysis_ms"]["normal_eigen"] > 0 and c["analysis_ms"]["qr_svd"] > 0
+
+
+# ---- the JAX baseline (bench extra; skipped without jax) ---------------------
+
+def test_jax_forward_kinematics_is_fivecal_s():
+    pytest.importorskip("jax")
+    import baseline_jax as jbase
+
+    m = fivecal.Machine.load(os.path.join(ROOT, "examples", "machines", "hu40t.json"))
+    rng = np.random.default_rng(5)
+    names = m.parameter_names()
+    # Every kind of parameter, cubic motions and backlash included (as the numpy test).
+    errors = {n: float(rng.normal(0, 2e-5 if n[1] in "ABC" else 5e-3))
+              for n in rng.choice(names, 40, replace=False) if not n.endswith(("2", "3"))}
+    errors.update({n: float(rng.normal(0, 1e-9)) for n in names if n.endswith("3")})
+    errors.update({"tip.x": 0.02, "tip.z": -0.01})
+    axes = _poses(m, 3000, rng)
+    dirs = {a: rng.choice([-1, 1], 3000) for a in m.axis_names if a != "S"}
+    ours = m.tool_point(axes, errors, directions=dirs)
+    q = _radians(m, m.axes_matrix(axes))
+    d = m.directions_matrix(dirs, 3000).astype(float)
+    model = jbase.JaxMachine(m)
+    theirs = np.asarray(model.tool_points(q, errors, d))
+    assert np.abs(ours - theirs).max() < 1e-9
+    fk = jbase.forward_kinematics(m, list(errors))     # the jitted call the bench times (no directions)
+    jitted = np.asarray(fk(q, np.array(list(errors.values()))))
+    assert np.abs(m.tool_point(axes, errors) - jitted).max() < 1e-9
+
+
+def test_jax_fits_are_fivecal_s():
+    """The JAX Levenberg-Marquardt finds fivecal's optimum (within a small
+    fraction of sigma) on the bench's ball3d case, small, and on TANGO S3."""
+    pytest.importorskip("jax")
+    r = bench.case_ball3d(500, 1, baseline=False)
+    assert r["jax_max_difference_in_sigma"] < 0.01
+    assert r["jax_compile_s"] > 0 and r["jax_s"] > 0 and r["ratio_jax"] == r["jax_s"] / r["fivecal_s"]
+    import baseline_jax as jbase
+
+    ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=2)
+    res = fivecal.identify(ds, "S3")
+    x, evaluations, cost, ok = jbase.JaxProblem(ds, res.estimated).fit_function()()
+    assert bool(ok) and int(evaluations) < 20
+    z = max(abs(float(x[i]) - res.values[n]) / res.std[n] for i, n in enumerate(res.estimated))
+    assert z < 0.01
+    assert abs(2 * float(cost) - res.chi2) < 1e-6 * res.chi2
+
+
+def test_bench_runs_and_says_so_without_jax(monkeypatch):
+    monkeypatch.setattr(bench, "jbase", None)
+    monkeypatch.setattr(bench, "JAX_MISSING", "jax not installed")
+    r = bench.case_ball3d(200, 1, baseline=False)
+    assert r["jax_skipped"] == "jax not installed" and "jax_s" not in r
+    doc = {"machine": {"cpu": "test cpu", "cores": 2, "date": "today"}, "results": [r]}
+    assert "| not measured: jax not installed |" in bench.readme_section(doc)
+    assert "not measured: jax not installed" in bench.table([r])
+
+
+@pytest.mark.parametrize("kind", ["ball3d", "dbb"])
+def test_jax_ball_rows_are_fivecal_s(kind):
+    """JaxProblem's ball rows (a prefix per mounting, gathered setup offsets,
+    one row per DBB reading or three per 3D sample) are fivecal's residuals."""
+    pytest.importorskip("jax")
+    import baseline_jax as jbase
+
+    m = fivecal.Machine.load(os.path.join(ROOT, "examples", "machines", "c600u.json"))
+    rng = np.random.default_rng(1)
+    n = 40
+    rot = {"X": np.zeros(n), "Y": np.zeros(n), "Z": np.zeros(n), "A": rng.uniform(-90, 90, n),
+           "C": rng.uniform(0, 360, n)}
+    tool, table = [0.0, 0.0, 150.0], [50.0, 0.0, 80.0]
+    _, tool_axes = m.tool_pose(rot, tip=tool)
+    axes = m.inverse(np.tile(table, (n, 1)), tool_axes=tool_axes, start={k: v[0] for k, v in rot.items()})
+    if kind == "ball3d":
+        ds = fivecal.ball_dataset(m, kind, axes, tool, table, measured=rng.normal(0, 5e-3, (n, 3)), setup="R1")
+    else:
+        ds = fivecal.ball_dataset(m, kind, axes, tool, table, length=100.0, readings=rng.normal(0, 5e-3, n),
+                                  setup="R1")
+    values = {"EB0A": 3e-5, "EY0C": -0.01, f"{kind}.R1.tool.x": 0.003, f"{kind}.R1.table.z": -0.002}
+    if kind == "dbb":
+        values["dbb.R1.length"] = 0.004
+    ours, _ = fivecal._core.predict_residuals(ds._core, values)
+    theirs = np.asarray(jbase.JaxProblem(ds, list(values)).residuals(np.array(list(values.values()))))
+    assert ours.shape == theirs.shape and np.abs(ours - theirs).max() < 1e-9
