@@ -56,12 +56,15 @@ def _balls():
     for i in range(40):
         axes = {"X": float(rng.uniform(-50, 50)), "Y": float(rng.uniform(-50, 50)), "Z": float(rng.uniform(-50, 0)),
                 "B": float(rng.uniform(0, 90)), "C": float(rng.uniform(-180, 180)), "S": 0.0}
+        # the nominal tool ball (= the tool tip) at these axes, workpiece frame
+        p = m.tool_point({a: [v] for a, v in axes.items()})[0]
         if i % 3 == 0:
-            plan.append({"type": "dbb", "setup": "A1", "axes": axes, "length": 100.0, "tool_ball": [0, 0, 100],
+            plan.append({"type": "dbb", "setup": "A1", "axes": axes, "tool_ball": [0, 0, 100],
+                         "length": float(np.linalg.norm(p - np.array([100.0, 0, 0]))),
                          "table_ball": [100, 0, 0], "direction": {"C": 1 if i % 2 else -1}})
         else:
             plan.append({"type": "ball3d", "setup": "R1" if i % 2 else "R2", "axes": axes, "tool_ball": [0, 0, 100],
-                         "table_ball": [50, 20, 0], "id": f"s{i}"})
+                         "table_ball": [float(x) for x in p], "id": f"s{i}"})
     d = fivecal.simulate(m, plan, errors={"EX0C": 0.01, "EB0C": 2e-5}, sigma={"dbb": 0.001, "ball3d": 0.001},
                          seed=2).to_dict()
     for i, o in enumerate(d["observations"]):
@@ -293,12 +296,12 @@ def test_nan_and_null_name_the_row_and_column(tmp_path):
 def test_unknown_kind_and_unknown_column(tmp_path):
     t = _ball3d_table()
     _refused(_write(_set(t, "type", pa.array(["ball4d"] * t.num_rows)), tmp_path / "a.parquet"),
-             "unknown observation type \"ball4d\"", "ball3d")
+             "row 0, column type: unknown observation type 'ball4d'", "did you mean 'ball3d'")
     bad = t.append_column("mesured.w", pa.array([0.0] * t.num_rows)).replace_schema_metadata(t.schema.metadata)
-    _refused(_write(bad, tmp_path / "b.parquet"), "unknown column \"mesured.w\"")
+    _refused(_write(bad, tmp_path / "b.parquet"), "unknown column 'mesured.w'")
     # an axis the machine does not have
     bad = t.append_column("A", pa.array([0.0] * t.num_rows)).replace_schema_metadata(t.schema.metadata)
-    _refused(_write(bad, tmp_path / "c.parquet"), "unknown column \"A\"", "machine axes")
+    _refused(_write(bad, tmp_path / "c.parquet"), "unknown column 'A'", "machine axes")
 
 
 def test_metadata_missing_or_wrong(tmp_path):
@@ -307,14 +310,14 @@ def test_metadata_missing_or_wrong(tmp_path):
     no_machine = {k: v for k, v in meta.items() if k != b"fivecal.machine"}
     _refused(_write(t, tmp_path / "a.parquet", no_machine), "metadata fivecal.machine missing")
     _refused(_write(t, tmp_path / "b.parquet", {}), "not a fivecal dataset")
-    bad_units = dict(meta, **{b"fivecal.units": json.dumps({"length": "um", "rotary_axis": "deg",
-                                                            "angle": "rad"}).encode()})
+    bad_units = {**meta, b"fivecal.units": json.dumps({"length": "um", "rotary_axis": "deg",
+                                                       "angle": "rad"}).encode()}
     _refused(_write(t, tmp_path / "c.parquet", bad_units), "fivecal.units", "um")
-    broken = dict(meta, **{b"fivecal.machine": b"{not json"})
+    broken = {**meta, b"fivecal.machine": b"{not json"}
     _refused(_write(t, tmp_path / "d.parquet", broken), "fivecal.machine: not valid JSON")
     m = json.loads(meta[b"fivecal.machine"])
     m["axes"]["B"]["direction"] = [0, 1]
-    _refused(_write(t, tmp_path / "e.parquet", dict(meta, **{b"fivecal.machine": json.dumps(m).encode()})),
+    _refused(_write(t, tmp_path / "e.parquet", {**meta, b"fivecal.machine": json.dumps(m).encode()}),
              "machine.axes.B.direction")
 
 

@@ -159,7 +159,7 @@ def _metadata(pf, path: str) -> dict:
     meta = {k.decode("utf-8", "replace"): v for k, v in raw.items()}
     if not any(k.startswith("fivecal.") for k in meta):
         raise ValueError(f"{path}: a Parquet file without fivecal metadata (fivecal.machine, ...): "
-                         "not a fivecal dataset (write one with fivecal convert or fivecal.io.write_parquet)")
+                         "not a fivecal dataset (write one with fivecal convert or fivecal.io.columnar.write_parquet)")
     if meta.get("fivecal.format", b"dataset") not in (b"dataset",):
         raise ValueError(f"{path}: metadata fivecal.format: {meta['fivecal.format'].decode(errors='replace')!r} "
                          "is not a dataset")
@@ -272,6 +272,15 @@ def _open(path: str):
         row = int(np.flatnonzero(types.is_null().to_numpy(zero_copy_only=False))[0])
         raise ValueError(f"{path}: row {row}, column type: null (every row names its observation kind)")
     kinds = pc.unique(types).to_pylist()
+    known = [k["name"] for k in _core.observation_kinds()]
+    for k in kinds:
+        if k not in known:
+            import difflib
+
+            row = int(np.flatnonzero(pc.equal(types, k).to_numpy(zero_copy_only=False))[0])
+            near = difflib.get_close_matches(k, known, n=1)
+            raise ValueError(f"{path}: row {row}, column type: unknown observation type {k!r} "
+                             f"({', '.join(known)})" + (f" (did you mean {near[0]!r}?)" if near else ""))
     return pf, core_head, kinds
 
 
@@ -296,11 +305,14 @@ def read_parquet(path: Union[str, os.PathLike], check: bool = True):
     as it checks a JSON file. ValueError names the file, and the kind, row and
     column at fault. ``check``: run the plausibility checks (units) as
     :func:`fivecal.load_dataset` does."""
-    pa = _pyarrow()
+    path = os.fspath(path)
+    try:
+        pa = _pyarrow()
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
     from .. import plausibility
     from ..dataset import Dataset
 
-    path = os.fspath(path)
     pf, core_head, kinds = _open(path)
     loader = _core.ColumnLoader(core_head, pf.metadata.num_rows)
     start = 0
@@ -325,11 +337,14 @@ def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000) -> Itera
     artefact and instruments: a trace too long to hold whole (10^7 samples
     are about 6 GB loaded) read piece by piece. Messages name the row of the
     file."""
-    pa = _pyarrow()
+    path = os.fspath(path)
+    try:
+        pa = _pyarrow()
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
     from .. import plausibility
     from ..dataset import Dataset
 
-    path = os.fspath(path)
     if rows < 1:
         raise ValueError(f"rows: expected a positive number of observations per piece, got {rows}")
     pf, core_head, kinds = _open(path)
