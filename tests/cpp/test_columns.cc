@@ -87,7 +87,7 @@ TEST(Columns, NanNamesKindRowAndColumn) {
 TEST(Columns, UnknownAndMissingColumnsAreNamed) {
   Ball3dColumns c;
   c.names[6] = "mesured.x";
-  ExpectInvalid([&] { Load(c.Batch()); }, "unknown column 'mesured.x'");
+  ExpectInvalid([&] { Load(c.Batch()); }, "unknown column 'mesured.x' (did you mean \"measured.x\"?)");
   Ball3dColumns d;
   d.names.erase(d.names.begin() + 1);
   d.values.erase(d.values.begin() + 1);

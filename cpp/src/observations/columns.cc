@@ -93,8 +93,13 @@ std::vector<Column> Roles(const ObservationKind& kind, const Machine& m, const C
       names.push_back("sigma");
       std::string list;
       for (const std::string& x : names) list += (list.empty() ? "" : ", ") + x;
+      // A near miss may be a vector component (mesured.x: measured.x).
+      std::vector<std::string> near = names;
+      for (const char* k : keys)
+        if (has_key(k))
+          for (const char* comp : {".x", ".y", ".z"}) near.push_back(k + std::string(comp));
       throw std::invalid_argument(std::string(kind.name()) + ": unknown column " + Quote(name) +
-                                  DidYouMean(name, names) + " (machine axes " + m.axis_names() +
+                                  DidYouMean(name, near) + " (machine axes " + m.axis_names() +
                                   "; columns of a " + kind.name() + " observation: " + list +
                                   ", a vector as <key>.x|y|z)");
     }
@@ -174,6 +179,8 @@ void ColumnLoader::Add(const ColumnBatch& b) {
                                     " observation's rows differ in unit: give sigma.0 to sigma." +
                                     std::to_string(kind->rows() - 1));
 
+  std::string w = RowName(*kind, 0);
+  const size_t w_prefix = w.size() - 1;
   for (int64_t i = 0; i < b.rows; ++i) {
     const int64_t at = b.positions ? b.positions[i] : next_ + i;
     const int64_t row = first_ + at;  // what messages call it
@@ -243,7 +250,9 @@ void ColumnLoader::Add(const ColumnBatch& b) {
         slot->get_ref<std::string&>().assign(c->text->data + c->text->offsets[i],
                                              static_cast<size_t>(c->text->offsets[i + 1] - c->text->offsets[i]));
     }
-    const std::string w = RowName(*kind, row);
+    // The row's name, in a buffer reused row after row.
+    w.resize(w_prefix);
+    w += std::to_string(row);
     auto read = [&](const json& o) {
       try {
         kind->Read(o, w, ds_, &ob);
