@@ -200,7 +200,7 @@ def main(argv):
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     here = os.path.dirname(os.path.abspath(__file__))
-    if args.sizes is None:
+    if not args.sizes:
         args.sizes = [1_000_000, 10_000_000] if args.parquet else [100_000, 1_000_000]
     if args.out is None:
         args.out = os.path.join(here, "load_dataset_parquet.json" if args.parquet else "load_dataset.json")
