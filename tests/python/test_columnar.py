@@ -352,3 +352,18 @@ def test_float64_columns_reach_the_core_without_a_copy(tmp_path):
     values, valid = columnar._number(pa, arr, "X", "ball3d")
     assert valid is None
     assert values.ctypes.data == arr.buffers()[1].address + arr.offset * 8
+
+
+def test_pieces_of_a_long_file_add_up_to_the_whole_and_name_file_rows(tmp_path):
+    ds = _balls()
+    columnar.write_parquet(ds, tmp_path / "b.parquet")
+    pieces = list(columnar.iter_datasets(tmp_path / "b.parquet", rows=7))
+    assert [len(p) for p in pieces] == [7] * 5 + [5]
+    assert sum((p.observations for p in pieces), []) == ds.observations
+    assert all(p.to_dict()["machine"] == ds.to_dict()["machine"] for p in pieces)
+    t = _ball3d_table(20)
+    v = t.column("measured.x").to_numpy().copy()
+    v[10] = np.nan
+    path = _write(_set(t, "measured.x", pa.array(v)), tmp_path / "nan.parquet")
+    with pytest.raises(ValueError, match="ball3d row 10, column measured.x: NaN"):
+        list(columnar.iter_datasets(path, rows=7))
