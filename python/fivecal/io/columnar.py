@@ -289,6 +289,8 @@ def _load_batch(loader, pa, batch, kinds, offset: int, path: str) -> None:
     its first row."""
     import pyarrow.compute as pc
 
+    if batch.num_rows == 0:
+        return
     if len(kinds) == 1:
         _add(loader, pa, batch, kinds[0], None, False, path)
         return
