@@ -367,3 +367,28 @@ def test_pieces_of_a_long_file_add_up_to_the_whole_and_name_file_rows(tmp_path):
     path = _write(_set(t, "measured.x", pa.array(v)), tmp_path / "nan.parquet")
     with pytest.raises(ValueError, match="ball3d row 10, column measured.x: NaN"):
         list(columnar.iter_datasets(path, rows=7))
+
+
+def test_a_piece_is_freed_before_the_next_one_is_built(tmp_path, monkeypatch):
+    # Two pieces in memory at once would double the peak of a long trace.
+    import weakref
+
+    from fivecal import plausibility
+
+    columnar.write_parquet(_balls(), tmp_path / "b.parquet")
+    previous, alive = [], []
+    check, load = plausibility.check_loaded, columnar._load_batch
+
+    def checked(ds, **kw):
+        previous.append(weakref.ref(ds))
+        return check(ds, **kw)
+
+    def loading(*a, **kw):
+        alive.append(any(r() is not None for r in previous))
+        return load(*a, **kw)
+
+    monkeypatch.setattr(plausibility, "check_loaded", checked)
+    monkeypatch.setattr(columnar, "_load_batch", loading)
+    for piece in columnar.iter_datasets(tmp_path / "b.parquet", rows=10):
+        del piece
+    assert alive == [False] * 4

@@ -365,10 +365,15 @@ def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000) -> Itera
             core = loader.finish(whole=False)
         except ValueError as e:
             raise ValueError(f"{path}: {e}") from None
-        ds = Dataset(core)
-        plausibility.check_loaded(ds, where=path)
         start += batch.num_rows
+        # Nothing of this piece may stay referenced here while the next one is
+        # read: two pieces in memory at once would double the peak.
+        del loader, batch
+        ds = Dataset(core)
+        del core
+        plausibility.check_loaded(ds, where=path)
         yield ds
+        del ds
 
 
 # --------------------------------------------------------------------------
