@@ -392,3 +392,15 @@ def test_a_piece_is_freed_before_the_next_one_is_built(tmp_path, monkeypatch):
     for piece in columnar.iter_datasets(tmp_path / "b.parquet", rows=10):
         del piece
     assert alive == [False] * 4
+
+
+def test_text_and_number_columns_of_other_arrow_types_are_read(tmp_path):
+    # What other writers produce: dictionary-encoded text, large strings,
+    # float32 / integer numbers.
+    ds = _balls()
+    t = columnar.dataset_columns(ds)
+    t = _set(t, "type", t.column("type").dictionary_encode())
+    t = _set(t, "setup", t.column("setup").cast(pa.large_string()))
+    t = _set(t, "direction.C", t.column("direction.C").cast(pa.int64()))
+    t = _set(t, "S", t.column("S").cast(pa.float32()))
+    assert columnar.read_parquet(_write(t, tmp_path / "d.parquet")).to_dict() == ds.to_dict()

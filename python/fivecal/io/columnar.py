@@ -200,12 +200,18 @@ def _number(pa, arr, name: str, kind: str):
     return values, valid
 
 
+def _is_text(pa, t) -> bool:
+    # string_view exists from pyarrow 16 on; fivecal[arrow] asks for >= 14
+    view = getattr(pa.types, "is_string_view", lambda _: False)
+    return pa.types.is_string(t) or pa.types.is_large_string(t) or view(t)
+
+
 def _text(pa, arr):
     t = arr.type
     if pa.types.is_dictionary(t):
         arr = arr.dictionary_decode()
         t = arr.type
-    if not (pa.types.is_string(t) or pa.types.is_large_string(t) or pa.types.is_string_view(t)):
+    if not _is_text(pa, t):
         return None
     if not pa.types.is_large_string(t):
         arr = arr.cast(pa.large_string())
@@ -265,8 +271,7 @@ def _open(path: str):
         types = pf.read(columns=["type"]).column("type")
     except pa.ArrowException as e:
         raise ValueError(f"{path}: not a readable Parquet file ({e})") from None
-    if not (pa.types.is_string(types.type) or pa.types.is_large_string(types.type)
-            or pa.types.is_dictionary(types.type) or pa.types.is_string_view(types.type)):
+    if not (_is_text(pa, types.type) or pa.types.is_dictionary(types.type)):
         raise ValueError(f"{path}: column type: expected text (the observation kind), got {types.type}")
     if types.null_count:
         row = int(np.flatnonzero(types.is_null().to_numpy(zero_copy_only=False))[0])
