@@ -111,11 +111,11 @@ def write_parquet_trace(path: str, n: int, piece: int = 1_000_000) -> int:
                     "B": 45 * np.sin(0.01 * t), "C": np.degrees(t) % 360 - 180, "S": np.zeros(m),
                     "setup": pa.array(np.full(m, "R1", dtype=object), pa.string())}
             for c, x in zip("xyz", rng.normal(0, 0.002, (3, m))):
-                cols[f"measured.{c}"] = x
+                cols[f"measured_{c}"] = x
             for c, x in zip("xyz", (0.0, 0.0, 100.0)):
-                cols[f"tool_ball.{c}"] = np.full(m, x)
+                cols[f"tool_ball_{c}"] = np.full(m, x)
             for c, x in zip("xyz", (100.0, 0.0, 0.0)):
-                cols[f"table_ball.{c}"] = np.full(m, x)
+                cols[f"table_ball_{c}"] = np.full(m, x)
             w.write_table(pa.table({f.name: cols[f.name] for f in schema}, schema=schema))
     return os.path.getsize(path)
 

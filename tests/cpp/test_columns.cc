@@ -34,9 +34,9 @@ struct Ball3dColumns {
       {1, 2, 3}, {4, 5, 6}, {-1, -2, -3}, {0, 30, 60}, {0, 45, 90}, {0, 0, 0},  // X Y Z B C S
       {0.001, 0.002, 0.003}, {0, 0, 0}, {-0.001, 0, 0.001},                      // measured
       {0, 0, 0}, {0, 0, 0}, {100, 100, 100}, {50, 50, 50}, {0, 0, 0}, {0, 0, 0}};
-  std::vector<std::string> names = {"X", "Y", "Z", "B", "C", "S", "measured.x", "measured.y", "measured.z",
-                                    "tool_ball.x", "tool_ball.y", "tool_ball.z", "table_ball.x", "table_ball.y",
-                                    "table_ball.z"};
+  std::vector<std::string> names = {"X", "Y", "Z", "B", "C", "S", "measured_x", "measured_y", "measured_z",
+                                    "tool_ball_x", "tool_ball_y", "tool_ball_z", "table_ball_x", "table_ball_y",
+                                    "table_ball_z"};
   std::vector<int64_t> offsets = {0, 2, 4, 6};
   std::string setup = "R1R1R1";
   ColumnBatch Batch() const {
@@ -81,13 +81,13 @@ TEST(Columns, Ball3dRowsReadAsTheirJsonObservations) {
 TEST(Columns, NanNamesKindRowAndColumn) {
   Ball3dColumns c;
   c.values[7][2] = std::numeric_limits<double>::quiet_NaN();
-  ExpectInvalid([&] { Load(c.Batch()); }, "ball3d row 2, column measured.y: NaN");
+  ExpectInvalid([&] { Load(c.Batch()); }, "ball3d row 2, column measured_y: NaN");
 }
 
 TEST(Columns, UnknownAndMissingColumnsAreNamed) {
   Ball3dColumns c;
-  c.names[6] = "mesured.x";
-  ExpectInvalid([&] { Load(c.Batch()); }, "unknown column 'mesured.x' (did you mean \"measured.x\"?)");
+  c.names[6] = "mesured_x";
+  ExpectInvalid([&] { Load(c.Batch()); }, "unknown column 'mesured_x' (did you mean \"measured_x\"?)");
   Ball3dColumns d;
   d.names.erase(d.names.begin() + 1);
   d.values.erase(d.values.begin() + 1);

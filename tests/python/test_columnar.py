@@ -177,9 +177,9 @@ def test_file_layout_one_row_per_observation_with_the_head_in_the_metadata(tmp_p
     assert t.num_rows == len(ds)
     assert t.column("type").to_pylist() == ds.observation_types
     assert t.schema.names[:2] == ["type", "id"]
-    assert {"X", "Y", "Z", "B", "C", "S", "direction.C", "measured.x", "tool_ball.z", "reading", "length",
-            "setup", "sigma", "sigma.0", "sigma.2"} <= set(t.schema.names)
-    assert t.schema.field("X").type == pa.float64() and t.schema.field("direction.C").type == pa.int8()
+    assert {"X", "Y", "Z", "B", "C", "S", "dir_C", "measured_x", "tool_ball_z", "reading", "length",
+            "setup", "sigma", "sigma_1", "sigma_3"} <= set(t.schema.names)
+    assert t.schema.field("X").type == pa.float64() and t.schema.field("dir_C").type == pa.int8()
     meta = {k.decode(): v.decode() for k, v in t.schema.metadata.items() if k.startswith(b"fivecal.")}
     assert json.loads(meta["fivecal.machine"]) == ds.to_dict()["machine"]
     assert json.loads(meta["fivecal.units"]) == {"length": "mm", "rotary_axis": "deg", "angle": "rad"}
@@ -255,10 +255,10 @@ def _set(t, name, arr):
 
 def test_missing_column(tmp_path):
     t = _ball3d_table()
-    _refused(_write(t.drop_columns(["measured.y"]), tmp_path / "a.parquet", t.schema.metadata),
-             "missing column measured.y")
+    _refused(_write(t.drop_columns(["measured_y"]), tmp_path / "a.parquet", t.schema.metadata),
+             "missing column measured_y")
     _refused(_write(t.drop_columns(["Y"]), tmp_path / "b.parquet", t.schema.metadata), "missing column Y")
-    _refused(_write(t.drop_columns(["measured.x", "measured.y", "measured.z"]), tmp_path / "c.parquet",
+    _refused(_write(t.drop_columns(["measured_x", "measured_y", "measured_z"]), tmp_path / "c.parquet",
                     t.schema.metadata), "missing column measured")
     _refused(_write(t.drop_columns(["type"]), tmp_path / "d.parquet", t.schema.metadata), "column type missing")
 
@@ -269,36 +269,36 @@ def test_wrong_dtype(tmp_path):
     _refused(_write(bad, tmp_path / "a.parquet"), "column X", "expected numbers")
     bad = _set(t, "setup", pa.array([1.0] * t.num_rows))
     _refused(_write(bad, tmp_path / "b.parquet"), "column setup", "string")
-    bad = _set(t, "measured.x", pa.array([[1.0]] * t.num_rows))
-    _refused(_write(bad, tmp_path / "c.parquet"), "column measured.x", "neither numbers nor text")
+    bad = _set(t, "measured_x", pa.array([[1.0]] * t.num_rows))
+    _refused(_write(bad, tmp_path / "c.parquet"), "column measured_x", "neither numbers nor text")
 
 
 def test_nan_and_null_name_the_row_and_column(tmp_path):
     t = _ball3d_table()
-    v = t.column("measured.y").to_numpy().copy()
+    v = t.column("measured_y").to_numpy().copy()
     v[3] = np.nan
-    _refused(_write(_set(t, "measured.y", pa.array(v)), tmp_path / "a.parquet"),
-             "ball3d row 3, column measured.y: NaN")
+    _refused(_write(_set(t, "measured_y", pa.array(v)), tmp_path / "a.parquet"),
+             "ball3d row 3, column measured_y: NaN")
     x = t.column("X").to_pylist()
     x[4] = None
     _refused(_write(_set(t, "X", pa.array(x, pa.float64())), tmp_path / "b.parquet"), "ball3d row 4, column X: null")
-    d = t.column("direction.C").to_pylist() if "direction.C" in t.schema.names else None
+    d = t.column("dir_C").to_pylist() if "dir_C" in t.schema.names else None
     assert d is None  # the trace has no backlash directions; add a bad one
-    bad = t.append_column("direction.C", pa.array([0, 0, 2, 0, 0, 0], pa.int8())).replace_schema_metadata(
+    bad = t.append_column("dir_C", pa.array([0, 0, 2, 0, 0, 0], pa.int8())).replace_schema_metadata(
         t.schema.metadata)
-    _refused(_write(bad, tmp_path / "c.parquet"), "ball3d row 2, column direction.C: must be -1, 0 or +1")
-    m = t.column("measured.z").to_pylist()
+    _refused(_write(bad, tmp_path / "c.parquet"), "ball3d row 2, column dir_C: must be -1, 0 or +1")
+    m = t.column("measured_z").to_pylist()
     m[5] = None
-    _refused(_write(_set(t, "measured.z", pa.array(m, pa.float64())), tmp_path / "d.parquet"),
-             "ball3d row 5, column measured.z: null while measured.x is given")
+    _refused(_write(_set(t, "measured_z", pa.array(m, pa.float64())), tmp_path / "d.parquet"),
+             "ball3d row 5, column measured_z: null while measured_x is given")
 
 
 def test_unknown_kind_and_unknown_column(tmp_path):
     t = _ball3d_table()
     _refused(_write(_set(t, "type", pa.array(["ball4d"] * t.num_rows)), tmp_path / "a.parquet"),
              "row 0, column type: unknown observation type 'ball4d'", "did you mean 'ball3d'")
-    bad = t.append_column("mesured.w", pa.array([0.0] * t.num_rows)).replace_schema_metadata(t.schema.metadata)
-    _refused(_write(bad, tmp_path / "b.parquet"), "unknown column 'mesured.w'")
+    bad = t.append_column("mesured_w", pa.array([0.0] * t.num_rows)).replace_schema_metadata(t.schema.metadata)
+    _refused(_write(bad, tmp_path / "b.parquet"), "unknown column 'mesured_w'")
     # an axis the machine does not have
     bad = t.append_column("A", pa.array([0.0] * t.num_rows)).replace_schema_metadata(t.schema.metadata)
     _refused(_write(bad, tmp_path / "c.parquet"), "unknown column 'A'", "machine axes")
@@ -362,10 +362,10 @@ def test_pieces_of_a_long_file_add_up_to_the_whole_and_name_file_rows(tmp_path):
     assert sum((p.observations for p in pieces), []) == ds.observations
     assert all(p.to_dict()["machine"] == ds.to_dict()["machine"] for p in pieces)
     t = _ball3d_table(20)
-    v = t.column("measured.x").to_numpy().copy()
+    v = t.column("measured_x").to_numpy().copy()
     v[10] = np.nan
-    path = _write(_set(t, "measured.x", pa.array(v)), tmp_path / "nan.parquet")
-    with pytest.raises(ValueError, match="ball3d row 10, column measured.x: NaN"):
+    path = _write(_set(t, "measured_x", pa.array(v)), tmp_path / "nan.parquet")
+    with pytest.raises(ValueError, match="ball3d row 10, column measured_x: NaN"):
         list(columnar.iter_datasets(path, rows=7))
 
 
@@ -401,6 +401,6 @@ def test_text_and_number_columns_of_other_arrow_types_are_read(tmp_path):
     t = columnar.dataset_columns(ds)
     t = _set(t, "type", t.column("type").dictionary_encode())
     t = _set(t, "setup", t.column("setup").cast(pa.large_string()))
-    t = _set(t, "direction.C", t.column("direction.C").cast(pa.int64()))
+    t = _set(t, "dir_C", t.column("dir_C").cast(pa.int64()))
     t = _set(t, "S", t.column("S").cast(pa.float32()))
     assert columnar.read_parquet(_write(t, tmp_path / "d.parquet")).to_dict() == ds.to_dict()

@@ -61,47 +61,53 @@ std::vector<Column> Roles(const ObservationKind& kind, const Machine& m, const C
     c.name = name;
     c.number = n;
     c.text = s;
-    const size_t dot = name.find('.');
-    const std::string head = name.substr(0, dot), tail = dot == std::string::npos ? "" : name.substr(dot + 1);
-    if (dot == std::string::npos && IsUpper(name) && m.AxisIndex(name[0]) >= 0) {
+    // <head>_<tail>: the last underscore splits a vector component, an axis
+    // letter or a noise row from its key (tool_ball_x, dir_C, sigma_2).
+    const size_t us = name.rfind('_');
+    const std::string head = us == std::string::npos ? name : name.substr(0, us);
+    const std::string tail = us == std::string::npos ? "" : name.substr(us + 1);
+    const bool axis_tail = IsUpper(tail) && m.AxisIndex(tail[0]) >= 0;
+    if (IsUpper(name) && m.AxisIndex(name[0]) >= 0) {
       c.role = Role::kAxis;
       c.index = m.AxisIndex(name[0]);
-    } else if (head == "direction" && IsUpper(tail) && m.AxisIndex(tail[0]) >= 0) {
+    } else if (head == "dir" && axis_tail) {
       c.role = Role::kDirection;
       c.index = m.AxisIndex(tail[0]);
-    } else if (head == "sigma" && (tail.empty() || (tail.size() == 1 && tail[0] >= '0' && tail[0] < '0' + kind.rows()))) {
+    } else if (name == "sigma" ||
+               (head == "sigma" && tail.size() == 1 && tail[0] >= '1' && tail[0] < '1' + kind.rows())) {
       c.role = Role::kSigma;
-      c.index = tail.empty() ? -1 : tail[0] - '0';
-    } else if (dot != std::string::npos && has_key(head) && (tail == "x" || tail == "y" || tail == "z")) {
+      c.index = name == "sigma" ? -1 : tail[0] - '1';
+    } else if (us != std::string::npos && has_key(head) && (tail == "x" || tail == "y" || tail == "z")) {
       c.role = Role::kVector;
       c.key = head;
       c.index = tail[0] - 'x';
-    } else if (dot != std::string::npos && has_key(head) && IsUpper(tail) && m.AxisIndex(tail[0]) >= 0) {
+    } else if (us != std::string::npos && axis_tail && has_key(head + "_axes")) {
+      // Another set of axis commands: reference_C is reference_axes.C.
       c.role = Role::kAxesObject;
-      c.key = head;
+      c.key = head + "_axes";
       c.index = m.AxisIndex(tail[0]);
-    } else if (dot == std::string::npos && has_key(name)) {
+    } else if (has_key(name)) {
       c.role = Role::kScalar;
       c.key = name;
     } else {
       // Every name this kind accepts, for the message.
       std::vector<std::string> names;
       for (int a = 0; a < m.num_axes(); ++a) names.emplace_back(1, m.axis(a).name);
-      for (int a = 0; a < m.num_axes(); ++a) names.push_back("direction." + std::string(1, m.axis(a).name));
+      for (int a = 0; a < m.num_axes(); ++a) names.push_back("dir_" + std::string(1, m.axis(a).name));
       for (const char* k : keys)
         if (has_key(k)) names.push_back(k);
       names.push_back("sigma");
       std::string list;
       for (const std::string& x : names) list += (list.empty() ? "" : ", ") + x;
-      // A near miss may be a vector component (mesured.x: measured.x).
+      // A near miss may be a vector component (mesured_x: measured_x).
       std::vector<std::string> near = names;
       for (const char* k : keys)
         if (has_key(k))
-          for (const char* comp : {".x", ".y", ".z"}) near.push_back(k + std::string(comp));
+          for (const char* comp : {"_x", "_y", "_z"}) near.push_back(k + std::string(comp));
       throw std::invalid_argument(std::string(kind.name()) + ": unknown column " + Quote(name) +
                                   DidYouMean(name, near) + " (machine axes " + m.axis_names() +
                                   "; columns of a " + kind.name() + " observation: " + list +
-                                  ", a vector as <key>.x|y|z)");
+                                  ", a vector as <key>_x|y|z)");
     }
     if (c.role != Role::kScalar && !n)
       throw std::invalid_argument(std::string(kind.name()) + ": column " + name + ": expected numbers, got text");
@@ -121,9 +127,9 @@ std::vector<Column> Roles(const ObservationKind& kind, const Machine& m, const C
   for (const Column& c : out)
     if (c.role == Role::kVector)
       for (const char* comp : {"x", "y", "z"})
-        if (!seen.count(c.key + "." + comp))
-          throw std::invalid_argument(std::string(kind.name()) + ": missing column " + c.key + "." + comp + " (" +
-                                      c.name + " is given: a vector takes " + c.key + ".x, .y and .z)");
+        if (!seen.count(c.key + "_" + comp))
+          throw std::invalid_argument(std::string(kind.name()) + ": missing column " + c.key + "_" + comp + " (" +
+                                      c.name + " is given: a vector takes " + c.key + "_x, _y and _z)");
   return out;
 }
 
@@ -176,8 +182,8 @@ void ColumnLoader::Add(const ColumnBatch& b) {
     for (int r = 1; r < kind->rows(); ++r)
       if (std::string(kind->unit_row(r)) != kind->unit_row(0))
         throw std::invalid_argument(std::string(kind->name()) + ": column sigma: a " + kind->name() +
-                                    " observation's rows differ in unit: give sigma.0 to sigma." +
-                                    std::to_string(kind->rows() - 1));
+                                    " observation's rows differ in unit: give sigma_1 to sigma_" +
+                                    std::to_string(kind->rows()));
 
   std::string w = RowName(*kind, 0);
   const size_t w_prefix = w.size() - 1;
@@ -236,8 +242,8 @@ void ColumnLoader::Add(const ColumnBatch& b) {
       }
       if (given == kind->rows()) ob.sigma = s;
       else if (given != 0)
-        Fail(*kind, row, "sigma", "give sigma, or every one of sigma.0 to sigma." +
-                                      std::to_string(kind->rows() - 1) + ", or none (null: the default noise)");
+        Fail(*kind, row, "sigma", "give sigma, or every one of sigma_1 to sigma_" +
+                                      std::to_string(kind->rows()) + ", or none (null: the default noise)");
     }
     for (const Column& c : cols)
       if (c.role == Role::kScalar && c.key == "id" && !c.Null(i))
@@ -266,7 +272,7 @@ void ColumnLoader::Add(const ColumnBatch& b) {
           const std::string key = msg.substr(start, end - start);
           if (!o.contains(key) && !std::any_of(cols.begin(), cols.end(), [&](const Column& c) { return c.key == key; }))
             throw std::invalid_argument(std::string(kind->name()) + ": missing column " + key +
-                                        " (or " + key + ".x|y|z for a vector): " + msg);
+                                        " (or " + key + "_x|y|z for a vector): " + msg);
         }
         throw std::invalid_argument(msg);
       } catch (const nlohmann::json::exception& e) {

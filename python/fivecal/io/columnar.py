@@ -4,8 +4,8 @@
 One row per observation, in the dataset's order, with a ``type`` column and
 the columns of every kind the file holds (null where a row's kind has no such
 key); axes by axis letter (``X``, ``B``, ...), backlash directions as
-``direction.X``, 3-vectors as ``<key>.x|y|z``, noise as ``sigma`` (or
-``sigma.0`` ... one per residual row). The machine, probe, artefact,
+``dir_X``, 3-vectors as ``<key>_x|y|z``, noise as ``sigma`` (or ``sigma_1``
+... one per residual row): the column names of fivecal's observation tables. The machine, probe, artefact,
 instruments and units are the file's key-value metadata (``fivecal.*``, JSON
 strings). Loading hands Arrow's buffers to the C++ core (no Python per row);
 writing goes through the dataset's dicts.
@@ -60,27 +60,30 @@ def is_parquet(path: Union[str, os.PathLike]) -> bool:
 # --------------------------------------------------------------------------
 
 def _flatten(o: Mapping, axis_letters: str) -> dict:
-    """One observation dict as {column: value}: the naming of columns.h."""
+    """One observation dict as {column: value}: the names of columns.h, which
+    are those of fivecal's observation tables (``fivecal import fivecal``)."""
     out = {}
     for key, v in o.items():
         if key == "axes":
             out.update(v)
         elif key == "direction":
-            out.update({f"direction.{a}": d for a, d in v.items()})
+            out.update({f"dir_{a}": d for a, d in v.items()})
         elif key == "sigma":
             if isinstance(v, list):
-                out.update({f"sigma.{r}": s for r, s in enumerate(v)})
+                out.update({f"sigma_{r + 1}": s for r, s in enumerate(v)})
             else:
                 out["sigma"] = v
         elif isinstance(v, list):
             if len(v) != 3:
                 raise ValueError(f"{key}: a list of {len(v)} values has no column form (3-vectors only)")
-            out.update({f"{key}.{c}": x for c, x in zip("xyz", v)})
+            out.update({f"{key}_{c}": x for c, x in zip("xyz", v)})
         elif isinstance(v, dict):
+            if not key.endswith("_axes"):
+                raise ValueError(f"{key}: only a set of axis commands (<name>_axes) has a column form")
             for a, x in v.items():
                 if a not in axis_letters:
-                    raise ValueError(f"{key}.{a}: only objects of axis letters have a column form")
-                out[f"{key}.{a}"] = x
+                    raise ValueError(f"{key}.{a}: not an axis letter of the machine")
+                out[f"{key[:-len('_axes')]}_{a}"] = x
         elif isinstance(v, bool):
             raise ValueError(f"{key}: true/false has no column form")
         else:
@@ -95,8 +98,8 @@ def dataset_columns(ds) -> "pyarrow.Table":
     from ..dataset import Dataset
 
     d = Dataset.from_dict(ds).to_dict()
-    axis_letters = [a["name"] for a in d["machine"]["axes"]] if isinstance(d["machine"]["axes"], list) \
-        else list(d["machine"]["axes"])
+    # Linear axes, then rotary, then the spindle: the order people write them in.
+    axis_letters = sorted(d["machine"]["axes"], key=lambda a: ("XYZABCS".find(a) % 8, a))
     letters = "".join(axis_letters)
     rows = [_flatten(o, letters) for o in d["observations"]]
     n = len(rows)
@@ -108,14 +111,14 @@ def dataset_columns(ds) -> "pyarrow.Table":
             names.setdefault(k, None)
     first = ["type"] + (["id"] if "id" in names else [])
     axes = [a for a in axis_letters if a in names]
-    dirs = [f"direction.{a}" for a in axis_letters if f"direction.{a}" in names]
-    sig = sorted(k for k in names if k == "sigma" or k.startswith("sigma."))
+    dirs = [f"dir_{a}" for a in axis_letters if f"dir_{a}" in names]
+    sig = sorted(k for k in names if k == "sigma" or k.startswith("sigma_"))
     rest = [k for k in names if k not in set(first) | set(axes) | set(dirs) | set(sig)]
     arrays, fields = [], []
     for name in first + axes + dirs + rest + sig:
         vals = [r.get(name) for r in rows]
         kinds = {type(v) for v in vals if v is not None}
-        if name.startswith("direction."):
+        if name.startswith("dir_"):
             # Absent = 0 (no backlash term), as the loader reads it.
             arr = pa.array([0 if v is None else v for v in vals], pa.int8())
         elif kinds <= {str}:

@@ -4,12 +4,13 @@
 // buffers: float64 values, large-string offsets and bytes, a validity mask);
 // nothing is converted row by row outside C++.
 //
-// A column's name says which observation key it fills, for every kind alike:
+// A column's name says which observation key it fills, for every kind alike
+// (the names of fivecal's observation tables, docs/formats.md):
 //   X, Y, B, ...        the axis readings ("axes")
-//   direction.X, ...    the backlash directions
-//   <key>.x|y|z         a 3-vector key (tool_ball.x)
-//   <key>.X, ...        an object of axis letters (reference_axes.C)
-//   sigma, sigma.<r>    one noise for every row, or one per residual row
+//   dir_X, ...          the backlash directions
+//   <key>_x|y|z         a 3-vector key (tool_ball_x)
+//   <name>_X, ...       the axis letters of key <name>_axes (reference_C)
+//   sigma, sigma_<r>    one noise for every row, or one per residual row (1..)
 //   <key>               a number or string key (reading, setup, target, id)
 // Which keys a kind has, and what they mean, is the kind's own business: its
 // json_keys() decide which columns exist, its Read() reads each row's keys,
@@ -50,7 +51,7 @@ struct ColumnBatch {
 };
 
 // Builds a dataset of `rows` observations from batches. Messages name the
-// kind, the row and the column: "ball3d row 17, column measured.y: NaN".
+// kind, the row and the column: "ball3d row 17, column measured_y: NaN".
 class ColumnLoader {
  public:
   // `head`: machine, probe, artefact and instruments, no observations.
