@@ -171,6 +171,10 @@ def test_json_parquet_json_is_the_same_dataset(dataset, tmp_path):
 
 
 def test_file_layout_one_row_per_observation_with_the_head_in_the_metadata(tmp_path):
+    # The column names are those of the CSV observation tables: a 3-row sigma
+    # as a vector (sigma_x ...), a pose's six numbered (sigma_1 ... sigma_6).
+    pose = columnar.dataset_columns(_poses_kind()).schema.names
+    assert [c for c in pose if c.startswith("sigma")] == [f"sigma_{r}" for r in range(1, 7)]
     ds = _balls()
     columnar.write_parquet(ds, tmp_path / "b.parquet")
     t = pq.read_table(tmp_path / "b.parquet")
@@ -178,7 +182,7 @@ def test_file_layout_one_row_per_observation_with_the_head_in_the_metadata(tmp_p
     assert t.column("type").to_pylist() == ds.observation_types
     assert t.schema.names[:2] == ["type", "id"]
     assert {"X", "Y", "Z", "B", "C", "S", "dir_C", "measured_x", "tool_ball_z", "reading", "length",
-            "setup", "sigma", "sigma_1", "sigma_3"} <= set(t.schema.names)
+            "setup", "sigma", "sigma_x", "sigma_z"} <= set(t.schema.names)
     assert t.schema.field("X").type == pa.float64() and t.schema.field("dir_C").type == pa.int8()
     meta = {k.decode(): v.decode() for k, v in t.schema.metadata.items() if k.startswith(b"fivecal.")}
     assert json.loads(meta["fivecal.machine"]) == ds.to_dict()["machine"]
@@ -404,3 +408,11 @@ def test_text_and_number_columns_of_other_arrow_types_are_read(tmp_path):
     t = _set(t, "dir_C", t.column("dir_C").cast(pa.int64()))
     t = _set(t, "S", t.column("S").cast(pa.float32()))
     assert columnar.read_parquet(_write(t, tmp_path / "d.parquet")).to_dict() == ds.to_dict()
+
+
+def test_three_noise_rows_read_numbered_or_as_a_vector(tmp_path):
+    ds = _balls()
+    t = columnar.dataset_columns(ds)
+    t = t.rename_columns([{"sigma_x": "sigma_1", "sigma_y": "sigma_2", "sigma_z": "sigma_3"}.get(c, c)
+                          for c in t.schema.names]).replace_schema_metadata(t.schema.metadata)
+    assert columnar.read_parquet(_write(t, tmp_path / "n.parquet")).to_dict() == ds.to_dict()

@@ -77,6 +77,10 @@ std::vector<Column> Roles(const ObservationKind& kind, const Machine& m, const C
                (head == "sigma" && tail.size() == 1 && tail[0] >= '1' && tail[0] < '1' + kind.rows())) {
       c.role = Role::kSigma;
       c.index = name == "sigma" ? -1 : tail[0] - '1';
+    } else if (head == "sigma" && kind.rows() == 3 && (tail == "x" || tail == "y" || tail == "z")) {
+      // Three rows named as a vector is, as the CSV tables write them.
+      c.role = Role::kSigma;
+      c.index = tail[0] - 'x';
     } else if (us != std::string::npos && has_key(head) && (tail == "x" || tail == "y" || tail == "z")) {
       c.role = Role::kVector;
       c.key = head;

@@ -59,7 +59,7 @@ def is_parquet(path: Union[str, os.PathLike]) -> bool:
 # Writing
 # --------------------------------------------------------------------------
 
-def _flatten(o: Mapping, axis_letters: str) -> dict:
+def _flatten(o: Mapping, axis_letters: str, numbered=frozenset()) -> dict:
     """One observation dict as {column: value}: the names of columns.h, which
     are those of fivecal's observation tables (``fivecal import fivecal``)."""
     out = {}
@@ -68,15 +68,17 @@ def _flatten(o: Mapping, axis_letters: str) -> dict:
             out.update(v)
         elif key == "direction":
             out.update({f"dir_{a}": d for a, d in v.items()})
-        elif key == "sigma":
-            if isinstance(v, list):
-                out.update({f"sigma_{r + 1}": s for r, s in enumerate(v)})
-            else:
-                out["sigma"] = v
+        elif key == "sigma" and not isinstance(v, list):
+            out["sigma"] = v
         elif isinstance(v, list):
-            if len(v) != 3:
+            # As the CSV tables name them: three values as a vector, a key
+            # with lists of another length in any row numbered from 1.
+            if len(v) != 3 and key != "sigma":
                 raise ValueError(f"{key}: a list of {len(v)} values has no column form (3-vectors only)")
-            out.update({f"{key}_{c}": x for c, x in zip("xyz", v)})
+            if key in numbered:
+                out.update({f"{key}_{r + 1}": x for r, x in enumerate(v)})
+            else:
+                out.update({f"{key}_{c}": x for c, x in zip("xyz", v)})
         elif isinstance(v, dict):
             if not key.endswith("_axes"):
                 raise ValueError(f"{key}: only a set of axis commands (<name>_axes) has a column form")
@@ -101,7 +103,8 @@ def dataset_columns(ds) -> "pyarrow.Table":
     # Linear axes, then rotary, then the spindle: the order people write them in.
     axis_letters = sorted(d["machine"]["axes"], key=lambda a: ("XYZABCS".find(a) % 8, a))
     letters = "".join(axis_letters)
-    rows = [_flatten(o, letters) for o in d["observations"]]
+    numbered = frozenset(k for o in d["observations"] for k, v in o.items() if isinstance(v, list) and len(v) != 3)
+    rows = [_flatten(o, letters, numbered) for o in d["observations"]]
     n = len(rows)
     # Column order: type, id, the axes in machine order, the directions, then
     # each kind's keys as they first appear, the noise last.
