@@ -35,6 +35,7 @@ void BindUncertainty(py::module_& m);
 void BindDbb(py::module_& m);
 void BindDesign(py::module_& m);
 void BindControllers(py::module_& m);
+void BindColumns(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "fivecal C++ core: machine model, kinematics, identification";
@@ -129,4 +130,5 @@ PYBIND11_MODULE(_core, m) {
   BindDbb(m);
   BindDesign(m);
   BindControllers(m);
+  BindColumns(m);
 }

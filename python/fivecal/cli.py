@@ -55,6 +55,16 @@ def _identify(args) -> int:
     return EXIT_OK
 
 
+def _convert(args) -> int:
+    from .dataset import load_dataset, save_dataset
+
+    ds = load_dataset(args.dataset)
+    save_dataset(ds, args.out)
+    fmt = "Parquet" if args.out.lower().endswith((".parquet", ".pq")) else "JSON"
+    print(f"{args.dataset} -> {args.out}: {len(ds)} observations ({fmt})")
+    return EXIT_OK
+
+
 def _fit_warning():
     from .guards import FitWarning
 
@@ -659,7 +669,7 @@ def main(argv=None) -> int:
                         "(tip, touched facets, sphere centres, DBB lengths) and print a report.",
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
                         "  fivecal identify fivecal_demo/dataset.json --estimate S3 --robust huber")
-    pi.add_argument("dataset", help="dataset JSON (format: docs/formats.md)")
+    pi.add_argument("dataset", help="dataset, JSON or Parquet (format: docs/formats.md)")
     pi.add_argument("--estimate", default="auto",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "
                     "(default: auto, as in Python: every error under its prior, the undetermined "
@@ -677,6 +687,17 @@ def main(argv=None) -> int:
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")
     pi.set_defaults(func=_identify)
+
+    pv = sub.add_parser("convert", help="a dataset from JSON to Parquet or back (lossless)",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        description="Read a dataset (JSON or Parquet, recognised by its content) and write "
+                        "it as Parquet when OUT ends in .parquet or .pq (needs pyarrow: pip install "
+                        "'fivecal[arrow]'), as JSON otherwise (docs/formats.md).",
+                        epilog="example:\n  fivecal convert trace.json trace.parquet\n"
+                        "  fivecal convert trace.parquet trace.json")
+    pv.add_argument("dataset", help="dataset to read (JSON or Parquet)")
+    pv.add_argument("out", help="dataset to write: .parquet / .pq or .json")
+    pv.set_defaults(func=_convert)
 
     ps = sub.add_parser("simulate", help="simulate a measurement on a machine with known errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,

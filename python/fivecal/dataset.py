@@ -83,10 +83,14 @@ class Dataset:
 
 
 def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
-    """Load a dataset JSON file; ValueError names the file, observation and field."""
+    """Load a dataset file, JSON or Parquet (recognised by its first bytes;
+    docs/formats.md); ValueError names the file, observation and field."""
     from . import files
+    from .io import columnar
 
     path = os.fspath(path)
+    if columnar.is_parquet(path):
+        return columnar.read_parquet(path)
     text = files.read_text(path, "dataset")
     schema.check_text(text, "dataset", path)
     try:
@@ -98,10 +102,17 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
 
 
 def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
-    """Write a dataset (validated first) as JSON in the dataset format (docs/formats.md)."""
+    """Write a dataset (validated first) in the dataset format (docs/formats.md):
+    Parquet when the name ends in ``.parquet`` or ``.pq`` (needs pyarrow),
+    otherwise JSON."""
     from . import files
 
     ds = Dataset.from_dict(ds)
+    if os.fspath(path).lower().endswith((".parquet", ".pq")):
+        from .io import columnar
+
+        columnar.write_parquet(ds, path)
+        return
     files.write_json(path, ds.to_dict())
 
 

@@ -28,7 +28,9 @@ class Kind final : public BallMountKind {
   }
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
     ReadMount(o, w, ob);
-    ob->measured = ReadVector3(o.value("measured", json()), w + ".measured");
+    static const json absent;  // by reference: o.value(key, json()) copies the array
+    auto it = o.find("measured");
+    ob->measured = ReadVector3(it == o.end() ? absent : *it, w + ".measured");
   }
 
   // The nest (table ball) position always comes with ball3d data: a nest

@@ -21,8 +21,14 @@ const char* kXYZ[3] = {"x", "y", "z"};
 
 void BallMountKind::ReadMount(const json& o, const std::string& w, Observation* ob) {
   ob->setup = ReadSetup(o, w);
-  ob->tool_ball = ReadVector3(o.value("tool_ball", json()), w + ".tool_ball");
-  ob->table_ball = ReadVector3(o.value("table_ball", json()), w + ".table_ball");
+  // By reference: o.value(key, json()) copies the array, per sample of a trace.
+  static const json absent;
+  auto member = [&](const char* key) -> const json& {
+    auto it = o.find(key);
+    return it == o.end() ? absent : *it;
+  };
+  ob->tool_ball = ReadVector3(member("tool_ball"), w + ".tool_ball");
+  ob->table_ball = ReadVector3(member("table_ball"), w + ".table_ball");
 }
 
 void BallMountKind::Validate(const Dataset&, const Observation& o,
