@@ -158,6 +158,7 @@ void BindIdentification(py::module_& m) {
       .def_readonly("rms", &Result::rms)
       .def_readonly("max_abs", &Result::max_abs)
       .def_readonly("sigma", &Result::sigma)
+      .def_readonly("residual_units", &Result::residual_units)
       .def_readonly("condition_number", &Result::condition_number)
       .def_readonly("rank", &Result::rank)
       .def_readonly("unidentifiable", &Result::unidentifiable)
@@ -228,6 +229,14 @@ void BindIdentification(py::module_& m) {
       py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
       py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false,
       py::arg("variance_components") = false);
+
+  py::class_<UnitResiduals>(m, "UnitResiduals")
+      .def_readonly("unit", &UnitResiduals::unit)
+      .def_readonly("rows", &UnitResiduals::rows)
+      .def_readonly("rms", &UnitResiduals::rms)
+      .def_readonly("max_abs", &UnitResiduals::max_abs)
+      .def_readonly("sigma", &UnitResiduals::sigma)
+      .def_readonly("dof", &UnitResiduals::dof);
 
   py::class_<VarianceComponent>(m, "VarianceComponent")
       .def_readonly("group", &VarianceComponent::group)

@@ -48,6 +48,14 @@ def simulate(spec_json: str) -> Dataset: ...
 def observation_kinds() -> list[dict]: ...
 def noise_classes() -> list[str]: ...
 
+class UnitResiduals:
+    unit: str
+    rows: int
+    rms: float
+    max_abs: float
+    sigma: float
+    dof: float
+
 class Result:
     names: list[str]
     values: np.ndarray
@@ -62,6 +70,7 @@ class Result:
     rms: float
     max_abs: float
     sigma: float
+    residual_units: list[UnitResiduals]
     condition_number: float
     rank: int
     unidentifiable: list[list[str]]
