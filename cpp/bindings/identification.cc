@@ -129,6 +129,14 @@ void BindIdentification(py::module_& m) {
       d["default_sigma"] = k->default_sigma();
       d["noise_class"] = k->noise_class();
       d["noise_classes"] = k->noise_classes();
+      // Per residual row: its unit and its simulator noise class.
+      std::vector<std::string> units, classes;
+      for (int r = 0; r < k->rows(); ++r) {
+        units.push_back(k->unit_row(r));
+        classes.push_back(k->noise_class_row(r));
+      }
+      d["row_units"] = units;
+      d["row_noise_classes"] = classes;
       // The keys of a dataset observation and of a plan entry: the schemas
       // of a kind no schema file describes are built from them.
       const auto keys = k->json_keys();
@@ -141,6 +149,12 @@ void BindIdentification(py::module_& m) {
   });
 
   m.def("noise_classes", &NoiseClasses);
+  // class -> "mm" | "rad": which simulator noise levels are in rad.
+  m.def("noise_class_units", [] {
+    std::map<std::string, std::string> out;
+    for (const std::string& c : NoiseClasses()) out[c] = NoiseClassUnit(c);
+    return out;
+  });
 
   m.def("simulate", &Simulate, py::arg("spec_json"), py::call_guard<py::gil_scoped_release>());
 
