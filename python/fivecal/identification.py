@@ -148,6 +148,25 @@ class Result:
                          "residual": float(r)})
         return rows
 
+    def row_units(self) -> np.ndarray:
+        """The unit of every residual row ("mm"; "rad" for a pose's rotation
+        rows), from the registered kinds' rows."""
+        src = np.asarray(self.residual_source, dtype=int)
+        out = np.full(src.size, "mm", dtype=object)
+        kinds = {k["name"]: k["row_units"] for k in _core.observation_kinds()}
+        other = {n for n, u in kinds.items() if set(u) != {"mm"}}
+        types = self.dataset.observation_types
+        if not src.size or not other.intersection(types):
+            return out
+        # rows of one observation are consecutive: k = position within its run
+        start = np.r_[True, src[1:] != src[:-1]]
+        first = np.maximum.accumulate(np.where(start, np.arange(src.size), 0))
+        k = np.arange(src.size) - first
+        mixed = np.array([t in other for t in types] + [False])  # [-1]: a scale bar row
+        for i in np.flatnonzero(mixed[src]):
+            out[i] = kinds[types[src[i]]][k[i]]
+        return out
+
     def write_residuals(self, path) -> None:
         """:meth:`residual_table` as CSV (``residual_um`` in µm; µrad for the
         ``rx ry rz`` rows of a pose), observation ids kept."""

@@ -89,3 +89,23 @@ def test_one_unit_datasets_keep_one_summary():
     assert list(r.residual_units) == ["mm"]
     assert r.rms == pytest.approx(np.sqrt(np.mean(np.asarray(r.residuals) ** 2)), rel=1e-12)
     assert "residual_units" not in json.loads(r.to_json())
+
+
+def test_row_units_and_the_histogram_keep_the_rad_rows_apart(fitted, tmp_path, monkeypatch):
+    _, r = fitted
+    units = r.row_units()
+    assert list(units[:12]) == ["mm"] * 3 + ["rad"] * 3 + ["mm"] * 3 + ["rad"] * 3
+    from fivecal.report import plots
+    seen = {}
+    import matplotlib.axes
+    real = matplotlib.axes.Axes.hist
+
+    def spy(self, x, *a, **kw):
+        seen["x"] = np.asarray(x)
+        return real(self, x, *a, **kw)
+
+    monkeypatch.setattr(matplotlib.axes.Axes, "hist", spy)
+    plots.plot_residual_histogram(r, str(tmp_path / "h.png"))
+    # the position rows only, in um
+    assert seen["x"].size == (units == "mm").sum()
+    assert seen["x"] == pytest.approx(np.asarray(r.residuals)[units == "mm"] * 1e3)
