@@ -45,12 +45,10 @@ class _ReadOnlyList(_ReadOnly, list):
     __slots__ = ()
 
 
-def _frozen(x):
-    if isinstance(x, dict):
-        return _ReadOnlyDict((k, _frozen(v)) for k, v in x.items())
-    if isinstance(x, list):
-        return _ReadOnlyList(_frozen(v) for v in x)
-    return x
+def _frozen_pairs(pairs):
+    # json.loads hook, called innermost first: a dict's lists hold numbers or
+    # dicts frozen already (a dataset has no list of lists).
+    return _ReadOnlyDict((k, _ReadOnlyList(v) if type(v) is list else v) for k, v in pairs)
 
 
 def _thawed(x, deep: bool = True):
@@ -93,7 +91,7 @@ class Dataset:
     def _view(self) -> dict:
         # Built once, read-only: observations and artefact hand it out without copying.
         if self._dict is None:
-            self._dict = _frozen(json.loads(self._core.to_json()))
+            self._dict = json.loads(self._core.to_json(), object_pairs_hook=_frozen_pairs)
         return self._dict
 
     @property
