@@ -129,6 +129,14 @@ void BindIdentification(py::module_& m) {
       d["default_sigma"] = k->default_sigma();
       d["noise_class"] = k->noise_class();
       d["noise_classes"] = k->noise_classes();
+      // Per residual row: its unit and its simulator noise class.
+      std::vector<std::string> units, classes;
+      for (int r = 0; r < k->rows(); ++r) {
+        units.push_back(k->unit_row(r));
+        classes.push_back(k->noise_class_row(r));
+      }
+      d["row_units"] = units;
+      d["row_noise_classes"] = classes;
       // The keys of a dataset observation and of a plan entry: the schemas
       // of a kind no schema file describes are built from them.
       const auto keys = k->json_keys();
@@ -141,6 +149,12 @@ void BindIdentification(py::module_& m) {
   });
 
   m.def("noise_classes", &NoiseClasses);
+  // class -> "mm" | "rad": which simulator noise levels are in rad.
+  m.def("noise_class_units", [] {
+    std::map<std::string, std::string> out;
+    for (const std::string& c : NoiseClasses()) out[c] = NoiseClassUnit(c);
+    return out;
+  });
 
   m.def("simulate", &Simulate, py::arg("spec_json"), py::call_guard<py::gil_scoped_release>());
 
@@ -158,6 +172,7 @@ void BindIdentification(py::module_& m) {
       .def_readonly("rms", &Result::rms)
       .def_readonly("max_abs", &Result::max_abs)
       .def_readonly("sigma", &Result::sigma)
+      .def_readonly("residual_units", &Result::residual_units)
       .def_readonly("condition_number", &Result::condition_number)
       .def_readonly("rank", &Result::rank)
       .def_readonly("unidentifiable", &Result::unidentifiable)
@@ -228,6 +243,14 @@ void BindIdentification(py::module_& m) {
       py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
       py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false,
       py::arg("variance_components") = false);
+
+  py::class_<UnitResiduals>(m, "UnitResiduals")
+      .def_readonly("unit", &UnitResiduals::unit)
+      .def_readonly("rows", &UnitResiduals::rows)
+      .def_readonly("rms", &UnitResiduals::rms)
+      .def_readonly("max_abs", &UnitResiduals::max_abs)
+      .def_readonly("sigma", &UnitResiduals::sigma)
+      .def_readonly("dof", &UnitResiduals::dof);
 
   py::class_<VarianceComponent>(m, "VarianceComponent")
       .def_readonly("group", &VarianceComponent::group)

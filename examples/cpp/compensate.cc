@@ -1,11 +1,13 @@
 // Loads a machine definition and identified error values, computes where the
 // erroneous machine puts the tool for a nominal command, and the compensated
-// command that puts it where the nominal one was meant to be.
+// command that puts it where the nominal one was meant to be; lists the
+// observation kinds the core fits (the headers that need nlohmann_json).
 //
 //   compensate MACHINE.json ERRORS.json
 // ERRORS.json: {"EX0C": 0.01, ...} or a fivecal result file (mm, rad).
 #include <fivecal/model/inverse.h>
 #include <fivecal/model/kinematics.h>
+#include <fivecal/observations/registry.h>
 
 #include <fstream>
 #include <iostream>
@@ -39,6 +41,7 @@ int main(int argc, char** argv) {
     const Eigen::MatrixXd after = fivecal::ToolPoints(m, errors.values(), comp);
 
     std::cout << "machine " << m.name() << " (" << m.topology() << "), axes " << m.axis_names() << "\n"
+              << "observation kinds    " << fivecal::KindList() << "\n"
               << "nominal command      " << cmd << "\n"
               << "tool error (mm)      " << (real - target) << "\n"
               << "compensated command  " << comp << "\n"

@@ -47,6 +47,15 @@ class Dataset:
 def simulate(spec_json: str) -> Dataset: ...
 def observation_kinds() -> list[dict]: ...
 def noise_classes() -> list[str]: ...
+def noise_class_units() -> dict[str, str]: ...
+
+class UnitResiduals:
+    unit: str
+    rows: int
+    rms: float
+    max_abs: float
+    sigma: float
+    dof: float
 
 class Result:
     names: list[str]
@@ -62,6 +71,7 @@ class Result:
     rms: float
     max_abs: float
     sigma: float
+    residual_units: list[UnitResiduals]
     condition_number: float
     rank: int
     unidentifiable: list[list[str]]

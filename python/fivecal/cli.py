@@ -11,6 +11,7 @@ import argparse
 import io
 import math
 import os
+import re
 import signal
 import sys
 import time
@@ -628,7 +629,19 @@ def _run(args) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line usage errors (the subcommand parsers share it)."""
+    """argparse with one-line usage errors (the subcommand parsers share it),
+    and option values that start with '-' taken as values when they are
+    numbers: argparse alone takes ``--height -1e-3`` or ``--tool-ball
+    -5,0,100`` for an option (only plain ``-0.5`` passes), and a coordinate
+    or an offset is negative as often as not. No fivecal option looks like a
+    number, so nothing is lost."""
+
+    #: a number (with exponent) or a comma separated list of them, starting with '-'
+    _NEGATIVE_VALUE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)*$")
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = self._NEGATIVE_VALUE
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -13,6 +13,52 @@ from . import _core, _json, plausibility, schema
 from .machine import Machine
 
 
+class _ReadOnly:
+    """Refuses the mutating methods of a dict or list: the dataset's own view
+    of its observations is shared by every caller, and the core (what the fit
+    sees) would not follow an edit."""
+
+    def _refuse(self, *args, **kwargs):
+        raise TypeError("a Dataset's observations and artefact are read-only: edit a copy from "
+                        "Dataset.to_dict() and build a new Dataset with Dataset.from_dict()")
+
+    __setitem__ = __delitem__ = __iadd__ = __imul__ = __ior__ = _refuse
+    append = extend = insert = pop = remove = clear = sort = reverse = _refuse
+    update = setdefault = popitem = _refuse
+
+    # A copy is the caller's: plain, editable.
+    def __copy__(self):
+        return _thawed(self, deep=False)
+
+    def __deepcopy__(self, memo):
+        return _thawed(self)
+
+    def __reduce_ex__(self, protocol):
+        return _thawed, (_thawed(self, deep=False),)
+
+
+class _ReadOnlyDict(_ReadOnly, dict):
+    __slots__ = ()
+
+
+class _ReadOnlyList(_ReadOnly, list):
+    __slots__ = ()
+
+
+def _frozen_pairs(pairs):
+    # json.loads hook, called innermost first: a dict's lists hold numbers or
+    # dicts frozen already (a dataset has no list of lists).
+    return _ReadOnlyDict((k, _ReadOnlyList(v) if type(v) is list else v) for k, v in pairs)
+
+
+def _thawed(x, deep: bool = True):
+    if isinstance(x, dict):
+        return {k: _thawed(v) if deep else v for k, v in x.items()}
+    if isinstance(x, list):
+        return [_thawed(v) if deep else v for v in x]
+    return x
+
+
 def dumps(obj, path: str = "dataset") -> str:
     """JSON text of dicts that may hold numpy arrays or a Machine."""
     return _json.dumps(obj, path)
@@ -38,9 +84,14 @@ class Dataset:
         return ds
 
     def to_dict(self) -> dict:
-        """The dataset as a JSON-ready dict (docs/formats.md, mm / degrees)."""
+        """The dataset as a JSON-ready dict (docs/formats.md, mm / degrees): a
+        new copy on every call, the caller's to edit (the dataset does not change)."""
+        return _thawed(self._view())
+
+    def _view(self) -> dict:
+        # Built once, read-only: observations and artefact hand it out without copying.
         if self._dict is None:
-            self._dict = json.loads(self._core.to_json())
+            self._dict = json.loads(self._core.to_json(), object_pairs_hook=_frozen_pairs)
         return self._dict
 
     @property
@@ -50,13 +101,14 @@ class Dataset:
 
     @property
     def observations(self) -> list:
-        """Observation dicts (type, target or setup, axes in mm / degrees, ...)."""
-        return self.to_dict()["observations"]
+        """Observation dicts (type, target or setup, axes in mm / degrees, ...),
+        read-only (edit a copy from :meth:`to_dict`)."""
+        return self._view()["observations"]
 
     @property
     def artefact(self) -> dict:
-        """Facets, spheres and scale bars (mm, workpiece frame)."""
-        return self.to_dict()["artefact"]
+        """Facets, spheres and scale bars (mm, workpiece frame), read-only."""
+        return self._view()["artefact"]
 
     @property
     def observation_types(self) -> list:

@@ -34,9 +34,15 @@ class Result:
         self.residual_source: np.ndarray = np.asarray(core.residual_source)
         self.residual_vectors: np.ndarray = np.asarray(core.residual_vectors)
         self.points: np.ndarray = np.asarray(core.points)
+        #: rms, largest |residual| and a posteriori sigma of the mm rows (a pose's
+        #: rotation rows are in :attr:`residual_units`)
         self.rms: float = core.rms
         self.max_abs: float = core.max_abs
         self.sigma: float = core.sigma
+        #: per unit of the residual rows ("mm"; "rad": a pose's rotation rows) a dict with
+        #: rows, rms, max_abs and sigma in that unit
+        self.residual_units: dict = {u.unit: {"rows": u.rows, "rms": u.rms, "max_abs": u.max_abs,
+                                              "sigma": u.sigma} for u in core.residual_units}
         self.condition_number: float = core.condition_number
         self.rank: int = core.rank
         self.unidentifiable: list = [list(g) for g in core.unidentifiable]
@@ -143,6 +149,25 @@ class Result:
                          "residual": float(r)})
         return rows
 
+    def row_units(self) -> np.ndarray:
+        """The unit of every residual row ("mm"; "rad" for a pose's rotation
+        rows), from the registered kinds' rows."""
+        src = np.asarray(self.residual_source, dtype=int)
+        out = np.full(src.size, "mm", dtype=object)
+        kinds = {k["name"]: k["row_units"] for k in _core.observation_kinds()}
+        other = {n for n, u in kinds.items() if set(u) != {"mm"}}
+        types = self.dataset.observation_types
+        if not src.size or not other.intersection(types):
+            return out
+        # rows of one observation are consecutive: k = position within its run
+        start = np.r_[True, src[1:] != src[:-1]]
+        first = np.maximum.accumulate(np.where(start, np.arange(src.size), 0))
+        k = np.arange(src.size) - first
+        mixed = np.array([t in other for t in types] + [False])  # [-1]: a scale bar row
+        for i in np.flatnonzero(mixed[src]):
+            out[i] = kinds[types[src[i]]][k[i]]
+        return out
+
     def write_residuals(self, path) -> None:
         """:meth:`residual_table` as CSV (``residual_um`` in µm; µrad for the
         ``rx ry rz`` rows of a pose), observation ids kept."""
@@ -198,9 +223,8 @@ class Result:
         lines = [f"fivecal identification: {m.name} ({m.topology})"]
         lines += ["  " + t for t in verdict_lines(self, fd)]
         lines += [f"  observations {self.n_observations}, parameters {self.n_parameters}, "
-                  f"rank {self.rank}, condition number {self.condition_number:.4g}",
-                  f"  residual rms {self.rms * 1e3:.3f} µm, max {self.max_abs * 1e3:.3f} µm, "
-                  f"sigma {self.sigma * 1e3:.3f} µm"]
+                  f"rank {self.rank}, condition number {self.condition_number:.4g}"]
+        lines += ["  " + t for t in residual_lines(self)]
         lines += ["  " + t for t in noise_lines(self)]
         lines.append("")
         prior = getattr(self, "prior_std", None) or {}
@@ -287,7 +311,9 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     added unless ``default_setup=False``. ``selection_tolerance``: for ``location``
     and ``auto``, the fraction of a candidate's (scaled) Jacobian column that must
     lie outside the span of the parameters already chosen. ``fix`` removes names. ``robust``:
-    ``"huber"`` or ``"cauchy"`` to down-weight and flag outlier touches.
+    ``"huber"`` or ``"cauchy"`` to down-weight and flag outlier touches; ``robust_scale``
+    (mm, default 3 robust sigmas of a plain fit) is where flagging starts; a pose's rotation
+    rows are held to the same multiple of their declared noise as its position rows.
     ``estimate="auto"`` (the default) fits every candidate machine error under
     its prior (a MAP fit): :attr:`Result.informed` says how far the data narrowed
     each prior and :attr:`Result.undetermined` lists those the data did not
@@ -329,12 +355,31 @@ def verdict_lines(result, fd: "guards.Findings") -> list:
     return [f"Usable: the fit converged in {it} iterations; {adequacy}."]
 
 
+#: how reports show a residual of each row unit
+MICRO_UNITS = {"mm": (1e3, "µm"), "rad": (1e6, "µrad")}
+
+
+def residual_lines(result) -> list:
+    """Residual rms, largest |residual| and a posteriori sigma, one line per
+    unit of the rows: a pose's rotation rows (rad) are never folded into the
+    position rows' µm."""
+    units = getattr(result, "residual_units", None) or {"mm": {"rms": result.rms, "max_abs": result.max_abs,
+                                                               "sigma": result.sigma}}
+    out = []
+    for unit, u in units.items():
+        f, shown = MICRO_UNITS.get(unit, (1.0, unit))
+        what = "residual" if unit == "mm" else f"residual of the {unit} rows (rotations):"
+        out.append(f"{what} rms {u['rms'] * f:.3f} {shown}, max {u['max_abs'] * f:.3f} {shown}, "
+                   f"sigma {u['sigma'] * f:.3f} {shown}")
+    return out
+
+
 def noise_lines(result) -> list:
     """The instrument noise the fit estimated (variance components), one line per group."""
     out = []
     for g, c in sorted((getattr(result, "variance_components", None) or {}).items()):
         # a group of rotation rows (pose_rad, pose_rad.<id>) is in rad
-        f, unit = (1e6, "µrad") if g.split(".", 1)[0].endswith("_rad") else (1e3, "µm")
+        f, unit = MICRO_UNITS["rad" if g.split(".", 1)[0].endswith("_rad") else "mm"]
         if c["estimated"]:
             out.append(f"noise of {g}: {c['sigma'] * f:.3f} {unit} estimated from {c['rows']} rows "
                        f"(declared {c['declared_sigma'] * f:.3f} {unit}, x{c['factor']:.2f})")

@@ -21,6 +21,7 @@ and give a confident wrong answer. These checks run where data comes in
 """
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import os
@@ -119,15 +120,55 @@ def _axis_columns(machine: Machine, entries: Sequence[Mapping]):
             for a in machine.axis_names}
 
 
-#: Observation types in the order of the core's type codes (``Dataset.columns``).
-_TYPES = ("facet", "sphere", "dbb", "ball3d")
+#: Keys of observations and plan entries that hold a position (3-vector, mm) or
+#: a length (mm), besides the ball bar / 3D ball fields ``Dataset.columns``
+#: gives (``length``, ``tool_ball``, ``table_ball``): checked for µm wherever a
+#: registered kind has them (``_core.observation_kinds()``).
+POSITION_KEYS = ("target_point", "instrument_origin", "station_position", "point", "reference_point")
+LENGTH_KEYS = ("dead_length",)
+#: The other keys of the registered kinds: no position or length in mm (ids,
+#: axes (checked apart), directions, angles in rad, readings checked against
+#: their instrument's range, a point or pose's reading in the instrument frame).
+#: A kind that brings a key in neither list fails the test that holds this
+#: module to the registry.
+OTHER_KEYS = ("type", "target", "setup", "instrument", "station", "part", "feature", "id", "sigma", "axes",
+              "direction", "reference_axes", "reading", "measured", "measured_rotation", "target_rotation",
+              "instrument_angles", "normal", "reference_normal", "length", "tool_ball", "table_ball")
 
 
-def _cylinder_code() -> int:
-    """The core's type code of cylinder touches (after the first four kinds,
-    its place depends on the registry)."""
+@functools.lru_cache(maxsize=None)
+def _kinds() -> dict:
+    """name -> (type code, the keys of its observations and plan entries), from the registry."""
     from . import _core
-    return next((int(k["code"]) for k in _core.observation_kinds() if k["name"] == "cylinder"), -2)
+    return {k["name"]: (int(k["code"]), set(k["json_keys"]) | set(k["plan_keys"]))
+            for k in _core.observation_kinds()}
+
+
+def _code(name: str) -> int:
+    """The core's type code of a kind (``Dataset.columns``)."""
+    return _kinds()[name][0]
+
+
+def _codes_with(keys) -> list:
+    """Type codes of the kinds that have any of ``keys``."""
+    return [c for c, k in _kinds().values() if k & set(keys)]
+
+
+def _key_positions(entries, rows, codes) -> dict:
+    """key -> (rows, values) of POSITION_KEYS / LENGTH_KEYS over ``entries``
+    (the observations or plan entries at ``rows``, of type codes ``codes``):
+    only the entries whose kind has the key."""
+    out = {}
+    kinds = _kinds()
+    has = {c: k for c, k in kinds.values()}
+    for key in POSITION_KEYS + LENGTH_KEYS:
+        sel = [i for i, c in enumerate(codes) if key in has.get(int(c), ())]
+        if not sel:
+            continue
+        sub = [entries[i] for i in sel]
+        vals = _optional_rows(sub, key) if key in POSITION_KEYS else _optional_column(sub, key)
+        out[key] = (np.asarray([rows[i] for i in sel], dtype=int), vals)
+    return out
 
 
 def _optional_column(entries, key: str) -> np.ndarray:
@@ -146,25 +187,26 @@ def _dict_columns(machine: Machine, entries: Sequence, artefact) -> dict:
     entry; the ball fields (reading, length, measured, tool_ball, table_ball)
     of the rows listed in ``ball``, here every entry (NaN where a field is
     absent or not of that entry's type)."""
-    cyl = _cylinder_code()
-    types = np.array([_TYPES.index(e.get("type")) if isinstance(e, dict) and e.get("type") in _TYPES
-                      else cyl if isinstance(e, dict) and e.get("type") == "cylinder" else -1
+    kinds = _kinds()
+    types = np.array([kinds[e["type"]][0] if isinstance(e, dict) and e.get("type") in kinds else -1
                       for e in entries], dtype=int)
+    facet, sphere, cyl, dbb, ball3d = (_code(n) for n in ("facet", "sphere", "cylinder", "dbb", "ball3d"))
     ids = {}
     if isinstance(artefact, Mapping):
-        for code, key in ((0, "facets"), (1, "spheres"), (cyl, "cylinders")):
+        for code, key in ((facet, "facets"), (sphere, "spheres"), (cyl, "cylinders")):
             for k, x in enumerate(artefact.get(key) or []):
                 if isinstance(x, Mapping):
                     ids.setdefault((code, str(x.get("id"))), k)
-    target = np.array([ids.get((int(t), str(e.get("target"))), -1) if t in (0, 1, cyl) else -1
+    target = np.array([ids.get((int(t), str(e.get("target"))), -1) if t in (facet, sphere, cyl) else -1
                        for t, e in zip(types, entries)], dtype=int)
     measured = _optional_rows(entries, "measured")
-    measured[types != 3] = math.nan
+    measured[types != ball3d] = math.nan
     return {"axes": _axis_columns(machine, entries), "type": types, "target": target,
             "ball": np.arange(len(entries)),
-            "reading": np.where(types == 2, _optional_column(entries, "reading"), math.nan),
+            "reading": np.where(types == dbb, _optional_column(entries, "reading"), math.nan),
             "length": _optional_column(entries, "length"), "measured": measured,
-            "tool_ball": _optional_rows(entries, "tool_ball"), "table_ball": _optional_rows(entries, "table_ball")}
+            "tool_ball": _optional_rows(entries, "tool_ball"), "table_ball": _optional_rows(entries, "table_ball"),
+            "positions": _key_positions(entries, range(len(entries)), types)}
 
 
 def _largest(values: np.ndarray, fields, out_vals: list, out_fields: list) -> None:
@@ -187,6 +229,9 @@ def _positions(machine: Machine, cols: dict, where_list: str, ix=lambda i: i):
     _largest(cols["length"], lambda i, j: f"{where_list}[{ix(ball[i])}].length", vals, fields)
     for key in ("tool_ball", "table_ball"):
         _largest(cols[key], lambda i, j, key=key: f"{where_list}[{ix(ball[i])}].{key}[{j}]", vals, fields)
+    for key, (rows, v) in cols.get("positions", {}).items():
+        _largest(v, (lambda i, j, key=key, rows=rows: f"{where_list}[{ix(rows[i])}].{key}"
+                     + (f"[{j}]" if v.ndim == 2 else "")), vals, fields)
     return vals, fields
 
 
@@ -210,6 +255,14 @@ def check_loaded(ds, where: str = "dataset") -> None:
     cols = ds._core.columns()
     m = ds.machine
     cols["axes"] = {a: cols["axes"][:, k] for k, a in enumerate(m.axis_names)}
+    # The kinds' other positions (a tracker's pose, a station, a target point) are
+    # not among the columns: the few observations that have them go through JSON.
+    extra = [c for c in _codes_with(POSITION_KEYS + LENGTH_KEYS)
+             if c not in (_code("dbb"), _code("ball3d"))]
+    rows = np.flatnonzero(np.isin(cols["type"], extra))
+    if rows.size:
+        obs = json.loads(ds._core.subset(rows.tolist()).to_json())["observations"]
+        cols["positions"] = _key_positions(obs, rows, cols["type"][rows])
     _check_columns(m, head, cols, where)
 
 
@@ -265,7 +318,7 @@ def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lamb
 
     # Instrument ranges (rows of the ball fields: cols["ball"]).
     ball_types = cols["type"][cols["ball"]]
-    dbb = np.flatnonzero(ball_types == 2)
+    dbb = np.flatnonzero(ball_types == _code("dbb"))
     if dbb.size:
         r = cols["reading"][dbb]
         k = int(np.argmax(np.abs(np.nan_to_num(r))))
@@ -277,7 +330,7 @@ def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lamb
                              "measures about ±1 mm): "
                              "readings look like µm: divide by 1000 (a reading is the bar length minus "
                              "its nominal length, in mm)")
-    b3 = np.flatnonzero(ball_types == 3)
+    b3 = np.flatnonzero(ball_types == _code("ball3d"))
     if b3.size:
         mv = cols["measured"][b3]
         a = np.abs(np.nan_to_num(mv)).max(axis=1)
@@ -299,8 +352,8 @@ def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None
     r = _num(probe.get("tip_radius", 0.0)) if isinstance(probe, Mapping) else 0.0
     if not math.isfinite(r):
         return
-    cyl = _cylinder_code()
-    idx = np.flatnonzero((cols["type"] == 0) | (cols["type"] == 1) | (cols["type"] == cyl))
+    facet, sphere, cyl = _code("facet"), _code("sphere"), _code("cylinder")
+    idx = np.flatnonzero(np.isin(cols["type"], (facet, sphere, cyl)))
     if not idx.size:
         return
     sub = {a: c[idx] for a, c in cols["axes"].items()}
@@ -317,7 +370,7 @@ def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None
     for k, s in enumerate(art.get("spheres") or []):
         if not isinstance(s, Mapping):
             continue
-        sel = (types == 1) & (targets == k)
+        sel = (types == sphere) & (targets == k)
         c, R = _vec(s.get("center")), _num(s.get("radius"))
         if sel.sum() < 3 or not np.isfinite(c).all() or not (math.isfinite(R) and R > 0):
             continue
@@ -362,7 +415,7 @@ def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None
     for k, f in enumerate(art.get("facets") or []):
         if not isinstance(f, Mapping):
             continue
-        sel = (types == 0) & (targets == k)
+        sel = (types == facet) & (targets == k)
         a, n = _vec(f.get("point")), _vec(f.get("normal"))
         if not sel.any() or not (np.isfinite(a).all() and np.isfinite(n).all()) or np.linalg.norm(n) == 0:
             continue

@@ -65,15 +65,15 @@ def make_spec(machine, plan: Sequence[Mapping], errors: Optional[Mapping] = None
             "plan": list(plan), "sigma": sigma, "seed": seed_value(seed)}
 
 
-def _angular(noise_class: str) -> bool:
-    # "<kind>_angle" classes are rotation noise in rad (a pose's orientation rows)
-    return noise_class.endswith("_angle")
-
-
 def _noise_levels(sigma, default: float, default_angle: float = 0.0) -> dict:
     """One simulator noise level per noise class of the registered kinds
-    (``fivecal._core.noise_classes()``): mm, rad for the ``*_angle`` ones."""
+    (``fivecal._core.noise_classes()``): mm, or rad for the classes of rows in
+    rad (``fivecal._core.noise_class_units()``: a pose's ``pose_angle``)."""
+    units = _core.noise_class_units()
     classes = list(_core.noise_classes())
+
+    def _angular(c: str) -> bool:
+        return units[c] == "rad"
     if sigma is None:
         return {c: default_angle if _angular(c) else default for c in classes}
 
@@ -99,18 +99,10 @@ def _noise_levels(sigma, default: float, default_angle: float = 0.0) -> dict:
 
 def _default_levels(fit) -> tuple:
     """The noise a recorded dataset's plan assumes by default: the fit's
-    residual standard deviation (mm), and for a pose's rotation rows (rad)
-    their own. With rotation rows, the fit's sigma mixes mm and rad rows: then
-    each kind of row gets the rms of its own rows, both inflated by the fit's
-    rows / degrees of freedom as the sigma is."""
-    table = fit.residual_table()
-    rot = [t["residual"] for t in table if t["component"] in ("rx", "ry", "rz")]
-    if not rot:
-        return fit.sigma, 0.0
-    mm = [t["residual"] for t in table if t["component"] not in ("rx", "ry", "rz")]
-    inflate = np.sqrt(len(table) / fit.dof) if fit.dof > 0 else 1.0
-    rms = lambda r: float(np.sqrt(np.mean(np.square(r)))) * inflate if r else 0.0  # noqa: E731
-    return rms(mm), rms(rot)
+    residual standard deviation of its mm rows, and of its rad rows (a pose's
+    rotation rows; 0 without)."""
+    rad = fit.residual_units.get("rad")
+    return fit.sigma, rad["sigma"] if rad else 0.0
 
 
 def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):

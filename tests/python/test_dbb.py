@@ -407,3 +407,15 @@ def test_wang_origin_shift_compensation_flattens_the_trace(vmc):
     assert shifted.axis_error_remaining.max() > 20e-6  # EA0C stays in the tool axis
     full = compensate_poses(vmc, truth, axes, dirs)
     assert full.axis_error_remaining.max() < 1e-9 and full.max_remaining() < 1e-9
+
+
+def test_four_step_trace_redraws_the_measured_points_about_the_fitted_centre(c600u, four_step_plan):
+    # Pivots 50-100 um off the nominal ones (PAPER): about the nominal pivot the
+    # angles of the points are off by |centre| / radius.
+    res = dbb.jiang_cripps(_sim(c600u, four_step_plan, PAPER), engine=False)
+    for s in res.steps:
+        t = res.step_trace(s.setup)
+        a = np.radians(t.angles)
+        redrawn = np.asarray(s.centre) + (s.radius + t.readings)[:, None] * np.c_[np.cos(a), np.sin(a)]
+        assert np.abs(redrawn - np.asarray(s.points)).max() < 1e-9, s.setup
+        assert abs(t.angles[0] - np.degrees(s.angles[0])) < 1.0  # the same turn as the step's angles

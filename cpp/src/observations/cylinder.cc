@@ -51,32 +51,12 @@ class Kind final : public ProbeTouchKind {
   const char* name() const override { return "cylinder"; }
   const char* label() const override { return "probe touch on a cylinder"; }
 
-  std::vector<const char*> json_keys() const override {
-    return {"type", "target", "axes", "direction", "sigma", "id"};
-  }
-  void Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const override {
-    ob->target = ReadString(o, "target", w);
-    if (ds.artefact.CylinderIndex(ob->target) < 0)
-      throw std::invalid_argument(w + ".target: unknown cylinder " + Quote(ob->target) +
-                                  " (not in dataset.artefact.cylinders)");
-  }
-  void Write(const Observation&, json*) const override {}  // target: written by the dataset
-
   void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
     for (const Cylinder& c : ds.artefact.cylinders) {
       std::vector<int> idx;
       for (const char* f : kFields) idx.push_back(t->Add("cylinder." + c.id + "." + f));
       t->AddGroup(type(), c.id, idx);
     }
-  }
-  // The tip, the radius and where the axis line is; its tilt only on request
-  // (a short section hardly shows it).
-  void DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
-                    std::set<int>* out) const override {
-    const int tip = ds.machine().tip_index();
-    for (int c = 0; c < 3; ++c) out->insert(tip + c);
-    const auto& g = t.group(type(), o.target);
-    for (int c = 0; c < 3; ++c) out->insert(g[c]);
   }
   // cylinder.<id>.r|x|y|rx|ry
   bool IsParameterName(const std::string& rest) const override {
@@ -162,14 +142,10 @@ class Kind final : public ProbeTouchKind {
     }
   }
 
-  std::vector<const char*> plan_keys() const override {
-    return {"type", "target", "axes", "point", "direction", "id"};
-  }
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
     const Dataset& ds = *c.dataset;
-    const PoseData pose(ds.machine(), o);
-    const Eigen::Vector3d P = c.model->ToolPoint(pose.q.data(), pose.dir.data(), c.model->tip());
+    const Eigen::Vector3d P = FittedTipCentre(c, o);
     const Cylinder& cyl = ds.artefact.cylinders[ds.artefact.CylinderIndex(o.target)];
     double sv[5];
     const auto& g = c.table->group(type(), o.target);
@@ -180,17 +156,15 @@ class Kind final : public ProbeTouchKind {
   }
 
  protected:
-  void ValidateTarget(const Dataset& ds, const Observation& o,
-                      const std::function<std::string()>& where) const override {
-    if (ds.artefact.CylinderIndex(o.target) < 0)
-      throw std::invalid_argument(where() + ".target: unknown cylinder " + Quote(o.target));
-  }
+  int TargetIndex(const Artefact& a, const std::string& id) const override { return a.CylinderIndex(id); }
+  // The radius and where the axis line is (r, x, y); its tilt only on
+  // request (a short section hardly shows it).
+  int DefaultTargetParameters() const override { return 3; }
   void PlannedTouch(const json& e, const std::string& w, const PlanTruth& t, const Observation& ob,
                     Eigen::Vector3d* n_out, Eigen::Vector3d* c_out, Gap* gap) const override {
     const Dataset& ds = *t.dataset;
     const double r = ds.tip_radius;
-    const int ci = ds.artefact.CylinderIndex(ob.target);
-    if (ci < 0) throw std::invalid_argument(w + ".target: unknown cylinder " + Quote(ob.target));
+    const int ci = RequireTarget(ds, ob.target, w);
     const Cylinder& cyl = ds.artefact.cylinders[ci];
     if (!e.contains("point"))
       throw std::invalid_argument(w + ".point: missing (where to touch the cylinder, workpiece frame)");

@@ -20,25 +20,8 @@ class Kind final : public ProbeTouchKind {
   const char* name() const override { return "facet"; }
   const char* label() const override { return "probe touch on a facet"; }
 
-  std::vector<const char*> json_keys() const override {
-    return {"type", "target", "axes", "direction", "sigma", "id"};
-  }
-  void Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const override {
-    ob->target = ReadString(o, "target", w);
-    if (ds.artefact.FacetIndex(ob->target) < 0)
-      throw std::invalid_argument(w + ".target: unknown facet " + Quote(ob->target) +
-                                  " (not in dataset.artefact.facets)");
-  }
-  void Write(const Observation&, json*) const override {}  // target: written by the dataset
-
   void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
     for (const Facet& f : ds.artefact.facets) t->AddGroup(type(), f.id, {t->Add("facet." + f.id)});
-  }
-  void DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
-                    std::set<int>* out) const override {
-    const int tip = ds.machine().tip_index();
-    for (int c = 0; c < 3; ++c) out->insert(tip + c);
-    out->insert(t.group(type(), o.target)[0]);
   }
   bool IsParameterName(const std::string& rest) const override { return rest.find('.') == std::string::npos; }
   std::vector<PriorClass> prior_classes() const override {
@@ -77,29 +60,21 @@ class Kind final : public ProbeTouchKind {
     }
   }
 
-  std::vector<const char*> plan_keys() const override {
-    return {"type", "target", "axes", "point", "direction", "id"};
-  }
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
     const Dataset& ds = *c.dataset;
-    const PoseData pose(ds.machine(), o);
-    *point = c.model->ToolPoint(pose.q.data(), pose.dir.data(), c.model->tip());
+    *point = FittedTipCentre(c, o);
     *vector = r[0] * ds.artefact.facets[ds.artefact.FacetIndex(o.target)].normal;
   }
 
  protected:
-  void ValidateTarget(const Dataset& ds, const Observation& o,
-                      const std::function<std::string()>& where) const override {
-    if (ds.artefact.FacetIndex(o.target) < 0)
-      throw std::invalid_argument(where() + ".target: unknown facet " + Quote(o.target));
-  }
+  int TargetIndex(const Artefact& a, const std::string& id) const override { return a.FacetIndex(id); }
+  int DefaultTargetParameters() const override { return 1; }  // facet.<id>
   void PlannedTouch(const json& e, const std::string& w, const PlanTruth& t, const Observation& ob,
                     Eigen::Vector3d* n_out, Eigen::Vector3d* c, Gap* gap) const override {
     const Dataset& ds = *t.dataset;
     const double r = ds.tip_radius;
-    const int fi = ds.artefact.FacetIndex(ob.target);
-    if (fi < 0) throw std::invalid_argument(w + ".target: unknown facet " + Quote(ob.target));
+    const int fi = RequireTarget(ds, ob.target, w);
     const Facet& f = ds.artefact.facets[fi];
     const Eigen::Vector3d n = f.normal;
     Eigen::Vector3d p = e.contains("point") ? ReadVector3(e["point"], w + ".point") : f.point;

@@ -135,8 +135,7 @@ class Kind final : public ObservationKind {
                              target_R, truth.instrument_origin, ang, &ob->measured, &R);
     ob->measured_rotation = VectorOfRotation<double>(R);
   }
-  std::vector<std::string> noise_classes() const override { return {"pose", "pose_angle"}; }
-  double NoiseLevelRow(const NoiseLevels& n, int k) const override { return n.Of(k < 3 ? "pose" : "pose_angle"); }
+  const char* noise_class_row(int k) const override { return k < 3 ? "pose" : "pose_angle"; }
   // Rotation noise is a small rotation of the reading in the target frame,
   // R_m exp(x e_k), so that it enters the residual row k as -x exactly (a
   // noise added to the rotation vector's components would reach the rows

@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "fivecal/model/inverse.h"
+#include "fivecal/model/kinematic_model.h"
 #include "fivecal/model/kinematics.h"
 #include "fivecal/observations/simulate.h"
 #include "fivecal/solve/analytic_residuals.h"
@@ -118,11 +119,37 @@ const char* ProbeTouchKind::PriorClassOfName(const std::string& n) const {
   return IsProbeParameterName(n) ? "probe" : nullptr;
 }
 
+int ProbeTouchKind::RequireTarget(const Dataset& ds, const std::string& id, const std::string& where) const {
+  const int i = TargetIndex(ds.artefact, id);
+  if (i < 0)
+    throw std::invalid_argument(where + ".target: unknown " + name() + " " + Quote(id) + " (not among the artefact's " +
+                                name() + "s)");
+  return i;
+}
+
+Eigen::Vector3d ProbeTouchKind::FittedTipCentre(const ReportContext& c, const Observation& o) {
+  const PoseData pose(c.dataset->machine(), o);
+  return c.model->ToolPoint(pose.q.data(), pose.dir.data(), c.model->tip());
+}
+
+void ProbeTouchKind::Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const {
+  ob->target = ReadString(o, "target", w);
+  RequireTarget(ds, ob->target, w);
+}
+
+void ProbeTouchKind::DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                                  std::set<int>* out) const {
+  const int tip = ds.machine().tip_index();
+  for (int c = 0; c < 3; ++c) out->insert(tip + c);
+  const auto& g = t.group(type(), o.target);
+  for (int k = 0; k < DefaultTargetParameters(); ++k) out->insert(g[k]);
+}
+
 void ProbeTouchKind::Validate(const Dataset& ds, const Observation& o,
                               const std::function<std::string()>& where) const {
   if (ds.tip_radius <= 0)
     throw std::invalid_argument("dataset.probe.tip_radius: missing or zero but the dataset has probe touches");
-  ValidateTarget(ds, o, where);
+  RequireTarget(ds, o.target, where());
 }
 
 

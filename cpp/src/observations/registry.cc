@@ -74,7 +74,23 @@ std::vector<std::string> NoiseClasses() {
   return out;
 }
 
+std::string NoiseClassUnit(const std::string& c) {
+  for (const ObservationKind* k : ObservationKinds())
+    for (int r = 0; r < k->rows(); ++r)
+      if (c == k->noise_class_row(r)) return k->unit_row(r);
+  throw std::invalid_argument("noise class '" + c + "': no observation kind draws on it");
+}
+
 double ObservationKind::NoiseLevel(const NoiseLevels& n) const { return n.Of(noise_class()); }
+
+double ObservationKind::NoiseLevelRow(const NoiseLevels& n, int k) const { return n.Of(noise_class_row(k)); }
+
+std::vector<std::string> ObservationKind::noise_classes() const {
+  std::vector<std::string> out;
+  for (int r = 0; r < rows(); ++r)
+    if (std::find(out.begin(), out.end(), noise_class_row(r)) == out.end()) out.push_back(noise_class_row(r));
+  return out;
+}
 
 void ObservationKind::PrepareAnalytic(const Dataset&, const ParameterTable&, const Observation&,
                                       AnalyticRow*) const {

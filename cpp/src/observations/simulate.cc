@@ -165,9 +165,9 @@ SimulationPlan PlanSpec(const json& spec) {
     const std::vector<std::string> classes = NoiseClasses();
     std::string list;
     for (const std::string& c : classes) list += (list.empty() ? "" : ", ") + c;
-    // Classes named "<kind>_angle" are rotation noise in rad (a pose's
-    // orientation rows): a number in mm does not set them.
-    auto angular = [](const std::string& c) { return c.size() > 6 && c.compare(c.size() - 6, 6, "_angle") == 0; };
+    // Classes of rows in rad (a pose's orientation rows): a number in mm
+    // does not set them.
+    auto angular = [](const std::string& c) { return NoiseClassUnit(c) == "rad"; };
     if (s.is_number()) {
       const double x = level(s, "simulate.sigma");
       for (const std::string& c : classes)

@@ -28,30 +28,12 @@ class Kind final : public ProbeTouchKind {
   const char* name() const override { return "sphere"; }
   const char* label() const override { return "probe touch on a sphere"; }
 
-  std::vector<const char*> json_keys() const override {
-    return {"type", "target", "axes", "direction", "sigma", "id"};
-  }
-  void Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const override {
-    ob->target = ReadString(o, "target", w);
-    if (ds.artefact.SphereIndex(ob->target) < 0)
-      throw std::invalid_argument(w + ".target: unknown sphere " + Quote(ob->target) +
-                                  " (not in dataset.artefact.spheres)");
-  }
-  void Write(const Observation&, json*) const override {}  // target: written by the dataset
-
   void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
     for (const Sphere& s : ds.artefact.spheres) {
       std::vector<int> idx;
       for (const char* c : {"x", "y", "z", "r"}) idx.push_back(t->Add("sphere." + s.id + "." + c));
       t->AddGroup(type(), s.id, idx);
     }
-  }
-  void DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
-                    std::set<int>* out) const override {
-    const int tip = ds.machine().tip_index();
-    for (int c = 0; c < 3; ++c) out->insert(tip + c);
-    const auto& sp = t.group(type(), o.target);
-    for (int c = 0; c < 3; ++c) out->insert(sp[c]);
   }
   // sphere.<id>.x|y|z|r
   bool IsParameterName(const std::string& rest) const override {
@@ -180,8 +162,7 @@ class Kind final : public ProbeTouchKind {
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
     const Dataset& ds = *c.dataset;
-    const PoseData pose(ds.machine(), o);
-    const Eigen::Vector3d P = c.model->ToolPoint(pose.q.data(), pose.dir.data(), c.model->tip());
+    const Eigen::Vector3d P = FittedTipCentre(c, o);
     const auto& sp = c.table->group(type(), o.target);
     const Eigen::VectorXd& values = *c.values;
     const Eigen::Vector3d centre = ds.artefact.spheres[ds.artefact.SphereIndex(o.target)].center +
@@ -191,17 +172,14 @@ class Kind final : public ProbeTouchKind {
   }
 
  protected:
-  void ValidateTarget(const Dataset& ds, const Observation& o,
-                      const std::function<std::string()>& where) const override {
-    if (ds.artefact.SphereIndex(o.target) < 0)
-      throw std::invalid_argument(where() + ".target: unknown sphere " + Quote(o.target));
-  }
+  int TargetIndex(const Artefact& a, const std::string& id) const override { return a.SphereIndex(id); }
+  // The centre; the radius only on request (a calibrated sphere's is known).
+  int DefaultTargetParameters() const override { return 3; }
   void PlannedTouch(const json& e, const std::string& w, const PlanTruth& t, const Observation& ob,
                     Eigen::Vector3d* n_out, Eigen::Vector3d* c, Gap* gap) const override {
     const Dataset& ds = *t.dataset;
     const double r = ds.tip_radius;
-    const int si = ds.artefact.SphereIndex(ob.target);
-    if (si < 0) throw std::invalid_argument(w + ".target: unknown sphere " + Quote(ob.target));
+    const int si = RequireTarget(ds, ob.target, w);
     const Sphere& s = ds.artefact.spheres[si];
     if (!e.contains("normal")) throw std::invalid_argument(w + ".normal: missing (touch direction from the centre)");
     Eigen::Vector3d n = ReadVector3(e["normal"], w + ".normal");

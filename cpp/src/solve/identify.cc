@@ -16,6 +16,7 @@
 #include "fivecal/solve/problem.h"
 #include "fivecal/observations/registry.h"
 #include "json_util.h"
+#include "solve/residual_units.h"
 
 namespace fivecal {
 namespace {
@@ -165,11 +166,7 @@ Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Vector
     if (!(scale > 0)) {
       Eigen::VectorXd r;
       problem->Evaluate(&r, nullptr);
-      std::vector<double> a(r.data(), r.data() + r.size());
-      for (double& x : a) x = std::abs(x);
-      std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
-      scale = 3.0 * 1.4826 * a[a.size() / 2];
-      if (!(scale > 0)) scale = 1e-6;
+      scale = DefaultRobustScale(PositionScaledResiduals(ds, r, problem->row_sigma(), problem->row_source()));
     }
     out.robust_scale = scale;
     problem = std::make_unique<Problem>(ds, table, out.values, est, opt.robust, scale);
@@ -705,8 +702,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   res.rms = r.size() ? std::sqrt(r.squaredNorm() / r.size()) : 0.0;
   res.max_abs = r.size() ? r.cwiseAbs().maxCoeff() : 0.0;
   if (res.robust_scale > 0)
-    for (int i = 0; i < r.size(); ++i)
-      if (std::abs(r[i]) > res.robust_scale) res.outliers.push_back(i);
+    res.outliers = RobustOutliers(PositionScaledResiduals(ds, r, sig, problem->row_source()), res.robust_scale);
 
   // chi^2 of the data rows against the declared noise (rows the robust loss
   // flagged are left out: they are reported as outliers instead).
@@ -722,6 +718,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   // MAP: the posterior in prior units under the documented priors; it gives
   // the covariance and how far the data narrowed each prior.
   const Eigen::MatrixXd Cs = map ? ScaledPosterior(Jw, prior) : Eigen::MatrixXd();
+  Eigen::MatrixXd hat;  // (Jw^T Jw + P)^-1 of the fit that made the residuals
+  int sigma_dof = 0;
   if (map) {
     // Posterior covariance (Jw^T Jw + P)^-1, P = diag(1 / prior^2), in the
     // declared noise; inflated by chi2/dof when the residuals exceed it.
@@ -730,7 +728,10 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     const Eigen::MatrixXd C = prior.asDiagonal() * Cs * prior.asDiagonal();
     // Effective number of parameters: trace of the hat matrix = p - trace(Cs).
     const Eigen::VectorXd used = Gather(fit_prior, est);
-    const double p_eff = p - (rq.automatic ? ScaledPosterior(Jw, used).trace() : Cs.trace());
+    const Eigen::MatrixXd Cu = rq.automatic ? ScaledPosterior(Jw, used) : Cs;
+    const double p_eff = p - Cu.trace();
+    const Eigen::VectorXd& cu_scale = rq.automatic ? used : prior;
+    hat = cu_scale.asDiagonal() * Cu * cu_scale.asDiagonal();
     res.dof = std::max(1, rows - static_cast<int>(std::lround(p_eff)));
     const double k2 = std::max(1.0, chi2 / res.dof);
     res.covariance = k2 * C;
@@ -741,7 +742,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     Eigen::MatrixXd Ji(Jw.rows(), informed_cols.size());
     for (size_t k = 0; k < informed_cols.size(); ++k) Ji.col(k) = Jw.col(informed_cols[k]);
     res.condition_number = informed_cols.empty() ? 0.0 : AnalyzeJacobian(Ji, opt.rank_tolerance).condition_number;
-    res.sigma = res.dof > 0 ? std::sqrt(r.squaredNorm() / res.dof) : 0.0;
+    sigma_dof = res.dof;
   } else {
     res.dof = std::max(0, rows - id.rank);
     // Without redundancy the residuals (zero) say nothing about the noise:
@@ -751,8 +752,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     // The condition number of the column-scaled Jacobian in mm, as before the
     // weighting and as the plan design reports it.
     res.condition_number = AnalyzeJacobian(sig.asDiagonal() * Jw, opt.rank_tolerance).condition_number;
-    const int dof_mm = res.n_observations - id.rank;
-    res.sigma = dof_mm > 0 ? std::sqrt(r.squaredNorm() / dof_mm) : 0.0;
+    sigma_dof = res.n_observations - id.rank;
+    hat = id.inverse_normal;
+  }
+  res.sigma = sigma_dof > 0 ? std::sqrt(r.squaredNorm() / sigma_dof) : 0.0;
+  res.residual_units = ResidualsByUnit(ds, r, problem->row_source(), Jw, hat, sigma_dof);
+  if (res.residual_units.size() > 1) {
+    res.rms = res.residual_units[0].rms;
+    res.max_abs = res.residual_units[0].max_abs;
+    res.sigma = res.residual_units[0].sigma;
   }
   res.chi2 = chi2;
   res.chi2_p = res.dof > 0 ? ChiSquareSurvival(chi2, res.dof) : 1.0;
@@ -902,6 +910,13 @@ std::string Result::ToJson() const {
   j["residual_rms"] = Finite(rms);
   j["residual_max"] = Finite(max_abs);
   j["sigma"] = Finite(sigma);
+  if (residual_units.size() > 1) {
+    json units = json::object();
+    for (const UnitResiduals& u : residual_units)
+      units[u.unit] = {{"rows", u.rows}, {"rms", Finite(u.rms)}, {"max", Finite(u.max_abs)},
+                       {"sigma", Finite(u.sigma)}};
+    j["residual_units"] = units;
+  }
   j["n_observations"] = n_observations;
   j["n_parameters"] = n_parameters;
   j["condition_number"] = std::isfinite(condition_number) ? json(condition_number) : json(nullptr);

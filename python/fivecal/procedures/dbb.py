@@ -311,9 +311,17 @@ class FourStepResult:
 
     def step_trace(self, setup: str) -> Trace:
         """Radial deviations from the fitted circle of one step, against the
-        plane angle (deg)."""
+        angle (deg) of each measured point about the fitted centre: drawn at
+        (angle, radius + deviation) about that centre, the trace lands on the
+        measured points. (The step's ``angles`` are about the nominal pivot
+        O', as the command put the ball: they are off by up to |centre| /
+        radius, a few mrad with a pivot tens of µm away.)"""
         s = self.step(setup)
-        return Trace(np.degrees(np.asarray(s.angles)), np.asarray(s.residuals), label=setup)
+        d = np.asarray(s.points) - np.asarray(s.centre)
+        a = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+        # the same turn as the step's own angles (unwrap starts at -pi..pi)
+        a += 2 * np.pi * np.round((np.asarray(s.angles)[0] - a[0]) / (2 * np.pi))
+        return Trace(np.degrees(a), np.asarray(s.residuals), label=setup)
 
     def to_dict(self) -> dict:
         d = {"method": "Jiang & Cripps 2015 four-step DBB test",

@@ -265,9 +265,16 @@ def _fit_section(result) -> str:
     a = fd.assessment
     cls = "bad" if not a.usable else ("warn" if result.unidentifiable or fd.inseparable else "ok")
     chi2 = getattr(result, "chi2", None)
-    rows = [("residual rms", f"{result.rms * 1e3:.3f} µm"), ("largest |residual|", f"{result.max_abs * 1e3:.3f} µm"),
-            ("σ̂ (a posteriori)", f"{result.sigma * 1e3:.3f} µm"),
-            ("parameters", f"{result.n_parameters} estimated, rank {result.rank}"),
+    from ..identification import MICRO_UNITS
+    rows = []
+    for unit, u in (getattr(result, "residual_units", None)
+                    or {"mm": {"rms": result.rms, "max_abs": result.max_abs, "sigma": result.sigma}}).items():
+        f, shown = MICRO_UNITS.get(unit, (1.0, unit))
+        of = "" if unit == "mm" else f" ({unit} rows: rotations)"
+        rows += [(f"residual rms{of}", f"{u['rms'] * f:.3f} {shown}"),
+                 (f"largest |residual|{of}", f"{u['max_abs'] * f:.3f} {shown}"),
+                 (f"σ̂ (a posteriori){of}", f"{u['sigma'] * f:.3f} {shown}")]
+    rows += [("parameters", f"{result.n_parameters} estimated, rank {result.rank}"),
             ("condition number", f"{result.condition_number:.4g} (of the scaled Jacobian)"),
             ("solver", f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} "
                        "iterations")]

@@ -500,11 +500,16 @@ def dbb_residual_figure(result, title: str = "Double ball bar: residuals after t
 
 
 def plot_residual_histogram(result, path: str) -> str:
-    """Histogram of the residuals (µm) with the normal density of the
-    a-posteriori sigma; writes ``path`` (PNG) and returns it."""
+    """Histogram of the residuals of the mm rows (µm) with the normal density
+    of their a-posteriori sigma (a pose's rotation rows, in rad, are left
+    out: in µm they would pile up at 0); writes ``path`` (PNG) and returns it."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    r = result.residuals * 1e3
+    r = np.asarray(result.residuals) * 1e3
+    units = result.row_units() if hasattr(result, "row_units") else None
+    of = ""
+    if units is not None and units.size == r.size and (units != "mm").any():
+        r, of = r[units == "mm"], " (mm rows)"
     counts, edges, _ = ax.hist(r, bins=max(10, int(np.sqrt(r.size))), color="#4c78a8", label="residuals")
     sig = result.sigma * 1e3
     if sig > 0 and r.size:
@@ -514,7 +519,7 @@ def plot_residual_histogram(result, path: str) -> str:
         ax.legend(fontsize=8)
     ax.set_xlabel("residual (µm)")
     ax.set_ylabel("count")
-    ax.set_title(f"Residuals: rms {result.rms * 1e3:.3f} µm, σ̂ {result.sigma * 1e3:.3f} µm")
+    ax.set_title(f"Residuals{of}: rms {result.rms * 1e3:.3f} µm, σ̂ {result.sigma * 1e3:.3f} µm")
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
     plt.close(fig)

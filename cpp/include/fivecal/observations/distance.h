@@ -30,13 +30,6 @@ struct StationRefs {
 //        instrument's reading.
 // Derivatives (the automatic ones): d r / d s = -u, d r / d P_F = u with
 // u = (P_F - s) / |P_F - s|, d r / d l = -1. Only the templated form exists.
-template <typename T>
-Vec3<T> TargetInF(const Machine& m, const T* theta, const double* q, const int* dir, bool on_tool,
-                  const Vec3<T>& target) {
-  Eigen::Vector3d p_last;
-  const Frame<T> F = ChainFrame<T>(m, on_tool ? m.tool_chain() : m.workpiece_chain(), theta, q, dir, &p_last);
-  return F * Vec3<T>(target - p_last.template cast<T>());
-}
 
 class DistanceResidual {
  public:
@@ -47,12 +40,8 @@ class DistanceResidual {
   bool operator()(T const* const* p, T* residual) const {
     std::vector<T> theta;
     access_.Theta(p, &theta);
-    Vec3<T> target = o_.target_point.template cast<T>();
-    Vec3<T> station = o_.instrument_origin.template cast<T>();
-    for (int i = 0; i < 3; ++i) {
-      target[i] += access_.Setup(p, refs_.target[i]);
-      station[i] += access_.Setup(p, refs_.position[i]);
-    }
+    const Vec3<T> target = WithCorrections<T>(access_, p, o_.target_point, refs_.target);
+    const Vec3<T> station = WithCorrections<T>(access_, p, o_.instrument_origin, refs_.position);
     const Vec3<T> P = TargetInF<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(), o_.on_tool,
                                    target);
     // The target never sits on the station (validated readings are

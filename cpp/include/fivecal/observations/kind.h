@@ -176,11 +176,15 @@ class ObservationKind {
   virtual const char* noise_class() const { return name(); }
   // The kind's noise level among the simulator's levels.
   double NoiseLevel(const NoiseLevels& n) const;
-  // The noise classes the kind draws on: its noise_class(), and more for a
-  // kind whose rows differ in unit (a pose's rotation rows: "pose_angle").
-  virtual std::vector<std::string> noise_classes() const { return {noise_class()}; }
-  // The level of residual row k (default: the kind's level).
-  virtual double NoiseLevelRow(const NoiseLevels& n, int) const { return NoiseLevel(n); }
+  // The noise class residual row k draws on: noise_class(), or another for
+  // rows in another unit (a pose's rotation rows: "pose_angle"). A class's
+  // unit is that of its rows (NoiseClassUnit): the one place that says which
+  // levels are in rad.
+  virtual const char* noise_class_row(int) const { return noise_class(); }
+  // The noise classes of the kind's rows, each once, in row order.
+  std::vector<std::string> noise_classes() const;
+  // The level of residual row k.
+  double NoiseLevelRow(const NoiseLevels& n, int k) const;
   // The noise inputs of observation i of a plan (SimulationPlan), from a
   // simulated entry (`slot`) or from a recorded observation (`rec`, `slot`
   // null).

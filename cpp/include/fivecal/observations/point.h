@@ -40,14 +40,39 @@ struct InstrumentRefs {
 // Only this templated form exists (ObservationKind::analytic() is false):
 // the analytic batch has the tool point in the workpiece frame, not a point
 // in F, and a tracker dataset is small enough for automatic derivatives.
-// The target in the instrument frame (see above); q in internal units.
+// The erroneous frame of the chain that carries a target (tool side or
+// workpiece side) and its last axis point p_last: a target point t sits at
+// F (t - p_last) in F. Every fixed-frame kind (point, pose, distance) finds
+// its target through it; q in internal units.
+template <typename T>
+Frame<T> TargetChainFrame(const Machine& m, const T* theta, const double* q, const int* dir, bool on_tool,
+                          Eigen::Vector3d* p_last) {
+  return ChainFrame<T>(m, on_tool ? m.tool_chain() : m.workpiece_chain(), theta, q, dir, p_last);
+}
+
+// The target in F (P_F above).
+template <typename T>
+Vec3<T> TargetInF(const Machine& m, const T* theta, const double* q, const int* dir, bool on_tool,
+                  const Vec3<T>& target) {
+  Eigen::Vector3d p_last;
+  const Frame<T> F = TargetChainFrame<T>(m, theta, q, dir, on_tool, &p_last);
+  return F * Vec3<T>(target - p_last.template cast<T>());
+}
+
+// A nominal vector of the file plus its three setup corrections (a target
+// point and its offsets, an instrument origin or station and its position
+// correction, nominal angles and theirs).
+template <typename T>
+Vec3<T> WithCorrections(const ParameterAccess& a, T const* const* p, const Eigen::Vector3d& nominal,
+                        const SetupRef (&refs)[3]) {
+  return nominal.template cast<T>() + Vec3<T>(a.Setup(p, refs[0]), a.Setup(p, refs[1]), a.Setup(p, refs[2]));
+}
+
+// The target in the instrument frame (see above).
 template <typename T>
 Vec3<T> PointInInstrument(const Machine& m, const T* theta, const double* q, const int* dir, bool on_tool,
                           const Vec3<T>& target, const Vec3<T>& origin, const T* angles) {
-  Eigen::Vector3d p_last;
-  const Frame<T> F = ChainFrame<T>(m, on_tool ? m.tool_chain() : m.workpiece_chain(), theta, q, dir, &p_last);
-  const Vec3<T> P = F * Vec3<T>(target - p_last.template cast<T>());
-  return RotZYX(angles[0], angles[1], angles[2]).transpose() * (P - origin);
+  return RotZYX(angles[0], angles[1], angles[2]).transpose() * (TargetInF<T>(m, theta, q, dir, on_tool, target) - origin);
 }
 
 // What the fixed-frame kinds (point, pose, distance) share: an instrument
@@ -92,16 +117,11 @@ class PointResidual {
   bool operator()(T const* const* p, T* residual) const {
     std::vector<T> theta;
     access_.Theta(p, &theta);
-    Vec3<T> target = o_.target_point.template cast<T>();
-    Vec3<T> origin = o_.instrument_origin.template cast<T>();
-    T ang[3];
-    for (int i = 0; i < 3; ++i) {
-      target[i] += access_.Setup(p, refs_.target[i]);
-      origin[i] += access_.Setup(p, refs_.position[i]);
-      ang[i] = T(o_.instrument_angles[i]) + access_.Setup(p, refs_.angle[i]);
-    }
+    const Vec3<T> target = WithCorrections<T>(access_, p, o_.target_point, refs_.target);
+    const Vec3<T> origin = WithCorrections<T>(access_, p, o_.instrument_origin, refs_.position);
+    const Vec3<T> ang = WithCorrections<T>(access_, p, o_.instrument_angles, refs_.angle);
     const Vec3<T> r = PointInInstrument<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(),
-                                           o_.on_tool, target, origin, ang) -
+                                           o_.on_tool, target, origin, ang.data()) -
                       o_.measured.template cast<T>();
     for (int i = 0; i < 3; ++i) residual[i] = r[i];
     return true;

@@ -39,7 +39,7 @@ void PoseInInstrument(const Machine& m, const T* theta, const double* q, const i
                       const Vec3<T>& target, const Mat3<T>& target_R, const Vec3<T>& origin, const T* angles,
                       Vec3<T>* position, Mat3<T>* R) {
   Eigen::Vector3d p_last;
-  const Frame<T> F = ChainFrame<T>(m, on_tool ? m.tool_chain() : m.workpiece_chain(), theta, q, dir, &p_last);
+  const Frame<T> F = TargetChainFrame<T>(m, theta, q, dir, on_tool, &p_last);
   const Mat3<T> RIt = RotZYX(angles[0], angles[1], angles[2]).transpose();
   *position = RIt * (F * Vec3<T>(target - p_last.template cast<T>()) - origin);
   *R = RIt * F.R * target_R;
@@ -72,20 +72,15 @@ class PoseResidual {
   bool operator()(T const* const* p, T* residual) const {
     std::vector<T> theta;
     access_.Theta(p, &theta);
-    Vec3<T> target = o_.target_point.template cast<T>();
-    Vec3<T> origin = o_.instrument_origin.template cast<T>();
-    T ang[3], tang[3];
-    for (int i = 0; i < 3; ++i) {
-      target[i] += access_.Setup(p, refs_.point.target[i]);
-      origin[i] += access_.Setup(p, refs_.point.position[i]);
-      ang[i] = T(o_.instrument_angles[i]) + access_.Setup(p, refs_.point.angle[i]);
-      tang[i] = access_.Setup(p, refs_.target_angle[i]);
-    }
+    const Vec3<T> target = WithCorrections<T>(access_, p, o_.target_point, refs_.point.target);
+    const Vec3<T> origin = WithCorrections<T>(access_, p, o_.instrument_origin, refs_.point.position);
+    const Vec3<T> ang = WithCorrections<T>(access_, p, o_.instrument_angles, refs_.point.angle);
+    const Vec3<T> tang = WithCorrections<T>(access_, p, Eigen::Vector3d::Zero(), refs_.target_angle);
     const Mat3<T> target_R = target_R0_.template cast<T>() * RotZYX(tang[0], tang[1], tang[2]);
     Vec3<T> P;
     Mat3<T> R;
     PoseInInstrument<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(), o_.on_tool, target,
-                        target_R, origin, ang, &P, &R);
+                        target_R, origin, ang.data(), &P, &R);
     const Vec3<T> rp = P - o_.measured.template cast<T>();
     const Mat3<T> misfit = measured_RT_.template cast<T>() * R;
     const Vec3<T> rr = VectorOfRotation<T>(misfit);

@@ -21,6 +21,18 @@ class ProbeTouchKind : public ObservationKind {
   double default_sigma() const override { return 0.001; }
   bool probe_touch() const override { return true; }
 
+  // A touch names its target, one of the artefact's <name()>s; the file has
+  // nothing else of the kind's own.
+  std::vector<const char*> json_keys() const final { return {"type", "target", "axes", "direction", "sigma", "id"}; }
+  void Read(const nlohmann::json& o, const std::string& where, const Dataset& ds, Observation* ob) const final;
+  void Write(const Observation&, nlohmann::json*) const final {}  // target: written by the dataset
+  // A planned touch: its target and where on it ("point"; a sphere's
+  // touches say "normal" instead).
+  std::vector<const char*> plan_keys() const override { return {"type", "target", "axes", "point", "direction", "id"}; }
+  // The stylus tip and the first DefaultTargetParameters() of the target's
+  // setup group.
+  void DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                    std::set<int>* out) const final;
   void Validate(const Dataset& ds, const Observation& o,
                 const std::function<std::string()>& where) const final;
   void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
@@ -35,9 +47,16 @@ class ProbeTouchKind : public ObservationKind {
 
  protected:
   static PriorClass ProbeClass();
-  // The target of `o` exists in the artefact.
-  virtual void ValidateTarget(const Dataset& ds, const Observation& o,
-                              const std::function<std::string()>& where) const = 0;
+  // The index of the artefact's target `id` of this kind (-1: none).
+  virtual int TargetIndex(const Artefact& a, const std::string& id) const = 0;
+  // How many of the target's setup parameters, in group order, a touch
+  // estimates by default.
+  virtual int DefaultTargetParameters() const = 0;
+  // TargetIndex, or std::invalid_argument naming `where`.target.
+  int RequireTarget(const Dataset& ds, const std::string& id, const std::string& where) const;
+  // The stylus tip centre of touch `o` at the fit (workpiece frame): where
+  // the report draws the touch's residual.
+  static Eigen::Vector3d FittedTipCentre(const ReportContext& c, const Observation& o);
   using Gap = std::function<double(const Eigen::Vector3d&)>;
   // A planned touch on target ob->target: the surface normal n at the touch,
   // the nominal tip-centre target c, and the signed distance of the true

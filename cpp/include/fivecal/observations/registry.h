@@ -31,6 +31,10 @@ std::string KindList();
 // The simulator's noise classes (ObservationKind::noise_class()), each
 // once, in registration order: the keys of a spec's "sigma" object.
 std::vector<std::string> NoiseClasses();
+// The unit of a noise class's levels: that of the residual rows that draw on
+// it ("mm"; "rad" for a pose's rotation rows). Throws std::invalid_argument
+// for a class no kind has.
+std::string NoiseClassUnit(const std::string& noise_class);
 
 // Whether the data fix the length scale: an observation of a kind that does
 // (ball bar, 3D ball displacement), or an artefact length (a scale bar whose

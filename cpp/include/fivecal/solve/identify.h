@@ -25,7 +25,10 @@ struct IdentifyOptions {
   std::vector<std::string> fix;            // removed from the estimated set
   std::map<std::string, double> initial;   // start values / fixed values
   std::string robust;                      // "", "huber" or "cauchy"
-  double robust_scale = 0.0;               // mm; 0 = 3 x the MAD-based sigma of a plain fit
+  // mm; 0 = 3 x the MAD-based sigma of a plain fit. A row in another unit
+  // (a pose's rotation rows, rad) is held to the same multiple of its
+  // declared noise as its observation's position rows.
+  double robust_scale = 0.0;
   int max_iterations = 200;
   bool include_default_setup = true;
   // Fit even when the set is rank deficient (minimum-norm steps); the result
@@ -58,6 +61,15 @@ struct VarianceComponent {
   bool estimated = false;  // false: too little redundancy, the declared noise is kept
 };
 
+// The residual rows of one unit (a pose's position rows, mm, and rotation
+// rows, rad, are summarised apart: one figure over both would be in no unit).
+struct UnitResiduals {
+  std::string unit;                     // "mm", "rad"
+  int rows = 0;
+  double rms = 0, max_abs = 0, sigma = 0;  // in `unit`; sigma a posteriori
+  double dof = 0;                       // the unit's share of the degrees of freedom
+};
+
 struct Result {
   std::vector<std::string> names;     // every parameter of the problem
   Eigen::VectorXd values;             // every parameter (fitted or fixed)
@@ -69,7 +81,8 @@ struct Result {
   std::vector<int> residual_source;   // observation index or -(1 + scale bar)
   Eigen::MatrixXd residual_vectors;   // per observation, workpiece frame (mm)
   Eigen::MatrixXd points;             // per observation: predicted tool point
-  double rms = 0, max_abs = 0, sigma = 0;
+  double rms = 0, max_abs = 0, sigma = 0;  // of the mm rows
+  std::vector<UnitResiduals> residual_units;  // per unit, "mm" first
   double condition_number = 0;
   int rank = 0;
   std::vector<std::vector<std::string>> unidentifiable;
@@ -78,7 +91,7 @@ struct Result {
   std::string message;
   int n_observations = 0;
   int n_parameters = 0;
-  std::vector<int> outliers;          // residual rows beyond the robust scale
+  std::vector<int> outliers;          // residual rows beyond the robust scale (at their declared noise)
   double robust_scale = 0;
   double initial_cost = 0, final_cost = 0;
 

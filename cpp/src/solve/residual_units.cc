@@ -1,0 +1,99 @@
+#include "solve/residual_units.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "fivecal/observations/registry.h"
+
+namespace fivecal {
+namespace {
+
+// The unit of every row ("mm" for a scale bar row), from the kinds.
+std::vector<const char*> RowUnits(const Dataset& ds, const std::vector<int>& source) {
+  std::vector<const char*> unit(source.size(), "mm");
+  std::vector<int> seen(ds.observations.size(), 0);
+  for (size_t i = 0; i < source.size(); ++i) {
+    const int s = source[i];
+    if (s < 0 || s >= static_cast<int>(ds.observations.size())) continue;
+    unit[i] = KindOf(ds.observations[s]).unit_row(seen[s]++);
+  }
+  return unit;
+}
+
+bool SameUnit(const char* a, const char* b) { return std::strcmp(a, b) == 0; }
+
+}  // namespace
+
+Eigen::VectorXd PositionScaledResiduals(const Dataset& ds, const Eigen::VectorXd& r, const Eigen::VectorXd& sigma,
+                                        const std::vector<int>& source) {
+  const std::vector<const char*> unit = RowUnits(ds, source);
+  const int n_obs = static_cast<int>(ds.observations.size());
+  auto own = [&](int s) { return s >= 0 && s < n_obs; };
+  // The observation's position noise: its rows of the first unit.
+  std::vector<double> ref(ds.observations.size(), 0.0);
+  for (size_t i = 0; i < source.size(); ++i) {
+    const int s = source[i];
+    if (own(s) && SameUnit(unit[i], KindOf(ds.observations[s]).unit_row(0))) ref[s] = std::max(ref[s], sigma[i]);
+  }
+  Eigen::VectorXd out = r;
+  for (size_t i = 0; i < source.size(); ++i) {
+    const int s = source[i];
+    if (own(s) && ref[s] > 0 && sigma[i] > 0) out[i] = r[i] * (ref[s] / sigma[i]);
+  }
+  return out;
+}
+
+double DefaultRobustScale(const Eigen::VectorXd& scaled) {
+  if (scaled.size() == 0) return 1e-6;
+  std::vector<double> a(scaled.data(), scaled.data() + scaled.size());
+  for (double& x : a) x = std::abs(x);
+  std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+  const double scale = 3.0 * 1.4826 * a[a.size() / 2];
+  return scale > 0 ? scale : 1e-6;
+}
+
+std::vector<int> RobustOutliers(const Eigen::VectorXd& scaled, double scale) {
+  std::vector<int> out;
+  for (int i = 0; i < scaled.size(); ++i)
+    if (std::abs(scaled[i]) > scale) out.push_back(i);
+  return out;
+}
+
+std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
+                                           const std::vector<int>& source, const Eigen::MatrixXd& Jw,
+                                           const Eigen::MatrixXd& hat, int dof) {
+  const std::vector<const char*> unit = RowUnits(ds, source);
+  // "mm" first: every kind's first row is a length.
+  std::vector<UnitResiduals> out(1);
+  out[0].unit = "mm";
+  std::vector<int> group(unit.size());
+  for (size_t i = 0; i < unit.size(); ++i) {
+    size_t g = 0;
+    while (g < out.size() && out[g].unit != unit[i]) ++g;
+    if (g == out.size()) out.emplace_back().unit = unit[i];
+    group[i] = static_cast<int>(g);
+  }
+  std::vector<double> ss(out.size(), 0.0), used(out.size(), 0.0);
+  for (size_t i = 0; i < unit.size(); ++i) {
+    UnitResiduals& u = out[group[i]];
+    ++u.rows;
+    ss[group[i]] += r[i] * r[i];
+    u.max_abs = std::max(u.max_abs, std::abs(r[i]));
+    if (group[i] > 0 && hat.rows() == Jw.cols())
+      used[group[i]] += Jw.row(i).dot(hat * Jw.row(i).transpose());
+  }
+  double other_dof = 0;
+  for (size_t g = 1; g < out.size(); ++g) other_dof += out[g].rows - used[g];
+  for (size_t g = 0; g < out.size(); ++g) {
+    UnitResiduals& u = out[g];
+    u.rms = u.rows ? std::sqrt(ss[g] / u.rows) : 0.0;
+    u.dof = g == 0 ? dof - other_dof : u.rows - used[g];
+    u.sigma = u.dof > 0 ? std::sqrt(ss[g] / u.dof) : 0.0;
+  }
+  if (out[0].rows == 0) out.erase(out.begin());
+  return out;
+}
+
+}  // namespace fivecal
