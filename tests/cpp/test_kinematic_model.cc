@@ -8,6 +8,7 @@
 
 #include "fivecal/model/kinematic_model.h"
 #include "fivecal/model/kinematics.h"
+#include "fivecal/observations/probe_trigger.h"
 
 namespace fivecal {
 namespace {
@@ -95,6 +96,30 @@ TEST_P(KinematicModelTest, PointAndJacobianMatchJetKinematics) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Machines, KinematicModelTest, ::testing::Values(0, 1, 2));
+
+TEST_P(KinematicModelTest, ProbeFrameRotationIsTheNominalChainFramesRotation) {
+  // The probe-lobing rotation takes the product of the rotary axes' own
+  // rotations for the nominal chain frames: bit for bit the same.
+  const Machine m = Machine::FromJson(kMachines[GetParam()]);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(m.num_parameters());
+  for (int trial = 0; trial < 50; ++trial) {
+    Observation o;
+    o.axes.resize(m.num_axes());
+    for (int k = 0; k < m.num_axes(); ++k) o.axes[k] = m.axis(k).rotary() ? 360 * u(rng) : 300 * u(rng);
+    std::vector<double> q(m.num_axes());
+    AxisValuesToInternal(m, o.axes.data(), q.data());
+    Eigen::Vector3d pt, pw;
+    const Frame<double> Ft = ChainFrame<double>(m, m.tool_chain(), zero.data(), q.data(), nullptr, &pt);
+    const Frame<double> Fw = ChainFrame<double>(m, m.workpiece_chain(), zero.data(), q.data(), nullptr, &pw);
+    // At the zero pose the rotation is the probe's axes (times exact identities).
+    Observation zero_pose;
+    zero_pose.axes = Eigen::VectorXd::Zero(m.num_axes());
+    const Eigen::Matrix3d expected = ProbeFrameRotation(m, zero_pose) * (Fw.R.transpose() * Ft.R).transpose();
+    EXPECT_EQ(ProbeFrameRotation(m, o), expected) << trial;
+  }
+}
 
 TEST(KinematicModel, ToolAxisMatchesTemplatedKinematics) {
   const Machine m = Machine::FromJson(kMachines[0]);

@@ -538,6 +538,26 @@ TEST(FixedFrameKinds, SimulatedPoseNoiseIsWhatItDeclares) {
   EXPECT_EQ(mm.base.observations[0].sigma[3], PoseKind().default_sigma_row(3));
 }
 
+TEST(FixedFrameKinds, PoseNoiseDrawnAgainIntoOneDatasetIsAFreshDraw) {
+  // A pose composes its rotation inputs onto the current reading: a dataset
+  // realised again in place (Monte Carlo trials) must start from the
+  // noise-free reading, not from the previous trial's.
+  json spec = json::parse(kBase);
+  spec["plan"] = json::parse(kSamples.at("pose").plan);
+  spec["setup"] = json::parse(kSamples.at("pose").setup);
+  spec["sigma"] = {{"pose", 0.01}, {"pose_angle", 1e-3}};
+  const SimulationPlan plan = BuildSimulationPlan(spec.dump());
+  Dataset reused = plan.base;
+  for (uint64_t seed : {7u, 8u, 9u}) {
+    AddNoiseInto(plan, seed, &reused);
+    const Dataset fresh = AddNoise(plan, seed);
+    for (size_t i = 0; i < fresh.observations.size(); ++i) {
+      EXPECT_EQ(reused.observations[i].measured_rotation, fresh.observations[i].measured_rotation) << seed << " " << i;
+      EXPECT_EQ(reused.observations[i].measured, fresh.observations[i].measured) << seed << " " << i;
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Registry, EveryKind, ::testing::ValuesIn(ObservationKinds()),
                          [](const ::testing::TestParamInfo<const ObservationKind*>& info) {
                            return std::string(info.param->name());

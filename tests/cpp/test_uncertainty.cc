@@ -295,6 +295,27 @@ TEST(Gum, SensitivityMatrixMatchesRefits) {
   }
 }
 
+TEST(Refit, SessionEditedInPlaceIsAFreshRefit) {
+  // Monte Carlo trials edit one dataset per thread and refresh the problem
+  // prepared on it: each trial must be the refit of a freshly drawn dataset.
+  const SimulationPlan plan = BuildSimulationPlan(TangoSpec());
+  const IdentifyOptions opt = SmallFit();
+  const Result fit = Identify(plan.base, opt);
+  const Refit refit(plan.base, opt, fit);
+  Refit::Session session(refit);
+  for (uint64_t seed : {11u, 12u, 13u}) {
+    AddNoiseInto(plan, seed, &session.dataset());
+    const Dataset fresh = AddNoise(plan, seed);
+    ExpectSameReadings(session.dataset(), fresh);
+    const RefitResult a = session.Fit(true);
+    const RefitResult b = refit.Fit(fresh, true);
+    EXPECT_EQ(a.values, b.values) << seed;
+    EXPECT_EQ(a.std, b.std) << seed;
+    EXPECT_EQ(a.iterations, b.iterations) << seed;
+    EXPECT_TRUE(a.converged);
+  }
+}
+
 TEST(Gum, CyclesPooledByDaysRemovesTheChangeBetweenDays) {
   // Four cycles on each of three days; each day the machine's EX0C is 5 um
   // off (a change between days), the noise is 0.6 um. Pooling by days removes

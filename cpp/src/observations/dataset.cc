@@ -1,6 +1,8 @@
 #include "fivecal/observations/dataset.h"
 
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <algorithm>
 #include <exception>
 #include <functional>
@@ -63,18 +65,25 @@ std::string RowUnits(const ObservationKind& k) {
   return "[" + u + "]";
 }
 
-void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::string& where) {
+// `where()` names the field; called only to build a message (the check runs
+// on every observation that declares its sigma).
+template <typename Where>
+void CheckSigmaOf(const Eigen::VectorXd& sigma, ObservationType t, const Where& where) {
   if (sigma.size() == 0) return;
   const ObservationKind& k = KindOf(t);
   if (sigma.size() != k.rows())
-    throw std::invalid_argument(where + ": expected " + (OneUnit(k) ? "a number or " : "") +
+    throw std::invalid_argument(where() + ": expected " + (OneUnit(k) ? "a number or " : "") +
                                 std::to_string(k.rows()) + (k.rows() == 1 ? " value" : " values") +
                                 " (one per residual row of a " + k.name() +
                                 " observation, " + RowUnits(k) + "), got " + std::to_string(sigma.size()));
   for (int r = 0; r < sigma.size(); ++r)
     if (!(sigma[r] >= kMinSigma && sigma[r] <= kMaxSigma))
-      throw std::invalid_argument(where + (sigma.size() > 1 ? "[" + std::to_string(r) + "]" : "") +
+      throw std::invalid_argument(where() + (sigma.size() > 1 ? "[" + std::to_string(r) + "]" : "") +
                                   ": must be a finite number > 0 " + k.unit_row(r) + " (1e-9 to 1e3)");
+}
+
+void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::string& where) {
+  CheckSigmaOf(sigma, t, [&] { return where; });
 }
 
 void ValidateScaleBars(const Artefact& artefact) {
@@ -92,30 +101,35 @@ void ValidateScaleBars(const Artefact& artefact) {
   }
 }
 
-Eigen::VectorXd ReadSigma(const json& j, ObservationType t, const std::string& where) {
+template <typename Where>
+Eigen::VectorXd ReadSigmaOf(const json& j, ObservationType t, const Where& where) {
   const ObservationKind& k = KindOf(t);
   const int rows = k.rows();
   Eigen::VectorXd s;
   if (j.is_number()) {
     if (!OneUnit(k))
-      throw std::invalid_argument(where + ": a " + std::string(k.name()) + " observation's rows are in " +
+      throw std::invalid_argument(where() + ": a " + std::string(k.name()) + " observation's rows are in " +
                                   RowUnits(k) + ": give " + std::to_string(rows) + " values, not one number");
     s = Eigen::VectorXd::Constant(rows, j.get<double>());
     if (!(s[0] >= kMinSigma && s[0] <= kMaxSigma))
-      throw std::invalid_argument(where + ": must be a finite number > 0 " + k.unit_row(0) + " (1e-9 to 1e3)");
+      throw std::invalid_argument(where() + ": must be a finite number > 0 " + k.unit_row(0) + " (1e-9 to 1e3)");
     return s;
   }
   if (!j.is_array())
-    throw std::invalid_argument(where + ": expected " + (OneUnit(k) ? "a number (" + RowUnits(k) + ") or " : "") +
+    throw std::invalid_argument(where() + ": expected " + (OneUnit(k) ? "a number (" + RowUnits(k) + ") or " : "") +
                                 "an array of " + std::to_string(rows) + " (" + RowUnits(k) + ")");
   s.resize(static_cast<Eigen::Index>(j.size()));
   for (size_t r = 0; r < j.size(); ++r) {
     if (!j[r].is_number())
-      throw std::invalid_argument(where + "[" + std::to_string(r) + "]: expected a number");
+      throw std::invalid_argument(where() + "[" + std::to_string(r) + "]: expected a number");
     s[static_cast<Eigen::Index>(r)] = j[r].get<double>();
   }
-  CheckSigma(s, t, where);
+  CheckSigmaOf(s, t, where);
   return s;
+}
+
+Eigen::VectorXd ReadSigma(const json& j, ObservationType t, const std::string& where) {
+  return ReadSigmaOf(j, t, [&] { return where; });
 }
 
 // "instruments": {"<id>": {"sigma": number | [per row]}}. Read raw here (the
@@ -322,17 +336,30 @@ Dataset ParseHead(const json& j) {
 // path (a valid field) each does the test inline; only a field that fails it
 // goes through the json_util reader, which names what is wrong (or accepts a
 // rarer valid form).
+//
+// The kinds' Read takes the name as a string, so it is built for every
+// observation: into one buffer per thread, which after the first
+// observation allocates nothing (one observation is parsed at a time per
+// thread; a message copies the name before it is thrown).
 class ObservationName {
  public:
   explicit ObservationName(size_t i) : i_(i) {}
   const std::string& operator()() {
-    if (s_.empty()) s_ = "dataset.observations[" + std::to_string(i_) + "]";
-    return s_;
+    static thread_local std::string buffer;
+    if (!built_) {
+      char digits[24];
+      const int n = std::snprintf(digits, sizeof digits, "%zu", i_);
+      buffer.assign("dataset.observations[");
+      buffer.append(digits, static_cast<size_t>(n));
+      buffer.push_back(']');
+      built_ = true;
+    }
+    return buffer;
   }
 
  private:
   size_t i_;
-  std::string s_;
+  bool built_ = false;
 };
 
 void CheckKeysOf(const json& o, const std::vector<const char*>& allowed, ObservationName& w) {
@@ -411,7 +438,7 @@ Observation ParseObservation(const Dataset& ds, const json& o, size_t i, std::ve
     }
   }
   kind->Read(o, w(), ds, &ob);
-  if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigma(*sj, ob.type, w() + ".sigma");
+  if (const json* sj = Find(o, "sigma")) ob.sigma = ReadSigmaOf(*sj, ob.type, [&] { return w() + ".sigma"; });
   if (o.contains("id")) ob.id = StringOf(o, "id", w);
   return ob;
 }
@@ -910,10 +937,10 @@ void Dataset::Validate() const {
                                     ": must be -1, 0 or +1");
     }
     KindOf(o).Validate(*this, o, w);
-    if (o.sigma.size() > 0) CheckSigma(o.sigma, o.type, w() + ".sigma");
+    if (o.sigma.size() > 0) CheckSigmaOf(o.sigma, o.type, [&] { return w() + ".sigma"; });
     if (const char* key = KindOf(o).instrument_key()) {
       const auto first = instrument_ids.emplace(o.setup, std::make_pair(key, i)).first->second;
-      if (std::string(first.first) != key)
+      if (std::strcmp(first.first, key) != 0)
         throw std::invalid_argument(w() + "." + key + ": " + Quote(o.setup) + " is also the " + first.first +
                                     " of observations[" + std::to_string(first.second) +
                                     "]; its parameters instrument." + o.setup +

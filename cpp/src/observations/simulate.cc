@@ -56,15 +56,31 @@ void InitSlots(SimulationPlan* plan) {
 
 // Observation i of `ds` with input values `x` (one per input of i, in the
 // input's own unit, added to the noise-free value).
+// Into a dataset of the plan's structure (a copy of plan.base, possibly
+// realised before): each observation with inputs is reset to its noise-free
+// reading first (a kind may compose its inputs onto the current reading),
+// the others were never changed.
+template <typename Draw>
+void RealizeInto(const SimulationPlan& plan, Draw&& draw, Dataset* ds) {
+  if (ds->observations.size() != plan.base.observations.size())
+    throw std::invalid_argument("simulate: the dataset has " + std::to_string(ds->observations.size()) +
+                                " observations, the plan " + std::to_string(plan.base.observations.size()));
+  const int n_in = plan.num_inputs();
+  int last = -1;
+  for (int k = 0; k < n_in; ++k) {
+    const int i = plan.input_observation[k];
+    Observation& o = ds->observations[i];
+    // Copy-assignment into an observation of the same shape reuses its buffers.
+    if (i != last) o = plan.base.observations[i];
+    last = i;
+    KindOf(o).ApplyInput(plan, i, plan.input_component[k], draw(k), &o);
+  }
+}
+
 template <typename Draw>
 Dataset Realize(const SimulationPlan& plan, Draw&& draw) {
   Dataset ds = plan.base;
-  const int n_in = plan.num_inputs();
-  for (int k = 0; k < n_in; ++k) {
-    const int i = plan.input_observation[k];
-    Observation& o = ds.observations[i];
-    KindOf(o).ApplyInput(plan, i, plan.input_component[k], draw(k), &o);
-  }
+  RealizeInto(plan, std::forward<Draw>(draw), &ds);
   return ds;
 }
 }  // namespace
@@ -86,10 +102,22 @@ Dataset AddNoise(const SimulationPlan& plan, uint64_t seed) {
 }
 
 Dataset ApplyInputDeviations(const SimulationPlan& plan, const Eigen::VectorXd& deviation) {
+  Dataset ds = plan.base;
+  ApplyInputDeviationsInto(plan, deviation, &ds);
+  return ds;
+}
+
+void AddNoiseInto(const SimulationPlan& plan, uint64_t seed, Dataset* ds) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  RealizeInto(plan, [&](int k) { return plan.input_sigma[k] * normal(rng); }, ds);
+}
+
+void ApplyInputDeviationsInto(const SimulationPlan& plan, const Eigen::VectorXd& deviation, Dataset* ds) {
   if (deviation.size() != plan.num_inputs())
     throw std::invalid_argument("input deviations: " + std::to_string(deviation.size()) +
                                 " values for " + std::to_string(plan.num_inputs()) + " inputs");
-  return Realize(plan, [&](int k) { return deviation[k] / plan.sensitivity[k]; });
+  RealizeInto(plan, [&](int k) { return deviation[k] / plan.sensitivity[k]; }, ds);
 }
 
 namespace {

@@ -3,6 +3,8 @@
 #include "fivecal/model/kinematics.h"
 #include "fivecal/observations/registry.h"
 
+#include <stdexcept>
+
 namespace fivecal {
 
 AnalyticEval::AnalyticEval(const Machine& m, const Eigen::VectorXd& values, const KinematicModel& model,
@@ -23,18 +25,11 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
     block_of_[estimated_[b]] = static_cast<int>(b);
     mutable_parameter_block_sizes()->push_back(1);
   }
-  const Machine& m = ds.machine();
   rows_.reserve(ds.observations.size());
   for (size_t i = 0; i < ds.observations.size(); ++i) {
-    const Observation& o = ds.observations[i];
-    const ObservationKind& kind = KindOf(o);
-    AnalyticRow r;
-    r.kind = &kind;
-    r.q.resize(m.num_axes());
-    AxisValuesToInternal(m, o.axes.data(), r.q.data());
-    r.dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
-    kind.PrepareAnalytic(ds, table, o, &r);
-    rows_.push_back(std::move(r));
+    const ObservationKind& kind = KindOf(ds.observations[i]);
+    rows_.emplace_back();
+    PrepareRow(table, static_cast<int>(i), &rows_.back());
     for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(static_cast<int>(i));
   }
   for (const ObservationKind* kind : ObservationKinds())
@@ -46,6 +41,31 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
     runs_.back().end = i + 1;
   }
   set_num_residuals(static_cast<int>(row_source_.size()));
+}
+
+void AnalyticResiduals::PrepareRow(const ParameterTable& table, int i, AnalyticRow* r) const {
+  const Machine& m = ds_.machine();
+  const Observation& o = ds_.observations[i];
+  const ObservationKind& kind = KindOf(o);
+  // A fresh row keeping its buffers (a refresh allocates nothing here).
+  std::vector<double> q = std::move(r->q);
+  std::vector<int> dir = std::move(r->dir);
+  *r = AnalyticRow();
+  r->kind = &kind;
+  q.resize(m.num_axes());
+  AxisValuesToInternal(m, o.axes.data(), q.data());
+  dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
+  r->q = std::move(q);
+  r->dir = std::move(dir);
+  kind.PrepareAnalytic(ds_, table, o, r);
+}
+
+void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::VectorXd& values) {
+  if (values.size() != values_.size()) throw std::invalid_argument("analytic residuals: wrong number of values");
+  values_ = values;
+  // The observation rows come first, one per observation (the artefact rows
+  // after them depend on the artefact only).
+  for (size_t i = 0; i < ds_.observations.size(); ++i) PrepareRow(table, static_cast<int>(i), &rows_[i]);
 }
 
 bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residuals,

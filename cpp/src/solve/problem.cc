@@ -380,6 +380,16 @@ void Problem::Evaluate(Eigen::VectorXd* residuals, Eigen::MatrixXd* jacobian) {
   }
 }
 
+bool Problem::Refresh(const Eigen::VectorXd& values) {
+  if (!analytic_) return false;
+  if (values.size() != values_.size())
+    throw std::invalid_argument("problem: expected " + std::to_string(values_.size()) + " values");
+  // In place: Ceres holds pointers into values_.
+  values_ = values;
+  analytic_->Refresh(table_, values);
+  return true;
+}
+
 double Problem::SigmaOfRow(int source, int k) const {
   if (source < 0) return kScaleBarSigma;
   return ObservationSigma(ds_, ds_.observations[source], k);

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <memory>
 #include <mutex>
 #include <random>
 #include <stdexcept>
@@ -183,29 +184,34 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
   std::atomic<bool> cancel{false};
   std::mutex mu;
   std::condition_variable cv;
-  auto run_trial = [&](int t) {
+  // Each worker edits its own copy of the dataset in place and re-fits the
+  // problem it prepared once, from the reference solution.
+  auto run_trial = [&](Refit::Session& session, int t) {
     const uint64_t s = TrialSeed(opt.seed, static_cast<uint64_t>(t));
-    Dataset ds = [&] {
-      if (!correlated) return AddNoise(plan, s);
+    if (!correlated) {
+      AddNoiseInto(plan, s, &session.dataset());
+    } else {
       std::mt19937_64 rng(s);
       std::normal_distribution<double> normal(0.0, 1.0);
       Eigen::VectorXd z(n_in);
       for (int k = 0; k < n_in; ++k) z[k] = normal(rng);
-      return ApplyInputDeviations(plan, L * z);
-    }();
-    const RefitResult rf = refit.Fit(ds, opt.trial_std);
+      ApplyInputDeviationsInto(plan, L * z, &session.dataset());
+    }
+    const RefitResult rf = session.Fit(opt.trial_std);
     if (!rf.values.allFinite()) return;
     samples.row(t) = rf.values.transpose();
     if (opt.trial_std) tstd.row(t) = rf.std.transpose();
     usable[t] = rf.converged ? 1 : 0;
   };
   auto worker = [&] {
+    std::unique_ptr<Refit::Session> session;
     for (;;) {
       if (cancel.load()) return;
       const int t = next.fetch_add(1);
       if (t >= M) return;
       try {
-        run_trial(t);
+        if (!session) session = std::make_unique<Refit::Session>(refit);
+        run_trial(*session, t);
       } catch (const std::exception&) {
         usable[t] = -1;
       }

@@ -99,6 +99,12 @@ Dataset AddNoise(const SimulationPlan& plan, uint64_t seed);
 // (mm): input i moves by deviation[i] / sensitivity[i] in its own unit.
 Dataset ApplyInputDeviations(const SimulationPlan& plan, const Eigen::VectorXd& deviation);
 
+// The same draws into `ds`, a dataset of the plan's structure (a copy of
+// plan.base, possibly realised before): only the observations with inputs
+// are written, with no dataset copied (Monte Carlo trials).
+void AddNoiseInto(const SimulationPlan& plan, uint64_t seed, Dataset* ds);
+void ApplyInputDeviationsInto(const SimulationPlan& plan, const Eigen::VectorXd& deviation, Dataset* ds);
+
 // For the observation kinds (observations/kind.h): the tool point (workpiece
 // frame) at axis commands `cmd` (mm / degrees) for machine parameters theta
 // and a tip at `tip`; and one more noise input of observation `obs`.

@@ -111,7 +111,12 @@ class AnalyticResiduals : public ceres::CostFunction {
   // Per row: the observation index, or -(1 + scale bar index).
   const std::vector<int>& row_source() const { return row_source_; }
 
+  // Prepares the observation rows again from the dataset (edited in place
+  // since, same structure) and takes `values` as the fixed parameters' values.
+  void Refresh(const ParameterTable& table, const Eigen::VectorXd& values);
+
  private:
+  void PrepareRow(const ParameterTable& table, int observation, AnalyticRow* r) const;
   struct Run {  // consecutive rows of one kind and variant
     const ObservationKind* kind;
     int begin, end;

@@ -124,6 +124,14 @@ class Problem {
   void AddPriors(const Eigen::VectorXd& prior_sigma, const Eigen::VectorXd& prior_mean);
   bool has_priors() const { return !prior_blocks_.empty(); }
 
+  // Re-reads the observations of the dataset (whose readings and axis values
+  // were edited in place since; types, targets and setups unchanged) and
+  // sets every parameter's value, so that the prepared problem serves the
+  // next fit (Monte Carlo trials). False, changing nothing, when the rows are
+  // not one analytic batch (the templated residuals captured the readings at
+  // construction): build a new Problem then.
+  bool Refresh(const Eigen::VectorXd& values);
+
  private:
   friend class ProblemBuilder;
   void AddCostBlock(ceres::CostFunction* cost, int num_residuals, const std::vector<double*>& ptrs,
@@ -147,7 +155,7 @@ class Problem {
   std::vector<ceres::ResidualBlockId> prior_blocks_;
   int num_rows_ = 0;
   std::vector<int> row_source_;
-  const AnalyticResiduals* analytic_ = nullptr;  // the single block when analytic (owned by problem_)
+  AnalyticResiduals* analytic_ = nullptr;  // the single block when analytic (owned by problem_)
 };
 
 }  // namespace fivecal

@@ -17,6 +17,8 @@
 
 namespace fivecal {
 
+class Problem;
+
 struct RefitResult {
   Eigen::VectorXd values;   // estimated parameters, in Result::estimated order
   Eigen::VectorXd std;      // one-sigma as Identify reports it (only with_std)
@@ -38,7 +40,28 @@ class Refit {
   // observation structure (count, types, targets, setups).
   RefitResult Fit(const Dataset& ds, bool with_std = false) const;
 
+  // One thread's state for many fits: a copy of the reference dataset, to be
+  // edited in place (readings and axis values only), and the problem prepared
+  // once on it; each Fit re-reads the edited observations and starts again
+  // from the reference values. Same results as Refit::Fit on the edited
+  // dataset, without copying the dataset or rebuilding the problem per fit.
+  // One Session per thread; the Refit must outlive it.
+  class Session {
+   public:
+    explicit Session(const Refit& refit);
+    ~Session();
+    Session(const Session&) = delete;
+    Session& operator=(const Session&) = delete;
+    Dataset& dataset();
+    RefitResult Fit(bool with_std = false);
+
+   private:
+    struct State;
+    std::unique_ptr<State> s_;
+  };
+
  private:
+  std::unique_ptr<Problem> MakeProblem(const Dataset& ds) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
