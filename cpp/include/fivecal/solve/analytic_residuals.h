@@ -111,6 +111,17 @@ class AnalyticResiduals : public ceres::CostFunction {
   // Per row: the observation index, or -(1 + scale bar index).
   const std::vector<int>& row_source() const { return row_source_; }
 
+  // The streaming fit (solve/normal_equations.h) evaluates the prepared rows
+  // (one per observation, then the artefact rows) a chunk at a time instead
+  // of all rows at once: rows [begin, end) at every parameter's value `v`,
+  // with `model` built at `v` (RestrictJacobian to the estimated set when
+  // jacobians are wanted). Residual rows are written from residuals[0],
+  // column b of the estimated set at jacobians[b][0..] (zeroed by the
+  // caller; null: residuals only). Returns the number of residual rows.
+  int num_prepared() const { return static_cast<int>(rows_.size()); }
+  int EvaluateRows(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end,
+                   double* residuals, double** jacobians) const;
+
  private:
   struct Run {  // consecutive rows of one kind and variant
     const ObservationKind* kind;
