@@ -646,7 +646,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     nep = std::make_unique<NormalEquationProblem>(ds, table, values, est, opt.num_threads);
   res.fit_path = nep ? "normal_equations" : "dense";
   auto weighted_jacobian_at = [&](const Eigen::VectorXd& at) {
-    if (nep) return NormalFactor(nep->Accumulate(at).JtJ);
+    if (nep) return NormalFactor(nep->Accumulate(at, true).JtJ);  // true: the fit reuses it
     Problem pr(ds, table, at, est);
     Eigen::VectorXd r;
     Eigen::MatrixXd Jw;

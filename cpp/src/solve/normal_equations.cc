@@ -151,7 +151,18 @@ Eigen::VectorXd NormalEquationProblem::Residuals(const Eigen::VectorXd& values) 
   return r;
 }
 
+double NormalEquationProblem::Cost(const Eigen::VectorXd& values) const {
+  std::vector<NormalEquations> partial;
+  Pass(values, false, false, nullptr, &partial);
+  ++residual_passes_;
+  double cost = 0;
+  for (const NormalEquations& ne : partial) cost += ne.cost;  // in block order
+  return cost;
+}
+
 NormalEquations NormalEquationProblem::Accumulate(const Eigen::VectorXd& values, bool unweighted) const {
+  if (cached_values_.size() == values.size() && cached_values_ == values && (cached_unweighted_ || !unweighted))
+    return cached_;
   const int p = num_parameters();
   std::vector<NormalEquations> partial;
   // One declared noise for every row (one instrument): J^T J in mm is the
@@ -174,6 +185,9 @@ NormalEquations NormalEquationProblem::Accumulate(const Eigen::VectorXd& values,
   out.JtJ = Eigen::MatrixXd(out.JtJ.selfadjointView<Eigen::Lower>());
   if (scaled) out.JtJ_unweighted = (uniform_sigma_ * uniform_sigma_) * out.JtJ;
   else if (unweighted) out.JtJ_unweighted = Eigen::MatrixXd(out.JtJ_unweighted.selfadjointView<Eigen::Lower>());
+  cached_values_ = values;
+  cached_ = out;
+  cached_unweighted_ = unweighted;
   return out;
 }
 
@@ -265,22 +279,25 @@ NormalEquationFit FitNormalEquations(const NormalEquationProblem& pr, const Eige
     }
     Eigen::VectorXd trial = out.values;
     for (int j = 0; j < p; ++j) trial[est[j]] += dx[j];
-    NormalEquations trial_data = pr.Accumulate(trial, true);
-    const NormalEquations next = with_prior(trial_data, trial);
+    // The candidate's cost without derivatives (about a third of a pass
+    // with them): the last candidate of a converging fit is not taken, and a
+    // rejected one needs no Jacobian either.
+    const Eigen::VectorXd tt = theta(trial);
+    const double next_cost = pr.Cost(trial) + 0.5 * tt.cwiseProduct(tt).dot(inv_prior2);
     const double model_decrease = -(cur.Jtr.dot(dx) + 0.5 * dx.dot(cur.JtJ * dx));
-    const double actual = cur.cost - next.cost;
+    const double actual = cur.cost - next_cost;
     // As Ceres: a relative cost change this small ends the fit at the
     // current point, the candidate not taken.
-    if (std::isfinite(next.cost) && std::abs(actual) <= kFunctionTolerance * cur.cost) {
+    if (std::isfinite(next_cost) && std::abs(actual) <= kFunctionTolerance * cur.cost) {
       out.converged = true;
       out.message = "function tolerance reached";
       break;
     }
     const double rho = model_decrease > 0 ? actual / model_decrease : -1.0;
-    if (std::isfinite(next.cost) && rho > kMinRelativeDecrease) {
+    if (std::isfinite(next_cost) && rho > kMinRelativeDecrease) {
       out.values = trial;
-      data = std::move(trial_data);
-      cur = next;
+      data = pr.Accumulate(trial, true);
+      cur = with_prior(data, trial);
       radius = radius / std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3));
       radius = std::min(radius, 1e16);
       decrease_factor = 2.0;

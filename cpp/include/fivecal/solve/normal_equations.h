@@ -51,8 +51,12 @@ class NormalEquationProblem {
 
   // At `values` (every table entry): residuals only (mm, data-sized), or the
   // normal equations (unweighted J^T J too when `unweighted`).
+  // The last accumulation is kept: the analyses and the fit that follows
+  // them start at the same point, and one pass serves both.
   Eigen::VectorXd Residuals(const Eigen::VectorXd& values) const;
   NormalEquations Accumulate(const Eigen::VectorXd& values, bool unweighted = false) const;
+  // 0.5 sum rw^2 at `values`: a pass without derivatives.
+  double Cost(const Eigen::VectorXd& values) const;
 
   // Passes over the data so far (a pass with the Jacobian counts in both).
   int jacobian_passes() const { return jacobian_passes_; }
@@ -75,6 +79,9 @@ class NormalEquationProblem {
   std::vector<Block> blocks_;
   int num_threads_;
   mutable int jacobian_passes_ = 0, residual_passes_ = 0;
+  mutable Eigen::VectorXd cached_values_;
+  mutable NormalEquations cached_;
+  mutable bool cached_unweighted_ = false;
 };
 
 // Outcome of one fit on the normal equations, as identify's Solve.
