@@ -217,3 +217,31 @@ TEST(NormalEquations, UndeterminedLongDataRefused) {
 
 }  // namespace
 }  // namespace fivecal
+
+namespace fivecal {
+namespace {
+
+TEST(NormalEquations, DerivativesOnlyAtAcceptedPoints) {
+  // The dense fit of a nearly linear problem evaluated the whole Jacobian at
+  // every candidate and again for the analyses; here a pass with derivatives
+  // is made only where the fit steps from, candidates get their cost alone.
+  const Dataset ds = RTest(5000, false, kTruth, 7);
+  const ParameterTable table(ds);
+  const std::vector<int> est = Indices(table, {"EB0A", "EA0C", "EB0C", "EY0C", "ball3d.R1.table.x",
+                                               "ball3d.R1.table.y", "ball3d.R1.table.z"});
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(table.size());
+  const NormalEquationProblem pr(ds, table, zero, est, 2);
+  const NormalEquationFit f = FitNormalEquations(pr, zero, Eigen::VectorXd(), 200);
+  EXPECT_TRUE(f.converged) << f.message;
+  // Every step is a good one here: derivatives at the start and at each
+  // taken candidate, the cost alone at each candidate; at most one pass of
+  // each per iteration.
+  EXPECT_LE(f.iterations, 4);
+  EXPECT_GE(pr.jacobian_passes(), 2);
+  EXPECT_LE(pr.jacobian_passes(), f.iterations);
+  EXPECT_LE(pr.residual_passes() - pr.jacobian_passes(), f.iterations);
+  EXPECT_NEAR(f.values[table.Require("EY0C")], -0.012, 1e-4);
+}
+
+}  // namespace
+}  // namespace fivecal
