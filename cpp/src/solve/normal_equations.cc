@@ -144,6 +144,8 @@ void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, b
 }
 
 Eigen::VectorXd NormalEquationProblem::Residuals(const Eigen::VectorXd& values) const {
+  // The fit ends where it last took derivatives: that pass kept its rows.
+  if (cached_values_.size() == values.size() && cached_values_ == values) return cached_residuals_;
   Eigen::VectorXd r(num_rows());
   std::vector<NormalEquations> partial;
   Pass(values, false, false, r.data(), &partial);
@@ -168,7 +170,9 @@ NormalEquations NormalEquationProblem::Accumulate(const Eigen::VectorXd& values,
   // One declared noise for every row (one instrument): J^T J in mm is the
   // weighted one times sigma^2, no second rank update needed.
   const bool scaled = unweighted && uniform_sigma_ > 0;
-  Pass(values, true, unweighted && !scaled, nullptr, &partial);
+  cached_values_.resize(0);
+  cached_residuals_.resize(num_rows());
+  Pass(values, true, unweighted && !scaled, cached_residuals_.data(), &partial);
   ++jacobian_passes_;
   ++residual_passes_;
   NormalEquations out;

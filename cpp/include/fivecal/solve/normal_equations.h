@@ -51,8 +51,9 @@ class NormalEquationProblem {
 
   // At `values` (every table entry): residuals only (mm, data-sized), or the
   // normal equations (unweighted J^T J too when `unweighted`).
-  // The last accumulation is kept: the analyses and the fit that follows
-  // them start at the same point, and one pass serves both.
+  // The last accumulation is kept, with its residual rows: the analyses and
+  // the fit that follows them start at the same point, the report's
+  // residuals are those of the fit's last point, and one pass serves both.
   Eigen::VectorXd Residuals(const Eigen::VectorXd& values) const;
   NormalEquations Accumulate(const Eigen::VectorXd& values, bool unweighted = false) const;
   // 0.5 sum rw^2 at `values`: a pass without derivatives.
@@ -81,6 +82,7 @@ class NormalEquationProblem {
   mutable int jacobian_passes_ = 0, residual_passes_ = 0;
   mutable Eigen::VectorXd cached_values_;
   mutable NormalEquations cached_;
+  mutable Eigen::VectorXd cached_residuals_;  // rows (mm) of the last accumulation
   mutable bool cached_unweighted_ = false;
 };
 
