@@ -739,7 +739,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   } else {
     WeightedJacobian(problem.get(), &r, &Jw);
   }
-  const Eigen::VectorXd sig = nep ? nep->row_sigma() : problem->row_sigma();
+  const Eigen::VectorXd& sig = nep ? nep->row_sigma() : problem->row_sigma();  // no copy of a data-sized vector
   const Determination det = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
   if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable)
     throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
