@@ -188,6 +188,7 @@ void BindIdentification(py::module_& m) {
       .def_readonly("undetermined", &Result::undetermined)
       .def_readonly("implausible", &Result::implausible)
       .def_readonly("map_fit", &Result::map_fit)
+      .def_readonly("fit_path", &Result::fit_path)
       .def_readonly("class_scales", &Result::class_scales)
       .def_readonly("variance_components", &Result::variance_components)
       .def_readonly("chi2", &Result::chi2)
@@ -229,11 +230,12 @@ void BindIdentification(py::module_& m) {
          const std::string& robust, double robust_scale, int max_iterations,
          bool allow_unidentifiable, bool include_default_setup, int num_threads,
          double selection_tolerance, const std::map<std::string, double>& priors, bool prior,
-         bool variance_components) {
+         bool variance_components, const std::string& fit_path) {
         IdentifyOptions o = MakeOptions(estimate, fix, initial, robust, robust_scale, max_iterations,
                                         include_default_setup, selection_tolerance,
                                         allow_unidentifiable, num_threads, priors, prior);
         o.variance_components = variance_components;
+        o.fit_path = fit_path;
         py::gil_scoped_release release;
         return Identify(ds, o);
       },
@@ -242,7 +244,7 @@ void BindIdentification(py::module_& m) {
       py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
       py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
       py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false,
-      py::arg("variance_components") = false);
+      py::arg("variance_components") = false, py::arg("fit_path") = "auto");
 
   py::class_<UnitResiduals>(m, "UnitResiduals")
       .def_readonly("unit", &UnitResiduals::unit)

@@ -61,6 +61,8 @@ class Result:
         self.implausible: list = list(core.implausible)
         #: True when the fit had prior rows (estimate "auto" or prior=True)
         self.map_fit: bool = core.map_fit
+        #: "dense" or "normal_equations": how the fit ran (identify's fit_path)
+        self.fit_path: str = core.fit_path
         #: estimate "auto": factor (0.001-1) the data put on each machine-error class's
         #: prior for the point estimate (small: the data show no sign of that class)
         self.class_scales: dict = dict(core.class_scales)
@@ -301,7 +303,7 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
              max_iterations: int = 200, num_threads: int = 1,
              selection_tolerance: Optional[float] = None,
              priors: Optional[Mapping[str, float]] = None, prior: bool = False,
-             variance_components: bool = False) -> Result:
+             variance_components: bool = False, fit_path: str = "auto") -> Result:
     """Fit the machine errors to a dataset.
 
     ``estimate``: parameter names and/or presets (``S1``-``S4`` on ``wCBXfZYSt``,
@@ -327,6 +329,16 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     components) instead of trusting the declared sigmas; mixed data are then
     weighed by what they show, :attr:`Result.variance_components` reports each
     group's sigma, and the covariance uses them.
+    ``fit_path``: ``"auto"`` (default), ``"dense"`` or ``"normal_equations"``.
+    Long data (rows times estimated parameters above two million: R-test and
+    ball-bar traces, tracker streams) are fitted on normal equations
+    accumulated from the data in chunks, in memory proportional to the
+    parameters squared instead of to rows times parameters, and with
+    ``num_threads`` threads; the result is the same as the dense fit's.
+    ``estimate`` ``"auto"``/``"location"``, robust losses and
+    ``variance_components`` always take the dense path; ``"normal_equations"``
+    forces the accumulated path (ValueError where it cannot run), ``"dense"``
+    the dense one. :attr:`Result.fit_path` says which ran.
     Raises ValueError when the data cannot determine an explicitly requested
     set, naming the groups and the likely cause.
     """
@@ -337,7 +349,7 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
                           IdentifyOptionsDefaults.selection_tolerance if selection_tolerance is None
                           else float(selection_tolerance),
                           {str(k): float(v) for k, v in (priors or {}).items()}, bool(prior),
-                          bool(variance_components))
+                          bool(variance_components), str(fit_path))
     return Result(core, ds)
 
 

@@ -1,5 +1,7 @@
 #include "fivecal/solve/analytic_residuals.h"
 
+#include <algorithm>
+
 #include "fivecal/model/kinematics.h"
 #include "fivecal/observations/registry.h"
 
@@ -83,6 +85,18 @@ bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residu
   AnalyticEval e(m, v, model, estimated_, block_of_, residuals, jacobians);
   for (const Run& run : runs_) run.kind->EvaluateAnalytic(e, rows_.data() + run.begin, run.end - run.begin);
   return true;
+}
+
+int AnalyticResiduals::EvaluateRows(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end,
+                                    double* residuals, double** jacobians) const {
+  AnalyticEval e(ds_.machine(), v, model, estimated_, block_of_, residuals, jacobians);
+  // Interleaved kinds make as many runs as rows: find the first one, do not scan.
+  auto run = std::partition_point(runs_.begin(), runs_.end(), [&](const Run& r) { return r.end <= begin; });
+  for (; run != runs_.end() && run->begin < end; ++run) {
+    const int b = std::max(begin, run->begin), f = std::min(end, run->end);
+    if (b < f) run->kind->EvaluateAnalytic(e, rows_.data() + b, f - b);
+  }
+  return e.row;
 }
 
 }  // namespace fivecal

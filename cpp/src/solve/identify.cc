@@ -12,6 +12,7 @@
 #include "fivecal/solve/identifiability.h"
 #include "fivecal/model/kinematic_model.h"
 #include "fivecal/model/kinematics.h"
+#include "fivecal/solve/normal_equations.h"
 #include "fivecal/solve/priors.h"
 #include "fivecal/solve/problem.h"
 #include "fivecal/observations/registry.h"
@@ -64,6 +65,9 @@ void ValidateOptions(const IdentifyOptions& o) {
                                 o.robust + "'");
   if (!std::isfinite(o.robust_scale) || o.robust_scale < 0)
     throw std::invalid_argument("identify: robust_scale must be finite and >= 0 mm");
+  if (o.fit_path != "auto" && o.fit_path != "dense" && o.fit_path != "normal_equations")
+    throw std::invalid_argument("identify: fit_path must be 'auto', 'dense' or 'normal_equations', got '" +
+                                o.fit_path + "'");
   if (o.num_threads < 1 || o.num_threads > 1024)
     throw std::invalid_argument("identify: num_threads must be in 1..1024, got " +
                                 std::to_string(o.num_threads));
@@ -174,6 +178,30 @@ Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Vector
   }
   if (final_problem) *final_problem = std::move(problem);
   return out;
+}
+
+// Whether the fit runs on the accumulated normal equations
+// (normal_equations.h); empty = yes, else why not. What needs more of the
+// Jacobian than J^T J stays dense: "location" (the greedy selection projects
+// the columns), "auto" and variance components (the hyperparameter loop
+// takes per-row leverages from the hat matrix), robust losses (Ceres
+// reweights each row), kinds without the analytic batch.
+std::string DenseReason(const Dataset& ds, const IdentifyOptions& opt, const Request& rq, size_t p) {
+  if (opt.fit_path == "dense") return "fit_path 'dense' requested";
+  std::string why;
+  if (rq.location || rq.automatic) why = "estimate 'location' and 'auto' select on the dense Jacobian";
+  else if (opt.variance_components) why = "variance components need the per-row leverages";
+  else if (!opt.robust.empty() && opt.robust != "none") why = "a robust loss reweights every row";
+  else if (!NormalEquationProblem::Supported(ds)) why = "a kind of this data has no analytic batch";
+  if (!why.empty()) {
+    if (opt.fit_path == "normal_equations")
+      throw std::invalid_argument("identify: fit_path 'normal_equations' is not available here: " + why);
+    return why;
+  }
+  if (opt.fit_path == "normal_equations") return "";
+  double rows = 0;
+  for (const Observation& o : ds.observations) rows += KindOf(o).rows();
+  return rows * static_cast<double>(p) > kNormalEquationElements ? "" : "short data";
 }
 
 // "location": the forced set, then each candidate in priority order while
@@ -628,23 +656,51 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     return groups;
   };
 
+  // Long data: the fits and the analyses below on the accumulated normal
+  // equations. Every analysis of the weighted Jacobian Jw depends on it only
+  // through Jw^T Jw, so there it is replaced by a p x p factor of that
+  // (NormalFactor).
+  std::unique_ptr<NormalEquationProblem> nep;
+  if (DenseReason(ds, opt, rq, est.size()).empty())
+    nep = std::make_unique<NormalEquationProblem>(ds, table, values, est, opt.num_threads);
+  res.fit_path = nep ? "normal_equations" : "dense";
+  auto weighted_jacobian_at = [&](const Eigen::VectorXd& at) {
+    if (nep) return NormalFactor(nep->Accumulate(at, true).JtJ);  // true: the fit reuses it
+    Problem pr(ds, table, at, est);
+    Eigen::VectorXd r;
+    Eigen::MatrixXd Jw;
+    WeightedJacobian(&pr, &r, &Jw);
+    return Jw;
+  };
+  auto to_solve = [](const NormalEquationFit& f) {
+    Solve s;
+    s.values = f.values;
+    s.converged = f.converged;
+    s.iterations = f.iterations;
+    s.message = f.message;
+    s.initial_cost = f.initial_cost;
+    s.final_cost = f.final_cost;
+    return s;
+  };
+  auto fit_from = [&](const Eigen::VectorXd& start, const Eigen::VectorXd& prior_all) {
+    if (nep) return to_solve(FitNormalEquations(*nep, start, prior_all, opt.max_iterations));
+    return RunFit(ds, table, start, est, opt, prior_all, nullptr);
+  };
+
   if (!map) {
     // A plain least-squares request must be determined by the data: judged
     // at the start and, when the start says no, again near the solution
     // (after a MAP fit, well posed whatever the start), so that a rough
     // nominal neither drops nor admits parameters wrongly.
-    Problem start_problem(ds, table, values, est);
-    if (start_problem.num_rows() < p && !opt.allow_unidentifiable)
+    Eigen::MatrixXd Jw = weighted_jacobian_at(values);
+    const int num_rows = nep ? nep->num_rows() : static_cast<int>(Jw.rows());
+    if (num_rows < p && !opt.allow_unidentifiable)
       throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
-                                  std::to_string(start_problem.num_rows()) + " residuals");
-    Eigen::VectorXd r;
-    Eigen::MatrixXd Jw;
-    WeightedJacobian(&start_problem, &r, &Jw);
+                                  std::to_string(num_rows) + " residuals");
     Determination d = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
     if (!d.undetermined.empty()) {
-      const Solve pre = RunFit(ds, table, values, est, opt, setup.prior, nullptr);
-      Problem at(ds, table, pre.values, est);
-      WeightedJacobian(&at, &r, &Jw);
+      const Solve pre = fit_from(values, setup.prior);
+      Jw = weighted_jacobian_at(pre.values);
       const Determination d2 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
       if (d2.undetermined.empty()) {
         values = pre.values;
@@ -652,9 +708,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
         // The MAP point may still sit where a weakly seen setup parameter
         // (a sphere with few touches) looks free; the least-squares point
         // decides. Refuse only when it too leaves the set undetermined.
-        const Solve ls = RunFit(ds, table, pre.values, est, opt, no_prior, nullptr);
-        Problem at_ls(ds, table, ls.values, est);
-        WeightedJacobian(&at_ls, &r, &Jw);
+        const Solve ls = fit_from(pre.values, no_prior);
+        Jw = weighted_jacobian_at(ls.values);
         const Determination d3 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
         if (!d3.undetermined.empty())
           throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(d2)));
@@ -668,16 +723,22 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   Eigen::VectorXd fit_prior = map ? setup.prior : no_prior;
   // With variance components the fit runs on a copy whose sigmas are the
   // estimated ones; everything below (covariance, chi-square) uses them.
-  Dataset weighted = ds;
+  // (A copy only then: long data would double their memory.)
+  std::unique_ptr<Dataset> weighted_copy;
+  const Dataset* weighted = &ds;
   if (rq.automatic || opt.variance_components) {
-    const Hyper hy = AdaptHyperparameters(ds, &weighted, table, values, est, opt, fit_prior, rq.automatic);
+    weighted_copy = std::make_unique<Dataset>(ds);
+    weighted = weighted_copy.get();
+    const Hyper hy = AdaptHyperparameters(ds, weighted_copy.get(), table, values, est, opt, fit_prior, rq.automatic);
     fit_prior = hy.prior;
     values = hy.values;
     res.class_scales = hy.scale;
     res.variance_components = hy.noise;
   }
   std::unique_ptr<Problem> problem;
-  const Solve fit = RunFit(weighted, table, values, est, opt, fit_prior, &problem);
+  NormalEquationFit nfit;
+  const Solve fit = nep ? to_solve(nfit = FitNormalEquations(*nep, values, fit_prior, opt.max_iterations))
+                        : RunFit(*weighted, table, values, est, opt, fit_prior, &problem);
   values = fit.values;
   res.converged = fit.converged;
   res.iterations = fit.iterations;
@@ -686,23 +747,31 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   res.final_cost = fit.final_cost;
   res.robust_scale = fit.robust_scale;
 
+  // Residual rows (mm) and the weighted Jacobian at the solution; on the
+  // normal-equation path its factor, from the pass the fit ended with, and
+  // the residuals from one more pass without derivatives.
   Eigen::VectorXd r;
   Eigen::MatrixXd Jw;
-  WeightedJacobian(problem.get(), &r, &Jw);
-  const Eigen::VectorXd sig = problem->row_sigma();
+  if (nep) {
+    r = nep->Residuals(values);
+    Jw = NormalFactor(nfit.at_solution.JtJ);
+  } else {
+    WeightedJacobian(problem.get(), &r, &Jw);
+  }
+  const Eigen::VectorXd& sig = nep ? nep->row_sigma() : problem->row_sigma();  // no copy of a data-sized vector
   const Determination det = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
   if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable)
     throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
 
   res.values = values;
   res.residuals = r;
-  res.residual_source = problem->row_source();
-  res.n_observations = problem->num_rows();
+  res.residual_source = nep ? nep->row_source() : problem->row_source();
+  res.n_observations = nep ? nep->num_rows() : problem->num_rows();
   res.n_parameters = p;
   res.rms = r.size() ? std::sqrt(r.squaredNorm() / r.size()) : 0.0;
   res.max_abs = r.size() ? r.cwiseAbs().maxCoeff() : 0.0;
   if (res.robust_scale > 0)
-    res.outliers = RobustOutliers(PositionScaledResiduals(ds, r, sig, problem->row_source()), res.robust_scale);
+    res.outliers = RobustOutliers(PositionScaledResiduals(ds, r, sig, res.residual_source), res.robust_scale);
 
   // chi^2 of the data rows against the declared noise (rows the robust loss
   // flagged are left out: they are reported as outliers instead).
@@ -751,12 +820,18 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     res.covariance = s2 * id.inverse_normal;
     // The condition number of the column-scaled Jacobian in mm, as before the
     // weighting and as the plan design reports it.
-    res.condition_number = AnalyzeJacobian(sig.asDiagonal() * Jw, opt.rank_tolerance).condition_number;
+    res.condition_number =
+        AnalyzeJacobian(nep ? NormalFactor(nfit.at_solution.JtJ_unweighted) : Eigen::MatrixXd(sig.asDiagonal() * Jw),
+                        opt.rank_tolerance)
+            .condition_number;
     sigma_dof = res.n_observations - id.rank;
     hat = id.inverse_normal;
   }
   res.sigma = sigma_dof > 0 ? std::sqrt(r.squaredNorm() / sigma_dof) : 0.0;
-  res.residual_units = ResidualsByUnit(ds, r, problem->row_source(), Jw, hat, sigma_dof);
+  // On the normal-equation path Jw is the p x p factor, not rows; its kinds
+  // (those with the analytic batch) have length rows only, which need no
+  // hat-matrix share.
+  res.residual_units = ResidualsByUnit(ds, r, res.residual_source, nep ? Eigen::MatrixXd() : Jw, hat, sigma_dof);
   if (res.residual_units.size() > 1) {
     res.rms = res.residual_units[0].rms;
     res.max_abs = res.residual_units[0].max_abs;

@@ -115,6 +115,17 @@ class AnalyticResiduals : public ceres::CostFunction {
   // since, same structure) and takes `values` as the fixed parameters' values.
   void Refresh(const ParameterTable& table, const Eigen::VectorXd& values);
 
+  // The streaming fit (solve/normal_equations.h) evaluates the prepared rows
+  // (one per observation, then the artefact rows) a chunk at a time instead
+  // of all rows at once: rows [begin, end) at every parameter's value `v`,
+  // with `model` built at `v` (RestrictJacobian to the estimated set when
+  // jacobians are wanted). Residual rows are written from residuals[0],
+  // column b of the estimated set at jacobians[b][0..] (zeroed by the
+  // caller; null: residuals only). Returns the number of residual rows.
+  int num_prepared() const { return static_cast<int>(rows_.size()); }
+  int EvaluateRows(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end,
+                   double* residuals, double** jacobians) const;
+
  private:
   void PrepareRow(const ParameterTable& table, int observation, AnalyticRow* r) const;
   struct Run {  // consecutive rows of one kind and variant

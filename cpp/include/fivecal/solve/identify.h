@@ -47,6 +47,12 @@ struct IdentifyOptions {
   // ball3d) from the residuals (variance components) instead of trusting the
   // declared sigmas; the covariance then uses the estimated noise.
   bool variance_components = false;
+  // Which fit runs: "auto" (the normal equations accumulated chunk by chunk,
+  // solve/normal_equations.h, for long data: rows x estimated parameters
+  // above kNormalEquationElements, when the options allow it), "dense" (the
+  // dense Jacobian) or "normal_equations" (throws when the options or the
+  // kinds do not allow it).
+  std::string fit_path = "auto";
 };
 
 // One instrument group's noise, estimated from its residuals.
@@ -113,6 +119,7 @@ struct Result {
   std::string adequacy;               // the likely cause when not adequate
   bool finite = true;                 // every value and std finite
   bool explicit_request = false;      // no "auto": undetermined parameters make the verdict
+  std::string fit_path;               // the path that ran: "dense" or "normal_equations"
   // "ok", "not_converged", "inadequate", "non_finite" or "undetermined".
   std::string verdict() const;
 

@@ -1,0 +1,130 @@
+// The fit path for long data: the normal equations Jw^T Jw, Jw^T rw of the
+// noise-weighted rows accumulated chunk by chunk from the analytic batch
+// (analytic_residuals.h), never the rows x parameters Jacobian. An R-test or
+// ball-bar trace at 1 kHz has millions of rows and a handful of unknowns: the
+// dense Jacobian then costs memory and traffic out of all proportion to the
+// p x p system that decides the fit. Memory is O(p^2) plus the data.
+//
+// The sums run over a fixed partition of the rows (kBlocks blocks, each
+// summed in row order, then the blocks in order), so the result does not
+// depend on the number of threads.
+#ifndef FIVECAL_NORMAL_EQUATIONS_H_
+#define FIVECAL_NORMAL_EQUATIONS_H_
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "fivecal/observations/dataset.h"
+#include "fivecal/solve/problem.h"
+
+namespace fivecal {
+
+class AnalyticResiduals;
+
+// The normal equations of the data rows at one point.
+struct NormalEquations {
+  Eigen::MatrixXd JtJ;             // Jw^T Jw, rows divided by their declared sigma
+  Eigen::VectorXd Jtr;             // Jw^T rw
+  Eigen::MatrixXd JtJ_unweighted;  // J^T J in mm (only when asked for)
+  double cost = 0;                 // 0.5 sum rw^2
+};
+
+class NormalEquationProblem {
+ public:
+  // values: every table entry (constants for the fixed ones); estimated:
+  // table indices, in covariance order. Every kind of the dataset must have
+  // the analytic batch (Supported).
+  NormalEquationProblem(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
+                        const std::vector<int>& estimated, int num_threads);
+  ~NormalEquationProblem();
+
+  // Every observation's kind has the analytic batch.
+  static bool Supported(const Dataset& ds);
+
+  int num_rows() const { return static_cast<int>(row_sigma_.size()); }
+  int num_parameters() const { return static_cast<int>(estimated_.size()); }
+  const std::vector<int>& estimated() const { return estimated_; }
+  const std::vector<int>& row_source() const;
+  const Eigen::VectorXd& row_sigma() const { return row_sigma_; }
+
+  // At `values` (every table entry): residuals only (mm, data-sized), or the
+  // normal equations (unweighted J^T J too when `unweighted`).
+  // The last accumulation is kept, with its residual rows: the analyses and
+  // the fit that follows them start at the same point, the report's
+  // residuals are those of the fit's last point, and one pass serves both.
+  Eigen::VectorXd Residuals(const Eigen::VectorXd& values) const;
+  NormalEquations Accumulate(const Eigen::VectorXd& values, bool unweighted = false) const;
+  // 0.5 sum rw^2 at `values`: a pass without derivatives.
+  double Cost(const Eigen::VectorXd& values) const;
+
+  // Passes over the data so far (a pass with the Jacobian counts in both).
+  int jacobian_passes() const { return jacobian_passes_; }
+  int residual_passes() const { return residual_passes_; }
+
+ private:
+  struct Block {
+    int begin, end;  // prepared rows
+    int row;         // first residual row
+    int rows;        // residual rows
+  };
+  void Pass(const Eigen::VectorXd& values, bool jacobian, bool unweighted, double* residuals,
+            std::vector<NormalEquations>* partial) const;
+
+  const Dataset& ds_;
+  std::vector<int> estimated_;
+  std::unique_ptr<AnalyticResiduals> batch_;
+  Eigen::VectorXd row_sigma_;
+  double uniform_sigma_ = 0;  // every row's sigma when they are all equal, else 0
+  std::vector<Block> blocks_;
+  int num_threads_;
+  mutable int jacobian_passes_ = 0, residual_passes_ = 0;
+  mutable Eigen::VectorXd cached_values_;
+  mutable NormalEquations cached_;
+  mutable Eigen::VectorXd cached_residuals_;  // rows (mm) of the last accumulation
+  mutable bool cached_unweighted_ = false;
+};
+
+// Outcome of one fit on the normal equations, as identify's Solve.
+struct NormalEquationFit {
+  Eigen::VectorXd values;  // every table entry
+  bool converged = false;
+  int iterations = 0;
+  std::string message;
+  double initial_cost = 0, final_cost = 0;
+  NormalEquations at_solution;  // data rows only (no prior rows), with J^T J in mm
+};
+
+// Levenberg-Marquardt on the accumulated normal equations with the
+// convergence tests and tolerances of the dense path (Problem::SolverOptions:
+// function, parameter and gradient tolerances; a trust region so large that
+// the first steps are Gauss-Newton steps). prior_all: per table entry, the
+// prior sigma of a MAP fit (rows (theta_j - 0) / sigma_j), empty for none.
+NormalEquationFit FitNormalEquations(const NormalEquationProblem& pr, const Eigen::VectorXd& start,
+                                     const Eigen::VectorXd& prior_all, int max_iterations);
+
+// A p x p factor R with R^T R = N, from the eigen-decomposition of the
+// column-scaled N (the scaled J^T J): what the dense analyses of a Jacobian
+// (identifiability.h, the posterior of a MAP fit) see of it, since they
+// depend on J only through J^T J. Eigenvalues below the rounding level of
+// the scaled N (p eps times the largest) are taken as exactly zero: the
+// normal equations cannot resolve singular values below about sqrt(p eps)
+// (1e-7) of the largest, so such directions count as free.
+Eigen::MatrixXd NormalFactor(const Eigen::MatrixXd& N);
+
+// Whether identify takes the normal-equation path by default: rows x p above
+// kNormalEquationElements.
+//
+// Below, the dense Jacobian is at most 16 MB, the dense fit is as fast (the
+// chunked evaluation saves memory traffic, not arithmetic) and its rank
+// decisions resolve singular values to the rank tolerance (1e-9) rather than
+// the 1e-7 of the normal equations. Above, the dense path's copies of J
+// (the Jacobian Ceres holds, the weighted copy, the column-scaled copies of
+// the analyses) dominate time and memory: at 3e6 rows x 4 unknowns the dense
+// fit takes seconds for a tenth of a second of arithmetic.
+constexpr double kNormalEquationElements = 2e6;
+
+}  // namespace fivecal
+
+#endif  // FIVECAL_NORMAL_EQUATIONS_H_

@@ -1,0 +1,322 @@
+#include "fivecal/solve/normal_equations.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <exception>
+#include <limits>
+#include <stdexcept>
+#include <thread>
+
+#include "fivecal/model/kinematic_model.h"
+#include "fivecal/observations/registry.h"
+#include "fivecal/solve/analytic_residuals.h"
+
+namespace fivecal {
+namespace {
+
+// The fixed partition of the observations: enough blocks for two to eight
+// threads to share evenly, few enough that the per-block p x p partial sums
+// stay small (64 x 50^2 doubles = 1.3 MB). It depends on the data only, so
+// the sums, and the fit, do not depend on the thread count.
+constexpr int kBlocks = 64;
+// Prepared rows per chunk: the chunk's Jacobian (256 x 3 rows x p) stays in
+// the cache between its evaluation and its rank update.
+constexpr int kChunk = 256;
+
+using ChunkMatrix = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+
+}  // namespace
+
+NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterTable& table,
+                                             const Eigen::VectorXd& values, const std::vector<int>& estimated,
+                                             int num_threads)
+    : ds_(ds), estimated_(estimated), num_threads_(std::max(1, num_threads)) {
+  if (!Supported(ds))
+    throw std::invalid_argument(
+        "identify: the normal-equation fit needs every observation kind to have the analytic batch");
+  if (values.size() != table.size())
+    throw std::invalid_argument("identify: expected " + std::to_string(table.size()) + " values");
+  batch_ = std::make_unique<AnalyticResiduals>(ds, table, values, estimated_);
+  const std::vector<int>& src = batch_->row_source();
+  const int nr = batch_->num_residuals();
+  row_sigma_.resize(nr);
+  for (int r = 0, k = 0; r < nr; ++r) {
+    k = (r > 0 && src[r] == src[r - 1]) ? k + 1 : 0;
+    // As Problem weighs them: a scale bar's length row at kScaleBarSigma.
+    row_sigma_[r] = src[r] < 0 ? kScaleBarSigma : ObservationSigma(ds, ds.observations[src[r]], k);
+  }
+  uniform_sigma_ = nr > 0 && row_sigma_.maxCoeff() == row_sigma_.minCoeff() ? row_sigma_[0] : 0.0;
+  const int n = static_cast<int>(ds.observations.size());
+  const int nb = std::max(1, std::min(kBlocks, (n + kChunk - 1) / kChunk));
+  int row = 0, obs = 0;
+  for (int b = 0; b < nb; ++b) {
+    const int end = static_cast<int>((static_cast<long long>(n) * (b + 1)) / nb);
+    Block B{obs, end, row, 0};
+    for (; obs < end; ++obs) B.rows += KindOf(ds.observations[obs]).rows();
+    row += B.rows;
+    if (B.end > B.begin) blocks_.push_back(B);
+  }
+  // The artefact rows (scale bars) after the observations: one block, one chunk.
+  if (batch_->num_prepared() > n) blocks_.push_back({n, batch_->num_prepared(), row, nr - row});
+  else if (row != nr)
+    throw std::logic_error("normal equations: residual rows do not add up");
+}
+
+NormalEquationProblem::~NormalEquationProblem() = default;
+
+bool NormalEquationProblem::Supported(const Dataset& ds) {
+  for (const Observation& o : ds.observations)
+    if (!KindOf(o).analytic()) return false;
+  return true;
+}
+
+const std::vector<int>& NormalEquationProblem::row_source() const { return batch_->row_source(); }
+
+void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, bool unweighted,
+                                 double* residuals, std::vector<NormalEquations>* partial) const {
+  const int p = num_parameters();
+  KinematicModel model(ds_.machine(), values.data());
+  if (jacobian) model.RestrictJacobian(estimated_);
+  const int nb = static_cast<int>(blocks_.size());
+  partial->assign(nb, NormalEquations{});
+  int max_kind_rows = 1;
+  for (const ObservationKind* k : ObservationKinds()) max_kind_rows = std::max(max_kind_rows, k->rows());
+  std::atomic<int> next{0};
+  std::exception_ptr error;
+  std::atomic<bool> failed{false};
+  auto work = [&]() {
+    try {
+      std::vector<double> r, jac;
+      std::vector<double*> cols(p);
+      for (int b; !failed && (b = next++) < nb;) {
+        const Block& B = blocks_[b];
+        const bool tail = B.begin >= static_cast<int>(ds_.observations.size());
+        const int ld = tail ? B.rows : std::min(B.rows, kChunk * max_kind_rows);
+        r.resize(ld);
+        if (jacobian) {
+          jac.resize(static_cast<size_t>(ld) * p);
+          for (int c = 0; c < p; ++c) cols[c] = jac.data() + static_cast<size_t>(c) * ld;
+        }
+        NormalEquations& ne = (*partial)[b];
+        if (jacobian) {
+          ne.JtJ = Eigen::MatrixXd::Zero(p, p);
+          ne.Jtr = Eigen::VectorXd::Zero(p);
+          if (unweighted) ne.JtJ_unweighted = Eigen::MatrixXd::Zero(p, p);
+        }
+        int row = B.row;
+        for (int s = B.begin; s < B.end;) {
+          const int e = tail ? B.end : std::min(B.end, s + kChunk);
+          if (jacobian) std::fill(jac.begin(), jac.end(), 0.0);
+          const int m = batch_->EvaluateRows(model, values, s, e, r.data(), jacobian ? cols.data() : nullptr);
+          if (m > ld || row + m > num_rows()) throw std::logic_error("normal equations: chunk overflow");
+          if (residuals) std::copy(r.begin(), r.begin() + m, residuals + row);
+          const Eigen::Map<const Eigen::VectorXd> sig(row_sigma_.data() + row, m);
+          Eigen::Map<Eigen::VectorXd> rw(r.data(), m);
+          rw.array() /= sig.array();
+          ne.cost += 0.5 * rw.squaredNorm();
+          if (jacobian) {
+            ChunkMatrix J(jac.data(), m, p, Eigen::OuterStride<>(ld));
+            if (unweighted) ne.JtJ_unweighted.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
+            J = sig.cwiseInverse().asDiagonal() * J;
+            ne.JtJ.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
+            ne.Jtr.noalias() += J.transpose() * rw;
+          }
+          row += m;
+          s = e;
+        }
+        if (row != B.row + B.rows) throw std::logic_error("normal equations: block rows do not add up");
+      }
+    } catch (...) {
+      if (!failed.exchange(true)) error = std::current_exception();
+    }
+  };
+  const int T = std::min(num_threads_, nb);
+  if (T <= 1) {
+    work();
+  } else {
+    std::vector<std::thread> pool;
+    for (int t = 0; t < T; ++t) pool.emplace_back(work);
+    for (std::thread& t : pool) t.join();
+  }
+  if (error) std::rethrow_exception(error);
+}
+
+Eigen::VectorXd NormalEquationProblem::Residuals(const Eigen::VectorXd& values) const {
+  // The fit ends where it last took derivatives: that pass kept its rows.
+  if (cached_values_.size() == values.size() && cached_values_ == values) return cached_residuals_;
+  Eigen::VectorXd r(num_rows());
+  std::vector<NormalEquations> partial;
+  Pass(values, false, false, r.data(), &partial);
+  ++residual_passes_;
+  return r;
+}
+
+double NormalEquationProblem::Cost(const Eigen::VectorXd& values) const {
+  std::vector<NormalEquations> partial;
+  Pass(values, false, false, nullptr, &partial);
+  ++residual_passes_;
+  double cost = 0;
+  for (const NormalEquations& ne : partial) cost += ne.cost;  // in block order
+  return cost;
+}
+
+NormalEquations NormalEquationProblem::Accumulate(const Eigen::VectorXd& values, bool unweighted) const {
+  if (cached_values_.size() == values.size() && cached_values_ == values && (cached_unweighted_ || !unweighted))
+    return cached_;
+  const int p = num_parameters();
+  std::vector<NormalEquations> partial;
+  // One declared noise for every row (one instrument): J^T J in mm is the
+  // weighted one times sigma^2, no second rank update needed.
+  const bool scaled = unweighted && uniform_sigma_ > 0;
+  cached_values_.resize(0);
+  cached_residuals_.resize(num_rows());
+  Pass(values, true, unweighted && !scaled, cached_residuals_.data(), &partial);
+  ++jacobian_passes_;
+  ++residual_passes_;
+  NormalEquations out;
+  out.JtJ = Eigen::MatrixXd::Zero(p, p);
+  out.Jtr = Eigen::VectorXd::Zero(p);
+  if (unweighted) out.JtJ_unweighted = Eigen::MatrixXd::Zero(p, p);
+  // In block order, whatever thread summed which block.
+  for (const NormalEquations& ne : partial) {
+    out.JtJ += ne.JtJ;
+    out.Jtr += ne.Jtr;
+    out.cost += ne.cost;
+    if (unweighted && !scaled) out.JtJ_unweighted += ne.JtJ_unweighted;
+  }
+  out.JtJ = Eigen::MatrixXd(out.JtJ.selfadjointView<Eigen::Lower>());
+  if (scaled) out.JtJ_unweighted = (uniform_sigma_ * uniform_sigma_) * out.JtJ;
+  else if (unweighted) out.JtJ_unweighted = Eigen::MatrixXd(out.JtJ_unweighted.selfadjointView<Eigen::Lower>());
+  cached_values_ = values;
+  cached_ = out;
+  cached_unweighted_ = unweighted;
+  return out;
+}
+
+Eigen::MatrixXd NormalFactor(const Eigen::MatrixXd& N) {
+  const int p = static_cast<int>(N.rows());
+  Eigen::VectorXd d(p), inv(p);
+  for (int j = 0; j < p; ++j) {
+    d[j] = N(j, j) > 0 ? std::sqrt(N(j, j)) : 0.0;
+    inv[j] = d[j] > 0 ? 1.0 / d[j] : 0.0;
+  }
+  const Eigen::MatrixXd S = inv.asDiagonal() * N * inv.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(S);
+  if (eig.info() != Eigen::Success) throw std::runtime_error("normal equations: eigen-decomposition failed");
+  Eigen::VectorXd lambda = eig.eigenvalues();
+  const double top = std::max(lambda.size() ? lambda.maxCoeff() : 0.0, 0.0);
+  // Rounding of the scaled N is about p eps of its largest eigenvalue: below
+  // that an eigenvalue is noise of either sign, not information.
+  const double floor = 4.0 * p * std::numeric_limits<double>::epsilon() * top;
+  for (int k = 0; k < p; ++k) lambda[k] = lambda[k] > floor ? std::sqrt(lambda[k]) : 0.0;
+  // R = Lambda^(1/2) V^T D: R^T R = D V Lambda V^T D = N.
+  return lambda.asDiagonal() * eig.eigenvectors().transpose() * d.asDiagonal();
+}
+
+NormalEquationFit FitNormalEquations(const NormalEquationProblem& pr, const Eigen::VectorXd& start,
+                                     const Eigen::VectorXd& prior_all, int max_iterations) {
+  // The tolerances of Problem::SolverOptions, so that both paths stop alike.
+  constexpr double kFunctionTolerance = 1e-10, kParameterTolerance = 1e-12, kGradientTolerance = 1e-16;
+  constexpr double kMinRelativeDecrease = 1e-3;
+  const std::vector<int>& est = pr.estimated();
+  const int p = static_cast<int>(est.size());
+  Eigen::VectorXd inv_prior2 = Eigen::VectorXd::Zero(p);
+  if (prior_all.size())
+    for (int j = 0; j < p; ++j) {
+      const double s = prior_all[est[j]];
+      if (!(s > 0) || !std::isfinite(s))
+        throw std::invalid_argument("problem: prior sigma of parameter " + std::to_string(est[j]) +
+                                    " must be finite and > 0");
+      inv_prior2[j] = 1.0 / (s * s);
+    }
+  auto theta = [&](const Eigen::VectorXd& v) {
+    Eigen::VectorXd t(p);
+    for (int j = 0; j < p; ++j) t[j] = v[est[j]];
+    return t;
+  };
+  // The MAP fit's prior rows theta_j / s_j (mean 0) join the data rows.
+  auto with_prior = [&](NormalEquations ne, const Eigen::VectorXd& v) {
+    const Eigen::VectorXd t = theta(v);
+    ne.JtJ.diagonal() += inv_prior2;
+    ne.Jtr += inv_prior2.cwiseProduct(t);
+    ne.cost += 0.5 * t.cwiseProduct(t).dot(inv_prior2);
+    return ne;
+  };
+
+  NormalEquationFit out;
+  out.values = start;
+  NormalEquations data = pr.Accumulate(start, true);
+  NormalEquations cur = with_prior(data, start);
+  out.initial_cost = cur.cost;
+  // Levenberg-Marquardt as Ceres runs it: the step solves
+  // (N + D / radius) dx = -g with D = diag(N) clamped to [1e-6, 1e32], the
+  // radius grows after a good step and shrinks after a bad one.
+  double radius = 1e12, decrease_factor = 2.0;
+  out.message = "maximum iterations reached";
+  for (int it = 0; it < max_iterations; ++it) {
+    if (!cur.Jtr.allFinite() || !cur.JtJ.allFinite()) {
+      out.message = "residuals or Jacobian not finite";
+      break;
+    }
+    if (cur.Jtr.lpNorm<Eigen::Infinity>() <= kGradientTolerance) {
+      out.converged = true;
+      out.message = "gradient tolerance reached";
+      break;
+    }
+    Eigen::MatrixXd A = cur.JtJ;
+    A.diagonal() += cur.JtJ.diagonal().cwiseMax(1e-6).cwiseMin(1e32) / radius;
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
+    Eigen::VectorXd dx = ldlt.solve(-cur.Jtr);
+    out.iterations = it + 1;
+    if (ldlt.info() != Eigen::Success || !dx.allFinite()) {
+      radius /= decrease_factor;
+      decrease_factor *= 2;
+      continue;
+    }
+    const Eigen::VectorXd t = theta(out.values);
+    if (dx.norm() <= kParameterTolerance * (t.norm() + kParameterTolerance)) {
+      out.converged = true;
+      out.message = "parameter tolerance reached";
+      break;
+    }
+    Eigen::VectorXd trial = out.values;
+    for (int j = 0; j < p; ++j) trial[est[j]] += dx[j];
+    // The candidate's cost without derivatives (about a third of a pass
+    // with them): the last candidate of a converging fit is not taken, and a
+    // rejected one needs no Jacobian either.
+    const Eigen::VectorXd tt = theta(trial);
+    const double next_cost = pr.Cost(trial) + 0.5 * tt.cwiseProduct(tt).dot(inv_prior2);
+    const double model_decrease = -(cur.Jtr.dot(dx) + 0.5 * dx.dot(cur.JtJ * dx));
+    const double actual = cur.cost - next_cost;
+    // As Ceres: a relative cost change this small ends the fit at the
+    // current point, the candidate not taken.
+    if (std::isfinite(next_cost) && std::abs(actual) <= kFunctionTolerance * cur.cost) {
+      out.converged = true;
+      out.message = "function tolerance reached";
+      break;
+    }
+    const double rho = model_decrease > 0 ? actual / model_decrease : -1.0;
+    if (std::isfinite(next_cost) && rho > kMinRelativeDecrease) {
+      out.values = trial;
+      data = pr.Accumulate(trial, true);
+      cur = with_prior(data, trial);
+      radius = radius / std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3));
+      radius = std::min(radius, 1e16);
+      decrease_factor = 2.0;
+    } else {
+      radius /= decrease_factor;
+      decrease_factor *= 2.0;
+      if (radius < 1e-32) {
+        out.message = "trust region too small";
+        break;
+      }
+    }
+  }
+  out.final_cost = cur.cost;
+  out.at_solution = std::move(data);
+  return out;
+}
+
+}  // namespace fivecal
