@@ -242,7 +242,7 @@ void BindIdentification(py::module_& m) {
       py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"),
       py::arg("robust") = "", py::arg("robust_scale") = 0.0, py::arg("max_iterations") = 200,
       py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
-      py::arg("num_threads") = 1, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
+      py::arg("num_threads") = 0, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
       py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false,
       py::arg("variance_components") = false, py::arg("fit_path") = "auto");
 

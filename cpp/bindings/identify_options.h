@@ -15,7 +15,7 @@ inline IdentifyOptions MakeOptions(const std::vector<std::string>& estimate, con
                                    const std::map<std::string, double>& initial, const std::string& robust,
                                    double robust_scale, int max_iterations, bool include_default_setup,
                                    double selection_tolerance, bool allow_unidentifiable = false,
-                                   int num_threads = 1,
+                                   int num_threads = 0,
                                    const std::map<std::string, double>& priors = {},
                                    bool prior = false) {
   IdentifyOptions o;

@@ -300,7 +300,7 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
              fix: Union[None, str, Sequence[str]] = None, robust: Optional[str] = None,
              initial: Optional[Mapping[str, float]] = None, robust_scale: float = 0.0,
              allow_unidentifiable: bool = False, default_setup: bool = True,
-             max_iterations: int = 200, num_threads: int = 1,
+             max_iterations: int = 200, num_threads: int = 0,
              selection_tolerance: Optional[float] = None,
              priors: Optional[Mapping[str, float]] = None, prior: bool = False,
              variance_components: bool = False, fit_path: str = "auto") -> Result:
@@ -334,7 +334,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     ball-bar traces, tracker streams) are fitted on normal equations
     accumulated from the data in chunks, in memory proportional to the
     parameters squared instead of to rows times parameters, and with
-    ``num_threads`` threads; the result is the same as the dense fit's.
+    ``num_threads`` threads (0, the default: every core); the result is the
+    same as the dense fit's, whatever the thread count.
     ``estimate`` ``"auto"``/``"location"``, robust losses and
     ``variance_components`` always take the dense path; ``"normal_equations"``
     forces the accumulated path (ValueError where it cannot run), ``"dense"``

@@ -232,7 +232,7 @@ TEST(IdentifyOptionsValidation, NamedErrors) {
   o.robust = "hubber";
   expect(o, "robust");
   o = {};
-  o.num_threads = 0;
+  o.num_threads = -1;
   expect(o, "num_threads");
   o = {};
   o.initial = {{"EX0C", NAN}};

@@ -7,6 +7,7 @@
 #include <set>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 #include "fivecal/uncertainty/gum.h"
 #include "fivecal/solve/identifiability.h"
@@ -68,8 +69,8 @@ void ValidateOptions(const IdentifyOptions& o) {
   if (o.fit_path != "auto" && o.fit_path != "dense" && o.fit_path != "normal_equations")
     throw std::invalid_argument("identify: fit_path must be 'auto', 'dense' or 'normal_equations', got '" +
                                 o.fit_path + "'");
-  if (o.num_threads < 1 || o.num_threads > 1024)
-    throw std::invalid_argument("identify: num_threads must be in 1..1024, got " +
+  if (o.num_threads < 0 || o.num_threads > 1024)
+    throw std::invalid_argument("identify: num_threads must be in 0..1024 (0 = automatic), got " +
                                 std::to_string(o.num_threads));
 }
 
@@ -662,7 +663,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   // (NormalFactor).
   std::unique_ptr<NormalEquationProblem> nep;
   if (DenseReason(ds, opt, rq, est.size()).empty())
-    nep = std::make_unique<NormalEquationProblem>(ds, table, values, est, opt.num_threads);
+    nep = std::make_unique<NormalEquationProblem>(
+        ds, table, values, est,
+        opt.num_threads > 0 ? opt.num_threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
   res.fit_path = nep ? "normal_equations" : "dense";
   auto weighted_jacobian_at = [&](const Eigen::VectorXd& at) {
     if (nep) return NormalFactor(nep->Accumulate(at, true).JtJ);  // true: the fit reuses it

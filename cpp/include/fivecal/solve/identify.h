@@ -36,7 +36,9 @@ struct IdentifyOptions {
   bool allow_unidentifiable = false;
   double rank_tolerance = 1e-9;
   double selection_tolerance = 1e-2;       // for "location", in (0, 1)
-  int num_threads = 1;                     // >= 1
+  // 0: automatic (the normal-equation path of long data on every core, the
+  // dense fit, whose problems are small, on one); else that many threads.
+  int num_threads = 0;
   // Prior sigma overrides (priors.h): parameter name or "class:<name>" ->
   // sigma; applied after the machine file's "priors".
   std::map<std::string, double> priors;
