@@ -193,7 +193,10 @@ def test_gum_with_correlated_inputs_agrees_with_monte_carlo(spec):
     plan, _ = uncertainty.simulation_plan(spec)
     groups = [tango.indexation_of(p) for p in spec["plan"]]
     same = np.array([[a == b for b in groups] for a in groups], float)
-    Ux = SIGMA ** 2 * np.eye(plan.num_inputs) + 0.0008 ** 2 * same
+    # The scale bar's length is an input too (after the touches), independent.
+    n = len(groups)
+    Ux = np.diag(np.square(plan.input_sigma))
+    Ux[:n, :n] = SIGMA ** 2 * np.eye(n) + 0.0008 ** 2 * same
     r = uncertainty.monte_carlo(plan, "S3", trials=500, seed=11, progress=False, input_covariance=Ux)
     # GUM by hand from the sensitivity matrix of the noise-free fit.
     base = fivecal.Dataset(plan.base)
@@ -221,6 +224,15 @@ def _cycles(spec, days=3, per_day=4):
             row.append(fivecal.simulate(spec["machine"], spec["plan"], errors=e, artefact=spec["artefact"],
                                         tip_radius=3.0, sigma=SIGMA, seed=100 * d + c, setup=spec["setup"]))
         out.append(row)
+    # One physical bar in every cycle: its certificate length is the same
+    # (the simulator draws a calibration error per spec and seed).
+    length = [b["length"] for b in out[0][0].to_dict()["artefact"]["scale_bars"]]
+    for row in out:
+        for i, ds in enumerate(row):
+            dd = ds.to_dict()
+            for b, L in zip(dd["artefact"]["scale_bars"], length):
+                b["length"] = L
+            row[i] = fivecal.Dataset.from_dict(dd)
     return out
 
 
