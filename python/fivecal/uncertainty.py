@@ -342,12 +342,14 @@ def monte_carlo(dataset_or_spec, estimate: Union[str, Sequence[str]] = "auto", t
     dataset (its readings are the centre of the noise, see
     :func:`simulation_plan`) or a ``_core.SimulationPlan``.  Each of
     ``trials`` trials re-draws the noise of every input (probe trigger along
-    its approach line, DBB reading, ball3d component) and re-fits ``estimate``
+    its approach line, DBB reading, ball3d component, and the calibrated
+    length of each scale bar, with the sigma the fit weighs its row with) and re-fits ``estimate``
     (as :func:`fivecal.identify`) in C++ on ``threads`` threads (0: all
     cores).  Trial ``t`` uses the seed ``_core.trial_seed(seed, t)``: the
     result does not depend on ``threads``.  ``input_covariance``: optional
-    inputs x inputs covariance (mm^2, along the residuals) for correlated
-    noise.  ``robust``/``robust_scale``: a robust loss with a fixed scale (mm;
+    inputs x inputs covariance (mm^2, along the residuals; one row per
+    input of the plan: the observations' in order, then the scale bars') for
+    correlated noise.  ``robust``/``robust_scale``: a robust loss with a fixed scale (mm;
     give it for simulated specs, whose noise-free reference fit has no
     residual scale).  ``progress``: True for the shared bar on stderr (drawn on a
     terminal or with ``FIVECAL_PROGRESS=1``), or a callable ``(done, total)

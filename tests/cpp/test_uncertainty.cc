@@ -19,6 +19,7 @@
 #include "fivecal/uncertainty/gum.h"
 #include "fivecal/solve/identify.h"
 #include "fivecal/solve/refit.h"
+#include "fivecal/solve/problem.h"
 #include "fivecal/uncertainty/monte_carlo.h"
 #include "fivecal/procedures/probing_stats.h"
 #include "fivecal/observations/simulate.h"
@@ -62,7 +63,8 @@ void ExpectSameReadings(const Dataset& a, const Dataset& b) {
 TEST(SimulationPlan, AddNoiseWithTheSpecSeedIsSimulate) {
   const std::string spec = TangoSpec();
   const SimulationPlan plan = BuildSimulationPlan(spec);
-  EXPECT_EQ(plan.num_inputs(), 105);
+  EXPECT_EQ(plan.num_inputs(), 106);  // 105 touches, then the scale bar's length
+  EXPECT_EQ(plan.input_observation.back(), -1);
   ExpectSameReadings(Simulate(spec), AddNoise(plan, plan.seed));
   // Another seed gives other readings.
   const Dataset other = AddNoise(plan, plan.seed + 1);
@@ -73,8 +75,42 @@ TEST(SimulationPlan, TouchSensitivityIsMinusOneAlongTheApproach) {
   const SimulationPlan plan = BuildSimulationPlan(TangoSpec());
   for (int k = 0; k < plan.num_inputs(); ++k) {
     EXPECT_NEAR(plan.sensitivity[k], -1.0, 1e-3) << k;  // the erroneous machine tilts the approach by < 1e-3
-    EXPECT_EQ(plan.input_sigma[k], 0.0006);
+    // The last input is the bar length, weighed as the fit weighs its row.
+    EXPECT_EQ(plan.input_sigma[k], plan.input_observation[k] < 0 ? kScaleBarSigma : 0.0006) << k;
   }
+}
+
+TEST(SimulationPlan, ScaleBarInputMovesOnlyTheBarRowByItsSensitivity) {
+  // Finite difference of the bar row in the bar length: the plan's
+  // sensitivity, and the length written is true + the drawn error.
+  const SimulationPlan plan = BuildSimulationPlan(TangoSpec());
+  const int n = plan.num_inputs(), kb = n - 1;
+  ASSERT_EQ(plan.input_observation[kb], -1);
+  const double h = 1e-3;
+  Eigen::VectorXd dev = Eigen::VectorXd::Zero(n);
+  dev[kb] = h;  // along the residual: the length moves by h / sensitivity
+  const Dataset moved = ApplyInputDeviations(plan, dev);
+  EXPECT_NEAR(moved.artefact.scale_bars[0].length - plan.base.artefact.scale_bars[0].length,
+              h / plan.sensitivity[kb], 1e-12);
+  std::vector<int> src;
+  const Eigen::VectorXd r0 = PredictResiduals(plan.base, plan.values, &src);
+  const Eigen::VectorXd r = PredictResiduals(moved, plan.values);
+  int bar_rows = 0;
+  for (int row = 0; row < r.size(); ++row) {
+    if (src[row] == -1) {
+      ++bar_rows;
+      const double dlength = moved.artefact.scale_bars[0].length - plan.base.artefact.scale_bars[0].length;
+      EXPECT_NEAR((r[row] - r0[row]) / dlength, plan.sensitivity[kb], 1e-9);
+    } else {
+      EXPECT_NEAR(r[row], r0[row], 1e-12) << row;
+    }
+  }
+  EXPECT_EQ(bar_rows, 1);
+  // GUM sees the bar as its last input, as the plan does.
+  const Result fit = Identify(plan.base, SmallFit());
+  const Sensitivity s = SensitivityMatrix(plan.base, fit);
+  ASSERT_EQ(static_cast<int>(s.input_source.size()), n);
+  EXPECT_EQ(s.input_source.back(), -1);
 }
 
 TEST(SimulationPlan, InputDeviationsMoveTheirResidualRowsOnly) {

@@ -193,7 +193,10 @@ def test_gum_with_correlated_inputs_agrees_with_monte_carlo(spec):
     plan, _ = uncertainty.simulation_plan(spec)
     groups = [tango.indexation_of(p) for p in spec["plan"]]
     same = np.array([[a == b for b in groups] for a in groups], float)
-    Ux = SIGMA ** 2 * np.eye(plan.num_inputs) + 0.0008 ** 2 * same
+    # The scale bar's length is an input too (after the touches), independent.
+    n = len(groups)
+    Ux = np.diag(np.square(plan.input_sigma))
+    Ux[:n, :n] = SIGMA ** 2 * np.eye(n) + 0.0008 ** 2 * same
     r = uncertainty.monte_carlo(plan, "S3", trials=500, seed=11, progress=False, input_covariance=Ux)
     # GUM by hand from the sensitivity matrix of the noise-free fit.
     base = fivecal.Dataset(plan.base)
@@ -221,6 +224,15 @@ def _cycles(spec, days=3, per_day=4):
             row.append(fivecal.simulate(spec["machine"], spec["plan"], errors=e, artefact=spec["artefact"],
                                         tip_radius=3.0, sigma=SIGMA, seed=100 * d + c, setup=spec["setup"]))
         out.append(row)
+    # One physical bar in every cycle: its certificate length is the same
+    # (the simulator draws a calibration error per spec and seed).
+    length = [b["length"] for b in out[0][0].to_dict()["artefact"]["scale_bars"]]
+    for row in out:
+        for i, ds in enumerate(row):
+            dd = ds.to_dict()
+            for b, L in zip(dd["artefact"]["scale_bars"], length):
+                b["length"] = L
+            row[i] = fivecal.Dataset.from_dict(dd)
     return out
 
 
@@ -355,3 +367,37 @@ def test_gum_after_plain_least_squares_has_no_prior_term():
     r = fivecal.identify(ds, "S3")
     s = uncertainty.sensitivity(ds, r)
     assert s.prior_term.size == 0
+
+
+def test_monte_carlo_and_gum_include_the_scale_bar_length():
+    """The fit weighs each scale bar row with the bar's sigma, so its
+    covariance counts the bar length's uncertainty: Monte Carlo must draw the
+    length and GUM propagate it (before, both were ~0.66 of the fit's sigma
+    for every scale-dependent parameter)."""
+    ds = tango.hu40t_dataset(seed=5)
+    plan, _ = uncertainty.simulation_plan(ds, "S3")
+    bars = [k for k in plan.input_observation if k < 0]
+    assert bars == [-1 - b for b in range(len(ds.to_dict()["artefact"]["scale_bars"]))] and bars
+    assert all(k >= 0 for k in plan.input_observation[:plan.num_inputs - len(bars)])  # bars last
+    mc = uncertainty.monte_carlo(ds, "S3", trials=400, threads=2, seed=1, progress=False)
+    r = fivecal.identify(ds, "S3")
+    for k in mc.names:
+        assert 0.85 < mc.std[k] / r.std[k] < 1.15, k
+        assert mc.gum_std[k] / r.std[k] == pytest.approx(1.0, abs=0.02), k
+
+
+def test_scale_bar_input_leaves_observation_noise_and_bar_free_plans_alone(spec):
+    """The bar lengths are drawn after every observation's noise: a spec's
+    observations read as with no bar at all, and only the bar's certificate
+    length moves (by about its sigma). Without bars the plan has no bar input."""
+    no_bar = json.loads(json.dumps(spec))
+    no_bar["artefact"]["scale_bars"] = []
+    with_bar = fivecal.Dataset(_core.simulate(json.dumps(spec))).to_dict()
+    without = fivecal.Dataset(_core.simulate(json.dumps(no_bar))).to_dict()
+    assert with_bar["observations"] == without["observations"]
+    plan, _ = uncertainty.simulation_plan(spec)
+    drawn = [b["length"] for b in with_bar["artefact"]["scale_bars"]]
+    truth = [b["length"] for b in fivecal.Dataset(plan.base).to_dict()["artefact"]["scale_bars"]]
+    assert all(0 < abs(d - t) < 0.005 for d, t in zip(drawn, truth))
+    p0, _ = uncertainty.simulation_plan(no_bar)
+    assert min(p0.input_observation) >= 0 and p0.num_inputs == plan.num_inputs - len(truth)

@@ -4,6 +4,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <set>
 #include <stdexcept>
 
 #include "fivecal/model/inverse.h"
@@ -54,8 +55,27 @@ void InitSlots(SimulationPlan* plan) {
   }
 }
 
+// The calibrated length of every scale bar the fit has a row for (the
+// sphere kind's rule: both spheres probed), after the observation inputs and
+// in bar order, as the fit's rows come. The bar row is |c1 - c2| - L, so
+// d residual / d L = -1. Without any noise the plan stays noise-free.
+void AddScaleBarInputs(SimulationPlan* plan) {
+  const Dataset& ds = plan->base;
+  std::set<std::string> probed;
+  for (const Observation& o : ds.observations)
+    if (o.type == ObservationType::kSphere) probed.insert(o.target);
+  bool noisy = false;
+  for (const auto& kv : plan->noise.level) noisy = noisy || kv.second > 0;
+  for (size_t b = 0; b < ds.artefact.scale_bars.size(); ++b) {
+    const ScaleBar& bar = ds.artefact.scale_bars[b];
+    if (!probed.count(bar.sphere1) || !probed.count(bar.sphere2)) continue;
+    AddPlanInput(plan, -1 - static_cast<int>(b), 0, -1.0, noisy ? kScaleBarSigma : 0.0);
+  }
+}
+
 // Observation i of `ds` with input values `x` (one per input of i, in the
-// input's own unit, added to the noise-free value).
+// input's own unit, added to the noise-free value); a scale bar input adds
+// to the bar's length.
 // Into a dataset of the plan's structure (a copy of plan.base, possibly
 // realised before): each observation with inputs is reset to its noise-free
 // reading first (a kind may compose its inputs onto the current reading),
@@ -69,6 +89,11 @@ void RealizeInto(const SimulationPlan& plan, Draw&& draw, Dataset* ds) {
   int last = -1;
   for (int k = 0; k < n_in; ++k) {
     const int i = plan.input_observation[k];
+    if (i < 0) {
+      const int b = -1 - i;
+      ds->artefact.scale_bars[b].length = plan.base.artefact.scale_bars[b].length + draw(k);
+      continue;
+    }
     Observation& o = ds->observations[i];
     // Copy-assignment into an observation of the same shape reuses its buffers.
     if (i != last) o = plan.base.observations[i];
@@ -319,6 +344,10 @@ SimulationPlan PlanSpec(const json& spec) {
     }
     kind.AddInputs(&out, oi, &slots[i], nullptr);
   }
+  // A simulated bar's certificate is off by its calibration error too: the
+  // spec's seed draws it after all observation noise (so a spec's
+  // observations read as they did before bars were inputs).
+  AddScaleBarInputs(&out);
   return out;
 }
 
@@ -347,6 +376,7 @@ SimulationPlan PlanFromDataset(const Dataset& ds, const std::map<std::string, do
   InitSlots(&plan);
   for (size_t i = 0; i < ds.observations.size(); ++i)
     KindOf(ds.observations[i]).AddInputs(&plan, static_cast<int>(i), nullptr, &rec);
+  AddScaleBarInputs(&plan);
   return plan;
 }
 

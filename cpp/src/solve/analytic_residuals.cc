@@ -65,9 +65,17 @@ void AnalyticResiduals::PrepareRow(const ParameterTable& table, int i, AnalyticR
 void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::VectorXd& values) {
   if (values.size() != values_.size()) throw std::invalid_argument("analytic residuals: wrong number of values");
   values_ = values;
-  // The observation rows come first, one per observation (the artefact rows
-  // after them depend on the artefact only).
-  for (size_t i = 0; i < ds_.observations.size(); ++i) PrepareRow(table, static_cast<int>(i), &rows_[i]);
+  // The observation rows come first, one per observation; the artefact rows
+  // after them are made again too: a Monte Carlo trial draws the scale bars'
+  // calibrated lengths, which those rows hold.
+  const size_t n = ds_.observations.size();
+  for (size_t i = 0; i < n; ++i) PrepareRow(table, static_cast<int>(i), &rows_[i]);
+  const size_t before = rows_.size();
+  rows_.resize(n);
+  std::vector<int> source;
+  for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactAnalyticRows(ds_, table, &rows_, &source);
+  if (rows_.size() != before)
+    throw std::invalid_argument("analytic residuals: the dataset's artefact rows changed since it was prepared");
 }
 
 bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residuals,

@@ -372,12 +372,14 @@ Sensitivity SensitivityMatrix(const Dataset& ds, const Result& fit) {
   s.names = fit.estimated;
   s.values.resize(est.size());
   for (size_t i = 0; i < est.size(); ++i) s.values[i] = fit.values[est[i]];
+  // Every residual row is an input: an observation's noise, or a scale bar's
+  // calibrated length (source -1 - b, after the observations), an input with
+  // an uncertainty as much as a reading is (JCGM 101 propagates all inputs).
   const std::vector<int>& src = problem.row_source();
-  for (int row = 0; row < static_cast<int>(src.size()); ++row)
-    if (src[row] >= 0) {
-      s.input_rows.push_back(row);
-      s.input_source.push_back(src[row]);
-    }
+  for (int row = 0; row < static_cast<int>(src.size()); ++row) {
+    s.input_rows.push_back(row);
+    s.input_source.push_back(src[row]);
+  }
   Eigen::MatrixXd Jin(s.input_rows.size(), J.cols());
   for (size_t k = 0; k < s.input_rows.size(); ++k)
     Jin.row(k) = J.row(s.input_rows[k]) * (w[s.input_rows[k]] * w[s.input_rows[k]]);
@@ -410,7 +412,17 @@ CyclesUncertainty GumFromCycles(const std::vector<Dataset>& cycles, const std::v
   std::map<std::string, double> at;
   for (int i = 0; i < table.size(); ++i) at[table.names()[i]] = fit.values[i];
 
-  const int n = static_cast<int>(sens.input_rows.size());
+  // Only the observations' residuals are pooled: a scale bar is the same
+  // physical bar in every cycle, so its calibration error is common to all
+  // cycles and their scatter says nothing about it. Its columns are left out
+  // (the result is the repeatability over the cycles, as the pooled scatter
+  // of the cycles' own fits, output_pooled, is).
+  std::vector<int> obs_inputs;
+  for (int k = 0; k < static_cast<int>(sens.input_source.size()); ++k)
+    if (sens.input_source[k] >= 0) obs_inputs.push_back(k);
+  const int n = static_cast<int>(obs_inputs.size());
+  Eigen::MatrixXd C_obs(sens.C.rows(), n);
+  for (int k = 0; k < n; ++k) C_obs.col(k) = sens.C.col(obs_inputs[k]);
   Eigen::MatrixXd X(K, n);
   const Refit refit(ref, identify, fit);
   CyclesUncertainty out;
@@ -429,7 +441,7 @@ CyclesUncertainty GumFromCycles(const std::vector<Dataset>& cycles, const std::v
     int k = 0;
     for (int row = 0; row < r.size(); ++row) {
       if (src[row] < 0) continue;
-      if (k >= n || src[row] != sens.input_source[k])
+      if (k >= n || src[row] != sens.input_source[obs_inputs[k]])
         throw std::invalid_argument("cycle " + std::to_string(c) +
                                     ": its observations differ from the reference cycle's");
       X(c, k++) = r[row];
@@ -441,7 +453,7 @@ CyclesUncertainty GumFromCycles(const std::vector<Dataset>& cycles, const std::v
   out.output_pooled = PoolCovariance(out.cycle_values, group).covariance;
   const CoverageFactor cf = MakeCoverageFactor(options.probability, out.inputs.dof,
                                                static_cast<int>(fit.estimated.size()), options.coverage_factor);
-  out.gum = PropagateCovariance(sens.C, out.inputs.covariance, sens.names, sens.values, cf, sens.prior_term);
+  out.gum = PropagateCovariance(C_obs, out.inputs.covariance, sens.names, sens.values, cf, sens.prior_term);
   out.day = day;
   out.cycle = cycle;
   out.pooling = options.pooling;

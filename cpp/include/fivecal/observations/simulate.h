@@ -48,7 +48,9 @@ struct NoiseLevels {
 //            "tool_ball": [...], "table_ball": [...]},
 //           {"type": "ball3d", "setup": "R1", "axes": {...}, "tool_ball": [...], "table_ball": [...]}],
 //  "sigma": 0.0006 | {"probe": .., "dbb": .., "ball3d": .., <any noise class>: ..}, "seed": 1}
-// Scale bar lengths are set to the true distance of the true sphere centres.
+// Scale bar lengths are set to the true distance of the true sphere centres,
+// plus (with noise) a calibration error drawn after every observation's noise
+// (the written length is the bar's certificate, the truth is the distance).
 Dataset Simulate(const std::string& spec_json);
 
 // A measurement plan resolved once, for re-drawing the noise many times
@@ -62,6 +64,13 @@ Dataset Simulate(const std::string& spec_json);
 // sample, 3 per ball3d sample. `sensitivity` is d(residual row)/d(input) at
 // the plan's parameter values: about -1 for a touch (the approach moves the
 // tip into the surface), -1 for a DBB reading or a ball3d component.
+// After the observation inputs, one input per scale bar that has a residual
+// row (both its spheres probed), in bar order: the bar's calibrated length
+// (sensitivity -1, sigma kScaleBarSigma, the sigma the fit weighs the bar
+// row with; 0 in a plan without noise). Its input_observation is -1 - b, as
+// the bar row's Problem::row_source(). `base` holds the bar's true length; a
+// draw writes the certificate length = true + calibration error into the
+// dataset, so the fit sees a bar whose declared length is off by the draw.
 struct SimulationPlan {
   explicit SimulationPlan(Dataset d) : base(std::move(d)) {}
   Dataset base;
@@ -73,8 +82,8 @@ struct SimulationPlan {
   std::vector<double> s0;                  // per observation: noise-free trigger position (touches)
   std::vector<double> reading0;            // per observation: noise-free DBB reading
   std::vector<Eigen::Vector3d> measured0;  // per observation: noise-free ball3d displacement
-  std::vector<int> input_observation;      // per input: observation index
-  std::vector<int> input_component;        // per input: 0 (touch, dbb) or 0..2 (ball3d)
+  std::vector<int> input_observation;      // per input: observation index, or -1 - b for scale bar b
+  std::vector<int> input_component;        // per input: 0 (touch, dbb, bar) or 0..2 (ball3d)
   Eigen::VectorXd sensitivity;             // per input: d residual / d input
   Eigen::VectorXd input_sigma;             // per input: its noise level (mm), from `noise`
   int num_inputs() const { return static_cast<int>(input_observation.size()); }
@@ -92,7 +101,8 @@ SimulationPlan PlanFromDataset(const Dataset& ds, const std::map<std::string, do
 
 // The dataset of one noise draw: std::mt19937_64(seed), one standard normal
 // per input in input order, scaled by the input's sigma. With the spec's seed
-// this is exactly Simulate(spec_json).
+// this is exactly Simulate(spec_json). The scale bar inputs come last, so a
+// seed draws the same observation noise as before bars were inputs.
 Dataset AddNoise(const SimulationPlan& plan, uint64_t seed);
 
 // The dataset with the given input deviations, expressed along the residual

@@ -112,7 +112,8 @@ struct Sensitivity {
   Eigen::VectorXd values;
   Eigen::MatrixXd C;               // p x inputs
   std::vector<int> input_rows;     // residual row of each input
-  std::vector<int> input_source;   // observation index of each input
+  std::vector<int> input_source;   // observation index of each input; -1 - b for scale bar b
+                                   // (its calibrated length; the bars come after the observations)
   // After a MAP fit (Result::map_fit) the prior is one more input: the
   // estimate is y = -N^-1 (J_in^T W dx - P theta0) with N = J^T W J + P,
   // P = diag(1 / prior_std^2), so C = -N^-1 J_in^T W and the prior adds

@@ -50,7 +50,8 @@ struct MonteCarloOptions {
   int significant_digits = 2;   // n_dig of the numerical tolerance (JCGM 101 §7.9.2), 1 .. 17
   int blocks = 10;              // h for the stability estimate
   // Optional input covariance (inputs x inputs, mm^2, along the residuals as
-  // in gum.h). Empty: independent inputs with the plan's noise levels.
+  // in gum.h; one row per plan input: the observations' noise, then the scale
+  // bars' lengths). Empty: independent inputs with the plan's noise levels.
   Eigen::MatrixXd input_covariance;
   // Also record each trial's one-sigma uncertainties as Identify reports them
   // (residual sigma x sqrt(diag (J^T J)^-1)): coverage checks of a single fit.
