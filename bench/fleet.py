@@ -74,14 +74,14 @@ def score(store, truth, nights):
             "quiet_machine_nights": quiet, "false_alarm_fraction": false / max(quiet, 1), "design_rate": RATE}
 
 
-def fleet_run(data, workers, store):
+def fleet_run(data, workers, store, chunk=None):
     from fivecal.history.fleet import fleet_identify
 
     load0 = os.getloadavg()
     c, client = cluster(workers)
     try:
         t = time.perf_counter()
-        run = fleet_identify(data, store=store, procedure="sphere", client=client)
+        run = fleet_identify(data, store=store, procedure="sphere", client=client, chunk=chunk)
         wall = time.perf_counter() - t
     finally:
         client.close()
@@ -171,12 +171,13 @@ def main(argv=None):
     p.add_argument("--nights", type=int, default=30)
     p.add_argument("--workers", default="1,2", help="worker counts, comma separated (default 1,2)")
     p.add_argument("--data", help="folder for the simulated fleet, kept and reused (default: a temporary one)")
+    p.add_argument("--chunk", type=int, help="datasets per Dask task (default: fivecal's choice, up to 32)")
     p.add_argument("--breakdown", type=int, default=200, help="datasets timed step by step (default 200)")
     p.add_argument("--out", help="results file (default bench/fleet_results.json for the default case, "
                    "else fivecal-fleet-<machines>x<nights>.json in the temporary folder)")
     a = p.parse_args(argv)
     workers = [int(w) for w in a.workers.split(",")]
-    full = (a.machines, a.nights, workers) == (1000, 30, [1, 2])
+    full = (a.machines, a.nights, workers, a.chunk) == (1000, 30, [1, 2], None)
     out = a.out or (os.path.join(HERE, "fleet_results.json") if full else
                     os.path.join(tempfile.gettempdir(), f"fivecal-fleet-{a.machines}x{a.nights}.json"))
 
@@ -193,7 +194,7 @@ def main(argv=None):
         runs, stores = [], []
         for w in workers:
             store = os.path.join(tmp, f"fleet-{w}.fcdb")
-            r = fleet_run(data, w, store)
+            r = fleet_run(data, w, store, a.chunk)
             runs.append(r)
             stores.append(store)
             log(f"{w} worker(s): {r['datasets_per_second']:.1f} datasets/s, fit share {r['fit_share']:.0%}, "
@@ -213,7 +214,7 @@ def main(argv=None):
         log(f"breakdown (ms per dataset): {json.dumps({k: round(v, 2) for k, v in bd['per_dataset_ms'].items()})}")
     doc = {"fivecal": fivecal.__version__, "date": time.strftime("%Y-%m-%d %H:%M:%S"), "cores": os.cpu_count(),
            "loadavg_at_start": load0, "loadavg_at_end": os.getloadavg(), "machines": a.machines,
-           "nights": a.nights, "datasets": len(paths), "simulation_seconds": sim,
+           "nights": a.nights, "chunk": a.chunk, "datasets": len(paths), "simulation_seconds": sim,
            "total_seconds": time.perf_counter() - t_all, "runs": runs,
            "same_values_on_every_worker_count": same, "detection": det, "breakdown": bd}
     with open(out, "w") as f:

@@ -131,9 +131,10 @@ def _load(path: str):
 
 
 def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), options: Optional[dict] = None,
-                 trials: int = 0):
+                 trials: int = 0, machine: bool = True):
     """Worker side: ``("skipped", digest, job)``, ``("ok", Calibration, seconds
-    in the fit, machine)`` or ``("failed", digest, job, error text)``.
+    in the fit, machine)`` or ``("failed", digest, job, error text)``;
+    ``machine``: the machine's definition (dict), None with ``machine=False``.
     ``trials`` > 0: the covariance is that of a JCGM 101 Monte Carlo of
     ``trials`` trials around this dataset (one thread: the cluster is the
     parallelism), recorded as ``uncertainty = "monte_carlo:N"``."""
@@ -157,7 +158,7 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
             idx = [mc.names.index(n) for n in cal.names]
             cal.covariance = np.asarray(mc.covariance, float)[np.ix_(idx, idx)]
             cal.uncertainty = f"monte_carlo:{trials}"
-        return ("ok", cal, fit, ds.machine.to_dict())
+        return ("ok", cal, fit, ds.machine.to_dict() if machine else None)
     except Exception as e:      # a bad dataset is recorded, the run goes on
         return ("failed", digest, job, f"{type(e).__name__}: {e}")
 
@@ -173,11 +174,10 @@ def identify_chunk(jobs: Sequence[Job], estimate="location", done: frozenset = f
     t0 = _time.perf_counter()
     out, sent = [], set()
     for j in jobs:
-        r = identify_one(j, estimate=estimate, done=done, options=options, trials=trials)
+        r = identify_one(j, estimate=estimate, done=done, options=options, trials=trials,
+                         machine=j.machine_id not in sent)
         if r[0] == "ok":
-            mid = r[1].machine_id
-            r = r if mid not in sent else r[:3] + (None,)
-            sent.add(mid)
+            sent.add(j.machine_id)
         out.append(r)
     return out, _time.perf_counter() - t0
 
