@@ -89,6 +89,7 @@ def test_datasets_go_in_chunks_and_the_run_says_where_the_time_went(fleet):
     d, truth, store, run = fleet
     assert 2 * 4 <= run.tasks <= MACHINES * NIGHTS // 10
     assert 0 < run.fit_seconds < run.task_seconds < 2 * run.seconds
+    assert 0 < run.fit_cpu_seconds < run.task_cpu_seconds <= run.task_seconds * 1.01
     assert 0 < run.store_seconds < run.seconds
 
 
@@ -96,8 +97,9 @@ def test_a_chunk_identifies_each_dataset_and_sends_the_machine_once(fleet, clust
     d, truth, store, run = fleet
     paths = [str(d / "data" / "M0005" / (fleetsim.night_time(n)[:10] + ".json")) for n in range(3)]
     jobs = history.fleet.jobs_from(paths)
-    results, seconds = history.fleet.identify_chunk(jobs)
-    assert [r[0] for r in results] == ["ok"] * 3 and seconds > 0
+    results, seconds, cpu = history.fleet.identify_chunk(jobs)
+    assert [r[0] for r in results] == ["ok"] * 3 and 0 < cpu <= seconds * 1.01
+    assert all(0 < r[2][1] <= r[2][0] * 1.01 for r in results)       # (wall, CPU) of each fit
     # the machine's definition travels once per chunk
     assert results[0][3] is not None and results[1][3] is None and results[2][3] is None
     with pytest.raises(ValueError, match="chunk"):

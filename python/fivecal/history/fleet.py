@@ -132,8 +132,9 @@ def _load(path: str):
 
 def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), options: Optional[dict] = None,
                  trials: int = 0, machine: bool = True):
-    """Worker side: ``("skipped", digest, job)``, ``("ok", Calibration, seconds
-    in the fit, machine)`` or ``("failed", digest, job, error text)``;
+    """Worker side: ``("skipped", digest, job)``, ``("ok", Calibration, (wall,
+    CPU) seconds of this thread in the identification call, machine)`` or
+    ``("failed", digest, job, error text)``;
     ``machine``: the machine's definition (dict), None with ``machine=False``.
     ``trials`` > 0: the covariance is that of a JCGM 101 Monte Carlo of
     ``trials`` trials around this dataset (one thread: the cluster is the
@@ -146,9 +147,9 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
         digest = dataset_digest(ds)
         if digest in done:
             return ("skipped", digest, job)
-        t0 = _time.perf_counter()
+        t0, c0 = _time.perf_counter(), _time.thread_time()
         r = identify(ds, estimate=estimate, **(options or {}))
-        fit = _time.perf_counter() - t0
+        fit = (_time.perf_counter() - t0, _time.thread_time() - c0)
         cal = calibration_from_result(r, job.machine_id, job.time, job.procedure, digest=digest, source=job.path)
         if trials:
             from ..uncertainty import monte_carlo
@@ -165,13 +166,14 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
 
 def identify_chunk(jobs: Sequence[Job], estimate="location", done: frozenset = frozenset(),
                    options: Optional[dict] = None, trials: int = 0):
-    """Worker side, one Dask task for several datasets: ``(results, seconds)``,
-    the :func:`identify_one` result of each job (a machine's definition only
-    with the first of its results in the chunk) and the task's time on the
-    worker. One task per dataset cost the scheduler, the transfer and the
+    """Worker side, one Dask task for several datasets: ``(results, seconds,
+    cpu_seconds)``, the :func:`identify_one` result of each job (a machine's
+    definition only with the first of its results in the chunk), the task's
+    wall time and its thread's CPU time (on a loaded machine the wall time
+    also counts the waits for a core). One task per dataset cost the scheduler, the transfer and the
     client about as much as a nightly fit (issue 18's bench), so datasets go
     in chunks."""
-    t0 = _time.perf_counter()
+    t0, c0 = _time.perf_counter(), _time.thread_time()
     out, sent = [], set()
     for j in jobs:
         r = identify_one(j, estimate=estimate, done=done, options=options, trials=trials,
@@ -179,7 +181,7 @@ def identify_chunk(jobs: Sequence[Job], estimate="location", done: frozenset = f
         if r[0] == "ok":
             sent.add(j.machine_id)
         out.append(r)
-    return out, _time.perf_counter() - t0
+    return out, _time.perf_counter() - t0, _time.thread_time() - c0
 
 
 @dataclass
@@ -188,14 +190,18 @@ class FleetRun:
     identification calls (the C++ fit and the wrapping of its result),
     ``task_seconds``: time the workers spent in fleet tasks (that and reading,
     validating, digesting the datasets and building the records),
-    ``store_seconds``: the client's time writing results; ``seconds``: wall
-    time of the run, cluster start-up included when the run started it."""
+    ``fit_cpu_seconds`` and ``task_cpu_seconds``: the same in CPU time of the
+    workers' task threads, ``store_seconds``: the client's time writing
+    results; ``seconds``: wall time of the run, cluster start-up included when
+    the run started it."""
     done: int = 0
     skipped: int = 0
     failed: int = 0
     seconds: float = 0.0
     fit_seconds: float = 0.0
     task_seconds: float = 0.0
+    fit_cpu_seconds: float = 0.0
+    task_cpu_seconds: float = 0.0
     store_seconds: float = 0.0
     tasks: int = 0
     failures: List[tuple] = field(default_factory=list)
@@ -306,8 +312,9 @@ def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, jobs
     try:
         for fut in completed:
             try:
-                results, seconds = fut.result()
+                results, seconds, cpu = fut.result()
                 run.task_seconds += seconds
+                run.task_cpu_seconds += cpu
             except Exception as e:   # the task itself died (a worker killed by it): its datasets are failures
                 results = [("failed", "", j, f"{type(e).__name__}: {e}") for j in jobs_of[fut.key]]
             run.tasks += 1
@@ -317,7 +324,8 @@ def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, jobs
                 elif r[0] == "ok":
                     _, cal, fit, mdef = r
                     run.done += 1
-                    run.fit_seconds += fit
+                    run.fit_seconds += fit[0]
+                    run.fit_cpu_seconds += fit[1]
                     pending.append(cal)
                     if mdef is not None:
                         machines[cal.machine_id] = mdef
