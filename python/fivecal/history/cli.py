@@ -193,7 +193,8 @@ def add_identify_options(p) -> None:
                    "report adds this machine's trend, the comparison with its previous calibration and, with "
                    "tolerances, pass / fail. This result is placed in the trend at the date in the dataset's "
                    "file name (YYYY-MM-DD[THH:MM[:SS]]), else at the file's modification time")
-    g.add_argument("--machine-id", metavar="ID", help="which machine of the store this dataset is (needed with --history)")
+    g.add_argument("--machine-id", metavar="ID",
+                   help="which machine of the store this dataset is (needed with --history)")
     g.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
                    help="largest acceptable |value|, mm / rad, e.g. EX0C=0.005 (repeatable, comma separated)")
     g.add_argument("--volumetric-tolerance", type=float, metavar="MM",
