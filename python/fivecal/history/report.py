@@ -95,7 +95,7 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
     if this is None:
         this = usable[-1] if usable else cals[-1]
     before = [c for c in usable if c is not this and c.time <= this.time]
-    if this in usable and before:
+    if any(c is this for c in usable) and before:       # identity: a Calibration holds arrays
         cmp = compare(before[-1], this, machine=machine)
         rows = []
         for q in cmp.parameters:
