@@ -147,3 +147,22 @@ def test_identify_report_with_history_renders_in_chromium(nights, tmp_path):
     assert found["broken"] == [] and min(found["widths"]) > 500
     for section in ("Calibration history", "Compared with the previous calibration", "Pass / fail"):
         assert section in found["h2"]
+
+
+def test_identify_report_of_an_unusable_fit_fails_it_and_compares_nothing(nights, tmp_path):
+    """A night whose residuals are 10x the declared noise: the report grades
+    that night (FAIL, not usable) instead of the newest usable one, and
+    draws no comparison from it."""
+    d, paths, store = nights
+    data = json.loads(open(paths[6]).read())
+    for o in data["observations"]:
+        o["sigma"] = 0.00006
+    bad = tmp_path / "2026-01-08.json"
+    bad.write_text(json.dumps(data))
+    rep = tmp_path / "rep"
+    assert main(["identify", str(bad), "--estimate", "location", "--report", str(rep), "--history", store,
+                 "--machine-id", "HU-7", "--tolerance", "EX0C=0.02"]) == 1
+    text = (rep / "report.html").read_text(encoding="utf-8")
+    assert "1 not usable, left out of the trend" in text
+    assert "This calibration (2026-01-08T00:00:00Z): <b>FAIL</b> (the fit itself is not usable: inadequate)" in text
+    assert ">Compared with the previous calibration</h2>" not in text
