@@ -27,6 +27,9 @@ def _identify(args) -> int:
 
     from .progress import busy
 
+    from .history.cli import identify_history
+
+    hist = identify_history(args)
     ds = load_dataset(args.dataset)
     with busy(f"fitting {len(ds)} observations"), warnings.catch_warnings():
         warnings.simplefilter("ignore", category=_fit_warning())  # said once below, in one line
@@ -44,8 +47,13 @@ def _identify(args) -> int:
 
         path = write_report(result, args.report, title=f"fivecal identification — {os.path.basename(args.dataset)}",
                             summary=f"dataset {args.dataset}, estimate {args.estimate}"
-                                    + (f", fixed {args.fix}" if args.fix else ""))
+                                    + (f", fixed {args.fix}" if args.fix else ""),
+                            history=hist)
         print(f"\nreport: {os.path.abspath(path)} (with result.json and the plots as PNG)")
+    if hist is not None and args.record:
+        from .history.cli import record_identify
+
+        record_identify(args, result, hist)
     a = result.assessment()
     if not a.usable:
         written = [x for x in (args.out, args.report) if x]
@@ -699,6 +707,7 @@ def main(argv=None) -> int:
     pi.add_argument("--out", help="write the result JSON here")
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")
+    from .history.cli import add_identify_options; add_identify_options(pi)  # noqa: E702
     pi.set_defaults(func=_identify)
 
     pv = sub.add_parser("convert", help="a dataset from JSON to Parquet or back (lossless)",

@@ -43,7 +43,7 @@ def cluster():
 def fleet(tmp_path_factory, cluster):
     d = tmp_path_factory.mktemp("fleet")
     truth = fleetsim.fleet_truth(MACHINES, NIGHTS, drift_fraction=0.5, seed=7)
-    fleetsim.write_fleet(str(d / "data"), truth, NIGHTS, seed=7)
+    fleetsim.write_fleet(str(d / "data"), truth, NIGHTS, seed=7, client=cluster[1])
     store = str(d / "fleet.fcdb")
     run = history.fleet.fleet_identify(str(d / "data"), store=store, procedure="sphere", client=cluster[1])
     return d, truth, store, run
@@ -79,6 +79,41 @@ def test_the_fleet_run_identifies_every_night(fleet):
         assert np.all(ex0c < 0.0003)          # σ(EX0C) per night ≲ 0.3 µm: a 2 µm step is > 6σ
         assert all(c.verdict == "ok" for c in cals)
         assert s.machine("M0000") is not None
+
+
+def test_datasets_go_in_chunks_and_the_run_says_where_the_time_went(fleet):
+    """One Dask task per dataset cost about as much as the fit itself (the
+    scheduler, the transfer, the client): a run of 600 datasets on 2 workers
+    makes a few dozen tasks, and it reports the time in the fits, in the
+    workers' tasks and in the store writes."""
+    d, truth, store, run = fleet
+    assert 2 * 4 <= run.tasks <= MACHINES * NIGHTS // 10
+    assert 0 < run.fit_seconds < run.task_seconds < 2 * run.seconds
+    assert 0 < run.fit_cpu_seconds < run.task_cpu_seconds <= run.task_seconds * 1.01
+    assert 0 < run.store_seconds < run.seconds
+
+
+def test_a_chunk_identifies_each_dataset_and_sends_the_machine_once(fleet, cluster, tmp_path):
+    d, truth, store, run = fleet
+    paths = [str(d / "data" / "M0005" / (fleetsim.night_time(n)[:10] + ".json")) for n in range(3)]
+    jobs = history.fleet.jobs_from(paths)
+    results, seconds, cpu = history.fleet.identify_chunk(jobs)
+    assert [r[0] for r in results] == ["ok"] * 3 and 0 < cpu <= seconds * 1.01
+    assert all(0 < r[2][1] <= r[2][0] * 1.01 for r in results)       # (wall, CPU) of each fit
+    # the machine's definition travels once per chunk
+    assert results[0][3] is not None and results[1][3] is None and results[2][3] is None
+    with pytest.raises(ValueError, match="chunk"):
+        history.fleet.fleet_identify(paths, client=cluster[1], chunk=0)
+    r = history.fleet.fleet_identify(paths, client=cluster[1], chunk=2)
+    assert r.tasks == 2 and r.done == 3
+
+
+def test_the_fleet_simulated_on_the_cluster_is_the_same_as_in_process(cluster, tmp_path):
+    truth = fleetsim.fleet_truth(3, 8, drift_fraction=0.34, seed=3)
+    a = fleetsim.write_fleet(str(tmp_path / "a"), truth, 8, seed=3)
+    b = fleetsim.write_fleet(str(tmp_path / "b"), truth, 8, seed=3, client=cluster[1])
+    assert [os.path.relpath(p, tmp_path / "a") for p in a] == [os.path.relpath(p, tmp_path / "b") for p in b]
+    assert all(open(p).read() == open(q).read() for p, q in zip(a, b))
 
 
 def test_change_detection_finds_the_drifts_without_false_alarms(fleet):

@@ -52,9 +52,10 @@ def _list(args) -> int:
         print(json.dumps([{"id": c.id, "machine_id": c.machine_id, "time": c.time, "procedure": c.procedure,
                            "verdict": c.verdict, "digest": c.digest} for c in cals], indent=1))
         return 0
-    print(f"{'id':>6}  {'machine':<14}{'time':<22}{'procedure':<12}{'verdict':<14}{'rms µm':>8}  digest")
+    tw = max([22] + [len(c.time) + 2 for c in cals])     # times with microseconds are longer
+    print(f"{'id':>6}  {'machine':<14}{'time':<{tw}}{'procedure':<12}{'verdict':<14}{'rms µm':>8}  digest")
     for c in cals:
-        print(f"{c.id:>6}  {c.machine_id:<14}{c.time:<22}{c.procedure:<12}{c.verdict:<14}"
+        print(f"{c.id:>6}  {c.machine_id:<14}{c.time:<{tw}}{c.procedure:<12}{c.verdict:<14}"
               f"{c.rms * 1e3:>8.3f}  {c.digest[:12]}")
     print(f"{len(cals)} calibrations")
     return 0
@@ -182,6 +183,66 @@ def _fleet(args) -> int:
         print(f"  ... {len(run.failures) - 20} more" + (f" (fivecal history failures --store {args.store})"
                                                          if args.store else ""), file=sys.stderr)
     return 0
+
+
+def add_identify_options(p) -> None:
+    """``fivecal identify``'s history options: the report shows this machine's
+    trend, the comparison with its previous calibration and pass / fail."""
+    g = p.add_argument_group("history (docs/history.md)")
+    g.add_argument("--history", metavar="STORE", help="calibration store (SQLite file): with --report, the "
+                   "report adds this machine's trend, the comparison with its previous calibration and, with "
+                   "tolerances, pass / fail. This result is placed in the trend at the date in the dataset's "
+                   "file name (YYYY-MM-DD[THH:MM[:SS]]), else at the file's modification time")
+    g.add_argument("--machine-id", metavar="ID",
+                   help="which machine of the store this dataset is (needed with --history)")
+    g.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
+                   help="largest acceptable |value|, mm / rad, e.g. EX0C=0.005 (repeatable, comma separated)")
+    g.add_argument("--volumetric-tolerance", type=float, metavar="MM",
+                   help="largest acceptable predicted tool-point error, mm")
+    g.add_argument("--record", action="store_true", help="also record this result in the store (created if "
+                   "missing), with the dataset's digest and that time, after the report is written")
+    g.add_argument("--procedure", metavar="LABEL", help="procedure label recorded with --record (e.g. sphere, tango)")
+
+
+def identify_history(args):
+    """The report's :class:`~fivecal.history.report.History` for ``fivecal
+    identify`` (None without --history); checks the options first."""
+    from .report import History
+
+    given = [o for o, v in (("--machine-id", args.machine_id), ("--tolerance", args.tolerance),
+                            ("--volumetric-tolerance", args.volumetric_tolerance), ("--record", args.record),
+                            ("--procedure", args.procedure)) if v]
+    if not args.history:
+        if given:
+            raise ValueError(f"{given[0]}: needs --history STORE")
+        return None
+    if not args.machine_id or not args.machine_id.strip():
+        raise ValueError("--history: give --machine-id ID (which machine of the store this dataset is)")
+    if not args.report and not args.record:
+        raise ValueError("--history: the trend, comparison and pass / fail go in the HTML report: give "
+                         "--report DIR (or --record to only record the result)")
+    vt = args.volumetric_tolerance
+    if vt is not None and not (math.isfinite(vt) and vt > 0):
+        raise ValueError(f"--volumetric-tolerance: expected a positive number of mm, got {vt}")
+    from .store import Store
+
+    # a missing (without --record) or foreign file is said before the fit
+    Store(args.history, create=args.record).close()
+    from .fleet import _time_of
+
+    return History(args.history, args.machine_id.strip(), tolerances=_tolerances(args.tolerance) or None,
+                   volumetric_tolerance=vt, time=_time_of(args.dataset) if os.path.isfile(args.dataset) else None)
+
+
+def record_identify(args, result, hist) -> None:
+    """``fivecal identify --record``: the result into the store."""
+    from .store import Store
+
+    with Store(hist.store, create=True) as s:
+        i = s.add(result, machine_id=hist.machine_id, procedure=args.procedure or "", time=hist.time,
+                  source=args.dataset)
+        n = len(s.list(hist.machine_id))
+    print(f"history: calibration #{i} of {hist.machine_id} recorded in {hist.store} ({n} in all)")
 
 
 def register(sub) -> None:

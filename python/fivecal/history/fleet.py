@@ -6,9 +6,10 @@ paths, or a manifest (Parquet or CSV with a ``path`` column and optionally
 is the name of the dataset's folder and the time the ISO date (or date and
 time) in the file name, else the file's modification time.
 
-Each dataset is one Dask task: the worker reads it, computes its digest,
-skips it when that digest is already finished, identifies it and returns a
-small record (values, covariance, fit quality) or the error. The client is
+Datasets go to Dask in chunks (one task for up to 32 of them): for each,
+the worker reads it, computes its digest, skips it when that digest is
+already finished, identifies it and returns a small record (values,
+covariance, fit quality) or the error. The client is
 the only writer: it records results in the store (and/or partitioned
 Parquet) as they complete, so a run stopped half way keeps what it did and a
 re-run skips it. A dataset that fails is recorded as a failure, never stops
@@ -130,9 +131,11 @@ def _load(path: str):
 
 
 def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), options: Optional[dict] = None,
-                 trials: int = 0):
-    """Worker side: ``("skipped", digest, job)``, ``("ok", Calibration, seconds
-    in the fit, machine)`` or ``("failed", digest, job, error text)``.
+                 trials: int = 0, machine: bool = True):
+    """Worker side: ``("skipped", digest, job)``, ``("ok", Calibration, (wall,
+    CPU) seconds of this thread in the identification call, machine)`` or
+    ``("failed", digest, job, error text)``;
+    ``machine``: the machine's definition (dict), None with ``machine=False``.
     ``trials`` > 0: the covariance is that of a JCGM 101 Monte Carlo of
     ``trials`` trials around this dataset (one thread: the cluster is the
     parallelism), recorded as ``uncertainty = "monte_carlo:N"``."""
@@ -144,9 +147,9 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
         digest = dataset_digest(ds)
         if digest in done:
             return ("skipped", digest, job)
-        t0 = _time.perf_counter()
+        t0, c0 = _time.perf_counter(), _time.thread_time()
         r = identify(ds, estimate=estimate, **(options or {}))
-        fit = _time.perf_counter() - t0
+        fit = (_time.perf_counter() - t0, _time.thread_time() - c0)
         cal = calibration_from_result(r, job.machine_id, job.time, job.procedure, digest=digest, source=job.path)
         if trials:
             from ..uncertainty import monte_carlo
@@ -156,18 +159,51 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
             idx = [mc.names.index(n) for n in cal.names]
             cal.covariance = np.asarray(mc.covariance, float)[np.ix_(idx, idx)]
             cal.uncertainty = f"monte_carlo:{trials}"
-        return ("ok", cal, fit, ds.machine.to_dict())
+        return ("ok", cal, fit, ds.machine.to_dict() if machine else None)
     except Exception as e:      # a bad dataset is recorded, the run goes on
         return ("failed", digest, job, f"{type(e).__name__}: {e}")
 
 
+def identify_chunk(jobs: Sequence[Job], estimate="location", done: frozenset = frozenset(),
+                   options: Optional[dict] = None, trials: int = 0):
+    """Worker side, one Dask task for several datasets: ``(results, seconds,
+    cpu_seconds)``, the :func:`identify_one` result of each job (a machine's
+    definition only with the first of its results in the chunk), the task's
+    wall time and its thread's CPU time (on a loaded machine the wall time
+    also counts the waits for a core). One task per dataset cost the scheduler, the transfer and the
+    client about as much as a nightly fit (issue 18's bench), so datasets go
+    in chunks."""
+    t0, c0 = _time.perf_counter(), _time.thread_time()
+    out, sent = [], set()
+    for j in jobs:
+        r = identify_one(j, estimate=estimate, done=done, options=options, trials=trials,
+                         machine=j.machine_id not in sent)
+        if r[0] == "ok":
+            sent.add(j.machine_id)
+        out.append(r)
+    return out, _time.perf_counter() - t0, _time.thread_time() - c0
+
+
 @dataclass
 class FleetRun:
+    """Counts and times of a fleet run. ``fit_seconds``: time in the
+    identification calls (the C++ fit and the wrapping of its result),
+    ``task_seconds``: time the workers spent in fleet tasks (that and reading,
+    validating, digesting the datasets and building the records),
+    ``fit_cpu_seconds`` and ``task_cpu_seconds``: the same in CPU time of the
+    workers' task threads, ``store_seconds``: the client's time writing
+    results; ``seconds``: wall time of the run, cluster start-up included when
+    the run started it."""
     done: int = 0
     skipped: int = 0
     failed: int = 0
     seconds: float = 0.0
     fit_seconds: float = 0.0
+    task_seconds: float = 0.0
+    fit_cpu_seconds: float = 0.0
+    task_cpu_seconds: float = 0.0
+    store_seconds: float = 0.0
+    tasks: int = 0
     failures: List[tuple] = field(default_factory=list)
     calibrations: List[Calibration] = field(default_factory=list)
 
@@ -177,19 +213,29 @@ class FleetRun:
                 f"{self.seconds:.1f} s ({rate:.1f} datasets/s)")
 
 
+def _chunk_size(n: int, workers: int) -> int:
+    # big enough that the scheduler's per-task cost is small against the fits,
+    # small enough that every worker gets several tasks (balance, progress)
+    return max(1, min(32, -(-n // (4 * max(workers, 1)))))
+
+
 def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: Optional[str] = None,
                    estimate="location", procedure: str = "", machine_id: Optional[str] = None,
                    scheduler: Optional[str] = None, workers: Optional[int] = None, progress: bool = False,
-                   options: Optional[dict] = None, batch: int = 200, client=None, trials: int = 0) -> FleetRun:
+                   options: Optional[dict] = None, batch: int = 200, client=None, trials: int = 0,
+                   chunk: Optional[int] = None) -> FleetRun:
     """Identify every dataset of ``source`` on Dask (``scheduler``: address of
     an existing cluster; default a ``LocalCluster`` of ``workers`` processes,
     one thread each). Results go to ``store`` (path or :class:`Store`) and/or
     ``parquet`` (a folder, partitioned by machine_id). ``trials``: also a
-    Monte Carlo of that many trials per dataset for the covariance. Returns
-    counts and, when neither output is given, the calibrations."""
+    Monte Carlo of that many trials per dataset for the covariance. ``chunk``:
+    datasets per Dask task (default: up to 32, at least 4 tasks a worker).
+    Returns counts and, when neither output is given, the calibrations."""
     require_dask()
     from distributed import Client, LocalCluster, as_completed
 
+    if chunk is not None and chunk < 1:
+        raise ValueError(f"chunk: expected an integer >= 1, got {chunk}")
     jobs = jobs_from(source, procedure, machine_id)
     own_store = isinstance(store, (str, os.PathLike))
     st = Store(store) if own_store else store
@@ -213,15 +259,18 @@ def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: O
         else:
             own_client = False
         try:
+            size = chunk or _chunk_size(len(jobs), sum(client.nthreads().values()))
+            chunks = [jobs[i:i + size] for i in range(0, len(jobs), size)]
             # one copy of the finished digests on every worker (a list: scatter
             # would split a set into one future per element)
             done_f = client.scatter([frozenset(done)], broadcast=True)[0] if done else frozenset()
-            futures = client.map(identify_one, jobs, estimate=estimate, done=done_f, options=options, trials=trials,
-                                 key=[f"fivecal-identify-{i}-{os.path.basename(j.path)}" for i, j in enumerate(jobs)],
-                                 pure=False)
-            job_of = {f.key: j for f, j in zip(futures, jobs)}
+            futures = client.map(identify_chunk, chunks, estimate=estimate, done=done_f, options=options,
+                                 trials=trials, pure=False,
+                                 key=[f"fivecal-identify-{i}-{os.path.basename(c[0].path)}"
+                                      for i, c in enumerate(chunks)])
+            jobs_of = {f.key: c for f, c in zip(futures, chunks)}
             writer = threading.Thread(target=_collect, args=(as_completed(futures), st, parquet, run, batch,
-                                                             st is None and not parquet, job_of))
+                                                             st is None and not parquet, jobs_of))
             writer.start()
             if progress:
                 from distributed import progress as dask_progress
@@ -242,13 +291,14 @@ def fleet_identify(source, store: Optional[Union[str, Store]] = None, parquet: O
     return run
 
 
-def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, job_of: dict) -> None:
+def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, jobs_of: dict) -> None:
     pending: List[Calibration] = []
     machines = {}
 
     def flush():
         if not pending:
             return
+        t = _time.perf_counter()
         if st is not None:
             st.add_many(pending, machines=machines)
         if parquet:
@@ -257,29 +307,38 @@ def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, job_
             run.calibrations.extend(pending)
         pending.clear()
         machines.clear()
+        run.store_seconds += _time.perf_counter() - t
 
     try:
         for fut in completed:
             try:
-                r = fut.result()
-            except Exception as e:   # the task itself died (a worker killed by it): recorded like a failure
-                r = ("failed", "", job_of[fut.key], f"{type(e).__name__}: {e}")
-            if r[0] == "skipped":
-                run.skipped += 1
-            elif r[0] == "ok":
-                _, cal, fit, mdef = r
-                run.done += 1
-                run.fit_seconds += fit
-                pending.append(cal)
-                machines[cal.machine_id] = mdef
-                if len(pending) >= batch:
-                    flush()
-            else:
-                _, digest, job, err = r
-                run.failed += 1
-                run.failures.append((job.path, err))
-                if st is not None:
-                    st.add_failure(digest or "", err, job.path, job.machine_id)
+                results, seconds, cpu = fut.result()
+                run.task_seconds += seconds
+                run.task_cpu_seconds += cpu
+            except Exception as e:   # the task itself died (a worker killed by it): its datasets are failures
+                results = [("failed", "", j, f"{type(e).__name__}: {e}") for j in jobs_of[fut.key]]
+            run.tasks += 1
+            for r in results:
+                if r[0] == "skipped":
+                    run.skipped += 1
+                elif r[0] == "ok":
+                    _, cal, fit, mdef = r
+                    run.done += 1
+                    run.fit_seconds += fit[0]
+                    run.fit_cpu_seconds += fit[1]
+                    pending.append(cal)
+                    if mdef is not None:
+                        machines[cal.machine_id] = mdef
+                    if len(pending) >= batch:
+                        flush()
+                else:
+                    _, digest, job, err = r
+                    run.failed += 1
+                    run.failures.append((job.path, err))
+                    if st is not None:
+                        t = _time.perf_counter()
+                        st.add_failure(digest or "", err, job.path, job.machine_id)
+                        run.store_seconds += _time.perf_counter() - t
         flush()
     except BaseException as e:     # re-raised by the caller's thread
         run._error = e

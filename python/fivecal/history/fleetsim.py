@@ -73,12 +73,14 @@ def fleet_truth(machines: int, nights: int, drift_fraction: float = 0.05, seed: 
     return out
 
 
-def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigma: Optional[float] = None) -> list:
+def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigma: Optional[float] = None,
+                client=None) -> list:
     """Simulate every machine's nightly sphere checks into
     ``folder/<machine_id>/<YYYY-MM-DD>.json`` (the layout ``fivecal fleet
     identify`` reads: machine id from the folder, time from the file name);
-    returns the paths."""
-    from .. import _core, simulate
+    returns the paths. ``client``: a Dask client to simulate the machines on
+    its workers (the same files as without)."""
+    from .. import simulate
     from ..procedures import tango
 
     m = machine()
@@ -91,8 +93,21 @@ def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigm
     spec = {"machine": m.to_dict(), "setup": {}, "probe": {"tip_radius": tango.TIP_RADIUS},
             "artefact": {"spheres": [SPHERE]}, "plan": plan,
             "sigma": tango.PROBE_SIGMA if sigma is None else sigma}
+    work = list(enumerate(truth))
+    if client is None:
+        return _write_machines(work, folder, spec, nights, seed)
+    step = max(1, -(-len(work) // (8 * max(1, sum(client.nthreads().values())))))
+    spec_f = client.scatter([spec], broadcast=True)[0]
+    parts = [work[i:i + step] for i in range(0, len(work), step)]
+    futures = client.map(_write_machines, parts, folder=folder, spec=spec_f, nights=nights, seed=seed, pure=False)
+    return [p for part in client.gather(futures) for p in part]
+
+
+def _write_machines(work: list, folder: str, spec: dict, nights: int, seed: int) -> list:
+    from .. import _core
+
     paths = []
-    for k, mach in enumerate(truth):
+    for k, mach in work:
         d = os.path.join(folder, mach["machine_id"])
         os.makedirs(d, exist_ok=True)
         for night in range(nights):

@@ -22,6 +22,9 @@ class History:
     tolerances: Optional[Mapping[str, float]] = None
     volumetric_tolerance: Optional[float] = None
     false_alarm_rate: float = 0.001
+    #: when the reported result was measured (ISO 8601 or datetime; default now),
+    #: where it sits in the trend when it is not in the store yet
+    time: Optional[object] = None
 
 
 def _e(x) -> str:
@@ -49,12 +52,16 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
     finally:
         if own:
             st.close()
+    this = None                 # the calibration the report is about
     if result is not None:
         digest = dataset_digest(result.dataset)
-        if not any(c.digest == digest for c in cals):
-            cur = calibration_from_result(result, h.machine_id, digest=digest, source="this report")
+        this = next((c for c in reversed(cals) if c.digest == digest), None)
+        if this is None:
+            cur = calibration_from_result(result, h.machine_id, time=h.time, digest=digest, source="this report")
             cur.id = 0
             cals.append(cur)
+            cals.sort(key=lambda c: c.time)         # stable: the store's order among equal times
+            this = cur
         if machine is None:
             machine = result.dataset.machine
     if not cals:
@@ -63,7 +70,9 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
     usable = [c for c in cals if c.usable]
     charts = detect(usable, false_alarm_rate=h.false_alarm_rate) if len(usable) >= 2 else {}
     parts = [f"<p>{len(cals)} calibrations of <b>{_e(h.machine_id)}</b> from {_e(cals[0].time)} to "
-             f"{_e(cals[-1].time)} ({len(cals) - len(usable)} not usable, left out of the trend).</p>"]
+             f"{_e(cals[-1].time)} ({len(cals) - len(usable)} not usable, left out of the trend)"
+             + ("" if this is None else f"; this report's is the one of {_e(this.time)}"
+                + (" (not in the store)" if this.id == 0 else f" (#{this.id} in the store)")) + ".</p>"]
     if charts:
         alarmed = {n: [c.times[i] for i in c.alarms] for n, c in charts.items() if c.alarms}
         d = next(iter(charts.values()))
@@ -80,18 +89,24 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
                      "(triangles).</figcaption></figure>")
     out.append(("Calibration history", "\n".join(parts)))
 
-    if len(usable) >= 2:
-        cmp = compare(usable[-2], usable[-1], machine=machine, tolerances=h.tolerances)
+    # this report's calibration against the usable one before it in time (the
+    # newest two without a result); the tolerances are on values, not on
+    # changes, so the comparison is not graded
+    if this is None:
+        this = usable[-1] if usable else cals[-1]
+    before = [c for c in usable if c is not this and c.time <= this.time]
+    if any(c is this for c in usable) and before:       # identity: a Calibration holds arrays
+        cmp = compare(before[-1], this, machine=machine)
         rows = []
         for q in cmp.parameters:
             f, unit = display_scale(q.name)
             rows.append([q.name, f"{q.a * f:.3f}", f"{q.b * f:.3f}", f"{q.delta * f:.3f}", f"{q.std_delta * f:.3f}",
-                         f"{q.z:.2f}", unit, "" if q.passed is None else ("pass" if q.passed else "FAIL")])
-        html_ = [f"<p>{_e(usable[-2].time)} → {_e(usable[-1].time)}. z = Δ / √(u_A² + u_B²): the two "
+                         f"{q.z:.2f}", unit])
+        html_ = [f"<p>{_e(before[-1].time)} → {_e(this.time)}. z = Δ / √(u_A² + u_B²): the two "
                  "calibrations come from separate datasets, so their covariance term is 0. Changes beyond "
                  f"{cmp.z_limit:g}σ: <b>{_e(', '.join(cmp.significant()) or 'none')}</b>.</p>",
-                 table_html(["parameter", "before", "now", "change", "u(change)", "z", "unit", "tolerance"], rows,
-                            [False, True, True, True, True, True, False, False])]
+                 table_html(["parameter", "before", "this", "change", "u(change)", "z", "unit"], rows,
+                            [False, True, True, True, True, True, False])]
         v = cmp.volumetric
         if v is not None:
             html_.append(f"<p>Predicted volumetric error over {v.poses} poses: largest {v.max_a * 1e3:.2f} → "
@@ -101,7 +116,7 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
         out.append(("Compared with the previous calibration", "\n".join(html_)))
 
     if h.tolerances or h.volumetric_tolerance is not None:
-        g = grade(cals[-1], h.tolerances or {}, h.volumetric_tolerance, machine=machine)
+        g = grade(this, h.tolerances or {}, h.volumetric_tolerance, machine=machine)
         rows = []
         for n, p in g.parameters.items():
             f, unit = display_scale(n)
@@ -111,8 +126,10 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
             rows.append(["volumetric (largest)", f"{g.volumetric['max'] * 1e3:.3f}", "",
                          f"{g.volumetric['tolerance'] * 1e3:g}", "µm", g.volumetric["grade"]])
         cls = {"pass": "ok", "fail": "bad"}.get(g.verdict, "warn")
-        out.append(("Pass / fail", f"<div class='box {cls}'>Latest calibration: <b>{g.verdict.upper()}</b>"
-                    "(pass: |value| + 2u within the tolerance; fail: |value| − 2u beyond it; otherwise "
+        which = "This calibration" if result is not None else "Latest calibration"
+        out.append(("Pass / fail", f"<div class='box {cls}'>{which} ({_e(this.time)}): <b>{g.verdict.upper()}</b>"
+                    + ("" if this.usable else f" (the fit itself is not usable: {_e(this.verdict)})")
+                    + " (pass: |value| + 2u within the tolerance; fail: |value| − 2u beyond it; otherwise "
                     "undecided).</div>" + table_html(["item", "value", "U = 2u", "tolerance", "unit", "grade"],
                                                      rows, [False, True, True, True, False, False])))
     return out

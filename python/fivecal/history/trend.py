@@ -523,11 +523,13 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
             handles.setdefault(lab, h)
     axes[-1, 0].set_xlabel("calibration time (UTC)")
     fig.autofmt_xdate()
-    fig.suptitle(title or f"{cals[0].machine_id}: calibration history")
-    top = 1 - 0.62 / fig.get_figheight()
+    # title, then the legend under it, then the panels: fixed inches from the
+    # top, so neither overlaps the other whatever the number of panels
+    H = fig.get_figheight()
+    fig.suptitle(title or f"{cals[0].machine_id}: calibration history", y=1 - 0.12 / H, va="top")
     fig.legend(list(handles.values()), list(handles), loc="upper center", ncol=len(handles), fontsize=8,
-               bbox_to_anchor=(0.5, top + 0.3 / fig.get_figheight()), frameon=False)
-    fig.tight_layout(rect=(0, 0, 1, top))
+               bbox_to_anchor=(0.5, 1 - 0.45 / H), frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.7 / H))
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
