@@ -91,7 +91,10 @@ def fleet_run(data, workers, store, chunk=None):
         c.close()
     n = max(run.done, 1)
     spent = workers * wall
-    return {"workers": workers, "datasets": run.done, "failed": run.failed, "tasks": run.tasks,
+    return {"workers": workers, "datasets": run.done, "failed": run.failed,
+            # which datasets and why (first few): a failure is recorded, not fatal, but must be explained
+            "failures": [{"path": os.path.relpath(str(p), str(data)), "error": e} for p, e in run.failures[:10]],
+            "tasks": run.tasks,
             "seconds": wall, "datasets_per_second": run.done / wall,
             "per_dataset_ms": {"fit": 1e3 * run.fit_seconds / n,
                                "worker_other": 1e3 * (run.task_seconds - run.fit_seconds) / n,

@@ -42,6 +42,16 @@ def test_round_trip_is_bit_exact(tmp_path, result):
     assert c.fivecal_version == fivecal.__version__
 
 
+def test_times_order_by_instant_not_by_text(tmp_path, result):
+    """'...:05.5Z' is after '...:05Z' although it sorts before it as text."""
+    with history.Store(tmp_path / "t.fcdb") as s:
+        late = s.add(result, machine_id="M1", time="2026-01-02T03:04:05.500000Z")
+        early = s.add(result, machine_id="M1", time="2026-01-02T03:04:05Z")
+        assert [c.id for c in s.list(machine_id="M1")] == [early, late]
+        assert [c.id for c in s.list(since="2026-01-02T03:04:05.2Z")] == [late]
+        assert [c.id for c in s.list(until="2026-01-02T03:04:05.2Z")] == [early]
+
+
 def test_digest_ignores_layout_not_content(tmp_path, result):
     d = copy.deepcopy(result.dataset.to_dict())     # to_dict hands out the dataset's own cached dict
     (tmp_path / "a.json").write_text(json.dumps(d, indent=4))

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import List, Mapping, Optional, Tuple, Union
 
 from ..units import display_scale
-from .store import Store, calibration_from_result, dataset_digest
+from .store import Store, calibration_from_result, dataset_digest, time_key
 
 
 @dataclass
@@ -60,7 +60,7 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
             cur = calibration_from_result(result, h.machine_id, time=h.time, digest=digest, source="this report")
             cur.id = 0
             cals.append(cur)
-            cals.sort(key=lambda c: c.time)         # stable: the store's order among equal times
+            cals.sort(key=lambda c: time_key(c.time))         # stable: the store's order among equal times
             this = cur
         if machine is None:
             machine = result.dataset.machine
@@ -94,7 +94,7 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
     # changes, so the comparison is not graded
     if this is None:
         this = usable[-1] if usable else cals[-1]
-    before = [c for c in usable if c is not this and c.time <= this.time]
+    before = [c for c in usable if c is not this and time_key(c.time) <= time_key(this.time)]
     if any(c is this for c in usable) and before:       # identity: a Calibration holds arrays
         cmp = compare(before[-1], this, machine=machine)
         rows = []

@@ -106,8 +106,9 @@ def _array(b, shape=None) -> Optional[np.ndarray]:
 
 def utc_time(t=None) -> str:
     """``t`` (None = now, a datetime, or ISO text) as UTC ISO 8601 text
-    ``YYYY-MM-DDTHH:MM:SSZ`` (a naive time is taken as UTC): stored times
-    sort as text in time order."""
+    ``YYYY-MM-DDTHH:MM:SS[.ffffff]Z`` (a naive time is taken as UTC). Order
+    stored times with :func:`time_key` (or SQLite's ``julianday``), not as
+    text: ``...:00.5Z`` sorts before ``...:00Z`` as text."""
     if t is None:
         t = datetime.datetime.now(datetime.timezone.utc)
     elif isinstance(t, str):
@@ -124,6 +125,11 @@ def utc_time(t=None) -> str:
         t = t.replace(tzinfo=datetime.timezone.utc)
     t = t.astimezone(datetime.timezone.utc)
     return t.strftime("%Y-%m-%dT%H:%M:%S") + (f".{t.microsecond:06d}" if t.microsecond else "") + "Z"
+
+
+def time_key(text: str) -> datetime.datetime:
+    """The instant a stored time (:func:`utc_time`) stands for, to order by."""
+    return datetime.datetime.fromisoformat(text[:-1] + "+00:00" if text.endswith("Z") else text)
 
 
 def dataset_digest(dataset) -> str:
@@ -417,13 +423,13 @@ class Store:
             where.append("procedure = ?")
             args.append(procedure)
         if since is not None:
-            where.append("time >= ?")
+            where.append("julianday(time) >= julianday(?)")
             args.append(utc_time(since))
         if until is not None:
-            where.append("time <= ?")
+            where.append("julianday(time) <= julianday(?)")
             args.append(utc_time(until))
         sql = f"SELECT {_COLUMNS} FROM calibrations" + (" WHERE " + " AND ".join(where) if where else "") + \
-              " ORDER BY time, id"
+              " ORDER BY julianday(time), id"
         return [_row(r) for r in self._db.execute(sql, args)]
 
     def get(self, id: int) -> Calibration:
