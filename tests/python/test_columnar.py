@@ -22,14 +22,7 @@ from fivecal.io import columnar  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-# A machine with rotary axes on both sides, for the fixed-frame kinds.
-TABLE_HEAD = {"name": "table-head", "topology": "wCfXYZBt",
-              "axes": {"C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]},
-                       "X": {"type": "linear", "direction": [1, 0, 0]},
-                       "Y": {"type": "linear", "direction": [0, 1, 0]},
-                       "Z": {"type": "linear", "direction": [0, 0, 1]},
-                       "B": {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}},
-              "tool": {"tip": [0, 0, 150]}}
+from shared_machines import TABLE_HEAD  # noqa: E402
 
 
 def _poses(rng, n):

@@ -12,13 +12,7 @@ import pytest
 
 import fivecal
 
-MACHINE = {"name": "table-head", "topology": "wCfXYZBt",
-           "axes": {"C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]},
-                    "X": {"type": "linear", "direction": [1, 0, 0]},
-                    "Y": {"type": "linear", "direction": [0, 1, 0]},
-                    "Z": {"type": "linear", "direction": [0, 0, 1]},
-                    "B": {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}},
-           "tool": {"tip": [0, 0, 150]}}
+from shared_machines import TABLE_HEAD as MACHINE  # noqa: E402
 # Five stations around and above the machine, not in one plane; each
 # station's dead length (the distance at reading 0) is roughly known.
 STATIONS = {"L1": [900, -700, 150], "L2": [-800, -600, 650], "L3": [700, 800, 900], "L4": [-900, 700, 100],

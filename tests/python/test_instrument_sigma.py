@@ -11,13 +11,7 @@ import pytest
 
 import fivecal
 
-MACHINE = {"name": "table-head", "topology": "wCfXYZBt",
-           "axes": {"C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]},
-                    "X": {"type": "linear", "direction": [1, 0, 0]},
-                    "Y": {"type": "linear", "direction": [0, 1, 0]},
-                    "Z": {"type": "linear", "direction": [0, 0, 1]},
-                    "B": {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}},
-           "tool": {"tip": [0, 0, 150]}}
+from shared_machines import TABLE_HEAD as MACHINE  # noqa: E402
 ORIGIN, ANGLES = [2000.0, -500.0, 400.0], [0.5, -1.0, 155.0]
 TRUTH = {"EA0B": 3e-5, "EC0B": -4e-5, "EX0C": 0.03, "EY0C": -0.02, "EA0C": 2e-5, "EB0C": -3e-5,
          "EB0Z": 5e-5, "EXX1": 2e-5}

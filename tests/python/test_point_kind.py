@@ -11,13 +11,7 @@ import pytest
 
 import fivecal
 
-MACHINE = {"name": "table-head", "topology": "wCfXYZBt",
-           "axes": {"C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]},
-                    "X": {"type": "linear", "direction": [1, 0, 0]},
-                    "Y": {"type": "linear", "direction": [0, 1, 0]},
-                    "Z": {"type": "linear", "direction": [0, 0, 1]},
-                    "B": {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}},
-           "tool": {"tip": [0, 0, 150]}}
+from shared_machines import TABLE_HEAD as MACHINE  # noqa: E402
 ORIGIN, ANGLES = [2000.0, -500.0, 400.0], [0.5, -1.0, 155.0]  # tracker pose, mm / deg
 # Location errors of both rotary axes, a squareness and a scale gain. The
 # pivot positions of the head (EX0B, EZ0B) are not among them: with the

@@ -13,13 +13,7 @@ import fivecal
 from fivecal import _core, schema
 from fivecal.uncertainty import simulation_plan
 
-MACHINE = {"name": "table-head", "topology": "wCfXYZBt",
-           "axes": {"C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]},
-                    "X": {"type": "linear", "direction": [1, 0, 0]},
-                    "Y": {"type": "linear", "direction": [0, 1, 0]},
-                    "Z": {"type": "linear", "direction": [0, 0, 1]},
-                    "B": {"type": "rotary", "direction": [0, 1, 0], "point": [0, 0, 300]}},
-           "tool": {"tip": [0, 0, 150]}}
+from shared_machines import TABLE_HEAD as MACHINE  # noqa: E402
 
 
 # The tracker pose and target offsets are known here: the test is about the noise.
