@@ -243,8 +243,8 @@ class JaxProblem:
 
     def monte_carlo_function(self, batch=64):
         """A jitted (x_start, key, trials) -> fitted values (trials, p):
-        trial t re-fits the weighted rows plus N(0, 1) noise (on the
-        observation rows; none on the scale bars) from x_start
+        trial t re-fits the weighted rows plus N(0, 1) noise (on every row,
+        the scale bars' included) from x_start
         (the reference fit), vmapped over trials ``batch`` at a time (lax.map:
         all trials at once would hold trials x rows x unknowns x 9 doubles of
         tangents per rotation)."""
@@ -252,13 +252,10 @@ class JaxProblem:
         def one(x_start, noise):
             return lm(lambda x: self.weighted_residuals(x, noise), x_start)[0]
 
-        # Noise on the observation rows only: a scale bar's length is the
-        # artefact's calibration, not a reading fivecal's Monte Carlo re-draws.
-        mask = np.ones(self.n_rows)
-        mask[self.n_rows - self.bar_len.size:] = 0.0
-
+        # Every row, the scale bars' too: fivecal's Monte Carlo re-draws a
+        # bar's calibrated length with the sigma its row is weighted by.
         def run(x_start, key, trials):
-            noise = jax.random.normal(key, (trials, self.n_rows)) * mask
+            noise = jax.random.normal(key, (trials, self.n_rows))
             return lax.map(lambda e: one(x_start, e), noise, batch_size=batch)
 
         return jax.jit(run, static_argnums=2)
