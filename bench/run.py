@@ -224,7 +224,7 @@ def case_monte_carlo(trials, threads, repeat, baseline_trials=0, jax_trials=0):
     figure is the per-trial cost of the SciPy fit times the trial count.
     ``jax_trials``: run that many JAX trials (one vmapped Levenberg-Marquardt
     solve per trial, from the reference fit, on the weighted rows plus N(0, 1)
-    noise on the observation rows) and scale the time to ``trials`` when fewer; their spread is checked
+    noise on every row, scale bars included) and scale the time to ``trials`` when fewer; their spread is checked
     against fivecal's Monte Carlo of the same size."""
     from fivecal import uncertainty
 
