@@ -188,8 +188,10 @@ def _dict_columns(machine: Machine, entries: Sequence, artefact) -> dict:
     of the rows listed in ``ball``, here every entry (NaN where a field is
     absent or not of that entry's type)."""
     kinds = _kinds()
-    types = np.array([kinds[e["type"]][0] if isinstance(e, dict) and e.get("type") in kinds else -1
-                      for e in entries], dtype=int)
+    # A malformed entry (a type that is not a string: a list, a dict) is left
+    # to the core, which names it; here it only has no kind.
+    types = np.array([kinds[e["type"]][0] if isinstance(e, dict) and isinstance(e.get("type"), str)
+                      and e["type"] in kinds else -1 for e in entries], dtype=int)
     facet, sphere, cyl, dbb, ball3d = (_code(n) for n in ("facet", "sphere", "cylinder", "dbb", "ball3d"))
     ids = {}
     if isinstance(artefact, Mapping):
