@@ -214,8 +214,11 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
                      f"--column FIELD=HEADER or skip it with --ignore '{name}')")
 
 
-def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, rename: Mapping[str, str],
-             ignore: Iterable[str], length_unit: Optional[str], angle_unit: Optional[str]) -> list:
+def _named_headers(headers: Sequence[str], where: str, rename: Mapping[str, str], ignore: Iterable[str]):
+    """The columns a table keeps, as (index, header, name, unit, where of the
+    column): ``--ignore``d ones left out, ``--column FIELD=HEADER`` renames
+    applied (the file's header still names the unit when it ends in one), an
+    unnamed column or a rename/ignore of a column the header lacks refused."""
     by_header = {}
     for field, header in rename.items():
         by_header.setdefault(header.strip().lower(), field.strip())
@@ -224,23 +227,25 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
     for h in list(by_header) + sorted(ignored):
         if h not in known:
             raise ValueError(f"{where}: no column '{h}' in the header (columns: {', '.join(headers)})")
-    cols, seen = [], {}
     for i, h in enumerate(headers):
         key = h.strip().lower()
         if key in ignored:
             continue
         if not key:
             raise ValueError(f"{where}: column {i + 1} has no name")
-        cw = f"{where}: column '{h.strip()}'"
         name, unit = _split_unit(h)
-        if key in by_header:
-            # --column reading=dL_um: the file's header names the unit when it ends in one
-            name = by_header[key]
+        yield i, h.strip(), by_header.get(key, name), unit, f"{where}: column '{h.strip()}'"
+
+
+def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, rename: Mapping[str, str],
+             ignore: Iterable[str], length_unit: Optional[str], angle_unit: Optional[str]) -> list:
+    cols, seen = [], {}
+    for i, h, name, unit, cw in _named_headers(headers, where, rename, ignore):
         field = _field(name, machine, kind, cw)
         if field in seen:
-            raise ValueError(f"{where}: columns '{seen[field]}' and '{h.strip()}' both give {field}")
-        seen[field] = h.strip()
-        c = _Column(i, h.strip(), field, unit)
+            raise ValueError(f"{where}: columns '{seen[field]}' and '{h}' both give {field}")
+        seen[field] = h
+        c = _Column(i, h, field, unit)
         quantity = "angle" if (len(field) == 1 and machine.is_rotary(field)) or field in _MEASURED_ROT else \
             "length" if field in _LENGTH_FIELDS or len(field) == 1 else None
         if quantity and unit is not None:
@@ -1077,14 +1082,6 @@ def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: M
         keys |= set(k["json_keys"])
     keys -= {"axes", "direction"}
     axes = machine.axis_names
-    by_header = {}
-    for field, header in rename.items():
-        by_header.setdefault(header.strip().lower(), field.strip())
-    ignored = {i.strip().lower() for i in ignore}
-    known_headers = {h.strip().lower() for h in headers}
-    for h in list(by_header) + sorted(ignored):
-        if h not in known_headers:
-            raise ValueError(f"{where}: no column '{h}' in the header (columns: {', '.join(headers)})")
 
     def resolve(name: str, cw: str):
         low, up = name.strip().lower(), name.strip().upper()
@@ -1130,21 +1127,12 @@ def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: M
                          f"or skip it with --ignore '{name}')")
 
     cols, seen = [], {}
-    for i, h in enumerate(headers):
-        key = h.strip().lower()
-        if key in ignored:
-            continue
-        if not key:
-            raise ValueError(f"{where}: column {i + 1} has no name")
-        cw = f"{where}: column '{h.strip()}'"
-        name, unit = _split_unit(h)
-        if key in by_header:
-            name = by_header[key]
+    for i, h, name, unit, cw in _named_headers(headers, where, rename, ignore):
         field, part = resolve(name, cw)
         if (field, part) in seen:
-            raise ValueError(f"{where}: columns '{seen[(field, part)]}' and '{h.strip()}' both give "
+            raise ValueError(f"{where}: columns '{seen[(field, part)]}' and '{h}' both give "
                              f"{field}{'' if part is None else f' {part}'}")
-        seen[(field, part)] = h.strip()
+        seen[(field, part)] = h
         factor = 1.0
         letter = part if field == "axes" or field.endswith("_axes") else None
         if letter is not None and machine.is_rotary(letter):
