@@ -63,10 +63,15 @@ def _run_kinematics(args) -> int:
         text = K.export_csv(machine, ab)
     else:
         text = K.export_text(machine, ab)
-    if args.out:
-        with open(args.out, "w", encoding="utf-8") as f:
+    return _write_or_print(text, args.out, f"written: {args.out}")
+
+
+def _write_or_print(text: str, out, message: str) -> int:
+    """``text`` to the file ``out`` (then ``message``), or to stdout."""
+    if out:
+        with open(out, "w", encoding="utf-8") as f:
             f.write(text)
-        print(f"written: {args.out}")
+        print(message)
     else:
         print(text, end="")
     return 0
@@ -144,13 +149,8 @@ def _run_program(args) -> int:
             text = D.dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
                                  tolerance=args.tolerance * 1e-3)
     blocks = sum(1 for ln in text.splitlines() if ln[:1] in "GM")
-    if args.out:
-        with open(args.out, "w", encoding="utf-8") as f:
-            f.write(text)
-        print(f"{kind} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
-    else:
-        print(text, end="")
-    return 0
+    return _write_or_print(text, args.out,
+                           f"{kind} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
 
 
 def register(sub) -> None:
