@@ -548,8 +548,60 @@ def readme_section(doc):
                   f"normal Cholesky {sv['dense_normal_cholesky']:.2f} ms vs dense QR {sv['dense_qr']:.2f} ms; "
                   f"identifiability and covariance from the normal matrix {an['normal_eigen']:.2f} ms vs "
                   f"QR + SVD {an['qr_svd']:.2f} ms."]
+    lines += ["", targets_paragraph(doc)]
     lines.append("<!-- performance:end -->")
     return "\n".join(lines)
+
+
+def _read_json(name):
+    path = os.path.join(HERE, name)
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        return json.load(f)
+
+
+def targets_paragraph(doc):
+    """The speed targets of the issue that asked for the JAX baseline and the
+    long-data path, each with the figure measured against it, generated so
+    that the prose cannot drift from results.json and the long-data JSONs."""
+    res = {r["case"]: r for r in doc["results"]}
+    out = []
+
+    def say(text, met):
+        out.append(f"{text}: {'met' if met else '**missed**'}")
+
+    behind = [f"{r['case']} {r['ratio_jax']:.2g}×" for r in doc["results"] if "ratio_jax" in r
+              and r["ratio_jax"] < 2]
+    if any("ratio_jax" in r for r in doc["results"]):
+        say("every case ≥ 2× faster than the warm JAX baseline" + (f" (below: {', '.join(behind)})"
+                                                                  if behind else ""), not behind)
+    s4 = res.get("tango_S4")
+    if s4:
+        say(f"TANGO S4 identify < 3 ms ({s4['fivecal_s'] * 1e3:.1f} ms)", s4["fivecal_s"] < 3e-3)
+    mc = res.get("monte_carlo_10000_t2")
+    if mc:
+        say(f"10,000 Monte Carlo re-fits of S3 on 2 threads < 2 s ({mc['fivecal_s']:.2f} s)", mc["fivecal_s"] < 2)
+    long = _read_json("long_data.json")
+    by_n = {r["samples"]: r for r in long["results"]} if long else {}
+    if 1_000_000 in by_n:
+        r = by_n[1_000_000]
+        say(f"10⁶ samples within 3× of the arithmetic floor (identify {r['identify_s']:.2f} s; "
+            f"{r['ratio_to_floor']:.1f}× the measured floor of {r['floor_s']:.2f} s, two Jacobian passes "
+            "and one residual pass of tool points plus JᵀJ, bench/long_data.json)", r["ratio_to_floor"] <= 3)
+    pq = _read_json("load_dataset_parquet.json")
+    pq_n = {r["observations"]: r for r in pq["results"]} if pq else {}
+    if 10_000_000 in by_n and 10_000_000 in pq_n:
+        r, load = by_n[10_000_000], pq_n[10_000_000]["modes"]["load"]
+        total = r["identify_s"] + load["wall_s"]
+        peak = max(r["peak_rss_mb"], load["peak_rss_mb"]) / 1024
+        say(f"10⁷ 3D-ball samples from Parquet, load plus fit < 10 s and < 2 GB ({load['wall_s']:.0f} s load + "
+            f"{r['identify_s']:.0f} s fit, {peak:.1f} GB peak; bench/load_dataset_parquet.json, "
+            "bench/long_data.json)", total < 10 and peak < 2)
+    if not out:
+        return ""
+    return ("Speed targets against these figures (single runs vary by about 10 %; what bounds each case: "
+            "[docs/bench_bounds.md](docs/bench_bounds.md)): " + "; ".join(out) + ".")
 
 
 def update_readme(doc, path):
