@@ -116,9 +116,12 @@ def _run_program(args) -> int:
     kind = args.kind
     if kind == "auto":
         kinds = {_PLAN_KINDS.get(t) for t in types}
+        if kinds == {"probing", "sphere"}:
+            kinds = {"probing"}  # facet and sphere touches: one G38.2 cycle in plan order
         if len(kinds) != 1 or None in kinds:
-            raise ValueError(f"{args.spec}: plan entries of type {', '.join(types)}; a program runs one "
-                             "kind (facet, sphere, ball3d or dbb): give --kind or split the plan")
+            raise ValueError(f"{args.spec}: plan entries of type {', '.join(types)}; a program runs facet "
+                             "and sphere touches (together or apart), ball3d or dbb entries: give --kind or "
+                             "split the plan")
         kind = kinds.pop()
     need_kins = kind in ("probing", "sphere") or (kind == "rtest" and args.mode == "tcp")
     if need_kins and not args.kins:
@@ -128,7 +131,11 @@ def _run_program(args) -> int:
         raise ValueError(f"{args.spec}: probe.tip_radius: the stylus ball radius (mm) is needed for the "
                          "contact points")
     feed = args.feed
-    if kind == "probing":
+    if kind == "probing" and any(e.get("type") == "sphere" for e in plan):
+        text = N.touch_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
+                               overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
+                               safe=args.safe, overshoot=args.overshoot, dwell=args.dwell, log=args.log)
+    elif kind == "probing":
         text = L.probing_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
                                  overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
                                  safe=args.safe, dwell=args.dwell, log=args.log)
@@ -219,7 +226,8 @@ def register(sub) -> None:
         "program", formatter_class=RD,
         help="ISO G-code that runs a test plan: probing, sphere cycle, R-test, ball bar",
         description="Write the NC program of a fivecal plan (the 'plan' of a simulation spec, "
-        "docs/formats.md): facet touches and sphere touches as G38.2 probing cycles for LinuxCNC "
+        "docs/formats.md): facet touches and sphere touches (apart or mixed in one plan, as fivecal "
+        "design writes them) as G38.2 probing cycles for LinuxCNC "
         "with its tool-centre-point kinematics (--kins; probe log with PROBEOPEN, read back by "
         "fivecal.io.linuxcnc.read_probe_log), R-test K tests with a G4 dwell at each sample (axis "
         "commands, LinuxCNC joint values with --kins, or world moves with --mode tcp), ball bar "
@@ -230,7 +238,8 @@ def register(sub) -> None:
         "  fivecal export program fourstep_spec.json --feed 500 --out fourstep.ngc")
     pp.add_argument("spec", help="simulation spec JSON: machine (object or path), plan, artefact, probe")
     pp.add_argument("--kind", default="auto", choices=["auto", "probing", "sphere", "rtest", "dbb"],
-                    help="program kind (default: from the plan's entry types)")
+                    help="program kind (default: from the plan's entry types; probing takes facet and "
+                    "sphere touches together)")
     pp.add_argument("--kins", choices=list(L.KINS), help="LinuxCNC kinematics (needed for probing, "
                     "sphere and --mode tcp; for rtest / dbb: write LinuxCNC joint values, for dbb rotary "
                     "paths only)")
@@ -242,8 +251,8 @@ def register(sub) -> None:
     g.add_argument("--overtravel", type=float, default=1.0, help="end of each G38.2 beyond the contact, mm")
     g.add_argument("--retract", type=float, default=5.0, help="retract along the touch direction, mm")
     g.add_argument("--safe", type=float, default=100.0, help="lift along the tool axis for indexing, mm")
-    g.add_argument("--overshoot", type=float, default=1.0, help="sphere: degrees beyond a position to "
-                   "reach it from the side the plan asks for (0: off)")
+    g.add_argument("--overshoot", type=float, default=1.0, help="sphere and mixed facet/sphere plans: degrees "
+                   "beyond a position to reach it from the side the plan asks for (0: off)")
     g.add_argument("--dwell", type=float, default=0.0, help="seconds: after each indexing; R-test: at "
                    "each sample (default 1)")
     g.add_argument("--log", default="probe-log.txt", help="probe log file name (PROBEOPEN)")

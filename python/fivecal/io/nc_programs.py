@@ -1,4 +1,4 @@
-"""ISO G-code for fivecal's sphere and R-test plans (docs/linuxcnc.md).
+"""ISO G-code for fivecal's sphere, mixed probing and R-test plans (docs/linuxcnc.md).
 
 * :func:`sphere_program`: the touches of a sphere plan
   (:func:`fivecal.procedures.sphere_check.plan`,
@@ -10,9 +10,13 @@
   probed positions go to a ``PROBEOPEN`` log, which
   :func:`fivecal.io.linuxcnc.read_probe_log` reads back into sphere
   observations.
+* :func:`touch_program`: a plan that mixes facet and sphere touches (as
+  ``fivecal design`` and the TANGO plan write them) as one such cycle, in
+  the plan's order; its log reads back into facet and sphere observations.
 * :func:`sphere_trigger_model` / :func:`sphere_sim_lines` /
-  :func:`sphere_log`: where a touch trips on a machine with given errors
-  (the exact crossing of the probe line with the sphere), as the plane the
+  :func:`sphere_log` (and ``touch_*`` for mixed plans): where a touch trips
+  on a machine with given errors (the exact crossing of the probe line with
+  the sphere or the facet's plane), as the plane the
   simulator's probe input (:func:`fivecal.io.linuxcnc.probe_sim_hal`) needs,
   or as the log a perfect probe would write.
 * :func:`rtest_program`: the path of an R-test K test
@@ -42,22 +46,29 @@ def _f(v: float) -> str:
     return "0.000000" if float(s) == 0.0 else s
 
 
-def _spheres(artefact: Mapping) -> Dict[str, dict]:
-    sp = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
-    if not sp:
-        raise ValueError("artefact: no spheres (a sphere cycle needs the sphere's centre and radius)")
-    return sp
-
-
-def _as_facets(plan: Sequence[Mapping], artefact: Mapping):
+def _as_facets(plan: Sequence[Mapping], artefact: Mapping, kinds=("sphere",)):
     """Each sphere touch as a touch of the tangent plane at its nominal
     contact point: what the facet probing geometry of fivecal.io.linuxcnc
-    works with (approach and retract along the touch direction)."""
-    spheres = _spheres(artefact)
-    fplan, facets = [], []
+    works with (approach and retract along the touch direction). Facet
+    touches (when ``kinds`` has "facet") pass through to their facet."""
+    what = " and ".join(kinds)
+    spheres = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
+    afacets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
+    fplan, facets = [], {}
     for i, t in enumerate(plan):
-        if t.get("type") != "sphere":
-            raise ValueError(f"plan[{i}]: type '{t.get('type')}': a sphere cycle needs sphere touches")
+        kind = t.get("type")
+        if kind not in kinds:
+            raise ValueError(f"plan[{i}]: type '{kind}': a {'sphere cycle' if kinds == ('sphere',) else 'probing cycle'} "
+                             f"runs {what} touches")
+        if kind == "facet":
+            f = afacets.get(t.get("target"))
+            if f is None:
+                raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a facet of the artefact")
+            facets[f["id"]] = f
+            fplan.append(dict(t))
+            continue
+        if not spheres:
+            raise ValueError("artefact: no spheres (a sphere touch needs the sphere's centre and radius)")
         s = spheres.get(t.get("target"))
         if s is None:
             raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a sphere of the artefact")
@@ -67,13 +78,13 @@ def _as_facets(plan: Sequence[Mapping], artefact: Mapping):
         n = n / np.linalg.norm(n)
         fid = f"{t['target']}#{i + 1}"
         p = np.asarray(s["center"], dtype=float) + float(s["radius"]) * n
-        facets.append({"id": fid, "point": p.tolist(), "normal": n.tolist()})
+        facets[fid] = {"id": fid, "point": p.tolist(), "normal": n.tolist()}
         fplan.append({"type": "facet", "target": fid, "axes": t.get("axes", {})})
-    return fplan, {"facets": facets}
+    return fplan, {"facets": list(facets.values())}
 
 
-def _geometry(machine, kins, plan, artefact, tip_radius, workpiece_shift=(0.0, 0.0, 0.0)):
-    fplan, fart = _as_facets(plan, artefact)
+def _geometry(machine, kins, plan, artefact, tip_radius, workpiece_shift=(0.0, 0.0, 0.0), kinds=("sphere",)):
+    fplan, fart = _as_facets(plan, artefact, kinds)
     return L._touch_geometry(machine, kins, fplan, fart, tip_radius, workpiece_shift)
 
 
@@ -89,6 +100,51 @@ def _joint_directions(machine: Machine, kins: str, plan: Sequence[Mapping]):
         out.append((int(np.sign(d.get(tilt, 0))) * int(mp["sign"][3]),
                     int(np.sign(d.get("C", 0))) * int(mp["sign"][4])))
     return out
+
+
+def _lift(entry: Mapping, spheres: Mapping, tip_radius: float, retract: float, safe: float) -> float:
+    """How far along the tool axis the move to or from this touch's retract
+    point is lifted between two touches of one rotary position."""
+    if entry.get("type") == "sphere":
+        return float(spheres[entry["target"]]["radius"]) + tip_radius + retract
+    return safe
+
+
+def _segment_gap(a: np.ndarray, b: np.ndarray, centre: np.ndarray) -> float:
+    """Distance of ``centre`` from the segment a-b."""
+    d = b - a
+    dd = float(d @ d)
+    s = 0.0 if dd == 0 else min(1.0, max(0.0, float((centre - a) @ d) / dd))
+    return float(np.linalg.norm(a + s * d - centre))
+
+
+def _clear_lift(a, va, b, vb, lift, balls, touch: int, step: float = 5.0, extra: float = 500.0) -> float:
+    """The smallest lift >= ``lift`` (in ``step`` mm) for which the moves
+    a -> a + lift va -> b + lift vb -> b (up from one retract point along its
+    tool axis, across, down to the next; ``a`` or ``b`` None: that end only)
+    keep out of every ball (world centre, stylus-centre radius plus clearance).
+    The lift moves along the tool axis cannot go round a sphere: a sphere
+    over a retract point is refused, naming the touch."""
+    ends = [(a, va), (b, vb)] if a is not None and b is not None else [(a, va)] if a is not None else [(b, vb)]
+    for name, c, r in balls:
+        for p, v in ends:
+            # the ray p + s v (s >= 0) misses the ball if its nearest point is outside
+            s = max(0.0, float((c - p) @ v))
+            if np.linalg.norm(p + s * v - c) <= r:
+                raise ValueError(f"touch {touch}: the tool-axis move to or from its retract "
+                                 f"point passes through sphere {name}; a sphere cycle cannot reach this touch from "
+                                 "above (change the plan or the artefact's sphere)")
+    if a is None or b is None:
+        return lift
+    k = 0
+    while k * step <= extra:
+        h = lift + k * step
+        p, q = a + h * va, b + h * vb
+        if all(_segment_gap(p, q, c) > r for _, c, r in balls):
+            return h
+        k += 1
+    raise ValueError(f"touch {touch}: no lift up to {lift + extra:g} mm along the tool axis clears the spheres "
+                     "between this touch and the one before (raise --safe or change the plan)")
 
 
 def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
@@ -118,9 +174,42 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
     from the spindle; check the moves against your fixtures). ``sync``, ``arm``,
     ``disarm``, ``before_probe``, ``log`` and ``tcp_on`` as in
     :func:`fivecal.io.linuxcnc.probing_program`."""
+    return _touch_program(machine, kins, plan, artefact, tip_radius, ("sphere",), clearance, overtravel,
+                          feed, retract, safe, overshoot, dwell, arm, disarm, sync, log, tcp_on,
+                          workpiece_shift, before_probe)
+
+
+def touch_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                  tip_radius: float, clearance: float = 1.0, overtravel: float = 1.0,
+                  feed: float = 60.0, retract: float = 5.0, safe: float = 100.0,
+                  overshoot: float = 1.0, dwell: float = 0.0, arm: str = "", disarm: str = "",
+                  sync: str = "", log: str = "probe-log.txt", tcp_on: str = "M428",
+                  workpiece_shift=(0.0, 0.0, 0.0),
+                  before_probe: Optional[Sequence[Sequence[str]]] = None) -> str:
+    """One ``G38.2`` program for a plan that mixes facet touches
+    (``{"type": "facet", "target": id, "axes": {...}, "point": [...]}``) and
+    sphere touches (as in :func:`sphere_program`), in the plan's order, as
+    ``fivecal design`` and :func:`fivecal.procedures.tango.hu40t_plan` write
+    them. Indexing, ``overshoot``, ``dwell`` and each touch run as in
+    :func:`sphere_program`; a facet touch approaches along the facet normal
+    to its contact point (its ``point`` plus the stylus radius along the
+    normal). Between two touches of one rotary position the stylus moves from
+    one retract point to the next lifted along the tool axis: by ``safe`` mm
+    when either touch is on a facet (as :func:`fivecal.io.linuxcnc.probing_program`
+    does), otherwise by the sphere's radius plus the stylus radius plus
+    ``retract`` (over the sphere). Check the moves against your fixtures. The
+    log reads back with :func:`fivecal.io.linuxcnc.read_probe_log` into facet
+    and sphere observations in plan order."""
+    return _touch_program(machine, kins, plan, artefact, tip_radius, ("facet", "sphere"), clearance,
+                          overtravel, feed, retract, safe, overshoot, dwell, arm, disarm, sync, log, tcp_on,
+                          workpiece_shift, before_probe)
+
+
+def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, overtravel, feed, retract,
+                   safe, overshoot, dwell, arm, disarm, sync, log, tcp_on, workpiece_shift, before_probe):
     k = L._kins(kins)
     tilt = L.TILT[k]
-    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
     if before_probe is not None and len(before_probe) != len(geo):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(geo)} touches")
     for name, v, lo in (("clearance", clearance, 0), ("overtravel", overtravel, 0), ("feed", feed, 0)):
@@ -132,29 +221,35 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
     if retract < clearance:
         raise ValueError(f"retract: {retract} mm is less than the clearance {clearance} mm")
     dirs = _joint_directions(machine, k, plan)
+    spheres = {sp["id"]: sp for sp in (artefact or {}).get("spheres", [])}
+    origin = np.asarray(L.match(machine, k)["origin"], float) + np.asarray(workpiece_shift, float)
+    # every sphere of the artefact stands in the way, touched in this plan or not
+    balls = [(sp["id"], np.asarray(sp["center"], float) - origin, float(sp["radius"]) + tip_radius + clearance)
+             for sp in spheres.values()]
     xyz = lambda p: f"X{_f(p[0])} Y{_f(p[1])} Z{_f(p[2])}"  # noqa: E731
     targets = sorted({str(t.get("target")) for t in plan})
-    out = [f"(fivecal sphere cycle: {len(geo)} touches on {', '.join(targets)}, machine {machine.name}, {k}-kins)",
+    what = "sphere cycle" if kinds == ("sphere",) else "probing cycle"
+    out = [f"(fivecal {what}: {len(geo)} touches on {', '.join(targets)}, machine {machine.name}, {k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
-           f"(stylus ball radius {tip_radius:g} mm; touches approach and retract along the sphere normal)",
+           f"(stylus ball radius {tip_radius:g} mm; touches approach and retract along the "
+           f"{'sphere' if kinds == ('sphere',) else 'surface'} normal)",
            "G21 G90 G94 G17 G40 G49 G54 G61"]
     if tcp_on:
         out.append(f"{tcp_on} (tool centre point kinematics on)")
     out.append(f"(PROBEOPEN {log})")
     last_rot = None   # (tilt, C) joint values the table stands at
     last_dir = None
-    hold = None       # the retract point of the previous touch at this position
+    hold = v_prev = None  # the retract point and tool axis of the previous touch
     for i, (t, c, w, n, v) in enumerate(geo):
         start, end = w + clearance * n, w - overtravel * n
         off = w + retract * n
         rot = (t, c)
-        nd = np.asarray(plan[i]["normal"], float)
-        out.append(f"(touch {i + 1}: {plan[i]['target']} direction "
-                   f"{' '.join(_f(x) for x in nd / np.linalg.norm(nd))})")
+        out.append(f"(touch {i + 1}: {plan[i]['target']} direction {' '.join(_f(x) for x in n)})")
         if rot != last_rot or dirs[i] != last_dir:
-            up = off + safe * v
+            lift = _clear_lift(hold, v_prev, off, v, safe, balls, i + 1)
+            up = off + lift * v
             if hold is not None:
-                out.append(f"G0 {xyz(hold + safe * v_prev)}")
+                out.append(f"G0 {xyz(hold + lift * v_prev)}")
             side = ["+-"[d < 0] if d else "." for d in dirs[i]]
             out.append(f"(position {tilt} {_f(t)} C {_f(c)}, approached {side[0]}{tilt} {side[1]}C)")
             if overshoot > 0 and any(dirs[i]):
@@ -172,11 +267,13 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
             last_rot, last_dir = rot, dirs[i]
             out.append(f"G0 {xyz(off)}")
         else:
-            # to the next touch of this position over the sphere: both retract
-            # points lifted by the sphere's stylus-centre radius along the tool
-            # axis, so the straight move between them stays outside it
-            s = _spheres(artefact)[plan[i]["target"]]
-            lift = float(s["radius"]) + tip_radius + retract
+            # to the next touch of this position: both retract points lifted
+            # along the tool axis, over a sphere by its stylus-centre radius
+            # (the straight move between them stays outside it), to the safe
+            # height when a facet is involved (its solid can be anywhere below)
+            lift = max(_lift(plan[i - 1], spheres, tip_radius, retract, safe),
+                       _lift(plan[i], spheres, tip_radius, retract, safe))
+            lift = _clear_lift(hold, v, off, v, lift, balls, i + 1)
             out += [f"G0 {xyz(hold + lift * v)}", f"G0 {xyz(off + lift * v)}", f"G0 {xyz(off)}"]
         out.append(f"G0 {xyz(start)}")
         out += [sync] if sync else []
@@ -187,7 +284,7 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
         out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}"]
         hold, v_prev = off, v
     if hold is not None:
-        out.append(f"G0 {xyz(hold + safe * v_prev)}")
+        out.append(f"G0 {xyz(hold + _clear_lift(hold, v_prev, None, None, safe, balls, len(geo)) * v_prev)}")
     out += ["(PROBECLOSE)", "M2"]
     return "\n".join(out) + "\n"
 
@@ -205,14 +302,29 @@ def sphere_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], a
     rotary joints the ball centre is affine in the linear joints and the
     G38.2 runs a straight joint line, so the crossing is exact (location
     errors)."""
+    return _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
+                          workpiece_shift, ("sphere",))
+
+
+def touch_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                        tip_radius: float, pins: Mapping[str, float], errors=None,
+                        clearance: float = 1.0, overtravel: float = 1.0,
+                        workpiece_shift=(0.0, 0.0, 0.0)) -> List[dict]:
+    """:func:`sphere_trigger_model` for the facet and sphere touches of
+    :func:`touch_program`: a facet touch trips where the stylus ball reaches
+    the facet's plane (``g``, ``h``: that plane in the linear joints)."""
+    return _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
+                          workpiece_shift, ("facet", "sphere"))
+
+
+def _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
+                   workpiece_shift, kinds):
     k = L._kins(kins)
-    spheres = _spheres(artefact)
-    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
+    spheres = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
+    facets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
+    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
     out = []
     for i, (t, c, w, n, _) in enumerate(geo):
-        s = spheres[plan[i]["target"]]
-        centre = np.asarray(s["center"], dtype=float)
-        rr = float(s["radius"]) + float(tip_radius)
         ws, we = w + clearance * n, w - overtravel * n
         js = L.inverse(k, pins, np.array([[*ws, t, c], [*we, t, c]]))
         jj = np.array([js[0], js[1], [0, 0, 0, t, c], [1, 0, 0, t, c], [0, 1, 0, t, c], [0, 0, 1, t, c]], float)
@@ -220,18 +332,35 @@ def sphere_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], a
         dirs = {a: np.full(len(jj), float(v)) for a, v in (plan[i].get("direction") or {}).items()}
         p = machine.tool_point(L.commands(machine, k, jj), errors=errors, directions=dirs or None)
         ps, d = p[0], p[1] - p[0]
-        # |ps + s d - centre| = rr, the first crossing from outside
-        a, b, cc = float(d @ d), float(2 * d @ (ps - centre)), float((ps - centre) @ (ps - centre) - rr * rr)
-        disc = b * b - 4 * a * cc
-        if cc <= 0:
-            raise ValueError(f"touch {i + 1}: the stylus is already on or in sphere {s['id']} at the "
+        target = plan[i]["target"]
+        if plan[i]["type"] == "sphere":
+            centre = np.asarray(spheres[target]["center"], dtype=float)
+            rr = float(spheres[target]["radius"]) + float(tip_radius)
+            # |ps + s d - centre| = rr, the first crossing from outside
+            a, b, cc = float(d @ d), float(2 * d @ (ps - centre)), float((ps - centre) @ (ps - centre) - rr * rr)
+            disc = b * b - 4 * a * cc
+            inside = cc <= 0
+            sc = (-b - math.sqrt(disc)) / (2 * a) if disc >= 0 else math.inf
+            q = ps + sc * d if math.isfinite(sc) else ps
+            nc = (q - centre) / np.linalg.norm(q - centre)
+            what = f"sphere {target}"
+        else:
+            # the ball centre's distance to the facet's plane (stylus radius
+            # off): n . (ps + s d - point) = tip_radius
+            nc = np.asarray(facets[target]["normal"], dtype=float)
+            nc = nc / np.linalg.norm(nc)
+            q0 = np.asarray(facets[target]["point"], dtype=float) + float(tip_radius) * nc
+            h0, dn = float(nc @ (ps - q0)), float(nc @ d)
+            inside = h0 <= 0
+            sc = -h0 / dn if dn < 0 else math.inf
+            q = ps + sc * d if math.isfinite(sc) else ps
+            what = f"facet {target}"
+        if inside:
+            raise ValueError(f"touch {i + 1}: the stylus is already on or in {what} at the "
                              f"start of the probe move (clearance {clearance} mm too small for the errors)")
-        if disc < 0 or (-b - math.sqrt(disc)) / (2 * a) > 1:
-            raise ValueError(f"touch {i + 1}: the probe move misses sphere {s['id']} on this machine "
+        if sc > 1:
+            raise ValueError(f"touch {i + 1}: the probe move misses {what} on this machine "
                              f"(overtravel {overtravel} mm too small for the errors)")
-        sc = (-b - math.sqrt(disc)) / (2 * a)
-        q = ps + sc * d
-        nc = (q - centre) / np.linalg.norm(q - centre)
         M = (p[3:] - p[2]).T
         out.append({"world": (ws + sc * (we - ws)).tolist(), "rot": [t, c],
                     "joints": (js[0] + sc * (js[1] - js[0])).tolist(),
@@ -249,6 +378,19 @@ def sphere_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artef
     disarm="M65 P0")``)."""
     model = sphere_trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance,
                                  overtravel, workpiece_shift)
+    return _sim_lines(model)
+
+
+def touch_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
+                    tip_radius: float, pins: Mapping[str, float], errors=None, clearance: float = 1.0,
+                    overtravel: float = 1.0, workpiece_shift=(0.0, 0.0, 0.0)) -> List[List[str]]:
+    """:func:`sphere_sim_lines` for :func:`touch_program` (facet and sphere
+    touches)."""
+    return _sim_lines(touch_trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance,
+                                          overtravel, workpiece_shift))
+
+
+def _sim_lines(model) -> List[List[str]]:
     return [[f"M68 E{e} Q{v:.12f}" for e, v in enumerate((*m["g"], -m["h"]), 4)] for m in model]
 
 
@@ -259,18 +401,27 @@ def sphere_log(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: M
     a perfect probe writes running :func:`sphere_program` on the machine with
     ``errors``: fivecal's own model of the trigger positions, for checking a
     program without a controller."""
-    k = L._kins(kins)
-    ti = 3 if L.TILT[k] == "A" else 4
+    return _log(kins, sphere_trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance,
+                                           overtravel, workpiece_shift))
+
+
+def touch_log(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping, tip_radius: float,
+              pins: Mapping[str, float], errors=None, clearance: float = 1.0, overtravel: float = 1.0,
+              workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+    """:func:`sphere_log` for :func:`touch_program` (facet and sphere touches)."""
+    return _log(kins, touch_trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance,
+                                          overtravel, workpiece_shift))
+
+
+def _log(kins: str, model) -> str:
+    ti = 3 if L.TILT[L._kins(kins)] == "A" else 4
     rows = []
-    for m in sphere_trigger_model(machine, k, plan, artefact, tip_radius, pins, errors, clearance,
-                                  overtravel, workpiece_shift):
+    for m in model:
         r = [*m["world"], 0.0, 0.0, m["rot"][1], 0.0, 0.0, 0.0]
         r[ti] = m["rot"][0]
         rows.append(" ".join(f"{x:.6f}" for x in r))
     return "\n".join(rows) + "\n"
 
-
-# ---- R-test K tests ---------------------------------------------------------
 
 def _rtest_setups(plan: Sequence[Mapping]) -> Dict[str, List[Mapping]]:
     out: Dict[str, List[Mapping]] = {}
