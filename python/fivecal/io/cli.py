@@ -27,8 +27,11 @@ def _run_planned(args) -> int:
                              decimal=args.decimal, header=args.header, sigma=args.sigma, ignore=args.ignore or ())
     ds = P.write(d, args.out)
     n = sum(1 for e in P.read_plan(args.plan)[1] if e.get("type") in {o["type"] for o in d["observations"]})
-    print(f"{args.file}: {len(ds)} {d['observations'][0]['type']} observations of the {n} planned "
-          f"(plan {args.plan}) written to {args.out}")
+    counts = {}  # per type, in the order the plan first uses it (a mixed facet/sphere plan)
+    for o in d["observations"]:
+        counts[o["type"]] = counts.get(o["type"], 0) + 1
+    what = " and ".join(f"{c} {t}" for t, c in counts.items())
+    print(f"{args.file}: {what} observations of the {n} planned (plan {args.plan}) written to {args.out}")
     return 0
 
 
