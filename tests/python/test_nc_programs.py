@@ -4,6 +4,8 @@ programs of rotary-axis paths, read back with fivecal's G-code tokenizer and
 replayed through fivecal's nominal model; the ball bar and R-test programs
 also in the LinuxCNC simulator (the sphere cycle's simulator run is in
 test_linuxcnc.py)."""
+import re
+
 import numpy as np
 import pytest
 
@@ -177,6 +179,133 @@ def test_sphere_cycle_refusals():
     with pytest.raises(ValueError, match="touch 1: the stylus is already"):
         N.sphere_trigger_model(m, KINS, plan[:1], art, 3.0, L.nominal_pins(m, KINS),
                                errors={"EX0C": 0.2, "EY0A": 0.2}, clearance=0.01)
+
+
+# ---- mixed facet and sphere plans (TANGO) ---------------------------------------
+
+TANGO_KINS = "xyzbc-trt"
+# location errors of B and C and C's reversal error on the HU40T-like machine
+TANGO_ERRORS = {"EX0C": 0.0312, "EY0C": -0.0187, "EA0C": 2.1e-5, "EB0C": -1.6e-5,
+                "EX0B": 0.0241, "EZ0B": -0.0153, "EA0B": 1.2e-5, "EC0B": -2.4e-5, "ECCb": 3e-5}
+
+
+def _tango():
+    from fivecal.procedures import tango
+    m, art = tango.hu40t_machine(), tango.octagonal_table()
+    return m, art, tango.hu40t_plan(art, m)
+
+
+def check_touch_program(m, kins, plan, art, prog, tip, clearance, overtravel):
+    """Every G38.2 of ``prog`` runs from ``clearance`` outside to
+    ``overtravel`` inside the contact point of its plan entry (a facet touch:
+    its point plus the stylus radius along the facet normal; a sphere touch:
+    the centre plus radius plus stylus radius along its normal), at the
+    entry's rotary pose, in plan order; no other straight move comes nearer
+    any sphere of the artefact than the clearance. Returns the number of
+    facet and sphere touches."""
+    tilt = L.TILT[kins]
+    mp = L.match(m, kins)
+    origin = np.asarray(mp["origin"])
+    facets = {f["id"]: f for f in art["facets"]}
+    spheres = {s["id"]: s for s in art["spheres"]}
+    blocks = _blocks(prog)
+    probes = [i for i, b in enumerate(blocks) if b[1] == 38.2]
+    assert len(probes) == len(plan)
+    kinds = {"facet": 0, "sphere": 0}
+    for k, i in enumerate(probes):
+        e = plan[k]
+        if e["type"] == "facet":
+            n = np.asarray(facets[e["target"]]["normal"], float)
+            contact = np.asarray(e["point"], float) + tip * n
+        else:
+            n = np.asarray(e["normal"], float)
+            n = n / np.linalg.norm(n)
+            s = spheres[e["target"]]
+            contact = np.asarray(s["center"]) + (s["radius"] + tip) * n
+        kinds[e["type"]] += 1
+        start = np.array([blocks[i - 1][2][a] for a in "XYZ"])
+        end = np.array([blocks[i][2][a] for a in "XYZ"])
+        np.testing.assert_allclose(start, contact - origin + clearance * n, atol=2e-6, err_msg=f"touch {k + 1}")
+        np.testing.assert_allclose(end, contact - origin - overtravel * n, atol=2e-6, err_msg=f"touch {k + 1}")
+        assert abs(blocks[i][2][tilt] - mp["sign"][3] * e["axes"][tilt]) < 1e-6
+        assert abs(blocks[i][2]["C"] - mp["sign"][4] * e["axes"]["C"]) < 1e-6
+    # the touch comments name the plan's targets in the plan's order
+    assert re.findall(r"\(touch \d+: (\S+) ", prog) == [e["target"] for e in plan]
+    balls = [(np.asarray(s["center"]) - origin, s["radius"] + tip) for s in art["spheres"]]
+    prev, near = None, np.inf
+    for ln, g, pos, _, text in blocks:
+        p = np.array([pos[a] for a in "XYZ"])
+        if g == 0.0 and prev is not None:
+            t = np.linspace(0, 1, 400)[:, None]
+            for c, rr in balls:
+                d = np.linalg.norm(prev + t * (p - prev) - c, axis=1).min() - rr
+                assert d > clearance - 1e-6, (ln, text, d)
+                near = min(near, d)
+        prev = None if g == 38.2 else p
+    return kinds
+
+
+def test_mixed_tango_plan_is_one_program_touching_each_target_kind():
+    """The TANGO plan (facets of the octagonal table and the scale bar's
+    balls, as fivecal design's pool) becomes one G38.2 program: each touch
+    ends at the contact of its own kind of target, no move cuts through a
+    ball (facet touches lifted only by --safe passed 2-5 mm through them)."""
+    m, art, plan = _tango()
+    assert {e["type"] for e in plan} == {"facet", "sphere"}
+    prog = N.touch_program(m, TANGO_KINS, plan, art, 3.0, clearance=0.5, overtravel=0.8, retract=4.0)
+    assert prog.count("G38.2") == len(plan) and "(PROBEOPEN probe-log.txt)" in prog
+    assert check_touch_program(m, TANGO_KINS, plan, art, prog, 3.0, 0.5, 0.8) == {"facet": 378, "sphere": 10}
+    # facets and spheres interleaved at one position (B = C = 0: five touches
+    # of each ball, then the facets): a facet touch between two of S1's and
+    # between S1's last and S2's first
+    mixed = [dict(e) for e in plan]
+    k = next(i for i, e in enumerate(mixed) if e["type"] == "sphere")
+    mixed.insert(k + 2, mixed.pop(k + 10))
+    mixed.insert(k + 6, mixed.pop(k + 11))
+    assert [e["target"] for e in mixed[k:k + 8]] == ["S1", "S1", "F3", "S1", "S1", "S1", "F4", "S2"]
+    prog = N.touch_program(m, TANGO_KINS, mixed, art, 3.0, clearance=0.5, overtravel=0.8, retract=4.0)
+    check_touch_program(m, TANGO_KINS, mixed, art, prog, 3.0, 0.5, 0.8)
+
+
+def test_mixed_tango_log_reads_back_into_facet_and_sphere_touches_that_fit():
+    """The log a probe writes running that program on a machine with errors
+    (fivecal's trigger model plus 0.6 um noise) reads back with the plan into
+    facet and sphere observations of the plan's targets; identify recovers
+    the errors within 3 sigma."""
+    m, art, plan = _tango()
+    pins = L.nominal_pins(m, TANGO_KINS)
+    log = N.touch_log(m, TANGO_KINS, plan, art, 3.0, pins, errors=TANGO_ERRORS)
+    rng = np.random.default_rng(5)
+    rows = [[float(v) for v in ln.split()] for ln in log.splitlines()]
+    for r in rows:
+        r[:3] = list(np.asarray(r[:3]) + rng.normal(0, 0.0006, 3))
+    log = "".join(" ".join(f"{v:.6f}" for v in r) + "\n" for r in rows)
+    obs = L.read_probe_log(log, m, TANGO_KINS, plan, pins)
+    assert [(o["type"], o["target"]) for o in obs] == [(e["type"], e["target"]) for e in plan]
+    # each touch came back where its plan entry commanded the rotary axes
+    assert all(abs(o["axes"][a] - e["axes"][a]) < 1e-6 for o, e in zip(obs, plan) for a in "BC")
+    for o in obs:
+        o["sigma"] = 0.0006
+    ds = fivecal.Dataset.from_dict({"machine": m.to_dict(), "probe": {"tip_radius": 3.0}, "artefact": art,
+                                    "observations": obs})
+    r = fivecal.identify(ds, estimate=list(TANGO_ERRORS), fix=["tip.x", "tip.y", "tip.z"])
+    assert r.converged
+    for name, truth in TANGO_ERRORS.items():
+        assert abs(r.values[name] - truth) < 3 * r.std[name], (name, r.values[name], truth, r.std[name])
+
+
+def test_mixed_program_refusals():
+    m, art, plan = _tango()
+    with pytest.raises(ValueError, match=r"plan\[1\]: type 'ball3d'"):
+        N.touch_program(m, TANGO_KINS, [plan[0], {"type": "ball3d", "axes": {"B": 0, "C": 0}}], art, 3.0)
+    with pytest.raises(ValueError, match="not a facet of the artefact"):
+        N.touch_program(m, TANGO_KINS, [dict(plan[0], target="S1")], art, 3.0)
+    # a sphere standing over a facet touch: the stylus cannot come down to it
+    over = dict(art, spheres=[{"id": "S9", "center": [0.0, -160.0, 40.0], "radius": 10.0}])
+    f22 = [e for e in plan if e["target"] == "F22" and e["axes"]["B"] == 0][:1]
+    assert f22 and np.allclose(f22[0]["point"][:2], [0.0, -160.0], atol=6)
+    with pytest.raises(ValueError, match="touch 1: the tool-axis move .* sphere S9"):
+        N.touch_program(m, TANGO_KINS, [dict(f22[0], point=[0.0, -160.0, 0.0])], over, 3.0)
 
 
 # ---- R-test -----------------------------------------------------------------
