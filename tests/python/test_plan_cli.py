@@ -311,3 +311,89 @@ def test_sphere_check_plan_program_log_import_and_check(tmp_path, machine_file, 
     assert rc == 2 and "planned touches" in err
     rc, _, err = run(capsys, "import", "probe-log", log, "--plan", plan_file, "--out", ds_file)
     assert rc == 2 and "--kins" in err
+
+
+# ---- a designed TANGO plan: facet and sphere touches in one program ------------
+
+TANGO_SPEC = __import__("os").path.join(__import__("os").path.dirname(__file__), "..", "..", "examples", "design",
+                                        "hu40t_table_4_2.json")
+
+
+def test_designed_mixed_plan_program_log_import_and_identify(tmp_path, capsys):
+    """`fivecal design` picks visits of the TANGO pool with facets and the
+    scale bar's balls; `fivecal export program` (kind auto) writes them as one
+    probing program; the log of a run on a machine with location errors
+    (fivecal's trigger model of that program plus 0.6 um noise) comes back
+    through `fivecal import probe-log --plan` as facet and sphere touches, and
+    `fivecal identify` recovers the errors within 3 sigma."""
+    from fivecal.procedures import tango
+    from test_nc_programs import TANGO_ERRORS, check_touch_program
+
+    kins = "xyzbc-trt"
+    errors = {k: v for k, v in TANGO_ERRORS.items() if k != "ECCb"}
+    plan_file = tmp_path / "plan.json"
+    # visit 16 is the B = C = 0 row with the balls (Table 4-2 row 17)
+    rc, out, err = run(capsys, "design", TANGO_SPEC, "-k", "8", "--require", "16", "--estimate", ",".join(errors),
+                       "--no-progress", "--out", plan_file)
+    assert rc == 0, err
+    spec = json.loads(plan_file.read_text())
+    plan, art = spec["plan"], spec["artefact"]
+    assert {e["type"] for e in plan} == {"facet", "sphere"}
+    m = tango.hu40t_machine()
+    prog_file = tmp_path / "tango.ngc"
+    rc, out, err = run(capsys, "export", "program", plan_file, "--kins", kins, "--clearance", "1",
+                       "--overtravel", "1", "--out", prog_file)
+    assert rc == 0, err
+    assert f"probing program, {len(plan)} plan entries" in out
+    prog = prog_file.read_text()
+    kinds = check_touch_program(m, kins, plan, art, prog, 3.0, 1.0, 1.0)
+    assert kinds["facet"] > 0 and kinds["sphere"] == 10
+    pins = L.nominal_pins(m, kins)
+    model = N.touch_trigger_model(m, kins, plan, art, 3.0, pins, errors=errors)
+    rng = np.random.default_rng(7)
+    rows = []
+    for t in model:
+        w = np.asarray(t["world"]) + rng.normal(0, 0.0006, 3)
+        rows.append(" ".join(f"{x:.6f}" for x in (w[0], w[1], w[2], 0.0, t["rot"][0], t["rot"][1], 0, 0, 0)))
+    log = tmp_path / "probe-log.txt"
+    log.write_text("\n".join(rows) + "\n")
+    ds_file = tmp_path / "ds.json"
+    rc, out, err = run(capsys, "import", "probe-log", log, "--plan", plan_file, "--kins", kins, "--out", ds_file)
+    assert rc == 0, err
+    assert f"{kinds['facet']} facet and 10 sphere observations of the {len(plan)} planned" in out
+    obs = json.loads(ds_file.read_text())["observations"]
+    assert [(o["type"], o["target"]) for o in obs] == [(e["type"], e["target"]) for e in plan]
+    res_file = tmp_path / "result.json"
+    rc, out, err = run(capsys, "identify", ds_file, "--estimate", ",".join(errors), "--fix", "tip.x,tip.y,tip.z",
+                       "--out", res_file)
+    assert rc == 0, err
+    got = json.loads(res_file.read_text())["parameters"]
+    for name, truth in errors.items():
+        p = got[name]
+        assert abs(p["value"] - truth) < 3 * p["std"], (name, p, truth)
+
+
+def test_export_program_refuses_a_mix_that_is_not_one_program(tmp_path, capsys):
+    from fivecal.procedures import rtest
+    m = fivecal.Machine.from_dict(MACHINES[KINS])
+    art = {"facets": [{"id": "TOP", "point": [0, 0, 60], "normal": [0, 0, 1]}],
+           "spheres": [{"id": "S1", "center": [60.0, 30.0, 40.0], "radius": 12.5}]}
+    facet = {"type": "facet", "target": "TOP", "axes": {"A": 0, "C": 0}, "point": [10.0, 0.0, 60.0]}
+    sphere = {"type": "sphere", "target": "S1", "axes": {"A": 0, "C": 0}, "normal": [0, 0, 1]}
+    ball3d = rtest.plan(m, "K1", table_ball=[60, 20, 30], step=60)[0]
+    for entries, named in (([facet, ball3d], "ball3d, facet"), ([facet, sphere, ball3d], "ball3d, facet, sphere")):
+        spec = tmp_path / "mix.json"
+        spec.write_text(json.dumps({"machine": MACHINES[KINS], "plan": entries, "artefact": art,
+                                    "probe": {"tip_radius": 3.0}}))
+        rc, _, err = run(capsys, "export", "program", spec, "--kins", KINS)
+        assert rc == 2, err
+        assert f"plan entries of type {named}" in err and "--kind" in err
+    # facet and sphere together are one program (to standard output)
+    spec.write_text(json.dumps({"machine": MACHINES[KINS], "plan": [facet, sphere, facet], "artefact": art,
+                                "probe": {"tip_radius": 3.0}}))
+    rc, out, err = run(capsys, "export", "program", spec, "--kins", KINS)
+    assert rc == 0, err
+    assert out == N.touch_program(m, KINS, [facet, sphere, facet], art, 3.0, retract=5.0, safe=100.0)
+    # --kind sphere still takes sphere touches only
+    rc, _, err = run(capsys, "export", "program", spec, "--kins", KINS, "--kind", "sphere")
+    assert rc == 2 and "type 'facet'" in err
