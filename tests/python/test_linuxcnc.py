@@ -513,3 +513,51 @@ def test_sphere_cycle_runs_in_linuxcnc_and_identifies():
     for name, truth in errors.items():
         tol = 3e-6 if name[1] in "ABC" else 1e-3  # rad / mm; servo-cycle quantisation
         assert abs(got[name] - truth) < tol, (name, got[name], truth)
+
+
+@needs_linuxcnc
+def test_mixed_facet_and_sphere_program_runs_in_linuxcnc_and_identifies():
+    """TANGO rows with the octagonal table's facets and the scale bar's balls
+    (Table 4-2 rows 1, 7, 13, 17, 22 on the HU40T-like machine, xyzbc-trt)
+    as one G38.2 program: it runs in the simulator with a probe that trips at
+    each touch's own target on the machine with location errors (the facet's
+    plane or the plane tangent to the ball where the probe line meets it);
+    the log, read back with the plan, gives facet and sphere touches from
+    which identify recovers the errors within 3 sigma."""
+    from fivecal.io import nc_programs as N
+    from fivecal.procedures import tango
+    from test_nc_programs import TANGO_ERRORS, check_touch_program
+    kins = "xyzbc-trt"
+    m, art = tango.hu40t_machine(), tango.octagonal_table()
+    plan = tango.hu40t_plan(art, m, rows=[0, 6, 12, 16, 21])
+    assert {e["type"] for e in plan} == {"facet", "sphere"}
+    errors = {k: v for k, v in TANGO_ERRORS.items() if k != "ECCb"}
+    pins = L.nominal_pins(m, kins)
+    # the errors move the contacts up to 0.06 mm along the probe lines here
+    opts = dict(clearance=0.1, overtravel=0.2)
+    planes = N.touch_sim_lines(m, kins, plan, art, 3.0, pins, errors=errors, **opts)
+    prog = N.touch_program(m, kins, plan, art, 3.0, feed=10, sync="M66 E0 L0", arm="M64 P0",
+                           disarm="M65 P0", before_probe=planes, **opts)
+    check_touch_program(m, kins, plan, art, prog, 3.0, opts["clearance"], opts["overtravel"])
+    with harness.Sim(kins, hal=L.hal_text(kins, pins) + L.probe_sim_hal(),
+                     files={"mixed.ngc": prog}) as sim:
+        out = sim.run([], setup=[], program="mixed.ngc", program_timeout=600)
+        log = sim.read("probe-log.txt")
+    assert out["errors"] == []
+    # every trip 0 to 2 servo cycles (0.17 um each at 10 mm/min) past the
+    # crossing fivecal's model predicts, facet and sphere touches alike
+    model = N.touch_trigger_model(m, kins, plan, art, 3.0, pins, errors=errors, **opts)
+    got = np.array([[float(v) for v in ln.split()[:3]] for ln in log.splitlines() if ln.strip()])
+    assert got.shape == (len(plan), 3)
+    lag = np.linalg.norm(got - np.array([p["world"] for p in model]), axis=1)
+    assert lag.max() < 0.5e-3, f"touches off the modelled crossing: {np.flatnonzero(lag >= 0.5e-3) + 1}"
+    obs = L.read_probe_log(log, m, kins, plan, pins)
+    assert [(o["type"], o["target"]) for o in obs] == [(e["type"], e["target"]) for e in plan]
+    for o in obs:
+        o["sigma"] = tango.PROBE_SIGMA
+    ds = fivecal.Dataset.from_dict({"machine": m.to_dict(), "probe": {"tip_radius": 3.0},
+                                    "artefact": art, "observations": obs})
+    r = fivecal.identify(ds, estimate=list(errors), fix=["tip.x", "tip.y", "tip.z"])
+    assert r.converged
+    for name, truth in errors.items():
+        assert abs(r.values[name] - truth) < 3 * r.std[name], (name, r.values[name], truth, r.std[name])
