@@ -230,7 +230,7 @@ def check_touch_program(m, kins, plan, art, prog, tip, clearance, overtravel):
         assert abs(blocks[i][2][tilt] - mp["sign"][3] * e["axes"][tilt]) < 1e-6
         assert abs(blocks[i][2]["C"] - mp["sign"][4] * e["axes"]["C"]) < 1e-6
     # the touch comments name the plan's targets in the plan's order
-    assert re.findall(r"\(touch \d+: (\S+) ", prog) == [e["target"] for e in plan]
+    assert re.findall(r"\(touch \d+: ([^\s)]+)", prog) == [e["target"] for e in plan]
     balls = [(np.asarray(s["center"]) - origin, s["radius"] + tip) for s in art["spheres"]]
     prev, near = None, np.inf
     for ln, g, pos, _, text in blocks:

@@ -397,3 +397,22 @@ def test_export_program_refuses_a_mix_that_is_not_one_program(tmp_path, capsys):
     # --kind sphere still takes sphere touches only
     rc, _, err = run(capsys, "export", "program", spec, "--kins", KINS, "--kind", "sphere")
     assert rc == 2 and "type 'facet'" in err
+
+
+def test_facet_plan_beside_balls_keeps_out_of_them(tmp_path, capsys):
+    """A facet-only plan on an artefact that also carries balls (TANGO's
+    octagonal table with its scale bar): the program's moves keep out of the
+    balls (the per-touch lift of the facet-only program went up to 4 mm
+    through them)."""
+    from fivecal.procedures import tango
+    from test_nc_programs import check_touch_program
+    kins = "xyzbc-trt"
+    m, art = tango.hu40t_machine(), tango.octagonal_table()
+    plan = [e for e in tango.hu40t_plan(art, m) if e["type"] == "facet"]
+    spec = tmp_path / "facets.json"
+    spec.write_text(json.dumps({"machine": m.to_dict(), "plan": plan, "artefact": art,
+                                "probe": {"tip_radius": 3.0}}))
+    rc, out, err = run(capsys, "export", "program", spec, "--kins", kins, "--out", tmp_path / "f.ngc")
+    assert rc == 0, err
+    kinds = check_touch_program(m, kins, plan, art, (tmp_path / "f.ngc").read_text(), 3.0, 1.0, 1.0)
+    assert kinds == {"facet": len(plan), "sphere": 0}

@@ -131,7 +131,9 @@ def _run_program(args) -> int:
         raise ValueError(f"{args.spec}: probe.tip_radius: the stylus ball radius (mm) is needed for the "
                          "contact points")
     feed = args.feed
-    if kind == "probing" and any(e.get("type") == "sphere" for e in plan):
+    # with spheres on the artefact (a scale bar beside the facets, as in
+    # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
+    if kind == "probing" and (any(e.get("type") == "sphere" for e in plan) or artefact.get("spheres")):
         text = N.touch_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
                                overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
                                safe=args.safe, overshoot=args.overshoot, dwell=args.dwell, log=args.log)
