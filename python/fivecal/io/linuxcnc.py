@@ -561,7 +561,9 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
     each plan entry) from LinuxCNC's probe log (the
     ``PROBEOPEN`` file: one line 'x y z a b c u v w' per probe, in program
     coordinates) of a program :func:`probing_program` (or
-    :func:`fivecal.io.nc_programs.sphere_program`) wrote for ``plan``:
+    :func:`fivecal.io.nc_programs.sphere_program`, or
+    :func:`fivecal.io.nc_programs.touch_program` for a plan that mixes facet
+    and sphere touches) wrote for ``plan``, one line per touch in plan order:
     each world position goes through LinuxCNC's inverse kinematics with the
     ``pins`` the controller ran with to the joints, then to fivecal's axis
     readings. ``source`` is a path or the log text."""

@@ -123,24 +123,18 @@ def _clear_lift(a, va, b, vb, lift, balls, touch: int, step: float = 5.0, extra:
     a -> a + lift va -> b + lift vb -> b (up from one retract point along its
     tool axis, across, down to the next; ``a`` or ``b`` None: that end only)
     keep out of every ball (world centre, stylus-centre radius plus clearance).
-    The lift moves along the tool axis cannot go round a sphere: a sphere
-    over a retract point is refused, naming the touch."""
-    ends = [(a, va), (b, vb)] if a is not None and b is not None else [(a, va)] if a is not None else [(b, vb)]
-    for name, c, r in balls:
-        for p, v in ends:
-            # the ray p + s v (s >= 0) misses the ball if its nearest point is outside
-            s = max(0.0, float((c - p) @ v))
-            if np.linalg.norm(p + s * v - c) <= r:
-                raise ValueError(f"touch {touch}: the tool-axis move to or from its retract "
-                                 f"point passes through sphere {name}; a sphere cycle cannot reach this touch from "
-                                 "above (change the plan or the artefact's sphere)")
-    if a is None or b is None:
-        return lift
+    A lift along the tool axis cannot go round a sphere: a sphere in its way
+    is refused, naming the touch."""
+    ends = [(p, v) for p, v in ((a, va), (b, vb)) if p is not None]
     k = 0
     while k * step <= extra:
         h = lift + k * step
-        p, q = a + h * va, b + h * vb
-        if all(_segment_gap(p, q, c) > r for _, c, r in balls):
+        for name, c, r in balls:
+            if any(_segment_gap(p, p + h * v, c) <= r for p, v in ends):
+                raise ValueError(f"touch {touch}: the tool-axis move to or from its retract point passes "
+                                 f"through sphere {name} (lifted {h:g} mm); the cycle cannot reach this touch "
+                                 "from above (change the plan, --safe or the artefact's sphere)")
+        if len(ends) < 2 or all(_segment_gap(a + h * va, b + h * vb, c) > r for _, c, r in balls):
             return h
         k += 1
     raise ValueError(f"touch {touch}: no lift up to {lift + extra:g} mm along the tool axis clears the spheres "
