@@ -58,8 +58,8 @@ def _as_facets(plan: Sequence[Mapping], artefact: Mapping, kinds=("sphere",)):
     for i, t in enumerate(plan):
         kind = t.get("type")
         if kind not in kinds:
-            raise ValueError(f"plan[{i}]: type '{kind}': a {'sphere cycle' if kinds == ('sphere',) else 'probing cycle'} "
-                             f"runs {what} touches")
+            cycle = "sphere cycle" if kinds == ("sphere",) else "probing cycle"
+            raise ValueError(f"plan[{i}]: type '{kind}': a {cycle} runs {what} touches")
         if kind == "facet":
             f = afacets.get(t.get("target"))
             if f is None:
@@ -191,9 +191,13 @@ def touch_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact
     one retract point to the next lifted along the tool axis: by ``safe`` mm
     when either touch is on a facet (as :func:`fivecal.io.linuxcnc.probing_program`
     does), otherwise by the sphere's radius plus the stylus radius plus
-    ``retract`` (over the sphere). Check the moves against your fixtures. The
-    log reads back with :func:`fivecal.io.linuxcnc.read_probe_log` into facet
-    and sphere observations in plan order."""
+    ``retract`` (over the sphere); any lift, and the lift out of a position
+    before indexing, is raised in 5 mm steps until the straight moves keep
+    ``clearance`` off every sphere of the artefact, touched or not (a sphere
+    over a retract point is refused, naming the touch). Other solids are not
+    modelled: check the moves against your fixtures. The log reads back
+    with :func:`fivecal.io.linuxcnc.read_probe_log` into facet and sphere
+    observations in plan order."""
     return _touch_program(machine, kins, plan, artefact, tip_radius, ("facet", "sphere"), clearance,
                           overtravel, feed, retract, safe, overshoot, dwell, arm, disarm, sync, log, tcp_on,
                           workpiece_shift, before_probe)
