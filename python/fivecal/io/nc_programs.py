@@ -165,7 +165,9 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
     retract point to the next lifted along the tool axis by the sphere's
     radius plus the stylus radius plus ``retract``, so the straight move does
     not cut across the sphere (for touches at or above its equator as seen
-    from the spindle; check the moves against your fixtures). ``sync``, ``arm``,
+    from the spindle; any lift is raised until its moves keep ``clearance``
+    off every sphere of the artefact, as in :func:`touch_program`; check the
+    moves against your fixtures). ``sync``, ``arm``,
     ``disarm``, ``before_probe``, ``log`` and ``tcp_on`` as in
     :func:`fivecal.io.linuxcnc.probing_program`."""
     return _touch_program(machine, kins, plan, artefact, tip_radius, ("sphere",), clearance, overtravel,
