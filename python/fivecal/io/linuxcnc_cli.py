@@ -236,6 +236,8 @@ def register(sub) -> None:
         "circles and rotary-axis paths with feed-in and feed-out (docs/linuxcnc.md). Check every "
         "program's clearance moves against your fixtures before running it on a machine.",
         epilog="examples:\n  fivecal export program sphere_spec.json --kins xyzac-trt --out sphere.ngc\n"
+        "  fivecal export program plan14.json --kins xyzbc-trt --out tango.ngc   (fivecal design's facets "
+        "and balls)\n"
         "  fivecal export program rtest_spec.json --mode tcp --kins xyzac-trt --out k4.ngc\n"
         "  fivecal export program fourstep_spec.json --feed 500 --out fourstep.ngc")
     pp.add_argument("spec", help="simulation spec JSON: machine (object or path), plan, artefact, probe")
