@@ -21,4 +21,5 @@ cmake -S examples/cpp -B build/example -G Ninja -DCMAKE_PREFIX_PATH="$PWD/build/
 cmake --build build/example
 ./build/example/compensate examples/machines/hu40t.json examples/cpp/errors_example.json
 
-$PY -m pytest -q tests/python
+# Two workers (pytest-xdist); the LinuxCNC tests share one (tests/python/conftest.py).
+$PY -m pytest -q -n "$JOBS" --dist loadgroup tests/python

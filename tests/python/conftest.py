@@ -19,3 +19,16 @@ def table():
 def plan(table, hu40t):
     """The Table 4-2 touch plan on the octagonal table."""
     return tango.hu40t_plan(table, hu40t)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist (scripts/test.sh runs ``-n JOBS --dist loadgroup``)
+    the tests of modules that drive LinuxCNC stay on one worker: only one
+    LinuxCNC runs on a machine at a time (the harness's file lock), so two
+    workers would take turns waiting on each other's simulator."""
+    import linuxcnc_harness
+
+    for item in items:
+        mod = getattr(item, "module", None)
+        if mod is not None and any(v is linuxcnc_harness for v in vars(mod).values()):
+            item.add_marker(pytest.mark.xdist_group("linuxcnc"))
