@@ -274,10 +274,14 @@ Dataset EveryKind() {
                    {"pose", 0.01},   {"pose_angle", 1e-4}, {"distance", 0.001}, {"machined", 0.003}};
   spec["seed"] = 3;
   nlohmann::json plan = nlohmann::json::array();
+  // The tool tip on (100, 0, 0) of the workpiece at A = -20 i, C = 40 i
+  // (Machine.inverse): the ball bar's balls 150 mm apart there.
+  const double xyz[4][3] = {{100, 0, -150}, {76.6044, -60.4023, -171.9846}, {17.3648, -75.4407, -213.3022},
+                            {-50, -43.3013, -225}};
   for (int i = 0; i < 4; ++i) {
     const double a = -20.0 * i, c = 40.0 * i;
     const nlohmann::json rot = {{"A", a}, {"C", c}, {"S", 0}};
-    const nlohmann::json full = {{"X", 90 + 5 * i}, {"Y", 10.0 * i}, {"Z", 20 - 3 * i}, {"A", a}, {"C", c}, {"S", 0}};
+    const nlohmann::json full = {{"X", xyz[i][0]}, {"Y", xyz[i][1]}, {"Z", xyz[i][2]}, {"A", a}, {"C", c}, {"S", 0}};
     plan.push_back({{"type", "sphere"}, {"target", i % 2 ? "S1" : "S2"}, {"axes", rot}, {"normal", {0.3 * i, 0, 1}}});
     plan.push_back({{"type", "point"}, {"instrument", "T1"}, {"target", "work"}, {"target_point", {100, 0, 20}},
                     {"axes", full}, {"instrument_origin", {1500, -800, 300}}, {"instrument_angles", {0.5, -1, 30}}});
