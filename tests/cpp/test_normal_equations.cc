@@ -265,7 +265,8 @@ Dataset EveryKind() {
   f >> spec["machine"];
   spec["probe"] = {{"tip_radius", 3.0}};
   spec["artefact"] = nlohmann::json::parse(R"({
-    "spheres": [{"id": "S1", "center": [60, 40, 30], "radius": 12.5}, {"id": "S2", "center": [-60, 40, 30], "radius": 12.5}],
+    "spheres": [{"id": "S1", "center": [60, 40, 30], "radius": 12.5},
+                {"id": "S2", "center": [-60, 40, 30], "radius": 12.5}],
     "scale_bars": [{"spheres": ["S1", "S2"], "length": 120}],
     "facets": [{"id": "F1", "point": [0, 0, 0], "normal": [0, 0, 1]}],
     "cylinders": [{"id": "K1", "point": [0, 0, 0], "axis": [0, 0, 1], "radius": 80}]})");
