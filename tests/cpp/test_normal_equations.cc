@@ -417,5 +417,60 @@ TEST(NormalEquations, TheBatchOfEveryKindRefreshes) {
   EXPECT_EQ((J1 - J2).cwiseAbs().maxCoeff(), 0.0);
 }
 
+TEST(NormalEquations, LongTrackerDataTakeTheStreamingPath) {
+  // A tracker stream (the templated point kind), rows x unknowns above
+  // kNormalEquationElements: "auto" takes the normal equations. One
+  // simulated reading per target copied over random poses.
+  nlohmann::json spec;
+  std::ifstream f(std::string(FIVECAL_SOURCE_DIR) + "/examples/machines/c600u.json");
+  f >> spec["machine"];
+  spec["plan"] = nlohmann::json::parse(R"([{"type": "point", "instrument": "T1", "target": "work",
+    "target_point": [100, 0, 20], "axes": {"X": 0, "Y": 0, "Z": 0, "A": 0, "C": 0, "S": 0},
+    "instrument_origin": [1500, -800, 300], "instrument_angles": [0.01, -0.02, 0.5]},
+    {"type": "point", "instrument": "T1", "target": "tool",
+    "target_point": [0, 0, 150], "axes": {"X": 0, "Y": 0, "Z": 0, "A": 0, "C": 0, "S": 0},
+    "instrument_origin": [1500, -800, 300], "instrument_angles": [0.01, -0.02, 0.5]}])");
+  Dataset ds = Simulate(spec.dump());
+  const Observation work = ds.observations[0], tool = ds.observations[1];
+  const Machine& m = ds.machine();
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, 0.005);
+  const int n = 60000;
+  ds.observations.assign(n, work);
+  for (int i = 1; i < n; i += 2) ds.observations[i] = tool;
+  for (Observation& o : ds.observations) {
+    o.axes[m.AxisIndex('A')] = -90 * u(rng);
+    o.axes[m.AxisIndex('C')] = 360 * u(rng);
+    for (char a : {'X', 'Y', 'Z'}) o.axes[m.AxisIndex(a)] = -100 + 200 * u(rng);
+    o.measured.setZero();
+  }
+  const std::map<std::string, double> truth = {{"EB0A", 3e-5}, {"EA0C", 4e-5}, {"EY0C", -0.012},
+                                               {"instrument.T1.x", 0.2}};
+  std::vector<int> src;
+  const Eigen::VectorXd r = PredictResiduals(ds, truth, &src);  // predicted - 0
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) ds.observations[i].measured[c] = r[3 * i + c] + noise(rng);
+  IdentifyOptions o;
+  o.estimate = {"EB0A", "EA0C", "EY0C"};
+  // The tool reflector's offsets move it as the tracker's position does
+  // (no rotary axis carries the tool): known.
+  o.fix = {"instrument.T1.tool_x", "instrument.T1.tool_y", "instrument.T1.tool_z"};
+  o.num_threads = 2;
+  const Result s = Identify(ds, o);  // auto
+  EXPECT_GT(3.0 * n * s.estimated.size(), kNormalEquationElements);
+  EXPECT_EQ(s.fit_path, "normal_equations");
+  EXPECT_EQ(s.verdict(), "ok");
+  // (The same fit as the dense path's is shown on short data of every kind
+  // above and in test_long_data_fit.py; the dense fit here would take twice
+  // as long as this one.)
+  for (size_t j = 0; j < s.estimated.size(); ++j) {
+    const auto it = truth.find(s.estimated[j]);
+    const double want = it == truth.end() ? 0.0 : it->second;
+    const int k = static_cast<int>(std::find(s.names.begin(), s.names.end(), s.estimated[j]) - s.names.begin());
+    EXPECT_LT(std::abs(s.values[k] - want), 4 * s.std[j]) << s.estimated[j];
+  }
+}
+
 }  // namespace
 }  // namespace fivecal
