@@ -45,8 +45,9 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
     row_sigma_[r] = src[r] < 0 ? kScaleBarSigma : ObservationSigma(ds, ds.observations[src[r]], k);
   }
   uniform_sigma_ = nr > 0 && row_sigma_.maxCoeff() == row_sigma_.minCoeff() ? row_sigma_[0] : 0.0;
-  // Row units as the residual summary groups them (scale bar rows: mm).
-  // A per-row byte only for data holding such a kind (a pose), not for every R-test sample.
+  // Row units as the residual summary groups them (scale bar rows: mm); a
+  // byte per row only for data holding a kind of rows in another unit (a
+  // pose), not for every R-test sample.
   bool other = false;
   std::vector<const ObservationKind*> seen;
   for (const Observation& o : ds.observations) {
@@ -63,11 +64,13 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
       const std::string unit = KindOf(ds.observations[src[r]]).unit_row(k);
       if (unit == "mm") continue;
       auto it = std::find(other_units_.begin(), other_units_.end(), unit);
-      if (it == other_units_.end()) it = other_units_.insert(other_units_.end(), unit);
+      if (it == other_units_.end()) {
+        if (other_units_.size() >= 255) throw std::logic_error("normal equations: too many row units");
+        it = other_units_.insert(other_units_.end(), unit);
+      }
       row_unit_[r] = static_cast<unsigned char>(1 + (it - other_units_.begin()));
     }
     if (other_units_.empty()) row_unit_.clear();
-    if (other_units_.size() > 254) throw std::logic_error("normal equations: too many row units");
   }
   const int n = static_cast<int>(ds.observations.size());
   const int nb = std::max(1, std::min(kBlocks, (n + kChunk - 1) / kChunk));

@@ -2,10 +2,11 @@
 // noise-weighted rows accumulated chunk by chunk from the batch of every row
 // (analytic_residuals.h: analytic derivatives, and the templated functors of
 // the kinds without them, in the dense path's row order), never the
-// rows x parameters Jacobian. Any dataset, of any mix of kinds, runs here. An R-test or
-// ball-bar trace at 1 kHz has millions of rows and a handful of unknowns: the
-// dense Jacobian then costs memory and traffic out of all proportion to the
-// p x p system that decides the fit. Memory is O(p^2) plus the data.
+// rows x parameters Jacobian. Any dataset, of any mix of kinds, runs here.
+// An R-test or ball-bar trace at 1 kHz has millions of rows and a handful of
+// unknowns: the dense Jacobian then costs memory and traffic out of all
+// proportion to the p x p system that decides the fit. Memory is O(p^2) plus
+// the data (and one cost function per observation of a templated kind).
 //
 // The sums run over a fixed partition of the rows (kBlocks blocks, each
 // summed in row order, then the blocks in order), so the result does not
