@@ -245,3 +245,232 @@ TEST(NormalEquations, DerivativesOnlyAtAcceptedPoints) {
 
 }  // namespace
 }  // namespace fivecal
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+
+#include "fivecal/observations/registry.h"
+#include "fivecal/observations/simulate.h"
+
+namespace fivecal {
+namespace {
+
+// Observations of every registered kind on the c600u, several of each,
+// interleaved (analytic and templated rows alternate), with the scale bar
+// whose rows follow the observations.
+Dataset EveryKind() {
+  std::ifstream f(std::string(FIVECAL_SOURCE_DIR) + "/examples/machines/c600u.json");
+  nlohmann::json spec;
+  f >> spec["machine"];
+  spec["probe"] = {{"tip_radius", 3.0}};
+  spec["artefact"] = nlohmann::json::parse(R"({
+    "spheres": [{"id": "S1", "center": [60, 40, 30], "radius": 12.5},
+                {"id": "S2", "center": [-60, 40, 30], "radius": 12.5}],
+    "scale_bars": [{"spheres": ["S1", "S2"], "length": 120}],
+    "facets": [{"id": "F1", "point": [0, 0, 0], "normal": [0, 0, 1]}],
+    "cylinders": [{"id": "K1", "point": [0, 0, 0], "axis": [0, 0, 1], "radius": 80}]})");
+  spec["errors"] = {{"EX0C", 0.01}, {"EA0C", 2e-5}, {"EB0A", -3e-5}};
+  spec["sigma"] = {{"probe", 0.001}, {"dbb", 0.0005}, {"ball3d", 0.001}, {"point", 0.005},
+                   {"pose", 0.01},   {"pose_angle", 1e-4}, {"distance", 0.001}, {"machined", 0.003}};
+  spec["seed"] = 3;
+  nlohmann::json plan = nlohmann::json::array();
+  // The tool tip on (100, 0, 0) of the workpiece at A = -20 i, C = 40 i
+  // (Machine.inverse): the ball bar's balls 150 mm apart there.
+  const double xyz[4][3] = {{100, 0, -150}, {76.6044, -60.4023, -171.9846}, {17.3648, -75.4407, -213.3022},
+                            {-50, -43.3013, -225}};
+  for (int i = 0; i < 4; ++i) {
+    const double a = -20.0 * i, c = 40.0 * i;
+    const nlohmann::json rot = {{"A", a}, {"C", c}, {"S", 0}};
+    const nlohmann::json full = {{"X", xyz[i][0]}, {"Y", xyz[i][1]}, {"Z", xyz[i][2]}, {"A", a}, {"C", c}, {"S", 0}};
+    plan.push_back({{"type", "sphere"}, {"target", i % 2 ? "S1" : "S2"}, {"axes", rot}, {"normal", {0.3 * i, 0, 1}}});
+    plan.push_back({{"type", "point"}, {"instrument", "T1"}, {"target", "work"}, {"target_point", {100, 0, 20}},
+                    {"axes", full}, {"instrument_origin", {1500, -800, 300}}, {"instrument_angles", {0.5, -1, 30}}});
+    plan.push_back({{"type", "facet"}, {"target", "F1"}, {"axes", rot}, {"point", {10.0 + 5 * i, 5, 0}}});
+    plan.push_back({{"type", "pose"}, {"instrument", "CAM"}, {"target", "work"}, {"target_point", {100, 0, 20}},
+                    {"target_rotation", {0.1, 0, 0}}, {"axes", full}, {"instrument_origin", {0, -900, 300}},
+                    {"instrument_angles", {0, 0, 90}}});
+    plan.push_back({{"type", "cylinder"}, {"target", "K1"}, {"axes", rot}, {"point", {80, 0, 10.0 + i}}});
+    plan.push_back({{"type", "distance"}, {"station", "L1"}, {"instrument", "LT2"}, {"target", "tool"},
+                    {"target_point", {0, 0, 150}}, {"axes", full}, {"station_position", {900, -700, 150}},
+                    {"dead_length", 200.0}});
+    plan.push_back({{"type", "dbb"}, {"setup", "D1"}, {"axes", full}, {"length", 150.0}, {"tool_ball", {0, 0, 150}},
+                    {"table_ball", {100, 0, 150}}});
+    plan.push_back({{"type", "machined"}, {"part", "P1"}, {"feature", "face"}, {"axes", rot},
+                    {"point", {0, 150, 60}}, {"normal", {0, 0, 1}}});
+    plan.push_back({{"type", "ball3d"}, {"setup", "R1"}, {"axes", full}, {"tool_ball", {0, 0, 150}},
+                    {"table_ball", {100, 0, 0}}});
+  }
+  spec["plan"] = plan;
+  return Simulate(spec.dump());
+}
+
+TEST(NormalEquations, EveryKindAccumulatesTheDenseNormalEquations) {
+  const Dataset ds = EveryKind();
+  // A kind registered later without a sample here fails.
+  std::set<const ObservationKind*> present;
+  for (const Observation& o : ds.observations) present.insert(&KindOf(o));
+  for (const ObservationKind* k : ObservationKinds()) EXPECT_TRUE(present.count(k)) << "no sample of " << k->name();
+  const ParameterTable table(ds);
+  // Every parameter estimated, at a point away from zero: every column of
+  // every kind (machine, setup, artefact) is compared.
+  std::mt19937 rng(2);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  Eigen::VectorXd v(table.size());
+  for (int i = 0; i < table.size(); ++i) v[i] = (i < ds.machine().num_parameters() ? 1e-6 : 1e-3) * n01(rng);
+  std::vector<int> all(table.size());
+  for (int i = 0; i < table.size(); ++i) all[i] = i;
+  // The dense reference: the templated functors, one Ceres block each.
+  Problem dense(ds, table, v, all, "", 0.0, false);
+  Eigen::VectorXd r;
+  Eigen::MatrixXd J;
+  dense.Evaluate(&r, &J);
+  const Eigen::VectorXd w = dense.row_sigma().cwiseInverse();
+  const Eigen::MatrixXd Jw = w.asDiagonal() * J;
+  const Eigen::VectorXd rw = w.asDiagonal() * r;
+  const Eigen::MatrixXd N = Jw.transpose() * Jw;
+  const NormalEquationProblem one(ds, table, v, all, 1);
+  ASSERT_EQ(one.num_rows(), dense.num_rows());
+  EXPECT_EQ(one.row_source(), dense.row_source());
+  EXPECT_LT((one.row_sigma() - dense.row_sigma()).cwiseAbs().maxCoeff(), 1e-15);
+  const NormalEquations acc = one.Accumulate(v, true);
+  EXPECT_LT((acc.JtJ - N).norm(), 1e-12 * N.norm());
+  EXPECT_LT((acc.JtJ_unweighted - J.transpose() * J).norm(), 1e-12 * (J.transpose() * J).norm());
+  EXPECT_LT((acc.Jtr - Jw.transpose() * rw).norm(), 1e-11 * (Jw.transpose() * rw).norm());
+  EXPECT_NEAR(acc.cost, 0.5 * rw.squaredNorm(), 1e-12 * rw.squaredNorm());
+  EXPECT_LT((one.Residuals(v) - r).cwiseAbs().maxCoeff(), 1e-12);
+  // The pose's rotation rows: their own J^T J, for the residual summary per unit.
+  ASSERT_EQ(one.other_units(), std::vector<std::string>{"rad"});
+  Eigen::MatrixXd Nrad = Eigen::MatrixXd::Zero(N.rows(), N.cols());
+  int rad_rows = 0;
+  for (int i = 0, k = 0; i < r.size(); ++i) {
+    const int s = dense.row_source()[i];
+    k = (i > 0 && s == dense.row_source()[i - 1]) ? k + 1 : 0;
+    if (s >= 0 && std::string(KindOf(ds.observations[s]).unit_row(k)) == "rad") {
+      Nrad += Jw.row(i).transpose() * Jw.row(i);
+      ++rad_rows;
+    }
+  }
+  EXPECT_EQ(rad_rows, 12);
+  EXPECT_LT((acc.JtJ_units[0] - Nrad).norm(), 1e-12 * Nrad.norm());
+  // Threads: the same sums, bitwise (the templated rows evaluate on each thread).
+  for (int threads : {2, 3}) {
+    const NormalEquations many = NormalEquationProblem(ds, table, v, all, threads).Accumulate(v, true);
+    EXPECT_EQ((many.JtJ - acc.JtJ).cwiseAbs().maxCoeff(), 0.0) << threads;
+    EXPECT_EQ((many.Jtr - acc.Jtr).cwiseAbs().maxCoeff(), 0.0) << threads;
+    EXPECT_EQ((many.JtJ_units[0] - acc.JtJ_units[0]).cwiseAbs().maxCoeff(), 0.0) << threads;
+    EXPECT_EQ(many.cost, acc.cost) << threads;
+  }
+}
+
+TEST(NormalEquations, MixedKindsSameFitAsTheDensePath) {
+  // A well-posed fit of interleaved touches, tracker points, poses and
+  // distances: values, covariance, costs, residuals and per-unit sigma.
+  const Dataset ds = EveryKind();
+  IdentifyOptions o;
+  o.estimate = {"EX0C", "EA0C", "EB0A"};
+  o.include_default_setup = false;
+  o.fit_path = "dense";
+  const Result d = Identify(ds, o);
+  ASSERT_EQ(d.residual_units.size(), 2u);
+  for (int threads : {1, 2}) {
+    o.fit_path = "normal_equations";
+    o.num_threads = threads;
+    const Result s = Identify(ds, o);
+    ExpectSameFit(d, s);
+    ASSERT_EQ(s.residual_units.size(), 2u);
+    for (size_t u = 0; u < 2; ++u) {
+      EXPECT_EQ(s.residual_units[u].unit, d.residual_units[u].unit);
+      EXPECT_NEAR(s.residual_units[u].dof, d.residual_units[u].dof, 1e-9 * d.residual_units[u].dof);
+      EXPECT_NEAR(s.residual_units[u].sigma, d.residual_units[u].sigma, 1e-9 * d.residual_units[u].sigma);
+    }
+  }
+}
+
+TEST(NormalEquations, TheBatchOfEveryKindRefreshes) {
+  // The dense path's Problem holds the same batch: a Monte Carlo trial edits
+  // the readings in place and refreshes it, templated kinds included (their
+  // functors captured the readings, so they are recorded again).
+  Dataset ds = EveryKind();
+  const ParameterTable table(ds);
+  std::vector<int> est;
+  for (const char* n : {"EX0C", "EA0C", "EB0A", "instrument.T1.x", "instrument.CAM.c", "instrument.L1.length",
+                        "machined.P1.z", "facet.F1", "dbb.D1.length", "ball3d.R1.table.x"})
+    est.push_back(table.Require(n));
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  Problem pr(ds, table, v, est);
+  std::mt19937 rng(4);
+  std::normal_distribution<double> n01(0.0, 1e-3);
+  for (Observation& o : ds.observations) {
+    o.reading += n01(rng);
+    for (int c = 0; c < 3; ++c) o.measured[c] += n01(rng), o.measured_rotation[c] += 0.01 * n01(rng);
+    o.axes[0] += n01(rng);
+  }
+  for (int i : est) v[i] = n01(rng);
+  ASSERT_TRUE(pr.Refresh(v));
+  Problem fresh(ds, table, v, est);
+  Eigen::VectorXd r1, r2;
+  Eigen::MatrixXd J1, J2;
+  pr.Evaluate(&r1, &J1);
+  fresh.Evaluate(&r2, &J2);
+  EXPECT_EQ((r1 - r2).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ((J1 - J2).cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(NormalEquations, LongTrackerDataTakeTheStreamingPath) {
+  // A tracker stream (the templated point kind), rows x unknowns above
+  // kNormalEquationElements: "auto" takes the normal equations. One
+  // simulated reading per target copied over random poses.
+  nlohmann::json spec;
+  std::ifstream f(std::string(FIVECAL_SOURCE_DIR) + "/examples/machines/c600u.json");
+  f >> spec["machine"];
+  spec["plan"] = nlohmann::json::parse(R"([{"type": "point", "instrument": "T1", "target": "work",
+    "target_point": [100, 0, 20], "axes": {"X": 0, "Y": 0, "Z": 0, "A": 0, "C": 0, "S": 0},
+    "instrument_origin": [1500, -800, 300], "instrument_angles": [0.01, -0.02, 0.5]},
+    {"type": "point", "instrument": "T1", "target": "tool",
+    "target_point": [0, 0, 150], "axes": {"X": 0, "Y": 0, "Z": 0, "A": 0, "C": 0, "S": 0},
+    "instrument_origin": [1500, -800, 300], "instrument_angles": [0.01, -0.02, 0.5]}])");
+  Dataset ds = Simulate(spec.dump());
+  const Observation work = ds.observations[0], tool = ds.observations[1];
+  const Machine& m = ds.machine();
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, 0.005);
+  const int n = 60000;
+  ds.observations.assign(n, work);
+  for (int i = 1; i < n; i += 2) ds.observations[i] = tool;
+  for (Observation& o : ds.observations) {
+    o.axes[m.AxisIndex('A')] = -90 * u(rng);
+    o.axes[m.AxisIndex('C')] = 360 * u(rng);
+    for (char a : {'X', 'Y', 'Z'}) o.axes[m.AxisIndex(a)] = -100 + 200 * u(rng);
+    o.measured.setZero();
+  }
+  const std::map<std::string, double> truth = {{"EB0A", 3e-5}, {"EA0C", 4e-5}, {"EY0C", -0.012},
+                                               {"instrument.T1.x", 0.2}};
+  std::vector<int> src;
+  const Eigen::VectorXd r = PredictResiduals(ds, truth, &src);  // predicted - 0
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) ds.observations[i].measured[c] = r[3 * i + c] + noise(rng);
+  IdentifyOptions o;
+  o.estimate = {"EB0A", "EA0C", "EY0C"};
+  // The tool reflector's offsets move it as the tracker's position does
+  // (no rotary axis carries the tool): known.
+  o.fix = {"instrument.T1.tool_x", "instrument.T1.tool_y", "instrument.T1.tool_z"};
+  o.num_threads = 2;
+  const Result s = Identify(ds, o);  // auto
+  EXPECT_GT(3.0 * n * s.estimated.size(), kNormalEquationElements);
+  EXPECT_EQ(s.fit_path, "normal_equations");
+  EXPECT_EQ(s.verdict(), "ok");
+  // (The same fit as the dense path's is shown on short data of every kind
+  // above and in test_long_data_fit.py; the dense fit here would take twice
+  // as long as this one.)
+  for (size_t j = 0; j < s.estimated.size(); ++j) {
+    const auto it = truth.find(s.estimated[j]);
+    const double want = it == truth.end() ? 0.0 : it->second;
+    const int k = static_cast<int>(std::find(s.names.begin(), s.names.end(), s.estimated[j]) - s.names.begin());
+    EXPECT_LT(std::abs(s.values[k] - want), 4 * s.std[j]) << s.estimated[j];
+  }
+}
+
+}  // namespace
+}  // namespace fivecal

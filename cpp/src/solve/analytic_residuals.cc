@@ -4,10 +4,75 @@
 
 #include "fivecal/model/kinematics.h"
 #include "fivecal/observations/registry.h"
+#include "fivecal/observations/residuals.h"
 
+#include <limits>
 #include <stdexcept>
+#include <string>
 
 namespace fivecal {
+
+// Records what a kind's AddResidual adds: the cost function and the table
+// entries of its parameter blocks. A block's "storage" is a slot of a
+// private array indexed like the table, so the pointer names the entry; the
+// values are supplied at each evaluation.
+class AnalyticResiduals::Recorder : public ResidualBuilder {
+ public:
+  Recorder(const Dataset& ds, const ParameterTable& table, std::shared_ptr<const ResidualContext> ctx,
+           const std::vector<int>& estimated, const std::vector<int>& block_of, std::vector<Piece>* out)
+      : ResidualBuilder(ds, table, std::move(ctx)), block_of_(block_of), slots_(table.size()), out_(out) {
+    // The estimated machine parameters in the order ResidualContext numbers
+    // them (as Problem's builder does).
+    for (int i : estimated)
+      if (i < ds.machine().num_parameters()) machine_ptrs_.push_back(slots_.data() + i);
+  }
+
+ protected:
+  double* Block(int index) override { return block_of_[index] >= 0 ? slots_.data() + index : nullptr; }
+  void AddCost(ceres::CostFunction* cost, int num_residuals, const std::vector<double*>& ptrs, int) override {
+    Piece p;
+    p.cost.reset(cost);
+    for (double* q : ptrs) p.index.push_back(static_cast<int>(q - slots_.data()));
+    p.rows = num_residuals;
+    out_->push_back(std::move(p));
+  }
+  void AddConstant(int num_residuals, std::function<void(double*)> eval, int) override {
+    Piece p;
+    p.constant = std::move(eval);
+    p.rows = num_residuals;
+    out_->push_back(std::move(p));
+  }
+
+ private:
+  const std::vector<int>& block_of_;
+  std::vector<double> slots_;
+  std::vector<Piece>* out_;
+};
+
+namespace {
+
+// What the templated functors read the fixed parameters from, as Problem
+// makes it.
+std::shared_ptr<const ResidualContext> MakeContext(const Machine& m, const Eigen::VectorXd& values,
+                                                   const std::vector<int>& estimated) {
+  auto ctx = std::make_shared<ResidualContext>();
+  ctx->machine = &m;
+  ctx->values = values;
+  ctx->machine_block.assign(m.num_parameters(), -1);
+  for (int i : estimated)
+    if (i < m.num_parameters()) ctx->machine_block[i] = ctx->num_machine_blocks++;
+  return ctx;
+}
+
+bool AnyTemplated(const Dataset& ds) {
+  for (const Observation& o : ds.observations)
+    if (!KindOf(o).analytic()) return true;
+  return false;
+}
+
+}  // namespace
+
+AnalyticResiduals::~AnalyticResiduals() = default;
 
 AnalyticEval::AnalyticEval(const Machine& m, const Eigen::VectorXd& values, const KinematicModel& model,
                            const std::vector<int>& estimated, const std::vector<int>& block_of,
@@ -28,10 +93,15 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
     mutable_parameter_block_sizes()->push_back(1);
   }
   rows_.reserve(ds.observations.size());
+  std::unique_ptr<Recorder> recorder;
+  if (AnyTemplated(ds))
+    recorder = std::make_unique<Recorder>(ds, table, MakeContext(ds.machine(), values_, estimated_), estimated_,
+                                          block_of_, &pieces_);
   for (size_t i = 0; i < ds.observations.size(); ++i) {
     const ObservationKind& kind = KindOf(ds.observations[i]);
     rows_.emplace_back();
-    PrepareRow(table, static_cast<int>(i), &rows_.back());
+    if (kind.analytic()) PrepareRow(table, static_cast<int>(i), &rows_.back());
+    else RecordRow(*recorder, static_cast<int>(i), &rows_.back());
     for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(static_cast<int>(i));
   }
   for (const ObservationKind* kind : ObservationKinds())
@@ -39,7 +109,7 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
   for (int i = 0; i < static_cast<int>(rows_.size()); ++i) {
     const AnalyticRow& r = rows_[i];
     if (runs_.empty() || runs_.back().kind != r.kind || rows_[runs_.back().begin].variant != r.variant)
-      runs_.push_back({r.kind, i, i});
+      runs_.push_back({r.kind, i, i, r.piece_begin >= 0});
     runs_.back().end = i + 1;
   }
   set_num_residuals(static_cast<int>(row_source_.size()));
@@ -62,6 +132,56 @@ void AnalyticResiduals::PrepareRow(const ParameterTable& table, int i, AnalyticR
   kind.PrepareAnalytic(ds_, table, o, r);
 }
 
+void AnalyticResiduals::RecordRow(Recorder& recorder, int i, AnalyticRow* r) const {
+  const Observation& o = ds_.observations[i];
+  const ObservationKind& kind = KindOf(o);
+  *r = AnalyticRow();
+  r->kind = &kind;
+  r->piece_begin = static_cast<int>(pieces_.size());
+  recorder.Start(i, true);
+  kind.AddResidual(recorder, o);
+  r->piece_end = static_cast<int>(pieces_.size());
+  int rows = 0;
+  for (int k = r->piece_begin; k < r->piece_end; ++k) rows += pieces_[k].rows;
+  if (rows != kind.rows())
+    throw std::logic_error(std::string(kind.name()) + ": templated residual rows differ from the kind's rows()");
+}
+
+void AnalyticResiduals::EvaluateTemplated(AnalyticEval& e, const AnalyticRow* rows, int count) const {
+  // Per call: the parameter pointers go into the caller's values, the
+  // Jacobian into a buffer of this call; the cost functions are const.
+  std::vector<const double*> params;
+  std::vector<double> jac;
+  std::vector<double*> jac_ptrs;
+  for (const AnalyticRow* r = rows; r != rows + count; ++r)
+    for (int k = r->piece_begin; k < r->piece_end; ++k) {
+      const Piece& p = pieces_[k];
+      double* out = e.residuals + e.row;
+      if (!p.cost) {
+        p.constant(out);
+        e.row += p.rows;
+        continue;
+      }
+      const int nb = static_cast<int>(p.index.size());
+      params.resize(nb);
+      for (int b = 0; b < nb; ++b) params[b] = e.v.data() + p.index[b];
+      if (e.jacobians) {
+        jac.assign(static_cast<size_t>(nb) * p.rows, 0.0);
+        jac_ptrs.resize(nb);
+        for (int b = 0; b < nb; ++b) jac_ptrs[b] = jac.data() + static_cast<size_t>(b) * p.rows;
+      }
+      if (!p.cost->Evaluate(params.data(), out, e.jacobians ? jac_ptrs.data() : nullptr)) {
+        // As Ceres takes a failed evaluation: the step is not taken.
+        std::fill(out, out + p.rows, std::numeric_limits<double>::quiet_NaN());
+      } else if (e.jacobians) {
+        // Each block is one scalar: its Jacobian is the column of its rows.
+        for (int b = 0; b < nb; ++b)
+          for (int i = 0; i < p.rows; ++i) e.Put(e.row + i, p.index[b], jac_ptrs[b][i]);
+      }
+      e.row += p.rows;
+    }
+}
+
 void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::VectorXd& values) {
   if (values.size() != values_.size()) throw std::invalid_argument("analytic residuals: wrong number of values");
   values_ = values;
@@ -69,7 +189,16 @@ void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::Vector
   // after them are made again too: a Monte Carlo trial draws the scale bars'
   // calibrated lengths, which those rows hold.
   const size_t n = ds_.observations.size();
-  for (size_t i = 0; i < n; ++i) PrepareRow(table, static_cast<int>(i), &rows_[i]);
+  std::unique_ptr<Recorder> recorder;
+  if (!pieces_.empty() || AnyTemplated(ds_)) {
+    pieces_.clear();
+    recorder = std::make_unique<Recorder>(ds_, table, MakeContext(ds_.machine(), values_, estimated_), estimated_,
+                                          block_of_, &pieces_);
+  }
+  for (size_t i = 0; i < n; ++i) {
+    if (KindOf(ds_.observations[i]).analytic()) PrepareRow(table, static_cast<int>(i), &rows_[i]);
+    else RecordRow(*recorder, static_cast<int>(i), &rows_[i]);
+  }
   const size_t before = rows_.size();
   rows_.resize(n);
   std::vector<int> source;
@@ -91,7 +220,10 @@ bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residu
     for (int b = 0; b < nb; ++b)
       if (jacobians[b]) std::fill(jacobians[b], jacobians[b] + nr, 0.0);
   AnalyticEval e(m, v, model, estimated_, block_of_, residuals, jacobians);
-  for (const Run& run : runs_) run.kind->EvaluateAnalytic(e, rows_.data() + run.begin, run.end - run.begin);
+  for (const Run& run : runs_) {
+    if (run.templated) EvaluateTemplated(e, rows_.data() + run.begin, run.end - run.begin);
+    else run.kind->EvaluateAnalytic(e, rows_.data() + run.begin, run.end - run.begin);
+  }
   return true;
 }
 
@@ -102,7 +234,9 @@ int AnalyticResiduals::EvaluateRows(const KinematicModel& model, const Eigen::Ve
   auto run = std::partition_point(runs_.begin(), runs_.end(), [&](const Run& r) { return r.end <= begin; });
   for (; run != runs_.end() && run->begin < end; ++run) {
     const int b = std::max(begin, run->begin), f = std::min(end, run->end);
-    if (b < f) run->kind->EvaluateAnalytic(e, rows_.data() + b, f - b);
+    if (b >= f) continue;
+    if (run->templated) EvaluateTemplated(e, rows_.data() + b, f - b);
+    else run->kind->EvaluateAnalytic(e, rows_.data() + b, f - b);
   }
   return e.row;
 }

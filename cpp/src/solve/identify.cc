@@ -186,14 +186,14 @@ Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Vector
 // Jacobian than J^T J stays dense: "location" (the greedy selection projects
 // the columns), "auto" and variance components (the hyperparameter loop
 // takes per-row leverages from the hat matrix), robust losses (Ceres
-// reweights each row), kinds without the analytic batch.
+// reweights each row). Every kind can: those without analytic derivatives
+// enter through their templated functors.
 std::string DenseReason(const Dataset& ds, const IdentifyOptions& opt, const Request& rq, size_t p) {
   if (opt.fit_path == "dense") return "fit_path 'dense' requested";
   std::string why;
   if (rq.location || rq.automatic) why = "estimate 'location' and 'auto' select on the dense Jacobian";
   else if (opt.variance_components) why = "variance components need the per-row leverages";
   else if (!opt.robust.empty() && opt.robust != "none") why = "a robust loss reweights every row";
-  else if (!NormalEquationProblem::Supported(ds)) why = "a kind of this data has no analytic batch";
   if (!why.empty()) {
     if (opt.fit_path == "normal_equations")
       throw std::invalid_argument("identify: fit_path 'normal_equations' is not available here: " + why);
@@ -831,10 +831,16 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     hat = id.inverse_normal;
   }
   res.sigma = sigma_dof > 0 ? std::sqrt(r.squaredNorm() / sigma_dof) : 0.0;
-  // On the normal-equation path Jw is the p x p factor, not rows; its kinds
-  // (those with the analytic batch) have length rows only, which need no
-  // hat-matrix share.
-  res.residual_units = ResidualsByUnit(ds, r, res.residual_source, nep ? Eigen::MatrixXd() : Jw, hat, sigma_dof);
+  // On the normal-equation path Jw is the p x p factor, not rows: a unit's
+  // share of the parameters is trace(hat Jw_u^T Jw_u) from its rows' sums.
+  if (nep) {
+    std::map<std::string, double> share;
+    for (size_t u = 0; u < nep->other_units().size(); ++u)
+      share[nep->other_units()[u]] = hat.cwiseProduct(nfit.at_solution.JtJ_units[u]).sum();
+    res.residual_units = ResidualsByUnit(ds, r, res.residual_source, share, sigma_dof);
+  } else {
+    res.residual_units = ResidualsByUnit(ds, r, res.residual_source, Jw, hat, sigma_dof);
+  }
   if (res.residual_units.size() > 1) {
     res.rms = res.residual_units[0].rms;
     res.max_abs = res.residual_units[0].max_abs;

@@ -33,9 +33,6 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
                                              const Eigen::VectorXd& values, const std::vector<int>& estimated,
                                              int num_threads)
     : ds_(ds), estimated_(estimated), num_threads_(std::max(1, num_threads)) {
-  if (!Supported(ds))
-    throw std::invalid_argument(
-        "identify: the normal-equation fit needs every observation kind to have the analytic batch");
   if (values.size() != table.size())
     throw std::invalid_argument("identify: expected " + std::to_string(table.size()) + " values");
   batch_ = std::make_unique<AnalyticResiduals>(ds, table, values, estimated_);
@@ -48,6 +45,33 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
     row_sigma_[r] = src[r] < 0 ? kScaleBarSigma : ObservationSigma(ds, ds.observations[src[r]], k);
   }
   uniform_sigma_ = nr > 0 && row_sigma_.maxCoeff() == row_sigma_.minCoeff() ? row_sigma_[0] : 0.0;
+  // Row units as the residual summary groups them (scale bar rows: mm); a
+  // byte per row only for data holding a kind of rows in another unit (a
+  // pose), not for every R-test sample.
+  bool other = false;
+  std::vector<const ObservationKind*> seen;
+  for (const Observation& o : ds.observations) {
+    const ObservationKind* kind = &KindOf(o);
+    if (std::find(seen.begin(), seen.end(), kind) != seen.end()) continue;
+    seen.push_back(kind);
+    for (int k = 0; k < kind->rows(); ++k) other = other || std::string(kind->unit_row(k)) != "mm";
+  }
+  if (other) {
+    row_unit_.assign(nr, 0);
+    for (int r = 0, k = 0; r < nr; ++r) {
+      k = (r > 0 && src[r] == src[r - 1]) ? k + 1 : 0;
+      if (src[r] < 0) continue;
+      const std::string unit = KindOf(ds.observations[src[r]]).unit_row(k);
+      if (unit == "mm") continue;
+      auto it = std::find(other_units_.begin(), other_units_.end(), unit);
+      if (it == other_units_.end()) {
+        if (other_units_.size() >= 255) throw std::logic_error("normal equations: too many row units");
+        it = other_units_.insert(other_units_.end(), unit);
+      }
+      row_unit_[r] = static_cast<unsigned char>(1 + (it - other_units_.begin()));
+    }
+    if (other_units_.empty()) row_unit_.clear();
+  }
   const int n = static_cast<int>(ds.observations.size());
   const int nb = std::max(1, std::min(kBlocks, (n + kChunk - 1) / kChunk));
   int row = 0, obs = 0;
@@ -65,12 +89,6 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
 }
 
 NormalEquationProblem::~NormalEquationProblem() = default;
-
-bool NormalEquationProblem::Supported(const Dataset& ds) {
-  for (const Observation& o : ds.observations)
-    if (!KindOf(o).analytic()) return false;
-  return true;
-}
 
 const std::vector<int>& NormalEquationProblem::row_source() const { return batch_->row_source(); }
 
@@ -104,6 +122,7 @@ void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, b
           ne.JtJ = Eigen::MatrixXd::Zero(p, p);
           ne.Jtr = Eigen::VectorXd::Zero(p);
           if (unweighted) ne.JtJ_unweighted = Eigen::MatrixXd::Zero(p, p);
+          ne.JtJ_units.assign(other_units_.size(), Eigen::MatrixXd::Zero(p, p));
         }
         int row = B.row;
         for (int s = B.begin; s < B.end;) {
@@ -122,6 +141,10 @@ void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, b
             J = sig.cwiseInverse().asDiagonal() * J;
             ne.JtJ.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
             ne.Jtr.noalias() += J.transpose() * rw;
+            if (!row_unit_.empty())
+              for (int i = 0; i < m; ++i)
+                if (const int u = row_unit_[row + i])
+                  ne.JtJ_units[u - 1].selfadjointView<Eigen::Lower>().rankUpdate(J.row(i).transpose());
           }
           row += m;
           s = e;
@@ -179,13 +202,16 @@ NormalEquations NormalEquationProblem::Accumulate(const Eigen::VectorXd& values,
   out.JtJ = Eigen::MatrixXd::Zero(p, p);
   out.Jtr = Eigen::VectorXd::Zero(p);
   if (unweighted) out.JtJ_unweighted = Eigen::MatrixXd::Zero(p, p);
+  out.JtJ_units.assign(other_units_.size(), Eigen::MatrixXd::Zero(p, p));
   // In block order, whatever thread summed which block.
   for (const NormalEquations& ne : partial) {
     out.JtJ += ne.JtJ;
     out.Jtr += ne.Jtr;
     out.cost += ne.cost;
     if (unweighted && !scaled) out.JtJ_unweighted += ne.JtJ_unweighted;
+    for (size_t u = 0; u < other_units_.size(); ++u) out.JtJ_units[u] += ne.JtJ_units[u];
   }
+  for (Eigen::MatrixXd& Nu : out.JtJ_units) Nu = Eigen::MatrixXd(Nu.selfadjointView<Eigen::Lower>());
   out.JtJ = Eigen::MatrixXd(out.JtJ.selfadjointView<Eigen::Lower>());
   if (scaled) out.JtJ_unweighted = (uniform_sigma_ * uniform_sigma_) * out.JtJ;
   else if (unweighted) out.JtJ_unweighted = Eigen::MatrixXd(out.JtJ_unweighted.selfadjointView<Eigen::Lower>());

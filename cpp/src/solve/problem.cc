@@ -261,11 +261,9 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
   if (!robust_.empty() && !(robust_scale > 0))
     throw std::invalid_argument("robust: the loss scale must be > 0 mm");
 
-  for (const Observation& o : ds.observations)
-    if (!KindOf(o).analytic()) {
-      analytic = false;
-      break;
-    }
+  // The batch holds every kind (those without analytic derivatives through
+  // their recorded functors), so the dense path and the streaming one
+  // (normal_equations.h) see the same rows, and Refresh serves any data.
   if (analytic && robust_.empty() && !estimated_.empty()) {
     auto* cost = new AnalyticResiduals(ds, table, values_, estimated_);
     analytic_ = cost;

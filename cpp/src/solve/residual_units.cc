@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <string>
 
 #include "fivecal/observations/registry.h"
@@ -61,9 +62,13 @@ std::vector<int> RobustOutliers(const Eigen::VectorXd& scaled, double scale) {
   return out;
 }
 
-std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
-                                           const std::vector<int>& source, const Eigen::MatrixXd& Jw,
-                                           const Eigen::MatrixXd& hat, int dof) {
+namespace {
+
+// row_share(i): row i's share Jw_i hat Jw_i^T, asked for rows of units
+// other than mm only; unit_share: a whole unit's instead.
+std::vector<UnitResiduals> ByUnit(const Dataset& ds, const Eigen::VectorXd& r, const std::vector<int>& source,
+                                  const std::function<double(size_t)>& row_share,
+                                  const std::map<std::string, double>* unit_share, int dof) {
   const std::vector<const char*> unit = RowUnits(ds, source);
   // "mm" first: every kind's first row is a length.
   std::vector<UnitResiduals> out(1);
@@ -81,9 +86,13 @@ std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::Vecto
     ++u.rows;
     ss[group[i]] += r[i] * r[i];
     u.max_abs = std::max(u.max_abs, std::abs(r[i]));
-    if (group[i] > 0 && hat.rows() == Jw.cols())
-      used[group[i]] += Jw.row(i).dot(hat * Jw.row(i).transpose());
+    if (group[i] > 0 && row_share) used[group[i]] += row_share(i);
   }
+  if (unit_share)
+    for (size_t g = 1; g < out.size(); ++g) {
+      auto it = unit_share->find(out[g].unit);
+      if (it != unit_share->end()) used[g] = it->second;
+    }
   double other_dof = 0;
   for (size_t g = 1; g < out.size(); ++g) other_dof += out[g].rows - used[g];
   for (size_t g = 0; g < out.size(); ++g) {
@@ -94,6 +103,23 @@ std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::Vecto
   }
   if (out[0].rows == 0) out.erase(out.begin());
   return out;
+}
+
+}  // namespace
+
+std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
+                                           const std::vector<int>& source, const Eigen::MatrixXd& Jw,
+                                           const Eigen::MatrixXd& hat, int dof) {
+  std::function<double(size_t)> share;
+  if (hat.rows() == Jw.cols() && Jw.rows() == r.size())
+    share = [&](size_t i) { return Jw.row(i).dot(hat * Jw.row(i).transpose()); };
+  return ByUnit(ds, r, source, share, nullptr, dof);
+}
+
+std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
+                                           const std::vector<int>& source,
+                                           const std::map<std::string, double>& share, int dof) {
+  return ByUnit(ds, r, source, nullptr, &share, dof);
 }
 
 }  // namespace fivecal

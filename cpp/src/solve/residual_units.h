@@ -9,6 +9,8 @@
 #define FIVECAL_SOLVE_RESIDUAL_UNITS_H_
 
 #include <Eigen/Core>
+#include <map>
+#include <string>
 #include <vector>
 
 #include "fivecal/observations/dataset.h"
@@ -43,6 +45,13 @@ std::vector<int> RobustOutliers(const Eigen::VectorXd& scaled, double scale);
 std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
                                            const std::vector<int>& source, const Eigen::MatrixXd& Jw,
                                            const Eigen::MatrixXd& hat, int dof);
+
+// The same with each unit's share of the parameters given (unit -> sum over
+// its rows of Jw_i hat Jw_i^T, i.e. trace(hat Jw_u^T Jw_u)): the
+// normal-equation fit has no rows of Jw, only each unit's Jw_u^T Jw_u.
+std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
+                                           const std::vector<int>& source,
+                                           const std::map<std::string, double>& share, int dof);
 
 }  // namespace fivecal
 

@@ -11,12 +11,23 @@
 // the chain rule through the tool point shared here (AnalyticEval): per row,
 // with P the tool point and J = dP/dtheta, a kind gives the gradients G of
 // its residual rows in P and the derivatives in its setup parameters.
+//
+// An observation of a kind without the analytic batch (analytic() false:
+// point, pose, distance, machined) takes its place in the same row order as
+// its templated functor, recorded through a ResidualBuilder at construction
+// and evaluated with automatic derivatives; so every dataset, mixed ones
+// too, is one batch, and the streaming fit (normal_equations.h) runs on any
+// data. That costs one Ceres cost function per such observation: fine for
+// those kinds (tracker, camera and CMM data: thousands of rows, not the
+// millions of samples of an R-test or ball-bar trace, which are analytic).
 #ifndef FIVECAL_ANALYTIC_RESIDUALS_H_
 #define FIVECAL_ANALYTIC_RESIDUALS_H_
 
 #include <ceres/ceres.h>
 
 #include <Eigen/Core>
+#include <functional>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -43,6 +54,9 @@ struct AnalyticRow {
   // table index of probe.pretravel (-1: none) and the rotation M.
   int probe0 = -1;
   Eigen::Matrix3d probe_rotation = Eigen::Matrix3d::Identity();
+  // A kind without the analytic batch: its recorded templated pieces
+  // [piece_begin, piece_end) (AnalyticResiduals), -1: an analytic row.
+  int piece_begin = -1, piece_end = -1;
 };
 
 // One evaluation of the batch, as the kinds see it.
@@ -100,6 +114,8 @@ class AnalyticEval {
 
 class AnalyticResiduals : public ceres::CostFunction {
  public:
+  ~AnalyticResiduals() override;
+
   // values: every parameter of the table (constants for the fixed ones);
   // estimated: the table indices that are the parameter blocks, in order.
   AnalyticResiduals(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
@@ -112,7 +128,9 @@ class AnalyticResiduals : public ceres::CostFunction {
   const std::vector<int>& row_source() const { return row_source_; }
 
   // Prepares the observation rows again from the dataset (edited in place
-  // since, same structure) and takes `values` as the fixed parameters' values.
+  // since, same structure) and takes `values` as the fixed parameters' values
+  // (the templated observations are recorded again: their functors hold the
+  // readings and the fixed values).
   void Refresh(const ParameterTable& table, const Eigen::VectorXd& values);
 
   // The streaming fit (solve/normal_equations.h) evaluates the prepared rows
@@ -122,21 +140,38 @@ class AnalyticResiduals : public ceres::CostFunction {
   // jacobians are wanted). Residual rows are written from residuals[0],
   // column b of the estimated set at jacobians[b][0..] (zeroed by the
   // caller; null: residuals only). Returns the number of residual rows.
+  // Safe to call from several threads at once (it writes only its outputs).
   int num_prepared() const { return static_cast<int>(rows_.size()); }
   int EvaluateRows(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end,
                    double* residuals, double** jacobians) const;
 
  private:
+  // A templated residual of an observation without the analytic batch, as
+  // its kind adds it through a ResidualBuilder: a cost function over the
+  // table entries `index` (each a block of size 1), or, when nothing
+  // estimated enters it, a constant evaluation.
+  struct Piece {
+    std::unique_ptr<ceres::CostFunction> cost;
+    std::vector<int> index;
+    std::function<void(double*)> constant;
+    int rows = 0;
+  };
+  class Recorder;
   void PrepareRow(const ParameterTable& table, int observation, AnalyticRow* r) const;
+  // Records observation i's templated pieces into *pieces (row r points at them).
+  void RecordRow(Recorder& recorder, int observation, AnalyticRow* r) const;
+  void EvaluateTemplated(AnalyticEval& e, const AnalyticRow* rows, int count) const;
   struct Run {  // consecutive rows of one kind and variant
     const ObservationKind* kind;
     int begin, end;
+    bool templated;
   };
   const Dataset& ds_;
   Eigen::VectorXd values_;
   std::vector<int> estimated_;
   std::vector<int> block_of_;  // per table index: block or -1
   std::vector<AnalyticRow> rows_;  // one per observation or artefact row
+  std::vector<Piece> pieces_;      // of the templated rows, in row order
   std::vector<Run> runs_;
   std::vector<int> row_source_;
 };

@@ -1,9 +1,12 @@
 // The fit path for long data: the normal equations Jw^T Jw, Jw^T rw of the
-// noise-weighted rows accumulated chunk by chunk from the analytic batch
-// (analytic_residuals.h), never the rows x parameters Jacobian. An R-test or
-// ball-bar trace at 1 kHz has millions of rows and a handful of unknowns: the
-// dense Jacobian then costs memory and traffic out of all proportion to the
-// p x p system that decides the fit. Memory is O(p^2) plus the data.
+// noise-weighted rows accumulated chunk by chunk from the batch of every row
+// (analytic_residuals.h: analytic derivatives, and the templated functors of
+// the kinds without them, in the dense path's row order), never the
+// rows x parameters Jacobian. Any dataset, of any mix of kinds, runs here.
+// An R-test or ball-bar trace at 1 kHz has millions of rows and a handful of
+// unknowns: the dense Jacobian then costs memory and traffic out of all
+// proportion to the p x p system that decides the fit. Memory is O(p^2) plus
+// the data (and one cost function per observation of a templated kind).
 //
 // The sums run over a fixed partition of the rows (kBlocks blocks, each
 // summed in row order, then the blocks in order), so the result does not
@@ -29,25 +32,30 @@ struct NormalEquations {
   Eigen::VectorXd Jtr;             // Jw^T rw
   Eigen::MatrixXd JtJ_unweighted;  // J^T J in mm (only when asked for)
   double cost = 0;                 // 0.5 sum rw^2
+  // Jw^T Jw of the rows of each unit but mm (NormalEquationProblem::
+  // other_units(), same order): a pose's rotation rows. The residual
+  // summary per unit needs each unit's share of the parameters,
+  // trace(hat N_unit), which the dense path takes row by row.
+  std::vector<Eigen::MatrixXd> JtJ_units;
 };
 
 class NormalEquationProblem {
  public:
-  // values: every table entry (constants for the fixed ones); estimated:
-  // table indices, in covariance order. Every kind of the dataset must have
-  // the analytic batch (Supported).
+  // values: every table entry (constants for the fixed ones: the fits
+  // change only the estimated ones); estimated: table indices, in
+  // covariance order.
   NormalEquationProblem(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
                         const std::vector<int>& estimated, int num_threads);
   ~NormalEquationProblem();
-
-  // Every observation's kind has the analytic batch.
-  static bool Supported(const Dataset& ds);
 
   int num_rows() const { return static_cast<int>(row_sigma_.size()); }
   int num_parameters() const { return static_cast<int>(estimated_.size()); }
   const std::vector<int>& estimated() const { return estimated_; }
   const std::vector<int>& row_source() const;
   const Eigen::VectorXd& row_sigma() const { return row_sigma_; }
+  // The row units other than mm in this data, in order of first row
+  // (empty for data of lengths only).
+  const std::vector<std::string>& other_units() const { return other_units_; }
 
   // At `values` (every table entry): residuals only (mm, data-sized), or the
   // normal equations (unweighted J^T J too when `unweighted`).
@@ -76,6 +84,8 @@ class NormalEquationProblem {
   std::vector<int> estimated_;
   std::unique_ptr<AnalyticResiduals> batch_;
   Eigen::VectorXd row_sigma_;
+  std::vector<std::string> other_units_;
+  std::vector<unsigned char> row_unit_;  // per row: 0 mm, else 1 + other unit; empty when none
   double uniform_sigma_ = 0;  // every row's sigma when they are all equal, else 0
   std::vector<Block> blocks_;
   int num_threads_;

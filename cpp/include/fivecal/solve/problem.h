@@ -93,7 +93,8 @@ class Problem {
   // `values`: every parameter's value (initial for the estimated ones, the
   // fixed value for the others). `estimated`: indices into the table.
   //
-  // analytic: evaluate all rows in one AnalyticResiduals block (fast). A
+  // analytic: evaluate all rows in one AnalyticResiduals block (fast; the
+  // kinds without analytic derivatives enter it through their functors). A
   // robust loss needs one block per observation, so it uses the templated
   // functors with automatic derivatives, as does analytic = false.
   Problem(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
@@ -128,8 +129,8 @@ class Problem {
   // were edited in place since; types, targets and setups unchanged) and
   // sets every parameter's value, so that the prepared problem serves the
   // next fit (Monte Carlo trials). False, changing nothing, when the rows are
-  // not one analytic batch (the templated residuals captured the readings at
-  // construction): build a new Problem then.
+  // not one batch (robust loss, analytic = false: the per-observation
+  // functors captured the readings at construction): build a new Problem then.
   bool Refresh(const Eigen::VectorXd& values);
 
  private:
