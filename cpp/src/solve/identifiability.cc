@@ -93,7 +93,9 @@ Identifiability Analyze(const Eigen::MatrixXd& J, double rank_tolerance, bool fu
   const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
   if (zero_columns.empty() && WellConditioned(Js, rank_tolerance, full, &out)) return out;
   const Eigen::MatrixXd reduced = TriangularFactor(Js);
-  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, full ? Eigen::ComputeFullV : 0);
+  // The singular values first, without vectors (less than half the cost):
+  // of full rank, (Js^T Js)^-1 = R^-1 R^-T needs no V.
+  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, 0);
   const Eigen::VectorXd s = svd.singularValues();
   // Thin SVD of an n x p matrix with n < p has only n singular values.
   out.singular_values = Eigen::VectorXd::Zero(p);
@@ -109,6 +111,12 @@ Identifiability Analyze(const Eigen::MatrixXd& J, double rank_tolerance, bool fu
   for (int i = 0; i < p; ++i) logdet += 2.0 * std::log(std::max(out.singular_values[i], 1e-300));
   out.log_det_per_parameter = p ? logdet / p : 0.0;
   if (!full) return out;
+  if (out.rank == p && reduced.rows() == p && reduced.triangularView<Eigen::StrictlyLower>().toDenseMatrix().isZero(0)) {
+    const Eigen::MatrixXd X = reduced.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(p, p));
+    out.inverse_normal = inv_scale.asDiagonal() * (X * X.transpose()) * inv_scale.asDiagonal();
+    return out;  // nothing confounded
+  }
+  svd.compute(reduced, Eigen::ComputeFullV);
 
   // (J^T J)^+ = D V S^-2 V^T D over the retained singular values.
   const Eigen::MatrixXd& V = svd.matrixV();
