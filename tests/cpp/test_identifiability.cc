@@ -90,6 +90,34 @@ TEST(Identifiability, GroupsFollowAPermutationOfTheColumns) {
   EXPECT_EQ(old, (Groups{{0, 1}, {2, 3}, {4}, {6}}));
 }
 
+// A well determined set (every singular value well above 1 / threshold) is
+// judged without singular vectors; the ratios and singular values are the
+// SVD's.
+TEST(Identifiability, DeterminedSetWithoutSingularVectorsAgreesWithTheSvd) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> g;
+  Eigen::MatrixXd J(50, 6);
+  for (int i = 0; i < J.rows(); ++i)
+    for (int j = 0; j < J.cols(); ++j) J(i, j) = g(rng);
+  J.col(5) = J.col(4) + 0.3 * J.col(5);  // correlated, still determined
+  J *= 5;
+  const Eigen::VectorXd prior = (Eigen::VectorXd(6) << 1, 2, 3, 0.5, 4, 4).finished();
+  const Determination d = AnalyzeDetermination(J, prior, kDeterminedRatio);
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(J * prior.asDiagonal(), Eigen::ComputeFullV);
+  const Eigen::VectorXd s = svd.singularValues();
+  ASSERT_GT(s[5], 2.0 / kDeterminedRatio);
+  const Eigen::MatrixXd& V = svd.matrixV();
+  EXPECT_EQ(d.rank, 6);
+  EXPECT_TRUE(d.undetermined.empty());
+  EXPECT_TRUE(d.groups.empty());
+  for (int j = 0; j < 6; ++j) {
+    double r2 = 0;
+    for (int k = 0; k < 6; ++k) r2 += V(j, k) * V(j, k) / (s[k] * s[k]);
+    EXPECT_NEAR(d.ratio[j], std::sqrt(r2), 1e-12 * std::sqrt(r2)) << j;
+    EXPECT_NEAR(d.singular_values[j], s[j], 1e-10 * s[0]) << j;
+  }
+}
+
 std::string ReadFile(const std::string& path) {
   std::ifstream f(path);
   EXPECT_TRUE(f.good()) << path;
