@@ -69,7 +69,7 @@ struct Determination {
   int rank = 0;                     // singular values > 1 / threshold
   std::vector<int> undetermined;    // columns with ratio >= threshold
   // Undetermined columns grouped by the weakly determined directions
-  // (singular values <= 1 / threshold) they share.
+  // (singular values <= 1 / threshold) they share (UndeterminedGroups).
   std::vector<std::vector<int>> groups;
 };
 
