@@ -25,7 +25,7 @@ constexpr double kEigenConditionBound = 1e4;
 
 // Full-rank, well-conditioned case: rank, condition, log det and
 // (J^T J)^-1 (unscaled) from N without an SVD. False: use the SVD.
-bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, Identifiability* out) {
+bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, bool inverse, Identifiability* out) {
   const int p = static_cast<int>(Js.cols());
   if (p == 0 || Js.rows() < p) return false;
   const Eigen::MatrixXd N = ScaledNormal(Js);
@@ -35,22 +35,28 @@ bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, Identifia
   if (!(lambda[0] > 0) || lambda[p - 1] > kEigenConditionBound * kEigenConditionBound * lambda[0] ||
       std::sqrt(lambda[0]) <= rank_tolerance * std::sqrt(lambda[p - 1]))
     return false;
-  const Eigen::LLT<Eigen::MatrixXd> llt(N);
-  if (llt.info() != Eigen::Success) return false;
+  Eigen::LLT<Eigen::MatrixXd> llt;
+  if (inverse) {
+    llt.compute(N);
+    if (llt.info() != Eigen::Success) return false;
+  }
   out->singular_values = lambda.reverse().cwiseSqrt();
   out->rank = p;
   out->condition_number = out->singular_values[0] / out->singular_values[p - 1];
   double logdet = 0;
   for (int i = 0; i < p; ++i) logdet += std::log(lambda[i]);
   out->log_det_per_parameter = logdet / p;
+  if (!inverse) return true;
   const Eigen::VectorXd inv_scale = out->column_norms.cwiseInverse();
   out->inverse_normal = llt.solve(Eigen::MatrixXd::Identity(p, p));
   out->inverse_normal = inv_scale.asDiagonal() * out->inverse_normal * inv_scale.asDiagonal();
   return true;
 }
 
-// A tall matrix reduced to its p x p triangular QR factor: same singular
-// values and right singular vectors, so an SVD after it costs O(p^3), not O(n p^2).
+Identifiability Analyze(const Eigen::MatrixXd& J, double rank_tolerance, bool full);
+
+}  // namespace
+
 Eigen::MatrixXd TriangularFactor(const Eigen::MatrixXd& A) {
   const Eigen::Index p = A.cols();
   if (A.rows() <= p) return A;
@@ -58,9 +64,19 @@ Eigen::MatrixXd TriangularFactor(const Eigen::MatrixXd& A) {
   return qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
 }
 
-}  // namespace
-
 Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance) {
+  return Analyze(J, rank_tolerance, true);
+}
+
+double ConditionNumber(const Eigen::MatrixXd& J, double rank_tolerance) {
+  return Analyze(J, rank_tolerance, false).condition_number;
+}
+
+namespace {
+
+// full: also V's products (inverse_normal, confounded); without, only what
+// the singular values give.
+Identifiability Analyze(const Eigen::MatrixXd& J, double rank_tolerance, bool full) {
   Identifiability out;
   const int p = static_cast<int>(J.cols());
   out.column_norms = J.colwise().norm().transpose();
@@ -75,9 +91,11 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
     }
   }
   const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
-  if (zero_columns.empty() && WellConditioned(Js, rank_tolerance, &out)) return out;
+  if (zero_columns.empty() && WellConditioned(Js, rank_tolerance, full, &out)) return out;
   const Eigen::MatrixXd reduced = TriangularFactor(Js);
-  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
+  // The singular values first, without vectors (less than half the cost):
+  // of full rank, (Js^T Js)^-1 = R^-1 R^-T needs no V.
+  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, 0);
   const Eigen::VectorXd s = svd.singularValues();
   // Thin SVD of an n x p matrix with n < p has only n singular values.
   out.singular_values = Eigen::VectorXd::Zero(p);
@@ -92,6 +110,13 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
   double logdet = 0;
   for (int i = 0; i < p; ++i) logdet += 2.0 * std::log(std::max(out.singular_values[i], 1e-300));
   out.log_det_per_parameter = p ? logdet / p : 0.0;
+  if (!full) return out;
+  if (out.rank == p && reduced.rows() == p && reduced.triangularView<Eigen::StrictlyLower>().toDenseMatrix().isZero(0)) {
+    const Eigen::MatrixXd X = reduced.triangularView<Eigen::Upper>().solve(Eigen::MatrixXd::Identity(p, p));
+    out.inverse_normal = inv_scale.asDiagonal() * (X * X.transpose()) * inv_scale.asDiagonal();
+    return out;  // nothing confounded
+  }
+  svd.compute(reduced, Eigen::ComputeFullV);
 
   // (J^T J)^+ = D V S^-2 V^T D over the retained singular values.
   const Eigen::MatrixXd& V = svd.matrixV();
@@ -129,6 +154,8 @@ Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance)
     if (!g.empty()) out.confounded.push_back(g);
   return out;
 }
+
+}  // namespace
 
 bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin) {
   const int p = static_cast<int>(J.cols());
@@ -177,19 +204,133 @@ std::vector<int> SelectIdentifiable(const Eigen::MatrixXd& J, const std::vector<
   return kept;
 }
 
+namespace {
+
+// A basis of the span of the orthonormal columns Vc that depends on the
+// subspace only: the pivoted Cholesky factor of its projector P = Vc Vc^T,
+// pivots by largest remaining diagonal (ties to the lower index). Any
+// orthonormal basis of the span gives the same P, hence the same vectors (up
+// to rounding), and a span that splits into pieces on disjoint parameters
+// gives vectors each inside one piece (the Schur complements of a block
+// diagonal P stay block diagonal). A one-column Vc comes back as itself, up
+// to sign.
+Eigen::MatrixXd SubspaceBasis(const Eigen::MatrixXd& Vc) {
+  const Eigen::Index p = Vc.rows(), m = Vc.cols();
+  if (m <= 1) return Vc;
+  const Eigen::MatrixXd P = Vc * Vc.transpose();
+  Eigen::VectorXd d = P.diagonal();
+  Eigen::MatrixXd L = Eigen::MatrixXd::Zero(p, m);
+  for (Eigen::Index t = 0; t < m; ++t) {
+    const double dmax = d.maxCoeff();
+    if (!(dmax > 1e-12)) {
+      L.conservativeResize(p, t);
+      break;
+    }
+    // Ties within rounding go to the lower index, so that two bases of one
+    // subspace pick the same pivots.
+    Eigen::Index piv = 0;
+    while (d[piv] < dmax * (1 - 1e-8)) ++piv;
+    Eigen::VectorXd col = P.col(piv);
+    if (t) col -= L.leftCols(t) * L.row(piv).head(t).transpose();
+    col /= std::sqrt(d[piv]);
+    L.col(t) = col;
+    d -= col.cwiseAbs2();
+    d[piv] = 0;
+  }
+  return L;
+}
+
+}  // namespace
+
+std::vector<std::vector<int>> UndeterminedGroups(const Eigen::VectorXd& s, const Eigen::MatrixXd& V,
+                                                 const std::vector<bool>& bad, double zero, double weak) {
+  const int p = static_cast<int>(V.rows());
+  std::vector<int> parent(p);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  // The weak directions in clusters of equal singular values (every exactly
+  // free one in one cluster): inside a cluster the singular vectors are any
+  // orthonormal basis of its subspace, which the SVD picks at will (Jacobi
+  // keeps separate free directions apart, divide and conquer mixes them), so
+  // each cluster is read through SubspaceBasis.
+  const double smax = s.size() ? std::max(s.maxCoeff(), 1.0) : 1.0;
+  const double tie = 1e-10 * smax;
+  // A thin SVD of a wide matrix has fewer singular values than V has columns:
+  // the rest are zero.
+  auto sv = [&](int k) { return k < s.size() ? s[k] : 0.0; };
+  const int nv = static_cast<int>(V.cols());
+  int k = 0;
+  while (k < nv && sv(k) > weak) ++k;
+  while (k < nv) {
+    const bool exact = sv(k) <= zero;
+    int end = k + 1;
+    if (exact)
+      end = nv;
+    else
+      while (end < nv && sv(end) > zero && sv(end - 1) - sv(end) <= tie) ++end;
+    const Eigen::MatrixXd basis = SubspaceBasis(V.middleCols(k, end - k));
+    for (int c = 0; c < basis.cols(); ++c) {
+      const auto v = basis.col(c);
+      double vmax = 0;
+      for (int j = 0; j < p; ++j)
+        if (bad[j]) vmax = std::max(vmax, std::abs(v[j]));
+      // An exactly free direction binds every parameter it touches, however
+      // lightly (their sigmas are all infinite); a weak one its main members.
+      int first = -1;
+      for (int j = 0; j < p; ++j) {
+        if (!bad[j] || std::abs(v[j]) < (exact ? 1e-2 : 0.1) * vmax) continue;
+        if (first < 0) first = j;
+        else parent[find(j)] = find(first);
+      }
+    }
+    k = end;
+  }
+  std::vector<std::vector<int>> groups(p);
+  for (int j = 0; j < p; ++j)
+    if (bad[j]) groups[find(j)].push_back(j);
+  std::vector<std::vector<int>> out;
+  for (auto& g : groups)
+    if (!g.empty()) out.push_back(std::move(g));
+  return out;
+}
+
 Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
                                    double threshold) {
   Determination out;
   const int p = static_cast<int>(Jw.cols());
   out.ratio = Eigen::VectorXd::Zero(p);
   if (p == 0) return out;
-  const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
-  const Eigen::MatrixXd reduced = TriangularFactor(Js);
-  // One-sided Jacobi, not divide and conquer (3x faster on S4): the groups
-  // below are read off the null-space basis, and Jacobi's keeps separate
-  // free directions apart (120 free sphere y's: 120 groups) where BDCSVD's
-  // mixes them into one (test_guards: refusal of many groups).
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
+  const Eigen::MatrixXd reduced = TriangularFactor(Jw * prior.asDiagonal());
+  const double weak = 1.0 / threshold;
+  // Every direction clearly above `weak` (the usual case): no singular
+  // vectors. The eigenvalues of N = Js^T Js carry an absolute rounding of
+  // about p eps lambda_max, far inside the margin; then every ratio is below
+  // 1 / sigma_min < threshold, and they come from the Cholesky factor of N.
+  if (reduced.rows() >= p) {
+    const Eigen::MatrixXd N = ScaledNormal(reduced);
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
+    const Eigen::VectorXd lambda = eig.eigenvalues();  // ascending
+    if (eig.info() == Eigen::Success && lambda[0] > 1.01 * weak * weak + 1e-12 * lambda[p - 1]) {
+      const Eigen::LLT<Eigen::MatrixXd> llt(N);
+      const Eigen::VectorXd ratio =
+          llt.info() == Eigen::Success
+              ? Eigen::VectorXd(llt.solve(Eigen::MatrixXd::Identity(p, p)).diagonal().cwiseMax(0.0).cwiseSqrt())
+              : Eigen::VectorXd::Constant(p, INFINITY);
+      if ((ratio.array() < threshold).all()) {
+        out.singular_values = lambda.reverse().cwiseSqrt();
+        out.rank = p;
+        out.ratio = ratio;
+        return out;
+      }
+    }
+  }
+  // Divide and conquer (6x faster than Jacobi on S4's 121 columns): what is
+  // read off V below depends on its subspaces only, not on the basis the
+  // SVD picks inside them.
+  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, Eigen::ComputeFullV);
   out.singular_values = Eigen::VectorXd::Zero(p);
   const Eigen::VectorXd s = svd.singularValues();
   out.singular_values.head(s.size()) = s;
@@ -197,48 +338,31 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
   const double smax = s.size() ? s[0] : 0.0;
   // Directions below this are exactly free (rounding level): infinite variance.
   const double zero = 1e-12 * std::max(smax, 1.0);
-  const double weak = 1.0 / threshold;
+  // ratio_j^2 = [(Js^T Js)^+]_jj over the determined directions; infinite
+  // when the projection of e_j on the free subspace is beyond rounding
+  // (|P0 e_j| with P0 its projector: the same for any basis of it).
+  Eigen::VectorXd free2 = Eigen::VectorXd::Zero(p);
   for (int k = 0; k < p; ++k) {
     const double sk = out.singular_values[k];
     if (sk > weak) ++out.rank;
-    for (int j = 0; j < p; ++j) {
-      if (std::abs(V(j, k)) < 1e-9) continue;
-      out.ratio[j] += sk > zero ? V(j, k) * V(j, k) / (sk * sk) : INFINITY;
+    if (sk > zero) {
+      // Entries at rounding level say nothing (and 1e-18 / sk^2 can be large).
+      for (int j = 0; j < p; ++j)
+        if (std::abs(V(j, k)) >= 1e-9) out.ratio[j] += V(j, k) * V(j, k) / (sk * sk);
+    } else {
+      free2 += V.col(k).cwiseAbs2();
     }
   }
   out.ratio = out.ratio.cwiseSqrt();
-  std::vector<int> parent(p);
-  std::iota(parent.begin(), parent.end(), 0);
-  auto find = [&](int i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
   std::vector<bool> bad(p, false);
-  for (int j = 0; j < p; ++j)
+  for (int j = 0; j < p; ++j) {
+    if (free2[j] >= 1e-18) out.ratio[j] = INFINITY;
     if (!(out.ratio[j] < threshold)) {
       bad[j] = true;
       out.undetermined.push_back(j);
     }
-  for (int k = 0; k < p; ++k) {
-    if (out.singular_values[k] > weak) continue;
-    const Eigen::VectorXd v = V.col(k);
-    double vmax = 0;
-    for (int j = 0; j < p; ++j)
-      if (bad[j]) vmax = std::max(vmax, std::abs(v[j]));
-    // An exactly free direction binds every parameter it touches, however
-    // lightly (their sigmas are all infinite); a weak one its main members.
-    const bool exact = out.singular_values[k] <= zero;
-    int first = -1;
-    for (int j = 0; j < p; ++j) {
-      if (!bad[j] || std::abs(v[j]) < (exact ? 1e-2 : 0.1) * vmax) continue;
-      if (first < 0) first = j;
-      else parent[find(j)] = find(first);
-    }
   }
-  std::vector<std::vector<int>> groups(p);
-  for (int j : out.undetermined) groups[find(j)].push_back(j);
-  for (auto& g : groups)
-    if (!g.empty()) out.groups.push_back(g);
+  out.groups = UndeterminedGroups(out.singular_values, V, bad, zero, weak);
   return out;
 }
 

@@ -762,7 +762,10 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     WeightedJacobian(problem.get(), &r, &Jw);
   }
   const Eigen::VectorXd& sig = nep ? nep->row_sigma() : problem->row_sigma();  // no copy of a data-sized vector
-  const Determination det = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
+  // Every analysis of Jw below depends on it only through Jw^T Jw (and is
+  // invariant to column scaling): one QR serves them all.
+  const Eigen::MatrixXd Rw = TriangularFactor(Jw);
+  const Determination det = AnalyzeDetermination(Rw, prior, kDeterminedRatio);
   if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable)
     throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
 
@@ -785,11 +788,11 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   for (int i = 0; i < r.size(); ++i)
     if (!outlier[i]) chi2 += (r[i] / sig[i]) * (r[i] / sig[i]), ++rows;
 
-  const Identifiability id = AnalyzeJacobian(Jw, opt.rank_tolerance);
+  const Identifiability id = AnalyzeJacobian(Rw, opt.rank_tolerance);
   res.rank = id.rank;
   // MAP: the posterior in prior units under the documented priors; it gives
   // the covariance and how far the data narrowed each prior.
-  const Eigen::MatrixXd Cs = map ? ScaledPosterior(Jw, prior) : Eigen::MatrixXd();
+  const Eigen::MatrixXd Cs = map ? ScaledPosterior(Rw, prior) : Eigen::MatrixXd();
   Eigen::MatrixXd hat;  // (Jw^T Jw + P)^-1 of the fit that made the residuals
   int sigma_dof = 0;
   if (map) {
@@ -800,7 +803,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     const Eigen::MatrixXd C = prior.asDiagonal() * Cs * prior.asDiagonal();
     // Effective number of parameters: trace of the hat matrix = p - trace(Cs).
     const Eigen::VectorXd used = Gather(fit_prior, est);
-    const Eigen::MatrixXd Cu = rq.automatic ? ScaledPosterior(Jw, used) : Cs;
+    const Eigen::MatrixXd Cu = rq.automatic ? ScaledPosterior(Rw, used) : Cs;
     const double p_eff = p - Cu.trace();
     const Eigen::VectorXd& cu_scale = rq.automatic ? used : prior;
     hat = cu_scale.asDiagonal() * Cu * cu_scale.asDiagonal();
@@ -811,9 +814,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     std::vector<int> informed_cols;
     for (int j = 0; j < p; ++j)
       if (std::sqrt(std::max(Cs(j, j), 0.0)) < kInformedThreshold) informed_cols.push_back(j);
-    Eigen::MatrixXd Ji(Jw.rows(), informed_cols.size());
-    for (size_t k = 0; k < informed_cols.size(); ++k) Ji.col(k) = Jw.col(informed_cols[k]);
-    res.condition_number = informed_cols.empty() ? 0.0 : AnalyzeJacobian(Ji, opt.rank_tolerance).condition_number;
+    Eigen::MatrixXd Ri(Rw.rows(), informed_cols.size());
+    for (size_t k = 0; k < informed_cols.size(); ++k) Ri.col(k) = Rw.col(informed_cols[k]);
+    res.condition_number = informed_cols.empty() ? 0.0 : ConditionNumber(Ri, opt.rank_tolerance);
     sigma_dof = res.dof;
   } else {
     res.dof = std::max(0, rows - id.rank);
@@ -823,10 +826,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     res.covariance = s2 * id.inverse_normal;
     // The condition number of the column-scaled Jacobian in mm, as before the
     // weighting and as the plan design reports it.
-    res.condition_number =
-        AnalyzeJacobian(nep ? NormalFactor(nfit.at_solution.JtJ_unweighted) : Eigen::MatrixXd(sig.asDiagonal() * Jw),
-                        opt.rank_tolerance)
-            .condition_number;
+    res.condition_number = ConditionNumber(
+        nep ? NormalFactor(nfit.at_solution.JtJ_unweighted) : Eigen::MatrixXd(sig.asDiagonal() * Jw),
+        opt.rank_tolerance);
     sigma_dof = res.n_observations - id.rank;
     hat = id.inverse_normal;
   }

@@ -29,6 +29,16 @@ struct Identifiability {
 // rank_tolerance: singular values below rank_tolerance * sigma_max count as zero.
 Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance = 1e-9);
 
+// AnalyzeJacobian(J, rank_tolerance).condition_number without the singular
+// vectors and the inverse.
+double ConditionNumber(const Eigen::MatrixXd& J, double rank_tolerance = 1e-9);
+
+// A tall J reduced to the p x p upper triangular R of its QR (J itself when it
+// has no more rows than columns): R^T R = J^T J, so every analysis here gives
+// the same for R as for J (and R D is the factor of J D for a diagonal D), at
+// O(p^3) instead of O(n p^2) each.
+Eigen::MatrixXd TriangularFactor(const Eigen::MatrixXd& J);
+
 // Cheap screen before a fit: true when the column-scaled Jacobian is clearly
 // of full column rank (smallest |R_ii| of its QR factor, taken from the
 // Cholesky factor of the normal matrix, above `margin` times the largest).
@@ -59,12 +69,20 @@ struct Determination {
   int rank = 0;                     // singular values > 1 / threshold
   std::vector<int> undetermined;    // columns with ratio >= threshold
   // Undetermined columns grouped by the weakly determined directions
-  // (singular values <= 1 / threshold) they share.
+  // (singular values <= 1 / threshold) they share (UndeterminedGroups).
   std::vector<std::vector<int>> groups;
 };
 
 Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
                                    double threshold);
+
+// The groups of AnalyzeDetermination from an SVD of Js (s descending, V its
+// right singular vectors): the `bad` columns joined when they share a weak
+// direction (s <= weak; exactly free when s <= zero). Depends on the
+// subspaces of equal singular values only, not on the basis an SVD picks in
+// them (a degenerate free space mixed by any rotation gives the same groups).
+std::vector<std::vector<int>> UndeterminedGroups(const Eigen::VectorXd& s, const Eigen::MatrixXd& V,
+                                                 const std::vector<bool>& bad, double zero, double weak);
 
 // The data-only ratio (as above) of every column of the subset `cols` of a
 // prior-scaled, noise-weighted Jacobian Js; +inf when the subset is singular.
