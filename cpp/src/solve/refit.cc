@@ -137,6 +137,22 @@ class DenseRefit {
     rc_.resize(m);
     cols_.resize(p_);
     ptrs_.resize(p_);
+    // The columns of the parameters that enter most rows first, the others
+    // (most setup parameters) after them: NormalMatrix then sums a few rows
+    // for these. From the Jacobian at the start; only speed depends on it.
+    pos_.resize(p_);
+    for (int b = 0; b < p_; ++b) pos_[b] = b;
+    double cost = 0;
+    std::vector<int> dense, sparse;
+    const bool ok = Evaluate(start_, &r_, &J_, &cost, false);
+    for (int b = 0; b < p_; ++b) {
+      const int nnz = ok ? static_cast<int>((J_.col(b).array().abs() > 0.0).count()) : m;
+      (4 * nnz >= m ? dense : sparse).push_back(b);
+    }
+    nd_ = static_cast<int>(dense.size());
+    dense.insert(dense.end(), sparse.begin(), sparse.end());
+    for (int c = 0; c < p_; ++c) pos_[dense[c]] = c;
+    J_.setZero();
   }
 
   void Refresh(const ParameterTable& table, const Eigen::VectorXd& values) { batch_.Refresh(table, values); }
@@ -147,7 +163,7 @@ class DenseRefit {
     constexpr double kMaxRadius = 1e16, kMinRadius = 1e-32;
     Eigen::VectorXd x = start_;
     double x_cost = 0;
-    if (!Evaluate(x, &r_, &J_, &x_cost, &gmax_)) return false;
+    if (!Evaluate(x, &r_, &J_, &x_cost, false)) return false;
     scale_ = (J_.colwise().squaredNorm().array().sqrt() + 1.0).inverse().matrix().transpose();
     J_.array().rowwise() *= scale_.transpose().array();
     double radius = 1e12, decrease_factor = 2;
@@ -159,10 +175,17 @@ class DenseRefit {
     Eigen::VectorXd diag, lm, step, mr, cand;
     Eigen::MatrixXd lhs(p_, p_);
     bool reuse_diagonal = false;
+    Eigen::VectorXd rhs = J_.transpose() * r_;
     for (;;) {
-      // Ceres's checks at the end of an iteration (FinalizeIteration...).
+      // Ceres's checks at the end of an iteration (FinalizeIteration...). Its
+      // gradient is J^T r before the scaling: rhs over the scale here.
       if (iteration >= max_iterations_) return false;
-      if (successful && gmax_ <= kGradientTolerance) {
+      double gmax = 0;
+      for (int b = 0; b < p_; ++b) {
+        const double g = rhs[pos_[b]] / scale_[pos_[b]];
+        gmax = std::max(gmax, std::abs(x[b] - (x[b] - g)));
+      }
+      if (successful && gmax <= kGradientTolerance) {
         converged = true;
         break;
       }
@@ -176,7 +199,6 @@ class DenseRefit {
       lm = (diag / radius).cwiseSqrt();
       NormalMatrix(&lhs);
       lhs.diagonal() += lm.cwiseAbs2();
-      const Eigen::VectorXd rhs = J_.transpose() * r_;
       Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>, Eigen::Lower> llt(lhs);
       if (llt.info() != Eigen::Success) return false;
       step = -llt.solve(rhs);
@@ -184,14 +206,15 @@ class DenseRefit {
       mr = J_ * step;
       const double model_cost_change = -mr.dot(r_ + mr / 2.0);
       if (!(model_cost_change > 0.0)) return false;
-      cand = x + step.cwiseProduct(scale_);
-      double cand_cost = 0, cand_gmax = 0;
+      cand = x;
+      for (int b = 0; b < p_; ++b) cand[b] += step[pos_[b]] * scale_[pos_[b]];
+      double cand_cost = 0;
       // Ceres costs the candidate, then evaluates the Jacobian again at it
       // once accepted; here both come from one evaluation, except for a step
       // whose model decrease is within the function tolerance: that one
       // nearly always ends the fit, so its Jacobian would be of no use.
       const bool last = model_cost_change <= 10 * kFunctionTolerance * x_cost;
-      if (!Evaluate(cand, &rc_, last ? nullptr : &Jc_, &cand_cost, &cand_gmax)) return false;
+      if (!Evaluate(cand, &rc_, last ? nullptr : &Jc_, &cand_cost, true)) return false;
       if ((x - cand).norm() <= kParameterTolerance * (x.norm() + kParameterTolerance)) {
         converged = true;
         break;
@@ -204,14 +227,13 @@ class DenseRefit {
       if (quality > kMinRelativeDecrease) {
         x = cand;
         if (last) {
-          if (!Evaluate(x, &r_, &J_, &x_cost, &gmax_)) return false;
+          if (!Evaluate(x, &r_, &J_, &x_cost, true)) return false;
         } else {
           J_.swap(Jc_);
           r_.swap(rc_);
           x_cost = cand_cost;
-          gmax_ = cand_gmax;
         }
-        J_.array().rowwise() *= scale_.transpose().array();
+        rhs.noalias() = J_.transpose() * r_;
         successful = true;
         radius = std::min(kMaxRadius, radius / std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * quality - 1.0, 3)));
         decrease_factor = 2;
@@ -252,35 +274,61 @@ class DenseRefit {
  private:
   // Residuals (and, J not null, Jacobian) of the weighted data rows and the
   // prior rows at x; cost = half their squared norm, summed block by block as
-  // Ceres sums it; gmax: Ceres's gradient norm for its gradient tolerance
-  // (on the unscaled Jacobian).
-  bool Evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* r, Eigen::MatrixXd* J, double* cost, double* gmax) {
+  // Ceres sums it. `scaled`: the Jacobian's columns times scale_ (Ceres's
+  // Jacobi scaling, applied after the weights as there). A non-finite
+  // Jacobian shows as a non-finite step.
+  bool Evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* r, Eigen::MatrixXd* J, double* cost, bool scaled) {
     for (int b = 0; b < p_; ++b) {
       ptrs_[b] = &x[b];
-      if (J) cols_[b] = J->col(b).data();
+      if (J) cols_[b] = J->col(pos_[b]).data();
     }
     if (!batch_.Evaluate(ptrs_.data(), r->data(), J ? cols_.data() : nullptr)) return false;
     r->head(n_).array() *= w_.array();
     double c = 0.5 * r->head(n_).squaredNorm();
-    for (int b = 0; b < static_cast<int>(prior_inv_.size()); ++b) {
+    const int np = static_cast<int>(prior_inv_.size());
+    for (int b = 0; b < np; ++b) {
       (*r)[n_ + b] = x[b] * prior_inv_[b];
       c += 0.5 * (*r)[n_ + b] * (*r)[n_ + b];
     }
     *cost = c;
     if (!std::isfinite(c)) return false;
     if (J) {
-      J->topRows(n_).array().colwise() *= w_.array();
-      for (int b = 0; b < static_cast<int>(prior_inv_.size()); ++b) (*J)(n_ + b, b) = prior_inv_[b];
-      if (!J->allFinite()) return false;
-      const Eigen::VectorXd g = J->transpose() * *r;
-      *gmax = (x - (x - g)).lpNorm<Eigen::Infinity>();
+      for (int b = 0; b < np; ++b) (*J)(n_ + b, pos_[b]) = prior_inv_[b];
+      for (int k = 0; k < p_; ++k) {
+        auto col = J->col(k).head(n_).array();
+        if (scaled) col = (col * w_.array()) * scale_[k];
+        else col *= w_.array();
+      }
+      if (scaled)
+        for (int b = 0; b < np; ++b) (*J)(n_ + b, pos_[b]) *= scale_[pos_[b]];
     }
     return true;
   }
-  // J_^T J_ (lower triangle).
-  void NormalMatrix(Eigen::MatrixXd* lhs) const {
+
+  // J_^T J_ (lower triangle). Most setup parameters enter a few rows (a
+  // facet's offset its facet's touches): the columns from nd_ on are summed
+  // over their nonzero rows only, the first nd_ by one rank update.
+  void NormalMatrix(Eigen::MatrixXd* lhs) {
+    const int m = static_cast<int>(J_.rows());
     lhs->setZero();
-    lhs->selfadjointView<Eigen::Lower>().rankUpdate(J_.transpose());
+    if (nd_) lhs->topLeftCorner(nd_, nd_).selfadjointView<Eigen::Lower>().rankUpdate(J_.leftCols(nd_).transpose());
+    rows_.resize(m);
+    a_.resize(m);
+    for (int i = nd_; i < p_; ++i) {
+      const double* c = J_.col(i).data();
+      int k = 0;
+      for (int r = 0; r < m; ++r) {  // branch-free: most entries are zero
+        rows_[k] = r;
+        k += std::abs(c[r]) > 0.0;
+      }
+      for (int e = 0; e < k; ++e) a_[e] = c[rows_[e]];
+      for (int j = 0; j <= i; ++j) {
+        const double* cj = J_.col(j).data();
+        double sum = 0;
+        for (int e = 0; e < k; ++e) sum += a_[e] * cj[rows_[e]];
+        (*lhs)(i, j) = sum;
+      }
+    }
   }
 
   AnalyticResiduals batch_;
@@ -288,9 +336,12 @@ class DenseRefit {
   int n_, p_, max_iterations_;
   Eigen::MatrixXd J_, Jc_;  // at x, at the candidate (weighted; J_ scaled once evaluated)
   Eigen::VectorXd r_, rc_;
-  double gmax_ = 0;
   std::vector<const double*> ptrs_;
   std::vector<double*> cols_;
+  std::vector<int> pos_;  // column of each estimated parameter in J_
+  int nd_ = 0;            // the columns before it enter most rows
+  std::vector<int> rows_;  // NormalMatrix's work space
+  std::vector<double> a_;
 };
 
 }  // namespace
