@@ -156,6 +156,8 @@ class DenseRefit {
   }
 
   void Refresh(const ParameterTable& table, const Eigen::VectorXd& values) { batch_.Refresh(table, values); }
+  void RefreshAxes(const ParameterTable& table) { batch_.RefreshAxes(table); }
+  const std::vector<AnalyticRow>& rows() const { return batch_.rows(); }
 
   bool Solve(RefitResult* out) {
     constexpr double kFunctionTolerance = 1e-10, kParameterTolerance = 1e-12, kGradientTolerance = 1e-16;
@@ -382,7 +384,26 @@ struct Refit::Session::State {
   // robust loss; null otherwise.
   std::unique_ptr<DenseRefit> dense;
   bool prepared = false;
+  // Preparing the rows again (Refresh) costs as much as an evaluation; a
+  // trial changes the touches' axis values only. After kAxesChecks trials
+  // whose full refresh changed nothing in the rows but their axis values,
+  // the session re-reads the axis values alone; one that changed more keeps
+  // the full refresh for good.
+  static constexpr int kAxesChecks = 2;
+  int axes_checks = 0;  // < 0: full refresh for good
+  std::vector<AnalyticRow> before;
 };
+
+namespace {
+
+// Everything a row holds but its axis values.
+bool SameButAxes(const AnalyticRow& a, const AnalyticRow& b) {
+  return a.kind == b.kind && a.variant == b.variant && a.dir == b.dir && a.a == b.a && a.n == b.n &&
+         a.tool_ball == b.tool_ball && a.measured == b.measured && a.constant == b.constant &&
+         std::equal(a.idx, a.idx + 8, b.idx) && a.probe0 == b.probe0 && a.probe_rotation == b.probe_rotation;
+}
+
+}  // namespace
 
 Refit::Session::Session(const Refit& refit) : s_(std::make_unique<State>(refit)) {}
 Refit::Session::~Session() = default;
@@ -401,8 +422,18 @@ RefitResult Refit::Session::Fit(bool with_std) {
     if (analytic)
       s.dense = std::make_unique<DenseRefit>(s.ds, d.table, d.start, d.est, s.problem->row_sigma(), d.prior,
                                              d.options.max_iterations);
+  } else if (s.dense && s.axes_checks >= State::kAxesChecks) {
+    s.dense->RefreshAxes(d.table);
   } else if (s.dense) {
+    const size_t n = s.ds.observations.size();
+    if (s.axes_checks >= 0) s.before.assign(s.dense->rows().begin(), s.dense->rows().begin() + n);
     s.dense->Refresh(d.table, d.start);
+    if (s.axes_checks >= 0) {
+      bool same = true;
+      for (size_t i = 0; i < n && same; ++i) same = SameButAxes(s.before[i], s.dense->rows()[i]);
+      s.axes_checks = same ? s.axes_checks + 1 : -1;
+      if (!same || s.axes_checks >= State::kAxesChecks) s.before = {};
+    }
   }
   if (s.dense) {
     RefitResult out;
