@@ -390,6 +390,39 @@ TEST(Refit, SessionEqualsCeresOnTheThesisSubsetAndMapFits) {
   }
 }
 
+TEST(Refit, SessionOnAxesOnlyReReadsAxesAndFallsBackWhenMoreChanged) {
+  // set_axes_only: after two trials that change axis values only, the
+  // session re-reads them alone; same values as the Ceres refit either way.
+  // A trial that changes more (here a touch's approach direction, which the
+  // prepared row holds) before the switch keeps the full preparation for good.
+  const SimulationPlan plan = BuildSimulationPlan(TangoSpec());
+  IdentifyOptions opt;
+  opt.estimate = {"S3"};  // with the backlashes, which the directions enter
+  const Result fit = Identify(plan.base, opt);
+  const Refit refit(plan.base, opt, fit);
+  for (bool edit_direction : {false, true}) {
+    Refit::Session session(refit);
+    session.set_axes_only(true);
+    for (uint64_t seed = 31; seed < 37; ++seed) {
+      AddNoiseInto(plan, seed, &session.dataset());
+      Dataset fresh = AddNoise(plan, seed);
+      if (edit_direction && seed >= 32) {
+        // Flip a touch's last move directions (which select the backlash;
+        // the row holds them, the axes-only refresh would miss them) from
+        // the second trial on.
+        Observation& o = session.dataset().observations[3];
+        ASSERT_FALSE(o.direction.size() == 0);
+        o.direction.setConstant(seed % 2 ? 1 : -1);
+        fresh.observations[3].direction = o.direction;
+      }
+      const RefitResult a = session.Fit(true);
+      const RefitResult b = refit.Fit(fresh, true);
+      ExpectSameRefit(a, b, std::string(edit_direction ? "direction edited" : "axes only") + " seed " +
+                                std::to_string(seed));
+    }
+  }
+}
+
 TEST(Refit, SessionWithARobustLossIsTheCeresRefit) {
   // A robust loss is left to Ceres: bit-identical to Refit::Fit.
   const SimulationPlan plan = BuildSimulationPlan(TangoSpec());

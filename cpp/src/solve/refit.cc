@@ -390,7 +390,8 @@ struct Refit::Session::State {
   // the session re-reads the axis values alone; one that changed more keeps
   // the full refresh for good.
   static constexpr int kAxesChecks = 2;
-  int axes_checks = 0;  // < 0: full refresh for good
+  bool axes_only = false;  // set_axes_only
+  int axes_checks = 0;    // < 0: full refresh for good
   std::vector<AnalyticRow> before;
 };
 
@@ -410,6 +411,11 @@ Refit::Session::~Session() = default;
 
 Dataset& Refit::Session::dataset() { return s_->ds; }
 
+void Refit::Session::set_axes_only(bool on) {
+  s_->axes_only = on;
+  if (!on) s_->axes_checks = 0;
+}
+
 RefitResult Refit::Session::Fit(bool with_std) {
   State& s = *s_;
   const Impl& d = *s.refit.impl_;
@@ -422,13 +428,14 @@ RefitResult Refit::Session::Fit(bool with_std) {
     if (analytic)
       s.dense = std::make_unique<DenseRefit>(s.ds, d.table, d.start, d.est, s.problem->row_sigma(), d.prior,
                                              d.options.max_iterations);
-  } else if (s.dense && s.axes_checks >= State::kAxesChecks) {
+  } else if (s.dense && s.axes_only && s.axes_checks >= State::kAxesChecks) {
     s.dense->RefreshAxes(d.table);
   } else if (s.dense) {
     const size_t n = s.ds.observations.size();
-    if (s.axes_checks >= 0) s.before.assign(s.dense->rows().begin(), s.dense->rows().begin() + n);
+    const bool check = s.axes_only && s.axes_checks >= 0;
+    if (check) s.before.assign(s.dense->rows().begin(), s.dense->rows().begin() + n);
     s.dense->Refresh(d.table, d.start);
-    if (s.axes_checks >= 0) {
+    if (check) {
       bool same = true;
       for (size_t i = 0; i < n && same; ++i) same = SameButAxes(s.before[i], s.dense->rows()[i]);
       s.axes_checks = same ? s.axes_checks + 1 : -1;
