@@ -384,6 +384,8 @@ TEST(Refit, SessionEqualsCeresOnTheThesisSubsetAndMapFits) {
         AddNoiseInto(noisy, seed, &session.dataset());
         const RefitResult a = session.Fit(true);
         const RefitResult b = refit.Fit(AddNoise(noisy, seed), true);
+        EXPECT_FALSE(a.ceres);  // the session's own loop, not its Ceres fallback
+        EXPECT_TRUE(b.ceres);
         ExpectSameRefit(a, b, opt.estimate[0] + " gain " + std::to_string(gain) + " seed " + std::to_string(seed));
       }
     }
@@ -423,6 +425,24 @@ TEST(Refit, SessionOnAxesOnlyReReadsAxesAndFallsBackWhenMoreChanged) {
   }
 }
 
+TEST(Refit, SessionAtTheIterationLimitIsTheCeresRefit) {
+  // A fit that reaches max_iterations is left to Ceres: its verdict (not
+  // converged) and its values, bit for bit.
+  const SimulationPlan plan = BuildSimulationPlan(TangoSpec());
+  IdentifyOptions opt = SmallFit();
+  const Result fit = Identify(plan.base, opt);
+  opt.max_iterations = 1;
+  const Refit refit(plan.base, opt, fit);
+  Refit::Session session(refit);
+  AddNoiseInto(plan, 41, &session.dataset());
+  const RefitResult a = session.Fit();
+  const RefitResult b = refit.Fit(AddNoise(plan, 41));
+  EXPECT_TRUE(a.ceres);
+  EXPECT_FALSE(a.converged);
+  EXPECT_EQ(a.values, b.values);
+  EXPECT_EQ(a.iterations, b.iterations);
+}
+
 TEST(Refit, SessionWithARobustLossIsTheCeresRefit) {
   // A robust loss is left to Ceres: bit-identical to Refit::Fit.
   const SimulationPlan plan = BuildSimulationPlan(TangoSpec());
@@ -436,6 +456,7 @@ TEST(Refit, SessionWithARobustLossIsTheCeresRefit) {
     AddNoiseInto(plan, seed, &session.dataset());
     const RefitResult a = session.Fit(true);
     const RefitResult b = refit.Fit(AddNoise(plan, seed), true);
+    EXPECT_TRUE(a.ceres);
     EXPECT_EQ(a.values, b.values) << seed;
     EXPECT_EQ(a.std, b.std) << seed;
     EXPECT_EQ(a.iterations, b.iterations) << seed;

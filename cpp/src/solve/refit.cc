@@ -252,6 +252,7 @@ class DenseRefit {
       }
       ++pushed;
     }
+    out->ceres = false;
     out->converged = converged;
     out->iterations = pushed - 1;
     out->final_cost = min_cost;

@@ -28,6 +28,7 @@ struct RefitResult {
   bool converged = false;
   int iterations = 0;
   double final_cost = 0;
+  bool ceres = true;  // solved by Ceres (false: by Session's own loop)
 };
 
 class Refit {
