@@ -110,9 +110,10 @@ RefitResult SolveRefit(Problem& problem, const std::vector<int>& est,
 // fixed at the first Jacobian, LM diagonal clamped to [1e-6, 1e32] over the
 // radius, step quality, radius updates, the parameter and function
 // tolerances checked on each candidate before it is accepted), so it stops
-// where Ceres stops and returns the same point, to rounding. What Ceres
-// costs per solve on these small problems (program and evaluator setup,
-// option checks, the summary, a jacobian copy) exceeded the work itself.
+// where Ceres stops and returns the same point, to rounding. On these small
+// problems what Ceres adds per solve (program and evaluator setup, option
+// checks, the summary, a Jacobian copy, a residual-only evaluation before
+// each accepted step's Jacobian) cost about as much as the model itself.
 // Solve returns false, leaving the fit to Ceres, on anything this loop does
 // not reproduce: an invalid step (Cholesky failure, no model decrease), a
 // non-finite residual or Jacobian, the iteration limit.
@@ -398,7 +399,8 @@ struct Refit::Session::State {
 
 namespace {
 
-// Everything a row holds but its axis values.
+// Everything a row holds but its axis values (a field added to AnalyticRow
+// belongs here, or the check would miss a trial that changes it).
 bool SameButAxes(const AnalyticRow& a, const AnalyticRow& b) {
   return a.kind == b.kind && a.variant == b.variant && a.dir == b.dir && a.a == b.a && a.n == b.n &&
          a.tool_ball == b.tool_ball && a.measured == b.measured && a.constant == b.constant &&
