@@ -147,14 +147,22 @@ KinematicModel::KinematicModel(const Machine& m, const double* theta) : machine_
 
 void KinematicModel::RestrictJacobian(const std::vector<int>& wanted) {
   const Machine& m = *machine_;
-  for (AxisConstants& A : axes_) A.want_location = A.want_motion = false;
+  for (AxisConstants& A : axes_) {
+    A.want_location = A.want_motion = false;
+    A.location_mask = A.motion_mask = 0;
+  }
   for (int i : wanted) {
     if (i < 0 || i >= m.num_parameters()) continue;  // setup parameters have no machine column
     const ParameterInfo& p = m.parameters()[i];
     if (p.axis < 0) continue;  // tip: always written
     AxisConstants& A = axes_[p.axis];
-    if (p.kind == ParameterKind::kMotion) A.want_motion = true;
-    else A.want_location = true;  // location and backlash share the E frame
+    if (p.kind == ParameterKind::kMotion) {
+      A.want_motion = true;
+      A.motion_mask |= 1u << (3 * p.component + p.degree - 1);
+    } else {
+      A.want_location = true;  // location and backlash share the E frame
+      A.location_mask |= p.kind == ParameterKind::kBacklash ? 1u << 6 : 1u << p.component;
+    }
   }
 }
 
@@ -280,14 +288,13 @@ FIVECAL_ISA_CLONES void KinematicModel::Columns(const std::vector<int>& chain, c
     const AxisConstants& A = axes_[k];
     const Factor& F = factors[i++];
     if (A.want_location) {
-      const Eigen::Matrix3d Qb = S * F.R_before;
       const Eigen::Vector3d dE = P - F.oE;
       for (int c = 0; c < 3; ++c) {
-        col(A.offset + c) = Qb.col(c);
-        col(A.offset + 3 + c) = S * (F.R_before * A.eAxes[c]).cross(dE);
+        if (A.location_mask & (1u << c)) col(A.offset + c) = S * F.R_before.col(c);
+        if (A.location_mask & (8u << c)) col(A.offset + 3 + c) = S * (F.R_before * A.eAxes[c]).cross(dE);
       }
       // Backlash: a shift of the command along or about the axis.
-      if (A.backlash_index >= 0) {
+      if (A.backlash_index >= 0 && (A.location_mask & (1u << 6))) {
         const int d = dir ? dir[k] : 0;
         const Eigen::Vector3d& w = F.backlash_w;
         col(A.backlash_index) = d * (S * (A.rotary ? Eigen::Vector3d(w.cross(dE)) : w));
@@ -295,12 +302,13 @@ FIVECAL_ISA_CLONES void KinematicModel::Columns(const std::vector<int>& chain, c
     }
     if (A.want_motion) {
       // Error motions: the unit effect of each component times q^d.
-      const Eigen::Matrix3d Qm = S * F.R_afterM;
       const Eigen::Vector3d dEps = P - F.oEps;
       for (int c = 0; c < 6; ++c) {
+        if (!((A.motion_mask >> (3 * c)) & 7u)) continue;
         const Eigen::Vector3d unit =
-            c < 3 ? Eigen::Vector3d(Qm.col(c)) : Eigen::Vector3d(S * F.epsW[c - 3].cross(dEps));
-        for (int d = 1; d <= 3; ++d) col(A.motion_index[c][d]) = unit * F.qpow[d];
+            c < 3 ? Eigen::Vector3d(S * F.R_afterM.col(c)) : Eigen::Vector3d(S * F.epsW[c - 3].cross(dEps));
+        for (int d = 1; d <= 3; ++d)
+          if (A.motion_mask & (1u << (3 * c + d - 1))) col(A.motion_index[c][d]) = unit * F.qpow[d];
       }
     }
   }

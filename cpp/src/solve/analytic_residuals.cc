@@ -241,4 +241,19 @@ int AnalyticResiduals::EvaluateRows(const KinematicModel& model, const Eigen::Ve
   return e.row;
 }
 
+void AnalyticResiduals::RefreshAxes(const ParameterTable& table) {
+  const Machine& m = ds_.machine();
+  const size_t n = ds_.observations.size();
+  for (size_t i = 0; i < n; ++i) {
+    rows_[i].q.resize(m.num_axes());
+    AxisValuesToInternal(m, ds_.observations[i].axes.data(), rows_[i].q.data());
+  }
+  const size_t before = rows_.size();
+  rows_.resize(n);
+  std::vector<int> source;
+  for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactAnalyticRows(ds_, table, &rows_, &source);
+  if (rows_.size() != before)
+    throw std::invalid_argument("analytic residuals: the dataset's artefact rows changed since it was prepared");
+}
+
 }  // namespace fivecal

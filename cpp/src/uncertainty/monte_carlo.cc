@@ -203,6 +203,13 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
     if (opt.trial_std) tstd.row(t) = rf.std.transpose();
     usable[t] = rf.converged ? 1 : 0;
   };
+  // Touches move along their approach lines and scale bars change length:
+  // the sessions then need re-read only the axis values.
+  bool axes_only = true;
+  for (int k = 0; k < n_in; ++k) {
+    const int o = plan.input_observation[k];
+    if (o >= 0 && (o >= static_cast<int>(plan.approach.size()) || plan.approach[o].size() == 0)) axes_only = false;
+  }
   auto worker = [&] {
     std::unique_ptr<Refit::Session> session;
     for (;;) {
@@ -210,7 +217,10 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
       const int t = next.fetch_add(1);
       if (t >= M) return;
       try {
-        if (!session) session = std::make_unique<Refit::Session>(refit);
+        if (!session) {
+          session = std::make_unique<Refit::Session>(refit);
+          session->set_axes_only(axes_only);
+        }
         run_trial(*session, t);
       } catch (const std::exception&) {
         usable[t] = -1;

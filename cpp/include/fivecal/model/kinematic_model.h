@@ -49,9 +49,8 @@ class KinematicModel {
                          Eigen::Vector3d* point, double* J) const;
 
   // A fit needs only the columns of its estimated parameters: afterwards
-  // ToolPointJacobian writes the columns of every axis group (location,
-  // backlash, error motions of one axis) holding a wanted parameter, and the
-  // tip columns; the others are left as they are.
+  // ToolPointJacobian writes the wanted columns and the tip columns; the
+  // others are left as they are.
   void RestrictJacobian(const std::vector<int>& wanted_parameters);
 
  private:
@@ -73,6 +72,9 @@ class KinematicModel {
     int backlash_index = -1;
     int motion_index[6][4];  // motion_index(k, c, d), d = 1..3
     bool want_location = true, want_motion = true;  // Jacobian groups to write
+    // Within them, the columns to write: location component c (bit c), the
+    // backlash (bit 6); error motion component c, degree d (bit 3 c + d - 1).
+    unsigned location_mask = 0x7f, motion_mask = 0x3ffff;
   };
   // Frames recorded along one chain for the Jacobian (rotations relative to
   // the chain's base frame).

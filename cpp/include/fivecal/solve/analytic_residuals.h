@@ -124,6 +124,15 @@ class AnalyticResiduals : public ceres::CostFunction {
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
 
+  // Refresh for a dataset whose observations changed in their axis values
+  // alone (a Monte Carlo trial moves each touch along its approach line):
+  // each observation row's axis values are read again and the rest of the
+  // row is kept; the artefact rows are made again. The caller knows that
+  // the rows depend on nothing else that changed (Refit::Session checks it
+  // against Refresh on its first trials).
+  void RefreshAxes(const ParameterTable& table);
+  const std::vector<AnalyticRow>& rows() const { return rows_; }
+
   // Per row: the observation index, or -(1 + scale bar index).
   const std::vector<int>& row_source() const { return row_source_; }
 

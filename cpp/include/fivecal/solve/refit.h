@@ -3,7 +3,9 @@
 // cycles). The estimated set, the fixed values and the robust scale are those
 // of `reference_fit` (a Result of Identify on `reference`); every fit starts
 // from its values and skips the identifiability checks of Identify. Fit() is
-// const and thread-safe (each call builds its own Ceres problem).
+// const and thread-safe (each call builds its own Ceres problem). A Session
+// fits without Ceres where it can (one analytic batch, no robust loss): the
+// same trust-region steps and stopping rules, so the same values to rounding.
 #ifndef FIVECAL_REFIT_H_
 #define FIVECAL_REFIT_H_
 
@@ -26,6 +28,7 @@ struct RefitResult {
   bool converged = false;
   int iterations = 0;
   double final_cost = 0;
+  bool ceres = true;  // solved by Ceres (false: by Session's own loop)
 };
 
 class Refit {
@@ -54,6 +57,13 @@ class Refit {
     Session& operator=(const Session&) = delete;
     Dataset& dataset();
     RefitResult Fit(bool with_std = false);
+    // The caller's word that every edit changes the observations' axis
+    // values only (a Monte Carlo trial moving touches along their approach
+    // lines; scale bar lengths may change too). After two fits that bear it
+    // out (their rows differ from the previous ones in axis values alone),
+    // a fit then re-reads the axis values instead of preparing the rows
+    // again; results are the same.
+    void set_axes_only(bool on);
 
    private:
     struct State;
