@@ -82,10 +82,6 @@ void CheckSigmaOf(const Eigen::VectorXd& sigma, ObservationType t, const Where& 
                                   ": must be a finite number > 0 " + k.unit_row(r) + " (1e-9 to 1e3)");
 }
 
-void CheckSigma(const Eigen::VectorXd& sigma, ObservationType t, const std::string& where) {
-  CheckSigmaOf(sigma, t, [&] { return where; });
-}
-
 void ValidateScaleBars(const Artefact& artefact) {
   for (size_t i = 0; i < artefact.scale_bars.size(); ++i) {
     const ScaleBar& b = artefact.scale_bars[i];
@@ -126,10 +122,6 @@ Eigen::VectorXd ReadSigmaOf(const json& j, ObservationType t, const Where& where
   }
   CheckSigmaOf(s, t, where);
   return s;
-}
-
-Eigen::VectorXd ReadSigma(const json& j, ObservationType t, const std::string& where) {
-  return ReadSigmaOf(j, t, [&] { return where; });
 }
 
 // "instruments": {"<id>": {"sigma": number | [per row]}}. Read raw here (the
