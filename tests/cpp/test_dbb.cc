@@ -8,6 +8,8 @@
 // errors of docs/dbb.md or 3 sigma with noise.
 #include <gtest/gtest.h>
 
+#include "test_files.h"
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -37,13 +39,6 @@ namespace {
 using nlohmann::json;
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kUm = 1e-3, kUrad = 1e-6;
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
 
 json MachineJson(const char* name) {
   return json::parse(ReadFile(std::string(FIVECAL_SOURCE_DIR) + "/examples/machines/" + name));

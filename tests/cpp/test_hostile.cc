@@ -8,6 +8,8 @@
 // the sanitizer build also aborts on any UB on the way.
 #include <gtest/gtest.h>
 
+#include "test_files.h"
+
 #include <climits>
 #include <cmath>
 #include <cstdint>
@@ -29,14 +31,6 @@ namespace fivecal {
 namespace {
 
 using nlohmann::json;
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream f(path);
-  EXPECT_TRUE(f.good()) << path;
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
 
 std::string TangoSpec() { return ReadFile(std::string(FIVECAL_SOURCE_DIR) + "/tests/data/tango_thin_spec.json"); }
 

@@ -3,6 +3,8 @@
 // the fast decomposition AnalyzeDetermination uses groups as Jacobi does.
 #include <gtest/gtest.h>
 
+#include "test_files.h"
+
 #include <Eigen/Dense>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -116,14 +118,6 @@ TEST(Identifiability, DeterminedSetWithoutSingularVectorsAgreesWithTheSvd) {
     EXPECT_NEAR(d.ratio[j], std::sqrt(r2), 1e-12 * std::sqrt(r2)) << j;
     EXPECT_NEAR(d.singular_values[j], s[j], 1e-10 * s[0]) << j;
   }
-}
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream f(path);
-  EXPECT_TRUE(f.good()) << path;
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
 }
 
 // AnalyzeDetermination (QR, then divide and conquer) against a one-sided

@@ -4,6 +4,8 @@
 // Identify boundary.
 #include <gtest/gtest.h>
 
+#include "test_files.h"
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -19,14 +21,6 @@
 
 namespace fivecal {
 namespace {
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream f(path);
-  EXPECT_TRUE(f.good()) << path;
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
 
 const Dataset& Tango() {
   static const Dataset ds =

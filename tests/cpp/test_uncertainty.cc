@@ -5,6 +5,8 @@
 // statistics of thesis eqs. 4-9 to 4-16 and 7-1 on a hand-computed grid.
 #include <gtest/gtest.h>
 
+#include "test_files.h"
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -26,14 +28,6 @@
 
 namespace fivecal {
 namespace {
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream f(path);
-  EXPECT_TRUE(f.good()) << path;
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
 
 // TANGO-style HU40T spec: 95 facet touches + 10 scale-bar touches (see the
 // file's _comment).

@@ -199,12 +199,7 @@ void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::Vector
     if (KindOf(ds_.observations[i]).analytic()) PrepareRow(table, static_cast<int>(i), &rows_[i]);
     else RecordRow(*recorder, static_cast<int>(i), &rows_[i]);
   }
-  const size_t before = rows_.size();
-  rows_.resize(n);
-  std::vector<int> source;
-  for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactAnalyticRows(ds_, table, &rows_, &source);
-  if (rows_.size() != before)
-    throw std::invalid_argument("analytic residuals: the dataset's artefact rows changed since it was prepared");
+  RemakeArtefactRows(table);
 }
 
 bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residuals,
@@ -241,6 +236,18 @@ int AnalyticResiduals::EvaluateRows(const KinematicModel& model, const Eigen::Ve
   return e.row;
 }
 
+// The artefact rows (scale bars) read their lengths from the dataset, which a
+// Monte Carlo trial edits: made again after the observation rows.
+void AnalyticResiduals::RemakeArtefactRows(const ParameterTable& table) {
+  const size_t n = ds_.observations.size();
+  const size_t before = rows_.size();
+  rows_.resize(n);
+  std::vector<int> source;
+  for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactAnalyticRows(ds_, table, &rows_, &source);
+  if (rows_.size() != before)
+    throw std::invalid_argument("analytic residuals: the dataset's artefact rows changed since it was prepared");
+}
+
 void AnalyticResiduals::RefreshAxes(const ParameterTable& table) {
   const Machine& m = ds_.machine();
   const size_t n = ds_.observations.size();
@@ -248,12 +255,7 @@ void AnalyticResiduals::RefreshAxes(const ParameterTable& table) {
     rows_[i].q.resize(m.num_axes());
     AxisValuesToInternal(m, ds_.observations[i].axes.data(), rows_[i].q.data());
   }
-  const size_t before = rows_.size();
-  rows_.resize(n);
-  std::vector<int> source;
-  for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactAnalyticRows(ds_, table, &rows_, &source);
-  if (rows_.size() != before)
-    throw std::invalid_argument("analytic residuals: the dataset's artefact rows changed since it was prepared");
+  RemakeArtefactRows(table);
 }
 
 }  // namespace fivecal

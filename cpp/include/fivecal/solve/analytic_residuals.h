@@ -167,6 +167,7 @@ class AnalyticResiduals : public ceres::CostFunction {
   };
   class Recorder;
   void PrepareRow(const ParameterTable& table, int observation, AnalyticRow* r) const;
+  void RemakeArtefactRows(const ParameterTable& table);
   // Records observation i's templated pieces into *pieces (row r points at them).
   void RecordRow(Recorder& recorder, int observation, AnalyticRow* r) const;
   void EvaluateTemplated(AnalyticEval& e, const AnalyticRow* rows, int count) const;
