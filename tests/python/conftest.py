@@ -32,3 +32,11 @@ def pytest_collection_modifyitems(config, items):
         mod = getattr(item, "module", None)
         if mod is not None and any(v is linuxcnc_harness for v in vars(mod).values()):
             item.add_marker(pytest.mark.xdist_group("linuxcnc"))
+
+
+def pytest_report_header(config):
+    """Which fivecal the run tests: the installed package (scripts/test.sh, CI)
+    or a tree's python/ (PYTHONPATH=python after scripts/dev builds)."""
+    import fivecal
+
+    return f"fivecal {fivecal.__version__} from {fivecal.__file__}"
