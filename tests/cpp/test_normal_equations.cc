@@ -57,6 +57,33 @@ std::vector<int> Indices(const ParameterTable& t, const std::vector<std::string>
   return out;
 }
 
+// The dense reference of an accumulation: residuals, Jacobian and weighted
+// normal equations of the same rows from a Problem.
+struct DenseSums {
+  Eigen::VectorXd r, rw;
+  Eigen::MatrixXd J, Jw, N;
+};
+
+DenseSums DenseReference(Problem& dense) {
+  DenseSums d;
+  dense.Evaluate(&d.r, &d.J);
+  const Eigen::VectorXd w = dense.row_sigma().cwiseInverse();
+  d.Jw = w.asDiagonal() * d.J;
+  d.rw = w.asDiagonal() * d.r;
+  d.N = d.Jw.transpose() * d.Jw;
+  return d;
+}
+
+// The accumulated sums are the dense ones to rounding.
+void ExpectSameSums(const NormalEquations& acc, const DenseSums& d) {
+  const Eigen::MatrixXd Nu = d.J.transpose() * d.J;
+  const Eigen::VectorXd g = d.Jw.transpose() * d.rw;
+  EXPECT_LT((acc.JtJ - d.N).norm(), 1e-12 * d.N.norm());
+  EXPECT_LT((acc.JtJ_unweighted - Nu).norm(), 1e-12 * Nu.norm());
+  EXPECT_LT((acc.Jtr - g).norm(), 1e-11 * g.norm());
+  EXPECT_NEAR(acc.cost, 0.5 * d.rw.squaredNorm(), 1e-12 * d.rw.squaredNorm());
+}
+
 TEST(NormalEquations, AccumulationEqualsDenseNormalMatrix) {
   for (bool two : {false, true}) {
     const Dataset ds = RTest(3000, false, kTruth, 2, two);
@@ -67,25 +94,15 @@ TEST(NormalEquations, AccumulationEqualsDenseNormalMatrix) {
     v[table.Require("EA0C")] = 1e-4;  // away from zero: a point of nonzero residuals
     v[table.Require("EY0C")] = 0.01;
     Problem dense(ds, table, v, est);
-    Eigen::VectorXd r;
-    Eigen::MatrixXd J;
-    dense.Evaluate(&r, &J);
-    const Eigen::VectorXd w = dense.row_sigma().cwiseInverse();
-    const Eigen::MatrixXd Jw = w.asDiagonal() * J;
-    const Eigen::VectorXd rw = w.asDiagonal() * r;
+    const DenseSums d = DenseReference(dense);
     const NormalEquationProblem ne(ds, table, v, est, 2);
     ASSERT_EQ(ne.num_rows(), dense.num_rows());
     const NormalEquations acc = ne.Accumulate(v, true);
-    const Eigen::MatrixXd N = Jw.transpose() * Jw;
-    const Eigen::MatrixXd Nu = J.transpose() * J;
-    EXPECT_LT((acc.JtJ - N).norm(), 1e-12 * N.norm());
-    EXPECT_LT((acc.JtJ_unweighted - Nu).norm(), 1e-12 * Nu.norm());
-    EXPECT_LT((acc.Jtr - Jw.transpose() * rw).norm(), 1e-11 * (Jw.transpose() * rw).norm());
-    EXPECT_NEAR(acc.cost, 0.5 * rw.squaredNorm(), 1e-12 * rw.squaredNorm());
-    EXPECT_LT((ne.Residuals(v) - r).cwiseAbs().maxCoeff(), 1e-12);
+    ExpectSameSums(acc, d);
+    EXPECT_LT((ne.Residuals(v) - d.r).cwiseAbs().maxCoeff(), 1e-12);
     // The factor the analyses see: R^T R = N.
     const Eigen::MatrixXd R = NormalFactor(acc.JtJ);
-    EXPECT_LT((R.transpose() * R - N).norm(), 1e-10 * N.norm());
+    EXPECT_LT((R.transpose() * R - d.N).norm(), 1e-10 * d.N.norm());
     // One Jacobian pass per accumulation, one residual pass per residual call.
     EXPECT_EQ(ne.jacobian_passes(), 1);
   }
@@ -322,22 +339,16 @@ TEST(NormalEquations, EveryKindAccumulatesTheDenseNormalEquations) {
   for (int i = 0; i < table.size(); ++i) all[i] = i;
   // The dense reference: the templated functors, one Ceres block each.
   Problem dense(ds, table, v, all, "", 0.0, false);
-  Eigen::VectorXd r;
-  Eigen::MatrixXd J;
-  dense.Evaluate(&r, &J);
-  const Eigen::VectorXd w = dense.row_sigma().cwiseInverse();
-  const Eigen::MatrixXd Jw = w.asDiagonal() * J;
-  const Eigen::VectorXd rw = w.asDiagonal() * r;
-  const Eigen::MatrixXd N = Jw.transpose() * Jw;
+  const DenseSums d = DenseReference(dense);
+  const Eigen::VectorXd& r = d.r;
+  const Eigen::MatrixXd& Jw = d.Jw;
+  const Eigen::MatrixXd& N = d.N;
   const NormalEquationProblem one(ds, table, v, all, 1);
   ASSERT_EQ(one.num_rows(), dense.num_rows());
   EXPECT_EQ(one.row_source(), dense.row_source());
   EXPECT_LT((one.row_sigma() - dense.row_sigma()).cwiseAbs().maxCoeff(), 1e-15);
   const NormalEquations acc = one.Accumulate(v, true);
-  EXPECT_LT((acc.JtJ - N).norm(), 1e-12 * N.norm());
-  EXPECT_LT((acc.JtJ_unweighted - J.transpose() * J).norm(), 1e-12 * (J.transpose() * J).norm());
-  EXPECT_LT((acc.Jtr - Jw.transpose() * rw).norm(), 1e-11 * (Jw.transpose() * rw).norm());
-  EXPECT_NEAR(acc.cost, 0.5 * rw.squaredNorm(), 1e-12 * rw.squaredNorm());
+  ExpectSameSums(acc, d);
   EXPECT_LT((one.Residuals(v) - r).cwiseAbs().maxCoeff(), 1e-12);
   // The pose's rotation rows: their own J^T J, for the residual summary per unit.
   ASSERT_EQ(one.other_units(), std::vector<std::string>{"rad"});
