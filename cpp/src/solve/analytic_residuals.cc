@@ -51,19 +51,6 @@ class AnalyticResiduals::Recorder : public ResidualBuilder {
 
 namespace {
 
-// What the templated functors read the fixed parameters from, as Problem
-// makes it.
-std::shared_ptr<const ResidualContext> MakeContext(const Machine& m, const Eigen::VectorXd& values,
-                                                   const std::vector<int>& estimated) {
-  auto ctx = std::make_shared<ResidualContext>();
-  ctx->machine = &m;
-  ctx->values = values;
-  ctx->machine_block.assign(m.num_parameters(), -1);
-  for (int i : estimated)
-    if (i < m.num_parameters()) ctx->machine_block[i] = ctx->num_machine_blocks++;
-  return ctx;
-}
-
 bool AnyTemplated(const Dataset& ds) {
   for (const Observation& o : ds.observations)
     if (!KindOf(o).analytic()) return true;
@@ -94,9 +81,7 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
   }
   rows_.reserve(ds.observations.size());
   std::unique_ptr<Recorder> recorder;
-  if (AnyTemplated(ds))
-    recorder = std::make_unique<Recorder>(ds, table, MakeContext(ds.machine(), values_, estimated_), estimated_,
-                                          block_of_, &pieces_);
+  if (AnyTemplated(ds)) recorder = NewRecorder(table);
   for (size_t i = 0; i < ds.observations.size(); ++i) {
     const ObservationKind& kind = KindOf(ds.observations[i]);
     rows_.emplace_back();
@@ -130,6 +115,13 @@ void AnalyticResiduals::PrepareRow(const ParameterTable& table, int i, AnalyticR
   r->q = std::move(q);
   r->dir = std::move(dir);
   kind.PrepareAnalytic(ds_, table, o, r);
+}
+
+// The templated pieces are recorded afresh (at the current fixed values).
+std::unique_ptr<AnalyticResiduals::Recorder> AnalyticResiduals::NewRecorder(const ParameterTable& table) {
+  pieces_.clear();
+  return std::make_unique<Recorder>(ds_, table, ResidualContext::Make(ds_.machine(), values_, estimated_),
+                                    estimated_, block_of_, &pieces_);
 }
 
 void AnalyticResiduals::RecordRow(Recorder& recorder, int i, AnalyticRow* r) const {
@@ -190,11 +182,7 @@ void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::Vector
   // calibrated lengths, which those rows hold.
   const size_t n = ds_.observations.size();
   std::unique_ptr<Recorder> recorder;
-  if (!pieces_.empty() || AnyTemplated(ds_)) {
-    pieces_.clear();
-    recorder = std::make_unique<Recorder>(ds_, table, MakeContext(ds_.machine(), values_, estimated_), estimated_,
-                                          block_of_, &pieces_);
-  }
+  if (!pieces_.empty() || AnyTemplated(ds_)) recorder = NewRecorder(table);
   for (size_t i = 0; i < n; ++i) {
     if (KindOf(ds_.observations[i]).analytic()) PrepareRow(table, static_cast<int>(i), &rows_[i]);
     else RecordRow(*recorder, static_cast<int>(i), &rows_[i]);

@@ -244,12 +244,7 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
   for (size_t i = 0; i < estimated_.size(); ++i) block_of_[estimated_[i]] = static_cast<int>(i);
 
   const Machine& m = ds.machine();
-  ctx_ = std::make_shared<ResidualContext>();
-  ctx_->machine = &m;
-  ctx_->values = values_;
-  ctx_->machine_block.assign(m.num_parameters(), -1);
-  for (int i : estimated_)
-    if (i < m.num_parameters()) ctx_->machine_block[i] = ctx_->num_machine_blocks++;
+  ctx_ = ResidualContext::Make(m, values_, estimated_);
 
   ceres::Problem::Options opts;
   opts.enable_fast_removal = false;

@@ -29,6 +29,19 @@ struct ResidualContext {
   Eigen::VectorXd values;              // all parameters; constants for the fixed ones
   std::vector<int> machine_block;      // per machine parameter: block number or -1
   int num_machine_blocks = 0;
+
+  // The context of a problem estimating `estimated` (table indices, in block
+  // order) at `values`: the estimated machine parameters numbered in order.
+  static std::shared_ptr<const ResidualContext> Make(const Machine& m, const Eigen::VectorXd& values,
+                                                     const std::vector<int>& estimated) {
+    auto ctx = std::make_shared<ResidualContext>();
+    ctx->machine = &m;
+    ctx->values = values;
+    ctx->machine_block.assign(m.num_parameters(), -1);
+    for (int i : estimated)
+      if (i < m.num_parameters()) ctx->machine_block[i] = ctx->num_machine_blocks++;
+    return ctx;
+  }
 };
 
 // One setup parameter as seen by a residual: its full index and its block

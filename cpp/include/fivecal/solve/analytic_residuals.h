@@ -169,6 +169,7 @@ class AnalyticResiduals : public ceres::CostFunction {
   void PrepareRow(const ParameterTable& table, int observation, AnalyticRow* r) const;
   void RemakeArtefactRows(const ParameterTable& table);
   // Records observation i's templated pieces into *pieces (row r points at them).
+  std::unique_ptr<Recorder> NewRecorder(const ParameterTable& table);
   void RecordRow(Recorder& recorder, int observation, AnalyticRow* r) const;
   void EvaluateTemplated(AnalyticEval& e, const AnalyticRow* rows, int count) const;
   struct Run {  // consecutive rows of one kind and variant

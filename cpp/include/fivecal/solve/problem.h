@@ -145,7 +145,7 @@ class Problem {
   Eigen::VectorXd values_;  // storage of the Ceres parameter blocks
   std::vector<int> estimated_;
   std::vector<int> block_of_;  // per parameter: position in estimated_ or -1
-  std::shared_ptr<ResidualContext> ctx_;
+  std::shared_ptr<const ResidualContext> ctx_;
   std::unique_ptr<ceres::Problem> problem_;
   std::vector<ceres::ResidualBlockId> blocks_;
   std::vector<int> block_row_;  // first residual row of each block
