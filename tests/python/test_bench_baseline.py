@@ -131,7 +131,7 @@ def test_jax_fits_are_fivecal_s():
     """The JAX Levenberg-Marquardt finds fivecal's optimum (within a small
     fraction of sigma) on the bench's ball3d case, small, and on TANGO S3."""
     pytest.importorskip("jax")
-    r = bench.case_ball3d(500, 1, baseline=False)
+    r = bench.case_ball3d(500, 1, baseline_repeat=0)
     assert r["jax_max_difference_in_sigma"] < 0.01
     assert r["jax_compile_s"] > 0 and r["jax_s"] > 0 and r["ratio_jax"] == r["jax_s"] / r["fivecal_s"]
     import baseline_jax as jbase
@@ -148,7 +148,7 @@ def test_jax_fits_are_fivecal_s():
 def test_bench_runs_and_says_so_without_jax(monkeypatch):
     monkeypatch.setattr(bench, "jbase", None)
     monkeypatch.setattr(bench, "JAX_MISSING", "jax not installed")
-    r = bench.case_ball3d(200, 1, baseline=False)
+    r = bench.case_ball3d(200, 1, baseline_repeat=0)
     assert r["jax_skipped"] == "jax not installed" and "jax_s" not in r
     doc = {"machine": {"cpu": "test cpu", "cores": 2, "date": "today"}, "results": [r]}
     assert "| not measured: jax not installed |" in bench.readme_section(doc)
