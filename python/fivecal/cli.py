@@ -61,6 +61,14 @@ def _identify(args) -> int:
               + (f" ({' and '.join(written)} written, marked not usable)" if written else ""),
               file=sys.stderr)
         return EXIT_FIT
+    if hist is not None and (hist.tolerances or hist.volumetric_tolerance is not None):
+        from .history.cli import grade_identify
+
+        # a machine out of tolerance must stop a script as `history compare` does,
+        # not only turn a box red in the report
+        if grade_identify(result, hist) == "fail":
+            print("fivecal identify: FAIL against the tolerances (see the grade above)", file=sys.stderr)
+            return EXIT_FIT
     return EXIT_OK
 
 

@@ -85,7 +85,10 @@ def test_identify_report_with_history_through_the_cli(nights, tmp_path, capsys):
     d, paths, store = nights
     rep = tmp_path / "rep"
     assert main(["identify", paths[6], "--estimate", "location", "--report", str(rep), "--history", store,
-                 "--machine-id", "HU-7", "--tolerance", "EX0C=0.012", "--volumetric-tolerance", "0.05"]) == 0
+                 "--machine-id", "HU-7", "--tolerance", "EX0C=0.012", "--volumetric-tolerance", "0.05"]) == 1
+    out, err = capsys.readouterr()
+    # out of tolerance stops a script (exit 1), with the grade on stdout and why on stderr
+    assert "FAIL against the tolerances" in err and ": FAIL" in out and "EX0C" in out
     text = (rep / "report.html").read_text(encoding="utf-8")
     for title in ("Calibration history", "Compared with the previous calibration", "Pass / fail"):
         assert f">{title}</h2>" in text
@@ -142,7 +145,7 @@ def test_identify_report_with_history_renders_in_chromium(nights, tmp_path):
     d, paths, store = nights
     rep = tmp_path / "rep"
     assert main(["identify", paths[6], "--estimate", "location", "--report", str(rep), "--history", store,
-                 "--machine-id", "HU-7", "--tolerance", "EX0C=0.012"]) == 0
+                 "--machine-id", "HU-7", "--tolerance", "EX0C=0.012"]) == 1     # FAIL: still reported
     found = render_check(rep / "report.html", tmp_path)
     assert found["broken"] == [] and min(found["widths"]) > 500
     for section in ("Calibration history", "Compared with the previous calibration", "Pass / fail"):

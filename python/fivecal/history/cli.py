@@ -234,6 +234,19 @@ def identify_history(args):
                    volumetric_tolerance=vt, time=_time_of(args.dataset) if os.path.isfile(args.dataset) else None)
 
 
+def grade_identify(result, hist) -> str:
+    """``fivecal identify --tolerance``: this result graded as the report
+    grades it (printed); returns the verdict (pass, fail, undecided)."""
+    from .store import calibration_from_result
+    from .trend import grade
+
+    cal = calibration_from_result(result, hist.machine_id, time=hist.time, source="this identification")
+    g = grade(cal, hist.tolerances or {}, hist.volumetric_tolerance, machine=result.dataset.machine)
+    print()
+    print(g.report())
+    return g.verdict
+
+
 def record_identify(args, result, hist) -> None:
     """``fivecal identify --record``: the result into the store."""
     from .store import Store
