@@ -341,6 +341,10 @@ def test_probing_program_and_log_reader_offline():
     art = _octagon()
     plan = _probe_plan(m, art)
     pins = L.nominal_pins(m, kins)
+    # a sphere beside the facets: this cycle's lifts would not avoid it, so it refuses
+    with pytest.raises(ValueError, match=r"1 sphere\(s\).*touch_program"):
+        L.probing_program(m, kins, plan, {**art, "spheres": [{"id": "S1", "centre": [0, 0, 50], "radius": 10}]},
+                          3.0)
     prog = L.probing_program(m, kins, plan, art, 3.0)
     assert prog.count("G38.2") == len(plan) and "(PROBEOPEN probe-log.txt)" in prog
     # a log of the nominal contact points reads back as the planned indexations

@@ -514,6 +514,13 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     its ``arm`` line (the simulator's probe planes: :func:`probe_sim_lines`)."""
     k = _kins(kins)
     tilt = TILT[k]
+    spheres = artefact.get("spheres") or []
+    if spheres:
+        # its straight lifts know nothing of spheres: on TANGO they ran 4 mm
+        # through the scale bar's balls
+        raise ValueError(f"probing_program: the artefact has {len(spheres)} sphere(s) this facet cycle's moves "
+                         "do not avoid; use fivecal.io.nc_programs.touch_program, whose moves keep clear of "
+                         "every sphere (fivecal export program chooses it)")
     touches = _touch_geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
     if before_probe is not None and len(before_probe) != len(touches):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(touches)} touches")
