@@ -231,6 +231,21 @@ def test_d_criterion_and_touch_budget(pool, full_quality):
     assert b.quality.d_criterion <= d.quality.d_criterion        # information only decreases
 
 
+def test_fixed_tip_offsets_stay_fixed_in_the_design_s_assessment(pool):
+    """The probe tip's offsets are machine columns in the parameter table but
+    default setup in a preset: fixing them must hold in the search and in the
+    reported quality of the pool and of the chosen plan (they came back)."""
+    tip = ["tip.x", "tip.y", "tip.z"]
+    d = design.design_plan(pool, 14, "S3", fix=tip)
+    for q in (d.quality, d.reference):
+        assert not set(tip) & set(q.parameters) and q.n_parameters == 49
+    full = design.plan_quality(pool, "S3", fix=tip)
+    chosen = design.plan_quality(pool.subset(d.observations), "S3", fix=tip)
+    assert d.reference.condition_number == pytest.approx(full.condition_number, rel=1e-9)
+    assert d.quality.condition_number == pytest.approx(chosen.condition_number, rel=1e-9)
+    assert "tip.x" not in d.report()
+
+
 def test_progress_can_stop_the_search(pool):
     d = design.design_plan(pool, 10, "S3", progress=lambda phase, done, total, best: done < 3)
     assert d.stopped

@@ -959,9 +959,10 @@ DesignResult DesignPlan(const Dataset& ds, const std::vector<int>& group, const 
     for (int i : pool.table_.DefaultSetup(ds)) default_full.insert(i);
     for (int c = pool.cols_.n_machine; c < pool.p_; ++c)
       if (!default_full.count(pool.cols_.table_index[c])) fixed.estimate.push_back(pool.cols_.names[c]);
-    // and the pool's exclusions of default setup parameters
-    for (const std::string& f : opt.fix)
-      if (pool.table_.Index(f) >= pool.table_.num_machine()) fixed.fix.push_back(f);
+    // and the pool's exclusions of default setup parameters, the probe tip's
+    // offsets among them although the table counts them as machine columns
+    // (filtering on the setup part let a fixed tip back in)
+    fixed.fix = opt.fix;
   }
   res.quality = AssessPlan(ds, fixed, &res.observations);
   res.reference = AssessPlan(ds, fixed, nullptr);
