@@ -9,6 +9,7 @@
 #include <string>
 
 #include "fivecal/observations/columns.h"
+#include "fivecal/solve/analytic_residuals.h"
 
 namespace py = pybind11;
 using namespace fivecal;
@@ -86,4 +87,18 @@ void BindColumns(py::module_& m) {
           },
           py::arg("kind"), py::arg("rows"), py::arg("numbers"), py::arg("strings"), py::arg("positions") = py::none())
       .def("finish", &ColumnLoader::Finish, py::arg("whole") = true);
+  // How many prepared residual rows are alive, and the most at once since the
+  // last reset (solve/analytic_residuals.h): what shows that the streaming
+  // fit of a long dataset holds a chunk of them per thread, not one per sample.
+  m.def(
+      "prepared_rows",
+      [](bool reset_peak) {
+        if (reset_peak) ResetPreparedRowsPeak();
+        py::dict d;
+        d["alive"] = PreparedRowsAlive();
+        d["peak"] = PreparedRowsPeak();
+        d["chunk"] = kPreparedChunk;
+        return d;
+      },
+      py::arg("reset_peak") = false);
 }

@@ -485,3 +485,93 @@ TEST(NormalEquations, LongTrackerDataTakeTheStreamingPath) {
 
 }  // namespace
 }  // namespace fivecal
+
+#include "fivecal/solve/analytic_residuals.h"
+
+namespace fivecal {
+namespace {
+
+// A batch evaluated whole (AnalyticResiduals::Evaluate, as Ceres calls it).
+void EvaluateBatch(const AnalyticResiduals& b, const Eigen::VectorXd& v, const std::vector<int>& est,
+                   Eigen::VectorXd* r, Eigen::MatrixXd* J) {
+  std::vector<const double*> params;
+  for (int i : est) params.push_back(&v[i]);
+  r->resize(b.num_residuals());
+  *J = Eigen::MatrixXd::Zero(b.num_residuals(), est.size());
+  std::vector<double*> cols;
+  for (size_t c = 0; c < est.size(); ++c) cols.push_back(J->col(c).data());
+  ASSERT_TRUE(b.Evaluate(params.data(), r->data(), cols.data()));
+}
+
+TEST(NormalEquations, PassesHoldAChunkOfPreparedRowsPerThread) {
+  // Interleaved kinds of every sort, then a long R-test trace: the streaming
+  // passes prepare the analytic rows a chunk at a time, so the prepared rows
+  // alive never exceed the held ones (templated kinds, scale bar) plus a
+  // chunk per thread, whatever the data's length.
+  Dataset ds = EveryKind();
+  const int templated_and_artefact = [&] {
+    int k = 0;
+    for (const Observation& o : ds.observations) k += KindOf(o).analytic() ? 0 : 1;
+    return k + 1;  // the scale bar
+  }();
+  const Dataset trace = RTest(20000, false, kTruth, 5);
+  ds.observations.insert(ds.observations.end(), trace.observations.begin(), trace.observations.end());
+  const ParameterTable table(ds);
+  std::vector<int> est;
+  for (const char* n : {"EX0C", "EA0C", "EB0A", "EB0C", "EY0C", "instrument.T1.x", "instrument.CAM.c",
+                        "instrument.L1.length", "machined.P1.z", "facet.F1", "dbb.D1.length", "ball3d.R1.table.x",
+                        "sphere.S1.x"})
+    est.push_back(table.Require(n));
+  std::mt19937 rng(6);
+  std::normal_distribution<double> n01(0.0, 1e-5);
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  for (int i : est) v[i] = n01(rng);
+
+  const int64_t before = PreparedRowsAlive();
+  ResetPreparedRowsPeak();
+  {
+    const NormalEquationProblem ne(ds, table, v, est, 2);
+    EXPECT_EQ(PreparedRowsAlive() - before, templated_and_artefact);
+    const NormalEquations acc = ne.Accumulate(v, true);
+    Eigen::VectorXd w = v;
+    w[est[0]] += 1e-6;
+    ne.Cost(w);
+    ne.Residuals(w);
+    const int64_t peak = PreparedRowsPeak() - before;
+    EXPECT_GT(peak, templated_and_artefact);  // rows were prepared, and counted
+    EXPECT_LE(peak, templated_and_artefact + 2 * kPreparedChunk);
+    // The sums are those of the dense path, which holds every row.
+    ResetPreparedRowsPeak();
+    Problem dense(ds, table, v, est);
+    EXPECT_GE(PreparedRowsPeak() - before, static_cast<int64_t>(ds.observations.size()));
+    ExpectSameSums(acc, DenseReference(dense));
+  }
+  EXPECT_EQ(PreparedRowsAlive(), before);
+
+  // Both storages evaluate the same rows to the same bits, and refresh alike.
+  AnalyticResiduals all(ds, table, v, est, RowStorage::kAll);
+  AnalyticResiduals chunk(ds, table, v, est, RowStorage::kPerChunk);
+  EXPECT_EQ(static_cast<int>(all.rows().size()), static_cast<int>(ds.observations.size()) + 1);
+  EXPECT_EQ(static_cast<int>(chunk.rows().size()), templated_and_artefact);
+  EXPECT_EQ(all.num_prepared(), chunk.num_prepared());
+  EXPECT_EQ(all.row_source(), chunk.row_source());
+  for (int round = 0; round < 2; ++round) {
+    Eigen::VectorXd r1, r2;
+    Eigen::MatrixXd J1, J2;
+    EvaluateBatch(all, v, est, &r1, &J1);
+    EvaluateBatch(chunk, v, est, &r2, &J2);
+    EXPECT_EQ((r1 - r2).cwiseAbs().maxCoeff(), 0.0) << round;
+    EXPECT_EQ((J1 - J2).cwiseAbs().maxCoeff(), 0.0) << round;
+    // Readings and axes edited in place, then refreshed.
+    for (Observation& o : ds.observations) {
+      o.reading += n01(rng);
+      for (int c = 0; c < 3; ++c) o.measured[c] += n01(rng);
+      o.axes[0] += n01(rng);
+    }
+    all.Refresh(table, v);
+    chunk.Refresh(table, v);
+  }
+}
+
+}  // namespace
+}  // namespace fivecal

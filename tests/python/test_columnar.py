@@ -409,3 +409,39 @@ def test_three_noise_rows_read_numbered_or_as_a_vector(tmp_path):
     t = t.rename_columns([{"sigma_x": "sigma_1", "sigma_y": "sigma_2", "sigma_z": "sigma_3"}.get(c, c)
                           for c in t.schema.names]).replace_schema_metadata(t.schema.metadata)
     assert columnar.read_parquet(_write(t, tmp_path / "n.parquet")).to_dict() == ds.to_dict()
+
+
+def test_the_streaming_fit_of_a_parquet_trace_holds_a_chunk_of_prepared_rows(tmp_path):
+    # A long R-test trace from a Parquet file: the normal-equation passes
+    # prepare its rows a chunk at a time (a chunk per thread alive at most,
+    # as the core counts them), and the fit is still the dense one, which
+    # holds a prepared row per sample.
+    from fivecal import _core
+
+    m = fivecal.Machine.load(os.path.join(ROOT, "examples", "machines", "c600u.json"))
+    true = {"EB0A": 3e-5, "EA0C": 4e-5, "EB0C": -2e-5, "EY0C": -0.012}
+    table = [50.0, 0.0, 80.0]
+    n = 40_000
+    rng = np.random.default_rng(4)
+    tilt, turn = np.radians(rng.uniform(0, 60, n)), np.radians(rng.uniform(0, 360, n))
+    tool_axes = np.column_stack([np.sin(tilt) * np.cos(turn), np.sin(tilt) * np.sin(turn), np.cos(tilt)])
+    axes = m.inverse(np.tile(table, (n, 1)), tool_axes)
+    meas = m.tool_point(axes, true) - np.array(table) + rng.normal(0, 5e-4, (n, 3))
+    path = tmp_path / "trace.parquet"
+    fivecal.save_dataset(fivecal.ball_dataset(m, "ball3d", axes, m.tip, table, measured=meas, setup="R1"), path)
+    ds = fivecal.load_dataset(path)
+
+    before = _core.prepared_rows(reset_peak=True)
+    s = fivecal.identify(ds, list(true), fit_path="normal_equations", num_threads=2)
+    after = _core.prepared_rows()
+    assert after["alive"] == before["alive"]
+    assert 0 < after["peak"] - before["alive"] <= 2 * after["chunk"] < n
+    _core.prepared_rows(reset_peak=True)
+    d = fivecal.identify(ds, list(true), fit_path="dense")
+    assert _core.prepared_rows()["peak"] - before["alive"] >= n  # the count sees held rows
+    assert (d.fit_path, s.fit_path) == ("dense", "normal_equations")
+    assert s.verdict == d.verdict == "ok"
+    for k in d.estimated:
+        assert abs(d.values[k] - s.values[k]) < 1e-9 * d.std[k], k
+        assert s.std[k] == pytest.approx(d.std[k], rel=1e-8), k
+    np.testing.assert_allclose(s.residuals, d.residuals, atol=1e-9 * d.rms)

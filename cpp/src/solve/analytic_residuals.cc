@@ -1,6 +1,7 @@
 #include "fivecal/solve/analytic_residuals.h"
 
 #include <algorithm>
+#include <atomic>
 
 #include "fivecal/model/kinematics.h"
 #include "fivecal/observations/registry.h"
@@ -57,9 +58,34 @@ bool AnyTemplated(const Dataset& ds) {
   return false;
 }
 
+std::atomic<int64_t> g_alive{0}, g_peak{0};
+
+void CountAlive(int64_t k) {
+  const int64_t a = g_alive.fetch_add(k) + k;
+  int64_t p = g_peak.load();
+  while (a > p && !g_peak.compare_exchange_weak(p, a)) {
+  }
+}
+
+// Rows prepared for one chunk's evaluation, counted while they are in use.
+struct ChunkCount {
+  explicit ChunkCount(int64_t k) : k(k) { CountAlive(k); }
+  ~ChunkCount() { CountAlive(-k); }
+  int64_t k;
+};
+
 }  // namespace
 
-AnalyticResiduals::~AnalyticResiduals() = default;
+int64_t PreparedRowsAlive() { return g_alive.load(); }
+int64_t PreparedRowsPeak() { return g_peak.load(); }
+void ResetPreparedRowsPeak() { g_peak.store(g_alive.load()); }
+
+AnalyticResiduals::~AnalyticResiduals() { CountAlive(-counted_); }
+
+void AnalyticResiduals::CountHeld(int64_t rows) {
+  CountAlive(rows - counted_);
+  counted_ = rows;
+}
 
 AnalyticEval::AnalyticEval(const Machine& m, const Eigen::VectorXd& values, const KinematicModel& model,
                            const std::vector<int>& estimated, const std::vector<int>& block_of,
@@ -72,32 +98,47 @@ AnalyticEval::AnalyticEval(const Machine& m, const Eigen::VectorXd& values, cons
 }
 
 AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& table,
-                                     const Eigen::VectorXd& values, const std::vector<int>& estimated)
-    : ds_(ds), values_(values), estimated_(estimated) {
+                                     const Eigen::VectorXd& values, const std::vector<int>& estimated,
+                                     RowStorage storage)
+    : ds_(ds), table_(&table), storage_(storage), values_(values), estimated_(estimated) {
   block_of_.assign(table.size(), -1);
   for (size_t b = 0; b < estimated_.size(); ++b) {
     block_of_[estimated_[b]] = static_cast<int>(b);
     mutable_parameter_block_sizes()->push_back(1);
   }
-  rows_.reserve(ds.observations.size());
+  const bool all = storage_ == RowStorage::kAll;
+  const int n = static_cast<int>(ds.observations.size());
+  if (all) rows_.reserve(n);
   std::unique_ptr<Recorder> recorder;
   if (AnyTemplated(ds)) recorder = NewRecorder(table);
-  for (size_t i = 0; i < ds.observations.size(); ++i) {
+  for (int i = 0; i < n; ++i) {
     const ObservationKind& kind = KindOf(ds.observations[i]);
-    rows_.emplace_back();
-    if (kind.analytic()) PrepareRow(table, static_cast<int>(i), &rows_.back());
-    else RecordRow(*recorder, static_cast<int>(i), &rows_.back());
-    for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(static_cast<int>(i));
+    const bool templated = !kind.analytic();
+    const bool held = all || templated;
+    if (runs_.empty() || runs_.back().kind != &kind)
+      runs_.push_back({&kind, i, i, templated, held ? static_cast<int>(rows_.size()) : -1});
+    runs_.back().end = i + 1;
+    if (held) {
+      rows_.emplace_back();
+      if (templated) RecordRow(*recorder, i, &rows_.back());
+      else PrepareRow(table, i, &rows_.back());
+    }
+    for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(i);
   }
+  held_observations_ = static_cast<int>(rows_.size());
   for (const ObservationKind* kind : ObservationKinds())
     kind->AddArtefactAnalyticRows(ds, table, &rows_, &row_source_);
-  for (int i = 0; i < static_cast<int>(rows_.size()); ++i) {
-    const AnalyticRow& r = rows_[i];
-    if (runs_.empty() || runs_.back().kind != r.kind || rows_[runs_.back().begin].variant != r.variant)
-      runs_.push_back({r.kind, i, i, r.piece_begin >= 0});
+  // The artefact rows: runs of their own after the observations'.
+  for (int j = held_observations_; j < static_cast<int>(rows_.size()); ++j) {
+    const AnalyticRow& r = rows_[j];
+    const int i = n + (j - held_observations_);
+    if (j == held_observations_ || runs_.back().kind != r.kind || rows_[runs_.back().held].variant != r.variant)
+      runs_.push_back({r.kind, i, i, r.piece_begin >= 0, j});
     runs_.back().end = i + 1;
   }
+  num_prepared_ = n + static_cast<int>(rows_.size()) - held_observations_;
   set_num_residuals(static_cast<int>(row_source_.size()));
+  CountHeld(static_cast<int64_t>(rows_.size()));
 }
 
 void AnalyticResiduals::PrepareRow(const ParameterTable& table, int i, AnalyticRow* r) const {
@@ -177,15 +218,18 @@ void AnalyticResiduals::EvaluateTemplated(AnalyticEval& e, const AnalyticRow* ro
 void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::VectorXd& values) {
   if (values.size() != values_.size()) throw std::invalid_argument("analytic residuals: wrong number of values");
   values_ = values;
-  // The observation rows come first, one per observation; the artefact rows
-  // after them are made again too: a Monte Carlo trial draws the scale bars'
-  // calibrated lengths, which those rows hold.
+  table_ = &table;
+  // The observation rows come first, one per held observation; the artefact
+  // rows after them are made again too: a Monte Carlo trial draws the scale
+  // bars' calibrated lengths, which those rows hold. Rows prepared per chunk
+  // are read from the dataset at each evaluation anyway.
   const size_t n = ds_.observations.size();
+  const bool all = storage_ == RowStorage::kAll;
   std::unique_ptr<Recorder> recorder;
   if (!pieces_.empty() || AnyTemplated(ds_)) recorder = NewRecorder(table);
-  for (size_t i = 0; i < n; ++i) {
-    if (KindOf(ds_.observations[i]).analytic()) PrepareRow(table, static_cast<int>(i), &rows_[i]);
-    else RecordRow(*recorder, static_cast<int>(i), &rows_[i]);
+  for (size_t i = 0, h = 0; i < n; ++i) {
+    if (!KindOf(ds_.observations[i]).analytic()) RecordRow(*recorder, static_cast<int>(i), &rows_[h++]);
+    else if (all) PrepareRow(table, static_cast<int>(i), &rows_[h++]);
   }
   RemakeArtefactRows(table);
 }
@@ -203,23 +247,40 @@ bool AnalyticResiduals::Evaluate(double const* const* parameters, double* residu
     for (int b = 0; b < nb; ++b)
       if (jacobians[b]) std::fill(jacobians[b], jacobians[b] + nr, 0.0);
   AnalyticEval e(m, v, model, estimated_, block_of_, residuals, jacobians);
-  for (const Run& run : runs_) {
-    if (run.templated) EvaluateTemplated(e, rows_.data() + run.begin, run.end - run.begin);
-    else run.kind->EvaluateAnalytic(e, rows_.data() + run.begin, run.end - run.begin);
-  }
+  std::vector<AnalyticRow> scratch;
+  for (const Run& run : runs_) EvaluateRun(e, run, run.begin, run.end, &scratch);
   return true;
 }
 
+void AnalyticResiduals::EvaluateRun(AnalyticEval& e, const Run& run, int begin, int end,
+                                    std::vector<AnalyticRow>* scratch) const {
+  if (run.held >= 0) {
+    const AnalyticRow* rows = rows_.data() + run.held + (begin - run.begin);
+    if (run.templated) EvaluateTemplated(e, rows, end - begin);
+    else run.kind->EvaluateAnalytic(e, rows, end - begin);
+    return;
+  }
+  // Rows of an analytic kind prepared per chunk: from the observations,
+  // into the caller's buffer (whose rows keep their vectors' storage).
+  for (int s = begin; s < end; s += kPreparedChunk) {
+    const int c = std::min(end, s + kPreparedChunk) - s;
+    if (static_cast<int>(scratch->size()) < c) scratch->resize(c);
+    const ChunkCount count(c);
+    for (int k = 0; k < c; ++k) PrepareRow(*table_, s + k, &(*scratch)[k]);
+    run.kind->EvaluateAnalytic(e, scratch->data(), c);
+  }
+}
+
 int AnalyticResiduals::EvaluateRows(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end,
-                                    double* residuals, double** jacobians) const {
+                                    double* residuals, double** jacobians, std::vector<AnalyticRow>* scratch) const {
   AnalyticEval e(ds_.machine(), v, model, estimated_, block_of_, residuals, jacobians);
+  std::vector<AnalyticRow> local;
+  if (!scratch) scratch = &local;
   // Interleaved kinds make as many runs as rows: find the first one, do not scan.
   auto run = std::partition_point(runs_.begin(), runs_.end(), [&](const Run& r) { return r.end <= begin; });
   for (; run != runs_.end() && run->begin < end; ++run) {
     const int b = std::max(begin, run->begin), f = std::min(end, run->end);
-    if (b >= f) continue;
-    if (run->templated) EvaluateTemplated(e, rows_.data() + b, f - b);
-    else run->kind->EvaluateAnalytic(e, rows_.data() + b, f - b);
+    if (b < f) EvaluateRun(e, *run, b, f, scratch);
   }
   return e.row;
 }
@@ -227,9 +288,8 @@ int AnalyticResiduals::EvaluateRows(const KinematicModel& model, const Eigen::Ve
 // The artefact rows (scale bars) read their lengths from the dataset, which a
 // Monte Carlo trial edits: made again after the observation rows.
 void AnalyticResiduals::RemakeArtefactRows(const ParameterTable& table) {
-  const size_t n = ds_.observations.size();
   const size_t before = rows_.size();
-  rows_.resize(n);
+  rows_.resize(held_observations_);
   std::vector<int> source;
   for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactAnalyticRows(ds_, table, &rows_, &source);
   if (rows_.size() != before)
@@ -237,11 +297,14 @@ void AnalyticResiduals::RemakeArtefactRows(const ParameterTable& table) {
 }
 
 void AnalyticResiduals::RefreshAxes(const ParameterTable& table) {
-  const Machine& m = ds_.machine();
-  const size_t n = ds_.observations.size();
-  for (size_t i = 0; i < n; ++i) {
-    rows_[i].q.resize(m.num_axes());
-    AxisValuesToInternal(m, ds_.observations[i].axes.data(), rows_[i].q.data());
+  // Rows prepared per chunk read the axes at each evaluation.
+  if (storage_ == RowStorage::kAll) {
+    const Machine& m = ds_.machine();
+    const size_t n = ds_.observations.size();
+    for (size_t i = 0; i < n; ++i) {
+      rows_[i].q.resize(m.num_axes());
+      AxisValuesToInternal(m, ds_.observations[i].axes.data(), rows_[i].q.data());
+    }
   }
   RemakeArtefactRows(table);
 }

@@ -35,7 +35,9 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
     : ds_(ds), estimated_(estimated), num_threads_(std::max(1, num_threads)) {
   if (values.size() != table.size())
     throw std::invalid_argument("identify: expected " + std::to_string(table.size()) + " values");
-  batch_ = std::make_unique<AnalyticResiduals>(ds, table, values, estimated_);
+  // Rows prepared per chunk: the passes hold a chunk of prepared rows per
+  // thread, not one per sample (analytic_residuals.h, RowStorage).
+  batch_ = std::make_unique<AnalyticResiduals>(ds, table, values, estimated_, RowStorage::kPerChunk);
   const std::vector<int>& src = batch_->row_source();
   const int nr = batch_->num_residuals();
   row_sigma_.resize(nr);
@@ -108,6 +110,7 @@ void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, b
     try {
       std::vector<double> r, jac;
       std::vector<double*> cols(p);
+      std::vector<AnalyticRow> prepared;  // the thread's chunk of prepared rows
       for (int b; !failed && (b = next++) < nb;) {
         const Block& B = blocks_[b];
         const bool tail = B.begin >= static_cast<int>(ds_.observations.size());
@@ -128,7 +131,7 @@ void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, b
         for (int s = B.begin; s < B.end;) {
           const int e = tail ? B.end : std::min(B.end, s + kChunk);
           if (jacobian) std::fill(jac.begin(), jac.end(), 0.0);
-          const int m = batch_->EvaluateRows(model, values, s, e, r.data(), jacobian ? cols.data() : nullptr);
+          const int m = batch_->EvaluateRows(model, values, s, e, r.data(), jacobian ? cols.data() : nullptr, &prepared);
           if (m > ld || row + m > num_rows()) throw std::logic_error("normal equations: chunk overflow");
           if (residuals) std::copy(r.begin(), r.begin() + m, residuals + row);
           const Eigen::Map<const Eigen::VectorXd> sig(row_sigma_.data() + row, m);

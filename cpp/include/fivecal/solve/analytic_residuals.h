@@ -26,6 +26,7 @@
 #include <ceres/ceres.h>
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <utility>
@@ -112,14 +113,36 @@ class AnalyticEval {
   Eigen::Matrix<double, 3, Eigen::Dynamic> J_;
 };
 
+// Prepared rows alive in this process: those every batch holds, plus those
+// a per-chunk evaluation holds for the moment; and the most there were at
+// once since the last ResetPreparedRowsPeak(). What tests and benchmarks read
+// to see that the streaming fit of long data holds a chunk of prepared rows
+// per thread, not one per sample.
+int64_t PreparedRowsAlive();
+int64_t PreparedRowsPeak();
+void ResetPreparedRowsPeak();
+
+// How a batch holds the rows of the observations of analytic kinds.
+//   kAll:      prepared once, all held (the dense path: its Jacobian is
+//              data-sized anyway, and Refit compares rows across refreshes);
+//   kPerChunk: prepared from the dataset at each evaluation, a chunk of at
+//              most kPreparedChunk rows at a time, and dropped after it (the
+//              streaming fit of long data: a prepared row is ~0.35 kB, which
+//              at 10^7 samples is more than the data itself). Rows of the
+//              templated kinds and the artefact rows are held in both.
+enum class RowStorage { kAll, kPerChunk };
+constexpr int kPreparedChunk = 256;
+
 class AnalyticResiduals : public ceres::CostFunction {
  public:
   ~AnalyticResiduals() override;
 
   // values: every parameter of the table (constants for the fixed ones);
   // estimated: the table indices that are the parameter blocks, in order.
+  // With kPerChunk, `table` is read at every evaluation: it must outlive
+  // the batch.
   AnalyticResiduals(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
-                    const std::vector<int>& estimated);
+                    const std::vector<int>& estimated, RowStorage storage = RowStorage::kAll);
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override;
@@ -131,7 +154,10 @@ class AnalyticResiduals : public ceres::CostFunction {
   // the rows depend on nothing else that changed (Refit::Session checks it
   // against Refresh on its first trials).
   void RefreshAxes(const ParameterTable& table);
+  // The held rows: with kAll one per observation, then the artefact rows
+  // (kPerChunk: those of the templated kinds and the artefact rows only).
   const std::vector<AnalyticRow>& rows() const { return rows_; }
+  RowStorage storage() const { return storage_; }
 
   // Per row: the observation index, or -(1 + scale bar index).
   const std::vector<int>& row_source() const { return row_source_; }
@@ -149,10 +175,12 @@ class AnalyticResiduals : public ceres::CostFunction {
   // jacobians are wanted). Residual rows are written from residuals[0],
   // column b of the estimated set at jacobians[b][0..] (zeroed by the
   // caller; null: residuals only). Returns the number of residual rows.
-  // Safe to call from several threads at once (it writes only its outputs).
-  int num_prepared() const { return static_cast<int>(rows_.size()); }
+  // Safe to call from several threads at once (it writes only its outputs
+  // and `scratch`, the caller's buffer for rows prepared per chunk, kept
+  // between calls so that their buffers are reused; null: one of the call).
+  int num_prepared() const { return num_prepared_; }
   int EvaluateRows(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end,
-                   double* residuals, double** jacobians) const;
+                   double* residuals, double** jacobians, std::vector<AnalyticRow>* scratch = nullptr) const;
 
  private:
   // A templated residual of an observation without the analytic batch, as
@@ -176,12 +204,20 @@ class AnalyticResiduals : public ceres::CostFunction {
     const ObservationKind* kind;
     int begin, end;
     bool templated;
+    int held;  // rows_ index of row `begin`; -1: prepared per chunk
   };
+  void EvaluateRun(AnalyticEval& e, const Run& run, int begin, int end, std::vector<AnalyticRow>* scratch) const;
+  void CountHeld(int64_t rows);
   const Dataset& ds_;
+  const ParameterTable* table_;  // kPerChunk: read at every evaluation
+  RowStorage storage_;
+  int num_prepared_ = 0;
+  int held_observations_ = 0;  // rows_ of observations (the artefact rows follow)
+  int64_t counted_ = 0;  // held rows counted in PreparedRowsAlive
   Eigen::VectorXd values_;
   std::vector<int> estimated_;
   std::vector<int> block_of_;  // per table index: block or -1
-  std::vector<AnalyticRow> rows_;  // one per observation or artefact row
+  std::vector<AnalyticRow> rows_;  // the held rows (rows())
   std::vector<Piece> pieces_;      // of the templated rows, in row order
   std::vector<Run> runs_;
   std::vector<int> row_source_;

@@ -6,7 +6,10 @@
 // An R-test or ball-bar trace at 1 kHz has millions of rows and a handful of
 // unknowns: the dense Jacobian then costs memory and traffic out of all
 // proportion to the p x p system that decides the fit. Memory is O(p^2) plus
-// the data (and one cost function per observation of a templated kind).
+// the data, the residual rows and their sigmas (and one cost function per
+// observation of a templated kind): the analytic kinds' prepared rows are
+// made a chunk at a time during each pass (RowStorage::kPerChunk), so a
+// pass holds a chunk of them per thread, not one per observation.
 //
 // The sums run over a fixed partition of the rows (kBlocks blocks, each
 // summed in row order, then the blocks in order), so the result does not
