@@ -312,12 +312,20 @@ def _design_scores(Mb, cb, sb, info, cnt, sph, bar_M, bar_s, core, log_scale2, t
         # Unused columns: decoupled unit eigenvalues (log 1 = 0, never null).
         Ms = A * s[:, None] * s[None, :] + jnp.diag(jnp.where(live, 0.0, 1.0))
         lam = jnp.linalg.eigvalsh(Ms)
+        # The Cholesky below must wait for eigvalsh (the zero times an
+        # eigenvalue makes it wait; lax.optimization_barrier does not survive
+        # XLA:CPU's compilation): XLA:CPU runs independent batched LAPACK calls
+        # at once, each on a thread of its intra-op pool and each blocking its
+        # thread until the pool has run its share of the batch; with two pool
+        # threads (2 cores) both then wait for each other for ever (seen with
+        # jaxlib 0.10: both pool threads parked in jax::ParallelBatchMap).
+        Ss = Ms[pm:, pm:] + 0.0 * lam[-1]
         pos = lam > tol * tol * lam[-1]
         n_active = active.sum()
         deficiency = n_active - live.sum() + (~pos).sum()
         logsum = jnp.where(pos, jnp.log(jnp.where(pos, lam, 1.0)), 0.0).sum()
         if p > pm:
-            L = jnp.linalg.cholesky(Ms[pm:, pm:])      # NaN when not positive definite
+            L = jnp.linalg.cholesky(Ss)      # NaN when not positive definite
             logdet_ss = 2.0 * jnp.log(jnp.diagonal(L)).sum()
         else:
             logdet_ss = 0.0
