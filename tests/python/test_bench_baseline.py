@@ -260,3 +260,41 @@ def test_design_case_has_a_jax_figure():
     assert r["jax_agreement"] == "same indexations" and r["jax_same_indexations"]
     assert r["jax_evaluations"] + 1 == r["fivecal_evaluations"]
     assert r["jax_criterion_relative_error"] < 1e-9
+
+
+def test_jax_design_scoring_runs_its_lapack_calls_one_after_the_other():
+    """The scoring's two batched LAPACK calls (eigvalsh, then the Cholesky of
+    the setup block) must not run at once: on XLA:CPU each blocks a thread of
+    the intra-op pool until the pool has run its share of the batch, and on a
+    2-core machine the two deadlocked (the 10,000-candidate case hung). The
+    compiled program must make the Cholesky depend on the eigenvalues."""
+    pytest.importorskip("jax")
+    import re
+
+    import baseline_jax as jbase
+
+    p, G, pm = 12, 5, 6
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(G, 20, p))
+    data = (np.einsum("gri,grj->gij", X, X), np.ones((G, p), int), np.ones((G, 1), int), np.zeros((0, p, p)),
+            np.zeros((0, 2), int), np.arange(p) < pm, np.zeros(pm))
+    hlo = jbase._design_add_scores.lower(np.zeros((p, p)), np.zeros(p, int), np.zeros(1, int), data,
+                                         tol=1e-7, pm=pm).compile().as_text()
+    entry = hlo[hlo.index("\nENTRY"):]
+    uses, target = {}, {}
+    for line in entry.splitlines():
+        m = re.match(r"\s*(?:ROOT )?%(\S+) = (.*)", line)
+        if m:
+            uses[m.group(1)] = set(re.findall(r"%([\w.\-]+)", m.group(2)))
+            t = re.search(r'custom_call_target="(\w+)"', line)
+            if t:
+                target[t.group(1)] = m.group(1)
+    eigh = next(v for k, v in target.items() if "syevd" in k)
+    chol = next(v for k, v in target.items() if "potrf" in k)
+    seen, todo = set(), [chol]
+    while todo:
+        n = todo.pop()
+        if n not in seen:
+            seen.add(n)
+            todo += uses.get(n, ())
+    assert eigh in seen, "the Cholesky can run concurrently with eigvalsh"
