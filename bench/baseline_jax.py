@@ -280,3 +280,227 @@ def ball3d_fit_function(machine, names):
 def block(out):
     """Wait for JAX's asynchronous dispatch (timings must include the work)."""
     return jax.block_until_ready(out)
+
+
+# ---- test design: greedy + exchange D-optimal search ---------------------------
+# (the search of baseline_numpy.NumpyDesign and of fivecal.design.design_plan,
+# criterion "d", method "exchange", written the JAX way)
+
+from functools import partial  # noqa: E402
+
+def _design_scores(Mb, cb, sb, info, cnt, sph, bar_M, bar_s, core, log_scale2, tol, pm):
+    """Scores of the selections base + one candidate, for every candidate.
+
+    Mb (p, p), cb (p,), sb (n_spheres,): the base selection's touch information,
+    column and sphere counts; info (G, p, p), cnt (G, p), sph (G, n_spheres):
+    the candidates'. Returns (deficiency, nonnull, dcrit), each (G,): the
+    ranking of fivecal's Evaluate (null directions counted against tol^2
+    lambda_max of the column-scaled matrix; Ds-criterion on the Schur
+    complement of the machine columns in characteristic units)."""
+    p = Mb.shape[0]
+    A = Mb + info
+    S = sb + sph
+    if bar_M.shape[0]:      # a scale bar's row counts once both of its balls are touched
+        on = (S[:, bar_s[:, 0]] > 0) & (S[:, bar_s[:, 1]] > 0)
+        A = A + jnp.einsum("gb,bij->gij", on.astype(A.dtype), bar_M)
+    active = core | ((cb + cnt) > 0)
+
+    def one(A, active):
+        d = jnp.diagonal(A)
+        live = active & (d > 0)
+        s = jnp.where(live, 1.0 / jnp.sqrt(jnp.where(live, d, 1.0)), 0.0)
+        # Unused columns: decoupled unit eigenvalues (log 1 = 0, never null).
+        Ms = A * s[:, None] * s[None, :] + jnp.diag(jnp.where(live, 0.0, 1.0))
+        lam = jnp.linalg.eigvalsh(Ms)
+        # The Cholesky below must wait for eigvalsh (the zero times an
+        # eigenvalue makes it wait; lax.optimization_barrier does not survive
+        # XLA:CPU's compilation): XLA:CPU runs independent batched LAPACK calls
+        # at once, each on a thread of its intra-op pool and each blocking its
+        # thread until the pool has run its share of the batch; with two pool
+        # threads (2 cores) both then wait for each other for ever (seen with
+        # jaxlib 0.10: both pool threads parked in jax::ParallelBatchMap).
+        Ss = Ms[pm:, pm:] + 0.0 * lam[-1]
+        pos = lam > tol * tol * lam[-1]
+        n_active = active.sum()
+        deficiency = n_active - live.sum() + (~pos).sum()
+        logsum = jnp.where(pos, jnp.log(jnp.where(pos, lam, 1.0)), 0.0).sum()
+        if p > pm:
+            L = jnp.linalg.cholesky(Ss)      # NaN when not positive definite
+            logdet_ss = 2.0 * jnp.log(jnp.diagonal(L)).sum()
+        else:
+            logdet_ss = 0.0
+        shift = (jnp.log(d[:pm]) + log_scale2).sum()
+        dc = (logsum - logdet_ss + shift) / pm
+        dcrit = jnp.where((deficiency == 0) & jnp.isfinite(dc), dc, -jnp.inf)
+        return deficiency, logsum / n_active, dcrit
+
+    return jax.vmap(one)(A, active)
+
+
+@partial(jax.jit, static_argnames=("tol", "pm"))
+def _design_add_scores(Mb, cb, sb, data, tol, pm):
+    """Greedy step: the base plus each candidate indexation."""
+    return _design_scores(Mb, cb, sb, *data, tol, pm)
+
+
+@partial(jax.jit, static_argnames=("tol", "pm"))
+def _design_swap_scores(Mbs, cbs, sbs, data, tol, pm):
+    """Exchange pass: for each chosen indexation, the selection without it plus
+    each candidate -> (k, G) scores; lax.map over the k bases keeps one (G, p, p)
+    stack alive at a time."""
+    return lax.map(lambda b: _design_scores(*b, *data, tol, pm), (Mbs, cbs, sbs))
+
+
+class JaxDesign:
+    """The D-optimal greedy + exchange search of fivecal.design.design_plan
+    (criterion "d", method "exchange") in JAX: the Jacobian of JaxProblem's
+    residuals at the nominal machine by ``jacfwd`` and the per-indexation
+    information matrices in one jitted call, each step's candidate selections
+    scored by one jitted, vmapped function (eigvalsh, Cholesky of the setup
+    block); the discrete choices in Python around it. The rules are
+    NumpyDesign's (a setup column counts once a chosen touch uses it, a scale
+    bar's row once both of its balls are touched; rank first, then the
+    Ds-criterion) and the choice among near-equal candidates is fivecal's:
+    candidates in its scan order, a later one taken only when strictly better
+    beyond its tolerance.
+
+    Built once per pool (parsing, bookkeeping); ``search`` runs everything
+    that computes, so its first call compiles."""
+
+    def __init__(self, dataset, names, n_machine, scale, groups, tol=1e-7):
+        self.prob = JaxProblem(dataset, names)
+        p = self.prob.np
+        if p.b_idx.size:
+            raise ValueError("JaxDesign: probing datasets only (facets, spheres, scale bars)")
+        self.names, self.p, self.pm, self.tol = list(names), len(names), int(n_machine), float(tol)
+        self.groups = np.asarray(groups, dtype=int)
+        self.G = int(self.groups.max()) + 1
+        col = {n: i for i, n in enumerate(self.names)}
+        # Touch rows (facets, then spheres: JaxProblem's order) gathered per
+        # indexation into a zero-padded (G, rows, p) stack: row n_touch is zero.
+        row_obs = np.concatenate([p.f_idx, p.s_idx]).astype(int)
+        self.n_touch = row_obs.size
+        g_row = self.groups[row_obs]
+        order = np.argsort(g_row, kind="stable")
+        size = np.bincount(g_row, minlength=self.G)
+        start = np.concatenate([[0], np.cumsum(size)[:-1]])
+        rank = np.arange(order.size) - start[g_row[order]]
+        self.gather = np.full((self.G, int(size.max())), self.n_touch)
+        self.gather[g_row[order], rank] = order
+        # Activation: facet offsets and sphere centres by touch, sphere touches by sphere.
+        sphere_ids = sorted(set(p.s_ids))
+        sph = {s: i for i, s in enumerate(sphere_ids)}
+        self.cnt = np.zeros((self.G, self.p), dtype=int)
+        self.sph = np.zeros((self.G, max(1, len(sphere_ids))), dtype=int)
+        for i, t in zip(p.f_idx, p.f_ids):
+            if f"facet.{t}" in col:
+                np.add.at(self.cnt, (self.groups[i], col[f"facet.{t}"]), 1)
+        for i, t in zip(p.s_idx, p.s_ids):
+            self.sph[self.groups[i], sph[t]] += 1
+            for a in "xyz":
+                if f"sphere.{t}.{a}" in col:
+                    self.cnt[self.groups[i], col[f"sphere.{t}.{a}"]] += 1
+        self.bar_s = np.array([[sph[b[0]], sph[b[1]]] for b in p.bars], dtype=int).reshape(-1, 2)
+        self.core = np.arange(self.p) < self.pm
+        self.log_scale2 = 2.0 * np.log(np.asarray(scale, float)[: self.pm])
+        prob, gather, n_touch = self.prob, self.gather, self.n_touch
+
+        def information(x):
+            J = jax.jacfwd(prob.residuals)(x)
+            Jt = jnp.concatenate([J[:n_touch], jnp.zeros((1, J.shape[1]))])[gather]
+            Jb = J[n_touch:]
+            return jnp.einsum("gri,grj->gij", Jt, Jt), jnp.einsum("bi,bj->bij", Jb, Jb)
+
+        self._information = jax.jit(information)
+        self.evaluations = 0
+
+    def search(self, k, max_passes=50):
+        """Jacobian, information, greedy forward selection of k indexations,
+        then best-swap exchange passes while a swap improves. Returns
+        (groups, history, evaluations); evaluations counts the candidate
+        selections of the search (the unchosen ones of each step)."""
+        info_d, bar_M = self._information(jnp.zeros(self.p))
+        info = np.asarray(info_d)
+        data = (info_d, self.cnt, self.sph, bar_M, self.bar_s, self.core, self.log_scale2)
+        static = {"tol": self.tol, "pm": self.pm}
+        chosen = np.zeros(self.G, dtype=bool)
+        M = np.zeros((self.p, self.p))
+        cnt = np.zeros(self.p, dtype=int)
+        sph = np.zeros(self.sph.shape[1], dtype=int)
+        history, best, evaluations = [], None, 0
+        for _ in range(k):
+            sc = [np.asarray(x) for x in _design_add_scores(M, cnt, sph, data, **static)]
+            h = np.where(~chosen)[0]
+            evaluations += h.size
+            g = h[_pick(sc, h)]
+            chosen[g] = True
+            M, cnt, sph = M + info[g], cnt + self.cnt[g], sph + self.sph[g]
+            best = tuple(x[g] for x in sc)
+            history.append(float(best[2]) if best[0] == 0 else -np.inf)
+        for _ in range(max_passes):
+            out = np.where(chosen)[0]
+            h = np.where(~chosen)[0]
+            if h.size == 0:
+                break
+            sc = [np.asarray(x) for x in _design_swap_scores(M - info[out], cnt - self.cnt[out],
+                                                             sph - self.sph[out], data, **static)]
+            evaluations += out.size * h.size
+            # fivecal's scan order: removed indexation ascending, then added.
+            flat = (np.arange(out.size)[:, None] * self.G + h[None, :]).ravel()
+            j = _pick([x.ravel() for x in sc], flat, best)
+            if j is None:
+                break
+            g, hh = out[flat[j] // self.G], flat[j] % self.G
+            chosen[g], chosen[hh] = False, True
+            M = M - info[g] + info[hh]
+            cnt = cnt - self.cnt[g] + self.cnt[hh]
+            sph = sph - self.sph[g] + self.sph[hh]
+            best = tuple(x.ravel()[flat[j]] for x in sc)
+            history.append(float(best[2]) if best[0] == 0 else -np.inf)
+        self.evaluations = evaluations
+        return [int(g) for g in np.where(chosen)[0]], history, evaluations
+
+
+def _better(a, b):
+    """fivecal's strict ordering of two (deficiency, nonnull, dcrit)."""
+    if a[0] != b[0]:
+        return a[0] < b[0]
+    if a[0] > 0:
+        return a[1] > b[1] + 1e-12
+    return -a[2] < -b[2] - 1e-9 * max(1.0, abs(b[2]))
+
+
+def _pick(scores, candidates, start=None):
+    """What fivecal's scan picks: over ``candidates`` (indices into the score
+    arrays, in scan order) the current pick is replaced only by a strictly
+    better one (_better), starting from ``start`` (a score; None: the first
+    candidate). Returns the position in ``candidates`` or None when nothing
+    beats ``start``. Only candidates near the best can end as the pick (one
+    far from it is replaced by any near one and never replaces one), so the
+    scan runs over those few."""
+    defi, nonnull, dcrit = (x[candidates] for x in scores)
+    m = defi.min()
+    key = -nonnull if m > 0 else -dcrit
+    kmin = key[defi == m].min()
+    near = np.where((defi == m) & (key <= kmin + 1e-6 * max(1.0, abs(kmin))))[0] if np.isfinite(kmin) \
+        else np.where((defi == m) & (key == kmin))[0]
+    pick, pick_score = None, start
+    for j in near:
+        s = (defi[j], nonnull[j], dcrit[j])
+        if pick_score is None or _better(s, pick_score):
+            pick, pick_score = j, s
+    return pick
+
+
+def design_search_function(dataset, names, n_machine, scale, groups, k, max_passes=50):
+    """A () -> (groups, observation indices, history, evaluations) running the
+    whole JAX search on the candidate dataset (as baseline_numpy.design_search
+    returns); the pool is parsed once here, the first call compiles."""
+    jd = JaxDesign(dataset, names, n_machine, scale, groups)
+
+    def run():
+        chosen, history, evaluations = jd.search(k, max_passes)
+        obs = np.where(np.isin(jd.groups, chosen))[0]
+        return chosen, [int(i) for i in obs], history, evaluations
+
+    return run

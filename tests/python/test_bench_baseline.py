@@ -181,3 +181,120 @@ def test_jax_ball_rows_are_fivecal_s(kind):
     ours, _ = fivecal._core.predict_residuals(ds._core, values)
     theirs = np.asarray(jbase.JaxProblem(ds, list(values)).residuals(np.array(list(values.values()))))
     assert ours.shape == theirs.shape and np.abs(ours - theirs).max() < 1e-9
+
+
+# ---- the JAX design search (bench extra; skipped without jax) -----------------
+
+def _scan(scores, start=None):
+    """fivecal's DesignPlan scan, literally: every candidate in order, the pick
+    replaced by a strictly better one."""
+    import baseline_jax as jbase
+
+    pick, best = None, start
+    for j, s in enumerate(zip(*scores)):
+        if best is None or jbase._better(s, best):
+            pick, best = j, s
+    return pick
+
+
+def test_jax_design_pick_is_fivecals_scan():
+    """The JAX search picks as fivecal's scan does among near ties (within the
+    1e-9 relative tolerance a later candidate does not replace an earlier one),
+    not the arithmetic best, and scans only the candidates near the best."""
+    jax = pytest.importorskip("jax")  # noqa: F841
+    import baseline_jax as jbase
+
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        n = int(rng.integers(1, 12))
+        defi = rng.integers(0, 2, n) if trial % 3 else np.zeros(n, int)
+        base = 17.0 + rng.integers(0, 3, n) * 1e-3
+        # near ties: offsets around the ordering's tolerance (1e-9 relative)
+        dcrit = base + rng.choice([0.0, 5e-9, 2e-8, 1e-7], n) * rng.choice([-1, 1], n)
+        nonnull = rng.integers(0, 3, n) * 1e-13 + rng.integers(0, 2, n) * 1e-3
+        dcrit = np.where(defi == 0, dcrit, -np.inf)
+        scores = (defi, nonnull, dcrit)
+        cand = np.arange(n)
+        assert jbase._pick(scores, cand) == _scan(scores), trial
+        start = (0, 0.0, 17.001)
+        assert jbase._pick(scores, cand, start) == _scan(scores, start), trial
+    # the tolerance matters: a later, barely better candidate does not replace the first
+    scores = (np.zeros(2, int), np.zeros(2), np.array([17.0, 17.0 + 5e-9]))
+    assert jbase._pick(scores, np.arange(2)) == 0
+    assert jbase._pick((scores[0], scores[1], np.array([17.0, 17.0 + 1e-7])), np.arange(2)) == 1
+
+
+def test_jax_design_search_picks_fivecals_plan():
+    """On a small pool of the bench's kind the JAX search (exact jacfwd
+    Jacobian) takes fivecal's design_plan's steps: the same indexations, the
+    same D-criterion after every greedy step and swap, as many candidate
+    selections scored (fivecal also scores the empty one)."""
+    pytest.importorskip("jax")
+    import baseline_jax as jbase
+    from fivecal import design
+
+    m, art, plan, groups = bench.design_pool(400, seed=11)
+    ds = fivecal.simulate(m, plan, artefact=art, tip_radius=tango.TIP_RADIUS)
+    k = 8
+    d = design.design_plan(ds, k, "S3", groups=groups, criterion="d", method="exchange")
+    assert len(d.history) > k        # the exchange passes swapped: they are checked too
+    ref = d.reference
+    scale = [design.characteristic_scale(m, x) for x in ref.parameters]
+    run = jbase.design_search_function(ds, ref.parameters, ref.n_machine, scale, groups, k)
+    g, obs, history, evaluations = run()
+    assert g == d.groups
+    assert obs == list(d.observations)
+    assert len(history) == len(d.history)
+    for ours, theirs in zip(history, d.history):
+        assert ours == theirs == -np.inf or abs(ours - theirs) < 1e-9 * abs(theirs)
+    assert evaluations + 1 == d.evaluations
+
+
+def test_design_case_has_a_jax_figure():
+    """case_design_search times the JAX search like the other JAX cases and
+    records that it found fivecal's plan."""
+    pytest.importorskip("jax")
+    r = bench.case_design_search(300, 1, 1, k=6)
+    assert "jax_skipped" not in r
+    assert r["jax_compile_s"] > 0 and r["jax_s"] > 0 and r["ratio_jax"] == r["jax_s"] / r["fivecal_s"]
+    assert r["jax_agreement"] == "same indexations" and r["jax_same_indexations"]
+    assert r["jax_evaluations"] + 1 == r["fivecal_evaluations"]
+    assert r["jax_criterion_relative_error"] < 1e-9
+
+
+def test_jax_design_scoring_runs_its_lapack_calls_one_after_the_other():
+    """The scoring's two batched LAPACK calls (eigvalsh, then the Cholesky of
+    the setup block) must not run at once: on XLA:CPU each blocks a thread of
+    the intra-op pool until the pool has run its share of the batch, and on a
+    2-core machine the two deadlocked (the 10,000-candidate case hung). The
+    compiled program must make the Cholesky depend on the eigenvalues."""
+    pytest.importorskip("jax")
+    import re
+
+    import baseline_jax as jbase
+
+    p, G, pm = 12, 5, 6
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(G, 20, p))
+    data = (np.einsum("gri,grj->gij", X, X), np.ones((G, p), int), np.ones((G, 1), int), np.zeros((0, p, p)),
+            np.zeros((0, 2), int), np.arange(p) < pm, np.zeros(pm))
+    hlo = jbase._design_add_scores.lower(np.zeros((p, p)), np.zeros(p, int), np.zeros(1, int), data,
+                                         tol=1e-7, pm=pm).compile().as_text()
+    entry = hlo[hlo.index("\nENTRY"):]
+    uses, target = {}, {}
+    for line in entry.splitlines():
+        m = re.match(r"\s*(?:ROOT )?%(\S+) = (.*)", line)
+        if m:
+            uses[m.group(1)] = set(re.findall(r"%([\w.\-]+)", m.group(2)))
+            t = re.search(r'custom_call_target="(\w+)"', line)
+            if t:
+                target[t.group(1)] = m.group(1)
+    eigh = next(v for k, v in target.items() if "syevd" in k)
+    chol = next(v for k, v in target.items() if "potrf" in k)
+    seen, todo = set(), [chol]
+    while todo:
+        n = todo.pop()
+        if n not in seen:
+            seen.add(n)
+            todo += uses.get(n, ())
+    assert eigh in seen, "the Cholesky can run concurrently with eigvalsh"
