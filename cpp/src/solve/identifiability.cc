@@ -297,6 +297,26 @@ std::vector<std::vector<int>> UndeterminedGroups(const Eigen::VectorXd& s, const
   return out;
 }
 
+bool CertainlyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold) {
+  const int p = static_cast<int>(Jw.cols());
+  if (p == 0) return false;
+  // Pivot j of the Cholesky factor of N = Js^T Js, L_jj^2, is the squared
+  // distance d_j^2 of column j from the span of the columns before it. With
+  // x the combination that leaves that distance (x_j = 1), ratio_j^2 =
+  // e_j^T N^+ e_j >= x_j^2 / x^T N x = 1 / d_j^2 (or e_j leans on a free
+  // direction: ratio_j infinite). So d_j < 1 / threshold makes column j
+  // undetermined. The margin covers the pivots' rounding, about p eps
+  // lambda_max <= p eps trace(N) in absolute terms; a failed Cholesky (a
+  // pivot at or below zero) is the same certificate for its column.
+  const Eigen::MatrixXd N = ScaledNormal(Jw * prior.asDiagonal());
+  const double weak2 = 1.0 / (threshold * threshold);
+  const double slack = 1e-10 * N.trace();
+  if (!std::isfinite(slack) || !(slack < 0.5 * weak2)) return false;
+  const Eigen::LLT<Eigen::MatrixXd> llt(N);
+  if (llt.info() != Eigen::Success) return true;
+  return llt.matrixLLT().diagonal().cwiseAbs2().minCoeff() < 0.99 * weak2 - slack;
+}
+
 Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
                                    double threshold) {
   Determination out;

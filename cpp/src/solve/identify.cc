@@ -700,22 +700,28 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     if (num_rows < p && !opt.allow_unidentifiable)
       throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
                                   std::to_string(num_rows) + " residuals");
-    Determination d = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
-    if (!d.undetermined.empty()) {
+    // Here only whether everything is determined matters (the groups only
+    // for a refusal): the Cholesky certificate settles most undetermined
+    // sets without the QR and SVD of AnalyzeDetermination.
+    auto undetermined = [&](const Eigen::MatrixXd& J) {
+      return CertainlyUndetermined(J, prior, kDeterminedRatio) ||
+             !AnalyzeDetermination(J, prior, kDeterminedRatio).undetermined.empty();
+    };
+    const bool start_undetermined = undetermined(Jw);
+    if (start_undetermined) {
       const Solve pre = fit_from(values, setup.prior);
-      Jw = weighted_jacobian_at(pre.values);
-      const Determination d2 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
-      if (d2.undetermined.empty()) {
+      const Eigen::MatrixXd Jpre = weighted_jacobian_at(pre.values);
+      const bool pre_undetermined = undetermined(Jpre);
+      if (!pre_undetermined) {
         values = pre.values;
       } else if (!opt.allow_unidentifiable) {
         // The MAP point may still sit where a weakly seen setup parameter
         // (a sphere with few touches) looks free; the least-squares point
         // decides. Refuse only when it too leaves the set undetermined.
         const Solve ls = fit_from(pre.values, no_prior);
-        Jw = weighted_jacobian_at(ls.values);
-        const Determination d3 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
-        if (!d3.undetermined.empty())
-          throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(d2)));
+        if (undetermined(weighted_jacobian_at(ls.values)))
+          throw std::invalid_argument(
+              UndeterminedMessage(ds, undetermined_groups(AnalyzeDetermination(Jpre, prior, kDeterminedRatio))));
         values = ls.values;
       }
     }
@@ -826,9 +832,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     res.covariance = s2 * id.inverse_normal;
     // The condition number of the column-scaled Jacobian in mm, as before the
     // weighting and as the plan design reports it.
-    res.condition_number = ConditionNumber(
-        nep ? NormalFactor(nfit.at_solution.JtJ_unweighted) : Eigen::MatrixXd(sig.asDiagonal() * Jw),
-        opt.rank_tolerance);
+    // Every row of one declared noise (a plan of probe touches): the mm
+    // Jacobian is Jw times that noise, its column-scaled form Jw's, and the
+    // condition number id's.
+    const bool one_noise = sig.size() > 0 && (sig.array() == sig[0]).all();
+    res.condition_number =
+        one_noise ? id.condition_number
+                  : ConditionNumber(nep ? NormalFactor(nfit.at_solution.JtJ_unweighted)
+                                        : Eigen::MatrixXd(sig.asDiagonal() * Jw),
+                                    opt.rank_tolerance);
     sigma_dof = res.n_observations - id.rank;
     hat = id.inverse_normal;
   }
