@@ -146,10 +146,11 @@ struct Solve {
 
 // One fit of `est` from `values`: plain least squares, or MAP with
 // `prior_all` (per table index; empty = no prior rows); with the robust loss a
-// plain pass first sets the loss scale.
+// plain pass first sets the loss scale. `prepared`: a Problem(ds, table,
+// values, est) already made, for the first pass.
 Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
              const std::vector<int>& est, const IdentifyOptions& opt, const Eigen::VectorXd& prior_all,
-             std::unique_ptr<Problem>* final_problem) {
+             std::unique_ptr<Problem>* final_problem, std::unique_ptr<Problem> prepared = nullptr) {
   const ceres::Solver::Options so = Problem::SolverOptions(opt.max_iterations, opt.num_threads);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(table.size());
   Solve out;
@@ -180,7 +181,7 @@ Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Vector
     if (out.initial_cost == 0) out.initial_cost = summary.initial_cost;
     out.final_cost = summary.final_cost;
   };
-  auto problem = std::make_unique<Problem>(ds, table, values, est);
+  std::unique_ptr<Problem> problem = prepared ? std::move(prepared) : std::make_unique<Problem>(ds, table, values, est);
   run(problem.get());
   if (!opt.robust.empty() && opt.robust != "none") {
     double scale = opt.robust_scale;
@@ -683,12 +684,17 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
         ds, table, values, est,
         opt.num_threads > 0 ? opt.num_threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
   res.fit_path = nep ? "normal_equations" : "dense";
+  // The dense path's last problem made at `kept_at`: a fit from there
+  // starts on it instead of making it again.
+  std::unique_ptr<Problem> kept;
+  Eigen::VectorXd kept_at;
   auto weighted_jacobian_at = [&](const Eigen::VectorXd& at) {
     if (nep) return NormalFactor(nep->Accumulate(at, true).JtJ);  // true: the fit reuses it
-    Problem pr(ds, table, at, est);
+    kept = std::make_unique<Problem>(ds, table, at, est);
+    kept_at = at;
     Eigen::VectorXd r;
     Eigen::MatrixXd Jw;
-    WeightedJacobian(&pr, &r, &Jw);
+    WeightedJacobian(kept.get(), &r, &Jw);
     return Jw;
   };
   auto to_solve = [](const NormalEquationFit& f) {
@@ -701,9 +707,27 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     s.final_cost = f.final_cost;
     return s;
   };
+  // A dense fit leaves its problem in `kept` (at its solution) when that is
+  // one analytic batch, as a fresh problem there would be.
   auto fit_from = [&](const Eigen::VectorXd& start, const Eigen::VectorXd& prior_all) {
     if (nep) return to_solve(FitNormalEquations(*nep, start, prior_all, opt.max_iterations));
-    return RunFit(ds, table, start, est, opt, prior_all, nullptr);
+    std::unique_ptr<Problem> prepared = kept && kept_at == start ? std::move(kept) : nullptr;
+    std::unique_ptr<Problem> fitted;
+    const Solve fit = RunFit(ds, table, start, est, opt, prior_all, &fitted, std::move(prepared));
+    kept.reset();
+    if (fitted && fitted->analytic_batch()) {
+      kept = std::move(fitted);
+      kept_at = fit.values;
+    }
+    return fit;
+  };
+  // The weighted Jacobian at a dense fit's solution, from its problem.
+  auto weighted_jacobian_after = [&](const Solve& fit) {
+    if (nep || !kept || kept_at != fit.values) return weighted_jacobian_at(fit.values);
+    Eigen::VectorXd r;
+    Eigen::MatrixXd Jw;
+    WeightedJacobian(kept.get(), &r, &Jw);
+    return Jw;
   };
 
   if (!map) {
@@ -726,7 +750,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     const bool start_undetermined = undetermined(Jw);
     if (start_undetermined) {
       const Solve pre = fit_from(values, setup.prior);
-      const Eigen::MatrixXd Jpre = weighted_jacobian_at(pre.values);
+      const Eigen::MatrixXd Jpre = weighted_jacobian_after(pre);
       const bool pre_undetermined = undetermined(Jpre);
       if (!pre_undetermined) {
         values = pre.values;
@@ -735,7 +759,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
         // (a sphere with few touches) looks free; the least-squares point
         // decides. Refuse only when it too leaves the set undetermined.
         const Solve ls = fit_from(pre.values, no_prior);
-        if (undetermined(weighted_jacobian_at(ls.values)))
+        if (undetermined(weighted_jacobian_after(ls)))
           throw std::invalid_argument(
               UndeterminedMessage(ds, undetermined_groups(AnalyzeDetermination(Jpre, prior, kDeterminedRatio))));
         values = ls.values;
@@ -763,7 +787,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   std::unique_ptr<Problem> problem;
   NormalEquationFit nfit;
   const Solve fit = nep ? to_solve(nfit = FitNormalEquations(*nep, values, fit_prior, opt.max_iterations))
-                        : RunFit(*weighted, table, values, est, opt, fit_prior, &problem);
+                        : RunFit(*weighted, table, values, est, opt, fit_prior, &problem,
+                                 weighted == &ds && kept && kept_at == values ? std::move(kept) : nullptr);
   values = fit.values;
   res.converged = fit.converged;
   res.iterations = fit.iterations;
