@@ -297,6 +297,32 @@ std::vector<std::vector<int>> UndeterminedGroups(const Eigen::VectorXd& s, const
   return out;
 }
 
+namespace {
+
+// CertainlyUndetermined on N = Js^T Js. Pivot j of its Cholesky factor,
+// L_jj^2, is the squared distance d_j^2 of column j from the span of the
+// columns before it. With x the combination that leaves that distance
+// (x_j = 1), ratio_j^2 = e_j^T N^+ e_j >= x_j^2 / x^T N x = 1 / d_j^2 (or
+// e_j leans on a free direction: ratio_j infinite). So d_j < 1 / threshold
+// makes column j undetermined. The margin covers the pivots' rounding, about
+// p eps lambda_max <= p eps trace(N) in absolute terms; a failed Cholesky (a
+// pivot at or below zero) is the same certificate for its column.
+bool PivotCertificate(const Eigen::LLT<Eigen::MatrixXd>& llt, double trace, double threshold) {
+  const double weak2 = 1.0 / (threshold * threshold);
+  const double slack = 1e-10 * trace;
+  if (!std::isfinite(slack) || !(slack < 0.5 * weak2)) return false;
+  if (llt.info() != Eigen::Success) return true;
+  return llt.matrixLLT().diagonal().cwiseAbs2().minCoeff() < 0.99 * weak2 - slack;
+}
+
+}  // namespace
+
+bool CertainlyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold) {
+  if (Jw.cols() == 0) return false;
+  const Eigen::MatrixXd N = ScaledNormal(Jw * prior.asDiagonal());
+  return PivotCertificate(Eigen::LLT<Eigen::MatrixXd>(N), N.trace(), threshold);
+}
+
 Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
                                    double threshold) {
   Determination out;
@@ -311,10 +337,15 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
   // 1 / sigma_min < threshold, and they come from the Cholesky factor of N.
   if (reduced.rows() >= p) {
     const Eigen::MatrixXd N = ScaledNormal(reduced);
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
-    const Eigen::VectorXd lambda = eig.eigenvalues();  // ascending
-    if (eig.info() == Eigen::Success && lambda[0] > 1.01 * weak * weak + 1e-12 * lambda[p - 1]) {
-      const Eigen::LLT<Eigen::MatrixXd> llt(N);
+    // A column the pivots already show undetermined would fail the ratio
+    // check below: the eigenvalues are of no use then.
+    const Eigen::LLT<Eigen::MatrixXd> llt(N);
+    Eigen::VectorXd lambda;  // ascending; empty: not computed or failed
+    if (!PivotCertificate(llt, N.trace(), threshold)) {
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
+      if (eig.info() == Eigen::Success) lambda = eig.eigenvalues();
+    }
+    if (lambda.size() == p && lambda[0] > 1.01 * weak * weak + 1e-12 * lambda[p - 1]) {
       const Eigen::VectorXd ratio =
           llt.info() == Eigen::Success
               ? Eigen::VectorXd(llt.solve(Eigen::MatrixXd::Identity(p, p)).diagonal().cwiseMax(0.0).cwiseSqrt())

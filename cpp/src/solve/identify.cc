@@ -16,6 +16,7 @@
 #include "fivecal/solve/normal_equations.h"
 #include "fivecal/solve/priors.h"
 #include "fivecal/solve/problem.h"
+#include "fivecal/solve/refit.h"
 #include "fivecal/observations/registry.h"
 #include "json_util.h"
 #include "solve/residual_units.h"
@@ -145,15 +146,31 @@ struct Solve {
 
 // One fit of `est` from `values`: plain least squares, or MAP with
 // `prior_all` (per table index; empty = no prior rows); with the robust loss a
-// plain pass first sets the loss scale.
+// plain pass first sets the loss scale. `prepared`: a Problem(ds, table,
+// values, est) already made, for the first pass.
 Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
              const std::vector<int>& est, const IdentifyOptions& opt, const Eigen::VectorXd& prior_all,
-             std::unique_ptr<Problem>* final_problem) {
+             std::unique_ptr<Problem>* final_problem, std::unique_ptr<Problem> prepared = nullptr) {
   const ceres::Solver::Options so = Problem::SolverOptions(opt.max_iterations, opt.num_threads);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(table.size());
   Solve out;
   out.values = values;
+  // Invalid prior sigmas are left to AddPriors, which names them.
+  bool valid_priors = true;
+  for (int i : est) valid_priors = valid_priors && (!prior_all.size() || (prior_all[i] > 0 && std::isfinite(prior_all[i])));
   auto run = [&](Problem* pr) {
+    // The loop Ceres would run, without Ceres's per-solve overhead (most of
+    // a fit's time on a few hundred rows); Ceres where it does not apply.
+    RefitResult own;
+    if (valid_priors && SolveWithoutCeres(*pr, prior_all, opt.max_iterations, &own)) {
+      out.values = pr->values();
+      out.converged = own.converged;
+      out.iterations += own.iterations;
+      out.message = own.message;
+      if (out.initial_cost == 0) out.initial_cost = own.initial_cost;
+      out.final_cost = own.final_cost;
+      return;
+    }
     if (prior_all.size()) pr->AddPriors(prior_all, zero);
     ceres::Solver::Summary summary;
     ceres::Solve(so, &pr->ceres_problem(), &summary);
@@ -164,7 +181,7 @@ Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Vector
     if (out.initial_cost == 0) out.initial_cost = summary.initial_cost;
     out.final_cost = summary.final_cost;
   };
-  auto problem = std::make_unique<Problem>(ds, table, values, est);
+  std::unique_ptr<Problem> problem = prepared ? std::move(prepared) : std::make_unique<Problem>(ds, table, values, est);
   run(problem.get());
   if (!opt.robust.empty() && opt.robust != "none") {
     double scale = opt.robust_scale;
@@ -667,12 +684,17 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
         ds, table, values, est,
         opt.num_threads > 0 ? opt.num_threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
   res.fit_path = nep ? "normal_equations" : "dense";
+  // The dense path's last problem made at `kept_at`: a fit from there
+  // starts on it instead of making it again.
+  std::unique_ptr<Problem> kept;
+  Eigen::VectorXd kept_at;
   auto weighted_jacobian_at = [&](const Eigen::VectorXd& at) {
     if (nep) return NormalFactor(nep->Accumulate(at, true).JtJ);  // true: the fit reuses it
-    Problem pr(ds, table, at, est);
+    kept = std::make_unique<Problem>(ds, table, at, est);
+    kept_at = at;
     Eigen::VectorXd r;
     Eigen::MatrixXd Jw;
-    WeightedJacobian(&pr, &r, &Jw);
+    WeightedJacobian(kept.get(), &r, &Jw);
     return Jw;
   };
   auto to_solve = [](const NormalEquationFit& f) {
@@ -685,9 +707,27 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     s.final_cost = f.final_cost;
     return s;
   };
+  // A dense fit leaves its problem in `kept` (at its solution) when that is
+  // one analytic batch, as a fresh problem there would be.
   auto fit_from = [&](const Eigen::VectorXd& start, const Eigen::VectorXd& prior_all) {
     if (nep) return to_solve(FitNormalEquations(*nep, start, prior_all, opt.max_iterations));
-    return RunFit(ds, table, start, est, opt, prior_all, nullptr);
+    std::unique_ptr<Problem> prepared = kept && kept_at == start ? std::move(kept) : nullptr;
+    std::unique_ptr<Problem> fitted;
+    const Solve fit = RunFit(ds, table, start, est, opt, prior_all, &fitted, std::move(prepared));
+    kept.reset();
+    if (fitted && fitted->analytic_batch()) {
+      kept = std::move(fitted);
+      kept_at = fit.values;
+    }
+    return fit;
+  };
+  // The weighted Jacobian at a dense fit's solution, from its problem.
+  auto weighted_jacobian_after = [&](const Solve& fit) {
+    if (nep || !kept || kept_at != fit.values) return weighted_jacobian_at(fit.values);
+    Eigen::VectorXd r;
+    Eigen::MatrixXd Jw;
+    WeightedJacobian(kept.get(), &r, &Jw);
+    return Jw;
   };
 
   if (!map) {
@@ -700,22 +740,28 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     if (num_rows < p && !opt.allow_unidentifiable)
       throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
                                   std::to_string(num_rows) + " residuals");
-    Determination d = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
-    if (!d.undetermined.empty()) {
+    // Here only whether everything is determined matters (the groups only
+    // for a refusal): the Cholesky certificate settles most undetermined
+    // sets without the QR and SVD of AnalyzeDetermination.
+    auto undetermined = [&](const Eigen::MatrixXd& J) {
+      return CertainlyUndetermined(J, prior, kDeterminedRatio) ||
+             !AnalyzeDetermination(J, prior, kDeterminedRatio).undetermined.empty();
+    };
+    const bool start_undetermined = undetermined(Jw);
+    if (start_undetermined) {
       const Solve pre = fit_from(values, setup.prior);
-      Jw = weighted_jacobian_at(pre.values);
-      const Determination d2 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
-      if (d2.undetermined.empty()) {
+      const Eigen::MatrixXd Jpre = weighted_jacobian_after(pre);
+      const bool pre_undetermined = undetermined(Jpre);
+      if (!pre_undetermined) {
         values = pre.values;
       } else if (!opt.allow_unidentifiable) {
         // The MAP point may still sit where a weakly seen setup parameter
         // (a sphere with few touches) looks free; the least-squares point
         // decides. Refuse only when it too leaves the set undetermined.
         const Solve ls = fit_from(pre.values, no_prior);
-        Jw = weighted_jacobian_at(ls.values);
-        const Determination d3 = AnalyzeDetermination(Jw, prior, kDeterminedRatio);
-        if (!d3.undetermined.empty())
-          throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(d2)));
+        if (undetermined(weighted_jacobian_after(ls)))
+          throw std::invalid_argument(
+              UndeterminedMessage(ds, undetermined_groups(AnalyzeDetermination(Jpre, prior, kDeterminedRatio))));
         values = ls.values;
       }
     }
@@ -741,7 +787,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   std::unique_ptr<Problem> problem;
   NormalEquationFit nfit;
   const Solve fit = nep ? to_solve(nfit = FitNormalEquations(*nep, values, fit_prior, opt.max_iterations))
-                        : RunFit(*weighted, table, values, est, opt, fit_prior, &problem);
+                        : RunFit(*weighted, table, values, est, opt, fit_prior, &problem,
+                                 weighted == &ds && kept && kept_at == values ? std::move(kept) : nullptr);
   values = fit.values;
   res.converged = fit.converged;
   res.iterations = fit.iterations;
@@ -826,9 +873,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     res.covariance = s2 * id.inverse_normal;
     // The condition number of the column-scaled Jacobian in mm, as before the
     // weighting and as the plan design reports it.
-    res.condition_number = ConditionNumber(
-        nep ? NormalFactor(nfit.at_solution.JtJ_unweighted) : Eigen::MatrixXd(sig.asDiagonal() * Jw),
-        opt.rank_tolerance);
+    // Every row of one declared noise (a plan of probe touches): the mm
+    // Jacobian is Jw times that noise, its column-scaled form Jw's, and the
+    // condition number id's.
+    const bool one_noise = sig.size() > 0 && (sig.array() == sig[0]).all();
+    res.condition_number =
+        one_noise ? id.condition_number
+                  : ConditionNumber(nep ? NormalFactor(nfit.at_solution.JtJ_unweighted)
+                                        : Eigen::MatrixXd(sig.asDiagonal() * Jw),
+                                    opt.rank_tolerance);
     sigma_dof = res.n_observations - id.rank;
     hat = id.inverse_normal;
   }

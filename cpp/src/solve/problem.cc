@@ -383,6 +383,13 @@ bool Problem::Refresh(const Eigen::VectorXd& values) {
   return true;
 }
 
+void Problem::SetEstimated(const Eigen::VectorXd& v) {
+  if (v.size() != static_cast<Eigen::Index>(estimated_.size()))
+    throw std::invalid_argument("problem: expected " + std::to_string(estimated_.size()) + " estimated values");
+  // In place: Ceres holds pointers into values_.
+  for (size_t b = 0; b < estimated_.size(); ++b) values_[estimated_[b]] = v[b];
+}
+
 double Problem::SigmaOfRow(int source, int k) const {
   if (source < 0) return kScaleBarSigma;
   return ObservationSigma(ds_, ds_.observations[source], k);

@@ -4,6 +4,7 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -119,10 +120,22 @@ RefitResult SolveRefit(Problem& problem, const std::vector<int>& est,
 // non-finite residual or Jacobian, the iteration limit.
 class DenseRefit {
  public:
+  // On a batch of its own (a Session's, refreshed per trial).
   DenseRefit(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& start,
              const std::vector<int>& est, const Eigen::VectorXd& row_sigma, const Eigen::VectorXd& prior_all,
              int max_iterations)
-      : batch_(ds, table, start, est), start_(est.size()), w_(row_sigma.cwiseInverse()),
+      : DenseRefit(std::make_unique<AnalyticResiduals>(ds, table, start, est), nullptr, start, est, row_sigma,
+                   prior_all, max_iterations) {}
+  // On a Problem's batch (SolveWithoutCeres), which must outlive it.
+  DenseRefit(AnalyticResiduals* batch, const Eigen::VectorXd& start, const std::vector<int>& est,
+             const Eigen::VectorXd& row_sigma, const Eigen::VectorXd& prior_all, int max_iterations)
+      : DenseRefit(nullptr, batch, start, est, row_sigma, prior_all, max_iterations) {}
+
+ private:
+  DenseRefit(std::unique_ptr<AnalyticResiduals> own, AnalyticResiduals* batch, const Eigen::VectorXd& start,
+             const std::vector<int>& est, const Eigen::VectorXd& row_sigma, const Eigen::VectorXd& prior_all,
+             int max_iterations)
+      : own_(std::move(own)), batch_(own_ ? *own_ : *batch), start_(est.size()), w_(row_sigma.cwiseInverse()),
         n_(static_cast<int>(row_sigma.size())), p_(static_cast<int>(est.size())), max_iterations_(max_iterations) {
     if (batch_.num_residuals() != n_) throw std::logic_error("refit: batch rows differ from the problem's");
     for (int b = 0; b < p_; ++b) start_[b] = start[est[b]];
@@ -153,11 +166,28 @@ class DenseRefit {
     nd_ = static_cast<int>(dense.size());
     dense.insert(dense.end(), sparse.begin(), sparse.end());
     for (int c = 0; c < p_; ++c) pos_[dense[c]] = c;
-    J_.setZero();
+    // That evaluation is the first of Solve, its columns in their new places
+    // (each column is computed alone: the same numbers as evaluated there).
+    if (ok) {
+      const Eigen::MatrixXd first = J_;
+      for (int b = 0; b < p_; ++b) J_.col(pos_[b]) = first.col(b);
+      start_cost_ = cost;
+      at_start_ = true;
+    } else {
+      J_.setZero();
+    }
   }
 
-  void Refresh(const ParameterTable& table, const Eigen::VectorXd& values) { batch_.Refresh(table, values); }
-  void RefreshAxes(const ParameterTable& table) { batch_.RefreshAxes(table); }
+ public:
+
+  void Refresh(const ParameterTable& table, const Eigen::VectorXd& values) {
+    at_start_ = false;
+    batch_.Refresh(table, values);
+  }
+  void RefreshAxes(const ParameterTable& table) {
+    at_start_ = false;
+    batch_.RefreshAxes(table);
+  }
   const std::vector<AnalyticRow>& rows() const { return batch_.rows(); }
 
   bool Solve(RefitResult* out) {
@@ -165,8 +195,11 @@ class DenseRefit {
     constexpr double kMinRelativeDecrease = 1e-3, kMinDiagonal = 1e-6, kMaxDiagonal = 1e32;
     constexpr double kMaxRadius = 1e16, kMinRadius = 1e-32;
     Eigen::VectorXd x = start_;
-    double x_cost = 0;
-    if (!Evaluate(x, &r_, &J_, &x_cost, false)) return false;
+    double x_cost = start_cost_;
+    if (!at_start_ && !Evaluate(x, &r_, &J_, &x_cost, false)) return false;
+    at_start_ = false;
+    const double initial_cost = x_cost;
+    char message[160];
     scale_ = (J_.colwise().squaredNorm().array().sqrt() + 1.0).inverse().matrix().transpose();
     J_.array().rowwise() *= scale_.transpose().array();
     double radius = 1e12, decrease_factor = 2;
@@ -189,10 +222,14 @@ class DenseRefit {
         gmax = std::max(gmax, std::abs(x[b] - (x[b] - g)));
       }
       if (successful && gmax <= kGradientTolerance) {
+        std::snprintf(message, sizeof message, "Gradient tolerance reached. Gradient max norm: %e <= %e", gmax,
+                      kGradientTolerance);
         converged = true;
         break;
       }
       if (radius <= kMinRadius) {
+        std::snprintf(message, sizeof message, "Minimum trust region radius reached. Trust region radius: %e <= %e",
+                      radius, kMinRadius);
         converged = true;
         break;
       }
@@ -218,11 +255,16 @@ class DenseRefit {
       // nearly always ends the fit, so its Jacobian would be of no use.
       const bool last = model_cost_change <= 10 * kFunctionTolerance * x_cost;
       if (!Evaluate(cand, &rc_, last ? nullptr : &Jc_, &cand_cost, true)) return false;
-      if ((x - cand).norm() <= kParameterTolerance * (x.norm() + kParameterTolerance)) {
+      const double step_norm = (x - cand).norm();
+      if (step_norm <= kParameterTolerance * (x.norm() + kParameterTolerance)) {
+        std::snprintf(message, sizeof message, "Parameter tolerance reached. Relative step_norm: %e <= %e.",
+                      step_norm / (x.norm() + kParameterTolerance), kParameterTolerance);
         converged = true;
         break;
       }
       if (std::abs(x_cost - cand_cost) <= kFunctionTolerance * x_cost) {
+        std::snprintf(message, sizeof message, "Function tolerance reached. |cost_change|/cost: %e <= %e",
+                      std::abs(x_cost - cand_cost) / x_cost, kFunctionTolerance);
         converged = true;
         break;
       }
@@ -258,6 +300,8 @@ class DenseRefit {
     out->iterations = pushed - 1;
     out->final_cost = min_cost;
     out->values = best;
+    out->initial_cost = initial_cost;
+    out->message = message;
     return true;
   }
 
@@ -335,8 +379,11 @@ class DenseRefit {
     }
   }
 
-  AnalyticResiduals batch_;
+  std::unique_ptr<AnalyticResiduals> own_;
+  AnalyticResiduals& batch_;
   Eigen::VectorXd start_, w_, prior_inv_, scale_;
+  double start_cost_ = 0;
+  bool at_start_ = false;  // r_, J_ (unscaled) and start_cost_ are those at start_
   int n_, p_, max_iterations_;
   Eigen::MatrixXd J_, Jc_;  // at x, at the candidate (weighted; J_ scaled once evaluated)
   Eigen::VectorXd r_, rc_;
@@ -349,6 +396,17 @@ class DenseRefit {
 };
 
 }  // namespace
+
+bool SolveWithoutCeres(Problem& problem, const Eigen::VectorXd& prior_all, int max_iterations, RefitResult* out) {
+  AnalyticResiduals* batch = problem.analytic_batch();
+  if (!batch || problem.estimated().empty()) return false;
+  DenseRefit fit(batch, problem.values(), problem.estimated(), problem.row_sigma(), prior_all, max_iterations);
+  RefitResult r;
+  if (!fit.Solve(&r)) return false;
+  problem.SetEstimated(r.values);
+  *out = std::move(r);
+  return true;
+}
 
 std::unique_ptr<Problem> Refit::MakeProblem(const Dataset& ds) const {
   const Impl& d = *impl_;

@@ -76,6 +76,12 @@ struct Determination {
 Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
                                    double threshold);
 
+// True when AnalyzeDetermination(Jw, prior, threshold) certainly leaves a
+// column undetermined; false says nothing (run AnalyzeDetermination). For a
+// caller that needs only whether everything is determined: one Cholesky of
+// the scaled normal matrix instead of a QR and an SVD.
+bool CertainlyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold);
+
 // The groups of AnalyzeDetermination from an SVD of Js (s descending, V its
 // right singular vectors): the `bad` columns joined when they share a weak
 // direction (s <= weak; exactly free when s <= zero). Depends on the

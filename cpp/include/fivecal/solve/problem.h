@@ -133,6 +133,13 @@ class Problem {
   // functors captured the readings at construction): build a new Problem then.
   bool Refresh(const Eigen::VectorXd& values);
 
+  // The one block of every row when the problem is a single analytic batch
+  // (no robust loss), else null: for a solver other than Ceres (refit.h),
+  // which then hands its solution back through SetEstimated.
+  AnalyticResiduals* analytic_batch() { return analytic_; }
+  // Sets the estimated parameters' values (in estimated() order).
+  void SetEstimated(const Eigen::VectorXd& v);
+
  private:
   friend class ProblemBuilder;
   void AddCostBlock(ceres::CostFunction* cost, int num_residuals, const std::vector<double*>& ptrs,

@@ -29,7 +29,19 @@ struct RefitResult {
   int iterations = 0;
   double final_cost = 0;
   bool ceres = true;  // solved by Ceres (false: by Session's own loop)
+  double initial_cost = 0;  // only SolveWithoutCeres
+  std::string message;      // why it stopped (only SolveWithoutCeres)
 };
+
+// Solves `problem` from its values as Ceres does with
+// Problem::SolverOptions(max_iterations, 1), with the trust-region loop of
+// Refit::Session, when the problem is one analytic batch (no robust loss).
+// prior_all: the sigmas of MAP prior rows (per table index, mean 0; empty:
+// none), which the loop adds itself (not through Problem::AddPriors). False,
+// the problem unchanged, where the loop does not reproduce Ceres (robust
+// loss, iteration limit, a failed step): solve it with Ceres then. True: the
+// problem holds the solution; out->values in estimated() order.
+bool SolveWithoutCeres(Problem& problem, const Eigen::VectorXd& prior_all, int max_iterations, RefitResult* out);
 
 class Refit {
  public:
