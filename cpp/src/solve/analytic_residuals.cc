@@ -109,11 +109,7 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
   const bool all = storage_ == RowStorage::kAll;
   const int n = static_cast<int>(ds.observations.size());
   if (all) rows_.reserve(n);
-  {
-    int64_t rows = 0;
-    for (const Observation& o : ds.observations) rows += KindOf(o).rows();
-    row_source_.reserve(static_cast<size_t>(rows));
-  }
+  row_source_.reserve(n);  // a row or more per observation; not a walk over the data to count them
   std::unique_ptr<Recorder> recorder;
   if (AnyTemplated(ds)) recorder = NewRecorder(table);
   for (int i = 0; i < n; ++i) {
