@@ -1,8 +1,10 @@
 // Bindings of the identification engine: Dataset, Simulate, Identify, Result.
+#include <algorithm>
 #include <limits>
 #include <optional>
 
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -166,7 +168,14 @@ void BindIdentification(py::module_& m) {
       .def_readonly("covariance", &Result::covariance)
       .def_readonly("correlation", &Result::correlation)
       .def_readonly("residuals", &Result::residuals)
-      .def_readonly("residual_source", &Result::residual_source)
+      // An int64 array, not a list: a list of the rows of long data (3e6 for
+      // 1e6 R-test samples) costs a Python int per row.
+      .def_property_readonly("residual_source",
+                             [](const Result& r) {
+                               py::array_t<int64_t> a(static_cast<py::ssize_t>(r.residual_source.size()));
+                               std::copy(r.residual_source.begin(), r.residual_source.end(), a.mutable_data());
+                               return a;
+                             })
       .def_readonly("residual_vectors", &Result::residual_vectors)
       .def_readonly("points", &Result::points)
       .def_readonly("rms", &Result::rms)

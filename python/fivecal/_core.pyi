@@ -66,7 +66,7 @@ class Result:
     covariance: np.ndarray
     correlation: np.ndarray
     residuals: np.ndarray
-    residual_source: list[int]
+    residual_source: np.ndarray  # int64, one per residual row
     residual_vectors: np.ndarray
     points: np.ndarray
     rms: float

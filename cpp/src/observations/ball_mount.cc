@@ -1,5 +1,6 @@
 #include "fivecal/observations/ball_mount.h"
 
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -102,6 +103,19 @@ void BallMountKind::PrepareAnalytic(const Dataset&, const ParameterTable& t, con
                                     AnalyticRow* r) const {
   const auto& mt = t.group(type(), o.setup);
   for (int c = 0; c < 7; ++c) r->idx[c] = mt[c];
+  PrepareSample(o, r);
+}
+
+// A trace's samples share one mounting: its indices from the row before
+// rather than a lookup of the setup id per sample.
+void BallMountKind::PrepareAnalyticAfter(const Dataset& ds, const ParameterTable& t, const Observation& po,
+                                         const AnalyticRow& prev, const Observation& o, AnalyticRow* r) const {
+  if (o.setup != po.setup) return PrepareAnalytic(ds, t, o, r);
+  std::copy(prev.idx, prev.idx + 7, r->idx);
+  PrepareSample(o, r);
+}
+
+void BallMountKind::PrepareSample(const Observation& o, AnalyticRow* r) {
   r->a = o.table_ball;
   r->tool_ball = o.tool_ball;
   r->measured = o.measured;

@@ -109,6 +109,7 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
   const bool all = storage_ == RowStorage::kAll;
   const int n = static_cast<int>(ds.observations.size());
   if (all) rows_.reserve(n);
+  row_source_.reserve(n);  // a row or more per observation; not a walk over the data to count them
   std::unique_ptr<Recorder> recorder;
   if (AnyTemplated(ds)) recorder = NewRecorder(table);
   for (int i = 0; i < n; ++i) {
@@ -121,7 +122,7 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
     if (held) {
       rows_.emplace_back();
       if (templated) RecordRow(*recorder, i, &rows_.back());
-      else PrepareRow(table, i, &rows_.back());
+      else PrepareRow(table, kind, i, nullptr, &rows_.back());
     }
     for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(i);
   }
@@ -141,21 +142,21 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
   CountHeld(static_cast<int64_t>(rows_.size()));
 }
 
-void AnalyticResiduals::PrepareRow(const ParameterTable& table, int i, AnalyticRow* r) const {
+void AnalyticResiduals::PrepareRow(const ParameterTable& table, const ObservationKind& kind, int i,
+                                   const AnalyticRow* prev, AnalyticRow* r) const {
   const Machine& m = ds_.machine();
   const Observation& o = ds_.observations[i];
-  const ObservationKind& kind = KindOf(o);
-  // A fresh row keeping its buffers (a refresh allocates nothing here).
-  std::vector<double> q = std::move(r->q);
-  std::vector<int> dir = std::move(r->dir);
-  *r = AnalyticRow();
+  // A fresh row keeping its buffers (a refresh, and the per-chunk rows of
+  // every pass, allocate nothing here): copied from a default row, not
+  // built per row, and a vector assigned an empty one keeps its storage.
+  static const AnalyticRow kFresh;
+  *r = kFresh;
   r->kind = &kind;
-  q.resize(m.num_axes());
-  AxisValuesToInternal(m, o.axes.data(), q.data());
-  dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
-  r->q = std::move(q);
-  r->dir = std::move(dir);
-  kind.PrepareAnalytic(ds_, table, o, r);
+  r->q.resize(m.num_axes());
+  AxisValuesToInternal(m, o.axes.data(), r->q.data());
+  r->dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
+  if (prev) kind.PrepareAnalyticAfter(ds_, table, ds_.observations[i - 1], *prev, o, r);
+  else kind.PrepareAnalytic(ds_, table, o, r);
 }
 
 // The templated pieces are recorded afresh (at the current fixed values).
@@ -229,7 +230,7 @@ void AnalyticResiduals::Refresh(const ParameterTable& table, const Eigen::Vector
   if (!pieces_.empty() || AnyTemplated(ds_)) recorder = NewRecorder(table);
   for (size_t i = 0, h = 0; i < n; ++i) {
     if (!KindOf(ds_.observations[i]).analytic()) RecordRow(*recorder, static_cast<int>(i), &rows_[h++]);
-    else if (all) PrepareRow(table, static_cast<int>(i), &rows_[h++]);
+    else if (all) PrepareRow(table, KindOf(ds_.observations[i]), static_cast<int>(i), nullptr, &rows_[h++]);
   }
   RemakeArtefactRows(table);
 }
@@ -266,8 +267,11 @@ void AnalyticResiduals::EvaluateRun(AnalyticEval& e, const Run& run, int begin, 
     const int c = std::min(end, s + kPreparedChunk) - s;
     if (static_cast<int>(scratch->size()) < c) scratch->resize(c);
     const ChunkCount count(c);
-    for (int k = 0; k < c; ++k) PrepareRow(*table_, s + k, &(*scratch)[k]);
-    run.kind->EvaluateAnalytic(e, scratch->data(), c);
+    // Each row after the chunk's first follows its observation's
+    // predecessor (of this run's kind) in the chunk.
+    AnalyticRow* rows = scratch->data();
+    for (int k = 0; k < c; ++k) PrepareRow(*table_, *run.kind, s + k, k > 0 ? rows + k - 1 : nullptr, rows + k);
+    run.kind->EvaluateAnalytic(e, rows, c);
   }
 }
 

@@ -38,52 +38,50 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
   // Rows prepared per chunk: the passes hold a chunk of prepared rows per
   // thread, not one per sample (analytic_residuals.h, RowStorage).
   batch_ = std::make_unique<AnalyticResiduals>(ds, table, values, estimated_, RowStorage::kPerChunk);
-  const std::vector<int>& src = batch_->row_source();
   const int nr = batch_->num_residuals();
-  row_sigma_.resize(nr);
-  for (int r = 0, k = 0; r < nr; ++r) {
-    k = (r > 0 && src[r] == src[r - 1]) ? k + 1 : 0;
-    // As Problem weighs them: a scale bar's length row at kScaleBarSigma.
-    row_sigma_[r] = src[r] < 0 ? kScaleBarSigma : ObservationSigma(ds, ds.observations[src[r]], k);
-  }
-  uniform_sigma_ = nr > 0 && row_sigma_.maxCoeff() == row_sigma_.minCoeff() ? row_sigma_[0] : 0.0;
-  // Row units as the residual summary groups them (scale bar rows: mm); a
-  // byte per row only for data holding a kind of rows in another unit (a
-  // pose), not for every R-test sample.
-  bool other = false;
-  std::vector<const ObservationKind*> seen;
-  for (const Observation& o : ds.observations) {
-    const ObservationKind* kind = &KindOf(o);
-    if (std::find(seen.begin(), seen.end(), kind) != seen.end()) continue;
-    seen.push_back(kind);
-    for (int k = 0; k < kind->rows(); ++k) other = other || std::string(kind->unit_row(k)) != "mm";
-  }
-  if (other) {
-    row_unit_.assign(nr, 0);
-    for (int r = 0, k = 0; r < nr; ++r) {
-      k = (r > 0 && src[r] == src[r - 1]) ? k + 1 : 0;
-      if (src[r] < 0) continue;
-      const std::string unit = KindOf(ds.observations[src[r]]).unit_row(k);
-      if (unit == "mm") continue;
-      auto it = std::find(other_units_.begin(), other_units_.end(), unit);
-      if (it == other_units_.end()) {
-        if (other_units_.size() >= 255) throw std::logic_error("normal equations: too many row units");
-        it = other_units_.insert(other_units_.end(), unit);
-      }
-      row_unit_[r] = static_cast<unsigned char>(1 + (it - other_units_.begin()));
-    }
-    if (other_units_.empty()) row_unit_.clear();
-  }
   const int n = static_cast<int>(ds.observations.size());
   const int nb = std::max(1, std::min(kBlocks, (n + kChunk - 1) / kChunk));
-  int row = 0, obs = 0;
-  for (int b = 0; b < nb; ++b) {
-    const int end = static_cast<int>((static_cast<long long>(n) * (b + 1)) / nb);
-    Block B{obs, end, row, 0};
-    for (; obs < end; ++obs) B.rows += KindOf(ds.observations[obs]).rows();
-    row += B.rows;
-    if (B.end > B.begin) blocks_.push_back(B);
+  // One walk over the observations (of long data, hundreds of MB): each
+  // row's sigma as Problem weighs it, the row units as the residual summary
+  // groups them, and the blocks' rows. A byte per row only for data holding
+  // a kind of rows in another unit (a pose), not for every R-test sample.
+  row_sigma_.resize(nr);
+  int row = 0, b = 0;
+  Block B{0, static_cast<int>((static_cast<long long>(n) * 1) / nb), 0, 0};
+  const ObservationKind* last = nullptr;
+  std::vector<std::string> unit_of;  // of `last`'s rows
+  for (int i = 0; i < n; ++i) {
+    const Observation& o = ds.observations[i];
+    const ObservationKind* kind = &KindOf(o);
+    const int rows = kind->rows();
+    if (kind != last) {
+      last = kind;
+      unit_of.clear();
+      for (int k = 0; k < rows; ++k) unit_of.push_back(kind->unit_row(k));
+    }
+    for (int k = 0; k < rows; ++k) {
+      row_sigma_[row + k] = ObservationSigma(ds, o, k);
+      if (unit_of[k] == "mm") continue;
+      auto it = std::find(other_units_.begin(), other_units_.end(), unit_of[k]);
+      if (it == other_units_.end()) {
+        if (other_units_.size() >= 255) throw std::logic_error("normal equations: too many row units");
+        it = other_units_.insert(other_units_.end(), unit_of[k]);
+      }
+      if (row_unit_.empty()) row_unit_.assign(nr, 0);
+      row_unit_[row + k] = static_cast<unsigned char>(1 + (it - other_units_.begin()));
+    }
+    row += rows;
+    B.rows += rows;
+    // The fixed partition of the observations (kBlocks).
+    while (i + 1 == B.end) {
+      if (B.end > B.begin) blocks_.push_back(B);
+      if (++b == nb) break;
+      B = Block{B.end, static_cast<int>((static_cast<long long>(n) * (b + 1)) / nb), row, 0};
+    }
   }
+  // As Problem weighs them: a scale bar's length row at kScaleBarSigma.
+  for (int r = row; r < nr; ++r) row_sigma_[r] = kScaleBarSigma;
+  uniform_sigma_ = nr > 0 && row_sigma_.maxCoeff() == row_sigma_.minCoeff() ? row_sigma_[0] : 0.0;
   // The artefact rows (scale bars) after the observations: one block, one chunk.
   if (batch_->num_prepared() > n) blocks_.push_back({n, batch_->num_prepared(), row, nr - row});
   else if (row != nr)

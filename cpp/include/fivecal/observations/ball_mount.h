@@ -52,6 +52,8 @@ class BallMountKind : public ObservationKind {
   void AddResidual(ResidualBuilder& b, const Observation& o) const final;
   void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
                        AnalyticRow* r) const final;
+  void PrepareAnalyticAfter(const Dataset& ds, const ParameterTable& t, const Observation& po,
+                            const AnalyticRow& prev, const Observation& o, AnalyticRow* r) const final;
   void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
                      Observation* ob, PlanSlot* slot) const final;
   bool LengthReference() const final { return true; }
@@ -81,6 +83,10 @@ class BallMountKind : public ObservationKind {
                                Observation* ob) const = 0;
   // The report vector of rows r given the ball distance vector d.
   virtual Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d& d) const = 0;
+
+ private:
+  // The fields of a prepared row that come from the sample itself.
+  static void PrepareSample(const Observation& o, AnalyticRow* r);
 };
 
 }  // namespace fivecal

@@ -158,6 +158,15 @@ class ObservationKind {
   // defaults, which throw std::logic_error: nothing may call them.
   virtual void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
                                AnalyticRow* r) const;
+  // PrepareAnalytic for `o` when the batch has just prepared `prev` for the
+  // observation `po` before it (of this kind, same table): the streaming fit
+  // prepares every row at every pass, and a kind whose rows look up their
+  // setup parameters by setup id may take them from `prev` when the id is
+  // the same. The row must come out as PrepareAnalytic makes it.
+  virtual void PrepareAnalyticAfter(const Dataset& ds, const ParameterTable& t, const Observation& /*po*/,
+                                    const AnalyticRow& /*prev*/, const Observation& o, AnalyticRow* r) const {
+    PrepareAnalytic(ds, t, o, r);
+  }
   virtual void AddArtefactAnalyticRows(const Dataset&, const ParameterTable&,
                                        std::vector<AnalyticRow>*, std::vector<int>* /*source*/) const {}
   virtual void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const;

@@ -194,7 +194,10 @@ class AnalyticResiduals : public ceres::CostFunction {
     int rows = 0;
   };
   class Recorder;
-  void PrepareRow(const ParameterTable& table, int observation, AnalyticRow* r) const;
+  // Observation i's row, of `kind`; `prev`: the row just prepared for
+  // observation i - 1, of the same kind (null: none).
+  void PrepareRow(const ParameterTable& table, const ObservationKind& kind, int observation,
+                  const AnalyticRow* prev, AnalyticRow* r) const;
   void RemakeArtefactRows(const ParameterTable& table);
   // Records observation i's templated pieces into *pieces (row r points at them).
   std::unique_ptr<Recorder> NewRecorder(const ParameterTable& table);
