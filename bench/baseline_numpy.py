@@ -207,6 +207,9 @@ def fit(fun, names, x0=None):
 
 MIN_CLASS_SCALE = 1e-3
 MIN_REDUNDANCY = 5.0
+# Finite-difference step in prior sigmas: the Jacobian then within ~3e-6
+# relative of the exact one on TANGO (truncation and rounding balanced).
+AUTO_FD_STEP = 1e-5
 # A probe touch of any kind is one instrument (fivecal's noise class "probe");
 # the ball instruments are each their own.
 NOISE_GROUP = {"facet": "probe", "sphere": "probe", "dbb": "dbb", "ball3d": "ball3d"}
@@ -328,10 +331,10 @@ def auto_covariance(Jd, lam_p, chi2, n_rows):
 def identify_auto(dataset, names, variance_components=False, setup=None, max_rounds=60):
     """estimate="auto" with numpy/SciPy over ``names`` (fivecal's candidates,
     ``Result.estimated``). Each MAP fit is scipy least_squares (2-point
-    finite differences, as ``fit``) on the weighted rows augmented by the
-    prior rows u / lambda, in u = theta / documented sigma: in those units a
-    difference step of sqrt(eps) suits every error, a cubic motion's as a
-    location's. Returns a dict: values, std (dicts by name), class_scales,
+    finite differences, as ``fit``, with a step of AUTO_FD_STEP) on the
+    weighted rows augmented by the prior rows u / lambda, in u = theta /
+    documented sigma: in those units one step suits every error, a cubic
+    motion's as a location's. Returns a dict: values, std (dicts by name), class_scales,
     variance_factors, rounds, function_evaluations."""
     a = AutoSetup(dataset, names) if setup is None else setup
     prob, prior, n = a.prob, a.prior, len(a.names)
@@ -342,17 +345,33 @@ def identify_auto(dataset, names, variance_components=False, setup=None, max_rou
     nfev = 0
 
     def map_fit(u0, lam_p, sig):
+        last = {}
+
         def fun(x):
-            return np.concatenate([prob.residuals(dict(zip(a.names, x * prior))) / sig, x / lam_p])
-        return least_squares(fun, u0, jac="2-point", method="trf", x_scale="jac",
-                             ftol=1e-12, xtol=1e-12, gtol=1e-12)
+            nonlocal nfev
+            nfev += 1
+            f = np.concatenate([prob.residuals(dict(zip(a.names, x * prior))) / sig, x / lam_p])
+            last["x"], last["f"] = x.copy(), f
+            return f
+
+        def jac(x):
+            # 2-point differences with a step of AUTO_FD_STEP prior sigma
+            # (SciPy's relative sqrt(eps) step is 1e-8 of a prior sigma at
+            # most: the rounding of the ~500 mm coordinates the residuals are
+            # differences of then put percent errors on the weakly seen
+            # columns and moved the optimum by ~0.006 sigma).
+            f0 = last["f"] if "x" in last and np.array_equal(last["x"], x) else fun(x)
+            cols = [(fun(x + AUTO_FD_STEP * e) - f0) / AUTO_FD_STEP for e in np.eye(n)]
+            return np.stack(cols, axis=1)
+
+        # u is already scaled (prior units), hence x_scale=1.
+        return least_squares(fun, u0, jac=jac, method="trf", x_scale=1.0, ftol=1e-12, xtol=1e-12, gtol=1e-12)
 
     rounds = 0
     for rounds in range(1, max_rounds + 1):
         lam_p = a.lam_per_name(lam)
         sig = prob.sigma * a.factor_per_row(factor)
         sol = map_fit(u, lam_p, sig)
-        nfev += sol.nfev + (sol.njev or 0) * n    # a 2-point Jacobian costs n evaluations
         u = sol.x
         Jd = sol.jac[: a.n_rows]
         new_lam, Ninv = evidence_update(a.members, u, Jd, lam_p)
@@ -367,7 +386,6 @@ def identify_auto(dataset, names, variance_components=False, setup=None, max_rou
     lam_p = a.lam_per_name(lam)
     sig = prob.sigma * a.factor_per_row(factor)
     sol = map_fit(u, lam_p, sig)
-    nfev += sol.nfev + (sol.njev or 0) * n
     Jd = sol.jac[: a.n_rows]
     r_w = sol.fun[: a.n_rows]
     Cs = auto_covariance(Jd, lam_p, float(r_w @ r_w), a.n_rows)
