@@ -174,12 +174,14 @@ def auto_agreement(r, values, std, scales, factors, groups=()):
     return {k: float(v) for k, v in out.items()}
 
 
-# An "auto" baseline agrees with fivecal when its values are within 0.01 of
-# fivecal's sigma, its sigma within 0.1 %, its class scales within the
-# stopping rule's 1 % (a loop stopping one round apart moves a scale by less)
-# and its noise factors within the variance loop's 0.1 %.
-AUTO_TOLERANCE = {"max_difference_in_sigma": 0.01, "max_std_relative_difference": 1e-3,
-                  "max_class_scale_log_ratio": 0.01, "max_variance_factor_log_ratio": 1e-3}
+# An "auto" baseline agrees with fivecal when its values are within 0.001 of
+# fivecal's sigma, its sigmas and noise factors within 1e-4 relative, and its
+# class scales within the stopping rule's 1 % (loops stopping one round apart
+# differ by less). Measured on TANGO: about 5e-5 sigma for the numpy baseline
+# (finite differences), 1e-5 for JAX; SciPy's default difference step gave
+# 0.006 sigma and 6e-4 in the sigmas, which these bounds reject.
+AUTO_TOLERANCE = {"max_difference_in_sigma": 1e-3, "max_std_relative_difference": 1e-4,
+                  "max_class_scale_log_ratio": 0.01, "max_variance_factor_log_ratio": 1e-4}
 
 
 def check_auto_agreement(agreement, who):
