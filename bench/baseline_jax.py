@@ -261,6 +261,91 @@ class JaxProblem:
         return jax.jit(run, static_argnums=2)
 
 
+# ---- estimate "auto": hierarchical prior, evidence loop, variance components ----
+#
+# baseline_numpy.identify_auto (fivecal's AdaptHyperparameters: class scales
+# by the evidence fixed point, optional variance components, then one more
+# MAP fit and the covariance) with one jitted round: the Levenberg-Marquardt
+# MAP fit (``lm``) on JaxProblem's weighted rows plus the prior rows
+# u / lambda, u = theta / documented sigma, warm-started from the previous
+# round, then the evidence and variance steps on the exact Jacobian (jacfwd)
+# at the MAP point. The rounds are a Python loop around it (the stopping
+# rule needs one scalar per round); the final fit is one more round whose
+# Jacobian gives the covariance. One round compiled, not two nested
+# while_loops (the fit's compile dominated the whole loop's). The priors,
+# classes and noise groups come from baseline_numpy.AutoSetup (the same
+# parsing as the numpy baseline).
+
+class JaxAuto:
+    """estimate="auto" over ``names`` (fivecal's Result.estimated). Call
+    ``run()`` -> dict(values (p,), std (p,), class_scales (K,) in
+    ``setup.classes`` order, variance_factors (G,) in ``setup.groups``
+    order, rounds, converged, jacobian_evaluations)."""
+
+    def __init__(self, dataset, names, variance_components=False, max_rounds=60):
+        a = self.setup = base.AutoSetup(dataset, names)
+        jp = JaxProblem(dataset, names)
+        prior, sigma = a.prior, jp.sigma
+        members, group_rows = a.members, a.group_rows
+        K, G, p, m = len(a.classes), len(a.groups), len(a.names), a.n_rows
+        cls_idx = np.where(a.cls_idx >= 0, a.cls_idx, K)        # K: "no class", scale 1
+        row_group = np.where(a.row_group >= 0, a.row_group, G)  # G: a scale bar, factor 1
+        has_group = (a.row_group >= 0).astype(float)
+        self.vc, self.max_rounds = variance_components, max_rounds
+        self.tol = 1e-3 if variance_components else 0.01
+        self.K, self.G = K, G
+
+        def data_rows(u, f_rows):
+            return jp.residuals(u * prior) / (sigma * f_rows)
+
+        jac_data = jax.jacfwd(data_rows)
+
+        def one_round(u, lam, factor):
+            lam_p = jnp.append(lam, 1.0)[cls_idx]
+            f_rows = jnp.append(factor, 1.0)[row_group]
+            u, evaluations, _, conv = lm(lambda x: jnp.concatenate([data_rows(x, f_rows), x / lam_p]), u)
+            Jd = jac_data(u, f_rows)
+            r = data_rows(u, f_rows)
+            N = Jd.T @ Jd
+            Ninv = jnp.linalg.inv(N + jnp.diag(1.0 / lam_p ** 2))
+            gamma = jnp.clip(1.0 - jnp.diag(Ninv) / lam_p ** 2, 0.0, 1.0)
+            m2, g = members @ (u * u), members @ gamma
+            new = jnp.where(g > 1e-9, jnp.sqrt(m2 / jnp.where(g > 1e-9, g, 1.0)), base.MIN_CLASS_SCALE)
+            new = jnp.clip(jnp.where(jnp.isfinite(new), new, 1.0), base.MIN_CLASS_SCALE, 1.0)
+            change = jnp.max(jnp.abs(jnp.log(new / lam)), initial=0.0)
+            f = factor
+            if variance_components:
+                rg = r * has_group
+                h = jnp.einsum("ij,ij->i", Jd @ Ninv, Jd)
+                red = group_rows @ jnp.clip(1.0 - h, 0.0, 1.0)
+                f = factor * jnp.sqrt((group_rows @ (rg * rg)) / red)
+                f = jnp.where((red >= base.MIN_REDUNDANCY) & jnp.isfinite(f) & (f > 0), f, factor)
+                change = jnp.maximum(change, jnp.max(jnp.abs(jnp.log(f / factor)), initial=0.0))
+            # fivecal's covariance: documented priors (unit in u), inflated by
+            # max(1, chi2 / dof), dof from the hat matrix of this fit's priors.
+            Cs = jnp.linalg.inv(N + jnp.eye(p))
+            p_eff = p - jnp.trace(jnp.linalg.inv(lam_p[:, None] * N * lam_p[None, :] + jnp.eye(p)))
+            dof = jnp.maximum(1.0, m - jnp.round(p_eff))
+            std = prior * jnp.sqrt(jnp.maximum(jnp.maximum(1.0, (r @ r) / dof) * jnp.diag(Cs), 0.0))
+            return u, new, f, change, conv, evaluations + 1, std
+
+        self._round = jax.jit(one_round)
+        self._p = p
+
+    def run(self):
+        u, lam, factor = jnp.zeros(self._p), jnp.ones(self.K), jnp.ones(self.G)
+        ok, evaluations, rounds = True, 0, 0
+        for rounds in range(1, self.max_rounds + 1):
+            u, new_lam, new_f, change, conv, ev, _ = self._round(u, lam, factor)
+            lam, factor = new_lam, new_f
+            ok, evaluations = ok & bool(conv), evaluations + int(ev)
+            if float(change) < self.tol:
+                break
+        u, _, _, _, conv, ev, std = self._round(u, lam, factor)   # the final fit at the final scales
+        return {"values": u * self.setup.prior, "std": std, "class_scales": lam, "variance_factors": factor,
+                "rounds": rounds, "converged": ok & bool(conv), "jacobian_evaluations": evaluations + int(ev)}
+
+
 def ball3d_fit_function(machine, names):
     """A jitted (q (N, num_axes) mm/rad, tool_ball, table_ball, measured (N, 3))
     -> (x, iterations, cost, converged): the ball3d fit of one mounting

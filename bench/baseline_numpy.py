@@ -189,6 +189,213 @@ def fit(fun, names, x0=None):
                          x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12)
 
 
+# ---- estimate "auto": hierarchical prior, evidence loop, variance components ----
+#
+# fivecal's identify(ds, "auto") (cpp/src/solve/identify.cc, AdaptHyperparameters)
+# written with numpy/SciPy: every candidate under a Gaussian prior (mean 0,
+# the documented sigma of its class), the class scales lambda_k in [1e-3, 1]
+# on those sigmas by MacKay's evidence fixed point
+#     lambda_k^2 = sum_j (theta_j / s_j)^2 / sum_j gamma_j,
+#     gamma_j = 1 - posterior var_j / (lambda_k s_j)^2,
+# at the MAP point of the current scales (one warm-started MAP fit per
+# round), optionally with Helmert/REML variance components of the noise
+# groups, f_g^2 <- f_g^2 sum_g (e_i / s_i)^2 / sum_g (1 - H_ii); stop when no
+# scale or factor moves by more than 1 % (1e-3 with variance components) in
+# log, at most 60 rounds; then one more MAP fit at the final scales and the
+# posterior covariance under the documented (unscaled) priors, inflated by
+# max(1, chi2 / dof). Setup parameters and the stylus tip keep their prior.
+
+MIN_CLASS_SCALE = 1e-3
+MIN_REDUNDANCY = 5.0
+# Finite-difference step in prior sigmas: the Jacobian then within ~3e-6
+# relative of the exact one on TANGO (truncation and rounding balanced).
+AUTO_FD_STEP = 1e-5
+# A probe touch of any kind is one instrument (fivecal's noise class "probe");
+# the ball instruments are each their own.
+NOISE_GROUP = {"facet": "probe", "sphere": "probe", "dbb": "dbb", "ball3d": "ball3d"}
+
+
+def prior_class(machine: fivecal.Machine, name: str) -> str:
+    """The documented prior class of a parameter (the rules of
+    cpp/src/solve/priors.cc PriorClassOf for the probing setup)."""
+    if name.startswith("tip."):
+        return "tip"
+    if name.startswith("facet."):
+        return "facet"
+    if name.startswith("sphere."):
+        return "sphere_radius" if name.endswith(".r") else "sphere_center"
+    if not name.startswith("E") or len(name) != 4:
+        raise ValueError(f"prior_class: no class for '{name}' in the numpy baseline")
+    comp, axis, last = name[1], name[2:3], name[3]
+    if axis == "0":          # location E<c>0<axis>
+        return "location_angle" if comp in "ABC" else "location_offset"
+    ax = {a["name"]: a for a in machine.axes}[axis]
+    rotary = ax["type"] == "rotary"
+    if last == "b":
+        return "backlash_rotary" if rotary else "backlash_linear"
+    d, angular = int(last), comp in "ABC"
+    if rotary:
+        return f"rotary_{'tilt' if angular else 'motion'}_{d}"
+    if d == 1 and not angular and abs(ax["direction"]["XYZ".index(comp)]) > 0.5:
+        return "scale_gain"    # the axis's own translational component of degree 1
+    return f"linear_{'tilt' if angular else 'motion'}_{d}"
+
+
+def prior_sigmas(dataset: fivecal.Dataset, names):
+    """(documented prior sigma per name, class per name): the class's sigma,
+    overridden by the machine file's "priors" (class:<name>, then the name)."""
+    from fivecal.identification import prior_classes
+
+    sigma = {c["name"]: c["sigma"] for c in prior_classes()}
+    machine_priors = dataset.to_dict()["machine"].get("priors") or {}
+    cls = [prior_class(dataset.machine, n) for n in names]
+    s = []
+    for n, c in zip(names, cls):
+        v = machine_priors.get(f"class:{c}", sigma[c])
+        s.append(machine_priors.get(n, v))
+    return np.array(s, float), cls
+
+
+class AutoSetup:
+    """What both baselines need for "auto": documented priors of ``names``,
+    the hierarchical classes (machine errors but the tip: setup parameters
+    keep their prior) as a one-hot (classes x names) matrix, and the noise
+    group of every residual row of NumpyProblem (scale bars: none, -1)."""
+
+    def __init__(self, dataset, names, prob=None):
+        self.prob = NumpyProblem(dataset) if prob is None else prob
+        self.names = list(names)
+        self.prior, cls = prior_sigmas(dataset, self.names)
+        machine_names = set(dataset.machine.parameter_names())
+        scaled = [c if (n in machine_names and c != "tip") else None for n, c in zip(self.names, cls)]
+        self.classes = sorted({c for c in scaled if c})
+        self.cls_idx = np.array([self.classes.index(c) if c else -1 for c in scaled], int)
+        self.members = np.array([self.cls_idx == k for k in range(len(self.classes))], float).reshape(
+            len(self.classes), len(self.names))
+        p = self.prob
+        kinds = ([p.types[i] for i in p.f_idx] + [p.types[i] for i in p.s_idx]
+                 + [t for i in p.b_idx for t in [p.types[i]] * (3 if p.types[i] == "ball3d" else 1)])
+        self.groups = sorted({NOISE_GROUP[k] for k in kinds})
+        self.row_group = np.array([self.groups.index(NOISE_GROUP[k]) for k in kinds] + [-1] * len(p.bars), int)
+        self.group_rows = np.array([self.row_group == g for g in range(len(self.groups))], float).reshape(
+            len(self.groups), self.row_group.size)
+        self.n_rows = self.row_group.size
+
+    def lam_per_name(self, lam):
+        return np.where(self.cls_idx >= 0, np.append(lam, 1.0)[self.cls_idx], 1.0)
+
+    def factor_per_row(self, factor):
+        return np.where(self.row_group >= 0, np.append(factor, 1.0)[self.row_group], 1.0)
+
+
+def evidence_update(members, u, Jd, lam_p):
+    """One evidence step. u: values in units of the documented priors; Jd:
+    weighted data rows' Jacobian in those units; lam_p: the class scale of
+    each column (1 for unscaled ones). Returns (new class scales, Ninv in u
+    units)."""
+    N = Jd.T @ Jd
+    N[np.diag_indices_from(N)] += 1.0 / lam_p ** 2
+    Ninv = np.linalg.inv(N)
+    gamma = np.clip(1.0 - np.diag(Ninv) / lam_p ** 2, 0.0, 1.0)
+    m2, g = members @ (u * u), members @ gamma
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = np.where(g > 1e-9, np.sqrt(m2 / np.where(g > 1e-9, g, 1.0)), MIN_CLASS_SCALE)
+    lam = np.clip(np.where(np.isfinite(lam), lam, 1.0), MIN_CLASS_SCALE, 1.0)
+    return lam, Ninv
+
+
+def variance_update(group_rows, factor, r_w, Jd, Ninv):
+    """Helmert / REML step: r_w the weighted data rows at the current noise."""
+    h = np.einsum("ij,ij->i", Jd @ Ninv, Jd)
+    red = group_rows @ np.clip(1.0 - h, 0.0, 1.0)
+    chi2 = group_rows @ (r_w * r_w)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = factor * np.sqrt(chi2 / red)
+    ok = (red >= MIN_REDUNDANCY) & np.isfinite(f) & (f > 0)
+    return np.where(ok, f, factor), red
+
+
+def auto_covariance(Jd, lam_p, chi2, n_rows):
+    """fivecal's MAP covariance in prior units: (Jd^T Jd + I)^-1 under the
+    documented priors, times max(1, chi2 / dof), dof = rows - round(trace of
+    the hat matrix of the fit that ran, at the scaled priors)."""
+    p = Jd.shape[1]
+    N = Jd.T @ Jd
+    Cs = np.linalg.inv(N + np.eye(p))
+    Nu = (lam_p[:, None] * N * lam_p[None, :]) + np.eye(p)
+    p_eff = p - np.trace(np.linalg.inv(Nu))
+    dof = max(1, n_rows - int(round(p_eff)))
+    return max(1.0, chi2 / dof) * Cs
+
+
+def identify_auto(dataset, names, variance_components=False, setup=None, max_rounds=60):
+    """estimate="auto" with numpy/SciPy over ``names`` (fivecal's candidates,
+    ``Result.estimated``). Each MAP fit is scipy least_squares (2-point
+    finite differences, as ``fit``, with a step of AUTO_FD_STEP) on the
+    weighted rows augmented by the prior rows u / lambda, in u = theta /
+    documented sigma: in those units one step suits every error, a cubic
+    motion's as a location's. Returns a dict: values, std (dicts by name), class_scales,
+    variance_factors, rounds, function_evaluations."""
+    a = AutoSetup(dataset, names) if setup is None else setup
+    prob, prior, n = a.prob, a.prior, len(a.names)
+    lam = np.ones(len(a.classes))
+    factor = np.ones(len(a.groups))
+    tol = 1e-3 if variance_components else 0.01
+    u = np.zeros(n)
+    nfev = 0
+
+    def map_fit(u0, lam_p, sig):
+        last = {}
+
+        def fun(x):
+            nonlocal nfev
+            nfev += 1
+            f = np.concatenate([prob.residuals(dict(zip(a.names, x * prior))) / sig, x / lam_p])
+            last["x"], last["f"] = x.copy(), f
+            return f
+
+        def jac(x):
+            # 2-point differences with a step of AUTO_FD_STEP prior sigma
+            # (SciPy's relative sqrt(eps) step is 1e-8 of a prior sigma at
+            # most: the rounding of the ~500 mm coordinates the residuals are
+            # differences of then put percent errors on the weakly seen
+            # columns and moved the optimum by ~0.006 sigma).
+            f0 = last["f"] if "x" in last and np.array_equal(last["x"], x) else fun(x)
+            cols = [(fun(x + AUTO_FD_STEP * e) - f0) / AUTO_FD_STEP for e in np.eye(n)]
+            return np.stack(cols, axis=1)
+
+        # u is already scaled (prior units), hence x_scale=1.
+        return least_squares(fun, u0, jac=jac, method="trf", x_scale=1.0, ftol=1e-12, xtol=1e-12, gtol=1e-12)
+
+    rounds = 0
+    for rounds in range(1, max_rounds + 1):
+        lam_p = a.lam_per_name(lam)
+        sig = prob.sigma * a.factor_per_row(factor)
+        sol = map_fit(u, lam_p, sig)
+        u = sol.x
+        Jd = sol.jac[: a.n_rows]
+        new_lam, Ninv = evidence_update(a.members, u, Jd, lam_p)
+        change = float(np.max(np.abs(np.log(new_lam / lam)), initial=0.0))
+        lam = new_lam
+        if variance_components:
+            new_f, _ = variance_update(a.group_rows, factor, sol.fun[: a.n_rows] * (a.row_group >= 0), Jd, Ninv)
+            change = max(change, float(np.max(np.abs(np.log(new_f / factor)), initial=0.0)))
+            factor = new_f
+        if change < tol:
+            break
+    lam_p = a.lam_per_name(lam)
+    sig = prob.sigma * a.factor_per_row(factor)
+    sol = map_fit(u, lam_p, sig)
+    Jd = sol.jac[: a.n_rows]
+    r_w = sol.fun[: a.n_rows]
+    Cs = auto_covariance(Jd, lam_p, float(r_w @ r_w), a.n_rows)
+    std = prior * np.sqrt(np.maximum(np.diag(Cs), 0.0))
+    return {"values": dict(zip(a.names, sol.x * prior)), "std": dict(zip(a.names, std)),
+            "class_scales": dict(zip(a.classes, lam)),
+            "variance_factors": dict(zip(a.groups, factor)) if variance_components else {},
+            "rounds": rounds, "function_evaluations": int(nfev)}
+
+
 # ---- test design: greedy + exchange D-optimal search ----------------------------
 
 def fd_jacobian(fun, names, h=1e-6):

@@ -298,3 +298,70 @@ def test_jax_design_scoring_runs_its_lapack_calls_one_after_the_other():
             seen.add(n)
             todo += uses.get(n, ())
     assert eigh in seen, "the Cholesky can run concurrently with eigvalsh"
+
+
+# ---- estimate "auto": the numpy and JAX baselines of the evidence loop ---------
+
+def _small_auto_problem():
+    """A smaller "auto" problem than the bench's (61 unknowns, not 166, so
+    the finite-difference baseline takes seconds, not minutes): TANGO S3
+    data with every motion error but the scale gains fixed. Its loop still
+    shrinks three classes and estimates the probe's noise."""
+    ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=2)
+    m = ds.machine
+    fix = [n for n in m.parameter_names() if n[-1] in "123" and base.prior_class(m, n) != "scale_gain"]
+    r = fivecal.identify(ds, "auto", fix=fix, variance_components=True)
+    assert sum(0.01 < s < 0.9 for s in r.class_scales.values()) >= 3   # the loop has work to do
+    assert r.variance_components["probe"]["estimated"]
+    return ds, r
+
+
+def test_numpy_auto_is_fivecal_s():
+    """baseline_numpy.identify_auto reproduces identify(ds, "auto",
+    variance_components=True): the same documented priors, values within
+    0.001 of fivecal's sigma, sigmas, class scales and the probe's noise
+    factor (bench.AUTO_TOLERANCE)."""
+    ds, r = _small_auto_problem()
+    setup = base.AutoSetup(ds, r.estimated)
+    assert list(setup.prior) == [r.prior_std[n] for n in r.estimated]
+    b = base.identify_auto(ds, r.estimated, True, setup=setup)
+    agree = bench.auto_agreement(r, b["values"], b["std"], b["class_scales"], b["variance_factors"],
+                                 setup.groups)
+    assert set(agree) == set(bench.AUTO_TOLERANCE)
+    bench.check_auto_agreement(agree, "numpy")
+
+
+def test_jax_auto_is_fivecal_s_and_the_check_has_teeth():
+    """baseline_jax.JaxAuto reproduces the same result; the agreement check
+    rejects the same loop stopped after its first round, and a class prior
+    twice its documented sigma (the scale compensates, the check sees it)."""
+    pytest.importorskip("jax")
+    import baseline_jax as jbase
+
+    ds, r = _small_auto_problem()
+    ja = jbase.JaxAuto(ds, r.estimated, True)
+    a = ja.setup
+
+    def agreement(out, setup=a):
+        x, s, lam, f = (np.asarray(out[k]) for k in ("values", "std", "class_scales", "variance_factors"))
+        return bench.auto_agreement(r, dict(zip(r.estimated, x)), dict(zip(r.estimated, s)),
+                                    dict(zip(setup.classes, lam)), dict(zip(setup.groups, f)), setup.groups)
+
+    out = ja.run()
+    assert out["converged"] and out["rounds"] > 1
+    bench.check_auto_agreement(agreement(out), "JAX")
+    ja.max_rounds = 1                                  # the same compiled round, one round only
+    with pytest.raises(AssertionError, match="JAX auto baseline off"):
+        bench.check_auto_agreement(agreement(ja.run()), "JAX")
+    # numpy with the location-angle class prior doubled: the same fit with
+    # that class's scale halved (two rounds only, to save time: the doubling
+    # alone is a log ratio of 0.69)
+    setup = base.AutoSetup(ds, r.estimated)
+    k = setup.classes.index("location_angle")
+    setup.prior = np.where(setup.cls_idx == k, 2 * setup.prior, setup.prior)
+    b = base.identify_auto(ds, r.estimated, True, setup=setup, max_rounds=2)
+    agree = bench.auto_agreement(r, b["values"], b["std"], b["class_scales"], b["variance_factors"],
+                                 setup.groups)
+    assert agree["max_class_scale_log_ratio"] > 0.5
+    with pytest.raises(AssertionError, match="numpy auto baseline off"):
+        bench.check_auto_agreement(agree, "numpy")
