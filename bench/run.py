@@ -189,7 +189,8 @@ def check_auto_agreement(agreement, who):
         assert v < AUTO_TOLERANCE[k], f"{who} auto baseline off fivecal's: {k} = {v:.3g}"
 
 
-def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dataset=None, fix=None):
+def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dataset=None, fix=None,
+                    jax_repeat=None):
     """estimate="auto" on the TANGO touches: every candidate error under its
     prior with the class scales found by the evidence (a loop of MAP fits),
     optionally with variance components. The baselines run the same loop over
@@ -203,6 +204,14 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
     fix = list(fix or [])
     vc = bool(variance_components)
     t_f, runs_f, r = timed(lambda: fivecal.identify(ds, "auto", fix=fix, variance_components=vc), repeat)
+    if baseline_repeat == 0:
+        why = ("not run in this bench run (bench/run.py --auto-baselines 0): one numpy run of the evidence "
+               "loop takes about 10 min and a JAX one minutes after a compile of minutes")
+        return {"case": "tango_auto" + ("_vce" if vc else ""),
+                "size": {"touches": len(ds), "unknowns": r.n_parameters, "rows": r.n_observations},
+                "fivecal_s": t_f, "runs_fivecal_s": runs_f, "fivecal_iterations": r.iterations,
+                "jax_skipped": why, "baseline_skipped": why,
+                "class_scales": {c: float(v) for c, v in r.class_scales.items()}}
     names = r.estimated
     setup = base.AutoSetup(ds, names)
     groups = setup.groups if vc else ()
@@ -223,7 +232,7 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
         jx = {"jax_skipped": JAX_MISSING}
     else:
         ja = jbase.JaxAuto(ds, names, vc)
-        first, t_j, runs_j, out = timed_jax(ja.run, repeat)
+        first, t_j, runs_j, out = timed_jax(ja.run, repeat if jax_repeat is None else jax_repeat)
         assert out["converged"], "JAX Levenberg-Marquardt did not converge in every round"
         x, s, lam, f = (np.asarray(out[k]) for k in ("values", "std", "class_scales", "variance_factors"))
         agree_j = auto_agreement(r, dict(zip(names, x)), dict(zip(names, s)), dict(zip(setup.classes, lam)),
@@ -571,6 +580,8 @@ def jax_cells(r, times="x", dash="-"):
     if "jax_s" in r:
         return _ms(r["jax_s"]), _ms(r["jax_compile_s"]), _ratio(r["ratio_jax"], times)
     why = r.get("jax_skipped", "")
+    if why.startswith("not run"):              # said once below the table
+        return "not run (below)", "", ""
     if why and not why.startswith("no "):      # "no JAX ...": the case has no JAX version
         return f"not measured: {why}", "", ""
     return dash, dash, dash
@@ -614,7 +625,7 @@ def readme_section(doc):
             lines.append(f"| {r['case']} | – | not measured: {r['skipped']} | | | | | |")
             continue
         size = ", ".join(f"{k} {v}" for k, v in r["size"].items())
-        b = _ms(r["baseline_s"]) if "baseline_s" in r else "–"
+        b = _ms(r["baseline_s"]) if "baseline_s" in r else ("not run (below)" if "baseline_skipped" in r else "–")
         ratio = _ratio(r["ratio"], "×") if "ratio" in r else "–"
         j, jc, jr = jax_cells(r, "×", "–")
         lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} | {j} | {jc} | {jr} |")
@@ -651,6 +662,10 @@ def readme_section(doc):
     if scaled:
         lines += ["", "JAX Monte Carlo scaled from one run of " + ", ".join(
             f"{r['jax_trials_run']} vmapped trials ({r['case']})" for r in scaled) + " to the case's trial count."]
+    not_run = [r["case"] for r in doc["results"] if r.get("baseline_skipped", "").startswith("not run")]
+    if not_run:
+        lines += ["", f"{', '.join(not_run)}: baselines "
+                  + next(r["baseline_skipped"] for r in doc["results"] if r["case"] == not_run[0]) + "."]
     no_jax = sorted({r["jax_skipped"] for r in doc["results"] if r.get("jax_skipped", "").startswith("no JAX")})
     for reason in no_jax:
         cases = [r["case"] for r in doc["results"] if r.get("jax_skipped") == reason]
@@ -710,7 +725,14 @@ def targets_paragraph(doc):
             "and one residual pass of tool points plus JᵀJ, bench/long_data.json)", r["ratio_to_floor"] <= 3)
     pq = _read_json("load_dataset_parquet.json")
     pq_n = {r["observations"]: r for r in pq["results"]} if pq else {}
-    if 10_000_000 in by_n and 10_000_000 in pq_n:
+    if 10_000_000 in by_n and "load_s" in by_n[10_000_000]:
+        # load and fit measured in one process from the Parquet file (long_data.py --parquet)
+        r = by_n[10_000_000]
+        total, peak = r["identify_s"] + r["load_s"], r["peak_rss_mb"] / 1024
+        say(f"10⁷ 3D-ball samples from Parquet, load plus fit < 10 s and < 2 GB ({r['load_s']:.0f} s load + "
+            f"{r['identify_s']:.0f} s fit, {peak:.1f} GB peak, one process, machine load "
+            f"{r['load_average_before'][0]:.0f}; bench/long_data.json)", total < 10 and peak < 2)
+    elif 10_000_000 in by_n and 10_000_000 in pq_n:
         r, load = by_n[10_000_000], pq_n[10_000_000]["modes"]["load"]
         total = r["identify_s"] + load["wall_s"]
         peak = max(r["peak_rss_mb"], load["peak_rss_mb"]) / 1024
@@ -738,23 +760,52 @@ def update_readme(doc, path):
         f.write(text)
 
 
+def _load(path):
+    with open(path) as f:
+        return json.load(f)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
     p.add_argument("--readme", action="store_true", help="rewrite the README performance section")
     p.add_argument("--out", default=os.path.join(HERE, "results.json"))
+    p.add_argument("--auto-baselines", type=int, default=None, metavar="N",
+                   help="numpy runs of the 'auto' cases (default: as many as fivecal's, one when a run "
+                   "exceeds 20 s; 0: neither baseline)")
+    p.add_argument("--auto-jax-runs", type=int, default=None, metavar="N",
+                   help="warm JAX runs of the 'auto' cases (default: as many as fivecal's; one takes minutes)")
+    p.add_argument("--auto-from", metavar="JSON", help="take the two 'auto' cases from this results file "
+                   "(bench/run.py --only-auto --out JSON) instead of running them")
+    p.add_argument("--only-auto", action="store_true", help="run the two 'auto' cases only")
     p.add_argument("--numpy-runs-1e6", type=int, default=5, metavar="N",
                    help="runs of the numpy baseline of the 1e6-sample fit (about 2 min each; 0: none)")
     a = p.parse_args(argv)
     repeat = 5
     results = []
+    if a.only_auto:
+        for vc in (False, True):
+            before = os.getloadavg()
+            results.append(case_tango_auto(repeat, vc, jax_repeat=a.auto_jax_runs))
+            results[-1].update(load_average_before=before, load_average_after=os.getloadavg())
+        doc = {"machine": machine_info(), "quick": False, "results": results, "choices": []}
+        with open(a.out, "w") as f:
+            json.dump(doc, f, indent=1)
+        print(table(results))
+        return 0
     results.append(case_forward_kinematics(20_000 if a.quick else 1_000_000, repeat))
     print(table(results[-1:]), flush=True)
     for s in ("S3", "S4"):
         results.append(case_tango(s, repeat, 1 if a.quick else 5))
         print(table(results[-1:]), flush=True)
     for vc in (False, True):
-        results.append(case_tango_auto(3 if a.quick else repeat, vc))
+        if a.auto_from:
+            # measured apart (a numpy run of the evidence loop takes minutes)
+            results.append(next(r for r in _load(a.auto_from)["results"]
+                                if r["case"] == "tango_auto" + ("_vce" if vc else "")))
+        else:
+            results.append(case_tango_auto(3 if a.quick else repeat, vc, baseline_repeat=a.auto_baselines,
+                                           jax_repeat=a.auto_jax_runs))
         print(table(results[-1:]), flush=True)
     for n in ((10_000,) if a.quick else (10_000, 100_000, 1_000_000)):
         results.append(case_ball3d(n, repeat, repeat if n < 1_000_000 else a.numpy_runs_1e6))

@@ -365,3 +365,25 @@ def test_jax_auto_is_fivecal_s_and_the_check_has_teeth():
     assert agree["max_class_scale_log_ratio"] > 0.5
     with pytest.raises(AssertionError, match="numpy auto baseline off"):
         bench.check_auto_agreement(agree, "numpy")
+
+
+def test_every_case_of_the_committed_bench_carries_both_ratios_or_says_why_not():
+    """bench/results.json (the figures the README prints) compares every case
+    with the numpy and the JAX baselines, in medians of at least 5 fivecal
+    runs, with its size and the machine it ran on; a case whose baselines were
+    left out of a run says so (the 'auto' cases: minutes per baseline run)."""
+    with open(os.path.join(ROOT, "bench", "results.json")) as f:
+        doc = json.load(f)
+    assert not doc["quick"]
+    assert {"cpu", "cores", "date"} <= set(doc["machine"])
+    for r in doc["results"]:
+        case = r["case"]
+        assert "skipped" not in r, case
+        assert r["size"] and len(r["runs_fivecal_s"]) >= 5, case
+        if r.get("baseline_skipped", "").startswith("not run in this bench run"):
+            assert case.startswith("tango_auto"), case
+            continue
+        assert "jax_skipped" not in r, case
+        assert r["ratio"] == pytest.approx(r["baseline_s"] / r["fivecal_s"]), case
+        assert r["ratio_jax"] == pytest.approx(r["jax_s"] / r["fivecal_s"]), case
+        assert r["jax_compile_s"] > 0, case
