@@ -546,13 +546,7 @@ class JaxDesign:
         return [int(g) for g in np.where(chosen)[0]], history, evaluations
 
 
-def _better(a, b):
-    """fivecal's strict ordering of two (deficiency, nonnull, dcrit)."""
-    if a[0] != b[0]:
-        return a[0] < b[0]
-    if a[0] > 0:
-        return a[1] > b[1] + 1e-12
-    return -a[2] < -b[2] - 1e-9 * max(1.0, abs(b[2]))
+_better = base.NumpyDesign._better     # fivecal's strict ordering of two scores, shared
 
 
 def _pick(scores, candidates, start=None):

@@ -503,6 +503,17 @@ void EvaluateBatch(const AnalyticResiduals& b, const Eigen::VectorXd& v, const s
   ASSERT_TRUE(b.Evaluate(params.data(), r->data(), cols.data()));
 }
 
+// The held and the per-chunk batch evaluate the same rows to the same bits.
+void ExpectSameRows(const AnalyticResiduals& all, const AnalyticResiduals& chunk, const Eigen::VectorXd& v,
+                    const std::vector<int>& est, int round) {
+  Eigen::VectorXd r1, r2;
+  Eigen::MatrixXd J1, J2;
+  EvaluateBatch(all, v, est, &r1, &J1);
+  EvaluateBatch(chunk, v, est, &r2, &J2);
+  EXPECT_EQ((r1 - r2).cwiseAbs().maxCoeff(), 0.0) << round;
+  EXPECT_EQ((J1 - J2).cwiseAbs().maxCoeff(), 0.0) << round;
+}
+
 TEST(NormalEquations, PassesHoldAChunkOfPreparedRowsPerThread) {
   // Interleaved kinds of every sort, then a long R-test trace: the streaming
   // passes prepare the analytic rows a chunk at a time, so the prepared rows
@@ -556,12 +567,7 @@ TEST(NormalEquations, PassesHoldAChunkOfPreparedRowsPerThread) {
   EXPECT_EQ(all.num_prepared(), chunk.num_prepared());
   EXPECT_EQ(all.row_source(), chunk.row_source());
   for (int round = 0; round < 2; ++round) {
-    Eigen::VectorXd r1, r2;
-    Eigen::MatrixXd J1, J2;
-    EvaluateBatch(all, v, est, &r1, &J1);
-    EvaluateBatch(chunk, v, est, &r2, &J2);
-    EXPECT_EQ((r1 - r2).cwiseAbs().maxCoeff(), 0.0) << round;
-    EXPECT_EQ((J1 - J2).cwiseAbs().maxCoeff(), 0.0) << round;
+    ExpectSameRows(all, chunk, v, est, round);
     // Readings and axes edited in place, then refreshed.
     for (Observation& o : ds.observations) {
       o.reading += n01(rng);
@@ -600,12 +606,7 @@ TEST(NormalEquations, PerChunkRowsFollowTheSetupOfEachSample) {
   AnalyticResiduals all(ds, table, v, est, RowStorage::kAll);
   AnalyticResiduals chunk(ds, table, v, est, RowStorage::kPerChunk);
   for (int round = 0; round < 2; ++round) {
-    Eigen::VectorXd r1, r2;
-    Eigen::MatrixXd J1, J2;
-    EvaluateBatch(all, v, est, &r1, &J1);
-    EvaluateBatch(chunk, v, est, &r2, &J2);
-    EXPECT_EQ((r1 - r2).cwiseAbs().maxCoeff(), 0.0) << round;
-    EXPECT_EQ((J1 - J2).cwiseAbs().maxCoeff(), 0.0) << round;
+    ExpectSameRows(all, chunk, v, est, round);
     // The streaming sums see the same rows.
     const NormalEquationProblem ne(ds, table, v, est, 2);
     Problem dense(ds, table, v, est);
