@@ -656,8 +656,13 @@ def readme_section(doc):
     few = [r for r in doc["results"] if "runs_baseline_s" in r and "baseline_s_per_trial" not in r
            and len(r["runs_baseline_s"]) < 5]
     for r in few:
+        jax_runs = r.get("runs_jax_s", [])
         lines += ["", f"{r['case']}: the numpy baseline is the median of {len(r['runs_baseline_s'])} "
-                  f"run(s) ({', '.join(f'{t:.0f} s' for t in r['runs_baseline_s'])})."]
+                  f"run(s) ({', '.join(f'{t:.0f} s' for t in r['runs_baseline_s'])})"
+                  + (f", JAX of {len(jax_runs)} warm run(s) ({', '.join(f'{t:.0f} s' for t in jax_runs)})"
+                     if 0 < len(jax_runs) < 5 else "")
+                  + (f"; measured apart from the other cases (machine load {r['load_average_before'][0]:.1f})"
+                     if "load_average_before" in r else "") + "."]
     scaled = [r for r in doc["results"] if "jax_trials_run" in r and r["jax_trials_run"] < r["size"]["trials"]]
     if scaled:
         lines += ["", "JAX Monte Carlo scaled from one run of " + ", ".join(
