@@ -189,6 +189,18 @@ def check_auto_agreement(agreement, who):
         assert v < AUTO_TOLERANCE[k], f"{who} auto baseline off fivecal's: {k} = {v:.3g}"
 
 
+def small_auto_problem():
+    """A smaller "auto" problem than the bench's (61 unknowns, not 166, so
+    the finite-difference baseline takes seconds, not minutes): TANGO S3
+    data with every motion error but the scale gains fixed. Its loop still
+    shrinks three classes and estimates the probe's noise. Used by the
+    tests and by ``--quick``."""
+    ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=2)
+    m = ds.machine
+    fix = [n for n in m.parameter_names() if n[-1] in "123" and base.prior_class(m, n) != "scale_gain"]
+    return ds, fix
+
+
 def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dataset=None, fix=None,
                     jax_repeat=None):
     """estimate="auto" on the TANGO touches: every candidate error under its
@@ -197,9 +209,9 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
     fivecal's candidates (baseline_numpy.identify_auto: SciPy MAP fits with
     finite differences; baseline_jax.JaxAuto: a jitted LM round with jacfwd)
     and must reproduce fivecal's values, sigmas, class scales and noise
-    factors. The numpy baseline runs ``baseline_repeat`` times (default
-    ``repeat``), once only when its first run exceeds 20 s. ``dataset``,
-    ``fix``: another problem (the tests' smaller one)."""
+    factors. The numpy baseline runs ``baseline_repeat`` times; by default
+    ``repeat`` times, or once only when its first run exceeds 20 s.
+    ``dataset``, ``fix``: another problem (``small_auto_problem``)."""
     ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=3) if dataset is None else dataset
     fix = list(fix or [])
     vc = bool(variance_components)
@@ -218,7 +230,7 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
     t1, _, b = timed(lambda: base.identify_auto(ds, names, vc, setup=setup), 1)
     runs_b = [t1]
     n_b = repeat if baseline_repeat is None else baseline_repeat
-    if t1 <= 20:
+    if t1 <= 20 or baseline_repeat is not None:
         runs_b += timed(lambda: base.identify_auto(ds, names, vc, setup=setup), n_b - 1)[1] if n_b > 1 else []
     t_b = statistics.median(runs_b)
     agree = auto_agreement(r, b["values"], b["std"], b["class_scales"], b["variance_factors"], groups)
@@ -776,7 +788,7 @@ def main(argv=None):
     p.add_argument("--readme", action="store_true", help="rewrite the README performance section")
     p.add_argument("--out", default=os.path.join(HERE, "results.json"))
     p.add_argument("--auto-baselines", type=int, default=None, metavar="N",
-                   help="numpy runs of the 'auto' cases (default: as many as fivecal's, one when a run "
+                   help="numpy runs of the 'auto' cases (default: as many as fivecal's, or one when a run "
                    "exceeds 20 s; 0: neither baseline)")
     p.add_argument("--auto-jax-runs", type=int, default=None, metavar="N",
                    help="warm JAX runs of the 'auto' cases (default: as many as fivecal's; one takes minutes)")
@@ -791,7 +803,8 @@ def main(argv=None):
     if a.only_auto:
         for vc in (False, True):
             before = os.getloadavg()
-            results.append(case_tango_auto(repeat, vc, jax_repeat=a.auto_jax_runs))
+            results.append(case_tango_auto(repeat, vc, baseline_repeat=a.auto_baselines,
+                                           jax_repeat=a.auto_jax_runs))
             results[-1].update(load_average_before=before, load_average_after=os.getloadavg())
         doc = {"machine": machine_info(), "quick": False, "results": results, "choices": []}
         with open(a.out, "w") as f:
@@ -808,8 +821,13 @@ def main(argv=None):
             # measured apart (a numpy run of the evidence loop takes minutes)
             results.append(next(r for r in _load(a.auto_from)["results"]
                                 if r["case"] == "tango_auto" + ("_vce" if vc else "")))
+        elif a.quick:
+            # the tests' smaller problem: the full one's baselines take minutes a run
+            ds, fix = small_auto_problem()
+            results.append(case_tango_auto(3, vc, baseline_repeat=a.auto_baselines, jax_repeat=a.auto_jax_runs,
+                                           dataset=ds, fix=fix))
         else:
-            results.append(case_tango_auto(3 if a.quick else repeat, vc, baseline_repeat=a.auto_baselines,
+            results.append(case_tango_auto(repeat, vc, baseline_repeat=a.auto_baselines,
                                            jax_repeat=a.auto_jax_runs))
         print(table(results[-1:]), flush=True)
     for n in ((10_000,) if a.quick else (10_000, 100_000, 1_000_000)):

@@ -303,13 +303,7 @@ def test_jax_design_scoring_runs_its_lapack_calls_one_after_the_other():
 # ---- estimate "auto": the numpy and JAX baselines of the evidence loop ---------
 
 def _small_auto_problem():
-    """A smaller "auto" problem than the bench's (61 unknowns, not 166, so
-    the finite-difference baseline takes seconds, not minutes): TANGO S3
-    data with every motion error but the scale gains fixed. Its loop still
-    shrinks three classes and estimates the probe's noise."""
-    ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=2)
-    m = ds.machine
-    fix = [n for n in m.parameter_names() if n[-1] in "123" and base.prior_class(m, n) != "scale_gain"]
+    ds, fix = bench.small_auto_problem()
     r = fivecal.identify(ds, "auto", fix=fix, variance_components=True)
     assert sum(0.01 < s < 0.9 for s in r.class_scales.values()) >= 3   # the loop has work to do
     assert r.variance_components["probe"]["estimated"]
