@@ -1,7 +1,10 @@
 """Fixtures several test modules share: the thesis HU40T machine, its
-octagonal TANGO table and the Table 4-2 plan (built once per session)."""
+octagonal TANGO table and the Table 4-2 plan (built once per session), and
+the example c600u machine (once per module: some tests edit it)."""
 import pytest
 
+import fivecal
+from fivecal.demo import example_machine_path
 from fivecal.procedures import tango
 
 
@@ -19,6 +22,11 @@ def table():
 def plan(table, hu40t):
     """The Table 4-2 touch plan on the octagonal table."""
     return tango.hu40t_plan(table, hu40t)
+
+
+@pytest.fixture(scope="module")
+def c600u():
+    return fivecal.Machine.load(example_machine_path("c600u"))
 
 
 def pytest_collection_modifyitems(config, items):

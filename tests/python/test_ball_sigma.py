@@ -1,21 +1,14 @@
 """fivecal.ball_dataset carries the declared noise of its samples into the
 fit: one number, one per sample or one per ball3d component, exactly as
 ``"sigma"`` in a dataset file."""
-import os
 
 import numpy as np
 import pytest
 
 import fivecal
 
-HERE = os.path.dirname(os.path.abspath(__file__))
 TRUE = {"EB0A": 3e-5, "EA0C": 4e-5, "EB0C": -2e-5, "EY0C": -0.012}
 TABLE = [50.0, 0.0, 80.0]
-
-
-@pytest.fixture(scope="module")
-def c600u():
-    return fivecal.Machine.load(os.path.join(HERE, "..", "..", "examples", "machines", "c600u.json"))
 
 
 @pytest.fixture(scope="module")

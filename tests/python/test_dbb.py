@@ -29,11 +29,6 @@ TRUTH = dict(PAPER, EB0A=45e-6, EC0A=-30e-6, EA0C=-108e-6, EB0C=25e-6)
 
 
 @pytest.fixture(scope="module")
-def c600u():
-    return fivecal.Machine.load(os.path.join(MACHINES, "c600u.json"))
-
-
-@pytest.fixture(scope="module")
 def vmc():
     return fivecal.Machine.load(os.path.join(MACHINES, "vmc0656.json"))
 

@@ -8,12 +8,6 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal.demo import example_machine_path
-
-
-@pytest.fixture(scope="module")
-def c600u():
-    return fivecal.Machine.load(example_machine_path("c600u"))
 
 
 def _sphere_plan(machine, n_index=12, seed=0):

@@ -15,11 +15,6 @@ TRUE = {"EB0A": 3e-5, "EA0C": 4e-5, "EB0C": -2e-5, "EY0C": -0.012}
 TABLE = [50.0, 0.0, 80.0]
 
 
-@pytest.fixture(scope="module")
-def c600u():
-    return fivecal.Machine.load(os.path.join(HERE, "..", "..", "examples", "machines", "c600u.json"))
-
-
 def rtest(m, n, seed=3):
     # An R-test: the nominal tool ball on the table ball at every pose.
     rng = np.random.default_rng(seed)

@@ -37,11 +37,6 @@ def zz_values(scale=1.0):
     return errors, setup
 
 
-@pytest.fixture(scope="module")
-def c600u():
-    return fivecal.Machine.load(ROOT / "examples" / "machines" / "c600u.json")
-
-
 def test_zhang_tests_poses_and_directions(c600u):
     tests = machining.zhang_tests(c600u, L=150.0, H=60.0)
     assert [t["id"] for t in tests] == ["T1", "T2", "T3"]

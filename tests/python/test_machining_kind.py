@@ -17,7 +17,6 @@ Units: mm, rad (axes in degrees).
 from __future__ import annotations
 
 import math
-import pathlib
 
 import numpy as np
 import pytest
@@ -28,13 +27,7 @@ from fivecal.procedures import machining
 from test_machine import ZZ_H, ZZ_L
 from test_machining import zz_values
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
 TILT = list(machining.TILT_AXIS_ERRORS)  # EA0C, EY0C, EZ0C
-
-
-@pytest.fixture(scope="module")
-def c600u():
-    return fivecal.Machine.load(ROOT / "examples" / "machines" / "c600u.json")
 
 
 def _rot(u, deg):
