@@ -369,3 +369,27 @@ def test_sphere_free_subset_has_no_scale_bar_row(s3_data):
     assert len(r.residuals) == len(sub)
     assert r.rms == pytest.approx(SIGMA, rel=0.2)
     assert len(r.predict(sub)) == len(sub)
+
+
+def test_condition_number_of_one_declared_noise_is_the_general_one(s3_data):
+    """identify reports the condition number of the column-scaled Jacobian in
+    mm, before the weighting (as the plan design reports it). When every row
+    carries one declared noise it takes the number from the determination
+    analysis instead of computing it again; that shortcut must give what the
+    general computation gives, which a change of one part in 1e9 in one
+    touch's noise forces. Facets only (fix EXX1): the scale bar's row would
+    carry its own 1 µm noise and the shortcut would never run."""
+    facets = [i for i, o in enumerate(s3_data.observations) if o["type"] == "facet"]
+    d = s3_data.subset(facets).to_dict()
+    assert {o["sigma"] for o in d["observations"]} == {SIGMA}
+
+    def cond(sigma_of_first):
+        e = copy.deepcopy(d)
+        e["observations"][0]["sigma"] = sigma_of_first
+        return fivecal.identify(fivecal.Dataset.from_dict(e), "S3", fix=["EXX1"]).condition_number
+
+    one = cond(SIGMA)
+    assert 1 < one < 1e4
+    assert cond(SIGMA * (1 + 1e-9)) == pytest.approx(one, rel=1e-9)
+    # the weights do not enter: one touch of twice the noise, the same number
+    assert cond(2 * SIGMA) == pytest.approx(one, rel=1e-6)
