@@ -351,7 +351,7 @@ def case_monte_carlo(trials, threads, repeat, baseline_trials=5, jax_trials=JAX_
     if jbase is None:
         out["jax_skipped"] = JAX_MISSING
     elif jax_trials:
-        out.update(jax_monte_carlo(ds, trials, jax_trials, t_f))
+        out.update(jax_monte_carlo(ds, trials, jax_trials, t_f, repeat))
     return out
 
 
@@ -359,23 +359,23 @@ _NUMPY_MC = {}   # baseline_trials -> (median s per SciPy re-fit, runs)
 _JAX_MC = {}     # jax_trials -> the measured run (every Monte Carlo case re-fits the same dataset)
 
 
-def jax_monte_carlo(ds, trials, jax_trials, t_f):
-    """The JAX Monte Carlo: ``jax_trials`` vmapped LM re-fits (timed once
-    warm: one run already takes seconds), scaled to ``trials``. Agreement:
+def jax_monte_carlo(ds, trials, jax_trials, t_f, repeat):
+    """The JAX Monte Carlo: ``jax_trials`` vmapped LM re-fits (the median of
+    ``repeat`` warm runs, measured once for every case), scaled to ``trials``. Agreement:
     the reference fit within sigma of fivecal's, and the trials' mean and
     standard deviation those of fivecal's Monte Carlo with as many trials,
     within five times their sampling error."""
     if jax_trials not in _JAX_MC:
-        _JAX_MC[jax_trials] = _jax_monte_carlo_run(ds, jax_trials)
+        _JAX_MC[jax_trials] = _jax_monte_carlo_run(ds, jax_trials, repeat)
     run = _JAX_MC[jax_trials]
     t_j, scale = run["jax_s_per_trial"] * jax_trials, trials / jax_trials
     return {**run, "jax_s": t_j * scale, "ratio_jax": t_j * scale / t_f,
-            "jax_note": ("JAX: vmap of the LM re-fit over trials (lax.map, 64 at a time), one warm run of "
-                         f"{jax_trials} trials" + (f" scaled to {trials}" if scale != 1 else "") +
+            "jax_note": ("JAX: vmap of the LM re-fit over trials (lax.map, 64 at a time), the median of "
+                         f"{len(run['runs_jax_s'])} warm runs of {jax_trials} trials" + (f" scaled to {trials}" if scale != 1 else "") +
                          "; its first call (compile + the same run) is jax_compile_s")}
 
 
-def _jax_monte_carlo_run(ds, jax_trials):
+def _jax_monte_carlo_run(ds, jax_trials, repeat):
     import jax
     from fivecal import uncertainty
 
@@ -388,7 +388,7 @@ def _jax_monte_carlo_run(ds, jax_trials):
     assert z < 0.1, f"JAX reference fit off fivecal's by {z} sigma"
     mc = prob.monte_carlo_function()
     keys = iter(range(1, 1000))
-    first, t_j, runs_j, X = timed_jax(lambda: mc(x_ref, jax.random.PRNGKey(next(keys)), jax_trials), 1)
+    first, t_j, runs_j, X = timed_jax(lambda: mc(x_ref, jax.random.PRNGKey(next(keys)), jax_trials), repeat)
     X = np.asarray(X)
     ref = uncertainty.monte_carlo(ds, "S3", trials=jax_trials, threads=0, seed=1, progress=False,
                                   keep_samples=False)
@@ -677,8 +677,9 @@ def readme_section(doc):
                      if "load_average_before" in r else "") + "."]
     scaled = [r for r in doc["results"] if "jax_trials_run" in r and r["jax_trials_run"] < r["size"]["trials"]]
     if scaled:
-        lines += ["", "JAX Monte Carlo scaled from one run of " + ", ".join(
-            f"{r['jax_trials_run']} vmapped trials ({r['case']})" for r in scaled) + " to the case's trial count."]
+        lines += ["", "JAX Monte Carlo: " + ", ".join(
+            f"the median of {len(r['runs_jax_s'])} warm run(s) of {r['jax_trials_run']} vmapped trials ({r['case']})"
+            for r in scaled) + ", scaled to the case's trial count (the cases share one measurement)."]
     not_run = [r["case"] for r in doc["results"] if r.get("baseline_skipped", "").startswith("not run")]
     if not_run:
         lines += ["", f"{', '.join(not_run)}: baselines "

@@ -86,14 +86,26 @@ def main(job_path, out_path):
     njoints = s.joints
     wait_for(lambda: all(s.homed[:njoints]), s, timeout, "homing")
 
+    def at_rest():
+        # Idle and in position can both hold for a moment before a queued move
+        # starts (seen on a loaded machine: joints read 0.3 mm short of the
+        # move's end). At rest = also an empty planner queue and commanded
+        # joints that stay put over a few servo periods.
+        if not (s.interp_state == linuxcnc.INTERP_IDLE and s.inpos and s.queue == 0):
+            return False
+        before = list(s.joint_position[:njoints])
+        time.sleep(0.02)
+        s.poll()
+        return (s.interp_state == linuxcnc.INTERP_IDLE and s.inpos and s.queue == 0
+                and list(s.joint_position[:njoints]) == before)
+
     def mdi(line):
         c.mode(linuxcnc.MODE_MDI)
         c.wait_complete(timeout)
         c.mdi(line)
         if c.wait_complete(timeout) == -1:
             raise TimeoutError(f"LinuxCNC: MDI '{line}' did not complete in {timeout} s")
-        wait_for(lambda: s.interp_state == linuxcnc.INTERP_IDLE and s.inpos, s, timeout,
-                 f"MDI '{line}' to finish")
+        wait_for(at_rest, s, timeout, f"MDI '{line}' to finish")
         check_errors()
         if errors:
             raise RuntimeError(f"LinuxCNC refused '{line}': {errors[-1]}")
