@@ -677,9 +677,14 @@ def readme_section(doc):
                      if "load_average_before" in r else "") + "."]
     scaled = [r for r in doc["results"] if "jax_trials_run" in r and r["jax_trials_run"] < r["size"]["trials"]]
     if scaled:
-        lines += ["", "JAX Monte Carlo: " + ", ".join(
-            f"the median of {len(r['runs_jax_s'])} warm run(s) of {r['jax_trials_run']} vmapped trials ({r['case']})"
-            for r in scaled) + ", scaled to the case's trial count (the cases share one measurement)."]
+        kinds = sorted({(len(r["runs_jax_s"]), r["jax_trials_run"]) for r in scaled})
+        lines += ["", "JAX Monte Carlo: " + "; ".join(
+            f"the median of {n} warm run(s) of {k} vmapped trials" for n, k in kinds)
+            + f", shared by {', '.join(r['case'] for r in scaled)} and scaled to each case's trial count."]
+    apart = [r for r in doc["results"] if "measured_apart" in r]
+    if apart:
+        lines += ["", f"{', '.join(r['case'] for r in apart)}: fivecal and both baselines measured "
+                  f"together after the main run ({apart[0]['measured_apart']})."]
     not_run = [r["case"] for r in doc["results"] if r.get("baseline_skipped", "").startswith("not run")]
     if not_run:
         lines += ["", f"{', '.join(not_run)}: baselines "
