@@ -2,6 +2,7 @@
 the speed ratios in the README compare different things."""
 import json
 import os
+import statistics
 import sys
 
 import numpy as np
@@ -363,8 +364,8 @@ def test_jax_auto_is_fivecal_s_and_the_check_has_teeth():
 
 def test_every_case_of_the_committed_bench_carries_both_ratios_or_says_why_not():
     """bench/results.json (the figures the README prints) compares every case
-    with the numpy and the JAX baselines, in medians of at least 5 fivecal
-    runs, with its size and the machine it ran on; a case whose baselines were
+    with the numpy and the JAX baselines, in medians of at least 5 runs of
+    each, with its size and the machine it ran on; a case whose baselines were
     left out of a run says so (the 'auto' cases: minutes per baseline run)."""
     with open(os.path.join(ROOT, "bench", "results.json")) as f:
         doc = json.load(f)
@@ -381,3 +382,11 @@ def test_every_case_of_the_committed_bench_carries_both_ratios_or_says_why_not()
         assert r["ratio"] == pytest.approx(r["baseline_s"] / r["fivecal_s"]), case
         assert r["ratio_jax"] == pytest.approx(r["jax_s"] / r["fivecal_s"]), case
         assert r["jax_compile_s"] > 0, case
+        # the baselines' figures are medians of at least 5 runs too (the numpy
+        # Monte Carlo: 5 single re-fits times the trial count)
+        assert len(r["runs_baseline_s"]) >= 5 and len(r["runs_jax_s"]) >= 5, case
+        per_trial = case.startswith("monte_carlo")
+        assert r["baseline_s"] == pytest.approx(statistics.median(r["runs_baseline_s"])
+                                                * (r["size"]["trials"] if per_trial else 1)), case
+        assert r["jax_s"] == pytest.approx(statistics.median(r["runs_jax_s"])
+                                           * (r["size"]["trials"] / r["jax_trials_run"] if per_trial else 1)), case
