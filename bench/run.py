@@ -371,8 +371,9 @@ def jax_monte_carlo(ds, trials, jax_trials, t_f, repeat):
     t_j, scale = run["jax_s_per_trial"] * jax_trials, trials / jax_trials
     return {**run, "jax_s": t_j * scale, "ratio_jax": t_j * scale / t_f,
             "jax_note": ("JAX: vmap of the LM re-fit over trials (lax.map, 64 at a time), the median of "
-                         f"{len(run['runs_jax_s'])} warm runs of {jax_trials} trials" + (f" scaled to {trials}" if scale != 1 else "") +
-                         "; its first call (compile + the same run) is jax_compile_s")}
+                         f"{len(run['runs_jax_s'])} warm runs of {jax_trials} trials"
+                         + (f" scaled to {trials}" if scale != 1 else "")
+                         + "; its first call (compile + the same run) is jax_compile_s")}
 
 
 def _jax_monte_carlo_run(ds, jax_trials, repeat):
