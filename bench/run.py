@@ -673,9 +673,7 @@ def readme_section(doc):
         lines += ["", f"{r['case']}: the numpy baseline is the median of {len(r['runs_baseline_s'])} "
                   f"run(s) ({', '.join(f'{t:.0f} s' for t in r['runs_baseline_s'])})"
                   + (f", JAX of {len(jax_runs)} warm run(s) ({', '.join(f'{t:.0f} s' for t in jax_runs)})"
-                     if 0 < len(jax_runs) < 5 else "")
-                  + (f"; measured apart from the other cases (machine load {r['load_average_before'][0]:.1f})"
-                     if "load_average_before" in r else "") + "."]
+                     if 0 < len(jax_runs) < 5 else "") + "."]
     scaled = [r for r in doc["results"] if "jax_trials_run" in r and r["jax_trials_run"] < r["size"]["trials"]]
     if scaled:
         kinds = sorted({(len(r["runs_jax_s"]), r["jax_trials_run"]) for r in scaled})
@@ -786,11 +784,6 @@ def update_readme(doc, path):
         f.write(text)
 
 
-def _load(path):
-    with open(path) as f:
-        return json.load(f)
-
-
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
@@ -825,10 +818,12 @@ def main(argv=None):
     for s in ("S3", "S4"):
         results.append(case_tango(s, repeat, 1 if a.quick else 5))
         print(table(results[-1:]), flush=True)
+    if a.auto_from:
+        # measured apart (a numpy run of the evidence loop takes minutes)
+        with open(a.auto_from) as f:
+            apart = json.load(f)
     for vc in (False, True):
         if a.auto_from:
-            # measured apart (a numpy run of the evidence loop takes minutes)
-            apart = _load(a.auto_from)
             results.append({**next(r for r in apart["results"] if r["case"] == "tango_auto" + ("_vce" if vc else "")),
                             "measured_apart": apart["machine"]["date"]})
         elif a.quick:
