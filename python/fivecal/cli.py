@@ -17,6 +17,7 @@ import sys
 import time
 
 from . import __version__, schema
+from .tolerances import parse_value
 
 
 def _identify(args) -> int:
@@ -27,10 +28,11 @@ def _identify(args) -> int:
 
     from .progress import busy
 
-    from .history.cli import identify_history
+    from .history.cli import check_identify_history, identify_history
 
     hist = identify_history(args)
     ds = load_dataset(args.dataset)
+    check_identify_history(args, hist, ds)
     with busy(f"fitting {len(ds)} observations"), warnings.catch_warnings():
         warnings.simplefilter("ignore", category=_fit_warning())  # said once below, in one line
         result = identify(ds, estimate=args.estimate, fix=args.fix, robust=args.robust,
@@ -412,8 +414,9 @@ def _rtest(args) -> int:
     from .dataset import load_dataset
     from .procedures import rtest
 
+    # µm when bare (this command's unit since its first release), any length unit when written
+    tol = None if args.tolerance is None else parse_value(args.tolerance, "--tolerance", bare_unit="um")
     out = rtest.evaluate(load_dataset(args.dataset), identify=not args.no_identify)
-    tol = None if args.tolerance is None else args.tolerance * 1e-3
     print(out.report(tol))
     verdicts = [("the location-error fit", out.result.assessment())] if out.result is not None else []
     status = fit_status("rtest", verdicts, args.force)
@@ -586,8 +589,10 @@ def _existing(path) -> bool:
 def _declared_files(args):
     """(inputs, outputs) named on the command line, as (label, path) pairs."""
     inputs, outputs = [], []
+    # a calibration store is read and written: an output over it loses every calibration
     for attr, label in (("dataset", "dataset"), ("spec", "spec"), ("result", "result"), ("machine", "machine"),
-                        ("program", "program"), ("values", "--values")):
+                        ("program", "program"), ("values", "--values"), ("store", "--store"),
+                        ("history", "--history")):
         v = getattr(args, attr, None)
         if _existing(v):
             inputs.append((label, v))
@@ -606,10 +611,11 @@ def _declared_files(args):
                 inputs.append(("--csv", part.split("=", 1)[1].strip()))
     if args.command == "demo":
         return inputs, []
+    labels = getattr(args, "file_labels", None) or {}     # a positional output is named as in --help
     for attr in ("out", "table", "plot", "patterns", "save_dataset"):
         v = getattr(args, attr, None)
         if isinstance(v, str) and not (attr == "out" and "{k}" in v):
-            outputs.append((f"--{attr.replace('_', '-')}", v))
+            outputs.append((labels.get(attr, f"--{attr.replace('_', '-')}"), v))
     report = getattr(args, "report", None)
     if isinstance(report, str):
         outputs += [("--report", os.path.join(report, "result.json")), ("--report", os.path.join(report, "report.html"))]
@@ -918,8 +924,9 @@ def main(argv=None) -> int:
                         "fivecal.procedures.rtest.plan (docs/design.md).",
                         epilog="example:\n  fivecal rtest rtest_data.json --tolerance 20")
     pp.add_argument("dataset", help="dataset JSON with the ball3d observations")
-    pp.add_argument("--tolerance", type=POSITIVE, default=None,
-                    help="largest allowed range per direction, µm (exit 1 when a test exceeds it)")
+    pp.add_argument("--tolerance", default=None, metavar="UM",
+                    help="largest allowed range per direction, µm, or with a unit: 0.02mm (exit 1 when a test "
+                    "exceeds it)")
     pp.add_argument("--no-identify", action="store_true", help="only the ranges, no location-error fit")
     pp.add_argument("--force", action="store_true", help="exit 0 even when the fit is not usable")
     pp.set_defaults(func=_rtest)

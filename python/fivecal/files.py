@@ -15,14 +15,26 @@ Inside :func:`transaction` (the ``fivecal`` command runs each command in
 one), every path read is remembered, a write over one of them is refused,
 and when the command fails the files it created are removed and the files
 it replaced get their previous content back.
+
+One guard, :func:`guard_output`, stands before every write: a file read in
+the running transaction, or a database opened with :func:`open_sqlite` (a
+calibration store, read or written, in a transaction or not, while it is
+open), is never overwritten. Writers that produce bytes another library
+makes (Parquet through :func:`write_parquet_table`, figures through
+:func:`save_figure`) go through :func:`write_bytes` like the rest, so no
+module writes a file but through here (tests/python/test_files.py checks
+the source for it).
 """
 from __future__ import annotations
 
 import contextlib
 import io
 import os
+import sqlite3
 import stat
 import tempfile
+import threading
+import weakref
 from typing import List, Optional, Sequence, Tuple, Union
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -41,13 +53,16 @@ class _Transaction:
         self.created: List[str] = []
         self.backups: List[Tuple[str, str]] = []  # (destination, hard link to its previous content)
         self.dirs: List[str] = []
+        self.databases: List[Tuple[str, Optional[os.stat_result]]] = []  # opened with open_sqlite
 
-    def note_input(self, path: str) -> None:
+    def note_input(self, path: str, database: bool = False) -> None:
         try:
             st = os.stat(path)
         except OSError:
             st = None
         self.inputs.append((path, st))
+        if database:
+            self.databases.append((path, st))
 
 
 _active: List[_Transaction] = []
@@ -57,21 +72,102 @@ def _same(a: os.stat_result, b: os.stat_result) -> bool:
     return a.st_dev == b.st_dev and a.st_ino == b.st_ino
 
 
-def _input_clash(dest: str) -> Optional[str]:
-    """The input path of the active transaction that ``dest`` resolves to."""
-    if not _active:
-        return None
+def _stat(path: str) -> Optional[os.stat_result]:
     try:
-        st = os.stat(dest)
+        return os.stat(path)
     except OSError:
-        st = None
+        return None
+
+
+class _HeldConnection(sqlite3.Connection):
+    """A SQLite connection whose file (and its WAL and shared-memory files)
+    is an input for as long as it is open."""
+    _fivecal_inputs: List[Tuple[str, Optional[os.stat_result]]] = []
+
+    def close(self) -> None:
+        try:
+            super().close()
+        finally:
+            with _held_lock:
+                _held.discard(self)
+
+
+#: open database connections (weak: one dropped without close() stops guarding)
+_held: "weakref.WeakSet[_HeldConnection]" = weakref.WeakSet()
+_held_lock = threading.Lock()
+
+
+def _inputs() -> List[Tuple[str, Optional[os.stat_result]]]:
+    out = list(_active[-1].inputs) if _active else []
+    with _held_lock:
+        for c in list(_held):
+            out.extend(c._fivecal_inputs)
+    return out
+
+
+def _clash(dest: str, inputs) -> Optional[str]:
+    st = _stat(dest)
     real = os.path.realpath(dest)
-    for path, ist in _active[-1].inputs:
+    for path, ist in inputs:
         if st is not None and ist is not None and _same(st, ist):
             return path
         if os.path.realpath(path) == real:
             return path
     return None
+
+
+def _input_clash(dest: str) -> Optional[str]:
+    """The input (read in the active transaction, or an open database) that
+    ``dest`` is, by name, symbolic link or hard link."""
+    return _clash(dest, _inputs())
+
+
+def guard_output(path: PathLike, label: str = "") -> str:
+    """The one output-is-not-an-input check: ValueError naming ``label`` (an
+    option such as ``--plot``), the path and the input when ``path`` is a
+    file read in the running transaction or an open database. Every write of
+    the package passes here (through :func:`write_bytes` or directly, for a
+    library that writes a folder itself)."""
+    path = os.fspath(path)
+    clash = _input_clash(path)
+    if clash is not None:
+        what = f"{label} {path}" if label else path
+        raise ValueError(f"{what}: is the input {clash}; refusing to overwrite an input")
+    return path
+
+
+def note_input(path: PathLike) -> None:
+    """Count ``path`` as an input of the running transaction (no-op outside
+    one): a later write over it is refused."""
+    if _active:
+        _active[-1].note_input(os.fspath(path))
+
+
+def open_sqlite(path: PathLike, label: str = "", **kwargs) -> sqlite3.Connection:
+    """``sqlite3.connect(path, **kwargs)`` for a database that is both read
+    and written (the calibration store): refused when it is an input of the
+    running transaction under another name (a dataset given as the store),
+    and, while the connection is open and for the rest of the transaction,
+    an input itself, so no output of the command lands on it."""
+    path = os.fspath(path)
+    if _active:
+        # a database opened before in this transaction is this one again, not a clash
+        dbs = _active[-1].databases
+        files_read = [i for i in _active[-1].inputs if _clash(i[0], dbs) is None]
+        clash = _clash(path, files_read)
+        if clash is not None:
+            raise ValueError(f"{label + ' ' if label else ''}{path}: is the input {clash}; refusing to "
+                             "open it as a database (it would be written)")
+    db = sqlite3.connect(path, factory=_HeldConnection, **kwargs)
+    # the WAL holds committed data not yet copied into the file: as precious
+    parts = (path, path + "-wal", path + "-shm")
+    db._fivecal_inputs = [(p, _stat(p)) for p in parts]
+    with _held_lock:
+        _held.add(db)
+    if _active:
+        for p in parts:
+            _active[-1].note_input(p, database=True)
+    return db
 
 
 @contextlib.contextmanager
@@ -232,14 +328,13 @@ def _new_file_mode() -> int:
 _before_replace = None
 
 
-def write_bytes(path: PathLike, data: bytes) -> str:
+def write_bytes(path: PathLike, data: bytes, label: str = "", durable: bool = True) -> str:
     """Atomically replace ``path`` (through a symbolic link: its target) with
-    ``data``; returns ``path``.  ValueError inside a :func:`transaction` when
-    ``path`` is one of its inputs."""
-    path = os.fspath(path)
-    clash = _input_clash(path)
-    if clash is not None:
-        raise ValueError(f"{path}: is the input {clash}; refusing to overwrite an input")
+    ``data``; returns ``path``.  ValueError (naming ``label``, the option
+    that named the file) when ``path`` is an input (:func:`guard_output`).
+    ``durable=False`` skips the fsyncs (the replace stays atomic): for
+    thousands of generated files that can be made again."""
+    path = guard_output(path, label)
     dest = os.path.realpath(path)
     folder = os.path.dirname(dest) or "."
     if os.path.isdir(dest):
@@ -258,7 +353,8 @@ def write_bytes(path: PathLike, data: bytes) -> str:
             if _before_replace is not None:
                 _before_replace(f)
             f.flush()
-            os.fsync(f.fileno())
+            if durable:
+                os.fsync(f.fileno())
         os.chmod(tmp, stat.S_IMODE(old.st_mode) if old is not None else _new_file_mode())
         backup = None
         if _active and old is not None:
@@ -278,6 +374,8 @@ def write_bytes(path: PathLike, data: bytes) -> str:
             _active[-1].created.append(dest)
         elif backup is not None:
             _active[-1].backups.append((dest, backup))
+    if not durable:
+        return path
     with contextlib.suppress(OSError):  # the rename itself durable
         dfd = os.open(folder, os.O_RDONLY)
         try:
@@ -287,9 +385,9 @@ def write_bytes(path: PathLike, data: bytes) -> str:
     return path
 
 
-def write_text(path: PathLike, text: str, encoding: str = "utf-8") -> str:
+def write_text(path: PathLike, text: str, encoding: str = "utf-8", label: str = "", durable: bool = True) -> str:
     """:func:`write_bytes` of ``text`` encoded (UTF-8 by default)."""
-    return write_bytes(path, text.encode(encoding))
+    return write_bytes(path, text.encode(encoding), label=label, durable=durable)
 
 
 def write_json(path: PathLike, obj, indent: int = 1, **kw) -> str:
@@ -322,13 +420,25 @@ def make_dirs(path: PathLike) -> str:
     return path
 
 
-def save_figure(fig, path: PathLike, **kw) -> str:
+def save_figure(fig, path: PathLike, label: str = "", **kw) -> str:
     """Render a matplotlib Figure (PNG unless the name says otherwise) to
     memory, then write it atomically."""
-    path = os.fspath(path)
+    path = guard_output(path, label)     # before the rendering: say it at once
     ext = os.path.splitext(path)[1].lower().lstrip(".")
     buf = io.BytesIO()
     fig.savefig(buf, format=kw.pop("format", None) or (ext if ext in ("png", "pdf", "svg", "eps", "ps", "jpg",
                                                                         "jpeg", "tif", "tiff", "webp")
                                                        else "png"), **kw)
-    return write_bytes(path, buf.getvalue())
+    return write_bytes(path, buf.getvalue(), label=label)
+
+
+def write_parquet_table(path: PathLike, table, label: str = "", **kw) -> str:
+    """A pyarrow Table as a Parquet file (``pyarrow.parquet.write_table``
+    options in ``kw``), rendered in memory, then written atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = guard_output(path, label)
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink, **kw)
+    return write_bytes(path, memoryview(sink.getvalue()), label=label)

@@ -45,8 +45,9 @@ def test_round_trip_is_bit_exact(tmp_path, result):
 def test_times_order_by_instant_not_by_text(tmp_path, result):
     """'...:05.5Z' is after '...:05Z' although it sorts before it as text."""
     with history.Store(tmp_path / "t.fcdb") as s:
-        late = s.add(result, machine_id="M1", time="2026-01-02T03:04:05.500000Z")
-        early = s.add(result, machine_id="M1", time="2026-01-02T03:04:05Z")
+        # two datasets (digests): the same one twice would be one calibration
+        late = s.add(result, machine_id="M1", time="2026-01-02T03:04:05.500000Z", digest="a" * 64)
+        early = s.add(result, machine_id="M1", time="2026-01-02T03:04:05Z", digest="b" * 64)
         assert [c.id for c in s.list(machine_id="M1")] == [early, late]
         assert [c.id for c in s.list(since="2026-01-02T03:04:05.2Z")] == [late]
         assert [c.id for c in s.list(until="2026-01-02T03:04:05.2Z")] == [early]
@@ -118,17 +119,18 @@ def test_a_store_of_the_previous_schema_opens_and_is_migrated(tmp_path):
     db.commit()
     db.close()
     with history.Store(path) as s:
-        assert s.schema_version == history.SCHEMA_VERSION == 3
+        assert s.schema_version == history.SCHEMA_VERSION == 4
         (c,) = s.list("M7")
         assert c.values.tobytes() == v.tobytes() and c.covariance.tobytes() == C.tobytes()
         assert c.prior_std is None and c.dof is None and c.fivecal_version == "0.0.9"
         assert c.uncertainty == "gum"                   # v3's default for older rows
         assert s.failures() == []                       # the v2 table exists
+        assert s.rebuilds("M7") == []                   # and v4's
         s.add_many([history.Calibration("M7", "2026-01-02", ["EX0C"], np.array([0.0124]), np.eye(1) * 1e-8,
                                         prior_std=np.array([0.1]), dof=3)])
         assert [c.dof for c in s.list("M7")] == [None, 3]
     versions = [r[0] for r in sqlite3.connect(path).execute("SELECT version FROM schema_version ORDER BY version")]
-    assert versions == [1, 2, 3]
+    assert versions == [1, 2, 3, 4]
 
 
 def test_a_store_of_a_newer_fivecal_is_refused(tmp_path):
@@ -173,15 +175,25 @@ def test_missing_pyarrow_names_the_extra(tmp_path, monkeypatch):
         s.export_parquet(tmp_path / "x.parquet")
 
 
-def test_cli_add_list_show_export(tmp_path, result, capsys):
+@pytest.fixture(scope="module")
+def result2():
+    """Another night of the same machine (another noise draw)."""
+    m = fleetsim.machine()
+    ds = fivecal.simulate(m, fleetsim.sphere_check_plan(m), errors={"EX0C": 0.01},
+                          artefact={"spheres": [fleetsim.SPHERE]}, tip_radius=3.0, sigma=0.0006, seed=4)
+    return fivecal.identify(ds, "location")
+
+
+def test_cli_add_list_show_export(tmp_path, result, result2, capsys):
     pytest.importorskip("pyarrow")
     result.save(tmp_path / "r.json")
+    result2.save(tmp_path / "r2.json")
     db = str(tmp_path / "s.fcdb")
     assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9", "--procedure", "sphere",
                  "--time", "2026-03-01T02:00:00Z", "--machine", str(tmp_path / "m.json")]) == 2
     assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9", "--procedure", "sphere",
                  "--time", "2026-03-01T02:00:00Z"]) == 0
-    assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9",
+    assert main(["history", "add", "--store", db, str(tmp_path / "r2.json"), "--machine-id", "M9",
                  "--time", "2026-03-02T02:00:00Z"]) == 0
     capsys.readouterr()
     assert main(["history", "list", "--store", db]) == 0
@@ -195,15 +207,21 @@ def test_cli_add_list_show_export(tmp_path, result, capsys):
     assert "EX0C" in out and "covariance term is 0" in out
     assert main(["history", "export", "--store", db, str(tmp_path / "o.parquet")]) == 0
     assert len(history.read_parquet(tmp_path / "o.parquet")) == 2
-    fivecal.save_dataset(result.dataset, tmp_path / "ds.json")
-    assert main(["history", "add", "--store", db, str(tmp_path / "r.json"), "--machine-id", "M9",
+    # the result of night 2 again, now with its dataset: the same values, so already recorded ...
+    fivecal.save_dataset(result2.dataset, tmp_path / "ds.json")
+    capsys.readouterr()
+    assert main(["history", "add", "--store", db, str(tmp_path / "r2.json"), "--machine-id", "M9",
                  "--dataset", str(tmp_path / "ds.json")]) == 0
+    assert "already recorded (calibration #2" in capsys.readouterr().err
+    # ... unless replaced: then it carries the digest
+    assert main(["history", "add", "--store", db, str(tmp_path / "r2.json"), "--machine-id", "M9",
+                 "--dataset", str(tmp_path / "ds.json"), "--replace", "--time", "2026-03-02T02:00:00Z"]) == 0
     capsys.readouterr()
     assert main(["history", "list", "--store", db, "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert [r["digest"] for r in rows] == ["", "", history.dataset_digest(result.dataset)]
+    assert [r["digest"] for r in rows] == ["", history.dataset_digest(result2.dataset)]
     with history.Store(db) as s:      # the dataset's machine is kept for volumetric comparisons
-        assert s.machine("M9").to_dict() == result.dataset.machine.to_dict()
+        assert s.machine("M9").to_dict() == result2.dataset.machine.to_dict()
     assert main(["history", "show", "--store", db, "7"]) == 2
     assert "no calibration with id 7" in capsys.readouterr().err
 
@@ -212,7 +230,7 @@ def test_cli_trend_grades_and_failures(tmp_path, result, capsys):
     db = str(tmp_path / "s.fcdb")
     with history.Store(db) as s:
         for night in range(4):
-            s.add(result, machine_id="M1", time=f"2026-01-0{night + 1}T02:00:00Z")
+            s.add(result, machine_id="M1", time=f"2026-01-0{night + 1}T02:00:00Z", digest=f"night{night}")
         s.add_failure("abc", "ValueError: broken", "x/2026-01-05.json", "M1")
     ex = result.values["EX0C"]
     assert main(["history", "trend", "--store", db, "--machine-id", "M1", "--tolerance", f"EX0C={ex * 2}",

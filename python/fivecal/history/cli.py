@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
+import warnings
+
+from ..tolerances import check_names, parse_tolerances, volumetric_tolerance
+from .store import AlreadyRecorded
 
 
 def _store(args, create=False):
@@ -14,21 +17,20 @@ def _store(args, create=False):
     return Store(args.store, create=create)
 
 
-def _tolerances(items) -> dict:
-    out = {}
-    for text in items or ():
-        for item in [t for t in text.split(",") if t.strip()]:
-            if "=" not in item:
-                raise ValueError(f"--tolerance: expected NAME=VALUE (mm / rad), got '{item.strip()}'")
-            k, v = item.split("=", 1)
-            try:
-                x = float(v)
-            except ValueError:
-                raise ValueError(f"--tolerance: {k.strip()}: '{v.strip()}' is not a number") from None
-            if not (math.isfinite(x) and x > 0):
-                raise ValueError(f"--tolerance: {k.strip()}: expected a positive number, got '{v.strip()}'")
-            out[k.strip()] = x
-    return out
+def _recording(record):
+    """Run ``record()`` (a Store.add); a repeat is said on stderr (exit 0,
+    nothing changed). Returns (row id, whether it was a repeat)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", AlreadyRecorded)
+        i = record()
+    for w in caught:
+        if issubclass(w.category, AlreadyRecorded):
+            a = w.message
+            print(f"history: {a.machine_id}: this dataset is already recorded (calibration #{a.id} at {a.time}); "
+                  "nothing changed (--replace replaces it)", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return i, any(issubclass(w.category, AlreadyRecorded) for w in caught)
 
 
 def _add(args) -> int:
@@ -37,11 +39,13 @@ def _add(args) -> int:
     digest = dataset_digest(args.dataset) if args.dataset else None
     machine = args.machine or args.dataset
     with _store(args, create=True) as s:
-        i = s.add(args.result, machine_id=args.machine_id, procedure=args.procedure or "", time=args.time,
-                  machine=machine, digest=digest)
+        i, repeat = _recording(lambda: s.add(args.result, machine_id=args.machine_id, procedure=args.procedure or "",
+                                             time=args.time, machine=machine, digest=digest, replace=args.replace,
+                                             rebuilt=args.rebuilt))
         c = s.get(i)
-    print(f"{args.store}: calibration #{i} of {c.machine_id} at {c.time} recorded ({len(c.names)} parameters, "
-          f"verdict {c.verdict})")
+    if not repeat:
+        print(f"{args.store}: calibration #{i} of {c.machine_id} at {c.time} recorded ({len(c.names)} parameters, "
+              f"verdict {c.verdict})" + (" as the first after a rebuild" if args.rebuilt else ""))
     return 0
 
 
@@ -102,11 +106,14 @@ def _compare(args) -> int:
     s = _store(args) if args.store else None
     try:
         a, b = _resolve(s, args.a, "A"), _resolve(s, args.b, "B")
-        machine = Machine.load(args.machine) if args.machine else (s.machine(b.machine_id) if s else None)
+        # the machines the store recorded for stored calibrations: a comparison across machines is refused
+        ma, mb = ((s.machine(c.machine_id) if s is not None and c.id else None) for c in (a, b))
+        machine = Machine.load(args.machine) if args.machine else (mb if s else None)
     finally:
         if s is not None:
             s.close()
-    cmp = compare(a, b, machine=machine, tolerances=_tolerances(args.tolerance), z_limit=args.z)
+    tol = parse_tolerances(args.tolerance, names=None)
+    cmp = compare(a, b, machine=machine, tolerances=tol, z_limit=args.z, machines=(ma, mb))
     print(json.dumps(cmp.to_dict(), indent=1) if args.json else cmp.report())
     return 0
 
@@ -121,11 +128,12 @@ def _failures(args) -> int:
 
 
 def _export(args) -> int:
-    with _store(args) as s:
-        cals = s.list(args.machine_id)
     from .store import write_parquet
 
-    write_parquet(cals, args.out)
+    with _store(args) as s:
+        cals = s.list(args.machine_id)
+        # written while the store is open: the one guard refuses OUT being the store
+        write_parquet(cals, args.out, label="OUT")
     print(f"{len(cals)} calibrations written to {args.out}")
     return 0
 
@@ -133,11 +141,19 @@ def _export(args) -> int:
 def _trend(args) -> int:
     from .trend import ChartDesign, detect, grade, plot_trend, pooled_statistics
 
+    vt = volumetric_tolerance(args.volumetric_tolerance)
     with _store(args) as s:
-        cals = s.list(args.machine_id, args.procedure)
         machine = s.machine(args.machine_id)
-    if not cals:
-        raise ValueError(f"{args.store}: no calibration of machine '{args.machine_id}'")
+        rebuilt = s.rebuilt_at(args.machine_id)
+        # a rebuilt machine's trend starts at its rebuild: never pooled across it
+        cals = s.list(args.machine_id, args.procedure, since=rebuilt)
+        if not cals:
+            raise ValueError(f"{args.store}: no calibration of machine '{args.machine_id}'"
+                             + (f" since its rebuild at {rebuilt}" if rebuilt else ""))
+        tol = parse_tolerances(args.tolerance, names=_names_of(cals[-1]),
+                               what=f"machine {args.machine_id}'s latest calibration")
+    if rebuilt:
+        print(f"machine {args.machine_id} rebuilt at {rebuilt}: the trend starts there")
     charts = detect(cals, false_alarm_rate=args.false_alarm_rate)
     if charts:
         d = next(iter(charts.values()))
@@ -147,10 +163,9 @@ def _trend(args) -> int:
               f"{len(charts)} parameters)")
         for n, ch in charts.items():
             print(f"  {n:<12}" + (", ".join(ch.times[i] for i in ch.alarms) if ch.alarms else "no alarm"))
-    tol = _tolerances(args.tolerance)
     status = 0
-    if tol or args.volumetric_tolerance:
-        g = grade(cals[-1], tol, args.volumetric_tolerance, machine=machine)
+    if tol or vt is not None:
+        g = grade(cals[-1], tol, vt, machine=machine)
         print(g.report())
         status = 1 if g.verdict == "fail" else 0
     try:
@@ -158,9 +173,14 @@ def _trend(args) -> int:
     except ValueError as e:
         print(f"pooled statistics: {e}")
     if args.plot:
-        plot_trend(cals, args.plot, tolerances=tol, charts=charts)
+        plot_trend(cals, args.plot, tolerances=tol, charts=charts, label="--plot")
         print(f"trend plot: {args.plot}")
     return status
+
+
+def _names_of(cal) -> list:
+    """Names a tolerance may name: the graded calibration's parameters."""
+    return list(cal.names) + list(cal.fixed)
 
 
 def _fleet(args) -> int:
@@ -185,6 +205,20 @@ def _fleet(args) -> int:
     return 0
 
 
+def _tolerance_help(what: str) -> str:
+    return (f"largest acceptable {what}, e.g. EX0C=12um, EA0C=20urad, EXX1=5um/m (repeatable, comma "
+            "separated); a bare number is in mm / rad, and a bare number too large for the parameter "
+            "(12 for EX0C) is refused as probably µm (docs/history.md)")
+
+
+def _record_options(g) -> None:
+    g.add_argument("--replace", action="store_true", help="replace the calibration of the same dataset "
+                   "(digest) of this machine id when it is already recorded (without: a repeat changes nothing)")
+    g.add_argument("--rebuilt", action="store_true", help="the machine was rebuilt: accept a result whose "
+                   "machine definition differs from the one recorded for this machine id; the store records "
+                   "the rebuild and the trend starts again here")
+
+
 def add_identify_options(p) -> None:
     """``fivecal identify``'s history options: the report shows this machine's
     trend, the comparison with its previous calibration and pass / fail."""
@@ -195,23 +229,25 @@ def add_identify_options(p) -> None:
                    "file name (YYYY-MM-DD[THH:MM[:SS]]), else at the file's modification time")
     g.add_argument("--machine-id", metavar="ID",
                    help="which machine of the store this dataset is (needed with --history)")
-    g.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
-                   help="largest acceptable |value|, mm / rad, e.g. EX0C=0.005 (repeatable, comma separated)")
-    g.add_argument("--volumetric-tolerance", type=float, metavar="MM",
-                   help="largest acceptable predicted tool-point error, mm")
+    g.add_argument("--tolerance", action="append", metavar="NAME=VALUE", help=_tolerance_help("|value|"))
+    g.add_argument("--volumetric-tolerance", metavar="MM",
+                   help="largest acceptable predicted tool-point error, mm (or with a unit: 20um)")
     g.add_argument("--record", action="store_true", help="also record this result in the store (created if "
                    "missing), with the dataset's digest and that time, after the report is written")
     g.add_argument("--procedure", metavar="LABEL", help="procedure label recorded with --record (e.g. sphere, tango)")
+    _record_options(g)
 
 
 def identify_history(args):
     """The report's :class:`~fivecal.history.report.History` for ``fivecal
-    identify`` (None without --history); checks the options first."""
+    identify`` (None without --history); checks the options first (the
+    tolerance names against the machine: :func:`check_identify_history`)."""
     from .report import History
 
     given = [o for o, v in (("--machine-id", args.machine_id), ("--tolerance", args.tolerance),
                             ("--volumetric-tolerance", args.volumetric_tolerance), ("--record", args.record),
-                            ("--procedure", args.procedure)) if v]
+                            ("--procedure", args.procedure), ("--replace", args.replace),
+                            ("--rebuilt", args.rebuilt)) if v]
     if not args.history:
         if given:
             raise ValueError(f"{given[0]}: needs --history STORE")
@@ -221,17 +257,35 @@ def identify_history(args):
     if not args.report and not args.record:
         raise ValueError("--history: the trend, comparison and pass / fail go in the HTML report: give "
                          "--report DIR (or --record to only record the result)")
-    vt = args.volumetric_tolerance
-    if vt is not None and not (math.isfinite(vt) and vt > 0):
-        raise ValueError(f"--volumetric-tolerance: expected a positive number of mm, got {vt}")
+    for o, v in (("--replace", args.replace), ("--rebuilt", args.rebuilt)):
+        if v and not args.record:
+            raise ValueError(f"{o}: only with --record")
+    vt = volumetric_tolerance(args.volumetric_tolerance)
+    tol = parse_tolerances(args.tolerance)
     from .store import Store
 
     # a missing (without --record) or foreign file is said before the fit
     Store(args.history, create=args.record).close()
     from .fleet import _time_of
 
-    return History(args.history, args.machine_id.strip(), tolerances=_tolerances(args.tolerance) or None,
+    return History(args.history, args.machine_id.strip(), tolerances=tol or None,
                    volumetric_tolerance=vt, time=_time_of(args.dataset) if os.path.isfile(args.dataset) else None)
+
+
+def check_identify_history(args, hist, dataset) -> None:
+    """Before the fit, with the dataset loaded: every tolerance names a
+    parameter of its machine, and the machine is the one the store holds for
+    --machine-id (unless --rebuilt)."""
+    from .store import Store
+
+    if hist is None:
+        return
+    m = dataset.machine
+    if hist.tolerances:
+        check_names(hist.tolerances, m.parameter_names(), f"machine {m.name} ({m.topology})")
+    if not args.rebuilt and os.path.exists(hist.store):
+        with Store(hist.store, create=False) as s:
+            s.check_machine(hist.machine_id, m)
 
 
 def grade_identify(result, hist) -> str:
@@ -252,10 +306,13 @@ def record_identify(args, result, hist) -> None:
     from .store import Store
 
     with Store(hist.store, create=True) as s:
-        i = s.add(result, machine_id=hist.machine_id, procedure=args.procedure or "", time=hist.time,
-                  source=args.dataset)
+        i, repeat = _recording(lambda: s.add(result, machine_id=hist.machine_id, procedure=args.procedure or "",
+                                             time=hist.time, source=args.dataset, replace=args.replace,
+                                             rebuilt=args.rebuilt))
         n = len(s.list(hist.machine_id))
-    print(f"history: calibration #{i} of {hist.machine_id} recorded in {hist.store} ({n} in all)")
+    if not repeat:
+        print(f"history: calibration #{i} of {hist.machine_id} recorded in {hist.store} ({n} in all)"
+              + (", the first after a rebuild" if args.rebuilt else ""))
 
 
 def register(sub) -> None:
@@ -284,6 +341,7 @@ def register(sub) -> None:
     a.add_argument("--machine", help="machine JSON (kept for volumetric comparisons)")
     a.add_argument("--dataset", help="the dataset the result came from: its sha256 digest is recorded "
                    "(and its machine kept)")
+    _record_options(a)
     a.set_defaults(func=_add)
 
     lst = hs.add_parser("list", help="list recorded calibrations")
@@ -304,17 +362,16 @@ def register(sub) -> None:
     c.add_argument("a", metavar="A", help="calibration id in --store, or a result JSON")
     c.add_argument("b", metavar="B", help="calibration id in --store, or a result JSON")
     c.add_argument("--machine", help="machine JSON for the volumetric change (default: the store's)")
-    c.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
-                   help="largest acceptable change, mm / rad, e.g. EX0C=0.005 (repeatable, comma separated)")
+    c.add_argument("--tolerance", action="append", metavar="NAME=VALUE", help=_tolerance_help("change |B - A|"))
     c.add_argument("--z", type=float, default=3.0, help="|z| above this is reported as a change (default 3)")
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_compare)
 
     e = hs.add_parser("export", help="write the calibrations to Parquet (needs fivecal[arrow])")
     common(e)
-    e.add_argument("out", help="Parquet file to write")
+    e.add_argument("out", metavar="OUT", help="Parquet file to write")
     e.add_argument("--machine-id")
-    e.set_defaults(func=_export)
+    e.set_defaults(func=_export, file_labels={"out": "OUT"})
 
     fl = hs.add_parser("failures", help="datasets a fleet run could not identify, with the reason")
     common(fl)
@@ -327,8 +384,9 @@ def register(sub) -> None:
     t.add_argument("--false-alarm-rate", type=float, default=0.001,
                    help="in-control probability that a calibration raises an alarm (default 0.001)")
     t.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
-                   help="largest acceptable |value|, mm / rad (the latest calibration is graded)")
-    t.add_argument("--volumetric-tolerance", type=float, help="largest acceptable predicted tool-point error, mm")
+                   help=_tolerance_help("|value| of the latest calibration"))
+    t.add_argument("--volumetric-tolerance", metavar="MM",
+                   help="largest acceptable predicted tool-point error, mm (or with a unit: 20um)")
     t.add_argument("--pool", choices=["days", "cycles"], default="days", help="pooled statistics by (default days)")
     t.add_argument("--plot", help="write the trend plot (PNG) here")
     t.set_defaults(func=_trend)

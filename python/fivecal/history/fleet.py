@@ -151,6 +151,7 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
         r = identify(ds, estimate=estimate, **(options or {}))
         fit = (_time.perf_counter() - t0, _time.thread_time() - c0)
         cal = calibration_from_result(r, job.machine_id, job.time, job.procedure, digest=digest, source=job.path)
+        cal.check()         # a non-finite fit is a failure of this dataset, not a record
         if trials:
             from ..uncertainty import monte_carlo
 
@@ -300,6 +301,19 @@ def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, jobs
             return
         t = _time.perf_counter()
         if st is not None:
+            # a dataset of another machine in a machine's folder fails, the run goes on
+            for k in dict.fromkeys(c.machine_id for c in pending):
+                mine = [c for c in pending if c.machine_id == k]
+                try:
+                    st.check_machine(k, machines.get(k), [n for c in mine for n in c.names])
+                except ValueError as e:
+                    for c in mine:
+                        pending.remove(c)
+                        run.done -= 1
+                        run.failed += 1
+                        run.failures.append((c.source, str(e)))
+                        st.add_failure(c.digest, f"ValueError: {e}", c.source, k)
+                    machines.pop(k, None)
             st.add_many(pending, machines=machines)
         if parquet:
             _write_parquet_part(parquet, pending)
@@ -360,14 +374,26 @@ def _parquet_digests(folder: str) -> set:
 
 
 def _write_parquet_part(folder: str, cals: Sequence[Calibration]) -> None:
+    """One new Parquet file per machine in ``folder/machine_id=<id>/`` (hive
+    layout, the id URL-encoded as pyarrow does), each written through
+    fivecal.files like every output (never over an input, atomic)."""
+    from .. import files
     from .store import arrow_table, require_pyarrow
 
     require_pyarrow()
     import uuid
 
+    import pyarrow as pa
+    import pyarrow.compute as pc
     import pyarrow.dataset as pds
 
-    t = arrow_table(cals)
-    pds.write_dataset(t, folder, format="parquet", partitioning=["machine_id"], partitioning_flavor="hive",
-                      existing_data_behavior="overwrite_or_ignore",
-                      basename_template=f"part-{uuid.uuid4().hex}-{{i}}.parquet")
+    part = pds.partitioning(pa.schema([("machine_id", pa.string())]), flavor="hive")
+    by: dict = {}
+    for c in cals:
+        by.setdefault(c.machine_id, []).append(c)
+    for k, group in by.items():
+        sub = os.path.join(folder, part.format(pc.field("machine_id") == k)[0])
+        files.make_dirs(sub)
+        t = arrow_table(group)
+        files.write_parquet_table(os.path.join(sub, f"part-{uuid.uuid4().hex}-0.parquet"),
+                                  t.drop_columns(["machine_id"]), label="--parquet")

@@ -18,6 +18,8 @@ from typing import List, Optional
 
 import numpy as np
 
+from .. import files
+
 SPHERE = {"id": "P", "center": [100.0, -50.0, 60.0], "radius": 19.05 / 2}
 INDEXATIONS = [{"B": float(b), "C": float(c)} for b in (0, 30, -30) for c in (0, 90, 180, 270)]
 #: one-sigma of each machine's own location errors (mm, rad)
@@ -118,7 +120,7 @@ def _write_machines(work: list, folder: str, spec: dict, nights: int, seed: int)
             text = json.dumps({**spec, "errors": errors, "seed": (seed * 1_000_003 + k) * 1000 + night})
             core = _core.simulate(text)
             path = os.path.join(d, night_time(night)[:10] + ".json")
-            with open(path, "w", encoding="utf-8") as f:
-                f.write(core.to_json())
+            # thousands of files a simulation can make again: atomic, not fsynced
+            files.write_text(path, core.to_json(), durable=False)
             paths.append(path)
     return paths

@@ -47,7 +47,8 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
     own = not isinstance(h.store, Store)
     st = Store(h.store, create=False) if own else h.store
     try:
-        cals = st.list(h.machine_id)
+        # a rebuilt machine's history starts at its rebuild: nothing before it is compared or charted
+        cals = st.list(h.machine_id, since=st.rebuilt_at(h.machine_id))
         machine = st.machine(h.machine_id)
     finally:
         if own:

@@ -10,6 +10,12 @@ store is opened, so a store written by one fivecal version opens in the next.
 Several processes may write to one store at once: the file is in WAL mode,
 each write is one ``BEGIN IMMEDIATE`` transaction and a writer that finds the
 file locked waits (``timeout`` seconds) instead of failing.
+
+What goes in is checked: a calibration whose values or uncertainties are not
+finite is refused, a result of another machine than the one the store holds
+for that machine id is refused unless the machine was rebuilt (which the
+store records, and trends start again there), and recording the same
+dataset of a machine again changes nothing unless asked to replace it.
 """
 from __future__ import annotations
 
@@ -19,10 +25,15 @@ import json
 import math
 import os
 import sqlite3
+import warnings
 from dataclasses import dataclass, field
 from typing import Iterable, List, Mapping, Optional, Sequence
 
 import numpy as np
+
+from .. import files
+from ..machine import Machine
+from ..units import _BACKLASH, _LOCATION, _MOTION
 
 # ---------------------------------------------------------------------------
 # schema: migrations in order, never edited once released (a store written
@@ -82,8 +93,24 @@ _V3 = """
 ALTER TABLE calibrations ADD COLUMN uncertainty TEXT NOT NULL DEFAULT 'gum';
 """
 
+# v4: machines rebuilt (the user said so when a result of another machine
+# definition was recorded under an existing machine id): the trend of a
+# machine starts again at the latest rebuild, never pooling across it
+_V4 = """
+CREATE TABLE rebuilds (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    machine_id TEXT NOT NULL,
+    time TEXT NOT NULL,
+    previous TEXT,
+    definition TEXT,
+    recorded TEXT NOT NULL,
+    fivecal_version TEXT NOT NULL
+);
+CREATE INDEX rebuilds_machine_time ON rebuilds (machine_id, time);
+"""
+
 #: (version, SQL) in order; the store's ``schema_version`` table holds the last applied
-MIGRATIONS = [(1, _V1), (2, _V2), (3, _V3)]
+MIGRATIONS = [(1, _V1), (2, _V2), (3, _V3), (4, _V4)]
 SCHEMA_VERSION = MIGRATIONS[-1][0]
 
 
@@ -207,6 +234,29 @@ class Calibration:
     def usable(self) -> bool:
         return self.verdict == "ok" and self.converged
 
+    def check(self) -> "Calibration":
+        """ValueError naming the parameter when a value, a fixed value or an
+        uncertainty is not finite (or a variance negative), or the sizes do
+        not agree: such a result is not a measurement and is never recorded."""
+        n = len(self.names)
+        v = np.asarray(self.values, float).reshape(-1)
+        C = np.asarray(self.covariance, float)
+        who = f"calibration of {self.machine_id}"
+        if v.size != n or C.size != n * n:
+            raise ValueError(f"{who}: {n} names but {v.size} values and a covariance of {C.size} entries")
+        C = C.reshape(n, n)
+        for i, name in enumerate(self.names):
+            if not math.isfinite(v[i]):
+                raise ValueError(f"{who}: {name} = {v[i]} is not a finite value; a fit with non-finite values "
+                                 "is not recorded")
+            if not (np.all(np.isfinite(C[i])) and C[i, i] >= 0):
+                raise ValueError(f"{who}: the uncertainty of {name} is not finite (variance {C[i, i]}); a fit "
+                                 "with non-finite uncertainties is not recorded")
+        for name, x in self.fixed.items():
+            if not (isinstance(x, (int, float)) and math.isfinite(x)):
+                raise ValueError(f"{who}: fixed {name} = {x} is not a finite value")
+        return self
+
 
 def _num(x):
     x = float(x)
@@ -274,6 +324,39 @@ def _from_result_dict(d: Mapping, machine_id, time, procedure, digest, source) -
                        fivecal_version=_version(), source=source)
 
 
+class AlreadyRecorded(UserWarning):
+    """The dataset was already recorded for this machine: nothing changed."""
+
+    def __init__(self, machine_id: str, id: int, time: str):
+        self.machine_id, self.id, self.time = machine_id, id, time
+        super().__init__(f"{machine_id}: this dataset is already recorded (calibration #{id} at {time}); "
+                         "nothing changed (replace it with --replace / replace=True)")
+
+
+def _is_machine_error(name: str) -> bool:
+    return bool(_LOCATION.match(name) or _MOTION.match(name) or _BACKLASH.match(name))
+
+
+def _kinematics(definition: Mapping) -> tuple:
+    """What makes two machine definitions the same machine: the topology and
+    each axis's type, direction and point (not its name, tool, limits or priors)."""
+    def vec(x, default):
+        return tuple(round(float(c), 9) + 0.0 for c in (x if x is not None else default))
+
+    axes = definition.get("axes") or {}
+    if isinstance(axes, Mapping):
+        axes = [dict(a, name=k) for k, a in axes.items()]
+    return (str(definition.get("topology", "")),
+            tuple(sorted((str(a.get("name")), str(a.get("type")), vec(a.get("direction"), (0, 0, 0)),
+                          vec(a.get("point"), (0, 0, 0))) for a in axes)))
+
+
+def describe_machine(definition: Mapping) -> str:
+    """``'HU40T-like (wCBXfZYSt)'``: a machine definition named in a message."""
+    name = definition.get("name") or "a machine"
+    return f"{name} ({definition.get('topology', '?')})"
+
+
 def _machine_id(m) -> str:
     if not isinstance(m, str) or not m.strip():
         raise ValueError("machine_id: a non-empty text naming the machine is required")
@@ -300,7 +383,8 @@ class Store:
             raise ValueError(f"{self.path}: folder {d} does not exist")
         try:
             # check_same_thread off: a fleet run writes from its collector thread (one user at a time)
-            self._db = sqlite3.connect(self.path, timeout=timeout, isolation_level=None, check_same_thread=False)
+            # through files: while open, the store is an input no output may overwrite
+            self._db = files.open_sqlite(self.path, timeout=timeout, isolation_level=None, check_same_thread=False)
             self._db.execute(f"PRAGMA busy_timeout = {int(timeout * 1000)}")
             self._db.execute("PRAGMA journal_mode = WAL")
             self._migrate()
@@ -344,31 +428,55 @@ class Store:
 
     # -- writing -----------------------------------------------------------
     def add(self, result, machine_id: str, procedure: str = "", time=None, machine=None,
-            digest: Optional[str] = None, source: str = "") -> int:
+            digest: Optional[str] = None, source: str = "", replace: bool = False, rebuilt: bool = False) -> int:
         """Record an identification: a :class:`fivecal.Result`, a result dict
         or the path of a result.json. ``machine``: the machine definition
         (Machine, dict or path; a Result brings its own) kept for the
-        volumetric comparisons. Returns the new row id."""
+        volumetric comparisons. Returns the row id.
+
+        A result of another machine than the one recorded for ``machine_id``
+        is refused (ValueError) unless ``rebuilt`` (the machine was rebuilt:
+        recorded, and trends start again from this calibration). The same
+        dataset (digest) of the same machine id recorded again changes
+        nothing (an :class:`AlreadyRecorded` warning, the stored id
+        returned) unless ``replace``."""
         cal = result if isinstance(result, Calibration) else calibration_from_result(
             result, machine_id, time, procedure, digest, source)
         if machine is None and hasattr(result, "dataset"):
             machine = result.dataset.machine
-        return self.add_many([cal], machine=machine)[0]
+        return self.add_many([cal], machine=machine, replace=replace, rebuilt=rebuilt)[0]
 
     def add_many(self, calibrations: Iterable[Calibration], machine=None,
-                 machines: Optional[Mapping[str, object]] = None) -> List[int]:
-        """Record several calibrations in one transaction (all or none)."""
+                 machines: Optional[Mapping[str, object]] = None, replace: bool = False,
+                 rebuilt: bool = False) -> List[int]:
+        """Record several calibrations in one transaction (all or none), with
+        the checks of :meth:`add`. Returns the row ids (a repeat: the stored one)."""
         cals = list(calibrations)
+        for c in cals:
+            c.machine_id = _machine_id(c.machine_id)
+            c.check()
         defs = {}
         if machine is not None:
             for c in cals:
                 defs[c.machine_id] = _machine_json(machine)
         for k, m in (machines or {}).items():
-            defs[k] = _machine_json(m)
-        ids = []
+            defs[_machine_id(k)] = _machine_json(m)
+        ids, repeats = [], []
         db = self._db
         db.execute("BEGIN IMMEDIATE")
         try:
+            for k in dict.fromkeys([c.machine_id for c in cals] + list(defs)):
+                names = [n for c in cals if c.machine_id == k for n in c.names + list(c.fixed)]
+                if not rebuilt:
+                    self._refuse_other_machine(k, defs.get(k), names)
+                if rebuilt and self._has_calibrations(k):
+                    first = min((c for c in cals if c.machine_id == k), key=lambda c: time_key(utc_time(c.time)),
+                                default=None)
+                    prev = db.execute("SELECT definition FROM machines WHERE machine_id = ?", (k,)).fetchone()
+                    db.execute("INSERT INTO rebuilds (machine_id, time, previous, definition, recorded, "
+                               "fivecal_version) VALUES (?, ?, ?, ?, ?, ?)",
+                               (k, utc_time(first.time if first is not None else None), prev and prev[0],
+                                defs.get(k), utc_time(), _version()))
             for k, text in defs.items():
                 db.execute("INSERT INTO machines VALUES (?, ?) ON CONFLICT(machine_id) DO UPDATE SET "
                            "definition = excluded.definition", (k, text))
@@ -376,11 +484,18 @@ class Store:
                 n = len(c.names)
                 v = np.asarray(c.values, float).reshape(n)
                 C = np.asarray(c.covariance, float).reshape(n, n)
+                same = self._same_record(c.machine_id, c.digest, c.names, v, C)
+                if same and not replace:
+                    ids.append(same[0])
+                    repeats.append((c, same[0]))
+                    continue
+                for i in same:
+                    db.execute("DELETE FROM calibrations WHERE id = ?", (i,))
                 cur = db.execute(
                     "INSERT INTO calibrations (machine_id, time, procedure, digest, names, \"values\", covariance, "
                     "fixed, rms, chi2, verdict, converged, undetermined, fivecal_version, prior_std, dof, chi2_p, "
                     "source, uncertainty) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (_machine_id(c.machine_id), utc_time(c.time), c.procedure, c.digest, json.dumps(list(c.names)),
+                    (c.machine_id, utc_time(c.time), c.procedure, c.digest, json.dumps(list(c.names)),
                      _blob(v), _blob(C), json.dumps(c.fixed), _nullable(c.rms), _nullable(c.chi2), c.verdict,
                      int(bool(c.converged)), json.dumps(list(c.undetermined)), c.fivecal_version or _version(),
                      None if c.prior_std is None else _blob(np.asarray(c.prior_std, float).reshape(n)),
@@ -392,7 +507,66 @@ class Store:
             raise
         for c, i in zip(cals, ids):
             c.id = i
+        for c, i in repeats:
+            warnings.warn(AlreadyRecorded(c.machine_id, i, self.get(i).time), stacklevel=3)
         return ids
+
+    def _has_calibrations(self, machine_id: str) -> bool:
+        return self._db.execute("SELECT 1 FROM calibrations WHERE machine_id = ? LIMIT 1",
+                                (machine_id,)).fetchone() is not None
+
+    def _same_record(self, machine_id: str, digest: str, names, v: np.ndarray, C: np.ndarray) -> List[int]:
+        """Ids of the stored calibrations this one repeats: the same machine
+        id and dataset digest, or, where one of the two has no digest (a
+        result.json added alone), the same values and covariance bit for bit
+        (no two measurements give that)."""
+        rows = self._db.execute(
+            "SELECT id FROM calibrations WHERE machine_id = ? AND ((? != '' AND digest = ?) OR "
+            "((digest = '' OR ? = '') AND names = ? AND \"values\" = ? AND covariance = ?)) ORDER BY id",
+            (machine_id, digest or "", digest or "", digest or "", json.dumps(list(names)), _blob(v), _blob(C)))
+        return [r[0] for r in rows]
+
+    def check_machine(self, machine_id: str, machine=None, names: Sequence[str] = ()) -> None:
+        """ValueError naming the machine id and both machines when a result
+        of ``machine`` (Machine, dict, path or None) with parameters ``names``
+        is not of the machine the store holds for ``machine_id``."""
+        self._refuse_other_machine(_machine_id(machine_id), None if machine is None else _machine_json(machine),
+                                   list(names))
+
+    def _refuse_other_machine(self, machine_id: str, definition: Optional[str], names: Sequence[str]) -> None:
+        why = self._machine_conflict(machine_id, definition, names)
+        if why is not None:
+            raise ValueError(f"{why}; if machine {machine_id} was rebuilt, say so (--rebuilt, rebuilt=True) and "
+                             "its trend starts again here, else give this result its own machine id")
+
+    def _machine_conflict(self, machine_id: str, definition: Optional[str], names: Sequence[str]) -> Optional[str]:
+        """Why a result (its machine's ``definition`` JSON, or None when not
+        known, and its parameter ``names``) is not of the machine the store
+        holds for ``machine_id``; None when nothing says so."""
+        row = self._db.execute("SELECT definition FROM machines WHERE machine_id = ?", (machine_id,)).fetchone()
+        stored = json.loads(row[0]) if row else None
+        new = json.loads(definition) if definition else None
+        if stored is not None and new is not None:
+            if _kinematics(stored) != _kinematics(new):
+                return (f"machine {machine_id} is {describe_machine(stored)} in {self.path}; this result is of "
+                        f"{describe_machine(new)}")
+            return None
+        ref = stored if stored is not None else new
+        if ref is None:
+            return None
+        # one side's definition is unknown: its parameter names must be the other machine's
+        if stored is None:
+            names = [n for (ns,) in self._db.execute("SELECT names FROM calibrations WHERE machine_id = ?",
+                                                     (machine_id,)) for n in json.loads(ns)]
+        known = set(Machine.from_dict(ref).parameter_names())
+        foreign = sorted({n for n in names if _is_machine_error(n) and n not in known})
+        if not foreign:
+            return None
+        if stored is not None:
+            return (f"machine {machine_id} is {describe_machine(stored)} in {self.path}, which has no "
+                    f"{', '.join(foreign[:4])}: this result is of another machine")
+        return (f"machine {machine_id} has calibrations in {self.path} with {', '.join(foreign[:4])}, which "
+                f"{describe_machine(new)} (this result's machine) does not have")
 
     def add_failure(self, digest: str, error: str, source: str = "", machine_id: str = "", time=None) -> None:
         """Record that identifying a dataset failed (a fleet run goes on)."""
@@ -446,9 +620,17 @@ class Store:
         r = self._db.execute("SELECT definition FROM machines WHERE machine_id = ?", (machine_id,)).fetchone()
         if r is None:
             return None
-        from ..machine import Machine
-
         return Machine.from_dict(json.loads(r[0]))
+
+    def rebuilds(self, machine_id: str) -> List[str]:
+        """Times (UTC ISO) at which ``machine_id`` was recorded as rebuilt, in order."""
+        return [r[0] for r in self._db.execute("SELECT time FROM rebuilds WHERE machine_id = ? ORDER BY "
+                                               "julianday(time), id", (machine_id,))]
+
+    def rebuilt_at(self, machine_id: str) -> Optional[str]:
+        """The latest rebuild of ``machine_id`` (None: never): its trend starts there."""
+        r = self.rebuilds(machine_id)
+        return r[-1] if r else None
 
     def digests(self) -> set:
         """Digests of the datasets already identified (a fleet re-run skips them)."""
@@ -543,11 +725,12 @@ def arrow_table(calibrations: Sequence[Calibration]):
     return pa.table(cols, schema=schema)
 
 
-def write_parquet(calibrations: Sequence[Calibration], path) -> None:
+def write_parquet(calibrations: Sequence[Calibration], path, label: str = "") -> None:
+    """The calibrations as one Parquet file, written through :mod:`fivecal.files`
+    (atomic; never over an input or an open store)."""
     require_pyarrow()
-    import pyarrow.parquet as pq
-
-    pq.write_table(arrow_table(calibrations), os.fspath(path))
+    files.guard_output(path, label)
+    files.write_parquet_table(path, arrow_table(calibrations), label=label)
 
 
 def read_parquet(path) -> List[Calibration]:

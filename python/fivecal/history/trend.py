@@ -23,8 +23,10 @@ from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..units import display_scale
-from .store import Calibration
+from .. import files
+from .. import tolerances as _tolerances
+from ..units import _BACKLASH, _LOCATION, _MOTION, display_scale
+from .store import Calibration, _kinematics, describe_machine
 
 
 def machine_error_names(cal: Calibration) -> List[str]:
@@ -158,12 +160,61 @@ class Comparison:
         return d
 
 
+def _axes_of(cal: Calibration) -> set:
+    """The axes a calibration's machine errors name (``EX0C`` -> C, ``EXX1`` -> X)."""
+    out = set()
+    for n in list(cal.names) + list(cal.fixed):
+        m = _LOCATION.match(n) or _MOTION.match(n) or _BACKLASH.match(n)
+        if m:
+            out.add(m.group(2))
+    return out
+
+
+def _label(c: Calibration, which: str) -> str:
+    return f"{which} ({c.machine_id}" + (f" #{c.id}" if c.id else "") + ")"
+
+
+def check_same_machine(a: Calibration, b: Calibration, machine=None, machines=(None, None)) -> None:
+    """ValueError saying why when A and B are not calibrations of one
+    machine: stored under two machine ids, of two machine definitions
+    (``machines``: A's and B's, when known), with machine errors of axes the
+    other has not, or of parameters ``machine`` (the one the comparison
+    predicts with) does not have. Their z-scores would measure the
+    difference between two machines, not a change."""
+    why = None
+    ma, mb = machines
+    if a.id and b.id and a.machine_id != b.machine_id:
+        why = f"A is machine {a.machine_id}, B is machine {b.machine_id}"
+    elif ma is not None and mb is not None and _kinematics(ma.to_dict()) != _kinematics(mb.to_dict()):
+        why = f"A is {describe_machine(ma.to_dict())}, B is {describe_machine(mb.to_dict())}"
+    else:
+        xa, xb = _axes_of(a), _axes_of(b)
+        if not (xa <= xb or xb <= xa):
+            why = (f"A's errors are of the axes {' '.join(sorted(xa))}, B's of {' '.join(sorted(xb))}: not "
+                   "one machine")
+        for c, which, m in ((a, "A", machine or ma), (b, "B", machine or mb)):
+            if why is None and m is not None:
+                known = set(m.parameter_names())
+                foreign = [n for n in c.names if n not in known and "." not in n]
+                if foreign:
+                    why = (f"{which} has {', '.join(foreign[:4])}, which {describe_machine(m.to_dict())} "
+                           "does not have")
+    if why is not None:
+        raise ValueError(f"compare: {_label(a, 'A')} and {_label(b, 'B')} are calibrations of different "
+                         f"machines ({why}); their differences are not changes of one machine")
+
+
 def compare(a: Calibration, b: Calibration, machine=None, grid: Optional[Mapping] = None,
             tolerances: Optional[Mapping[str, float]] = None, names: Optional[Sequence[str]] = None,
-            z_limit: float = 3.0) -> Comparison:
+            z_limit: float = 3.0, machines=(None, None)) -> Comparison:
     """B against A, per machine error both estimated. ``machine``: the
     :class:`fivecal.Machine` for the volumetric change (omitted: none).
-    ``tolerances``: name -> largest acceptable |B − A| (mm / rad)."""
+    ``tolerances``: name -> largest acceptable |B − A| (mm / rad, or text
+    with a unit: ``"5um"``). ``machines``: A's and B's machine definitions
+    when known. Calibrations of different machines are refused
+    (:func:`check_same_machine`)."""
+    check_same_machine(a, b, machine, machines)
+    tolerances = _tolerances.check_tolerances(tolerances) if tolerances else None
     if names is None:
         nb = set(machine_error_names(b))
         names = [n for n in machine_error_names(a) if n in nb]
@@ -232,7 +283,10 @@ def grade(cal: Calibration, tolerances: Mapping[str, float], volumetric_toleranc
     ``fail`` when |value| − k·u > tolerance, else ``undecided`` (ISO 14253-1
     decision with U = k u). The volumetric error (largest predicted tool-point
     error over the grid, mm) is graded on its value. A calibration whose fit
-    is not usable fails."""
+    is not usable fails. Tolerances are numbers in mm / rad or text with a
+    unit (``"12um"``), > 0 and plausible (:mod:`fivecal.tolerances`)."""
+    tolerances = _tolerances.check_tolerances(tolerances)
+    volumetric_tolerance = _tolerances.volumetric_tolerance(volumetric_tolerance, "volumetric tolerance")
     std = cal.std
     params = {}
     for n, tol in tolerances.items():
@@ -470,7 +524,7 @@ def pooled_statistics(calibrations: Sequence[Calibration], by: str = "days",
 
 def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[Sequence[str]] = None,
                tolerances: Optional[Mapping[str, float]] = None, charts: Optional[Mapping[str, Chart]] = None,
-               title: Optional[str] = None) -> str:
+               title: Optional[str] = None, label: str = "") -> str:
     """One panel per parameter: value against calibration date with a ±2σ
     band, ±tolerance lines (dashed red) and CUSUM alarms (red triangles)."""
     import datetime
@@ -478,6 +532,8 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
     from ..files import save_figure
     from ..report.plots import _pyplot
 
+    files.guard_output(path, label)
+    tolerances = _tolerances.check_tolerances(tolerances) if tolerances else None
     cals = [c for c in calibrations if c.usable]
     if not cals:
         raise ValueError("trend plot: no usable calibration")
@@ -530,7 +586,7 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
     fig.legend(list(handles.values()), list(handles), loc="upper center", ncol=len(handles), fontsize=8,
                bbox_to_anchor=(0.5, 1 - 0.45 / H), frameon=False)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.7 / H))
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, label=label, dpi=110)
     plt.close(fig)
     return path
 

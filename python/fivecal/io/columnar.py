@@ -144,16 +144,11 @@ def dataset_columns(ds) -> "pyarrow.Table":
 def write_parquet(ds, path: Union[str, os.PathLike], compression: str = "zstd") -> None:
     """Write a dataset (a Dataset or a dict in the dataset format, validated
     first) as a Parquet file (docs/formats.md, "Columnar datasets")."""
-    pa = _pyarrow()
-    import pyarrow.parquet as pq
-
+    _pyarrow()
     from .. import files
 
-    table = dataset_columns(ds)
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink, compression=compression)
     # Written whole and renamed into place, as every fivecal output.
-    files.write_bytes(path, memoryview(sink.getvalue()))
+    files.write_parquet_table(path, dataset_columns(ds), compression=compression)
 
 
 # --------------------------------------------------------------------------

@@ -25,6 +25,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .. import _core
+from ..files import make_dirs, write_text
 from ..guards import CorrectionLimitError
 from ..machine import Machine
 
@@ -401,12 +402,11 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     from . import controllers as K
     kab = K.absorb(machine, k, errors, poses=poses, compensation=True)
     ab.rms_compensated, ab.max_compensated = kab.rms_compensated, kab.max_compensated
-    os.makedirs(out_dir, exist_ok=True)
+    make_dirs(out_dir)
     files = []
 
     def write(name, text):
-        with open(os.path.join(out_dir, name), "w", encoding="utf-8") as f:
-            f.write(text)
+        write_text(os.path.join(out_dir, name), text)
         files.append(name)
 
     write("fivecal-kins.hal", hal_text(k, ab.pins, ab.old_pins, header=f"machine {machine.name}"))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from .. import files
+from ..tolerances import parse_value
 from . import linuxcnc as L
 
 
@@ -69,8 +71,7 @@ def _run_kinematics(args) -> int:
 def _write_or_print(text: str, out, message: str) -> int:
     """``text`` to the file ``out`` (then ``message``), or to stdout."""
     if out:
-        with open(out, "w", encoding="utf-8") as f:
-            f.write(text)
+        files.write_text(out, text, label="--out")
         print(message)
     else:
         print(text, end="")
@@ -149,14 +150,12 @@ def _run_program(args) -> int:
         text = N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=feed or 500.0,
                                dwell=args.dwell if args.dwell > 0 else 1.0, subdivide=args.subdivide)
     else:
-        if not (args.tolerance > 0):
-            raise ValueError(f"--tolerance: expected a positive number of µm, got {args.tolerance}")
+        tol = parse_value(args.tolerance, "--tolerance", bare_unit="um")     # mm
         if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
             text = D.rotary_dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
-                                        kins=args.kins, tolerance=args.tolerance * 1e-3)
+                                        kins=args.kins, tolerance=tol)
         else:
-            text = D.dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
-                                 tolerance=args.tolerance * 1e-3)
+            text = D.dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in, tolerance=tol)
     blocks = sum(1 for ln in text.splitlines() if ln[:1] in "GM")
     return _write_or_print(text, args.out,
                            f"{kind} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
@@ -265,6 +264,6 @@ def register(sub) -> None:
                    "(joint values with --kins) or world coordinates with TCP on")
     g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two samples")
     g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, mm")
-    g.add_argument("--tolerance", type=float, default=0.02, help="ball bar rotary paths: largest change "
-                   "of the nominal bar length between two blocks, µm (default 0.02)")
+    g.add_argument("--tolerance", default="0.02", metavar="UM", help="ball bar rotary paths: largest change "
+                   "of the nominal bar length between two blocks, µm, or with a unit: 2e-5mm (default 0.02)")
     pp.set_defaults(func=_run_program)
