@@ -112,7 +112,8 @@ def _compare(args) -> int:
     finally:
         if s is not None:
             s.close()
-    tol = parse_tolerances(args.tolerance, names=None)
+    tol = parse_tolerances(args.tolerance, names=[n for n in a.names if n in set(b.names)],
+                           what="both calibrations")
     cmp = compare(a, b, machine=machine, tolerances=tol, z_limit=args.z, machines=(ma, mb))
     print(json.dumps(cmp.to_dict(), indent=1) if args.json else cmp.report())
     return 0

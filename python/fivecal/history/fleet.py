@@ -387,6 +387,7 @@ def _write_parquet_part(folder: str, cals: Sequence[Calibration]) -> None:
     import pyarrow.compute as pc
     import pyarrow.dataset as pds
 
+    files.guard_output(folder, "--parquet")      # a store or a dataset given as the folder
     part = pds.partitioning(pa.schema([("machine_id", pa.string())]), flavor="hive")
     by: dict = {}
     for c in cals:

@@ -249,9 +249,12 @@ class Calibration:
             if not math.isfinite(v[i]):
                 raise ValueError(f"{who}: {name} = {v[i]} is not a finite value; a fit with non-finite values "
                                  "is not recorded")
-            if not (np.all(np.isfinite(C[i])) and C[i, i] >= 0):
-                raise ValueError(f"{who}: the uncertainty of {name} is not finite (variance {C[i, i]}); a fit "
-                                 "with non-finite uncertainties is not recorded")
+        # a parameter's own variance first: a NaN std spreads into every covariance of its column
+        bad = [i for i in range(n) if not (math.isfinite(C[i, i]) and C[i, i] >= 0)] or \
+              [i for i in range(n) if not np.all(np.isfinite(C[i]))]
+        if bad:
+            raise ValueError(f"{who}: the uncertainty of {self.names[bad[0]]} is not finite (variance "
+                             f"{C[bad[0], bad[0]]}); a fit with non-finite uncertainties is not recorded")
         for name, x in self.fixed.items():
             if not (isinstance(x, (int, float)) and math.isfinite(x)):
                 raise ValueError(f"{who}: fixed {name} = {x} is not a finite value")
@@ -484,7 +487,7 @@ class Store:
                 n = len(c.names)
                 v = np.asarray(c.values, float).reshape(n)
                 C = np.asarray(c.covariance, float).reshape(n, n)
-                same = self._same_record(c.machine_id, c.digest, c.names, v, C)
+                same = self._same_record(c.machine_id, c.digest, c.names, v)
                 if same and not replace:
                     ids.append(same[0])
                     repeats.append((c, same[0]))
@@ -515,15 +518,16 @@ class Store:
         return self._db.execute("SELECT 1 FROM calibrations WHERE machine_id = ? LIMIT 1",
                                 (machine_id,)).fetchone() is not None
 
-    def _same_record(self, machine_id: str, digest: str, names, v: np.ndarray, C: np.ndarray) -> List[int]:
+    def _same_record(self, machine_id: str, digest: str, names, v: np.ndarray) -> List[int]:
         """Ids of the stored calibrations this one repeats: the same machine
         id and dataset digest, or, where one of the two has no digest (a
-        result.json added alone), the same values and covariance bit for bit
-        (no two measurements give that)."""
+        result.json added alone), the same estimates bit for bit (no two
+        measurements give that; the covariance is not compared: a result
+        file keeps it as correlation and std, which rebuild it to rounding)."""
         rows = self._db.execute(
             "SELECT id FROM calibrations WHERE machine_id = ? AND ((? != '' AND digest = ?) OR "
-            "((digest = '' OR ? = '') AND names = ? AND \"values\" = ? AND covariance = ?)) ORDER BY id",
-            (machine_id, digest or "", digest or "", digest or "", json.dumps(list(names)), _blob(v), _blob(C)))
+            "((digest = '' OR ? = '') AND names = ? AND \"values\" = ?)) ORDER BY id",
+            (machine_id, digest or "", digest or "", digest or "", json.dumps(list(names)), _blob(v)))
         return [r[0] for r in rows]
 
     def check_machine(self, machine_id: str, machine=None, names: Sequence[str] = ()) -> None:

@@ -188,10 +188,6 @@ def check_same_machine(a: Calibration, b: Calibration, machine=None, machines=(N
     elif ma is not None and mb is not None and _kinematics(ma.to_dict()) != _kinematics(mb.to_dict()):
         why = f"A is {describe_machine(ma.to_dict())}, B is {describe_machine(mb.to_dict())}"
     else:
-        xa, xb = _axes_of(a), _axes_of(b)
-        if not (xa <= xb or xb <= xa):
-            why = (f"A's errors are of the axes {' '.join(sorted(xa))}, B's of {' '.join(sorted(xb))}: not "
-                   "one machine")
         for c, which, m in ((a, "A", machine or ma), (b, "B", machine or mb)):
             if why is None and m is not None:
                 known = set(m.parameter_names())
@@ -199,6 +195,10 @@ def check_same_machine(a: Calibration, b: Calibration, machine=None, machines=(N
                 if foreign:
                     why = (f"{which} has {', '.join(foreign[:4])}, which {describe_machine(m.to_dict())} "
                            "does not have")
+        xa, xb = _axes_of(a), _axes_of(b)
+        if why is None and not (xa <= xb or xb <= xa):
+            why = (f"A's errors are of the axes {' '.join(sorted(xa))}, B's of {' '.join(sorted(xb))}: not "
+                   "one machine")
     if why is not None:
         raise ValueError(f"compare: {_label(a, 'A')} and {_label(b, 'B')} are calibrations of different "
                          f"machines ({why}); their differences are not changes of one machine")
