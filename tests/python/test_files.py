@@ -226,19 +226,109 @@ def test_deep_json_is_a_named_error_not_a_recursion_error(tmp_path):
 # ---------------------------------------------------------------------------
 # hygiene
 # ---------------------------------------------------------------------------
-def test_no_bare_write_outside_files_py():
-    """Every writer goes through fivecal.files (atomic): no open(..., "w"/"a"/"x"),
-    no savefig to a path, no write_text/write_bytes of pathlib elsewhere."""
+_WRITE_MODE = re.compile(r"[wax+]")
+#: calls that write a file whatever their receiver (matplotlib, numpy, pandas, json to a file object)
+_WRITING_METHODS = {"savefig", "tofile", "to_csv", "to_parquet", "to_feather", "to_hdf", "to_pickle"}
+#: functions of a module that write files: (module, function)
+_WRITING_FUNCTIONS = {("os", "replace"), ("os", "rename"), ("os", "renames"), ("os", "link"), ("os", "symlink"),
+                      ("os", "truncate"), ("shutil", "copy"), ("shutil", "copy2"), ("shutil", "copyfile"),
+                      ("shutil", "copytree"), ("shutil", "move"), ("sqlite3", "connect"), ("json", "dump"),
+                      ("np", "save"), ("np", "savez"), ("np", "savez_compressed"), ("np", "savetxt"),
+                      ("numpy", "save"), ("numpy", "savetxt"), ("pickle", "dump")}
+#: pyarrow's writers (through any alias of a pyarrow module)
+_PYARROW_WRITERS = {"write_table", "write_dataset", "write_to_dataset", "ParquetWriter", "write_feather",
+                    "write_csv", "CSVWriter", "new_file", "new_stream", "OSFile"}
+
+
+def _bare_writes(source: str, where: str) -> list:
+    """Every place in ``source`` that writes a file other than through
+    fivecal.files: open(..., "w"/"a"/"x"/"+") (or a mode that is not a
+    literal), os.open for writing, os.replace / shutil copies, sqlite3.connect,
+    pyarrow / numpy / pandas / matplotlib writers, pathlib write_text /
+    write_bytes. The one guard against overwriting an input is in files.py."""
+    import ast
+
+    tree = ast.parse(source, where)
+    pyarrow = set()             # names bound to a pyarrow module in this source
     bad = []
-    pat = re.compile(r"""\bopen\(.*['"][rbt+]*[wax][rbt+]*['"]|\.savefig\((?!buf)|(?<!files)(?<!\bwrite_json)\.write_(text|bytes)\(|"""
-                     r"""os\.open\([^)]*O_(WRONLY|RDWR|CREAT)""")
-    for name in sorted(os.listdir(PKG)):
-        if not name.endswith(".py") or name == "files.py":
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "pyarrow":
+                    pyarrow.add(a.asname or a.name.split(".")[0])
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] in ("pyarrow", "sqlite3"):
+            for a in node.names:
+                if a.name in _PYARROW_WRITERS or a.name == "connect":
+                    bad.append(f"{where}:{node.lineno}: from {node.module} import {a.name}")
+                pyarrow.add(a.asname or a.name)
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call):
             continue
-        with open(os.path.join(PKG, name), encoding="utf-8") as f:
-            for n, line in enumerate(f, 1):
-                if pat.search(line) and "devnull" not in line:
-                    bad.append(f"{name}:{n}: {line.strip()}")
+        f = node.func
+        mode = [k.value for k in node.keywords if k.arg in ("mode", "flags")]
+        line = f"{where}:{node.lineno}: {ast.unparse(node)[:90]}"
+        if isinstance(f, ast.Name) and f.id == "open":
+            m = mode or node.args[1:2]
+            if m and not (isinstance(m[0], ast.Constant) and isinstance(m[0].value, str)
+                          and not _WRITE_MODE.search(m[0].value)):
+                bad.append(line)
+        elif isinstance(f, ast.Attribute):
+            recv = f.value.id if isinstance(f.value, ast.Name) else ""
+            if f.attr == "open" and recv == "os":
+                devnull = bool(node.args) and ast.unparse(node.args[0]) == "os.devnull"
+                flags = ast.unparse(node.args[1]) if len(node.args) > 1 else ""
+                if not devnull and re.search(r"O_(WRONLY|RDWR|CREAT|TRUNC|APPEND)", flags):
+                    bad.append(line)
+            elif f.attr == "open":          # io / gzip / tarfile / pathlib open with a write mode
+                lits = [a for a in list(node.args) + mode if isinstance(a, ast.Constant) and isinstance(a.value, str)]
+                if any(_WRITE_MODE.search(a.value) and len(a.value) <= 3 for a in lits):
+                    bad.append(line)
+            elif f.attr in _WRITING_METHODS or (recv, f.attr) in _WRITING_FUNCTIONS:
+                bad.append(line)
+            elif f.attr in _PYARROW_WRITERS and (recv in pyarrow or (isinstance(f.value, ast.Attribute)
+                                                                     and ast.unparse(f.value).startswith("pa"))):
+                bad.append(line)
+            elif f.attr in ("write_text", "write_bytes") and recv != "files":
+                bad.append(line)
+    return bad
+
+
+def test_the_write_checker_finds_every_kind_of_bare_write():
+    src = textwrap.dedent("""
+        import os, shutil, sqlite3, json
+        import numpy as np
+        import pyarrow.parquet as pq
+        import pyarrow.dataset as pds
+        from pathlib import Path
+        open(p, "w"); open(p, mode="ab"); open(p, m); open(p, "r+")
+        Path(p).open("w"); Path(p).write_text("x")
+        os.open(p, os.O_WRONLY | os.O_CREAT); os.replace(a, b); shutil.copyfile(a, b)
+        sqlite3.connect(p); json.dump(d, f); np.save(p, x); fig.savefig(p); df.to_csv(p)
+        pq.write_table(t, p); pds.write_dataset(t, p)
+        """)
+    assert len(_bare_writes(src, "x.py")) == 16
+    ok = textwrap.dedent("""
+        import os
+        from . import files
+        open(p); open(p, "rb"); open(p, encoding="utf-8"); os.open(os.devnull, os.O_WRONLY)
+        files.write_text(p, "x"); files.save_figure(fig, p); tables.write_dataset(a, b); fig.savefig_x
+        """)
+    assert _bare_writes(ok, "ok.py") == []
+
+
+def test_no_module_writes_a_file_but_through_files_py():
+    """Every writer of the package, in every subpackage, goes through
+    fivecal.files: atomic writes, and the one output-is-not-an-input guard
+    (files.guard_output), which also holds the calibration stores opened
+    through files.open_sqlite. A new writer that bypasses it fails here."""
+    bad = []
+    for folder, _, names in os.walk(PKG):
+        for name in sorted(names):
+            path = os.path.join(folder, name)
+            rel = os.path.relpath(path, PKG)
+            if name.endswith(".py") and rel != "files.py":
+                with open(path, encoding="utf-8") as f:
+                    bad += _bare_writes(f.read(), rel)
     assert not bad, "\n".join(bad)
 
 
