@@ -116,6 +116,7 @@ def test_cli_rtest(c600u, tmp_path, capsys):
     assert main(["rtest", str(path), "--tolerance", "20"]) == 1  # K1 ranges ~50 µm
     assert "FAIL" in capsys.readouterr().out
     assert main(["rtest", str(path), "--tolerance", "100", "--no-identify"]) == 0
-    with pytest.raises(SystemExit) as e:
-        main(["rtest", str(path), "--tolerance", "-3"])
-    assert e.value.code == 2
+    capsys.readouterr()
+    assert main(["rtest", str(path), "--tolerance", "-3"]) == 2
+    assert "--tolerance" in capsys.readouterr().err
+    assert main(["rtest", str(path), "--tolerance", "0.1mm", "--no-identify"]) == 0     # 100 µm, with its unit
