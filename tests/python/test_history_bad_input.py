@@ -376,3 +376,28 @@ def test_a_fleet_dataset_of_another_machine_is_a_failure(shop, store, tmp_path):
     back = history.read_parquet(tmp_path / "pq")          # the Parquet part went through fivecal.files
     assert [c.machine_id for c in back] == ["HU3"] and back[0].values.tobytes() == hu.values.tobytes()
     assert fleet._parquet_digests(str(tmp_path / "pq")) == {"x" * 64}
+
+
+def test_identify_record_of_a_non_finite_fit_says_so_and_records_nothing(shop, store, capsys):
+    from fivecal.history.cli import record_identify
+    from fivecal.history.report import History
+
+    r = fivecal.identify(fivecal.load_dataset(shop.hu[0]), "location")
+    bad = SimpleNamespace(estimated=r.estimated, values={**r.values, "EB0C": float("nan")},
+                          covariance=r.covariance, prior_std=r.prior_std, rms=r.rms, chi2=r.chi2, dof=r.dof,
+                          chi2_p=r.chi2_p, verdict="non_finite", converged=True, undetermined=[], dataset=r.dataset)
+    before = _sha(store)
+    args = SimpleNamespace(procedure="", dataset=shop.hu[0], replace=False, rebuilt=False)
+    capsys.readouterr()
+    record_identify(args, bad, History(store, "HU1"))
+    _refused(capsys, "not recorded", "EB0C")
+    assert _sha(store) == before
+
+
+def test_a_file_refused_as_a_store_is_not_held_as_one(tmp_path):
+    junk = tmp_path / "junk.fcdb"
+    junk.write_bytes(b"not a database at all" * 100)
+    with pytest.raises(ValueError, match="not a calibration store"):
+        history.Store(junk)
+    files.write_text(junk, "replaced")          # the caller's file again, once refused
+    assert junk.read_text() == "replaced"

@@ -303,13 +303,21 @@ def grade_identify(result, hist) -> str:
 
 
 def record_identify(args, result, hist) -> None:
-    """``fivecal identify --record``: the result into the store."""
-    from .store import Store
+    """``fivecal identify --record``: the result into the store; a
+    non-finite fit is not recorded (said on stderr; the command then exits 1
+    on the fit, keeping its report and result to inspect)."""
+    from .store import Store, calibration_from_result
 
+    cal = calibration_from_result(result, hist.machine_id, time=hist.time, procedure=args.procedure or "",
+                                  source=args.dataset)
+    try:
+        cal.check()
+    except ValueError as e:
+        print(f"history: not recorded: {e}", file=sys.stderr)
+        return
     with Store(hist.store, create=True) as s:
-        i, repeat = _recording(lambda: s.add(result, machine_id=hist.machine_id, procedure=args.procedure or "",
-                                             time=hist.time, source=args.dataset, replace=args.replace,
-                                             rebuilt=args.rebuilt))
+        i, repeat = _recording(lambda: s.add(cal, machine_id=hist.machine_id, machine=result.dataset.machine,
+                                             replace=args.replace, rebuilt=args.rebuilt))
         n = len(s.list(hist.machine_id))
     if not repeat:
         print(f"history: calibration #{i} of {hist.machine_id} recorded in {hist.store} ({n} in all)"

@@ -388,11 +388,17 @@ class Store:
             # check_same_thread off: a fleet run writes from its collector thread (one user at a time)
             # through files: while open, the store is an input no output may overwrite
             self._db = files.open_sqlite(self.path, timeout=timeout, isolation_level=None, check_same_thread=False)
+        except sqlite3.DatabaseError as e:
+            raise ValueError(f"{self.path}: not a calibration store ({e})") from None
+        try:
             self._db.execute(f"PRAGMA busy_timeout = {int(timeout * 1000)}")
             self._db.execute("PRAGMA journal_mode = WAL")
             self._migrate()
-        except sqlite3.DatabaseError as e:
-            raise ValueError(f"{self.path}: not a calibration store ({e})") from None
+        except BaseException as e:
+            self._db.close()        # a file refused is not held as an open store
+            if isinstance(e, sqlite3.DatabaseError):
+                raise ValueError(f"{self.path}: not a calibration store ({e})") from None
+            raise
 
     # -- schema ------------------------------------------------------------
     def _migrate(self) -> None:
