@@ -238,7 +238,7 @@ def test_recording_a_dataset_again_changes_nothing_unless_replaced(shop, store, 
 def test_the_python_api_says_a_repeat_and_returns_the_stored_id(shop, store):
     r = history.calibration_from_result(shop.hu_results[1], "HU1", digest=history.dataset_digest(shop.hu[1]))
     with history.Store(store) as s:
-        with pytest.warns(history.store.AlreadyRecorded, match="already recorded"):
+        with pytest.warns(history.AlreadyRecorded, match="already recorded"):
             i = s.add(r, machine_id="HU1")
         assert i == 2 and len(s) == 2
         with warnings.catch_warnings():
