@@ -319,6 +319,11 @@ def test_identify_checks_tolerance_names_before_the_fit(shop, store, capsys):
                  "--record", "--tolerance", "EX0C=20um,EX0Q=5um"]) == 2
     err = _refused(capsys, "--tolerance", "EX0Q", "HU40T-like")
     assert "fitting" not in err
+    # a parameter of the machine the fit does not estimate: said before the fit too
+    assert main(["identify", shop.hu[1], "--estimate", "location", "--history", store, "--machine-id", "HU1",
+                 "--record", "--tolerance", "EXX1=5um/m"]) == 2
+    err = _refused(capsys, "--tolerance", "EXX1", "--estimate location")
+    assert "fitting" not in err
     assert _count(store) == 2
 
 

@@ -7,6 +7,7 @@ import os
 import sys
 import warnings
 
+from ..identification import resolve_estimate
 from ..tolerances import check_names, parse_tolerances, volumetric_tolerance
 from .store import AlreadyRecorded
 
@@ -284,6 +285,10 @@ def check_identify_history(args, hist, dataset) -> None:
     m = dataset.machine
     if hist.tolerances:
         check_names(hist.tolerances, m.parameter_names(), f"machine {m.name} ({m.topology})")
+        # a tolerance on a parameter the fit will not estimate could only be graded after it, on nothing
+        est = resolve_estimate(dataset, args.estimate, args.fix)
+        check_names(hist.tolerances, est, f"the fit (--estimate {args.estimate} estimates {len(est)} parameters; "
+                    "estimate it or drop its tolerance)")
     if not args.rebuilt and os.path.exists(hist.store):
         with Store(hist.store, create=False) as s:
             s.check_machine(hist.machine_id, m)
