@@ -16,12 +16,11 @@ from .store import (AlreadyRecorded, Calibration, MIGRATIONS, SCHEMA_VERSION, St
                     dataset_digest, read_parquet, utc_time, write_parquet)
 from . import fleet, fleetsim  # noqa: E402  (neither imports Dask at import time)
 from .trend import (Chart, ChartDesign, Comparison, Grade, PooledStatistics, check_same_machine, compare, cusum,
-                    cusum_interval,
-                    default_grid, detect, first_alarm, grade, gum_from_history, machine_error_names, plot_trend, pooled_statistics,
-                    siegmund_arl, volumetric_change, volumetric_errors)
+                    cusum_interval, default_grid, detect, first_alarm, grade, gum_from_history, machine_error_names,
+                    plot_trend, pooled_statistics, siegmund_arl, volumetric_change, volumetric_errors)
 
-__all__ = ["AlreadyRecorded", "Calibration", "MIGRATIONS", "SCHEMA_VERSION", "Store", "calibration_from_result", "dataset_digest",
-           "read_parquet", "utc_time", "write_parquet", "Chart", "ChartDesign", "Comparison", "Grade",
-           "PooledStatistics", "check_same_machine", "compare", "cusum", "cusum_interval", "default_grid", "detect", "first_alarm",
-           "grade", "gum_from_history", "machine_error_names", "plot_trend", "pooled_statistics", "siegmund_arl", "volumetric_change",
-           "volumetric_errors"]
+__all__ = ["AlreadyRecorded", "Calibration", "MIGRATIONS", "SCHEMA_VERSION", "Store", "calibration_from_result",
+           "dataset_digest", "read_parquet", "utc_time", "write_parquet", "Chart", "ChartDesign", "Comparison", "Grade",
+           "PooledStatistics", "check_same_machine", "compare", "cusum", "cusum_interval", "default_grid", "detect",
+           "first_alarm", "grade", "gum_from_history", "machine_error_names", "plot_trend", "pooled_statistics",
+           "siegmund_arl", "volumetric_change", "volumetric_errors"]
