@@ -327,3 +327,82 @@ def test_renamed_columns_keep_the_unit_of_their_header(tmp_path):
     assert o["id"] == "r.csv:3"
     with pytest.raises(ValueError, match=r"no column 'nope' in the header"):
         read_table(f, "rtest", C600U, sidecar=RTEST_SIDE, columns={"X": "nope"})
+
+
+# --------------------------------------------------------------------------
+# Units, encodings and broken files (issue #27)
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("a,c,angle_units", [
+    ("A [°]", "C°", None), ("A_degrees", "C (degree)", None), ("A (deg)", "C_°", None),
+    ("A", "C", "°"), ("A", "C", "degrees"), ("A [µrad]", "C [μrad]", None)])
+def test_every_spelling_of_an_angle_unit_is_read(tmp_path, capsys, a, c, angle_units):
+    f = _write(tmp_path / "r.csv", [f"X,Y,Z,{a},{c},dx_um,dy_um,dz_um", GOOD])
+    o = read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE, angle_units=angle_units)["observations"][0]
+    want = -30.0 * (1.8e-4 / np.pi if "rad" in a else 1.0)
+    assert o["axes"]["A"] == pytest.approx(want)
+    args = ["--angle-units", angle_units] if angle_units else []
+    rc = cli.main(["import", "rtest", f, "--machine", C600U, "--sidecar", _side(tmp_path), *args,
+                   "--out", str(tmp_path / "ds.json")])
+    assert rc == 0, capsys.readouterr().err
+
+
+def _side(tmp_path, side=RTEST_SIDE):
+    p = tmp_path / "side.json"
+    p.write_text(json.dumps(side))
+    return str(p)
+
+
+def test_an_unknown_angle_unit_names_the_column_and_the_units(tmp_path, capsys):
+    f = _write(tmp_path / "r.csv", ["X,Y,Z,A [grad],C,dx_um,dy_um,dz_um", GOOD])
+    with pytest.raises(ValueError, match=r"r\.csv:1: column 'A \[grad\]': unknown unit 'grad' for an angle "
+                                         r"\(units: deg, °, .*rad"):
+        read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE)
+    rc = cli.main(["import", "rtest", f, "--machine", C600U, "--sidecar", _side(tmp_path),
+                   "--angle-units", "grad", "--out", str(tmp_path / "ds.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--angle-units 'grad': expected deg or rad" in err and "°" in err, err
+
+
+def test_a_table_in_latin1_is_refused_naming_the_file_line_and_the_fix(tmp_path, capsys):
+    f = tmp_path / "r.csv"
+    f.write_bytes("# R-test\nX,Y,Z,A [°],C,dx_um,dy_um,dz_um\n".encode("latin-1") + GOOD.encode() + b"\n")
+    with pytest.raises(ValueError, match=r"r\.csv: not UTF-8 text \(byte 0xb0 at byte offset 18\) on line 2, "
+                                         r"'°' in Latin-1.*save the file as UTF-8"):
+        read_table(str(f), "ball3d", C600U, sidecar=RTEST_SIDE)
+    side = tmp_path / "s.json"
+    side.write_bytes(json.dumps({"setup": "R1"}).encode()[:-1] + ', "_comment": "\xb5m"}'.encode("latin-1"))
+    rc = cli.main(["import", "rtest", _write(tmp_path / "g.csv", [HEAD, GOOD]), "--machine", C600U,
+                   "--sidecar", str(side), "--out", str(tmp_path / "ds.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "s.json: not UTF-8 text" in err and "on line 1" in err and err.count("\n") == 1, err
+
+
+def test_a_probe_log_in_latin1_is_refused_naming_the_file(tmp_path, m):
+    from fivecal.io import linuxcnc
+
+    log = tmp_path / "probe.log"
+    log.write_bytes(b"1 2 3 0 0 0 0 0 0\n# \xb0\n")
+    with pytest.raises(ValueError, match=r"probe\.log: not UTF-8 text .* on line 2"):
+        linuxcnc.read_probe_log(str(log), m, "xyzac-trt", [], {})
+
+
+@pytest.mark.parametrize("sep,quote", [(",", ""), (",", '"'), (";", ""), (" ", "")])
+def test_a_huge_cell_is_refused_naming_the_line(tmp_path, capsys, sep, quote):
+    big = quote + "1" * 2_000_000 + quote
+    f = _write(tmp_path / "r.csv", [HEAD.replace(",", sep), GOOD.replace(",", sep),
+                                    sep.join(GOOD.split(",")[:5] + [big] + GOOD.split(",")[6:])])
+    with pytest.raises(ValueError, match=r"r\.csv:3: .*characters \(at most 4096 are read\)"):
+        read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE)
+    rc = cli.main(["import", "rtest", f, "--machine", C600U, "--sidecar",
+                   _side(tmp_path), "--out", str(tmp_path / "ds.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "r.csv:3:" in err and len(err) < 400 and "internal error" not in err, err[:400]
+
+
+@pytest.mark.parametrize("head", ["X,Y,Z,A,C,dx,dy,dz,X", "X Y Z A C dx dy dz DZ", "x,Y,Z,A,C,dx,dy,dz,temp,X"])
+def test_a_column_named_twice_is_refused(tmp_path, head):
+    n = len(head.replace(" ", ",").split(","))
+    f = _write(tmp_path / "r.csv", [head, ",".join(["0.1"] * n) if "," in head else " ".join(["0.1"] * n)])
+    with pytest.raises(ValueError, match=r"r\.csv:1: column '.*' appears twice in the header \(columns \d+ and "
+                                         rf"{n}\)"):
+        read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE, ignore=["temp"] if "temp" in head else ())

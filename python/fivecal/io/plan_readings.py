@@ -61,7 +61,7 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
     if not order:
         raise ValueError(f"--plan {plan_path}: no ball3d (R-test) entries in the plan")
     if units is not None and units.lower() not in _units.LENGTH_SUFFIXES:
-        raise ValueError(f"--units '{units}': expected um or mm")
+        raise ValueError(f"--units '{units}': expected um or mm (length units: {_units.unit_list('length')})")
     if sigma is not None and not sigma > 0:
         raise ValueError(f"--sigma: {sigma:g} mm must be > 0")
     if decimal not in (None, "comma", "point"):
@@ -76,7 +76,7 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
     else:
         hline, first = lines[0]
         delim = T._delimiter(first, delimiter)
-        names = T._split(first, delim)
+        names = T._split(first, delim, f"{path}:{hline}")
         lines = lines[1:]
         hwhere = f"{path}:{hline}"
         if all(T._is_number(h) for h in names):
@@ -84,6 +84,7 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
                              "dx dy dz [id] (e.g. dx_um dy_um dz_um) or give --header")
     decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
     ignored = {i.strip().lower() for i in ignore or ()}
+    T._once(names, hwhere, ignored)
     axes = {a.lower(): a for a in machine.axis_names}
     cols = {}
     for i, h in enumerate(names):
@@ -114,7 +115,7 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
     obs, used = [], {}
     for n, (lineno, line) in enumerate(lines):
         where = f"{path}:{lineno}"
-        cells = T._split(line, delim)
+        cells = T._split(line, delim, where)
         if len(cells) != len(names):
             raise ValueError(f"{where}: {len(cells)} cells, the header has {len(names)} columns ({', '.join(names)})")
         if "id" in cols:

@@ -91,7 +91,6 @@ _REQUIRED["distance"] = ("reading",)
 _TEXT_FIELDS.add("station")
 _JOINT_TYPES = {"prismatic": "linear", "linear": "linear", "translational": "linear",
                 "revolute": "rotary", "rotary": "rotary", "rotational": "rotary"}
-_ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
 
 
 def _axis_list(machine: Machine, skip_s: bool = False) -> str:
@@ -140,10 +139,34 @@ def _delimiter(header: str, option: Optional[str]) -> Optional[str]:
     return None
 
 
-def _split(line: str, delim: Optional[str]) -> list:
+#: characters: no cell of an instrument table (a number, an id, a name) is
+#: longer; a longer one is a broken file, refused before it fills a message
+_MAX_CELL = 4096
+
+
+def _split(line: str, delim: Optional[str], where: str) -> list:
+    """The cells of a line (``where``: its file and line, for the message)."""
     if delim is None:
-        return line.split()
-    return [c.strip() for c in next(csv.reader([line], delimiter=delim))]
+        cells = line.split()
+    else:
+        try:
+            cells = [c.strip() for c in next(csv.reader([line], delimiter=delim))]
+        except csv.Error as e:
+            if "field limit" in str(e):  # the csv module's own cap, 128 KiB
+                raise ValueError(f"{where}: a cell holds more than {csv.field_size_limit()} characters (at most "
+                                 f"{_MAX_CELL} are read); is the separator or a quote missing?") from None
+            raise ValueError(f"{where}: not a valid CSV line ({e})") from None
+    for i, c in enumerate(cells):
+        if len(c) > _MAX_CELL:
+            raise ValueError(f"{where}: cell {i + 1} holds {len(c)} characters (at most {_MAX_CELL} are read); "
+                             f"it starts '{_shown(c)}': is the separator or a quote missing?")
+    return cells
+
+
+def _shown(cell: str, n: int = 40) -> str:
+    """A cell for a message: its start when it is long."""
+    c = cell.strip()
+    return c if len(c) <= n else c[:n] + "…"
 
 
 def _number(cell: str, decimal_comma: bool, where: str) -> float:
@@ -158,24 +181,16 @@ def _number(cell: str, decimal_comma: bool, where: str) -> float:
         hint = ""
         if "," in s and not decimal_comma:
             hint = " (a decimal comma needs ';', tab or space separators, or --decimal comma)"
-        raise ValueError(f"{where}: '{cell.strip()}' is not a number{hint}") from None
+        raise ValueError(f"{where}: '{_shown(cell)}' is not a number{hint}") from None
     if not math.isfinite(v):
-        raise ValueError(f"{where}: '{cell.strip()}' is not a finite number (NaN or infinity is not a measurement)")
+        raise ValueError(f"{where}: '{_shown(cell)}' is not a finite number (NaN or infinity is not a measurement)")
     return v
 
 
 def _split_unit(header: str):
     """(name, unit or None): ``reading_um`` -> (reading, um), ``dx [um]`` -> (dx, um),
     ``table_ball_x`` -> (table_ball_x, None)."""
-    h = header.strip().strip('"').strip("'")
-    m = re.match(r"^(.*?)\s*[\[(]\s*([^\])]*)\s*[\])]\s*$", h)
-    if m:
-        return m.group(1).strip(), m.group(2).strip()
-    if "_" in h:
-        base, suffix = h.rsplit("_", 1)
-        if suffix.lower() in _ALL_UNITS and base:
-            return base, suffix
-    return h, None
+    return _units.split_unit(header)
 
 
 # --------------------------------------------------------------------------
@@ -214,6 +229,18 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
                      f"--column FIELD=HEADER or skip it with --ignore '{name}')")
 
 
+def _once(headers: Sequence[str], where: str, ignored) -> None:
+    """Refuse a header naming a kept column twice (names are case-insensitive):
+    which of the two a reader keyed by name would use is arbitrary."""
+    first = {}
+    for i, h in enumerate(headers):
+        key = h.strip().lower()
+        if key and key in first and key not in ignored:
+            raise ValueError(f"{where}: column '{h.strip()}' appears twice in the header (columns {first[key] + 1} "
+                             f"and {i + 1}); rename one, or skip both with --ignore '{h.strip()}'")
+        first.setdefault(key, i)
+
+
 def _named_headers(headers: Sequence[str], where: str, rename: Mapping[str, str], ignore: Iterable[str]):
     """The columns a table keeps, as (index, header, name, unit, where of the
     column): ``--ignore``d ones left out, ``--column FIELD=HEADER`` renames
@@ -227,6 +254,7 @@ def _named_headers(headers: Sequence[str], where: str, rename: Mapping[str, str]
     for h in list(by_header) + sorted(ignored):
         if h not in known:
             raise ValueError(f"{where}: no column '{h}' in the header (columns: {', '.join(headers)})")
+    _once(headers, where, ignored)
     for i, h in enumerate(headers):
         key = h.strip().lower()
         if key in ignored:
@@ -448,9 +476,11 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     if side.get("setup") is not None and (not isinstance(side["setup"], str) or "." in side["setup"]):
         raise ValueError(f"{origin['setup']}: expected a mounting name without '.', got {side['setup']!r}")
     if units is not None and units.lower() not in _units.LENGTH_SUFFIXES:
-        raise ValueError(f"import: --units '{units}': expected um or mm")
+        raise ValueError(f"import: --units '{units}': expected um or mm (length units: "
+                         f"{_units.unit_list('length')})")
     if angle_units is not None and angle_units.lower() not in _units.ANGLE_SUFFIXES:
-        raise ValueError(f"import: --angle-units '{angle_units}': expected deg or rad")
+        raise ValueError(f"import: --angle-units '{angle_units}': expected deg or rad (angle units: "
+                         f"{_units.unit_list('angle')})")
     if decimal not in (None, "comma", "point"):
         raise ValueError(f"import: decimal '{decimal}': expected comma or point")
     if kind in _FIXED:
@@ -471,7 +501,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         hline, first = lines[0]
         delim = _delimiter(first, delimiter)
         headers = given
-        if not any(_is_number(h) for h in _split(first, delim)):
+        if not any(_is_number(h) for h in _split(first, delim, f"{path}:{hline}")):
             raise ValueError(f"{path}:{hline}: this line holds names, not numbers, like a header row, but the "
                              f"column names were given ({origin['header']}); a file with a header row needs no "
                              "'header'")
@@ -480,7 +510,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     else:
         hline, first = lines[0]
         delim = _delimiter(first, delimiter)
-        headers = _split(first, delim)
+        headers = _split(first, delim, f"{path}:{hline}")
         hwhere, hdesc = f"{path}:{hline}", f"line {hline}"
     if all(_is_number(h) for h in headers):
         raise ValueError(f"{hwhere}: no header row (this line holds numbers); the first line must name "
@@ -507,7 +537,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     base = os.path.basename(path)
     obs, lineno_of, ids = [], [], {}
     for lineno, line in lines[1:]:
-        cells = _split(line, delim)
+        cells = _split(line, delim, f"{path}:{lineno}")
         if len(cells) != len(headers):
             raise ValueError(f"{path}:{lineno}: {len(cells)} cells, the header ({hdesc}) has "
                              f"{len(headers)} columns ({', '.join(headers)})")
