@@ -74,18 +74,44 @@ def looks_like_radians(values) -> bool:
     v = v[np.isfinite(v)]
     if v.size == 0 or np.abs(v).max() > 2 * np.pi + 1e-6:
         return False
-    milli = v * 1000.0
-    non_round = np.abs(milli - np.round(milli)) > 1e-6 * np.maximum(1.0, np.abs(milli))
-    nz = v[v != 0.0]
-    if nz.size and np.all(non_round[v != 0.0]):
-        # Radian indexations written out (1.5708 = 90 degrees): every non-zero value
-        # a multiple of pi/12 to 4 decimals, none round in degrees.
-        k = nz / (np.pi / 12)
-        if np.all(np.abs(k - np.round(k)) < 5e-4) and np.all(np.round(k) != 0):
-            return True
+    if _pi_over_12(v):
+        return True
     if v.size < 2 or v.max() - v.min() <= 1.0:
         return False
-    return bool(np.any(non_round))
+    return bool(np.any(_non_round(v)))
+
+
+def _non_round(v):
+    """Values with more than 3 decimals."""
+    import numpy as np
+
+    milli = v * 1000.0
+    return np.abs(milli - np.round(milli)) > 1e-6 * np.maximum(1.0, np.abs(milli))
+
+
+def _pi_over_12(v) -> bool:
+    """Radian indexations written out (1.5708 = 90 degrees): every non-zero
+    value a multiple of pi/12 to 4 decimals, none round in degrees."""
+    import numpy as np
+
+    nz = v[v != 0.0]
+    if not nz.size or not np.all(_non_round(nz)) or np.abs(nz).max() > 2 * np.pi + 1e-6:
+        return False
+    k = nz / (np.pi / 12)
+    return bool(np.all(np.abs(k - np.round(k)) < 5e-4) and np.all(np.round(k) != 0))
+
+
+def written_as_radians(values) -> bool:
+    """True when rotary values meant in degrees are radian indexations beyond
+    doubt: every non-zero value a multiple of pi/12 written to 4 or more
+    decimals (``0.7854``, ``1.5708``) and at least two different ones.
+    Degrees never fall on that pattern by chance, so an importer may refuse
+    them, where :func:`looks_like_radians` (ambiguous cases too) only warns."""
+    import numpy as np
+
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    return _pi_over_12(v) and np.unique(v[v != 0.0]).size >= 2
 
 
 def radians_message(where: str, values) -> str:

@@ -559,6 +559,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         lineno_of.append(lineno)
     if not obs:
         raise ValueError(f"{path}: a header but no data rows")
+    _rotary_units(_rotary_columns(obs, cols, machine, lineno_of, angle_units), path)
     if generic:
         _angle_checks(obs, cols, machine, path, lineno_of)
     d = {"machine": machine.to_dict(), "observations": obs}
@@ -1349,26 +1350,88 @@ def _machined_checks(o: dict, parts, text, empty, side: Mapping, machine: Machin
 
 def _angle_checks(obs: list, cols, machine: Machine, path: str, lines: list) -> None:
     """Rotary columns of an axes object other than ``axes`` (a step's
-    reference cut) that look like radians warn as the axes do; a column
-    declared in rad whose values pass a turn many times is refused as degrees."""
+    reference cut) that look like radians warn as the axes do."""
     from ..units import looks_like_radians, radians_message
 
     for c in cols:
-        if not (c.key == "axes" or c.key.endswith("_axes")) or not machine.is_rotary(c.part):
+        if not c.key.endswith("_axes") or not machine.is_rotary(c.part):
             continue
-        values = [(o[c.key][c.part], n) for o, n in zip(obs, lines) if c.part in (o.get(c.key) or {})]
+        values = [o[c.key][c.part] for o in obs if c.part in (o.get(c.key) or {})]
+        if values and looks_like_radians(values):
+            _warn(radians_message(f"{path}: column '{c.header}'", values)
+                  + f", name the column {c.header}_rad or give --angle-units rad", RadiansWarning)
+
+
+#: A test turns a rotary axis through a turn at most (plus an approach): a
+#: column declared in radians whose values pass a turn and a quarter holds
+#: degrees (8 rad is 458 degrees; 8 degrees is what was meant).
+_RAD_TURNS = 1.25
+
+
+def _rotary_columns(obs: list, cols, machine: Machine, lines: list, angle_units: Optional[str]) -> list:
+    """The rotary axis columns of a read table as (what to call it, unit,
+    [(value in that unit, line)], how to say it is in degrees, how to say it
+    is in radians): axis columns, a step's reference axes, and a joint
+    layout's position column per rotary joint."""
+    out = []
+    default = (angle_units or "deg").lower()
+    for c in cols:
+        key, part = (c.key, c.part) if isinstance(c, _GColumn) else ("axes", c.field)
+        if not (key == "axes" or key.endswith("_axes")) or part not in machine.axis_names or \
+                not machine.is_rotary(part):
+            continue
+        values = [(o[key][part] / c.factor, n) for o, n in zip(obs, lines) if part in (o.get(key) or {})]
+        out.append(_rotary_column(c.header, values, default))
+    position = next((c.header for c in cols if getattr(c, "field", None) == "position"), "position")
+    factor = _units.ANGLE_SUFFIXES[default]
+    for a in machine.axis_names:
+        values = [(o["_joint"][1] / factor, n) for o, n in zip(obs, lines) if o.get("_joint", ("",))[0] == a]
+        if values and machine.is_rotary(a):
+            out.append((f"column '{position}' (joint {a})", default, values,
+                        f"drop --angle-units {default} (degrees are the default)", "give --angle-units rad"))
+    return out
+
+
+def _rotary_column(header: str, values: list, default: str) -> tuple:
+    """A rotary axis column for :func:`_rotary_units`: its unit is its
+    header's, else ``default`` (``--angle-units``, else deg)."""
+    base, unit = _split_unit(header)
+    if unit is not None:
+        return (f"column '{header}'", unit.lower(), values, f"name the column {base}_deg",
+                f"name the column {base}_rad")
+    return (f"column '{header}'", default, values, f"drop --angle-units {default} (degrees are the default) or "
+            f"name the column {base}_deg", f"name the column {base}_rad or give --angle-units rad")
+
+
+def _rotary_units(columns: list, path: str) -> None:
+    """Refuse a rotary column whose values are plainly in another unit than
+    the one declared (its header, else --angle-units, else degrees), naming
+    the column, the line and the fix."""
+    for what, unit, values, to_deg, to_rad in columns:
         if not values:
             continue
-        rad = c.factor == _units.ANGLE_SUFFIXES["rad"]
-        big = [(v, n) for v, n in values if abs(v) / c.factor > 4 * math.pi]
-        if rad and big:
-            v, n = big[0]
-            raise ValueError(f"{path}:{n}: column '{c.header}': {v / c.factor:.6g} rad is {v:.6g} degrees, more "
-                             f"than two turns; the values look like degrees: name the column {c.part}_deg "
-                             f"(or reference_{c.part}_deg)")
-        if c.key != "axes" and looks_like_radians([v for v, _ in values]):
-            _warn(radians_message(f"{path}: column '{c.header}'", [v for v, _ in values])
-                  + f", name the column {c.header}_rad or give --angle-units rad", RadiansWarning)
+        factor = _units.ANGLE_SUFFIXES[unit]
+        if factor != 1.0:
+            bound = _RAD_TURNS * 360.0 / factor
+            big = next(((v, n) for v, n in values if abs(v) > bound), None)
+            if big:
+                v, n = big
+                raise ValueError(f"{path}:{n}: {what}: {v:.6g} {unit} is {v * factor:.6g} degrees, more than a "
+                                 f"turn and a quarter ({bound:.4g} {unit}); the values look like degrees: {to_deg}")
+            nonzero = [(v, n) for v, n in values if v != 0.0]
+            if unit == "rad" and len({v for v, _ in nonzero}) >= 2 and all(v == round(v) for v, _ in nonzero):
+                # radians are written in decimals (0.7854, 1.5708); whole numbers are degrees
+                v, n = nonzero[0]
+                shown = ", ".join(f"{x:g}" for x in sorted({x for x, _ in nonzero})[:4])
+                raise ValueError(f"{path}:{n}: {what}: {v:g} rad, and every value of the column is a whole "
+                                 f"number ({shown}, ...), as degrees are written; the values look like degrees: "
+                                 f"{to_deg}")
+        elif _units.written_as_radians([v for v, _ in values]):
+            v, n = next((v, n) for v, n in values if v != 0.0)
+            k = round(v / (math.pi / 12))
+            raise ValueError(f"{path}:{n}: {what}: {v:g} degrees, and every value of the column is a multiple of "
+                             f"π/12 written in decimals ({v:g} = {k}π/12), as radians are written; the values "
+                             f"look like radians: {to_rad}")
 
 
 def write_table(dataset, path: Union[str, os.PathLike], *, delimiter: str = ",") -> dict:
