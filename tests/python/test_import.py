@@ -489,3 +489,44 @@ def test_angle_units_rad_over_degrees_is_refused_by_the_cli_for_every_kind(tmp_p
                [f"C,{c},{c},0,0" for c in (0, 30, 60)])
     with pytest.raises(ValueError, match=r"j\.csv:3: column 'position' \(joint C\): 30 rad .*drop --angle-units"):
         import_dataset(f, "point", C600U, target="work", target_point=[100, 0, 0], angle_units="rad")
+
+
+# --------------------------------------------------------------------------
+# Lengths of the set-up typed in µm (issue #27)
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("side,options,match", [
+    ({**DBB_SIDE, "length": 100000}, {}, r"side\.json: length: 100000 mm: no ball bar is that long \(refused "
+                                         r"beyond 2000 mm\); it looks like µm: give 100 \(mm\)"),
+    ({**DBB_SIDE, "length": 50000.0}, {}, r"side\.json: length: 50000 mm"),
+    (DBB_SIDE, {"length": 100000}, r"^--length: 100000 mm: no ball bar"),
+    ({**DBB_SIDE, "table_ball": [100000, 0, 0]}, {}, r"side\.json: table_ball\[0\]: 100000 mm"),
+    (DBB_SIDE, {"tool_ball": "0,0,150000"}, r"--tool-ball\[2\]: 150000 mm"),
+    ({**DBB_SIDE, "probe": {"tip_radius": 3000}}, {}, r"side\.json: probe\.tip_radius: 3000 mm: no probe tip"),
+    ({**DBB_SIDE, "artefact": {"spheres": [{"id": "S1", "center": [0, 0, 0], "radius": 12500}]}}, {},
+     r"side\.json: artefact\.spheres\[0\]\.radius: 12500 mm: no reference sphere"),
+])
+def test_set_up_lengths_in_um_are_refused_naming_the_field(tmp_path, side, options, match):
+    f = _dbb(tmp_path, "C", [0, 30, 60])
+    with pytest.raises(ValueError, match=match):
+        import_dataset(f, "dbb", C600U, sidecar=_side(tmp_path, side), **options)
+
+
+def test_set_up_lengths_in_um_are_refused_in_columns_and_by_the_cli(tmp_path, capsys):
+    f = _write(tmp_path / "l.csv", ["X,Y,Z,A,C,reading_um,length", "0,0,-150,0,0,5,100", "0,0,-150,0,30,5,100000"])
+    with pytest.raises(ValueError, match=r"l\.csv:3: column 'length': 100000 mm: no ball bar"):
+        import_dataset(f, "dbb", C600U, sidecar=DBB_SIDE)
+    f = _write(tmp_path / "g.csv", ["type,X,Y,Z,A,C,reading,length,tool_ball_x,tool_ball_y,tool_ball_z",
+                                    "dbb,0,0,-150,0,0,0.005,100,0,0,150", "dbb,0,0,-150,0,30,0.005,100,0,0,150000"])
+    with pytest.raises(ValueError, match=r"g\.csv:3: column 'tool_ball_z': 150000 mm"):
+        import_dataset(f, "fivecal", C600U, sidecar=DBB_SIDE)
+    side = tmp_path / "s.json"
+    side.write_text(json.dumps({**DBB_SIDE, "length": 100000}))
+    out = tmp_path / "ds.json"
+    rc = cli.main(["import", "dbb", os.path.join(EX, "dbb_trace.csv"), "--machine", C600U, "--sidecar", str(side),
+                   "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "s.json: length: 100000 mm" in err and not out.exists(), err
+    rc = cli.main(["import", "dbb", os.path.join(EX, "dbb_trace.csv"), "--machine", C600U, "--sidecar",
+                   os.path.join(EX, "dbb_trace.json"), "--length", "100000", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--length: 100000 mm" in err, err

@@ -487,6 +487,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         _point_setup(side, origin, machine)
     if kind == "distance":
         _distance_setup(side, origin, machine)
+    _sidecar_sizes(side, origin, machine)
 
     text = files.read_text(path, f"{kind} table")
     lines = list(_lines(text))
@@ -947,9 +948,11 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
     balls = set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"])
     used = {"facet": {"sigma"}, "sphere": {"sigma"}, "cylinder": {"sigma"}, "dbb": {"reading", "length", "sigma"} | balls,
             "ball3d": {"dx", "dy", "dz", "sigma"} | balls}[typ]
-    for f, (_, fw) in vals.items():
+    for f, (v, fw) in vals.items():
         if f not in used:
             raise ValueError(f"{fw}: a {typ} row has no {f} (leave the cell empty)")
+        if f in _SIZES:
+            _size(f, v, fw)
     for key in ("dir_" + a for a in machine.axis_names):
         if key in empty:
             raise ValueError(f"{empty[key]}: empty cell (a direction -1, 0 or +1 is expected)")
@@ -1028,6 +1031,63 @@ def _value(vals, key, where, typ, empty=None):
     if key not in vals:
         raise ValueError(f"{where}: no '{key}' for this {typ} row")
     return vals[key]
+
+
+#: The length-like values of a sidecar, the options and the columns (key ->
+#: the size in mm beyond which the value is µm typed as mm, what has that
+#: size); readings and axis positions have their own checks.
+_SIZES = {"length": (plausibility.BAR_LENGTH, "no ball bar is that long"),
+          "tip_radius": (plausibility.TIP_RADIUS, "no probe tip is that large"),
+          "radius": (plausibility.ARTEFACT_RADIUS, "no reference sphere or cylinder is that large"),
+          "scale_bar": (plausibility.LOCAL_POSITION, "no scale bar is that long"),
+          "dead_length": (plausibility.LOCAL_POSITION, "no tracer station is that far from its target"),
+          "tool_ball": (plausibility.LOCAL_POSITION, "no tool ball sits that far from the origin at the zero pose"),
+          "table_ball": (plausibility.LOCAL_POSITION, "no table ball is that far from the workpiece origin"),
+          "target_point": (plausibility.LOCAL_POSITION, "no target is that far from its frame's origin"),
+          "instrument_origin": (plausibility.REFUSE_POSITION, "no instrument is that far from the machine"),
+          "station_position": (plausibility.REFUSE_POSITION, "no station is that far from the machine"),
+          "axis": (plausibility.REFUSE_POSITION, "beyond any machine tool")}
+for _k, _c in _VECTORS.items():
+    _SIZES.update({c: _SIZES[_k] for c in _c})
+
+
+def _size(key: str, value, where: str) -> None:
+    """Refuse a length-like value (mm) of ``key`` beyond its plausible size
+    (:data:`_SIZES`), naming where it was given; a list: each entry."""
+    if isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _size(key, v, f"{where}[{i}]")
+        return
+    limit, why = _SIZES[key]
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) > limit:
+        raise ValueError(f"{where}: {value:.6g} mm: {why} (refused beyond {limit:g} mm); it looks like µm: "
+                         f"give {value / 1000:.6g} (mm)")
+
+
+def _sidecar_sizes(side: Mapping, origin: Mapping, machine: Machine) -> None:
+    """The length-like values of the sidecar and the options, named where given."""
+    for key in ("length", "tool_ball", "table_ball", "target_point", "instrument_origin"):
+        if side.get(key) is not None:
+            _size(key, side[key], origin.get(key, key))
+    probe = side.get("probe")
+    if isinstance(probe, Mapping):
+        _size("tip_radius", probe.get("tip_radius"), f"{origin.get('probe', 'probe')}.tip_radius")
+    art = side.get("artefact")
+    if isinstance(art, Mapping):
+        for group, key, size in (("spheres", "radius", "radius"), ("cylinders", "radius", "radius"),
+                                 ("scale_bars", "length", "scale_bar")):
+            for k, x in enumerate(art.get(group) or []):
+                if isinstance(x, Mapping):
+                    _size(size, x.get(key), f"{origin.get('artefact', 'artefact')}.{group}[{k}].{key}")
+    for sid, st in (side.get("stations") or {}).items() if isinstance(side.get("stations"), Mapping) else ():
+        if isinstance(st, Mapping):
+            _size("station_position", st.get("position"), f"{origin.get('stations', 'stations')}.{sid}.position")
+            _size("dead_length", st.get("dead_length"), f"{origin.get('stations', 'stations')}.{sid}.dead_length")
+    joints = side.get("joints")
+    if isinstance(joints, Mapping) and isinstance(joints.get("home"), Mapping):
+        for a, v in joints["home"].items():
+            if a in machine.axis_names and not machine.is_rotary(a):
+                _size("axis", v, f"{origin.get('joints', 'joints')}.home.{a}")
 
 
 def _positive(value, what: str) -> float:
@@ -1247,6 +1307,9 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
     for key, got in parts.items():
         if key not in keys:
             raise ValueError(f"{next(iter(got.values()))[1]}: a {typ} row has no {key} (leave the cell empty)")
+        if key in _SIZES:
+            for v, cw in got.values():
+                _size(key, v, cw)
     # every axis of the machine but S in every row; an empty direction cell is an axis not recorded
     for (key, part), cw in empty.items():
         if key == "axes" and part != "S":
