@@ -244,15 +244,19 @@ def read_bytes(path: PathLike, what: str = "input", max_bytes: int = MAX_INPUT_B
 
 def decode_text(data: bytes, path: str) -> str:
     """UTF-8 text (a leading BOM is dropped); ValueError naming the file and
-    the byte offset for binary data or another encoding."""
+    the byte offset (and line) for binary data or another encoding."""
     nul = data.find(b"\0")
     if nul >= 0:
         raise ValueError(f"{path}: binary data (a NUL byte at byte offset {nul}), expected UTF-8 text")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise ValueError(f"{path}: not UTF-8 text (byte 0x{data[e.start]:02x} at byte offset {e.start}); "
-                         "save the file as UTF-8") from None
+        b = data[e.start]
+        line = data.count(b"\n", 0, e.start) + 1
+        # the usual culprit: a degree or micro sign saved by a Windows tool
+        latin = f", '{bytes([b]).decode('cp1252')}' in Latin-1 / Windows-1252" if b in (0xb0, 0xb5) else ""
+        raise ValueError(f"{path}: not UTF-8 text (byte 0x{b:02x} at byte offset {e.start}) on line {line}"
+                         f"{latin}; save the file as UTF-8") from None
     return text[1:] if text.startswith("\ufeff") else text
 
 

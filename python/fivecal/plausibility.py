@@ -45,6 +45,15 @@ DBB_RANGE = 2.0
 BALL3D_RANGE = 5.0
 #: mm: facet touches farther than this from their facet at the nominal machine.
 FACET_DISTANCE = 5.0
+#: mm: sizes of the set-up an import reads (sidecar, options, columns) beyond
+#: which a value is µm typed as mm: a ball bar's nominal length (a QC20-W with
+#: every extension is 600 mm), a probe tip radius, a reference sphere's or
+#: cylinder's radius, and how far a ball, a target or a tracer's dead length
+#: reaches from its frame's origin (positions in F use REFUSE_POSITION).
+BAR_LENGTH = 2000.0
+TIP_RADIUS = 50.0
+ARTEFACT_RADIUS = 1000.0
+LOCAL_POSITION = 1e4
 
 
 def _warn(message: str, category) -> None:

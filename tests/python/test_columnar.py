@@ -301,6 +301,21 @@ def test_unknown_kind_and_unknown_column(tmp_path):
     _refused(_write(bad, tmp_path / "c.parquet"), "unknown column 'A'", "machine axes")
 
 
+def test_a_column_name_given_twice_is_refused(tmp_path):
+    # Arrow keeps both columns; a reader keyed by name would keep one of them
+    # silently (the last X won)
+    t = _ball3d_table()
+    for name, other in (("X", "X"), ("measured_y", "measured_y"), ("type", "type"), ("id", "id")):
+        if name not in t.schema.names:
+            t = t.append_column(name, pa.array([f"r{i}" for i in range(t.num_rows)]))
+        col = t.column(name)
+        bad = t.append_column(pa.field(other, col.type), col).replace_schema_metadata(t.schema.metadata)
+        _refused(_write(bad, tmp_path / f"{name}.parquet"), f"column '{name}'", "twice", f"{t.num_columns + 1}")
+    with pytest.raises(ValueError, match=r"column 'X' .*twice"):
+        list(columnar.iter_datasets(_write(t.append_column(pa.field("X", pa.float64()), t.column("X"))
+                                           .replace_schema_metadata(t.schema.metadata), tmp_path / "i.parquet")))
+
+
 def test_metadata_missing_or_wrong(tmp_path):
     t = _ball3d_table()
     meta = dict(t.schema.metadata)

@@ -71,3 +71,22 @@ def test_tracer_import_refusals(tmp_path):
     with pytest.raises(ValueError, match="readings look like µm"):
         fivecal.io.import_dataset(tmp_path / "um.csv", "distance", D.MACHINE, sidecar={"stations": stations},
                                   units="mm", **kw)
+
+
+def test_station_places_and_dead_lengths_in_um_are_refused_naming_the_station(tmp_path):
+    m = fivecal.Machine.from_dict(D.MACHINE)
+    ds = fivecal.simulate(m, [e for e in D._plan(np.random.default_rng(2), n=2) if e["target"] == "tool"],
+                          errors={}, setup=TOOL_SETUP, sigma=D.NOISE, seed=2)
+    table = tmp_path / "t.csv"
+    _write(ds, table)
+    stations = {s: {"position": p, "dead_length": D.DEAD[s]} for s, p in D.STATIONS.items()}
+    side = tmp_path / "s.json"
+    for st, key, match in (({"dead_length": 200000}, "L2", r"s\.json: stations\.L2\.dead_length: 200000"),
+                           ({"position": [900, -700, 2e8]}, "L1", r"s\.json: stations\.L1\.position\[2\]: 2e\+08")):
+        side.write_text(json.dumps({"stations": {**stations, key: {**stations[key], **st}}}))
+        with pytest.raises(ValueError, match=match + r" mm: no .* it looks like µm"):
+            fivecal.io.import_dataset(table, "distance", D.MACHINE, sidecar=side, target="tool")
+    side.write_text(json.dumps({"stations": stations}))
+    with pytest.raises(ValueError, match=r"--target-point\[2\]: 150000 mm: no target"):
+        fivecal.io.import_dataset(table, "distance", D.MACHINE, sidecar=side, target="tool",
+                                  target_point=[0, 0, 150000])

@@ -311,12 +311,14 @@ def test_sidecar_and_option_values_are_named_where_given(tmp_path):
 
 
 def test_rotary_columns_in_radians_warn_naming_the_column_and_the_option(tmp_path):
-    lines = ["X,Y,Z,A,C,dx,dy,dz"] + [f"0,0,0,0,{c:.5f},0.001,0,0" for c in np.linspace(0, 2 * np.pi, 13)[:-1]]
+    # a sweep off the quarter turns: radian indexations (0.5236, 1.0472, ...) are refused (below)
+    sweep = np.linspace(0, 2 * np.pi, 13)[:-1] + 0.01
+    lines = ["X,Y,Z,A,C,dx,dy,dz"] + [f"0,0,0,0,{c:.5f},0.001,0,0" for c in sweep]
     f = _write(tmp_path / "r.csv", lines)
     with pytest.warns(fivecal.RadiansWarning, match=r"r\.csv: axis column C: .*C_rad or give --angle-units rad"):
         import_dataset(f, "ball3d", C600U, sidecar=RTEST_SIDE)
     ds = import_dataset(f, "ball3d", C600U, sidecar=RTEST_SIDE, angle_units="rad")
-    assert ds.observations[3]["axes"]["C"] == pytest.approx(90.0, abs=1e-3)
+    assert ds.observations[3]["axes"]["C"] == pytest.approx(90.0 + np.degrees(0.01), abs=1e-3)
 
 
 def test_renamed_columns_keep_the_unit_of_their_header(tmp_path):
@@ -327,3 +329,204 @@ def test_renamed_columns_keep_the_unit_of_their_header(tmp_path):
     assert o["id"] == "r.csv:3"
     with pytest.raises(ValueError, match=r"no column 'nope' in the header"):
         read_table(f, "rtest", C600U, sidecar=RTEST_SIDE, columns={"X": "nope"})
+
+
+# --------------------------------------------------------------------------
+# Units, encodings and broken files (issue #27)
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("a,c,angle_units", [
+    ("A [°]", "C°", None), ("A_degrees", "C (degree)", None), ("A (deg)", "C_°", None),
+    ("A", "C", "°"), ("A", "C", "degrees"), ("A [µrad]", "C [μrad]", None)])
+def test_every_spelling_of_an_angle_unit_is_read(tmp_path, capsys, a, c, angle_units):
+    f = _write(tmp_path / "r.csv", [f"X,Y,Z,{a},{c},dx_um,dy_um,dz_um", GOOD])
+    o = read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE, angle_units=angle_units)["observations"][0]
+    want = -30.0 * (1.8e-4 / np.pi if "rad" in a else 1.0)
+    assert o["axes"]["A"] == pytest.approx(want)
+    args = ["--angle-units", angle_units] if angle_units else []
+    rc = cli.main(["import", "rtest", f, "--machine", C600U, "--sidecar", _side(tmp_path), *args,
+                   "--out", str(tmp_path / "ds.json")])
+    assert rc == 0, capsys.readouterr().err
+
+
+def _side(tmp_path, side=RTEST_SIDE):
+    p = tmp_path / "side.json"
+    p.write_text(json.dumps(side))
+    return str(p)
+
+
+def test_an_unknown_angle_unit_names_the_column_and_the_units(tmp_path, capsys):
+    f = _write(tmp_path / "r.csv", ["X,Y,Z,A [grad],C,dx_um,dy_um,dz_um", GOOD])
+    with pytest.raises(ValueError, match=r"r\.csv:1: column 'A \[grad\]': unknown unit 'grad' for an angle "
+                                         r"\(units: deg, °, .*rad"):
+        read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE)
+    rc = cli.main(["import", "rtest", f, "--machine", C600U, "--sidecar", _side(tmp_path),
+                   "--angle-units", "grad", "--out", str(tmp_path / "ds.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--angle-units 'grad': expected deg or rad" in err and "°" in err, err
+
+
+def test_a_table_in_latin1_is_refused_naming_the_file_line_and_the_fix(tmp_path, capsys):
+    f = tmp_path / "r.csv"
+    f.write_bytes("# R-test\nX,Y,Z,A [°],C,dx_um,dy_um,dz_um\n".encode("latin-1") + GOOD.encode() + b"\n")
+    with pytest.raises(ValueError, match=r"r\.csv: not UTF-8 text \(byte 0xb0 at byte offset 18\) on line 2, "
+                                         r"'°' in Latin-1.*save the file as UTF-8"):
+        read_table(str(f), "ball3d", C600U, sidecar=RTEST_SIDE)
+    side = tmp_path / "s.json"
+    side.write_bytes(json.dumps({"setup": "R1"}).encode()[:-1] + ', "_comment": "\xb5m"}'.encode("latin-1"))
+    rc = cli.main(["import", "rtest", _write(tmp_path / "g.csv", [HEAD, GOOD]), "--machine", C600U,
+                   "--sidecar", str(side), "--out", str(tmp_path / "ds.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "s.json: not UTF-8 text" in err and "on line 1" in err and err.count("\n") == 1, err
+
+
+def test_a_probe_log_in_latin1_is_refused_naming_the_file(tmp_path, m):
+    from fivecal.io import linuxcnc
+
+    log = tmp_path / "probe.log"
+    log.write_bytes(b"1 2 3 0 0 0 0 0 0\n# \xb0\n")
+    with pytest.raises(ValueError, match=r"probe\.log: not UTF-8 text .* on line 2"):
+        linuxcnc.read_probe_log(str(log), m, "xyzac-trt", [], {})
+
+
+@pytest.mark.parametrize("sep,quote", [(",", ""), (",", '"'), (";", ""), (" ", "")])
+def test_a_huge_cell_is_refused_naming_the_line(tmp_path, capsys, sep, quote):
+    big = quote + "1" * 2_000_000 + quote
+    f = _write(tmp_path / "r.csv", [HEAD.replace(",", sep), GOOD.replace(",", sep),
+                                    sep.join(GOOD.split(",")[:5] + [big] + GOOD.split(",")[6:])])
+    with pytest.raises(ValueError, match=r"r\.csv:3: .*characters \(at most 4096 are read\)"):
+        read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE)
+    rc = cli.main(["import", "rtest", f, "--machine", C600U, "--sidecar",
+                   _side(tmp_path), "--out", str(tmp_path / "ds.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "r.csv:3:" in err and len(err) < 400 and "internal error" not in err, err[:400]
+
+
+@pytest.mark.parametrize("head", ["X,Y,Z,A,C,dx,dy,dz,X", "X Y Z A C dx dy dz DZ", "x,Y,Z,A,C,dx,dy,dz,temp,X"])
+def test_a_column_named_twice_is_refused(tmp_path, head):
+    n = len(head.replace(" ", ",").split(","))
+    f = _write(tmp_path / "r.csv", [head, ",".join(["0.1"] * n) if "," in head else " ".join(["0.1"] * n)])
+    with pytest.raises(ValueError, match=r"r\.csv:1: column '.*' appears twice in the header \(columns \d+ and "
+                                         rf"{n}\)"):
+        read_table(f, "ball3d", C600U, sidecar=RTEST_SIDE, ignore=["temp"] if "temp" in head else ())
+
+
+# --------------------------------------------------------------------------
+# Rotary columns in another unit than declared (issue #27)
+# --------------------------------------------------------------------------
+DBB_SIDE = {"setup": "C1", "length": 100.0, "tool_ball": [0, 0, 150.0], "table_ball": [100.0, 0.0, 0.0]}
+
+
+def _dbb(tmp_path, c_header, cs, name="d.csv"):
+    return _write(tmp_path / name, [f"X,Y,Z,A,{c_header},reading_um"] + [f"0,0,-150,0,{c},5" for c in cs])
+
+
+@pytest.mark.parametrize("header,values,angle_units,match", [
+    ("C_rad", [0, 30, 60, 90], None,
+     r"d\.csv:3: column 'C_rad': 30 rad is 1718\.87 degrees, more than a turn and a quarter \(7\.854 rad\); "
+     r"the values look like degrees: name the column C_deg$"),
+    ("C [rad]", [0, -5, -10, 15], None, r"d\.csv:4: column 'C \[rad\]': -10 rad .*name the column C_deg"),
+    ("C_rad", [0, 1, 2, 3, 4, 5], None, r"d\.csv:3: column 'C_rad': 1 rad, and every value of the column is a "
+                                        r"whole number \(1, 2, 3, 4, \.\.\.\), as degrees are written"),
+    ("C", [0, 30, 60], "rad", r"d\.csv:3: column 'C': 30 rad .*drop --angle-units rad \(degrees are the default\)"),
+    ("C", [0, -2, 2, 4], "RAD", r"d\.csv:3: column 'C': -2 rad, .*whole number.*drop --angle-units rad"),
+    ("C (mrad)", [0, 9000], None, r"d\.csv:3: column 'C \(mrad\)': 9000 mrad is 515\.662 degrees"),
+    ("C", [0, 0.7854, 1.5708, 3.1416], None,
+     r"d\.csv:3: column 'C': 0\.7854 degrees, and every value of the column is a multiple of π/12 written in "
+     r"decimals \(0\.7854 = 3π/12\), as radians are written; .*name the column C_rad or give --angle-units rad"),
+    ("C_deg", [0, 0.5236, -1.0472], None, r"d\.csv:3: column 'C_deg': .*π/12.*name the column C_rad$"),
+])
+def test_rotary_values_plainly_in_another_unit_than_declared_are_refused(tmp_path, header, values, angle_units,
+                                                                         match):
+    f = _dbb(tmp_path, header, values)
+    with pytest.raises(ValueError, match=match):
+        import_dataset(f, "dbb", C600U, sidecar=DBB_SIDE, angle_units=angle_units)
+
+
+@pytest.mark.parametrize("header,values,angle_units,want", [
+    ("C_rad", [f"{c:.5f}" for c in np.linspace(-2 * np.pi, 2 * np.pi, 9)], None, -360.0),
+    ("C_rad", [0, 7], None, 0.0),  # one whole value: 7 rad (401 degrees) may be meant
+    ("C", [0, 0.5, 1, 1.5], None, 0.0),  # small rotations in degrees
+    ("C", [0, 0.25, 0.5], "deg", 0.0),
+    ("C", ["0.52360", "1.04720"], "rad", 30.0),
+    ("C (mrad)", [0, 15, 30], None, 0.0),  # whole mrad are usual
+])
+def test_rotary_values_that_fit_their_unit_are_read(tmp_path, header, values, angle_units, want):
+    f = _dbb(tmp_path, header, values)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fivecal.RadiansWarning)
+        ds = import_dataset(f, "dbb", C600U, sidecar=DBB_SIDE, angle_units=angle_units)
+    assert ds.observations[0]["axes"]["C"] == pytest.approx(want, abs=1e-3)
+
+
+def test_angle_units_rad_over_degrees_is_refused_by_the_cli_for_every_kind(tmp_path, capsys):
+    out = str(tmp_path / "ds.json")
+    rc = cli.main(["import", "rtest", os.path.join(EX, "rtest.txt"), "--machine", C600U, "--sidecar",
+                   os.path.join(EX, "rtest.json"), "--angle-units", "rad", "--out", out])
+    err = capsys.readouterr().err
+    assert rc == 2 and "rtest.txt:3: column 'A': -30 rad is -1718.87 degrees" in err and \
+        "drop --angle-units rad" in err and err.count("\n") == 1, err
+    with pytest.raises(ValueError, match=r"rtest\.txt:3: column 'A': -30 rad"):
+        import_dataset(os.path.join(EX, "rtest.txt"), "rtest", C600U, sidecar=os.path.join(EX, "rtest.json"),
+                       angle_units="rad")
+    trace = open(os.path.join(EX, "dbb_trace.csv"), encoding="utf-8").read()
+    for header, extra, needle in (("C_rad", [], "column 'C_rad': 30 rad"),
+                                  ("C", ["--angle-units", "rad"], "column 'C': 30 rad")):
+        f = tmp_path / "t.csv"
+        f.write_text(trace.replace("C_deg", header), encoding="utf-8")
+        rc = cli.main(["import", "dbb", str(f), "--machine", C600U, "--sidecar", os.path.join(EX, "dbb_trace.json"),
+                       *extra, "--out", out])
+        err = capsys.readouterr().err
+        assert rc == 2 and f"t.csv:4: {needle}" in err, err
+        assert not os.path.exists(out)
+    # the generic table and a joint layout: the same check
+    f = _write(tmp_path / "g.csv", ["type,X,Y,Z,A,C_rad,dx,dy,dz"] +
+               [f"ball3d,0,0,0,0,{c},0.001,0,0" for c in (0, 45, 90)])
+    with pytest.raises(ValueError, match=r"g\.csv:3: column 'C_rad': 45 rad"):
+        import_dataset(f, "fivecal", C600U, sidecar=RTEST_SIDE)
+    f = _write(tmp_path / "j.csv", ["joint,position,measured_x,measured_y,measured_z"] +
+               [f"C,{c},{c},0,0" for c in (0, 30, 60)])
+    with pytest.raises(ValueError, match=r"j\.csv:3: column 'position' \(joint C\): 30 rad .*drop --angle-units"):
+        import_dataset(f, "point", C600U, target="work", target_point=[100, 0, 0], angle_units="rad")
+
+
+# --------------------------------------------------------------------------
+# Lengths of the set-up typed in µm (issue #27)
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("side,options,match", [
+    ({**DBB_SIDE, "length": 100000}, {}, r"side\.json: length: 100000 mm: no ball bar is that long \(refused "
+                                         r"beyond 2000 mm\); it looks like µm: give 100 \(mm\)"),
+    ({**DBB_SIDE, "length": 50000.0}, {}, r"side\.json: length: 50000 mm"),
+    (DBB_SIDE, {"length": 100000}, r"^--length: 100000 mm: no ball bar"),
+    ({**DBB_SIDE, "table_ball": [100000, 0, 0]}, {}, r"side\.json: table_ball\[0\]: 100000 mm"),
+    (DBB_SIDE, {"tool_ball": "0,0,150000"}, r"--tool-ball\[2\]: 150000 mm"),
+    ({**DBB_SIDE, "probe": {"tip_radius": 3000}}, {}, r"side\.json: probe\.tip_radius: 3000 mm: no probe tip"),
+    ({**DBB_SIDE, "artefact": {"spheres": [{"id": "S1", "center": [0, 0, 0], "radius": 12500}]}}, {},
+     r"side\.json: artefact\.spheres\[0\]\.radius: 12500 mm: no reference sphere"),
+])
+def test_set_up_lengths_in_um_are_refused_naming_the_field(tmp_path, side, options, match):
+    f = _dbb(tmp_path, "C", [0, 30, 60])
+    with pytest.raises(ValueError, match=match):
+        import_dataset(f, "dbb", C600U, sidecar=_side(tmp_path, side), **options)
+
+
+def test_set_up_lengths_in_um_are_refused_in_columns_and_by_the_cli(tmp_path, capsys):
+    f = _write(tmp_path / "l.csv", ["X,Y,Z,A,C,reading_um,length", "0,0,-150,0,0,5,100", "0,0,-150,0,30,5,100000"])
+    with pytest.raises(ValueError, match=r"l\.csv:3: column 'length': 100000 mm: no ball bar"):
+        import_dataset(f, "dbb", C600U, sidecar=DBB_SIDE)
+    f = _write(tmp_path / "g.csv", ["type,X,Y,Z,A,C,reading,length,tool_ball_x,tool_ball_y,tool_ball_z",
+                                    "dbb,0,0,-150,0,0,0.005,100,0,0,150", "dbb,0,0,-150,0,30,0.005,100,0,0,150000"])
+    with pytest.raises(ValueError, match=r"g\.csv:3: column 'tool_ball_z': 150000 mm"):
+        import_dataset(f, "fivecal", C600U, sidecar=DBB_SIDE)
+    side = tmp_path / "s.json"
+    side.write_text(json.dumps({**DBB_SIDE, "length": 100000}))
+    out = tmp_path / "ds.json"
+    rc = cli.main(["import", "dbb", os.path.join(EX, "dbb_trace.csv"), "--machine", C600U, "--sidecar", str(side),
+                   "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "s.json: length: 100000 mm" in err and not out.exists(), err
+    rc = cli.main(["import", "dbb", os.path.join(EX, "dbb_trace.csv"), "--machine", C600U, "--sidecar",
+                   os.path.join(EX, "dbb_trace.json"), "--length", "100000", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--length: 100000 mm" in err, err

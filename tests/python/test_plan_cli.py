@@ -245,6 +245,30 @@ def test_rtest_readings_that_do_not_line_up_are_refused(tmp_path, machine_file, 
     assert rc == 0 and "2 ball3d observations of the 5 planned" in out
 
 
+def test_rtest_readings_read_rotary_columns_in_the_declared_unit(tmp_path, machine_file, capsys):
+    plan_file = tmp_path / "p.json"
+    run(capsys, "plan", "rtest", machine_file, "--tests", "K1", "--table-ball", "60,20,30", "--step", "90",
+        "--out", plan_file)
+
+    def imp(text, *extra):
+        f = tmp_path / "r.csv"
+        f.write_text(text)
+        return run(capsys, "import", "rtest", f, "--plan", plan_file, "--out", tmp_path / "ds.json", *extra)
+
+    # K1-1 is at C 90, K1-2 at C 180: --angle-units was ignored, now it reads the C column
+    rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,1.570796,1,2,3\nK1-2,3.141593,1,2,3\n", "--angle-units", "rad")
+    assert rc == 0, err
+    rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,90,1,2,3\nK1-2,180,1,2,3\n", "--angle-units", "rad")
+    assert rc == 2 and "r.csv:2: column 'C': 90 rad is 5156.62 degrees" in err and "--angle-units" in err, err
+    rc, _, err = imp("id,C_rad,dx_um,dy_um,dz_um\nK1-1,90,1,2,3\nK1-2,180,1,2,3\n")
+    assert rc == 2 and "column 'C_rad': 90 rad" in err and "C_deg" in err, err
+    rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,90,1,2,3\n", "--angle-units", "grad")
+    assert rc == 2 and "--angle-units 'grad'" in err, err
+    rc, _, err = run(capsys, "import", "probe-log", tmp_path / "r.csv", "--plan", plan_file, "--kins", "xyzac-trt",
+                     "--angle-units", "rad", "--out", tmp_path / "ds.json")
+    assert rc == 2 and "--angle-units: not used by a probe-log import" in err, err
+
+
 # ---- sphere check: plan -> program -> probe log -> import -> sphere-check ---
 
 def test_sphere_check_plan_program_log_import_and_check(tmp_path, machine_file, capsys):

@@ -11,10 +11,12 @@ def _run_planned(args) -> int:
 
     files.check_outputs([("FILE", args.file), ("--plan", args.plan), ("--pins", args.pins)], [("--out", args.out)])
     if args.kind == "probe-log":
-        for opt in ("machine", "sidecar", "column", "setup", "length", "tool_ball", "table_ball", "header"):
+        for opt in ("machine", "sidecar", "column", "setup", "length", "tool_ball", "table_ball", "header",
+                    "units", "angle_units"):
             if getattr(args, opt, None):
                 raise ValueError(f"--{opt.replace('_', '-')}: not used by a probe-log import (the plan gives "
-                                 "the machine, the touches and the artefact)")
+                                 "the machine, the touches and the artefact; the log holds the program's mm and "
+                                 "degrees)")
         d = P.probe_log_dataset(args.file, args.plan, args.kins, args.pins)
     else:
         for opt in ("machine", "sidecar", "column", "setup", "length", "tool_ball", "table_ball"):
@@ -24,7 +26,8 @@ def _run_planned(args) -> int:
         if args.kins or args.pins:
             raise ValueError(f"--{'kins' if args.kins else 'pins'}: belongs to a probe-log import")
         d = P.rtest_readings(args.file, args.plan, units=args.units, delimiter=args.delimiter,
-                             decimal=args.decimal, header=args.header, sigma=args.sigma, ignore=args.ignore or ())
+                             decimal=args.decimal, header=args.header, sigma=args.sigma, ignore=args.ignore or (),
+                             angle_units=args.angle_units)
     ds = P.write(d, args.out)
     n = sum(1 for e in P.read_plan(args.plan)[1] if e.get("type") in {o["type"] for o in d["observations"]})
     counts = {}  # per type, in the order the plan first uses it (a mixed facet/sphere plan)

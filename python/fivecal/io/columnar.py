@@ -259,6 +259,14 @@ def _open(path: str):
         if isinstance(e, FileNotFoundError):
             raise ValueError(f"{path}: cannot read dataset (no such file)") from None
         raise ValueError(f"{path}: not a readable Parquet file ({e})") from None
+    names = pf.schema_arrow.names
+    first = {}
+    for i, name in enumerate(names):
+        if name in first:
+            # Arrow keeps both; every lookup by name below would see only one
+            raise ValueError(f"{path}: column '{name}' appears twice (columns {first[name] + 1} and {i + 1}); "
+                             "each column name once")
+        first[name] = i
     head = _metadata(pf, path)
     schema.validate(dict(head, observations=[]), "dataset", path)
     try:

@@ -26,6 +26,7 @@ import numpy as np
 
 from .. import _core
 from ..files import make_dirs, write_text
+from ..files import read_text as _read_text
 from ..guards import CorrectionLimitError
 from ..machine import Machine
 
@@ -576,8 +577,7 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
     readings. ``source`` is a path or the log text."""
     k = _kins(kins)
     if "\n" not in source and os.path.exists(source):
-        with open(source, encoding="utf-8") as fh:
-            text, where = fh.read(), source
+        text, where = _read_text(source, "probe log"), source
     else:
         text, where = source, "probe log"
     rows = []
@@ -588,7 +588,8 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
         try:
             vals = [float(v) for v in parts]
         except ValueError:
-            raise ValueError(f"{where}:{no}: expected 9 numbers 'x y z a b c u v w', got '{line.strip()}'") from None
+            got = line.strip() if len(line.strip()) <= 80 else line.strip()[:80] + "…"
+            raise ValueError(f"{where}:{no}: expected 9 numbers 'x y z a b c u v w', got '{got}'") from None
         if len(vals) != 9 or not all(math.isfinite(v) for v in vals):
             raise ValueError(f"{where}:{no}: expected 9 finite numbers 'x y z a b c u v w', got {len(vals)}")
         rows.append(vals)

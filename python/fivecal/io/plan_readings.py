@@ -47,7 +47,7 @@ def _program_order(plan) -> List[Tuple[int, dict]]:
 
 def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: Optional[str] = None,
                    decimal: Optional[str] = None, header=None, sigma: Optional[float] = None,
-                   ignore=()) -> dict:
+                   ignore=(), angle_units: Optional[str] = None) -> dict:
     """A ball3d dataset dict from the nest readings at the dwells of an
     R-test program, lined up with the plan of ``plan_path`` by id or by
     program order (module docstring). ValueError names the file, line and
@@ -61,7 +61,10 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
     if not order:
         raise ValueError(f"--plan {plan_path}: no ball3d (R-test) entries in the plan")
     if units is not None and units.lower() not in _units.LENGTH_SUFFIXES:
-        raise ValueError(f"--units '{units}': expected um or mm")
+        raise ValueError(f"--units '{units}': expected um or mm (length units: {_units.unit_list('length')})")
+    if angle_units is not None and angle_units.lower() not in _units.ANGLE_SUFFIXES:
+        raise ValueError(f"--angle-units '{angle_units}': expected deg or rad (angle units: "
+                         f"{_units.unit_list('angle')})")
     if sigma is not None and not sigma > 0:
         raise ValueError(f"--sigma: {sigma:g} mm must be > 0")
     if decimal not in (None, "comma", "point"):
@@ -76,7 +79,7 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
     else:
         hline, first = lines[0]
         delim = T._delimiter(first, delimiter)
-        names = T._split(first, delim)
+        names = T._split(first, delim, f"{path}:{hline}")
         lines = lines[1:]
         hwhere = f"{path}:{hline}"
         if all(T._is_number(h) for h in names):
@@ -84,6 +87,7 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
                              "dx dy dz [id] (e.g. dx_um dy_um dz_um) or give --header")
     decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
     ignored = {i.strip().lower() for i in ignore or ()}
+    T._once(names, hwhere, ignored)
     axes = {a.lower(): a for a in machine.axis_names}
     cols = {}
     for i, h in enumerate(names):
@@ -100,8 +104,10 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
         if field == "id":
             factor = None
         elif field in machine.axis_names:
-            q = "angle" if machine.is_rotary(field) else "length"
-            factor = _units.column_unit(h, q, hwhere)[0] if unit else 1.0
+            if unit:
+                factor = _units.column_unit(h, "angle" if machine.is_rotary(field) else "length", hwhere)[0]
+            else:
+                factor = _units.ANGLE_SUFFIXES[(angle_units or "deg").lower()] if machine.is_rotary(field) else 1.0
         else:
             factor = (_units.column_unit(h, "length", hwhere)[0] if unit
                       else _units.LENGTH_SUFFIXES[(units or "mm").lower()])
@@ -110,11 +116,23 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
     if missing:
         raise ValueError(f"{hwhere}: no '{missing[0]}' column; R-test readings need dx dy dz (e.g. dx_um "
                          "dy_um dz_um) and optionally the plan id of each reading")
+    # a rotary column in another unit than declared, said before a mismatch with the plan hides why
+    rotary = []
+    for field, (ci, h, factor) in cols.items():
+        if field in machine.axis_names and machine.is_rotary(field):
+            values = []
+            for lineno, line in lines:
+                try:
+                    values.append((T._number(T._split(line, delim, path)[ci], decimal_comma, path), lineno))
+                except (ValueError, IndexError):
+                    pass  # the reading loop below names the bad cell
+            rotary.append(T._rotary_column(h, values, (angle_units or "deg").lower()))
+    T._rotary_units(rotary, path)
     by_id = {str(e.get("id")): (i, e) for i, e in order if e.get("id") is not None}
     obs, used = [], {}
     for n, (lineno, line) in enumerate(lines):
         where = f"{path}:{lineno}"
-        cells = T._split(line, delim)
+        cells = T._split(line, delim, where)
         if len(cells) != len(names):
             raise ValueError(f"{where}: {len(cells)} cells, the header has {len(names)} columns ({', '.join(names)})")
         if "id" in cols:

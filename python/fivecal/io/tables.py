@@ -91,7 +91,6 @@ _REQUIRED["distance"] = ("reading",)
 _TEXT_FIELDS.add("station")
 _JOINT_TYPES = {"prismatic": "linear", "linear": "linear", "translational": "linear",
                 "revolute": "rotary", "rotary": "rotary", "rotational": "rotary"}
-_ALL_UNITS = set(_units.LENGTH_SUFFIXES) | set(_units.ANGLE_SUFFIXES)
 
 
 def _axis_list(machine: Machine, skip_s: bool = False) -> str:
@@ -140,10 +139,34 @@ def _delimiter(header: str, option: Optional[str]) -> Optional[str]:
     return None
 
 
-def _split(line: str, delim: Optional[str]) -> list:
+#: characters: no cell of an instrument table (a number, an id, a name) is
+#: longer; a longer one is a broken file, refused before it fills a message
+_MAX_CELL = 4096
+
+
+def _split(line: str, delim: Optional[str], where: str) -> list:
+    """The cells of a line (``where``: its file and line, for the message)."""
     if delim is None:
-        return line.split()
-    return [c.strip() for c in next(csv.reader([line], delimiter=delim))]
+        cells = line.split()
+    else:
+        try:
+            cells = [c.strip() for c in next(csv.reader([line], delimiter=delim))]
+        except csv.Error as e:
+            if "field limit" in str(e):  # the csv module's own cap, 128 KiB
+                raise ValueError(f"{where}: a cell holds more than {csv.field_size_limit()} characters (at most "
+                                 f"{_MAX_CELL} are read); is the separator or a quote missing?") from None
+            raise ValueError(f"{where}: not a valid CSV line ({e})") from None
+    for i, c in enumerate(cells):
+        if len(c) > _MAX_CELL:
+            raise ValueError(f"{where}: cell {i + 1} holds {len(c)} characters (at most {_MAX_CELL} are read); "
+                             f"it starts '{_shown(c)}': is the separator or a quote missing?")
+    return cells
+
+
+def _shown(cell: str, n: int = 40) -> str:
+    """A cell for a message: its start when it is long."""
+    c = cell.strip()
+    return c if len(c) <= n else c[:n] + "…"
 
 
 def _number(cell: str, decimal_comma: bool, where: str) -> float:
@@ -158,24 +181,16 @@ def _number(cell: str, decimal_comma: bool, where: str) -> float:
         hint = ""
         if "," in s and not decimal_comma:
             hint = " (a decimal comma needs ';', tab or space separators, or --decimal comma)"
-        raise ValueError(f"{where}: '{cell.strip()}' is not a number{hint}") from None
+        raise ValueError(f"{where}: '{_shown(cell)}' is not a number{hint}") from None
     if not math.isfinite(v):
-        raise ValueError(f"{where}: '{cell.strip()}' is not a finite number (NaN or infinity is not a measurement)")
+        raise ValueError(f"{where}: '{_shown(cell)}' is not a finite number (NaN or infinity is not a measurement)")
     return v
 
 
 def _split_unit(header: str):
     """(name, unit or None): ``reading_um`` -> (reading, um), ``dx [um]`` -> (dx, um),
     ``table_ball_x`` -> (table_ball_x, None)."""
-    h = header.strip().strip('"').strip("'")
-    m = re.match(r"^(.*?)\s*[\[(]\s*([^\])]*)\s*[\])]\s*$", h)
-    if m:
-        return m.group(1).strip(), m.group(2).strip()
-    if "_" in h:
-        base, suffix = h.rsplit("_", 1)
-        if suffix.lower() in _ALL_UNITS and base:
-            return base, suffix
-    return h, None
+    return _units.split_unit(header)
 
 
 # --------------------------------------------------------------------------
@@ -214,6 +229,18 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
                      f"--column FIELD=HEADER or skip it with --ignore '{name}')")
 
 
+def _once(headers: Sequence[str], where: str, ignored) -> None:
+    """Refuse a header naming a kept column twice (names are case-insensitive):
+    which of the two a reader keyed by name would use is arbitrary."""
+    first = {}
+    for i, h in enumerate(headers):
+        key = h.strip().lower()
+        if key and key in first and key not in ignored:
+            raise ValueError(f"{where}: column '{h.strip()}' appears twice in the header (columns {first[key] + 1} "
+                             f"and {i + 1}); rename one, or skip both with --ignore '{h.strip()}'")
+        first.setdefault(key, i)
+
+
 def _named_headers(headers: Sequence[str], where: str, rename: Mapping[str, str], ignore: Iterable[str]):
     """The columns a table keeps, as (index, header, name, unit, where of the
     column): ``--ignore``d ones left out, ``--column FIELD=HEADER`` renames
@@ -227,6 +254,7 @@ def _named_headers(headers: Sequence[str], where: str, rename: Mapping[str, str]
     for h in list(by_header) + sorted(ignored):
         if h not in known:
             raise ValueError(f"{where}: no column '{h}' in the header (columns: {', '.join(headers)})")
+    _once(headers, where, ignored)
     for i, h in enumerate(headers):
         key = h.strip().lower()
         if key in ignored:
@@ -448,15 +476,18 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     if side.get("setup") is not None and (not isinstance(side["setup"], str) or "." in side["setup"]):
         raise ValueError(f"{origin['setup']}: expected a mounting name without '.', got {side['setup']!r}")
     if units is not None and units.lower() not in _units.LENGTH_SUFFIXES:
-        raise ValueError(f"import: --units '{units}': expected um or mm")
+        raise ValueError(f"import: --units '{units}': expected um or mm (length units: "
+                         f"{_units.unit_list('length')})")
     if angle_units is not None and angle_units.lower() not in _units.ANGLE_SUFFIXES:
-        raise ValueError(f"import: --angle-units '{angle_units}': expected deg or rad")
+        raise ValueError(f"import: --angle-units '{angle_units}': expected deg or rad (angle units: "
+                         f"{_units.unit_list('angle')})")
     if decimal not in (None, "comma", "point"):
         raise ValueError(f"import: decimal '{decimal}': expected comma or point")
     if kind in _FIXED:
         _point_setup(side, origin, machine)
     if kind == "distance":
         _distance_setup(side, origin, machine)
+    _sidecar_sizes(side, origin, machine)
 
     text = files.read_text(path, f"{kind} table")
     lines = list(_lines(text))
@@ -471,7 +502,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         hline, first = lines[0]
         delim = _delimiter(first, delimiter)
         headers = given
-        if not any(_is_number(h) for h in _split(first, delim)):
+        if not any(_is_number(h) for h in _split(first, delim, f"{path}:{hline}")):
             raise ValueError(f"{path}:{hline}: this line holds names, not numbers, like a header row, but the "
                              f"column names were given ({origin['header']}); a file with a header row needs no "
                              "'header'")
@@ -480,7 +511,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     else:
         hline, first = lines[0]
         delim = _delimiter(first, delimiter)
-        headers = _split(first, delim)
+        headers = _split(first, delim, f"{path}:{hline}")
         hwhere, hdesc = f"{path}:{hline}", f"line {hline}"
     if all(_is_number(h) for h in headers):
         raise ValueError(f"{hwhere}: no header row (this line holds numbers); the first line must name "
@@ -507,7 +538,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     base = os.path.basename(path)
     obs, lineno_of, ids = [], [], {}
     for lineno, line in lines[1:]:
-        cells = _split(line, delim)
+        cells = _split(line, delim, f"{path}:{lineno}")
         if len(cells) != len(headers):
             raise ValueError(f"{path}:{lineno}: {len(cells)} cells, the header ({hdesc}) has "
                              f"{len(headers)} columns ({', '.join(headers)})")
@@ -529,6 +560,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         lineno_of.append(lineno)
     if not obs:
         raise ValueError(f"{path}: a header but no data rows")
+    _rotary_units(_rotary_columns(obs, cols, machine, lineno_of, angle_units), path)
     if generic:
         _angle_checks(obs, cols, machine, path, lineno_of)
     d = {"machine": machine.to_dict(), "observations": obs}
@@ -916,9 +948,11 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
     balls = set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"])
     used = {"facet": {"sigma"}, "sphere": {"sigma"}, "cylinder": {"sigma"}, "dbb": {"reading", "length", "sigma"} | balls,
             "ball3d": {"dx", "dy", "dz", "sigma"} | balls}[typ]
-    for f, (_, fw) in vals.items():
+    for f, (v, fw) in vals.items():
         if f not in used:
             raise ValueError(f"{fw}: a {typ} row has no {f} (leave the cell empty)")
+        if f in _SIZES:
+            _size(f, v, fw)
     for key in ("dir_" + a for a in machine.axis_names):
         if key in empty:
             raise ValueError(f"{empty[key]}: empty cell (a direction -1, 0 or +1 is expected)")
@@ -997,6 +1031,63 @@ def _value(vals, key, where, typ, empty=None):
     if key not in vals:
         raise ValueError(f"{where}: no '{key}' for this {typ} row")
     return vals[key]
+
+
+#: The length-like values of a sidecar, the options and the columns (key ->
+#: the size in mm beyond which the value is µm typed as mm, what has that
+#: size); readings and axis positions have their own checks.
+_SIZES = {"length": (plausibility.BAR_LENGTH, "no ball bar is that long"),
+          "tip_radius": (plausibility.TIP_RADIUS, "no probe tip is that large"),
+          "radius": (plausibility.ARTEFACT_RADIUS, "no reference sphere or cylinder is that large"),
+          "scale_bar": (plausibility.LOCAL_POSITION, "no scale bar is that long"),
+          "dead_length": (plausibility.LOCAL_POSITION, "no tracer station is that far from its target"),
+          "tool_ball": (plausibility.LOCAL_POSITION, "no tool ball sits that far from the origin at the zero pose"),
+          "table_ball": (plausibility.LOCAL_POSITION, "no table ball is that far from the workpiece origin"),
+          "target_point": (plausibility.LOCAL_POSITION, "no target is that far from its frame's origin"),
+          "instrument_origin": (plausibility.REFUSE_POSITION, "no instrument is that far from the machine"),
+          "station_position": (plausibility.REFUSE_POSITION, "no station is that far from the machine"),
+          "axis": (plausibility.REFUSE_POSITION, "beyond any machine tool")}
+for _k, _c in _VECTORS.items():
+    _SIZES.update({c: _SIZES[_k] for c in _c})
+
+
+def _size(key: str, value, where: str) -> None:
+    """Refuse a length-like value (mm) of ``key`` beyond its plausible size
+    (:data:`_SIZES`), naming where it was given; a list: each entry."""
+    if isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _size(key, v, f"{where}[{i}]")
+        return
+    limit, why = _SIZES[key]
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) > limit:
+        raise ValueError(f"{where}: {value:.6g} mm: {why} (refused beyond {limit:g} mm); it looks like µm: "
+                         f"give {value / 1000:.6g} (mm)")
+
+
+def _sidecar_sizes(side: Mapping, origin: Mapping, machine: Machine) -> None:
+    """The length-like values of the sidecar and the options, named where given."""
+    for key in ("length", "tool_ball", "table_ball", "target_point", "instrument_origin"):
+        if side.get(key) is not None:
+            _size(key, side[key], origin.get(key, key))
+    probe = side.get("probe")
+    if isinstance(probe, Mapping):
+        _size("tip_radius", probe.get("tip_radius"), f"{origin.get('probe', 'probe')}.tip_radius")
+    art = side.get("artefact")
+    if isinstance(art, Mapping):
+        for group, key, size in (("spheres", "radius", "radius"), ("cylinders", "radius", "radius"),
+                                 ("scale_bars", "length", "scale_bar")):
+            for k, x in enumerate(art.get(group) or []):
+                if isinstance(x, Mapping):
+                    _size(size, x.get(key), f"{origin.get('artefact', 'artefact')}.{group}[{k}].{key}")
+    for sid, st in (side.get("stations") or {}).items() if isinstance(side.get("stations"), Mapping) else ():
+        if isinstance(st, Mapping):
+            _size("station_position", st.get("position"), f"{origin.get('stations', 'stations')}.{sid}.position")
+            _size("dead_length", st.get("dead_length"), f"{origin.get('stations', 'stations')}.{sid}.dead_length")
+    joints = side.get("joints")
+    if isinstance(joints, Mapping) and isinstance(joints.get("home"), Mapping):
+        for a, v in joints["home"].items():
+            if a in machine.axis_names and not machine.is_rotary(a):
+                _size("axis", v, f"{origin.get('joints', 'joints')}.home.{a}")
 
 
 def _positive(value, what: str) -> float:
@@ -1216,6 +1307,9 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
     for key, got in parts.items():
         if key not in keys:
             raise ValueError(f"{next(iter(got.values()))[1]}: a {typ} row has no {key} (leave the cell empty)")
+        if key in _SIZES:
+            for v, cw in got.values():
+                _size(key, v, cw)
     # every axis of the machine but S in every row; an empty direction cell is an axis not recorded
     for (key, part), cw in empty.items():
         if key == "axes" and part != "S":
@@ -1319,26 +1413,88 @@ def _machined_checks(o: dict, parts, text, empty, side: Mapping, machine: Machin
 
 def _angle_checks(obs: list, cols, machine: Machine, path: str, lines: list) -> None:
     """Rotary columns of an axes object other than ``axes`` (a step's
-    reference cut) that look like radians warn as the axes do; a column
-    declared in rad whose values pass a turn many times is refused as degrees."""
+    reference cut) that look like radians warn as the axes do."""
     from ..units import looks_like_radians, radians_message
 
     for c in cols:
-        if not (c.key == "axes" or c.key.endswith("_axes")) or not machine.is_rotary(c.part):
+        if not c.key.endswith("_axes") or not machine.is_rotary(c.part):
             continue
-        values = [(o[c.key][c.part], n) for o, n in zip(obs, lines) if c.part in (o.get(c.key) or {})]
+        values = [o[c.key][c.part] for o in obs if c.part in (o.get(c.key) or {})]
+        if values and looks_like_radians(values):
+            _warn(radians_message(f"{path}: column '{c.header}'", values)
+                  + f", name the column {c.header}_rad or give --angle-units rad", RadiansWarning)
+
+
+#: A test turns a rotary axis through a turn at most (plus an approach): a
+#: column declared in radians whose values pass a turn and a quarter holds
+#: degrees (8 rad is 458 degrees; 8 degrees is what was meant).
+_RAD_TURNS = 1.25
+
+
+def _rotary_columns(obs: list, cols, machine: Machine, lines: list, angle_units: Optional[str]) -> list:
+    """The rotary axis columns of a read table as (what to call it, unit,
+    [(value in that unit, line)], how to say it is in degrees, how to say it
+    is in radians): axis columns, a step's reference axes, and a joint
+    layout's position column per rotary joint."""
+    out = []
+    default = (angle_units or "deg").lower()
+    for c in cols:
+        key, part = (c.key, c.part) if isinstance(c, _GColumn) else ("axes", c.field)
+        if not (key == "axes" or key.endswith("_axes")) or part not in machine.axis_names or \
+                not machine.is_rotary(part):
+            continue
+        values = [(o[key][part] / c.factor, n) for o, n in zip(obs, lines) if part in (o.get(key) or {})]
+        out.append(_rotary_column(c.header, values, default))
+    position = next((c.header for c in cols if getattr(c, "field", None) == "position"), "position")
+    factor = _units.ANGLE_SUFFIXES[default]
+    for a in machine.axis_names:
+        values = [(o["_joint"][1] / factor, n) for o, n in zip(obs, lines) if o.get("_joint", ("",))[0] == a]
+        if values and machine.is_rotary(a):
+            out.append((f"column '{position}' (joint {a})", default, values,
+                        f"drop --angle-units {default} (degrees are the default)", "give --angle-units rad"))
+    return out
+
+
+def _rotary_column(header: str, values: list, default: str) -> tuple:
+    """A rotary axis column for :func:`_rotary_units`: its unit is its
+    header's, else ``default`` (``--angle-units``, else deg)."""
+    base, unit = _split_unit(header)
+    if unit is not None:
+        return (f"column '{header}'", unit.lower(), values, f"name the column {base}_deg",
+                f"name the column {base}_rad")
+    return (f"column '{header}'", default, values, f"drop --angle-units {default} (degrees are the default) or "
+            f"name the column {base}_deg", f"name the column {base}_rad or give --angle-units rad")
+
+
+def _rotary_units(columns: list, path: str) -> None:
+    """Refuse a rotary column whose values are plainly in another unit than
+    the one declared (its header, else --angle-units, else degrees), naming
+    the column, the line and the fix."""
+    for what, unit, values, to_deg, to_rad in columns:
         if not values:
             continue
-        rad = c.factor == _units.ANGLE_SUFFIXES["rad"]
-        big = [(v, n) for v, n in values if abs(v) / c.factor > 4 * math.pi]
-        if rad and big:
-            v, n = big[0]
-            raise ValueError(f"{path}:{n}: column '{c.header}': {v / c.factor:.6g} rad is {v:.6g} degrees, more "
-                             f"than two turns; the values look like degrees: name the column {c.part}_deg "
-                             f"(or reference_{c.part}_deg)")
-        if c.key != "axes" and looks_like_radians([v for v, _ in values]):
-            _warn(radians_message(f"{path}: column '{c.header}'", [v for v, _ in values])
-                  + f", name the column {c.header}_rad or give --angle-units rad", RadiansWarning)
+        factor = _units.ANGLE_SUFFIXES[unit]
+        if factor != 1.0:
+            bound = _RAD_TURNS * 360.0 / factor
+            big = next(((v, n) for v, n in values if abs(v) > bound), None)
+            if big:
+                v, n = big
+                raise ValueError(f"{path}:{n}: {what}: {v:.6g} {unit} is {v * factor:.6g} degrees, more than a "
+                                 f"turn and a quarter ({bound:.4g} {unit}); the values look like degrees: {to_deg}")
+            nonzero = [(v, n) for v, n in values if v != 0.0]
+            if unit == "rad" and len({v for v, _ in nonzero}) >= 2 and all(v == round(v) for v, _ in nonzero):
+                # radians are written in decimals (0.7854, 1.5708); whole numbers are degrees
+                v, n = nonzero[0]
+                shown = ", ".join(f"{x:g}" for x in sorted({x for x, _ in nonzero})[:4])
+                raise ValueError(f"{path}:{n}: {what}: {v:g} rad, and every value of the column is a whole "
+                                 f"number ({shown}, ...), as degrees are written; the values look like degrees: "
+                                 f"{to_deg}")
+        elif _units.written_as_radians([v for v, _ in values]):
+            v, n = next((v, n) for v, n in values if v != 0.0)
+            k = round(v / (math.pi / 12))
+            raise ValueError(f"{path}:{n}: {what}: {v:g} degrees, and every value of the column is a multiple of "
+                             f"π/12 written in decimals ({v:g} = {k}π/12), as radians are written; the values "
+                             f"look like radians: {to_rad}")
 
 
 def write_table(dataset, path: Union[str, os.PathLike], *, delimiter: str = ",") -> dict:
