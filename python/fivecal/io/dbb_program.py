@@ -36,13 +36,13 @@ values, for its identity kinematics (``M429`` in fivecal's sample configs).
 """
 from __future__ import annotations
 
-import math
 import warnings
 from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
 from ..machine import Machine, RadiansWarning
+from . import nc_options as O
 
 _PLANES = {"XY": ("G17", "X", "Y", "IJ"), "ZX": ("G18", "Z", "X", "KI"), "YZ": ("G19", "Y", "Z", "JK")}
 
@@ -103,12 +103,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
     planar circles as arcs, setups in which a rotary axis moves as in
     :func:`rotary_dbb_program` (with ``tolerance``, exact stop); ``feed``
     mm/min for feed-in, path and feed-out."""
-    if not (feed > 0 and math.isfinite(feed)):
-        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
-    if not (0 < feed_in and math.isfinite(feed_in)):
-        raise ValueError(f"feed_in: expected a positive distance in mm, got {feed_in}")
-    if int(turns) != turns or turns < 1:
-        raise ValueError(f"turns: expected a whole number >= 1, got {turns}")
+    O.check(feed=feed, feed_in=feed_in, turns=turns, tolerance=tolerance)
     f = lambda v: f"{v:.6f}"  # noqa: E731
     out = [f"(fivecal ball bar program, machine {machine.name}: feed-in, arc, feed-out per setup)",
            "G21 G90 G94 G40 G49 G54"]
@@ -118,7 +113,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
             continue
         c = circle_of(machine, entries)
         if feed_in >= c["radius"]:
-            raise ValueError(f"feed_in: {feed_in} mm is not less than the radius {c['radius']:g} mm")
+            raise O.OptionError("feed_in", f"{feed_in} mm is not less than the radius {c['radius']:g} mm")
         a1, a2 = c["axes"]
         cen, st = c["centre"], c["start"]
         u = np.array([st[a1] - cen[a1], st[a2] - cen[a2]]) / c["radius"]
@@ -245,7 +240,7 @@ def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed
     letters = [a for a in machine.axis_names if a != "S"]
     bar = _Bar(machine, entries[0])
     if feed_in >= bar.length:
-        raise ValueError(f"feed_in: {feed_in} mm is not less than the bar length {bar.length:g} mm")
+        raise O.OptionError("feed_in", f"{feed_in} mm is not less than the bar length {bar.length:g} mm")
     for i, e in enumerate(entries):
         if (np.abs(np.asarray(e["tool_ball"], float) - bar.tool).max() > 1e-12
                 or np.abs(np.asarray(e["table_ball"], float) - bar.table).max() > 1e-12
@@ -300,12 +295,7 @@ def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 
     written) or e.g. ``G64 P0.0001`` (blending within 0.1 µm, continuous);
     ``kins``: write LinuxCNC joint values (``tcp_off`` switches its identity
     kinematics on first)."""
-    if not (feed > 0 and math.isfinite(feed)):
-        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
-    if not (0 < feed_in and math.isfinite(feed_in)):
-        raise ValueError(f"feed_in: expected a positive distance in mm, got {feed_in}")
-    if not (tolerance > 0 and math.isfinite(tolerance)):
-        raise ValueError(f"tolerance: expected a positive length in mm, got {tolerance}")
+    O.check(feed=feed, feed_in=feed_in, tolerance=tolerance)
     setups = _setups(plan)
     fixed = [s for s, e in setups.items() if not _rotary_moves(machine, e)]
     if fixed:

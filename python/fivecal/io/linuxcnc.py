@@ -27,6 +27,7 @@ import numpy as np
 from .. import _core
 from ..guards import CorrectionLimitError
 from ..machine import Machine
+from . import nc_options as O
 
 KINS = ("xyzac-trt", "xyzbc-trt")
 TILT = {"xyzac-trt": "A", "xyzbc-trt": "B"}
@@ -514,6 +515,8 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     its ``arm`` line (the simulator's probe planes: :func:`probe_sim_lines`)."""
     k = _kins(kins)
     tilt = TILT[k]
+    O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
+            safe=safe, dwell=dwell)
     spheres = artefact.get("spheres") or []
     if spheres:
         # its straight lifts know nothing of spheres: on TANGO they ran 4 mm
@@ -524,8 +527,6 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     touches = _touch_geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
     if before_probe is not None and len(before_probe) != len(touches):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(touches)} touches")
-    if not (clearance > 0 and overtravel > 0 and feed > 0 and retract >= 0):
-        raise ValueError("probing_program: clearance, overtravel and feed must be positive")
     f = lambda v: f"{v:.6f}"  # noqa: E731
     out = [f"(fivecal probing program: {len(touches)} touches, machine {machine.name}, {k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",

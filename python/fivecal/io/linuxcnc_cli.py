@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import linuxcnc as L
+from . import nc_options as O
 
 
 def _volume(text: str) -> dict:
@@ -104,13 +105,16 @@ def _read_spec(path: str):
     probe = spec.get("probe") or {}
     if not isinstance(probe, dict):
         raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")
-    return machine, plan, spec.get("artefact") or {}, float(probe.get("tip_radius", 0.0))
+    try:
+        tip = float(probe.get("tip_radius", 0.0))
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: probe.tip_radius: expected the stylus ball radius in mm, got "
+                         f"{probe.get('tip_radius')!r}") from None
+    return machine, plan, spec.get("artefact") or {}, tip
 
 
 def _run_program(args) -> int:
-    from . import dbb_program as D
-    from . import nc_programs as N
-
+    O.check_cli(args)
     machine, plan, artefact, tip = _read_spec(args.spec)
     types = sorted({str(e.get("type")) for e in plan})
     kind = args.kind
@@ -130,36 +134,42 @@ def _run_program(args) -> int:
     if kind in ("probing", "sphere") and not tip > 0:
         raise ValueError(f"{args.spec}: probe.tip_radius: the stylus ball radius (mm) is needed for the "
                          "contact points")
-    feed = args.feed
-    # with spheres on the artefact (a scale bar beside the facets, as in
-    # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
-    if kind == "probing" and (any(e.get("type") == "sphere" for e in plan) or artefact.get("spheres")):
-        text = N.touch_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
-                               overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
-                               safe=args.safe, overshoot=args.overshoot, dwell=args.dwell, log=args.log)
-    elif kind == "probing":
-        text = L.probing_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
-                                 overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
-                                 safe=args.safe, dwell=args.dwell, log=args.log)
-    elif kind == "sphere":
-        text = N.sphere_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
-                                overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
-                                safe=args.safe, overshoot=args.overshoot, dwell=args.dwell, log=args.log)
-    elif kind == "rtest":
-        text = N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=feed or 500.0,
-                               dwell=args.dwell if args.dwell > 0 else 1.0, subdivide=args.subdivide)
-    else:
-        if not (args.tolerance > 0):
-            raise ValueError(f"--tolerance: expected a positive number of µm, got {args.tolerance}")
-        if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
-            text = D.rotary_dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
-                                        kins=args.kins, tolerance=args.tolerance * 1e-3)
-        else:
-            text = D.dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
-                                 tolerance=args.tolerance * 1e-3)
+    try:
+        text = _program_text(args, kind, machine, plan, artefact, tip)
+    except O.OptionError as e:
+        # a plan-dependent bound a writer checks: name the option as typed
+        if e.option == "tip_radius":
+            raise ValueError(f"{args.spec}: probe.tip_radius: {e.text}") from None
+        raise e.for_cli() from None
     blocks = sum(1 for ln in text.splitlines() if ln[:1] in "GM")
     return _write_or_print(text, args.out,
                            f"{kind} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
+
+
+def _program_text(args, kind, machine, plan, artefact, tip) -> str:
+    from . import dbb_program as D
+    from . import nc_programs as N
+
+    # an option left out takes the writer's default for this kind of program
+    opt = lambda name, default: default if getattr(args, name) is None else getattr(args, name)  # noqa: E731
+    touch = dict(clearance=args.clearance, overtravel=args.overtravel, feed=opt("feed", 60.0),
+                 retract=args.retract, safe=args.safe, dwell=opt("dwell", 0.0), log=args.log)
+    # with spheres on the artefact (a scale bar beside the facets, as in
+    # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
+    if kind == "probing" and (any(e.get("type") == "sphere" for e in plan) or artefact.get("spheres")):
+        return N.touch_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
+    if kind == "probing":
+        return L.probing_program(machine, args.kins, plan, artefact, tip, **touch)
+    if kind == "sphere":
+        return N.sphere_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
+    if kind == "rtest":
+        return N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=opt("feed", 500.0),
+                               dwell=opt("dwell", 1.0), subdivide=args.subdivide)
+    feed = opt("feed", 1000.0)
+    if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
+        return D.rotary_dbb_program(machine, plan, feed=feed, feed_in=args.feed_in, kins=args.kins,
+                                    tolerance=args.tolerance * 1e-3)
+    return D.dbb_program(machine, plan, feed=feed, feed_in=args.feed_in, tolerance=args.tolerance * 1e-3)
 
 
 def register(sub) -> None:
@@ -248,23 +258,32 @@ def register(sub) -> None:
                     "sphere and --mode tcp; for rtest / dbb: write LinuxCNC joint values, for dbb rotary "
                     "paths only)")
     pp.add_argument("--out", help="file to write (default: standard output)")
-    pp.add_argument("--feed", type=float, help="mm/min: probing moves (default 60), R-test path (500), "
-                    "ball bar path (1000; rotary paths in inverse time for the balls' relative speed)")
+    pp.add_argument("--feed", type=float, help="mm/min: probing moves (default 60), R-test path "
+                    "(500), ball bar path (1000; rotary paths in inverse time for the balls' relative speed); "
+                    "at most 100000")
     g = pp.add_argument_group("probing and sphere cycles")
-    g.add_argument("--clearance", type=float, default=1.0, help="start of each G38.2 off the contact, mm")
-    g.add_argument("--overtravel", type=float, default=1.0, help="end of each G38.2 beyond the contact, mm")
-    g.add_argument("--retract", type=float, default=5.0, help="retract along the touch direction, mm")
-    g.add_argument("--safe", type=float, default=100.0, help="lift along the tool axis for indexing, mm")
-    g.add_argument("--overshoot", type=float, default=1.0, help="sphere and mixed facet/sphere plans: degrees "
-                   "beyond a position to reach it from the side the plan asks for (0: off)")
-    g.add_argument("--dwell", type=float, default=0.0, help="seconds: after each indexing; R-test: at "
-                   "each sample (default 1)")
+    g.add_argument("--clearance", type=float, default=1.0, help="start of each G38.2 off "
+                   "the contact, mm (at most 50)")
+    g.add_argument("--overtravel", type=float, default=1.0, help="end of each G38.2 beyond "
+                   "the contact, mm (at most 10, and at most the radius of a touched sphere)")
+    g.add_argument("--retract", type=float, default=5.0, help="retract along the touch "
+                   "direction, mm (at least --clearance, at most 500)")
+    g.add_argument("--safe", type=float, default=100.0, help="lift along the tool axis for "
+                   "indexing, mm (at most 2000)")
+    g.add_argument("--overshoot", type=float, default=1.0, help="sphere and mixed "
+                   "facet/sphere plans: degrees beyond a position to reach it from the side the plan asks for "
+                   "(0: off; at most 45)")
+    g.add_argument("--dwell", type=float, default=None, help="seconds: after each indexing "
+                   "(default 0); R-test: at each sample (default 1); at most 3600")
     g.add_argument("--log", default="probe-log.txt", help="probe log file name (PROBEOPEN)")
     g = pp.add_argument_group("R-test and ball bar")
     g.add_argument("--mode", choices=["axes", "tcp"], default="axes", help="R-test words: axis commands "
                    "(joint values with --kins) or world coordinates with TCP on")
-    g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two samples")
-    g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, mm")
-    g.add_argument("--tolerance", type=float, default=0.02, help="ball bar rotary paths: largest change "
-                   "of the nominal bar length between two blocks, µm (default 0.02)")
+    g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two "
+                   "samples (at most 1000)")
+    g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, "
+                   "mm (at most 50, and less than the circle's radius or the bar length)")
+    g.add_argument("--tolerance", type=float, default=0.02, help="ball bar rotary paths: "
+                   "largest change of the nominal bar length between two blocks, µm (default 0.02, at most "
+                   "1000)")
     pp.set_defaults(func=_run_program)

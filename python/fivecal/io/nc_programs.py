@@ -39,6 +39,7 @@ import numpy as np
 from ..machine import Machine
 from ..procedures.rtest import tip_offset
 from . import linuxcnc as L
+from . import nc_options as O
 
 
 def _f(v: float) -> str:
@@ -212,16 +213,16 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
     if before_probe is not None and len(before_probe) != len(geo):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(geo)} touches")
-    for name, v, lo in (("clearance", clearance, 0), ("overtravel", overtravel, 0), ("feed", feed, 0)):
-        if not (v > lo and math.isfinite(v)):
-            raise ValueError(f"{name}: expected a positive number, got {v}")
-    for name, v in (("retract", retract), ("safe", safe), ("overshoot", overshoot), ("dwell", dwell)):
-        if not (v >= 0 and math.isfinite(v)):
-            raise ValueError(f"{name}: expected a number >= 0, got {v}")
+    O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
+            safe=safe, overshoot=overshoot, dwell=dwell)
     if retract < clearance:
-        raise ValueError(f"retract: {retract} mm is less than the clearance {clearance} mm")
-    dirs = _joint_directions(machine, k, plan)
+        raise O.OptionError("retract", f"{retract} mm is less than the clearance {clearance} mm")
     spheres = {sp["id"]: sp for sp in (artefact or {}).get("spheres", [])}
+    touched = sorted((float(spheres[t["target"]]["radius"]), t["target"]) for t in plan if t.get("type") == "sphere")
+    if touched:
+        # past the radius the G38.2 of a probe that does not trip ends beyond the sphere's centre
+        O.at_most("overtravel", overtravel, touched[0][0], f"the radius of sphere {touched[0][1]}")
+    dirs = _joint_directions(machine, k, plan)
     origin = np.asarray(L.match(machine, k)["origin"], float) + np.asarray(workpiece_shift, float)
     # every sphere of the artefact stands in the way, touched in this plan or not
     balls = [(sp["id"], np.asarray(sp["center"], float) - origin, float(sp["radius"]) + tip_radius + clearance)
@@ -320,6 +321,7 @@ def touch_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], ar
 def _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
                    workpiece_shift, kinds):
     k = L._kins(kins)
+    O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel)
     spheres = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
     facets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
     geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
@@ -443,8 +445,7 @@ def rtest_points(machine: Machine, entries: Sequence[Mapping], subdivide: int = 
     (``sample``: its index) and, with ``subdivide`` = n, n points between two
     samples with the rotary commands interpolated and the linear ones from
     the nominal inverse kinematics (the ball stays in the nest there too)."""
-    if int(subdivide) != subdivide or subdivide < 0:
-        raise ValueError(f"subdivide: expected a whole number >= 0, got {subdivide}")
+    O.check(subdivide=subdivide)
     rot = [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
     pts = []
     for i, e in enumerate(entries):
@@ -492,10 +493,7 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
     if mode == "tcp" and not kins:
         raise ValueError("mode 'tcp': give kins (xyzac-trt or xyzbc-trt), the kinematics whose "
                          "tool-centre-point function runs the path")
-    if not (feed > 0 and math.isfinite(feed)):
-        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
-    if not (dwell >= 0 and math.isfinite(dwell)):
-        raise ValueError(f"dwell: expected a number of seconds >= 0, got {dwell}")
+    O.check(feed=feed, dwell=dwell, subdivide=subdivide)
     k = L._kins(kins) if kins else None
     if k and pins is None:
         pins = L.nominal_pins(machine, k)
