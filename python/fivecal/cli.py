@@ -609,7 +609,8 @@ def _declared_files(args):
     for attr in ("out", "table", "plot", "patterns", "save_dataset"):
         v = getattr(args, attr, None)
         if isinstance(v, str) and not (attr == "out" and "{k}" in v):
-            outputs.append((f"--{attr.replace('_', '-')}", v))
+            folder = attr == "out" and getattr(args, "out_is_folder", False)
+            outputs.append((f"--{attr.replace('_', '-')}{' DIR' if folder else ''}", v))
     report = getattr(args, "report", None)
     if isinstance(report, str):
         outputs += [("--report", os.path.join(report, "result.json")), ("--report", os.path.join(report, "report.html"))]

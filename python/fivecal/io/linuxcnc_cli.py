@@ -3,6 +3,7 @@ fivecal.io.linuxcnc, fivecal.io.controllers and the NC programs of the test plan
 from __future__ import annotations
 
 import argparse
+import os
 
 from . import linuxcnc as L
 from . import nc_options as O
@@ -27,14 +28,8 @@ def _run(args) -> int:
     from ..cli import _read_machine
 
     machine = _read_machine(args.machine)
-    limit = None
-    if str(args.max_change).lower() != "off":
-        try:
-            limit = float(args.max_change)
-        except ValueError:
-            raise ValueError(f"--max-change: '{args.max_change}' is not a number of mm or 'off'") from None
-        if not limit > 0 or limit != limit or limit == float("inf"):
-            raise ValueError(f"--max-change: expected a positive number of mm, got {args.max_change}")
+    limits = L.parse_max_change(args.max_change)
+    limit = None if limits is None else limits["mm"]
     old = L.read_hal_pins(args.old, args.kins) if args.old else None
     volume = _volume(args.volume) if args.volume else None
     if not (args.comp_step > 0):
@@ -42,6 +37,8 @@ def _run(args) -> int:
     exp = L.export(args.result, machine, args.kins, args.out, old_pins=old, max_change=limit,
                    force=args.force, volume=volume, comp_step=args.comp_step, what=args.result)
     print(exp.summary())
+    if exp.replaced:
+        print(f"{args.out}: replaced the earlier export ({', '.join(exp.replaced)})")
     print(f"files in {args.out}; recipe: docs/linuxcnc.md")
     return 0
 
@@ -56,15 +53,41 @@ def _run_kinematics(args) -> int:
     machine = _read_machine(args.machine)
     errors = usable_errors(args.result, machine, args.force, args.result)
     volume = _volume(args.volume) if args.volume else None
+    fmt = _kinematics_format(args.format, args.out)
+    limits = L.parse_max_change(args.max_change, angular=True)
     ab = K.absorb(machine, args.model, errors, poses=K.pose_grid(machine, volume),
                   directions=args.directions, compensation=True)
-    if args.format == "json":
+    # the same plausibility guard as export linuxcnc: the values are changes
+    # from the nominal model
+    L.check_changes(f"{args.model} model", [(p.label, float(v), p.unit) for p, v in zip(ab.parameters, ab.values)],
+                    limits, args.force)
+    if fmt == "json":
         text = json.dumps(K.export_dict(machine, ab), indent=1) + "\n"
-    elif args.format == "csv":
+    elif fmt == "csv":
         text = K.export_csv(machine, ab)
     else:
         text = K.export_text(machine, ab)
     return _write_or_print(text, args.out, f"written: {args.out}")
+
+
+_FORMATS = {".json": "json", ".csv": "csv", ".txt": "text", ".text": "text"}
+
+
+def _kinematics_format(fmt, out) -> str:
+    """The format to write: ``--format``, or the one ``--out``'s extension
+    names; a file whose extension says another format, or none fivecal
+    writes, is refused."""
+    if not out:
+        return fmt or "text"
+    ext = os.path.splitext(out)[1].lower()
+    named = _FORMATS.get(ext)
+    if named is None:
+        raise ValueError(f"--out {out}: the extension '{ext or '(none)'}' names no format fivecal writes; "
+                         "use .json, .csv or .txt")
+    if fmt and fmt != named:
+        raise ValueError(f"--out {out}: a .{ext[1:]} file, but --format {fmt}; give a file name that says the "
+                         f"format (or --format {named})")
+    return named
 
 
 def _write_or_print(text: str, out, message: str) -> int:
@@ -84,8 +107,6 @@ _PLAN_KINDS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb":
 def _read_spec(path: str):
     """machine, plan, artefact and stylus radius of a simulation spec (or a
     dataset whose observations are the plan)."""
-    import os
-
     from ..cli import _read_json
     from ..machine import Machine
 
@@ -194,7 +215,8 @@ def register(sub) -> None:
     pl.add_argument("result", help="result JSON of fivecal identify (or a JSON object name -> value)")
     pl.add_argument("--machine", required=True, help="machine definition JSON (or a dataset JSON)")
     pl.add_argument("--kins", required=True, choices=list(L.KINS), help="LinuxCNC kinematics module")
-    pl.add_argument("--out", required=True, help="folder to write the files into")
+    pl.add_argument("--out", required=True, help="folder to write the files into (a folder of an earlier "
+                    "export is replaced, all or nothing; one holding other files is refused)")
     pl.add_argument("--old", metavar="HAL", help="the controller's current pins: a HAL file with "
                     "'setp <kins>-kins.<pin> <value>' lines (default: the machine file's nominal geometry)")
     pl.add_argument("--max-change", default=str(L.DEFAULT_MAX_CHANGE),
@@ -207,7 +229,7 @@ def register(sub) -> None:
                     "table points (mm or degrees, default 5)")
     pl.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
                     "--max-change; only to inspect the values")
-    pl.set_defaults(func=_run)
+    pl.set_defaults(func=_run, out_is_folder=True)
     from . import controllers as K
     pk = esub.add_parser(
         "kinematics", formatter_class=RD,
@@ -229,10 +251,14 @@ def register(sub) -> None:
     pk.add_argument("--volume", metavar="RANGES", help="working volume of the fit, e.g. "
                     "X=-200:200,B=-90:30 (mm, degrees; default linear +-100, a rotary axis along z a "
                     "full turn, other rotary axes -90:90)")
-    pk.add_argument("--format", choices=("text", "csv", "json"), default="text")
-    pk.add_argument("--out", help="file to write (default: standard output)")
-    pk.add_argument("--force", action="store_true", help="use a result that is not usable; only to "
-                    "inspect the values")
+    pk.add_argument("--format", choices=("text", "csv", "json"), default=None,
+                    help="default: the one --out's extension names (.json, .csv, .txt), text on standard output")
+    pk.add_argument("--out", help="file to write, .json, .csv or .txt (default: standard output)")
+    pk.add_argument("--max-change", default=f"{L.DEFAULT_MAX_CHANGE},{L.DEFAULT_MAX_CHANGE_RAD}",
+                    help=f"plausibility limit on any parameter change, MM[,RAD] (default {L.DEFAULT_MAX_CHANGE} "
+                    f"mm, {L.DEFAULT_MAX_CHANGE_RAD} rad; 'off' switches it off)")
+    pk.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
+                    "--max-change; only to inspect the values")
     pk.set_defaults(func=_run_kinematics)
     pp = esub.add_parser(
         "program", formatter_class=RD,
