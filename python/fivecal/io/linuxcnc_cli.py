@@ -32,8 +32,8 @@ def _run(args) -> int:
     limit = None if limits is None else limits["mm"]
     old = L.read_hal_pins(args.old, args.kins) if args.old else None
     volume = _volume(args.volume) if args.volume else None
-    if not (args.comp_step > 0):
-        raise ValueError(f"--comp-step: expected a positive step, got {args.comp_step}")
+    if not (0 < args.comp_step < float("inf")):
+        raise ValueError(f"--comp-step: expected a positive finite step, got {args.comp_step}")
     exp = L.export(args.result, machine, args.kins, args.out, old_pins=old, max_change=limit,
                    force=args.force, volume=volume, comp_step=args.comp_step, what=args.result)
     print(exp.summary())
