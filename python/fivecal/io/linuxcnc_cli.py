@@ -217,8 +217,9 @@ def register(sub) -> None:
     pl.add_argument("--kins", required=True, choices=list(L.KINS), help="LinuxCNC kinematics module")
     pl.add_argument("--out", required=True, help="folder to write the files into (a folder of an earlier "
                     "export is replaced, all or nothing; one holding other files is refused)")
-    pl.add_argument("--old", metavar="HAL", help="the controller's current pins: a HAL file with "
-                    "'setp <kins>-kins.<pin> <value>' lines (default: the machine file's nominal geometry)")
+    pl.add_argument("--old", metavar="HAL", help="the controller's current pins: the HAL file that sets them "
+                    "(setp, or sets on the signal a net links them to; read as halcmd reads it, "
+                    "docs/linuxcnc.md; default: the machine file's nominal geometry)")
     pl.add_argument("--max-change", default=str(L.DEFAULT_MAX_CHANGE),
                     help=f"plausibility limit on any pin change in mm (default {L.DEFAULT_MAX_CHANGE}; "
                     "'off' switches it off)")
