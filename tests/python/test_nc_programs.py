@@ -661,3 +661,37 @@ def _octagon_plan(m):
     from test_linuxcnc import _octagon, _probe_plan
     art = _octagon()
     return _probe_plan(m, art), art
+
+
+@pytest.mark.parametrize("log", ["a)\nG0 X999", "probe(1).txt", "", "log\r.txt"])
+def test_probe_log_name_cannot_slip_blocks_into_the_program(tmp_path, capsys, log):
+    # before: --log 'a)<newline>G0 X999' closed the PROBEOPEN comment and
+    # wrote a G0 X999 block into the program
+    from fivecal.cli import main
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    with pytest.raises(ValueError, match="^log: "):
+        N.sphere_program(m, KINS, plan, art, 3.0, log=log)
+    with pytest.raises(ValueError, match="^arm: "):
+        N.sphere_program(m, KINS, plan, art, 3.0, arm="M64 P0\nG0 Z-50")
+    spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=art, probe={"tip_radius": 3.0})
+    assert main(["export", "program", spec, "--kins", KINS, "--log", log]) == 2
+    assert "--log: " in capsys.readouterr().err
+
+
+def test_a_program_position_no_machine_reaches_is_refused(tmp_path, capsys):
+    # before: a sphere 1e9 mm out (a unit slip in the artefact) gave a
+    # program with X1000000000 moves; a NaN workpiece shift, 'X nan' words
+    from fivecal.cli import main
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    far = {"spheres": [dict(art["spheres"][0], center=[1e9, 0.0, 40.0])]}
+    spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=far, probe={"tip_radius": 3.0})
+    assert main(["export", "program", spec, "--kins", KINS]) == 2
+    err = capsys.readouterr().err
+    assert "sphere cycle: line " in err and "moves X to 1e+09, beyond any machine tool" in err, err
+    for shift in ([np.nan, 0, 0], [0, 0], [2e5, 0, 0]):
+        with pytest.raises(ValueError, match="^workpiece_shift: expected"):
+            N.sphere_program(m, KINS, plan, art, 3.0, workpiece_shift=shift)
+        with pytest.raises(ValueError, match="^workpiece_shift: expected"):
+            N.rtest_program(m, _rtest_plan(m), kins=KINS, mode="tcp", workpiece_shift=shift)

@@ -131,7 +131,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
             out.append(f"{arc} {a1}{f(st[a1])} {a2}{f(st[a2])} {ij[0]}{f(off[a1])} {ij[1]}{f(off[a2])}")
         out.append(f"G1 {a1}{f(approach[a1])} {a2}{f(approach[a2])} (feed-out)")
     out.append("M2")
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "ball bar program")
 
 
 # ---- setups in which a rotary axis moves ------------------------------------
@@ -296,6 +296,8 @@ def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 
     ``kins``: write LinuxCNC joint values (``tcp_off`` switches its identity
     kinematics on first)."""
     O.check(feed=feed, feed_in=feed_in, tolerance=tolerance)
+    O.check_line("tcp_off", tcp_off)
+    O.check_line("path_mode", path_mode)
     setups = _setups(plan)
     fixed = [s for s, e in setups.items() if not _rotary_moves(machine, e)]
     if fixed:
@@ -310,4 +312,4 @@ def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 
     for setup, entries in setups.items():
         out += _rotary_setup(machine, setup, entries, feed, feed_in, kins, tolerance, path_mode)
     out.append("M2")
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "ball bar program")

@@ -593,6 +593,7 @@ def _touch_geometry(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     """Per touch: (joint tilt, joint C, contact world point, facet normal,
     tool axis in world coordinates)."""
     k = _kins(kins)
+    O.check_vector("workpiece_shift", workpiece_shift)
     mp = match(machine, k)
     tilt = TILT[k]
     facets = _facets(artefact)
@@ -653,6 +654,12 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     tilt = TILT[k]
     O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
             safe=safe, dwell=dwell)
+    O.check_line("log", log, comment=True)
+    for name, line in (("arm", arm), ("disarm", disarm), ("sync", sync), ("tcp_on", tcp_on)):
+        O.check_line(name, line)
+    for i, lines in enumerate(before_probe or []):
+        for line in lines:
+            O.check_line(f"before_probe[{i}]", line)
     spheres = artefact.get("spheres") or []
     if spheres:
         # its straight lifts know nothing of spheres: on TANGO they ran 4 mm
@@ -696,7 +703,7 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         out += [disarm] if disarm else []
         out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
     out += ["(PROBECLOSE)", "M2"]
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "probing program")
 
 
 def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapping],

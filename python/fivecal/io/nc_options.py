@@ -18,8 +18,11 @@ writers, which raise :class:`OptionError` for them too.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Optional
+
+from ..plausibility import REFUSE_POSITION
 
 
 @dataclass(frozen=True)
@@ -128,3 +131,49 @@ def at_most(name: str, value: float, bound: float, what: str) -> None:
         raise OptionError(name, f"{value:g} {RULES[name].unit} is more than {what} ({bound:g} "
                                 f"{RULES[name].unit})")
 
+
+
+def check_line(name: str, value, comment: bool = False) -> None:
+    """A text option written into the program as it is (``arm``, ``tcp_on``,
+    or with ``comment`` the probe log's file name inside ``(PROBEOPEN ...)``):
+    one line of printable text, so it cannot end its line or comment early
+    and slip other blocks into the program."""
+    if value is None:
+        return
+    if not isinstance(value, str):
+        raise OptionError(name, f"expected text, got {value!r}")
+    bad = next((c for c in value if not c.isprintable()), None)
+    if bad is not None:
+        raise OptionError(name, f"{bad!r} in {value!r}: it is written into the program as one line")
+    if comment and (not value.strip() or "(" in value or ")" in value):
+        raise OptionError(name, f"expected a file name without parentheses (it is written inside a G-code "
+                                f"comment), got {value!r}")
+
+
+_COMMENT = re.compile(r"\([^)]*\)")
+_AXIS_WORD = re.compile(r"([XYZABC])([+-]?(?:\d+\.?\d*|\.\d+|nan|inf))")
+
+
+def check_positions(text: str, what: str) -> str:
+    """``text`` (a program) as it is when every axis word is within
+    ±plausibility.REFUSE_POSITION (mm or degrees); else ValueError naming
+    the line: a position no machine tool reaches comes from an artefact, plan
+    or option in the wrong unit, and must not be run."""
+    for ln, line in enumerate(text.splitlines(), 1):
+        for letter, number in _AXIS_WORD.findall(_COMMENT.sub("", line)):
+            if not abs(float(number)) <= REFUSE_POSITION:
+                raise ValueError(f"{what}: line {ln} moves {letter} to {float(number):g}, beyond any machine "
+                                 f"tool (|{letter}| <= {REFUSE_POSITION:g} mm or degrees): check the plan's, the "
+                                 "artefact's and the options' units")
+    return text
+
+
+def check_vector(name: str, value) -> None:
+    """A point or shift option (``workpiece_shift``): three finite numbers
+    of mm within ±plausibility.REFUSE_POSITION."""
+    try:
+        v = [float(x) for x in value]
+    except (TypeError, ValueError):
+        v = []
+    if len(v) != 3 or not all(abs(x) <= REFUSE_POSITION for x in v):
+        raise OptionError(name, f"expected [x, y, z] in mm, finite and within ±{REFUSE_POSITION:g}, got {value!r}")

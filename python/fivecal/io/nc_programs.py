@@ -215,6 +215,12 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(geo)} touches")
     O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
             safe=safe, overshoot=overshoot, dwell=dwell)
+    O.check_line("log", log, comment=True)
+    for name, line in (("arm", arm), ("disarm", disarm), ("sync", sync), ("tcp_on", tcp_on)):
+        O.check_line(name, line)
+    for i, lines in enumerate(before_probe or []):
+        for line in lines:
+            O.check_line(f"before_probe[{i}]", line)
     if retract < clearance:
         raise O.OptionError("retract", f"{retract} mm is less than the clearance {clearance} mm")
     spheres = {sp["id"]: sp for sp in (artefact or {}).get("spheres", [])}
@@ -287,7 +293,7 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     if hold is not None:
         out.append(f"G0 {xyz(hold + _clear_lift(hold, v_prev, None, None, safe, balls, len(geo)) * v_prev)}")
     out += ["(PROBECLOSE)", "M2"]
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", what)
 
 
 def sphere_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
@@ -494,6 +500,9 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
         raise ValueError("mode 'tcp': give kins (xyzac-trt or xyzbc-trt), the kinematics whose "
                          "tool-centre-point function runs the path")
     O.check(feed=feed, dwell=dwell, subdivide=subdivide)
+    O.check_vector("workpiece_shift", workpiece_shift)
+    O.check_line("tcp_on", tcp_on)
+    O.check_line("tcp_off", tcp_off)
     k = L._kins(kins) if kins else None
     if k and pins is None:
         pins = L.nominal_pins(machine, k)
@@ -536,4 +545,4 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
             if p["sample"] is not None:
                 out.append(f"G4 P{dwell:g} (sample {p['sample'] + 1}: {p.get('id') or ''})")
     out.append("M2")
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "R-test program")
