@@ -695,3 +695,23 @@ def test_a_program_position_no_machine_reaches_is_refused(tmp_path, capsys):
             N.sphere_program(m, KINS, plan, art, 3.0, workpiece_shift=shift)
         with pytest.raises(ValueError, match="^workpiece_shift: expected"):
             N.rtest_program(m, _rtest_plan(m), kins=KINS, mode="tcp", workpiece_shift=shift)
+
+
+def test_names_written_into_comments_stay_in_them():
+    # before: a machine or target named with ')' and a newline closed the
+    # comment and put the rest into the program as a block (G0 X999 here)
+    m = fivecal.Machine.from_dict(dict(MACHINES_KINS(), name="trt (copy)\nG0 X999 (x"))
+    art, plan = _sphere_cycle(m)
+    progs = [N.sphere_program(m, KINS, plan, art, 3.0), N.rtest_program(m, [dict(e, setup="K4)\nG0 X999")
+                                                                              for e in _rtest_plan(m)])]
+    hal = L.hal_text(KINS, {"x-rot-point": 0.1}, header="machine a\\\nsetp xyzac-trt-kins.y-rot-point 5")
+    for prog in progs:
+        for ln, line in enumerate(gcode.split_lines(prog), 1):
+            words = gcode.tokenize(line.rstrip("\n"), "prog", ln)
+            assert not any(w.letter == "X" and w.value == 999 for w in words), line
+    assert [ln for ln in hal.splitlines() if not ln.startswith("#")] == ["setp xyzac-trt-kins.x-rot-point 0.1"]
+
+
+def MACHINES_KINS():
+    from test_linuxcnc import MACHINES
+    return MACHINES[KINS]

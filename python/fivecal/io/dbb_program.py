@@ -105,7 +105,8 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
     mm/min for feed-in, path and feed-out."""
     O.check(feed=feed, feed_in=feed_in, turns=turns, tolerance=tolerance)
     f = lambda v: f"{v:.6f}"  # noqa: E731
-    out = [f"(fivecal ball bar program, machine {machine.name}: feed-in, arc, feed-out per setup)",
+    out = [f"(fivecal ball bar program, machine {O.comment_text(machine.name)}: feed-in, arc, feed-out per "
+           "setup)",
            "G21 G90 G94 G40 G49 G54"]
     for setup, entries in _setups(plan).items():
         if _rotary_moves(machine, entries):
@@ -123,7 +124,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
         ij = _PLANES[c["plane"]][3]
         off = {a1: cen[a1] - st[a1], a2: cen[a2] - st[a2]}
         arc = "G3" if c["ccw"] else "G2"
-        out += [f"(setup {setup}: radius {c['radius']:g} mm, plane {c['plane']}, "
+        out += [f"(setup {O.comment_text(setup)}: radius {c['radius']:g} mm, plane {c['plane']}, "
                 f"{'counter-clockwise' if c['ccw'] else 'clockwise'} in axis commands, {turns} turn{'s' if turns > 1 else ''})",
                 c["g"], f"G0 {words(approach)}",
                 f"G1 {a1}{f(st[a1])} {a2}{f(st[a2])} F{feed:g} (feed-in)"]
@@ -273,7 +274,7 @@ def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed
     leave = bar.restore(last, feed_in)
     moving = [a for a in _rotary(machine) if np.ptp(Q[a]) > 1e-9]
     path = rows(P)
-    out = [f"(setup {setup}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
+    out = [f"(setup {O.comment_text(setup)}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
            f"poses, {npts} path points, bar length within {tolerance * 1e3:g} um between them)",
            path_mode, "G94", f"G0 {rows(approach)[0]}", f"G1 {path[0]} F{feed:g} (feed-in)", "G93"]
     rel = np.linalg.norm(np.diff(bar.ball(P), axis=0), axis=1)
@@ -302,7 +303,7 @@ def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 
     fixed = [s for s, e in setups.items() if not _rotary_moves(machine, e)]
     if fixed:
         raise ValueError(f"setup {fixed[0]}: no rotary axis moves (a planar circle: dbb_program)")
-    out = [f"(fivecal ball bar program, machine {machine.name}: rotary-axis paths, feed-in, path, "
+    out = [f"(fivecal ball bar program, machine {O.comment_text(machine.name)}: rotary-axis paths, feed-in, path, "
            "feed-out per setup)",
            f"(words: {'LinuxCNC ' + kins + ' joint values' if kins else 'axis commands'}; path feed in "
            "inverse time for the balls' relative speed " + f"{feed:g} mm/min)",

@@ -312,7 +312,7 @@ def hal_text(kins: str, pins: Mapping[str, float], old: Optional[Mapping[str, fl
     _check_pins(k, pins, "pins")
     if old is not None:
         _check_pins(k, old, "old")
-    out = [f"# fivecal: {k}-kins pins (mm){(' - ' + header) if header else ''}"]
+    out = [f"# fivecal: {k}-kins pins (mm){(' - ' + O.comment_text(header)) if header else ''}"]
     if old is not None:
         out += ["# " + line for line in pins_table(old, pins).splitlines()]
     for n in pin_names(k):
@@ -671,7 +671,8 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     if before_probe is not None and len(before_probe) != len(touches):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(touches)} touches")
     f = lambda v: f"{v:.6f}"  # noqa: E731
-    out = [f"(fivecal probing program: {len(touches)} touches, machine {machine.name}, {k}-kins)",
+    out = [f"(fivecal probing program: {len(touches)} touches, machine {O.comment_text(machine.name)}, "
+           f"{k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
            # G61 exact stop: no move blends into the next, so every G38.2
            # starts from its start point at rest
@@ -685,7 +686,7 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         start, end = w + clearance * n, w - overtravel * n
         off = start + retract * n
         up = off + safe * v
-        out.append(f"(touch {i + 1}: {plan[i]['target']})")
+        out.append(f"(touch {i + 1}: {O.comment_text(plan[i]['target'])})")
         out.append(f"G0 {xyz(up)} {tilt}{f(t)} C{f(c)}")
         if dwell > 0 and last != (t, c):
             out.append(f"G4 P{dwell:g}")

@@ -177,3 +177,14 @@ def check_vector(name: str, value) -> None:
         v = []
     if len(v) != 3 or not all(abs(x) <= REFUSE_POSITION for x in v):
         raise OptionError(name, f"expected [x, y, z] in mm, finite and within ±{REFUSE_POSITION:g}, got {value!r}")
+
+
+def comment_text(value) -> str:
+    """``value`` (a machine, target, setup or sample name) as text that
+    stays inside the comment it is written into, a G-code ``( )`` or a HAL
+    ``#``: one line, parentheses as brackets, no backslash (which would
+    continue a HAL comment onto the next line). A name with ``)`` or a
+    newline would otherwise end the comment and put the rest of it into the
+    program as blocks."""
+    s = "".join(c if c.isprintable() else " " for c in str(value))
+    return s.replace("(", "[").replace(")", "]").replace("\\", "/")

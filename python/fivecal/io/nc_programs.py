@@ -236,7 +236,8 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     xyz = lambda p: f"X{_f(p[0])} Y{_f(p[1])} Z{_f(p[2])}"  # noqa: E731
     targets = sorted({str(t.get("target")) for t in plan})
     what = "sphere cycle" if kinds == ("sphere",) else "probing cycle"
-    out = [f"(fivecal {what}: {len(geo)} touches on {', '.join(targets)}, machine {machine.name}, {k}-kins)",
+    out = [f"(fivecal {what}: {len(geo)} touches on {O.comment_text(', '.join(targets))}, machine "
+           f"{O.comment_text(machine.name)}, {k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
            f"(stylus ball radius {tip_radius:g} mm; touches approach and retract along the "
            f"{'sphere' if kinds == ('sphere',) else 'surface'} normal)",
@@ -251,7 +252,7 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
         start, end = w + clearance * n, w - overtravel * n
         off = w + retract * n
         rot = (t, c)
-        out.append(f"(touch {i + 1}: {plan[i]['target']} direction {' '.join(_f(x) for x in n)})")
+        out.append(f"(touch {i + 1}: {O.comment_text(plan[i]['target'])} direction {' '.join(_f(x) for x in n)})")
         if rot != last_rot or dirs[i] != last_dir:
             lift = _clear_lift(hold, v_prev, off, v, safe, balls, i + 1)
             up = off + lift * v
@@ -507,7 +508,7 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
     if k and pins is None:
         pins = L.nominal_pins(machine, k)
     letters = [a for a in machine.axis_names if a != "S"]
-    head = (f"(fivecal R-test program, machine {machine.name}: "
+    head = (f"(fivecal R-test program, machine {O.comment_text(machine.name)}: "
             + ("axis commands from the nominal inverse kinematics" if mode == "axes" and not k else
                f"LinuxCNC {k}-kins joint values, identity kinematics" if mode == "axes" else
                f"world coordinates, {k}-kins tool centre point on") + ")")
@@ -535,7 +536,7 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
 
     for setup, entries in _rtest_setups(plan).items():
         pts = rtest_points(machine, entries, 0 if mode == "tcp" else subdivide)
-        out.append(f"(setup {setup}: {len(entries)} samples, table ball "
+        out.append(f"(setup {O.comment_text(setup)}: {len(entries)} samples, table ball "
                    f"{' '.join(_f(x) for x in entries[0]['table_ball'])}, tool ball "
                    f"{' '.join(_f(x) for x in entries[0]['tool_ball'])})")
         for n, p in enumerate(pts):
@@ -543,6 +544,6 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
             fw = f" F{feed:g}" if n == 1 else ""
             out.append(f"{g} {words(p['axes'])}{fw}")
             if p["sample"] is not None:
-                out.append(f"G4 P{dwell:g} (sample {p['sample'] + 1}: {p.get('id') or ''})")
+                out.append(f"G4 P{dwell:g} (sample {p['sample'] + 1}: {O.comment_text(p.get('id') or '')})")
     out.append("M2")
     return O.check_positions("\n".join(out) + "\n", "R-test program")
