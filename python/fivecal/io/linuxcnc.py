@@ -332,6 +332,8 @@ def ini_text(kins: str, pins: Mapping[str, float], section: str = "FIVECAL_KINS"
     (``setp <kins>-kins.x-rot-point [FIVECAL_KINS]X_ROT_POINT``)."""
     k = _kins(kins)
     _check_pins(k, pins, "pins")
+    if not re.fullmatch(r"[A-Za-z0-9_]+", str(section)):
+        raise ValueError(f"section: expected an INI section name of letters, digits and '_', got {section!r}")
     ini = [f"[{section}]", f"# fivecal: {k}-kins pins (mm)"]
     hal = [f"# fivecal: {k}-kins pins from the INI section [{section}]"]
     for n in pin_names(k):
