@@ -5,6 +5,10 @@ substitutions refused by line), the pin lines it writes (no NaN, no pin
 left out silently), and the export folder (a second export replaces the
 first, all or nothing)."""
 import os
+import re
+import shutil
+import subprocess
+import tempfile
 
 import numpy as np
 import pytest
@@ -13,9 +17,12 @@ import fivecal
 from fivecal.cli import main
 from fivecal.io import linuxcnc as L
 
+import linuxcnc_harness as harness
 from test_linuxcnc import ERRORS, MACHINES, _write_inputs
 
 KINS = "xyzac-trt"
+#: LinuxCNC's halcmd checks what the reader makes of the files (when installed)
+REASON = harness.unavailable_reason()
 
 # configs/sim/axis/vismach/5axis/table-rotary-tilting/xyzac-trt.ini's HALCMD
 # lines as a HAL file, with a GUI pin on the offsets' signals
@@ -69,7 +76,7 @@ def test_sample_configuration_pins_set_through_signals(tmp_path):
     ("net :y xyzac-trt-kins.y-offset\nsets :y 1\nsets :y 2\nunlinkp xyzac-trt-kins.y-offset\n", {"y-offset": 2.0}),
     # comments, a continuation line, 'PIN = VALUE', a '#' in a quoted word
     ("setp xyzac-trt-kins.x-rot-point \\\n  0.125   # mm\nxyzac-trt-kins.y-rot-point = -3\n"
-     "loadusr -W 'gui #1'\n", {"x-rot-point": 0.125, "y-rot-point": -3.0}),
+     "print 'gui #1'\n", {"x-rot-point": 0.125, "y-rot-point": -3.0}),
     # a comment line ending in a backslash swallows the next line, as in halcmd
     ("setp xyzac-trt-kins.x-rot-point 1\n# old value \\\nsetp xyzac-trt-kins.x-rot-point 2\n",
      {"x-rot-point": 1.0}),
@@ -79,6 +86,11 @@ def test_sample_configuration_pins_set_through_signals(tmp_path):
 ])
 def test_hal_syntax_as_halcmd_reads_it(tmp_path, text, expected):
     assert L.read_hal_pins(_hal(tmp_path, text), KINS) == expected
+    if REASON is None and "xyzbc" not in text:
+        # the same file in LinuxCNC's own halcmd gives the pins the same values
+        rc, values = _halcmd(text)
+        assert rc == 0, values
+        assert values == {n: expected.get(n, 0.0) for n in L.MODULE_PINS if n != "conventional-directions"}
 
 
 @pytest.mark.parametrize("text,line,fragment", [
@@ -111,6 +123,27 @@ def test_hal_lines_fivecal_cannot_read_are_refused_by_line(tmp_path, text, line,
     msg = str(e.value)
     assert msg.startswith(f"{path}:{line}: " if line else f"{path}: "), msg
     assert fragment in msg, msg
+    if REASON is None and "halcmd refuses" in msg:
+        assert _halcmd(text)[0] != 0  # and LinuxCNC's halcmd stops there too
+
+
+def _halcmd(text):
+    """(exit status, pin values of xyzac-trt-kins) of LinuxCNC's halcmd
+    (halrun, non-realtime) running ``text`` after loading the module."""
+    harness._ensure_user()
+    d = tempfile.mkdtemp(prefix="fivecal-hal-")
+    try:
+        os.chmod(d, 0o755)
+        path = os.path.join(d, "t.hal")
+        with open(path, "w") as f:
+            f.write("loadrt xyzac-trt-kins\n" + text + "\nshow pin xyzac-trt-kins\n")
+        os.chmod(path, 0o644)
+        r = subprocess.run(harness._as_user(["halrun", "-f", path]), capture_output=True, text=True, timeout=120)
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+    values = {m.group(2): float(m.group(1)) for m in
+              re.finditer(r"float\s+IN\s+(\S+)\s+xyzac-trt-kins\.([a-z-]+)", r.stdout)}
+    return r.returncode, values if r.returncode == 0 else r.stdout + r.stderr
 
 
 def test_non_utf8_hal_names_the_file_and_line(tmp_path):
