@@ -615,7 +615,8 @@ def _declared_files(args):
     for attr in ("out", "table", "plot", "patterns", "save_dataset"):
         v = getattr(args, attr, None)
         if isinstance(v, str) and not (attr == "out" and "{k}" in v):
-            outputs.append((labels.get(attr, f"--{attr.replace('_', '-')}"), v))
+            folder = attr == "out" and getattr(args, "out_is_folder", False)
+            outputs.append((labels.get(attr, f"--{attr.replace('_', '-')}") + (" DIR" if folder else ""), v))
     report = getattr(args, "report", None)
     if isinstance(report, str):
         outputs += [("--report", os.path.join(report, "result.json")), ("--report", os.path.join(report, "report.html"))]
@@ -774,7 +775,7 @@ def main(argv=None) -> int:
                         "rotary words are replaced by the commands of the inverse kinematics on the "
                         "identified error model; comments, N numbers, F, S, M and all other words, "
                         "spacing and case are kept. Program words are read as machine axis commands "
-                        "(mm or inch after G20, degrees). With --table, write the identified location "
+                        "(mm, or inch after G20/G70; degrees). With --table, write the identified location "
                         "errors as a controller-neutral CSV or JSON table with the sign convention.",
                         epilog="examples:\n"
                         "  fivecal compensate result.json machine.json part.nc --out part_comp.nc\n"
@@ -797,7 +798,8 @@ def main(argv=None) -> int:
     pc.add_argument("--tool-tip", metavar="X,Y,Z", help="the cutting tool's tip in the machine frame at the "
                     "zero pose (mm), replacing the machine file's tool.tip")
     pc.add_argument("--decimals", type=_integer_type(0, 13), default=4, help="at least this many decimals for the "
-                    "compensated words (default 4; a word written with more keeps its own)")
+                    "compensated words (default 4, one more for a linear word on an inch line; a word written "
+                    "with more keeps its own)")
     pc.add_argument("--position-only", action="store_true", help="compensate the tool point only; keep the "
                     "rotary axes at their programmed values")
     pc.add_argument("--max-correction", metavar="MM[,DEG]", default=None,

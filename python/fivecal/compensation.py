@@ -367,7 +367,9 @@ def compensate_gcode(program: str, machine: Union[Machine, Mapping], errors,
 
     Units: G20/G70 inch, G21/G71 mm; each word is converted with the unit
     mode of its own line and positions are held in mm, so a unit switch never
-    reinterprets a held position. ``start`` is in program coordinates in mm.
+    reinterprets a held position; a linear word on an inch line gets at least
+    ``min_decimals`` + 1 decimals (the same resolution). ``start`` is in
+    program coordinates in mm.
 
     Refused with ValueError naming the line (``name:N: ... (line N: text)``):
     incremental moves (G91), arcs (G2/G3), canned cycles (G73-G89), coordinate

@@ -253,3 +253,54 @@ def test_cli_export_kinematics_5axiskins_pin(tmp_path):
     assert "after absorption rms" in r.stdout
     ab = K.absorb(m, "5axiskins", {"EZ0S": -0.02, "EX0B": 0.005})
     assert ab.max > 4e-3
+
+
+# ---- export kinematics: the plausibility guard and the file format (issue 27) ----
+
+def _kinematics(tmp_path, errors, *extra):
+    from fivecal.cli import main
+    res = tmp_path / "errors.json"
+    res.write_text(json.dumps(errors))
+    return main(["export", "kinematics", str(res), "--machine", "examples/machines/hu40t.json", "--model",
+                 "table-table", *extra])
+
+
+@pytest.mark.parametrize("errors,extra,fragment", [
+    ({"EX0C": 50.0}, [], "C pivot x would change by 50 mm, more than the plausibility limit of 0.5 mm"),
+    ({"EX0C": 0.03, "EA0C": 0.01}, ["--directions"], "C direction about x would change by 0.01 rad"),
+    ({"EX0C": 0.8}, ["--max-change", "0.5,0.01"], "C pivot x"),
+])
+def test_cli_export_kinematics_refuses_an_implausible_change(tmp_path, capsys, errors, extra, fragment):
+    # before: a 50 mm pivot change was exported as if it were the machine
+    assert _kinematics(tmp_path, errors, *extra) == 2
+    err = capsys.readouterr().err
+    assert fragment in err and "--max-change" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_cli_export_kinematics_max_change_lifts_the_guard(tmp_path, capsys):
+    assert _kinematics(tmp_path, {"EX0C": 50.0}, "--max-change", "60") == 0
+    assert _kinematics(tmp_path, {"EX0C": 50.0}, "--max-change", "off") == 0
+    assert _kinematics(tmp_path, {"EX0C": 0.03, "EA0C": 0.01}, "--directions", "--max-change", "0.5,0.02") == 0
+    capsys.readouterr()
+    for bad in ("x", "0", "-1", "nan", "1,2,3"):
+        assert _kinematics(tmp_path, {"EX0C": 0.03}, "--max-change", bad) == 2
+        assert "--max-change" in capsys.readouterr().err
+
+
+def test_cli_export_kinematics_writes_the_format_its_extension_says(tmp_path, capsys):
+    # before: --out k.json without --format wrote the text report into it
+    errors = {"EX0C": 0.03, "EY0C": -0.02}
+    assert _kinematics(tmp_path, errors, "--out", str(tmp_path / "k.json")) == 0
+    assert json.loads((tmp_path / "k.json").read_text())["model"] == "table-table"
+    assert _kinematics(tmp_path, errors, "--out", str(tmp_path / "k.csv")) == 0
+    assert (tmp_path / "k.csv").read_text().startswith("axis,chain,value,old,new")
+    assert _kinematics(tmp_path, errors, "--out", str(tmp_path / "k.txt")) == 0
+    assert (tmp_path / "k.txt").read_text().startswith("controller model table-table")
+    capsys.readouterr()
+    for name, extra, fragment in (("t.json", ["--format", "text"], "--format text"),
+                                  ("t.csv", ["--format", "json"], "--format json"),
+                                  ("t.xlsx", [], "'.xlsx' names no format"), ("t", ["--format", "json"], "(none)")):
+        assert _kinematics(tmp_path, errors, "--out", str(tmp_path / name), *extra) == 2
+        err = capsys.readouterr().err
+        assert f"--out {tmp_path / name}:" in err and fragment in err, err
+        assert not (tmp_path / name).exists()

@@ -314,3 +314,41 @@ def test_example_program_cancels_compensation_in_its_head(hu40t):
     text = open(os.path.join(ROOT, "examples", "gcode", "hu40t_5axis.nc")).read()
     assert "G40 G49" in text
     assert compensate_gcode(text, hu40t, {"EX0C": 0.01}).moves > 0
+
+
+INCH_ERRORS = {"EX0C": 0.05, "EY0C": -0.03, "EXZ1": 1e-3, "EA0B": 2e-5}
+MM_PROGRAM = "G21 G90 G0 X25.4 Y12.7 Z0 B0 C0\nG1 Z12.7 B15\nG1 Y25.4 C30\nG1 X-50.8 Z-2.54\n"
+
+
+@pytest.mark.parametrize("head", ["G70", "g70", "G70.", "G70.0", "G070", "G 70", "G700", "N10 G70",
+                                  "G70\n", "(inch) G70 (ISO 6983)\n", "G20"])
+def test_inch_program_compensates_as_the_mm_program_converted(hu40t, head, tmp_path):
+    # before: an inch program's words were written with the mm resolution
+    # (4 decimals: 0.0001 in = 2.5 um), so its output was not the mm program's
+    # output converted; now inch words get one decimal more (0.25 um)
+    inch = (head if head.endswith("\n") else head + " ") + \
+        "G90 G0 X1 Y0.5 Z0 B0 C0\nG1 Z0.5 B15\nG1 Y1 C30\nG1 X-2 Z-0.1\n"
+    a = compensate_gcode(MM_PROGRAM, hu40t, INCH_ERRORS)
+    b = compensate_gcode(inch, hu40t, INCH_ERRORS)
+    for k in "XYZBC":
+        np.testing.assert_allclose(b.poses.axes[k], a.poses.axes[k], atol=1e-9)
+    assert a.max_written_error() < 2e-4 and b.max_written_error() < 4e-4  # mm: under 0.4 um
+    # the written words: the mm output's linear words / 25.4, to the last inch decimal written
+    mm_lines = [ln for ln in a.text.splitlines() if ln.strip()]
+    in_lines = [ln for ln in b.text.splitlines() if ln.strip()][-4:]
+    word = re.compile(r"([XYZBC])(-?\d+\.?\d*)")
+    for lm, li in zip(mm_lines, in_lines):
+        wm, wi = dict(word.findall(lm)), dict(word.findall(li))
+        assert wm.keys() == wi.keys(), (lm, li)
+        for k in wm:
+            if k in "XYZ" and "." in wi[k] and len(wi[k].split(".")[1]) >= 5:
+                assert abs(float(wi[k]) - float(wm[k]) / 25.4) <= 0.5e-5 + 0.5e-4 / 25.4 + 1e-12, (k, lm, li)
+            elif k in "BC":
+                assert float(wi[k]) == float(wm[k]), (k, lm, li)
+    # and the command line reads the file the same way
+    from fivecal.cli import main
+    (tmp_path / "in.nc").write_text(inch)
+    (tmp_path / "r.json").write_text(__import__("json").dumps(INCH_ERRORS))
+    assert main(["compensate", str(tmp_path / "r.json"), os.path.join(MACHINES, "hu40t.json"),
+                 str(tmp_path / "in.nc"), "--out", str(tmp_path / "out.nc")]) == 0
+    assert (tmp_path / "out.nc").read_text() == b.text

@@ -4,6 +4,7 @@ programs of rotary-axis paths, read back with fivecal's G-code tokenizer and
 replayed through fivecal's nominal model; the ball bar and R-test programs
 also in the LinuxCNC simulator (the sphere cycle's simulator run is in
 test_linuxcnc.py)."""
+import math
 import re
 
 import numpy as np
@@ -558,3 +559,159 @@ def test_vendor_names_cite_the_public_sources():
     assert "I2" in s and "$TC_CARR4..6" in s and "MD24550 $MC_TRAFO5_BASE_TOOL_1" in s and "KEY Trans" in h
     s, _ = K.vendor_names(m, "C", "point")
     assert "I3" in s and "$TC_CARR15..17" in s and "MD24558" in s
+
+
+# ---- numeric options: one rule each, the same from Python and the command line ----
+
+@pytest.mark.parametrize("option,value", [
+    ("--feed", "0"), ("--feed", "-60"), ("--feed", "nan"), ("--feed", "inf"), ("--feed", "1e6"),
+    ("--overtravel", "1e6"), ("--overtravel", "0"), ("--clearance", "0"), ("--clearance", "1e4"),
+    ("--retract", "1e6"), ("--safe", "1e6"), ("--safe", "-5"), ("--overshoot", "-1"), ("--overshoot", "360"),
+    ("--dwell", "-1"), ("--dwell", "nan"), ("--dwell", "1e9"),
+])
+def test_cli_export_program_refuses_bad_option_values(tmp_path, capsys, option, value):
+    # before: --feed 0 silently became F60, --overtravel 1e6 wrote a G38.2 a
+    # kilometre long, --dwell -1 was written as G4 P-1
+    from fivecal.cli import main
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=art, probe={"tip_radius": 3.0})
+    out = tmp_path / "s.ngc"
+    assert main(["export", "program", spec, "--kins", KINS, "--out", str(out), f"{option}={value}"]) == 2
+    err = capsys.readouterr().err
+    assert f"{option}:" in err and "expected" in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("option,value", [("--feed", "0"), ("--dwell", "-1"), ("--subdivide", "-1"),
+                                          ("--subdivide", "100000"), ("--feed", "1e7")])
+def test_cli_export_rtest_program_refuses_bad_option_values(tmp_path, capsys, option, value):
+    from fivecal.cli import main
+    m = _machine()
+    spec = _spec(tmp_path, "rtest.json", m.to_dict(), rtest.plan(m, "K4", table_ball=[60, 20, 30], step=30,
+                                                                  tilt=-30))
+    assert main(["export", "program", spec, f"{option}={value}"]) == 2
+    assert f"{option}:" in capsys.readouterr().err
+
+
+def test_cli_export_program_zero_dwell_is_zero(tmp_path, capsys):
+    # before: an R-test --dwell 0 became the default 1 s, as --feed 0 became F60
+    from fivecal.cli import main
+    m = _machine()
+    rplan = rtest.plan(m, "K4", table_ball=[60, 20, 30], step=30, tilt=-30)
+    spec = _spec(tmp_path, "rtest.json", m.to_dict(), rplan)
+    assert main(["export", "program", spec, "--dwell", "0"]) == 0
+    assert capsys.readouterr().out == N.rtest_program(m, rplan, dwell=0.0)
+
+
+def test_cli_export_ball_bar_program_refuses_bad_option_values(tmp_path, capsys):
+    from fivecal.cli import main
+    import os
+    c6 = fivecal.Machine.load("examples/machines/c600u.json")
+    spec = _spec(tmp_path, "fs.json", os.path.abspath("examples/machines/c600u.json"),
+                 dbb.four_step_plan(c6, step=10.0))
+    for option, value in (("--feed-in", "0"), ("--feed-in", "1e6"), ("--tolerance", "-1"), ("--tolerance", "1e9"),
+                          ("--feed", "0")):
+        assert main(["export", "program", spec, f"{option}={value}"]) == 2
+        assert f"{option}:" in capsys.readouterr().err
+    # a plan-dependent bound a writer checks is named as the option too
+    spec = _spec(tmp_path, "circle.json", os.path.abspath("examples/machines/c600u.json"),
+                 dbb.planar_plan(c6, "ZX", radius=20.0, step=10.0))
+    assert main(["export", "program", spec, "--feed-in", "30"]) == 2
+    assert "--feed-in: 30.0 mm is not less than the radius 20 mm" in capsys.readouterr().err
+
+
+def test_overtravel_is_bounded_by_the_touched_sphere(tmp_path, capsys):
+    from fivecal.cli import main
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    small = {"spheres": [dict(art["spheres"][0], radius=4.0)]}
+    with pytest.raises(ValueError, match=r"^overtravel: 6 mm is more than the radius of sphere S1"):
+        N.sphere_program(m, KINS, plan, small, 3.0, overtravel=6.0)
+    spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=small, probe={"tip_radius": 3.0})
+    assert main(["export", "program", spec, "--kins", KINS, "--overtravel", "6"]) == 2
+    assert "--overtravel: 6 mm is more than the radius of sphere S1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name,value", [("feed", 0.0), ("feed", math.nan), ("feed", 2e5), ("dwell", -1.0),
+                                        ("clearance", math.inf), ("overtravel", 1e6), ("safe", 1e6),
+                                        ("retract", -1.0), ("overshoot", math.nan)])
+def test_every_program_writer_checks_its_options_by_one_rule(name, value):
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    fplan, fart = _octagon_plan(m)
+    calls = [lambda kw: N.sphere_program(m, KINS, plan, art, 3.0, **kw),
+             lambda kw: N.touch_program(m, KINS, plan, art, 3.0, **kw),
+             lambda kw: L.probing_program(m, KINS, fplan, fart, 3.0, **{k: v for k, v in kw.items()
+                                                                        if k != "overshoot"})]
+    if name in ("feed", "dwell"):
+        calls.append(lambda kw: N.rtest_program(m, _rtest_plan(m), **kw))
+    if name == "feed":
+        c6 = fivecal.Machine.load("examples/machines/c600u.json")
+        calls += [lambda kw: dbb_program(c6, dbb.four_step_plan(c6, step=10.0), **kw),
+                  lambda kw: rotary_dbb_program(c6, dbb.four_step_plan(c6, step=10.0), **kw)]
+    for call in calls:
+        if name == "overshoot" and call is calls[2]:
+            continue
+        with pytest.raises(ValueError, match=rf"^{name}: expected a number"):
+            call({name: value})
+
+
+def _octagon_plan(m):
+    from test_linuxcnc import _octagon, _probe_plan
+    art = _octagon()
+    return _probe_plan(m, art), art
+
+
+@pytest.mark.parametrize("log", ["a)\nG0 X999", "probe(1).txt", "", "log\r.txt"])
+def test_probe_log_name_cannot_slip_blocks_into_the_program(tmp_path, capsys, log):
+    # before: --log 'a)<newline>G0 X999' closed the PROBEOPEN comment and
+    # wrote a G0 X999 block into the program
+    from fivecal.cli import main
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    with pytest.raises(ValueError, match="^log: "):
+        N.sphere_program(m, KINS, plan, art, 3.0, log=log)
+    with pytest.raises(ValueError, match="^arm: "):
+        N.sphere_program(m, KINS, plan, art, 3.0, arm="M64 P0\nG0 Z-50")
+    spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=art, probe={"tip_radius": 3.0})
+    assert main(["export", "program", spec, "--kins", KINS, "--log", log]) == 2
+    assert "--log: " in capsys.readouterr().err
+
+
+def test_a_program_position_no_machine_reaches_is_refused(tmp_path, capsys):
+    # before: a sphere 1e9 mm out (a unit slip in the artefact) gave a
+    # program with X1000000000 moves; a NaN workpiece shift, 'X nan' words
+    from fivecal.cli import main
+    m = _machine()
+    art, plan = _sphere_cycle(m)
+    far = {"spheres": [dict(art["spheres"][0], center=[1e9, 0.0, 40.0])]}
+    spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=far, probe={"tip_radius": 3.0})
+    assert main(["export", "program", spec, "--kins", KINS]) == 2
+    err = capsys.readouterr().err
+    assert "sphere cycle: line " in err and "moves X to 1e+09, beyond any machine tool" in err, err
+    for shift in ([np.nan, 0, 0], [0, 0], [2e5, 0, 0]):
+        with pytest.raises(ValueError, match="^workpiece_shift: expected"):
+            N.sphere_program(m, KINS, plan, art, 3.0, workpiece_shift=shift)
+        with pytest.raises(ValueError, match="^workpiece_shift: expected"):
+            N.rtest_program(m, _rtest_plan(m), kins=KINS, mode="tcp", workpiece_shift=shift)
+
+
+def test_names_written_into_comments_stay_in_them():
+    # before: a machine or target named with ')' and a newline closed the
+    # comment and put the rest into the program as a block (G0 X999 here)
+    m = fivecal.Machine.from_dict(dict(MACHINES_KINS(), name="trt (copy)\nG0 X999 (x"))
+    art, plan = _sphere_cycle(m)
+    progs = [N.sphere_program(m, KINS, plan, art, 3.0), N.rtest_program(m, [dict(e, setup="K4)\nG0 X999")
+                                                                              for e in _rtest_plan(m)])]
+    hal = L.hal_text(KINS, {"x-rot-point": 0.1}, header="machine a\\\nsetp xyzac-trt-kins.y-rot-point 5")
+    for prog in progs:
+        for ln, line in enumerate(gcode.split_lines(prog), 1):
+            words = gcode.tokenize(line.rstrip("\n"), "prog", ln)
+            assert not any(w.letter == "X" and w.value == 999 for w in words), line
+    assert [ln for ln in hal.splitlines() if not ln.startswith("#")] == ["setp xyzac-trt-kins.x-rot-point 0.1"]
+
+
+def MACHINES_KINS():
+    from test_linuxcnc import MACHINES
+    return MACHINES[KINS]

@@ -36,13 +36,13 @@ values, for its identity kinematics (``M429`` in fivecal's sample configs).
 """
 from __future__ import annotations
 
-import math
 import warnings
 from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
 from ..machine import Machine, RadiansWarning
+from . import nc_options as O
 
 _PLANES = {"XY": ("G17", "X", "Y", "IJ"), "ZX": ("G18", "Z", "X", "KI"), "YZ": ("G19", "Y", "Z", "JK")}
 
@@ -103,14 +103,10 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
     planar circles as arcs, setups in which a rotary axis moves as in
     :func:`rotary_dbb_program` (with ``tolerance``, exact stop); ``feed``
     mm/min for feed-in, path and feed-out."""
-    if not (feed > 0 and math.isfinite(feed)):
-        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
-    if not (0 < feed_in and math.isfinite(feed_in)):
-        raise ValueError(f"feed_in: expected a positive distance in mm, got {feed_in}")
-    if int(turns) != turns or turns < 1:
-        raise ValueError(f"turns: expected a whole number >= 1, got {turns}")
+    O.check(feed=feed, feed_in=feed_in, turns=turns, tolerance=tolerance)
     f = lambda v: f"{v:.6f}"  # noqa: E731
-    out = [f"(fivecal ball bar program, machine {machine.name}: feed-in, arc, feed-out per setup)",
+    out = [f"(fivecal ball bar program, machine {O.comment_text(machine.name)}: feed-in, arc, feed-out per "
+           "setup)",
            "G21 G90 G94 G40 G49 G54"]
     for setup, entries in _setups(plan).items():
         if _rotary_moves(machine, entries):
@@ -118,7 +114,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
             continue
         c = circle_of(machine, entries)
         if feed_in >= c["radius"]:
-            raise ValueError(f"feed_in: {feed_in} mm is not less than the radius {c['radius']:g} mm")
+            raise O.OptionError("feed_in", f"{feed_in} mm is not less than the radius {c['radius']:g} mm")
         a1, a2 = c["axes"]
         cen, st = c["centre"], c["start"]
         u = np.array([st[a1] - cen[a1], st[a2] - cen[a2]]) / c["radius"]
@@ -128,7 +124,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
         ij = _PLANES[c["plane"]][3]
         off = {a1: cen[a1] - st[a1], a2: cen[a2] - st[a2]}
         arc = "G3" if c["ccw"] else "G2"
-        out += [f"(setup {setup}: radius {c['radius']:g} mm, plane {c['plane']}, "
+        out += [f"(setup {O.comment_text(setup)}: radius {c['radius']:g} mm, plane {c['plane']}, "
                 f"{'counter-clockwise' if c['ccw'] else 'clockwise'} in axis commands, {turns} turn{'s' if turns > 1 else ''})",
                 c["g"], f"G0 {words(approach)}",
                 f"G1 {a1}{f(st[a1])} {a2}{f(st[a2])} F{feed:g} (feed-in)"]
@@ -136,7 +132,7 @@ def dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 1000.0,
             out.append(f"{arc} {a1}{f(st[a1])} {a2}{f(st[a2])} {ij[0]}{f(off[a1])} {ij[1]}{f(off[a2])}")
         out.append(f"G1 {a1}{f(approach[a1])} {a2}{f(approach[a2])} (feed-out)")
     out.append("M2")
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "ball bar program")
 
 
 # ---- setups in which a rotary axis moves ------------------------------------
@@ -245,7 +241,7 @@ def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed
     letters = [a for a in machine.axis_names if a != "S"]
     bar = _Bar(machine, entries[0])
     if feed_in >= bar.length:
-        raise ValueError(f"feed_in: {feed_in} mm is not less than the bar length {bar.length:g} mm")
+        raise O.OptionError("feed_in", f"{feed_in} mm is not less than the bar length {bar.length:g} mm")
     for i, e in enumerate(entries):
         if (np.abs(np.asarray(e["tool_ball"], float) - bar.tool).max() > 1e-12
                 or np.abs(np.asarray(e["table_ball"], float) - bar.table).max() > 1e-12
@@ -278,7 +274,7 @@ def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed
     leave = bar.restore(last, feed_in)
     moving = [a for a in _rotary(machine) if np.ptp(Q[a]) > 1e-9]
     path = rows(P)
-    out = [f"(setup {setup}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
+    out = [f"(setup {O.comment_text(setup)}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
            f"poses, {npts} path points, bar length within {tolerance * 1e3:g} um between them)",
            path_mode, "G94", f"G0 {rows(approach)[0]}", f"G1 {path[0]} F{feed:g} (feed-in)", "G93"]
     rel = np.linalg.norm(np.diff(bar.ball(P), axis=0), axis=1)
@@ -300,17 +296,14 @@ def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 
     written) or e.g. ``G64 P0.0001`` (blending within 0.1 µm, continuous);
     ``kins``: write LinuxCNC joint values (``tcp_off`` switches its identity
     kinematics on first)."""
-    if not (feed > 0 and math.isfinite(feed)):
-        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
-    if not (0 < feed_in and math.isfinite(feed_in)):
-        raise ValueError(f"feed_in: expected a positive distance in mm, got {feed_in}")
-    if not (tolerance > 0 and math.isfinite(tolerance)):
-        raise ValueError(f"tolerance: expected a positive length in mm, got {tolerance}")
+    O.check(feed=feed, feed_in=feed_in, tolerance=tolerance)
+    O.check_line("tcp_off", tcp_off)
+    O.check_line("path_mode", path_mode)
     setups = _setups(plan)
     fixed = [s for s, e in setups.items() if not _rotary_moves(machine, e)]
     if fixed:
         raise ValueError(f"setup {fixed[0]}: no rotary axis moves (a planar circle: dbb_program)")
-    out = [f"(fivecal ball bar program, machine {machine.name}: rotary-axis paths, feed-in, path, "
+    out = [f"(fivecal ball bar program, machine {O.comment_text(machine.name)}: rotary-axis paths, feed-in, path, "
            "feed-out per setup)",
            f"(words: {'LinuxCNC ' + kins + ' joint values' if kins else 'axis commands'}; path feed in "
            "inverse time for the balls' relative speed " + f"{feed:g} mm/min)",
@@ -320,4 +313,4 @@ def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 
     for setup, entries in setups.items():
         out += _rotary_setup(machine, setup, entries, feed, feed_in, kins, tolerance, path_mode)
     out.append("M2")
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "ball bar program")

@@ -20,7 +20,9 @@ Reading rules:
   a G70 / G71 line carrying P, Q, U, W or R words is refused as a cycle.
 * Every axis word is converted to machine units (mm) with the unit mode in
   force on its own line, and the modal positions are kept in machine units,
-  so a G21 -> G20 switch never reinterprets a position already held.
+  so a G21 -> G20 switch never reinterprets a position already held. A
+  compensated linear word on an inch line is written with one decimal more
+  than on a millimetre line (0.00001 in beside 0.0001 mm).
 * Cutter radius compensation (G41, G42) and tool length compensation (G43,
   G44) shift the path by the tool's radius or length in the controller's
   offset table: a move while one is active is refused, naming the move and
@@ -416,10 +418,18 @@ def fmt(value: float, decimals: int, plus: bool) -> str:
 def write_program(prog: Program, compensated: Mapping[str, Sequence[float]], min_decimals: int = 4
                   ) -> Tuple[str, int, Dict[str, List[float]]]:
     """The program text with the compensated machine commands of its moves
-    (dict axis -> one value per move, mm / degrees) written back; the number
+    (dict axis -> one value per move, mm / degrees) written back with at
+    least ``min_decimals`` decimals (one more for a linear word on an inch
+    line, G20/G70, so an inch program is written to the same resolution as a
+    millimetre one); the number
     of changed lines; and per axis the machine command the controller holds at
     each move as written (after rounding), for checking what was written."""
     letters = sorted(prog.axis_letters, key=AXIS_ORDER.index)
+
+    def least(a: str, inch: bool) -> int:
+        # the same resolution in inch: 0.00001 in (0.25 um) beside 0.0001 mm
+        return min_decimals + (1 if inch and a not in ROTARY else 0)
+
     # The values the controller holds, in machine units, as the program is rewritten.
     held: Dict[str, Optional[float]] = dict(prog.start)
     held_dec: Dict[str, int] = {a: min_decimals for a in letters}
@@ -436,7 +446,7 @@ def write_program(prog: Program, compensated: Mapping[str, Sequence[float]], min
                         held[a] = None
                     else:
                         held[a] = prog.to_machine(a, w.value, st.inch)
-                        held_dec[a] = max(w.decimals, min_decimals)
+                        held_dec[a] = max(w.decimals, least(a, st.inch))
             continue
         mi = move_at[li]
         mv = prog.moves[mi]
@@ -448,7 +458,7 @@ def write_program(prog: Program, compensated: Mapping[str, Sequence[float]], min
             v = prog.to_program(a, float(compensated[a][mi]), mv.inch)
             if a in mv.words:
                 w = mv.words[a]
-                dec = max(w.decimals, min_decimals)
+                dec = max(w.decimals, least(a, mv.inch))
                 held_dec[a] = dec
                 if abs(v - w.value) < 0.5 * 10.0 ** (-dec):
                     held[a] = prog.to_machine(a, w.value, mv.inch)
@@ -457,7 +467,7 @@ def write_program(prog: Program, compensated: Mapping[str, Sequence[float]], min
                 edits.append((w.start, w.end, s))
                 held[a] = prog.to_machine(a, float(s), mv.inch)
             else:
-                dec = held_dec[a]
+                dec = max(held_dec[a], least(a, mv.inch))
                 h_machine = held[a] if held[a] is not None else mv.pose[a]
                 h = prog.to_program(a, h_machine, mv.inch)
                 if abs(v - h) < 0.5 * 10.0 ** (-dec):

@@ -19,22 +19,30 @@ from __future__ import annotations
 import math
 import os
 import re
+import shutil
+import stat
+import tempfile
 from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .. import _core
-from ..files import make_dirs, write_text
+from .. import _core, files
 from ..files import read_text as _read_text
 from ..guards import CorrectionLimitError
 from ..machine import Machine
+from . import hal
+from . import nc_options as O
 
 KINS = ("xyzac-trt", "xyzbc-trt")
 TILT = {"xyzac-trt": "A", "xyzbc-trt": "B"}
 #: default plausibility limit on a pin change (mm): rotary pivots of a built
 #: machine are off by tens of micrometres; a millimetre is a unit or sign slip
 DEFAULT_MAX_CHANGE = 0.5
+#: default plausibility limit on an angular change (rad) of a controller
+#: model (``fivecal export kinematics``): axis directions of a built machine
+#: are off by tens of microradians; a milliradian (1 mm/m) is a slip
+DEFAULT_MAX_CHANGE_RAD = 1e-3
 #: default working volume of the absorption fit
 DEFAULT_VOLUME = {"linear": (-100.0, 100.0), "tilt": (-90.0, 90.0), "C": (-180.0, 180.0)}
 
@@ -212,19 +220,81 @@ def pins_table(old: Mapping[str, float], new: Mapping[str, float]) -> str:
     return "\n".join(rows)
 
 
+class ChangeLimitError(CorrectionLimitError):
+    """A controller value would change by more than the plausibility limit
+    (``--max-change``)."""
+
+    def __init__(self, where: str, name: str, size: float, limit: float, unit: str):
+        self.where, self.index, self.axis, self.size, self.limit, self.unit = where, 0, name, size, limit, unit
+        ValueError.__init__(
+            self, f"{where}: {name} would change by {size:.4g} {unit}, more than the plausibility limit of "
+            f"{limit:g} {unit} (--max-change; 'off' switches it off); a change this large is more likely a unit "
+            "or sign slip or a bad identification than the machine: check the result, or raise --max-change if "
+            "the machine really is that far off")
+
+
+def parse_max_change(text: str, angular: bool = False) -> Optional[Dict[str, float]]:
+    """``--max-change`` as limits by unit: ``MM`` (and, with ``angular``,
+    ``MM,RAD``; the other keeps its default) or ``off`` (None)."""
+    if str(text).strip().lower() == "off":
+        return None
+    parts = [t.strip() for t in str(text).split(",")]
+    form = "MM,RAD" if angular else "MM"
+    limits = {"mm": DEFAULT_MAX_CHANGE, "rad": DEFAULT_MAX_CHANGE_RAD}
+    if len(parts) > (2 if angular else 1):
+        raise ValueError(f"--max-change: expected {form} or 'off', got '{text}'")
+    for unit, t in zip(("mm", "rad"), parts):
+        try:
+            v = float(t)
+        except ValueError:
+            raise ValueError(f"--max-change: '{t}' is not a number of {unit} ({form} or 'off')") from None
+        if not (v > 0 and math.isfinite(v)):
+            raise ValueError(f"--max-change: expected a positive number of {unit}, got {t}")
+        limits[unit] = v
+    return limits
+
+
+def check_changes(where: str, changes: Sequence[Tuple[str, float, str]],
+                  limits: Optional[Mapping[str, float]], force: bool = False) -> None:
+    """The plausibility guard of every controller export: ChangeLimitError
+    for the largest change (name, change, unit 'mm' or 'rad') beyond its
+    unit's limit in ``limits``, unless ``force`` or ``limits`` is None. A
+    change that is not a finite number is beyond any limit."""
+    if force or limits is None:
+        return
+    over = [(math.inf if not math.isfinite(c) else abs(c) / limits[u], n, c, u) for n, c, u in changes
+            if u in limits and not abs(c) <= limits[u]]
+    if over:
+        _, name, c, u = max(over, key=lambda o: o[0])
+        raise ChangeLimitError(where, name, abs(c), limits[u], u)
+
+
 def check_change(old: Mapping[str, float], new: Mapping[str, float],
                  limit: Optional[float] = DEFAULT_MAX_CHANGE, force: bool = False) -> None:
-    """CorrectionLimitError for the largest pin change beyond ``limit`` (mm),
+    """ChangeLimitError for the largest pin change beyond ``limit`` (mm),
     unless ``force`` or ``limit`` is None."""
-    if force or limit is None:
-        return
-    worst = max(((abs(new[n] - float(old.get(n, 0.0))), n) for n in new), default=(0.0, ""))
-    if worst[0] > limit:
-        raise CorrectionLimitError("LinuxCNC pins", 0, worst[1], worst[0], limit, "mm")
+    check_changes("LinuxCNC pins", [(n, new[n] - float(old.get(n, 0.0)), "mm") for n in new],
+                  None if limit is None else {"mm": limit}, force)
 
 
 def _number(v: float) -> str:
     return repr(float(v))  # shortest text that reads back as the same double
+
+
+def _check_pins(k: str, pins: Mapping[str, float], what: str) -> None:
+    """ValueError naming the pin for a name ``<k>-kins`` does not have or a
+    value that is not a finite number: a HAL file must not say ``nan``, nor
+    leave out a pin it was asked to set."""
+    names = pin_names(k)
+    for n, v in pins.items():
+        if n not in names:
+            raise ValueError(f"{what}: '{n}' is not a pin of {k}-kins fivecal sets ({', '.join(names)})")
+        try:
+            ok = math.isfinite(float(v))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ValueError(f"{what}: {k}-kins.{n}: expected a finite number of mm, got {v!r}")
 
 
 #: pins the fit holds at their old values: hal_text and ini_text leave them to
@@ -240,7 +310,10 @@ def hal_text(kins: str, pins: Mapping[str, float], old: Optional[Mapping[str, fl
     after the kinematics module (a HALFILE after the motion module); remove
     any other ``setp``/``sets``/``net`` of the pins it sets."""
     k = _kins(kins)
-    out = [f"# fivecal: {k}-kins pins (mm){(' - ' + header) if header else ''}"]
+    _check_pins(k, pins, "pins")
+    if old is not None:
+        _check_pins(k, old, "old")
+    out = [f"# fivecal: {k}-kins pins (mm){(' - ' + O.comment_text(header)) if header else ''}"]
     if old is not None:
         out += ["# " + line for line in pins_table(old, pins).splitlines()]
     for n in pin_names(k):
@@ -259,6 +332,9 @@ def ini_text(kins: str, pins: Mapping[str, float], section: str = "FIVECAL_KINS"
     """The same values as an INI section plus the HAL lines that read it
     (``setp <kins>-kins.x-rot-point [FIVECAL_KINS]X_ROT_POINT``)."""
     k = _kins(kins)
+    _check_pins(k, pins, "pins")
+    if not re.fullmatch(r"[A-Za-z0-9_]+", str(section)):
+        raise ValueError(f"section: expected an INI section name of letters, digits and '_', got {section!r}")
     ini = [f"[{section}]", f"# fivecal: {k}-kins pins (mm)"]
     hal = [f"# fivecal: {k}-kins pins from the INI section [{section}]"]
     for n in pin_names(k):
@@ -269,34 +345,40 @@ def ini_text(kins: str, pins: Mapping[str, float], section: str = "FIVECAL_KINS"
     return "\n".join(ini) + "\n", "\n".join(hal) + "\n"
 
 
-_SETP = re.compile(r"^\s*setp\s+(xyz[ab]c-trt)-kins\.([a-z\-]+)\s+(\S+)", re.I)
+#: every pin of LinuxCNC's <kins>-kins (trtfuncs.c; conventional-directions
+#: from LinuxCNC 2.10): a name outside this list is a typo
+MODULE_PINS = ("x-rot-point", "y-rot-point", "z-rot-point", "x-offset", "y-offset", "z-offset", "tool-offset",
+               "conventional-directions")
 
 
 def read_hal_pins(path: str, kins: str) -> Dict[str, float]:
-    """Current pin values from a HAL file's ``setp <kins>-kins.<pin> VALUE``
-    lines (the controller's old values)."""
+    """The controller's current pin values from a HAL file, read as halcmd
+    reads it (:mod:`fivecal.io.hal`): ``setp``, ``sets`` and ``net`` lines,
+    comments, continuations. A pin whose value the file cannot give (an INI
+    substitution, a line halcmd refuses, a signal another component drives)
+    is refused naming the file and line, except ``tool-offset`` driven at run
+    time (``motion.tooloffset.z``, the sample configs' way): the pins are for
+    the tool fivecal was calibrated with, offset 0, so it is left out."""
     k = _kins(kins)
     names = pin_names(k)
+    got = hal.pin_values(path, f"{k}-kins", MODULE_PINS, names + ["conventional-directions"])
     out: Dict[str, float] = {}
-    with open(path, encoding="utf-8") as f:
-        for no, line in enumerate(f, 1):
-            m = _SETP.match(line.split("#", 1)[0])
-            if not m or m.group(1).lower() != k:
-                continue
-            name = m.group(2).lower()
-            if name not in names:
-                raise ValueError(f"{path}:{no}: '{name}' is not a pin fivecal sets on {k}-kins "
-                                 f"({', '.join(names)})")
-            try:
-                v = float(m.group(3))
-            except ValueError:
-                raise ValueError(f"{path}:{no}: {name}: '{m.group(3)}' is not a number (an INI "
-                                 "reference like [SECTION]KEY cannot be read here; give the values)") from None
-            if not math.isfinite(v):
-                raise ValueError(f"{path}:{no}: {name}: value is not finite")
-            out[name] = v
+    for n, v in got.items():
+        if v.problem is not None and n == "tool-offset" and v.runtime:
+            continue
+        if v.problem is not None:
+            raise ValueError(f"{v.where}: {k}-kins.{n}: {v.problem}")
+        if not math.isfinite(v.value):
+            raise ValueError(f"{v.where}: {k}-kins.{n}: value is not finite")
+        if n == "conventional-directions":
+            if v.value != 0:
+                raise ValueError(f"{v.where}: {k}-kins.conventional-directions is on; fivecal's model of "
+                                 f"{k}-kins is that of the default directions (0)")
+            continue
+        out[n] = v.value
     if not out:
-        raise ValueError(f"{path}: no 'setp {k}-kins.<pin> <value>' lines")
+        raise ValueError(f"{path}: no value for a pin of {k}-kins (setp, sets or net lines of "
+                         f"{', '.join(names)})")
     return out
 
 
@@ -367,6 +449,7 @@ class Export:
     files: List[str]
     comp: Dict[str, str]        # axis -> file name
     not_exported: List[str]     # non-zero errors neither the pins nor a comp file carry
+    replaced: List[str] = field(default_factory=list)  # files of an earlier export the folder held
 
     def summary(self) -> str:
         lines = [self.absorption.report()]
@@ -379,6 +462,62 @@ class Export:
         return "\n".join(lines)
 
 
+#: the files :func:`export` writes: a folder that holds only these (an
+#: earlier export) is replaced as a whole
+_EXPORT_FILE = re.compile(r"(fivecal-kins\.hal|fivecal-kins\.ini|fivecal-kins-ini\.hal|linuxcnc-report\.txt"
+                          r"|comp-[A-Z]\.txt)\Z")
+
+
+def _write_folder(out_dir: str, contents: Mapping[str, str]) -> List[str]:
+    """``contents`` (name -> text) as the folder ``out_dir``, all or nothing:
+    written into a new folder beside it, which then takes its place. A
+    folder that exists must hold only files of an earlier export (they are
+    replaced, stale comp files included: returned); anything else in it is
+    refused, naming the file. On a failure the old folder stays as it was."""
+    dest = os.path.realpath(out_dir)
+    old: List[str] = []
+    if os.path.lexists(dest):
+        if not os.path.isdir(dest):
+            raise ValueError(f"--out {out_dir}: exists and is not a folder")
+        old = sorted(os.listdir(dest))
+        foreign = [n for n in old if not _EXPORT_FILE.match(n)]
+        if foreign:
+            raise ValueError(f"--out {out_dir}: holds {foreign[0]}"
+                             f"{f' and {len(foreign) - 1} more' if len(foreign) > 1 else ''}, which fivecal export "
+                             "linuxcnc did not write; it replaces only a folder of its own files: choose a new or "
+                             "empty folder")
+    parent = os.path.dirname(dest)
+    files.make_dirs(parent)
+    try:
+        tmp = tempfile.mkdtemp(dir=parent, prefix=f".{os.path.basename(dest)}.", suffix=".new")
+    except OSError as e:
+        raise ValueError(f"--out {out_dir}: cannot create a folder beside it ({e.strerror})") from None
+    try:
+        mask = os.umask(0)
+        os.umask(mask)
+        # mkdtemp makes it private; the export keeps the old folder's mode
+        os.chmod(tmp, stat.S_IMODE(os.stat(dest).st_mode) if os.path.isdir(dest) else 0o777 & ~mask)
+        for name, text in contents.items():
+            files.write_text(os.path.join(tmp, name), text)
+        if os.path.isdir(dest):
+            aside = tmp[:-len(".new")] + ".old"
+            os.rename(dest, aside)
+            try:
+                os.rename(tmp, dest)
+            except BaseException:
+                os.rename(aside, dest)
+                raise
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            os.rename(tmp, dest)
+    except BaseException as e:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(e, OSError):
+            raise ValueError(f"--out {out_dir}: cannot write ({e.strerror or e})") from None
+        raise
+    return old
+
+
 def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional[Mapping] = None,
            max_change: Optional[float] = DEFAULT_MAX_CHANGE, force: bool = False,
            volume: Optional[Mapping] = None, comp_step: float = 5.0,
@@ -389,7 +528,9 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     comments), fivecal-kins.ini + fivecal-kins-ini.hal (the same through an INI
     section), comp-<axis>.txt per axis with an along-axis error motion or
     backlash, and linuxcnc-report.txt. Refuses a result that is not usable and
-    pin changes beyond ``max_change`` mm unless ``force``."""
+    pin changes beyond ``max_change`` mm unless ``force``. A folder of an
+    earlier export is replaced as a whole (:attr:`Export.replaced` lists its
+    files), all or nothing; a folder holding anything else is refused."""
     from ..compensation import usable_errors
 
     k = _kins(kins)
@@ -403,12 +544,10 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     from . import controllers as K
     kab = K.absorb(machine, k, errors, poses=poses, compensation=True)
     ab.rms_compensated, ab.max_compensated = kab.rms_compensated, kab.max_compensated
-    make_dirs(out_dir)
-    files = []
+    contents: Dict[str, str] = {}
 
     def write(name, text):
-        write_text(os.path.join(out_dir, name), text)
-        files.append(name)
+        contents[name] = text
 
     write("fivecal-kins.hal", hal_text(k, ab.pins, ab.old_pins, header=f"machine {machine.name}"))
     ini, ini_hal = ini_text(k, ab.pins)
@@ -433,13 +572,13 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
         carried |= {f"E{a}{a}{d}" for d in (1, 2, 3)} | {f"E{a}{a}b"}
     not_exported = sorted(n for n, v in errors.items() if abs(float(v)) > 0 and n not in carried
                           and not n.startswith("tip."))
-    exp = Export(ab, files, comp, not_exported)
+    exp = Export(ab, list(contents) + ["linuxcnc-report.txt"], comp, not_exported)
     report = [exp.summary(), "", "INI lines for the compensation files:"]
     for a, name in comp.items():
         j, _ = _joint_of(machine, k, a)
         report += [f"[JOINT_{j}]", f"COMP_FILE = {name}", "COMP_FILE_TYPE = 0"]
     write("linuxcnc-report.txt", "\n".join(report) + "\n")
-    exp.files = files
+    exp.replaced = _write_folder(out_dir, contents)
     return exp
 
 
@@ -457,6 +596,7 @@ def _touch_geometry(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     """Per touch: (joint tilt, joint C, contact world point, facet normal,
     tool axis in world coordinates)."""
     k = _kins(kins)
+    O.check_vector("workpiece_shift", workpiece_shift)
     mp = match(machine, k)
     tilt = TILT[k]
     facets = _facets(artefact)
@@ -515,6 +655,14 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     its ``arm`` line (the simulator's probe planes: :func:`probe_sim_lines`)."""
     k = _kins(kins)
     tilt = TILT[k]
+    O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
+            safe=safe, dwell=dwell)
+    O.check_line("log", log, comment=True)
+    for name, line in (("arm", arm), ("disarm", disarm), ("sync", sync), ("tcp_on", tcp_on)):
+        O.check_line(name, line)
+    for i, lines in enumerate(before_probe or []):
+        for line in lines:
+            O.check_line(f"before_probe[{i}]", line)
     spheres = artefact.get("spheres") or []
     if spheres:
         # its straight lifts know nothing of spheres: on TANGO they ran 4 mm
@@ -525,10 +673,9 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     touches = _touch_geometry(machine, k, plan, artefact, tip_radius, workpiece_shift)
     if before_probe is not None and len(before_probe) != len(touches):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(touches)} touches")
-    if not (clearance > 0 and overtravel > 0 and feed > 0 and retract >= 0):
-        raise ValueError("probing_program: clearance, overtravel and feed must be positive")
     f = lambda v: f"{v:.6f}"  # noqa: E731
-    out = [f"(fivecal probing program: {len(touches)} touches, machine {machine.name}, {k}-kins)",
+    out = [f"(fivecal probing program: {len(touches)} touches, machine {O.comment_text(machine.name)}, "
+           f"{k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
            # G61 exact stop: no move blends into the next, so every G38.2
            # starts from its start point at rest
@@ -542,7 +689,7 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         start, end = w + clearance * n, w - overtravel * n
         off = start + retract * n
         up = off + safe * v
-        out.append(f"(touch {i + 1}: {plan[i]['target']})")
+        out.append(f"(touch {i + 1}: {O.comment_text(plan[i]['target'])})")
         out.append(f"G0 {xyz(up)} {tilt}{f(t)} C{f(c)}")
         if dwell > 0 and last != (t, c):
             out.append(f"G4 P{dwell:g}")
@@ -560,7 +707,7 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
         out += [disarm] if disarm else []
         out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}", f"G0 {xyz(up)}"]
     out += ["(PROBECLOSE)", "M2"]
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "probing program")
 
 
 def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapping],

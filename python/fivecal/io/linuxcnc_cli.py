@@ -3,10 +3,12 @@ fivecal.io.linuxcnc, fivecal.io.controllers and the NC programs of the test plan
 from __future__ import annotations
 
 import argparse
+import os
 
 from .. import files
 from ..tolerances import parse_value
 from . import linuxcnc as L
+from . import nc_options as O
 
 
 def _volume(text: str) -> dict:
@@ -28,21 +30,17 @@ def _run(args) -> int:
     from ..cli import _read_machine
 
     machine = _read_machine(args.machine)
-    limit = None
-    if str(args.max_change).lower() != "off":
-        try:
-            limit = float(args.max_change)
-        except ValueError:
-            raise ValueError(f"--max-change: '{args.max_change}' is not a number of mm or 'off'") from None
-        if not limit > 0 or limit != limit or limit == float("inf"):
-            raise ValueError(f"--max-change: expected a positive number of mm, got {args.max_change}")
+    limits = L.parse_max_change(args.max_change)
+    limit = None if limits is None else limits["mm"]
     old = L.read_hal_pins(args.old, args.kins) if args.old else None
     volume = _volume(args.volume) if args.volume else None
-    if not (args.comp_step > 0):
-        raise ValueError(f"--comp-step: expected a positive step, got {args.comp_step}")
+    if not (0 < args.comp_step < float("inf")):
+        raise ValueError(f"--comp-step: expected a positive finite step, got {args.comp_step}")
     exp = L.export(args.result, machine, args.kins, args.out, old_pins=old, max_change=limit,
                    force=args.force, volume=volume, comp_step=args.comp_step, what=args.result)
     print(exp.summary())
+    if exp.replaced:
+        print(f"{args.out}: replaced the earlier export ({', '.join(exp.replaced)})")
     print(f"files in {args.out}; recipe: docs/linuxcnc.md")
     return 0
 
@@ -57,15 +55,41 @@ def _run_kinematics(args) -> int:
     machine = _read_machine(args.machine)
     errors = usable_errors(args.result, machine, args.force, args.result)
     volume = _volume(args.volume) if args.volume else None
+    fmt = _kinematics_format(args.format, args.out)
+    limits = L.parse_max_change(args.max_change, angular=True)
     ab = K.absorb(machine, args.model, errors, poses=K.pose_grid(machine, volume),
                   directions=args.directions, compensation=True)
-    if args.format == "json":
+    # the same plausibility guard as export linuxcnc: the values are changes
+    # from the nominal model
+    L.check_changes(f"{args.model} model", [(p.label, float(v), p.unit) for p, v in zip(ab.parameters, ab.values)],
+                    limits, args.force)
+    if fmt == "json":
         text = json.dumps(K.export_dict(machine, ab), indent=1) + "\n"
-    elif args.format == "csv":
+    elif fmt == "csv":
         text = K.export_csv(machine, ab)
     else:
         text = K.export_text(machine, ab)
     return _write_or_print(text, args.out, f"written: {args.out}")
+
+
+_FORMATS = {".json": "json", ".csv": "csv", ".txt": "text", ".text": "text"}
+
+
+def _kinematics_format(fmt, out) -> str:
+    """The format to write: ``--format``, or the one ``--out``'s extension
+    names; a file whose extension says another format, or none fivecal
+    writes, is refused."""
+    if not out:
+        return fmt or "text"
+    ext = os.path.splitext(out)[1].lower()
+    named = _FORMATS.get(ext)
+    if named is None:
+        raise ValueError(f"--out {out}: the extension '{ext or '(none)'}' names no format fivecal writes; "
+                         "use .json, .csv or .txt")
+    if fmt and fmt != named:
+        raise ValueError(f"--out {out}: a .{ext[1:]} file, but --format {fmt}; give a file name that says the "
+                         f"format (or --format {named})")
+    return named
 
 
 def _write_or_print(text: str, out, message: str) -> int:
@@ -84,8 +108,6 @@ _PLAN_KINDS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb":
 def _read_spec(path: str):
     """machine, plan, artefact and stylus radius of a simulation spec (or a
     dataset whose observations are the plan)."""
-    import os
-
     from ..cli import _read_json
     from ..machine import Machine
 
@@ -105,13 +127,16 @@ def _read_spec(path: str):
     probe = spec.get("probe") or {}
     if not isinstance(probe, dict):
         raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")
-    return machine, plan, spec.get("artefact") or {}, float(probe.get("tip_radius", 0.0))
+    try:
+        tip = float(probe.get("tip_radius", 0.0))
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: probe.tip_radius: expected the stylus ball radius in mm, got "
+                         f"{probe.get('tip_radius')!r}") from None
+    return machine, plan, spec.get("artefact") or {}, tip
 
 
 def _run_program(args) -> int:
-    from . import dbb_program as D
-    from . import nc_programs as N
-
+    O.check_cli(args)
     machine, plan, artefact, tip = _read_spec(args.spec)
     types = sorted({str(e.get("type")) for e in plan})
     kind = args.kind
@@ -131,34 +156,43 @@ def _run_program(args) -> int:
     if kind in ("probing", "sphere") and not tip > 0:
         raise ValueError(f"{args.spec}: probe.tip_radius: the stylus ball radius (mm) is needed for the "
                          "contact points")
-    feed = args.feed
-    # with spheres on the artefact (a scale bar beside the facets, as in
-    # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
-    if kind == "probing" and (any(e.get("type") == "sphere" for e in plan) or artefact.get("spheres")):
-        text = N.touch_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
-                               overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
-                               safe=args.safe, overshoot=args.overshoot, dwell=args.dwell, log=args.log)
-    elif kind == "probing":
-        text = L.probing_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
-                                 overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
-                                 safe=args.safe, dwell=args.dwell, log=args.log)
-    elif kind == "sphere":
-        text = N.sphere_program(machine, args.kins, plan, artefact, tip, clearance=args.clearance,
-                                overtravel=args.overtravel, feed=feed or 60.0, retract=args.retract,
-                                safe=args.safe, overshoot=args.overshoot, dwell=args.dwell, log=args.log)
-    elif kind == "rtest":
-        text = N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=feed or 500.0,
-                               dwell=args.dwell if args.dwell > 0 else 1.0, subdivide=args.subdivide)
-    else:
-        tol = parse_value(args.tolerance, "--tolerance", bare_unit="um")     # mm
-        if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
-            text = D.rotary_dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
-                                        kins=args.kins, tolerance=tol)
-        else:
-            text = D.dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in, tolerance=tol)
+    try:
+        text = _program_text(args, kind, machine, plan, artefact, tip)
+    except O.OptionError as e:
+        # a plan-dependent bound a writer checks: name the option as typed
+        if e.option == "tip_radius":
+            raise ValueError(f"{args.spec}: probe.tip_radius: {e.text}") from None
+        raise e.for_cli() from None
     blocks = sum(1 for ln in text.splitlines() if ln[:1] in "GM")
     return _write_or_print(text, args.out,
                            f"{kind} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
+
+
+def _program_text(args, kind, machine, plan, artefact, tip) -> str:
+    from . import dbb_program as D
+    from . import nc_programs as N
+
+    # an option left out takes the writer's default for this kind of program
+    opt = lambda name, default: default if getattr(args, name) is None else getattr(args, name)  # noqa: E731
+    touch = dict(clearance=args.clearance, overtravel=args.overtravel, feed=opt("feed", 60.0),
+                 retract=args.retract, safe=args.safe, dwell=opt("dwell", 0.0), log=args.log)
+    # with spheres on the artefact (a scale bar beside the facets, as in
+    # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
+    if kind == "probing" and (any(e.get("type") == "sphere" for e in plan) or artefact.get("spheres")):
+        return N.touch_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
+    if kind == "probing":
+        return L.probing_program(machine, args.kins, plan, artefact, tip, **touch)
+    if kind == "sphere":
+        return N.sphere_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
+    if kind == "rtest":
+        return N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=opt("feed", 500.0),
+                               dwell=opt("dwell", 1.0), subdivide=args.subdivide)
+    feed = opt("feed", 1000.0)
+    tol = parse_value(args.tolerance, "--tolerance", bare_unit="um")     # mm
+    if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
+        return D.rotary_dbb_program(machine, plan, feed=feed, feed_in=args.feed_in, kins=args.kins,
+                                    tolerance=tol)
+    return D.dbb_program(machine, plan, feed=feed, feed_in=args.feed_in, tolerance=tol)
 
 
 def register(sub) -> None:
@@ -183,9 +217,11 @@ def register(sub) -> None:
     pl.add_argument("result", help="result JSON of fivecal identify (or a JSON object name -> value)")
     pl.add_argument("--machine", required=True, help="machine definition JSON (or a dataset JSON)")
     pl.add_argument("--kins", required=True, choices=list(L.KINS), help="LinuxCNC kinematics module")
-    pl.add_argument("--out", required=True, help="folder to write the files into")
-    pl.add_argument("--old", metavar="HAL", help="the controller's current pins: a HAL file with "
-                    "'setp <kins>-kins.<pin> <value>' lines (default: the machine file's nominal geometry)")
+    pl.add_argument("--out", required=True, help="folder to write the files into (a folder of an earlier "
+                    "export is replaced, all or nothing; one holding other files is refused)")
+    pl.add_argument("--old", metavar="HAL", help="the controller's current pins: the HAL file that sets them "
+                    "(setp, or sets on the signal a net links them to; read as halcmd reads it, "
+                    "docs/linuxcnc.md; default: the machine file's nominal geometry)")
     pl.add_argument("--max-change", default=str(L.DEFAULT_MAX_CHANGE),
                     help=f"plausibility limit on any pin change in mm (default {L.DEFAULT_MAX_CHANGE}; "
                     "'off' switches it off)")
@@ -196,7 +232,7 @@ def register(sub) -> None:
                     "table points (mm or degrees, default 5)")
     pl.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
                     "--max-change; only to inspect the values")
-    pl.set_defaults(func=_run)
+    pl.set_defaults(func=_run, out_is_folder=True)
     from . import controllers as K
     pk = esub.add_parser(
         "kinematics", formatter_class=RD,
@@ -218,10 +254,14 @@ def register(sub) -> None:
     pk.add_argument("--volume", metavar="RANGES", help="working volume of the fit, e.g. "
                     "X=-200:200,B=-90:30 (mm, degrees; default linear +-100, a rotary axis along z a "
                     "full turn, other rotary axes -90:90)")
-    pk.add_argument("--format", choices=("text", "csv", "json"), default="text")
-    pk.add_argument("--out", help="file to write (default: standard output)")
-    pk.add_argument("--force", action="store_true", help="use a result that is not usable; only to "
-                    "inspect the values")
+    pk.add_argument("--format", choices=("text", "csv", "json"), default=None,
+                    help="default: the one --out's extension names (.json, .csv, .txt), text on standard output")
+    pk.add_argument("--out", help="file to write, .json, .csv or .txt (default: standard output)")
+    pk.add_argument("--max-change", default=f"{L.DEFAULT_MAX_CHANGE},{L.DEFAULT_MAX_CHANGE_RAD}",
+                    help=f"plausibility limit on any parameter change, MM[,RAD] (default {L.DEFAULT_MAX_CHANGE} "
+                    f"mm, {L.DEFAULT_MAX_CHANGE_RAD} rad; 'off' switches it off)")
+    pk.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
+                    "--max-change; only to inspect the values")
     pk.set_defaults(func=_run_kinematics)
     pp = esub.add_parser(
         "program", formatter_class=RD,
@@ -247,23 +287,32 @@ def register(sub) -> None:
                     "sphere and --mode tcp; for rtest / dbb: write LinuxCNC joint values, for dbb rotary "
                     "paths only)")
     pp.add_argument("--out", help="file to write (default: standard output)")
-    pp.add_argument("--feed", type=float, help="mm/min: probing moves (default 60), R-test path (500), "
-                    "ball bar path (1000; rotary paths in inverse time for the balls' relative speed)")
+    pp.add_argument("--feed", type=float, help="mm/min: probing moves (default 60), R-test path "
+                    "(500), ball bar path (1000; rotary paths in inverse time for the balls' relative speed); "
+                    "at most 100000")
     g = pp.add_argument_group("probing and sphere cycles")
-    g.add_argument("--clearance", type=float, default=1.0, help="start of each G38.2 off the contact, mm")
-    g.add_argument("--overtravel", type=float, default=1.0, help="end of each G38.2 beyond the contact, mm")
-    g.add_argument("--retract", type=float, default=5.0, help="retract along the touch direction, mm")
-    g.add_argument("--safe", type=float, default=100.0, help="lift along the tool axis for indexing, mm")
-    g.add_argument("--overshoot", type=float, default=1.0, help="sphere and mixed facet/sphere plans: degrees "
-                   "beyond a position to reach it from the side the plan asks for (0: off)")
-    g.add_argument("--dwell", type=float, default=0.0, help="seconds: after each indexing; R-test: at "
-                   "each sample (default 1)")
+    g.add_argument("--clearance", type=float, default=1.0, help="start of each G38.2 off "
+                   "the contact, mm (at most 50)")
+    g.add_argument("--overtravel", type=float, default=1.0, help="end of each G38.2 beyond "
+                   "the contact, mm (at most 10, and at most the radius of a touched sphere)")
+    g.add_argument("--retract", type=float, default=5.0, help="retract along the touch "
+                   "direction, mm (at least --clearance, at most 500)")
+    g.add_argument("--safe", type=float, default=100.0, help="lift along the tool axis for "
+                   "indexing, mm (at most 2000)")
+    g.add_argument("--overshoot", type=float, default=1.0, help="sphere and mixed "
+                   "facet/sphere plans: degrees beyond a position to reach it from the side the plan asks for "
+                   "(0: off; at most 45)")
+    g.add_argument("--dwell", type=float, default=None, help="seconds: after each indexing "
+                   "(default 0); R-test: at each sample (default 1); at most 3600")
     g.add_argument("--log", default="probe-log.txt", help="probe log file name (PROBEOPEN)")
     g = pp.add_argument_group("R-test and ball bar")
     g.add_argument("--mode", choices=["axes", "tcp"], default="axes", help="R-test words: axis commands "
                    "(joint values with --kins) or world coordinates with TCP on")
-    g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two samples")
-    g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, mm")
+    g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two "
+                   "samples (at most 1000)")
+    g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, "
+                   "mm (at most 50, and less than the circle's radius or the bar length)")
     g.add_argument("--tolerance", default="0.02", metavar="UM", help="ball bar rotary paths: largest change "
-                   "of the nominal bar length between two blocks, µm, or with a unit: 2e-5mm (default 0.02)")
+                   "of the nominal bar length between two blocks, µm, or with a unit: 2e-5mm (default 0.02, "
+                   "at most 1000 µm)")
     pp.set_defaults(func=_run_program)

@@ -39,6 +39,7 @@ import numpy as np
 from ..machine import Machine
 from ..procedures.rtest import tip_offset
 from . import linuxcnc as L
+from . import nc_options as O
 
 
 def _f(v: float) -> str:
@@ -212,16 +213,22 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
     if before_probe is not None and len(before_probe) != len(geo):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(geo)} touches")
-    for name, v, lo in (("clearance", clearance, 0), ("overtravel", overtravel, 0), ("feed", feed, 0)):
-        if not (v > lo and math.isfinite(v)):
-            raise ValueError(f"{name}: expected a positive number, got {v}")
-    for name, v in (("retract", retract), ("safe", safe), ("overshoot", overshoot), ("dwell", dwell)):
-        if not (v >= 0 and math.isfinite(v)):
-            raise ValueError(f"{name}: expected a number >= 0, got {v}")
+    O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
+            safe=safe, overshoot=overshoot, dwell=dwell)
+    O.check_line("log", log, comment=True)
+    for name, line in (("arm", arm), ("disarm", disarm), ("sync", sync), ("tcp_on", tcp_on)):
+        O.check_line(name, line)
+    for i, lines in enumerate(before_probe or []):
+        for line in lines:
+            O.check_line(f"before_probe[{i}]", line)
     if retract < clearance:
-        raise ValueError(f"retract: {retract} mm is less than the clearance {clearance} mm")
-    dirs = _joint_directions(machine, k, plan)
+        raise O.OptionError("retract", f"{retract} mm is less than the clearance {clearance} mm")
     spheres = {sp["id"]: sp for sp in (artefact or {}).get("spheres", [])}
+    touched = sorted((float(spheres[t["target"]]["radius"]), t["target"]) for t in plan if t.get("type") == "sphere")
+    if touched:
+        # past the radius the G38.2 of a probe that does not trip ends beyond the sphere's centre
+        O.at_most("overtravel", overtravel, touched[0][0], f"the radius of sphere {touched[0][1]}")
+    dirs = _joint_directions(machine, k, plan)
     origin = np.asarray(L.match(machine, k)["origin"], float) + np.asarray(workpiece_shift, float)
     # every sphere of the artefact stands in the way, touched in this plan or not
     balls = [(sp["id"], np.asarray(sp["center"], float) - origin, float(sp["radius"]) + tip_radius + clearance)
@@ -229,7 +236,8 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     xyz = lambda p: f"X{_f(p[0])} Y{_f(p[1])} Z{_f(p[2])}"  # noqa: E731
     targets = sorted({str(t.get("target")) for t in plan})
     what = "sphere cycle" if kinds == ("sphere",) else "probing cycle"
-    out = [f"(fivecal {what}: {len(geo)} touches on {', '.join(targets)}, machine {machine.name}, {k}-kins)",
+    out = [f"(fivecal {what}: {len(geo)} touches on {O.comment_text(', '.join(targets))}, machine "
+           f"{O.comment_text(machine.name)}, {k}-kins)",
            "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
            f"(stylus ball radius {tip_radius:g} mm; touches approach and retract along the "
            f"{'sphere' if kinds == ('sphere',) else 'surface'} normal)",
@@ -244,7 +252,7 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
         start, end = w + clearance * n, w - overtravel * n
         off = w + retract * n
         rot = (t, c)
-        out.append(f"(touch {i + 1}: {plan[i]['target']} direction {' '.join(_f(x) for x in n)})")
+        out.append(f"(touch {i + 1}: {O.comment_text(plan[i]['target'])} direction {' '.join(_f(x) for x in n)})")
         if rot != last_rot or dirs[i] != last_dir:
             lift = _clear_lift(hold, v_prev, off, v, safe, balls, i + 1)
             up = off + lift * v
@@ -286,7 +294,7 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     if hold is not None:
         out.append(f"G0 {xyz(hold + _clear_lift(hold, v_prev, None, None, safe, balls, len(geo)) * v_prev)}")
     out += ["(PROBECLOSE)", "M2"]
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", what)
 
 
 def sphere_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
@@ -320,6 +328,7 @@ def touch_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], ar
 def _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
                    workpiece_shift, kinds):
     k = L._kins(kins)
+    O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel)
     spheres = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
     facets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
     geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
@@ -443,8 +452,7 @@ def rtest_points(machine: Machine, entries: Sequence[Mapping], subdivide: int = 
     (``sample``: its index) and, with ``subdivide`` = n, n points between two
     samples with the rotary commands interpolated and the linear ones from
     the nominal inverse kinematics (the ball stays in the nest there too)."""
-    if int(subdivide) != subdivide or subdivide < 0:
-        raise ValueError(f"subdivide: expected a whole number >= 0, got {subdivide}")
+    O.check(subdivide=subdivide)
     rot = [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
     pts = []
     for i, e in enumerate(entries):
@@ -492,15 +500,15 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
     if mode == "tcp" and not kins:
         raise ValueError("mode 'tcp': give kins (xyzac-trt or xyzbc-trt), the kinematics whose "
                          "tool-centre-point function runs the path")
-    if not (feed > 0 and math.isfinite(feed)):
-        raise ValueError(f"feed: expected a positive number of mm/min, got {feed}")
-    if not (dwell >= 0 and math.isfinite(dwell)):
-        raise ValueError(f"dwell: expected a number of seconds >= 0, got {dwell}")
+    O.check(feed=feed, dwell=dwell, subdivide=subdivide)
+    O.check_vector("workpiece_shift", workpiece_shift)
+    O.check_line("tcp_on", tcp_on)
+    O.check_line("tcp_off", tcp_off)
     k = L._kins(kins) if kins else None
     if k and pins is None:
         pins = L.nominal_pins(machine, k)
     letters = [a for a in machine.axis_names if a != "S"]
-    head = (f"(fivecal R-test program, machine {machine.name}: "
+    head = (f"(fivecal R-test program, machine {O.comment_text(machine.name)}: "
             + ("axis commands from the nominal inverse kinematics" if mode == "axes" and not k else
                f"LinuxCNC {k}-kins joint values, identity kinematics" if mode == "axes" else
                f"world coordinates, {k}-kins tool centre point on") + ")")
@@ -528,7 +536,7 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
 
     for setup, entries in _rtest_setups(plan).items():
         pts = rtest_points(machine, entries, 0 if mode == "tcp" else subdivide)
-        out.append(f"(setup {setup}: {len(entries)} samples, table ball "
+        out.append(f"(setup {O.comment_text(setup)}: {len(entries)} samples, table ball "
                    f"{' '.join(_f(x) for x in entries[0]['table_ball'])}, tool ball "
                    f"{' '.join(_f(x) for x in entries[0]['tool_ball'])})")
         for n, p in enumerate(pts):
@@ -536,6 +544,6 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
             fw = f" F{feed:g}" if n == 1 else ""
             out.append(f"{g} {words(p['axes'])}{fw}")
             if p["sample"] is not None:
-                out.append(f"G4 P{dwell:g} (sample {p['sample'] + 1}: {p.get('id') or ''})")
+                out.append(f"G4 P{dwell:g} (sample {p['sample'] + 1}: {O.comment_text(p.get('id') or '')})")
     out.append("M2")
-    return "\n".join(out) + "\n"
+    return O.check_positions("\n".join(out) + "\n", "R-test program")
