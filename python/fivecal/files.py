@@ -30,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import shutil
 import sqlite3
 import stat
 import tempfile
@@ -134,6 +135,48 @@ def guard_output(path: PathLike, label: str = "") -> str:
         what = f"{label} {path}" if label else path
         raise ValueError(f"{what}: is the input {clash}; refusing to overwrite an input")
     return path
+
+
+def write_folder(path: PathLike, contents: "dict[str, str]", label: str = "") -> str:
+    """The folder ``path`` holding exactly ``contents`` (file name -> text),
+    all or nothing: the files are written into a new folder beside it, which
+    then takes its place (an existing folder is replaced whole, so stale
+    files of an earlier write go). On any failure the old folder stays as it
+    was and nothing is left beside it. ValueError names ``label``."""
+    dest = os.path.realpath(guard_output(path, label))
+    what = label or dest
+    for name in contents:
+        guard_output(os.path.join(dest, name), label)
+    parent = os.path.dirname(dest)
+    make_dirs(parent)
+    try:
+        tmp = tempfile.mkdtemp(dir=parent, prefix=f".{os.path.basename(dest)}.", suffix=".new")
+    except OSError as e:
+        raise ValueError(f"{what}: cannot create a folder beside it ({e.strerror})") from None
+    try:
+        mask = os.umask(0)
+        os.umask(mask)
+        # mkdtemp makes it private; the new folder keeps the old folder's mode
+        os.chmod(tmp, stat.S_IMODE(os.stat(dest).st_mode) if os.path.isdir(dest) else 0o777 & ~mask)
+        for name, text in contents.items():
+            write_text(os.path.join(tmp, name), text)
+        if os.path.isdir(dest):
+            aside = tmp[:-len(".new")] + ".old"
+            os.rename(dest, aside)
+            try:
+                os.rename(tmp, dest)
+            except BaseException:
+                os.rename(aside, dest)
+                raise
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            os.rename(tmp, dest)
+    except BaseException as e:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(e, OSError):
+            raise ValueError(f"{what}: cannot write ({e.strerror or e})") from None
+        raise
+    return dest
 
 
 def note_input(path: PathLike) -> None:

@@ -19,9 +19,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import shutil
-import stat
-import tempfile
 from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
@@ -486,35 +483,7 @@ def _write_folder(out_dir: str, contents: Mapping[str, str]) -> List[str]:
                              f"{f' and {len(foreign) - 1} more' if len(foreign) > 1 else ''}, which fivecal export "
                              "linuxcnc did not write; it replaces only a folder of its own files: choose a new or "
                              "empty folder")
-    parent = os.path.dirname(dest)
-    files.make_dirs(parent)
-    try:
-        tmp = tempfile.mkdtemp(dir=parent, prefix=f".{os.path.basename(dest)}.", suffix=".new")
-    except OSError as e:
-        raise ValueError(f"--out {out_dir}: cannot create a folder beside it ({e.strerror})") from None
-    try:
-        mask = os.umask(0)
-        os.umask(mask)
-        # mkdtemp makes it private; the export keeps the old folder's mode
-        os.chmod(tmp, stat.S_IMODE(os.stat(dest).st_mode) if os.path.isdir(dest) else 0o777 & ~mask)
-        for name, text in contents.items():
-            files.write_text(os.path.join(tmp, name), text)
-        if os.path.isdir(dest):
-            aside = tmp[:-len(".new")] + ".old"
-            os.rename(dest, aside)
-            try:
-                os.rename(tmp, dest)
-            except BaseException:
-                os.rename(aside, dest)
-                raise
-            shutil.rmtree(aside, ignore_errors=True)
-        else:
-            os.rename(tmp, dest)
-    except BaseException as e:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if isinstance(e, OSError):
-            raise ValueError(f"--out {out_dir}: cannot write ({e.strerror or e})") from None
-        raise
+    files.write_folder(dest, contents, f"--out {out_dir}")
     return old
 
 
