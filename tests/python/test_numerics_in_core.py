@@ -372,3 +372,22 @@ def test_a_sphere_check_plan_records_the_return_to_zero_of_the_other_axis():
     later = [p for p in plan if abs(p["axes"][second]) > 1e-9]
     assert later and all(p["axes"][first] == 0.0 for p in later)
     assert all(p["direction"][first] == 1 for p in later)
+
+
+def test_the_moved_functions_refuse_bad_input_naming_the_field():
+    pts = np.array([[0.0, 0.0, 15.5], [3.0, 0.0, 15.2], [0.0, 3.0, 15.2], [-3.0, 0.0, 15.2]])
+    with pytest.raises(ValueError, match=r"points\[1\]"):
+        sphere_test.fit_sphere_centre(np.where(np.arange(12).reshape(4, 3) == 4, np.nan, pts), 15.5, [0, 0, 0])
+    with pytest.raises(ValueError, match="radius"):
+        sphere_test.fit_sphere_centre(pts, -1.0, [0, 0, 0])
+    with pytest.raises(ValueError, match="points: need at least 3"):
+        sphere_test.fit_sphere_centre(pts[:2], 15.5, [0, 0, 0])
+    with pytest.raises(ValueError, match="start"):
+        sphere_test.fit_sphere_centre(pts, 15.5, [0, 0])
+    with pytest.raises(ValueError, match=r"scale\[1\]"):
+        _core.wang_four_point(np.eye(2), np.array([1.0, 0.0]))
+    m = fivecal.Machine.load(os.path.join(MACHINES, "c600u.json"))
+    q = np.zeros((2, len(m.axis_names)))
+    q[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"poses\[1\]"):
+        _core.bar_length_commands(m._core, np.array([0, 0, 100.0]), np.zeros(3), 50.0, q)
