@@ -204,6 +204,22 @@ void BindDbb(py::module_& m) {
       py::arg("start"), py::arg("end"), py::arg("step"), py::arg("start_tilt"),
       py::arg("start_rotary"));
 
+  py::class_<WangFourPoint>(m, "WangFourPoint")
+      .def_readonly("singular_values", &WangFourPoint::singular_values)
+      .def_readonly("rank", &WangFourPoint::rank)
+      .def_readonly("null_space", &WangFourPoint::null_space)
+      .def_readonly("estimable", &WangFourPoint::estimable)
+      .def_readonly("solved", &WangFourPoint::solved)
+      .def_readonly("values", &WangFourPoint::values);
+  m.def(
+      "wang_four_point",
+      [](const Eigen::MatrixXd& sensitivity, const Eigen::VectorXd& scale,
+         const std::optional<Eigen::VectorXd>& readings) {
+        return AnalyzeWangFourPoint(sensitivity, scale, readings ? &*readings : nullptr);
+      },
+      py::arg("sensitivity"), py::arg("scale"), py::arg("readings") = py::none(),
+      "The Wang et al. four-point equations S e = r analysed (wang_path.h AnalyzeWangFourPoint).");
+
   py::class_<CircularRunResult>(m, "CircularRunResult")
       .def_readonly("direction", &CircularRunResult::direction)
       .def_readonly("centre", &CircularRunResult::centre)
@@ -226,12 +242,17 @@ void BindDbb(py::module_& m) {
       .def_readonly("runs", &CircularTestResult::runs)
       .def_readonly("hysteresis", &CircularTestResult::hysteresis)
       .def_readonly("has_hysteresis", &CircularTestResult::has_hysteresis)
-      .def_readonly("diagnosis", &CircularTestResult::diagnosis);
+      .def_readonly("diagnosis", &CircularTestResult::diagnosis)
+      .def_readonly("cyclic_pitch1", &CircularTestResult::cyclic_pitch1)
+      .def_readonly("cyclic_pitch2", &CircularTestResult::cyclic_pitch2)
+      .def_readonly("cyclic_pitches_tried1", &CircularTestResult::cyclic_pitches_tried1)
+      .def_readonly("cyclic_pitches_tried2", &CircularTestResult::cyclic_pitches_tried2);
   m.def(
       "circular_test",
       [](const std::vector<std::tuple<Eigen::VectorXd, Eigen::VectorXd, int>>& runs, double radius,
          double feed, bool reversal_spikes, double spike_width, bool lateral_play, bool straightness,
-         bool radial_play, double cyclic_pitch1, double cyclic_pitch2, double significance) {
+         bool radial_play, double cyclic_pitch1, double cyclic_pitch2, double significance,
+         bool search_cyclic_pitch1, bool search_cyclic_pitch2) {
         std::vector<CircularRun> rs;
         for (const auto& t : runs) {
           CircularRun r;
@@ -249,12 +270,16 @@ void BindDbb(py::module_& m) {
         o.cyclic_pitch1 = cyclic_pitch1;
         o.cyclic_pitch2 = cyclic_pitch2;
         o.significance = significance;
+        o.search_cyclic_pitch1 = search_cyclic_pitch1;
+        o.search_cyclic_pitch2 = search_cyclic_pitch2;
+        py::gil_scoped_release release;
         return AnalyzeCircularTest(rs, radius, feed, o);
       },
       py::arg("runs"), py::arg("radius"), py::arg("feed") = 0.0, py::arg("reversal_spikes") = true,
       py::arg("spike_width") = 3.0, py::arg("lateral_play") = true, py::arg("straightness") = true,
       py::arg("radial_play") = true, py::arg("cyclic_pitch1") = 0.0, py::arg("cyclic_pitch2") = 0.0,
-      py::arg("significance") = 3.0);
+      py::arg("significance") = 3.0, py::arg("search_cyclic_pitch1") = false,
+      py::arg("search_cyclic_pitch2") = false);
   m.def(
       "trim_overshoot",
       [](const Eigen::VectorXd& angles, const Eigen::VectorXd& readings, int direction, double data_arc,
@@ -296,6 +321,10 @@ void BindDbb(py::module_& m) {
       },
       py::arg("machine"), py::arg("axes"), py::arg("tool_ball"), py::arg("table_ball"),
       "Nominal spindle-ball and table-ball positions in F (N x 3 each, mm).");
+  m.def("bar_length_commands", &BarLengthCommands, py::arg("machine"), py::arg("tool_ball"),
+        py::arg("table_ball"), py::arg("length"), py::arg("poses"),
+        "Poses (N x num_axes) with the linear axes moved along the bar to the nominal `length` "
+        "(dbb_setup.h BarLengthCommands).");
   m.def("trace_harmonics", &TraceHarmonics, py::arg("angles"), py::arg("values"),
         py::arg("max_order"));
 }

@@ -174,6 +174,15 @@ void BindDesign(py::module_& m) {
   m.def("fit_sphere", &FitSphere, py::arg("points"), py::arg("max_iterations") = 50,
         py::arg("tolerance") = 1e-13);
 
+  py::class_<SphereCentreFit>(m, "SphereCentreFit")
+      .def_readonly("center", &SphereCentreFit::center)
+      .def_readonly("residuals", &SphereCentreFit::residuals)
+      .def_readonly("rms", &SphereCentreFit::rms)
+      .def_readonly("iterations", &SphereCentreFit::iterations)
+      .def_readonly("converged", &SphereCentreFit::converged);
+  m.def("fit_sphere_centre", &FitSphereCentre, py::arg("points"), py::arg("radius"), py::arg("start"),
+        py::arg("max_iterations") = 50, py::arg("tolerance") = 1e-12);
+
   m.def("table_points", &TablePoints, py::arg("dataset"), py::arg("values"), py::arg("indices"),
         py::call_guard<py::gil_scoped_release>());
 

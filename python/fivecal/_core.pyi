@@ -339,6 +339,16 @@ class SphereTestResult:
 
 def sphere_points(rings: Sequence[tuple[float, int]] = ..., pole: np.ndarray = ...) -> np.ndarray: ...
 def fit_sphere(points: np.ndarray, max_iterations: int = 50, tolerance: float = 1e-13) -> SphereFit: ...
+
+class SphereCentreFit:
+    center: np.ndarray
+    residuals: np.ndarray
+    rms: float
+    iterations: int
+    converged: bool
+
+def fit_sphere_centre(points: np.ndarray, radius: float, start: np.ndarray, max_iterations: int = 50,
+                      tolerance: float = 1e-12) -> SphereCentreFit: ...
 def table_points(dataset: Dataset, values: dict, indices: Sequence[int]) -> np.ndarray: ...
 def sphere_test(dataset: Dataset, sphere: str, values: dict) -> SphereTestResult: ...
 def sphere_sensitivity(setup: Dataset, plan_json: str, sphere: str, names: Sequence[str], values: dict = ...,
@@ -388,3 +398,34 @@ def trt_joints(machine: Machine, kins: str, commands: np.ndarray) -> np.ndarray:
 def trt_commands(machine: Machine, kins: str, joints: np.ndarray) -> np.ndarray: ...
 def trt_fit(machine: Machine, kins: str, theta: np.ndarray, poses: np.ndarray,
             held: dict = ...) -> dict: ...
+
+# ---- double ball bar (cpp/bindings/dbb.cc; only what is stubbed so far) ----
+class CircularTestResult:
+    nominal_radius: float
+    runs: list
+    hysteresis: float
+    has_hysteresis: bool
+    diagnosis: object
+    cyclic_pitch1: float
+    cyclic_pitch2: float
+    cyclic_pitches_tried1: int
+    cyclic_pitches_tried2: int
+
+def circular_test(runs: Sequence[tuple[np.ndarray, np.ndarray, int]], radius: float, feed: float = 0.0,
+                  reversal_spikes: bool = True, spike_width: float = 3.0, lateral_play: bool = True,
+                  straightness: bool = True, radial_play: bool = True, cyclic_pitch1: float = 0.0,
+                  cyclic_pitch2: float = 0.0, significance: float = 3.0, search_cyclic_pitch1: bool = False,
+                  search_cyclic_pitch2: bool = False) -> CircularTestResult: ...
+
+class WangFourPoint:
+    singular_values: np.ndarray
+    rank: int
+    null_space: np.ndarray
+    estimable: list[int]
+    solved: bool
+    values: np.ndarray
+
+def wang_four_point(sensitivity: np.ndarray, scale: np.ndarray,
+                    readings: Optional[np.ndarray] = None) -> WangFourPoint: ...
+def bar_length_commands(machine: Machine, tool_ball: np.ndarray, table_ball: np.ndarray, length: float,
+                        poses: np.ndarray) -> np.ndarray: ...

@@ -81,24 +81,26 @@ def visit_groups(plan_or_dataset) -> List[int]:
 
 def rotary_directions(indexations: Sequence[Mapping[str, float]], axes: Iterable[str] = "ABC",
                       start: Optional[Mapping[str, int]] = None) -> List[Dict[str, int]]:
-    """Last-move direction (+1/-1) of each rotary axis at each indexation,
-    visited in order (an axis that does not move keeps its direction; +1
-    before the first move unless ``start`` says otherwise)."""
-    axes = [a for a in axes]
+    """Last-move direction (+1/-1) of each rotary axis of ``axes`` at each
+    indexation, visited in order: one dict per indexation with every axis of
+    ``axes``. An indexation that does not name an axis holds it at 0, the
+    command a plan writes for it, so going back to 0 is a move like any
+    other. An axis that does not move keeps its direction; ``start`` gives
+    the directions before the first indexation (default +1: the axes were
+    brought to 0 by positive moves)."""
+    axes = list(axes)
     prev = {a: 0.0 for a in axes}
     dirs = {a: int((start or {}).get(a, 1)) for a in axes}
     out = []
     for ix in indexations:
         for a in axes:
-            if a not in ix:
-                continue
-            v = float(ix[a])
+            v = float(ix.get(a, 0.0))
             if v > prev[a]:
                 dirs[a] = 1
             elif v < prev[a]:
                 dirs[a] = -1
             prev[a] = v
-        out.append({a: dirs[a] for a in axes if a in ix})
+        out.append(dict(dirs))
     return out
 
 

@@ -11,6 +11,7 @@
 #include "test_files.h"
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -28,6 +29,7 @@
 #include "fivecal/procedures/circular_test.h"
 #include "fivecal/observations/dataset.h"
 #include "fivecal/procedures/dbb_four_step.h"
+#include "fivecal/procedures/dbb_setup.h"
 #include "fivecal/solve/identify.h"
 #include "fivecal/model/machine.h"
 #include "fivecal/observations/simulate.h"
@@ -593,6 +595,139 @@ TEST(CircularTest, OvershootArcsAreRemoved) {
     EXPECT_NEAR(a.diagnosis.Get(b.diagnosis.names[i]), b.diagnosis.values[i], 1e-12) << b.diagnosis.names[i];
   // A run without overshoot is kept whole.
   EXPECT_EQ(TrimOvershoot(data).removed_start + TrimOvershoot(data).removed_end, 0);
+}
+
+TEST(CircularTest, SearchFindsTheCyclicPitchAndTheGateRefusesChance) {
+  const double R = 100, sigma = 0.0003;
+  auto base = [&](double deg, int s) {
+    const double phi = deg * kPi / 180, x1 = R * std::cos(phi), x2 = R * std::sin(phi);
+    return Eigen::Vector2d(6e-6 * x1 - 5e-6 * x2 - 0.0006 * s * SgnD(std::sin(phi)),
+                           -3e-6 * x2 + 0.0005 * s * SgnD(std::cos(phi)));
+  };
+  auto cyc = [&](double deg, int s) {
+    const double x2 = R * std::sin(deg * kPi / 180);
+    return Eigen::Vector2d(base(deg, s) + Eigen::Vector2d(0, 0.003 * std::cos(2 * kPi * x2 / 8.0 + 0.7)));
+  };
+  CircularDiagnosisOptions o;
+  o.search_cyclic_pitch2 = true;
+  const CircularTestResult found =
+      AnalyzeCircularTest({ErrorRun(-1, R, cyc, sigma, 31), ErrorRun(1, R, cyc, sigma, 32)}, R, 0, o);
+  EXPECT_NEAR(found.cyclic_pitch2, 8.0, 8.0 * 2e-3);
+  EXPECT_EQ(found.cyclic_pitch1, 0.0);
+  EXPECT_GT(found.cyclic_pitches_tried2, 100);
+  EXPECT_EQ(found.cyclic_pitches_tried1, 0);
+  const CircularDiagnosis& d = found.diagnosis;
+  ASSERT_TRUE(d.Has("cyclic_error.2.cos"));
+  EXPECT_NEAR(std::hypot(d.Get("cyclic_error.2.cos"), d.Get("cyclic_error.2.sin")), 0.003, 1e-4);
+  EXPECT_EQ(d.ranking[0], "cyclic_error.2");
+  // nothing periodic: the best of the pitches tried does not clear the
+  // Bonferroni threshold, and the report says so
+  o.search_cyclic_pitch1 = true;
+  const CircularTestResult quiet =
+      AnalyzeCircularTest({ErrorRun(-1, R, base, sigma, 33), ErrorRun(1, R, base, sigma, 34)}, R, 0, o);
+  EXPECT_EQ(quiet.cyclic_pitch1, 0.0);
+  EXPECT_EQ(quiet.cyclic_pitch2, 0.0);
+  EXPECT_FALSE(quiet.diagnosis.Has("cyclic_error.1.cos"));
+  int gated = 0;
+  for (const std::string& s : quiet.diagnosis.not_significant)
+    gated += s.rfind("cyclic_error.", 0) == 0 && s.find("searched among") != std::string::npos;
+  EXPECT_EQ(gated, 2);
+  // too sparse along the axis for any pitch below R/2
+  CircularRun sparse;
+  sparse.angles = Eigen::VectorXd::LinSpaced(45, 0, 352);
+  sparse.readings = Eigen::VectorXd::Zero(45);
+  try {
+    AnalyzeCircularTest({sparse}, R, 0, o);
+    ADD_FAILURE() << "no throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cyclic_pitch auto"), std::string::npos) << e.what();
+  }
+}
+
+TEST(WangFourPoint, SaysWhatTheFourPointsCannotSee) {
+  // Columns 1..3 symmetric (rows 0 = 3, 1 = 2), column 0 antisymmetric: the
+  // structure of the Wang path's diagonal readings (docs/dbb.md).
+  Eigen::MatrixXd S(4, 4);
+  S << 1.0, 0.3, -0.2, 0.5,
+      -0.5, 0.1, 0.4, -0.3,
+       0.5, 0.1, 0.4, -0.3,
+      -1.0, 0.3, -0.2, 0.5;
+  const Eigen::VectorXd scale = Eigen::Vector4d(0.01, 0.01, 0.01, 5e-5);
+  const Eigen::VectorXd r = Eigen::Vector4d(0.001, 0.002, 0.002, 0.001);
+  const WangFourPoint a = AnalyzeWangFourPoint(S, scale, &r);
+  EXPECT_EQ(a.rank, 3);
+  EXPECT_FALSE(a.solved);
+  ASSERT_EQ(a.null_space.cols(), 1);
+  const Eigen::VectorXd v = a.null_space.col(0);
+  EXPECT_NEAR((S * scale.asDiagonal() * v).norm(), 0.0, 1e-12);
+  EXPECT_GT(v.cwiseAbs().maxCoeff(), 0.0);
+  Eigen::Index at;
+  v.cwiseAbs().maxCoeff(&at);
+  EXPECT_GT(v[at], 0.0);  // signed: largest component positive
+  EXPECT_EQ(a.estimable, std::vector<int>({0}));
+  EXPECT_NEAR(a.singular_values[0], 1.0, 1e-15);
+  EXPECT_LT(a.singular_values[3], 1e-12);
+  // a regular system is solved exactly
+  Eigen::MatrixXd T = S;
+  T(0, 1) = 0.35;
+  const Eigen::Vector4d e(0.002, -0.001, 0.003, 2e-5);
+  const Eigen::VectorXd rt = T * e;
+  const WangFourPoint b = AnalyzeWangFourPoint(T, scale, &rt);
+  EXPECT_EQ(b.rank, 4);
+  ASSERT_TRUE(b.solved);
+  EXPECT_LT((b.values - e).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_EQ(b.estimable.size(), 4u);
+  const WangFourPoint c = AnalyzeWangFourPoint(T, scale);
+  EXPECT_FALSE(c.solved);
+  // bad input names the field
+  auto message = [](const Eigen::MatrixXd& s, const Eigen::VectorXd& sc, const Eigen::VectorXd* rr) {
+    try {
+      AnalyzeWangFourPoint(s, sc, rr);
+    } catch (const std::invalid_argument& ex) {
+      return std::string(ex.what());
+    }
+    return std::string("no throw");
+  };
+  Eigen::MatrixXd nan = S;
+  nan(2, 1) = std::nan("");
+  EXPECT_NE(message(nan, scale, nullptr).find("sensitivity[2][1]"), std::string::npos);
+  EXPECT_NE(message(S, Eigen::Vector3d(1, 1, 1), nullptr).find("scale"), std::string::npos);
+  EXPECT_NE(message(S, Eigen::Vector4d(1, 0, 1, 1), nullptr).find("scale[1]"), std::string::npos);
+  const Eigen::VectorXd r3 = Eigen::Vector3d(1, 2, 3);
+  EXPECT_NE(message(S, scale, &r3).find("readings"), std::string::npos);
+}
+
+TEST(BarLengthCommands, MoveTheToolBallAlongTheBar) {
+  // c600u: linear axes on the tool side; hu40t: X on the workpiece side.
+  for (const char* name : {"c600u.json", "hu40t.json"}) {
+    const Machine m = Machine::FromJson(MachineJson(name).dump());
+    const Eigen::Vector3d tool(0, 0, 100), table(30, -20, 40);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-60, 60);
+    Eigen::MatrixXd poses(6, m.num_axes());
+    for (int i = 0; i < poses.rows(); ++i)
+      for (int k = 0; k < m.num_axes(); ++k) poses(i, k) = m.axis(k).name == 'S' ? 0.0 : u(rng);
+    const Eigen::MatrixXd out = BarLengthCommands(m, tool, table, 118.5, poses);
+    for (int i = 0; i < poses.rows(); ++i) {
+      const Eigen::Vector3d before = NominalToolBallInWorkpiece(m, poses.row(i).transpose(), tool);
+      const Eigen::Vector3d after = NominalToolBallInWorkpiece(m, out.row(i).transpose(), tool);
+      EXPECT_NEAR((after - table).norm(), 118.5, 1e-10) << name;
+      // along the bar: the ball stays on the line from the table ball
+      EXPECT_NEAR((after - table).normalized().cross((before - table).normalized()).norm(), 0.0, 1e-12) << name;
+      for (int k = 0; k < m.num_axes(); ++k)
+        if (m.axis(k).rotary()) EXPECT_EQ(out(i, k), poses(i, k)) << name;
+    }
+    EXPECT_THROW(BarLengthCommands(m, tool, table, 0.0, poses), std::invalid_argument);
+    EXPECT_THROW(BarLengthCommands(m, tool, table, 100.0, poses.leftCols(2)), std::invalid_argument);
+    Eigen::MatrixXd bad = poses;
+    bad(1, 0) = std::nan("");
+    try {
+      BarLengthCommands(m, tool, table, 100.0, bad);
+      ADD_FAILURE() << "no throw";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("poses[1]"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(TraceHarmonics, RecoversCoefficients) {

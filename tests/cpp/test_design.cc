@@ -341,6 +341,42 @@ TEST(SphereTest, FitRecoversSphere) {
   EXPECT_THROW(FitSphere(flat), std::invalid_argument);
 }
 
+TEST(SphereTest, KnownRadiusCentreFromACap) {
+  // Five touches on a 40 deg cap: a free radius is poorly determined there,
+  // the known one pins the centre.
+  const Eigen::Vector3d c(80.2, 49.9, 60.05);
+  const double R = 15.5;
+  Eigen::MatrixXd P(5, 3);
+  const double th[5] = {0, 30, 40, 35, 20}, az[5] = {0, 0, 90, 200, 290};
+  for (int i = 0; i < 5; ++i) {
+    const double t = th[i] * M_PI / 180, a = az[i] * M_PI / 180;
+    P.row(i) = (c + R * Eigen::Vector3d(std::sin(t) * std::cos(a), std::sin(t) * std::sin(a), std::cos(t)))
+                   .transpose();
+  }
+  const SphereCentreFit f = FitSphereCentre(P, R, Eigen::Vector3d(80, 50, 60));
+  EXPECT_TRUE(f.converged);
+  EXPECT_NEAR((f.center - c).norm(), 0.0, 1e-10);
+  EXPECT_LT(f.rms, 1e-10);
+  auto message = [&](const Eigen::MatrixXd& pts, double r, const Eigen::Vector3d& start) {
+    try {
+      FitSphereCentre(pts, r, start);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("no throw");
+  };
+  EXPECT_NE(message(P.topRows(2), R, c).find("points: need at least 3"), std::string::npos);
+  Eigen::MatrixXd bad = P;
+  bad(2, 1) = std::nan("");
+  EXPECT_NE(message(bad, R, c).find("points[2]"), std::string::npos);
+  EXPECT_NE(message(P, 0.0, c).find("radius"), std::string::npos);
+  EXPECT_NE(message(P, R, Eigen::Vector3d(0, std::nan(""), 0)).find("start"), std::string::npos);
+  // three points on one line through the start: the centre is free about it
+  Eigen::MatrixXd line(3, 3);
+  line << 0, 0, 1, 0, 0, 2, 0, 0, -3;
+  EXPECT_NE(message(line, 2.0, Eigen::Vector3d::Zero()).find("do not determine the centre"), std::string::npos);
+}
+
 TEST(SphereTest, RigidErrorsLeaveTheSphereRound) {
   const json m = MachineJson("hu40t");
   const json art = {{"spheres", {{{"id", "P"}, {"center", {100.0, -50.0, 60.0}}, {"radius", 9.525}}}}};

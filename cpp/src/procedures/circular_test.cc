@@ -3,10 +3,13 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numeric>
 #include <sstream>
 #include <stdexcept>
+#include <tuple>
+#include <utility>
 
 #include "fivecal/procedures/circle_fit.h"
 
@@ -103,6 +106,20 @@ struct Interpolator {
   }
 };
 
+// [1, cos phi, sin phi, ..., cos K phi, sin K phi] at the angles (deg).
+Eigen::MatrixXd HarmonicBasis(const Eigen::VectorXd& angles_deg, int max_order) {
+  Eigen::MatrixXd A(angles_deg.size(), 2 * max_order + 1);
+  for (int i = 0; i < angles_deg.size(); ++i) {
+    const double phi = angles_deg[i] * kRad;
+    A(i, 0) = 1.0;
+    for (int k = 1; k <= max_order; ++k) {
+      A(i, 2 * k - 1) = std::cos(k * phi);
+      A(i, 2 * k) = std::sin(k * phi);
+    }
+  }
+  return A;
+}
+
 }  // namespace
 
 TrimmedRun TrimOvershoot(const CircularRun& run, double data_arc, double feed_in, double tolerance) {
@@ -184,7 +201,10 @@ bool CircularDiagnosis::Has(const std::string& name) const {
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
-CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, double R, double feed,
+namespace {
+
+// The analysis with the cyclic pitches as given in options (no search).
+CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, double R, double feed,
                                        const CircularDiagnosisOptions& options) {
   if (runs.empty() || runs.size() > 2)
     throw std::invalid_argument("circular test: give one or two runs (CW and CCW), got " +
@@ -464,6 +484,140 @@ CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, dou
     d.contribution[j] = contrib[j].first;
   }
   (void)feed;  // the feed only converts servo_mismatch to a time (dtau = l / v), done by callers
+  res.cyclic_pitch1 = o.cyclic_pitch1;
+  res.cyclic_pitch2 = o.cyclic_pitch2;
+  return res;
+}
+
+// The pitch (mm) of the strongest periodic error of plane axis `axis` and the
+// number of frequencies tried (options.search_cyclic_pitch1 in the header).
+std::pair<double, int> SearchCyclicPitch(const std::vector<CircularRun>& runs, double R, int axis, double feed,
+                                         const CircularDiagnosisOptions& options) {
+  std::vector<double> x, proj, rest;
+  double spacing = 0.0;
+  for (const CircularRun& r : runs) {
+    const Eigen::MatrixXd B = HarmonicBasis(r.angles, 8);
+    // minimum norm, so a run with fewer samples than shape terms leaves no remainder
+    const Eigen::VectorXd coef = B.completeOrthogonalDecomposition().solve(r.readings);
+    const Eigen::VectorXd res = r.readings - B * coef;
+    for (int i = 0; i < r.angles.size(); ++i) {
+      const double phi = r.angles[i] * kRad, p = axis == 1 ? std::cos(phi) : std::sin(phi);
+      if (i > 0) spacing = std::max(spacing, std::abs(R * p - x.back()));
+      x.push_back(R * p);
+      proj.push_back(p);
+      rest.push_back(res[i]);
+    }
+  }
+  const double p_min = 4.0 * spacing, p_max = R / 2.0;
+  if (!(p_min < p_max)) {
+    char buf[320];
+    std::snprintf(buf, sizeof buf,
+                  "cyclic_pitch auto: the samples are %.3g mm apart along the axis; too sparse to find a "
+                  "pitch below R/2 = %g mm (sample more densely or give the pitch)",
+                  spacing, p_max);
+    throw std::invalid_argument(buf);
+  }
+  // The grid numpy.arange(1/p_max, 1/p_min + df, df) builds: the same
+  // frequencies as the Python this replaced, so the same one wins a near tie.
+  const double df = 1.0 / (16.0 * R), f0 = 1.0 / p_max, f1 = 1.0 / p_min + df;
+  const int n_tried = static_cast<int>(std::ceil((f1 - f0) / df));
+  const double delta = (f0 + df) - f0;
+  const double two_pi = 2.0 * 3.14159265358979323846;
+  const size_t n = x.size();
+  double best = f0, power = -1.0;
+  for (int j = 0; j < n_tried; ++j) {
+    const double f = f0 + j * delta;
+    double cc = 0, ss = 0, cs = 0, cr = 0, sr = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const double arg = two_pi * (f * x[i]);
+      const double c = proj[i] * std::cos(arg), sn = proj[i] * std::sin(arg);
+      cc += c * c;
+      ss += sn * sn;
+      cs += c * sn;
+      cr += c * rest[i];
+      sr += sn * rest[i];
+    }
+    const double det = cc * ss - cs * cs;
+    const double pw = det > 0 ? (ss * cr * cr - 2 * cs * cr * sr + cc * sr * sr) / det : 0.0;
+    if (pw > power) {
+      power = pw;
+      best = f;
+    }
+  }
+  CircularDiagnosisOptions o = options;
+  o.search_cyclic_pitch1 = o.search_cyclic_pitch2 = false;
+  o.significance = 0.0;
+  double best_rms = std::numeric_limits<double>::infinity(), pitch = 1.0 / best;
+  // numpy.linspace(best - df, best + df, 9), as the Python this replaced
+  const double lo = best - df, step = ((best + df) - lo) / 8.0;
+  for (int i = 0; i < 9; ++i) {
+    const double f = i == 8 ? best + df : lo + i * step;
+    if (!(f > 0)) continue;
+    o.cyclic_pitch1 = axis == 1 ? 1.0 / f : 0.0;
+    o.cyclic_pitch2 = axis == 2 ? 1.0 / f : 0.0;
+    const double rms = AnalyzeGivenPitches(runs, R, feed, o).diagnosis.rms;
+    if (rms < best_rms) {
+      best_rms = rms;
+      pitch = 1.0 / f;
+    }
+  }
+  return {pitch, n_tried};
+}
+
+}  // namespace
+
+CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, double R, double feed,
+                                       const CircularDiagnosisOptions& options) {
+  const bool search[2] = {options.search_cyclic_pitch1, options.search_cyclic_pitch2};
+  if (!search[0] && !search[1]) return AnalyzeGivenPitches(runs, R, feed, options);
+  if (runs.empty() || runs.size() > 2)
+    throw std::invalid_argument("circular test: give one or two runs (CW and CCW), got " +
+                                std::to_string(runs.size()));
+  if (!(R > 0) || !std::isfinite(R))
+    throw std::invalid_argument("circular test: nominal radius must be > 0 mm");
+  for (size_t k = 0; k < runs.size(); ++k) ValidateRun(runs[k], static_cast<int>(k));
+  CircularDiagnosisOptions o = options;
+  o.search_cyclic_pitch1 = o.search_cyclic_pitch2 = false;
+  double* pitch[2] = {&o.cyclic_pitch1, &o.cyclic_pitch2};
+  int tried[2] = {0, 0};
+  for (int k = 0; k < 2; ++k)
+    if (search[k]) std::tie(*pitch[k], tried[k]) = SearchCyclicPitch(runs, R, k + 1, feed, options);
+  CircularTestResult res = AnalyzeGivenPitches(runs, R, feed, o);
+  std::vector<std::string> dropped;
+  if (options.significance > 0) {
+    CircularDiagnosisOptions all = o;
+    all.significance = 0.0;
+    const CircularDiagnosis d = AnalyzeGivenPitches(runs, R, feed, all).diagnosis;
+    const double tail = std::erfc(options.significance / std::sqrt(2.0));
+    for (int k = 0; k < 2; ++k) {
+      if (!search[k]) continue;
+      const std::string c = "cyclic_error." + std::to_string(k + 1);
+      double z = 0.0;
+      if (d.Has(c + ".cos")) {
+        double v[2], s[2];
+        for (int j = 0; j < 2; ++j) {
+          const std::string nm = c + (j == 0 ? ".cos" : ".sin");
+          const size_t at = std::find(d.names.begin(), d.names.end(), nm) - d.names.begin();
+          v[j] = d.values[at];
+          s[j] = d.std[at];
+        }
+        z = std::hypot(v[0] / s[0], v[1] / s[1]);
+      }
+      const double need = std::sqrt(-2.0 * std::log(tail / tried[k]));
+      if (z < need) {
+        char buf[200];
+        std::snprintf(buf, sizeof buf, "%s (pitch %.4g mm searched among %d: %.2g sigma, %.2g needed)",
+                      c.c_str(), *pitch[k], tried[k], z, need);
+        dropped.push_back(buf);
+        *pitch[k] = 0.0;
+      }
+    }
+    if (!dropped.empty()) res = AnalyzeGivenPitches(runs, R, feed, o);
+  }
+  auto& ns = res.diagnosis.not_significant;
+  ns.insert(ns.end(), dropped.begin(), dropped.end());
+  res.cyclic_pitches_tried1 = tried[0];
+  res.cyclic_pitches_tried2 = tried[1];
   return res;
 }
 
@@ -479,16 +633,7 @@ Eigen::MatrixXd TraceHarmonics(const Eigen::VectorXd& angles_deg, const Eigen::V
   for (int i = 0; i < n; ++i)
     if (!std::isfinite(angles_deg[i]) || !std::isfinite(values[i]))
       throw std::invalid_argument("trace harmonics: sample " + std::to_string(i) + " is not finite");
-  Eigen::MatrixXd A(n, p);
-  for (int i = 0; i < n; ++i) {
-    const double phi = angles_deg[i] * kRad;
-    A(i, 0) = 1.0;
-    for (int k = 1; k <= max_order; ++k) {
-      A(i, 2 * k - 1) = std::cos(k * phi);
-      A(i, 2 * k) = std::sin(k * phi);
-    }
-  }
-  const Eigen::VectorXd x = A.colPivHouseholderQr().solve(values);
+  const Eigen::VectorXd x = HarmonicBasis(angles_deg, max_order).colPivHouseholderQr().solve(values);
   Eigen::MatrixXd out = Eigen::MatrixXd::Zero(max_order + 1, 2);
   out(0, 0) = x[0];
   for (int k = 1; k <= max_order; ++k) out.row(k) << x[2 * k - 1], x[2 * k];

@@ -125,6 +125,55 @@ SphereFit FitSphere(const Eigen::MatrixXd& P, int max_iterations, double toleran
   return f;
 }
 
+SphereCentreFit FitSphereCentre(const Eigen::MatrixXd& P, double radius, const Eigen::Vector3d& start,
+                                int max_iterations, double tolerance) {
+  const std::string w = "fit_sphere_centre";
+  const int n = static_cast<int>(P.rows());
+  if (P.cols() != 3) throw std::invalid_argument(w + ": points must be N x 3");
+  if (n < 3)
+    throw std::invalid_argument(w + ": points: need at least 3 for a centre of known radius, got " +
+                                std::to_string(n));
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) RequireFinite(P(i, c), w + ": points[" + std::to_string(i) + "]");
+  if (!(radius > 0) || !std::isfinite(radius))
+    throw std::invalid_argument(w + ": radius must be a finite length > 0 mm");
+  for (int c = 0; c < 3; ++c) RequireFinite(start[c], w + ": start");
+  if (max_iterations < 1) throw std::invalid_argument(w + ": max_iterations must be >= 1");
+  if (!(tolerance > 0)) throw std::invalid_argument(w + ": tolerance must be > 0 mm");
+  SphereCentreFit f;
+  f.center = start;
+  Eigen::MatrixXd J(n, 3);
+  Eigen::VectorXd e(n);
+  auto residuals = [&](bool jac) {
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector3d d = P.row(i).transpose() - f.center;
+      const double dist = d.norm();
+      if (jac && !(dist > 0))
+        throw std::invalid_argument(w + ": points[" + std::to_string(i) +
+                                    "] sits on the centre; the points do not determine it");
+      e[i] = dist - radius;
+      if (jac) J.row(i) = -(d / dist).transpose();
+    }
+  };
+  for (f.iterations = 0; f.iterations < max_iterations;) {
+    residuals(true);
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(J);
+    if (qr.rank() < 3)
+      throw std::invalid_argument(w + ": points do not determine the centre (all on one line through it)");
+    const Eigen::Vector3d step = qr.solve(-e);
+    f.center += step;
+    ++f.iterations;
+    if (step.cwiseAbs().maxCoeff() < tolerance) {
+      f.converged = true;
+      break;
+    }
+  }
+  residuals(false);
+  f.residuals = e;
+  f.rms = std::sqrt(e.squaredNorm() / n);
+  return f;
+}
+
 Eigen::MatrixXd TablePoints(const Dataset& ds, const std::map<std::string, double>& values,
                             const std::vector<int>& indices) {
   const Machine& m = ds.machine();

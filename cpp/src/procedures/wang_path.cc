@@ -1,7 +1,9 @@
 #include "fivecal/procedures/wang_path.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -177,6 +179,54 @@ WangPath ComputeWangPath(const Machine& m, const WangPathOptions& o) {
     P.max_circle_error = std::max(P.max_circle_error, (B - target).norm());
   }
   return P;
+}
+
+WangFourPoint AnalyzeWangFourPoint(const Eigen::MatrixXd& S, const Eigen::VectorXd& scale,
+                                   const Eigen::VectorXd* readings) {
+  const std::string w = "wang four-point";
+  const Eigen::Index m = S.rows(), p = S.cols();
+  if (m < 1 || p < 1) throw std::invalid_argument(w + ": sensitivity is empty");
+  for (Eigen::Index i = 0; i < m; ++i)
+    for (Eigen::Index j = 0; j < p; ++j)
+      if (!std::isfinite(S(i, j)))
+        throw std::invalid_argument(w + ": sensitivity[" + std::to_string(i) + "][" + std::to_string(j) +
+                                    "] is not finite");
+  if (scale.size() != p)
+    throw std::invalid_argument(w + ": scale has " + std::to_string(scale.size()) + " entries, the sensitivity " +
+                                std::to_string(p) + " columns (one per error)");
+  for (Eigen::Index j = 0; j < p; ++j)
+    if (!(scale[j] > 0) || !std::isfinite(scale[j]))
+      throw std::invalid_argument(w + ": scale[" + std::to_string(j) + "] must be a finite size > 0");
+  if (readings) {
+    if (readings->size() != m)
+      throw std::invalid_argument(w + ": readings has " + std::to_string(readings->size()) +
+                                  " entries, the sensitivity " + std::to_string(m) + " rows (one per angle)");
+    for (Eigen::Index i = 0; i < m; ++i)
+      if (!std::isfinite((*readings)[i]))
+        throw std::invalid_argument(w + ": readings[" + std::to_string(i) + "] is not finite");
+  }
+  const Eigen::MatrixXd Ss = S * scale.asDiagonal();
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Ss, Eigen::ComputeFullV);
+  const Eigen::VectorXd sv = svd.singularValues();
+  WangFourPoint out;
+  const double top = sv.size() ? sv[0] : 0.0;
+  const double tol = static_cast<double>(std::max(m, p)) * std::numeric_limits<double>::epsilon() * 1e6 * top;
+  for (Eigen::Index k = 0; k < sv.size(); ++k) out.rank += sv[k] > tol;
+  out.singular_values = top > 0 ? Eigen::VectorXd(sv / top) : Eigen::VectorXd(sv);
+  out.null_space = svd.matrixV().rightCols(p - out.rank);
+  for (Eigen::Index k = 0; k < out.null_space.cols(); ++k) {
+    Eigen::Index at;
+    out.null_space.col(k).cwiseAbs().maxCoeff(&at);
+    if (out.null_space(at, k) < 0) out.null_space.col(k) *= -1.0;
+  }
+  for (Eigen::Index j = 0; j < p; ++j)
+    if (out.null_space.cols() == 0 || out.null_space.row(j).cwiseAbs().maxCoeff() < 1e-6)
+      out.estimable.push_back(static_cast<int>(j));
+  if (readings && out.rank == p) {
+    out.values = S.colPivHouseholderQr().solve(*readings);
+    out.solved = true;
+  }
+  return out;
 }
 
 }  // namespace fivecal

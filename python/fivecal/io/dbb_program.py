@@ -41,6 +41,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
+from .. import _core
 from ..machine import Machine, RadiansWarning
 from . import nc_options as O
 
@@ -168,7 +169,6 @@ class _Bar:
         self.tool = np.asarray(entry["tool_ball"], float)
         self.table = np.asarray(entry["table_ball"], float)
         self.length = float(entry["length"])
-        self.lin = [a for a in "XYZ" if a in machine.axis_names]
 
     def ball(self, Q: Dict[str, np.ndarray]) -> np.ndarray:
         with warnings.catch_warnings():
@@ -182,22 +182,13 @@ class _Bar:
 
     def restore(self, Q: Dict[str, np.ndarray], short: float = 0.0) -> Dict[str, np.ndarray]:
         """Q (axis -> array) with the linear axes moved along the bar so that
-        it is ``short`` mm shorter than nominal at every pose."""
-        Q = {a: np.array(v, float) for a, v in Q.items()}
-        for _ in range(4):
-            p = self.ball(Q)
-            cols = [self.ball({**Q, a: Q[a] + 1.0}) - p for a in self.lin]
-            J = np.stack(cols, axis=2)  # (N, 3, n_lin): d ball / d linear command
-            d = p - self.table
-            r = np.linalg.norm(d, axis=1)
-            err = r - (self.length - short)
-            if np.abs(err).max() < 1e-12:
-                break
-            dp = -(err / r)[:, None] * d
-            step = np.einsum("nij,nj->ni", np.linalg.pinv(J), dp)
-            for k, a in enumerate(self.lin):
-                Q[a] = Q[a] + step[:, k]
-        return Q
+        it is ``short`` mm shorter than nominal at every pose (C++
+        ``BarLengthCommands``)."""
+        names = self.m.axis_names
+        n = len(next(iter(Q.values())))
+        q = np.column_stack([np.broadcast_to(np.asarray(Q.get(a, 0.0), float), (n,)) for a in names])
+        out = _core.bar_length_commands(self.m._core, self.tool, self.table, self.length - short, q)
+        return {a: np.array(out[:, names.index(a)]) for a in Q}
 
 
 def _interp(Q: Dict[str, np.ndarray], i: np.ndarray, t: np.ndarray) -> Dict[str, np.ndarray]:

@@ -717,8 +717,9 @@ class FourPointAnalysis:
     analysed instead of trusted. ``sensitivity`` (4 x 4): reading change (mm)
     per unit error at each diagonal angle; ``singular_values`` of it with its
     columns scaled by ``scale`` (a plausible size of each error);
-    ``rank``; ``null_space``: error combinations (per unit of ``scale``)
-    the four readings cannot see; ``estimable``: the errors the four points
+    ``rank``; ``null_space``: error combinations (per unit of ``scale``,
+    each signed so that its largest component is positive) the four
+    readings cannot see; ``estimable``: the errors the four points
     do determine; ``values``: the four-point solution, or None when the system
     is singular (then nothing but ``estimable`` is reported)."""
 
@@ -755,7 +756,8 @@ def wang_four_point(machine: Union[Machine, Mapping], readings: Optional[Mapping
     ``S e = r`` with ``S`` the patterns at the diagonal angles. ``readings``:
     tracking angle (deg) -> DBB reading (mm) at those angles; without them
     only the analysis is returned. ``scale``: plausible size of each error
-    (default 10 µm, 50 µrad) to make the rank judgement unit-free."""
+    (default 10 µm, 50 µrad) to make the rank judgement unit-free. The
+    analysis is the core's (``wang_path.h``, ``AnalyzeWangFourPoint``)."""
     angles = np.asarray(angles, float)
     scale = dict(scale or {})
     sc = np.array([scale.get(n, 50e-6 if n.startswith(("EA", "EB", "EC")) else 0.01) for n in errors])
@@ -769,16 +771,11 @@ def wang_four_point(machine: Union[Machine, Mapping], readings: Optional[Mapping
                 raise ValueError(f"wang_four_point: tracking angle {a:g} deg is not on the sampled path "
                                  f"({p.tracking[0]:g}-{p.tracking[-1]:g} deg, step of the path)")
             S[i, j] = p.readings[k[0]] / sc[j]
-    _, sv, vt = np.linalg.svd(S * sc)
-    tol = max(S.shape) * np.finfo(float).eps * 1e6 * sv[0]
-    rank = int((sv > tol).sum())
-    null = vt[rank:].T
-    estimable = [n for j, n in enumerate(errors) if np.abs(null[j]).max(initial=0.0) < 1e-6]
-    values = None
-    if readings is not None and rank == len(errors):
-        r = np.array([float(readings[a]) for a in angles])
-        values = dict(zip(errors, np.linalg.lstsq(S, r, rcond=None)[0].tolist()))
-    return FourPointAnalysis(angles, tuple(errors), S, sc, sv / sv[0], rank, null, estimable, values)
+    r = None if readings is None else np.array([float(readings[a]) for a in angles])
+    a = _core.wang_four_point(S, sc, r)
+    values = dict(zip(errors, np.asarray(a.values).tolist())) if a.solved else None
+    return FourPointAnalysis(angles, tuple(errors), S, sc, np.asarray(a.singular_values), int(a.rank),
+                             np.asarray(a.null_space), [errors[j] for j in a.estimable], values)
 
 
 # --------------------------------------------------------------------------
@@ -1043,96 +1040,26 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
         pitches = list(cyclic_pitch)
         if len(pitches) != 2:
             raise ValueError(f"cyclic_pitch: one pitch or one per plane axis (2), got {len(pitches)}")
+    search = [False, False]
     for i, p in enumerate(pitches):
         if isinstance(p, str):
             if p.strip().lower() != "auto":
                 raise ValueError(f"cyclic_pitch: {p!r}; give mm or 'auto'")
-            pitches[i] = "auto"
+            search[i], pitches[i] = True, 0.0
         else:
             pitches[i] = float(p or 0.0)
-    opts = dict(reversal_spikes=bool(reversal_spikes), spike_width=float(spike_width),
-                lateral_play=bool(lateral_play), straightness=bool(straightness), radial_play=bool(radial_play))
     packed = [(r.angles, r.readings, int(r.direction)) for r in runs]
-
-    def fit(p1, p2, sig):
-        return _core.circular_test(packed, float(radius), float(feed or 0.0), cyclic_pitch1=p1, cyclic_pitch2=p2,
-                                   significance=sig, **opts)
-
-    searched = {}
-    for k in (1, 2):
-        if pitches[k - 1] == "auto":
-            pitches[k - 1], searched[k] = _search_cyclic_pitch(runs, float(radius), k, fit)
-    core = fit(pitches[0], pitches[1], float(significance))
-    dropped = []
-    if searched and significance > 0:
-        # The best of many pitches passes a fixed threshold by chance far more
-        # often than one pitch given in advance: Bonferroni over the pitches tried.
-        # z of the searched term with every diagnosis in (the thresholded fit may have dropped it)
-        d = fit(pitches[0], pitches[1], 0.0).diagnosis
-        vals = dict(zip(d.names, np.asarray(d.values)))
-        sds = dict(zip(d.names, np.asarray(d.std)))
-        for k, n_tried in searched.items():
-            c, sn = f"cyclic_error.{k}.cos", f"cyclic_error.{k}.sin"
-            tail = math.erfc(significance / math.sqrt(2.0))
-            need = math.sqrt(-2.0 * math.log(tail / n_tried))
-            z = math.hypot(vals[c] / sds[c], vals[sn] / sds[sn]) if c in vals else 0.0
-            if z < need:
-                dropped.append(f"cyclic_error.{k} (pitch {pitches[k - 1]:.4g} mm searched among {n_tried}: "
-                               f"{z:.2g} sigma, {need:.2g} needed)")
-                pitches[k - 1] = 0.0
-        if dropped:
-            core = fit(pitches[0], pitches[1], float(significance))
+    core = _core.circular_test(packed, float(radius), float(feed or 0.0), cyclic_pitch1=pitches[0],
+                               cyclic_pitch2=pitches[1], significance=float(significance),
+                               reversal_spikes=bool(reversal_spikes), spike_width=float(spike_width),
+                               lateral_play=bool(lateral_play), straightness=bool(straightness),
+                               radial_play=bool(radial_play), search_cyclic_pitch1=search[0],
+                               search_cyclic_pitch2=search[1])
     name = machine.name if isinstance(machine, Machine) else machine
     res = CircularResult(core, plane, feed, runs, trimmed, name, date)
-    res.not_significant += dropped
-    res.cyclic_pitch = tuple(pitches)
-    res.cyclic_pitch_searched = {k: (pitches[k - 1] or None) for k in searched}
+    res.cyclic_pitch = (float(core.cyclic_pitch1), float(core.cyclic_pitch2))
+    res.cyclic_pitch_searched = {k: (res.cyclic_pitch[k - 1] or None) for k in (1, 2) if search[k - 1]}
     return res
-
-
-def _search_cyclic_pitch(runs, radius: float, axis: int, fit) -> tuple:
-    """The pitch (mm) of the strongest periodic error of plane axis ``axis``
-    and the number of pitches tried. A periodogram of the readings, with the
-    low harmonics of the trace (the shape terms) removed, over pitches from
-    four sample spacings of the axis to R/2, evenly in 1/pitch at a step that
-    keeps the phase error over the diameter under a quarter turn; then the
-    full C++ fit refines the best one (least residual)."""
-    phis, resid, steps = [], [], []
-    for r in runs:
-        phi = np.radians(r.angles)
-        cols = [np.ones_like(phi)]
-        for k in range(1, 9):
-            cols += [np.cos(k * phi), np.sin(k * phi)]
-        B = np.column_stack(cols)
-        coef, *_ = np.linalg.lstsq(B, r.readings, rcond=None)
-        phis.append(phi)
-        resid.append(r.readings - B @ coef)
-        x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
-        steps.append(np.max(np.abs(np.diff(x))) if x.size > 1 else radius)
-    phi, res = np.concatenate(phis), np.concatenate(resid)
-    x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
-    proj = np.cos(phi) if axis == 1 else np.sin(phi)
-    p_min, p_max = 4.0 * max(steps), radius / 2.0
-    if not p_min < p_max:
-        raise ValueError(f"cyclic_pitch auto: the samples are {max(steps):.3g} mm apart along the axis; too "
-                         f"sparse to find a pitch below R/2 = {p_max:g} mm (sample more densely or give the pitch)")
-    dinv = 1.0 / (16.0 * radius)
-    inv = np.arange(1.0 / p_max, 1.0 / p_min + dinv, dinv)
-    best, power = None, -1.0
-    for chunk in np.array_split(inv, max(1, inv.size // 64)):
-        arg = 2 * np.pi * np.outer(chunk, x)
-        C, S = proj * np.cos(arg), proj * np.sin(arg)
-        cc, ss, cs = (C * C).sum(1), (S * S).sum(1), (C * S).sum(1)
-        cr, sr = C @ res, S @ res
-        det = cc * ss - cs * cs
-        pw = (ss * cr * cr - 2 * cs * cr * sr + cc * sr * sr) / np.where(det > 0, det, np.inf)
-        j = int(np.argmax(pw))
-        if pw[j] > power:
-            power, best = float(pw[j]), float(chunk[j])
-    fine = np.linspace(best - dinv, best + dinv, 9)
-    fine = fine[fine > 0]
-    rms = [fit(1.0 / f if axis == 1 else 0.0, 1.0 / f if axis == 2 else 0.0, 0.0).diagnosis.rms for f in fine]
-    return 1.0 / float(fine[int(np.argmin(rms))]), int(inv.size)
 
 
 @dataclass

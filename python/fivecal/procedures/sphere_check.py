@@ -101,22 +101,6 @@ def plan(machine: Union[Machine, Mapping], sphere: Mapping, *, tip_radius: float
                                    limits=limits)
 
 
-def _centre(points: np.ndarray, start: np.ndarray, radius: float) -> np.ndarray:
-    """Least-squares centre of a sphere of known radius through ``points``
-    (Gauss-Newton from ``start``): a position's few touches on a cap leave a
-    free radius undetermined, the stylus-centre radius is known."""
-    c = start.astype(float).copy()
-    for _ in range(20):
-        d = points - c
-        r = np.linalg.norm(d, axis=1)
-        J = -d / r[:, None]
-        step = np.linalg.lstsq(J, -(r - radius), rcond=None)[0]
-        c += step
-        if np.abs(step).max() < 1e-12:
-            break
-    return c
-
-
 @dataclass
 class SphereCheck:
     """Result of :func:`evaluate` (mm, rad)."""
@@ -240,8 +224,8 @@ def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_styl
         idx = [i for i, kk in enumerate(key) if kk == k and obs[i].get("target") == sid]
         if len(idx) < 3:
             continue
-        before.append(_centre(Pn[idx], c0, R))
-        after.append(_centre(Pi[idx], c0, R))
+        before.append(sphere_test.fit_sphere_centre(Pn[idx], R, c0))
+        after.append(sphere_test.fit_sphere_centre(Pi[idx], R, c0))
         labels.append(", ".join(f"{a} {v:g}°" for a, v in zip(moved, k)))
     before, after = np.array(before), np.array(after)
 

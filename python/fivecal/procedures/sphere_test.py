@@ -28,8 +28,9 @@ from ..dataset import Dataset, dumps
 from ..machine import Machine
 from ..units import display_scale
 
-__all__ = ["THESIS_RINGS", "sphere_points", "sphere_plan", "SphereFit", "fit_sphere", "table_points",
-           "SphereTest", "sphere_test", "format_sphere_tests", "sensitivity_table", "format_sensitivity"]
+__all__ = ["THESIS_RINGS", "sphere_points", "sphere_plan", "SphereFit", "fit_sphere", "fit_sphere_centre",
+           "table_points", "SphereTest", "sphere_test", "format_sphere_tests", "sensitivity_table",
+           "format_sensitivity"]
 
 #: Thesis §6.3 point distribution (ISO 230-10-like): (latitude deg, points) rings.
 THESIS_RINGS = [(0.0, 12), (30.0, 8), (-30.0, 8), (60.0, 4), (90.0, 1)]
@@ -92,6 +93,24 @@ def fit_sphere(points) -> SphereFit:
     if P.ndim != 2 or P.shape[1] != 3:
         raise ValueError(f"points: expected shape (N, 3), got {P.shape}")
     return SphereFit._from_core(_core.fit_sphere(P))
+
+
+def fit_sphere_centre(points, radius: float, start) -> np.ndarray:
+    """Least-squares centre (3,) of a sphere of KNOWN ``radius`` (mm, e.g.
+    sphere + stylus ball) through (N >= 3, 3) points, by Gauss-Newton from
+    ``start`` (the nominal centre): a few touches on a cap leave a free
+    radius (:func:`fit_sphere`) undetermined, a known one needs three."""
+    P = np.atleast_2d(np.asarray(points, float))
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ValueError(f"points: expected shape (N, 3), got {P.shape}")
+    c0 = np.asarray(start, float)
+    if c0.shape != (3,):
+        raise ValueError(f"start: expected 3 coordinates, got shape {c0.shape}")
+    f = _core.fit_sphere_centre(P, float(radius), c0)
+    if not f.converged:
+        raise ValueError(f"fit_sphere_centre: Gauss-Newton did not converge in {f.iterations} iterations "
+                         "(points far from a sphere of that radius, or start far from the centre)")
+    return np.asarray(f.center)
 
 
 def table_points(dataset: Dataset, values=None, indices: Optional[Iterable[int]] = None) -> np.ndarray:

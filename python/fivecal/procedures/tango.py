@@ -32,6 +32,9 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
+# the design layer's rule (an axis an indexation does not name is at 0), re-exported
+from ..design import rotary_directions
+
 __all__ = [
     "HU40T_MACHINE", "KX8_MACHINE", "hu40t_machine", "kx8_machine",
     "TABLE_4_2", "SCALE_BAR_LENGTH", "SCALE_BAR_BALL_RADIUS", "TIP_RADIUS", "PROBE_SIGMA",
@@ -190,28 +193,6 @@ def _facet_basis(normal) -> Tuple[np.ndarray, np.ndarray]:
 # visits of a facet land on different points of the small probed area.
 _SPREAD_PATTERN = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0),
                    (0.7, 0.7), (-0.7, -0.7), (0.7, -0.7), (-0.7, 0.7)]
-
-
-def rotary_directions(indexations: Sequence[Mapping[str, float]], axes: Iterable[str],
-                      start: Optional[Mapping[str, int]] = None) -> List[Dict[str, int]]:
-    """Last-move direction (+1/-1) of each rotary axis at each indexation, for
-    indexations visited in the given order.  An axis that does not move keeps
-    its previous direction; ``start`` gives the directions before the first
-    one (default +1: the axes were brought to zero by positive moves)."""
-    axes = list(axes)
-    prev = {a: 0.0 for a in axes}
-    dirs = {a: int((start or {}).get(a, 1)) for a in axes}
-    out = []
-    for ix in indexations:
-        for a in axes:
-            v = float(ix.get(a, 0.0))
-            if v > prev[a]:
-                dirs[a] = 1
-            elif v < prev[a]:
-                dirs[a] = -1
-            prev[a] = v
-        out.append(dict(dirs))
-    return out
 
 
 # --------------------------------------------------------------------------

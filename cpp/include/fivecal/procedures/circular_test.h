@@ -108,6 +108,28 @@ struct CircularDiagnosisOptions {
   bool radial_play = true;
   // Cyclic error pitch per axis (mm); 0 = not fitted.
   double cyclic_pitch1 = 0.0, cyclic_pitch2 = 0.0;
+  // Search the pitch of axis k instead of taking cyclic_pitchk (ignored then):
+  //  * the readings of each run less their least-squares harmonics 0..8 (the
+  //    basis of TraceHarmonics: the shape terms), pooled;
+  //  * a periodogram of that remainder against proj_k (cos, sin)(2 pi x_k f),
+  //    x_k = R (cos phi | sin phi), proj_k = cos phi | sin phi, the power of
+  //    the two-column least-squares fit, over f from 2 / R (pitch R/2) to
+  //    1 / (4 h) (h the largest sample spacing along the axis in any run),
+  //    evenly at df = 1 / (16 R), which keeps the phase error over the
+  //    diameter under a quarter turn; the first strongest f wins;
+  //  * the full diagnosis (significance 0, the other axis' cyclic error out)
+  //    at 9 frequencies evenly over f +- df: the least residual rms gives the
+  //    pitch.
+  // The best of many pitches passes a fixed threshold by chance far more
+  // often than one pitch given in advance, so with significance > 0 a found
+  // pitch is kept only when the cyclic error's z = hypot(a / s_a, b / s_b)
+  // (fit with every diagnosis in) reaches the Rayleigh tail
+  // sqrt(-2 ln(erfc(significance / sqrt 2) / n)), n the frequencies tried
+  // (Bonferroni); otherwise it is dropped (pitch 0) and listed in
+  // not_significant as "cyclic_error.k (pitch P mm searched among n: z
+  // sigma, need needed)". Throws std::invalid_argument when the samples are
+  // too sparse for any pitch below R / 2.
+  bool search_cyclic_pitch1 = false, search_cyclic_pitch2 = false;
   // An extended diagnosis whose value is below this many standard
   // uncertainties is dropped (least significant first, refitting after
   // each) and listed in not_significant; 0 keeps every one.
@@ -166,6 +188,11 @@ struct CircularTestResult {
   double hysteresis = 0.0;  // H (mm); 0 with one run
   bool has_hysteresis = false;
   CircularDiagnosis diagnosis;
+  // The pitches (mm) the cyclic errors were fitted with, given or found (0 =
+  // none, also for a found pitch the significance gate dropped), and the
+  // number of frequencies the search of axis k tried (0 = not searched).
+  double cyclic_pitch1 = 0.0, cyclic_pitch2 = 0.0;
+  int cyclic_pitches_tried1 = 0, cyclic_pitches_tried2 = 0;
 };
 
 // runs: one or two (CW and CCW); throws std::invalid_argument naming the run

@@ -34,6 +34,26 @@ Eigen::Vector3d NominalTableBallInF(const Machine& m, const Eigen::VectorXd& cmd
 Eigen::VectorXd ToolBallCommands(const Machine& m, const Eigen::Vector3d& tool_ball,
                                  const Eigen::Vector3d& target, const Eigen::VectorXd& pose);
 
+// The nominal tool ball seen from the workpiece (the tool point of
+// kinematics.h with tip = tool_ball) at the axis commands `cmd`.
+Eigen::Vector3d NominalToolBallInWorkpiece(const Machine& m, const Eigen::VectorXd& cmd,
+                                           const Eigen::Vector3d& tool_ball);
+
+// Each pose (a row of `poses`, N x num_axes, mm / degrees) with its linear
+// axes, on either branch, moved so that the nominal balls are `length` apart,
+// the tool ball moving along the bar (the line from the table ball, workpiece
+// frame, through the tool ball). As in ToolBallCommands the tool ball is
+// affine in the linear commands once the rotary axes are fixed, so one
+// linear solve is exact (a second one removes rounding); with more than
+// three linear axes the smallest change of the commands is taken (minimum
+// norm). Throws std::invalid_argument naming the field for a length not
+// > 0, non-finite commands, a pose where the balls coincide (no bar
+// direction), or linear axes that cannot move the ball in three independent
+// directions.
+Eigen::MatrixXd BarLengthCommands(const Machine& m, const Eigen::Vector3d& tool_ball,
+                                  const Eigen::Vector3d& table_ball, double length,
+                                  const Eigen::MatrixXd& poses);
+
 }  // namespace fivecal
 
 #endif  // FIVECAL_DBB_SETUP_H_

@@ -61,6 +61,26 @@ struct SphereFit {
 // non-finite or coplanar/degenerate points.
 SphereFit FitSphere(const Eigen::MatrixXd& points, int max_iterations = 50, double tolerance = 1e-13);
 
+// Least-squares centre of a sphere of KNOWN radius (the stylus-centre
+// radius: sphere + stylus ball) through N >= 3 points (N x 3):
+//   min over c of sum_i (|P_i - c| - radius)^2,
+// Gauss-Newton from `start` (a nominal centre), stopping when no component
+// of a step exceeds `tolerance` (mm). A few touches on a cap leave a free
+// radius (FitSphere) undetermined; a known radius needs three. Throws
+// std::invalid_argument naming the field (points, radius, start) for
+// non-finite values, fewer than 3 points, a radius not > 0, or points that
+// do not determine the centre (all on one line through it, a point on it).
+struct SphereCentreFit {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  Eigen::VectorXd residuals;  // |P_i - c| - radius, mm
+  double rms = 0;
+  int iterations = 0;
+  bool converged = false;
+};
+
+SphereCentreFit FitSphereCentre(const Eigen::MatrixXd& points, double radius, const Eigen::Vector3d& start,
+                                int max_iterations = 50, double tolerance = 1e-12);
+
 // Stylus-ball centres (N x 3, workpiece frame) of the observations `indices`
 // of ds computed from their readings with the machine model `values` (machine
 // parameter name -> value, tip.x|y|z included; setup names such as facet.F3

@@ -30,6 +30,7 @@
 #define FIVECAL_WANG_PATH_H_
 
 #include <Eigen/Core>
+#include <vector>
 
 #include "fivecal/model/machine.h"
 
@@ -64,6 +65,35 @@ struct WangPath {
 // exactly two intersecting rotary axes on the workpiece side, or the circle
 // is not on the table ball's sphere.
 WangPath ComputeWangPath(const Machine& m, const WangPathOptions& options = {});
+
+// The paper's four-point extraction (Section 5.1: the readings where the
+// trace crosses the two diagonals, four equations for four errors) analysed
+// instead of trusted. The readings are linear in the errors, so the
+// equations are S e = r with S (m x p) the reading change (mm) per unit of
+// each error at the m tracking angles (the single-error patterns there).
+// With `scale` (p) a plausible size of each error, the judgement is made on
+// Ss = S diag(scale), unit-free:
+//   singular values of Ss, descending, divided by the largest;
+//   rank: those above max(m, p) eps 1e6 (of the largest);
+//   null space: the right singular vectors past the rank (p x (p - rank),
+//     per unit of scale), each signed so that its largest component is
+//     positive: error combinations the readings cannot see;
+//   estimable: the errors with no component above 1e-6 in the null space;
+//   values: the least-squares solution of S e = r, only with `readings` (m)
+//     and full column rank (rank == p); otherwise none.
+// Throws std::invalid_argument naming the field for non-finite entries, a
+// scale not > 0, or sizes that do not match.
+struct WangFourPoint {
+  Eigen::VectorXd singular_values;
+  int rank = 0;
+  Eigen::MatrixXd null_space;
+  std::vector<int> estimable;  // column indices of S
+  bool solved = false;
+  Eigen::VectorXd values;      // per error, in its unit (mm, rad), when solved
+};
+
+WangFourPoint AnalyzeWangFourPoint(const Eigen::MatrixXd& sensitivity, const Eigen::VectorXd& scale,
+                                   const Eigen::VectorXd* readings = nullptr);
 
 }  // namespace fivecal
 

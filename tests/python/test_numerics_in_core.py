@@ -1,0 +1,393 @@
+"""Numerics moved from Python into the C++ core (issue #29, item 2), each
+pinned to the Python it replaced: a copy of the old code lives here (only
+here), and the library's answer on representative inputs must equal it to
+about 1e-9 relative.
+
+* the cyclic-error pitch search of the planar circular test and its
+  Bonferroni gate (was ``dbb._search_cyclic_pitch`` and a block of
+  ``dbb.circular_test``; now ``AnalyzeCircularTest`` with a searched pitch);
+* the Wang four-point extraction's SVD (was ``dbb.wang_four_point``; now
+  ``AnalyzeWangFourPoint``);
+* the centre of a sphere of known radius (was ``sphere_check._centre``; now
+  ``FitSphereCentre`` beside ``FitSphere``);
+* the bar restored along its direction by the linear axes (was
+  ``dbb_program._Bar.restore``, Newton with ``pinv``; now ``BarLengthCommands``
+  beside ``ToolBallCommands``);
+* one ``rotary_directions`` for the design layer and TANGO, with one rule for
+  an axis an indexation does not name.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+import fivecal
+from fivecal import _core, design
+from fivecal.io import dbb_program
+from fivecal.procedures import dbb, sphere_check, sphere_test, tango
+
+MACHINES = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "machines")
+REL = 1e-9
+
+
+def _close(new, old, rel=REL, abs_=1e-12):
+    np.testing.assert_allclose(np.asarray(new, float), np.asarray(old, float), rtol=rel, atol=abs_)
+
+
+# ---------------------------------------------------------------------------
+# Cyclic pitch search and its significance gate (old Python, verbatim logic)
+# ---------------------------------------------------------------------------
+def _old_search_cyclic_pitch(runs, radius, axis, fit):
+    phis, resid, steps = [], [], []
+    for r in runs:
+        phi = np.radians(r.angles)
+        cols = [np.ones_like(phi)]
+        for k in range(1, 9):
+            cols += [np.cos(k * phi), np.sin(k * phi)]
+        B = np.column_stack(cols)
+        coef, *_ = np.linalg.lstsq(B, r.readings, rcond=None)
+        phis.append(phi)
+        resid.append(r.readings - B @ coef)
+        x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
+        steps.append(np.max(np.abs(np.diff(x))) if x.size > 1 else radius)
+    phi, res = np.concatenate(phis), np.concatenate(resid)
+    x = radius * (np.cos(phi) if axis == 1 else np.sin(phi))
+    proj = np.cos(phi) if axis == 1 else np.sin(phi)
+    p_min, p_max = 4.0 * max(steps), radius / 2.0
+    if not p_min < p_max:
+        raise ValueError(f"cyclic_pitch auto: the samples are {max(steps):.3g} mm apart along the axis; too "
+                         f"sparse to find a pitch below R/2 = {p_max:g} mm (sample more densely or give the pitch)")
+    dinv = 1.0 / (16.0 * radius)
+    inv = np.arange(1.0 / p_max, 1.0 / p_min + dinv, dinv)
+    best, power = None, -1.0
+    for chunk in np.array_split(inv, max(1, inv.size // 64)):
+        arg = 2 * np.pi * np.outer(chunk, x)
+        C, S = proj * np.cos(arg), proj * np.sin(arg)
+        cc, ss, cs = (C * C).sum(1), (S * S).sum(1), (C * S).sum(1)
+        cr, sr = C @ res, S @ res
+        det = cc * ss - cs * cs
+        pw = (ss * cr * cr - 2 * cs * cr * sr + cc * sr * sr) / np.where(det > 0, det, np.inf)
+        j = int(np.argmax(pw))
+        if pw[j] > power:
+            power, best = float(pw[j]), float(chunk[j])
+    fine = np.linspace(best - dinv, best + dinv, 9)
+    fine = fine[fine > 0]
+    rms = [fit(1.0 / f if axis == 1 else 0.0, 1.0 / f if axis == 2 else 0.0, 0.0).diagnosis.rms for f in fine]
+    return 1.0 / float(fine[int(np.argmin(rms))]), int(inv.size)
+
+
+def _old_auto(runs, radius, pitches, significance=3.0):
+    """The old circular_test's pitch handling on already trimmed runs:
+    (pitches, searched, final core result, dropped)."""
+    packed = [(r.angles, r.readings, int(r.direction)) for r in runs]
+
+    def fit(p1, p2, sig):
+        return _core.circular_test(packed, float(radius), 0.0, cyclic_pitch1=p1, cyclic_pitch2=p2,
+                                   significance=sig)
+
+    pitches = list(pitches)
+    searched = {}
+    for k in (1, 2):
+        if pitches[k - 1] == "auto":
+            pitches[k - 1], searched[k] = _old_search_cyclic_pitch(runs, float(radius), k, fit)
+    core = fit(pitches[0], pitches[1], float(significance))
+    dropped = []
+    if searched and significance > 0:
+        d = fit(pitches[0], pitches[1], 0.0).diagnosis
+        vals = dict(zip(d.names, np.asarray(d.values)))
+        sds = dict(zip(d.names, np.asarray(d.std)))
+        for k, n_tried in searched.items():
+            c, sn = f"cyclic_error.{k}.cos", f"cyclic_error.{k}.sin"
+            tail = math.erfc(significance / math.sqrt(2.0))
+            need = math.sqrt(-2.0 * math.log(tail / n_tried))
+            z = math.hypot(vals[c] / sds[c], vals[sn] / sds[sn]) if c in vals else 0.0
+            if z < need:
+                dropped.append(f"cyclic_error.{k} (pitch {pitches[k - 1]:.4g} mm searched among {n_tried}: "
+                               f"{z:.2g} sigma, {need:.2g} needed)")
+                pitches[k - 1] = 0.0
+        if dropped:
+            core = fit(pitches[0], pitches[1], float(significance))
+    return pitches, searched, core, dropped
+
+
+R = 100.0
+
+
+def _run(direction, seed, cyc1=None, cyc2=None, step=0.5, sigma=0.0003):
+    """A CCW (+1) or CW (-1) run with a little scale, squareness and backlash
+    and, optionally, a periodic error (amplitude, pitch, phase) per axis."""
+    n = int(round(360.0 / step))
+    deg = direction * step * np.arange(n)
+    phi = np.radians(deg)
+    x1, x2 = R * np.cos(phi), R * np.sin(phi)
+    v1, v2 = -direction * np.sign(np.round(np.sin(phi), 12)), direction * np.sign(np.round(np.cos(phi), 12))
+    e1 = 6e-6 * x1 - 5e-6 * x2 + 0.0006 * v1
+    e2 = -3e-6 * x2 + 0.0005 * v2
+    if cyc1:
+        a, p, ph = cyc1
+        e1 = e1 + a * np.cos(2 * np.pi * x1 / p + ph)
+    if cyc2:
+        a, p, ph = cyc2
+        e2 = e2 + a * np.cos(2 * np.pi * x2 / p + ph)
+    rng = np.random.default_rng(seed)
+    d = np.hypot(x1 + e1, x2 + e2) - R + rng.normal(0.0, sigma, n)
+    return dbb.Trace(deg, d, direction)
+
+
+CYCLIC_CASES = {
+    "axis 2 found": ([_run(-1, 31, cyc2=(0.003, 8.0, 0.7)), _run(1, 32, cyc2=(0.003, 8.0, 0.7))], (0, "auto"), 3.0),
+    "nothing periodic": ([_run(-1, 33), _run(1, 34)], ("auto", "auto"), 3.0),
+    "both found": ([_run(-1, 35, (0.002, 7.0, 0.2), (0.004, 11.0, 1.1)),
+                    _run(1, 36, (0.002, 7.0, 0.2), (0.004, 11.0, 1.1))], ("auto", "auto"), 3.0),
+    "one run, no gate": ([_run(1, 37, cyc1=(0.003, 12.5, -0.4))], ("auto", 0), 0.0),
+    "given and searched": ([_run(-1, 38, (0.002, 10.0, 0.0), (0.003, 9.0, 0.3)),
+                            _run(1, 39, (0.002, 10.0, 0.0), (0.003, 9.0, 0.3))], (10.0, "auto"), 3.0),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CYCLIC_CASES))
+def test_cyclic_pitch_search_and_gate_equal_the_old_python(case):
+    runs, pitch, sig = CYCLIC_CASES[case]
+    res = dbb.circular_test(runs, R, cyclic_pitch=pitch, significance=sig, trim=False)
+    pitches, searched, core, dropped = _old_auto(runs, R, pitch, sig)
+    _close(res.cyclic_pitch, pitches)
+    assert set(res.cyclic_pitch_searched) == set(searched)
+    d = core.diagnosis
+    assert list(res.diagnosis) == list(d.names)
+    _close(list(res.diagnosis.values()), np.asarray(d.values), abs_=1e-15)
+    _close(list(res.diagnosis_std.values()), np.asarray(d.std), abs_=1e-15)
+    assert res.not_significant == list(d.not_significant) + dropped
+    _close(res.diagnosis_rms, d.rms)
+
+
+def test_cyclic_pitch_search_refuses_sparse_samples_as_before():
+    runs = [_run(-1, 40, step=8.0), _run(1, 41, step=8.0)]
+    with pytest.raises(ValueError) as new:
+        dbb.circular_test(runs, R, cyclic_pitch="auto", trim=False)
+    with pytest.raises(ValueError) as old:
+        _old_auto(runs, R, ("auto", "auto"))
+    assert str(new.value) == str(old.value)
+
+
+# ---------------------------------------------------------------------------
+# Wang four-point extraction
+# ---------------------------------------------------------------------------
+def _old_wang_four_point(machine, readings=None, angles=(135.0, 225.0, 315.0, 405.0),
+                         errors=dbb.WANG_ERRORS, scale=None):
+    angles = np.asarray(angles, float)
+    scale = dict(scale or {})
+    sc = np.array([scale.get(n, 50e-6 if n.startswith(("EA", "EB", "EC")) else 0.01) for n in errors])
+    pats = dbb.wang_patterns(machine, {n: float(v) for n, v in zip(errors, sc)})
+    S = np.empty((len(angles), len(errors)))
+    for j, n in enumerate(errors):
+        p = pats[n]
+        for i, a in enumerate(angles):
+            k = np.flatnonzero(np.abs(p.tracking - a) < 1e-6)
+            S[i, j] = p.readings[k[0]] / sc[j]
+    _, sv, vt = np.linalg.svd(S * sc)
+    tol = max(S.shape) * np.finfo(float).eps * 1e6 * sv[0]
+    rank = int((sv > tol).sum())
+    null = vt[rank:].T
+    estimable = [n for j, n in enumerate(errors) if np.abs(null[j]).max(initial=0.0) < 1e-6]
+    values = None
+    if readings is not None and rank == len(errors):
+        r = np.array([float(readings[a]) for a in angles])
+        values = dict(zip(errors, np.linalg.lstsq(S, r, rcond=None)[0].tolist()))
+    return S, sc, sv / sv[0], rank, null, estimable, values
+
+
+@pytest.fixture(scope="module")
+def vmc():
+    return fivecal.Machine.load(os.path.join(MACHINES, "vmc0656.json"))
+
+
+@pytest.mark.parametrize("errors", [dbb.WANG_ERRORS, ("EX0C", "EY0C", "EZ0C"), ("EX0C", "EY0C", "EA0C", "EB0C")])
+def test_wang_four_point_equals_the_old_python(vmc, errors):
+    truth = {"EX0C": 0.007, "EY0C": -0.005, "EZ0C": 0.006, "EA0C": 30e-6, "EB0C": -20e-6}
+    plan = dbb.wang_plan(vmc)
+    ds = fivecal.simulate(vmc, [{k: v for k, v in e.items() if k != "tracking"} for e in plan],
+                          errors={n: truth[n] for n in errors}, sigma={"dbb": 0.0})
+    readings = {e["tracking"]: o["reading"] for e, o in zip(plan, ds.observations)}
+    new = dbb.wang_four_point(vmc, readings, errors=errors)
+    S, sc, sv, rank, null, estimable, values = _old_wang_four_point(vmc, readings, errors=errors)
+    _close(new.sensitivity, S)
+    _close(new.scale, sc)
+    _close(new.singular_values, sv, abs_=1e-13)
+    assert new.rank == rank and new.estimable == estimable
+    assert new.null_space.shape == null.shape
+    # the null space is a subspace: compare its projector (signs are free)
+    _close(new.null_space @ new.null_space.T, null @ null.T, abs_=1e-12)
+    if values is None:
+        assert new.values is None
+    else:
+        assert list(new.values) == list(values)
+        _close(list(new.values.values()), list(values.values()))
+
+
+# ---------------------------------------------------------------------------
+# Centre of a sphere of known radius
+# ---------------------------------------------------------------------------
+def _old_centre(points, start, radius):
+    c = start.astype(float).copy()
+    for _ in range(20):
+        d = points - c
+        r = np.linalg.norm(d, axis=1)
+        J = -d / r[:, None]
+        step = np.linalg.lstsq(J, -(r - radius), rcond=None)[0]
+        c += step
+        if np.abs(step).max() < 1e-12:
+            break
+    return c
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("n, cap", [(3, 40.0), (5, 60.0), (12, 90.0), (33, 180.0)])
+def test_known_radius_centre_equals_the_old_python(seed, n, cap):
+    rng = np.random.default_rng(seed)
+    radius = 15.5
+    centre = np.array([80.0, 50.0, 60.0]) + rng.normal(0, 0.05, 3)
+    # touches on a cap of half-angle `cap` deg about +Z (+ a little noise)
+    th = np.radians(rng.uniform(0, cap, n))
+    az = rng.uniform(0, 2 * np.pi, n)
+    u = np.column_stack([np.sin(th) * np.cos(az), np.sin(th) * np.sin(az), np.cos(th)])
+    pts = centre + (radius + rng.normal(0, 0.001, n))[:, None] * u
+    start = np.array([80.0, 50.0, 60.0])
+    _close(sphere_test.fit_sphere_centre(pts, radius, start), _old_centre(pts, start, radius), abs_=1e-9)
+
+
+def test_sphere_check_centres_equal_the_old_python():
+    m = fivecal.Machine.load(os.path.join(MACHINES, "c600u.json"))
+    ball = {"id": "S1", "center": [80.0, 50.0, 60.0], "radius": 12.5}
+    truth = {"EY0A": 0.012, "EZ0A": -0.008, "EB0C": 2e-5, "EAAb": 1e-5, "ECCb": -1.5e-5}
+    truth = {k: v for k, v in truth.items() if k in m.parameter_names()}
+    plan = sphere_check.plan(m, ball, tip_radius=3.0)
+    ds = fivecal.simulate(m, plan, errors=truth, artefact={"spheres": [ball]}, tip_radius=3.0, sigma=0.001,
+                          seed=5)
+    c = sphere_check.evaluate(ds)
+    obs = ds.observations
+    key = [tuple(round(float(o["axes"].get(a, 0.0)), 6) for a in c.axes) for o in obs]
+    Pn, Pi = sphere_test.table_points(ds), sphere_test.table_points(ds, c.result)
+    c0, Rb = np.array(ball["center"]), ball["radius"] + 3.0
+    before, after = [], []
+    for k in dict.fromkeys(key):
+        idx = [i for i, kk in enumerate(key) if kk == k]
+        if len(idx) >= 3:
+            before.append(_old_centre(Pn[idx], c0, Rb))
+            after.append(_old_centre(Pi[idx], c0, Rb))
+    _close(c.centres_before, before, abs_=1e-9)
+    _close(c.centres_after, after, abs_=1e-9)
+
+
+# ---------------------------------------------------------------------------
+# The bar restored by the linear axes
+# ---------------------------------------------------------------------------
+def _old_restore(bar, Q, short=0.0):
+    lin = [a for a in "XYZ" if a in bar.m.axis_names]
+    Q = {a: np.array(v, float) for a, v in Q.items()}
+    for _ in range(4):
+        p = bar.ball(Q)
+        cols = [bar.ball({**Q, a: Q[a] + 1.0}) - p for a in lin]
+        J = np.stack(cols, axis=2)
+        d = p - bar.table
+        r = np.linalg.norm(d, axis=1)
+        err = r - (bar.length - short)
+        if np.abs(err).max() < 1e-12:
+            break
+        dp = -(err / r)[:, None] * d
+        step = np.einsum("nij,nj->ni", np.linalg.pinv(J), dp)
+        for k, a in enumerate(lin):
+            Q[a] = Q[a] + step[:, k]
+    return Q
+
+
+def _bar_cases():
+    c600u = fivecal.Machine.load(os.path.join(MACHINES, "c600u.json"))
+    hu40t = tango.hu40t_machine()  # X on the workpiece side
+    out = [(c600u, dbb.four_step_plan(c600u, step=15.0))]
+    e = {"type": "dbb", "setup": "H1", "tool_ball": [0.0, 0.0, 100.0], "table_ball": [30.0, -20.0, 40.0],
+         "length": 120.0}
+    rng = np.random.default_rng(4)
+    hplan = []
+    for _ in range(12):
+        axes = {"X": rng.uniform(-50, 50), "Y": rng.uniform(-50, 50), "Z": rng.uniform(-50, 50),
+                "B": rng.uniform(-60, 60), "C": rng.uniform(-180, 180), "S": 0.0}
+        hplan.append(dict(e, axes=axes))
+    out.append((fivecal.Machine.from_dict(hu40t), hplan))
+    return out
+
+
+@pytest.mark.parametrize("case", [0, 1])
+@pytest.mark.parametrize("short", [0.0, 1.5])
+def test_bar_restore_equals_the_old_python(case, short):
+    m, plan = _bar_cases()[case]
+    setups = {}
+    for e in plan:
+        setups.setdefault(e["setup"], []).append(e)
+    for entries in setups.values():
+        bar = dbb_program._Bar(m, entries[0])
+        Q = {a: np.array([float(e["axes"].get(a, 0.0)) for e in entries]) for a in m.axis_names}
+        # off the bar by up to a few mm, so that the restore has work to do
+        rng = np.random.default_rng(len(entries))
+        for a in "XYZ":
+            Q[a] = Q[a] + rng.uniform(-3, 3, len(entries))
+        new, old = bar.restore(Q, short), _old_restore(bar, Q, short)
+        assert list(new) == list(old)
+        for a in m.axis_names:
+            _close(new[a], old[a], abs_=1e-9)
+        np.testing.assert_allclose(bar.deviation(new), -short, atol=1e-10)
+
+
+# ---------------------------------------------------------------------------
+# rotary_directions: one implementation, one rule for an axis not named
+# ---------------------------------------------------------------------------
+def test_tango_and_design_share_one_rotary_directions():
+    assert tango.rotary_directions is design.rotary_directions
+
+
+def test_an_axis_an_indexation_does_not_name_is_at_zero():
+    """An indexation that does not name an axis holds it at 0 (the command
+    the plan writes for it), so moving back to 0 is a move with a
+    direction; every axis asked for gets its direction at every
+    indexation."""
+    seq = [{"B": 30}, {"C": 90}, {"B": 30, "C": 90}, {"C": -45}]
+    assert design.rotary_directions(seq, "BC") == [
+        {"B": 1, "C": 1}, {"B": -1, "C": 1}, {"B": 1, "C": 1}, {"B": -1, "C": -1}]
+    # the rule TANGO's plans always used, unchanged on indexations naming every axis
+    full = [{"B": 30, "C": -90}, {"B": 60, "C": -180}, {"B": 45, "C": -180}, {"B": 45, "C": 0}]
+    assert design.rotary_directions(full, "BC") == [
+        {"B": 1, "C": -1}, {"B": 1, "C": -1}, {"B": -1, "C": -1}, {"B": -1, "C": 1}]
+    assert design.rotary_directions(seq, "BC", start={"B": -1, "C": -1})[0] == {"B": 1, "C": -1}
+
+
+def test_a_sphere_check_plan_records_the_return_to_zero_of_the_other_axis():
+    m = fivecal.Machine.load(os.path.join(MACHINES, "c600u.json"))
+    rot = sphere_check._rotary_axes(m)
+    plan = sphere_check.plan(m, {"id": "S1", "center": [80.0, 50.0, 60.0], "radius": 12.5}, tip_radius=3.0)
+    # the second axis' visits: the first axis is back at 0, reached by a move up
+    # from the last (lowest) position of its descending pass
+    first, second = rot[0], rot[1]
+    later = [p for p in plan if abs(p["axes"][second]) > 1e-9]
+    assert later and all(p["axes"][first] == 0.0 for p in later)
+    assert all(p["direction"][first] == 1 for p in later)
+
+
+def test_the_moved_functions_refuse_bad_input_naming_the_field():
+    pts = np.array([[0.0, 0.0, 15.5], [3.0, 0.0, 15.2], [0.0, 3.0, 15.2], [-3.0, 0.0, 15.2]])
+    with pytest.raises(ValueError, match=r"points\[1\]"):
+        sphere_test.fit_sphere_centre(np.where(np.arange(12).reshape(4, 3) == 4, np.nan, pts), 15.5, [0, 0, 0])
+    with pytest.raises(ValueError, match="radius"):
+        sphere_test.fit_sphere_centre(pts, -1.0, [0, 0, 0])
+    with pytest.raises(ValueError, match="points: need at least 3"):
+        sphere_test.fit_sphere_centre(pts[:2], 15.5, [0, 0, 0])
+    with pytest.raises(ValueError, match="start"):
+        sphere_test.fit_sphere_centre(pts, 15.5, [0, 0])
+    with pytest.raises(ValueError, match=r"scale\[1\]"):
+        _core.wang_four_point(np.eye(2), np.array([1.0, 0.0]))
+    m = fivecal.Machine.load(os.path.join(MACHINES, "c600u.json"))
+    q = np.zeros((2, len(m.axis_names)))
+    q[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"poses\[1\]"):
+        _core.bar_length_commands(m._core, np.array([0, 0, 100.0]), np.zeros(3), 50.0, q)
