@@ -448,3 +448,9 @@ def checked_dumps(obj: Any, kind: str) -> str:
     doc = plain(obj, root)
     validate(doc, kind)
     return json.dumps(doc)
+
+
+def _read_json(path: str, what: str):
+    from .files import read_json
+
+    return schema.validate(read_json(path, what), schema.guess_kind(what), path)

@@ -1,0 +1,20 @@
+def _convert(args) -> int:
+    from .dataset import load_dataset, save_dataset
+
+    ds = load_dataset(args.dataset)
+    save_dataset(ds, args.out)
+    fmt = "Parquet" if args.out.lower().endswith((".parquet", ".pq")) else "JSON"
+    print(f"{args.dataset} -> {args.out}: {len(ds)} observations ({fmt})")
+    return EXIT_OK
+
+
+    pv = sub.add_parser("convert", help="a dataset from JSON to Parquet or back (lossless)",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        description="Read a dataset (JSON or Parquet, recognised by its content) and write "
+                        "it as Parquet when OUT ends in .parquet or .pq (needs pyarrow: pip install "
+                        "'fivecal[arrow]'), as JSON otherwise (docs/formats.md).",
+                        epilog="example:\n  fivecal convert trace.json trace.parquet\n"
+                        "  fivecal convert trace.parquet trace.json")
+    pv.add_argument("dataset", help="dataset to read (JSON or Parquet)")
+    pv.add_argument("out", help="dataset to write: .parquet / .pq or .json")
+    pv.set_defaults(func=_convert)

@@ -1,0 +1,26 @@
+def _rtest(args) -> int:
+    from .dataset import load_dataset
+    from .procedures import rtest
+
+    out = rtest.evaluate(load_dataset(args.dataset), identify=not args.no_identify)
+    tol = None if args.tolerance is None else args.tolerance * 1e-3
+    print(out.report(tol))
+    verdicts = [("the location-error fit", out.result.assessment())] if out.result is not None else []
+    status = fit_status("rtest", verdicts, args.force)
+    failed = tol is not None and not all(t.passes(tol) for t in out.tests.values())
+    return EXIT_FIT if failed and status == EXIT_OK else status
+
+
+    pp = sub.add_parser("rtest", help="R-test K tests: deviation ranges and the rotary axes' location errors",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        description="Evaluate R-test data (ball3d observations, one setup per test): the "
+                        "range of the recorded deviation in X, Y, Z per test, pass/fail against --tolerance, "
+                        "and the location errors of the rotary axes fitted to all tests. Plans: "
+                        "fivecal.procedures.rtest.plan (docs/design.md).",
+                        epilog="example:\n  fivecal rtest rtest_data.json --tolerance 20")
+    pp.add_argument("dataset", help="dataset JSON with the ball3d observations")
+    pp.add_argument("--tolerance", type=POSITIVE, default=None,
+                    help="largest allowed range per direction, µm (exit 1 when a test exceeds it)")
+    pp.add_argument("--no-identify", action="store_true", help="only the ranges, no location-error fit")
+    pp.add_argument("--force", action="store_true", help="exit 0 even when the fit is not usable")
+    pp.set_defaults(func=_rtest)
