@@ -16,8 +16,6 @@ from .procedures.dbb import Trace, circular_test, jiang_cripps, read_trace_csv, 
 from . import uncertainty
 from .uncertainty import gum_input_covariance, monte_carlo
 
-__version__ = "0.1.0"
-
 __all__ = ["Machine", "RadiansWarning", "UnitsWarning", "Dataset", "ball_dataset", "load_dataset", "save_dataset", "simulate",
            "identify", "resolve_estimate", "Result", "FitWarning", "UnusableResultError",
            "CorrectionLimitError", "compensate_poses", "compensate_gcode",

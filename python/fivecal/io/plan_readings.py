@@ -208,3 +208,30 @@ def write(d: Mapping, out) -> "object":
 
 
 __all__ = ["rtest_readings", "probe_log_dataset", "read_plan", "write", "AXIS_TOLERANCE"]
+
+
+def _read_spec(path: str):
+    """machine, plan, artefact and stylus radius of a simulation spec (or a
+    dataset whose observations are the plan)."""
+    import os
+
+    from ..cli import _read_json
+    from ..machine import Machine
+
+    spec = _read_json(path, "the plan (a simulation spec)")
+    if not isinstance(spec, dict):
+        raise ValueError(f"{path}: expected a JSON object with machine, plan, artefact, probe")
+    machine = spec.get("machine")
+    if isinstance(machine, str):  # a path relative to the spec file
+        machine = Machine.load(os.path.join(os.path.dirname(os.path.abspath(path)), machine))
+    elif isinstance(machine, dict):
+        machine = Machine.from_dict(machine)
+    else:
+        raise ValueError(f"{path}: 'machine' missing (a machine object or a path)")
+    plan = spec.get("plan", spec.get("observations"))
+    if not isinstance(plan, list) or not plan or not all(isinstance(e, dict) for e in plan):
+        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, docs/formats.md)")
+    probe = spec.get("probe") or {}
+    if not isinstance(probe, dict):
+        raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")
+    return machine, plan, spec.get("artefact") or {}, float(probe.get("tip_radius", 0.0))

@@ -61,24 +61,10 @@ pre{background:#f6f6f6;padding:8px;overflow-x:auto;font-size:0.85em}
 """
 
 
-def _e(x) -> str:
-    return html.escape(str(x))
-
-
 def _fmt(v: float, digits: int = 3) -> str:
     if v is None or not np.isfinite(v):
         return "–"
     return f"{v:.{digits}f}"
-
-
-def _img_tag(path: str, out_dir: str, embed: bool, alt: str) -> str:
-    if embed:
-        with open(path, "rb") as f:
-            data = base64.b64encode(f.read()).decode("ascii")
-        src = f"data:image/png;base64,{data}"
-    else:
-        src = os.path.relpath(os.path.abspath(path), os.path.abspath(out_dir)).replace(os.sep, "/")
-    return f'<img src="{_e(src)}" alt="{_e(alt)}">'
 
 
 def _count(n: int, word: str) -> str:
@@ -670,14 +656,3 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
 
     write_text(path, doc)
     return path
-
-
-def table_html(header: Sequence[str], rows: Iterable[Sequence], numeric: Sequence[bool] = ()) -> str:
-    """A small HTML table (for the ``sections`` of :func:`write_report`)."""
-    num = list(numeric) + [False] * (len(header) - len(numeric))
-    out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in header) + "</tr>"]
-    for r in rows:
-        out.append("<tr>" + "".join(f"<td class='num'>{_e(c)}</td>" if num[i] else f"<td>{_e(c)}</td>"
-                                    for i, c in enumerate(r)) + "</tr>")
-    out.append("</table>")
-    return "".join(out)
