@@ -4,7 +4,21 @@ Errors are one clear line on stderr, never a traceback (set FIVECAL_DEBUG=1
 to see one). Exit status: 0 success, 1 the fit failed / did not converge / is
 not usable, 2 bad input or a refused request, 3 internal error (a bug). Long runs draw a progress bar on stderr
 when it is a terminal (FIVECAL_PROGRESS=1 forces it, =0 silences it).
+
+One module per command (or group of sub-commands), each with a ``register(sub)``
+that adds its parser; :mod:`.common` holds what they share. This package is
+the top layer: nothing else in fivecal imports it.
 """
+from __future__ import annotations
+
+import sys
+
+from .._version import __version__
+from . import (compensate, convert, dbb, demo, design, export, history, identify, import_, plan, rtest, simulate,
+               sphere, sphere_check, uncertainty)
+from .common import _Parser, _PipeSafeStdout, execute
+
+__all__ = ["main"]
 
 
 def main(argv=None) -> int:
@@ -17,18 +31,10 @@ def main(argv=None) -> int:
     p.add_argument("--version", action="version", version=f"fivecal {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
-
-    from .procedures.dbb_cli import register as _register_dbb
-
-    _register_dbb(sub)
-    from .procedures.plan_cli import register as _register_plan; _register_plan(sub)  # noqa: E702
-    from .io.linuxcnc_cli import register as _register_export; _register_export(sub)  # noqa: E702
-
-    from .history.cli import register as _register_history; _register_history(sub)  # noqa: E702
-    from .io.cli import register as _register_import
-
-    _register_import(sub)
-
+    # the order of `fivecal --help`
+    for command in (identify, convert, simulate, demo, dbb, plan, export, history, import_, compensate, uncertainty,
+                    design, sphere, sphere_check, rtest):
+        command.register(sub)
 
     old_stdout = sys.stdout
     sys.stdout = _PipeSafeStdout(old_stdout)  # --help | head too
@@ -39,7 +45,4 @@ def main(argv=None) -> int:
         raise
     finally:
         sys.stdout = old_stdout
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    return execute(args)

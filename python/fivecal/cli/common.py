@@ -1,3 +1,8 @@
+"""What every command shares: the option types (a bad value is refused
+naming the option), reading the JSON files a command is given, the exit
+status of a command that fits, and running a command: its outputs in a
+files.transaction, any error as one line with its exit status (README "Exit
+codes")."""
 from __future__ import annotations
 
 import argparse
@@ -7,14 +12,14 @@ import os
 import re
 import signal
 import sys
-import time
 
-from . import __version__, schema
+from .. import files, guards
+from ..guards import FitWarning
+from ..machine import Machine
+from ..schema import read_checked as _read_json
 
 
 def _fit_warning():
-    from .guards import FitWarning
-
     return FitWarning
 
 
@@ -22,8 +27,6 @@ def _values_verdict(values, std=None, converged: bool = True, iterations=None):
     """The :class:`fivecal.guards.Assessment` of a fit that gives plain
     values (and standard uncertainties) rather than a Result: judged on
     convergence and finiteness like ``identify``'s."""
-    from . import guards
-
     params = {n: {"value": v, **({"std": std[n]} if std and n in std else {})} for n, v in values.items()}
     return guards.assess({"parameters": params, "converged": bool(converged), "iterations": iterations})
 
@@ -116,8 +119,6 @@ PROBABILITY = _float_type(0.0, 1.0, low_open=True, what="a probability")
 
 def _read_machine(path):
     """The machine of a machine file, or of a dataset file (its "machine")."""
-    from .machine import Machine
-
     doc = _read_json(path, "the machine")
     if isinstance(doc, dict) and "observations" in doc and isinstance(doc.get("machine"), dict):
         doc = doc["machine"]  # a dataset file: use its machine
@@ -227,8 +228,6 @@ def _run(args) -> int:
     """The command inside a files.transaction: an output that is an input
     is refused before any work; if the command fails or is interrupted, the
     outputs it wrote are removed (or restored to their previous content)."""
-    from . import files
-
     files.check_outputs(*_declared_files(args))
     old_stdout = sys.stdout
     sys.stdout = _PipeSafeStdout(old_stdout)
@@ -289,6 +288,11 @@ EXIT_INPUT = 2     # bad input or a refused request (unusable result, correction
 EXIT_INTERNAL = 3  # a bug: FIVECAL_DEBUG=1 shows the traceback
 
 
+def execute(args) -> int:
+    """Run the parsed command (:func:`_run`) and turn what it raises into one
+    line on stderr and the exit status: 2 bad input or a refused request,
+    3 anything else (a bug; FIVECAL_DEBUG=1 raises it with its traceback),
+    130 / 143 interrupted / terminated."""
     debug = os.environ.get("FIVECAL_DEBUG", "") not in ("", "0")
     try:
         return _run(args)

@@ -1,7 +1,16 @@
+"""``fivecal compensate``: compensated G-code and error tables from identified errors."""
+from __future__ import annotations
+
+import argparse
+import os
+
+from ..compensation import (MAX_CORRECTION, MAX_CORRECTION_DEG, compensate_gcode_file, usable_errors,
+                            write_error_table)
+from .common import _axis_values, _integer_type, _read_machine
+
+
 def _limits(text: str) -> tuple:
     """--max-correction MM[,DEG]: the plausibility limits; 'off' switches them off."""
-    from .compensation import MAX_CORRECTION, MAX_CORRECTION_DEG
-
     if text is None:
         return MAX_CORRECTION, MAX_CORRECTION_DEG
     parts = [t.strip() for t in text.split(",")]
@@ -23,8 +32,6 @@ def _limits(text: str) -> tuple:
 
 
 def _compensate(args) -> int:
-    from .compensation import compensate_gcode_file, usable_errors, write_error_table
-
     machine = _read_machine(args.machine)
     max_mm, max_deg = _limits(args.max_correction)
     # Refuses a result that did not converge, is not finite, failed the chi-square
@@ -60,6 +67,7 @@ def _compensate(args) -> int:
     return 0
 
 
+def register(sub) -> None:
     pc = sub.add_parser("compensate", help="compensated G-code and error tables from identified errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Rewrite the G0/G1 moves of an absolute (G90) ISO G-code program so "

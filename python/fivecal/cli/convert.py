@@ -1,6 +1,13 @@
-def _convert(args) -> int:
-    from .dataset import load_dataset, save_dataset
+"""``fivecal convert``: a dataset from JSON to Parquet or back."""
+from __future__ import annotations
 
+import argparse
+
+from ..dataset import load_dataset, save_dataset
+from .common import EXIT_OK
+
+
+def _convert(args) -> int:
     ds = load_dataset(args.dataset)
     save_dataset(ds, args.out)
     fmt = "Parquet" if args.out.lower().endswith((".parquet", ".pq")) else "JSON"
@@ -8,6 +15,7 @@ def _convert(args) -> int:
     return EXIT_OK
 
 
+def register(sub) -> None:
     pv = sub.add_parser("convert", help="a dataset from JSON to Parquet or back (lossless)",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Read a dataset (JSON or Parquet, recognised by its content) and write "

@@ -1,10 +1,18 @@
-def _demo(args) -> int:
-    from .demo import run_demo
+"""``fivecal demo``: the bundled HU40T TANGO example, simulated, identified and reported."""
+from __future__ import annotations
 
+import argparse
+
+from ..demo import run_demo
+from .common import SEED
+
+
+def _demo(args) -> int:
     run_demo(args.out, seed=args.seed)
     return 0
 
 
+def register(sub) -> None:
     pd = sub.add_parser("demo", help="simulate, identify and validate the bundled HU40T TANGO example",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         epilog="example:\n  fivecal demo --out fivecal_demo")

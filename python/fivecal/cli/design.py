@@ -1,6 +1,17 @@
-def _design_spec(path: str) -> dict:
-    from .machine import Machine
+"""``fivecal design``: choose the rotary indexations of a probing test."""
+from __future__ import annotations
 
+import argparse
+import os
+
+from .. import design
+from .._json import plain
+from ..files import write_json
+from ..machine import Machine
+from .common import COUNT, POSITIVE, _read_json
+
+
+def _design_spec(path: str) -> dict:
     spec = _read_json(path, "design spec")
     if not isinstance(spec, dict):
         raise ValueError(f"{path}: expected a JSON object (a simulation spec with a candidate plan)")
@@ -14,8 +25,6 @@ def _design_spec(path: str) -> dict:
 
 
 def _design(args) -> int:
-    from . import design
-
     spec = _design_spec(args.spec)
     machine, artefact = spec["machine"], spec.get("artefact") or {}
     probe = spec.get("probe") or {}
@@ -80,8 +89,6 @@ def _design(args) -> int:
                                 "condition_number": finite(d.quality.condition_number),
                                 "candidate_condition_number": finite(d.reference.condition_number),
                                 "groups": d.groups}
-            from ._json import plain
-            from .files import write_json
 
             write_json(out, plain(result, "design"))
             print(f"designed plan (a simulation spec) written to {out}")
@@ -90,6 +97,7 @@ def _design(args) -> int:
     return 0
 
 
+def register(sub) -> None:
     pg = sub.add_parser("design", help="choose K rotary indexations that minimise the condition number",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Read a simulation spec whose 'plan' is the pool of candidate touches "

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from . import linuxcnc as L
+from ..compensation import usable_errors
+from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_programs as N
+from ..io.plan_readings import _read_spec
+from .common import _read_machine
 
 
 def _volume(text: str) -> dict:
@@ -23,8 +26,6 @@ def _volume(text: str) -> dict:
 
 
 def _run(args) -> int:
-    from ..cli import _read_machine
-
     machine = _read_machine(args.machine)
     limit = None
     if str(args.max_change).lower() != "off":
@@ -47,10 +48,6 @@ def _run(args) -> int:
 
 def _run_kinematics(args) -> int:
     import json
-
-    from ..cli import _read_machine
-    from ..compensation import usable_errors
-    from . import controllers as K
 
     machine = _read_machine(args.machine)
     errors = usable_errors(args.result, machine, args.force, args.result)
@@ -81,9 +78,6 @@ _PLAN_KINDS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb":
 
 
 def _run_program(args) -> int:
-    from . import dbb_program as D
-    from . import nc_programs as N
-
     machine, plan, artefact, tip = _read_spec(args.spec)
     types = sorted({str(e.get("type")) for e in plan})
     kind = args.kind
@@ -171,7 +165,6 @@ def register(sub) -> None:
     pl.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
                     "--max-change; only to inspect the values")
     pl.set_defaults(func=_run)
-    from . import controllers as K
     pk = esub.add_parser(
         "kinematics", formatter_class=RD,
         help="what a controller's kinematic model absorbs; a neutral kinematics table",

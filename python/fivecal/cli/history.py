@@ -7,10 +7,15 @@ import math
 import os
 import sys
 
+from ..history.fleet import _time_of, fleet_identify
+from ..history.store import Store, calibration_from_result, dataset_digest, write_parquet
+from ..history.trend import ChartDesign, compare, detect, grade, plot_trend, pooled_statistics
+from ..machine import Machine
+from ..report.history import History
+from ..units import display_scale
+
 
 def _store(args, create=False):
-    from .store import Store
-
     return Store(args.store, create=create)
 
 
@@ -32,8 +37,6 @@ def _tolerances(items) -> dict:
 
 
 def _add(args) -> int:
-    from .store import dataset_digest
-
     digest = dataset_digest(args.dataset) if args.dataset else None
     machine = args.machine or args.dataset
     with _store(args, create=True) as s:
@@ -62,8 +65,6 @@ def _list(args) -> int:
 
 
 def _show(args) -> int:
-    from ..units import display_scale
-
     with _store(args) as s:
         c = s.get(args.id)
     if args.json:
@@ -79,8 +80,6 @@ def _show(args) -> int:
 
 
 def _resolve(s, ref: str, what: str):
-    from .store import calibration_from_result
-
     if os.path.isfile(ref):
         import datetime
 
@@ -96,9 +95,6 @@ def _resolve(s, ref: str, what: str):
 
 
 def _compare(args) -> int:
-    from ..machine import Machine
-    from .trend import compare
-
     s = _store(args) if args.store else None
     try:
         a, b = _resolve(s, args.a, "A"), _resolve(s, args.b, "B")
@@ -123,7 +119,6 @@ def _failures(args) -> int:
 def _export(args) -> int:
     with _store(args) as s:
         cals = s.list(args.machine_id)
-    from .store import write_parquet
 
     write_parquet(cals, args.out)
     print(f"{len(cals)} calibrations written to {args.out}")
@@ -131,8 +126,6 @@ def _export(args) -> int:
 
 
 def _trend(args) -> int:
-    from .trend import ChartDesign, detect, grade, plot_trend, pooled_statistics
-
     with _store(args) as s:
         cals = s.list(args.machine_id, args.procedure)
         machine = s.machine(args.machine_id)
@@ -164,8 +157,6 @@ def _trend(args) -> int:
 
 
 def _fleet(args) -> int:
-    from .fleet import fleet_identify
-
     if not args.store and not args.parquet:
         raise ValueError("fleet identify: give --store FILE and/or --parquet DIR for the results")
     if args.workers is not None and args.workers < 1:
@@ -205,10 +196,8 @@ def add_identify_options(p) -> None:
 
 
 def identify_history(args):
-    """The report's :class:`~fivecal.history.report.History` for ``fivecal
+    """The report's :class:`~fivecal.report.history.History` for ``fivecal
     identify`` (None without --history); checks the options first."""
-    from .report import History
-
     given = [o for o, v in (("--machine-id", args.machine_id), ("--tolerance", args.tolerance),
                             ("--volumetric-tolerance", args.volumetric_tolerance), ("--record", args.record),
                             ("--procedure", args.procedure)) if v]
@@ -224,11 +213,9 @@ def identify_history(args):
     vt = args.volumetric_tolerance
     if vt is not None and not (math.isfinite(vt) and vt > 0):
         raise ValueError(f"--volumetric-tolerance: expected a positive number of mm, got {vt}")
-    from .store import Store
 
     # a missing (without --record) or foreign file is said before the fit
     Store(args.history, create=args.record).close()
-    from .fleet import _time_of
 
     return History(args.history, args.machine_id.strip(), tolerances=_tolerances(args.tolerance) or None,
                    volumetric_tolerance=vt, time=_time_of(args.dataset) if os.path.isfile(args.dataset) else None)
@@ -237,9 +224,6 @@ def identify_history(args):
 def grade_identify(result, hist) -> str:
     """``fivecal identify --tolerance``: this result graded as the report
     grades it (printed); returns the verdict (pass, fail, undecided)."""
-    from .store import calibration_from_result
-    from .trend import grade
-
     cal = calibration_from_result(result, hist.machine_id, time=hist.time, source="this identification")
     g = grade(cal, hist.tolerances or {}, hist.volumetric_tolerance, machine=result.dataset.machine)
     print()
@@ -249,8 +233,6 @@ def grade_identify(result, hist) -> str:
 
 def record_identify(args, result, hist) -> None:
     """``fivecal identify --record``: the result into the store."""
-    from .store import Store
-
     with Store(hist.store, create=True) as s:
         i = s.add(result, machine_id=hist.machine_id, procedure=args.procedure or "", time=hist.time,
                   source=args.dataset)

@@ -1,12 +1,20 @@
+"""``fivecal identify``: fit machine errors to a dataset and report them."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from ..dataset import load_dataset
+from ..identification import identify
+from ..progress import busy
+from ..report.document import write_report
+from .common import EXIT_FIT, EXIT_OK, _fit_warning
+from .history import add_identify_options, grade_identify, identify_history, record_identify
+
+
 def _identify(args) -> int:
     import warnings
-
-    from .dataset import load_dataset
-    from .identification import identify
-
-    from .progress import busy
-
-    from .history.cli import identify_history
 
     hist = identify_history(args)
     ds = load_dataset(args.dataset)
@@ -22,16 +30,12 @@ def _identify(args) -> int:
         result.save(args.out)
         print(f"\nresult written to {args.out}")
     if args.report:
-        from .report.document import write_report
-
         path = write_report(result, args.report, title=f"fivecal identification — {os.path.basename(args.dataset)}",
                             summary=f"dataset {args.dataset}, estimate {args.estimate}"
                                     + (f", fixed {args.fix}" if args.fix else ""),
                             history=hist)
         print(f"\nreport: {os.path.abspath(path)} (with result.json and the plots as PNG)")
     if hist is not None and args.record:
-        from .history.cli import record_identify
-
         record_identify(args, result, hist)
     a = result.assessment()
     if not a.usable:
@@ -41,8 +45,6 @@ def _identify(args) -> int:
               file=sys.stderr)
         return EXIT_FIT
     if hist is not None and (hist.tolerances or hist.volumetric_tolerance is not None):
-        from .history.cli import grade_identify
-
         # a machine out of tolerance must stop a script as `history compare` does,
         # not only turn a box red in the report
         if grade_identify(result, hist) == "fail":
@@ -51,6 +53,7 @@ def _identify(args) -> int:
     return EXIT_OK
 
 
+def register(sub) -> None:
     pi = sub.add_parser("identify", help="fit machine errors to a dataset",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Estimate the listed parameters plus the default setup set "
@@ -74,5 +77,5 @@ def _identify(args) -> int:
     pi.add_argument("--out", help="write the result JSON here")
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")
-    from .history.cli import add_identify_options; add_identify_options(pi)  # noqa: E702
+    add_identify_options(pi)
     pi.set_defaults(func=_identify)

@@ -1,7 +1,14 @@
-def _rtest(args) -> int:
-    from .dataset import load_dataset
-    from .procedures import rtest
+"""``fivecal rtest``: R-test K tests."""
+from __future__ import annotations
 
+import argparse
+
+from ..dataset import load_dataset
+from ..procedures import rtest
+from .common import EXIT_FIT, EXIT_OK, POSITIVE, fit_status
+
+
+def _rtest(args) -> int:
     out = rtest.evaluate(load_dataset(args.dataset), identify=not args.no_identify)
     tol = None if args.tolerance is None else args.tolerance * 1e-3
     print(out.report(tol))
@@ -11,6 +18,7 @@ def _rtest(args) -> int:
     return EXIT_FIT if failed and status == EXIT_OK else status
 
 
+def register(sub) -> None:
     pp = sub.add_parser("rtest", help="R-test K tests: deviation ranges and the rotary axes' location errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Evaluate R-test data (ball3d observations, one setup per test): the "

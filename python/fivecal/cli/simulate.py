@@ -1,8 +1,16 @@
-def _simulate(args) -> int:
-    from .dataset import save_dataset
-    from .machine import Machine
-    from .simulation import simulate
+"""``fivecal simulate``: the dataset a simulation spec describes."""
+from __future__ import annotations
 
+import argparse
+import os
+
+from ..dataset import save_dataset
+from ..machine import Machine
+from ..simulation import simulate
+from .common import SEED, SIGMA, _read_json
+
+
+def _simulate(args) -> int:
     spec = _read_json(args.spec, "the simulation spec")
     if not isinstance(spec, dict):
         raise ValueError(f"{args.spec}: expected a JSON object with machine, plan, errors, ...")
@@ -26,6 +34,7 @@ def _simulate(args) -> int:
     return 0
 
 
+def register(sub) -> None:
     ps = sub.add_parser("simulate", help="simulate a measurement on a machine with known errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Read a simulation spec (machine or machine path, errors, setup, "

@@ -1,8 +1,16 @@
-def _sphere(args) -> int:
-    from .procedures.sphere_test import format_sphere_tests, sphere_test
-    from .dataset import load_dataset
-    from .guards import require_usable
+"""``fivecal sphere``: the machine as a CMM, a sphere test with the nominal and identified model."""
+from __future__ import annotations
 
+import argparse
+import math
+
+from ..dataset import load_dataset
+from ..guards import require_usable
+from ..procedures.sphere_test import format_sphere_tests, sphere_test
+from .common import _read_json, _values_verdict, fit_status
+
+
+def _sphere(args) -> int:
     ds = load_dataset(args.dataset)
     tests = {"nominal model": sphere_test(ds, None, args.sphere)}
     if args.values:
@@ -35,6 +43,7 @@ def _sphere(args) -> int:
                                  for name, t in tests.items()], args.force)
 
 
+def register(sub) -> None:
     pp = sub.add_parser("sphere", help="machine as a CMM: sphere test with the nominal and identified model",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Express the touches of a precision sphere in the table frame with the "

@@ -1,8 +1,15 @@
-def _sphere_check(args) -> int:
-    from .dataset import load_dataset
-    from .files import write_text
-    from .procedures import sphere_check
+"""``fivecal sphere-check``: the quick sphere check of the rotary axes."""
+from __future__ import annotations
 
+import argparse
+
+from ..dataset import load_dataset
+from ..files import write_text
+from ..procedures import sphere_check
+from .common import fit_status
+
+
+def _sphere_check(args) -> int:
     ds = load_dataset(args.dataset)
     check = sphere_check.evaluate(ds, previous=args.previous, calibrated_stylus=not args.free_stylus,
                                   backlash=False if args.no_backlash else None, sphere=args.sphere)
@@ -14,6 +21,7 @@ def _sphere_check(args) -> int:
                       written=[args.out])
 
 
+def register(sub) -> None:
     pp = sub.add_parser("sphere-check", help="quick sphere check: rotary pivots, reversal, dispersion",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Evaluate a quick sphere check (a calibrated stylus, one sphere, a few "

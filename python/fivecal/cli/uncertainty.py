@@ -1,10 +1,19 @@
+"""``fivecal uncertainty``: Monte Carlo (JCGM 101) or pooled-cycles GUM uncertainty."""
+from __future__ import annotations
+
+import argparse
+import os
+
+from .. import schema, uncertainty
+from ..files import read_json
+from ..identification import identify
+from ..machine import Machine
+from .common import (POSITIVE, PROBABILITY, SEED, SIGMA, _FORCE_HELP, _fit_warning, _integer_type, _values_verdict,
+                     fit_status)
+
+
 def _uncertainty(args) -> int:
-    from . import uncertainty
-    from .machine import Machine
-
     def load(path):
-        from .files import read_json
-
         d = read_json(path, "spec or dataset")
         d = schema.validate(d, "dataset" if isinstance(d, dict) and "observations" in d else "spec", path)
         if isinstance(d, dict) and isinstance(d.get("machine"), str):  # a path relative to the file
@@ -51,8 +60,6 @@ def _uncertainty(args) -> int:
         print(f"\nresult written to {args.out}")
     # The sensitivities come from the fit of the first cycle: judged as
     # `fivecal identify` would judge it.
-    from .identification import identify
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", category=_fit_warning())  # said once, in one line
         reference = identify(inputs[0], args.estimate, fix=args.fix)
@@ -60,6 +67,7 @@ def _uncertainty(args) -> int:
                                       ("GUM", _values_verdict(u.values, u.std))], args.force, (args.out,))
 
 
+def register(sub) -> None:
     pu = sub.add_parser("uncertainty", help="Monte Carlo (JCGM 101) or pooled-cycles GUM uncertainty "
                         "of the identified parameters",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
