@@ -1,3 +1,9 @@
+"""Matplotlib figures without pyplot: every plot of the package (report/,
+uncertainty histograms, history trends) draws on these. matplotlib itself is
+imported when a figure is made, not with fivecal."""
+from __future__ import annotations
+
+
 def _pyplot():
     """The part of pyplot the plots use, on private ``Figure`` objects with
     an Agg canvas: no pyplot global state, and the caller's matplotlib

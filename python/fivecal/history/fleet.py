@@ -31,7 +31,9 @@ from typing import List, Optional, Sequence, Union
 
 import numpy as np
 
-from .store import Calibration, Store, calibration_from_result, dataset_digest, utc_time
+from ..uncertainty import monte_carlo
+from .store import (Calibration, Store, arrow_table, calibration_from_result, dataset_digest, require_pyarrow,
+                    utc_time)
 
 
 def require_dask():
@@ -87,8 +89,6 @@ def jobs_from(source: Union[str, Sequence[str]], procedure: str = "", machine_id
 
 def _manifest(path: str, procedure: str, machine_id: Optional[str]) -> List[Job]:
     if path.lower().endswith(".parquet"):
-        from .store import require_pyarrow
-
         require_pyarrow()
         import pyarrow.parquet as pq
 
@@ -152,8 +152,6 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
         fit = (_time.perf_counter() - t0, _time.thread_time() - c0)
         cal = calibration_from_result(r, job.machine_id, job.time, job.procedure, digest=digest, source=job.path)
         if trials:
-            from ..uncertainty import monte_carlo
-
             mc = monte_carlo(ds, estimate, trials=trials, threads=1, progress=False, keep_samples=False,
                              **{k: v for k, v in (options or {}).items() if k in ("fix", "initial", "robust")})
             idx = [mc.names.index(n) for n in cal.names]
@@ -347,7 +345,6 @@ def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, jobs
 def _parquet_digests(folder: str) -> set:
     if not os.path.isdir(folder):
         return set()
-    from .store import require_pyarrow
 
     require_pyarrow()
     import pyarrow.dataset as pds
@@ -360,8 +357,6 @@ def _parquet_digests(folder: str) -> set:
 
 
 def _write_parquet_part(folder: str, cals: Sequence[Calibration]) -> None:
-    from .store import arrow_table, require_pyarrow
-
     require_pyarrow()
     import uuid
 

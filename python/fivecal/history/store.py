@@ -24,6 +24,8 @@ from typing import Iterable, List, Mapping, Optional, Sequence
 
 import numpy as np
 
+from .._version import __version__
+
 # ---------------------------------------------------------------------------
 # schema: migrations in order, never edited once released (a store written
 # with version n is brought to the current one by running n+1 .. latest)
@@ -88,8 +90,6 @@ SCHEMA_VERSION = MIGRATIONS[-1][0]
 
 
 def _version() -> str:
-    from .. import __version__
-
     return __version__
 
 

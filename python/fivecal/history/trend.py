@@ -23,6 +23,10 @@ from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
+from .. import uncertainty
+from ..dataset import load_dataset
+from ..figures import _pyplot
+from ..files import save_figure
 from ..units import display_scale
 from .store import Calibration
 
@@ -433,8 +437,6 @@ def pooled_statistics(calibrations: Sequence[Calibration], by: str = "days",
     1 says the machine varies more than one fit's noise shows. To propagate
     the pooled input covariance of the datasets themselves, pass the datasets
     to :func:`fivecal.uncertainty.gum_input_covariance`."""
-    from .. import uncertainty
-
     cals = [c for c in calibrations if c.usable]
     if names is None:
         common = set(machine_error_names(cals[0])) if cals else set()
@@ -474,9 +476,6 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
     """One panel per parameter: value against calibration date with a ±2σ
     band, ±tolerance lines (dashed red) and CUSUM alarms (red triangles)."""
     import datetime
-
-    from ..files import save_figure
-    from ..report.plots import _pyplot
 
     cals = [c for c in calibrations if c.usable]
     if not cals:
@@ -543,9 +542,6 @@ def gum_from_history(calibrations: Sequence[Calibration], estimate="location", b
     :func:`fivecal.uncertainty.gum_input_covariance`, day labels from the
     stored times. Returns its :class:`fivecal.uncertainty.CyclesUncertainty`."""
     import os
-
-    from .. import uncertainty
-    from ..dataset import load_dataset
 
     cals = list(calibrations)
     missing = [c.source or f"#{c.id}" for c in cals if not c.source or not os.path.isfile(c.source)]

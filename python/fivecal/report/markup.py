@@ -1,3 +1,13 @@
+"""HTML pieces the report's sections share (report/document.py,
+report/history.py)."""
+from __future__ import annotations
+
+import base64
+import html
+import os
+from typing import Iterable, Sequence
+
+
 def _e(x) -> str:
     return html.escape(str(x))
 

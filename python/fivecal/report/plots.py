@@ -5,6 +5,8 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
+from .. import _core
+from ..figures import _pyplot
 from ..files import save_figure
 from ..units import display_scale
 
@@ -330,8 +332,6 @@ def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
     obs = result.dataset.observations
     if kind == "ball3d":
         return np.array([obs[i]["measured"] for i in rows], float) * 1e3
-    from .. import _core
-
     machine = set(result.dataset.machine.parameter_names())
     setup = {k: v for k, v in result.values.items() if k not in machine}
     res, src = _core.predict_residuals(result.dataset._core, setup)
