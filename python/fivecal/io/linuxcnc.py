@@ -25,8 +25,11 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .. import _core
+from ..compensation import usable_errors
 from ..guards import CorrectionLimitError
 from ..machine import Machine
+from . import controllers as K
+from .controllers import region_stats
 
 KINS = ("xyzac-trt", "xyzbc-trt")
 TILT = {"xyzac-trt": "A", "xyzbc-trt": "B"}
@@ -133,7 +136,6 @@ class Absorption:
 
     def by_region(self, axis: str, bins: int = 4) -> List[Tuple[float, float, float, float]]:
         """Residual |e| by region of one axis: (lo, hi, rms, max) per bin, mm."""
-        from .controllers import region_stats
         return region_stats(self.poses, self.residual, axis, bins)
 
     def report(self) -> str:
@@ -388,8 +390,6 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     section), comp-<axis>.txt per axis with an along-axis error motion or
     backlash, and linuxcnc-report.txt. Refuses a result that is not usable and
     pin changes beyond ``max_change`` mm unless ``force``."""
-    from ..compensation import usable_errors
-
     k = _kins(kins)
     errors = usable_errors(result, machine, force, what)
     match(machine, k)  # a clear refusal before any work
@@ -398,7 +398,6 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     check_change(ab.old_pins, ab.pins, max_change, force)
     # the same model in fivecal's parameters leaves the same map (tested), so
     # its G-code-compensated residual is this controller's
-    from . import controllers as K
     kab = K.absorb(machine, k, errors, poses=poses, compensation=True)
     ab.rms_compensated, ab.max_compensated = kab.rms_compensated, kab.max_compensated
     os.makedirs(out_dir, exist_ok=True)
