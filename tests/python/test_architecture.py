@@ -1,5 +1,5 @@
 """The Python layers are imported one way only (DESIGN.md "Python layers";
-README "Where things live"): the core API and its helpers, then io/,
+README "Where the code is"): the core API and its helpers, then io/,
 procedures/ and history/, then report/, then cli/. Every import of every
 module of python/fivecal is read from its source (those inside functions
 too, where a cycle would otherwise hide), so this holds without importing
@@ -135,7 +135,7 @@ def _cycles(edges: dict) -> list:
 
 def test_every_module_has_a_layer():
     assert not [m for m in MODULES if m != "fivecal" and _layer(m) is None], \
-        "place the new module in LAYERS (and in README 'Where things live')"
+        "place the new module in LAYERS (and in README 'Where the code is')"
 
 
 def test_no_module_imports_the_package_init():
