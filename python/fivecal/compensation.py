@@ -29,8 +29,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _core, guards, schema
-from .io import gcode
+from . import _core, gcode, guards, schema
 from .guards import CorrectionLimitError, UnusableResultError
 from .machine import Machine
 from .progress import Progress

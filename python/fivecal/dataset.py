@@ -9,8 +9,20 @@ from typing import Iterable, Mapping, Union
 
 import numpy as np
 
-from . import _core, _json, plausibility, schema
+from . import _core, _json, files, plausibility, schema
 from .machine import Machine
+
+#: Dataset file formats besides JSON, as (is_format(path), read(path),
+#: name suffixes, write(ds, path)): io/columnar.py registers Parquet (the
+#: package's __init__ imports it), since this module, below io/, imports none of it.
+_FORMATS: list = []
+
+
+def register_format(is_format, read, suffixes, write) -> None:
+    """Let :func:`load_dataset` read a file ``is_format(path)`` recognises
+    with ``read(path)``, and :func:`save_dataset` write a name ending in one
+    of ``suffixes`` with ``write(ds, path)``."""
+    _FORMATS.append((is_format, read, tuple(s.lower() for s in suffixes), write))
 
 
 class _ReadOnly:
@@ -137,12 +149,10 @@ class Dataset:
 def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
     """Load a dataset file, JSON or Parquet (recognised by its first bytes;
     docs/formats.md); ValueError names the file, observation and field."""
-    from . import files
-    from .io import columnar
-
     path = os.fspath(path)
-    if columnar.is_parquet(path):
-        return columnar.read_parquet(path)
+    for is_format, read, _, _ in _FORMATS:
+        if is_format(path):
+            return read(path)
     text = files.read_text(path, "dataset")
     schema.check_text(text, "dataset", path)
     try:
@@ -157,14 +167,11 @@ def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> 
     """Write a dataset (validated first) in the dataset format (docs/formats.md):
     Parquet when the name ends in ``.parquet`` or ``.pq`` (needs pyarrow),
     otherwise JSON."""
-    from . import files
-
     ds = Dataset.from_dict(ds)
-    if os.fspath(path).lower().endswith((".parquet", ".pq")):
-        from .io import columnar
-
-        columnar.write_parquet(ds, path)
-        return
+    for _, _, suffixes, write in _FORMATS:
+        if os.fspath(path).lower().endswith(suffixes):
+            write(ds, path)
+            return
     files.write_json(path, ds.to_dict())
 
 

@@ -107,7 +107,8 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
     write_text(os.path.join(out, "report.txt"), text + "\n")
 
     from .report.plots import plot_residual_vectors
-    from .report.document import table_html, write_report
+    from .report.document import write_report
+    from .report.markup import table_html
 
     s1_png = plot_residual_vectors(nominal, os.path.join(out, "residuals_S1.png"),
                                    title="Unexplained residuals, subset S1 (setup only)")

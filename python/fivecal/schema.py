@@ -32,8 +32,10 @@ import os
 from functools import lru_cache
 from typing import Any, Optional
 
+from . import files
+
 __all__ = ["KINDS", "FULL_CHECK_LIMIT", "BIG_TEXT", "BIG_TEXT_SAMPLE", "schema_path", "load_schema",
-           "validate", "parse", "check_text", "check_file", "checked_dumps", "guess_kind"]
+           "validate", "parse", "check_text", "check_file", "checked_dumps", "guess_kind", "read_checked"]
 
 #: The file kinds with a schema (``fivecal/schemas/<kind>.schema.json``).
 KINDS = ("machine", "dataset", "spec", "design", "result", "errors", "import")
@@ -424,8 +426,6 @@ def check_text(text: str, kind: str, where: Optional[str] = None) -> Any:
 
 def check_file(path, kind: str) -> Any:
     """Read, parse and :func:`validate` a JSON file; messages start with the path."""
-    from . import files
-
     path = os.fspath(path)
     return check_text(files.read_text(path, kind), kind, path)
 
@@ -448,3 +448,10 @@ def checked_dumps(obj: Any, kind: str) -> str:
     doc = plain(obj, root)
     validate(doc, kind)
     return json.dumps(doc)
+
+
+def read_checked(path: str, what: str):
+    """A JSON file a command is given, read and :func:`validate`d against
+    the schema :func:`guess_kind` finds for ``what`` ("the simulation
+    spec" -> spec); messages name the file."""
+    return validate(files.read_json(path, what), guess_kind(what), path)

@@ -39,6 +39,7 @@ import numpy as np
 from . import _core
 from ._json import dumps
 from .dataset import Dataset
+from .figures import _pyplot
 from .identification import _names, identify
 from .machine import Machine
 from .units import display_scale
@@ -290,7 +291,6 @@ class MonteCarloResult:
     def plot(self, path: str, names: Optional[Iterable[str]] = None, bins: int = 40) -> str:
         """Histograms of the trial values with the GUM normal density, the
         shortest interval (solid) and the GUM interval (dashed); PNG at ``path``."""
-        from .report.plots import _pyplot
         plt = _pyplot()
         names = list(names) if names is not None else self.ordered_names()[:12]
         cols = min(4, len(names))

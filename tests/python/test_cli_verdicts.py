@@ -113,6 +113,7 @@ def test_sphere(work, monkeypatch, capsys):
                "--force").returncode == 0
     # The sphere fit itself stopped before converging.
     from fivecal import cli as fivecal_cli
+    from fivecal.cli import sphere as sphere_command  # where the command looks `sphere_test` up
     from fivecal.procedures import sphere_test as cmm
 
     real = cmm.sphere_test
@@ -122,7 +123,7 @@ def test_sphere(work, monkeypatch, capsys):
         t.fit.converged = False
         return t
 
-    monkeypatch.setattr(cmm, "sphere_test", stopped)
+    monkeypatch.setattr(sphere_command, "sphere_test", stopped)
     assert fivecal_cli.main(["sphere", str(work / "spheres.json"), "--sphere", "S1"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "sphere fit (nominal model)" in err[0] and "did not converge" in err[0], err

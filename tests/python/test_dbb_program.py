@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal.io import gcode
+from fivecal import gcode
 from fivecal.io.dbb_program import dbb_program
 from fivecal.procedures.dbb import planar_plan
 

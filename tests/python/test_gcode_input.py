@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 import fivecal
 from fivecal.compensation import compensate_gcode
-from fivecal.io import gcode
+from fivecal import gcode
 
 ROOT = os.path.join(os.path.dirname(__file__), "..", "..")
 MACHINES = os.path.join(ROOT, "examples", "machines")

@@ -349,12 +349,13 @@ def test_every_command_exits_2_on_bad_input_and_0_on_help(tmp_path):
 
 
 def test_internal_error_exits_3_and_debug_shows_the_traceback(files, monkeypatch, capsys):
-    from fivecal import cli, identification
+    from fivecal import cli
+    from fivecal.cli import identify as identify_command  # where the command looks `identify` up
 
     def broken(*a, **k):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(identification, "identify", broken)
+    monkeypatch.setattr(identify_command, "identify", broken)
     monkeypatch.delenv("FIVECAL_DEBUG", raising=False)
     assert cli.main(["identify", str(files / "full.json")]) == 3
     err = capsys.readouterr().err
@@ -382,6 +383,7 @@ def test_identify_exits_1_on_inadequate_or_non_finite(files, monkeypatch, capsys
     """The fit's own verdict (chi-square against the declared noise, finiteness)
     drives the exit status; the faults are injected into a real fit's result."""
     from fivecal import cli, identification
+    from fivecal.cli import identify as identify_command  # where the command looks `identify` up
 
     real = identification.identify
 
@@ -394,7 +396,7 @@ def test_identify_exits_1_on_inadequate_or_non_finite(files, monkeypatch, capsys
                 setattr(r, key, v)
         return r
 
-    monkeypatch.setattr(identification, "identify", faulty)
+    monkeypatch.setattr(identify_command, "identify", faulty)
     assert cli.main(["identify", str(files / "full.json"), "--estimate", "S3"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0], err
@@ -404,9 +406,10 @@ def test_identify_exits_1_when_the_fit_does_not_converge(files, monkeypatch, cap
     """The solver stopped at its iteration limit: exit 1, one line, the result
     still written and marked."""
     from fivecal import cli, identification
+    from fivecal.cli import identify as identify_command  # where the command looks `identify` up
 
     real = identification.identify
-    monkeypatch.setattr(identification, "identify", lambda *a, **k: real(*a, **{**k, "max_iterations": 1}))
+    monkeypatch.setattr(identify_command, "identify", lambda *a, **k: real(*a, **{**k, "max_iterations": 1}))
     out = files / "stopped.json"
     assert cli.main(["identify", str(files / "full.json"), "--estimate", "S3", "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip().splitlines()

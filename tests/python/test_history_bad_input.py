@@ -384,8 +384,8 @@ def test_a_fleet_dataset_of_another_machine_is_a_failure(shop, store, tmp_path):
 
 
 def test_identify_record_of_a_non_finite_fit_says_so_and_records_nothing(shop, store, capsys):
-    from fivecal.history.cli import record_identify
-    from fivecal.history.report import History
+    from fivecal.cli.history import record_identify
+    from fivecal.report.history import History
 
     r = fivecal.identify(fivecal.load_dataset(shop.hu[0]), "location")
     bad = SimpleNamespace(estimated=r.estimated, values={**r.values, "EB0C": float("nan")},

@@ -6,7 +6,7 @@ import re
 import fivecal
 from fivecal import history
 from fivecal.history import fleetsim
-from fivecal.history.report import History
+from fivecal.report.history import History
 
 
 def test_report_has_history_sections(tmp_path):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal.io import gcode
+from fivecal import gcode
 from fivecal.io import linuxcnc as L
 from fivecal.io import nc_programs as N
 from fivecal.io.dbb_program import bar_length, dbb_program, rotary_dbb_program

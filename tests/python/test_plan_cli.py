@@ -11,7 +11,7 @@ import pytest
 
 import fivecal
 from fivecal.cli import main
-from fivecal.io import gcode
+from fivecal import gcode
 from fivecal.io import linuxcnc as L
 from fivecal.io import nc_programs as N
 

@@ -99,7 +99,7 @@ def figures_of(result):
         figs["ball3d_components"] = plots.component_figure(result, "ball3d")
     if "dbb" in kinds:
         figs["dbb_polar"] = polar.dbb_figure(result)
-        figs["dbb_residuals"] = plots.dbb_residual_figure(result)
+        figs["dbb_residuals"] = polar.dbb_residual_figure(result)
     return figs
 
 
@@ -350,7 +350,7 @@ def _cli(*args):
 
 
 def test_dbb_plot_cli_one_panel_per_setup(results, tmp_path, monkeypatch):
-    from fivecal.procedures import dbb_cli
+    from fivecal.cli import dbb as dbb_cli
     from fivecal.dataset import save_dataset
 
     save_dataset(results["dbb"].dataset, tmp_path / "ds.json")

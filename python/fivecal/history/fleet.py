@@ -31,7 +31,10 @@ from typing import List, Optional, Sequence, Union
 
 import numpy as np
 
-from .store import Calibration, Store, calibration_from_result, dataset_digest, utc_time
+from .. import files
+from ..uncertainty import monte_carlo
+from .store import (Calibration, Store, arrow_table, calibration_from_result, dataset_digest, require_pyarrow,
+                    utc_time)
 
 
 def require_dask():
@@ -87,8 +90,6 @@ def jobs_from(source: Union[str, Sequence[str]], procedure: str = "", machine_id
 
 def _manifest(path: str, procedure: str, machine_id: Optional[str]) -> List[Job]:
     if path.lower().endswith(".parquet"):
-        from .store import require_pyarrow
-
         require_pyarrow()
         import pyarrow.parquet as pq
 
@@ -153,8 +154,6 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
         cal = calibration_from_result(r, job.machine_id, job.time, job.procedure, digest=digest, source=job.path)
         cal.check()         # a non-finite fit is a failure of this dataset, not a record
         if trials:
-            from ..uncertainty import monte_carlo
-
             mc = monte_carlo(ds, estimate, trials=trials, threads=1, progress=False, keep_samples=False,
                              **{k: v for k, v in (options or {}).items() if k in ("fix", "initial", "robust")})
             idx = [mc.names.index(n) for n in cal.names]
@@ -361,7 +360,6 @@ def _collect(completed, st, parquet, run: FleetRun, batch: int, keep: bool, jobs
 def _parquet_digests(folder: str) -> set:
     if not os.path.isdir(folder):
         return set()
-    from .store import require_pyarrow
 
     require_pyarrow()
     import pyarrow.dataset as pds
@@ -374,12 +372,6 @@ def _parquet_digests(folder: str) -> set:
 
 
 def _write_parquet_part(folder: str, cals: Sequence[Calibration]) -> None:
-    """One new Parquet file per machine in ``folder/machine_id=<id>/`` (hive
-    layout, the id URL-encoded as pyarrow does), each written through
-    fivecal.files like every output (never over an input, atomic)."""
-    from .. import files
-    from .store import arrow_table, require_pyarrow
-
     require_pyarrow()
     import uuid
 

@@ -19,6 +19,7 @@ from typing import List, Optional
 import numpy as np
 
 from .. import files
+from ..simulation import simulate
 
 SPHERE = {"id": "P", "center": [100.0, -50.0, 60.0], "radius": 19.05 / 2}
 INDEXATIONS = [{"B": float(b), "C": float(c)} for b in (0, 30, -30) for c in (0, 90, 180, 270)]
@@ -82,7 +83,6 @@ def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigm
     identify`` reads: machine id from the folder, time from the file name);
     returns the paths. ``client``: a Dask client to simulate the machines on
     its workers (the same files as without)."""
-    from .. import simulate
     from ..procedures import tango
 
     m = machine()

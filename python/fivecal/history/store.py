@@ -32,6 +32,7 @@ from typing import Iterable, List, Mapping, Optional, Sequence
 import numpy as np
 
 from .. import files
+from .._version import __version__
 from ..machine import Machine
 from ..units import _BACKLASH, _LOCATION, _MOTION
 
@@ -115,8 +116,6 @@ SCHEMA_VERSION = MIGRATIONS[-1][0]
 
 
 def _version() -> str:
-    from .. import __version__
-
     return __version__
 
 

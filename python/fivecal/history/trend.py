@@ -25,6 +25,10 @@ import numpy as np
 
 from .. import files
 from .. import tolerances as _tolerances
+from .. import uncertainty
+from ..dataset import load_dataset
+from ..figures import _pyplot
+from ..files import save_figure
 from ..units import _BACKLASH, _LOCATION, _MOTION, display_scale
 from .store import Calibration, _kinematics, describe_machine
 
@@ -487,8 +491,6 @@ def pooled_statistics(calibrations: Sequence[Calibration], by: str = "days",
     1 says the machine varies more than one fit's noise shows. To propagate
     the pooled input covariance of the datasets themselves, pass the datasets
     to :func:`fivecal.uncertainty.gum_input_covariance`."""
-    from .. import uncertainty
-
     cals = [c for c in calibrations if c.usable]
     if names is None:
         common = set(machine_error_names(cals[0])) if cals else set()
@@ -528,9 +530,6 @@ def plot_trend(calibrations: Sequence[Calibration], path: str, names: Optional[S
     """One panel per parameter: value against calibration date with a ±2σ
     band, ±tolerance lines (dashed red) and CUSUM alarms (red triangles)."""
     import datetime
-
-    from ..files import save_figure
-    from ..report.plots import _pyplot
 
     files.guard_output(path, label)
     tolerances = _tolerances.check_tolerances(tolerances) if tolerances else None
@@ -599,9 +598,6 @@ def gum_from_history(calibrations: Sequence[Calibration], estimate="location", b
     :func:`fivecal.uncertainty.gum_input_covariance`, day labels from the
     stored times. Returns its :class:`fivecal.uncertainty.CyclesUncertainty`."""
     import os
-
-    from .. import uncertainty
-    from ..dataset import load_dataset
 
     cals = list(calibrations)
     missing = [c.source or f"#{c.id}" for c in cals if not c.source or not os.path.isfile(c.source)]

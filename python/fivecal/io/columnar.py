@@ -20,7 +20,8 @@ from typing import Iterable, Mapping, Optional, Union
 
 import numpy as np
 
-from .. import _core
+from .. import _core, files, plausibility
+from ..dataset import Dataset, load_dataset, register_format
 
 __all__ = ["FORMAT_VERSION", "UNITS", "is_parquet", "read_parquet", "iter_datasets", "write_parquet",
            "json_to_parquet", "parquet_to_json", "dataset_columns"]
@@ -97,8 +98,6 @@ def dataset_columns(ds) -> "pyarrow.Table":
     """The dataset (a Dataset or a dict in the dataset format) as an Arrow
     table with the fivecal metadata (what :func:`write_parquet` writes)."""
     pa = _pyarrow()
-    from ..dataset import Dataset
-
     d = Dataset.from_dict(ds).to_dict()
     # Linear axes, then rotary, then the spindle: the order people write them in.
     axis_letters = sorted(d["machine"]["axes"], key=lambda a: ("XYZABCS".find(a) % 8, a))
@@ -145,8 +144,6 @@ def write_parquet(ds, path: Union[str, os.PathLike], compression: str = "zstd") 
     """Write a dataset (a Dataset or a dict in the dataset format, validated
     first) as a Parquet file (docs/formats.md, "Columnar datasets")."""
     _pyarrow()
-    from .. import files
-
     # Written whole and renamed into place, as every fivecal output.
     files.write_parquet_table(path, dataset_columns(ds), compression=compression)
 
@@ -326,9 +323,6 @@ def read_parquet(path: Union[str, os.PathLike], check: bool = True):
         pa = _pyarrow()
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
-    from .. import plausibility
-    from ..dataset import Dataset
-
     pf, core_head, kinds = _open(path)
     loader = _core.ColumnLoader(core_head, pf.metadata.num_rows)
     start = 0
@@ -358,9 +352,6 @@ def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000) -> Itera
         pa = _pyarrow()
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
-    from .. import plausibility
-    from ..dataset import Dataset
-
     if rows < 1:
         raise ValueError(f"rows: expected a positive number of observations per piece, got {rows}")
     pf, core_head, kinds = _open(path)
@@ -397,13 +388,13 @@ def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000) -> Itera
 def json_to_parquet(src: Union[str, os.PathLike], dst: Union[str, os.PathLike]) -> None:
     """A JSON dataset file as a Parquet one (lossless: :func:`parquet_to_json`
     gives the same dataset back)."""
-    from ..dataset import load_dataset
-
     write_parquet(load_dataset(src), dst)
 
 
 def parquet_to_json(src: Union[str, os.PathLike], dst: Union[str, os.PathLike]) -> None:
     """A Parquet dataset file as a JSON one."""
-    from .. import files
-
     files.write_json(dst, read_parquet(src).to_dict())
+
+
+# load_dataset and save_dataset read and write Parquet through this
+register_format(is_parquet, read_parquet, (".parquet", ".pq"), write_parquet)

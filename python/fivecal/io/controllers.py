@@ -40,6 +40,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .. import _core
+from ..compensation import compensate_poses
 from ..machine import Machine
 
 GENERIC = ("table-table", "head-head", "table-head")
@@ -89,8 +90,7 @@ def _check_topology(machine: Machine, model: str) -> None:
                          f"(rotary axes {', '.join(a['name'] for a in rot)} on the "
                          f"{' and '.join(sides)} side)")
     if model in ("xyzac-trt", "xyzbc-trt"):
-        from . import linuxcnc as L
-        L.match(machine, model)
+        _core.trt_match(machine._core, model)  # linuxcnc.match: ValueError says why the machine does not fit
     if model == "5axiskins":
         _match_5axis(machine)
 
@@ -333,8 +333,6 @@ def compensated_residual(machine: Machine, errors, ab: Absorption) -> np.ndarray
     """(N, 3) mm: tool point error left at ``ab.poses`` when the controller
     runs the absorbed model and the program is compensated by fivecal on top
     (targets: the absorbed model's tool points plus the workpiece shift)."""
-    from ..compensation import compensate_poses
-
     names = machine.parameter_names()
     errs = {n: float(v) for n, v in zip(names, machine.theta(errors) - machine.theta(None)) if v != 0.0}
     cp = compensate_poses(machine, errs, ab.poses, reference_theta=ab.theta,

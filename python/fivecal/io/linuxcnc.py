@@ -25,11 +25,14 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .. import _core, files
+from ..compensation import usable_errors
 from ..files import read_text as _read_text
 from ..guards import CorrectionLimitError
 from ..machine import Machine
+from . import controllers as K
 from . import hal
 from . import nc_options as O
+from .controllers import region_stats
 
 KINS = ("xyzac-trt", "xyzbc-trt")
 TILT = {"xyzac-trt": "A", "xyzbc-trt": "B"}
@@ -140,7 +143,6 @@ class Absorption:
 
     def by_region(self, axis: str, bins: int = 4) -> List[Tuple[float, float, float, float]]:
         """Residual |e| by region of one axis: (lo, hi, rms, max) per bin, mm."""
-        from .controllers import region_stats
         return region_stats(self.poses, self.residual, axis, bins)
 
     def report(self) -> str:
@@ -500,8 +502,6 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     pin changes beyond ``max_change`` mm unless ``force``. A folder of an
     earlier export is replaced as a whole (:attr:`Export.replaced` lists its
     files), all or nothing; a folder holding anything else is refused."""
-    from ..compensation import usable_errors
-
     k = _kins(kins)
     errors = usable_errors(result, machine, force, what)
     match(machine, k)  # a clear refusal before any work
@@ -510,7 +510,6 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     check_change(ab.old_pins, ab.pins, max_change, force)
     # the same model in fivecal's parameters leaves the same map (tested), so
     # its G-code-compensated residual is this controller's
-    from . import controllers as K
     kab = K.absorb(machine, k, errors, poses=poses, compensation=True)
     ab.rms_compensated, ab.max_compensated = kab.rms_compensated, kab.max_compensated
     contents: Dict[str, str] = {}

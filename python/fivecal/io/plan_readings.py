@@ -19,8 +19,12 @@ from __future__ import annotations
 import os
 from typing import Dict, List, Mapping, Optional, Tuple
 
-from .. import plausibility
+from .. import files, plausibility
 from .. import units as _units
+from ..dataset import Dataset
+from ..machine import Machine
+from ..schema import read_checked as _read_json
+from . import linuxcnc as L
 from . import tables as T
 
 #: how far an axis column of a readings file may be from the plan's command
@@ -30,8 +34,6 @@ AXIS_TOLERANCE = 1e-3
 
 def read_plan(path: str):
     """(machine, plan, artefact, stylus radius) of a plan / simulation spec file."""
-    from .linuxcnc_cli import _read_spec
-
     return _read_spec(os.fspath(path))
 
 
@@ -53,8 +55,6 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
     program order (module docstring). ValueError names the file, line and
     column of a bad cell, an unknown or repeated id, a row count that does
     not match the dwells, or an axis cell that is not the plan's command."""
-    from .. import files
-
     path = os.fspath(path)
     machine, plan, _, _ = read_plan(plan_path)
     order = _program_order(plan)
@@ -192,8 +192,6 @@ def probe_log_dataset(path, plan_path, kins: str, pins_hal: Optional[str] = None
     """A sphere / facet dataset dict from LinuxCNC's probe log of the program
     of ``plan_path``; ``pins_hal``: the HAL file with the kinematics pins the
     controller ran with (default the machine's nominal pins)."""
-    from . import linuxcnc as L
-
     if not kins:
         raise ValueError("--kins: the LinuxCNC kinematics the program ran with (xyzac-trt or xyzbc-trt) "
                          "turns the logged world positions into axis readings")
@@ -217,12 +215,36 @@ def probe_log_dataset(path, plan_path, kins: str, pins_hal: Optional[str] = None
 
 def write(d: Mapping, out) -> "object":
     """Validate ``d`` as a Dataset and write it (atomically); returns the Dataset."""
-    from .. import files
-    from ..dataset import Dataset
-
     ds = Dataset.from_dict(d)
     files.write_json(out, ds.to_dict())
     return ds
 
 
 __all__ = ["rtest_readings", "probe_log_dataset", "read_plan", "write", "AXIS_TOLERANCE"]
+
+
+def _read_spec(path: str):
+    """machine, plan, artefact and stylus radius of a simulation spec (or a
+    dataset whose observations are the plan)."""
+    spec = _read_json(path, "the plan (a simulation spec)")
+    if not isinstance(spec, dict):
+        raise ValueError(f"{path}: expected a JSON object with machine, plan, artefact, probe")
+    machine = spec.get("machine")
+    if isinstance(machine, str):  # a path relative to the spec file
+        machine = Machine.load(os.path.join(os.path.dirname(os.path.abspath(path)), machine))
+    elif isinstance(machine, dict):
+        machine = Machine.from_dict(machine)
+    else:
+        raise ValueError(f"{path}: 'machine' missing (a machine object or a path)")
+    plan = spec.get("plan", spec.get("observations"))
+    if not isinstance(plan, list) or not plan or not all(isinstance(e, dict) for e in plan):
+        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, docs/formats.md)")
+    probe = spec.get("probe") or {}
+    if not isinstance(probe, dict):
+        raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")
+    try:
+        tip = float(probe.get("tip_radius", 0.0))
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: probe.tip_radius: expected the stylus ball radius in mm, got "
+                         f"{probe.get('tip_radius')!r}") from None
+    return machine, plan, spec.get("artefact") or {}, tip

@@ -40,8 +40,9 @@ import sys
 import warnings
 from typing import Iterable, Mapping, Optional, Sequence, Union
 
-from .. import plausibility
+from .. import plausibility, simulation
 from .. import units as _units
+from ..dataset import Dataset
 from ..machine import Machine, RadiansWarning
 
 KINDS = ("probing", "dbb", "ball3d", "point", "pose", "distance", "machined", "fivecal")
@@ -865,7 +866,6 @@ def _joint_homes(obs: list, machine: Machine, side: Mapping, origin: Mapping) ->
 def _place_instrument(obs: list, machine: Machine, side: Mapping, origin: Mapping, path: str) -> str:
     """Set each observation's instrument_origin / instrument_angles and say how
     they were found (the dataset's ``_comment``, printed by ``fivecal import``)."""
-    from .. import simulation
     from . import alignment
 
     inst = side["instrument"]
@@ -1579,8 +1579,6 @@ def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options)
     error the dataset checks find in an observation names its file and line.
     ``dataset.import_note`` says how a point import set the instrument's
     nominal pose (empty for other kinds)."""
-    from ..dataset import Dataset
-
     d, lines = _read(path, kind, machine, **options)
     path = os.fspath(path)
     sidecar = options.get("sidecar")

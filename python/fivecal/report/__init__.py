@@ -1,6 +1,8 @@
 """fivecal.report: what a user reads and looks at. :mod:`.document` writes the
 HTML and text report, :mod:`.plots` the figures of every observation kind,
-:mod:`.polar` the ball bar polar charts."""
-from .document import table_html, write_report
+:mod:`.polar` the ball bar polar charts, :mod:`.history` the report's
+calibration-history sections, :mod:`.markup` the HTML pieces they share."""
+from .document import write_report
+from .markup import table_html
 
 __all__ = ["table_html", "write_report"]

@@ -21,17 +21,22 @@ there (or in the R-test plots) is shown in the report, not raised.
 """
 from __future__ import annotations
 
-import base64
 import datetime
-import html
 import json
 import os
-from typing import Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from .. import guards
+from .._version import __version__
+from ..files import make_dirs, write_text
 from ..guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
+from ..identification import MICRO_UNITS, noise_lines, verdict_lines
 from ..units import display_scale
+from . import plots
+from .history import sections as _history_sections
+from .markup import _e, _img_tag, table_html
 
 __all__ = ["write_report", "Section"]
 
@@ -61,24 +66,10 @@ pre{background:#f6f6f6;padding:8px;overflow-x:auto;font-size:0.85em}
 """
 
 
-def _e(x) -> str:
-    return html.escape(str(x))
-
-
 def _fmt(v: float, digits: int = 3) -> str:
     if v is None or not np.isfinite(v):
         return "–"
     return f"{v:.{digits}f}"
-
-
-def _img_tag(path: str, out_dir: str, embed: bool, alt: str) -> str:
-    if embed:
-        with open(path, "rb") as f:
-            data = base64.b64encode(f.read()).decode("ascii")
-        src = f"data:image/png;base64,{data}"
-    else:
-        src = os.path.relpath(os.path.abspath(path), os.path.abspath(out_dir)).replace(os.sep, "/")
-    return f'<img src="{_e(src)}" alt="{_e(alt)}">'
 
 
 def _count(n: int, word: str) -> str:
@@ -196,8 +187,6 @@ def _verdict_banner(result, fd) -> str:
     """The verdict at the top of the report: red when the fit is not usable
     (never green then), amber when usable with reservations, green only for a
     usable fit with nothing left undetermined or inseparable."""
-    from ..identification import verdict_lines
-
     a = fd.assessment
     if not a.usable:
         return (f"<div class='box bad' id='verdict'><b>NOT USABLE — {_e(a.verdict.replace('_', ' '))}.</b> "
@@ -259,13 +248,10 @@ def _findings_section(result, fd) -> str:
 
 
 def _fit_section(result) -> str:
-    from .. import guards
-
     fd = guards.findings(result)
     a = fd.assessment
     cls = "bad" if not a.usable else ("warn" if result.unidentifiable or fd.inseparable else "ok")
     chi2 = getattr(result, "chi2", None)
-    from ..identification import MICRO_UNITS
     rows = []
     for unit, u in (getattr(result, "residual_units", None)
                     or {"mm": {"rms": result.rms, "max_abs": result.max_abs, "sigma": result.sigma}}).items():
@@ -278,7 +264,6 @@ def _fit_section(result) -> str:
             ("condition number", f"{result.condition_number:.4g} (of the scaled Jacobian)"),
             ("solver", f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} "
                        "iterations")]
-    from ..identification import noise_lines
     for line in noise_lines(result):
         rows.append(("instrument noise", line))
     if chi2 is not None and np.isfinite(chi2):
@@ -335,8 +320,6 @@ def _identifiability_section(result) -> str:
         for g in result.unidentifiable:
             parts.append("<li>{" + ", ".join(f"<code>{_e(n)}</code>" for n in g) + "}</li>")
         parts.append("</ul>")
-    from .. import guards
-
     fd = guards.findings(result)
     group = {n: i for i, g in enumerate(result.unidentifiable) for n in g}
     # pairs inside one confounded group are already named above
@@ -400,8 +383,6 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
     est = list(result.estimated)
     mach = sorted([n for n in est if n in machine_names and not n.startswith("tip.")], key=order.get)
     other = [n for n in est if n not in mach]
-
-    from .. import guards
 
     fd = guards.findings(result)
     und, part, impl = set(fd.undetermined), set(fd.partly), set(fd.implausible)
@@ -515,8 +496,6 @@ def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[str]]:
     touch probing (facet, sphere), per-component deviations for ball3d
     (R-test), polar panels and residuals per setup for DBB. Returns
     (figures, notes on figures that could not be drawn)."""
-    from . import plots
-
     types = set(result.dataset.observation_types)
     first: List[Figure] = []
     notes: List[str] = []
@@ -569,7 +548,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     alone (default); otherwise it references the PNG files next to it.
     ``summary``: a line of text shown under the title.
     ``history``: a calibration store (path or :class:`fivecal.history.Store`)
-    or a :class:`fivecal.history.report.History` with tolerances; with
+    or a :class:`fivecal.report.history.History` with tolerances; with
     ``machine_id`` it adds the machine's trend, the comparison with the
     previous calibration and pass / fail (docs/history.md).
 
@@ -579,12 +558,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     why; it then opens with a red "NOT USABLE" banner giving the reason, the
     page title says so, and no box on the page is green.
     """
-    from .. import __version__
-    from . import plots
-
     out_dir = os.fspath(out_dir)
-    from ..files import make_dirs
-
     make_dirs(out_dir)
     ds = result.dataset
     machine = ds.machine
@@ -614,11 +588,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
                         "parameters omitted; strongly correlated pairs are listed under Identifiability)."))
     figs += list(figures)
     if history is not None:
-        from ..history.report import sections as _history_sections
-
         sections = list(sections) + _history_sections(history, machine_id, out_dir, result, embed_images)
-
-    from .. import guards
 
     fd = guards.findings(result)
     title = title or f"fivecal identification report — {machine.name}"
@@ -666,18 +636,5 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
            f"<title>{_e(title)}</title><style>{_CSS}</style></head><body><main>\n"
            + "\n".join(body) + "\n</main></body></html>\n")
     path = os.path.join(out_dir, "report.html")
-    from ..files import write_text
-
     write_text(path, doc)
     return path
-
-
-def table_html(header: Sequence[str], rows: Iterable[Sequence], numeric: Sequence[bool] = ()) -> str:
-    """A small HTML table (for the ``sections`` of :func:`write_report`)."""
-    num = list(numeric) + [False] * (len(header) - len(numeric))
-    out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in header) + "</tr>"]
-    for r in rows:
-        out.append("<tr>" + "".join(f"<td class='num'>{_e(c)}</td>" if num[i] else f"<td>{_e(c)}</td>"
-                                    for i, c in enumerate(r)) + "</tr>")
-    out.append("</table>")
-    return "".join(out)

@@ -5,43 +5,10 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
+from .. import _core
+from ..figures import _pyplot
 from ..files import save_figure
 from ..units import display_scale
-
-
-def _pyplot():
-    """The part of pyplot the plots use, on private ``Figure`` objects with
-    an Agg canvas: no pyplot global state, and the caller's matplotlib
-    backend (a notebook's, a GUI's) is left alone."""
-    return _Figures
-
-
-class _Figures:
-    @staticmethod
-    def figure(**kw):
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        fig = Figure(**kw)
-        FigureCanvasAgg(fig)
-        return fig
-
-    @staticmethod
-    def subplots(nrows: int = 1, ncols: int = 1, squeeze: bool = True, subplot_kw=None, sharex=False,
-                 sharey=False, **kw):
-        fig = _Figures.figure(**kw)
-        return fig, fig.subplots(nrows, ncols, squeeze=squeeze, subplot_kw=subplot_kw, sharex=sharex,
-                                 sharey=sharey)
-
-    @staticmethod
-    def get_cmap(name: str):
-        import matplotlib
-
-        return matplotlib.colormaps[name]
-
-    @staticmethod
-    def close(fig) -> None:
-        """Nothing to release: the figure is not registered with pyplot."""
 
 
 def plot_parameters(result, path: str, names=None, truth: Optional[Mapping[str, float]] = None,
@@ -365,8 +332,6 @@ def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
     obs = result.dataset.observations
     if kind == "ball3d":
         return np.array([obs[i]["measured"] for i in rows], float) * 1e3
-    from .. import _core
-
     machine = set(result.dataset.machine.parameter_names())
     setup = {k: v for k, v in result.values.items() if k not in machine}
     res, src = _core.predict_residuals(result.dataset._core, setup)
@@ -452,51 +417,6 @@ def plot_components(result, path: str, kind: str = "ball3d", title: Optional[str
         return None
     save_figure(fig, path, dpi=110)
     return path
-
-
-def dbb_residual_figure(result, title: str = "Double ball bar: residuals after the fit"):
-    """Residuals of the DBB observations against the sample index (recording
-    order), one panel per setup, plane and bar length; the plane named in
-    each panel's title. None without DBB data."""
-    from ..procedures.dbb import trace_from_dataset
-    from .polar import MIN_SWEEP, dbb_groups
-
-    plt = _pyplot()
-    ds = result.dataset
-    groups = dbb_groups(ds)
-    if not groups:
-        return None
-    resid = {}
-    for k, r in zip(np.asarray(result.residual_source), np.asarray(result.residuals)):
-        if k >= 0:
-            resid.setdefault(int(k), float(r))
-    n = len(groups)
-    ncols = min(3, n)
-    nrows = -(-n // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(max(4.8 * ncols, 8.0), 2.7 * nrows + 0.9), squeeze=False,
-                             layout="constrained")
-    for k, (setup, length, idx) in enumerate(groups):
-        ax = axes[k // ncols][k % ncols]
-        where = "too few samples for a plane"
-        if len(idx) >= 3:
-            t = trace_from_dataset(ds.subset(idx), setup)
-            where = (f"plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
-                     f"no circle (the balls sweep {np.ptp(t.angles):.2g}°)")
-        r = np.array([resid.get(i, np.nan) for i in idx]) * 1e3
-        x = np.arange(len(idx))
-        ax.plot(x, r, "-o", ms=2, lw=1.0, color="#1f5fbf")
-        ax.axhline(0, color="#888", lw=0.7)
-        _limits(ax, x, np.r_[r, 0.0], margin=0.06)
-        rms = float(np.sqrt(np.nanmean(np.square(r)))) if np.isfinite(r).any() else float("nan")
-        ax.set_title(f"setup {setup or '(none)'} · {where} · bar {length:g} mm\n"
-                     f"{len(idx)} samples, rms {rms:.2f} µm", fontsize=10)
-        ax.grid(alpha=0.3)
-        ax.set_xlabel("sample (recording order)", fontsize=9)
-        ax.set_ylabel("residual (µm)", fontsize=9)
-    for k in range(n, nrows * ncols):
-        axes[k // ncols][k % ncols].set_visible(False)
-    fig.suptitle(title, fontsize=12)
-    return fig
 
 
 def plot_residual_histogram(result, path: str) -> str:

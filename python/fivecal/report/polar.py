@@ -31,18 +31,15 @@ from typing import Iterable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..procedures.dbb import Trace
+from ..figures import _pyplot
 from ..files import save_figure
+from ..procedures.dbb import Trace, trace_from_dataset
+from ..units import display_scale
+from .plots import _limits
 
 _NICE = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0)
 CW_COLOR, CCW_COLOR = "#1f5fbf", "#d62728"
 _PALETTE = ("#d62728", "#1f5fbf", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
-
-
-def _pyplot():
-    from .plots import _pyplot as figures
-
-    return figures()
 
 
 _NORMALS = {"XY": "+Z", "YZ": "+X", "ZX": "+Y", "YX": "−Z", "ZY": "−X", "XZ": "−Y"}
@@ -367,9 +364,6 @@ def plot_four_step(result, path: str) -> str:
     sweeps (the package's angle convention, not the rotary command: an axis
     whose direction is a negative basis vector turns the other way), with
     each step's fitted centre, and the PIGEs of both methods underneath."""
-    from ..procedures.dbb import trace_from_dataset
-    from ..units import display_scale
-
     ds = result.dataset
     panels = []
     for s in result.steps:
@@ -404,8 +398,6 @@ def plot_wang_patterns(patterns: Mapping, path: str, wang_path=None) -> str:
     """Polar plots of single-error traces along the Wang path (tracking angle
     90-450 deg), with their Fourier content: centre shift (1st harmonic),
     size change (mean), 2nd and 3rd harmonic amplitudes."""
-    from ..units import display_scale
-
     panels = []
     for name, p in patterns.items():
         h = np.asarray(p.harmonics) * 1e3
@@ -450,8 +442,6 @@ def dbb_panels(result) -> tuple:
     ``(panels, skipped)``; ``skipped`` names groups too short for a trace
     (fewer than 3 samples: no plane) or sweeping less than
     :data:`MIN_SWEEP` degrees."""
-    from ..procedures.dbb import trace_from_dataset
-
     ds = result.dataset
     resid = {}
     for k, r in zip(np.asarray(result.residual_source), np.asarray(result.residuals)):
@@ -496,8 +486,6 @@ def report_figures(result, out_dir: str) -> list:
     length in both."""
     import os
 
-    from .plots import dbb_residual_figure
-
     out = []
     panels, skipped = dbb_panels(result)
     if panels:
@@ -522,3 +510,45 @@ def report_figures(result, out_dir: str) -> list:
             cap += f" No polar plot: {'; '.join(skipped)}."
         out.append((path, cap))
     return out
+
+
+def dbb_residual_figure(result, title: str = "Double ball bar: residuals after the fit"):
+    """Residuals of the DBB observations against the sample index (recording
+    order), one panel per setup, plane and bar length; the plane named in
+    each panel's title. None without DBB data."""
+    plt = _pyplot()
+    ds = result.dataset
+    groups = dbb_groups(ds)
+    if not groups:
+        return None
+    resid = {}
+    for k, r in zip(np.asarray(result.residual_source), np.asarray(result.residuals)):
+        if k >= 0:
+            resid.setdefault(int(k), float(r))
+    n = len(groups)
+    ncols = min(3, n)
+    nrows = -(-n // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(max(4.8 * ncols, 8.0), 2.7 * nrows + 0.9), squeeze=False,
+                             layout="constrained")
+    for k, (setup, length, idx) in enumerate(groups):
+        ax = axes[k // ncols][k % ncols]
+        where = "too few samples for a plane"
+        if len(idx) >= 3:
+            t = trace_from_dataset(ds.subset(idx), setup)
+            where = (f"plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
+                     f"no circle (the balls sweep {np.ptp(t.angles):.2g}°)")
+        r = np.array([resid.get(i, np.nan) for i in idx]) * 1e3
+        x = np.arange(len(idx))
+        ax.plot(x, r, "-o", ms=2, lw=1.0, color="#1f5fbf")
+        ax.axhline(0, color="#888", lw=0.7)
+        _limits(ax, x, np.r_[r, 0.0], margin=0.06)
+        rms = float(np.sqrt(np.nanmean(np.square(r)))) if np.isfinite(r).any() else float("nan")
+        ax.set_title(f"setup {setup or '(none)'} · {where} · bar {length:g} mm\n"
+                     f"{len(idx)} samples, rms {rms:.2f} µm", fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("sample (recording order)", fontsize=9)
+        ax.set_ylabel("residual (µm)", fontsize=9)
+    for k in range(n, nrows * ncols):
+        axes[k // ncols][k % ncols].set_visible(False)
+    fig.suptitle(title, fontsize=12)
+    return fig

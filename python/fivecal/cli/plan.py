@@ -8,6 +8,12 @@ import argparse
 import math
 import os
 
+from .._json import plain
+from ..files import write_json
+from ..procedures import dbb, rtest, sphere_check, sphere_test
+from .common import POSITIVE, _axis_values, _float_type, _integer_type, _read_machine
+from .dbb import _values
+
 
 def _vector(text: str, option: str, n: int = 3) -> list:
     parts = [t.strip() for t in str(text).split(",")]
@@ -76,8 +82,6 @@ def _positions(items, machine, option: str = "--positions") -> dict:
 
 
 def _machine(path: str):
-    from ..cli import _read_machine
-
     return _read_machine(path)
 
 
@@ -108,9 +112,6 @@ def _rings(text):
 
 
 def _write(args, machine, plan, what: str, artefact=None, tip_radius=None) -> int:
-    from .._json import plain
-    from ..files import write_json
-
     if not plan:
         raise ValueError(f"{what}: the options leave no plan entry (check the ranges and limits)")
     spec = {"_comment": f"fivecal plan {args.plan_command} for {machine.name}: {len(plan)} entries; "
@@ -121,8 +122,6 @@ def _write(args, machine, plan, what: str, artefact=None, tip_radius=None) -> in
     if tip_radius is not None:
         spec["probe"] = {"tip_radius": tip_radius}
     if args.errors:
-        from .dbb_cli import _values
-
         if not os.path.exists(args.errors) and any("=" not in t for t in args.errors.split(",") if t.strip()):
             raise ValueError(f"--errors: expected NAME=VALUE pairs (mm, rad) or a JSON file, got '{args.errors}'")
         spec["errors"] = _values(args.errors, "--errors")
@@ -137,8 +136,6 @@ def _write(args, machine, plan, what: str, artefact=None, tip_radius=None) -> in
 
 
 def _sphere_check(args) -> int:
-    from . import sphere_check
-
     m = _machine(args.machine)
     ball = _sphere(args)
     limits = _ranges(args.limits, "--limits", m) if args.limits else None
@@ -151,9 +148,6 @@ def _sphere_check(args) -> int:
 
 
 def _sphere_test(args) -> int:
-    from ..cli import _axis_values
-    from . import sphere_test
-
     m = _machine(args.machine)
     ball = _sphere(args)
     if not args.at:
@@ -171,8 +165,6 @@ def _sphere_test(args) -> int:
 
 
 def _rtest(args) -> int:
-    from . import rtest
-
     m = _machine(args.machine)
     tests = [t.strip().upper() for t in args.tests.split(",") if t.strip()]
     bad = [t for t in tests if t not in rtest.TESTS]
@@ -194,8 +186,6 @@ def _rtest(args) -> int:
 
 
 def _four_step(args) -> int:
-    from . import dbb
-
     m = _machine(args.machine)
     pair = dbb.four_step_pair(m)  # says why a machine's geometry does not allow the test
     setups = None
@@ -216,8 +206,6 @@ def _four_step(args) -> int:
 
 
 def _wang(args) -> int:
-    from . import dbb
-
     m = _machine(args.machine)
     tb = _vector(args.table_ball, "--table-ball") if args.table_ball else (0.0, 150.0, 130.0)
     if "." in args.setup or not args.setup.strip():
@@ -230,8 +218,6 @@ def _wang(args) -> int:
 
 def register(sub) -> None:
     """Add ``plan`` (sphere-check, sphere-test, rtest, four-step, wang) to the main parser."""
-    from ..cli import POSITIVE, _float_type, _integer_type
-
     RD = argparse.RawDescriptionHelpFormatter
     pp = sub.add_parser(
         "plan", help="a test plan from a machine file: sphere check, sphere test, R-test, ball bar",

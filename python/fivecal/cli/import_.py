@@ -3,12 +3,13 @@ from __future__ import annotations
 
 import argparse
 
+from .. import files
+from ..io import plan_readings as P, tables
+from ..io.tables import KINDS
+
 
 def _run_planned(args) -> int:
     """Readings lined up with a plan: R-test dwell readings, LinuxCNC probe log."""
-    from .. import files
-    from . import plan_readings as P
-
     files.check_outputs([("FILE", args.file), ("--plan", args.plan), ("--pins", args.pins)], [("--out", args.out)])
     if args.kind == "probe-log":
         for opt in ("machine", "sidecar", "column", "setup", "length", "tool_ball", "table_ball", "header",
@@ -39,9 +40,6 @@ def _run_planned(args) -> int:
 
 
 def _run(args) -> int:
-    from .. import files
-    from . import tables
-
     if args.kind == "probe-log" and not args.plan:
         raise ValueError("--plan: a probe-log import needs the plan the program was written from")
     if args.plan:
@@ -74,8 +72,6 @@ def _run(args) -> int:
 
 
 def register(sub) -> None:
-    from .tables import KINDS
-
     p = sub.add_parser(
         "import", help="turn an instrument table (CSV or text) into a dataset",
         formatter_class=argparse.RawDescriptionHelpFormatter,

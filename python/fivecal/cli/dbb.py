@@ -18,6 +18,16 @@ import os
 
 import numpy as np
 
+from ..dataset import load_dataset, save_dataset
+from ..files import read_json, write_text
+from ..guards import FitWarning
+from ..machine import Machine
+from ..procedures import dbb
+from ..report.polar import (dbb_groups, plane_name, plot_circular_test, plot_four_step, plot_polar, plot_polar_grid,
+                            plot_volumetric, plot_wang_patterns)
+from ..simulation import simulate
+from .common import POSITIVE, SEED, SIGMA, _FORCE_HELP, _float_type, _values_verdict, fit_status
+
 #: Jiang & Cripps Tables 2-3 (positions in mm; orientations read as arc-seconds,
 #: see examples/machines/README.md).
 _ARCSEC = math.pi / (180 * 3600)
@@ -32,8 +42,6 @@ def paper_jiang(machine) -> dict:
     A's values, the carried axis C's, in the order of the pair's PIGE names
     (positions along the first and second plane axes, then the tilts about
     them)."""
-    from . import dbb
-
     names = dbb.four_step_pair(machine)["names"]
     return dict(zip(names, PAPER_JIANG.values()))
 
@@ -48,8 +56,6 @@ def _values(text, what: str, paper=None) -> dict:
     if text == "paper" and paper is not None:
         return dict(paper)
     if os.path.exists(text):
-        from ..files import read_json
-
         d = read_json(text, "errors")
         if not isinstance(d, dict):
             raise ValueError(f"{text}: expected an object name -> value")
@@ -91,8 +97,6 @@ def _vector(text, n: int, what: str):
 
 
 def _machine(path):
-    from ..machine import Machine
-
     if path is None:
         raise ValueError("--machine is required here (a machine JSON file)")
     if not os.path.exists(path):
@@ -105,8 +109,6 @@ def _machine(path):
 
 
 def _write_json(d: dict, path: str) -> None:
-    from ..files import write_text
-
     write_text(path, json.dumps(d, indent=1, default=float) + "\n")
 
 
@@ -127,8 +129,6 @@ def _quiet_fit_warnings():
     """FitWarnings silenced: the command judges the fit itself, in one line."""
     import warnings
 
-    from ..guards import FitWarning
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
         yield
@@ -136,10 +136,6 @@ def _quiet_fit_warnings():
 
 # ---- jiang -----------------------------------------------------------------
 def _jiang(args) -> int:
-    from . import dbb
-    from ..dataset import load_dataset, save_dataset
-    from ..simulation import simulate
-
     setups = None
     if args.setups:
         setups = [s.strip() for s in args.setups.split(",")]
@@ -184,11 +180,8 @@ def _jiang(args) -> int:
         _write_json(res.to_dict(), args.out)
         print(f"\nresult written to {args.out}")
     if args.plot:
-        from ..report.polar import plot_four_step
-
         plot_four_step(res, args.plot)
         print(f"polar plots written to {args.plot}")
-    from ..cli import _values_verdict, fit_status
 
     verdicts = [("four-step values", _values_verdict(res.values, res.std))]
     if res.engine is not None:
@@ -198,10 +191,6 @@ def _jiang(args) -> int:
 
 # ---- wang ------------------------------------------------------------------
 def _wang(args) -> int:
-    from . import dbb
-    from ..dataset import load_dataset, save_dataset
-    from ..simulation import simulate
-
     geometry = {"table_ball": _vector(args.table_ball, 3, "--table-ball") or (0.0, 150.0, 130.0),
                 "radius": args.radius, "height": args.height}
     ds = load_dataset(args.dataset) if args.dataset else None
@@ -209,8 +198,6 @@ def _wang(args) -> int:
     path = dbb.wang_path(m, **geometry)
     print(path.format_table(args.every))
     if args.patterns:
-        from ..report.polar import plot_wang_patterns
-
         sizes = _values(args.pattern_errors, "--pattern-errors") or {"EX0C": 0.01, "EY0C": 0.01,
                                                                      "EZ0C": 0.01, "EA0C": 50e-6}
         pats = dbb.wang_patterns(m, sizes, **geometry)
@@ -234,8 +221,6 @@ def _wang(args) -> int:
                          "separable": ident.separable}, args.out)
             print(f"\nresult written to {args.out}")
         if args.plot:
-            from ..report.polar import plot_polar
-
             t = dbb.trace_from_dataset(ds, args.setup)
             t.label = f"measured ({args.setup})"
             r = ident.result
@@ -252,7 +237,6 @@ def _wang(args) -> int:
                        annotations=notes, plane=tuple(getattr(t, "plane", "XY")),
                        colors=["#d62728", "#222222"])
             print(f"polar plot written to {args.plot}")
-        from ..cli import fit_status
 
         return fit_status("dbb wang", [("", ident.result.assessment())], args.force, (args.out, args.plot))
     return 0
@@ -280,8 +264,6 @@ def _diagnosis_options(args) -> dict:
 
 
 def _add_diagnosis_options(p) -> None:
-    from ..cli import POSITIVE, _float_type
-
     p.add_argument("--cyclic-pitch", metavar="MM[,MM]",
                    help="pitch of the cyclic error to fit (ball-screw or scale pitch), one for both plane axes "
                    "or one per axis; 'auto' searches it; default: not fitted")
@@ -298,10 +280,6 @@ def _add_diagnosis_options(p) -> None:
 
 
 def _circular(args) -> int:
-    from . import dbb
-    from ..dataset import load_dataset
-    from ..simulation import simulate
-
     traces = []
     if args.simulate is not None:
         m = _machine(args.machine)
@@ -334,11 +312,8 @@ def _circular(args) -> int:
         _write_json(res.to_dict(), args.out)
         print(f"\nresult written to {args.out}")
     if args.plot:
-        from ..report.polar import plot_circular_test
-
         plot_circular_test(res, args.plot)
         print(f"polar plot written to {args.plot}")
-    from ..cli import _values_verdict, fit_status
 
     # ISO 230-4 values of each run and the least-squares diagnosis: one
     # non-finite number (a degenerate trace) makes the whole test unusable.
@@ -351,9 +326,6 @@ def _circular(args) -> int:
 
 # ---- volumetric --------------------------------------------------------------
 def _volumetric(args) -> int:
-    from . import dbb
-    from ..simulation import simulate
-
     results = {}
     opts = _diagnosis_options(args)
     if args.simulate is not None:
@@ -390,11 +362,8 @@ def _volumetric(args) -> int:
         _write_json(vol.to_dict(), args.out)
         print(f"\nresult written to {args.out}")
     if args.plot:
-        from ..report.polar import plot_volumetric
-
         plot_volumetric(vol, args.plot)
         print(f"polar plot written to {args.plot}")
-    from ..cli import _values_verdict, fit_status
 
     values = {f"{p} diagnosis {k}": v for p, r in results.items() for k, v in r.diagnosis.items()}
     std = {f"{p} diagnosis {k}": r.diagnosis_std[k] for p, r in results.items() for k in r.diagnosis}
@@ -406,10 +375,6 @@ def _plot(args) -> int:
     """One polar panel per dataset setup and bar length (each in its own
     plane), and one for the CSV traces (the plane of --plane): planes and bar
     lengths are never mixed on one chart."""
-    from . import dbb
-    from ..dataset import load_dataset
-    from ..report.polar import dbb_groups, plane_name, plot_polar, plot_polar_grid
-
     panels, csv_traces = [], []
     csv_plane = plane_name(args.plane) if args.plane else "XY"
     for inp in args.inputs:
@@ -455,8 +420,6 @@ def _plot(args) -> int:
 
 def register(sub) -> None:
     """Add the ``dbb`` subcommand group to the main parser's subparsers."""
-    from ..cli import _FORCE_HELP, POSITIVE, SEED, SIGMA, _float_type
-
     FINITE = _float_type()
     RD = argparse.RawDescriptionHelpFormatter
     pd = sub.add_parser("dbb", help="double ball bar tests: jiang, wang, circular, volumetric, plot", formatter_class=RD,

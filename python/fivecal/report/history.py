@@ -4,13 +4,14 @@ comparison with the previous calibration, and pass / fail against the
 tolerances."""
 from __future__ import annotations
 
-import html
 import os
 from dataclasses import dataclass
 from typing import List, Mapping, Optional, Tuple, Union
 
+from ..history.store import Store, calibration_from_result, dataset_digest, time_key
+from ..history.trend import compare, detect, grade, plot_trend
 from ..units import display_scale
-from .store import Store, calibration_from_result, dataset_digest, time_key
+from .markup import _e, _img_tag, table_html
 
 
 @dataclass
@@ -27,18 +28,11 @@ class History:
     time: Optional[object] = None
 
 
-def _e(x) -> str:
-    return html.escape(str(x))
-
-
 def sections(history, machine_id: Optional[str], out_dir: str, result=None,
              embed: bool = True) -> List[Tuple[str, str]]:
     """(title, HTML) sections for the report; empty when the store holds no
     calibration of the machine. ``result``: the identification the report is
     about; when it is not in the store it is shown as the newest entry."""
-    from ..report.document import _img_tag, table_html
-    from .trend import compare, detect, grade, plot_trend
-
     h = history if isinstance(history, History) else History(history, machine_id)
     if machine_id:
         h.machine_id = machine_id

@@ -7,14 +7,17 @@ import os
 import sys
 import warnings
 
+from ..history.fleet import _time_of, fleet_identify
+from ..history.store import AlreadyRecorded, Store, calibration_from_result, dataset_digest, write_parquet
+from ..history.trend import ChartDesign, compare, detect, grade, plot_trend, pooled_statistics
 from ..identification import resolve_estimate
+from ..machine import Machine
+from ..report.history import History
 from ..tolerances import check_names, parse_tolerances, volumetric_tolerance
-from .store import AlreadyRecorded
+from ..units import display_scale
 
 
 def _store(args, create=False):
-    from .store import Store
-
     return Store(args.store, create=create)
 
 
@@ -35,8 +38,6 @@ def _recording(record):
 
 
 def _add(args) -> int:
-    from .store import dataset_digest
-
     digest = dataset_digest(args.dataset) if args.dataset else None
     machine = args.machine or args.dataset
     with _store(args, create=True) as s:
@@ -67,8 +68,6 @@ def _list(args) -> int:
 
 
 def _show(args) -> int:
-    from ..units import display_scale
-
     with _store(args) as s:
         c = s.get(args.id)
     if args.json:
@@ -84,8 +83,6 @@ def _show(args) -> int:
 
 
 def _resolve(s, ref: str, what: str):
-    from .store import calibration_from_result
-
     if os.path.isfile(ref):
         import datetime
 
@@ -101,9 +98,6 @@ def _resolve(s, ref: str, what: str):
 
 
 def _compare(args) -> int:
-    from ..machine import Machine
-    from .trend import compare
-
     s = _store(args) if args.store else None
     try:
         a, b = _resolve(s, args.a, "A"), _resolve(s, args.b, "B")
@@ -130,7 +124,6 @@ def _failures(args) -> int:
 
 
 def _export(args) -> int:
-    from .store import write_parquet
 
     with _store(args) as s:
         cals = s.list(args.machine_id)
@@ -141,8 +134,6 @@ def _export(args) -> int:
 
 
 def _trend(args) -> int:
-    from .trend import ChartDesign, detect, grade, plot_trend, pooled_statistics
-
     vt = volumetric_tolerance(args.volumetric_tolerance)
     with _store(args) as s:
         machine = s.machine(args.machine_id)
@@ -186,8 +177,6 @@ def _names_of(cal) -> list:
 
 
 def _fleet(args) -> int:
-    from .fleet import fleet_identify
-
     if not args.store and not args.parquet:
         raise ValueError("fleet identify: give --store FILE and/or --parquet DIR for the results")
     if args.workers is not None and args.workers < 1:
@@ -241,11 +230,9 @@ def add_identify_options(p) -> None:
 
 
 def identify_history(args):
-    """The report's :class:`~fivecal.history.report.History` for ``fivecal
+    """The report's :class:`~fivecal.report.history.History` for ``fivecal
     identify`` (None without --history); checks the options first (the
     tolerance names against the machine: :func:`check_identify_history`)."""
-    from .report import History
-
     given = [o for o, v in (("--machine-id", args.machine_id), ("--tolerance", args.tolerance),
                             ("--volumetric-tolerance", args.volumetric_tolerance), ("--record", args.record),
                             ("--procedure", args.procedure), ("--replace", args.replace),
@@ -264,11 +251,9 @@ def identify_history(args):
             raise ValueError(f"{o}: only with --record")
     vt = volumetric_tolerance(args.volumetric_tolerance)
     tol = parse_tolerances(args.tolerance)
-    from .store import Store
 
     # a missing (without --record) or foreign file is said before the fit
     Store(args.history, create=args.record).close()
-    from .fleet import _time_of
 
     return History(args.history, args.machine_id.strip(), tolerances=tol or None,
                    volumetric_tolerance=vt, time=_time_of(args.dataset) if os.path.isfile(args.dataset) else None)
@@ -297,9 +282,6 @@ def check_identify_history(args, hist, dataset) -> None:
 def grade_identify(result, hist) -> str:
     """``fivecal identify --tolerance``: this result graded as the report
     grades it (printed); returns the verdict (pass, fail, undecided)."""
-    from .store import calibration_from_result
-    from .trend import grade
-
     cal = calibration_from_result(result, hist.machine_id, time=hist.time, source="this identification")
     g = grade(cal, hist.tolerances or {}, hist.volumetric_tolerance, machine=result.dataset.machine)
     print()
@@ -311,8 +293,6 @@ def record_identify(args, result, hist) -> None:
     """``fivecal identify --record``: the result into the store; a
     non-finite fit is not recorded (said on stderr; the command then exits 1
     on the fit, keeping its report and result to inspect)."""
-    from .store import Store, calibration_from_result
-
     cal = calibration_from_result(result, hist.machine_id, time=hist.time, procedure=args.procedure or "",
                                   source=args.dataset)
     try:

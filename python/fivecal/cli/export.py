@@ -6,9 +6,11 @@ import argparse
 import os
 
 from .. import files
+from ..compensation import usable_errors
+from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
+from ..io.plan_readings import _read_spec
 from ..tolerances import parse_value
-from . import linuxcnc as L
-from . import nc_options as O
+from .common import _read_machine
 
 
 def _volume(text: str) -> dict:
@@ -27,8 +29,6 @@ def _volume(text: str) -> dict:
 
 
 def _run(args) -> int:
-    from ..cli import _read_machine
-
     machine = _read_machine(args.machine)
     limits = L.parse_max_change(args.max_change)
     limit = None if limits is None else limits["mm"]
@@ -47,10 +47,6 @@ def _run(args) -> int:
 
 def _run_kinematics(args) -> int:
     import json
-
-    from ..cli import _read_machine
-    from ..compensation import usable_errors
-    from . import controllers as K
 
     machine = _read_machine(args.machine)
     errors = usable_errors(args.result, machine, args.force, args.result)
@@ -105,36 +101,6 @@ def _write_or_print(text: str, out, message: str) -> int:
 _PLAN_KINDS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb": "dbb"}
 
 
-def _read_spec(path: str):
-    """machine, plan, artefact and stylus radius of a simulation spec (or a
-    dataset whose observations are the plan)."""
-    from ..cli import _read_json
-    from ..machine import Machine
-
-    spec = _read_json(path, "the plan (a simulation spec)")
-    if not isinstance(spec, dict):
-        raise ValueError(f"{path}: expected a JSON object with machine, plan, artefact, probe")
-    machine = spec.get("machine")
-    if isinstance(machine, str):  # a path relative to the spec file
-        machine = Machine.load(os.path.join(os.path.dirname(os.path.abspath(path)), machine))
-    elif isinstance(machine, dict):
-        machine = Machine.from_dict(machine)
-    else:
-        raise ValueError(f"{path}: 'machine' missing (a machine object or a path)")
-    plan = spec.get("plan", spec.get("observations"))
-    if not isinstance(plan, list) or not plan or not all(isinstance(e, dict) for e in plan):
-        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, docs/formats.md)")
-    probe = spec.get("probe") or {}
-    if not isinstance(probe, dict):
-        raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")
-    try:
-        tip = float(probe.get("tip_radius", 0.0))
-    except (TypeError, ValueError):
-        raise ValueError(f"{path}: probe.tip_radius: expected the stylus ball radius in mm, got "
-                         f"{probe.get('tip_radius')!r}") from None
-    return machine, plan, spec.get("artefact") or {}, tip
-
-
 def _run_program(args) -> int:
     O.check_cli(args)
     machine, plan, artefact, tip = _read_spec(args.spec)
@@ -169,9 +135,6 @@ def _run_program(args) -> int:
 
 
 def _program_text(args, kind, machine, plan, artefact, tip) -> str:
-    from . import dbb_program as D
-    from . import nc_programs as N
-
     # an option left out takes the writer's default for this kind of program
     opt = lambda name, default: default if getattr(args, name) is None else getattr(args, name)  # noqa: E731
     touch = dict(clearance=args.clearance, overtravel=args.overtravel, feed=opt("feed", 60.0),
@@ -233,7 +196,6 @@ def register(sub) -> None:
     pl.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
                     "--max-change; only to inspect the values")
     pl.set_defaults(func=_run, out_is_folder=True)
-    from . import controllers as K
     pk = esub.add_parser(
         "kinematics", formatter_class=RD,
         help="what a controller's kinematic model absorbs; a neutral kinematics table",
