@@ -263,8 +263,6 @@ def check_identify_history(args, hist, dataset) -> None:
     """Before the fit, with the dataset loaded: every tolerance names a
     parameter of its machine, and the machine is the one the store holds for
     --machine-id (unless --rebuilt)."""
-    from .store import Store
-
     if hist is None:
         return
     m = dataset.machine
