@@ -15,6 +15,7 @@ import re
 import signal
 import sys
 import time
+import warnings
 
 from . import __version__, schema
 
@@ -185,6 +186,43 @@ def _float_type(low=None, high=None, low_open: bool = False, what: str = "a numb
 
 SEED = _integer_type(0, 2 ** 64, "an integer seed")
 COUNT = _integer_type(0)
+
+# ---- sizes: how much a count or a step makes a command allocate --------------
+#: The most samples, plan entries, program points or Monte Carlo trials one
+#: option may ask for. A real test records a few thousand; a typo (-n 1000000000,
+#: --step 1e-6) is refused naming its option (exit 2), never a MemoryError.
+MAX_SAMPLES = 1_000_000      # samples of one simulated trace (the core's bound as well)
+MAX_PLAN_ENTRIES = 100_000   # entries of a written plan (each a JSON object) or program points
+MAX_TRIALS = 1_000_000       # JCGM 101 asks for about 10^6 trials for a 95 % interval
+MAX_WORKERS = 256            # worker processes of one machine's Dask LocalCluster
+
+
+def check_size(option: str, count: float, what: str = "plan entries", limit: int = MAX_PLAN_ENTRIES) -> int:
+    """``count`` (what ``option`` asks for) as an int; refused naming ``option`` above ``limit``."""
+    if not count <= limit:
+        raise ValueError(f"{option}: asks for {count:.4g} {what}; at most {limit}")
+    return int(count)
+
+
+def check_step(option: str, step: float, span: float, unit: str = "deg", what: str = "plan entries",
+               per: int = 1, limit: int = MAX_PLAN_ENTRIES) -> int:
+    """The number of samples ``step`` apart over ``span`` (times ``per``, e.g.
+    one set per test); refused naming ``option`` above ``limit``."""
+    if not (step > 0 and math.isfinite(step)):
+        raise ValueError(f"{option}: expected a step > 0 {unit}, got {step}")
+    count = (math.floor(abs(span) / step + 1e-9) + 1) * per
+    if not count <= limit:
+        raise ValueError(f"{option}: {step:g} {unit} gives {count:.4g} {what} over {abs(span):g} {unit}"
+                         f"{f' ({per} times)' if per > 1 else ''}; at most {limit} (use a larger step)")
+    return int(count)
+
+
+def count_type(low: int = 0, limit: int = MAX_PLAN_ENTRIES, what: str = "an integer"):
+    """An argparse type: an integer from ``low`` to ``limit`` (both included)."""
+    return _integer_type(low, limit + 1, what)
+
+
+TRIALS = count_type(2, MAX_TRIALS, "a number of trials")
 SIGMA = _float_type(0.0, what="a noise level in mm")
 POSITIVE = _float_type(0.0, low_open=True)
 PROBABILITY = _float_type(0.0, 1.0, low_open=True, what="a probability")
@@ -300,6 +338,21 @@ def _demo(args) -> int:
     return 0
 
 
+def _docs(args) -> int:
+    from . import manual
+
+    if args.name:
+        print(manual.doc_path(args.name))
+        return EXIT_OK
+    names = manual.doc_names()
+    if not names:
+        manual.doc_path("")  # raises: says the documentation is not installed
+    print(f"fivecal documentation in {manual.docs_dir()} (`fivecal docs NAME` prints a page's path):")
+    for n in names:
+        print(f"  {n:<28} {os.path.basename(manual.doc_path(n))}")
+    return EXIT_OK
+
+
 def _design_spec(path: str) -> dict:
     from .machine import Machine
 
@@ -348,10 +401,13 @@ def _design(args) -> int:
         ks = []
     if not ks or min(ks) < 1:
         raise ValueError(f"-k: expected a number of indexations (>= 1) or a comma-separated list, got '{args.k}'")
+    check_size("-k", max(ks), "indexations")
     try:
         required = [int(x) for x in args.require.split(",") if x.strip()] if args.require else None
     except ValueError:
         raise ValueError(f"--require: expected comma-separated visit numbers, got '{args.require}'") from None
+    if required:
+        check_size("--require", max(abs(r) for r in required), "(a visit number)")
     pool = design._as_dataset(plan, machine, artefact, tip_radius, None)
     rows = None
     for i, k in enumerate(ks):
@@ -663,6 +719,21 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+def _warning_line(command: str):
+    """A ``warnings.showwarning`` that prints ``fivecal COMMAND: warning: MESSAGE``
+    on one line: a user of the command line is shown neither the source line
+    that warned nor a path inside the package. Python API users keep the
+    standard display (it is installed only while a command runs)."""
+    def show(message, category, filename, lineno, file=None, line=None):
+        stream = sys.stderr if file is None else file
+        try:
+            stream.write(f"fivecal {command}: warning: {' '.join(str(message).split())}\n")
+        except (OSError, ValueError):  # stderr closed: a warning must not end the command
+            pass
+
+    return show
+
+
 def _one_line(e: BaseException) -> str:
     if isinstance(e, OSError) and e.filename is not None and e.strerror:
         text = f"{e.filename}: {e.strerror}"
@@ -698,7 +769,7 @@ def main(argv=None) -> int:
                         "(tip, touched facets, sphere centres, DBB lengths) and print a report.",
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
                         "  fivecal identify fivecal_demo/dataset.json --estimate S3 --robust huber")
-    pi.add_argument("dataset", help="dataset, JSON or Parquet (format: docs/formats.md)")
+    pi.add_argument("dataset", help="dataset, JSON or Parquet (format: `fivecal docs formats`)")
     pi.add_argument("--estimate", default="auto",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "
                     "(default: auto, as in Python: every error under its prior, the undetermined "
@@ -711,7 +782,7 @@ def main(argv=None) -> int:
     pi.add_argument("--variance-components", action="store_true",
                     help="estimate the noise of each instrument group (probe, dbb, ball3d, point, pose, "
                     "pose_rad, distance) from the residuals instead of trusting the declared sigmas "
-                    "(docs/identification.md)")
+                    "(`fivecal docs identification`)")
     pi.add_argument("--out", help="write the result JSON here")
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")
@@ -722,7 +793,7 @@ def main(argv=None) -> int:
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Read a dataset (JSON or Parquet, recognised by its content) and write "
                         "it as Parquet when OUT ends in .parquet or .pq (needs pyarrow: pip install "
-                        "'fivecal[arrow]'), as JSON otherwise (docs/formats.md).",
+                        "'fivecal[arrow]'), as JSON otherwise (`fivecal docs formats`).",
                         epilog="example:\n  fivecal convert trace.json trace.parquet\n"
                         "  fivecal convert trace.parquet trace.json")
     pv.add_argument("dataset", help="dataset to read (JSON or Parquet)")
@@ -732,7 +803,7 @@ def main(argv=None) -> int:
     ps = sub.add_parser("simulate", help="simulate a measurement on a machine with known errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Read a simulation spec (machine or machine path, errors, setup, "
-                        "probe, artefact, plan, sigma, seed; see docs/formats.md) and "
+                        "probe, artefact, plan, sigma, seed; see `fivecal docs formats`) and "
                         "write the dataset a real machine would record.",
                         epilog="example:\n  fivecal simulate spec.json --out dataset.json --sigma 0.0006")
     ps.add_argument("spec", help="simulation spec JSON")
@@ -749,6 +820,15 @@ def main(argv=None) -> int:
     pd.add_argument("--seed", type=SEED, default=1, help="random seed of the simulated noise and of the "
                     "held-out indexations (default: 1)")
     pd.set_defaults(func=_demo)
+
+    po = sub.add_parser("docs", help="where the user documentation is: list the pages or print one's path",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        description="The user documentation (docs/*.md and the README) is installed with "
+                        "the package; messages point to it as `fivecal docs NAME`. Without NAME, list the "
+                        "pages; with NAME (e.g. dbb, formats, readme), print the path of that page.",
+                        epilog="examples:\n  fivecal docs\n  less \"$(fivecal docs dbb)\"")
+    po.add_argument("name", nargs="?", help="a page: dbb, formats, identification, linuxcnc, readme, ...")
+    po.set_defaults(func=_docs)
 
     from .procedures.dbb_cli import register as _register_dbb
 
@@ -824,7 +904,7 @@ def main(argv=None) -> int:
     pu.add_argument("--estimate", default="location",
                     help="parameter names and/or presets, comma separated (default: location)")
     pu.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
-    pu.add_argument("--trials", type=_integer_type(2, 2 ** 31), default=10000,
+    pu.add_argument("--trials", type=TRIALS, default=10000,
                     help="Monte Carlo trials M (default 10000)")
     pu.add_argument("--threads", type=_integer_type(0, 2 ** 16), default=0, help="worker threads (default 0: all cores; the "
                     "result does not depend on it)")
@@ -898,7 +978,7 @@ def main(argv=None) -> int:
                         "the pivot of each rotary axis (position across the axis and tilt) and its reversal "
                         "error with their uncertainty, the change since the previous check, the dispersion of "
                         "the sphere positions before and after, and how well the positions determine them. "
-                        "Plans: fivecal.procedures.sphere_check.plan (docs/design.md).",
+                        "Plans: fivecal.procedures.sphere_check.plan (`fivecal docs design`).",
                         epilog="example:\n  fivecal sphere-check touches.json --previous last.json --out check.json")
     pp.add_argument("dataset", help="dataset JSON with the sphere touches")
     pp.add_argument("--previous", help="the previous check (--out of an earlier run, or a result JSON)")
@@ -915,7 +995,7 @@ def main(argv=None) -> int:
                         description="Evaluate R-test data (ball3d observations, one setup per test): the "
                         "range of the recorded deviation in X, Y, Z per test, pass/fail against --tolerance, "
                         "and the location errors of the rotary axes fitted to all tests. Plans: "
-                        "fivecal.procedures.rtest.plan (docs/design.md).",
+                        "fivecal.procedures.rtest.plan (`fivecal docs design`).",
                         epilog="example:\n  fivecal rtest rtest_data.json --tolerance 20")
     pp.add_argument("dataset", help="dataset JSON with the ball3d observations")
     pp.add_argument("--tolerance", type=POSITIVE, default=None,
@@ -934,6 +1014,8 @@ def main(argv=None) -> int:
     finally:
         sys.stdout = old_stdout
     debug = os.environ.get("FIVECAL_DEBUG", "") not in ("", "0")
+    old_showwarning = warnings.showwarning
+    warnings.showwarning = _warning_line(args.command)
     try:
         return _run(args)
     except KeyboardInterrupt:
@@ -959,6 +1041,8 @@ def main(argv=None) -> int:
         print(f"fivecal {args.command}: internal error ({type(e).__name__}): {_one_line(e)} "
               "(set FIVECAL_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_INTERNAL
+    finally:
+        warnings.showwarning = old_showwarning
 
 
 if __name__ == "__main__":

@@ -3,8 +3,15 @@ fivecal.io.linuxcnc, fivecal.io.controllers and the NC programs of the test plan
 from __future__ import annotations
 
 import argparse
+import math
 
+from ..cli import count_type
 from . import linuxcnc as L
+
+#: R-test points between two samples at most (--subdivide)
+MAX_SUBDIVIDE = 1000
+#: ball bar rotary paths: the smallest bar-length tolerance (µm) between blocks
+MIN_TOLERANCE_UM = 1e-4
 
 
 def _volume(text: str) -> dict:
@@ -41,7 +48,7 @@ def _run(args) -> int:
     exp = L.export(args.result, machine, args.kins, args.out, old_pins=old, max_change=limit,
                    force=args.force, volume=volume, comp_step=args.comp_step, what=args.result)
     print(exp.summary())
-    print(f"files in {args.out}; recipe: docs/linuxcnc.md")
+    print(f"files in {args.out}; recipe: `fivecal docs linuxcnc`")
     return 0
 
 
@@ -100,7 +107,7 @@ def _read_spec(path: str):
         raise ValueError(f"{path}: 'machine' missing (a machine object or a path)")
     plan = spec.get("plan", spec.get("observations"))
     if not isinstance(plan, list) or not plan or not all(isinstance(e, dict) for e in plan):
-        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, docs/formats.md)")
+        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, `fivecal docs formats`)")
     probe = spec.get("probe") or {}
     if not isinstance(probe, dict):
         raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")
@@ -149,8 +156,9 @@ def _run_program(args) -> int:
         text = N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=feed or 500.0,
                                dwell=args.dwell if args.dwell > 0 else 1.0, subdivide=args.subdivide)
     else:
-        if not (args.tolerance > 0):
-            raise ValueError(f"--tolerance: expected a positive number of µm, got {args.tolerance}")
+        if not (args.tolerance >= MIN_TOLERANCE_UM and math.isfinite(args.tolerance)):
+            # The path is split until the bar length holds within it: points grow as 1/sqrt(tolerance).
+            raise ValueError(f"--tolerance: expected a number of µm >= {MIN_TOLERANCE_UM:g}, got {args.tolerance}")
         if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
             text = D.rotary_dbb_program(machine, plan, feed=feed or 1000.0, feed_in=args.feed_in,
                                         kins=args.kins, tolerance=args.tolerance * 1e-3)
@@ -207,7 +215,7 @@ def register(sub) -> None:
         "working volume (least squares): its parameters, the tool-point error left (rms, max, by "
         "region), the error left when fivecal's G-code compensation runs on top, and the model as "
         "pivot points and axis directions in the machine frame, old and new, with the names the "
-        "values carry in Siemens and Heidenhain documentation (docs/controllers.md). No vendor "
+        "values carry in Siemens and Heidenhain documentation (`fivecal docs controllers`). No vendor "
         "file format is written.",
         epilog="example:\n  fivecal export kinematics result.json --machine machine.json "
         "--model table-table --directions --format csv --out kinematics.csv")
@@ -228,12 +236,12 @@ def register(sub) -> None:
         "program", formatter_class=RD,
         help="ISO G-code that runs a test plan: probing, sphere cycle, R-test, ball bar",
         description="Write the NC program of a fivecal plan (the 'plan' of a simulation spec, "
-        "docs/formats.md): facet touches and sphere touches (apart or mixed in one plan, as fivecal "
+        "`fivecal docs formats`): facet touches and sphere touches (apart or mixed in one plan, as fivecal "
         "design writes them) as G38.2 probing cycles for LinuxCNC "
         "with its tool-centre-point kinematics (--kins; probe log with PROBEOPEN, read back by "
         "fivecal.io.linuxcnc.read_probe_log), R-test K tests with a G4 dwell at each sample (axis "
         "commands, LinuxCNC joint values with --kins, or world moves with --mode tcp), ball bar "
-        "circles and rotary-axis paths with feed-in and feed-out (docs/linuxcnc.md). Check every "
+        "circles and rotary-axis paths with feed-in and feed-out (`fivecal docs linuxcnc`). Check every "
         "program's clearance moves against your fixtures before running it on a machine.",
         epilog="examples:\n  fivecal export program sphere_spec.json --kins xyzac-trt --out sphere.ngc\n"
         "  fivecal export program plan14.json --kins xyzbc-trt --out tango.ngc   (fivecal design's facets "
@@ -263,7 +271,8 @@ def register(sub) -> None:
     g = pp.add_argument_group("R-test and ball bar")
     g.add_argument("--mode", choices=["axes", "tcp"], default="axes", help="R-test words: axis commands "
                    "(joint values with --kins) or world coordinates with TCP on")
-    g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two samples")
+    g.add_argument("--subdivide", type=count_type(0, MAX_SUBDIVIDE), default=0,
+                   help=f"R-test: points between two samples (at most {MAX_SUBDIVIDE})")
     g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, mm")
     g.add_argument("--tolerance", type=float, default=0.02, help="ball bar rotary paths: largest change "
                    "of the nominal bar length between two blocks, µm (default 0.02)")
