@@ -127,6 +127,9 @@ SPHERE = ["--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
     (["four-step", "--step", "1e-6"], "--step"),
     (["four-step", "--step", "0.01", "--carrier-range=-50000:50000"], "--step"),
     (["wang", "--step", "1e-7"], "--step"),
+    (["sphere-check", "--sphere", "1e308,1e308,0", "--radius", "12.5", "--tip-radius", "3"], "--sphere"),
+    (["rtest", "--table-ball", "1e308,1e308,0"], "--table-ball"),
+    (["four-step", "--tool-ball", "-1e308,-1e308,0"], "--tool-ball"),
 ])
 def test_plan_counts_and_steps_are_bounded_naming_the_option(tmp_path, machine_file, capsys, argv, option):
     """Issue #27: `plan sphere-check -n 1000000000` and `plan rtest --step 1e-6`

@@ -13,6 +13,8 @@ from ..cli import check_size, check_step, count_type
 #: Positions per rotary axis of a sphere check at most (-n, --positions): one
 #: a degree over a full turn, far more than a pivot needs.
 MAX_POSITIONS = 360
+#: mm: positions and lengths (the core's kMaxLinear)
+MAX_LINEAR = 1e5
 
 
 def _vector(text: str, option: str, n: int = 3) -> list:
@@ -23,6 +25,9 @@ def _vector(text: str, option: str, n: int = 3) -> list:
         v = []
     if len(v) != n or not all(math.isfinite(x) for x in v):
         raise ValueError(f"{option}: expected {n} numbers separated by commas, got '{text}'")
+    if max(abs(x) for x in v) > MAX_LINEAR:  # the core's machine-size bound, named here by option
+        raise ValueError(f"{option}: {max(v, key=abs):g} mm is beyond {MAX_LINEAR / 1e3:g} m; values this "
+                         "large look like µm (fivecal expects mm)")
     return v
 
 
