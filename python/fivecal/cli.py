@@ -194,7 +194,7 @@ COUNT = _integer_type(0)
 MAX_SAMPLES = 1_000_000      # samples of one simulated trace (the core's bound as well)
 MAX_PLAN_ENTRIES = 100_000   # entries of a written plan (each a JSON object) or program points
 MAX_TRIALS = 1_000_000       # JCGM 101 asks for about 10^6 trials for a 95 % interval
-MAX_WORKERS = 256            # worker processes of one machine's Dask LocalCluster
+MAX_WORKERS = 1024           # threads or worker processes on one machine (the core's thread bound)
 
 
 def check_size(option: str, count: float, what: str = "plan entries", limit: int = MAX_PLAN_ENTRIES) -> int:
@@ -906,7 +906,7 @@ def main(argv=None) -> int:
     pu.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
     pu.add_argument("--trials", type=TRIALS, default=10000,
                     help="Monte Carlo trials M (default 10000)")
-    pu.add_argument("--threads", type=_integer_type(0, 2 ** 16), default=0, help="worker threads (default 0: all cores; the "
+    pu.add_argument("--threads", type=count_type(0, MAX_WORKERS, "a number of threads"), default=0, help="worker threads (default 0: all cores; the "
                     "result does not depend on it)")
     pu.add_argument("--seed", type=SEED, default=1, help="master seed, 0 <= seed < 2^64 (default 1)")
     pu.add_argument("--sigma", type=SIGMA, default=None, help="noise (mm): overrides the spec's, or the "

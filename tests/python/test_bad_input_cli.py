@@ -92,7 +92,8 @@ def test_compensate_table_over_the_program_is_refused_and_the_program_kept(tmp_p
     (["--threads", "-1"], "--threads"), (["--seed", "-1"], "--seed"), (["--seed", "1.5"], "--seed"),
     (["--seed", str(2 ** 64)], "--seed"), (["--sigma", "nan"], "--sigma"), (["--sigma", "-1"], "--sigma"),
     (["--probability", "1.5"], "--probability"), (["--digits", "0"], "--digits"),
-    (["--trials", "1000000000"], "--trials"), (["--trials", "2000000"], "--trials")])
+    (["--trials", "1000000000"], "--trials"), (["--trials", "2000000"], "--trials"),
+    (["--threads", "60000"], "--threads")])
 def test_uncertainty_options_are_refused_naming_the_option(args, option):
     one_line_error(fivecal_cli("uncertainty", SPEC, *args), option)
 
