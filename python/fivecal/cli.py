@@ -906,8 +906,8 @@ def main(argv=None) -> int:
     pu.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
     pu.add_argument("--trials", type=TRIALS, default=10000,
                     help="Monte Carlo trials M (default 10000)")
-    pu.add_argument("--threads", type=count_type(0, MAX_WORKERS, "a number of threads"), default=0, help="worker threads (default 0: all cores; the "
-                    "result does not depend on it)")
+    pu.add_argument("--threads", type=count_type(0, MAX_WORKERS, "a number of threads"), default=0,
+                    help="worker threads (default 0: all cores; the result does not depend on it)")
     pu.add_argument("--seed", type=SEED, default=1, help="master seed, 0 <= seed < 2^64 (default 1)")
     pu.add_argument("--sigma", type=SIGMA, default=None, help="noise (mm): overrides the spec's, or the "
                     "fit's residual sigma for a dataset")

@@ -298,7 +298,7 @@ def register(sub) -> None:
     common(p)
     sphere_opts(p)
     p.add_argument("-n", type=count_type(0, MAX_POSITIONS), default=5, help="positions per rotary axis spread over its "
-                   "range (default 5; a full turn for C, --limits or +-90 otherwise)")
+                   f"range (default 5, at most {MAX_POSITIONS}; a full turn for C, --limits or +-90 otherwise)")
     p.add_argument("--positions", action="append", metavar="AXIS=V1,V2,...",
                    help="the positions of one axis in degrees instead of -n (repeatable, one per axis)")
     p.add_argument("--one-side", action="store_true", help="reach each position from one side only (no "
