@@ -230,6 +230,9 @@ void BindIdentification(py::module_& m) {
           if (c.name == cls) return c.unit;
     return std::string();
   });
+  // Machine.theta skips these (a result's set-up values) and refuses any
+  // other unknown name, so a typo such as EX0C.x is never silently dropped.
+  m.def("is_setup_parameter_name", &IsSetupParameterName, py::arg("name"));
   m.def("informed_threshold", []() { return kInformedThreshold; });
 
   m.def(

@@ -325,19 +325,6 @@ std::string ReadSetup(const json& obj, const std::string& where) {
   return s;
 }
 
-bool IsSetupParameterName(const std::string& name) {
-  const size_t dot = name.find('.');
-  if (dot == std::string::npos || dot + 1 >= name.size()) return false;
-  const std::string kind = name.substr(0, dot), rest = name.substr(dot + 1);
-  if (const ObservationKind* k = FindKind(kind)) return k->IsParameterName(rest);
-  if (kind == "probe") return IsProbeParameterName(name);
-  if (kind == "instrument") {
-    const size_t d = rest.find('.');
-    return d != std::string::npos && d > 0 && rest.find('.', d + 1) == std::string::npos;
-  }
-  return false;
-}
-
 int AxisOfKey(const Machine& m, const std::string& key, const std::string& where) {
   const char c = key == "C1" ? 'S' : (key.size() == 1 ? key[0] : '?');
   const int k = m.AxisIndex(c);

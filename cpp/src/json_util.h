@@ -96,12 +96,6 @@ std::string ReadSetup(const json& obj, const std::string& where);
 
 inline json Array3(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
 
-// Whether `name` has the shape of a setup parameter name (facet.<id>,
-// sphere.<id>.x|y|z|r, dbb[.<setup>].length|tool.x|...|table.z,
-// ball3d.<setup>.tool.x|..., instrument.<id>.<field>), whatever dataset it
-// belongs to. A dotted name of any other shape (EX0C.x) is a mistake.
-bool IsSetupParameterName(const std::string& name);
-
 // Axis index for a JSON key ("C1" is the spindle S); throws naming `where`.
 int AxisOfKey(const Machine& m, const std::string& key, const std::string& where);
 

@@ -462,7 +462,7 @@ def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.Path
 # controller-neutral error table
 # ---------------------------------------------------------------------------
 SIGN_CONVENTION = [
-    "Sign convention (fivecal machine model; README, Sign conventions):",
+    "Sign convention (fivecal machine model; `fivecal docs readme`, Sign conventions):",
     "Every axis k has a frame that is parallel to the machine frame F when all axes are at 0 (the zero "
     "pose), with its origin at the axis point p_k of the machine file.",
     "Chains are built from the foundation outward (workpiece side and tool side separately); the parent "

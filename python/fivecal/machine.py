@@ -7,6 +7,7 @@ coincides with the machine frame F at the zero pose.
 from __future__ import annotations
 
 import json
+import numbers
 import os
 import warnings
 from typing import Mapping, Optional, Union
@@ -138,9 +139,18 @@ class Machine:
         if hasattr(errors, "values") and not isinstance(errors, Mapping):
             errors = errors.values  # a Result
         for name, value in errors.items():
-            if "." in name and not name.startswith("tip."):
-                continue  # setup parameters of a result (facet.F3, sphere.S1.x, ...)
-            theta[self._core.parameter_index(name)] = _finite_scalar(value, f"errors.{name}")
+            if not isinstance(name, str):
+                raise ValueError(f"errors: parameter names are strings, got {name!r}")
+            try:
+                i = self._core.parameter_index(name)
+            except ValueError as e:  # the message names the nearest parameter
+                # A result also carries its set-up values (facet.F3, sphere.S1.x,
+                # ...): only names of that shape are skipped; a typo such as
+                # EX0C.x would otherwise vanish and leave the error at zero.
+                if _core.is_setup_parameter_name(name):
+                    continue
+                raise ValueError(f"errors.{name}: {e}") from None
+            theta[i] = _finite_scalar(value, f"errors.{name}")
         return theta
 
     def axes_matrix(self, axes: Mapping[str, ArrayLike], name: str = "axes") -> np.ndarray:
@@ -159,7 +169,7 @@ class Machine:
                 raise ValueError(
                     f"{name}: unknown axis '{key}' for machine {self.name!r} "
                     f"(axes {', '.join(self.axis_names)})")
-            arr = np.asarray(val, dtype=float)
+            arr = float_array(val, f"{name}.{key}")
             if arr.ndim > 1:
                 raise ValueError(f"{name}.{key}: expected a 1-D array, got shape {arr.shape}")
             if arr.ndim == 1:
@@ -168,9 +178,6 @@ class Machine:
                         f"{name}: arrays of different lengths ({name}.{key} has {arr.size}, "
                         f"others {n})")
                 n = arr.size
-            bad = ~np.isfinite(np.atleast_1d(arr))
-            if bad.any():
-                raise ValueError(f"{name}.{key}[{int(np.argmax(bad))}]: value is not finite (NaN or inf)")
             if letter in "ABC" and looks_like_radians(arr):
                 warnings.warn(radians_message(f"{name}.{key}", arr), RadiansWarning, stacklevel=3)
             cols[letter] = arr
@@ -201,10 +208,7 @@ class Machine:
             if letter not in self.axis_names:
                 raise ValueError(f"directions: unknown axis '{key}' (machine axes "
                                  f"{', '.join(self.axis_names)})")
-            try:
-                arr = np.asarray(val, dtype=float)
-            except (TypeError, ValueError):
-                raise ValueError(f"directions.{key}: expected numbers -1, 0 or +1") from None
+            arr = float_array(val, f"directions.{key}")
             # A scalar applies to every pose, like a scalar axis value; any
             # other shape than one value per pose is refused, never broadcast.
             if arr.ndim > 1:
@@ -212,8 +216,11 @@ class Machine:
                                  f"got shape {arr.shape}")
             if arr.ndim == 1 and arr.size != n:
                 raise ValueError(f"directions.{key}: length {arr.size}, expected {n}")
-            if not np.all(np.isin(arr, (-1.0, 0.0, 1.0))):
-                raise ValueError(f"directions.{key}: values must be -1, 0 or +1")
+            bad = ~np.isin(np.atleast_1d(arr), (-1.0, 0.0, 1.0))
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise ValueError(f"directions.{key}{'' if arr.ndim == 0 else f'[{i}]'}: values must be -1, 0 "
+                                 f"or +1, got {np.atleast_1d(arr)[i]:g}")
             out[:, self.axis_names.index(letter)] = arr
         return out
 
@@ -241,7 +248,7 @@ class Machine:
     def _poses(self, axes, errors, directions, tip, with_axes):
         q = self.axes_matrix(axes)
         d = self.directions_matrix(directions, q.shape[0])
-        t = None if tip is None else np.asarray(tip, dtype=float).reshape(3)
+        t = None if tip is None else _vector3(tip, "tip")
         return _core.tool_poses(self._core, self.theta(errors), q, d, t, with_axes)
 
     def volumetric_error(self, axes: Mapping[str, ArrayLike], errors, directions=None) -> np.ndarray:
@@ -261,12 +268,12 @@ class Machine:
         the workpiece frame. Among several solutions the one with the smallest move from
         the previous pose (``start`` for the first) is chosen. With ``errors`` the
         erroneous model is inverted: the commands that compensate those errors."""
-        pts = np.atleast_2d(np.asarray(points, dtype=float))
-        if pts.shape[1] != 3:
+        pts = np.atleast_2d(float_array(points, "points"))
+        if pts.ndim != 2 or pts.shape[1] != 3:
             raise ValueError(f"points: expected shape (N, 3), got {pts.shape}")
         ta = None
         if tool_axes is not None:
-            ta = np.atleast_2d(np.asarray(tool_axes, dtype=float))
+            ta = np.atleast_2d(float_array(tool_axes, "tool_axes"))
             if ta.shape == (1, 3) and pts.shape[0] > 1:
                 ta = np.repeat(ta, pts.shape[0], axis=0)
             if ta.shape != pts.shape:
@@ -278,11 +285,63 @@ class Machine:
         return self.axes_dict(_core.inverse(self._core, self.theta(errors), pts, ta, s, d))
 
 
-def _finite_scalar(value, what: str) -> float:
+def _is_number(x) -> bool:
+    # bool is an int to Python, and numpy turns "1.5" into 1.5: neither is a
+    # number a user meant to give.
+    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+
+
+def _where(what: str, index) -> str:
+    return what + "".join(f"[{i}]" for i in index)
+
+
+def float_array(value, what: str) -> np.ndarray:
+    """``value`` (a number or nested lists / array of numbers) as a float
+    array. Anything else is refused with a ValueError naming ``what`` and the
+    index of the first bad element: ``axes.X[1]: expected a number, got 'a'``,
+    ``points[2][0]: value is not finite (NaN or inf)``, or a ragged nesting."""
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{what}: expected a number or an array of numbers, got {value!r}")
     try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{what}: expected a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise ValueError(f"{what}: value is not finite (NaN or inf)")
+        raw = np.asarray(value)
+    except ValueError:  # numpy refuses nested lists of unequal lengths
+        raise ValueError(f"{what}: rows of different lengths (ragged); expected a rectangular array of "
+                         "numbers") from None
+    if raw.dtype.kind in "iuf":
+        arr = raw.astype(float, copy=False)
+    else:  # strings, booleans, objects, complex: find the element to name
+        # As objects, [1, "+"] keeps its 1 (numpy would make it the string "1").
+        obj = raw if isinstance(value, np.ndarray) else np.asarray(value, dtype=object)
+        arr = np.empty(obj.shape)
+        for index in np.ndindex(obj.shape):
+            x = obj[index]
+            if isinstance(x, np.generic):
+                x = x.item()  # np.str_('a') -> 'a', for the message
+            if isinstance(x, (list, tuple, np.ndarray)):
+                raise ValueError(f"{_where(what, index)}: rows of different lengths (ragged); expected a "
+                                 "rectangular array of numbers")
+            if not _is_number(x):
+                raise ValueError(f"{_where(what, index)}: expected a number, got {x!r}")
+            try:
+                arr[index] = float(x)
+            except OverflowError:
+                raise ValueError(f"{_where(what, index)}: {x!r} is out of the range of a double") from None
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        index = np.unravel_index(int(np.argmax(bad)), arr.shape) if arr.ndim else ()
+        raise ValueError(f"{_where(what, index)}: value is not finite (NaN or inf)")
+    return arr
+
+
+def _vector3(value, what: str) -> np.ndarray:
+    v = float_array(value, what)
+    if v.shape != (3,):
+        raise ValueError(f"{what}: expected 3 numbers (x, y, z in mm), got shape {v.shape}")
+    return v
+
+
+def _finite_scalar(value, what: str) -> float:
+    if not _is_number(value) and not (isinstance(value, np.ndarray) and value.shape == ()):
+        raise ValueError(f"{what}: expected a number, got {value!r}")
+    v = float(float_array(value, what))
     return v

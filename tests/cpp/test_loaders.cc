@@ -267,6 +267,40 @@ TEST(LoaderBoundary, AxisDirectionWithOverflowingSquaredNormIsNormalisedStably) 
   EXPECT_NEAR(direct.axis(0).direction.z(), 1.0, 1e-15);
 }
 
+TEST(LoaderBoundary, DirectionsOfAnyFiniteScaleAreUnitVectorsOnEveryPath) {
+  // [-1e308, -1e308, 0]: even stableNorm() is finite only by luck; 1.7e308 in
+  // every component makes the norm itself inf. 5e-324 squares to 0.
+  const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> cases = {
+      {{-1e308, -1e308, 0}, {-std::sqrt(0.5), -std::sqrt(0.5), 0}},
+      {{1.7e308, 1.7e308, 1.7e308}, Eigen::Vector3d::Constant(1 / std::sqrt(3.0))},
+      {{5e-324, 0, 0}, {1, 0, 0}},
+      {{0, 0, -1e-200}, {0, 0, -1}}};
+  for (const auto& [v, unit] : cases) {
+    SCOPED_TRACE(v.transpose());
+    json mj = Hu40t();
+    mj["axes"]["B"]["direction"] = {v.x(), v.y(), v.z()};
+    mj["tool"]["axis"] = {v.x(), v.y(), v.z()};
+    const Machine from_json = Machine::FromJson(mj.dump());
+    EXPECT_NEAR((from_json.axis(from_json.AxisIndex('B')).direction - unit).norm(), 0.0, 1e-15);
+    EXPECT_NEAR((from_json.tool_axis() - unit).norm(), 0.0, 1e-15);
+    Axis b;
+    b.name = 'B';
+    b.type = AxisType::kRotary;
+    b.direction = v;
+    const Machine direct("m", "wBfXt", {b, Axis{}}, Eigen::Vector3d::Zero(), &v);
+    EXPECT_NEAR((direct.axis(direct.AxisIndex('B')).direction - unit).norm(), 0.0, 1e-15);
+    EXPECT_NEAR((direct.tool_axis() - unit).norm(), 0.0, 1e-15);
+    EXPECT_NEAR((UnitDirection(v, "v") - unit).norm(), 0.0, 1e-15);
+  }
+  ExpectInvalid([] { UnitDirection(Eigen::Vector3d::Zero(), "axes.X.direction"); },
+                {"axes.X.direction", "zero vector"});
+  ExpectInvalid([] { UnitDirection(Eigen::Vector3d(0, NAN, 1), "axes.X.direction"); },
+                {"axes.X.direction[1]", "not finite"});
+  json mj = Hu40t();
+  mj["tool"]["axis"] = {0, 0, 0};
+  ExpectInvalid([&] { Machine::FromJson(mj.dump()); }, {"machine.tool.axis", "zero vector"});
+}
+
 TEST(LoaderBoundary, ParallelLinearAxesAndMachinesWithoutAxesAreRefused) {
   json mj = Hu40t();
   mj["axes"]["Y"]["direction"] = {-2, 0, 0};  // along X

@@ -17,7 +17,7 @@ ROOT = os.path.join(os.path.dirname(__file__), "..", "..", "python", "fivecal")
 LAYERS = {
     # 0: the core API and the helpers it stands on
     "fivecal._core": 0, "fivecal._json": 0, "fivecal._version": 0, "fivecal.compensation": 0, "fivecal.dataset": 0,
-    "fivecal.design": 0, "fivecal.figures": 0, "fivecal.files": 0, "fivecal.gcode": 0, "fivecal.guards": 0,
+    "fivecal.design": 0, "fivecal.figures": 0, "fivecal.files": 0, "fivecal.gcode": 0, "fivecal.guards": 0, "fivecal.manual": 0,
     "fivecal.identification": 0, "fivecal.machine": 0, "fivecal.plausibility": 0, "fivecal.progress": 0,
     "fivecal.schema": 0, "fivecal.simulation": 0, "fivecal.tolerances": 0, "fivecal.uncertainty": 0,
     "fivecal.units": 0,

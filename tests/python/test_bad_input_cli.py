@@ -91,7 +91,9 @@ def test_compensate_table_over_the_program_is_refused_and_the_program_kept(tmp_p
     (["--trials", "2.9"], "--trials"), (["--trials", "1"], "--trials"), (["--threads", "x"], "--threads"),
     (["--threads", "-1"], "--threads"), (["--seed", "-1"], "--seed"), (["--seed", "1.5"], "--seed"),
     (["--seed", str(2 ** 64)], "--seed"), (["--sigma", "nan"], "--sigma"), (["--sigma", "-1"], "--sigma"),
-    (["--probability", "1.5"], "--probability"), (["--digits", "0"], "--digits")])
+    (["--probability", "1.5"], "--probability"), (["--digits", "0"], "--digits"),
+    (["--trials", "1000000000"], "--trials"), (["--trials", "2000000"], "--trials"),
+    (["--threads", "60000"], "--threads")])
 def test_uncertainty_options_are_refused_naming_the_option(args, option):
     one_line_error(fivecal_cli("uncertainty", SPEC, *args), option)
 
@@ -260,3 +262,80 @@ def test_too_few_trials_print_one_line_instead_of_verdicts():
     assert "validated" not in text.split("GUM not judged")[0].split("parameter")[-1]
     assert "GUM not judged" in text and f"about {mc.trials_needed()} trials are needed" in text
     assert text.count("not validated") == 0
+
+
+# ---------------------------------------------------------------------------
+# counts and steps that allocate: bounded, the option named (issue #27)
+# ---------------------------------------------------------------------------
+def test_counts_that_allocate_are_bounded_naming_the_option(tmp_path):
+    design_spec = os.path.join(ROOT, "examples", "design", "hu40t_table_4_2.json")
+    for args, option in (
+            (["design", design_spec, "-k", "10000000000"], "-k"),
+            (["design", design_spec, "-k", "3", "--require", "10000000000"], "--require"),
+            (["fleet", "identify", tmp_path, "--store", tmp_path / "s.fcdb", "--trials", "1000000000"], "--trials"),
+            (["fleet", "identify", tmp_path, "--store", tmp_path / "s.fcdb", "--workers", "100000"], "--workers"),
+            (["export", "program", SPEC, "--subdivide", "1000000000"], "--subdivide"),
+            (["dbb", "circular", "--machine", C600U, "--simulate", "EXX1=2e-5", "--radius", "100",
+              "--step", "1e-4"], "--step")):
+        r = fivecal_cli(*args, timeout=120)
+        one_line_error(r, option)
+        assert r.stderr.count("\n") == 1, r.stderr
+
+
+# ---------------------------------------------------------------------------
+# warnings: one line `fivecal COMMAND: warning: ...`, not Python's (issue #27)
+# ---------------------------------------------------------------------------
+def _warning_lines(r, command):
+    assert "Warning:" not in r.stderr and "sys.exit" not in r.stderr and ".py:" not in r.stderr, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if "warning" in ln]
+    assert lines and all(ln.startswith(f"fivecal {command}: warning: ") for ln in lines), r.stderr
+    return lines
+
+
+def test_a_radians_warning_is_one_line_of_the_command(tmp_path):
+    import math
+
+    rows = open(os.path.join(ROOT, "examples", "import", "probing.csv")).read().splitlines()
+    head = [i for i, ln in enumerate(rows) if ln.startswith("id,")][0]
+    cols = rows[head].split(",")
+    out = rows[:head + 1]
+    for ln in rows[head + 1:]:
+        f = ln.split(",")
+        for a in ("A", "C"):
+            f[cols.index(a)] = f"{math.radians(float(f[cols.index(a)])):.5f}"
+        out.append(",".join(f))
+    (tmp_path / "rad.csv").write_text("\n".join(out) + "\n")
+    r = fivecal_cli("import", "probing", tmp_path / "rad.csv", "--sidecar",
+                    os.path.join(ROOT, "examples", "import", "probing.json"), "--machine", C600U,
+                    "--out", tmp_path / "ds.json")
+    assert r.returncode == 0, r.stderr
+    lines = _warning_lines(r, "import")
+    assert any("look like radians" in ln for ln in lines), lines
+
+
+def test_a_fit_warning_is_one_line_of_the_command(tmp_path):
+    from fivecal.procedures import sphere_check
+
+    m = fivecal.Machine.load(C600U)
+    ball = {"id": "S1", "center": [60.0, 30.0, 40.0], "radius": 12.5}
+    plan = sphere_check.plan(m, ball, tip_radius=3.0, n=3)
+    ds = fivecal.simulate(m, plan, artefact={"spheres": [ball]}, tip_radius=3.0, sigma=0.01, seed=1).to_dict()
+    for o in ds["observations"]:
+        o["sigma"] = 1e-4  # declared 100 times smaller than drawn: the fit is inadequate
+    import json
+
+    (tmp_path / "ds.json").write_text(json.dumps(ds))
+    r = fivecal_cli("sphere-check", tmp_path / "ds.json")
+    assert r.returncode == 1, r.stderr
+    lines = _warning_lines(r, "sphere-check")
+    assert any("the result is not usable" in ln for ln in lines), lines
+
+
+def test_the_python_api_keeps_standard_warnings():
+    import warnings
+
+    from fivecal import cli
+
+    before = warnings.showwarning
+    assert cli.main(["docs", "dbb"]) == 0
+    assert warnings.showwarning is before

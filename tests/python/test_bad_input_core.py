@@ -221,3 +221,126 @@ def test_directions_of_the_wrong_shape_are_not_broadcast(dirs):
         m.tool_point(ax, directions=dirs)
     with pytest.raises(ValueError, match=r"directions: expected a dict"):
         m.tool_point(ax, directions=[1, 1, 1])
+
+
+# ---------------------------------------------------------------------------
+# directions of any finite scale; every path (dict, file) the same (issue #27)
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("axis, direction, unit", [
+    ("X", [-1e308, -1e308, 0], [-2 ** -0.5, -2 ** -0.5, 0.0]),  # the squared norm overflows
+    ("X", [1.7e308, 1.7e308, 1.7e308], [3 ** -0.5] * 3),       # so does the norm itself
+    ("X", [5e-324, 0, 0], [1.0, 0.0, 0.0]),                     # subnormal: its square is 0
+    ("B", [0, -1e-200, 0], [0.0, -1.0, 0.0]),
+    ("B", [0, -1e308, -1e308], [0.0, -2 ** -0.5, -2 ** -0.5]),
+    ("S", [1e308, 0, 1e308], [2 ** -0.5, 0.0, 2 ** -0.5]),
+])
+def test_axis_direction_of_any_finite_scale_is_a_unit_vector_on_every_path(tmp_path, axis, direction, unit):
+    m = copy.deepcopy(HU40T)
+    m["axes"][axis]["direction"] = direction
+    p = tmp_path / "m.json"
+    p.write_text(json.dumps(m))
+    for machine in (fivecal.Machine.from_dict(m), fivecal.Machine.load(p)):
+        got = next(a["direction"] for a in machine.axes if a["name"] == axis)
+        assert np.allclose(got, unit, atol=1e-15), (got, unit)
+
+
+@pytest.mark.parametrize("direction, message", [
+    ([0, 0, 0], r"machine\.axes\.Z\.direction: zero vector"),
+    ([0, float("nan"), 1], r"machine\.axes\.Z\.direction\[1\]: .*not finite"),
+])
+def test_a_zero_or_non_finite_axis_direction_is_refused_naming_it(direction, message):
+    m = copy.deepcopy(HU40T)
+    m["axes"]["Z"]["direction"] = direction
+    with pytest.raises(ValueError, match=message):
+        fivecal.Machine.from_dict(m)
+
+
+def test_inverse_tool_axes_of_any_scale_and_points_out_of_range():
+    m = fivecal.Machine.from_dict(HU40T)
+    p = m.tool_point({"X": [10.0], "Y": [20.0], "Z": [-5.0], "B": [30.0], "C": [40.0]})
+    _, a = m.tool_pose({"X": [10.0], "Y": [20.0], "Z": [-5.0], "B": [30.0], "C": [40.0]})
+    # the tool axis scaled past the square root of the largest double: still that axis
+    q = m.inverse(p, tool_axes=a * 1e308, start={"X": 0, "Y": 0, "Z": 0, "B": 20, "C": 30})
+    assert q["B"][0] == pytest.approx(30.0) and q["C"][0] == pytest.approx(40.0)
+    with pytest.raises(ValueError, match=r"tool_axes\[0\]: zero vector"):
+        m.inverse(p, tool_axes=[[0, 0, 0]])
+    with pytest.raises(ValueError, match=r"points\[0\]\[0\].*implausible"):
+        m.inverse([[1e308, 0, 0]])
+
+
+# ---------------------------------------------------------------------------
+# errors= names: only set-up parameter names are skipped (issue #27)
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("name, hint", [
+    ("EX0C.x", '"EX0C"'),        # a machine parameter with a stray component
+    ("EX0c", '"EX0C"'),
+    ("tip.q", '"tip.x"'),
+    ("sphere.S1.q", None),       # a set-up kind, but no such field
+    ("facet", None),
+    ("foo.bar", None),
+])
+def test_an_unknown_error_name_is_refused_naming_it(name, hint):
+    m = fivecal.Machine.from_dict(HU40T)
+    with pytest.raises(ValueError) as e:
+        m.tool_point(AXES, errors={name: 1e-3})
+    assert str(e.value).startswith(f"errors.{name}: unknown parameter")
+    if hint:
+        assert f"did you mean {hint}" in str(e.value)
+
+
+def test_set_up_parameters_of_a_result_are_skipped():
+    m = fivecal.Machine.from_dict(HU40T)
+    base = m.tool_point(AXES, errors={"EX0C": 1e-3})
+    setup = {"facet.F3": 0.01, "sphere.S1.x": 0.02, "sphere.S1.r": 0.01, "dbb.length": 0.1,
+             "dbb.A1.tool.x": 0.1, "ball3d.R1.table.z": 0.1, "instrument.T1.a": 0.001}
+    assert np.array_equal(m.tool_point(AXES, errors={"EX0C": 1e-3, **setup}), base)
+
+
+# ---------------------------------------------------------------------------
+# every array argument names its field and index (issue #27)
+# ---------------------------------------------------------------------------
+AX3 = {"X": [0.0, 1.0], "Y": [0.0, 0.0], "Z": [0.0, 0.0], "B": [0.0, 0.0], "C": [0.0, 0.0]}
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda m: m.tool_point({**AX3, "X": ["a", 0]}), r"^axes\.X\[0\]: expected a number, got 'a'"),
+    (lambda m: m.tool_point({**AX3, "Y": [0, None]}), r"^axes\.Y\[1\]: expected a number, got None"),
+    (lambda m: m.tool_point({**AX3, "Z": "10"}), r"^axes\.Z: expected a number"),
+    (lambda m: m.tool_point({**AX3, "B": [True, False]}), r"^axes\.B\[0\]: expected a number, got True"),
+    (lambda m: m.tool_point({**AX3, "C": [0, 1j]}), r"^axes\.C\[1\]: expected a number"),
+    (lambda m: m.tool_point({**AX3, "X": [[0, 1], [2]]}), r"^axes\.X: rows of different lengths"),
+    (lambda m: m.tool_point({**AX3, "X": [0, float("nan")]}), r"^axes\.X\[1\]: value is not finite"),
+    (lambda m: m.tool_point({**AX3, "X": [0, 10 ** 400]}), r"^axes\.X\[1\]: .*out of the range"),
+    (lambda m: m.tool_point(AX3, directions={"X": [1, "+"]}), r"^directions\.X\[1\]: expected a number"),
+    (lambda m: m.tool_point(AX3, directions={"X": [1, 2]}), r"^directions\.X\[1\]: values must be -1, 0 or \+1"),
+    (lambda m: m.tool_point(AX3, errors={"EX0C": "1e-3"}), r"^errors\.EX0C: expected a number"),
+    (lambda m: m.tool_point(AX3, errors={"EX0C": [1e-3]}), r"^errors\.EX0C: expected a number"),
+    (lambda m: m.tool_point(AX3, errors={"EX0C": float("inf")}), r"^errors\.EX0C: value is not finite"),
+    (lambda m: m.tool_point(AX3, tip=[0, 0]), r"^tip: expected 3 numbers"),
+    (lambda m: m.tool_point(AX3, tip=[0, "z", 0]), r"^tip\[1\]: expected a number"),
+    (lambda m: m.inverse([[0, 0, "a"]]), r"^points\[0\]\[2\]: expected a number"),
+    (lambda m: m.inverse([[0, 0, 0], [0, 0]]), r"^points: rows of different lengths"),
+    (lambda m: m.inverse([[0, 0, 0]], tool_axes=[[0, float("nan"), 1]]), r"^tool_axes\[0\]\[1\]: value is not finite"),
+    (lambda m: m.inverse([[0, 0, 0]], tool_axes=[[0, 1]]), r"^tool_axes: expected shape"),
+    (lambda m: m.inverse([[0, 0, 0]], start={**ZERO, "B": "x"}), r"^start\.B: expected a number"),
+])
+def test_bad_array_values_name_their_field_and_index(call, message):
+    m = fivecal.Machine.from_dict(HU40T)
+    with pytest.raises(ValueError, match=message):
+        call(m)
+
+
+def test_ball_bar_geometry_past_the_machine_size_is_refused_naming_it():
+    """Norms of 1e308 mm overflow: the four-step plan said the machine could
+    not place the ball, the Wang path reached inverse kinematics as inf."""
+    from fivecal.demo import example_machine_path
+    from fivecal.procedures import dbb
+
+    c600u = fivecal.Machine.load(example_machine_path("c600u"))
+    with pytest.raises(ValueError, match=r"four-step plan\.tool_ball\[0\]: .*implausible"):
+        dbb.four_step_plan(c600u, tool_ball=[-1e308, -1e308, 0])
+    with pytest.raises(ValueError, match=r"four-step plan\.extended_length: .*implausible"):
+        dbb.four_step_plan(c600u, extended_length=1e308)
+    vmc = fivecal.Machine.load(example_machine_path("vmc0656"))
+    with pytest.raises(ValueError, match=r"wang path\.table_ball\[0\]: .*implausible"):
+        dbb.wang_path(vmc, table_ball=[1e308, 1e308, 0])

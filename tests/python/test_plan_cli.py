@@ -113,6 +113,37 @@ def test_plan_errors_name_the_option(tmp_path, machine_file, capsys, argv, optio
     assert not (tmp_path / "x.json").exists()
 
 
+SPHERE = ["--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["sphere-check", *SPHERE, "-n", "1000000000"], "-n"),
+    (["sphere-check", *SPHERE, "-n", "361"], "-n"),
+    (["sphere-check", *SPHERE, "--positions", "A=" + ",".join(str(i / 10) for i in range(400))], "--positions A"),
+    (["sphere-test", *SPHERE, "--at", "A=0", "--rings", "0:1000000000"], "--rings"),
+    (["sphere-test", *SPHERE, "--at", "A=0", "--rings", "0:99999,10:99999"], "--rings"),
+    (["rtest", "--table-ball", "60,20,30", "--step", "1e-6"], "--step"),
+    (["rtest", "--table-ball", "60,20,30", "--tests", "K2", "--step", "0.01", "--tilt-range=-90000:90000"], "--step"),
+    (["four-step", "--step", "1e-6"], "--step"),
+    (["four-step", "--step", "0.01", "--carrier-range=-50000:50000"], "--step"),
+    (["wang", "--step", "1e-7"], "--step"),
+    (["sphere-check", "--sphere", "1e308,1e308,0", "--radius", "12.5", "--tip-radius", "3"], "--sphere"),
+    (["rtest", "--table-ball", "1e308,1e308,0"], "--table-ball"),
+    (["four-step", "--tool-ball", "-1e308,-1e308,0"], "--tool-ball"),
+])
+def test_plan_counts_and_steps_are_bounded_naming_the_option(tmp_path, machine_file, capsys, argv, option):
+    """Issue #27: `plan sphere-check -n 1000000000` and `plan rtest --step 1e-6`
+    ended in `internal error (MemoryError)`; now a one-line refusal, exit 2."""
+    try:
+        rc, _, err = run(capsys, "plan", argv[0], machine_file, *argv[1:], "--out", tmp_path / "x.json")
+    except SystemExit as e:  # argparse's own refusal of an option's value
+        rc, err = e.code, capsys.readouterr().err
+    assert rc == 2, err
+    assert re.search(rf"(^|argument |: ){re.escape(option)}[ :]", err), err
+    assert "internal error" not in err and "MemoryError" not in err
+    assert not (tmp_path / "x.json").exists()
+
+
 # ---- R-test: plan -> program -> nest readings -> import -> K-test analysis --
 
 def _dwells(prog, machine, kins=None, tcp=False):
@@ -440,3 +471,16 @@ def test_facet_plan_beside_balls_keeps_out_of_them(tmp_path, capsys):
     assert rc == 0, err
     kinds = check_touch_program(m, kins, plan, art, (tmp_path / "f.ngc").read_text(), 3.0, 1.0, 1.0)
     assert kinds == {"facet": len(plan), "sphere": 0}
+
+
+def test_export_program_bounds_its_counts_naming_the_option(tmp_path, machine_file, capsys):
+    """--subdivide and a ball bar path's --tolerance set how many points the
+    program gets: bounded like the plans' counts and steps (issue #27)."""
+    rc, _, err = run(capsys, "plan", "four-step", machine_file, "--out", tmp_path / "p.json")
+    assert rc == 0, err
+    for opt, value in (("--tolerance", "1e-12"), ("--subdivide", "1000000000")):
+        try:
+            rc, _, err = run(capsys, "export", "program", tmp_path / "p.json", opt, value)
+        except SystemExit as e:
+            rc, err = e.code, capsys.readouterr().err
+        assert rc == 2 and opt in err and "MemoryError" not in err, err

@@ -1065,11 +1065,8 @@ std::string CandidatePlan(const Dataset& setup, const Eigen::MatrixXd& indexatio
       throw std::invalid_argument("candidate_plan.targets: no facet, sphere or cylinder '" + t + "'");
   auto use = [&](const std::string& id) { return wanted.empty() || wanted.count(id); };
   std::vector<Eigen::Vector3d> normals;
-  for (size_t i = 0; i < sphere_normals.size(); ++i) {
-    if (!(sphere_normals[i].norm() > 1e-12))
-      throw std::invalid_argument("candidate_plan.sphere_normals[" + std::to_string(i) + "]: zero vector");
-    normals.push_back(sphere_normals[i].normalized());
-  }
+  for (size_t i = 0; i < sphere_normals.size(); ++i)
+    normals.push_back(UnitDirection(sphere_normals[i], "candidate_plan.sphere_normals[" + std::to_string(i) + "]"));
   const Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(m.num_parameters());
   const double r = setup.tip_radius;
   json plan = json::array();

@@ -83,11 +83,13 @@ Eigen::MatrixXd InverseKinematics(const Machine& m, const Eigen::VectorXd& theta
   ValidatePoses(m, theta, Eigen::MatrixXd(start.transpose()), nullptr);
   if (dirs && (dirs->rows() != n || dirs->cols() != na))
     throw std::invalid_argument("inverse: directions must be N x " + std::to_string(na));
-  for (int r = 0; r < n; ++r)
-    for (int c = 0; c < 3; ++c) {
-      RequireFinite(points(r, c), "inverse: points[" + std::to_string(r) + "]");
-      if (tool_axes) RequireFinite((*tool_axes)(r, c), "inverse: tool_axes[" + std::to_string(r) + "]");
-    }
+  // A target 1e308 mm away is a unit mistake, not a pose to solve for; the
+  // tool axes are directions of any scale (normalised below, overflow-safe).
+  for (int r = 0; r < n; ++r) {
+    for (int c = 0; c < 3; ++c)
+      RequireBounded(points(r, c), kMaxLinear, "inverse: points[" + std::to_string(r) + "][" + std::to_string(c) + "]");
+    if (tool_axes) (void)UnitDirection(tool_axes->row(r).transpose(), "inverse: tool_axes[" + std::to_string(r) + "]");
+  }
 
   std::vector<int> linear, orient;
   for (int k = 0; k < na; ++k) {
@@ -116,10 +118,7 @@ Eigen::MatrixXd InverseKinematics(const Machine& m, const Eigen::VectorXd& theta
     Eigen::VectorXd cmd = current;
 
     if (tool_axes && !orient.empty()) {
-      vt = tool_axes->row(r).transpose();
-      if (vt.norm() < 1e-12)
-        throw std::invalid_argument("inverse: tool_axes[" + std::to_string(r) + "] is zero");
-      vt.normalize();
+      vt = UnitDirection(tool_axes->row(r).transpose(), "inverse: tool_axes[" + std::to_string(r) + "]");
       // Tool axis after the spindle rotation (the spindle is last on the tool chain).
       Eigen::Vector3d a = m.tool_axis();
       if (spindle >= 0)

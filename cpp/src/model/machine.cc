@@ -9,6 +9,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "fivecal/observations/registry.h"
 #include "json_util.h"
 
 namespace fivecal {
@@ -85,6 +86,14 @@ void RequireFinite(double x, const std::string& what) {
   if (!std::isfinite(x)) throw std::invalid_argument(what + ": value is not finite (NaN or inf)");
 }
 
+Eigen::Vector3d UnitDirection(const Eigen::Vector3d& v, const std::string& what) {
+  for (int i = 0; i < 3; ++i) RequireFinite(v[i], what + "[" + std::to_string(i) + "]");
+  const double scale = v.cwiseAbs().maxCoeff();
+  if (!(scale > 0.0)) throw std::invalid_argument(what + ": zero vector (a direction needs a non-zero component)");
+  const Eigen::Vector3d s = v / scale;  // largest component +-1: its norm is in [1, sqrt(3)]
+  return s / s.norm();
+}
+
 void RequireBounded(double x, double bound, const std::string& what, const char* unit) {
   RequireFinite(x, what);
   if (!(std::abs(x) <= bound)) {
@@ -128,16 +137,12 @@ Machine::Machine(std::string name, std::string topology, std::vector<Axis> axes,
       throw std::invalid_argument(where + ".type: axis letter '" + std::string(1, c) + "' is " +
                                   (NaturalType(c) == AxisType::kLinear ? "linear" : "rotary") +
                                   " by ISO 230-1 naming");
-    for (int i = 0; i < 3; ++i) {
-      RequireFinite(a.direction[i], where + ".direction[" + std::to_string(i) + "]");
+    for (int i = 0; i < 3; ++i)
       RequireBounded(a.point[i], kMaxLinear, where + ".point[" + std::to_string(i) + "]");
-    }
-    // stableNorm: the squared norm of [0,0,1.35e154] overflows and norm()
-    // would turn the axis into a zero (motionless) one.
-    const double n = a.direction.stableNorm();
-    if (!(n > 1e-12) || !std::isfinite(n))
-      throw std::invalid_argument(where + ".direction: zero vector (or not finite)");
-    a.direction /= n;
+    // Every path (file, dict, direct construction) comes through here: a
+    // plain norm() of [0,0,1.35e154] or [-1e308,-1e308,0] is inf and would
+    // turn the axis into a zero (motionless) one.
+    a.direction = UnitDirection(a.direction, where + ".direction");
     axes_.push_back(a);
     by_name.erase(it);
   }
@@ -160,10 +165,7 @@ Machine::Machine(std::string name, std::string topology, std::vector<Axis> axes,
     RequireBounded(tip_[i], kMaxLinear, "machine.tool.tip[" + std::to_string(i) + "]");
   int s = AxisIndex('S');
   if (tool_axis) {
-    double n = tool_axis->stableNorm();
-    if (!std::isfinite(n) || n < 1e-12)
-      throw std::invalid_argument("machine.tool.axis: zero or non-finite vector");
-    tool_axis_ = *tool_axis / n;
+    tool_axis_ = UnitDirection(*tool_axis, "machine.tool.axis");
   } else {
     tool_axis_ = s >= 0 ? axes_[s].direction : Eigen::Vector3d::UnitZ();
   }

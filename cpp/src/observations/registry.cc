@@ -10,6 +10,7 @@
 #include "fivecal/observations/facet.h"
 #include "fivecal/observations/machined.h"
 #include "fivecal/observations/point.h"
+#include "fivecal/observations/probe_trigger.h"
 #include "fivecal/observations/pose.h"
 #include "fivecal/observations/simulate.h"
 #include "fivecal/observations/sphere.h"
@@ -106,6 +107,19 @@ bool HasLengthReference(const Dataset& ds) {
     if (KindOf(o).LengthReference()) return true;
   for (const ObservationKind* k : ObservationKinds())
     if (k->ArtefactLengthReference(ds)) return true;
+  return false;
+}
+
+bool IsSetupParameterName(const std::string& name) {
+  const size_t dot = name.find('.');
+  if (dot == std::string::npos || dot + 1 >= name.size()) return false;
+  const std::string kind = name.substr(0, dot), rest = name.substr(dot + 1);
+  if (const ObservationKind* k = FindKind(kind)) return k->IsParameterName(rest);
+  if (kind == "probe") return IsProbeParameterName(name);
+  if (kind == "instrument") {
+    const size_t d = rest.find('.');
+    return d != std::string::npos && d > 0 && rest.find('.', d + 1) == std::string::npos;
+  }
   return false;
 }
 

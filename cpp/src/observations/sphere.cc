@@ -182,9 +182,7 @@ class Kind final : public ProbeTouchKind {
     const int si = RequireTarget(ds, ob.target, w);
     const Sphere& s = ds.artefact.spheres[si];
     if (!e.contains("normal")) throw std::invalid_argument(w + ".normal: missing (touch direction from the centre)");
-    Eigen::Vector3d n = ReadVector3(e["normal"], w + ".normal");
-    if (n.norm() < 1e-12) throw std::invalid_argument(w + ".normal: zero vector");
-    n.normalize();
+    const Eigen::Vector3d n = UnitDirection(ReadVector3(e["normal"], w + ".normal"), w + ".normal");
     *c = s.center + (s.radius + r) * n;
     const std::string id = s.id;
     const Eigen::Vector3d c_true = s.center + Eigen::Vector3d(t.setup("sphere." + id + ".x"),

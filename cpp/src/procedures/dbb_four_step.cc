@@ -509,6 +509,19 @@ std::string FourStepPlanJson(const Machine& m, const FourStepPlanOptions& o_in) 
   if (o.c_extended_setup.empty()) o.c_extended_setup = def[3];
   for (double x : {o.length, o.extended_length, o.a_start, o.a_end, o.c_start, o.c_end, o.step})
     RequireFinite(x, w);
+  // Positions and lengths within the machine-size bound: the geometry below
+  // takes norms and cross products, which overflow for 1e308 mm and would
+  // turn a typo into a misleading message about the machine.
+  RequireBounded(o.length, kMaxLinear, "four-step plan.length");
+  RequireBounded(o.extended_length, kMaxLinear, "four-step plan.extended_length");
+  auto bounded = [](const Eigen::Vector3d& v, const char* name) {
+    if (!v.allFinite()) return;  // NaN: not given, the plan's own choice
+    for (int i = 0; i < 3; ++i)
+      RequireBounded(v[i], kMaxLinear, std::string("four-step plan.") + name + "[" + std::to_string(i) + "]");
+  };
+  bounded(o.tool_ball, "tool_ball");
+  bounded(o.a_pivot, "a_pivot");
+  bounded(o.c_pivot, "c_pivot");
   if (!(o.length > 0)) throw std::invalid_argument("four-step plan.length: must be > 0 mm");
   if (!(o.extended_length > o.length))
     throw std::invalid_argument("four-step plan.extended_length: must exceed length");

@@ -89,13 +89,9 @@ std::vector<PreparedTest> Prepare(const Machine& m, const std::vector<MachiningT
   for (size_t i = 0; i < tests.size(); ++i) {
     const MachiningTest& t = tests[i];
     const std::string w = "machining.tests[" + std::to_string(i) + "]" + (t.id.empty() ? "" : " (" + t.id + ")");
-    for (int c = 0; c < 3; ++c) {
-      RequireFinite(t.point[c], w + ".point");
-      RequireFinite(t.direction[c], w + ".direction");
-    }
-    if (!(t.direction.norm() > 1e-12)) throw std::invalid_argument(w + ".direction: zero vector");
+    for (int c = 0; c < 3; ++c) RequireFinite(t.point[c], w + ".point");
+    const Eigen::Vector3d r = UnitDirection(t.direction, w + ".direction");
     RequireFinite(t.measured, w + ".measured");
-    const Eigen::Vector3d r = t.direction.normalized();
     PreparedTest p;
     p.point = t.point;
     p.measured = t.measured;

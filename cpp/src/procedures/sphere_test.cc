@@ -7,6 +7,7 @@
 
 #include "fivecal/design/design.h"
 #include "fivecal/model/kinematics.h"
+#include "fivecal/observations/registry.h"
 #include "fivecal/observations/simulate.h"
 #include "json_util.h"
 
@@ -42,8 +43,7 @@ std::vector<Eigen::Vector3d> SpherePoints(const std::vector<std::pair<double, in
                                           const Eigen::Vector3d& pole_in) {
   std::vector<std::pair<double, int>> rings = rings_in;
   if (rings.empty()) rings = {{0.0, 12}, {30.0, 8}, {-30.0, 8}, {60.0, 4}, {90.0, 1}};
-  if (!(pole_in.norm() > 1e-12)) throw std::invalid_argument("sphere_points: pole is a zero vector");
-  const Eigen::Vector3d w = pole_in.normalized();
+  const Eigen::Vector3d w = UnitDirection(pole_in, "sphere_points: pole");
   const Eigen::Vector3d ref = std::abs(w.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   const Eigen::Vector3d u = (ref - w * w.dot(ref)).normalized();
   const Eigen::Vector3d v = w.cross(u);

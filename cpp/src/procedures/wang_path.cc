@@ -61,7 +61,11 @@ WangPath ComputeWangPath(const Machine& m, const WangPathOptions& o) {
                                 "rotary table, e.g. wCAf...)");
   for (double x : {o.radius, o.height, o.start, o.end, o.step, o.start_tilt, o.start_rotary})
     RequireFinite(x, w);
-  for (int i = 0; i < 3; ++i) RequireFinite(o.table_ball[i], w + ".table_ball");
+  // Within the machine-size bound: the path takes norms of these (1e308 would overflow).
+  for (int i = 0; i < 3; ++i)
+    RequireBounded(o.table_ball[i], kMaxLinear, w + ".table_ball[" + std::to_string(i) + "]");
+  RequireBounded(o.radius, kMaxLinear, w + ".radius");
+  RequireBounded(o.height, kMaxLinear, w + ".height");
   if (!(o.radius > 0)) throw std::invalid_argument(w + ".radius: must be > 0 mm");
   if (!(o.step > 0)) throw std::invalid_argument(w + ".step: must be > 0 deg");
   if (!(o.end > o.start)) throw std::invalid_argument(w + ".end: must exceed start");

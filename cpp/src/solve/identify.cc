@@ -1015,7 +1015,7 @@ Eigen::VectorXd PredictResiduals(const Dataset& ds, const std::map<std::string, 
   for (const auto& [name, value] : values) {
     const int i = table.Index(name);
     if (i >= 0) v[i] = value;  // other datasets' setup parameters do not apply here
-    else if (!json_util::IsSetupParameterName(name))
+    else if (!IsSetupParameterName(name))
       table.Require(name);  // throws: a machine name typo or a malformed dotted name
   }
   Problem problem(ds, table, v, {});

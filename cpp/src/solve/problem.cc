@@ -100,7 +100,7 @@ int ParameterTable::Require(const std::string& name) const {
   // (EX0C.x) is said to be malformed rather than "not in this dataset".
   std::string msg = "unknown parameter " + json_util::Quote(name);
   if (name.find('.') != std::string::npos && name.rfind("tip.", 0) != 0 &&
-      !json_util::IsSetupParameterName(name))
+      !IsSetupParameterName(name))
     msg += ": not a parameter name (machine errors have no '.', setup parameters are facet.<id>, "
            "sphere.<id>.x|y|z|r, cylinder.<id>.r|x|y|rx|ry, probe.pretravel|axial|lobe.c2|..., "
            "dbb[.<setup>].length|tool.x|..., ball3d.<setup>.tool.x|..., tip.x|y|z)";

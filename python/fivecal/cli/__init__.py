@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 
 from .._version import __version__
-from . import (compensate, convert, dbb, demo, design, export, history, identify, import_, plan, rtest, simulate,
+from . import (compensate, convert, dbb, demo, design, docs, export, history, identify, import_, plan, rtest, simulate,
                sphere, sphere_check, uncertainty)
 from .common import _Parser, _PipeSafeStdout, execute
 
@@ -32,7 +32,7 @@ def main(argv=None) -> int:
     sub = p.add_subparsers(dest="command", required=True)
 
     # the order of `fivecal --help`
-    for command in (identify, convert, simulate, demo, dbb, plan, export, history, import_, compensate, uncertainty,
+    for command in (identify, convert, simulate, demo, docs, dbb, plan, export, history, import_, compensate, uncertainty,
                     design, sphere, sphere_check, rtest):
         command.register(sub)
 

@@ -12,6 +12,7 @@ import os
 import re
 import signal
 import sys
+import warnings
 
 from .. import files, guards
 from ..guards import FitWarning
@@ -112,6 +113,43 @@ def _float_type(low=None, high=None, low_open: bool = False, what: str = "a numb
 
 SEED = _integer_type(0, 2 ** 64, "an integer seed")
 COUNT = _integer_type(0)
+
+# ---- sizes: how much a count or a step makes a command allocate --------------
+#: The most samples, plan entries, program points or Monte Carlo trials one
+#: option may ask for. A real test records a few thousand; a typo (-n 1000000000,
+#: --step 1e-6) is refused naming its option (exit 2), never a MemoryError.
+MAX_SAMPLES = 1_000_000      # samples of one simulated trace (the core's bound as well)
+MAX_PLAN_ENTRIES = 100_000   # entries of a written plan (each a JSON object) or program points
+MAX_TRIALS = 1_000_000       # JCGM 101 asks for about 10^6 trials for a 95 % interval
+MAX_WORKERS = 1024           # threads or worker processes on one machine (the core's thread bound)
+
+
+def check_size(option: str, count: float, what: str = "plan entries", limit: int = MAX_PLAN_ENTRIES) -> int:
+    """``count`` (what ``option`` asks for) as an int; refused naming ``option`` above ``limit``."""
+    if not count <= limit:
+        raise ValueError(f"{option}: asks for {count:.4g} {what}; at most {limit}")
+    return int(count)
+
+
+def check_step(option: str, step: float, span: float, unit: str = "deg", what: str = "plan entries",
+               per: int = 1, limit: int = MAX_PLAN_ENTRIES) -> int:
+    """The number of samples ``step`` apart over ``span`` (times ``per``, e.g.
+    one set per test); refused naming ``option`` above ``limit``."""
+    if not (step > 0 and math.isfinite(step)):
+        raise ValueError(f"{option}: expected a step > 0 {unit}, got {step}")
+    count = (math.floor(abs(span) / step + 1e-9) + 1) * per
+    if not count <= limit:
+        raise ValueError(f"{option}: {step:g} {unit} gives {count:.4g} {what} over {abs(span):g} {unit}"
+                         f"{f' ({per} times)' if per > 1 else ''}; at most {limit} (use a larger step)")
+    return int(count)
+
+
+def count_type(low: int = 0, limit: int = MAX_PLAN_ENTRIES, what: str = "an integer"):
+    """An argparse type: an integer from ``low`` to ``limit`` (both included)."""
+    return _integer_type(low, limit + 1, what)
+
+
+TRIALS = count_type(2, MAX_TRIALS, "a number of trials")
 SIGMA = _float_type(0.0, what="a noise level in mm")
 POSITIVE = _float_type(0.0, low_open=True)
 PROBABILITY = _float_type(0.0, 1.0, low_open=True, what="a probability")
@@ -292,12 +330,29 @@ EXIT_INPUT = 2     # bad input or a refused request (unusable result, correction
 EXIT_INTERNAL = 3  # a bug: FIVECAL_DEBUG=1 shows the traceback
 
 
+def _warning_line(command: str):
+    """A ``warnings.showwarning`` that prints ``fivecal COMMAND: warning: MESSAGE``
+    on one line: a user of the command line is shown neither the source line
+    that warned nor a path inside the package. Python API users keep the
+    standard display (it is installed only while a command runs)."""
+    def show(message, category, filename, lineno, file=None, line=None):
+        stream = sys.stderr if file is None else file
+        try:
+            stream.write(f"fivecal {command}: warning: {' '.join(str(message).split())}\n")
+        except (OSError, ValueError):  # stderr closed: a warning must not end the command
+            pass
+
+    return show
+
+
 def execute(args) -> int:
     """Run the parsed command (:func:`_run`) and turn what it raises into one
     line on stderr and the exit status: 2 bad input or a refused request,
     3 anything else (a bug; FIVECAL_DEBUG=1 raises it with its traceback),
     130 / 143 interrupted / terminated."""
     debug = os.environ.get("FIVECAL_DEBUG", "") not in ("", "0")
+    old_showwarning = warnings.showwarning
+    warnings.showwarning = _warning_line(args.command)
     try:
         return _run(args)
     except KeyboardInterrupt:
@@ -323,3 +378,5 @@ def execute(args) -> int:
         print(f"fivecal {args.command}: internal error ({type(e).__name__}): {_one_line(e)} "
               "(set FIVECAL_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_INTERNAL
+    finally:
+        warnings.showwarning = old_showwarning

@@ -20,7 +20,7 @@ def register(sub) -> None:
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Read a dataset (JSON or Parquet, recognised by its content) and write "
                         "it as Parquet when OUT ends in .parquet or .pq (needs pyarrow: pip install "
-                        "'fivecal[arrow]'), as JSON otherwise (docs/formats.md).",
+                        "'fivecal[arrow]'), as JSON otherwise (`fivecal docs formats`).",
                         epilog="example:\n  fivecal convert trace.json trace.parquet\n"
                         "  fivecal convert trace.parquet trace.json")
     pv.add_argument("dataset", help="dataset to read (JSON or Parquet)")

@@ -26,7 +26,8 @@ from ..procedures import dbb
 from ..report.polar import (dbb_groups, plane_name, plot_circular_test, plot_four_step, plot_polar, plot_polar_grid,
                             plot_volumetric, plot_wang_patterns)
 from ..simulation import simulate
-from .common import POSITIVE, SEED, SIGMA, _FORCE_HELP, _float_type, _values_verdict, fit_status
+from .common import (MAX_SAMPLES, POSITIVE, SEED, SIGMA, _FORCE_HELP, _float_type, _values_verdict, check_step,
+                     fit_status)
 
 #: Jiang & Cripps Tables 2-3 (positions in mm; orientations read as arc-seconds,
 #: see examples/machines/README.md).
@@ -112,16 +113,9 @@ def _write_json(d: dict, path: str) -> None:
     write_text(path, json.dumps(d, indent=1, default=float) + "\n")
 
 
-#: Samples per simulated trace at most (a ball bar records a few thousand per
-#: turn); a tiny --step would otherwise ask for billions of poses.
-MAX_TRACE_SAMPLES = 1_000_000
-
-
+# A tiny --step would otherwise ask for billions of poses (cli.MAX_SAMPLES).
 def _check_step(step: float, sweep: float) -> None:
-    n = math.floor(sweep / step + 1e-9) + 1
-    if n > MAX_TRACE_SAMPLES:
-        raise ValueError(f"--step: {step:g} deg gives {n} samples over {sweep:g} deg; at most "
-                         f"{MAX_TRACE_SAMPLES} per trace (use a larger step)")
+    check_step("--step", step, sweep, what="samples", limit=MAX_SAMPLES)
 
 
 @contextlib.contextmanager
@@ -423,7 +417,7 @@ def register(sub) -> None:
     FINITE = _float_type()
     RD = argparse.RawDescriptionHelpFormatter
     pd = sub.add_parser("dbb", help="double ball bar tests: jiang, wang, circular, volumetric, plot", formatter_class=RD,
-                        description="Double ball bar tests (docs/dbb.md).",
+                        description="Double ball bar tests (`fivecal docs dbb`).",
                         epilog="example:\n  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003")
     dsub = pd.add_subparsers(dest="dbb_command", required=True)
 

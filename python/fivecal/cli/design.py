@@ -8,7 +8,7 @@ from .. import design
 from .._json import plain
 from ..files import write_json
 from ..machine import Machine
-from .common import COUNT, POSITIVE, _read_json
+from .common import COUNT, POSITIVE, _read_json, check_size
 
 
 def _design_spec(path: str) -> dict:
@@ -55,10 +55,13 @@ def _design(args) -> int:
         ks = []
     if not ks or min(ks) < 1:
         raise ValueError(f"-k: expected a number of indexations (>= 1) or a comma-separated list, got '{args.k}'")
+    check_size("-k", max(ks), "indexations")
     try:
         required = [int(x) for x in args.require.split(",") if x.strip()] if args.require else None
     except ValueError:
         raise ValueError(f"--require: expected comma-separated visit numbers, got '{args.require}'") from None
+    if required:
+        check_size("--require", max(abs(r) for r in required), "(a visit number)")
     pool = design._as_dataset(plan, machine, artefact, tip_radius, None)
     rows = None
     for i, k in enumerate(ks):

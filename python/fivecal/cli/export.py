@@ -10,7 +10,12 @@ from ..compensation import usable_errors
 from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
 from ..io.plan_readings import _read_spec
 from ..tolerances import parse_value
-from .common import _read_machine
+from .common import _read_machine, count_type
+
+#: R-test points between two samples at most (--subdivide)
+MAX_SUBDIVIDE = 1000
+#: ball bar rotary paths: the smallest bar-length tolerance (µm) between blocks
+MIN_TOLERANCE_UM = 1e-4
 
 
 def _volume(text: str) -> dict:
@@ -41,7 +46,7 @@ def _run(args) -> int:
     print(exp.summary())
     if exp.replaced:
         print(f"{args.out}: replaced the earlier export ({', '.join(exp.replaced)})")
-    print(f"files in {args.out}; recipe: docs/linuxcnc.md")
+    print(f"files in {args.out}; recipe: `fivecal docs linuxcnc`")
     return 0
 
 
@@ -152,6 +157,9 @@ def _program_text(args, kind, machine, plan, artefact, tip) -> str:
                                dwell=opt("dwell", 1.0), subdivide=args.subdivide)
     feed = opt("feed", 1000.0)
     tol = parse_value(args.tolerance, "--tolerance", bare_unit="um")     # mm
+    if not tol >= MIN_TOLERANCE_UM * 1e-3:
+        # The path is split until the bar length holds within it: points grow as 1/sqrt(tolerance).
+        raise ValueError(f"--tolerance: expected at least {MIN_TOLERANCE_UM:g} µm, got {args.tolerance}")
     if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
         return D.rotary_dbb_program(machine, plan, feed=feed, feed_in=args.feed_in, kins=args.kins,
                                     tolerance=tol)
@@ -204,7 +212,7 @@ def register(sub) -> None:
         "working volume (least squares): its parameters, the tool-point error left (rms, max, by "
         "region), the error left when fivecal's G-code compensation runs on top, and the model as "
         "pivot points and axis directions in the machine frame, old and new, with the names the "
-        "values carry in Siemens and Heidenhain documentation (docs/controllers.md). No vendor "
+        "values carry in Siemens and Heidenhain documentation (`fivecal docs controllers`). No vendor "
         "file format is written.",
         epilog="example:\n  fivecal export kinematics result.json --machine machine.json "
         "--model table-table --directions --format csv --out kinematics.csv")
@@ -229,12 +237,12 @@ def register(sub) -> None:
         "program", formatter_class=RD,
         help="ISO G-code that runs a test plan: probing, sphere cycle, R-test, ball bar",
         description="Write the NC program of a fivecal plan (the 'plan' of a simulation spec, "
-        "docs/formats.md): facet touches and sphere touches (apart or mixed in one plan, as fivecal "
+        "`fivecal docs formats`): facet touches and sphere touches (apart or mixed in one plan, as fivecal "
         "design writes them) as G38.2 probing cycles for LinuxCNC "
         "with its tool-centre-point kinematics (--kins; probe log with PROBEOPEN, read back by "
         "fivecal.io.linuxcnc.read_probe_log), R-test K tests with a G4 dwell at each sample (axis "
         "commands, LinuxCNC joint values with --kins, or world moves with --mode tcp), ball bar "
-        "circles and rotary-axis paths with feed-in and feed-out (docs/linuxcnc.md). Check every "
+        "circles and rotary-axis paths with feed-in and feed-out (`fivecal docs linuxcnc`). Check every "
         "program's clearance moves against your fixtures before running it on a machine.",
         epilog="examples:\n  fivecal export program sphere_spec.json --kins xyzac-trt --out sphere.ngc\n"
         "  fivecal export program plan14.json --kins xyzbc-trt --out tango.ngc   (fivecal design's facets "
@@ -270,8 +278,8 @@ def register(sub) -> None:
     g = pp.add_argument_group("R-test and ball bar")
     g.add_argument("--mode", choices=["axes", "tcp"], default="axes", help="R-test words: axis commands "
                    "(joint values with --kins) or world coordinates with TCP on")
-    g.add_argument("--subdivide", type=int, default=0, help="R-test: points between two "
-                   "samples (at most 1000)")
+    g.add_argument("--subdivide", type=count_type(0, MAX_SUBDIVIDE), default=0,
+                   help=f"R-test: points between two samples (at most {MAX_SUBDIVIDE})")
     g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, "
                    "mm (at most 50, and less than the circle's radius or the bar length)")
     g.add_argument("--tolerance", default="0.02", metavar="UM", help="ball bar rotary paths: largest change "

@@ -15,6 +15,7 @@ from ..machine import Machine
 from ..report.history import History
 from ..tolerances import check_names, parse_tolerances, volumetric_tolerance
 from ..units import display_scale
+from .common import MAX_TRIALS, MAX_WORKERS, check_size
 
 
 def _store(args, create=False):
@@ -181,8 +182,11 @@ def _fleet(args) -> int:
         raise ValueError("fleet identify: give --store FILE and/or --parquet DIR for the results")
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers: expected an integer >= 1, got {args.workers}")
+    if args.workers is not None:
+        check_size("--workers", args.workers, "worker processes", MAX_WORKERS)
     if args.trials < 0:
         raise ValueError(f"--trials: expected an integer >= 0, got {args.trials}")
+    check_size("--trials", args.trials, "trials per dataset", MAX_TRIALS)
     est = args.estimate.split(",") if "," in args.estimate else args.estimate
     run = fleet_identify(args.source, store=args.store, parquet=args.parquet, estimate=est,
                          procedure=args.procedure or "", machine_id=args.machine_id, scheduler=args.scheduler,
@@ -213,7 +217,7 @@ def _record_options(g) -> None:
 def add_identify_options(p) -> None:
     """``fivecal identify``'s history options: the report shows this machine's
     trend, the comparison with its previous calibration and pass / fail."""
-    g = p.add_argument_group("history (docs/history.md)")
+    g = p.add_argument_group("history (`fivecal docs history`)")
     g.add_argument("--history", metavar="STORE", help="calibration store (SQLite file): with --report, the "
                    "report adds this machine's trend, the comparison with its previous calibration and, with "
                    "tolerances, pass / fail. This result is placed in the trend at the date in the dataset's "
@@ -311,7 +315,7 @@ def register(sub) -> None:
     p = sub.add_parser("history", help="calibration store: record, list, compare, trend, export",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        description="A calibration store is one SQLite file holding every recorded "
-                       "identification of a fleet of machines (docs/history.md).",
+                       "identification of a fleet of machines (`fivecal docs history`).",
                        epilog="examples:\n"
                        "  fivecal history add --store shop.fcdb result.json --machine-id HU40-17 --procedure sphere\n"
                        "  fivecal history list --store shop.fcdb --machine-id HU40-17\n"

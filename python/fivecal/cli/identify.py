@@ -61,7 +61,7 @@ def register(sub) -> None:
                         "(tip, touched facets, sphere centres, DBB lengths) and print a report.",
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
                         "  fivecal identify fivecal_demo/dataset.json --estimate S3 --robust huber")
-    pi.add_argument("dataset", help="dataset, JSON or Parquet (format: docs/formats.md)")
+    pi.add_argument("dataset", help="dataset, JSON or Parquet (format: `fivecal docs formats`)")
     pi.add_argument("--estimate", default="auto",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "
                     "(default: auto, as in Python: every error under its prior, the undetermined "
@@ -74,7 +74,7 @@ def register(sub) -> None:
     pi.add_argument("--variance-components", action="store_true",
                     help="estimate the noise of each instrument group (probe, dbb, ball3d, point, pose, "
                     "pose_rad, distance) from the residuals instead of trusting the declared sigmas "
-                    "(docs/identification.md)")
+                    "(`fivecal docs identification`)")
     pi.add_argument("--out", help="write the result JSON here")
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")

@@ -79,7 +79,7 @@ def register(sub) -> None:
         "(X Y Z A B C S, any case), the measured columns of KIND, and optionally id, sigma, setup, "
         "dir_<axis>. Units come from the header (reading_um, B_rad, 'dx [um]') or the options. Separators "
         "',' ';' tab or spaces; with ';', tab or spaces a decimal comma is read (1,234). Lines starting "
-        "with # are comments. Columns of each kind: docs/import.md.",
+        "with # are comments. Columns of each kind: `fivecal docs import`.",
         epilog="examples:\n"
         "  fivecal import probing touches.csv --machine hu40t.json --sidecar artefact.json --out ds.json\n"
         "  fivecal import dbb trace.csv --machine m.json --setup A1 --length 100 "

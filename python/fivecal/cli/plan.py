@@ -11,8 +11,15 @@ import os
 from .._json import plain
 from ..files import write_json
 from ..procedures import dbb, rtest, sphere_check, sphere_test
-from .common import POSITIVE, _axis_values, _float_type, _integer_type, _read_machine
+from .common import POSITIVE, _axis_values, _float_type, _read_machine, check_size, check_step, count_type
 from .dbb import _values
+
+
+#: Positions per rotary axis of a sphere check at most (-n, --positions): one
+#: a degree over a full turn, far more than a pivot needs.
+MAX_POSITIONS = 360
+#: mm: positions and lengths (the core's kMaxLinear)
+MAX_LINEAR = 1e5
 
 
 def _vector(text: str, option: str, n: int = 3) -> list:
@@ -23,6 +30,9 @@ def _vector(text: str, option: str, n: int = 3) -> list:
         v = []
     if len(v) != n or not all(math.isfinite(x) for x in v):
         raise ValueError(f"{option}: expected {n} numbers separated by commas, got '{text}'")
+    if max(abs(x) for x in v) > MAX_LINEAR:  # the core's machine-size bound, named here by option
+        raise ValueError(f"{option}: {max(v, key=abs):g} mm is beyond {MAX_LINEAR / 1e3:g} m; values this "
+                         "large look like µm (fivecal expects mm)")
     return v
 
 
@@ -108,6 +118,7 @@ def _rings(text):
         if not (-90 <= lat <= 90) or n < 1:
             raise ValueError(f"--rings: '{item}': latitude in -90..90 degrees and a count >= 1")
         out.append((lat, n))
+    check_size("--rings", sum(n for _, n in out), "touch directions per indexation")
     return out
 
 
@@ -142,6 +153,8 @@ def _sphere_check(args) -> int:
     pos = _positions(args.positions, m) if args.positions else None
     if args.n < 3:
         raise ValueError(f"-n: {args.n} positions per axis; a pivot needs at least 3")
+    for a, v in (pos or {}).items():
+        check_size(f"--positions {a}", len(v), "positions", MAX_POSITIONS)
     plan = sphere_check.plan(m, ball, tip_radius=args.tip_radius, n=args.n, axis_positions=pos, limits=limits,
                              both_sides=not args.one_side, min_dot=args.min_dot)
     return _write(args, m, plan, "sphere check", {"spheres": [ball]}, args.tip_radius)
@@ -159,7 +172,10 @@ def _sphere_test(args) -> int:
             _check_rotary(m, a, "--at")
         visits.append(v)
     limits = _ranges(args.limits, "--limits", m) if args.limits else None
-    plan = sphere_test.sphere_plan(m, ball, visits, tip_radius=args.tip_radius, rings=_rings(args.rings),
+    rings = _rings(args.rings)
+    if rings is not None:
+        check_size("--rings", sum(n for _, n in rings) * len(visits), f"touches at {len(visits)} indexations")
+    plan = sphere_test.sphere_plan(m, ball, visits, tip_radius=args.tip_radius, rings=rings,
                                    min_dot=args.min_dot, limits=limits)
     return _write(args, m, plan, "sphere test", {"spheres": [ball]}, args.tip_radius)
 
@@ -178,6 +194,9 @@ def _rtest(args) -> int:
     table_ball = _vector(args.table_ball, "--table-ball")
     tool_ball = _vector(args.tool_ball, "--tool-ball") if args.tool_ball else None
     tilt_range = _range(args.tilt_range, "--tilt-range")
+    # K1, K3 and K4 sample a full turn, K2 the tilt range.
+    spans = [tilt_range[1] - tilt_range[0] if t == "K2" else 360.0 for t in tests]
+    check_step("--step", args.step, max(spans), per=len(tests))
     plan = []
     for t in tests:
         plan += rtest.plan(m, t, table_ball=table_ball, tool_ball=tool_ball, step=args.step, tilt=args.tilt,
@@ -196,10 +215,12 @@ def _four_step(args) -> int:
     if not args.extended_length > args.length:
         raise ValueError(f"--extended-length: {args.extended_length:g} mm is not longer than --length "
                          f"{args.length:g} mm")
+    a_range = _range(args.carrier_range, "--carrier-range") if args.carrier_range else None
+    c_range = _range(args.carried_range, "--carried-range") if args.carried_range else None
+    # Each axis is swept twice (short and long bar); without a range at most a turn.
+    check_step("--step", args.step, max(r[1] - r[0] if r else 360.0 for r in (a_range, c_range)), per=4)
     plan = dbb.four_step_plan(
-        m, length=args.length, extended_length=args.extended_length,
-        a_range=_range(args.carrier_range, "--carrier-range") if args.carrier_range else None,
-        c_range=_range(args.carried_range, "--carried-range") if args.carried_range else None,
+        m, length=args.length, extended_length=args.extended_length, a_range=a_range, c_range=c_range,
         step=args.step, tool_ball=_vector(args.tool_ball, "--tool-ball") if args.tool_ball else None,
         setups=setups)
     return _write(args, m, plan, f"four-step ball bar ({pair['carrier']} then {pair['carried']})")
@@ -210,6 +231,7 @@ def _wang(args) -> int:
     tb = _vector(args.table_ball, "--table-ball") if args.table_ball else (0.0, 150.0, 130.0)
     if "." in args.setup or not args.setup.strip():
         raise ValueError(f"--setup: expected a mounting name without '.', got '{args.setup}'")
+    check_step("--step", args.step, 360.0)  # the tracking angle makes one turn
     plan = dbb.wang_plan(m, setup=args.setup, table_ball=tb, radius=args.radius, height=args.height,
                          step=args.step)
     plan = [{k: v for k, v in e.items() if k != "tracking"} for e in plan]
@@ -225,7 +247,7 @@ def register(sub) -> None:
         description="Write the plan of a test (as a simulation spec: machine, plan, artefact, probe) from "
         "a machine file. `fivecal export program PLAN` writes the G-code that runs it; `fivecal simulate "
         "PLAN` (with --errors) the dataset a machine with those errors would record; the readings of the "
-        "real test come back with `fivecal import` (docs/linuxcnc.md).",
+        "real test come back with `fivecal import` (`fivecal docs linuxcnc`).",
         epilog="examples:\n"
         "  fivecal plan sphere-check machine.json --sphere 60,30,40 --radius 12.5 --tip-radius 3 "
         "--out check_plan.json\n"
@@ -260,8 +282,8 @@ def register(sub) -> None:
                         "--out check_plan.json")
     common(p)
     sphere_opts(p)
-    p.add_argument("-n", type=_integer_type(0), default=5, help="positions per rotary axis spread over its "
-                   "range (default 5; a full turn for C, --limits or +-90 otherwise)")
+    p.add_argument("-n", type=count_type(0, MAX_POSITIONS), default=5, help="positions per rotary axis spread over its "
+                   f"range (default 5, at most {MAX_POSITIONS}; a full turn for C, --limits or +-90 otherwise)")
     p.add_argument("--positions", action="append", metavar="AXIS=V1,V2,...",
                    help="the positions of one axis in degrees instead of -n (repeatable, one per axis)")
     p.add_argument("--one-side", action="store_true", help="reach each position from one side only (no "

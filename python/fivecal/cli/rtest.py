@@ -26,7 +26,7 @@ def register(sub) -> None:
                         description="Evaluate R-test data (ball3d observations, one setup per test): the "
                         "range of the recorded deviation in X, Y, Z per test, pass/fail against --tolerance, "
                         "and the location errors of the rotary axes fitted to all tests. Plans: "
-                        "fivecal.procedures.rtest.plan (docs/design.md).",
+                        "fivecal.procedures.rtest.plan (`fivecal docs design`).",
                         epilog="example:\n  fivecal rtest rtest_data.json --tolerance 20")
     pp.add_argument("dataset", help="dataset JSON with the ball3d observations")
     pp.add_argument("--tolerance", default=None, metavar="UM",

@@ -38,7 +38,7 @@ def register(sub) -> None:
     ps = sub.add_parser("simulate", help="simulate a measurement on a machine with known errors",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         description="Read a simulation spec (machine or machine path, errors, setup, "
-                        "probe, artefact, plan, sigma, seed; see docs/formats.md) and "
+                        "probe, artefact, plan, sigma, seed; see `fivecal docs formats`) and "
                         "write the dataset a real machine would record.",
                         epilog="example:\n  fivecal simulate spec.json --out dataset.json --sigma 0.0006")
     ps.add_argument("spec", help="simulation spec JSON")

@@ -29,7 +29,7 @@ def register(sub) -> None:
                         "the pivot of each rotary axis (position across the axis and tilt) and its reversal "
                         "error with their uncertainty, the change since the previous check, the dispersion of "
                         "the sphere positions before and after, and how well the positions determine them. "
-                        "Plans: fivecal.procedures.sphere_check.plan (docs/design.md).",
+                        "Plans: fivecal.procedures.sphere_check.plan (`fivecal docs design`).",
                         epilog="example:\n  fivecal sphere-check touches.json --previous last.json --out check.json")
     pp.add_argument("dataset", help="dataset JSON with the sphere touches")
     pp.add_argument("--previous", help="the previous check (--out of an earlier run, or a result JSON)")

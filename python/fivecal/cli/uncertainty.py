@@ -8,8 +8,8 @@ from .. import schema, uncertainty
 from ..files import read_json
 from ..identification import identify
 from ..machine import Machine
-from .common import (POSITIVE, PROBABILITY, SEED, SIGMA, _FORCE_HELP, _fit_warning, _integer_type, _values_verdict,
-                     fit_status)
+from .common import (MAX_WORKERS, POSITIVE, PROBABILITY, SEED, SIGMA, TRIALS, _FORCE_HELP, _fit_warning, _integer_type,
+                     _values_verdict, count_type, fit_status)
 
 
 def _uncertainty(args) -> int:
@@ -89,10 +89,10 @@ def register(sub) -> None:
     pu.add_argument("--estimate", default="location",
                     help="parameter names and/or presets, comma separated (default: location)")
     pu.add_argument("--fix", default=None, help="names to keep fixed, comma separated")
-    pu.add_argument("--trials", type=_integer_type(2, 2 ** 31), default=10000,
+    pu.add_argument("--trials", type=TRIALS, default=10000,
                     help="Monte Carlo trials M (default 10000)")
-    pu.add_argument("--threads", type=_integer_type(0, 2 ** 16), default=0, help="worker threads (default 0: all cores; the "
-                    "result does not depend on it)")
+    pu.add_argument("--threads", type=count_type(0, MAX_WORKERS, "a number of threads"), default=0,
+                    help="worker threads (default 0: all cores; the result does not depend on it)")
     pu.add_argument("--seed", type=SEED, default=1, help="master seed, 0 <= seed < 2^64 (default 1)")
     pu.add_argument("--sigma", type=SIGMA, default=None, help="noise (mm): overrides the spec's, or the "
                     "fit's residual sigma for a dataset")

@@ -238,7 +238,7 @@ def _read_spec(path: str):
         raise ValueError(f"{path}: 'machine' missing (a machine object or a path)")
     plan = spec.get("plan", spec.get("observations"))
     if not isinstance(plan, list) or not plan or not all(isinstance(e, dict) for e in plan):
-        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, docs/formats.md)")
+        raise ValueError(f"{path}: 'plan' missing or empty (a list of plan entries, `fivecal docs formats`)")
     probe = spec.get("probe") or {}
     if not isinstance(probe, dict):
         raise ValueError(f"{path}: probe: expected an object like {{\"tip_radius\": 3.0}}")

@@ -1242,7 +1242,7 @@ def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: M
                 factor = _units.column_unit(h, "length", where)[0]
             except ValueError:
                 raise ValueError(f"{cw}: only axis columns take an angle unit here; give {field} in the unit "
-                                 "of the dataset file (docs/formats.md)") from None
+                                 "of the dataset file (`fivecal docs formats`)") from None
         elif field in _GENERIC_MEASURED:
             factor = _units.LENGTH_SUFFIXES[length_unit or "mm"]
         cols.append(_GColumn(i, h.strip(), field, part, factor))

@@ -947,7 +947,7 @@ class CircularResult:
                      f"{r.centre[1] * 1e3:+.3f}) µm, mean radius {r.mean_radius:.5f} mm")
         if self.hysteresis is not None:
             L.append(f"    circular hysteresis H {self.hysteresis * 1e3:.3f} µm")
-        L += ["", "  diagnosis (least squares on every reading; formulas in circular_test.h):"]
+        L += ["", "  diagnosis (least squares on every reading; formulas: `fivecal docs dbb`, section Diagnosis):"]
         for n in self.diagnosis:
             label, f, unit = _DIAG_LABELS[n]
             L.append(f"    {label.format(a1=a1, a2=a2):<52}{self.diagnosis[n] * f:>10.3f} ± "

@@ -463,7 +463,7 @@ moves the opposite way.</li>
 axes) of the error motion of axis k along/about the axes of F. For an axis whose direction is a negative basis
 vector a positive <code>Ekk1</code> shortens the travel.</li>
 <li>Backlash <code>Ekkb</code>: added to the command in the direction the axis last moved.</li>
-<li>Residuals (docs/formats.md): for a facet touch n̂·(P − a) − r − facet offset, i.e. how far the identified
+<li>Residuals (`fivecal docs formats`): for a facet touch n̂·(P − a) − r − facet offset, i.e. how far the identified
 model puts the stylus ball from the facet at the moment the probe triggered (mm; 0 for a perfect model). Residual
 vectors are these distances along the surface normal, drawn in the workpiece (table) frame.</li>
 </ul>
@@ -623,7 +623,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
         body.append(f"<div class='box warn'>{note}</div>")
     body += ["<h2 id='conventions'>Conventions</h2>", _CONVENTIONS,
              "<h2 id='files'>Files</h2><ul>",
-             "<li><a href='result.json'>result.json</a> — the result (format: docs/formats.md; values in mm and "
+             "<li><a href='result.json'>result.json</a> — the result (format: `fivecal docs formats`; values in mm and "
              "rad, one-sigma std)</li>" if write_result_json else "",
              "".join(f"<li><a href='{_e(os.path.basename(pth))}'>{_e(os.path.basename(pth))}</a></li>"
                      for pth, _ in figs if os.path.dirname(os.path.abspath(pth)) == os.path.abspath(out_dir)),

@@ -137,6 +137,14 @@ class ErrorModel {
 // Throws std::invalid_argument unless x is finite; `what` names the field.
 void RequireFinite(double x, const std::string& what);
 
+// v as a unit vector. Throws std::invalid_argument naming `what` (and the
+// component) unless every component is finite and one is non-zero. Any such
+// vector is a direction, whatever its scale: it is divided by its largest
+// component before the norm is taken, so neither [1e308, 1e308, 0] (whose
+// squared norm overflows to inf) nor [5e-324, 0, 0] (which underflows to 0)
+// becomes a zero vector.
+Eigen::Vector3d UnitDirection(const Eigen::Vector3d& v, const std::string& what);
+
 // Plausibility bounds of every file and API value. A value outside them is a
 // typing or unit mistake (1e308, a length in nm), never a measurement: it is
 // refused naming the field, so no inf or NaN can reach a fit or a report.

@@ -36,6 +36,13 @@ std::vector<std::string> NoiseClasses();
 // for a class no kind has.
 std::string NoiseClassUnit(const std::string& noise_class);
 
+// Whether `name` has the shape of a setup parameter name (facet.<id>,
+// sphere.<id>.x|y|z|r, dbb[.<setup>].length|tool.x|...|table.z,
+// ball3d.<setup>.tool.x|..., probe.*, instrument.<id>.<field>), whatever
+// dataset it belongs to. A dotted name of any other shape (EX0C.x) is a
+// mistake, never a set-up quantity to skip.
+bool IsSetupParameterName(const std::string& name);
+
 // Whether the data fix the length scale: an observation of a kind that does
 // (ball bar, 3D ball displacement), or an artefact length (a scale bar whose
 // balls were probed).
