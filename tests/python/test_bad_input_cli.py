@@ -302,7 +302,7 @@ def test_a_radians_warning_is_one_line_of_the_command(tmp_path):
     for ln in rows[head + 1:]:
         f = ln.split(",")
         for a in ("A", "C"):
-            f[cols.index(a)] = f"{math.radians(float(f[cols.index(a)])):.5f}"
+            f[cols.index(a)] = f"{math.radians(float(f[cols.index(a)])) + 0.01:.5f}"  # off the π/12 grid, which is refused
         out.append(",".join(f))
     (tmp_path / "rad.csv").write_text("\n".join(out) + "\n")
     r = fivecal_cli("import", "probing", tmp_path / "rad.csv", "--sidecar",

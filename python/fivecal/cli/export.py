@@ -192,7 +192,7 @@ def register(sub) -> None:
                     "export is replaced, all or nothing; one holding other files is refused)")
     pl.add_argument("--old", metavar="HAL", help="the controller's current pins: the HAL file that sets them "
                     "(setp, or sets on the signal a net links them to; read as halcmd reads it, "
-                    "docs/linuxcnc.md; default: the machine file's nominal geometry)")
+                    "`fivecal docs linuxcnc`; default: the machine file's nominal geometry)")
     pl.add_argument("--max-change", default=str(L.DEFAULT_MAX_CHANGE),
                     help=f"plausibility limit on any pin change in mm (default {L.DEFAULT_MAX_CHANGE}; "
                     "'off' switches it off)")

@@ -203,7 +203,7 @@ def _fleet(args) -> int:
 def _tolerance_help(what: str) -> str:
     return (f"largest acceptable {what}, e.g. EX0C=12um, EA0C=20urad, EXX1=5um/m (repeatable, comma "
             "separated); a bare number is in mm / rad, and a bare number too large for the parameter "
-            "(12 for EX0C) is refused as probably µm (docs/history.md)")
+            "(12 for EX0C) is refused as probably µm (`fivecal docs history`)")
 
 
 def _record_options(g) -> None:
