@@ -10,10 +10,8 @@ from ..compensation import usable_errors
 from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
 from ..io.plan_readings import _read_spec
 from ..tolerances import parse_value
-from .common import _read_machine, count_type
+from .common import _read_machine
 
-#: R-test points between two samples at most (--subdivide)
-MAX_SUBDIVIDE = 1000
 #: ball bar rotary paths: the smallest bar-length tolerance (µm) between blocks
 MIN_TOLERANCE_UM = 1e-4
 
@@ -278,8 +276,9 @@ def register(sub) -> None:
     g = pp.add_argument_group("R-test and ball bar")
     g.add_argument("--mode", choices=["axes", "tcp"], default="axes", help="R-test words: axis commands "
                    "(joint values with --kins) or world coordinates with TCP on")
-    g.add_argument("--subdivide", type=count_type(0, MAX_SUBDIVIDE), default=0,
-                   help=f"R-test: points between two samples (at most {MAX_SUBDIVIDE})")
+    # bounded by io.nc_options, the one rule every program writer checks
+    g.add_argument("--subdivide", type=int, default=0,
+                   help="R-test: points between two samples (at most 1000)")
     g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, "
                    "mm (at most 50, and less than the circle's radius or the bar length)")
     g.add_argument("--tolerance", default="0.02", metavar="UM", help="ball bar rotary paths: largest change "
