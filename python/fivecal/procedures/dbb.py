@@ -208,7 +208,7 @@ def trace_from_dataset(ds: Union[Dataset, Mapping], setup: str) -> Trace:
     S, B, idx = ball_positions(ds, setup)
     moving, fixed = (B, S) if np.ptp(B, axis=0).sum() >= np.ptp(S, axis=0).sum() else (S, B)
     rel = moving - fixed
-    _, _, vt = np.linalg.svd(rel - rel.mean(axis=0))
+    _, _, vt = np.linalg.svd(rel - rel.mean(axis=0), full_matrices=False)
     k = int(np.argmax(np.abs(vt[2])))
     e = np.eye(3)
     e1, e2 = e[(k + 1) % 3], e[(k + 2) % 3]
