@@ -625,12 +625,7 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     tilt = TILT[k]
     O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
             safe=safe, dwell=dwell)
-    O.check_line("log", log, comment=True)
-    for name, line in (("arm", arm), ("disarm", disarm), ("sync", sync), ("tcp_on", tcp_on)):
-        O.check_line(name, line)
-    for i, lines in enumerate(before_probe or []):
-        for line in lines:
-            O.check_line(f"before_probe[{i}]", line)
+    O.check_probe_lines(log, arm, disarm, sync, tcp_on, before_probe)
     spheres = artefact.get("spheres") or []
     if spheres:
         # its straight lifts know nothing of spheres: on TANGO they ran 4 mm

@@ -154,6 +154,17 @@ _COMMENT = re.compile(r"\([^)]*\)")
 _AXIS_WORD = re.compile(r"([XYZABC])([+-]?(?:\d+\.?\d*|\.\d+|nan|inf))")
 
 
+def check_probe_lines(log, arm, disarm, sync, tcp_on, before_probe) -> None:
+    """The text options of a probing cycle (the probe log's name and the
+    lines written as they are), each by :func:`check_line`."""
+    check_line("log", log, comment=True)
+    for name, line in (("arm", arm), ("disarm", disarm), ("sync", sync), ("tcp_on", tcp_on)):
+        check_line(name, line)
+    for i, lines in enumerate(before_probe or []):
+        for line in lines:
+            check_line(f"before_probe[{i}]", line)
+
+
 def check_positions(text: str, what: str) -> str:
     """``text`` (a program) as it is when every axis word is within
     ±plausibility.REFUSE_POSITION (mm or degrees); else ValueError naming

@@ -215,12 +215,7 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(geo)} touches")
     O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
             safe=safe, overshoot=overshoot, dwell=dwell)
-    O.check_line("log", log, comment=True)
-    for name, line in (("arm", arm), ("disarm", disarm), ("sync", sync), ("tcp_on", tcp_on)):
-        O.check_line(name, line)
-    for i, lines in enumerate(before_probe or []):
-        for line in lines:
-            O.check_line(f"before_probe[{i}]", line)
+    O.check_probe_lines(log, arm, disarm, sync, tcp_on, before_probe)
     if retract < clearance:
         raise O.OptionError("retract", f"{retract} mm is less than the clearance {clearance} mm")
     spheres = {sp["id"]: sp for sp in (artefact or {}).get("spheres", [])}
