@@ -29,7 +29,7 @@ def _run_planned(args) -> int:
         d = P.rtest_readings(args.file, args.plan, units=args.units, delimiter=args.delimiter,
                              decimal=args.decimal, header=args.header, sigma=args.sigma, ignore=args.ignore or (),
                              angle_units=args.angle_units)
-    ds = P.write(d, args.out)
+    P.write(d, args.out)
     n = sum(1 for e in P.read_plan(args.plan)[1] if e.get("type") in {o["type"] for o in d["observations"]})
     counts = {}  # per type, in the order the plan first uses it (a mixed facet/sphere plan)
     for o in d["observations"]:

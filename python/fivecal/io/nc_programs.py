@@ -467,8 +467,7 @@ def rtest_points(machine: Machine, entries: Sequence[Mapping], subdivide: int = 
 
 def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes", kins: Optional[str] = None,
                   pins: Optional[Mapping[str, float]] = None, feed: float = 500.0, dwell: float = 1.0,
-                  subdivide: int = 0, tcp_on: str = "M428", tcp_off: str = "M429",
-                  workpiece_shift=(0.0, 0.0, 0.0)) -> str:
+                  subdivide: int = 0, tcp_on: str = "M428", tcp_off: str = "M429") -> str:
     """ISO G-code of the R-test setups of ``plan``
     (:func:`fivecal.procedures.rtest.plan`): per setup, ``G0`` to the first
     sample, then ``G1`` from sample to sample at ``feed`` with a ``G4 P<dwell>``
@@ -489,14 +488,16 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
     straight lines in the rotary joints and the tool tip's world point, so
     ``subdivide`` is not needed; ``feed`` is then the speed of the (nearly
     still) tool point and LinuxCNC limits the rotary axes by their own
-    maximum speeds: use ``G93`` or a lower rotary speed on a real machine."""
+    maximum speeds: use ``G93`` or a lower rotary speed on a real machine.
+
+    There is no workpiece shift here: the path is fixed by the plan's joint
+    values, and a work offset does not move the balls relative to the axes."""
     if mode not in ("axes", "tcp"):
         raise ValueError(f"mode: expected 'axes' or 'tcp', got {mode!r}")
     if mode == "tcp" and not kins:
         raise ValueError("mode 'tcp': give kins (xyzac-trt or xyzbc-trt), the kinematics whose "
                          "tool-centre-point function runs the path")
     O.check(feed=feed, dwell=dwell, subdivide=subdivide)
-    O.check_vector("workpiece_shift", workpiece_shift)
     O.check_line("tcp_on", tcp_on)
     O.check_line("tcp_off", tcp_off)
     k = L._kins(kins) if kins else None
@@ -513,11 +514,8 @@ def rtest_program(machine: Machine, plan: Sequence[Mapping], mode: str = "axes",
         out.append(f"{tcp_on} (tool centre point kinematics on)")
     if k and mode == "axes" and tcp_off:
         out.append(f"{tcp_off} (identity kinematics: words are joint values)")
-    origin = None
     if k:
-        mp = L.match(machine, k)
         tilt = L.TILT[k]
-        origin = np.asarray(mp["origin"], float) + np.asarray(workpiece_shift, float)
         names = ["X", "Y", "Z", tilt, "C"]
 
     def words(q: Mapping[str, float]) -> str:
