@@ -1,7 +1,8 @@
 """The user documentation shipped with the package: ``fivecal docs [NAME]``.
 
-The wheel installs the project's ``docs/*.md`` and ``README.md`` into
-``site-packages/fivecal/docs`` (CMakeLists.txt), so a message can send an
+The wheel installs the project's ``README.md`` into ``site-packages/fivecal/docs``
+and ``docs/*.md`` into ``site-packages/fivecal/docs/docs`` (CMakeLists.txt): the
+tree's layout, so the pages' relative links resolve, so a message can send an
 installed user to a page they have: "see `fivecal docs dbb`", never to a
 ``docs/…`` path of a source tree they never saw. Run from a source tree
 (``PYTHONPATH=python``) the tree's own ``docs/`` and ``README.md`` are found.
@@ -16,7 +17,7 @@ __all__ = ["docs_dir", "doc_names", "doc_path"]
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
 #: where the wheel puts them, then the source tree (python/fivecal/../../docs)
-_PLACES = (os.path.join(_HERE, "docs"), os.path.join(_HERE, os.pardir, os.pardir, "docs"))
+_PLACES = (os.path.join(_HERE, "docs", "docs"), os.path.join(_HERE, os.pardir, os.pardir, "docs"))
 
 
 def docs_dir() -> Optional[str]:
@@ -35,7 +36,7 @@ def _files() -> Dict[str, str]:
         return {}
     out = {os.path.splitext(f)[0].lower(): os.path.join(d, f)
            for f in sorted(os.listdir(d)) if f.endswith(".md")}
-    if "readme" not in out:  # in a source tree the README sits beside docs/
+    if "readme" not in out:  # the README sits beside docs/, installed or in a tree
         readme = os.path.join(os.path.dirname(d), "README.md")
         if os.path.isfile(readme):
             out["readme"] = readme

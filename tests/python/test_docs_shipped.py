@@ -1,6 +1,7 @@
 """The user documentation ships with the package, and every message that
 points to a page points to one an installed user has: `fivecal docs NAME`
-(the wheel installs docs/*.md and README.md into site-packages/fivecal/docs;
+(the wheel installs README.md into site-packages/fivecal/docs and docs/*.md
+into fivecal/docs/docs, the tree's layout;
 run from a tree with PYTHONPATH=python, the tree's docs/ is found)."""
 import ast
 import os
@@ -47,7 +48,28 @@ def test_the_documentation_is_found():
         assert os.path.isfile(manual.doc_path(name)), name
     tree_docs = os.path.normpath(os.path.join(PACKAGE, os.pardir, os.pardir, "docs"))
     if not os.path.isdir(tree_docs):  # the installed package: its own copy, not a source tree's
-        assert d == os.path.join(PACKAGE, "docs")
+        assert d == os.path.join(PACKAGE, "docs", "docs")
+
+
+LINK = re.compile(r"\]\(([^)#\s]+)(#[^)\s]*)?\)")
+
+
+def test_every_relative_link_of_a_page_resolves_where_it_is_read():
+    # before: the wheel flattened README and docs/ into one folder, so the
+    # README's docs/dbb.md and formats.md's ../README.md led nowhere
+    pages = [manual.doc_path(n) for n in manual.doc_names()]
+    broken = []
+    for page in pages:
+        with open(page, encoding="utf-8") as fh:
+            for target, _ in LINK.findall(fh.read()):
+                if re.match(r"[a-z]+:", target):
+                    continue  # https:, mailto:
+                if not os.path.exists(os.path.join(os.path.dirname(page), target)):
+                    broken.append(f"{os.path.basename(page)}: {target}")
+    tree = os.path.isdir(os.path.normpath(os.path.join(PACKAGE, os.pardir, os.pardir, "docs")))
+    # the README's links to examples/ resolve in a tree only; the wheel ships examples/machines alone
+    allowed = () if tree else ("examples/",)
+    assert not [b for b in broken if not b.split(": ", 1)[1].startswith(allowed)], broken
 
 
 def test_no_message_points_into_a_source_tree():
