@@ -20,6 +20,11 @@ from .identification import identify
 from .machine import Machine
 from .simulation import simulate
 from .units import display_scale
+from .files import make_dirs
+from .files import write_text
+from .report.plots import plot_residual_vectors
+from .report.document import write_report
+from .report.markup import table_html
 
 SIGMA = 0.0006  # mm, the thesis's probing repeatability
 
@@ -47,7 +52,6 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
     held-out and setup-only prediction rms (mm) and the largest |z|."""
     t0 = time.perf_counter()
     say = print if verbose else (lambda *a, **k: None)
-    from .files import make_dirs
 
     make_dirs(out)
     machine = Machine.load(example_machine_path("hu40t"))
@@ -102,13 +106,9 @@ def run_demo(out: str, seed: int = 1, verbose: bool = True) -> dict:
               f"    setup-only model (S1) predicts them to {rms(pred_nominal) * 1e3:.2f} µm rms, "
               f"the identified S3 model to {rms(pred) * 1e3:.2f} µm rms"]
     text = report + "\n" + "\n".join(lines)
-    from .files import write_text
 
     write_text(os.path.join(out, "report.txt"), text + "\n")
 
-    from .report.plots import plot_residual_vectors
-    from .report.document import write_report
-    from .report.markup import table_html
 
     s1_png = plot_residual_vectors(nominal, os.path.join(out, "residuals_S1.png"),
                                    title="Unexplained residuals, subset S1 (setup only)")

@@ -32,6 +32,8 @@ from . import _core
 from .dataset import Dataset, dumps
 from .machine import Machine
 from .units import display_scale
+from .simulation import simulate
+from .progress import Progress
 
 __all__ = ["PlanQuality", "Design", "visit_groups", "plan_quality", "compare_plans", "format_comparison",
            "candidate_plan", "design_plan", "characteristic_scale", "rotary_directions"]
@@ -110,7 +112,6 @@ def _as_dataset(plan: PlanLike, machine, artefact, tip_radius, values) -> Datase
     if machine is None or artefact is None:
         raise ValueError("a plan needs machine= and artefact= (and tip_radius=) to be judged; "
                          "or pass a Dataset")
-    from .simulation import simulate
     m = Machine.from_dict(machine)
     names = set(m.parameter_names())
     v = _values(values)
@@ -349,7 +350,6 @@ class _DesignProgress:
         self.phase = None
 
     def __call__(self, phase: str, done: int, total: int, best: float) -> bool:
-        from .progress import Progress
         if phase != self.phase:
             self.close()
             self.phase = phase

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import _core, schema
 from .units import looks_like_radians, radians_message
+from . import files
 
 ArrayLike = Union[float, np.ndarray, list]
 
@@ -38,7 +39,6 @@ class Machine:
     @classmethod
     def load(cls, path: Union[str, os.PathLike]) -> "Machine":
         """Load a machine definition (JSON, or TOML with the same keys)."""
-        from . import files
 
         path = os.fspath(path)
         text = files.read_text(path, "machine")

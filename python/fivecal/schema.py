@@ -33,6 +33,8 @@ from functools import lru_cache
 from typing import Any, Optional
 
 from . import files
+from . import _core
+from ._json import plain
 
 __all__ = ["KINDS", "FULL_CHECK_LIMIT", "BIG_TEXT", "BIG_TEXT_SAMPLE", "schema_path", "load_schema",
            "validate", "parse", "check_text", "check_file", "checked_dumps", "guess_kind", "read_checked"]
@@ -90,7 +92,6 @@ def _with_registered_kinds(kind: str, s: dict) -> dict:
     the C++ loader checks the values, naming the field), and the spec's
     ``sigma`` object takes every noise class."""
     try:
-        from . import _core
 
         kinds, classes = _core.observation_kinds(), _core.noise_classes()
     except (ImportError, AttributeError):  # a module built before the registry said so
@@ -442,7 +443,6 @@ def guess_kind(what: str) -> str:
 
 def checked_dumps(obj: Any, kind: str) -> str:
     """JSON text of a user dict (numpy values allowed) after :func:`validate`."""
-    from ._json import plain
 
     root = _ROOT.get(kind, kind)
     doc = plain(obj, root)

@@ -43,6 +43,10 @@ from .figures import _pyplot
 from .identification import _names, identify
 from .machine import Machine
 from .units import display_scale
+from . import files
+from .simulation import integer, seed_value
+from .progress import Progress
+from .files import save_figure
 
 __all__ = ["make_spec", "simulation_plan", "monte_carlo", "MonteCarloResult", "gum_input_covariance",
            "CyclesUncertainty", "propagate", "pooled_covariance", "sensitivity", "coverage_factor"]
@@ -58,7 +62,6 @@ def make_spec(machine, plan: Sequence[Mapping], errors: Optional[Mapping] = None
               setup: Optional[Mapping[str, float]] = None) -> dict:
     """The simulation spec :func:`fivecal.simulate` builds from the same
     arguments (``docs/formats.md, "Simulation spec"``), as a dict."""
-    from .simulation import seed_value
 
     machine = Machine.from_dict(machine)
     return {"machine": machine.to_dict(), "errors": dict(errors or {}), "setup": dict(setup or {}),
@@ -119,7 +122,6 @@ def simulation_plan(source, estimate=None, sigma=None, fix=None, initial=None):
     if isinstance(source, _core.SimulationPlan):
         return source, None
     if isinstance(source, (str, os.PathLike)):
-        from . import files
 
         source = files.read_json(source, "spec or dataset")
     if isinstance(source, Mapping) and "plan" in source and "observations" not in source:
@@ -147,7 +149,6 @@ class _Bar:
     ``FIVECAL_PROGRESS=1``)."""
 
     def __init__(self, total: int, label: str = "Monte Carlo"):
-        from .progress import Progress
         self.bar = Progress(total, label)
 
     def __call__(self, done: int, total: int) -> bool:
@@ -223,7 +224,6 @@ class MonteCarloResult:
         return self._core.to_json(include_samples)
 
     def save(self, path, include_samples: bool = False) -> None:
-        from . import files
 
         files.write_text(path, self.to_json(include_samples) + "\n")
 
@@ -317,7 +317,6 @@ class MonteCarloResult:
         for ax in list(axes.flat)[len(names):]:
             ax.axis("off")
         fig.tight_layout()
-        from .files import save_figure
 
         save_figure(fig, path, dpi=110)
         plt.close(fig)
@@ -355,7 +354,6 @@ def monte_carlo(dataset_or_spec, estimate: Union[str, Sequence[str]] = "auto", t
     terminal or with ``FIVECAL_PROGRESS=1``), or a callable ``(done, total)
     -> bool`` called about every 0.1 s (False cancels).  Ctrl-C cancels too.
     """
-    from .simulation import integer, seed_value
 
     trials = integer(trials, "trials", 2, 2 ** 31)
     threads = integer(threads, "threads", 0, 2 ** 16)
@@ -453,7 +451,6 @@ class CyclesUncertainty:
         return json.loads(self._core.to_json())
 
     def save(self, path) -> None:
-        from . import files
 
         files.write_text(path, self._core.to_json() + "\n")
 

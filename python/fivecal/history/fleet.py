@@ -35,6 +35,9 @@ from .. import files
 from ..uncertainty import monte_carlo
 from .store import (Calibration, Store, arrow_table, calibration_from_result, dataset_digest, require_pyarrow,
                     utc_time)
+from .. import _core, plausibility
+from ..dataset import Dataset
+from ..identification import identify
 
 
 def require_dask():
@@ -119,8 +122,6 @@ def _load(path: str):
     observation and field), which ``load_dataset`` already relies on for big
     datasets. The schema pass costs more than the fit of a nightly sphere
     check; a fleet run pays the core's time, not the Python validator's."""
-    from .. import _core, files, plausibility
-    from ..dataset import Dataset
 
     text = files.read_text(path, "dataset")
     try:
@@ -140,7 +141,6 @@ def identify_one(job: Job, estimate="location", done: frozenset = frozenset(), o
     ``trials`` > 0: the covariance is that of a JCGM 101 Monte Carlo of
     ``trials`` trials around this dataset (one thread: the cluster is the
     parallelism), recorded as ``uncertainty = "monte_carlo:N"``."""
-    from ..identification import identify
 
     digest = ""
     try:

@@ -20,6 +20,8 @@ import numpy as np
 
 from .. import files
 from ..simulation import simulate
+from ..procedures import sphere_test, tango
+from .. import _core
 
 SPHERE = {"id": "P", "center": [100.0, -50.0, 60.0], "radius": 19.05 / 2}
 INDEXATIONS = [{"B": float(b), "C": float(c)} for b in (0, 30, -30) for c in (0, 90, 180, 270)]
@@ -30,13 +32,11 @@ START = datetime.datetime(2026, 1, 1, 2, 0, tzinfo=datetime.timezone.utc)
 
 
 def machine():
-    from ..procedures import tango
 
     return tango.hu40t_machine()
 
 
 def sphere_check_plan(m=None) -> list:
-    from ..procedures import sphere_test, tango
 
     return sphere_test.sphere_plan(m or machine(), SPHERE, INDEXATIONS, tip_radius=tango.TIP_RADIUS)
 
@@ -83,7 +83,6 @@ def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigm
     identify`` reads: machine id from the folder, time from the file name);
     returns the paths. ``client``: a Dask client to simulate the machines on
     its workers (the same files as without)."""
-    from ..procedures import tango
 
     m = machine()
     plan = sphere_check_plan(m)
@@ -106,7 +105,6 @@ def write_fleet(folder: str, truth: List[dict], nights: int, seed: int = 0, sigm
 
 
 def _write_machines(work: list, folder: str, spec: dict, nights: int, seed: int) -> list:
-    from .. import _core
 
     paths = []
     for k, mach in work:

@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Iterable, Mapping, Optional, Union
+from typing import Iterable, Mapping, Union
 
 import numpy as np
 
 from .. import _core, files, plausibility
 from ..dataset import Dataset, load_dataset, register_format
+from .. import schema
 
 __all__ = ["FORMAT_VERSION", "UNITS", "is_parquet", "read_parquet", "iter_datasets", "write_parquet",
            "json_to_parquet", "parquet_to_json", "dataset_columns"]
@@ -248,7 +249,6 @@ def _open(path: str):
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
 
-    from .. import schema
 
     try:
         pf = pq.ParquetFile(path)
