@@ -12,7 +12,10 @@ LOG --plan PLAN --kins K``; docs/linuxcnc.md).
   observation come from the plan.
 * :func:`probe_log_dataset`: LinuxCNC's ``PROBEOPEN`` log of a program
   ``fivecal export program`` wrote for a sphere or facet plan, through
-  :func:`fivecal.io.linuxcnc.read_probe_log`.
+  :func:`fivecal.io.linuxcnc.read_probe_log`: every line must be its touch
+  of the plan (the rotary positions the plan commands, a position on that
+  touch's probe line), so a log in another order, with lines missing, or of
+  another plan is refused naming the line.
 """
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ from ..dataset import Dataset
 from ..machine import Machine
 from ..schema import read_checked as _read_json
 from . import linuxcnc as L
+from . import nc_programs as N
 from . import tables as T
 
 #: how far an axis column of a readings file may be from the plan's command
@@ -204,7 +208,9 @@ def probe_log_dataset(path, plan_path, kins: str, pins_hal: Optional[str] = None
     path = os.fspath(path)
     if not os.path.exists(path):
         raise ValueError(f"{path}: no such probe log")
-    obs = L.read_probe_log(path, machine, kins, plan, pins)
+    # each line is checked against the probe line its touch's G38.2 ran along
+    geo = N._geometry(machine, kins, plan, artefact, tip, kinds=("facet", "sphere"))
+    obs = L.read_probe_log(path, machine, kins, plan, pins, touches=[(w, n) for _, _, w, n, _ in geo])
     d = {"machine": machine.to_dict(), "observations": obs}
     if artefact:
         d["artefact"] = artefact
