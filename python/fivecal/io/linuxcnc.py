@@ -724,8 +724,9 @@ def _check_log_order(rows, nos, where, plan, rots, touches) -> None:
                              f"runs in reverse order of the plan's {n} planned touches (sorted or reversed "
                              "after the run?)")
         later = [i for i in range(k + 1, n) if fits(row, i)]
-        if later and all(not fits(row, i) for i in range(k)):
-            j = later[0]
+        # lines missing: the log goes on from a later touch in the plan's order
+        j = later[0] if later else n
+        if later and (k + 1 >= len(rows) or j + 1 >= n or fits(rows[k + 1], j + 1)):
             miss = f"touch {k + 1}" if j == k + 1 else f"touches {k + 1}..{j}"
             raise ValueError(f"{where}:{no}: this line is touch {j + 1} of the plan, not touch {k + 1} "
                              f"({target}): {miss} missing before it ({len(rows)} probed positions for {n} "
