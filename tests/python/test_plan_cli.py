@@ -271,9 +271,14 @@ def test_rtest_readings_that_do_not_line_up_are_refused(tmp_path, machine_file, 
     assert rc == 2 and "--machine" in err
     rc, _, err = run(capsys, "import", "probe-log", tmp_path / "r.csv", "--out", tmp_path / "ds.json")
     assert rc == 2 and "--plan" in err
-    # an id column may give a subset: the samples read are imported
+    # an id column may leave a whole test out, not samples of a test it reads
     rc, out, err = imp("id,dx_um,dy_um,dz_um\nK1-2,1,2,3\nK1-0,1,2,3\n")
-    assert rc == 0 and "2 ball3d observations of the 5 planned" in out
+    assert rc == 2 and ":3: the readings end here without sample K1-1, K1-3, K1-4" in err, err
+    run(capsys, "plan", "rtest", machine_file, "--tests", "K1,K2", "--table-ball", "60,20,30", "--step", "90",
+        "--out", plan_file)
+    ids = [e["id"] for e in json.loads(plan_file.read_text())["plan"] if e["id"].startswith("K2")]
+    rc, out, err = imp("id,dx_um,dy_um,dz_um\n" + "".join(f"{i},1,2,3\n" for i in ids[::-1]))
+    assert rc == 0 and f"{len(ids)} ball3d observations of the {n + len(ids)} planned" in out, err
 
 
 def test_rtest_readings_read_rotary_columns_in_the_declared_unit(tmp_path, machine_file, capsys):

@@ -125,3 +125,28 @@ def test_the_python_reader_checks_rotary_positions_without_the_probe_lines(tmp_p
     assert len(L.read_probe_log("\n".join(rows) + "\n", m, KINS, plan, pins)) == len(rows)
     with pytest.raises(ValueError, match=r"probe log:1: .*reverse"):
         L.read_probe_log("\n".join(rows[::-1]) + "\n", m, KINS, plan, pins)
+
+
+def test_rtest_readings_reversed_short_or_partial_are_refused_naming_the_line(tmp_path, capsys):
+    mf = tmp_path / "machine.json"
+    mf.write_text(json.dumps(MACHINES[KINS]))
+    plan_file = tmp_path / "p.json"
+    assert run(capsys, "plan", "rtest", mf, "--tests", "K1", "--table-ball", "60,20,30", "--step", "90",
+               "--out", plan_file)[0] == 0
+    plan = json.loads(plan_file.read_text())["plan"]
+    rows = [f"{e['axes']['A']:g},{e['axes']['C']:g},1,2,3" for e in plan]
+    f = tmp_path / "r.csv"
+
+    def imp(lines):
+        f.write_text("A,C,dx_um,dy_um,dz_um\n" + "\n".join(lines) + "\n")
+        return run(capsys, "import", "rtest", f, "--plan", plan_file, "--out", tmp_path / "ds.json")
+
+    assert imp(rows)[0] == 0
+    rc, _, err = imp(rows[::-1])  # the logger's axis columns tell the order
+    assert rc == 2 and "r.csv:2:" in err and "not the plan's command" in err, err
+    rc, _, err = imp(rows[:1] + rows[2:])
+    assert rc == 2 and "r.csv:3:" in err and "not the plan's command" in err, err
+    rc, _, err = imp(rows[:-1])
+    assert rc == 2 and f"r.csv:{len(rows)}: the readings end here" in err, err
+    with pytest.raises(ValueError, match=f"r.csv:{len(rows)}: the readings end here"):
+        P.rtest_readings(f, plan_file)

@@ -6,8 +6,8 @@ LOG --plan PLAN --kins K``; docs/linuxcnc.md).
   :func:`fivecal.io.nc_programs.rtest_program` wrote, one per ``G4`` dwell.
   A table with ``dx dy dz`` (units from the header, ``dx_um``, or ``units``)
   and either an ``id`` column naming the plan sample (the id in the dwell's
-  comment, e.g. ``K1-3``) or no id, the rows then in program order (one per
-  dwell). Axis columns, when the logger writes them, are checked against the
+  comment, e.g. ``K1-3``; a test read must have every sample, a test left
+  out is fine) or no id, the rows then in program order (one per dwell). Axis columns, when the logger writes them, are checked against the
   plan's commands. The axes, direction, balls and mounting of each
   observation come from the plan.
 * :func:`probe_log_dataset`: LinuxCNC's ``PROBEOPEN`` log of a program
@@ -185,10 +185,21 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
         obs.append(o)
     if not obs:
         raise ValueError(f"{path}: a header but no readings")
+    last = lines[-1][0]
     if "id" not in cols and len(obs) != len(order):
-        raise ValueError(f"{path}: {len(obs)} readings for the {len(order)} dwells of the plan {plan_path} "
-                         "(rows in program order need one reading per dwell; an id column lines them up by "
-                         "plan id)")
+        raise ValueError(f"{path}:{last}: the readings end here: {len(obs)} readings for the {len(order)} dwells "
+                         f"of the plan {plan_path} (rows in program order need one reading per dwell; an id "
+                         "column lines them up by plan id)")
+    if "id" in cols:
+        # a whole test may be left out (read another day); a test read with
+        # samples missing has a range and a fit over part of its path
+        read = {str(e.get("setup", "")) for i, e in order if str(e.get("id")) in used}
+        missing = [e for i, e in order if str(e.get("setup", "")) in read and str(e.get("id")) not in used]
+        if missing:
+            ids = ", ".join(str(e.get("id")) for e in missing[:5]) + (" ..." if len(missing) > 5 else "")
+            raise ValueError(f"{path}:{last}: the readings end here without sample {ids} of the plan {plan_path} "
+                             f"({len(missing)} missing of test {missing[0].get('setup', '?')}, whose other "
+                             "samples were read): every sample of a test read, or none")
     return {"machine": machine.to_dict(), "observations": obs}
 
 
