@@ -479,11 +479,11 @@ def test_facet_plan_beside_balls_keeps_out_of_them(tmp_path, capsys):
 
 
 def test_export_program_bounds_its_counts_naming_the_option(tmp_path, machine_file, capsys):
-    """--subdivide and a ball bar path's --tolerance set how many points the
+    """--subdivide and a ball bar path's --path-tolerance set how many points the
     program gets: bounded like the plans' counts and steps (issue #27)."""
     rc, _, err = run(capsys, "plan", "four-step", machine_file, "--out", tmp_path / "p.json")
     assert rc == 0, err
-    for opt, value in (("--tolerance", "1e-12"), ("--subdivide", "1000000000")):
+    for opt, value in (("--path-tolerance", "1e-12um"), ("--subdivide", "1000000000")):
         try:
             rc, _, err = run(capsys, "export", "program", tmp_path / "p.json", opt, value)
         except SystemExit as e:
