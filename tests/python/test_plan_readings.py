@@ -150,3 +150,47 @@ def test_rtest_readings_reversed_short_or_partial_are_refused_naming_the_line(tm
     assert rc == 2 and f"r.csv:{len(rows)}: the readings end here" in err, err
     with pytest.raises(ValueError, match=f"r.csv:{len(rows)}: the readings end here"):
         P.rtest_readings(f, plan_file)
+
+
+# ---- ball bar traces of the four-step test -------------------------------------
+
+def _four_step_traces(tmp_path):
+    from fivecal.procedures import dbb
+    m = fivecal.Machine.load(str(__import__("pathlib").Path(__file__).parents[2] / "examples/machines/c600u.json"))
+    plan = dbb.four_step_plan(m, step=10.0)
+    ds = fivecal.simulate(m, plan, errors={"EX0C": 0.01, "EY0A": -0.02}, sigma={"dbb": 0.0002}, seed=2)
+    files = {}
+    for sid, axis in (("A1", "A"), ("A2", "A"), ("C1", "C"), ("C2", "C")):
+        obs = [o for o in ds.observations if o["setup"] == sid]
+        rows = [f"{o['axes'][axis]:.6f},{o['reading']:.7f}" for o in obs]
+        files[sid] = rows
+    return m, plan, files
+
+
+def test_four_step_traces_are_checked_against_the_plan(tmp_path, capsys):
+    from fivecal.procedures import dbb
+    m, plan, rows = _four_step_traces(tmp_path)
+
+    def traces(**override):
+        out = {}
+        for sid, r in {**rows, **override}.items():
+            p = tmp_path / f"{sid}.csv"
+            p.write_text("angle_deg,reading_mm\n" + "\n".join(r) + "\n")
+            out[sid] = dbb.read_trace_csv(p)
+        return out
+
+    assert len(dbb.four_step_dataset(m, traces(), plan).observations) == len(plan)
+    with pytest.raises(ValueError, match=r"trace A1 \(A1.csv\): row 1: the trace runs -A .* plan's A1 runs \+A"):
+        dbb.four_step_dataset(m, traces(A1=rows["A1"][::-1]), plan)
+    swapped = rows["C1"][:4] + [rows["C1"][5], rows["C1"][4]] + rows["C1"][6:]
+    with pytest.raises(ValueError, match=r"trace C1 \(C1.csv\): row 6: angle 40 deg goes back from 50 deg"):
+        dbb.four_step_dataset(m, traces(C1=swapped), plan)
+    with pytest.raises(ValueError, match=r"trace A2 \(A2.csv\): row \d+: angle .* outside the plan's A range"):
+        dbb.four_step_dataset(m, traces(A2=rows["C2"]), plan)      # the C file given for A2
+    # from the command line: exit 2 naming the trace and the row
+    mf = tmp_path / "m.json"
+    mf.write_text(json.dumps(m.to_dict()))
+    traces(A1=rows["A1"][::-1])
+    csv = ",".join(f"{s}={tmp_path / (s + '.csv')}" for s in rows)
+    rc, _, err = run(capsys, "dbb", "jiang", "--machine", mf, "--csv", csv, "--step", "10")
+    assert rc == 2 and "trace A1" in err and "row 1" in err and "runs -A" in err, err
