@@ -314,7 +314,7 @@ class _Parser(argparse.ArgumentParser):
 class _DeprecatedAlias(argparse.Action):
     """An option's old spelling, hidden from --help: it stores into the new
     option's value and says once on stderr which name to write. Only where
-    scripts already used the old name (docs/commands.md, "One name per
+    scripts already used the old name (`fivecal docs commands`, "One name per
     option")."""
 
     def __init__(self, option_strings, dest, new_flag="", append=False, **kwargs):
