@@ -610,8 +610,8 @@ def test_cli_export_ball_bar_program_refuses_bad_option_values(tmp_path, capsys)
     c6 = fivecal.Machine.load("examples/machines/c600u.json")
     spec = _spec(tmp_path, "fs.json", os.path.abspath("examples/machines/c600u.json"),
                  dbb.four_step_plan(c6, step=10.0))
-    for option, value in (("--feed-in", "0"), ("--feed-in", "1e6"), ("--path-tolerance", "-1"), ("--path-tolerance", "1e9"),
-                          ("--feed", "0")):
+    for option, value in (("--feed-in", "0"), ("--feed-in", "1e6"), ("--path-tolerance", "-1"),
+                          ("--path-tolerance", "1e9"), ("--feed", "0")):
         assert main(["export", "program", spec, f"{option}={value}"]) == 2
         assert f"{option}:" in capsys.readouterr().err
     # a plan-dependent bound a writer checks is named as the option too

@@ -235,10 +235,11 @@ def add_identify_options(p) -> None:
     """``fivecal identify``'s history options: the report shows this machine's
     trend, the comparison with its previous calibration and pass / fail."""
     g = p.add_argument_group("history (`fivecal docs history`)")
-    g.add_argument("--store", dest="history", metavar="STORE", help="calibration store (SQLite file): with --report, the "
-                   "report adds this machine's trend, the comparison with its previous calibration and, with "
-                   "tolerances, pass / fail. This result is placed in the trend at the date in the dataset's "
-                   "file name (YYYY-MM-DD[THH:MM[:SS]]), else at the file's modification time")
+    g.add_argument("--store", dest="history", metavar="STORE",
+                   help="calibration store (SQLite file): with --report, the report adds this machine's trend, "
+                   "the comparison with its previous calibration and, with tolerances, pass / fail. This result "
+                   "is placed in the trend at the date in the dataset's file name (YYYY-MM-DD[THH:MM[:SS]]), "
+                   "else at the file's modification time")
     deprecated_alias(g, "--history", "--store")   # its name before the store had one name everywhere
     g.add_argument("--machine-id", metavar="ID",
                    help="which machine of the store this dataset is (needed with --store)")

@@ -7,7 +7,8 @@ LOG --plan PLAN --kins K``; docs/linuxcnc.md).
   A table with ``dx dy dz`` (units from the header, ``dx_um``, or ``units``)
   and either an ``id`` column naming the plan sample (the id in the dwell's
   comment, e.g. ``K1-3``; a test read must have every sample, a test left
-  out is fine) or no id, the rows then in program order (one per dwell). Axis columns, when the logger writes them, are checked against the
+  out is fine) or no id, the rows then in program order (one per dwell).
+  Axis columns, when the logger writes them, are checked against the
   plan's commands. The axes, direction, balls and mounting of each
   observation come from the plan.
 * :func:`probe_log_dataset`: LinuxCNC's ``PROBEOPEN`` log of a program
