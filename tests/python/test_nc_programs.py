@@ -535,7 +535,8 @@ def test_cli_export_program(tmp_path, capsys):
     import os
     spec = _spec(tmp_path, "fs.json", os.path.abspath("examples/machines/c600u.json"), fplan)
     assert main(["export", "program", spec, "--feed", "500"]) == 0
-    assert capsys.readouterr().out == dbb_program(c6, fplan, feed=500.0)
+    # the command line's path tolerance: 0.1 µm, a ball bar's resolution (fivecal docs commands)
+    assert capsys.readouterr().out == dbb_program(c6, fplan, feed=500.0, tolerance=1e-4)
     # refusals: exit 2, one line naming the cause
     assert main(["export", "program", spec.replace("fs", "sphere")]) == 2
     assert "--kins" in capsys.readouterr().err

@@ -292,7 +292,9 @@ def test_rtest_readings_read_rotary_columns_in_the_declared_unit(tmp_path, machi
         return run(capsys, "import", "rtest", f, "--plan", plan_file, "--out", tmp_path / "ds.json", *extra)
 
     # K1-1 is at C 90, K1-2 at C 180: --angle-units was ignored, now it reads the C column
-    rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,1.570796,1,2,3\nK1-2,3.141593,1,2,3\n", "--angle-units", "rad")
+    rest = "K1-0,0,1,2,3\nK1-3,4.712389,1,2,3\nK1-4,6.283185,1,2,3\n"    # a test read is read whole
+    rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,1.570796,1,2,3\nK1-2,3.141593,1,2,3\n" + rest,
+                     "--angle-units", "rad")
     assert rc == 0, err
     rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,90,1,2,3\nK1-2,180,1,2,3\n", "--angle-units", "rad")
     assert rc == 2 and "r.csv:2: column 'C': 90 rad is 5156.62 degrees" in err and "--angle-units" in err, err
