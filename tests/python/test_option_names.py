@@ -47,6 +47,7 @@ def _visible(parser):
 #: concept -> (the one name, spellings no command may show)
 ONE_NAME = {
     "calibration store": ("--store", ["--history", "--db", "--database"]),
+    "a sphere (id or centre)": ("--sphere-id / --sphere-centre", ["--sphere", "--sphere-center"]),
     "plausibility limit on a change": ("--max-change", ["--max-correction", "--max-modification"]),
     "tolerance on a change": ("--change-tolerance", ["--delta-tolerance", "--drift-tolerance"]),
     "tolerance of a path": ("--path-tolerance", []),
@@ -99,6 +100,9 @@ def test_tolerance_options_are_named_for_what_they_grade(monkeypatch):
     (["identify", "ds.json", "--history", "s.fcdb"], "--history", "--store"),
     (["compensate", "r.json", "m.json", "--max-correction", "off"], "--max-correction", "--max-change"),
     (["export", "program", "spec.json", "--tolerance", "0.1um"], "--tolerance", "--path-tolerance"),
+    (["sphere-check", "ds.json", "--sphere", "S1"], "--sphere", "--sphere-id"),
+    (["plan", "sphere-check", "m.json", "--out", "p.json", "--sphere", "1,2,3", "--radius", "5", "--tip-radius",
+      "1"], "--sphere", "--sphere-centre"),
 ])
 def test_old_spellings_are_hidden_aliases_that_warn(monkeypatch, capsys, argv, old, new):
     p = _parser(monkeypatch)
@@ -107,8 +111,8 @@ def test_old_spellings_are_hidden_aliases_that_warn(monkeypatch, capsys, argv, o
     err = capsys.readouterr().err
     assert f"{old} is deprecated, write {new}" in err
     dest = {"--change-tolerance": "change_tolerance", "--store": "history", "--max-change": "max_change",
-            "--path-tolerance": "path_tolerance"}[new]
-    assert getattr(args, dest) in (["EX0C=5um"], "s.fcdb", "off", "0.1um")
+            "--path-tolerance": "path_tolerance", "--sphere-id": "sphere", "--sphere-centre": "sphere"}[new]
+    assert getattr(args, dest) in (["EX0C=5um"], "s.fcdb", "off", "0.1um", "S1", "1,2,3")
 
 
 def test_a_bare_tolerance_is_in_the_file_unit_everywhere_and_an_implausible_one_is_refused():
@@ -147,6 +151,7 @@ def test_docs_use_the_one_names():
             if f.endswith(".md"):
                 texts[f"{d}/{f}"] = open(os.path.join(ROOT, d, f), encoding="utf-8").read()
     texts["README.md"] = open(os.path.join(ROOT, "README.md"), encoding="utf-8").read()
+    texts.pop("docs/commands.md")   # the page that lists the old spellings, as such
     for name, text in texts.items():
         # the one paragraph that lists the old spellings, as such
         text = re.sub(r"The old spellings are hidden aliases.*?\n\n", "", text, flags=re.S)

@@ -332,7 +332,9 @@ class _DeprecatedAlias(argparse.Action):
 
 def deprecated_alias(parser, old: str, new: str) -> None:
     """Accept ``old`` (hidden from --help) as the option ``new`` already on
-    ``parser`` and warn; the value lands where ``new``'s does."""
+    ``parser`` and warn; the value lands where ``new``'s does. A required
+    ``new`` must be checked by the command (argparse does not count the old
+    spelling as given)."""
     target = parser._option_string_actions[new]
     parser.add_argument(old, action=_DeprecatedAlias, dest=target.dest, new_flag=new,
                         append=isinstance(target, argparse._AppendAction),
