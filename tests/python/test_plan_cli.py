@@ -39,9 +39,9 @@ def run(capsys, *argv):
 def test_plan_commands_write_specs_export_program_accepts(tmp_path, machine_file, capsys):
     m = fivecal.Machine.from_dict(MACHINES[KINS])
     cases = {
-        "chk": ["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+        "chk": ["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
                 "--positions", "A=-60,-15,30", "--positions", "C=-120,0,120"],
-        "st": ["sphere-test", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+        "st": ["sphere-test", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
                "--at", "A=0,C=0", "--at", "A=-30,C=90", "--rings", "0:8,45:4,90:1"],
         "rt": ["rtest", "--tests", "K1,K2", "--table-ball", "60,20,30", "--step", "30"],
         "fs": ["four-step", "--step", "5"],
@@ -84,16 +84,16 @@ def test_plan_commands_write_specs_export_program_accepts(tmp_path, machine_file
 
 
 @pytest.mark.parametrize("argv, option", [
-    (["sphere-check", "--sphere", "60,30", "--radius", "12.5", "--tip-radius", "3"], "--sphere"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+    (["sphere-check", "--sphere-centre", "60,30", "--radius", "12.5", "--tip-radius", "3"], "--sphere-centre"),
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
       "--positions", "B=1,2,3"], "--positions"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
       "--positions", "A=1,2"], "--positions A"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
       "--limits", "A=30:-90"], "--limits A"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "-1", "--tip-radius", "3"], "--radius"),
-    (["sphere-test", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"], "--at"),
-    (["sphere-test", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3", "--at", "A=0",
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "-1", "--tip-radius", "3"], "--radius"),
+    (["sphere-test", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3"], "--at"),
+    (["sphere-test", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3", "--at", "A=0",
       "--rings", "0:x"], "--rings"),
     (["rtest", "--tests", "K9", "--table-ball", "60,20,30"], "--tests"),
     (["rtest", "--table-ball", "60,20"], "--table-ball"),
@@ -113,7 +113,7 @@ def test_plan_errors_name_the_option(tmp_path, machine_file, capsys, argv, optio
     assert not (tmp_path / "x.json").exists()
 
 
-SPHERE = ["--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
+SPHERE = ["--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
 
 
 @pytest.mark.parametrize("argv, option", [
@@ -127,7 +127,7 @@ SPHERE = ["--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
     (["four-step", "--step", "1e-6"], "--step"),
     (["four-step", "--step", "0.01", "--carrier-range=-50000:50000"], "--step"),
     (["wang", "--step", "1e-7"], "--step"),
-    (["sphere-check", "--sphere", "1e308,1e308,0", "--radius", "12.5", "--tip-radius", "3"], "--sphere"),
+    (["sphere-check", "--sphere-centre", "1e308,1e308,0", "--radius", "12.5", "--tip-radius", "3"], "--sphere-centre"),
     (["rtest", "--table-ball", "1e308,1e308,0"], "--table-ball"),
     (["four-step", "--tool-ball", "-1e308,-1e308,0"], "--tool-ball"),
 ])
@@ -312,7 +312,7 @@ def test_rtest_readings_read_rotary_columns_in_the_declared_unit(tmp_path, machi
 def test_sphere_check_plan_program_log_import_and_check(tmp_path, machine_file, capsys):
     m = fivecal.Machine.from_dict(MACHINES[KINS])
     plan_file = tmp_path / "check_plan.json"
-    rc, _, err = run(capsys, "plan", "sphere-check", machine_file, "--sphere", "60,30,40", "--radius", "12.5",
+    rc, _, err = run(capsys, "plan", "sphere-check", machine_file, "--sphere-centre", "60,30,40", "--radius", "12.5",
                      "--tip-radius", "3", "--positions", "A=-60,-15,30", "--positions", "C=-120,0,120",
                      "--out", plan_file)
     assert rc == 0, err

@@ -31,7 +31,7 @@ def _plan(tmp_path, capsys, name, a="-60,-15,30", c="-120,0,120"):
     mf = tmp_path / "machine.json"
     mf.write_text(json.dumps(MACHINES[KINS]))
     plan_file = tmp_path / f"{name}.json"
-    rc, _, err = run(capsys, "plan", "sphere-check", mf, "--sphere", "60,30,40", "--radius", "12.5",
+    rc, _, err = run(capsys, "plan", "sphere-check", mf, "--sphere-centre", "60,30,40", "--radius", "12.5",
                      "--tip-radius", "3", "--positions", f"A={a}", "--positions", f"C={c}", "--out", plan_file)
     assert rc == 0, err
     return plan_file
