@@ -736,7 +736,7 @@ def _check_log_order(rows, nos, where, plan, rots, touches) -> None:
             raise ValueError(f"{where}:{no}: this line is touch {earlier[0] + 1} of the plan, not touch {k + 1} "
                              f"({target}): the log is not in the plan's order")
         raise ValueError(f"{where}:{no}: not touch {k + 1} of the plan ({target}): {why}; no touch of the plan "
-                         "was probed there (a log of another plan, or the program edited?)")
+                         "was probed there (a log of another plan or kinematics, or the program edited?)")
     if len(rows) < n:
         raise ValueError(f"{where}:{nos[-1] if nos else 0}: the log ends here, after {len(rows)} probed positions "
                          f"for {n} planned touches: touch {len(rows) + 1} ({plan[len(rows)].get('target', '?')}) "
