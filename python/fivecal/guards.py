@@ -47,7 +47,7 @@ class CorrectionLimitError(ValueError):
 
     def __init__(self, where: str, index: int, axis: str, size: float, limit: float, unit: str):
         self.where, self.index, self.axis, self.size, self.limit, self.unit = where, index, axis, size, limit, unit
-        option = ("max_correction" if unit == "mm" else "max_correction_deg") + ", --max-correction"
+        option = ("max_correction" if unit == "mm" else "max_correction_deg") + ", --max-change"
         super().__init__(
             f"{where}: the correction of axis {axis} is {size:.4g} {unit}, more than the plausibility "
             f"limit of {limit:g} {unit} ({option}); errors this large are more likely a bad "

@@ -12,6 +12,14 @@ the default prior σ of the parameter's class (1 mm for a pivot location,
 1 mrad for an axis orientation, ...): such a number is nearly always µm or
 µrad written without its unit (``EX0C=12`` meaning 12 µm would pass a
 −108 µm error). Write the unit to give a tolerance that large.
+
+One rule for every command: a bare number is in the file unit in
+``identify``, ``history compare | trend``, ``rtest`` and ``export program``
+alike (the last two read µm before; the implausibility refusal catches a
+bare µm number left in a script). The names say what is graded:
+:data:`VALUE_OPTION` a value (a parameter's |value|, a K test's range),
+:data:`CHANGE_OPTION` the change between two calibrations,
+:data:`PATH_OPTION` a program's path.
 """
 from __future__ import annotations
 
@@ -30,6 +38,21 @@ BARE_LIMIT_FACTOR = 10.0
 #: Largest bare volumetric tolerance (mm): the predicted tool-point error of a
 #: machine in service is tens of µm; a bare 12 is 12 µm meant.
 VOLUMETRIC_BARE_LIMIT = 1.0
+
+#: Largest bare tolerance on the range of an R-test K test (mm): ranges of a
+#: machine in service are tens of µm; a bare 20 is 20 µm meant.
+RANGE_BARE_LIMIT = 1.0
+
+#: Largest bare path tolerance of a ball bar program (mm): the change of the
+#: nominal bar length between two blocks must stay below what the bar can
+#: read (0.1 µm); a bare 0.02 is the old µm habit.
+PATH_BARE_LIMIT = 0.01
+
+#: The one spelling of each kind of tolerance on every command line
+#: (docs/history.md, "Tolerances"): a value's, a change's, a path's.
+VALUE_OPTION = "--tolerance"
+CHANGE_OPTION = "--change-tolerance"
+PATH_OPTION = "--path-tolerance"
 
 LENGTH_UNITS = {"mm": 1.0, "um": 1e-3, "µm": 1e-3, "μm": 1e-3, "nm": 1e-6, "m": 1e3}
 ANGLE_UNITS = {"rad": 1.0, "mrad": 1e-3, "urad": 1e-6, "µrad": 1e-6, "μrad": 1e-6, "deg": math.pi / 180,
@@ -207,6 +230,24 @@ def check_tolerances(tolerances: Optional[Mapping[str, object]], where: str = "t
     """The Python API's tolerances (name -> number in the file unit, or text with a
     unit) checked as the command line's are."""
     return {str(n): parameter_tolerance(str(n), v, f"{where} {n}") for n, v in (tolerances or {}).items()}
+
+
+def range_tolerance(value, where: str = VALUE_OPTION) -> Optional[float]:
+    """The largest range of an R-test K test (mm; text may carry a length
+    unit), None for None; a bare number above :data:`RANGE_BARE_LIMIT` is
+    refused as probably µm."""
+    if value is None:
+        return None
+    return parse_value(value, where, "length", bare_limit=RANGE_BARE_LIMIT,
+                       limit_hint=" for the range of an R-test K test")
+
+
+def path_tolerance(value, where: str = PATH_OPTION) -> float:
+    """The largest change of the nominal ball bar length between two blocks
+    of a program (mm; text may carry a length unit); a bare number above
+    :data:`PATH_BARE_LIMIT` is refused as probably µm."""
+    return parse_value(value, where, "length", bare_limit=PATH_BARE_LIMIT,
+                       limit_hint=" for a bar-length change between two blocks")
 
 
 def volumetric_tolerance(value, where: str = "--volumetric-tolerance") -> Optional[float]:

@@ -101,15 +101,15 @@ def test_dbb_circular(work, monkeypatch, capsys):
 
 
 def test_sphere(work, monkeypatch, capsys):
-    ok = cli("sphere", work / "spheres.json", "--sphere", "S1", "--values", work / "good.json")
+    ok = cli("sphere", work / "spheres.json", "--sphere-id", "S1", "--values", work / "good.json")
     assert ok.returncode == 0 and "reduced" in ok.stdout, ok.stderr
     # An unusable result is refused as `fivecal compensate` refuses it.
     bad = json.loads((work / "good.json").read_text())
     bad.update(converged=False, verdict="not_converged", iterations=1)
     (work / "bad.json").write_text(json.dumps(bad))
-    p = cli("sphere", work / "spheres.json", "--sphere", "S1", "--values", work / "bad.json")
+    p = cli("sphere", work / "spheres.json", "--sphere-id", "S1", "--values", work / "bad.json")
     assert p.returncode == 2 and "refusing to use" in one_line(p) and "did not converge" in p.stderr
-    assert cli("sphere", work / "spheres.json", "--sphere", "S1", "--values", work / "bad.json",
+    assert cli("sphere", work / "spheres.json", "--sphere-id", "S1", "--values", work / "bad.json",
                "--force").returncode == 0
     # The sphere fit itself stopped before converging.
     from fivecal import cli as fivecal_cli
@@ -124,7 +124,7 @@ def test_sphere(work, monkeypatch, capsys):
         return t
 
     monkeypatch.setattr(sphere_command, "sphere_test", stopped)
-    assert fivecal_cli.main(["sphere", str(work / "spheres.json"), "--sphere", "S1"]) == 1
+    assert fivecal_cli.main(["sphere", str(work / "spheres.json"), "--sphere-id", "S1"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "sphere fit (nominal model)" in err[0] and "did not converge" in err[0], err
 

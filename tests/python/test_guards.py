@@ -261,7 +261,7 @@ def test_max_correction_stops_compensation(good, machine):
     bad = implausible_result(good)
     assert guards.assess(bad).usable
     with pytest.raises(fivecal.CorrectionLimitError, match=r"pose [01]: the correction of axis \w is [\d.]+ mm, "
-                                                           r"more than the plausibility limit of 0.5 mm \(max_correction, --max-correction\)"):
+                                                           r"more than the plausibility limit of 0.5 mm \(max_correction, --max-change\)"):
         fivecal.compensate_poses(machine, bad, POSES)
     with pytest.raises(fivecal.CorrectionLimitError, match=r"part.nc:\d+: the correction of axis \w"):
         compensate_gcode(open(PROGRAM).read(), machine, bad, name="part.nc")
@@ -328,7 +328,7 @@ def test_compensate_exit_codes(files, tmp_path):
     p = fivecal_cli("compensate", d / "good.json", *base, "--max-correction", "0.001")
     assert p.returncode == 2 and "0.001 mm" in p.stderr
     p = fivecal_cli("compensate", d / "good.json", *base, "--max-correction", "-1")
-    assert p.returncode == 2 and "--max-correction" in p.stderr
+    assert p.returncode == 2 and "--max-change" in p.stderr
 
 
 def test_every_command_exits_2_on_bad_input_and_0_on_help(tmp_path):
@@ -371,7 +371,7 @@ def test_exit_codes_are_documented():
     sec = sec[:sec.index("\n## ", 5)]
     for code, words in ((0, "success"), (1, "not converge"), (2, "bad input"), (3, "internal")):
         assert re.search(rf"`{code}`[^\n]*{words}", sec), (code, words)
-    assert "--force" in sec and "--max-correction" in sec
+    assert "--force" in sec and "--max-change" in sec
 
 
 @pytest.mark.parametrize("fault, words", [

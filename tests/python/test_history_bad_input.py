@@ -108,7 +108,7 @@ def test_identify_outputs_over_the_history_store_are_refused(shop, store, tmp_pa
         capsys.readouterr()
         assert main(["identify", shop.hu[0], "--estimate", "location", "--history", store, "--machine-id", "HU1",
                      *extra]) == 2
-        _refused(capsys, "--out", "--history", store)
+        _refused(capsys, "--out", "--store", store)
         assert _sha(store) == before
 
 

@@ -122,7 +122,7 @@ def test_identify_history_options_are_checked_before_the_fit(nights, tmp_path, c
     bad.write_text("{}")
     cases = [(["--history", store, "--report", str(tmp_path / "r")], "--machine-id"),
              (["--history", store, "--machine-id", "HU-7"], "--report DIR"),
-             (["--tolerance", "EX0C=0.01", "--report", str(tmp_path / "r")], "needs --history"),
+             (["--tolerance", "EX0C=0.01", "--report", str(tmp_path / "r")], "needs --store"),
              (["--history", str(tmp_path / "missing.fcdb"), "--machine-id", "M", "--report", str(tmp_path / "r")],
               "no such calibration store"),
              (["--history", str(bad), "--machine-id", "M", "--report", str(tmp_path / "r")],

@@ -535,7 +535,8 @@ def test_cli_export_program(tmp_path, capsys):
     import os
     spec = _spec(tmp_path, "fs.json", os.path.abspath("examples/machines/c600u.json"), fplan)
     assert main(["export", "program", spec, "--feed", "500"]) == 0
-    assert capsys.readouterr().out == dbb_program(c6, fplan, feed=500.0)
+    # the command line's path tolerance: 0.1 µm, a ball bar's resolution (fivecal docs commands)
+    assert capsys.readouterr().out == dbb_program(c6, fplan, feed=500.0, tolerance=1e-4)
     # refusals: exit 2, one line naming the cause
     assert main(["export", "program", spec.replace("fs", "sphere")]) == 2
     assert "--kins" in capsys.readouterr().err
@@ -610,8 +611,8 @@ def test_cli_export_ball_bar_program_refuses_bad_option_values(tmp_path, capsys)
     c6 = fivecal.Machine.load("examples/machines/c600u.json")
     spec = _spec(tmp_path, "fs.json", os.path.abspath("examples/machines/c600u.json"),
                  dbb.four_step_plan(c6, step=10.0))
-    for option, value in (("--feed-in", "0"), ("--feed-in", "1e6"), ("--tolerance", "-1"), ("--tolerance", "1e9"),
-                          ("--feed", "0")):
+    for option, value in (("--feed-in", "0"), ("--feed-in", "1e6"), ("--path-tolerance", "-1"),
+                          ("--path-tolerance", "1e9"), ("--feed", "0")):
         assert main(["export", "program", spec, f"{option}={value}"]) == 2
         assert f"{option}:" in capsys.readouterr().err
     # a plan-dependent bound a writer checks is named as the option too

@@ -39,9 +39,9 @@ def run(capsys, *argv):
 def test_plan_commands_write_specs_export_program_accepts(tmp_path, machine_file, capsys):
     m = fivecal.Machine.from_dict(MACHINES[KINS])
     cases = {
-        "chk": ["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+        "chk": ["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
                 "--positions", "A=-60,-15,30", "--positions", "C=-120,0,120"],
-        "st": ["sphere-test", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+        "st": ["sphere-test", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
                "--at", "A=0,C=0", "--at", "A=-30,C=90", "--rings", "0:8,45:4,90:1"],
         "rt": ["rtest", "--tests", "K1,K2", "--table-ball", "60,20,30", "--step", "30"],
         "fs": ["four-step", "--step", "5"],
@@ -84,16 +84,16 @@ def test_plan_commands_write_specs_export_program_accepts(tmp_path, machine_file
 
 
 @pytest.mark.parametrize("argv, option", [
-    (["sphere-check", "--sphere", "60,30", "--radius", "12.5", "--tip-radius", "3"], "--sphere"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+    (["sphere-check", "--sphere-centre", "60,30", "--radius", "12.5", "--tip-radius", "3"], "--sphere-centre"),
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
       "--positions", "B=1,2,3"], "--positions"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
       "--positions", "A=1,2"], "--positions A"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3",
       "--limits", "A=30:-90"], "--limits A"),
-    (["sphere-check", "--sphere", "60,30,40", "--radius", "-1", "--tip-radius", "3"], "--radius"),
-    (["sphere-test", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"], "--at"),
-    (["sphere-test", "--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3", "--at", "A=0",
+    (["sphere-check", "--sphere-centre", "60,30,40", "--radius", "-1", "--tip-radius", "3"], "--radius"),
+    (["sphere-test", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3"], "--at"),
+    (["sphere-test", "--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3", "--at", "A=0",
       "--rings", "0:x"], "--rings"),
     (["rtest", "--tests", "K9", "--table-ball", "60,20,30"], "--tests"),
     (["rtest", "--table-ball", "60,20"], "--table-ball"),
@@ -113,7 +113,7 @@ def test_plan_errors_name_the_option(tmp_path, machine_file, capsys, argv, optio
     assert not (tmp_path / "x.json").exists()
 
 
-SPHERE = ["--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
+SPHERE = ["--sphere-centre", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
 
 
 @pytest.mark.parametrize("argv, option", [
@@ -127,7 +127,7 @@ SPHERE = ["--sphere", "60,30,40", "--radius", "12.5", "--tip-radius", "3"]
     (["four-step", "--step", "1e-6"], "--step"),
     (["four-step", "--step", "0.01", "--carrier-range=-50000:50000"], "--step"),
     (["wang", "--step", "1e-7"], "--step"),
-    (["sphere-check", "--sphere", "1e308,1e308,0", "--radius", "12.5", "--tip-radius", "3"], "--sphere"),
+    (["sphere-check", "--sphere-centre", "1e308,1e308,0", "--radius", "12.5", "--tip-radius", "3"], "--sphere-centre"),
     (["rtest", "--table-ball", "1e308,1e308,0"], "--table-ball"),
     (["four-step", "--tool-ball", "-1e308,-1e308,0"], "--tool-ball"),
 ])
@@ -271,9 +271,14 @@ def test_rtest_readings_that_do_not_line_up_are_refused(tmp_path, machine_file, 
     assert rc == 2 and "--machine" in err
     rc, _, err = run(capsys, "import", "probe-log", tmp_path / "r.csv", "--out", tmp_path / "ds.json")
     assert rc == 2 and "--plan" in err
-    # an id column may give a subset: the samples read are imported
+    # an id column may leave a whole test out, not samples of a test it reads
     rc, out, err = imp("id,dx_um,dy_um,dz_um\nK1-2,1,2,3\nK1-0,1,2,3\n")
-    assert rc == 0 and "2 ball3d observations of the 5 planned" in out
+    assert rc == 2 and ":3: the readings end here without sample K1-1, K1-3, K1-4" in err, err
+    run(capsys, "plan", "rtest", machine_file, "--tests", "K1,K2", "--table-ball", "60,20,30", "--step", "90",
+        "--out", plan_file)
+    ids = [e["id"] for e in json.loads(plan_file.read_text())["plan"] if e["id"].startswith("K2")]
+    rc, out, err = imp("id,dx_um,dy_um,dz_um\n" + "".join(f"{i},1,2,3\n" for i in ids[::-1]))
+    assert rc == 0 and f"{len(ids)} ball3d observations of the {n + len(ids)} planned" in out, err
 
 
 def test_rtest_readings_read_rotary_columns_in_the_declared_unit(tmp_path, machine_file, capsys):
@@ -287,7 +292,9 @@ def test_rtest_readings_read_rotary_columns_in_the_declared_unit(tmp_path, machi
         return run(capsys, "import", "rtest", f, "--plan", plan_file, "--out", tmp_path / "ds.json", *extra)
 
     # K1-1 is at C 90, K1-2 at C 180: --angle-units was ignored, now it reads the C column
-    rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,1.570796,1,2,3\nK1-2,3.141593,1,2,3\n", "--angle-units", "rad")
+    rest = "K1-0,0,1,2,3\nK1-3,4.712389,1,2,3\nK1-4,6.283185,1,2,3\n"    # a test read is read whole
+    rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,1.570796,1,2,3\nK1-2,3.141593,1,2,3\n" + rest,
+                     "--angle-units", "rad")
     assert rc == 0, err
     rc, _, err = imp("id,C,dx_um,dy_um,dz_um\nK1-1,90,1,2,3\nK1-2,180,1,2,3\n", "--angle-units", "rad")
     assert rc == 2 and "r.csv:2: column 'C': 90 rad is 5156.62 degrees" in err and "--angle-units" in err, err
@@ -305,7 +312,7 @@ def test_rtest_readings_read_rotary_columns_in_the_declared_unit(tmp_path, machi
 def test_sphere_check_plan_program_log_import_and_check(tmp_path, machine_file, capsys):
     m = fivecal.Machine.from_dict(MACHINES[KINS])
     plan_file = tmp_path / "check_plan.json"
-    rc, _, err = run(capsys, "plan", "sphere-check", machine_file, "--sphere", "60,30,40", "--radius", "12.5",
+    rc, _, err = run(capsys, "plan", "sphere-check", machine_file, "--sphere-centre", "60,30,40", "--radius", "12.5",
                      "--tip-radius", "3", "--positions", "A=-60,-15,30", "--positions", "C=-120,0,120",
                      "--out", plan_file)
     assert rc == 0, err
@@ -474,11 +481,11 @@ def test_facet_plan_beside_balls_keeps_out_of_them(tmp_path, capsys):
 
 
 def test_export_program_bounds_its_counts_naming_the_option(tmp_path, machine_file, capsys):
-    """--subdivide and a ball bar path's --tolerance set how many points the
+    """--subdivide and a ball bar path's --path-tolerance set how many points the
     program gets: bounded like the plans' counts and steps (issue #27)."""
     rc, _, err = run(capsys, "plan", "four-step", machine_file, "--out", tmp_path / "p.json")
     assert rc == 0, err
-    for opt, value in (("--tolerance", "1e-12"), ("--subdivide", "1000000000")):
+    for opt, value in (("--path-tolerance", "1e-12um"), ("--subdivide", "1000000000")):
         try:
             rc, _, err = run(capsys, "export", "program", tmp_path / "p.json", opt, value)
         except SystemExit as e:

@@ -113,9 +113,14 @@ def test_cli_rtest(c600u, tmp_path, capsys):
     assert main(["rtest", str(path)]) == 0
     text = capsys.readouterr().out
     assert "K4" in text and "EZ0A" in text
-    assert main(["rtest", str(path), "--tolerance", "20"]) == 1  # K1 ranges ~50 µm
+    assert main(["rtest", str(path), "--tolerance", "20um"]) == 1  # K1 ranges ~50 µm
     assert "FAIL" in capsys.readouterr().out
-    assert main(["rtest", str(path), "--tolerance", "100", "--no-identify"]) == 0
+    assert main(["rtest", str(path), "--tolerance", "0.1", "--no-identify"]) == 0   # bare: mm, as everywhere
+    capsys.readouterr()
+    # the old bare µm habit: 20 mm would pass any machine; refused, naming the unit to write
+    assert main(["rtest", str(path), "--tolerance", "20", "--no-identify"]) == 2
+    err = capsys.readouterr().err
+    assert "--tolerance" in err and "implausibly large" in err and "20um" in err, err
     capsys.readouterr()
     assert main(["rtest", str(path), "--tolerance", "-3"]) == 2
     assert "--tolerance" in capsys.readouterr().err

@@ -164,5 +164,5 @@ def test_cli_sphere(hu40t, calibration, tmp_path, capsys):
     assert main(["sphere", str(data), "--values", str(res), "--force"]) == 0
     out = capsys.readouterr().out
     assert "nominal model" in out and "identified model" in out and "-fold" in out
-    assert main(["sphere", str(data), "--sphere", "Q"]) == 2
+    assert main(["sphere", str(data), "--sphere-id", "Q"]) == 2
     assert "no sphere 'Q'" in capsys.readouterr().err

@@ -235,7 +235,7 @@ def _declared_files(args):
     # a calibration store is read and written: an output over it loses every calibration
     for attr, label in (("dataset", "dataset"), ("spec", "spec"), ("result", "result"), ("machine", "machine"),
                         ("program", "program"), ("values", "--values"), ("store", "--store"),
-                        ("history", "--history")):
+                        ("history", "--store")):
         v = getattr(args, attr, None)
         if _existing(v):
             inputs.append((label, v))
@@ -309,6 +309,37 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class _DeprecatedAlias(argparse.Action):
+    """An option's old spelling, hidden from --help: it stores into the new
+    option's value and says once on stderr which name to write. Only where
+    scripts already used the old name (`fivecal docs commands`, "One name per
+    option")."""
+
+    def __init__(self, option_strings, dest, new_flag="", append=False, **kwargs):
+        self.new_flag, self.append = new_flag, append
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"fivecal: warning: {option_string} is deprecated, write {self.new_flag}", file=sys.stderr)
+        if self.nargs == 0:
+            values = True
+        if self.append:
+            values = (getattr(namespace, self.dest, None) or []) + [values]
+        setattr(namespace, self.dest, values)
+
+
+def deprecated_alias(parser, old: str, new: str) -> None:
+    """Accept ``old`` (hidden from --help) as the option ``new`` already on
+    ``parser`` and warn; the value lands where ``new``'s does. A required
+    ``new`` must be checked by the command (argparse does not count the old
+    spelling as given)."""
+    target = parser._option_string_actions[new]
+    parser.add_argument(old, action=_DeprecatedAlias, dest=target.dest, new_flag=new,
+                        append=isinstance(target, argparse._AppendAction),
+                        nargs=0 if target.nargs == 0 else None, metavar=target.metavar,
+                        default=argparse.SUPPRESS, help=argparse.SUPPRESS)
 
 
 def _one_line(e: BaseException) -> str:

@@ -2,20 +2,21 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 
 from ..compensation import (MAX_CORRECTION, MAX_CORRECTION_DEG, compensate_gcode_file, usable_errors,
                             write_error_table)
-from .common import _axis_values, _integer_type, _read_machine
+from .common import _axis_values, _integer_type, _read_machine, deprecated_alias
 
 
 def _limits(text: str) -> tuple:
-    """--max-correction MM[,DEG]: the plausibility limits; 'off' switches them off."""
+    """--max-change MM[,DEG]: the plausibility limits; 'off' switches them off."""
     if text is None:
         return MAX_CORRECTION, MAX_CORRECTION_DEG
     parts = [t.strip() for t in text.split(",")]
     if len(parts) > 2 or not all(parts):
-        raise ValueError(f"--max-correction: expected MM or MM,DEG (e.g. 0.5 or 0.5,0.2) or 'off', got '{text}'")
+        raise ValueError(f"--max-change: expected MM or MM,DEG (e.g. 0.5 or 0.5,0.2) or 'off', got '{text}'")
     out = []
     for t in parts:
         if t.lower() in ("off", "none"):
@@ -24,16 +25,16 @@ def _limits(text: str) -> tuple:
         try:
             v = float(t)
         except ValueError:
-            raise ValueError(f"--max-correction: '{t}' is not a number") from None
+            raise ValueError(f"--max-change: '{t}' is not a number") from None
         if not v > 0 or v != v or v == float("inf"):
-            raise ValueError(f"--max-correction: {t}: expected a positive limit")
+            raise ValueError(f"--max-change: {t}: expected a positive limit")
         out.append(v)
     return (out[0], out[1] if len(out) == 2 else (MAX_CORRECTION_DEG if out[0] is not None else None))
 
 
 def _compensate(args) -> int:
     machine = _read_machine(args.machine)
-    max_mm, max_deg = _limits(args.max_correction)
+    max_mm, max_deg = _limits(args.max_change)
     # Refuses a result that did not converge, is not finite, failed the chi-square
     # test or left requested parameters undetermined, unless --force.
     errors = usable_errors(args.result, machine, args.force, args.result)
@@ -54,7 +55,10 @@ def _compensate(args) -> int:
             try:
                 tip = [float(x) for x in args.tool_tip.split(",")]
             except ValueError:
-                raise ValueError(f"--tool-tip: expected x,y,z in mm, got '{args.tool_tip}'") from None
+                tip = []
+            # said here, naming the option: the library's refusal names its argument, tool_tip
+            if len(tip) != 3 or not all(math.isfinite(x) for x in tip):
+                raise ValueError(f"--tool-tip: expected x,y,z, three finite numbers in mm, got '{args.tool_tip}'")
         res = compensate_gcode_file(args.program, args.out, machine, errors,
                                     start=_axis_values(args.start, "--start") if args.start else None,
                                     work_offset=_axis_values(args.work_offset, "--work-offset")
@@ -102,11 +106,12 @@ def register(sub) -> None:
                     "with more keeps its own)")
     pc.add_argument("--position-only", action="store_true", help="compensate the tool point only; keep the "
                     "rotary axes at their programmed values")
-    pc.add_argument("--max-correction", metavar="MM[,DEG]", default=None,
+    pc.add_argument("--max-change", metavar="MM[,DEG]", default=None,
                     help="plausibility limit: stop when a compensated command differs from the "
                     "programmed one by more than MM (linear axes) or DEG (rotary axes), like the "
                     "maximum-modification limit of controller calibration cycles (default 0.5,0.5; "
                     "'off' switches it off)")
+    deprecated_alias(pc, "--max-correction", "--max-change")   # its name before export's was shared
     pc.add_argument("--force", action="store_true", help="use a result that is not usable (not "
                     "converged, non-finite, inadequate or undetermined); only to inspect it")
     pc.set_defaults(func=_compensate)

@@ -9,11 +9,15 @@ from .. import files
 from ..compensation import usable_errors
 from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
 from ..io.plan_readings import _read_spec
-from ..tolerances import parse_value
-from .common import _read_machine
+from ..tolerances import PATH_OPTION, path_tolerance
+from .common import _read_machine, deprecated_alias
 
 #: ball bar rotary paths: the smallest bar-length tolerance (µm) between blocks
 MIN_TOLERANCE_UM = 1e-4
+#: ball bar rotary paths: the default bar-length tolerance between blocks: a
+#: ball bar reads 0.1 µm, so the path's own chords do not show in its trace
+#: (0.02 µm before, five times finer than any bar reads, for twice the blocks)
+DEFAULT_PATH_TOLERANCE = "0.1um"
 
 
 def _volume(text: str) -> dict:
@@ -154,10 +158,10 @@ def _program_text(args, kind, machine, plan, artefact, tip) -> str:
         return N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=opt("feed", 500.0),
                                dwell=opt("dwell", 1.0), subdivide=args.subdivide)
     feed = opt("feed", 1000.0)
-    tol = parse_value(args.tolerance, "--tolerance", bare_unit="um")     # mm
+    tol = path_tolerance(args.path_tolerance)     # mm
     if not tol >= MIN_TOLERANCE_UM * 1e-3:
         # The path is split until the bar length holds within it: points grow as 1/sqrt(tolerance).
-        raise ValueError(f"--tolerance: expected at least {MIN_TOLERANCE_UM:g} µm, got {args.tolerance}")
+        raise ValueError(f"{PATH_OPTION}: expected at least {MIN_TOLERANCE_UM:g} µm, got {args.path_tolerance}")
     if args.kins:  # joint words: rotary paths only (planar setups are refused, named)
         return D.rotary_dbb_program(machine, plan, feed=feed, feed_in=args.feed_in, kins=args.kins,
                                     tolerance=tol)
@@ -281,7 +285,10 @@ def register(sub) -> None:
                    help="R-test: points between two samples (at most 1000)")
     g.add_argument("--feed-in", type=float, default=1.5, help="ball bar: feed-in / feed-out, "
                    "mm (at most 50, and less than the circle's radius or the bar length)")
-    g.add_argument("--tolerance", default="0.02", metavar="UM", help="ball bar rotary paths: largest change "
-                   "of the nominal bar length between two blocks, µm, or with a unit: 2e-5mm (default 0.02, "
-                   "at most 1000 µm)")
+    g.add_argument(PATH_OPTION, default=DEFAULT_PATH_TOLERANCE, metavar="MM",
+                   help="ball bar rotary paths: largest change of the nominal bar length between two blocks, "
+                   f"mm, or with a unit: 0.1um (default {DEFAULT_PATH_TOLERANCE}, the reading resolution of a "
+                   "ball bar: the path's own chords stay invisible in the trace; at most 1 mm; a bare number "
+                   "above 0.01 is refused as probably µm)")
+    deprecated_alias(g, "--tolerance", PATH_OPTION)   # µm before; scripts keep working, bare µm is refused
     pp.set_defaults(func=_run_program)

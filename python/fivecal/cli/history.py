@@ -13,9 +13,9 @@ from ..history.trend import ChartDesign, compare, detect, grade, plot_trend, poo
 from ..identification import resolve_estimate
 from ..machine import Machine
 from ..report.history import History
-from ..tolerances import check_names, parse_tolerances, volumetric_tolerance
+from ..tolerances import CHANGE_OPTION, VALUE_OPTION, check_names, parse_tolerances, volumetric_tolerance
 from ..units import display_scale
-from .common import MAX_TRIALS, MAX_WORKERS, check_size
+from .common import EXIT_FIT, EXIT_OK, MAX_TRIALS, MAX_WORKERS, check_size, deprecated_alias
 
 
 def _store(args, create=False):
@@ -108,11 +108,17 @@ def _compare(args) -> int:
     finally:
         if s is not None:
             s.close()
-    tol = parse_tolerances(args.tolerance, names=[n for n in a.names if n in set(b.names)],
-                           what="both calibrations")
+    tol = parse_tolerances(args.change_tolerance, option=CHANGE_OPTION,
+                           names=[n for n in a.names if n in set(b.names)], what="both calibrations")
     cmp = compare(a, b, machine=machine, tolerances=tol, z_limit=args.z, machines=(ma, mb))
     print(json.dumps(cmp.to_dict(), indent=1) if args.json else cmp.report())
-    return 0
+    failed = [p.name for p in cmp.parameters if p.passed is False]
+    if failed:
+        # a change out of tolerance stops a script, as a FAIL does in every command
+        print(f"fivecal history compare: FAIL: {', '.join(failed)} changed by more than {CHANGE_OPTION}",
+              file=sys.stderr)
+        return EXIT_FIT
+    return EXIT_OK
 
 
 def _failures(args) -> int:
@@ -157,11 +163,22 @@ def _trend(args) -> int:
               f"{len(charts)} parameters)")
         for n, ch in charts.items():
             print(f"  {n:<12}" + (", ".join(ch.times[i] for i in ch.alarms) if ch.alarms else "no alarm"))
-    status = 0
+    # an alarm on the latest calibration is news, as a FAIL is: exit 1. An
+    # earlier alarm restarted its chart (the change became the reference) and
+    # was news on its own night
+    latest = cals[-1].time
+    alarming = [n for n, ch in charts.items() if ch.alarms and ch.times[ch.alarms[-1]] == latest]
+    failed = False
+    if alarming:
+        print(f"ALARM on the latest calibration ({latest}): {', '.join(alarming)}")
     if tol or vt is not None:
         g = grade(cals[-1], tol, vt, machine=machine)
         print(g.report())
-        status = 1 if g.verdict == "fail" else 0
+        failed = g.verdict == "fail"
+    news = [w for w, on in (("CUSUM ALARM", alarming), ("FAIL against the tolerances", failed)) if on]
+    if news:
+        print(f"fivecal history trend: {' and '.join(news)} (see above)", file=sys.stderr)
+    status = EXIT_FIT if news else EXIT_OK
     try:
         print(pooled_statistics(cals, by=args.pool).report())
     except ValueError as e:
@@ -203,7 +220,7 @@ def _fleet(args) -> int:
 def _tolerance_help(what: str) -> str:
     return (f"largest acceptable {what}, e.g. EX0C=12um, EA0C=20urad, EXX1=5um/m (repeatable, comma "
             "separated); a bare number is in mm / rad, and a bare number too large for the parameter "
-            "(12 for EX0C) is refused as probably µm (`fivecal docs history`)")
+            "(12 for EX0C) is refused as probably µm; exit 1 on a FAIL (`fivecal docs history`)")
 
 
 def _record_options(g) -> None:
@@ -218,13 +235,16 @@ def add_identify_options(p) -> None:
     """``fivecal identify``'s history options: the report shows this machine's
     trend, the comparison with its previous calibration and pass / fail."""
     g = p.add_argument_group("history (`fivecal docs history`)")
-    g.add_argument("--history", metavar="STORE", help="calibration store (SQLite file): with --report, the "
-                   "report adds this machine's trend, the comparison with its previous calibration and, with "
-                   "tolerances, pass / fail. This result is placed in the trend at the date in the dataset's "
-                   "file name (YYYY-MM-DD[THH:MM[:SS]]), else at the file's modification time")
+    g.add_argument("--store", dest="history", metavar="STORE",
+                   help="calibration store (SQLite file): with --report, the report adds this machine's trend, "
+                   "the comparison with its previous calibration and, with tolerances, pass / fail. This result "
+                   "is placed in the trend at the date in the dataset's file name (YYYY-MM-DD[THH:MM[:SS]]), "
+                   "else at the file's modification time")
+    deprecated_alias(g, "--history", "--store")   # its name before the store had one name everywhere
     g.add_argument("--machine-id", metavar="ID",
-                   help="which machine of the store this dataset is (needed with --history)")
-    g.add_argument("--tolerance", action="append", metavar="NAME=VALUE", help=_tolerance_help("|value|"))
+                   help="which machine of the store this dataset is (needed with --store)")
+    g.add_argument(VALUE_OPTION, dest="tolerance", action="append", metavar="NAME=VALUE",
+                   help=_tolerance_help("|value|"))
     g.add_argument("--volumetric-tolerance", metavar="MM",
                    help="largest acceptable predicted tool-point error, mm (or with a unit: 20um)")
     g.add_argument("--record", action="store_true", help="also record this result in the store (created if "
@@ -235,7 +255,7 @@ def add_identify_options(p) -> None:
 
 def identify_history(args):
     """The report's :class:`~fivecal.report.history.History` for ``fivecal
-    identify`` (None without --history); checks the options first (the
+    identify`` (None without --store); checks the options first (the
     tolerance names against the machine: :func:`check_identify_history`)."""
     given = [o for o, v in (("--machine-id", args.machine_id), ("--tolerance", args.tolerance),
                             ("--volumetric-tolerance", args.volumetric_tolerance), ("--record", args.record),
@@ -243,12 +263,12 @@ def identify_history(args):
                             ("--rebuilt", args.rebuilt)) if v]
     if not args.history:
         if given:
-            raise ValueError(f"{given[0]}: needs --history STORE")
+            raise ValueError(f"{given[0]}: needs --store STORE")
         return None
     if not args.machine_id or not args.machine_id.strip():
-        raise ValueError("--history: give --machine-id ID (which machine of the store this dataset is)")
+        raise ValueError("--store: give --machine-id ID (which machine of the store this dataset is)")
     if not args.report and not args.record:
-        raise ValueError("--history: the trend, comparison and pass / fail go in the HTML report: give "
+        raise ValueError("--store: the trend, comparison and pass / fail go in the HTML report: give "
                          "--report DIR (or --record to only record the result)")
     for o, v in (("--replace", args.replace), ("--rebuilt", args.rebuilt)):
         if v and not args.record:
@@ -319,7 +339,7 @@ def register(sub) -> None:
                        epilog="examples:\n"
                        "  fivecal history add --store shop.fcdb result.json --machine-id HU40-17 --procedure sphere\n"
                        "  fivecal history list --store shop.fcdb --machine-id HU40-17\n"
-                       "  fivecal history compare --store shop.fcdb 12 31 --tolerance EX0C=0.005\n"
+                       "  fivecal history compare --store shop.fcdb 12 31 --change-tolerance EX0C=5um\n"
                        "  fivecal history compare old_result.json new_result.json --machine machine.json\n"
                        "  fivecal history trend --store shop.fcdb --machine-id HU40-17 --plot trend.png\n"
                        "  fivecal history export --store shop.fcdb all.parquet")
@@ -358,7 +378,10 @@ def register(sub) -> None:
     c.add_argument("a", metavar="A", help="calibration id in --store, or a result JSON")
     c.add_argument("b", metavar="B", help="calibration id in --store, or a result JSON")
     c.add_argument("--machine", help="machine JSON for the volumetric change (default: the store's)")
-    c.add_argument("--tolerance", action="append", metavar="NAME=VALUE", help=_tolerance_help("change |B - A|"))
+    c.add_argument(CHANGE_OPTION, dest="change_tolerance", action="append", metavar="NAME=VALUE",
+                   help=_tolerance_help("change |B - A|"))
+    # --tolerance graded the change here and the value everywhere else: kept, hidden, for old scripts
+    deprecated_alias(c, "--tolerance", CHANGE_OPTION)
     c.add_argument("--z", type=float, default=3.0, help="|z| above this is reported as a change (default 3)")
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_compare)
@@ -373,13 +396,16 @@ def register(sub) -> None:
     common(fl)
     fl.set_defaults(func=_failures)
 
-    t = hs.add_parser("trend", help="CUSUM change detection, grade against tolerances, pooled statistics, plot")
+    t = hs.add_parser("trend", help="CUSUM change detection, grade against tolerances, pooled statistics, plot",
+                      description="CUSUM charts of the machine's errors, the latest calibration graded against "
+                      "--tolerance, pooled statistics. Exit 1 when a chart alarms on the latest calibration "
+                      "or the grade FAILs.")
     common(t)
     t.add_argument("--machine-id", required=True)
     t.add_argument("--procedure")
     t.add_argument("--false-alarm-rate", type=float, default=0.001,
                    help="in-control probability that a calibration raises an alarm (default 0.001)")
-    t.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
+    t.add_argument(VALUE_OPTION, dest="tolerance", action="append", metavar="NAME=VALUE",
                    help=_tolerance_help("|value| of the latest calibration"))
     t.add_argument("--volumetric-tolerance", metavar="MM",
                    help="largest acceptable predicted tool-point error, mm (or with a unit: 20um)")

@@ -11,7 +11,8 @@ import os
 from .._json import plain
 from ..files import write_json
 from ..procedures import dbb, rtest, sphere_check, sphere_test
-from .common import POSITIVE, _axis_values, _float_type, _read_machine, check_size, check_step, count_type
+from .common import (POSITIVE, _axis_values, _float_type, _read_machine, check_size, check_step, count_type,
+                     deprecated_alias)
 from .dbb import _values
 
 
@@ -97,7 +98,9 @@ def _machine(path: str):
 
 def _sphere(args) -> dict:
     r = args.radius
-    c = _vector(args.sphere, "--sphere")
+    if args.sphere is None:  # required, said here: argparse would not count the old spelling as given
+        raise ValueError("--sphere-centre: the sphere centre X,Y,Z (workpiece frame, mm) is required")
+    c = _vector(args.sphere, "--sphere-centre")
     if args.tip_radius is None or not args.tip_radius > 0:
         raise ValueError("--tip-radius: the stylus ball radius (mm) is needed for the contact points")
     if "." in args.sphere_id or not args.sphere_id.strip():
@@ -249,7 +252,7 @@ def register(sub) -> None:
         "PLAN` (with --errors) the dataset a machine with those errors would record; the readings of the "
         "real test come back with `fivecal import` (`fivecal docs linuxcnc`).",
         epilog="examples:\n"
-        "  fivecal plan sphere-check machine.json --sphere 60,30,40 --radius 12.5 --tip-radius 3 "
+        "  fivecal plan sphere-check machine.json --sphere-centre 60,30,40 --radius 12.5 --tip-radius 3 "
         "--out check_plan.json\n"
         "  fivecal plan rtest machine.json --tests K1,K4 --table-ball 60,20,30 --step 15 --out rtest_plan.json\n"
         "  fivecal plan four-step machine.json --length 100 --out fourstep_plan.json\n"
@@ -263,7 +266,10 @@ def register(sub) -> None:
                        "NAME=VALUE,... (mm, rad) or a JSON file")
 
     def sphere_opts(p):
-        p.add_argument("--sphere", required=True, metavar="X,Y,Z", help="sphere centre, workpiece frame, mm")
+        # --sphere names a sphere (its id) in sphere and sphere-check; here it was the centre: kept, hidden
+        p.add_argument("--sphere-centre", dest="sphere", metavar="X,Y,Z",
+                       help="sphere centre, workpiece frame, mm (required)")
+        deprecated_alias(p, "--sphere", "--sphere-centre")
         p.add_argument("--radius", type=POSITIVE, required=True, help="sphere radius, mm")
         p.add_argument("--sphere-id", default="S1", help="the sphere's name (default S1)")
         p.add_argument("--tip-radius", type=POSITIVE, required=True, help="stylus ball radius, mm")
@@ -277,7 +283,7 @@ def register(sub) -> None:
                         description="Each rotary axis in turn through its positions (the others at 0), upwards "
                         "and then downwards so every position is reached from both sides; at each position the "
                         "touches of the sphere that face the probe. Evaluated by `fivecal sphere-check`.",
-                        epilog="example:\n  fivecal plan sphere-check machine.json --sphere 60,30,40 "
+                        epilog="example:\n  fivecal plan sphere-check machine.json --sphere-centre 60,30,40 "
                         "--radius 12.5 --tip-radius 3 --positions A=-60,-15,30 --positions C=-120,0,120 "
                         "--out check_plan.json")
     common(p)
@@ -295,7 +301,7 @@ def register(sub) -> None:
                         description="Touch the sphere at each indexation (--at, repeatable) along the "
                         "directions of the point distribution (--rings, default the thesis' 33 points) that "
                         "face the probe. Evaluated by `fivecal sphere`.",
-                        epilog="example:\n  fivecal plan sphere-test machine.json --sphere 120,-60,80 "
+                        epilog="example:\n  fivecal plan sphere-test machine.json --sphere-centre 120,-60,80 "
                         "--radius 9.525 --tip-radius 3 --at B=0,C=0 --at B=30,C=90 --out sphere_plan.json")
     common(p)
     sphere_opts(p)

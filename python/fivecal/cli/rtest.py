@@ -5,13 +5,13 @@ import argparse
 
 from ..dataset import load_dataset
 from ..procedures import rtest
-from ..tolerances import parse_value
+from ..tolerances import VALUE_OPTION, range_tolerance
 from .common import EXIT_FIT, EXIT_OK, fit_status
 
 
 def _rtest(args) -> int:
-    # µm when bare (this command's unit since its first release), any length unit when written
-    tol = None if args.tolerance is None else parse_value(args.tolerance, "--tolerance", bare_unit="um")
+    # mm when bare, as every tolerance (µm before: a bare 20 is refused as implausible, naming 20um)
+    tol = range_tolerance(args.tolerance)
     out = rtest.evaluate(load_dataset(args.dataset), identify=not args.no_identify)
     print(out.report(tol))
     verdicts = [("the location-error fit", out.result.assessment())] if out.result is not None else []
@@ -27,11 +27,11 @@ def register(sub) -> None:
                         "range of the recorded deviation in X, Y, Z per test, pass/fail against --tolerance, "
                         "and the location errors of the rotary axes fitted to all tests. Plans: "
                         "fivecal.procedures.rtest.plan (`fivecal docs design`).",
-                        epilog="example:\n  fivecal rtest rtest_data.json --tolerance 20")
+                        epilog="example:\n  fivecal rtest rtest_data.json --tolerance 20um")
     pp.add_argument("dataset", help="dataset JSON with the ball3d observations")
-    pp.add_argument("--tolerance", default=None, metavar="UM",
-                    help="largest allowed range per direction, µm, or with a unit: 0.02mm (exit 1 when a test "
-                    "exceeds it)")
+    pp.add_argument(VALUE_OPTION, default=None, metavar="MM",
+                    help="largest allowed range per direction, mm, or with a unit: 20um (exit 1 when a test "
+                    "exceeds it; a bare number above 1 is refused as probably µm)")
     pp.add_argument("--no-identify", action="store_true", help="only the ranges, no location-error fit")
     pp.add_argument("--force", action="store_true", help="exit 0 even when the fit is not usable")
     pp.set_defaults(func=_rtest)

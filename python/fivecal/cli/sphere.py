@@ -7,7 +7,7 @@ import math
 from ..dataset import load_dataset
 from ..guards import require_usable
 from ..procedures.sphere_test import format_sphere_tests, sphere_test
-from .common import _read_json, _values_verdict, fit_status
+from .common import _read_json, _values_verdict, deprecated_alias, fit_status
 
 
 def _sphere(args) -> int:
@@ -52,7 +52,8 @@ def register(sub) -> None:
                         epilog="example:\n  fivecal sphere sphere_data.json --values result.json")
     pp.add_argument("dataset", help="dataset JSON with sphere touches")
     pp.add_argument("--values", help="identification result JSON (the compensated model)")
-    pp.add_argument("--sphere", default=None, help="sphere id (default: the only sphere touched)")
+    pp.add_argument("--sphere-id", dest="sphere", default=None, help="sphere id (default: the only sphere touched)")
+    deprecated_alias(pp, "--sphere", "--sphere-id")   # the id's name in plan too
     pp.add_argument("--force", action="store_true", help="use a --values result that is not usable and "
                     "exit 0 on a sphere fit that is not (not converged or not finite); only to inspect them")
     pp.set_defaults(func=_sphere)

@@ -6,7 +6,7 @@ import argparse
 from ..dataset import load_dataset
 from ..files import write_text
 from ..procedures import sphere_check
-from .common import fit_status
+from .common import deprecated_alias, fit_status
 
 
 def _sphere_check(args) -> int:
@@ -34,7 +34,8 @@ def register(sub) -> None:
     pp.add_argument("dataset", help="dataset JSON with the sphere touches")
     pp.add_argument("--previous", help="the previous check (--out of an earlier run, or a result JSON)")
     pp.add_argument("--out", help="write the check (parameters with value and std) as JSON")
-    pp.add_argument("--sphere", default=None, help="sphere id (default: the first sphere touched)")
+    pp.add_argument("--sphere-id", dest="sphere", default=None, help="sphere id (default: the first sphere touched)")
+    deprecated_alias(pp, "--sphere", "--sphere-id")   # the id's name in plan too
     pp.add_argument("--no-backlash", action="store_true", help="do not estimate the rotary reversal errors")
     pp.add_argument("--free-stylus", action="store_true",
                     help="estimate the stylus offsets too (default: the stylus is calibrated, tip.* fixed)")

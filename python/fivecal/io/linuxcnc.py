@@ -673,8 +673,80 @@ def probing_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     return O.check_positions("\n".join(out) + "\n", "probing program")
 
 
+#: how far a logged rotary position may be from the plan's command (degrees):
+#: the rotary joints stand still during a G38.2, so only the log's rounding
+PROBE_ROTARY_TOLERANCE = 1e-3
+#: how far a logged position may be from its touch's G38.2 line (mm): the
+#: controller follows the programmed straight line, so a log's rounding and
+#: following error, never another touch
+PROBE_LINE_TOLERANCE = 0.05
+
+
+def _touch_fits(row, rot, touch) -> Optional[str]:
+    """Why the logged row (world x y z, tilt, C) is not the planned touch
+    (``rot``: its tilt and C joint command; ``touch``: (contact point, normal)
+    of its probe line, or None), None when it is."""
+    dt = row[3] - rot[0]
+    dc = (row[4] - rot[1] + 180.0) % 360.0 - 180.0  # a wrapped C logs its angle modulo a turn
+    if abs(dt) > PROBE_ROTARY_TOLERANCE or abs(dc) > PROBE_ROTARY_TOLERANCE:
+        return f"rotary position {row[3]:.6g} {row[4]:.6g}, the plan commands {rot[0]:.6g} {rot[1]:.6g}"
+    if touch is None:
+        return None
+    w, n = touch
+    d = np.asarray(row[:3]) - w
+    s = float(d @ n)
+    off = float(np.linalg.norm(d - s * n))
+    lo, hi = -O.RULES["overtravel"].high, O.RULES["clearance"].high
+    if off > PROBE_LINE_TOLERANCE or not lo - PROBE_LINE_TOLERANCE <= s <= hi + PROBE_LINE_TOLERANCE:
+        return (f"position {row[0]:.6g} {row[1]:.6g} {row[2]:.6g} is {off:.3g} mm off and {s:.3g} mm along the "
+                f"probe line of the touch")
+    return None
+
+
+def _check_log_order(rows, nos, where, plan, rots, touches) -> None:
+    """Refuse, naming the line, a log whose positions are not the plan's
+    touches one by one: in another order, with lines missing or added, or of
+    another plan. A log that lines up wrongly gives touches at other rotary
+    positions than the fit believes, a confident wrong answer."""
+    t = lambda i: None if touches is None else touches[i]  # noqa: E731
+    fits = lambda r, i: _touch_fits(r, rots[i], t(i)) is None  # noqa: E731
+    n = len(plan)
+    for k, (row, no) in enumerate(zip(rows, nos)):
+        if k >= n:
+            raise ValueError(f"{where}:{no}: more probed positions ({len(rows)}) than the {n} planned touches of "
+                             "the plan (a log of another plan, or of two runs?)")
+        why = _touch_fits(row, rots[k], t(k))
+        if why is None:
+            continue
+        target = plan[k].get("target", "?")
+        if len(rows) == n and n > 1 and all(fits(r, n - 1 - i) for i, r in enumerate(rows)):
+            raise ValueError(f"{where}:{no}: this line is touch {n - k} of the plan, not touch {k + 1}: the log "
+                             f"runs in reverse order of the plan's {n} planned touches (sorted or reversed "
+                             "after the run?)")
+        later = [i for i in range(k + 1, n) if fits(row, i)]
+        # lines missing: the log goes on from a later touch in the plan's order
+        j = later[0] if later else n
+        if later and (k + 1 >= len(rows) or j + 1 >= n or fits(rows[k + 1], j + 1)):
+            miss = f"touch {k + 1}" if j == k + 1 else f"touches {k + 1}..{j}"
+            raise ValueError(f"{where}:{no}: this line is touch {j + 1} of the plan, not touch {k + 1} "
+                             f"({target}): {miss} missing before it ({len(rows)} probed positions for {n} "
+                             "planned touches)")
+        earlier = [i for i in range(n) if i != k and fits(row, i)]
+        if earlier:
+            raise ValueError(f"{where}:{no}: this line is touch {earlier[0] + 1} of the plan, not touch {k + 1} "
+                             f"({target}): the log is not in the plan's order")
+        raise ValueError(f"{where}:{no}: not touch {k + 1} of the plan ({target}): {why}; no touch of the plan "
+                         "was probed there (a log of another plan or kinematics, or the program edited?)")
+    if len(rows) < n:
+        raise ValueError(f"{where}:{nos[-1] if nos else 0}: the log ends here, after {len(rows)} probed positions "
+                         f"for {n} planned touches: touch {len(rows) + 1} ({plan[len(rows)].get('target', '?')}) "
+                         "and after missing (LinuxCNC skips a position equal to the previous one; a touch that "
+                         "did not trip stops the program)")
+
+
 def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapping],
-                   pins: Mapping[str, float]) -> List[dict]:
+                   pins: Mapping[str, float], touches: Optional[Sequence[Tuple[object, object]]] = None
+                   ) -> List[dict]:
     """Facet or sphere observations (dataset JSON, the type and target of
     each plan entry) from LinuxCNC's probe log (the
     ``PROBEOPEN`` file: one line 'x y z a b c u v w' per probe, in program
@@ -684,13 +756,21 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
     and sphere touches) wrote for ``plan``, one line per touch in plan order:
     each world position goes through LinuxCNC's inverse kinematics with the
     ``pins`` the controller ran with to the joints, then to fivecal's axis
-    readings. ``source`` is a path or the log text."""
+    readings. ``source`` is a path or the log text.
+
+    Every line is checked against its touch of the plan: its rotary
+    positions are the plan's commands, and with ``touches`` (per touch the
+    nominal contact point of the stylus centre in program coordinates and
+    the touch direction, as the program writers compute them:
+    :func:`fivecal.io.plan_readings.probe_log_dataset` passes them) its
+    position lies on that touch's probe line. A log in another order, with
+    lines missing or added, or of another plan is refused naming the line."""
     k = _kins(kins)
     if "\n" not in source and os.path.exists(source):
         text, where = _read_text(source, "probe log"), source
     else:
         text, where = source, "probe log"
-    rows = []
+    rows, nos = [], []
     for no, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
@@ -703,13 +783,22 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
         if len(vals) != 9 or not all(math.isfinite(v) for v in vals):
             raise ValueError(f"{where}:{no}: expected 9 finite numbers 'x y z a b c u v w', got {len(vals)}")
         rows.append(vals)
-    if len(rows) != len(plan):
-        raise ValueError(f"{where}: {len(rows)} probed positions for {len(plan)} planned touches "
-                         "(LinuxCNC skips a position equal to the previous one; a touch that did "
-                         "not trip stops the program)")
-    r = np.array(rows)
+        nos.append(no)
+    if touches is not None and len(touches) != len(plan):
+        raise ValueError(f"touches: {len(touches)} probe lines for {len(plan)} planned touches")
     ti = 3 if TILT[k] == "A" else 4
-    world = np.column_stack([r[:, :3], r[:, ti], r[:, 5]])
+    world = np.array([[*r[:3], r[ti], r[5]] for r in rows]).reshape(-1, 5)
+    mp = match(machine, k)
+    tilt = TILT[k]
+    rots = []
+    for i, t in enumerate(plan):
+        axes = t.get("axes") or {}
+        if tilt not in axes or "C" not in axes:
+            raise ValueError(f"plan[{i}].axes: needs {tilt} and C (degrees)")
+        rots.append((mp["sign"][3] * float(axes[tilt]), mp["sign"][4] * float(axes["C"])))
+    lines = None if touches is None else [(np.asarray(w, float), np.asarray(n, float) / np.linalg.norm(n))
+                                          for w, n in touches]
+    _check_log_order(world, nos, where, plan, rots, lines)
     j = inverse(k, pins, world)
     q = commands(machine, k, j)
     obs = []

@@ -33,8 +33,9 @@ class Rule:
     low_open: bool = False       # the low end itself is refused (a feed of 0)
     integer: bool = False
     why: str = ""                # what the upper bound stands for
-    cli_unit: Optional[str] = None   # the command line's unit when it differs (µm for --tolerance)
+    cli_unit: Optional[str] = None   # the command line's unit when it differs
     cli_scale: float = 1.0           # option value * cli_scale = value in ``unit``
+    cli_flag: Optional[str] = None   # the command line's name when it is not the writer's
 
 
 #: name -> rule; the values are the writers' (mm, mm/min, s, degrees)
@@ -52,13 +53,19 @@ RULES = {
     "subdivide": Rule("points", 0.0, 1000.0, integer=True),
     "feed_in": Rule("mm", 0.0, 50.0, low_open=True),
     "turns": Rule("turns", 1.0, 100.0, integer=True),
-    "tolerance": Rule("mm", 0.0, 1.0, low_open=True, cli_unit="µm", cli_scale=1e-3),
+    # --path-tolerance: read with its unit by fivecal.tolerances.path_tolerance, then checked here in mm
+    "tolerance": Rule("mm", 0.0, 1.0, low_open=True, cli_flag="--path-tolerance",
+                      why="the bar length between two blocks of a ball bar path"),
     "tip_radius": Rule("mm", 0.0, 50.0, low_open=True),
 }
 
 
 def flag(name: str) -> str:
-    """The command-line spelling of an option (``feed_in`` -> ``--feed-in``)."""
+    """The command-line spelling of an option (``feed_in`` -> ``--feed-in``,
+    ``tolerance`` -> ``--path-tolerance``)."""
+    rule = RULES.get(name)
+    if rule is not None and rule.cli_flag:
+        return rule.cli_flag
     return "--" + name.replace("_", "-")
 
 

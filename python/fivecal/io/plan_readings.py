@@ -6,13 +6,17 @@ LOG --plan PLAN --kins K``; docs/linuxcnc.md).
   :func:`fivecal.io.nc_programs.rtest_program` wrote, one per ``G4`` dwell.
   A table with ``dx dy dz`` (units from the header, ``dx_um``, or ``units``)
   and either an ``id`` column naming the plan sample (the id in the dwell's
-  comment, e.g. ``K1-3``) or no id, the rows then in program order (one per
-  dwell). Axis columns, when the logger writes them, are checked against the
+  comment, e.g. ``K1-3``; a test read must have every sample, a test left
+  out is fine) or no id, the rows then in program order (one per dwell).
+  Axis columns, when the logger writes them, are checked against the
   plan's commands. The axes, direction, balls and mounting of each
   observation come from the plan.
 * :func:`probe_log_dataset`: LinuxCNC's ``PROBEOPEN`` log of a program
   ``fivecal export program`` wrote for a sphere or facet plan, through
-  :func:`fivecal.io.linuxcnc.read_probe_log`.
+  :func:`fivecal.io.linuxcnc.read_probe_log`: every line must be its touch
+  of the plan (the rotary positions the plan commands, a position on that
+  touch's probe line), so a log in another order, with lines missing, or of
+  another plan is refused naming the line.
 """
 from __future__ import annotations
 
@@ -25,6 +29,7 @@ from ..dataset import Dataset
 from ..machine import Machine
 from ..schema import read_checked as _read_json
 from . import linuxcnc as L
+from . import nc_programs as N
 from . import tables as T
 
 #: how far an axis column of a readings file may be from the plan's command
@@ -181,10 +186,21 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
         obs.append(o)
     if not obs:
         raise ValueError(f"{path}: a header but no readings")
+    last = lines[-1][0]
     if "id" not in cols and len(obs) != len(order):
-        raise ValueError(f"{path}: {len(obs)} readings for the {len(order)} dwells of the plan {plan_path} "
-                         "(rows in program order need one reading per dwell; an id column lines them up by "
-                         "plan id)")
+        raise ValueError(f"{path}:{last}: the readings end here: {len(obs)} readings for the {len(order)} dwells "
+                         f"of the plan {plan_path} (rows in program order need one reading per dwell; an id "
+                         "column lines them up by plan id)")
+    if "id" in cols:
+        # a whole test may be left out (read another day); a test read with
+        # samples missing has a range and a fit over part of its path
+        read = {str(e.get("setup", "")) for i, e in order if str(e.get("id")) in used}
+        missing = [e for i, e in order if str(e.get("setup", "")) in read and str(e.get("id")) not in used]
+        if missing:
+            ids = ", ".join(str(e.get("id")) for e in missing[:5]) + (" ..." if len(missing) > 5 else "")
+            raise ValueError(f"{path}:{last}: the readings end here without sample {ids} of the plan {plan_path} "
+                             f"({len(missing)} missing of test {missing[0].get('setup', '?')}, whose other "
+                             "samples were read): every sample of a test read, or none")
     return {"machine": machine.to_dict(), "observations": obs}
 
 
@@ -204,7 +220,9 @@ def probe_log_dataset(path, plan_path, kins: str, pins_hal: Optional[str] = None
     path = os.fspath(path)
     if not os.path.exists(path):
         raise ValueError(f"{path}: no such probe log")
-    obs = L.read_probe_log(path, machine, kins, plan, pins)
+    # each line is checked against the probe line its touch's G38.2 ran along
+    geo = N._geometry(machine, kins, plan, artefact, tip, kinds=("facet", "sphere"))
+    obs = L.read_probe_log(path, machine, kins, plan, pins, touches=[(w, n) for _, _, w, n, _ in geo])
     d = {"machine": machine.to_dict(), "observations": obs}
     if artefact:
         d["artefact"] = artefact

@@ -463,11 +463,48 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Optional[Sequence[str
     return FourStepResult(core, ds, eng, err, options)
 
 
+#: deg: how far a trace's angle may go back against its run direction (a
+#: logger's rounding), or beyond the planned range of a tilting axis
+TRACE_ANGLE_TOLERANCE = 1e-3
+
+
+def _check_trace(sid: str, trace: Trace, entries: list, axis: str) -> None:
+    """Refuse, naming the data row, a trace that is not its setup's run of
+    the plan: angles outside the planned range (a trace of another axis or
+    plan), going back (rows out of order) or run the other way than planned
+    (a reversed file gives every sample the wrong approach direction)."""
+    name = f"trace {sid}" + (f" ({trace.label})" if trace.label and trace.label != sid else "")
+    planned = np.array([float(e["axes"][axis]) for e in entries])
+    want = int(np.sign(entries[0].get("direction", {}).get(axis, 0)))
+    a = trace.angles
+    if want and trace.direction and trace.direction != want:
+        raise ValueError(f"{name}: row 1: the trace runs {'+-'[trace.direction < 0]}{axis} ({a[0]:g} to "
+                         f"{a[-1]:g} deg), the plan's {sid} runs {'+-'[want < 0]}{axis}: rows reversed, or "
+                         "the run of the other direction (its readings would carry the wrong approach side)")
+    d = trace.direction or want
+    back = np.nonzero(np.diff(a) * d < -TRACE_ANGLE_TOLERANCE)[0] if d else []
+    if len(back):
+        k = int(back[0]) + 1
+        raise ValueError(f"{name}: row {k + 1}: angle {a[k]:g} deg goes back from {a[k - 1]:g} deg: the rows are "
+                         f"not in the order the axis ran")
+    step = float(np.max(np.abs(np.diff(planned)))) if planned.size > 1 else 0.0
+    if np.ptp(planned) + step < 360.0 - 1e-6:  # a full turn: any angle is on it
+        lo, hi = planned.min() - step - TRACE_ANGLE_TOLERANCE, planned.max() + step + TRACE_ANGLE_TOLERANCE
+        out = np.nonzero((a < lo) | (a > hi))[0]
+        if len(out):
+            k = int(out[0])
+            raise ValueError(f"{name}: row {k + 1}: angle {a[k]:g} deg is outside the plan's {axis} range "
+                             f"{planned.min():g} to {planned.max():g} deg for {sid} (a trace of another setup "
+                             "or plan?)")
+
+
 def four_step_dataset(machine: Union[Machine, Mapping], traces: Mapping[str, Trace],
                       plan: Optional[list] = None, **plan_options) -> Dataset:
     """A dataset from four CSV traces (angle = the moving axis command in deg,
     reading in mm), one per setup id, placed on the geometry of
-    :func:`four_step_plan` (same keyword options)."""
+    :func:`four_step_plan` (same keyword options). Each trace is checked
+    against its setup's run of the plan (:func:`_check_trace`: the planned
+    range, one direction, the planned direction); a refusal names the row."""
     m = Machine.from_dict(machine)
     plan = plan or four_step_plan(m, **plan_options)
     by_setup: dict = {}
@@ -480,6 +517,7 @@ def four_step_dataset(machine: Union[Machine, Mapping], traces: Mapping[str, Tra
                              f"{', '.join(by_setup)})")
         template = by_setup[sid][0]
         axis = next(iter(template["direction"]))
+        _check_trace(sid, trace, by_setup[sid], axis)
         for a, r in zip(trace.angles, trace.readings):
             o = {k: (dict(v) if isinstance(v, dict) else v) for k, v in template.items()}
             o["axes"][axis] = float(a)

@@ -28,6 +28,8 @@ is set up. Units: mm, degrees for commands; deviations in µm in reports.
 """
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence, Union
 
@@ -81,6 +83,10 @@ def tip_offset(machine: Machine, axes: Mapping[str, float], tool_ball) -> np.nda
     return machine.tool_point(q)[0] - machine.tool_point(q, tip=np.asarray(tool_ball, float))[0]
 
 
+#: smallest step (deg) of a K test's samples: 100000 a turn, the plans' bound on entries
+MIN_STEP = 360.0 / 100_000
+
+
 def plan(machine: Union[Machine, Mapping], test: str, *, table_ball: Sequence[float],
          tool_ball: Optional[Sequence[float]] = None, step: float = 15.0, tilt: float = -45.0,
          tilt_range: Sequence[float] = (-90.0, 90.0), setup: Optional[str] = None) -> list:
@@ -94,8 +100,11 @@ def plan(machine: Union[Machine, Mapping], test: str, *, table_ball: Sequence[fl
     is zero. ``setup`` names the mounting (default the test's name): one
     mounting per test, or the same name for tests run without re-mounting."""
     m = Machine.from_dict(machine)
-    if not step > 0:
-        raise ValueError(f"step: {step} deg; expected > 0")
+    # bounded here, not only by the command line: a tiny step builds millions of entries before anything is said
+    if isinstance(step, bool) or not isinstance(step, numbers.Real) or not (math.isfinite(step)
+                                                                           and step >= MIN_STEP):
+        raise ValueError(f"step: {step!r} deg; expected a number >= {MIN_STEP:g} deg (at most "
+                         f"{360.0 / MIN_STEP:.0f} samples a turn)")
     seq = _sequence(m, test, float(step), float(tilt), tilt_range)
     tb = np.asarray(table_ball, float)
     if tb.shape != (3,) or not np.isfinite(tb).all():

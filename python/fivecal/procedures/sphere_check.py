@@ -20,6 +20,8 @@ Units: mm, degrees for commands, rad for angular errors; reports in µm / µrad.
 from __future__ import annotations
 
 import json
+import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence, Union
 
@@ -56,12 +58,19 @@ def pivot_parameters(machine: Machine, axis: str, backlash: bool = True) -> List
     return names + ([f"E{axis}{axis}b"] if backlash else [])
 
 
+#: positions per rotary axis at most: one a degree over a full turn, far more than a pivot needs
+MAX_POSITIONS = 360
+
+
 def positions(machine: Machine, n: int = 5, limits: Optional[Mapping[str, Sequence[float]]] = None
               ) -> Dict[str, List[float]]:
     """``n`` positions of each rotary axis spread over its range (``limits``
     axis -> (min, max) degrees; default a full turn for C, ±90° otherwise)."""
-    if n < 3:
-        raise ValueError(f"sphere check: {n} positions per axis; a pivot needs at least 3")
+    # bounded here, not only by the command line: n = 10**9 would build the plan before anything is said
+    if isinstance(n, bool) or not isinstance(n, numbers.Real) or not (n == int(n) if math.isfinite(n) else False) \
+            or not 3 <= n <= MAX_POSITIONS:
+        raise ValueError(f"n: {n!r} positions per axis; expected a whole number from 3 (a pivot needs at "
+                         f"least 3) to {MAX_POSITIONS}")
     out = {}
     for a in _rotary_axes(machine):
         lo, hi = (limits or {}).get(a, (-180.0, 180.0) if a in FULL_TURN_AXES else (-90.0, 90.0))
@@ -69,7 +78,8 @@ def positions(machine: Machine, n: int = 5, limits: Optional[Mapping[str, Sequen
         if not hi > lo:
             raise ValueError(f"limits.{a}: ({lo:g}, {hi:g}) is not a range")
         full = hi - lo >= 360.0 - 1e-9
-        out[a] = [float(v) for v in (np.linspace(lo, hi, n, endpoint=False) if full else np.linspace(lo, hi, n))]
+        k = int(n)
+        out[a] = [float(v) for v in (np.linspace(lo, hi, k, endpoint=False) if full else np.linspace(lo, hi, k))]
     return out
 
 
@@ -92,6 +102,8 @@ def plan(machine: Union[Machine, Mapping], sphere: Mapping, *, tip_radius: float
     visits = []
     for a, vals in pos.items():
         vals = [float(v) for v in vals]
+        if len(vals) > MAX_POSITIONS:
+            raise ValueError(f"axis_positions.{a}: {len(vals)} positions; at most {MAX_POSITIONS}")
         if len(vals) < 3:
             raise ValueError(f"axis_positions.{a}: {len(vals)} positions; a pivot needs at least 3")
         visits += [{a: v} for v in vals]
