@@ -28,7 +28,7 @@ from fivecal import schema
 from fivecal.cli import main
 from fivecal.identification import PROCEDURES
 from fivecal.procedures import machining, rtest, sphere_check, tango
-from fivecal.procedures.sphere_check import spindle_equivalent
+from fivecal.procedures.sphere_check import spindle_equivalent, spindle_names
 
 from test_machining_kind import DATUM as MACHINED_DATUM
 from test_machining_kind import faces_plan
@@ -48,14 +48,8 @@ TABLE_BALL = [150.0, 0.0, 100.0]
 
 
 def seen(machine, truth: Dict[str, float]) -> Dict[str, float]:
-    """The truth under the names every command reports (the spindle's name for
-    a rotary offset that is a constant tool-part offset; minus its value on
-    the workpiece side)."""
-    out: Dict[str, float] = {}
-    for n, v in truth.items():
-        c = spindle_equivalent(machine, n)
-        out[c] = out.get(c, 0.0) + (v if c == n or n[3] not in machine.workpiece_chain else -v)
-    return out
+    """The truth under the names every command reports."""
+    return spindle_names(machine, truth)
 
 
 @dataclass

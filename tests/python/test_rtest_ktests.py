@@ -11,7 +11,7 @@ import pytest
 
 import fivecal
 from fivecal.procedures import rtest
-from fivecal.procedures.sphere_check import spindle_equivalent
+from fivecal.procedures.sphere_check import spindle_names
 
 MACHINES = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "machines")
 TRUTH = {"EX0C": 0.007, "EY0C": 0.016, "EA0C": 1e-5, "EB0C": -4e-5, "EY0A": 0.009, "EZ0A": -0.011,
@@ -23,11 +23,7 @@ def _seen(m, truth):
     """The truth under the names every command reports: on this A/C table EX0C
     (C moved along A's line) and EY0A are constant tool-part offsets, the
     spindle's EX0S and EY0S (minus the table axis' value)."""
-    out = {}
-    for n, v in truth.items():
-        c = spindle_equivalent(m, n)
-        out[c] = out.get(c, 0.0) + (v if c == n else -v)
-    return out
+    return spindle_names(m, truth)
 
 
 @pytest.fixture(scope="module")

@@ -68,7 +68,9 @@ def spindle_equivalent(machine: Machine, name: str) -> str:
     part when every rotary axis between it and the foundation turns about d
     (or there is none): on an A/C trunnion EX0C (C's line moved along A) and
     EY0A, on a B/C table EY0C and EX0B. The spindle's offset across its own
-    line is the same constant, so no data can tell them apart; identify's
+    line is the same constant (exactly for the first axis from the
+    foundation, to first order beyond: they differ by the product of the
+    parent's tilt errors and the offset), so no data can tell them apart; identify's
     location selection (docs/identification.md, the thesis' set) names it
     by the spindle, and so does every procedure, so results of different
     commands compare by name. The spindle's value is minus the axis' on the
@@ -88,6 +90,20 @@ def spindle_equivalent(machine: Machine, name: str) -> str:
     # the spindle's location candidates are its two positions most across its line
     across = np.argsort(s, kind="stable")[:2]
     return f"E{name[1]}0S" if k in across else name
+
+
+def spindle_names(machine: Machine, errors: Mapping[str, float]) -> Dict[str, float]:
+    """``errors`` (name -> mm / rad) under the names every fivecal command
+    reports them (:func:`spindle_equivalent`): a rotary offset that is the
+    spindle's offset becomes the spindle's, minus its value on the
+    workpiece side (equal errors add up). What a sphere check, an R-test or
+    ``identify --estimate location`` of a machine with these errors
+    recovers."""
+    out: Dict[str, float] = {}
+    for n, v in errors.items():
+        c = spindle_equivalent(machine, n)
+        out[c] = out.get(c, 0.0) + (v if c == n or n[3] not in machine.workpiece_chain else -float(v))
+    return out
 
 
 def positions(machine: Machine, n: int = 5, limits: Optional[Mapping[str, Sequence[float]]] = None
@@ -227,7 +243,7 @@ def _previous_values(previous, machine: Machine) -> Dict[str, tuple]:
     for n, (v, s) in list(out.items()):
         c = spindle_equivalent(machine, n)
         if c != n and c not in out:
-            out[c] = (-v if n[3] in machine.workpiece_chain else v, s)
+            out[c] = (spindle_names(machine, {n: v})[c], s)
     return out
 
 
@@ -304,4 +320,4 @@ def to_json(check: SphereCheck) -> str:
     return json.dumps(check.to_dict(), indent=1, sort_keys=True, ensure_ascii=False)
 
 
-__all__ = ["plan", "positions", "pivot_parameters", "spindle_equivalent", "evaluate", "SphereCheck", "to_json"]
+__all__ = ["plan", "positions", "pivot_parameters", "spindle_equivalent", "spindle_names", "evaluate", "SphereCheck", "to_json"]
