@@ -316,6 +316,28 @@ def test_rtest_without_a_fit_writes_a_result_no_consumer_takes_for_errors(tmp_pa
     assert "refusing" in capsys.readouterr().err
 
 
+def test_an_unusable_fit_exits_1_writes_its_document_and_consumers_refuse_it(tmp_path, capsys):
+    """Exit codes as identify's: readings 20x noisier than declared make the
+    R-test fit inadequate: exit 1, the document is written (verdict
+    inadequate, to inspect) and export / compensate refuse it (exit 2)."""
+    m = fivecal.Machine.load(VMC)
+    plan = [e for t in rtest.TESTS for e in rtest.plan(m, t, table_ball=TABLE_BALL, tilt_range=A_LIMITS, step=30)]
+    d = fivecal.simulate(m, plan, errors=AC_TRUTH, sigma={"ball3d": 0.0005}, seed=9).to_dict()
+    rng = np.random.default_rng(9)
+    for o in d["observations"]:
+        o["measured"] = [x + rng.normal(0, 0.01) for x in o["measured"]]
+    data, out = tmp_path / "noisy.json", tmp_path / "noisy_result.json"
+    data.write_text(json.dumps(d))
+    capsys.readouterr()
+    assert _cli("rtest", data, "--out", out) == 1
+    assert "not usable" in capsys.readouterr().err
+    doc = json.loads(out.read_text())
+    assert doc["verdict"] == "inadequate" and doc["procedure"]["name"] == "rtest"
+    assert _cli("export", "linuxcnc", out, "--machine", VMC, "--kins", "xyzac-trt", "--out", tmp_path / "l") == 2
+    assert _cli("compensate", out, VMC, "--table", tmp_path / "t.csv") == 2
+    assert _cli("rtest", data, "--out", out, "--force") == 0
+
+
 def test_standalone_machining_procedure_writes_the_result_document():
     m = fivecal.Machine.load(VMC)
     tests = machining.zhang_tests(m, L=150.0, H=60.0)
