@@ -31,8 +31,7 @@ def register(sub) -> None:
                         "range of the recorded deviation in X, Y, Z per test, pass/fail against --tolerance, "
                         "and the location errors of the rotary axes fitted to all tests. Plans: "
                         "fivecal.procedures.rtest.plan (`fivecal docs design`).",
-                        epilog="example:
-  fivecal rtest rtest_data.json --tolerance 20um --out rtest_result.json")
+                        epilog="example:\n  fivecal rtest rtest_data.json --tolerance 20um --out rtest_result.json")
     pp.add_argument("dataset", help="dataset JSON with the ball3d observations")
     pp.add_argument(VALUE_OPTION, default=None, metavar="MM",
                     help="largest allowed range per direction, mm, or with a unit: 20um (exit 1 when a test "
