@@ -3,17 +3,88 @@ uncertainties and an identifiability report (C++ core, Ceres)."""
 from __future__ import annotations
 
 import json
-from typing import Iterable, Mapping, Optional, Sequence, Union
+import math
+from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _core, guards
+from . import _core, files, guards, schema
 from .dataset import Dataset
 from .units import display_scale
 
 
 #: Result files list ``residual_ids`` for datasets of at most this many observations.
 RESIDUAL_IDS_LIMIT = 20000
+
+#: The procedures a result document may come from (the result schema's ``procedure.name``).
+PROCEDURES = ("identify", "four-step", "wang", "circular", "jiang-cripps", "sphere-check", "sphere-test",
+              "rtest", "machining", "tango")
+
+
+_ROW_ARRAYS = ("residuals", "residual_ids", "correlation")
+
+
+def _plain_values(obj: Any, where: str) -> Any:
+    # Procedure values are numbers a person reads: numpy scalars and arrays
+    # become JSON numbers and lists, and a value the procedure could not
+    # determine (NaN, inf) is written as null rather than as invalid JSON.
+    if isinstance(obj, Mapping):
+        return {str(k): _plain_values(v, f"{where}.{k}") for k, v in obj.items()}
+    if isinstance(obj, np.ndarray):
+        obj = obj.tolist()
+    if isinstance(obj, (list, tuple)):
+        return [_plain_values(v, f"{where}[{i}]") for i, v in enumerate(obj)]
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    raise ValueError(f"{where}: {type(obj).__name__} is not a JSON value")
+
+
+def result_document(result: Union["Result", Mapping], procedure: str = "identify",
+                    values: Optional[Mapping] = None) -> dict:
+    """The one result document every procedure writes (docs/formats.md, the
+    result schema): the fit (a :class:`Result`, or a dict already in the
+    result format: parameters with value and std under their ISO 230-1 names,
+    verdict, chi2, ...) plus ``procedure``: ``{"name": procedure, "values":
+    values}`` with the procedure's own values (dispersion, K-test ranges,
+    ISO 230-4 values ...; NaN / inf written as null). The document is
+    checked against the result schema, so a procedure cannot write one that
+    ``export``, ``compensate`` or ``history`` would refuse."""
+    if procedure not in PROCEDURES:
+        raise ValueError(f"procedure: {procedure!r} is not one of {', '.join(PROCEDURES)}")
+    if isinstance(result, Result):
+        d = result.to_dict(procedure=None)
+    elif isinstance(result, Mapping):
+        d = json.loads(json.dumps(result))
+    else:
+        raise ValueError(f"result: expected a fivecal Result or a result dict, got {type(result).__name__}")
+    d.pop("procedure", None)
+    sec = {"name": procedure}
+    if values:
+        sec["values"] = _plain_values(dict(values), "procedure.values")
+    d["procedure"] = sec
+    # the per-row arrays (10^5 rows for a ball bar trace) are written by the
+    # core in one shape: their head stands for them, the check stays fast
+    schema.validate({k: (v[:100] if k in _ROW_ARRAYS and isinstance(v, list) else v) for k, v in d.items()},
+                    "result", f"{procedure} result")
+    return d
+
+
+def result_json(result: Union["Result", Mapping], procedure: str = "identify",
+                values: Optional[Mapping] = None) -> str:
+    """JSON text of :func:`result_document`."""
+    return json.dumps(result_document(result, procedure, values), indent=1, sort_keys=True, ensure_ascii=False)
+
+
+def write_result(path, result: Union["Result", Mapping], procedure: str = "identify",
+                 values: Optional[Mapping] = None) -> None:
+    """Write :func:`result_document` to ``path``: the file ``export``,
+    ``compensate``, ``history`` and the report read, whichever procedure
+    wrote it."""
+    files.write_text(path, result_json(result, procedure, values) + "\n")
 
 
 class Result:
@@ -194,26 +265,26 @@ class Result:
         # write_residuals, so saving a big ball bar fit stays fast.
         return len(self.dataset) <= RESIDUAL_IDS_LIMIT and any("id" in o for o in self.dataset.observations)
 
-    def to_dict(self) -> dict:
+    def to_dict(self, procedure: Optional[str] = "identify", values: Optional[Mapping] = None) -> dict:
         """The result in the result format of docs/formats.md (values and std in mm / rad);
         ``residual_ids`` gives each residual row's observation id when the dataset has ids
-        (and at most :data:`RESIDUAL_IDS_LIMIT` observations)."""
+        (and at most :data:`RESIDUAL_IDS_LIMIT` observations). ``procedure`` (one of
+        :data:`PROCEDURES`) and its ``values`` make the ``procedure`` section
+        (:func:`result_document`); ``procedure=None`` leaves it out."""
         d = json.loads(self._core.to_json())
         if self._with_ids():
             d["residual_ids"] = [r["id"] for r in self.residual_table()]
-        return d
+        return d if procedure is None else result_document(d, procedure, values)
 
-    def to_json(self) -> str:
+    def to_json(self, procedure: Optional[str] = "identify", values: Optional[Mapping] = None) -> str:
         """JSON text of :meth:`to_dict`."""
-        if not self._with_ids():
-            return self._core.to_json()
-        return json.dumps(self.to_dict(), indent=1, sort_keys=True, ensure_ascii=False)
+        return json.dumps(self.to_dict(procedure, values), indent=1, sort_keys=True, ensure_ascii=False)
 
-    def save(self, path) -> None:
-        """Write :meth:`to_json` to ``path`` (the result file ``fivecal compensate`` reads)."""
-        from . import files
-
-        files.write_text(path, self.to_json() + "\n")
+    def save(self, path, procedure: str = "identify", values: Optional[Mapping] = None) -> None:
+        """Write the result document (:meth:`to_json`) to ``path``: the file
+        ``export``, ``compensate``, ``history`` and the report read. Every
+        procedure writes its result through here or :func:`write_result`."""
+        write_result(path, self, procedure, values)
 
     def report(self) -> str:
         """A readable text report in µm, µrad and µm/m: the verdict first,
