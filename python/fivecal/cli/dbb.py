@@ -561,10 +561,12 @@ def register(sub) -> None:
                          "it as a check. The same analysis as `dbb jiang`; its result names the procedure "
                          "four-step.",
                          epilog="examples:\n"
+                         "  fivecal dbb four-step --machine vmc0656.json --simulate EY0A=0.01,EX0C=-0.02 "
+                         "--out result.json\n"
                          "  fivecal plan four-step vmc0656.json --out plan.json   (add errors, sigma to it)\n"
                          "  fivecal simulate plan.json --out ds.json\n"
                          "  fivecal dbb four-step ds.json --out result.json\n"
-                         "  fivecal export linuxcnc result.json --machine vmc0656.json --kins kins.comp")
+                         "  fivecal export linuxcnc result.json --machine vmc0656.json --kins xyzac-trt --out hal")
     _add_four_step_options(pf)
     pf.set_defaults(func=_four_step_cmd)
 
