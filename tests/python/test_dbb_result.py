@@ -206,6 +206,10 @@ def test_circular_without_machine_writes_iso_values_only(tmp_path):
     doc = json.loads(out.read_text())
     schema.validate(doc, "result", "circular result")
     assert doc["parameters"] == {} and doc["procedure"]["values"]["runs"][0]["direction"] == "CCW"
+    # no machine errors were fitted: no consumer takes that for a measured zero
+    assert doc["verdict"] != "ok"
+    r = _run("export", "linuxcnc", out, "--machine", C600U, "--kins", "xyzac-trt", "--out", tmp_path / "hal")
+    assert r.returncode == 2 and "refusing to use" in r.stderr
 
 
 def test_four_step_no_engine_refuses_out(tmp_path):

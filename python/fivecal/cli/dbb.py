@@ -128,6 +128,13 @@ def _quiet_fit_warnings():
         yield
 
 
+#: The fit part of a result document written without a machine-error fit (CSV
+#: circular runs without --machine, the volumetric evaluation): no parameters,
+#: marked undetermined, so export, compensate and history refuse it rather than
+#: take "no errors" for a measured zero.
+_NO_FIT = {"parameters": {}, "converged": True, "verdict": "undetermined", "undetermined": []}
+
+
 # ---- jiang / four-step ------------------------------------------------------
 def _jiang(args) -> int:
     return _four_step(args, "jiang-cripps")
@@ -372,12 +379,13 @@ def _circular(args) -> int:
     if grade is not None:
         print("\n  grade against the tolerances: " + grade["grade"])
         for i in grade["items"]:
-            print(f"    {i['name']} {i['run']:<7}{i['value'] * 1e3:9.3f} µm  tolerance {i['tolerance'] * 1e3:.3f} µm  "
+            print(f"    {i['name']} {i['run']:<7}{i['value'] * 1e3:9.3f} µm  "
+                  f"tolerance {i['tolerance'] * 1e3:.3f} µm  "
                   f"{i['grade']}")
     if args.out:
         # without a machine there is no machine-error fit: the document carries
-        # the ISO 230-4 values alone (export and compensate then have nothing to use)
-        write_result(args.out, fit if fit is not None else {"parameters": {}}, "circular",
+        # the ISO 230-4 values alone, marked so that no consumer uses it
+        write_result(args.out, fit if fit is not None else _NO_FIT, "circular",
                      res.procedure_values(tolerances))
         print(f"\nresult written to {args.out}")
     if args.plot:
@@ -439,7 +447,7 @@ def _volumetric(args) -> int:
     if args.out:
         # the one result document; the planes' ISO 230-4 values and diagnoses are its
         # procedure values (no machine-error fit here: `dbb circular --machine` per plane gives one)
-        write_result(args.out, {"parameters": {}}, "circular", {"volumetric": vol.to_dict()})
+        write_result(args.out, _NO_FIT, "circular", {"volumetric": vol.to_dict()})
         print(f"\nresult written to {args.out}")
     if args.plot:
         plot_volumetric(vol, args.plot)
@@ -522,7 +530,8 @@ def _add_four_step_options(pj) -> None:
                     help="keep the positions in the pivot plane (do not refer them to the axis points)")
     pj.add_argument("--no-engine", action="store_true", help="skip the general engine")
     pj.add_argument("--save-dataset", help="write the simulated / imported dataset here")
-    pj.add_argument("--out", help="write the result JSON here (the general engine's machine errors; the method's values in its procedure section)")
+    pj.add_argument("--out", help="write the result JSON here (the general engine's machine errors; the "
+                    "method's values in its procedure section)")
     pj.add_argument("--plot", help="write polar plots of the four steps (PNG)")
     pj.add_argument("--force", action="store_true", help=_FORCE_HELP)
 
@@ -531,7 +540,8 @@ def register(sub) -> None:
     """Add the ``dbb`` subcommand group to the main parser's subparsers."""
     FINITE = _float_type()
     RD = argparse.RawDescriptionHelpFormatter
-    pd = sub.add_parser("dbb", help="double ball bar tests: four-step, jiang, wang, circular, volumetric, plot", formatter_class=RD,
+    pd = sub.add_parser("dbb", help="double ball bar tests: four-step, jiang, wang, circular, volumetric, plot",
+                        formatter_class=RD,
                         description="Double ball bar tests (`fivecal docs dbb`).",
                         epilog="example:\n  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003")
     dsub = pd.add_subparsers(dest="dbb_command", required=True)
