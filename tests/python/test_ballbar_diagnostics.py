@@ -291,7 +291,7 @@ def test_cli_circular_and_volumetric(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "machine VMC-7  ·  date 2026-11-24  ·  feed 1000 mm/min" in r.stdout
     assert "feed-in 180.0°" in r.stdout
-    d = json.load(open(tmp_path / "c.json"))
+    d = json.load(open(tmp_path / "c.json"))["procedure"]["values"]  # the one result document's section
     assert d["ranking"][0]["diagnosis"] == "straightness.2"
     assert d["overshoot_removed"][0]["removed_start"] == 360
     assert os.path.getsize(tmp_path / "c.png") > 20000
@@ -304,7 +304,8 @@ def test_cli_circular_and_volumetric(tmp_path):
              "--step", "2", "--plot", str(tmp_path / "v.png"), "--out", str(tmp_path / "v.json"))
     assert r.returncode == 0, r.stderr
     assert "combined circularity" in r.stdout and os.path.getsize(tmp_path / "v.png") > 20000
-    assert set(json.load(open(tmp_path / "v.json"))["planes"]) == {"XY", "YZ", "ZX"}
+    assert set(json.load(open(tmp_path / "v.json"))["procedure"]["values"]["volumetric"]["planes"]) == \
+        {"XY", "YZ", "ZX"}
 
 
 def test_cyclic_pitch_is_found_when_not_given():
@@ -330,7 +331,7 @@ def test_a_cw_trace_printed_modulo_360_is_read_as_cw():
     err = with_base(spike1)
     cw, ccw = run(-1, err, 41), run(+1, err, 42)
     wrapped = dbb.Trace(np.mod(cw.angles, 360.0), cw.readings, label="CW")
-    assert wrapped.direction == +1  # what the angles alone suggest
+    assert wrapped.direction == -1  # the net turn of the unwrapped angles (first minus last would say CCW)
     a = dbb.circular_test([wrapped, ccw], R)
     b = dbb.circular_test([cw, ccw], R)
     assert sorted(r.direction for r in a.runs) == [-1, 1]

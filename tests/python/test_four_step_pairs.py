@@ -238,11 +238,12 @@ def test_cli_jiang_on_other_pairs_with_plot(tmp_path, which):
     for s in expect:
         assert s in r.stdout
     assert png.stat().st_size > 10000
-    d = json.loads(out.read_text())
-    assert d["carrier"] == ("B" if which == "hu40t" else "C")
-    # 'paper' by role: the carrier gets A's Table 2 positions.
-    first = d["parameters"][next(iter(d["parameters"]))]
-    assert first["value"] == pytest.approx(0.0342, abs=3 * first["std"] + 1e-6)
+    d = json.loads(out.read_text())  # the one result document: the method's values in its procedure section
+    assert d["procedure"]["values"]["carrier"] == ("B" if which == "hu40t" else "C")
+    # 'paper' by role: the carrier gets A's Table 2 positions (the engine's and the method's value).
+    name = dbb.four_step_pair(fivecal.Machine.load(path))["names"][0]
+    for first in (d["parameters"][name], d["procedure"]["values"]["method_values"][name]):
+        assert first["value"] == pytest.approx(0.0342, abs=3 * first["std"] + 1e-6)
 
 
 def test_csv_traces_of_a_trunnion_rebuild_the_dataset(tmp_path):

@@ -406,6 +406,7 @@ struct Hyper {
   Eigen::VectorXd values;                // MAP point under `prior` and `noise`
   std::vector<VarianceComponent> noise;  // estimated instrument groups (variance components)
   int rounds = 0;
+  int iterations = 0;                    // solver iterations over every round
 };
 
 constexpr double kMinClassScale = 1e-3;
@@ -519,6 +520,7 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
     const Solve fit = RunFit(*scaled, table, out.values, est, opt, out.prior, &pr);
     out.values = fit.values;
     out.rounds = round + 1;
+    out.iterations += fit.iterations;
     Eigen::VectorXd r;
     Eigen::MatrixXd Jw;
     WeightedJacobian(pr.get(), &r, &Jw);
@@ -775,12 +777,16 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   // (A copy only then: long data would double their memory.)
   std::unique_ptr<Dataset> weighted_copy;
   const Dataset* weighted = &ds;
+  // The rounds that set the class scales and noise move the values from the
+  // start too: the reported iterations are every one the solver made.
+  int adapt_iterations = 0;
   if (rq.automatic || opt.variance_components) {
     weighted_copy = std::make_unique<Dataset>(ds);
     weighted = weighted_copy.get();
     const Hyper hy = AdaptHyperparameters(ds, weighted_copy.get(), table, values, est, opt, fit_prior, rq.automatic);
     fit_prior = hy.prior;
     values = hy.values;
+    adapt_iterations = hy.iterations;
     res.class_scales = hy.scale;
     res.variance_components = hy.noise;
   }
@@ -791,7 +797,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
                                  weighted == &ds && kept && kept_at == values ? std::move(kept) : nullptr);
   values = fit.values;
   res.converged = fit.converged;
-  res.iterations = fit.iterations;
+  res.iterations = fit.iterations + adapt_iterations;
   res.message = fit.message;
   res.initial_cost = fit.initial_cost;
   res.final_cost = fit.final_cost;

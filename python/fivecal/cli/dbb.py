@@ -1,5 +1,6 @@
 """``fivecal dbb ...``: double ball bar tests from the command line.
 
+  four-step four-step test of a rotary pair: the general engine's fit, the method beside it
   jiang     Jiang & Cripps four-step test of a rotary pair (and the general engine)
   wang      Wang et al. simultaneous A/C path: Table 1, patterns, identification
   circular  planar circular test: ISO 230-4 values and diagnosis
@@ -15,19 +16,22 @@ import contextlib
 import json
 import math
 import os
+import sys
 
 import numpy as np
 
 from ..dataset import load_dataset, save_dataset
-from ..files import read_json, write_text
+from ..files import read_json
 from ..guards import FitWarning
+from ..identification import identify, write_result
 from ..machine import Machine
 from ..procedures import dbb
 from ..report.polar import (dbb_groups, plane_name, plot_circular_test, plot_four_step, plot_polar, plot_polar_grid,
                             plot_volumetric, plot_wang_patterns)
 from ..simulation import simulate
-from .common import (MAX_SAMPLES, POSITIVE, SEED, SIGMA, _FORCE_HELP, _float_type, _values_verdict, check_step,
-                     fit_status)
+from ..tolerances import parse_value
+from .common import (EXIT_FIT, EXIT_OK, MAX_SAMPLES, POSITIVE, SEED, SIGMA, _FORCE_HELP, _float_type, _values_verdict,
+                     check_step, fit_status)
 
 #: Jiang & Cripps Tables 2-3 (positions in mm; orientations read as arc-seconds,
 #: see examples/machines/README.md).
@@ -109,10 +113,6 @@ def _machine(path):
     return Machine.load(path)
 
 
-def _write_json(d: dict, path: str) -> None:
-    write_text(path, json.dumps(d, indent=1, default=float) + "\n")
-
-
 # A tiny --step would otherwise ask for billions of poses (cli.MAX_SAMPLES).
 def _check_step(step: float, sweep: float) -> None:
     check_step("--step", step, sweep, what="samples", limit=MAX_SAMPLES)
@@ -128,8 +128,30 @@ def _quiet_fit_warnings():
         yield
 
 
-# ---- jiang -----------------------------------------------------------------
+#: The fit part of a result document written without a machine-error fit (CSV
+#: circular runs without --machine, the volumetric evaluation): no parameters,
+#: marked undetermined, so export, compensate and history refuse it rather than
+#: take "no errors" for a measured zero.
+_NO_FIT = {"parameters": {}, "converged": True, "verdict": "undetermined", "undetermined": []}
+
+
+# ---- jiang / four-step ------------------------------------------------------
 def _jiang(args) -> int:
+    return _four_step(args, "jiang-cripps")
+
+
+def _four_step_cmd(args) -> int:
+    return _four_step(args, "four-step")
+
+
+def _four_step(args, procedure: str) -> int:
+    """``dbb four-step`` and ``dbb jiang``: the same readings, the same fit.
+    The machine errors of the result document are the general engine's
+    (identify's fit of every reading, judged by identify's verdict); the
+    four-step method's own values (eqs. 1-20) go into ``procedure.values``."""
+    command = "dbb jiang" if procedure == "jiang-cripps" else "dbb four-step"
+    if args.no_engine and args.out:
+        raise ValueError("--out: the result's machine errors are the general engine's fit; drop --no-engine")
     setups = None
     if args.setups:
         setups = [s.strip() for s in args.setups.split(",")]
@@ -154,7 +176,9 @@ def _jiang(args) -> int:
                     raise ValueError("--csv: expected SETUP=FILE pairs, e.g. A1=a1.csv,A2=a2.csv,... "
                                      "(setups: " + ",".join(setups or dbb.four_step_pair(m)["setups"]) + ")")
                 sid, path = part.split("=", 1)
-                traces[sid.strip()] = dbb.read_trace_csv(path.strip())
+                t = dbb.read_trace_csv(path.strip())
+                dbb.check_direction(t, path.strip())  # a file named cw/ccw must turn that way
+                traces[sid.strip()] = t
             ds = dbb.four_step_dataset(m, traces, plan)
         elif args.simulate is not None:
             errors = _values(args.simulate, "--simulate", paper_jiang(m))
@@ -170,8 +194,8 @@ def _jiang(args) -> int:
                                uniform_angles=args.uniform_angles, refer_positions=not args.no_refer,
                                a_removal=args.a_removal, engine=not args.no_engine)
     print(res.report())
-    if args.out:
-        _write_json(res.to_dict(), args.out)
+    if args.out and res.engine is not None:
+        write_result(args.out, res.engine, procedure, res.procedure_values())
         print(f"\nresult written to {args.out}")
     if args.plot:
         plot_four_step(res, args.plot)
@@ -180,7 +204,14 @@ def _jiang(args) -> int:
     verdicts = [("four-step values", _values_verdict(res.values, res.std))]
     if res.engine is not None:
         verdicts.append(("general engine", res.engine.assessment()))
-    return fit_status("dbb jiang", verdicts, args.force, (args.out, args.plot))
+    elif not args.no_engine:
+        # the engine refused the fit (a confounded set): nothing a consumer may use
+        written = [x for x in (args.plot,) if x]
+        print(f"fivecal {command}: not usable: the general engine did not fit ({res.engine_error})"
+              + (f"; no result written to {args.out}" if args.out else "")
+              + (f" ({' and '.join(written)} written, to inspect)" if written else ""), file=sys.stderr)
+        return EXIT_FIT
+    return fit_status(command, verdicts, args.force, (args.out, args.plot))
 
 
 # ---- wang ------------------------------------------------------------------
@@ -188,6 +219,8 @@ def _wang(args) -> int:
     geometry = {"table_ball": _vector(args.table_ball, 3, "--table-ball") or (0.0, 150.0, 130.0),
                 "radius": args.radius, "height": args.height}
     ds = load_dataset(args.dataset) if args.dataset else None
+    if args.out and ds is None and args.simulate is None:
+        raise ValueError("--out: a result needs readings; give a DATASET or --simulate")
     m = ds.machine if ds is not None and args.machine is None else _machine(args.machine)
     path = dbb.wang_path(m, **geometry)
     print(path.format_table(args.every))
@@ -197,6 +230,8 @@ def _wang(args) -> int:
         pats = dbb.wang_patterns(m, sizes, **geometry)
         plot_wang_patterns(pats, args.patterns, path)
         print(f"\npatterns written to {args.patterns}")
+    # the path geometry belongs in the result only when it made the trace
+    ds_path_is_plan = ds is None
     if ds is None and args.simulate is not None:
         plan = dbb.wang_plan(m, setup=args.setup, path=path)
         ds = simulate(m, [{k: v for k, v in e.items() if k != "tracking"} for e in plan],
@@ -211,8 +246,7 @@ def _wang(args) -> int:
         print()
         print(ident.report())
         if args.out:
-            _write_json({"result": json.loads(ident.result.to_json()), "confounded": ident.confounded,
-                         "separable": ident.separable}, args.out)
+            write_result(args.out, ident.result, "wang", ident.procedure_values(path if ds_path_is_plan else None))
             print(f"\nresult written to {args.out}")
         if args.plot:
             t = dbb.trace_from_dataset(ds, args.setup)
@@ -273,37 +307,86 @@ def _add_diagnosis_options(p) -> None:
     p.add_argument("--date", help="test date for the report and plot header")
 
 
+def _run_word(direction: int) -> str:
+    return "CCW" if direction > 0 else ("CW" if direction < 0 else "no net turn")
+
+
+def _circular_tolerances(items) -> dict:
+    """``--tolerance G=15um,H=5um``: ISO 230-4 values (G, F, H) with a unit;
+    a bare number is mm, refused above 1 mm (µm written without its unit)."""
+    out = {}
+    for text in items or ():
+        for item in [t for t in str(text).split(",") if t.strip()]:
+            if "=" not in item:
+                raise ValueError(f"--tolerance: expected NAME=VALUE (e.g. G=15um), got '{item.strip()}'")
+            k, v = (x.strip() for x in item.split("=", 1))
+            if k not in dbb.CircularResult.TOLERANCE_NAMES:
+                raise ValueError(f"--tolerance {k}: a circular test grades G (circular deviation), F (radial "
+                                 "deviation) and H (hysteresis)")
+            if k in out:
+                raise ValueError(f"--tolerance: {k} is given twice")
+            out[k] = parse_value(v, f"--tolerance {k}", "length", bare_limit=1.0,
+                                 limit_hint=", a ball bar value")
+    return out
+
+
 def _circular(args) -> int:
-    traces = []
+    tolerances = _circular_tolerances(args.tolerance)
+    traces, ds = [], None
     if args.simulate is not None:
         m = _machine(args.machine)
         _check_step(args.step, 360.0)
         plan = dbb.planar_plan(m, args.plane, args.radius, step=args.step)
         ds = simulate(m, plan, errors=_values(args.simulate, "--simulate"), sigma={"dbb": args.sigma},
                       seed=args.seed)
-        for sid, label in (("P-", "CW"), ("P+", "CCW")):
-            t = dbb.trace_from_dataset(ds, sid)
-            t.label = label
-            traces.append(t)
+        setups = ["P-", "P+"]
+        source = "simulated setup {}"
     elif args.dataset:
         ds = load_dataset(args.dataset)
-        for sid in args.setups.split(","):
-            t = dbb.trace_from_dataset(ds, sid.strip())
-            t.label = ("CCW" if t.direction > 0 else "CW") + f" ({sid.strip()})"
-            traces.append(t)
+        setups = [x.strip() for x in args.setups.split(",") if x.strip()]
+        source = f"{args.dataset}: setup {{}}"
     else:
         if not args.runs:
             raise ValueError("give one or two CSV files (angle, reading), --dataset or --simulate")
         for path in args.runs:
             t = dbb.read_trace_csv(path)
-            t.label = ("CCW" if t.direction > 0 else "CW") + f" ({os.path.basename(path)})"
+            # the direction is the data's; a file named cw / ccw that turns the other way is refused
+            dbb.check_direction(t, path)
+            t.label = _run_word(t.direction) + f" ({os.path.basename(path)})"
             traces.append(t)
+        if args.machine:
+            ds = dbb.planar_dataset(_machine(args.machine), traces, args.plane, args.radius)
+    if ds is not None and not traces:
+        for sid in setups:
+            t = dbb.trace_from_dataset(ds, sid)
+            dbb.check_direction(t, source.format(sid), sid)
+            t.label = _run_word(t.direction) + f" ({sid})"
+            traces.append(t)
+        ds = ds.subset([i for sid in setups for i in dbb.ball_positions(ds, sid)[2]])
     if len(traces) > 2:
         raise ValueError(f"{len(traces)} runs; give one or two (CW and CCW)")
     res = dbb.circular_test(traces, args.radius, args.plane, args.feed, **_diagnosis_options(args))
     print(res.report())
+    fit = None
+    if ds is not None:
+        # the machine errors under their ISO 230-1 names: identify's fit of the same
+        # readings, every error under its prior, judged by identify's verdict
+        with _quiet_fit_warnings():
+            fit = identify(ds)
+        print("\nmachine errors (identify's fit of the same readings, every error under its prior):")
+        print(fit.report())
+    grade = res.grade(tolerances) if tolerances else None
+    if grade is not None:
+        print("\n  grade against the tolerances: " + grade["grade"])
+        for i in grade["items"]:
+            print(f"    {i['name']} {i['run']:<7}{i['value'] * 1e3:9.3f} µm  "
+                  f"tolerance {i['tolerance'] * 1e3:.3f} µm  "
+                  f"{i['grade']}")
     if args.out:
-        _write_json(res.to_dict(), args.out)
+        # without a machine there is no machine-error fit: the document carries
+        # the ISO 230-4 values alone, marked so that no consumer uses it
+        write_result(args.out, fit if fit is not None else _NO_FIT, "circular",
+                     res.procedure_values(tolerances))
         print(f"\nresult written to {args.out}")
     if args.plot:
         plot_circular_test(res, args.plot)
@@ -315,7 +398,16 @@ def _circular(args) -> int:
               for k in ("circular_deviation", "radial_deviation_max", "radial_deviation_min", "mean_radius")}
     values.update({f"diagnosis {k}": v for k, v in res.diagnosis.items()})
     std = {f"diagnosis {k}": v for k, v in res.diagnosis_std.items()}
-    return fit_status("dbb circular", [("", _values_verdict(values, std))], args.force, (args.out, args.plot))
+    verdicts = [("ISO 230-4 values", _values_verdict(values, std))]
+    if fit is not None:
+        verdicts.append(("machine errors", fit.assessment()))
+    rc = fit_status("dbb circular", verdicts, args.force, (args.out, args.plot))
+    if rc == EXIT_OK and grade is not None and grade["grade"] == "FAIL":
+        bad = [f"{i['name']} {i['run']} {i['value'] * 1e3:.3f} µm > {i['tolerance'] * 1e3:.3f} µm"
+               for i in grade["items"] if i["grade"] == "FAIL"]
+        print(f"fivecal dbb circular: FAIL against the tolerances: {'; '.join(bad)}", file=sys.stderr)
+        return EXIT_FIT
+    return rc
 
 
 # ---- volumetric --------------------------------------------------------------
@@ -353,7 +445,9 @@ def _volumetric(args) -> int:
     vol = dbb.volumetric_evaluation(results)
     print(vol.report())
     if args.out:
-        _write_json(vol.to_dict(), args.out)
+        # the one result document; the planes' ISO 230-4 values and diagnoses are its
+        # procedure values (no machine-error fit here: `dbb circular --machine` per plane gives one)
+        write_result(args.out, _NO_FIT, "circular", {"volumetric": vol.to_dict()})
         print(f"\nresult written to {args.out}")
     if args.plot:
         plot_volumetric(vol, args.plot)
@@ -412,29 +506,7 @@ def _plot(args) -> int:
     return 0
 
 
-def register(sub) -> None:
-    """Add the ``dbb`` subcommand group to the main parser's subparsers."""
-    FINITE = _float_type()
-    RD = argparse.RawDescriptionHelpFormatter
-    pd = sub.add_parser("dbb", help="double ball bar tests: jiang, wang, circular, volumetric, plot", formatter_class=RD,
-                        description="Double ball bar tests (`fivecal docs dbb`).",
-                        epilog="example:\n  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003")
-    dsub = pd.add_subparsers(dest="dbb_command", required=True)
-
-    pj = dsub.add_parser("jiang", formatter_class=RD,
-                         help="Jiang & Cripps four-step test of a pair of rotary axes",
-                         description="Four-step DBB test of the two rotary axes (table or head pair: A/C, "
-                         "B/C, either order), each without and with the 50 mm extension: eqs. 1-20 of Jiang & "
-                         "Cripps 2015, then the same readings through the general engine. The axis nearer the "
-                         "foundation (the carrier, the paper's A) is tested first. Input: a dataset with the "
-                         "four DBB setups (default <carrier>1 <carrier>2 <carried>1 <carried>2, e.g. A1 A2 C1 "
-                         "C2, B1 B2 C1 C2), four CSV traces (angle = axis command in deg, reading in mm) or a "
-                         "simulation.",
-                         epilog="examples:\n"
-                         "  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003 --plot jiang.png\n"
-                         "  fivecal dbb jiang --machine hu40t.json --simulate paper --plot bc.png   (B/C trunnion)\n"
-                         "  fivecal dbb jiang dataset.json --c-pivot-offset 0,0.8 --out result.json\n"
-                         "  fivecal dbb jiang --machine c600u.json --csv A1=a1.csv,A2=a2.csv,C1=c1.csv,C2=c2.csv")
+def _add_four_step_options(pj) -> None:
     pj.add_argument("dataset", nargs="?", help="dataset JSON with the four DBB setups")
     pj.add_argument("--machine", help="machine JSON (with --simulate or --csv)")
     pj.add_argument("--simulate", metavar="ERRORS",
@@ -458,10 +530,55 @@ def register(sub) -> None:
                     help="keep the positions in the pivot plane (do not refer them to the axis points)")
     pj.add_argument("--no-engine", action="store_true", help="skip the general engine")
     pj.add_argument("--save-dataset", help="write the simulated / imported dataset here")
-    pj.add_argument("--out", help="write the result JSON here")
+    pj.add_argument("--out", help="write the result JSON here (the general engine's machine errors; the "
+                    "method's values in its procedure section)")
     pj.add_argument("--plot", help="write polar plots of the four steps (PNG)")
     pj.add_argument("--force", action="store_true", help=_FORCE_HELP)
+
+
+def register(sub) -> None:
+    """Add the ``dbb`` subcommand group to the main parser's subparsers."""
+    FINITE = _float_type()
+    RD = argparse.RawDescriptionHelpFormatter
+    pd = sub.add_parser("dbb", help="double ball bar tests: four-step, jiang, wang, circular, volumetric, plot",
+                        formatter_class=RD,
+                        description="Double ball bar tests (`fivecal docs dbb`).",
+                        epilog="example:\n  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003")
+    dsub = pd.add_subparsers(dest="dbb_command", required=True)
+
+    pj = dsub.add_parser("jiang", formatter_class=RD,
+                         help="Jiang & Cripps four-step test of a pair of rotary axes",
+                         description="Four-step DBB test of the two rotary axes (table or head pair: A/C, "
+                         "B/C, either order), each without and with the 50 mm extension: eqs. 1-20 of Jiang & "
+                         "Cripps 2015, then the same readings through the general engine. The axis nearer the "
+                         "foundation (the carrier, the paper's A) is tested first. Input: a dataset with the "
+                         "four DBB setups (default <carrier>1 <carrier>2 <carried>1 <carried>2, e.g. A1 A2 C1 "
+                         "C2, B1 B2 C1 C2), four CSV traces (angle = axis command in deg, reading in mm) or a "
+                         "simulation.",
+                         epilog="examples:\n"
+                         "  fivecal dbb jiang --machine c600u.json --simulate paper --sigma 0.0003 --plot jiang.png\n"
+                         "  fivecal dbb jiang --machine hu40t.json --simulate paper --plot bc.png   (B/C trunnion)\n"
+                         "  fivecal dbb jiang dataset.json --c-pivot-offset 0,0.8 --out result.json\n"
+                         "  fivecal dbb jiang --machine c600u.json --csv A1=a1.csv,A2=a2.csv,C1=c1.csv,C2=c2.csv")
+    _add_four_step_options(pj)
     pj.set_defaults(func=_jiang)
+
+    pf = dsub.add_parser("four-step", formatter_class=RD,
+                         help="four-step ball bar test of a rotary pair (as planned by `fivecal plan four-step`)",
+                         description="The four-step DBB test of the two rotary axes (the plan of `fivecal plan "
+                         "four-step`): the general engine fits every reading (the eight location errors and the "
+                         "bar lengths; identify's verdict), and the Jiang & Cripps method (eqs. 1-20) runs beside "
+                         "it as a check. The same analysis as `dbb jiang`; its result names the procedure "
+                         "four-step.",
+                         epilog="examples:\n"
+                         "  fivecal dbb four-step --machine vmc0656.json --simulate EY0A=0.01,EX0C=-0.02 "
+                         "--out result.json\n"
+                         "  fivecal plan four-step vmc0656.json --out plan.json   (add errors, sigma to it)\n"
+                         "  fivecal simulate plan.json --out ds.json\n"
+                         "  fivecal dbb four-step ds.json --out result.json\n"
+                         "  fivecal export linuxcnc result.json --machine vmc0656.json --kins xyzac-trt --out hal")
+    _add_four_step_options(pf)
+    pf.set_defaults(func=_four_step_cmd)
 
     pw = dsub.add_parser("wang", formatter_class=RD, help="Wang et al. simultaneous A/C test",
                          description="The A/C path that keeps the table ball on a horizontal circle "
@@ -509,7 +626,11 @@ def register(sub) -> None:
     pc.add_argument("--feed", type=POSITIVE, default=None, help="feed (mm/min): servo mismatch as a time")
     pc.add_argument("--dataset", help="dataset JSON instead of CSV files")
     pc.add_argument("--setups", default="P-,P+", help="setup ids of the runs in --dataset")
-    pc.add_argument("--machine", help="machine JSON for --simulate")
+    pc.add_argument("--machine", help="machine JSON: for --simulate, and with CSV runs for the machine-error fit "
+                    "(identify's, the result's parameters)")
+    pc.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
+                    help="grade ISO 230-4 values: G (circular deviation of each run), F (largest |radial "
+                    "deviation|), H (hysteresis), with a unit (G=15um); FAIL exits 1")
     pc.add_argument("--simulate", metavar="ERRORS", help="simulate CW and CCW runs with these errors")
     pc.add_argument("--sigma", type=SIGMA, default=0.0003, help="simulated reading noise, mm")
     pc.add_argument("--seed", type=SEED, default=1, help="random seed, 0 <= seed < 2^64 (default 1)")

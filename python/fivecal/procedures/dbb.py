@@ -22,8 +22,9 @@ from typing import Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from .. import _core
+from .. import _core, guards
 from ..dataset import Dataset
+from ..identification import finding_lines, identify, verdict_lines
 from ..machine import Machine, RadiansWarning
 from ..units import column_unit, display_scale, looks_like_radians, radians_message
 
@@ -69,9 +70,52 @@ class Trace:
         if self.angles.shape != self.readings.shape:
             raise ValueError(f"trace {self.label or ''}: {self.angles.size} angles but "
                              f"{self.readings.size} readings")
-        if self.direction == 0 and self.angles.size > 1:
-            d = self.angles[-1] - self.angles[0]
-            self.direction = 1 if d > 0 else (-1 if d < 0 else 0)
+        if self.direction == 0:
+            self.direction = run_direction(self.angles)
+
+
+def run_direction(angles) -> int:
+    """+1 (counter-clockwise, angle increasing), -1 (clockwise) or 0 (no net
+    turn) from the angles themselves (deg): the net turn of the unwrapped
+    angles, so a trace printed modulo 360 (a CW turn 0, 359.5, ..., 0.5) is
+    CW although its last angle is larger than its first."""
+    a = np.asarray(angles, dtype=float).ravel()
+    if a.size < 2 or not np.all(np.isfinite(a)):
+        return 0
+    turn = float(np.sum(np.diff(np.unwrap(np.radians(a)))))
+    return 1 if turn > 1e-9 else (-1 if turn < -1e-9 else 0)
+
+
+def claimed_direction(label: str) -> int:
+    """The run direction a file name or setup id claims: +1 for a ``ccw``
+    word or a trailing ``+`` (the planar plan's ``P+``), -1 for ``cw`` or a
+    trailing ``-``, 0 when it claims none."""
+    base = os.path.splitext(os.path.basename(str(label)))[0].strip()
+    words = {w for w in "".join(c if c.isalnum() else " " for c in base.lower()).split()}
+    if "ccw" in words or "counterclockwise" in words:
+        return 1
+    if "cw" in words or "clockwise" in words:
+        return -1
+    if base.endswith("+"):
+        return 1
+    if base.endswith("-"):
+        return -1
+    return 0
+
+
+def check_direction(trace: "Trace", source: str, label: Optional[str] = None) -> int:
+    """The trace's run direction from its angles; ValueError naming
+    ``source`` (a file, or a dataset and setup) when its name (``label``,
+    default ``source``) claims the other one."""
+    claim = claimed_direction(source if label is None else label)
+    d = trace.direction
+    if claim and d and claim != d:
+        words = {1: "counter-clockwise (CCW)", -1: "clockwise (CW)"}
+        a = np.degrees(np.unwrap(np.radians(trace.angles)))
+        raise ValueError(f"{source}: its name says {words[claim]} but its angles run {words[d]} "
+                         f"(from {a[0]:g} to {a[-1]:g} deg, unwrapped); the run direction is taken from "
+                         "the data: rename the file or setup, or check the sign of the angles")
+    return d
 
 
 def _split(line: str) -> list:
@@ -323,6 +367,21 @@ class FourStepResult:
         a += 2 * np.pi * np.round((np.asarray(s.angles)[0] - a[0]) / (2 * np.pi))
         return Trace(np.degrees(a), np.asarray(s.residuals), label=setup)
 
+    def procedure_values(self) -> dict:
+        """The values of the four-step method itself (the ``procedure.values``
+        of the result document; the machine errors, ``parameters``, are the
+        general engine's fit of the same readings): the method's PIGEs with
+        their standard uncertainties, each step's circle, O'E, eq. 20's
+        substitution error, the options and, per PIGE, the method minus the
+        engine."""
+        d = self.to_dict()
+        d.pop("engine", None)
+        d["method_values"] = d.pop("parameters")
+        if self.engine is not None:
+            d["method_minus_engine"] = {n: self.values[n] - self.engine.values[n] for n in self.names
+                                        if n in self.engine.values}
+        return d
+
     def to_dict(self) -> dict:
         d = {"method": "Jiang & Cripps 2015 four-step DBB test",
              "carrier": self.carrier, "carried": self.carried,
@@ -375,10 +434,14 @@ class FourStepResult:
                         f"{(self.values[n] - eng.values[n]) * f:>14.3f}")
             L.append(row + f"  {unit}")
         if eng is not None:
+            fd = guards.findings(eng)
             L.append("")
             L.append(f"  general engine: {eng.n_observations} readings, {eng.n_parameters} parameters "
                      f"(with the bar lengths), rank {eng.rank}, condition {eng.condition_number:.3g}, "
                      f"rms {eng.rms * 1e3:.3f} µm")
+            # identify's own verdict words: the engine's fit is the one a consumer uses
+            L += ["  " + t for t in verdict_lines(eng, fd)]
+            L += ["  " + t for t in finding_lines(fd)]
         if self.engine_error:
             L.append(f"  general engine: not run ({self.engine_error})")
         L.append("  signs: fivecal's (E = Trans.Rz.Ry.Rx); on the paper's machine its eq. 18 gives "
@@ -437,8 +500,6 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Optional[Sequence[str
                "length_offsets": dict(length_offsets or {})}
     eng, err = None, None
     if engine:
-        from ..identification import identify
-
         m = ds.machine
         ball = "tool" if core.tool_side else "table"
         initial = {}
@@ -691,6 +752,32 @@ class WangIdentification:
         """Candidates this path separates: name -> largest |correlation| with the fitted set."""
         return {c: f for c, (k, _, f) in self.verdicts.items() if k == "separable"}
 
+    setup: str = WANG_SETUP
+
+    def procedure_values(self, path: Optional["WangPath"] = None) -> dict:
+        """The path's own values (the ``procedure.values`` of the result
+        document): the trace (setup, samples, bar length, both balls, the
+        range of each rotary axis), the path geometry when ``path`` is given,
+        and what this path separates from the fitted errors."""
+        ds = self.result.dataset
+        idx = _dbb_rows(ds, self.setup)
+        obs = [ds.observations[i] for i in idx]
+        m = ds.machine
+        rotary = [a["name"] for a in m.axes if a["type"] == "rotary" and a["name"] != "S"]
+        d = {"setup": self.setup, "samples": len(idx), "bar_length": float(obs[0]["length"]),
+             "tool_ball": list(map(float, obs[0]["tool_ball"])), "table_ball": list(map(float, obs[0]["table_ball"])),
+             "axis_range": {a: [min(float(o["axes"].get(a, 0.0)) for o in obs),
+                                max(float(o["axes"].get(a, 0.0)) for o in obs)] for a in rotary},
+             "identifiability": {c: {"kind": k, "partners": list(p), "correlation": float(f)}
+                                 for c, (k, p, f) in self.verdicts.items()}}
+        if path is not None:
+            d["path"] = {"tilt_axis": path.tilt_axis, "rotary_axis": path.rotary_axis,
+                         "circle_radius": float(path.radius), "height": float(path.height),
+                         "circle_centre": list(map(float, path.centre)),
+                         "spindle_ball": list(map(float, path.spindle_ball)),
+                         "max_circle_error": float(path.max_circle_error)}
+        return d
+
     def report(self) -> str:
         L = ["Wang et al. simultaneous A/C DBB test: least squares on the whole trace", "",
              self.result.report(), "",
@@ -719,9 +806,6 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
     the engine say whether this path separates it from the fitted set."""
     import warnings
 
-    from ..guards import FitWarning
-    from ..identification import identify
-
     ds = Dataset.from_dict(dataset)
     _dbb_rows(ds, setup)
     estimate = list(estimate)
@@ -732,7 +816,7 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
     verdicts = {}
     for c in cand:
         with warnings.catch_warnings():  # probing confounded sets on purpose: not a failed fit
-            warnings.simplefilter("ignore", FitWarning)
+            warnings.simplefilter("ignore", guards.FitWarning)
             r = identify(ds, estimate + [c], allow_unidentifiable=True)
         if r.rank < r.n_parameters:
             groups = [list(g) for g in r.unidentifiable if c in g]
@@ -745,7 +829,7 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
         j = int(np.argmax(corr))
         kind = "practically confounded" if corr[j] > 0.9999 else "separable"
         verdicts[c] = (kind, [r.estimated[j]], float(corr[j]))
-    return WangIdentification(result, verdicts)
+    return WangIdentification(result, verdicts, setup)
 
 
 @dataclass
@@ -1011,6 +1095,47 @@ class CircularResult:
         L += ["    " + line for line in self.ranking_lines()]
         return "\n".join(L)
 
+    def procedure_values(self, tolerances: Optional[Mapping[str, float]] = None) -> dict:
+        """The ISO 230-4 values per run and direction, the hysteresis and the
+        diagnosis (the ``procedure.values`` of the result document), with
+        the grade against ``tolerances`` (:meth:`grade`) when given."""
+        d = self.to_dict()
+        for run, t in zip(d["runs"], self.traces):
+            run["label"] = t.label
+            run["samples"] = int(t.angles.size)
+        if tolerances:
+            d["grade"] = self.grade(tolerances)
+        return d
+
+    #: what a circular test's tolerance may name: ISO 230-4 circular deviation
+    #: G (each run), radial deviation F (largest |F| of any run), hysteresis H
+    TOLERANCE_NAMES = ("G", "F", "H")
+
+    def grade(self, tolerances: Mapping[str, float]) -> dict:
+        """PASS / FAIL of each toleranced ISO 230-4 value (mm): ``{"grade":
+        "PASS"|"FAIL", "items": [{name, run, value, tolerance, grade}]}``;
+        a value that is missing (H of a single run) is refused."""
+        items = []
+        for name, tol in tolerances.items():
+            if name not in self.TOLERANCE_NAMES:
+                raise ValueError(f"--tolerance {name}: a circular test grades "
+                                 f"{', '.join(self.TOLERANCE_NAMES)} (circular deviation, radial deviation, "
+                                 "hysteresis)")
+            if name == "H":
+                if self.hysteresis is None:
+                    raise ValueError("--tolerance H: hysteresis needs a CW and a CCW run")
+                pairs = [("CW/CCW", float(self.hysteresis))]
+            else:
+                pairs = [("CCW" if r.direction > 0 else "CW",
+                          float(r.circular_deviation) if name == "G" else
+                          max(abs(float(r.radial_deviation_max)), abs(float(r.radial_deviation_min))))
+                         for r in self.runs]
+            for run, v in pairs:
+                ok = math.isfinite(v) and v <= tol
+                items.append({"name": name, "run": run, "value": v, "tolerance": float(tol),
+                              "grade": "PASS" if ok else "FAIL"})
+        return {"grade": "FAIL" if any(i["grade"] == "FAIL" for i in items) else "PASS", "items": items}
+
     def to_dict(self) -> dict:
         return {"plane": self.plane, "nominal_radius": self.nominal_radius, "feed": self.feed,
                 "runs": [{"direction": "CCW" if r.direction > 0 else "CW",
@@ -1229,29 +1354,67 @@ def planar_plan(machine: Union[Machine, Mapping], plane: str = "XY", radius: flo
     idx = {"X": 0, "Y": 1, "Z": 2}
     if len(plane) != 2 or plane[0] not in idx or plane[1] not in idx or plane[0] == plane[1]:
         raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")
+    plan = []
+    for s in directions:
+        phis = np.arange(0.0, 360.0, step) * (1 if s > 0 else -1)
+        plan += _planar_entries(m, plane, float(radius), centre, tool_ball, phis, 1 if s > 0 else -1,
+                                f"{setup_prefix}{'+' if s > 0 else '-'}")
+    return plan
+
+
+def planar_dataset(machine: Union[Machine, Mapping], traces: Sequence[Trace], plane: str = "XY",
+                   radius: float = 100.0, centre=None, tool_ball=None, setup_prefix: str = "P") -> Dataset:
+    """A dataset of measured planar runs (angle of the spindle ball about the
+    table ball in deg, reading in mm), placed on the geometry of
+    :func:`planar_plan`: each run a setup ``P+`` (CCW) or ``P-`` (CW), its
+    direction taken from its angles; the linear axes' directions of motion
+    recorded for backlash. The machine-error fit of ``dbb circular``."""
+    m = Machine.from_dict(machine)
+    plane = plane.upper()
+    if not (math.isfinite(float(radius)) and radius > 0):
+        raise ValueError(f"radius: {radius!r}; must be a finite number > 0 mm")
+    obs, seen = [], set()
+    for t in traces:
+        d = t.direction or run_direction(t.angles)
+        if d == 0:
+            raise ValueError(f"{t.label or 'run'}: its angles make no net turn; a run direction cannot be told")
+        setup = f"{setup_prefix}{'+' if d > 0 else '-'}"
+        if setup in seen:
+            raise ValueError(f"{t.label or 'run'}: a second {'CCW' if d > 0 else 'CW'} run; give one CW and "
+                             "one CCW run")
+        seen.add(setup)
+        entries = _planar_entries(m, plane, float(radius), centre, tool_ball, t.angles, d, setup)
+        for e, r in zip(entries, t.readings):
+            e["reading"] = float(r)
+            obs.append(e)
+    return Dataset.from_dict({"machine": m.to_dict(), "observations": obs})
+
+
+def _planar_entries(m: Machine, plane: str, radius: float, centre, tool_ball, phis, s: int, setup: str) -> list:
+    idx = {"X": 0, "Y": 1, "Z": 2}
+    if len(plane) != 2 or plane[0] not in idx or plane[1] not in idx or plane[0] == plane[1]:
+        raise ValueError(f"plane: {plane!r} (XY, YZ or ZX)")
     tb = np.asarray(tool_ball if tool_ball is not None else m.tip, float)
     c = np.asarray(centre if centre is not None else m.tip, float)
     e1, e2 = np.eye(3)[idx[plane[0]]], np.eye(3)[idx[plane[1]]]
     plan = []
-    for s in directions:
-        phis = np.arange(0.0, 360.0, step) * (1 if s > 0 else -1)
-        pts = np.array([c + radius * (math.cos(math.radians(p)) * e1 + math.sin(math.radians(p)) * e2)
-                        for p in phis])
-        cmd = m.inverse(pts + (m.tip - tb), start={a: 0.0 for a in m.axis_names})
-        for i, p in enumerate(phis):
-            axes = {a: float(v[i]) for a, v in cmd.items()}
-            # Velocity of the circle point: d/dphi (cos, sin) times the direction.
-            vel = s * (-math.sin(math.radians(p)) * e1 + math.cos(math.radians(p)) * e2)
-            direction = {}
-            for ax in m.axes:
-                if ax["type"] != "linear":
-                    continue
-                # Command sign of the motion: a table axis moves the part, so
-                # the tool runs against its direction relative to the part.
-                side = -1.0 if ax["name"] in m.workpiece_chain else 1.0
-                v = side * float(np.dot(vel, ax["direction"]))
-                direction[ax["name"]] = 0 if abs(v) < 1e-12 else int(np.sign(v))
-            plan.append({"type": "dbb", "setup": f"{setup_prefix}{'+' if s > 0 else '-'}", "axes": axes,
-                         "direction": direction, "length": float(radius),
-                         "tool_ball": [float(x) for x in tb], "table_ball": [float(x) for x in c]})
+    pts = np.array([c + radius * (math.cos(math.radians(p)) * e1 + math.sin(math.radians(p)) * e2)
+                    for p in phis])
+    cmd = m.inverse(pts + (m.tip - tb), start={a: 0.0 for a in m.axis_names})
+    for i, p in enumerate(phis):
+        axes = {a: float(v[i]) for a, v in cmd.items()}
+        # Velocity of the circle point: d/dphi (cos, sin) times the direction.
+        vel = s * (-math.sin(math.radians(p)) * e1 + math.cos(math.radians(p)) * e2)
+        direction = {}
+        for ax in m.axes:
+            if ax["type"] != "linear":
+                continue
+            # Command sign of the motion: a table axis moves the part, so
+            # the tool runs against its direction relative to the part.
+            side = -1.0 if ax["name"] in m.workpiece_chain else 1.0
+            v = side * float(np.dot(vel, ax["direction"]))
+            direction[ax["name"]] = 0 if abs(v) < 1e-12 else int(np.sign(v))
+        plan.append({"type": "dbb", "setup": setup, "axes": axes,
+                     "direction": direction, "length": float(radius),
+                     "tool_ball": [float(x) for x in tb], "table_ball": [float(x) for x in c]})
     return plan
