@@ -256,3 +256,38 @@ def test_history_compare_exits_1_when_a_change_is_beyond_its_tolerance(tmp_path,
     assert main(["history", "compare", *rs, "--change-tolerance", "EX0C=12"]) == 2
     err = capsys.readouterr().err
     assert "--change-tolerance EX0C" in err and "12um" in err, err
+
+
+def test_identify_store_exits_1_on_an_alarm_of_this_result(tmp_path, capsys):
+    """The trend identify --store --record shows: a 3 µm step of EX0C on this
+    night's check alarms, exit 1 (as history trend); the same machine
+    unchanged exits 0."""
+    import fivecal
+    from fivecal import history
+    from fivecal.history import fleetsim
+    m = fleetsim.machine()
+    plan = fleetsim.sphere_check_plan(m)
+
+    def dataset(ex, seed, path=None):
+        ds = fivecal.simulate(m, plan, errors={"EX0C": ex}, artefact={"spheres": [fleetsim.SPHERE]},
+                              tip_radius=3.0, sigma=0.0006, seed=seed)
+        if path is not None:
+            fivecal.save_dataset(ds, str(path))
+        return ds
+
+    db = str(tmp_path / "s.fcdb")
+    with history.Store(db) as s:
+        for night in range(8):
+            r = fivecal.identify(dataset(0.010, night), "location")
+            s.add(r, machine_id="M1", time=f"2026-01-{night + 1:02d}T02:00:00Z", digest=f"n{night}")
+    capsys.readouterr()
+    same, step = tmp_path / "2026-01-10.json", tmp_path / "2026-01-11.json"
+    dataset(0.010, 100, same)
+    dataset(0.013, 101, step)
+    assert main(["identify", str(same), "--estimate", "location", "--store", db, "--machine-id", "M1",
+                 "--record"]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    assert main(["identify", str(step), "--estimate", "location", "--store", db, "--machine-id", "M1",
+                 "--record"]) == 1
+    err = capsys.readouterr().err
+    assert "CUSUM ALARM on this result: EX0C" in err, err

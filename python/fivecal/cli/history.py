@@ -8,7 +8,8 @@ import sys
 import warnings
 
 from ..history.fleet import _time_of, fleet_identify
-from ..history.store import AlreadyRecorded, Store, calibration_from_result, dataset_digest, write_parquet
+from ..history.store import (AlreadyRecorded, Store, calibration_from_result, dataset_digest, time_key,
+                             write_parquet)
 from ..history.trend import ChartDesign, compare, detect, grade, plot_trend, pooled_statistics
 from ..identification import resolve_estimate
 from ..machine import Machine
@@ -309,6 +310,30 @@ def grade_identify(result, hist) -> str:
     print()
     print(g.report())
     return g.verdict
+
+
+def alarms_identify(result, hist) -> list:
+    """``fivecal identify --store``: the machine errors whose CUSUM chart
+    alarms on this result, in the trend the report shows (this result placed
+    at its time; found by its dataset's digest once recorded). An alarm exits
+    1, as a FAIL does."""
+    if not os.path.exists(hist.store):
+        return []
+    with Store(hist.store, create=False) as s:
+        cals = s.list(hist.machine_id, since=s.rebuilt_at(hist.machine_id))
+    digest = dataset_digest(result.dataset)
+    this = next((c for c in reversed(cals) if c.digest == digest), None)
+    if this is None:
+        this = calibration_from_result(result, hist.machine_id, time=hist.time, digest=digest,
+                                       source="this identification")
+        cals.append(this)
+        cals.sort(key=lambda c: time_key(c.time))
+    usable = [c for c in cals if c.usable]
+    k = next((i for i, c in enumerate(usable) if c is this), None)
+    if k is None or len(usable) < 2:
+        return []
+    charts = detect(usable, false_alarm_rate=hist.false_alarm_rate)
+    return [n for n, ch in charts.items() if k in ch.alarms]
 
 
 def record_identify(args, result, hist) -> None:

@@ -10,7 +10,8 @@ from ..identification import identify, procedure_of, procedure_values
 from ..progress import busy
 from ..report.document import write_report
 from .common import EXIT_FIT, EXIT_OK, _fit_warning
-from .history import add_identify_options, check_identify_history, grade_identify, identify_history, record_identify
+from .history import (add_identify_options, alarms_identify, check_identify_history, grade_identify, identify_history,
+                      record_identify)
 
 
 def _identify(args) -> int:
@@ -53,6 +54,11 @@ def _identify(args) -> int:
         if grade_identify(result, hist) == "fail":
             print("fivecal identify: FAIL against the tolerances (see the grade above)", file=sys.stderr)
             return EXIT_FIT
+    alarmed = alarms_identify(result, hist) if hist is not None else []
+    if alarmed:  # an alarm stops a script as a FAIL does (`history trend` too)
+        print(f"fivecal identify: CUSUM ALARM on this result: {', '.join(alarmed)} changed (the report's trend)",
+              file=sys.stderr)
+        return EXIT_FIT
     return EXIT_OK
 
 
