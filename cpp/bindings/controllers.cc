@@ -8,8 +8,12 @@
 
 #include <algorithm>
 #include <map>
+#include <optional>
 #include <string>
 
+#include "fivecal/controllers/absorb.h"
+#include "fivecal/controllers/compensate.h"
+#include "fivecal/controllers/linuxcnc_5axis.h"
 #include "fivecal/controllers/linuxcnc_trt.h"
 #include "fivecal/model/machine.h"
 
@@ -36,6 +40,33 @@ std::map<std::string, double> PinsToMap(TrtKins kins, const TrtPins& p) {
   std::map<std::string, double> d;
   for (const std::string& n : TrtPinNames(kins)) d[n] = TrtPin(p, n);
   return d;
+}
+
+py::dict TrtFitDict(TrtKins kins, const TrtFit& fit) {
+  py::dict d;
+  d["pins"] = PinsToMap(kins, fit.pins);
+  d["solved"] = fit.solved;
+  d["workpiece_shift"] = Eigen::Vector3d(fit.workpiece_shift);
+  d["workpiece_shift_held"] = Eigen::Vector3d(fit.workpiece_shift_held);
+  d["residual"] = fit.residual;
+  d["residual_held"] = fit.residual_held;
+  d["rms"] = fit.rms;
+  d["max"] = fit.max;
+  d["rms_held"] = fit.rms_held;
+  d["max_held"] = fit.max_held;
+  return d;
+}
+
+py::list ParameterList(const std::vector<ControllerParameter>& params) {
+  py::list l;
+  for (const ControllerParameter& p : params) {
+    py::dict d;
+    d["label"] = p.label;
+    d["unit"] = p.unit;
+    d["column"] = p.column;
+    l.append(d);
+  }
+  return l;
 }
 
 }  // namespace
@@ -128,21 +159,114 @@ void BindControllers(py::module_& m) {
           py::gil_scoped_release release;
           fit = FitTrtPins(mc, kins, theta, poses, PinsFromMap(kins, held));
         }
-        py::dict d;
-        d["pins"] = PinsToMap(kins, fit.pins);
-        d["solved"] = fit.solved;
-        d["workpiece_shift"] = Eigen::Vector3d(fit.workpiece_shift);
-        d["workpiece_shift_held"] = Eigen::Vector3d(fit.workpiece_shift_held);
-        d["residual"] = fit.residual;
-        d["residual_held"] = fit.residual_held;
-        d["rms"] = fit.rms;
-        d["max"] = fit.max;
-        d["rms_held"] = fit.rms_held;
-        d["max_held"] = fit.max_held;
-        return d;
+        return TrtFitDict(kins, fit);
       },
       py::arg("machine"), py::arg("kins"), py::arg("theta"), py::arg("poses"),
       py::arg("held") = std::map<std::string, double>{},
       "Pins that best absorb the errors theta over the poses (N x num_axes, mm / degrees): "
       "dict pins, solved, workpiece_shift(_held) (3, mm), residual / residual_held (N x 3 mm), rms, max, rms_held, max_held.");
+
+  m.def("controller_models", &ControllerModelNames,
+        "Names of the controller models the absorber knows (generic pivots, LinuxCNC trt, 5axiskins).");
+
+  m.def(
+      "controller_parameters",
+      [](const Machine& mc, const std::string& model, bool directions, bool tool_length) {
+        return ParameterList(ControllerParameters(mc, ParseControllerModel(model), directions, tool_length));
+      },
+      py::arg("machine"), py::arg("model"), py::arg("directions") = false, py::arg("tool_length") = true,
+      "The model's parameters on the machine: list of dicts label, unit, column (d theta per unit). "
+      "Raises ValueError when the machine's topology does not fit the model.");
+
+  m.def(
+      "controller_absorb",
+      [](const Machine& mc, const std::string& model_name, const Eigen::VectorXd& theta,
+         const Eigen::MatrixXd& poses, bool directions, bool tool_length,
+         const std::map<std::string, double>& held_pins) {
+        const ControllerModel model = ParseControllerModel(model_name);
+        AbsorbOptions o;
+        o.directions = directions;
+        o.tool_length = tool_length;
+        const bool trt = model == ControllerModel::kXyzacTrt || model == ControllerModel::kXyzbcTrt;
+        const TrtKins kins = model == ControllerModel::kXyzbcTrt ? TrtKins::kXyzbc : TrtKins::kXyzac;
+        if (!held_pins.empty()) {
+          if (!trt)
+            throw std::invalid_argument("held_pins: only the LinuxCNC trt models have pins (model " +
+                                        model_name + ")");
+          o.held_pins = PinsFromMap(kins, held_pins);
+        }
+        Absorption ab;
+        {
+          py::gil_scoped_release release;
+          ab = Absorb(mc, model, theta, poses, o);
+        }
+        py::dict d;
+        d["model"] = ControllerModelName(ab.model);
+        d["parameters"] = ParameterList(ab.parameters);
+        d["values"] = ab.values;
+        d["held"] = ab.held;
+        d["theta"] = ab.theta;
+        d["workpiece_shift"] = Eigen::Vector3d(ab.workpiece_shift);
+        d["residual"] = ab.residual;
+        d["residual_old"] = ab.residual_old;
+        d["rms"] = ab.rms;
+        d["max"] = ab.max;
+        d["rms_old"] = ab.rms_old;
+        d["max_old"] = ab.max_old;
+        d["trt"] = ab.trt ? py::object(TrtFitDict(kins, *ab.trt)) : py::object(py::none());
+        return d;
+      },
+      py::arg("machine"), py::arg("model"), py::arg("theta"), py::arg("poses"),
+      py::arg("directions") = false, py::arg("tool_length") = true,
+      py::arg("held_pins") = std::map<std::string, double>{},
+      "Least-squares absorption of the errors theta by the controller model over the poses (N x "
+      "num_axes, mm / degrees): dict model, parameters, values, held, theta, workpiece_shift, "
+      "residual, residual_old (N x 3 mm), rms, max, rms_old, max_old, and for the LinuxCNC trt "
+      "models trt (the pins fit, as trt_fit; held_pins: the pins it holds).");
+
+  m.def(
+      "fiveaxis_match",
+      [](const Machine& mc) {
+        const FiveAxisMapping map = MatchFiveAxis(mc);
+        py::dict sign;
+        for (int k = 0; k < 5; ++k) sign[py::str(std::string(1, "XYZBC"[k]))] = map.sign[k];
+        py::dict d;
+        d["sign"] = sign;
+        d["pivot_length"] = map.pivot_length;
+        d["origin"] = Eigen::Vector3d(map.origin);
+        return d;
+      },
+      py::arg("machine"),
+      "How the machine drives 5axiskins's joints X Y Z B C: sign (joint = sign * command), "
+      "pivot_length (mm) and origin (world = workpiece point - origin). ValueError says why a "
+      "machine does not fit.");
+  m.def("fiveaxis_forward", &FiveAxisForward, py::arg("pivot_length"), py::arg("joints"),
+        "5axiskins.c forward kinematics: joints N x 5 (X Y Z B C, mm / degrees) -> world N x 3.");
+  m.def("fiveaxis_inverse", &FiveAxisInverse, py::arg("pivot_length"), py::arg("world"),
+        "5axiskins.c inverse kinematics: world N x 5 (X Y Z B C) -> joints N x 5.");
+  m.def(
+      "fiveaxis_joints",
+      [](const Machine& mc, const Eigen::MatrixXd& commands) {
+        return FiveAxisJoints(mc, MatchFiveAxis(mc), commands);
+      },
+      py::arg("machine"), py::arg("commands"), "5axiskins joints N x 5 for fivecal commands.");
+
+  m.def(
+      "compensate_commands",
+      [](const Machine& mc, const Eigen::VectorXd& theta, const Eigen::MatrixXd& points,
+         const std::optional<Eigen::MatrixXd>& tool_axes, const Eigen::MatrixXd& nominal,
+         const std::optional<Eigen::MatrixXi>& dirs, bool orientation, double max_rotary_correction) {
+        CompensatedCommands c;
+        {
+          py::gil_scoped_release release;
+          c = CompensateCommands(mc, theta, points, tool_axes ? &*tool_axes : nullptr, nominal,
+                                 dirs ? &*dirs : nullptr, orientation, max_rotary_correction);
+        }
+        return py::make_tuple(c.commands, c.oriented);
+      },
+      py::arg("machine"), py::arg("theta"), py::arg("points"), py::arg("tool_axes"), py::arg("nominal"),
+      py::arg("directions") = py::none(), py::arg("orientation") = true,
+      py::arg("max_rotary_correction") = 0.1,
+      "Compensated commands for N poses, each seeded at its nominal commands: (N x num_axes "
+      "commands, N oriented flags). ValueError 'pose i: ...' for a target that cannot be reached.");
 }
