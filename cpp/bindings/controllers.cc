@@ -13,6 +13,7 @@
 
 #include "fivecal/controllers/absorb.h"
 #include "fivecal/controllers/compensate.h"
+#include "fivecal/controllers/kinematics_table.h"
 #include "fivecal/controllers/linuxcnc_5axis.h"
 #include "fivecal/controllers/linuxcnc_trt.h"
 #include "fivecal/model/machine.h"
@@ -269,4 +270,70 @@ void BindControllers(py::module_& m) {
       py::arg("max_rotary_correction") = 0.1,
       "Compensated commands for N poses, each seeded at its nominal commands: (N x num_axes "
       "commands, N oriented flags). ValueError 'pose i: ...' for a target that cannot be reached.");
+
+  m.def(
+      "kinematics_table",
+      [](const Machine& mc, const Eigen::VectorXd& theta) {
+        const KinematicsTable t = MakeKinematicsTable(mc, theta);
+        py::list rows;
+        for (const TableAxis& a : t.axes) {
+          py::dict r;
+          r["axis"] = std::string(1, a.axis);
+          r["chain"] = a.tool_chain ? "tool" : "workpiece";
+          r["type"] = a.rotary ? "rotary" : "linear";
+          r["direction"] = Eigen::Vector3d(a.direction);
+          if (a.rotary) r["point"] = Eigen::Vector3d(a.point);
+          rows.append(r);
+        }
+        py::dict d;
+        d["axes"] = rows;
+        d["tool_tip"] = Eigen::Vector3d(t.tool_tip);
+        d["tool_axis"] = Eigen::Vector3d(t.tool_axis);
+        d["part_origin"] = Eigen::Vector3d(t.part_origin);
+        d["part_rotation"] = Eigen::Matrix3d(t.part_rotation);
+        return d;
+      },
+      py::arg("machine"), py::arg("theta"),
+      "The machine (location errors and tip offsets of theta) as a neutral kinematics table: dict "
+      "axes (axis, chain, type, direction, point for a rotary axis), tool_tip, tool_axis, "
+      "part_origin, part_rotation; machine frame at the zero pose, mm.");
+
+  m.def(
+      "table_tool_points",
+      [](const std::vector<std::string>& names, const std::vector<std::string>& chains,
+         const std::vector<std::string>& types,
+         const Eigen::MatrixXd& directions, const Eigen::MatrixXd& points, const Eigen::Vector3d& tool_tip,
+         const Eigen::Vector3d& part_origin, const Eigen::Matrix3d& part_rotation, const Eigen::MatrixXd& q) {
+        const size_t n = chains.size();
+        if (names.size() != n || types.size() != n || size_t(directions.rows()) != n || size_t(points.rows()) != n ||
+            directions.cols() != 3 || points.cols() != 3)
+          throw std::invalid_argument("table.axes: names, chains, types, directions and points (N x 3) disagree");
+        KinematicsTable t;
+        for (size_t k = 0; k < n; ++k) {
+          if (chains[k] != "tool" && chains[k] != "workpiece")
+            throw std::invalid_argument("table.axes[" + std::to_string(k) + "].chain: '" + chains[k] +
+                                        "' (expected workpiece or tool)");
+          if (types[k] != "rotary" && types[k] != "linear")
+            throw std::invalid_argument("table.axes[" + std::to_string(k) + "].type: '" + types[k] +
+                                        "' (expected linear or rotary)");
+          TableAxis a;
+          if (names[k].size() != 1)
+            throw std::invalid_argument("table.axes[" + std::to_string(k) + "].axis: '" + names[k] +
+                                        "' (expected one axis letter)");
+          a.axis = names[k][0];
+          a.tool_chain = chains[k] == "tool";
+          a.rotary = types[k] == "rotary";
+          a.direction = directions.row(Eigen::Index(k)).transpose();
+          a.point = points.row(Eigen::Index(k)).transpose();
+          t.axes.push_back(a);
+        }
+        t.tool_tip = tool_tip;
+        t.part_origin = part_origin;
+        t.part_rotation = part_rotation;
+        return TableToolPoints(t, q);
+      },
+      py::arg("names"), py::arg("chains"), py::arg("types"), py::arg("directions"), py::arg("points"), py::arg("tool_tip"),
+      py::arg("part_origin"), py::arg("part_rotation"), py::arg("axes"),
+      "Tool points (N x 3, part frame) that a kinematics table describes for commands axes (N x "
+      "rows, mm / degrees): each axis a screw about its line.");
 }

@@ -412,6 +412,10 @@ def compensate_commands(machine: Machine, theta: np.ndarray, points: np.ndarray,
                         tool_axes: Optional[np.ndarray], nominal: np.ndarray,
                         directions: Optional[np.ndarray] = ..., orientation: bool = ...,
                         max_rotary_correction: float = ...) -> tuple[np.ndarray, list[bool]]: ...
+def kinematics_table(machine: Machine, theta: np.ndarray) -> dict: ...
+def table_tool_points(names: list[str], chains: list[str], types: list[str], directions: np.ndarray,
+                      points: np.ndarray, tool_tip: np.ndarray, part_origin: np.ndarray,
+                      part_rotation: np.ndarray, axes: np.ndarray) -> np.ndarray: ...
 
 # ---- double ball bar (cpp/bindings/dbb.cc; only what is stubbed so far) ----
 class CircularTestResult:

@@ -8,6 +8,7 @@
 
 #include "fivecal/controllers/absorb.h"
 #include "fivecal/controllers/compensate.h"
+#include "fivecal/controllers/kinematics_table.h"
 #include "fivecal/controllers/linuxcnc_5axis.h"
 #include "fivecal/model/kinematics.h"
 
@@ -146,6 +147,20 @@ TEST(Controllers, BatchedCompensationReachesTheTargets) {
     FAIL();
   } catch (const std::invalid_argument& e) {
     EXPECT_EQ(std::string(e.what()).rfind("pose 2: ", 0), 0u) << e.what();
+  }
+}
+
+TEST(Controllers, KinematicsTableReproducesTheToolPoints) {
+  // Location errors and tip offsets are what a table holds: its own screw
+  // kinematics gives fivecal's tool points (in the part frame it states).
+  for (const Machine& m : {TableTable(), HeadHead()}) {
+    const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.03}, {"EA0C", 4e-5}, {"EC0Y", 5e-5}, {"tip.z", 0.02},
+                                         {"EB0C", -2e-5}, {"EY0X", 0.01}});
+    const KinematicsTable t = MakeKinematicsTable(m, th);
+    const Eigen::MatrixXd q = Poses(m, 30);
+    Eigen::MatrixXd qt(q.rows(), Eigen::Index(t.axes.size()));
+    for (size_t k = 0; k < t.axes.size(); ++k) qt.col(Eigen::Index(k)) = q.col(m.AxisIndex(t.axes[k].axis));
+    EXPECT_LT((TableToolPoints(t, qt) - ToolPoints(m, th, q)).cwiseAbs().maxCoeff(), 1e-9) << m.name();
   }
 }
 

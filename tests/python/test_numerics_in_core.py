@@ -19,6 +19,8 @@ about 1e-9 relative.
   5axiskins (was ``io/controllers.absorb``, a finite-difference Gauss-Newton,
   and 5axiskins in numpy; now ``Absorb`` and ``linuxcnc_5axis`` in
   ``cpp/src/controllers``);
+* the neutral kinematics table and the screw kinematics it describes (was
+  numpy in ``io/controllers``; now ``kinematics_table.cc``);
 * compensation batched over poses (was a per-pose loop in
   ``compensation.compensate_poses``; now ``CompensateCommands``);
 * the facet residual of LinuxCNC's probe depths and simulated probe planes
@@ -765,3 +767,107 @@ def test_linuxcnc_probe_checks_use_the_core_facet_residual(errors):
         _close(a["g"], b["g"], rel=0, abs_=1e-11)
     with pytest.raises(ValueError, match="probe depths are of facet touches"):
         L.probe_depths(m, kins, [dict(p, type="sphere") for p in plan], art, 3.0, log, pins)
+
+
+# ---------------------------------------------------------------------------
+# The neutral kinematics table and the kinematics it describes (was numpy in
+# io/controllers.py; now cpp/src/controllers/kinematics_table.cc)
+# ---------------------------------------------------------------------------
+def _old_rot_zyx(a, b, c):
+    ca, sa, cb, sb, cc, sc = math.cos(a), math.sin(a), math.cos(b), math.sin(b), math.cos(c), math.sin(c)
+    return np.array([[cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
+                     [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
+                     [-sb, cb * sa, cb * ca]])
+
+
+def _old_kinematics_table(machine, th):
+    names = machine.parameter_names()
+    val = dict(zip(names, th))
+    axes = {a["name"]: a for a in machine.axes}
+    rows, frames = [], {}
+    for chain_name, chain in (("workpiece", machine.workpiece_chain), ("tool", machine.tool_chain)):
+        R, t, parent = np.eye(3), np.zeros(3), np.zeros(3)
+        for n in chain:
+            a = axes[n]
+            p = np.asarray(a.get("point") or [0.0, 0.0, 0.0], float)
+            loc = [val.get(f"E{c}0{n}", 0.0) for c in "XYZABC"]
+            t = t + R @ (np.asarray(loc[:3]) + p - parent)
+            R = R @ _old_rot_zyx(*loc[3:])
+            parent = p
+            if n != "S":
+                rows.append({"axis": n, "chain": chain_name, "type": a["type"],
+                             "direction": R @ np.asarray(a["direction"], float), "point": t.copy(),
+                             "nominal_point": p})
+        frames[chain_name] = (R, t, parent)
+    Rw, tw, pw = frames["workpiece"]
+    Rt, tt, pt = frames["tool"]
+    tip = machine.tip + np.array([val.get(f"tip.{c}", 0.0) for c in "xyz"])
+    out_rows = []
+    for r in rows:
+        d = r["direction"]
+        row = {"axis": r["axis"], "chain": r["chain"], "type": r["type"], "direction": d}
+        if r["type"] == "rotary":
+            o = r["point"]
+            row["point"] = o + ((r["nominal_point"] - o) @ d) * d
+        out_rows.append(row)
+    _, v = machine.tool_pose({n: 0.0 for n in machine.axis_names},
+                             errors={n: float(x) for n, x in zip(names, th) if x != 0.0})
+    return {"axes": out_rows, "tool_tip": tt + Rt @ (tip - pt), "tool_axis": Rw @ np.asarray(v[0]),
+            "part_origin": tw - Rw @ pw, "part_rotation": Rw}
+
+
+def _old_axis_angle(u, q):
+    u = u / np.linalg.norm(u)
+    K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    return np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * K @ K
+
+
+def _old_table_tool_points(table, axes):
+    names = [r["axis"] for r in table["axes"]]
+    qs = {n: np.atleast_1d(np.asarray(axes.get(n, 0.0), dtype=float)) for n in names}
+    n = max(len(v) for v in qs.values())
+    out = np.zeros((n, 3))
+    Rw = np.asarray(table.get("part_rotation", np.eye(3)), dtype=float)
+    Wt = np.asarray(table.get("part_origin", np.zeros(3)), dtype=float)
+    rows = {c: [r for r in table["axes"] if r["chain"] == c] for c in ("workpiece", "tool")}
+    for i in range(n):
+        def apply(chain, x, inverse):
+            for r in (chain if inverse else list(reversed(chain))):
+                qv = float(np.broadcast_to(qs[r["axis"]], (n,))[i])
+                d = np.asarray(r["direction"], float)
+                if r["type"] == "linear":
+                    x = x - qv * d if inverse else x + qv * d
+                else:
+                    x = np.asarray(r["point"], float) + _old_axis_angle(d, math.radians(-qv if inverse else qv)) \
+                        @ (x - np.asarray(r["point"], float))
+            return x
+        p = apply(rows["tool"], np.asarray(table["tool_tip"], float), False)
+        out[i] = Rw.T @ (apply(rows["workpiece"], p, True) - Wt)
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(ABSORB_MACHINES))
+def test_kinematics_table_and_its_kinematics_equal_the_old_python(name):
+    m = ABSORB_MACHINES[name][0]()
+    e = _absorb_errors(m, "tilts")
+    e.update({k: v for k, v in {"tip.x": 0.01, "tip.z": -0.02, "EC0Y": 4e-5, "EB0Z": -3e-5,
+                                "EX0S": 0.004}.items() if k in m.parameter_names()})
+    th = m.theta(e)
+    new, old = K.kinematics_table(m, th), _old_kinematics_table(m, th)
+    assert [(r["axis"], r["chain"], r["type"], "point" in r) for r in new["axes"]] == \
+        [(r["axis"], r["chain"], r["type"], "point" in r) for r in old["axes"]]
+    for a, b in zip(new["axes"], old["axes"]):
+        _close(a["direction"], b["direction"], abs_=1e-15)
+        if "point" in b:
+            _close(a["point"], b["point"], abs_=1e-12)
+    for k in ("tool_tip", "tool_axis", "part_origin", "part_rotation"):
+        _close(new[k], old[k], abs_=1e-15)
+    rng = np.random.default_rng(6)
+    poses = {a["name"]: rng.uniform(-120, 120, 25) for a in m.axes}
+    poses["S"] = np.zeros(25)
+    _close(K.table_tool_points(new, poses), _old_table_tool_points(old, poses), abs_=1e-12)
+    # a scalar command broadcasts, a missing axis is 0, as before
+    few = {new["axes"][0]["axis"]: 30.0, new["axes"][-1]["axis"]: np.array([1.0, -2.0, 5.0])}
+    _close(K.table_tool_points(new, few), _old_table_tool_points(old, few), abs_=1e-12)
+    with pytest.raises(ValueError, match=r"axes\[1\]"):
+        K.table_tool_points(new, {new["axes"][0]["axis"]: np.array([0.0, np.nan])})

@@ -261,13 +261,6 @@ def fiveaxis_joints(machine: Machine, axes: Mapping) -> np.ndarray:
 
 # ---- neutral kinematics table ------------------------------------------------
 
-def _rot_zyx(a: float, b: float, c: float) -> np.ndarray:
-    ca, sa, cb, sb, cc, sc = math.cos(a), math.sin(a), math.cos(b), math.sin(b), math.cos(c), math.sin(c)
-    return np.array([[cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
-                     [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
-                     [-sb, cb * sa, cb * ca]])
-
-
 def kinematics_table(machine: Machine, theta=None) -> dict:
     """The machine (with the location errors and tip offsets in ``theta``, a
     parameter vector or dict; default nominal) as a neutral kinematics table:
@@ -283,50 +276,10 @@ def kinematics_table(machine: Machine, theta=None) -> dict:
     table axis is the opposite rotation of the part: use a direction reversed
     against the nominal machine axis there). Error motions are not in a table."""
     th = machine.theta(theta) if not isinstance(theta, np.ndarray) else theta
-    names = machine.parameter_names()
-    val = dict(zip(names, th))
-    axes = {a["name"]: a for a in machine.axes}
-    rows = []
-    frames = {}
-    for chain_name, chain in (("workpiece", machine.workpiece_chain), ("tool", machine.tool_chain)):
-        R, t, parent = np.eye(3), np.zeros(3), np.zeros(3)
-        for n in chain:
-            a = axes[n]
-            keep = n != "S"  # the spindle's frame counts, its row does not
-            p = np.asarray(a.get("point") or [0.0, 0.0, 0.0], float)
-            loc = [val.get(f"E{c}0{n}", 0.0) for c in "XYZABC"]
-            t = t + R @ (np.asarray(loc[:3]) + p - parent)
-            R = R @ _rot_zyx(*loc[3:])
-            parent = p
-            if keep:
-                rows.append({"axis": n, "chain": chain_name, "type": a["type"],
-                             "direction": R @ np.asarray(a["direction"], float), "point": t.copy(),
-                             "nominal_point": p})
-        frames[chain_name] = (R, t, parent)
-    Rw, tw, pw = frames["workpiece"]
-    W_t = tw - Rw @ pw             # the part frame at the zero pose: W0 = F_last . Trans(-p_last)
-    Rt, tt, pt = frames["tool"]
-    tip = machine.tip + np.array([val.get(f"tip.{c}", 0.0) for c in "xyz"])
-    out_rows = []
-    for r in rows:
-        d = r["direction"]
-        row = {"axis": r["axis"], "chain": r["chain"], "type": r["type"], "direction": d}
-        if r["type"] == "rotary":
-            o = r["point"]
-            row["point"] = o + ((r["nominal_point"] - o) @ d) * d  # nearest the nominal pivot
-        out_rows.append(row)
-    zero = {n: 0.0 for n in machine.axis_names}
-    _, v = machine.tool_pose(zero, errors={n: float(x) for n, x in zip(names, th - machine.theta(None))
-                                           if x != 0.0})
-    return {"machine": machine.name, "topology": machine.topology, "axes": out_rows,
-            "tool_tip": tt + Rt @ (tip - pt), "tool_axis": Rw @ np.asarray(v[0]),
-            "part_origin": W_t, "part_rotation": Rw}
-
-
-def _axis_angle(u: np.ndarray, q: float) -> np.ndarray:
-    u = u / np.linalg.norm(u)
-    K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
-    return np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * K @ K
+    t = _core.kinematics_table(machine._core, np.asarray(th, dtype=float))
+    return {"machine": machine.name, "topology": machine.topology, "axes": list(t["axes"]),
+            "tool_tip": np.asarray(t["tool_tip"]), "tool_axis": np.asarray(t["tool_axis"]),
+            "part_origin": np.asarray(t["part_origin"]), "part_rotation": np.asarray(t["part_rotation"])}
 
 
 def table_tool_points(table: Mapping, axes: Mapping) -> np.ndarray:
@@ -334,29 +287,17 @@ def table_tool_points(table: Mapping, axes: Mapping) -> np.ndarray:
     table describes, for axis commands ``axes`` (mm, degrees): each axis a
     screw about its line, tool = S_tool(q) tip, part = S_workpiece(q), in the
     part frame (``part_origin``, ``part_rotation``)."""
-    names = [r["axis"] for r in table["axes"]]
+    rows = list(table["axes"])
+    names = [r["axis"] for r in rows]
     qs = {n: np.atleast_1d(np.asarray(axes.get(n, 0.0), dtype=float)) for n in names}
     n = max(len(v) for v in qs.values())
-    out = np.zeros((n, 3))
-    Rw = np.asarray(table.get("part_rotation", np.eye(3)), dtype=float)
-    Wt = np.asarray(table.get("part_origin", np.zeros(3)), dtype=float)
-    rows = {c: [r for r in table["axes"] if r["chain"] == c] for c in ("workpiece", "tool")}
-    for i in range(n):
-        def apply(chain, x, inverse):
-            seq = chain if inverse else list(reversed(chain))
-            for r in seq:  # forward: innermost first
-                qv = float(np.broadcast_to(qs[r["axis"]], (n,))[i])
-                d = np.asarray(r["direction"], float)
-                if r["type"] == "linear":
-                    x = x - qv * d if inverse else x + qv * d
-                else:
-                    R = _axis_angle(d, math.radians(-qv if inverse else qv))
-                    o = np.asarray(r["point"], float)
-                    x = o + R @ (x - o)
-            return x
-        p = apply(rows["tool"], np.asarray(table["tool_tip"], float), False)
-        out[i] = Rw.T @ (apply(rows["workpiece"], p, True) - Wt)
-    return out
+    q = np.column_stack([np.broadcast_to(qs[a], (n,)) for a in names]) if rows else np.zeros((n, 0))
+    return np.asarray(_core.table_tool_points(
+        names, [r["chain"] for r in rows], [r["type"] for r in rows],
+        np.array([np.asarray(r["direction"], float) for r in rows]).reshape(-1, 3),
+        np.array([np.asarray(r.get("point", (0.0, 0.0, 0.0)), float) for r in rows]).reshape(-1, 3),
+        np.asarray(table["tool_tip"], float), np.asarray(table.get("part_origin", np.zeros(3)), float),
+        np.asarray(table.get("part_rotation", np.eye(3)), float), q))
 
 
 def table_rows(old: Mapping, new: Mapping) -> List[dict]:
