@@ -112,7 +112,7 @@ def is_setup_parameter_name(name: str) -> bool: ...
 def informed_threshold() -> float: ...
 def predict_residuals(dataset: Dataset, values: dict) -> tuple[np.ndarray, list[int]]: ...
 
-# ---- uncertainty (cpp/bindings/uncertainty.cc) ----------------------------
+# ---- uncertainty (cpp/bindings/expose-uncertainty.cc) ----------------------------
 
 class SimulationPlan:
     base: Dataset
@@ -278,7 +278,7 @@ class GridStatistics:
 
 def analyze_grid(P: np.ndarray, window: int = 5) -> GridStatistics: ...
 
-# ---- test design, sphere test, machining tests (cpp/bindings/design.cc) ----
+# ---- test design (expose-design.cc), sphere test, machining tests (expose-procedures.cc) ----
 
 class PlanQuality:
     parameters: list[str]
@@ -390,7 +390,7 @@ def machining_jacobian(machine: Machine, tests: Sequence[MachiningTest], names: 
 def identify_machining(machine: Machine, tests: Sequence[MachiningTest], estimate: Sequence[str], values: dict,
                        sigma: float = 0.0, max_iterations: int = 50) -> MachiningResult: ...
 
-# LinuxCNC trt kinematics controller model (cpp/bindings/controllers.cc)
+# LinuxCNC trt kinematics controller model (cpp/bindings/expose-controllers.cc)
 def trt_pin_names(kins: str) -> list[str]: ...
 def trt_forward(kins: str, pins: dict, joints: np.ndarray) -> np.ndarray: ...
 def trt_inverse(kins: str, pins: dict, world: np.ndarray) -> np.ndarray: ...
@@ -417,7 +417,7 @@ def table_tool_points(names: list[str], chains: list[str], types: list[str], dir
                       points: np.ndarray, tool_tip: np.ndarray, part_origin: np.ndarray,
                       part_rotation: np.ndarray, axes: np.ndarray) -> np.ndarray: ...
 
-# ---- double ball bar (cpp/bindings/dbb.cc; only what is stubbed so far) ----
+# ---- double ball bar (cpp/bindings/expose-procedures.cc; only what is stubbed so far) ----
 class CircularTestResult:
     nominal_radius: float
     runs: list
