@@ -27,7 +27,10 @@ the tool-point error the controller leaves (:class:`Absorption`).
 :func:`kinematics_table` gives the model as pivot points and axis directions
 in the machine frame, and :func:`table_tool_points` is the kinematics such a
 table describes (independent of fivecal's chain code), so the table's values
-can be checked against the tool points they must reproduce.
+can be checked against the tool points they must reproduce. The numerics of
+all of it are the C++ core's (``cpp/src/controllers/``: ``absorb.cc``,
+``linuxcnc_5axis.cc``, ``kinematics_table.cc``); this module builds the
+pose grids and writes the tables and reports.
 
 Units: mm, degrees for rotary commands, rad for angular parameters.
 """
@@ -35,7 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import List, Mapping, Optional, Tuple
 
 import numpy as np
 
