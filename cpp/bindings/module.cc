@@ -1,41 +1,21 @@
 // pybind11 module fivecal._core: a thin boundary over the C++ core. Every
 // std::invalid_argument thrown by the core reaches Python as ValueError with
-// its message intact.
-#include <pybind11/eigen.h>
-#include <pybind11/numpy.h>
+// its message intact. One binding file per folder of the core
+// (expose-<folder>.cc, as Pinocchio's bindings/python/algorithm/expose-*.cpp).
 #include <pybind11/pybind11.h>
-#include <pybind11/stl.h>
 
-#include "fivecal/model/inverse.h"
-#include "fivecal/model/kinematics.h"
-#include "fivecal/model/machine.h"
+#include <exception>
+#include <stdexcept>
 
 namespace py = pybind11;
-using namespace fivecal;
 
-namespace {
-
-py::dict AxisDict(const Axis& a) {
-  py::dict d;
-  d["name"] = std::string(1, a.name);
-  d["type"] = a.rotary() ? "rotary" : "linear";
-  d["direction"] = std::vector<double>{a.direction.x(), a.direction.y(), a.direction.z()};
-  d["point"] = std::vector<double>{a.point.x(), a.point.y(), a.point.z()};
-  return d;
-}
-
-const Eigen::MatrixXi* OptionalDirs(const std::optional<Eigen::MatrixXi>& d) {
-  return d ? &*d : nullptr;
-}
-
-}  // namespace
-
-void BindIdentification(py::module_& m);
+void BindModel(py::module_& m);
+void BindObservations(py::module_& m);
+void BindSolve(py::module_& m);
 void BindUncertainty(py::module_& m);
-void BindDbb(py::module_& m);
+void BindProcedures(py::module_& m);
 void BindDesign(py::module_& m);
 void BindControllers(py::module_& m);
-void BindColumns(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
   m.doc() = "fivecal C++ core: machine model, kinematics, identification";
@@ -47,88 +27,11 @@ PYBIND11_MODULE(_core, m) {
     }
   });
 
-  py::class_<Machine>(m, "Machine")
-      .def_static("from_json", &Machine::FromJson, py::arg("text"))
-      .def_static("load", &Machine::Load, py::arg("path"))
-      .def("to_json", &Machine::ToJson)
-      .def_property_readonly("name", &Machine::name)
-      .def_property_readonly("topology", &Machine::topology)
-      .def_property_readonly("axis_names", &Machine::axis_names)
-      .def_property_readonly("axes", [](const Machine& mc) {
-        py::list l;
-        for (const Axis& a : mc.axes()) l.append(AxisDict(a));
-        return l;
-      })
-      .def_property_readonly("workpiece_chain", [](const Machine& mc) {
-        std::string s;
-        for (int k : mc.workpiece_chain()) s += mc.axis(k).name;
-        return s;
-      })
-      .def_property_readonly("tool_chain", [](const Machine& mc) {
-        std::string s;
-        for (int k : mc.tool_chain()) s += mc.axis(k).name;
-        return s;
-      })
-      .def_property_readonly("tip", [](const Machine& mc) { return Eigen::Vector3d(mc.tip()); })
-      .def_property_readonly("tool_axis",
-                             [](const Machine& mc) { return Eigen::Vector3d(mc.tool_axis()); })
-      .def("parameter_names", &Machine::parameter_names)
-      .def_property_readonly("num_parameters", &Machine::num_parameters)
-      .def("parameter_index", &Machine::RequireParameter, py::arg("name"))
-      .def("parameter_kind",
-           [](const Machine& mc, const std::string& name) {
-             const ParameterInfo& p = mc.parameters()[mc.RequireParameter(name)];
-             switch (p.kind) {
-               case ParameterKind::kLocation: return "location";
-               case ParameterKind::kMotion: return "motion";
-               case ParameterKind::kBacklash: return "backlash";
-               default: return "tip";
-             }
-           })
-      .def("parameter_is_angular",
-           [](const Machine& mc, const std::string& name) {
-             const ParameterInfo& p = mc.parameters()[mc.RequireParameter(name)];
-             if (p.kind == ParameterKind::kBacklash) return mc.axis(p.axis).rotary();
-             return p.angular();
-           });
-
-  m.def(
-      "tool_poses",
-      [](const Machine& mc, const Eigen::VectorXd& theta, const Eigen::Ref<const RowMatrixXd>& axes,
-         const std::optional<RowMatrixXi>& dirs, const std::optional<Eigen::Vector3d>& tip,
-         bool with_axes) {
-        // Written in place into the numpy arrays returned.
-        const py::ssize_t n = axes.rows();
-        py::array_t<double> p({n, py::ssize_t(3)}), a({with_axes ? n : 0, py::ssize_t(3)});
-        double* pp = p.mutable_data();
-        double* pa = with_axes ? a.mutable_data() : nullptr;
-        {
-          py::gil_scoped_release release;
-          ToolPosesRowMajor(mc, theta, axes, dirs ? &*dirs : nullptr, pp, pa, tip ? &*tip : nullptr);
-        }
-        return py::make_tuple(p, with_axes ? py::object(a) : py::object(py::none()));
-      },
-      py::arg("machine"), py::arg("theta"), py::arg("axes"), py::arg("directions") = py::none(),
-      py::arg("tip") = py::none(), py::arg("with_axes") = true,
-      "Tool points and tool axes (N x 3 each, workpiece frame) for N poses; axes N x num_axes "
-      "in mm / degrees. with_axes=False skips the tool axes (returned as None).");
-
-  m.def(
-      "inverse",
-      [](const Machine& mc, const Eigen::VectorXd& theta, const Eigen::MatrixXd& points,
-         const std::optional<Eigen::MatrixXd>& tool_axes, const Eigen::VectorXd& start,
-         const std::optional<Eigen::MatrixXi>& dirs) {
-        py::gil_scoped_release release;
-        return InverseKinematics(mc, theta, points, tool_axes ? &*tool_axes : nullptr, start,
-                                 OptionalDirs(dirs));
-      },
-      py::arg("machine"), py::arg("theta"), py::arg("points"), py::arg("tool_axes"),
-      py::arg("start"), py::arg("directions") = py::none());
-
-  BindIdentification(m);
+  BindModel(m);
+  BindObservations(m);
+  BindSolve(m);
   BindUncertainty(m);
-  BindDbb(m);
+  BindProcedures(m);
   BindDesign(m);
   BindControllers(m);
-  BindColumns(m);
 }

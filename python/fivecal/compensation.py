@@ -247,28 +247,12 @@ def compensate_poses(machine: Union[Machine, Mapping], errors, axes: Mapping[str
     if reference_shift is not None:
         P = P + np.asarray(reference_shift, dtype=float).reshape(1, 3)
     P0, A0 = _core.tool_poses(core, theta, q, d)
-    rot = np.array([a in ROTARY for a in machine.axis_names])
-    out = np.empty_like(q)
-    oriented = np.zeros(n, dtype=bool)
+    # one core call over every pose (CompensateCommands), each seeded at its nominal commands
     with Progress(n, "compensating poses", enabled=progress) as bar:
-        for i in range(n):
-            di = None if d is None else d[i:i + 1]
-            sol = None
-            if orientation:
-                try:
-                    c = _core.inverse(core, theta, P[i:i + 1], A[i:i + 1], q[i], di)[0]
-                    if not rot.any() or np.abs(c[rot] - q[i, rot]).max() <= max_rotary_correction:
-                        sol = c
-                        oriented[i] = True
-                except ValueError:
-                    sol = None
-            if sol is None:
-                try:
-                    sol = _core.inverse(core, theta, P[i:i + 1], None, q[i], di)[0]
-                except ValueError as e:
-                    raise ValueError(f"pose {i}: {e}") from None
-            out[i] = sol
-            bar.update()
+        out, oriented = _core.compensate_commands(core, theta, P, A, q, d, orientation,
+                                                  float(max_rotary_correction))
+        bar.update(n)
+    oriented = np.asarray(oriented, dtype=bool)
     _check_correction(machine, q, out, max_correction, max_correction_deg)
     P1, A1 = _core.tool_poses(core, theta, out, d)
     return CompensatedPoses(axes=machine.axes_dict(out), nominal=machine.axes_dict(q), points=P,

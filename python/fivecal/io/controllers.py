@@ -27,7 +27,10 @@ the tool-point error the controller leaves (:class:`Absorption`).
 :func:`kinematics_table` gives the model as pivot points and axis directions
 in the machine frame, and :func:`table_tool_points` is the kinematics such a
 table describes (independent of fivecal's chain code), so the table's values
-can be checked against the tool points they must reproduce.
+can be checked against the tool points they must reproduce. The numerics of
+all of it are the C++ core's (``cpp/src/controllers/``: ``absorb.cc``,
+``linuxcnc_5axis.cc``, ``kinematics_table.cc``); this module builds the
+pose grids and writes the tables and reports.
 
 Units: mm, degrees for rotary commands, rad for angular parameters.
 """
@@ -35,7 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import List, Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -61,40 +64,6 @@ def _side(machine: Machine, axis: str) -> str:
     return "workpiece" if axis in machine.workpiece_chain else "tool"
 
 
-def _perpendicular(u: np.ndarray) -> List[np.ndarray]:
-    """Two unit vectors perpendicular to u: the machine axes least along u,
-    made orthogonal to it (exactly x and y for u along z)."""
-    u = u / np.linalg.norm(u)
-    order = np.argsort(np.abs(u), kind="stable")[:2]
-    out = []
-    for i in sorted(order):
-        e = np.eye(3)[i] - (np.eye(3)[i] @ u) * u
-        for f in out:
-            e = e - (e @ f) * f
-        out.append(e / np.linalg.norm(e))
-    return out
-
-
-def _check_topology(machine: Machine, model: str) -> None:
-    rot = _rotaries(machine)
-    if len(rot) != 2:
-        raise ValueError(f"machine '{machine.name}' ({machine.topology}): a 5-axis controller model "
-                         f"needs two rotary axes, found {len(rot)}")
-    sides = sorted(_side(machine, a["name"]) for a in rot)
-    want = {"table-table": ["workpiece", "workpiece"], "head-head": ["tool", "tool"],
-            "table-head": ["tool", "workpiece"]}
-    if model in want and sides != want[model]:
-        kind = {("workpiece", "workpiece"): "table-table", ("tool", "tool"): "head-head"}.get(
-            tuple(sides), "table-head")
-        raise ValueError(f"model {model}: machine '{machine.name}' ({machine.topology}) is {kind} "
-                         f"(rotary axes {', '.join(a['name'] for a in rot)} on the "
-                         f"{' and '.join(sides)} side)")
-    if model in ("xyzac-trt", "xyzbc-trt"):
-        _core.trt_match(machine._core, model)  # linuxcnc.match: ValueError says why the machine does not fit
-    if model == "5axiskins":
-        _match_5axis(machine)
-
-
 @dataclass
 class Parameter:
     """One controller parameter: a direction in fivecal's parameter space."""
@@ -106,47 +75,11 @@ class Parameter:
 
 def parameters(machine: Machine, model: str, directions: bool = False,
                tool_length: bool = True) -> List[Parameter]:
-    """The parameters of ``model`` on ``machine`` (see the module text).
-    ValueError when the machine's topology does not fit the model."""
-    if model not in MODELS:
-        raise ValueError(f"model: '{model}' (expected one of {', '.join(MODELS)})")
-    _check_topology(machine, model)
-    names = machine.parameter_names()
-    idx = {n: i for i, n in enumerate(names)}
-    nt = len(names)
-    out: List[Parameter] = []
-
-    def col(entries):
-        c = np.zeros(nt)
-        for n, v in entries:
-            c[idx[n]] = v
-        return c
-
-    if model == "5axiskins":
-        directions, pivots = False, False
-        tool_length = True
-    elif model in ("xyzac-trt", "xyzbc-trt"):
-        directions, pivots, tool_length = False, True, False
-    else:
-        pivots = True
-    for a in _rotaries(machine) if pivots else []:
-        r = a["name"]
-        for e in _perpendicular(np.asarray(a["direction"], float)):
-            lab = "xyz"[int(np.argmax(np.abs(e)))]
-            out.append(Parameter(f"{r} pivot {lab}", "mm",
-                                 col([(f"E{c}0{r}", v) for c, v in zip("XYZ", e)])))
-    for a in _rotaries(machine) if directions else []:
-        r = a["name"]
-        for e in _perpendicular(np.asarray(a["direction"], float)):
-            lab = "xyz"[int(np.argmax(np.abs(e)))]
-            out.append(Parameter(f"{r} direction about {lab}", "rad",
-                                 col([(f"E{c}0{r}", v) for c, v in zip("ABC", e)])))
-    if tool_length:
-        zero = {n: 0.0 for n in machine.axis_names}
-        _, v = machine.tool_pose(zero)
-        out.append(Parameter("tool length", "mm",
-                             col([(f"tip.{c}", -float(x)) for c, x in zip("xyz", v[0])])))
-    return out
+    """The parameters of ``model`` on ``machine`` (see the module text; the
+    core's ``ControllerParameters``). ValueError when the machine's topology
+    does not fit the model."""
+    return [Parameter(p["label"], p["unit"], np.asarray(p["column"]))
+            for p in _core.controller_parameters(machine._core, model, directions, tool_length)]
 
 
 def absorbable(machine: Machine, model: str, directions: bool = False,
@@ -230,6 +163,7 @@ class Absorption:
     max_old: float = 0.0
     rms_compensated: Optional[float] = None   # after absorption + fivecal's G-code compensation
     max_compensated: Optional[float] = None
+    pins_fit: Optional[dict] = field(default=None, repr=False)  # LinuxCNC trt: the pins (core TrtFit)
 
     def value(self, label: str) -> float:
         return float(self.values[[p.label for p in self.parameters].index(label)])
@@ -256,77 +190,36 @@ class Absorption:
         return "\n".join(lines)
 
 
-def _points(machine: Machine, theta: np.ndarray, q: np.ndarray) -> np.ndarray:
-    return np.asarray(_core.tool_poses(machine._core, theta, q, None, None, False)[0])
-
-
 def absorb(machine: Machine, model: str, errors=None, poses: Optional[Mapping] = None,
            directions: bool = False, tool_length: bool = True,
-           compensation: bool = False) -> Absorption:
+           compensation: bool = False, held_pins: Optional[Mapping[str, float]] = None) -> Absorption:
     """Least-squares values of ``model``'s parameters (and a workpiece shift)
     that best reproduce the tool points of the machine with ``errors`` over
-    ``poses`` (default :func:`pose_grid`). With ``compensation`` also the
-    error left when fivecal's G-code compensation runs on top of the absorbed
-    model (inverse kinematics of the identified machine, targets the absorbed
-    model's tool points: :func:`fivecal.compensation.compensate_poses`)."""
-    params = parameters(machine, model, directions, tool_length)
+    ``poses`` (default :func:`pose_grid`): the core's ``Absorb``, one
+    absorber for every model. With ``compensation`` also the error left when
+    fivecal's G-code compensation runs on top of the absorbed model (inverse
+    kinematics of the identified machine, targets the absorbed model's tool
+    points: :func:`fivecal.compensation.compensate_poses`). For the LinuxCNC
+    trt models :attr:`Absorption.pins_fit` holds the pins (``held_pins``:
+    the z-offset and tool-offset held, and the "before" pins)."""
     poses = poses if poses is not None else pose_grid(machine)
     q = machine.axes_matrix(poses)
-    th_true = machine.theta(errors)
-    th0 = machine.theta(None)
-    truth = _points(machine, th_true, q)
-    n, k = len(q), len(params)
-    B = np.array([p.column for p in params]).T if k else np.zeros((len(th0), 0))
-    steps = np.array([1e-3 if p.unit == "mm" else 1e-6 for p in params])
-
-    def jac(phi):
-        J = np.zeros((3 * n, k + 3))
-        for c in range(k):
-            d = np.zeros(k)
-            d[c] = steps[c]
-            J[:, c] = ((_points(machine, th0 + B @ (phi + d), q)
-                        - _points(machine, th0 + B @ (phi - d), q)) / (2 * steps[c])).ravel()
-        J[:, k:] = np.tile(np.eye(3), (n, 1))
-        return J
-
-    # columns the poses cannot tell apart from earlier ones (the shift first,
-    # then the parameters in order) are held at 0: sequential projection
-    phi = np.zeros(k)
-    J = jac(phi)
-    order = list(range(k, k + 3)) + list(range(k))
-    keep, basis = [], []
-    for c in order:
-        v = J[:, c].copy()
-        for b in basis:
-            v -= (b @ v) * b
-        if np.linalg.norm(v) > 1e-8 * max(np.linalg.norm(J[:, c]), 1e-300):
-            keep.append(c)
-            basis.append(v / np.linalg.norm(v))
-    held = [params[c].label for c in range(k) if c not in keep]
-    shift = np.zeros(3)
-    for _ in range(4):
-        r = (truth - _points(machine, th0 + B @ phi, q) - shift).ravel()
-        x = np.linalg.lstsq(J[:, keep], r, rcond=None)[0]
-        step = np.zeros(k + 3)
-        step[keep] = x
-        phi = phi + step[:k]
-        shift = shift + step[k:]
-        if np.abs(step).max() < 1e-12:
-            break
-        J = jac(phi)
-    theta = th0 + B @ phi
-    residual = truth - _points(machine, theta, q) - shift
-    r0 = truth - _points(machine, th0, q)
-    r0 = r0 - r0.mean(axis=0)
-    rms, mx = _stats(residual)
-    rms0, mx0 = _stats(r0)
-    ab = Absorption(model=model, parameters=params, values=phi, held=held, theta=theta,
-                    workpiece_shift=shift, residual=residual, residual_old=r0,
-                    poses=machine.axes_dict(q), rms=rms, max=mx, rms_old=rms0, max_old=mx0)
+    fit = _core.controller_absorb(machine._core, model, machine.theta(errors), q, directions, tool_length,
+                                  dict(held_pins or {}))
+    params = [Parameter(p["label"], p["unit"], np.asarray(p["column"])) for p in fit["parameters"]]
+    ab = Absorption(model=model, parameters=params, values=np.asarray(fit["values"]), held=list(fit["held"]),
+                    theta=np.asarray(fit["theta"]), workpiece_shift=np.asarray(fit["workpiece_shift"]),
+                    residual=np.asarray(fit["residual"]), residual_old=np.asarray(fit["residual_old"]),
+                    poses=machine.axes_dict(q), rms=fit["rms"], max=fit["max"], rms_old=fit["rms_old"],
+                    max_old=fit["max_old"], pins_fit=fit["trt"])
     if compensation:
-        left = compensated_residual(machine, errors, ab)
-        ab.rms_compensated, ab.max_compensated = _stats(left)
+        ab.rms_compensated, ab.max_compensated = compensated_stats(machine, errors, ab)
     return ab
+
+
+def compensated_stats(machine: Machine, errors, ab: Absorption) -> Tuple[float, float]:
+    """(rms, max) mm of :func:`compensated_residual`."""
+    return _stats(compensated_residual(machine, errors, ab))
 
 
 def compensated_residual(machine: Machine, errors, ab: Absorption) -> np.ndarray:
@@ -344,70 +237,32 @@ def compensated_residual(machine: Machine, errors, ab: Absorption) -> np.ndarray
 # ---- LinuxCNC 5axiskins ----------------------------------------------------
 
 def _match_5axis(machine: Machine) -> dict:
-    """How ``machine`` drives 5axiskins's joints X Y Z B C: the spindle head
-    carries C (about z) and on it B (about y); LinuxCNC's B turns the tool
-    about -y and C about +z (5axiskins.c, note 10 on the tilt direction)."""
-    rot = {a["name"]: a for a in _rotaries(machine)}
-    if set(rot) != {"B", "C"} or any(_side(machine, r) != "tool" for r in rot):
-        raise ValueError(f"model 5axiskins: machine '{machine.name}' ({machine.topology}) needs a "
-                         "spindle head with C and, on it, B (topology like w X Y f Z C B S t)")
-    tc = machine.tool_chain
-    if tc.index("C") > tc.index("B"):
-        raise ValueError("model 5axiskins: C must carry B (C nearer the foundation in the tool chain)")
-    uc, ub = (np.asarray(rot[r]["direction"], float) for r in "CB")
-    if abs(abs(uc[2]) - 1) > 1e-9 or abs(abs(ub[1]) - 1) > 1e-9:
-        raise ValueError("model 5axiskins: C must be along +-z and B along +-y")
-    pc, pb = (np.asarray(rot[r]["point"], float) for r in "CB")
-    tip = machine.tip
-    if abs(pb[0] - pc[0]) > 1e-9 or abs(pb[1] - pc[1]) > 1e-9 or \
-            abs(tip[0] - pc[0]) > 1e-9 or abs(tip[1] - pc[1]) > 1e-9:
-        raise ValueError("model 5axiskins: B must cross the C axis and the tool tip lie on it "
-                         "(5axiskins has a single pivot and pivot-length only)")
-    sign = {}
-    for n in "XYZ":
-        a = next(x for x in machine.axes if x["name"] == n)
-        s = float(np.asarray(a["direction"], float)["XYZ".index(n)])
-        if abs(abs(s) - 1) > 1e-9:
-            raise ValueError(f"model 5axiskins: axis {n} is not along {n.lower()}")
-        sign[n] = s if _side(machine, n) == "tool" else -s
-    sign["C"] = float(np.sign(uc[2]))
-    sign["B"] = -float(np.sign(ub[1]))
-    return {"sign": sign, "pivot_length": float(pb[2] - tip[2]), "origin": tip}
+    """How ``machine`` drives 5axiskins's joints X Y Z B C (the core's
+    ``MatchFiveAxis``): ``sign`` (joint = sign * command, per axis letter),
+    ``pivot_length`` (mm) and ``origin``. ValueError says why a machine does
+    not fit."""
+    m = _core.fiveaxis_match(machine._core)
+    return {"sign": {a: float(v) for a, v in m["sign"].items()}, "pivot_length": float(m["pivot_length"]),
+            "origin": np.asarray(m["origin"])}
 
 
 def fiveaxis_forward(pivot_length: float, joints) -> np.ndarray:
     """5axiskins.c forward kinematics (W = 0): joints (N, 5: X Y Z B C, mm and
     degrees) -> world X Y Z."""
-    j = np.atleast_2d(np.asarray(joints, dtype=float))
-    b, c = np.radians(j[:, 3]), np.radians(j[:, 4])
-    p = np.radians(180.0) - b  # s2r(pivot_length, C, 180 - B)
-    L = pivot_length
-    r = np.column_stack([L * np.sin(p) * np.cos(c), L * np.sin(p) * np.sin(c), L * np.cos(p)])
-    return j[:, :3] + r + np.array([0.0, 0.0, L])
+    return np.asarray(_core.fiveaxis_forward(float(pivot_length), np.atleast_2d(np.asarray(joints, float))))
 
 
 def fiveaxis_inverse(pivot_length: float, world) -> np.ndarray:
     """5axiskins.c inverse kinematics: world rows (X Y Z B C) -> joints."""
-    w = np.atleast_2d(np.asarray(world, dtype=float))
-    zero = np.column_stack([np.zeros((len(w), 3)), w[:, 3:5]])
-    return np.column_stack([w[:, :3] - fiveaxis_forward(pivot_length, zero), w[:, 3:5]])
+    return np.asarray(_core.fiveaxis_inverse(float(pivot_length), np.atleast_2d(np.asarray(world, float))))
 
 
 def fiveaxis_joints(machine: Machine, axes: Mapping) -> np.ndarray:
     """5axiskins joints (N, 5) for fivecal axis commands."""
-    m = _match_5axis(machine)
-    q = machine.axes_dict(machine.axes_matrix(axes))
-    return np.column_stack([m["sign"][a] * np.asarray(q[a], float) for a in "XYZBC"])
+    return np.asarray(_core.fiveaxis_joints(machine._core, machine.axes_matrix(axes)))
 
 
 # ---- neutral kinematics table ------------------------------------------------
-
-def _rot_zyx(a: float, b: float, c: float) -> np.ndarray:
-    ca, sa, cb, sb, cc, sc = math.cos(a), math.sin(a), math.cos(b), math.sin(b), math.cos(c), math.sin(c)
-    return np.array([[cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
-                     [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
-                     [-sb, cb * sa, cb * ca]])
-
 
 def kinematics_table(machine: Machine, theta=None) -> dict:
     """The machine (with the location errors and tip offsets in ``theta``, a
@@ -424,50 +279,10 @@ def kinematics_table(machine: Machine, theta=None) -> dict:
     table axis is the opposite rotation of the part: use a direction reversed
     against the nominal machine axis there). Error motions are not in a table."""
     th = machine.theta(theta) if not isinstance(theta, np.ndarray) else theta
-    names = machine.parameter_names()
-    val = dict(zip(names, th))
-    axes = {a["name"]: a for a in machine.axes}
-    rows = []
-    frames = {}
-    for chain_name, chain in (("workpiece", machine.workpiece_chain), ("tool", machine.tool_chain)):
-        R, t, parent = np.eye(3), np.zeros(3), np.zeros(3)
-        for n in chain:
-            a = axes[n]
-            keep = n != "S"  # the spindle's frame counts, its row does not
-            p = np.asarray(a.get("point") or [0.0, 0.0, 0.0], float)
-            loc = [val.get(f"E{c}0{n}", 0.0) for c in "XYZABC"]
-            t = t + R @ (np.asarray(loc[:3]) + p - parent)
-            R = R @ _rot_zyx(*loc[3:])
-            parent = p
-            if keep:
-                rows.append({"axis": n, "chain": chain_name, "type": a["type"],
-                             "direction": R @ np.asarray(a["direction"], float), "point": t.copy(),
-                             "nominal_point": p})
-        frames[chain_name] = (R, t, parent)
-    Rw, tw, pw = frames["workpiece"]
-    W_t = tw - Rw @ pw             # the part frame at the zero pose: W0 = F_last . Trans(-p_last)
-    Rt, tt, pt = frames["tool"]
-    tip = machine.tip + np.array([val.get(f"tip.{c}", 0.0) for c in "xyz"])
-    out_rows = []
-    for r in rows:
-        d = r["direction"]
-        row = {"axis": r["axis"], "chain": r["chain"], "type": r["type"], "direction": d}
-        if r["type"] == "rotary":
-            o = r["point"]
-            row["point"] = o + ((r["nominal_point"] - o) @ d) * d  # nearest the nominal pivot
-        out_rows.append(row)
-    zero = {n: 0.0 for n in machine.axis_names}
-    _, v = machine.tool_pose(zero, errors={n: float(x) for n, x in zip(names, th - machine.theta(None))
-                                           if x != 0.0})
-    return {"machine": machine.name, "topology": machine.topology, "axes": out_rows,
-            "tool_tip": tt + Rt @ (tip - pt), "tool_axis": Rw @ np.asarray(v[0]),
-            "part_origin": W_t, "part_rotation": Rw}
-
-
-def _axis_angle(u: np.ndarray, q: float) -> np.ndarray:
-    u = u / np.linalg.norm(u)
-    K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
-    return np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * K @ K
+    t = _core.kinematics_table(machine._core, np.asarray(th, dtype=float))
+    return {"machine": machine.name, "topology": machine.topology, "axes": list(t["axes"]),
+            "tool_tip": np.asarray(t["tool_tip"]), "tool_axis": np.asarray(t["tool_axis"]),
+            "part_origin": np.asarray(t["part_origin"]), "part_rotation": np.asarray(t["part_rotation"])}
 
 
 def table_tool_points(table: Mapping, axes: Mapping) -> np.ndarray:
@@ -475,29 +290,17 @@ def table_tool_points(table: Mapping, axes: Mapping) -> np.ndarray:
     table describes, for axis commands ``axes`` (mm, degrees): each axis a
     screw about its line, tool = S_tool(q) tip, part = S_workpiece(q), in the
     part frame (``part_origin``, ``part_rotation``)."""
-    names = [r["axis"] for r in table["axes"]]
+    rows = list(table["axes"])
+    names = [r["axis"] for r in rows]
     qs = {n: np.atleast_1d(np.asarray(axes.get(n, 0.0), dtype=float)) for n in names}
     n = max(len(v) for v in qs.values())
-    out = np.zeros((n, 3))
-    Rw = np.asarray(table.get("part_rotation", np.eye(3)), dtype=float)
-    Wt = np.asarray(table.get("part_origin", np.zeros(3)), dtype=float)
-    rows = {c: [r for r in table["axes"] if r["chain"] == c] for c in ("workpiece", "tool")}
-    for i in range(n):
-        def apply(chain, x, inverse):
-            seq = chain if inverse else list(reversed(chain))
-            for r in seq:  # forward: innermost first
-                qv = float(np.broadcast_to(qs[r["axis"]], (n,))[i])
-                d = np.asarray(r["direction"], float)
-                if r["type"] == "linear":
-                    x = x - qv * d if inverse else x + qv * d
-                else:
-                    R = _axis_angle(d, math.radians(-qv if inverse else qv))
-                    o = np.asarray(r["point"], float)
-                    x = o + R @ (x - o)
-            return x
-        p = apply(rows["tool"], np.asarray(table["tool_tip"], float), False)
-        out[i] = Rw.T @ (apply(rows["workpiece"], p, True) - Wt)
-    return out
+    q = np.column_stack([np.broadcast_to(qs[a], (n,)) for a in names]) if rows else np.zeros((n, 0))
+    return np.asarray(_core.table_tool_points(
+        names, [r["chain"] for r in rows], [r["type"] for r in rows],
+        np.array([np.asarray(r["direction"], float) for r in rows]).reshape(-1, 3),
+        np.array([np.asarray(r.get("point", (0.0, 0.0, 0.0)), float) for r in rows]).reshape(-1, 3),
+        np.asarray(table["tool_tip"], float), np.asarray(table.get("part_origin", np.zeros(3)), float),
+        np.asarray(table.get("part_rotation", np.eye(3)), float), q))
 
 
 def table_rows(old: Mapping, new: Mapping) -> List[dict]:

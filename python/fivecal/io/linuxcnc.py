@@ -16,6 +16,7 @@ Units: mm, degrees for rotary joints; error parameters in mm and rad.
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -137,6 +138,7 @@ class Absorption:
     max_old: float = 0.0
     rms_compensated: Optional[float] = None   # with fivecal's G-code compensation on top
     max_compensated: Optional[float] = None
+    model: Optional[K.Absorption] = field(default=None, repr=False)  # the same pins in fivecal's parameters
 
     def changes(self) -> Dict[str, float]:
         return {n: self.pins[n] - self.old_pins.get(n, 0.0) for n in self.pins}
@@ -192,20 +194,24 @@ def absorb(machine: Machine, kins: str, errors=None, poses: Optional[Mapping] = 
     """Pins of ``<kins>-kins`` that best absorb ``errors`` (dict name -> mm/rad
     or a Result) over ``poses`` (fivecal commands; default :func:`pose_grid`).
     ``old_pins`` are the controller's current values (default: the machine's
-    nominal geometry); z-offset and tool-offset keep their old values."""
+    nominal geometry); z-offset and tool-offset keep their old values. One
+    call of the core's controller absorber (:func:`fivecal.io.controllers.absorb`,
+    which fits the pins through trtfuncs.c's kinematics and the same model
+    in fivecal's parameters: :attr:`Absorption.model`)."""
     k = _kins(kins)
     poses = poses if poses is not None else pose_grid(machine, k)
     q = machine.axes_matrix(poses)
     if old_pins is None:
         old_pins = nominal_pins(machine, k, poses=poses)
     old = {n: float(old_pins.get(n, 0.0)) for n in pin_names(k)}
-    fit = _core.trt_fit(machine._core, k, machine.theta(errors), q, old)
+    kab = K.absorb(machine, k, errors, poses=poses, held_pins=old)
+    fit = kab.pins_fit
     pins = {n: float(fit["pins"][n]) for n in pin_names(k)}
     return Absorption(kins=k, pins=pins, old_pins=old, solved=list(fit["solved"]),
                       workpiece_shift=np.asarray(fit["workpiece_shift"]),
                       residual=np.asarray(fit["residual"]), residual_old=np.asarray(fit["residual_held"]),
                       poses=machine.axes_dict(q), rms=fit["rms"], max=fit["max"],
-                      rms_old=fit["rms_held"], max_old=fit["max_held"])
+                      rms_old=fit["rms_held"], max_old=fit["max_held"], model=kab)
 
 
 # ---- pins: text, comparison, plausibility ---------------------------------
@@ -506,12 +512,12 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
     errors = usable_errors(result, machine, force, what)
     match(machine, k)  # a clear refusal before any work
     poses = pose_grid(machine, k, volume)
+    # one absorber: the pins and the same model in fivecal's parameters,
+    # which leaves the same map (tested), so its G-code-compensated residual
+    # is this controller's
     ab = absorb(machine, k, errors, poses=poses, old_pins=old_pins)
     check_change(ab.old_pins, ab.pins, max_change, force)
-    # the same model in fivecal's parameters leaves the same map (tested), so
-    # its G-code-compensated residual is this controller's
-    kab = K.absorb(machine, k, errors, poses=poses, compensation=True)
-    ab.rms_compensated, ab.max_compensated = kab.rms_compensated, kab.max_compensated
+    ab.rms_compensated, ab.max_compensated = K.compensated_stats(machine, errors, ab.model)
     contents: Dict[str, str] = {}
 
     def write(name, text):
@@ -870,6 +876,21 @@ def probe_sim_lines(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     return out
 
 
+def _touch_residuals(machine: Machine, artefact: Mapping, tip_radius: float, touches: Sequence[Mapping],
+                     errors=None) -> np.ndarray:
+    """(N,) mm: the core's residual of each touch (dataset observations of
+    the artefact's facets or spheres) on the machine with ``errors``, the
+    set-up parameters at 0: for a facet how far the stylus ball is outside
+    (> 0) or inside (< 0) it. Built without the loader's plausibility check:
+    a touch far off its target is what the caller measures."""
+    doc = {"machine": machine.to_dict(), "probe": {"tip_radius": float(tip_radius)},
+           "artefact": dict(artefact), "observations": list(touches)}
+    ds = _core.Dataset.from_json(json.dumps(doc))
+    values = {n: float(v) for n, v in zip(machine.parameter_names(), machine.theta(errors)) if v != 0.0}
+    r, _ = _core.predict_residuals(ds, values)
+    return np.asarray(r, dtype=float)
+
+
 def probe_depths(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
                  tip_radius: float, log: str, pins: Mapping[str, float], errors=None) -> np.ndarray:
     """(N,) mm: for each logged probe position, how far the stylus ball was
@@ -878,15 +899,10 @@ def probe_depths(machine: Machine, kins: str, plan: Sequence[Mapping], artefact:
     cycle's feed); anything else means the trip was early or late."""
     obs = read_probe_log(log, machine, kins, plan, pins)
     facets = _facets(artefact)
-    out = []
     for o in obs:
-        f = facets[o["target"]]
-        n = np.asarray(f["normal"], dtype=float)
-        n = n / np.linalg.norm(n)
-        p = machine.tool_point({a: np.array([o["axes"][a]]) for a in machine.axis_names},
-                               errors=errors)[0]
-        out.append(float(n @ (p - np.asarray(f["point"], dtype=float)) - tip_radius))
-    return np.array(out)
+        if o["type"] != "facet" or o["target"] not in facets:
+            raise ValueError(f"{o['id']}: probe depths are of facet touches, got {o['type']} {o['target']!r}")
+    return _touch_residuals(machine, artefact, tip_radius, obs, errors)
 
 
 def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
@@ -898,21 +914,20 @@ def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], ar
     in the linear joints, so four evaluations give it exactly (location
     errors; error motions make it only nearly affine)."""
     k = _kins(kins)
-    facets = list(_facets(artefact).values())
     poses = []
     for t, c, _, _, _ in _touch_geometry(machine, k, plan, artefact, tip_radius):
         if (t, c) not in poses:
             poses.append((t, c))
+    ids = list(_facets(artefact))
     out = []
     for t, c in poses:
         jj = np.array([[0, 0, 0, t, c], [1, 0, 0, t, c], [0, 1, 0, t, c], [0, 0, 1, t, c]], float)
-        p = machine.tool_point(commands(machine, k, jj), errors=errors)
-        M = (p[1:] - p[0]).T  # d(ball centre)/d(joint xyz)
-        g, h = [], []
-        for fct in facets:
-            n = np.asarray(fct["normal"], dtype=float)
-            n = n / np.linalg.norm(n)
-            g.append((n @ M).tolist())
-            h.append(float(n @ (p[0] - np.asarray(fct["point"], dtype=float)) - tip_radius))
-        out.append({"rot": [t, c], "g": g, "h": h})
+        q = commands(machine, k, jj)
+        # the core's facet residual at the four joint points: h at the first,
+        # its differences d(residual)/d(joint xyz) the rows g
+        touches = [{"type": "facet", "target": f, "axes": {a: float(q[a][i]) for a in machine.axis_names}}
+                   for i in range(4) for f in ids]
+        r = _touch_residuals(machine, artefact, tip_radius, touches, errors).reshape(4, len(ids))
+        g = (r[1:] - r[0]).T
+        out.append({"rot": [t, c], "g": g.tolist(), "h": [float(v) for v in r[0]]})
     return out

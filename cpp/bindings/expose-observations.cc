@@ -1,24 +1,51 @@
-// Bindings of the identification engine: Dataset, Simulate, Identify, Result.
+// Bindings of the observations (fivecal/observations/): Dataset, the
+// registered observation kinds, the simulator and its plans, and the
+// columnar loader (the caller passes Arrow's buffers as numpy arrays, zero
+// copy from pyarrow; this file only checks their shapes and hands raw
+// pointers to the core).
 #include <algorithm>
 #include <limits>
 #include <optional>
+#include <stdexcept>
+#include <string>
 
 #include <pybind11/eigen.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "fivecal/observations/columns.h"
 #include "fivecal/observations/dataset.h"
 #include "fivecal/observations/registry.h"
-#include "fivecal/solve/identify.h"
-#include "fivecal/solve/priors.h"
 #include "fivecal/observations/simulate.h"
-#include "identify_options.h"
+#include "fivecal/solve/priors.h"
 
 namespace py = pybind11;
 using namespace fivecal;
 
-void BindIdentification(py::module_& m) {
+namespace {
+
+std::string Shape(const py::array& a) {
+  std::string s = "(";
+  for (py::ssize_t d = 0; d < a.ndim(); ++d) s += (d ? ", " : "") + std::to_string(a.shape(d));
+  return s + (a.ndim() == 1 ? ",)" : ")");
+}
+
+// A 1-D array of T with `n` entries (n < 0: any length), or nullptr for None.
+template <typename T>
+const T* Buffer(py::handle obj, int64_t n, const std::string& what, py::list* keep) {
+  if (obj.is_none()) return nullptr;
+  auto a = py::array_t<T, py::array::c_style>::ensure(obj);
+  if (!a) throw std::invalid_argument(what + ": expected an array of " + py::str(py::dtype::of<T>()).cast<std::string>());
+  if (a.ndim() != 1 || (n >= 0 && a.shape(0) != n))
+    throw std::invalid_argument(what + ": expected shape (" + std::to_string(n) + ",), got " + Shape(a));
+  keep->append(a);
+  return a.data();
+}
+
+}  // namespace
+
+void BindObservations(py::module_& m) {
   py::class_<Dataset>(m, "Dataset")
       .def_static("from_json", &Dataset::FromJson, py::arg("text"),
                   py::arg("require_observations") = true)
@@ -159,68 +186,6 @@ void BindIdentification(py::module_& m) {
   });
 
   m.def("simulate", &Simulate, py::arg("spec_json"), py::call_guard<py::gil_scoped_release>());
-
-  py::class_<Result>(m, "Result")
-      .def_readonly("names", &Result::names)
-      .def_readonly("values", &Result::values)
-      .def_readonly("estimated", &Result::estimated)
-      .def_readonly("std", &Result::std)
-      .def_readonly("covariance", &Result::covariance)
-      .def_readonly("correlation", &Result::correlation)
-      .def_readonly("residuals", &Result::residuals)
-      // An int64 array, not a list: a list of the rows of long data (3e6 for
-      // 1e6 R-test samples) costs a Python int per row.
-      .def_property_readonly("residual_source",
-                             [](const Result& r) {
-                               py::array_t<int64_t> a(static_cast<py::ssize_t>(r.residual_source.size()));
-                               std::copy(r.residual_source.begin(), r.residual_source.end(), a.mutable_data());
-                               return a;
-                             })
-      .def_readonly("residual_vectors", &Result::residual_vectors)
-      .def_readonly("points", &Result::points)
-      .def_readonly("rms", &Result::rms)
-      .def_readonly("max_abs", &Result::max_abs)
-      .def_readonly("sigma", &Result::sigma)
-      .def_readonly("residual_units", &Result::residual_units)
-      .def_readonly("condition_number", &Result::condition_number)
-      .def_readonly("rank", &Result::rank)
-      .def_readonly("unidentifiable", &Result::unidentifiable)
-      .def_readonly("converged", &Result::converged)
-      .def_readonly("iterations", &Result::iterations)
-      .def_readonly("message", &Result::message)
-      .def_readonly("n_observations", &Result::n_observations)
-      .def_readonly("n_parameters", &Result::n_parameters)
-      .def_readonly("outliers", &Result::outliers)
-      .def_readonly("robust_scale", &Result::robust_scale)
-      .def_readonly("prior_std", &Result::prior_std)
-      .def_readonly("informed", &Result::informed)
-      .def_readonly("undetermined", &Result::undetermined)
-      .def_readonly("implausible", &Result::implausible)
-      .def_readonly("map_fit", &Result::map_fit)
-      .def_readonly("fit_path", &Result::fit_path)
-      .def_readonly("class_scales", &Result::class_scales)
-      .def_readonly("variance_components", &Result::variance_components)
-      .def_readonly("chi2", &Result::chi2)
-      .def_readonly("dof", &Result::dof)
-      .def_readonly("chi2_p", &Result::chi2_p)
-      .def_readonly("adequate", &Result::adequate)
-      .def_readonly("adequacy", &Result::adequacy)
-      .def_readonly("finite", &Result::finite)
-      .def_property_readonly("verdict", &Result::verdict)
-      .def("to_json", &Result::ToJson);
-
-  m.def("prior_classes", []() {
-    std::vector<py::dict> out;
-    for (const PriorClass& c : PriorClasses()) {
-      py::dict d;
-      d["name"] = c.name;
-      d["sigma"] = c.sigma;
-      d["unit"] = c.unit;
-      d["description"] = c.description;
-      out.push_back(d);
-    }
-    return out;
-  });
   // The unit of a setup parameter's prior class ("mm", "rad"; "" for a name
   // of no kind): how reports show it, whatever kind it belongs to.
   m.def("setup_parameter_unit", [](const std::string& name) {
@@ -233,69 +198,82 @@ void BindIdentification(py::module_& m) {
   // Machine.theta skips these (a result's set-up values) and refuses any
   // other unknown name, so a typo such as EX0C.x is never silently dropped.
   m.def("is_setup_parameter_name", &IsSetupParameterName, py::arg("name"));
-  m.def("informed_threshold", []() { return kInformedThreshold; });
 
-  m.def(
-      "identify",
-      [](const Dataset& ds, const std::vector<std::string>& estimate,
-         const std::vector<std::string>& fix, const std::map<std::string, double>& initial,
-         const std::string& robust, double robust_scale, int max_iterations,
-         bool allow_unidentifiable, bool include_default_setup, int num_threads,
-         double selection_tolerance, const std::map<std::string, double>& priors, bool prior,
-         bool variance_components, const std::string& fit_path) {
-        IdentifyOptions o = MakeOptions(estimate, fix, initial, robust, robust_scale, max_iterations,
-                                        include_default_setup, selection_tolerance,
-                                        allow_unidentifiable, num_threads, priors, prior);
-        o.variance_components = variance_components;
-        o.fit_path = fit_path;
-        py::gil_scoped_release release;
-        return Identify(ds, o);
-      },
-      py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"),
-      py::arg("robust") = "", py::arg("robust_scale") = 0.0, py::arg("max_iterations") = 200,
-      py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
-      py::arg("num_threads") = 0, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
-      py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false,
-      py::arg("variance_components") = false, py::arg("fit_path") = "auto");
+  // ---- Simulation plans ---------------------------------------------------------
+  py::class_<SimulationPlan>(m, "SimulationPlan")
+      .def_static("from_spec", &BuildSimulationPlan, py::arg("spec_json"),
+                  py::call_guard<py::gil_scoped_release>())
+      .def_static(
+          "from_dataset",
+          // noise: one sigma (mm) per noise class (fivecal._core.noise_classes()).
+          [](const Dataset& ds, const std::map<std::string, double>& values,
+             const std::map<std::string, double>& noise) {
+            NoiseLevels n;
+            n.level = noise;
+            py::gil_scoped_release release;
+            return PlanFromDataset(ds, values, n);
+          },
+          py::arg("dataset"), py::arg("values"), py::arg("noise"))
+      .def_readonly("base", &SimulationPlan::base)
+      .def_readonly("seed", &SimulationPlan::seed)
+      .def_readonly("values", &SimulationPlan::values)
+      .def_readonly("sensitivity", &SimulationPlan::sensitivity)
+      .def_readonly("input_sigma", &SimulationPlan::input_sigma)
+      .def_readonly("input_observation", &SimulationPlan::input_observation)
+      .def_readonly("input_component", &SimulationPlan::input_component)
+      .def_property_readonly("num_inputs", &SimulationPlan::num_inputs)
+      .def("add_noise", &AddNoise, py::arg("seed"), py::call_guard<py::gil_scoped_release>())
+      .def("apply_input_deviations", &ApplyInputDeviations, py::arg("deviation"),
+           py::call_guard<py::gil_scoped_release>());
 
-  py::class_<UnitResiduals>(m, "UnitResiduals")
-      .def_readonly("unit", &UnitResiduals::unit)
-      .def_readonly("rows", &UnitResiduals::rows)
-      .def_readonly("rms", &UnitResiduals::rms)
-      .def_readonly("max_abs", &UnitResiduals::max_abs)
-      .def_readonly("sigma", &UnitResiduals::sigma)
-      .def_readonly("dof", &UnitResiduals::dof);
-
-  py::class_<VarianceComponent>(m, "VarianceComponent")
-      .def_readonly("group", &VarianceComponent::group)
-      .def_readonly("rows", &VarianceComponent::rows)
-      .def_readonly("redundancy", &VarianceComponent::redundancy)
-      .def_readonly("declared", &VarianceComponent::declared)
-      .def_readonly("factor", &VarianceComponent::factor)
-      .def_readonly("sigma", &VarianceComponent::sigma)
-      .def_readonly("estimated", &VarianceComponent::estimated);
-
-  m.def(
-      "resolve_estimate",
-      [](const Dataset& ds, const std::vector<std::string>& estimate,
-         const std::vector<std::string>& fix, const std::map<std::string, double>& initial,
-         const std::map<std::string, double>& priors) {
-        IdentifyOptions o;
-        o.estimate = estimate;
-        o.fix = fix;
-        o.initial = initial;
-        o.priors = priors;
-        return ResolveEstimate(ds, o);
-      },
-      py::arg("dataset"), py::arg("estimate"), py::arg("fix"), py::arg("initial"),
-      py::arg("priors") = std::map<std::string, double>());
-
-  m.def(
-      "predict_residuals",
-      [](const Dataset& ds, const std::map<std::string, double>& values) {
-        std::vector<int> source;
-        Eigen::VectorXd r = PredictResiduals(ds, values, &source);
-        return py::make_tuple(r, source);
-      },
-      py::arg("dataset"), py::arg("values"));
+  py::class_<ColumnLoader>(m, "ColumnLoader")
+      .def(py::init<Dataset, int64_t, int64_t>(), py::arg("head"), py::arg("rows"), py::arg("first_row") = 0)
+      .def(
+          "add",
+          // numbers: name -> (float64 values, bool validity or None);
+          // strings: name -> (int64 offsets (rows + 1), uint8 bytes, validity or None);
+          // positions: int64 dataset index of each row, or None (after the previous batch).
+          [](ColumnLoader& l, const std::string& kind, int64_t rows, const py::dict& numbers,
+             const py::dict& strings, const py::object& positions) {
+            ColumnBatch b;
+            b.kind = kind;
+            b.rows = rows;
+            py::list keep;  // the arrays converted here live until Add returns
+            for (auto item : numbers) {
+              const std::string name = py::str(item.first);
+              const auto t = item.second.cast<py::tuple>();
+              const std::string w = kind + ": column " + name;
+              if (t.size() != 2) throw std::invalid_argument(w + ": expected (values, valid)");
+              NumberColumn c;
+              c.name = name;
+              c.values = Buffer<double>(t[0], rows, w, &keep);
+              if (!c.values) throw std::invalid_argument(w + ": no values");
+              c.valid = reinterpret_cast<const uint8_t*>(Buffer<bool>(t[1], rows, w + " (validity)", &keep));
+              b.numbers.push_back(c);
+            }
+            for (auto item : strings) {
+              const std::string name = py::str(item.first);
+              const auto t = item.second.cast<py::tuple>();
+              const std::string w = kind + ": column " + name;
+              if (t.size() != 3) throw std::invalid_argument(w + ": expected (offsets, data, valid)");
+              StringColumn c;
+              c.name = name;
+              c.offsets = Buffer<int64_t>(t[0], rows + 1, w + " (offsets)", &keep);
+              const auto data = py::array_t<uint8_t, py::array::c_style>::ensure(t[1]);
+              if (!c.offsets || !data || data.ndim() != 1) throw std::invalid_argument(w + ": expected offsets and bytes");
+              keep.append(data);
+              c.data = reinterpret_cast<const char*>(data.data());
+              if (c.offsets[0] < 0 || c.offsets[rows] > data.shape(0))
+                throw std::invalid_argument(w + ": offsets outside the bytes");
+              for (int64_t r = 0; r < rows; ++r)
+                if (c.offsets[r + 1] < c.offsets[r]) throw std::invalid_argument(w + ": offsets not increasing");
+              c.valid = reinterpret_cast<const uint8_t*>(Buffer<bool>(t[2], rows, w + " (validity)", &keep));
+              b.strings.push_back(c);
+            }
+            b.positions = Buffer<int64_t>(positions, rows, kind + ": positions", &keep);
+            py::gil_scoped_release release;
+            l.Add(b);
+          },
+          py::arg("kind"), py::arg("rows"), py::arg("numbers"), py::arg("strings"), py::arg("positions") = py::none())
+      .def("finish", &ColumnLoader::Finish, py::arg("whole") = true);
 }

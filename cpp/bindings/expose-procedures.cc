@@ -1,7 +1,10 @@
-// Bindings of the double ball bar algorithms: circle fits, the Jiang & Cripps
-// four-step test, the Wang et al. path and planar circular tests. Inputs are
-// validated in the core (std::invalid_argument -> ValueError).
+// Bindings of the procedures (fivecal/procedures/): the double ball bar
+// algorithms (circle fits, the Jiang & Cripps four-step test, the Wang et al.
+// path and planar circular tests), the machine-as-CMM sphere test, machining
+// tests and probing statistics. Inputs are validated in the core
+// (std::invalid_argument -> ValueError).
 #include <pybind11/eigen.h>
+#include <pybind11/functional.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -15,7 +18,11 @@
 #include "fivecal/observations/dataset.h"
 #include "fivecal/procedures/dbb_four_step.h"
 #include "fivecal/procedures/dbb_setup.h"
+#include "fivecal/procedures/machining_test.h"
+#include "fivecal/procedures/probing_stats.h"
+#include "fivecal/procedures/sphere_test.h"
 #include "fivecal/procedures/wang_path.h"
+#include "fivecal/solve/identify.h"
 
 namespace py = pybind11;
 using namespace fivecal;
@@ -33,9 +40,16 @@ Eigen::Vector3d OptionalVector(const std::optional<Eigen::Vector3d>& v) {
   return v ? *v : Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
 }
 
+Eigen::MatrixXd Stack(const std::vector<Eigen::Vector3d>& v) {
+  Eigen::MatrixXd m(v.size(), 3);
+  for (size_t i = 0; i < v.size(); ++i) m.row(i) = v[i].transpose();
+  return m;
+}
+
 }  // namespace
 
-void BindDbb(py::module_& m) {
+void BindProcedures(py::module_& m) {
+  // ---- double ball bar ------------------------------------------------------------
   py::class_<CircleFit>(m, "CircleFit")
       .def_readonly("centre", &CircleFit::centre)
       .def_readonly("radius", &CircleFit::radius)
@@ -327,4 +341,171 @@ void BindDbb(py::module_& m) {
         "(dbb_setup.h BarLengthCommands).");
   m.def("trace_harmonics", &TraceHarmonics, py::arg("angles"), py::arg("values"),
         py::arg("max_order"));
+
+  // ---- sphere test -------------------------------------------------------------
+  py::class_<SphereFit>(m, "SphereFit")
+      .def_readonly("center", &SphereFit::center)
+      .def_readonly("radius", &SphereFit::radius)
+      .def_readonly("residuals", &SphereFit::residuals)
+      .def_readonly("out_of_sphericity", &SphereFit::out_of_sphericity)
+      .def_readonly("max_residual", &SphereFit::max_residual)
+      .def_readonly("min_residual", &SphereFit::min_residual)
+      .def_readonly("std_residual", &SphereFit::std_residual)
+      .def_readonly("rms", &SphereFit::rms)
+      .def_readonly("iterations", &SphereFit::iterations)
+      .def_readonly("converged", &SphereFit::converged);
+
+  py::class_<SphereTestResult>(m, "SphereTestResult")
+      .def_readonly("sphere", &SphereTestResult::sphere)
+      .def_readonly("observations", &SphereTestResult::observations)
+      .def_readonly("points", &SphereTestResult::points)
+      .def_readonly("fit", &SphereTestResult::fit)
+      .def_readonly("size_error", &SphereTestResult::size_error)
+      .def("to_json", &SphereTestResult::ToJson);
+
+  m.def(
+      "sphere_points",
+      [](const std::vector<std::pair<double, int>>& rings, const Eigen::Vector3d& pole) {
+        return Stack(SpherePoints(rings, pole));
+      },
+      py::arg("rings") = std::vector<std::pair<double, int>>{}, py::arg("pole") = Eigen::Vector3d(0, 0, 1));
+
+  m.def("fit_sphere", &FitSphere, py::arg("points"), py::arg("max_iterations") = 50,
+        py::arg("tolerance") = 1e-13);
+
+  py::class_<SphereCentreFit>(m, "SphereCentreFit")
+      .def_readonly("center", &SphereCentreFit::center)
+      .def_readonly("residuals", &SphereCentreFit::residuals)
+      .def_readonly("rms", &SphereCentreFit::rms)
+      .def_readonly("iterations", &SphereCentreFit::iterations)
+      .def_readonly("converged", &SphereCentreFit::converged);
+  m.def("fit_sphere_centre", &FitSphereCentre, py::arg("points"), py::arg("radius"), py::arg("start"),
+        py::arg("max_iterations") = 50, py::arg("tolerance") = 1e-12);
+
+  m.def("table_points", &TablePoints, py::arg("dataset"), py::arg("values"), py::arg("indices"),
+        py::call_guard<py::gil_scoped_release>());
+
+  m.def("sphere_test", &SphereTest, py::arg("dataset"), py::arg("sphere"), py::arg("values"),
+        py::call_guard<py::gil_scoped_release>());
+
+  m.def(
+      "sphere_sensitivity",
+      [](const Dataset& setup, const std::string& plan_json, const std::string& sphere,
+         const std::vector<std::string>& names, const std::map<std::string, double>& values,
+         double characteristic_length) {
+        std::vector<SensitivityRow> rows;
+        {
+          py::gil_scoped_release release;
+          rows = SphereSensitivity(setup, plan_json, sphere, names, values, characteristic_length);
+        }
+        py::list out;
+        for (const SensitivityRow& r : rows) {
+          py::dict d;
+          d["name"] = r.name;
+          d["value"] = r.value;
+          d["size_error"] = r.size_error;
+          d["out_of_sphericity"] = r.out_of_sphericity;
+          d["max_residual"] = r.max_residual;
+          d["min_residual"] = r.min_residual;
+          out.append(d);
+        }
+        return out;
+      },
+      py::arg("setup"), py::arg("plan_json"), py::arg("sphere"), py::arg("names"),
+      py::arg("values") = std::map<std::string, double>{}, py::arg("characteristic_length") = 400.0);
+
+  // ---- machining tests ------------------------------------------------------------
+  py::class_<MachiningTest>(m, "MachiningTest")
+      .def(py::init([](const std::string& id, const Eigen::Vector3d& point, const Eigen::Vector3d& direction,
+                       const Eigen::VectorXd& pose, const std::optional<Eigen::VectorXd>& reference,
+                       double measured) {
+             MachiningTest t;
+             t.id = id;
+             t.point = point;
+             t.direction = direction;
+             t.pose = pose;
+             if (reference) t.reference = *reference;
+             t.measured = measured;
+             return t;
+           }),
+           py::arg("id"), py::arg("point"), py::arg("direction"), py::arg("pose"),
+           py::arg("reference") = py::none(), py::arg("measured") = 0.0)
+      .def_readonly("id", &MachiningTest::id)
+      .def_readonly("point", &MachiningTest::point)
+      .def_readonly("direction", &MachiningTest::direction)
+      .def_readonly("pose", &MachiningTest::pose)
+      .def_readonly("reference", &MachiningTest::reference)
+      .def_readonly("measured", &MachiningTest::measured);
+
+  py::class_<MachiningResult>(m, "MachiningResult")
+      .def_readonly("estimated", &MachiningResult::estimated)
+      .def_readonly("values", &MachiningResult::values)
+      .def_readonly("std", &MachiningResult::std)
+      .def_readonly("covariance", &MachiningResult::covariance)
+      .def_readonly("predicted", &MachiningResult::predicted)
+      .def_readonly("residuals", &MachiningResult::residuals)
+      .def_readonly("sigma", &MachiningResult::sigma)
+      .def_readonly("condition_number", &MachiningResult::condition_number)
+      .def_readonly("rank", &MachiningResult::rank)
+      .def_readonly("converged", &MachiningResult::converged)
+      .def_readonly("iterations", &MachiningResult::iterations)
+      .def("to_json", &MachiningResult::ToJson);
+
+  m.def("workpiece_setup_names", &WorkpieceSetupNames);
+  m.def("zhang_zhang_tests", &ZhangZhangTests, py::arg("machine"), py::arg("L"), py::arg("H"));
+  m.def("zhang_zhang_first_order", &ZhangZhangFirstOrder, py::arg("L"), py::arg("H"), py::arg("a_delta"),
+        py::arg("a_xi"), py::arg("c_delta"), py::arg("c_xi"));
+  m.def("machining_poses", &MachiningPoses, py::arg("machine"), py::arg("tests"));
+  m.def("predict_machining", &PredictMachining, py::arg("machine"), py::arg("tests"), py::arg("values"),
+        py::call_guard<py::gil_scoped_release>());
+  m.def("machining_jacobian", &MachiningJacobian, py::arg("machine"), py::arg("tests"), py::arg("names"),
+        py::arg("values"), py::call_guard<py::gil_scoped_release>());
+  m.def(
+      "identify_machining",
+      [](const Machine& mc, const std::vector<MachiningTest>& tests, const std::vector<std::string>& estimate,
+         const std::map<std::string, double>& values, double sigma, int max_iterations) {
+        MachiningOptions o;
+        o.estimate = estimate;
+        o.values = values;
+        o.sigma = sigma;
+        o.max_iterations = max_iterations;
+        py::gil_scoped_release release;
+        return IdentifyMachining(mc, tests, o);
+      },
+      py::arg("machine"), py::arg("tests"), py::arg("estimate"), py::arg("values"), py::arg("sigma") = 0.0,
+      py::arg("max_iterations") = 50);
+
+  // ---- Probing statistics ---------------------------------------------------------------
+  py::class_<PooledStd>(m, "PooledStd")
+      .def_readonly("pooled_std", &PooledStd::pooled_std)
+      .def_readonly("dof", &PooledStd::dof)
+      .def_readonly("group_std", &PooledStd::group_std)
+      .def_readonly("group_size", &PooledStd::group_size);
+  m.def("pooled_std", &PooledStandardDeviation, py::arg("groups"));
+  m.def("window_pooled_std", &WindowPooledStd, py::arg("series"), py::arg("window"));
+
+  py::class_<GridStatistics>(m, "GridStatistics")
+      .def_readonly("points", &GridStatistics::points)
+      .def_readonly("cycles", &GridStatistics::cycles)
+      .def_readonly("window", &GridStatistics::window)
+      .def_readonly("mean", &GridStatistics::mean)
+      .def_readonly("total_std", &GridStatistics::total_std)
+      .def_readonly("total_range", &GridStatistics::total_range)
+      .def_readonly("point_pooled_std", &GridStatistics::point_pooled_std)
+      .def_readonly("max_pooled_std", &GridStatistics::max_pooled_std)
+      .def_readonly("pooled_std", &GridStatistics::pooled_std)
+      .def_readonly("pooled_dof", &GridStatistics::pooled_dof)
+      .def_readonly("point_means", &GridStatistics::point_means)
+      .def_readonly("surface_std", &GridStatistics::surface_std)
+      .def_readonly("surface_range", &GridStatistics::surface_range)
+      .def_readonly("cycle_means", &GridStatistics::cycle_means)
+      .def_readonly("drift_std", &GridStatistics::drift_std)
+      .def_readonly("drift_range", &GridStatistics::drift_range)
+      .def_readonly("point_std", &GridStatistics::point_std)
+      .def_readonly("point_std_pooled", &GridStatistics::point_std_pooled)
+      .def_readonly("repeatability", &GridStatistics::repeatability)
+      .def_readonly("surface_component", &GridStatistics::surface_component)
+      .def_readonly("drift_component", &GridStatistics::drift_component)
+      .def("to_json", &GridStatistics::ToJson);
+  m.def("analyze_grid", &AnalyzeGrid, py::arg("P"), py::arg("window") = 5);
 }

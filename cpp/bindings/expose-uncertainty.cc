@@ -1,5 +1,5 @@
-// Bindings of the uncertainty tools: simulation plans, Monte Carlo, GUM with
-// input covariance, probing statistics. Long computations release the GIL;
+// Bindings of the uncertainty tools (fivecal/uncertainty/): Monte Carlo and
+// GUM with input covariance. Long computations release the GIL;
 // the Monte Carlo progress callback is called from the calling thread only,
 // with the GIL re-acquired for the call (the worker threads never touch Python).
 #include <pybind11/eigen.h>
@@ -13,8 +13,6 @@
 #include "fivecal/uncertainty/gum.h"
 #include "fivecal/solve/identify.h"
 #include "fivecal/uncertainty/monte_carlo.h"
-#include "fivecal/procedures/probing_stats.h"
-#include "fivecal/observations/simulate.h"
 #include "identify_options.h"
 
 namespace py = pybind11;
@@ -27,33 +25,6 @@ std::vector<bool> Bools(const std::vector<bool>& v) { return v; }
 }  // namespace
 
 void BindUncertainty(py::module_& m) {
-  // ---- Simulation plans ---------------------------------------------------------
-  py::class_<SimulationPlan>(m, "SimulationPlan")
-      .def_static("from_spec", &BuildSimulationPlan, py::arg("spec_json"),
-                  py::call_guard<py::gil_scoped_release>())
-      .def_static(
-          "from_dataset",
-          // noise: one sigma (mm) per noise class (fivecal._core.noise_classes()).
-          [](const Dataset& ds, const std::map<std::string, double>& values,
-             const std::map<std::string, double>& noise) {
-            NoiseLevels n;
-            n.level = noise;
-            py::gil_scoped_release release;
-            return PlanFromDataset(ds, values, n);
-          },
-          py::arg("dataset"), py::arg("values"), py::arg("noise"))
-      .def_readonly("base", &SimulationPlan::base)
-      .def_readonly("seed", &SimulationPlan::seed)
-      .def_readonly("values", &SimulationPlan::values)
-      .def_readonly("sensitivity", &SimulationPlan::sensitivity)
-      .def_readonly("input_sigma", &SimulationPlan::input_sigma)
-      .def_readonly("input_observation", &SimulationPlan::input_observation)
-      .def_readonly("input_component", &SimulationPlan::input_component)
-      .def_property_readonly("num_inputs", &SimulationPlan::num_inputs)
-      .def("add_noise", &AddNoise, py::arg("seed"), py::call_guard<py::gil_scoped_release>())
-      .def("apply_input_deviations", &ApplyInputDeviations, py::arg("deviation"),
-           py::call_guard<py::gil_scoped_release>());
-
   // ---- Monte Carlo ------------------------------------------------------------------
   py::class_<MonteCarloResult>(m, "MonteCarloResult")
       .def_readonly("estimated", &MonteCarloResult::estimated)
@@ -246,38 +217,4 @@ void BindUncertainty(py::module_& m) {
       py::arg("cycles"), py::arg("day"), py::arg("cycle"), py::arg("estimate"), py::arg("fix"),
       py::arg("initial"), py::arg("pooling") = "cycles", py::arg("probability") = 0.95,
       py::arg("coverage_factor") = 0.0, py::arg("reference") = 0, py::arg("include_default_setup") = true);
-
-  // ---- Probing statistics ---------------------------------------------------------------
-  py::class_<PooledStd>(m, "PooledStd")
-      .def_readonly("pooled_std", &PooledStd::pooled_std)
-      .def_readonly("dof", &PooledStd::dof)
-      .def_readonly("group_std", &PooledStd::group_std)
-      .def_readonly("group_size", &PooledStd::group_size);
-  m.def("pooled_std", &PooledStandardDeviation, py::arg("groups"));
-  m.def("window_pooled_std", &WindowPooledStd, py::arg("series"), py::arg("window"));
-
-  py::class_<GridStatistics>(m, "GridStatistics")
-      .def_readonly("points", &GridStatistics::points)
-      .def_readonly("cycles", &GridStatistics::cycles)
-      .def_readonly("window", &GridStatistics::window)
-      .def_readonly("mean", &GridStatistics::mean)
-      .def_readonly("total_std", &GridStatistics::total_std)
-      .def_readonly("total_range", &GridStatistics::total_range)
-      .def_readonly("point_pooled_std", &GridStatistics::point_pooled_std)
-      .def_readonly("max_pooled_std", &GridStatistics::max_pooled_std)
-      .def_readonly("pooled_std", &GridStatistics::pooled_std)
-      .def_readonly("pooled_dof", &GridStatistics::pooled_dof)
-      .def_readonly("point_means", &GridStatistics::point_means)
-      .def_readonly("surface_std", &GridStatistics::surface_std)
-      .def_readonly("surface_range", &GridStatistics::surface_range)
-      .def_readonly("cycle_means", &GridStatistics::cycle_means)
-      .def_readonly("drift_std", &GridStatistics::drift_std)
-      .def_readonly("drift_range", &GridStatistics::drift_range)
-      .def_readonly("point_std", &GridStatistics::point_std)
-      .def_readonly("point_std_pooled", &GridStatistics::point_std_pooled)
-      .def_readonly("repeatability", &GridStatistics::repeatability)
-      .def_readonly("surface_component", &GridStatistics::surface_component)
-      .def_readonly("drift_component", &GridStatistics::drift_component)
-      .def("to_json", &GridStatistics::ToJson);
-  m.def("analyze_grid", &AnalyzeGrid, py::arg("P"), py::arg("window") = 5);
 }

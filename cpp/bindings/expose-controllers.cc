@@ -1,0 +1,339 @@
+// Bindings of the controller models (fivecal/controllers/): LinuxCNC's
+// xyzac-trt / xyzbc-trt kinematics, the mapping of a fivecal machine onto
+// them and the pin values that best absorb identified errors. Pins cross the
+// boundary as dicts keyed by LinuxCNC's pin names ("x-rot-point", ...).
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <algorithm>
+#include <map>
+#include <optional>
+#include <string>
+
+#include "fivecal/controllers/absorb.h"
+#include "fivecal/controllers/compensate.h"
+#include "fivecal/controllers/kinematics_table.h"
+#include "fivecal/controllers/linuxcnc_5axis.h"
+#include "fivecal/controllers/linuxcnc_trt.h"
+#include "fivecal/model/machine.h"
+
+namespace py = pybind11;
+using namespace fivecal;
+using namespace fivecal::controllers;
+
+namespace {
+
+TrtPins PinsFromMap(TrtKins kins, const std::map<std::string, double>& d) {
+  TrtPins p;
+  const std::vector<std::string> names = TrtPinNames(kins);
+  for (const auto& [k, v] : d) {
+    if (std::find(names.begin(), names.end(), k) == names.end())
+      throw std::invalid_argument("pins: '" + k + "' is not a pin of " + TrtKinsName(kins) +
+                                  "-kins");
+    RequireBounded(v, kMaxLinear, "pins." + k);
+    TrtPin(p, k) = v;
+  }
+  return p;
+}
+
+std::map<std::string, double> PinsToMap(TrtKins kins, const TrtPins& p) {
+  std::map<std::string, double> d;
+  for (const std::string& n : TrtPinNames(kins)) d[n] = TrtPin(p, n);
+  return d;
+}
+
+py::dict TrtFitDict(TrtKins kins, const TrtFit& fit) {
+  py::dict d;
+  d["pins"] = PinsToMap(kins, fit.pins);
+  d["solved"] = fit.solved;
+  d["workpiece_shift"] = Eigen::Vector3d(fit.workpiece_shift);
+  d["workpiece_shift_held"] = Eigen::Vector3d(fit.workpiece_shift_held);
+  d["residual"] = fit.residual;
+  d["residual_held"] = fit.residual_held;
+  d["rms"] = fit.rms;
+  d["max"] = fit.max;
+  d["rms_held"] = fit.rms_held;
+  d["max_held"] = fit.max_held;
+  return d;
+}
+
+py::list ParameterList(const std::vector<ControllerParameter>& params) {
+  py::list l;
+  for (const ControllerParameter& p : params) {
+    py::dict d;
+    d["label"] = p.label;
+    d["unit"] = p.unit;
+    d["column"] = p.column;
+    l.append(d);
+  }
+  return l;
+}
+
+}  // namespace
+
+void BindControllers(py::module_& m) {
+  m.def(
+      "trt_pin_names", [](const std::string& kins) { return TrtPinNames(ParseTrtKins(kins)); },
+      py::arg("kins"), "HAL input pin names of LinuxCNC's <kins>-kins module.");
+
+  m.def(
+      "trt_forward",
+      [](const std::string& kins_name, const std::map<std::string, double>& pins,
+         const Eigen::MatrixXd& joints) {
+        const TrtKins kins = ParseTrtKins(kins_name);
+        if (joints.cols() != 5)
+          throw std::invalid_argument("joints: expected N x 5 (X Y Z tilt C), got " +
+                                      std::to_string(joints.cols()) + " columns");
+        const TrtPins p = PinsFromMap(kins, pins);
+        Eigen::MatrixXd w(joints.rows(), 3);
+        for (int i = 0; i < joints.rows(); ++i)
+          w.row(i) = TrtForward(kins, p, joints.row(i).transpose()).transpose();
+        return w;
+      },
+      py::arg("kins"), py::arg("pins"), py::arg("joints"),
+      "LinuxCNC's forward kinematics: joints N x 5 (mm, degrees) -> world N x 3 (mm).");
+
+  m.def(
+      "trt_inverse",
+      [](const std::string& kins_name, const std::map<std::string, double>& pins,
+         const Eigen::MatrixXd& world) {
+        const TrtKins kins = ParseTrtKins(kins_name);
+        if (world.cols() != 5)
+          throw std::invalid_argument("world: expected N x 5 (X Y Z tilt C), got " +
+                                      std::to_string(world.cols()) + " columns");
+        const TrtPins p = PinsFromMap(kins, pins);
+        Eigen::MatrixXd j = world;
+        for (int i = 0; i < world.rows(); ++i)
+          j.row(i).head<3>() =
+              TrtInverse(kins, p, world.row(i).head<3>().transpose(), world(i, 3), world(i, 4))
+                  .transpose();
+        return j;
+      },
+      py::arg("kins"), py::arg("pins"), py::arg("world"),
+      "LinuxCNC's inverse kinematics: world N x 5 (X Y Z mm, tilt C degrees) -> joints N x 5.");
+
+  m.def(
+      "trt_match",
+      [](const Machine& mc, const std::string& kins_name) {
+        const TrtMapping map = MatchTrt(mc, ParseTrtKins(kins_name));
+        py::dict d;
+        std::string axes;
+        std::vector<double> sign;
+        for (int k = 0; k < 5; ++k) {
+          axes += mc.axis(map.axis[k]).name;
+          sign.push_back(map.sign[k]);
+        }
+        d["axes"] = axes;
+        d["sign"] = sign;
+        d["origin"] = Eigen::Vector3d(map.origin);
+        return d;
+      },
+      py::arg("machine"), py::arg("kins"),
+      "How the machine's axes drive LinuxCNC's joints X Y Z tilt C: the fivecal axis letters, "
+      "joint = sign * command, and world = workpiece point - origin. Raises ValueError when "
+      "the machine does not fit the kinematics.");
+
+  m.def(
+      "trt_joints",
+      [](const Machine& mc, const std::string& kins_name, const Eigen::MatrixXd& commands) {
+        const TrtKins kins = ParseTrtKins(kins_name);
+        return TrtJoints(mc, MatchTrt(mc, kins), commands);
+      },
+      py::arg("machine"), py::arg("kins"), py::arg("commands"));
+
+  m.def(
+      "trt_commands",
+      [](const Machine& mc, const std::string& kins_name, const Eigen::MatrixXd& joints) {
+        const TrtKins kins = ParseTrtKins(kins_name);
+        return TrtCommands(mc, MatchTrt(mc, kins), joints);
+      },
+      py::arg("machine"), py::arg("kins"), py::arg("joints"));
+
+  m.def(
+      "trt_fit",
+      [](const Machine& mc, const std::string& kins_name, const Eigen::VectorXd& theta,
+         const Eigen::MatrixXd& poses, const std::map<std::string, double>& held) {
+        const TrtKins kins = ParseTrtKins(kins_name);
+        TrtFit fit;
+        {
+          py::gil_scoped_release release;
+          fit = FitTrtPins(mc, kins, theta, poses, PinsFromMap(kins, held));
+        }
+        return TrtFitDict(kins, fit);
+      },
+      py::arg("machine"), py::arg("kins"), py::arg("theta"), py::arg("poses"),
+      py::arg("held") = std::map<std::string, double>{},
+      "Pins that best absorb the errors theta over the poses (N x num_axes, mm / degrees): "
+      "dict pins, solved, workpiece_shift(_held) (3, mm), residual / residual_held (N x 3 mm), rms, max, rms_held, max_held.");
+
+  m.def("controller_models", &ControllerModelNames,
+        "Names of the controller models the absorber knows (generic pivots, LinuxCNC trt, 5axiskins).");
+
+  m.def(
+      "controller_parameters",
+      [](const Machine& mc, const std::string& model, bool directions, bool tool_length) {
+        return ParameterList(ControllerParameters(mc, ParseControllerModel(model), directions, tool_length));
+      },
+      py::arg("machine"), py::arg("model"), py::arg("directions") = false, py::arg("tool_length") = true,
+      "The model's parameters on the machine: list of dicts label, unit, column (d theta per unit). "
+      "Raises ValueError when the machine's topology does not fit the model.");
+
+  m.def(
+      "controller_absorb",
+      [](const Machine& mc, const std::string& model_name, const Eigen::VectorXd& theta,
+         const Eigen::MatrixXd& poses, bool directions, bool tool_length,
+         const std::map<std::string, double>& held_pins) {
+        const ControllerModel model = ParseControllerModel(model_name);
+        AbsorbOptions o;
+        o.directions = directions;
+        o.tool_length = tool_length;
+        const bool trt = model == ControllerModel::kXyzacTrt || model == ControllerModel::kXyzbcTrt;
+        const TrtKins kins = model == ControllerModel::kXyzbcTrt ? TrtKins::kXyzbc : TrtKins::kXyzac;
+        if (!held_pins.empty()) {
+          if (!trt)
+            throw std::invalid_argument("held_pins: only the LinuxCNC trt models have pins (model " +
+                                        model_name + ")");
+          o.held_pins = PinsFromMap(kins, held_pins);
+        }
+        Absorption ab;
+        {
+          py::gil_scoped_release release;
+          ab = Absorb(mc, model, theta, poses, o);
+        }
+        py::dict d;
+        d["model"] = ControllerModelName(ab.model);
+        d["parameters"] = ParameterList(ab.parameters);
+        d["values"] = ab.values;
+        d["held"] = ab.held;
+        d["theta"] = ab.theta;
+        d["workpiece_shift"] = Eigen::Vector3d(ab.workpiece_shift);
+        d["residual"] = ab.residual;
+        d["residual_old"] = ab.residual_old;
+        d["rms"] = ab.rms;
+        d["max"] = ab.max;
+        d["rms_old"] = ab.rms_old;
+        d["max_old"] = ab.max_old;
+        d["trt"] = ab.trt ? py::object(TrtFitDict(kins, *ab.trt)) : py::object(py::none());
+        return d;
+      },
+      py::arg("machine"), py::arg("model"), py::arg("theta"), py::arg("poses"),
+      py::arg("directions") = false, py::arg("tool_length") = true,
+      py::arg("held_pins") = std::map<std::string, double>{},
+      "Least-squares absorption of the errors theta by the controller model over the poses (N x "
+      "num_axes, mm / degrees): dict model, parameters, values, held, theta, workpiece_shift, "
+      "residual, residual_old (N x 3 mm), rms, max, rms_old, max_old, and for the LinuxCNC trt "
+      "models trt (the pins fit, as trt_fit; held_pins: the pins it holds).");
+
+  m.def(
+      "fiveaxis_match",
+      [](const Machine& mc) {
+        const FiveAxisMapping map = MatchFiveAxis(mc);
+        py::dict sign;
+        for (int k = 0; k < 5; ++k) sign[py::str(std::string(1, "XYZBC"[k]))] = map.sign[k];
+        py::dict d;
+        d["sign"] = sign;
+        d["pivot_length"] = map.pivot_length;
+        d["origin"] = Eigen::Vector3d(map.origin);
+        return d;
+      },
+      py::arg("machine"),
+      "How the machine drives 5axiskins's joints X Y Z B C: sign (joint = sign * command), "
+      "pivot_length (mm) and origin (world = workpiece point - origin). ValueError says why a "
+      "machine does not fit.");
+  m.def("fiveaxis_forward", &FiveAxisForward, py::arg("pivot_length"), py::arg("joints"),
+        "5axiskins.c forward kinematics: joints N x 5 (X Y Z B C, mm / degrees) -> world N x 3.");
+  m.def("fiveaxis_inverse", &FiveAxisInverse, py::arg("pivot_length"), py::arg("world"),
+        "5axiskins.c inverse kinematics: world N x 5 (X Y Z B C) -> joints N x 5.");
+  m.def(
+      "fiveaxis_joints",
+      [](const Machine& mc, const Eigen::MatrixXd& commands) {
+        return FiveAxisJoints(mc, MatchFiveAxis(mc), commands);
+      },
+      py::arg("machine"), py::arg("commands"), "5axiskins joints N x 5 for fivecal commands.");
+
+  m.def(
+      "compensate_commands",
+      [](const Machine& mc, const Eigen::VectorXd& theta, const Eigen::MatrixXd& points,
+         const std::optional<Eigen::MatrixXd>& tool_axes, const Eigen::MatrixXd& nominal,
+         const std::optional<Eigen::MatrixXi>& dirs, bool orientation, double max_rotary_correction) {
+        CompensatedCommands c;
+        {
+          py::gil_scoped_release release;
+          c = CompensateCommands(mc, theta, points, tool_axes ? &*tool_axes : nullptr, nominal,
+                                 dirs ? &*dirs : nullptr, orientation, max_rotary_correction);
+        }
+        return py::make_tuple(c.commands, c.oriented);
+      },
+      py::arg("machine"), py::arg("theta"), py::arg("points"), py::arg("tool_axes"), py::arg("nominal"),
+      py::arg("directions") = py::none(), py::arg("orientation") = true,
+      py::arg("max_rotary_correction") = 0.1,
+      "Compensated commands for N poses, each seeded at its nominal commands: (N x num_axes "
+      "commands, N oriented flags). ValueError 'pose i: ...' for a target that cannot be reached.");
+
+  m.def(
+      "kinematics_table",
+      [](const Machine& mc, const Eigen::VectorXd& theta) {
+        const KinematicsTable t = MakeKinematicsTable(mc, theta);
+        py::list rows;
+        for (const TableAxis& a : t.axes) {
+          py::dict r;
+          r["axis"] = std::string(1, a.axis);
+          r["chain"] = a.tool_chain ? "tool" : "workpiece";
+          r["type"] = a.rotary ? "rotary" : "linear";
+          r["direction"] = Eigen::Vector3d(a.direction);
+          if (a.rotary) r["point"] = Eigen::Vector3d(a.point);
+          rows.append(r);
+        }
+        py::dict d;
+        d["axes"] = rows;
+        d["tool_tip"] = Eigen::Vector3d(t.tool_tip);
+        d["tool_axis"] = Eigen::Vector3d(t.tool_axis);
+        d["part_origin"] = Eigen::Vector3d(t.part_origin);
+        d["part_rotation"] = Eigen::Matrix3d(t.part_rotation);
+        return d;
+      },
+      py::arg("machine"), py::arg("theta"),
+      "The machine (location errors and tip offsets of theta) as a neutral kinematics table: dict "
+      "axes (axis, chain, type, direction, point for a rotary axis), tool_tip, tool_axis, "
+      "part_origin, part_rotation; machine frame at the zero pose, mm.");
+
+  m.def(
+      "table_tool_points",
+      [](const std::vector<std::string>& names, const std::vector<std::string>& chains,
+         const std::vector<std::string>& types,
+         const Eigen::MatrixXd& directions, const Eigen::MatrixXd& points, const Eigen::Vector3d& tool_tip,
+         const Eigen::Vector3d& part_origin, const Eigen::Matrix3d& part_rotation, const Eigen::MatrixXd& q) {
+        const size_t n = chains.size();
+        if (names.size() != n || types.size() != n || size_t(directions.rows()) != n || size_t(points.rows()) != n ||
+            directions.cols() != 3 || points.cols() != 3)
+          throw std::invalid_argument("table.axes: names, chains, types, directions and points (N x 3) disagree");
+        KinematicsTable t;
+        for (size_t k = 0; k < n; ++k) {
+          if (chains[k] != "tool" && chains[k] != "workpiece")
+            throw std::invalid_argument("table.axes[" + std::to_string(k) + "].chain: '" + chains[k] +
+                                        "' (expected workpiece or tool)");
+          if (types[k] != "rotary" && types[k] != "linear")
+            throw std::invalid_argument("table.axes[" + std::to_string(k) + "].type: '" + types[k] +
+                                        "' (expected linear or rotary)");
+          TableAxis a;
+          if (names[k].size() != 1)
+            throw std::invalid_argument("table.axes[" + std::to_string(k) + "].axis: '" + names[k] +
+                                        "' (expected one axis letter)");
+          a.axis = names[k][0];
+          a.tool_chain = chains[k] == "tool";
+          a.rotary = types[k] == "rotary";
+          a.direction = directions.row(Eigen::Index(k)).transpose();
+          a.point = points.row(Eigen::Index(k)).transpose();
+          t.axes.push_back(a);
+        }
+        t.tool_tip = tool_tip;
+        t.part_origin = part_origin;
+        t.part_rotation = part_rotation;
+        return TableToolPoints(t, q);
+      },
+      py::arg("names"), py::arg("chains"), py::arg("types"), py::arg("directions"), py::arg("points"), py::arg("tool_tip"),
+      py::arg("part_origin"), py::arg("part_rotation"), py::arg("axes"),
+      "Tool points (N x 3, part frame) that a kinematics table describes for commands axes (N x "
+      "rows, mm / degrees): each axis a screw about its line.");
+}
