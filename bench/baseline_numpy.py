@@ -357,6 +357,14 @@ class FusedProblem:
         return a - v
 
 
+def fused_tool_points(machine, q, theta):
+    """Forward kinematics with fused_model on numpy (values as constants: the
+    zero ones cost nothing). q (N, num_axes) in mm / rad -> (N, 3)."""
+    qd, _ = fm.axis_columns(machine, q)
+    P = fm.Model(machine, np).tool_points(qd, {k: float(v) for k, v in theta.items()})
+    return np.stack([np.broadcast_to(v, (q.shape[0],)) for v in P], axis=1)
+
+
 def ball3d_fused(machine, names, q, tool_ball, table_ball, measured):
     """The ball3d rows of one mounting (the scaling benchmark) as
     ``evaluate(x, jacobian)`` -> (rows (3N,), Jacobian or None), unweighted."""

@@ -157,7 +157,25 @@ class Model:
             if any(not zero(x) for x in e[3:]):
                 R = matmul(R, self.rotzyx(*e[3:]))
             p_parent = p
+            R, t = self.barrier(R, t)
         return R, t, p_parent
+
+    def barrier(self, R, t):
+        """The frame after an axis, written out when ``ops`` has a
+        ``barrier`` (bench/baseline_jax.py). Without it XLA:CPU's loop
+        fusion evaluates every entry again in each entry that uses it, down
+        the whole chain."""
+        fn = getattr(self.ops, "barrier", None)
+        if fn is None:
+            return R, t
+        flat = [R[i][j] for i in range(3) for j in range(3)] + list(t)
+        live = [k for k, v in enumerate(flat) if not const(v)]
+        if not live:
+            return R, t
+        out = fn([flat[k] for k in live])
+        for k, v in zip(live, out):
+            flat[k] = v
+        return [flat[0:3], flat[3:6], flat[6:9]], flat[9:12]
 
     def tool_points(self, q, th, dirs=None, tip=None):
         """The tool point in workpiece coordinates, as three per-sample

@@ -4,12 +4,12 @@
     python3 bench/run.py --quick      # smaller sizes (a smoke run)
     python3 bench/run.py --readme     # also rewrite the README's performance section
 
-Every case runs fivecal and the numpy/SciPy baseline (bench/baseline_numpy.py)
+Every case runs fivecal and the numpy baseline (bench/baseline_numpy.py)
 in this process on the same data, checks they agree, and records medians of
 at least 5 runs, the problem sizes and the ratio baseline / fivecal. A second
 baseline, the same model and fits in JAX (bench/baseline_jax.py: jit, exact
-jacfwd Jacobians, Levenberg-Marquardt in lax.while_loop, vmap over Monte Carlo
-trials), runs beside it when jax is installed (the ``bench`` extra): its first
+jacfwd Jacobians, fivecal's Levenberg-Marquardt rule in lax.while_loop,
+lax.map over Monte Carlo trials), runs beside it when jax is installed (the ``bench`` extra): its first
 call (trace, compile and one run) is recorded apart as ``jax_compile_s``, its
 warm median as ``jax_s``, and ``ratio_jax`` = jax_s / fivecal_s. Without jax
 the JAX columns say so and everything else runs.
@@ -112,12 +112,11 @@ def case_forward_kinematics(n, repeat):
                              repeat)
     t_api, runs_api, p_api = timed(lambda: m.tool_point(axes, errors), repeat)
     assert np.array_equal(p_f, p_api)
-    nm = base.NumpyMachine(m)
     qi = q.copy()
     for i, a in enumerate(m.axis_names):
         if m.is_rotary(a):
             qi[:, i] = np.deg2rad(qi[:, i])
-    t_b, runs_b, p_b = timed(lambda: nm.tool_points(qi, errors), repeat)
+    t_b, runs_b, p_b = timed(lambda: base.fused_tool_points(m, qi, errors), repeat)
     diff = float(np.abs(p_f - p_b).max())
     assert diff < 1e-9, f"forward kinematics disagree by {diff} mm"
     if jbase is None:
@@ -339,7 +338,7 @@ def case_monte_carlo(trials, threads, repeat, baseline_trials=5, jax_trials=JAX_
     """Monte Carlo re-fits of the TANGO S3 problem (issue 5). The numpy
     figure is the median of ``baseline_trials`` single SciPy re-fits times
     the trial count (one thread: a plain SciPy user has no threaded re-fit).
-    ``jax_trials``: run that many JAX trials (one vmapped Levenberg-Marquardt
+    ``jax_trials``: run that many JAX trials (one Levenberg-Marquardt
     solve per trial, from the reference fit, on the weighted rows plus N(0, 1)
     noise on every row, scale bars included) and scale the time to ``trials``
     when fewer; their spread is checked against fivecal's Monte Carlo of the
@@ -389,7 +388,7 @@ _JAX_MC = {}     # jax_trials -> the measured run (every Monte Carlo case re-fit
 
 
 def jax_monte_carlo(ds, trials, jax_trials, t_f, repeat):
-    """The JAX Monte Carlo: ``jax_trials`` vmapped LM re-fits (the median of
+    """The JAX Monte Carlo: ``jax_trials`` LM re-fits (the median of
     ``repeat`` warm runs, measured once for every case), scaled to ``trials``. Agreement:
     the reference fit within sigma of fivecal's, and the trials' mean and
     standard deviation those of fivecal's Monte Carlo with as many trials,
@@ -399,7 +398,8 @@ def jax_monte_carlo(ds, trials, jax_trials, t_f, repeat):
     run = _JAX_MC[jax_trials]
     t_j, scale = run["jax_s_per_trial"] * jax_trials, trials / jax_trials
     return {**run, "jax_s": t_j * scale, "ratio_jax": t_j * scale / t_f,
-            "jax_note": ("JAX: vmap of the LM re-fit over trials (lax.map, 64 at a time), the median of "
+            "jax_note": ("JAX: lax.map of the LM re-fit over trials (one at a time: vmapped batches were "
+                         "slower), the median of "
                          f"{len(run['runs_jax_s'])} warm runs of {jax_trials} trials"
                          + (f" scaled to {trials}" if scale != 1 else "")
                          + "; its first call (compile + the same run) is jax_compile_s")}
@@ -647,22 +647,64 @@ def table(results):
     return "\n".join(lines)
 
 
+def jacobian_cell(r):
+    """Jacobian evaluations per fit (per trial for Monte Carlo) on each side, as printed."""
+    def g(*keys):
+        for k in keys:
+            if k in r:
+                v = r[k]
+                return f"{v:.2f}".rstrip("0").rstrip(".") if isinstance(v, float) else str(v)
+        return "–"
+    f = g("fivecal_jacobian_evaluations", "fivecal_jacobian_evaluations_per_trial")
+    n = g("baseline_jacobian_evaluations", "baseline_jacobian_evaluations_per_trial")
+    j = g("jax_jacobian_evaluations", "jax_jacobian_evaluations_per_trial")
+    return "–" if f == n == j == "–" else f"{f} / {n} / {j}"
+
+
+def previous_paragraph(doc):
+    """The ratios of the previous bench run (bench/results_previous.json, its
+    weaker baselines) beside this run's, case by case."""
+    prev = doc.get("previous")
+    if not prev:
+        return []
+    old = {r["case"]: r for r in prev["results"]}
+    cells = []
+    for r in doc["results"]:
+        o = old.get(r["case"])
+        if o and "ratio_jax" in o and "ratio_jax" in r:
+            cells.append(f"{r['case']} {_ratio(o['ratio_jax'], '×')} → {_ratio(r['ratio_jax'], '×')}")
+    if not cells:
+        return []
+    return ["", f"Against the previous bench run ({prev['machine']['date']}, `bench/results_previous.json`: "
+            "the JAX baseline then evaluated every absent error as zero times its term over all samples, "
+            "multiplied frames by batched 3×3 einsums and started its LM damped), JAX / fivecal went: "
+            + "; ".join(cells) + "."]
+
+
 def readme_section(doc):
     res = {r["case"]: r for r in doc["results"]}
     jax_measured = any("jax_s" in r for r in doc["results"])
-    jax_words = ("and the JAX baseline (`bench/baseline_jax.py`: the same model jit-compiled in double "
-                 "precision, exact `jax.jacfwd` Jacobians, Levenberg–Marquardt in `lax.while_loop`, `vmap` "
-                 "over Monte Carlo trials) " if jax_measured else "")
+    jax_words = ("and the JAX baseline (`bench/baseline_jax.py`: the same fused model jit-compiled in double "
+                 "precision, exact `jax.jacfwd` Jacobians, fivecal's Levenberg–Marquardt in one `lax.while_loop`, "
+                 "`lax.map` over Monte Carlo trials) " if jax_measured else "")
     lines = ["<!-- performance:begin (generated by python3 bench/run.py --readme) -->",
              f"Measured on {doc['machine']['cpu']} ({doc['machine']['cores']} cores), "
-             f"{doc['machine']['date']}; medians of at least 5 runs, the numpy/SciPy baseline "
-             "(`bench/baseline_numpy.py`: vectorised numpy transforms, `scipy.optimize.least_squares` "
-             "with a finite-difference Jacobian) " + jax_words + "run in the same process on the same data"
+             f"{doc['machine']['date']}" + (f" (load average {doc['machine']['load_average_before'][0]:.1f} "
+                                            f"at the start, {doc['machine']['load_average_after'][0]:.1f} at "
+                                            "the end: the 2 cores were shared)"
+                                            if "load_average_before" in doc["machine"] else "")
+             + "; medians of at least 5 runs, the numpy baseline "
+             "(`bench/baseline_numpy.py`: the model of `bench/fused_model.py`, one expression per matrix "
+             "entry specialised to the estimated parameters, on numpy arrays, exact Jacobians by forward-mode "
+             "dual numbers, fivecal's Levenberg–Marquardt start and stopping rule; SciPy's `least_squares` "
+             "with finite differences only in the `auto` loop, central differences in the design search) "
+             + jax_words + "run in the same process on the same data"
              + ("; JAX's first call (trace, XLA compile and one run) is shown apart from its warm median "
                 "and left out of its ratio, and XLA picks its own threads (it may use every core)"
                 if jax_measured else "") + ".", "",
-             "| case | size | fivecal | numpy/SciPy | ratio | JAX (warm) | JAX first call | ratio JAX |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| case | size | fivecal | numpy | ratio | JAX (warm) | JAX first call | ratio JAX "
+             "| Jacobians per fit: fivecal / numpy / JAX |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in doc["results"]:
         if "skipped" in r:
             lines.append(f"| {r['case']} | – | not measured: {r['skipped']} | | | | | |")
@@ -671,7 +713,8 @@ def readme_section(doc):
         b = _ms(r["baseline_s"]) if "baseline_s" in r else ("not run (below)" if "baseline_skipped" in r else "–")
         ratio = _ratio(r["ratio"], "×") if "ratio" in r else "–"
         j, jc, jr = jax_cells(r, "×", "–")
-        lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} | {j} | {jc} | {jr} |")
+        lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} | {j} | {jc} | {jr} "
+                     f"| {jacobian_cell(r)} |")
     fk = res.get("forward_kinematics")
     if fk:
         api = (f"; {fk['api_poses_per_s'] / 1e6:.2f} M poses/s through `Machine.tool_point` from a dict "
@@ -693,9 +736,9 @@ def readme_section(doc):
     extrapolated = [r for r in doc["results"] if "baseline_s_per_trial" in r]
     if extrapolated:
         lines += ["", "Monte Carlo numpy baseline: the median of "
-                  f"{len(extrapolated[0]['runs_baseline_s'])} single SciPy re-fits on one thread "
-                  f"({extrapolated[0]['baseline_s_per_trial']:.2f} s each) times the trial count, for "
-                  + ", ".join(r["case"] for r in extrapolated) + " (a full run would take hours)."]
+                  f"{len(extrapolated[0]['runs_baseline_s'])} single re-fits on one thread "
+                  f"({_ms(extrapolated[0]['baseline_s_per_trial'])} each) times the trial count, for "
+                  + ", ".join(r["case"] for r in extrapolated) + "."]
     few = [r for r in doc["results"] if "runs_baseline_s" in r and "baseline_s_per_trial" not in r
            and len(r["runs_baseline_s"]) < 5]
     for r in few:
@@ -708,7 +751,7 @@ def readme_section(doc):
     if scaled:
         kinds = sorted({(len(r["runs_jax_s"]), r["jax_trials_run"]) for r in scaled})
         lines += ["", "JAX Monte Carlo: " + "; ".join(
-            f"the median of {n} warm run(s) of {k} vmapped trials" for n, k in kinds)
+            f"the median of {n} warm run(s) of {k} trials (lax.map)" for n, k in kinds)
             + f", shared by {', '.join(r['case'] for r in scaled)} and scaled to each case's trial count."]
     for when in sorted({r["measured_apart"] for r in doc["results"] if "measured_apart" in r}):
         cases = [r["case"] for r in doc["results"] if r.get("measured_apart") == when]
@@ -734,6 +777,7 @@ def readme_section(doc):
                   f"normal Cholesky {sv['dense_normal_cholesky']:.2f} ms vs dense QR {sv['dense_qr']:.2f} ms; "
                   f"identifiability and covariance from the normal matrix {an['normal_eigen']:.2f} ms vs "
                   f"QR + SVD {an['qr_svd']:.2f} ms."]
+    lines += previous_paragraph(doc)
     lines += ["", targets_paragraph(doc)]
     lines.append("<!-- performance:end -->")
     return "\n".join(lines)
@@ -832,6 +876,19 @@ def main(argv=None):
     a = p.parse_args(argv)
     repeat = 5
     results = []
+    load_before = os.getloadavg()
+    # The previous run's figures stay beside the new ones (its baselines were another's).
+    previous = None
+    if not a.quick and not a.only_auto and os.path.exists(a.out):
+        with open(a.out) as f:
+            old = json.load(f)
+        if not old.get("quick"):
+            keep = os.path.join(os.path.dirname(os.path.abspath(a.out)), "results_previous.json")
+            with open(keep, "w") as f:
+                json.dump(old, f, indent=1)
+            previous = {"machine": old["machine"],
+                        "results": [{k: r[k] for k in ("case", "fivecal_s", "ratio", "ratio_jax", "jax_s") if k in r}
+                                    for r in old["results"]]}
     if a.only_auto:
         for vc in (False, True):
             before = os.getloadavg()
@@ -869,8 +926,10 @@ def main(argv=None):
         results.append(case_ball3d(n, repeat, repeat if n < 1_000_000 else a.numpy_runs_1e6))
         print(table(results[-1:]), flush=True)
     results += optional_cases(a.quick, repeat)
-    doc = {"machine": machine_info(), "quick": a.quick, "results": results,
-           "choices": core_choices(5 if a.quick else 21)}
+    doc = {"machine": {**machine_info(), "load_average_before": load_before, "load_average_after": os.getloadavg()},
+           "quick": a.quick, "results": results, "choices": core_choices(5 if a.quick else 21)}
+    if previous:
+        doc["previous"] = previous
     for c in doc["choices"]:
         print(json.dumps(c))
     with open(a.out, "w") as f:
