@@ -1,7 +1,12 @@
-"""The same computations written the way a researcher would with numpy and
-SciPy: vectorised homogeneous transforms for the forward kinematics of
-DESIGN.md's machine model, the DESIGN.md residuals, and
-``scipy.optimize.least_squares`` with a finite-difference Jacobian.
+"""The same computations written with numpy and SciPy. The bench's fits and
+forward kinematics use what a strong numpy user writes (``FusedProblem``,
+``ball3d_fused``, ``lm``, ``fused_tool_points``: bench/fused_model.py's
+expressions specialised to the estimated parameters, exact Jacobians by
+dual numbers, fivecal's Levenberg-Marquardt rule); ``NumpyMachine`` and
+``NumpyProblem`` (einsum transforms, every parameter by name) stay as the
+plain reference the tests compare with and as the parser of the datasets,
+and ``fit`` (``scipy.optimize.least_squares``, finite differences) serves
+the "auto" loop.
 
 It is the yardstick of bench/run.py: every figure there is a ratio measured
 side by side in the same process on the same data. tests/python/test_bench_baseline.py
