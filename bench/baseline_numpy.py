@@ -1,7 +1,12 @@
-"""The same computations written the way a researcher would with numpy and
-SciPy: vectorised homogeneous transforms for the forward kinematics of
-DESIGN.md's machine model, the DESIGN.md residuals, and
-``scipy.optimize.least_squares`` with a finite-difference Jacobian.
+"""The same computations written with numpy and SciPy. The bench's fits and
+forward kinematics use what a strong numpy user writes (``FusedProblem``,
+``ball3d_fused``, ``lm``, ``fused_tool_points``: bench/fused_model.py's
+expressions specialised to the estimated parameters, exact Jacobians by
+dual numbers, fivecal's Levenberg-Marquardt rule); ``NumpyMachine`` and
+``NumpyProblem`` (einsum transforms, every parameter by name) stay as the
+plain reference the tests compare with and as the parser of the datasets,
+and ``fit`` (``scipy.optimize.least_squares``, finite differences) serves
+the "auto" loop.
 
 It is the yardstick of bench/run.py: every figure there is a ratio measured
 side by side in the same process on the same data. tests/python/test_bench_baseline.py
@@ -187,6 +192,254 @@ def fit(fun, names, x0=None):
     x0 = np.zeros(len(names)) if x0 is None else x0
     return least_squares(lambda x: fun(dict(zip(names, x))), x0, jac="2-point", method="trf",
                          x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12)
+
+
+# ---- the fits of bench/run.py, written the way a strong numpy user would ------
+#
+# fused_model.Model (one expression per matrix entry, specialised to the
+# estimated parameters) evaluated on numpy arrays, with exact derivatives by
+# forward-mode dual numbers (value and the derivatives by every estimated
+# parameter, carried through the same element-wise expressions), and the
+# Levenberg-Marquardt of fivecal (bench/baseline_jax.py: lm, the same start,
+# step, acceptance and stopping rule) as a Python loop. SciPy's
+# least_squares has no way to cost a candidate without its Jacobian nor
+# fivecal's stopping rule; ``fit`` above (least_squares, trf, finite
+# differences) stays for the design search and the "auto" loop.
+
+import fused_model as fm  # noqa: E402
+
+
+class Dual:
+    """A value (scalar or (N,)) and its derivatives by the p estimated
+    parameters ((p, 1) or (p, N))."""
+
+    __slots__ = ("v", "d")
+    __array_ufunc__ = None      # array (op) Dual: numpy defers to Dual's reflected operators
+
+    def __init__(self, v, d):
+        self.v, self.d = v, d
+
+    def __add__(self, o):
+        if isinstance(o, Dual):
+            return Dual(self.v + o.v, self.d + o.d)
+        return Dual(self.v + o, self.d)
+
+    __radd__ = __add__
+
+    def __sub__(self, o):
+        if isinstance(o, Dual):
+            return Dual(self.v - o.v, self.d - o.d)
+        return Dual(self.v - o, self.d)
+
+    def __rsub__(self, o):
+        return Dual(o - self.v, -self.d)
+
+    def __neg__(self):
+        return Dual(-self.v, -self.d)
+
+    def __mul__(self, o):
+        if isinstance(o, Dual):
+            return Dual(self.v * o.v, self.d * o.v + o.d * self.v)
+        return Dual(self.v * o, self.d * o)
+
+    __rmul__ = __mul__
+
+    def __getitem__(self, i):
+        return Dual(self.v[i], self.d[:, i])
+
+
+class DualOps:
+    @staticmethod
+    def sin(x):
+        return Dual(np.sin(x.v), x.d * np.cos(x.v)) if isinstance(x, Dual) else np.sin(x)
+
+    @staticmethod
+    def cos(x):
+        return Dual(np.cos(x.v), -x.d * np.sin(x.v)) if isinstance(x, Dual) else np.cos(x)
+
+    @staticmethod
+    def sqrt(x):
+        s = np.sqrt(x.v)
+        return Dual(s, x.d * (0.5 / s))
+
+
+def _sqrt(x):
+    return DualOps.sqrt(x) if isinstance(x, Dual) else np.sqrt(x)
+
+
+def _parameters(x, with_jacobian):
+    """The estimated values as model inputs: floats, or duals seeded by the identity."""
+    if not with_jacobian:
+        return [float(v) for v in x]
+    eye = np.eye(len(x))
+    return [Dual(float(v), eye[:, i:i + 1]) for i, v in enumerate(x)]
+
+
+def _rows(parts):
+    """Concatenated residual rows -> (r (m,), J (m, p) or None)."""
+    if not isinstance(parts[0], Dual):
+        return np.concatenate([np.broadcast_to(np.asarray(v, float), np.shape(v)) for v in parts]), None
+    v = np.concatenate([np.asarray(d.v, float) for d in parts])
+    J = np.concatenate([np.broadcast_to(d.d, (d.d.shape[0], np.size(d.v))) for d in parts], axis=1)
+    return v, J.T
+
+
+class FusedProblem:
+    """NumpyProblem's weighted probing rows (facets, spheres, scale bars; the
+    TANGO fits) over ``names`` with fused_model and dual numbers.
+    ``evaluate(x, jacobian)`` -> (weighted rows, their Jacobian or None);
+    ``noise`` (sigma units) is added to the weighted rows (a Monte Carlo trial)."""
+
+    def __init__(self, dataset, names):
+        self.np = p = NumpyProblem(dataset)
+        if p.b_idx.size:
+            raise ValueError("FusedProblem: probing datasets only")
+        self.names = list(names)
+        self.model = fm.Model(dataset.machine, DualOps)
+        rows = np.concatenate([p.f_idx, p.s_idx]).astype(int)
+        self.nf = p.f_idx.size
+        self.q, self.dirs = fm.axis_columns(dataset.machine, p.q[rows], p.dirs[rows])
+        self.n_rows = p.sigma.size
+        self.noise = None
+        col = {n: i for i, n in enumerate(self.names)}
+        self.col = col
+
+    def evaluate(self, x, jacobian=True):
+        p, col = self.np, self.col
+        th = _parameters(x, jacobian)
+        v = dict(zip(self.names, th))
+        P = self.model.tool_points(self.q, v, self.dirs)
+        nf = self.nf
+        parts = []
+
+        def setup(key):
+            return th[col[key]] if key in col else 0.0
+
+        if nf:
+            d = sum(fm.mul(P[i][:nf] if not fm.const(P[i]) else P[i], p.f_n[:, i]) for i in range(3))
+            off = [setup(f"facet.{t}") for t in p.f_ids]
+            dot = fm.sub(d, (p.f_a * p.f_n).sum(1) + p.r_tip)
+            parts.append(self._minus_each(dot, off))
+        if p.s_idx.size:
+            dc = [[setup(f"sphere.{t}.{c}") for t in p.s_ids] for c in "xyz"]
+            d = [self._minus_each(P[i][nf:] - p.s_c[:, i], dc[i]) for i in range(3)]
+            rr = [setup(f"sphere.{t}.r") for t in p.s_ids]
+            parts.append(self._minus_each(_sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - (p.s_r + p.r_tip), rr))
+        for s1, s2, L, spheres in p.bars:
+            c = [[fm.add(spheres[s]["center"][k], setup(f"sphere.{s}.{'xyz'[k]}")) for k in range(3)]
+                 for s in (s1, s2)]
+            dd = [fm.sub(c[0][k], c[1][k]) for k in range(3)]
+            sq = fm.add(fm.add(fm.mul(dd[0], dd[0]), fm.mul(dd[1], dd[1])), fm.mul(dd[2], dd[2]))
+            bar = _sqrt(sq) - L
+            parts.append(Dual(np.atleast_1d(bar.v), bar.d) if isinstance(bar, Dual) else np.atleast_1d(bar))
+        if jacobian:
+            parts = [q if isinstance(q, Dual) else Dual(np.asarray(q, float), np.zeros((len(x), 1))) for q in parts]
+        r, J = _rows(parts)
+        w = 1.0 / p.sigma
+        r = r * w
+        if self.noise is not None:
+            r = r + self.noise
+        return r, (None if J is None else J * w[:, None])
+
+    @staticmethod
+    def _minus_each(a, values):
+        """a (N,) minus a per-row setup value (floats or duals, mostly 0)."""
+        idx = [i for i, v in enumerate(values) if not fm.zero(v)]
+        if not idx:
+            return a
+        if isinstance(values[idx[0]], Dual):
+            a = a if isinstance(a, Dual) else Dual(np.asarray(a, float), np.zeros((values[idx[0]].d.shape[0], 1)))
+            n = np.size(a.v)
+            v = np.zeros(n)
+            d = np.zeros((a.d.shape[0], n))
+            for i in idx:
+                v[i] = values[i].v
+                d[:, i] = values[i].d[:, 0]
+            return a - Dual(v, d)
+        v = np.zeros(np.size(a.v if isinstance(a, Dual) else a))
+        for i in idx:
+            v[i] = values[i]
+        return a - v
+
+
+def fused_tool_points(machine, q, theta):
+    """Forward kinematics with fused_model on numpy (values as constants: the
+    zero ones cost nothing). q (N, num_axes) in mm / rad -> (N, 3)."""
+    qd, _ = fm.axis_columns(machine, q)
+    P = fm.Model(machine, np).tool_points(qd, {k: float(v) for k, v in theta.items()})
+    return np.stack([np.broadcast_to(v, (q.shape[0],)) for v in P], axis=1)
+
+
+def ball3d_fused(machine, names, q, tool_ball, table_ball, measured):
+    """The ball3d rows of one mounting (the scaling benchmark) as
+    ``evaluate(x, jacobian)`` -> (rows (3N,), Jacobian or None), unweighted."""
+    model = fm.Model(machine, DualOps)
+    qd, _ = fm.axis_columns(machine, q)
+    tool = [float(v) for v in tool_ball]
+    const_part = [np.asarray(table_ball, float)[i] + measured[:, i] for i in range(3)]
+    n = q.shape[0]
+
+    def evaluate(x, jacobian=True):
+        th = _parameters(x, jacobian)
+        P = model.tool_points(qd, dict(zip(names, th)), None, tool)
+        cols = [fm.sub(P[i], const_part[i]) for i in range(3)]
+        if not jacobian:
+            return np.stack([np.broadcast_to(c, (n,)) for c in cols], axis=1).ravel(), None
+        r = np.stack([c.v for c in cols], axis=1).ravel()
+        J = np.stack([np.broadcast_to(c.d, (len(x), n)) for c in cols], axis=2).reshape(len(x), 3 * n).T
+        return r, J
+
+    return evaluate
+
+
+def lm(evaluate, x0, max_iterations=100):
+    """fivecal's Levenberg-Marquardt (baseline_jax.lm's rule) on
+    ``evaluate(x, jacobian)`` as a Python loop. Returns a dict: x, cost,
+    converged, iterations (steps solved), jacobian_evaluations,
+    residual_evaluations, JtJ (at x)."""
+    FTOL, XTOL, GTOL = 1e-10, 1e-12, 1e-16
+    x = np.asarray(x0, float).copy()
+    r, J = evaluate(x, True)
+    nj, nr, it = 1, 0, 0
+    c = 0.5 * r @ r
+    radius, df = 1e12, 2.0
+    converged = False
+    while it < max_iterations:
+        g = J.T @ r
+        N = J.T @ J
+        if np.max(np.abs(g)) <= GTOL:
+            converged = True
+            break
+        A = N + np.diag(np.clip(np.diagonal(N), 1e-6, 1e32) / radius)
+        dx = -np.linalg.solve(A, g)
+        if np.linalg.norm(dx) <= XTOL * (np.linalg.norm(x) + XTOL):
+            converged = True
+            break
+        it += 1
+        model = -(g @ dx + 0.5 * dx @ (N @ dx))
+        last = model <= 10 * FTOL * c
+        cand = x + dx
+        r1, J1 = evaluate(cand, not last)
+        nj, nr = nj + (not last), nr + last
+        c1 = 0.5 * r1 @ r1
+        if abs(c - c1) <= FTOL * c:
+            converged = True
+            break
+        rho = (c - c1) / model if model > 0 else -1.0
+        if np.isfinite(c1) and rho > 1e-3:
+            if last:
+                r1, J1 = evaluate(cand, True)
+                nj += 1
+            x, r, J, c = cand, r1, J1, c1
+            radius = min(1e16, radius / max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3))
+            df = 2.0
+        else:
+            radius /= df
+            df *= 2.0
+            if radius < 1e-32:
+                break
+    return {"x": x, "cost": c, "converged": converged, "iterations": it, "jacobian_evaluations": nj,
+            "residual_evaluations": nr, "JtJ": J.T @ J}
 
 
 # ---- estimate "auto": hierarchical prior, evidence loop, variance components ----

@@ -4,12 +4,12 @@
     python3 bench/run.py --quick      # smaller sizes (a smoke run)
     python3 bench/run.py --readme     # also rewrite the README's performance section
 
-Every case runs fivecal and the numpy/SciPy baseline (bench/baseline_numpy.py)
+Every case runs fivecal and the numpy baseline (bench/baseline_numpy.py)
 in this process on the same data, checks they agree, and records medians of
 at least 5 runs, the problem sizes and the ratio baseline / fivecal. A second
 baseline, the same model and fits in JAX (bench/baseline_jax.py: jit, exact
-jacfwd Jacobians, Levenberg-Marquardt in lax.while_loop, vmap over Monte Carlo
-trials), runs beside it when jax is installed (the ``bench`` extra): its first
+jacfwd Jacobians, fivecal's Levenberg-Marquardt rule in lax.while_loop,
+lax.map over Monte Carlo trials), runs beside it when jax is installed (the ``bench`` extra): its first
 call (trace, compile and one run) is recorded apart as ``jax_compile_s``, its
 warm median as ``jax_s``, and ``ratio_jax`` = jax_s / fivecal_s. Without jax
 the JAX columns say so and everything else runs.
@@ -39,6 +39,17 @@ try:
     JAX_MISSING = None
 except ImportError:   # jax is a bench extra: without it the JAX columns say so
     jbase, JAX_MISSING = None, "jax not installed"
+
+
+def fivecal_jacobians(r):
+    """Jacobian evaluations of fivecal's fit (not counting identify's
+    determinacy check at the start and covariance at the solution): on the
+    normal-equation path (long data) one at the start and one per accepted
+    step, Result.iterations counting the last candidate, costed without
+    derivatives; on the dense path the same, Result.iterations counting the
+    accepted steps only. Exact when no step was rejected (none is on these
+    nearly linear fits)."""
+    return r.iterations + (0 if r.fit_path == "normal_equations" else 1)
 
 
 def timed(fn, repeat=5):
@@ -101,12 +112,11 @@ def case_forward_kinematics(n, repeat):
                              repeat)
     t_api, runs_api, p_api = timed(lambda: m.tool_point(axes, errors), repeat)
     assert np.array_equal(p_f, p_api)
-    nm = base.NumpyMachine(m)
     qi = q.copy()
     for i, a in enumerate(m.axis_names):
         if m.is_rotary(a):
             qi[:, i] = np.deg2rad(qi[:, i])
-    t_b, runs_b, p_b = timed(lambda: nm.tool_points(qi, errors), repeat)
+    t_b, runs_b, p_b = timed(lambda: base.fused_tool_points(m, qi, errors), repeat)
     diff = float(np.abs(p_f - p_b).max())
     assert diff < 1e-9, f"forward kinematics disagree by {diff} mm"
     if jbase is None:
@@ -135,16 +145,17 @@ def case_tango(subset, repeat, baseline_repeat):
     # the bench times the same solver path with the refusal switched off.
     t_f, runs_f, r = timed(lambda: fivecal.identify(ds, subset, allow_unidentifiable=subset == "S4"), repeat)
     names = r.estimated
-    prob = base.NumpyProblem(ds)
-    t_b, runs_b, sol = timed(lambda: base.fit(prob.weighted_residuals, names), baseline_repeat)
+    prob = base.FusedProblem(ds, names)
+    t_b, runs_b, sol = timed(lambda: base.lm(prob.evaluate, np.zeros(len(names))), baseline_repeat)
+    assert sol["converged"], "numpy Levenberg-Marquardt did not converge"
     # The baseline must find the same optimum (the fivecal values are its reference).
-    fitted = dict(zip(names, sol.x))
+    fitted = dict(zip(names, sol["x"]))
     z = max(abs(fitted[n] - r.values[n]) / r.std[n] for n in names if n not in r.undetermined and r.std[n] > 0)
     if jbase is None:
         jx = {"jax_skipped": JAX_MISSING}
     else:
         fit = jbase.JaxProblem(ds, names).fit_function()
-        first, t_j, runs_j, (x_j, it_j, _, ok_j) = timed_jax(fit, baseline_repeat)
+        first, t_j, runs_j, (x_j, it_j, _, ok_j, *_) = timed_jax(fit, baseline_repeat)
         assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
         z_j = max(abs(float(x_j[i]) - r.values[n]) / r.std[n] for i, n in enumerate(names)
                   if n not in r.undetermined and r.std[n] > 0)
@@ -154,9 +165,11 @@ def case_tango(subset, repeat, baseline_repeat):
     return {**jx, "case": f"tango_{subset}", "size": {"touches": len(ds), "unknowns": len(names),
                                                 "rows": r.n_observations},
             "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
-            "fivecal_iterations": r.iterations, "baseline_function_evaluations": int(sol.nfev),
+            "fivecal_iterations": r.iterations, "fivecal_jacobian_evaluations": fivecal_jacobians(r),
+            "baseline_jacobian_evaluations": sol["jacobian_evaluations"],
             "max_difference_in_sigma": float(z), "runs_fivecal_s": runs_f, "runs_baseline_s": runs_b,
-            "note": "fivecal time is identify() end to end: identifiability check, fit, covariance"}
+            "note": "fivecal time is identify() end to end: identifiability check, fit, covariance; the "
+                    "baselines' is the fit alone (Levenberg-Marquardt with fivecal's rule from zero)"}
 
 
 def auto_agreement(r, values, std, scales, factors, groups=()):
@@ -279,19 +292,22 @@ def case_ball3d(n, repeat, baseline_repeat):
     t_f, runs_f, r = timed(lambda: fivecal.identify(ds, names, default_setup=False), repeat)
     assert r.verdict == "ok", r.verdict
     out = {"case": f"ball3d_fit_{n}", "size": {"samples": n, "rows": 3 * n, "unknowns": len(names)},
-           "fivecal_s": t_f, "runs_fivecal_s": runs_f,
+           "fivecal_s": t_f, "runs_fivecal_s": runs_f, "fivecal_iterations": r.iterations,
+           "fivecal_jacobian_evaluations": fivecal_jacobians(r),
            "fivecal_us_per_sample": 1e6 * t_f / n}
     if baseline_repeat:
         nm = base.NumpyMachine(m)
         q = m.axes_matrix(axes)
         q[:, [m.axis_names.index("A"), m.axis_names.index("C")]] = np.deg2rad(
             q[:, [m.axis_names.index("A"), m.axis_names.index("C")]])
-        fun = lambda v: base.ball3d_residuals(nm, q, tool, table, meas, v)  # noqa: E731
-        t_b, runs_b, sol = timed(lambda: base.fit(fun, names), baseline_repeat)
-        z = max(abs(sol.x[i] - r.values[k]) / r.std[k] for i, k in enumerate(names))
-        assert z < 0.1, f"numpy ball3d fit off fivecal's by {z} sigma"
+        fun = base.ball3d_fused(m, names, q, tool, table, meas)
+        t_b, runs_b, sol = timed(lambda: base.lm(fun, np.zeros(len(names))), baseline_repeat)
+        assert sol["converged"], "numpy Levenberg-Marquardt did not converge"
+        z = max(abs(sol["x"][i] - r.values[k]) / r.std[k] for i, k in enumerate(names))
+        assert z < 0.01, f"numpy ball3d fit off fivecal's by {z} sigma"
         out.update({"baseline_s": t_b, "ratio": t_b / t_f, "runs_baseline_s": runs_b,
-                    "max_difference_in_sigma": float(z)})
+                    "max_difference_in_sigma": float(z),
+                    "baseline_jacobian_evaluations": sol["jacobian_evaluations"]})
         if baseline_repeat < 5:
             out["note"] = (f"numpy: median of {baseline_repeat} run(s), each {min(runs_b):.0f} s or more "
                            "(bench run with --numpy-runs-1e6)")
@@ -304,10 +320,10 @@ def case_ball3d(n, repeat, baseline_repeat):
                 qj[:, i] = np.deg2rad(qj[:, i])
         fit = jbase.ball3d_fit_function(m, names)
         tool_a, table_a = np.asarray(tool, float), np.asarray(table, float)
-        first, t_j, runs_j, (x_j, it_j, _, ok_j) = timed_jax(lambda: fit(qj, tool_a, table_a, meas), repeat)
+        first, t_j, runs_j, (x_j, it_j, _, ok_j, *_) = timed_jax(lambda: fit(qj, tool_a, table_a, meas), repeat)
         assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
         z_j = max(abs(float(x_j[i]) - r.values[k]) / r.std[k] for i, k in enumerate(names))
-        assert z_j < 0.1, f"JAX ball3d fit off fivecal's by {z_j} sigma"
+        assert z_j < 0.01, f"JAX ball3d fit off fivecal's by {z_j} sigma"
         out.update(jax_result(t_f, first, t_j, runs_j, jax_jacobian_evaluations=int(it_j),
                               jax_max_difference_in_sigma=float(z_j)))
     return out
@@ -322,7 +338,7 @@ def case_monte_carlo(trials, threads, repeat, baseline_trials=5, jax_trials=JAX_
     """Monte Carlo re-fits of the TANGO S3 problem (issue 5). The numpy
     figure is the median of ``baseline_trials`` single SciPy re-fits times
     the trial count (one thread: a plain SciPy user has no threaded re-fit).
-    ``jax_trials``: run that many JAX trials (one vmapped Levenberg-Marquardt
+    ``jax_trials``: run that many JAX trials (one Levenberg-Marquardt
     solve per trial, from the reference fit, on the weighted rows plus N(0, 1)
     noise on every row, scale bars included) and scale the time to ``trials``
     when fewer; their spread is checked against fivecal's Monte Carlo of the
@@ -340,14 +356,26 @@ def case_monte_carlo(trials, threads, repeat, baseline_trials=5, jax_trials=JAX_
     if baseline_trials:
         if baseline_trials not in _NUMPY_MC:
             r = fivecal.identify(ds, "S3")
-            prob = base.NumpyProblem(ds)
-            t_b, runs_b, _ = timed(lambda: base.fit(prob.weighted_residuals, r.estimated), baseline_trials)
-            _NUMPY_MC[baseline_trials] = (t_b, runs_b)
-        t_b, runs_b = _NUMPY_MC[baseline_trials]
+            prob = base.FusedProblem(ds, r.estimated)
+            x_ref = np.array([r.values[n] for n in r.estimated])
+            rng = np.random.default_rng(11)
+            jac = []
+
+            def trial():
+                prob.noise = rng.normal(size=prob.n_rows)
+                out = base.lm(prob.evaluate, x_ref)
+                jac.append(out["jacobian_evaluations"])
+                return out
+
+            t_b, runs_b, _ = timed(trial, baseline_trials)
+            prob.noise = None
+            _NUMPY_MC[baseline_trials] = (t_b, runs_b, float(np.mean(jac)))
+        t_b, runs_b, jac_b = _NUMPY_MC[baseline_trials]
         out.update({"baseline_s": t_b * trials, "ratio": t_b * trials / t_f,
                     "baseline_s_per_trial": t_b, "runs_baseline_s": runs_b,
-                    "note": f"numpy: median of {baseline_trials} single SciPy re-fits (one thread) "
-                            f"times {trials} trials"})
+                    "baseline_jacobian_evaluations_per_trial": jac_b,
+                    "note": f"numpy: median of {baseline_trials} single re-fits (fused model, dual-number "
+                            f"Jacobian, fivecal's LM rule from the reference fit; one thread) times {trials} trials"})
     if jbase is None:
         out["jax_skipped"] = JAX_MISSING
     elif jax_trials:
@@ -360,7 +388,7 @@ _JAX_MC = {}     # jax_trials -> the measured run (every Monte Carlo case re-fit
 
 
 def jax_monte_carlo(ds, trials, jax_trials, t_f, repeat):
-    """The JAX Monte Carlo: ``jax_trials`` vmapped LM re-fits (the median of
+    """The JAX Monte Carlo: ``jax_trials`` LM re-fits (the median of
     ``repeat`` warm runs, measured once for every case), scaled to ``trials``. Agreement:
     the reference fit within sigma of fivecal's, and the trials' mean and
     standard deviation those of fivecal's Monte Carlo with as many trials,
@@ -370,7 +398,8 @@ def jax_monte_carlo(ds, trials, jax_trials, t_f, repeat):
     run = _JAX_MC[jax_trials]
     t_j, scale = run["jax_s_per_trial"] * jax_trials, trials / jax_trials
     return {**run, "jax_s": t_j * scale, "ratio_jax": t_j * scale / t_f,
-            "jax_note": ("JAX: vmap of the LM re-fit over trials (lax.map, 64 at a time), the median of "
+            "jax_note": ("JAX: lax.map of the LM re-fit over trials (one at a time: vmapped batches were "
+                         "slower), the median of "
                          f"{len(run['runs_jax_s'])} warm runs of {jax_trials} trials"
                          + (f" scaled to {trials}" if scale != 1 else "")
                          + "; its first call (compile + the same run) is jax_compile_s")}
@@ -383,13 +412,13 @@ def _jax_monte_carlo_run(ds, jax_trials, repeat):
     r = fivecal.identify(ds, "S3")
     names = r.estimated
     prob = jbase.JaxProblem(ds, names)
-    x_ref, _, _, ok = jbase.block(prob.fit_function()())
+    x_ref, _, _, ok, *_ = jbase.block(prob.fit_function()())
     assert bool(ok), "JAX reference fit did not converge"
     z = max(abs(float(x_ref[i]) - r.values[n]) / r.std[n] for i, n in enumerate(names))
     assert z < 0.1, f"JAX reference fit off fivecal's by {z} sigma"
     mc = prob.monte_carlo_function()
     keys = iter(range(1, 1000))
-    first, t_j, runs_j, X = timed_jax(lambda: mc(x_ref, jax.random.PRNGKey(next(keys)), jax_trials), repeat)
+    first, t_j, runs_j, (X, nj) = timed_jax(lambda: mc(x_ref, jax.random.PRNGKey(next(keys)), jax_trials), repeat)
     X = np.asarray(X)
     ref = uncertainty.monte_carlo(ds, "S3", trials=jax_trials, threads=0, seed=1, progress=False,
                                   keep_samples=False)
@@ -403,6 +432,7 @@ def _jax_monte_carlo_run(ds, jax_trials, repeat):
         f"JAX Monte Carlo std ratios {std_ratio.min()}..{std_ratio.max()}"
     return {"jax_compile_s": first, "runs_jax_s": runs_j, "jax_trials_run": jax_trials,
             "jax_s_per_trial": t_j / jax_trials, "jax_max_difference_in_sigma": z,
+            "jax_jacobian_evaluations_per_trial": float(np.mean(np.asarray(nj))),
             "jax_mean_difference_in_sigma": mean_z,
             "jax_std_ratio_range": [float(std_ratio.min()), float(std_ratio.max())]}
 
@@ -617,22 +647,64 @@ def table(results):
     return "\n".join(lines)
 
 
+def jacobian_cell(r):
+    """Jacobian evaluations per fit (per trial for Monte Carlo) on each side, as printed."""
+    def g(*keys):
+        for k in keys:
+            if k in r:
+                v = r[k]
+                return f"{v:.2f}".rstrip("0").rstrip(".") if isinstance(v, float) else str(v)
+        return "–"
+    f = g("fivecal_jacobian_evaluations", "fivecal_jacobian_evaluations_per_trial")
+    n = g("baseline_jacobian_evaluations", "baseline_jacobian_evaluations_per_trial")
+    j = g("jax_jacobian_evaluations", "jax_jacobian_evaluations_per_trial")
+    return "–" if f == n == j == "–" else f"{f} / {n} / {j}"
+
+
+def previous_paragraph(doc):
+    """The ratios of the previous bench run (bench/results_previous.json, its
+    weaker baselines) beside this run's, case by case."""
+    prev = doc.get("previous")
+    if not prev:
+        return []
+    old = {r["case"]: r for r in prev["results"]}
+    cells = []
+    for r in doc["results"]:
+        o = old.get(r["case"])
+        if o and "ratio_jax" in o and "ratio_jax" in r:
+            cells.append(f"{r['case']} {_ratio(o['ratio_jax'], '×')} → {_ratio(r['ratio_jax'], '×')}")
+    if not cells:
+        return []
+    return ["", f"Against the previous bench run ({prev['machine']['date']}, `bench/results_previous.json`: "
+            "the JAX baseline then evaluated every absent error as zero times its term over all samples, "
+            "multiplied frames by batched 3×3 einsums and started its LM damped), JAX / fivecal went: "
+            + "; ".join(cells) + "."]
+
+
 def readme_section(doc):
     res = {r["case"]: r for r in doc["results"]}
     jax_measured = any("jax_s" in r for r in doc["results"])
-    jax_words = ("and the JAX baseline (`bench/baseline_jax.py`: the same model jit-compiled in double "
-                 "precision, exact `jax.jacfwd` Jacobians, Levenberg–Marquardt in `lax.while_loop`, `vmap` "
-                 "over Monte Carlo trials) " if jax_measured else "")
+    jax_words = ("and the JAX baseline (`bench/baseline_jax.py`: the same fused model jit-compiled in double "
+                 "precision, exact `jax.jacfwd` Jacobians, fivecal's Levenberg–Marquardt in one `lax.while_loop`, "
+                 "`lax.map` over Monte Carlo trials) " if jax_measured else "")
     lines = ["<!-- performance:begin (generated by python3 bench/run.py --readme) -->",
              f"Measured on {doc['machine']['cpu']} ({doc['machine']['cores']} cores), "
-             f"{doc['machine']['date']}; medians of at least 5 runs, the numpy/SciPy baseline "
-             "(`bench/baseline_numpy.py`: vectorised numpy transforms, `scipy.optimize.least_squares` "
-             "with a finite-difference Jacobian) " + jax_words + "run in the same process on the same data"
+             f"{doc['machine']['date']}" + (f" (load average {doc['machine']['load_average_before'][0]:.1f} "
+                                            f"at the start, {doc['machine']['load_average_after'][0]:.1f} at "
+                                            "the end: the 2 cores were shared)"
+                                            if "load_average_before" in doc["machine"] else "")
+             + "; medians of at least 5 runs, the numpy baseline "
+             "(`bench/baseline_numpy.py`: the model of `bench/fused_model.py`, one expression per matrix "
+             "entry specialised to the estimated parameters, on numpy arrays, exact Jacobians by forward-mode "
+             "dual numbers, fivecal's Levenberg–Marquardt start and stopping rule; SciPy's `least_squares` "
+             "with finite differences only in the `auto` loop, central differences in the design search) "
+             + jax_words + "run in the same process on the same data"
              + ("; JAX's first call (trace, XLA compile and one run) is shown apart from its warm median "
                 "and left out of its ratio, and XLA picks its own threads (it may use every core)"
                 if jax_measured else "") + ".", "",
-             "| case | size | fivecal | numpy/SciPy | ratio | JAX (warm) | JAX first call | ratio JAX |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| case | size | fivecal | numpy | ratio | JAX (warm) | JAX first call | ratio JAX "
+             "| Jacobians per fit: fivecal / numpy / JAX |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in doc["results"]:
         if "skipped" in r:
             lines.append(f"| {r['case']} | – | not measured: {r['skipped']} | | | | | |")
@@ -641,7 +713,8 @@ def readme_section(doc):
         b = _ms(r["baseline_s"]) if "baseline_s" in r else ("not run (below)" if "baseline_skipped" in r else "–")
         ratio = _ratio(r["ratio"], "×") if "ratio" in r else "–"
         j, jc, jr = jax_cells(r, "×", "–")
-        lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} | {j} | {jc} | {jr} |")
+        lines.append(f"| {r['case']} | {size} | {r['fivecal_s'] * 1e3:.2f} ms | {b} | {ratio} | {j} | {jc} | {jr} "
+                     f"| {jacobian_cell(r)} |")
     fk = res.get("forward_kinematics")
     if fk:
         api = (f"; {fk['api_poses_per_s'] / 1e6:.2f} M poses/s through `Machine.tool_point` from a dict "
@@ -663,9 +736,9 @@ def readme_section(doc):
     extrapolated = [r for r in doc["results"] if "baseline_s_per_trial" in r]
     if extrapolated:
         lines += ["", "Monte Carlo numpy baseline: the median of "
-                  f"{len(extrapolated[0]['runs_baseline_s'])} single SciPy re-fits on one thread "
-                  f"({extrapolated[0]['baseline_s_per_trial']:.2f} s each) times the trial count, for "
-                  + ", ".join(r["case"] for r in extrapolated) + " (a full run would take hours)."]
+                  f"{len(extrapolated[0]['runs_baseline_s'])} single re-fits on one thread "
+                  f"({_ms(extrapolated[0]['baseline_s_per_trial'])} each) times the trial count, for "
+                  + ", ".join(r["case"] for r in extrapolated) + "."]
     few = [r for r in doc["results"] if "runs_baseline_s" in r and "baseline_s_per_trial" not in r
            and len(r["runs_baseline_s"]) < 5]
     for r in few:
@@ -678,7 +751,7 @@ def readme_section(doc):
     if scaled:
         kinds = sorted({(len(r["runs_jax_s"]), r["jax_trials_run"]) for r in scaled})
         lines += ["", "JAX Monte Carlo: " + "; ".join(
-            f"the median of {n} warm run(s) of {k} vmapped trials" for n, k in kinds)
+            f"the median of {n} warm run(s) of {k} trials (lax.map)" for n, k in kinds)
             + f", shared by {', '.join(r['case'] for r in scaled)} and scaled to each case's trial count."]
     for when in sorted({r["measured_apart"] for r in doc["results"] if "measured_apart" in r}):
         cases = [r["case"] for r in doc["results"] if r.get("measured_apart") == when]
@@ -703,7 +776,10 @@ def readme_section(doc):
                   f"{j['autodiff']:.1f} ms ({j['autodiff'] / j['analytic']:.0f}×); Ceres solve with dense "
                   f"normal Cholesky {sv['dense_normal_cholesky']:.2f} ms vs dense QR {sv['dense_qr']:.2f} ms; "
                   f"identifiability and covariance from the normal matrix {an['normal_eigen']:.2f} ms vs "
-                  f"QR + SVD {an['qr_svd']:.2f} ms."]
+                  f"QR + SVD {an['qr_svd']:.2f} ms"
+                  + (f" (measured {c['measured']}, not in this run: build/ctest absent)" if "measured" in c else "")
+                  + "."]
+    lines += previous_paragraph(doc)
     lines += ["", targets_paragraph(doc)]
     lines.append("<!-- performance:end -->")
     return "\n".join(lines)
@@ -802,6 +878,19 @@ def main(argv=None):
     a = p.parse_args(argv)
     repeat = 5
     results = []
+    load_before = os.getloadavg()
+    # The previous run's figures stay beside the new ones (its baselines were another's).
+    previous = None
+    if not a.quick and not a.only_auto and os.path.exists(a.out):
+        with open(a.out) as f:
+            old = json.load(f)
+        if not old.get("quick"):
+            keep = os.path.join(os.path.dirname(os.path.abspath(a.out)), "results_previous.json")
+            with open(keep, "w") as f:
+                json.dump(old, f, indent=1)
+            previous = {"machine": old["machine"], "choices": old.get("choices", []),
+                        "results": [{k: r[k] for k in ("case", "fivecal_s", "ratio", "ratio_jax", "jax_s") if k in r}
+                                    for r in old["results"]]}
     if a.only_auto:
         for vc in (False, True):
             before = os.getloadavg()
@@ -839,8 +928,14 @@ def main(argv=None):
         results.append(case_ball3d(n, repeat, repeat if n < 1_000_000 else a.numpy_runs_1e6))
         print(table(results[-1:]), flush=True)
     results += optional_cases(a.quick, repeat)
-    doc = {"machine": machine_info(), "quick": a.quick, "results": results,
-           "choices": core_choices(5 if a.quick else 21)}
+    doc = {"machine": {**machine_info(), "load_average_before": load_before, "load_average_after": os.getloadavg()},
+           "quick": a.quick, "results": results, "choices": core_choices(5 if a.quick else 21)}
+    if previous:
+        doc["previous"] = previous
+        if not doc["choices"]:
+            # the C++ bench binary is not built here: the last measured choices, dated
+            doc["choices"] = [{**c, "measured": c.get("measured", previous["machine"]["date"])}
+                              for c in previous["choices"]]
     for c in doc["choices"]:
         print(json.dumps(c))
     with open(a.out, "w") as f:

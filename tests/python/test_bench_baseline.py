@@ -139,7 +139,7 @@ def test_jax_fits_are_fivecal_s():
 
     ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=2)
     res = fivecal.identify(ds, "S3")
-    x, evaluations, cost, ok = jbase.JaxProblem(ds, res.estimated).fit_function()()
+    x, evaluations, cost, ok, *_ = jbase.JaxProblem(ds, res.estimated).fit_function()()
     assert bool(ok) and int(evaluations) < 20
     z = max(abs(float(x[i]) - res.values[n]) / res.std[n] for i, n in enumerate(res.estimated))
     assert z < 0.01
