@@ -73,12 +73,12 @@ def test_change_since_the_previous_check(tmp_path):
     m, truth, first = _check("c600u", 21)
     path = tmp_path / "last.json"
     path.write_text(sc.to_json(first))
-    moved = dict(truth, EX0C=truth["EX0C"] + 0.010)  # the C pivot moved 10 µm (a crash)
+    moved = dict(truth, EY0C=truth["EY0C"] + 0.010)  # the C pivot moved 10 µm (a crash)
     _, _, second = _check("c600u", 22, previous=str(path), truth=moved)
-    dx, s = second.change["EX0C"]
+    dx, s = second.change["EY0C"]
     assert abs(dx - 0.010) < 3 * s and s < 0.001
     for n, (d, s) in second.change.items():
-        if n != "EX0C":
+        if n != "EY0C":
             assert abs(d) < 4 * s, (n, d, s)
     assert "change" in second.report()
     # a Result or a SphereCheck works as previous too
@@ -114,7 +114,7 @@ def test_one_sided_approach_does_not_claim_backlash_and_bad_requests_are_refused
     ds = fivecal.simulate(m, still, errors={}, artefact={"spheres": [BALL]}, tip_radius=TIP, sigma=SIGMA, seed=2)
     with pytest.raises(ValueError, match="no rotary axis moved"):
         sc.evaluate(ds)
-    json.loads(sc.to_json(c))
+    assert json.loads(sc.to_json(c))["procedure"]["name"] == "sphere-check"
 
 
 def test_cli_sphere_check(tmp_path, capsys):

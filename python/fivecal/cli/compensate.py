@@ -82,7 +82,7 @@ def register(sub) -> None:
                         "  fivecal compensate result.json machine.json --table errors.csv\n"
                         "  fivecal compensate result.json machine.json part.nc --out part_comp.nc "
                         "--work-offset X=-120,Y=35 --tool-tip 0,0,150")
-    pc.add_argument("result", help="result JSON of fivecal identify (or a JSON object name -> value, mm/rad)")
+    pc.add_argument("result", help="result document of any fivecal procedure (identify, sphere-check, rtest, dbb, ...; --out), or a JSON object name -> value, mm/rad")
     pc.add_argument("machine", help="machine definition JSON (or a dataset JSON: its machine is used)")
     pc.add_argument("program", nargs="?", help="G-code program to compensate")
     pc.add_argument("--out", help="compensated program to write (required with PROGRAM)")

@@ -183,7 +183,7 @@ def register(sub) -> None:
         "change beyond --max-change unless --force.",
         epilog="example:\n  fivecal export linuxcnc result.json --machine machine.json "
         "--kins xyzac-trt --out lcnc/ --old current-kins.hal")
-    pl.add_argument("result", help="result JSON of fivecal identify (or a JSON object name -> value)")
+    pl.add_argument("result", help="result document of any fivecal procedure (identify, sphere-check, rtest, dbb, ...; --out), or a JSON object name -> value")
     pl.add_argument("--machine", required=True, help="machine definition JSON (or a dataset JSON)")
     pl.add_argument("--kins", required=True, choices=list(L.KINS), help="LinuxCNC kinematics module")
     pl.add_argument("--out", required=True, help="folder to write the files into (a folder of an earlier "
@@ -214,7 +214,7 @@ def register(sub) -> None:
         "file format is written.",
         epilog="example:\n  fivecal export kinematics result.json --machine machine.json "
         "--model table-table --directions --format csv --out kinematics.csv")
-    pk.add_argument("result", help="result JSON of fivecal identify (or a JSON object name -> value)")
+    pk.add_argument("result", help="result document of any fivecal procedure (identify, sphere-check, rtest, dbb, ...; --out), or a JSON object name -> value")
     pk.add_argument("--machine", required=True, help="machine definition JSON (or a dataset JSON)")
     pk.add_argument("--model", required=True, choices=list(K.MODELS), help="controller model")
     pk.add_argument("--directions", action="store_true", help="the model also holds the rotary "

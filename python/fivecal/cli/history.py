@@ -330,9 +330,9 @@ def register(sub) -> None:
 
     a = hs.add_parser("add", help="record a result (result.json of fivecal identify --out)")
     common(a)
-    a.add_argument("result", help="result JSON")
+    a.add_argument("result", help="result document of any fivecal procedure (--out of identify, sphere-check, rtest, dbb, ...)")
     a.add_argument("--machine-id", required=True, help="which machine (free text, e.g. its serial number)")
-    a.add_argument("--procedure", help="procedure label (e.g. sphere, tango, dbb)")
+    a.add_argument("--procedure", help="procedure label (default: the result document's procedure name, e.g. sphere-check, rtest)")
     a.add_argument("--time", help="when it was measured, ISO 8601 (default now; without a zone: UTC)")
     a.add_argument("--machine", help="machine JSON (kept for volumetric comparisons)")
     a.add_argument("--dataset", help="the dataset the result came from: its sha256 digest is recorded "
@@ -355,8 +355,8 @@ def register(sub) -> None:
 
     c = hs.add_parser("compare", help="two calibrations parameter by parameter (z-scores, volumetric change)")
     common(c, store_required=False)
-    c.add_argument("a", metavar="A", help="calibration id in --store, or a result JSON")
-    c.add_argument("b", metavar="B", help="calibration id in --store, or a result JSON")
+    c.add_argument("a", metavar="A", help="calibration id in --store, or a result document of any procedure")
+    c.add_argument("b", metavar="B", help="calibration id in --store, or a result document of any procedure")
     c.add_argument("--machine", help="machine JSON for the volumetric change (default: the store's)")
     c.add_argument("--tolerance", action="append", metavar="NAME=VALUE", help=_tolerance_help("change |B - A|"))
     c.add_argument("--z", type=float, default=3.0, help="|z| above this is reported as a change (default 3)")

@@ -6,7 +6,7 @@ import os
 import sys
 
 from ..dataset import load_dataset
-from ..identification import identify
+from ..identification import identify, procedure_of, procedure_values
 from ..progress import busy
 from ..report.document import write_report
 from .common import EXIT_FIT, EXIT_OK, _fit_warning
@@ -25,16 +25,18 @@ def _identify(args) -> int:
                           allow_unidentifiable=args.allow_unidentifiable,
                           variance_components=args.variance_components)
     print(result.report())
+    procedure = procedure_of(ds)
+    values = procedure_values(result, procedure)
     # An unusable fit is still written (marked so in the report and refused by
     # `fivecal compensate`): it is what one inspects to find out why.
     if args.out:
-        result.save(args.out)
+        result.save(args.out, procedure, values)
         print(f"\nresult written to {args.out}")
     if args.report:
         path = write_report(result, args.report, title=f"fivecal identification — {os.path.basename(args.dataset)}",
                             summary=f"dataset {args.dataset}, estimate {args.estimate}"
                                     + (f", fixed {args.fix}" if args.fix else ""),
-                            history=hist)
+                            history=hist, procedure=procedure, procedure_values=values)
         print(f"\nreport: {os.path.abspath(path)} (with result.json and the plots as PNG)")
     if hist is not None and args.record:
         record_identify(args, result, hist)
@@ -75,7 +77,8 @@ def register(sub) -> None:
                     help="estimate the noise of each instrument group (probe, dbb, ball3d, point, pose, "
                     "pose_rad, distance) from the residuals instead of trusting the declared sigmas "
                     "(`fivecal docs identification`)")
-    pi.add_argument("--out", help="write the result JSON here")
+    pi.add_argument("--out", help="write the result document here (its procedure: machining for machined "
+                    "features only, tango for facet or cylinder touches, else identify; `fivecal docs formats`)")
     pi.add_argument("--report", metavar="DIR", help="also write an HTML report (report.html, result.json, "
                     "plots as PNG) into this folder")
     add_identify_options(pi)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 from ..dataset import load_dataset
-from ..files import write_text
+from ..identification import write_result
 from ..procedures import sphere_check
 from .common import fit_status
 
@@ -15,8 +15,8 @@ def _sphere_check(args) -> int:
                                   backlash=False if args.no_backlash else None, sphere=args.sphere)
     print(check.report())
     if args.out:
-        write_text(args.out, sphere_check.to_json(check) + "\n")
-        print(f"\ncheck written to {args.out} (give it as --previous to the next check)")
+        write_result(args.out, check.result, "sphere-check", check.procedure_values())
+        print(f"\nresult written to {args.out} (give it as --previous to the next check)")
     return fit_status("sphere-check", [("the pivot fit", check.result.assessment())], args.force,
                       written=[args.out])
 
@@ -32,8 +32,10 @@ def register(sub) -> None:
                         "Plans: fivecal.procedures.sphere_check.plan (`fivecal docs design`).",
                         epilog="example:\n  fivecal sphere-check touches.json --previous last.json --out check.json")
     pp.add_argument("dataset", help="dataset JSON with the sphere touches")
-    pp.add_argument("--previous", help="the previous check (--out of an earlier run, or a result JSON)")
-    pp.add_argument("--out", help="write the check (parameters with value and std) as JSON")
+    pp.add_argument("--previous", help="the previous check: any result document (--out of an earlier check, "
+                    "of identify, rtest, ...)")
+    pp.add_argument("--out", help="write the result document (parameters with value and std, verdict, and the "
+                    "check's pivots, reversal, dispersion and change as procedure sphere-check)")
     pp.add_argument("--sphere", default=None, help="sphere id (default: the first sphere touched)")
     pp.add_argument("--no-backlash", action="store_true", help="do not estimate the rotary reversal errors")
     pp.add_argument("--free-stylus", action="store_true",

@@ -32,6 +32,7 @@ from typing import Iterable, List, Mapping, Optional, Sequence
 import numpy as np
 
 from .. import files
+from ..schema import validate as validate_document
 from .._version import __version__
 from ..machine import Machine
 from ..units import _BACKLASH, _LOCATION, _MOTION
@@ -275,10 +276,9 @@ def calibration_from_result(result, machine_id: str, time=None, procedure: str =
     result format of docs/formats.md (a dict, or the path of a result.json;
     its covariance is rebuilt from ``correlation`` and ``std``)."""
     if isinstance(result, (str, os.PathLike)):
-        from ..files import read_json
-
         source = source or os.fspath(result)
-        result = read_json(os.fspath(result), "result")
+        # any procedure's result document, checked as export and compensate check it
+        result = validate_document(files.read_json(os.fspath(result), "result"), "result", os.fspath(result))
     if isinstance(result, Mapping):
         return _from_result_dict(result, machine_id, time, procedure, digest or "", source)
     names = list(result.estimated)
@@ -294,6 +294,13 @@ def calibration_from_result(result, machine_id: str, time=None, procedure: str =
                        rms=float(result.rms), chi2=float(result.chi2), dof=int(result.dof),
                        chi2_p=float(result.chi2_p), verdict=str(result.verdict), converged=bool(result.converged),
                        undetermined=list(result.undetermined), fivecal_version=_version(), source=source)
+
+
+def _procedure_name(d: Mapping) -> str:
+    # the label a result document brings (its procedure section) when the
+    # caller gives none: a sphere check is recorded as one without --procedure
+    p = d.get("procedure")
+    return str(p.get("name", "")) if isinstance(p, Mapping) else ""
 
 
 def _from_result_dict(d: Mapping, machine_id, time, procedure, digest, source) -> Calibration:
@@ -317,7 +324,7 @@ def _from_result_dict(d: Mapping, machine_id, time, procedure, digest, source) -
         chi2 = {"value": chi2}
     prior = [params[n].get("prior_std") for n in names]
     return Calibration(machine_id=_machine_id(machine_id), time=utc_time(time), names=names, values=values,
-                       covariance=cov, procedure=procedure, digest=digest,
+                       covariance=cov, procedure=procedure or _procedure_name(d), digest=digest,
                        fixed={n: float(p["value"]) for n, p in params.items() if p.get("fixed")},
                        prior_std=np.array([_f(p) for p in prior]) if any(p is not None for p in prior) else None,
                        rms=_f(d.get("residual_rms")), chi2=_f(chi2.get("value")), dof=chi2.get("dof"),

@@ -33,6 +33,7 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence
 import numpy as np
 
 from .. import _core
+from ..identification import result_document
 from ..machine import Machine
 from ..units import display_scale
 
@@ -165,7 +166,22 @@ class MachiningResult:
         self.iterations: int = core.iterations
 
     def to_dict(self) -> dict:
-        return json.loads(self._core.to_json())
+        """The result document (the one every procedure writes): the
+        identified parameters with their σ, and per test its measured and
+        modelled machining error (mm) as ``procedure`` ``machining``."""
+        finite = all(math.isfinite(v) for v in self.values.values()) and \
+            all(math.isfinite(s) for s in self.std.values())
+        doc = {"parameters": {n: {"value": self.values[n], "std": self.std[n] if math.isfinite(self.std[n]) else None}
+                              for n in self.estimated},
+               "estimated": list(self.estimated), "n_observations": len(self.tests),
+               "n_parameters": len(self.estimated), "rank": int(self.rank), "converged": bool(self.converged),
+               "iterations": int(self.iterations), "finite": finite, "sigma": float(self.sigma),
+               "condition_number": float(self.condition_number) if math.isfinite(self.condition_number) else None,
+               "verdict": ("non_finite" if not finite else "not_converged" if not self.converged else
+                           "undetermined" if self.rank < len(self.estimated) else "ok")}
+        tests = {str(t.get("id", f"T{i + 1}")): {"measured": float(t.get("measured", 0.0)), "model": float(p)}
+                 for i, (t, p) in enumerate(zip(self.tests, self.predicted))}
+        return result_document(doc, "machining", {"tests": tests})
 
     def report(self) -> str:
         lines = [f"fivecal machining-test identification: {self.machine.name} ({len(self.tests)} tests, "

@@ -34,7 +34,10 @@ from typing import Dict, List, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from ..dataset import Dataset
+from ..identification import identify as fit
+from ..identification import result_document
 from ..machine import Machine
+from .sphere_check import pivot_parameters
 
 TESTS = ("K1", "K2", "K3", "K4")
 
@@ -153,13 +156,42 @@ class RTestResult:
                 L.append("    not determined by these tests: " + ", ".join(und))
         return "\n".join(L)
 
+    def procedure_values(self, tolerance: Optional[float] = None) -> dict:
+        """The K tests' own values, the ``procedure.values`` of the result
+        document (docs/formats.md): per test its samples and the deviation
+        range in X, Y, Z of the workpiece frame (mm), and with ``tolerance``
+        (mm) whether it passes."""
+        tests = {}
+        for t in self.tests.values():
+            d = {"samples": t.samples, "range": {k: float(v) for k, v in zip("xyz", t.ranges)}}
+            if tolerance is not None:
+                d["passes"] = t.passes(tolerance)
+            tests[t.name] = d
+        out = {"tests": tests}
+        if tolerance is not None:
+            out["tolerance"] = float(tolerance)
+        return out
+
+    def to_dict(self, tolerance: Optional[float] = None) -> dict:
+        """The result document (the one every procedure writes): the
+        location-error fit, with the K tests' ranges as ``procedure``
+        ``rtest``. Without a fit (``identify=False``) it holds no machine
+        error and its verdict is ``undetermined``: no consumer takes it as
+        measured errors."""
+        vals = self.procedure_values(tolerance)
+        if self.result is not None:
+            return result_document(self.result, "rtest", vals)
+        return result_document({"parameters": {}, "estimated": [], "converged": True, "iterations": 0,
+                                "n_observations": sum(t.samples for t in self.tests.values()),
+                                "n_parameters": 0, "verdict": "undetermined"}, "rtest", vals)
+
 
 def location_errors(machine: Machine) -> List[str]:
     """The location errors (ISO 230-7 position and orientation errors of an
     axis line) an R-test of both rotary axes can see: for each rotary axis the
-    two positions across it and the two tilts."""
-    from .sphere_check import pivot_parameters
-
+    two positions across it and the two tilts (a position that is the
+    spindle's offset under another name carries the spindle's name, as in
+    ``identify --estimate location``: :func:`fivecal.procedures.sphere_check.spindle_equivalent`)."""
     return [n for a in _rotary(machine) for n in pivot_parameters(machine, a, backlash=False)]
 
 
@@ -184,8 +216,6 @@ def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
         tests[name] = KTest(name, len(d), d.max(axis=0) - d.min(axis=0), d)
     out = RTestResult(tests)
     if identify:
-        from ..identification import identify as fit
-
         est = list(estimate or location_errors(ds.machine))
         out.result = fit(ds, est)
         out.estimated = est

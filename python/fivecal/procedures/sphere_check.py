@@ -26,6 +26,8 @@ from typing import Dict, List, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from ..dataset import Dataset
+from ..files import read_json
+from ..identification import identify, result_document
 from ..machine import Machine
 from . import sphere_test
 
@@ -52,8 +54,56 @@ def pivot_parameters(machine: Machine, axis: str, backlash: bool = True) -> List
     # Y and Z; for an inclined one, the pair with the smallest components):
     # their position and tilt errors move the axis line; the third is along it.
     pick = sorted(np.argsort(d, kind="stable")[:2])
-    names = [f"E{'XYZ'[k]}0{axis}" for k in pick] + [f"E{'ABC'[k]}0{axis}" for k in pick]
+    names = [spindle_equivalent(machine, f"E{'XYZ'[k]}0{axis}") for k in pick] + \
+            [f"E{'ABC'[k]}0{axis}" for k in pick]
     return names + ([f"E{axis}{axis}b"] if backlash else [])
+
+
+def spindle_equivalent(machine: Machine, name: str) -> str:
+    """The name every fivecal command gives the position error ``name``
+    (``E<X|Y|Z>0<axis>`` of a rotary axis): the spindle's ``E<d>0S`` when the
+    two are the same error, else ``name`` itself.
+
+    A rotary axis' offset along d is a constant offset between tool and
+    part when every rotary axis between it and the foundation turns about d
+    (or there is none): on an A/C trunnion EX0C (C's line moved along A) and
+    EY0A, on a B/C table EY0C and EX0B. The spindle's offset across its own
+    line is the same constant (exactly for the first axis from the
+    foundation, to first order beyond: they differ by the product of the
+    parent's tilt errors and the offset), so no data can tell them apart; identify's
+    location selection (docs/identification.md, the thesis' set) names it
+    by the spindle, and so does every procedure, so results of different
+    commands compare by name. The spindle's value is minus the axis' on the
+    workpiece side (README, sign conventions)."""
+    if len(name) != 4 or name[0] != "E" or name[1] not in "XYZ" or name[2] != "0":
+        return name
+    axis, k = name[3], "XYZ".index(name[1])
+    if "S" not in machine.axis_names or not machine.is_rotary(axis) or axis == "S":
+        return name
+    axes = machine.to_dict()["axes"]
+    chain = machine.workpiece_chain if axis in machine.workpiece_chain else machine.tool_chain
+    for a in chain[:chain.index(axis)]:
+        u = np.abs(np.asarray(axes[a]["direction"], float))
+        if machine.is_rotary(a) and u[k] < 1.0 - 1e-9:
+            return name
+    s = np.abs(np.asarray(axes["S"]["direction"], float))
+    # the spindle's location candidates are its two positions most across its line
+    across = np.argsort(s, kind="stable")[:2]
+    return f"E{name[1]}0S" if k in across else name
+
+
+def spindle_names(machine: Machine, errors: Mapping[str, float]) -> Dict[str, float]:
+    """``errors`` (name -> mm / rad) under the names every fivecal command
+    reports them (:func:`spindle_equivalent`): a rotary offset that is the
+    spindle's offset becomes the spindle's, minus its value on the
+    workpiece side (equal errors add up). What a sphere check, an R-test or
+    ``identify --estimate location`` of a machine with these errors
+    recovers."""
+    out: Dict[str, float] = {}
+    for n, v in errors.items():
+        c = spindle_equivalent(machine, n)
+        out[c] = out.get(c, 0.0) + (v if c == n or n[3] not in machine.workpiece_chain else -float(v))
+    return out
 
 
 def positions(machine: Machine, n: int = 5, limits: Optional[Mapping[str, Sequence[float]]] = None
@@ -118,6 +168,24 @@ class SphereCheck:
     condition_number: float = 0.0
     informed: Dict[str, float] = field(default_factory=dict)  #: parameter -> posterior / prior sigma
 
+    def procedure_values(self) -> dict:
+        """The check's own values, the ``procedure.values`` of its result
+        document (docs/formats.md): mm and rad; a σ that is not finite is null."""
+        vs = lambda v, s: {"value": v, "std": s}
+        return {"axes": list(self.axes),
+                "pivots": {a: {n: vs(*p) for n, p in ax.items()} for a, ax in self.pivots.items()},
+                "reversal": {a: dict(vs(*p), name=f"E{a}{a}b") for a, p in self.backlash.items()},
+                "change": {n: {"change": c, "std": s} for n, (c, s) in self.change.items()},
+                "positions": list(self.groups),
+                "dispersion_before": self.dispersion_before, "dispersion_after": self.dispersion_after,
+                "condition_number": self.condition_number, "informed": dict(self.informed)}
+
+    def to_dict(self) -> dict:
+        """The result document (the one every procedure writes): the pivot
+        fit with the check's values as ``procedure`` ``sphere-check``; the
+        next check takes it as ``previous``."""
+        return result_document(self.result, "sphere-check", self.procedure_values())
+
     def values(self) -> Dict[str, float]:
         return {n: v for ax in self.pivots.values() for n, (v, _) in ax.items()} | \
                {f"E{a}{a}b": v for a, (v, _) in self.backlash.items()}
@@ -133,7 +201,8 @@ class SphereCheck:
                 unit, k = ("µrad", 1e6) if n[1] in "ABC" else ("µm", 1e3)
                 ch = self.change.get(n)
                 chs = f"{ch[0] * k:>12.2f}{ch[1] * k:>10.2f}" if ch else f"{'':>22}"
-                L.append(f"  {n:<10}{v * k:>12.2f}{s * k:>10.2f}{chs}  {unit}")
+                same = f"  (the {a} line's offset, named as the spindle's)" if n[3] != a else ""
+                L.append(f"  {n:<10}{v * k:>12.2f}{s * k:>10.2f}{chs}  {unit}{same}")
             if a in self.backlash:
                 v, s = self.backlash[a]
                 L.append(f"  E{a}{a}b{'':<5}{v * 1e6:>12.2f}{s * 1e6:>10.2f}{'':>22}  µrad reversal")
@@ -147,7 +216,7 @@ class SphereCheck:
         return "\n".join(L)
 
 
-def _previous_values(previous) -> Dict[str, tuple]:
+def _previous_values(previous, machine: Machine) -> Dict[str, tuple]:
     if previous is None:
         return {}
     if isinstance(previous, SphereCheck):
@@ -155,15 +224,26 @@ def _previous_values(previous) -> Dict[str, tuple]:
     if hasattr(previous, "values") and hasattr(previous, "std") and not isinstance(previous, (str, dict)):
         return {n: (v, previous.std.get(n, 0.0)) for n, v in previous.values.items()}
     if not isinstance(previous, Mapping):
-        from ..files import read_json
         previous = read_json(previous, "previous check")
+    # any result document (any procedure's), or a plain mapping name -> value
     params = previous.get("parameters", previous)
+    if not isinstance(params, Mapping):
+        raise ValueError("previous: expected a result document with 'parameters'")
     out = {}
     for n, p in params.items():
-        if isinstance(p, Mapping):
-            out[n] = (float(p["value"]), float(p.get("std") or 0.0))
-        else:
-            out[n] = (float(p), 0.0)
+        try:
+            if isinstance(p, Mapping):
+                out[n] = (float(p["value"]), float(p.get("std") or 0.0))
+            else:
+                out[n] = (float(p), 0.0)
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"previous: parameters.{n}: expected a number or {{value, std}}") from None
+    # a check written before the spindle names (EX0C on an A/C trunnion, now
+    # EX0S): the same error, the spindle's value is minus the table axis'
+    for n, (v, s) in list(out.items()):
+        c = spindle_equivalent(machine, n)
+        if c != n and c not in out:
+            out[c] = (spindle_names(machine, {n: v})[c], s)
     return out
 
 
@@ -177,8 +257,6 @@ def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_styl
     check (a SphereCheck, a Result, or a result file / dict) for the change of
     each pivot, with the σ of the change from both checks (independent
     checks). Raises ValueError when the data cannot determine a pivot."""
-    from ..identification import identify
-
     ds = Dataset.from_dict(dataset)
     m = ds.machine
     obs = ds.observations
@@ -206,7 +284,7 @@ def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_styl
         b = f"E{a}{a}b"
         if b in r.estimated:
             lash[a] = (r.values.get(b, 0.0), std.get(b, float("nan")))
-    prev = _previous_values(previous)
+    prev = _previous_values(previous, m)
     change = {}
     for a in moved:
         for n, (v, s) in pivots[a].items():
@@ -238,12 +316,8 @@ def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_styl
 
 
 def to_json(check: SphereCheck) -> str:
-    """The check as a result-format JSON (parameters with value and std), so
-    that the next check can take it as ``previous``."""
-    params = {n: {"value": v, "std": s} for ax in check.pivots.values() for n, (v, s) in ax.items()}
-    params.update({f"E{a}{a}b": {"value": v, "std": s} for a, (v, s) in check.backlash.items()})
-    return json.dumps({"parameters": params, "dispersion_before": check.dispersion_before,
-                       "dispersion_after": check.dispersion_after}, indent=1)
+    """The check's result document (:meth:`SphereCheck.to_dict`) as JSON."""
+    return json.dumps(check.to_dict(), indent=1, sort_keys=True, ensure_ascii=False)
 
 
-__all__ = ["plan", "positions", "pivot_parameters", "evaluate", "SphereCheck", "to_json"]
+__all__ = ["plan", "positions", "pivot_parameters", "spindle_equivalent", "spindle_names", "evaluate", "SphereCheck", "to_json"]

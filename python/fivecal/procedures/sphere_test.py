@@ -25,10 +25,11 @@ import numpy as np
 
 from .. import _core
 from ..dataset import Dataset, dumps
+from ..identification import result_document
 from ..machine import Machine
 from ..units import display_scale
 
-__all__ = ["THESIS_RINGS", "sphere_points", "sphere_plan", "SphereFit", "fit_sphere", "fit_sphere_centre",
+__all__ = ["sphere_test_values", "sphere_test_document", "THESIS_RINGS", "sphere_points", "sphere_plan", "SphereFit", "fit_sphere", "fit_sphere_centre",
            "table_points", "SphereTest", "sphere_test", "format_sphere_tests", "sensitivity_table",
            "format_sensitivity"]
 
@@ -203,3 +204,30 @@ def format_sensitivity(rows: Sequence[Mapping]) -> str:
         lines.append(f"{r['name']:<12}{r['value'] * f:>10.4g}  {unit:<6}{r['size_error']:>17.3e}"
                      f"{r['out_of_sphericity']:>24.3e}")
     return "\n".join(lines)
+
+
+def sphere_test_values(tests: Mapping[str, SphereTest]) -> dict:
+    """The sphere tests' own values, the ``procedure.values`` of the result
+    document (docs/formats.md): the sphere and, per model (``nominal model``,
+    ``identified model``), the fitted stylus-centre sphere and its residual
+    statistics (mm)."""
+    t0 = next(iter(tests.values()))
+    return {"sphere": t0.sphere, "models": {name: {
+        "center": [float(x) for x in t.center], "radius": float(t.radius), "ball_diameter": float(t.ball_diameter),
+        "out_of_sphericity": float(t.out_of_sphericity), "max_residual": float(t.fit.max_residual),
+        "min_residual": float(t.fit.min_residual), "std_residual": float(t.fit.std_residual),
+        "size_error": float(t.size_error), "points": len(t.observations), "converged": bool(t.fit.converged)}
+        for name, t in tests.items()}}
+
+
+def sphere_test_document(tests: Mapping[str, SphereTest], model: Optional[Mapping] = None) -> dict:
+    """The result document of a sphere test: ``model`` (the result document
+    whose machine errors made the ``identified model``) with the tests as
+    ``procedure`` ``sphere-test``. Without one the test measured no machine
+    error: no parameters, verdict ``undetermined``, so no consumer takes it
+    for measured errors."""
+    base = dict(model) if model is not None else {
+        "parameters": {}, "estimated": [], "converged": all(t.fit.converged for t in tests.values()),
+        "iterations": 0, "n_observations": len(next(iter(tests.values())).observations), "n_parameters": 0,
+        "verdict": "undetermined"}
+    return result_document(base, "sphere-test", sphere_test_values(tests))

@@ -536,7 +536,8 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
                  truth: Optional[Mapping[str, float]] = None,
                  sections: Sequence[Section] = (), figures: Sequence[Figure] = (),
                  embed_images: bool = True, write_result_json: bool = True,
-                 summary: Optional[str] = None, history=None, machine_id: Optional[str] = None) -> str:
+                 summary: Optional[str] = None, history=None, machine_id: Optional[str] = None,
+                 procedure: str = "identify", procedure_values: Optional[Mapping] = None) -> str:
     """Write ``out_dir/report.html`` (plus PNGs and ``result.json``) for an
     identification :class:`fivecal.Result`; returns the HTML path.
 
@@ -564,7 +565,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     machine = ds.machine
     machine_names = set(machine.parameter_names())
     if write_result_json:
-        result.save(os.path.join(out_dir, "result.json"))
+        result.save(os.path.join(out_dir, "result.json"), procedure, procedure_values)
     result.write_residuals(os.path.join(out_dir, "residuals.csv"))
 
     figs: List[Figure] = []
