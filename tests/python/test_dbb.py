@@ -310,7 +310,8 @@ def test_cli_runs_every_subcommand(tmp_path):
              str(tmp_path / "j.png"), "--out", str(tmp_path / "j.json"), "--save-dataset", str(tmp_path / "ds.json"))
     assert r.returncode == 0, r.stderr
     assert "EB0C" in r.stdout and os.path.exists(tmp_path / "j.png")
-    assert json.load(open(tmp_path / "j.json"))["parameters"]["EY0A"]["value"] == pytest.approx(0.0342, abs=0.002)
+    # EY0A is the spindle's offset on this A/C table: the result names it EY0S = -EY0A
+    assert json.load(open(tmp_path / "j.json"))["parameters"]["EY0S"]["value"] == pytest.approx(-0.0342, abs=0.002)
     r = _cli("jiang", str(tmp_path / "ds.json"), "--no-engine")
     assert r.returncode == 0, r.stderr
     r = _cli("wang", "--machine", vmc, "--every", "45", "--simulate", "paper", "--patterns",

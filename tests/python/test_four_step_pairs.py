@@ -17,6 +17,7 @@ import pytest
 
 import fivecal
 from fivecal.procedures import dbb
+from fivecal.procedures.sphere_check import spindle_names
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 MACHINES = os.path.join(HERE, "..", "..", "examples", "machines")
@@ -241,9 +242,13 @@ def test_cli_jiang_on_other_pairs_with_plot(tmp_path, which):
     d = json.loads(out.read_text())  # the one result document: the method's values in its procedure section
     assert d["procedure"]["values"]["carrier"] == ("B" if which == "hu40t" else "C")
     # 'paper' by role: the carrier gets A's Table 2 positions (the engine's and the method's value).
-    name = dbb.four_step_pair(fivecal.Machine.load(path))["names"][0]
-    for first in (d["parameters"][name], d["procedure"]["values"]["method_values"][name]):
-        assert first["value"] == pytest.approx(0.0342, abs=3 * first["std"] + 1e-6)
+    m = fivecal.Machine.load(path)
+    name = dbb.four_step_pair(m)["names"][0]
+    first = d["procedure"]["values"]["method_values"][name]
+    assert first["value"] == pytest.approx(0.0342, abs=3 * first["std"] + 1e-6)
+    # the engine's, under the name every command reports (the spindle's when it is the spindle's offset)
+    (seen, v), = spindle_names(m, {name: 0.0342}).items()
+    assert d["parameters"][seen]["value"] == pytest.approx(v, abs=3 * d["parameters"][seen]["std"] + 1e-6)
 
 
 def test_csv_traces_of_a_trunnion_rebuild_the_dataset(tmp_path):

@@ -27,7 +27,7 @@ import fivecal
 from fivecal import schema
 from fivecal.cli import main
 from fivecal.identification import PROCEDURES
-from fivecal.procedures import machining, rtest, sphere_check, tango
+from fivecal.procedures import dbb, machining, rtest, sphere_check, tango
 from fivecal.procedures.sphere_check import spindle_equivalent, spindle_names
 
 from test_machining_kind import DATUM as MACHINED_DATUM
@@ -165,6 +165,49 @@ def _tango(d: str, seed: int) -> Run:
                    "--out", out)
     names = set(m.parameter_names())
     return Run(rc, out, HU40T, "xyzbc-trt", {n: v for n, v in truth.items() if n in names}, s)
+
+
+# ---- the ball-bar procedures (`fivecal dbb ...`) on the same A/C trunnion ----
+#: the Wang path's four errors (C relative to A), of the paper's size
+WANG_TRUTH = {"EX0C": 0.007, "EY0C": -0.005, "EZ0C": 0.006, "EA0C": 2e-5}
+#: what a planar circle determines on its own: each plane axis' backlash
+CIRCULAR_TRUTH = {"EXXb": 0.002, "EYYb": -0.0015}
+
+
+def _ball_bar(d: str, seed: int, name: str, plan, truth: Dict[str, float], *args) -> Run:
+    m = fivecal.Machine.load(VMC)
+    ds = fivecal.simulate(m, plan, errors=truth, sigma={"dbb": 0.0003}, seed=seed)
+    data = _save(ds, os.path.join(d, f"{name}_data.json"))
+    out = os.path.join(d, f"{name}.json")
+    rc, s = _timed(_cli, "dbb", *args, data, "--out", out)
+    return Run(rc, out, VMC, "xyzac-trt", seen(m, truth), s)
+
+
+@procedure("four-step")
+def _four_step(d: str, seed: int) -> Run:
+    m = fivecal.Machine.load(VMC)
+    return _ball_bar(d, seed, "four_step", dbb.four_step_plan(m, step=3.0), AC_TRUTH, "four-step")
+
+
+@procedure("jiang-cripps")
+def _jiang(d: str, seed: int) -> Run:
+    m = fivecal.Machine.load(VMC)
+    return _ball_bar(d, seed, "jiang", dbb.four_step_plan(m, step=3.0), AC_TRUTH, "jiang")
+
+
+@procedure("wang")
+def _wang(d: str, seed: int) -> Run:
+    m = fivecal.Machine.load(VMC)
+    plan = [{k: v for k, v in e.items() if k != "tracking"} for e in dbb.wang_plan(m)]
+    return _ball_bar(d, seed, "wang", plan, WANG_TRUTH, "wang")
+
+
+@procedure("circular")
+def _circular(d: str, seed: int) -> Run:
+    m = fivecal.Machine.load(VMC)
+    r = _ball_bar(d, seed, "circular", dbb.planar_plan(m, "XY", 100.0, step=3.0), CIRCULAR_TRUTH,
+                  "circular", "--radius", "100", "--dataset")
+    return r
 
 
 _CACHE: Dict[tuple, Run] = {}

@@ -26,6 +26,7 @@ from ..guards import FitWarning
 from ..identification import identify, write_result
 from ..machine import Machine
 from ..procedures import dbb
+from ..procedures.sphere_check import spindle_equivalent
 from ..report.polar import (dbb_groups, plane_name, plot_circular_test, plot_four_step, plot_polar, plot_polar_grid,
                             plot_volumetric, plot_wang_patterns)
 from ..simulation import simulate
@@ -192,7 +193,7 @@ def _four_step(args, procedure: str) -> int:
                                a_pivot_offset=_vector(args.a_pivot_offset, 2, "--a-pivot-offset") or (0, 0),
                                c_pivot_offset=_vector(args.c_pivot_offset, 2, "--c-pivot-offset") or (0, 0),
                                uniform_angles=args.uniform_angles, refer_positions=not args.no_refer,
-                               a_removal=args.a_removal, engine=not args.no_engine)
+                               a_removal=args.a_removal, engine=not args.no_engine, spindle_names=True)
     print(res.report())
     if args.out and res.engine is not None:
         write_result(args.out, res.engine, procedure, res.procedure_values())
@@ -240,7 +241,10 @@ def _wang(args) -> int:
         if args.save_dataset:
             save_dataset(ds, args.save_dataset)
     if ds is not None:
-        estimate = [s.strip() for s in args.estimate.split(",")] if args.estimate else list(dbb.WANG_ERRORS)
+        # an offset that is the spindle's (EX0C on an A/C trunnion) under the spindle's name,
+        # as every fivecal command names it
+        estimate = [s.strip() for s in args.estimate.split(",")] if args.estimate else \
+            list(dict.fromkeys(spindle_equivalent(ds.machine, n) for n in dbb.WANG_ERRORS))
         with _quiet_fit_warnings():  # judged once below, in one line
             ident = dbb.wang_identify(ds, estimate=estimate, setup=args.setup)
         print()
@@ -371,8 +375,12 @@ def _circular(args) -> int:
     if ds is not None:
         # the machine errors under their ISO 230-1 names: identify's fit of the same
         # readings, every error under its prior, judged by identify's verdict
+        m = ds.machine
+        # an offset that is the spindle's is estimated under the spindle's name only
+        # (as every fivecal command names it), not twice under two names
+        twins = [n for n in m.parameter_names() if spindle_equivalent(m, n) != n]
         with _quiet_fit_warnings():
-            fit = identify(ds)
+            fit = identify(ds, fix=twins or None)
         print("\nmachine errors (identify's fit of the same readings, every error under its prior):")
         print(fit.report())
     grade = res.grade(tolerances) if tolerances else None

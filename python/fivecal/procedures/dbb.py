@@ -27,6 +27,7 @@ from ..dataset import Dataset
 from ..identification import finding_lines, identify, verdict_lines
 from ..machine import Machine, RadiansWarning
 from ..units import column_unit, display_scale, looks_like_radians, radians_message
+from .sphere_check import spindle_equivalent
 
 #: Setup ids and PIGEs of the four-step test on the paper's machine (C on A);
 #: other pairs: :func:`four_step_pair`.
@@ -367,6 +368,24 @@ class FourStepResult:
         a += 2 * np.pi * np.round((np.asarray(s.angles)[0] - a[0]) / (2 * np.pi))
         return Trace(np.degrees(a), np.asarray(s.residuals), label=setup)
 
+    def engine_value(self, name: str):
+        """(value, std) of PIGE ``name`` in the engine's fit, or None. An
+        engine that named an offset by the spindle (``spindle_names``: EX0S
+        for EX0C on an A/C trunnion, the same error) gives it back under the
+        PIGE's name, minus the spindle's value for an axis on the workpiece
+        side."""
+        eng = self.engine
+        if eng is None:
+            return None
+        if name in eng.values:
+            return eng.values[name], eng.std.get(name, float("nan"))
+        m = self.dataset.machine
+        s = spindle_equivalent(m, name)
+        if s != name and s in eng.values:
+            sign = -1.0 if name[3] in m.workpiece_chain else 1.0
+            return sign * eng.values[s], eng.std.get(s, float("nan"))
+        return None
+
     def procedure_values(self) -> dict:
         """The values of the four-step method itself (the ``procedure.values``
         of the result document; the machine errors, ``parameters``, are the
@@ -378,8 +397,8 @@ class FourStepResult:
         d.pop("engine", None)
         d["method_values"] = d.pop("parameters")
         if self.engine is not None:
-            d["method_minus_engine"] = {n: self.values[n] - self.engine.values[n] for n in self.names
-                                        if n in self.engine.values}
+            d["method_minus_engine"] = {n: self.values[n] - self.engine_value(n)[0] for n in self.names
+                                        if self.engine_value(n) is not None}
         return d
 
     def to_dict(self) -> dict:
@@ -429,9 +448,9 @@ class FourStepResult:
         for n in self.names:
             f, unit = display_scale(n)
             row = f"  {n:<10}{self.values[n] * f:>16.3f}{self.std[n] * f:>10.3f}"
-            if eng is not None and n in eng.values:
-                row += (f"{eng.values[n] * f:>16.3f}{eng.std.get(n, float('nan')) * f:>10.3f}"
-                        f"{(self.values[n] - eng.values[n]) * f:>14.3f}")
+            ev = self.engine_value(n)
+            if ev is not None:
+                row += f"{ev[0] * f:>16.3f}{ev[1] * f:>10.3f}{(self.values[n] - ev[0]) * f:>14.3f}"
             L.append(row + f"  {unit}")
         if eng is not None:
             fd = guards.findings(eng)
@@ -439,6 +458,13 @@ class FourStepResult:
             L.append(f"  general engine: {eng.n_observations} readings, {eng.n_parameters} parameters "
                      f"(with the bar lengths), rank {eng.rank}, condition {eng.condition_number:.3g}, "
                      f"rms {eng.rms * 1e3:.3f} µm")
+            m = self.dataset.machine
+            moved = [(n, spindle_equivalent(m, n)) for n in self.names if n not in eng.values
+                     and spindle_equivalent(m, n) in eng.values]
+            if moved:
+                L.append("  the engine and the result file name " + ", ".join(
+                    f"{n} by the spindle: {s} = {'-' if n[3] in m.workpiece_chain else ''}{n}" for n, s in moved)
+                    + " (the same error; no ball bar reading tells it from the spindle ball's placement)")
             # identify's own verdict words: the engine's fit is the one a consumer uses
             L += ["  " + t for t in verdict_lines(eng, fd)]
             L += ["  " + t for t in finding_lines(fd)]
@@ -473,7 +499,8 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Optional[Sequence[str
                  length_offsets: Optional[Mapping[str, float]] = None,
                  a_pivot_offset=(0.0, 0.0), c_pivot_offset=(0.0, 0.0), uniform_angles: bool = False,
                  refer_positions: bool = True, a_removal: str = "full", engine: bool = True,
-                 engine_estimate: Optional[Sequence[str]] = None) -> FourStepResult:
+                 engine_estimate: Optional[Sequence[str]] = None,
+                 spindle_names: bool = False) -> FourStepResult:
     """Run the four-step analysis (C++ core) on the DBB observations of the
     four setups (default ``<carrier>1 <carrier>2 <carried>1 <carried>2``,
     ``A1 A2 C1 C2`` on the paper's machine; see :func:`four_step_pair`) and,
@@ -487,7 +514,11 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Optional[Sequence[str
     (eq. 1); the engine gets them as known ball offsets. ``length_offsets``:
     calibrated minus nominal bar length per setup (mm). ``a_removal``:
     ``full`` | ``position`` | ``none``: how the carrier's errors are removed
-    from the carried axis (see ``dbb_four_step.h``).
+    from the carried axis (see ``dbb_four_step.h``). ``spindle_names``: the
+    engine estimates an offset that is the spindle's (EX0C and EY0A on an
+    A/C trunnion: no ball bar reading tells them from the spindle ball's
+    placement) under the spindle's name, as every fivecal command names it
+    (:func:`fivecal.procedures.sphere_check.spindle_equivalent`).
     """
     ds = Dataset.from_dict(dataset)
     setups = list(setups) if setups else list(four_step_pair(ds.machine)["setups"])
@@ -518,7 +549,10 @@ def jiang_cripps(dataset: Union[Dataset, Mapping], setups: Optional[Sequence[str
             if length_offsets and sid in length_offsets:
                 initial[f"dbb.{sid}.length"] = float(length_offsets[sid])
         try:
-            eng = identify(ds, list(engine_estimate or core.names), initial=initial)
+            names = list(engine_estimate or core.names)
+            if spindle_names:
+                names = list(dict.fromkeys(spindle_equivalent(m, n) for n in names))
+            eng = identify(ds, names, initial=initial)
         except ValueError as e:
             err = str(e)
     return FourStepResult(core, ds, eng, err, options)

@@ -384,8 +384,9 @@ def plot_four_step(result, path: str) -> str:
     for n in result.names:
         f, unit = display_scale(n)
         t = f"{n} {result.values[n] * f:+.2f}"
-        if eng is not None and n in eng.values:
-            t += f" ({eng.values[n] * f:+.2f})"
+        ev = result.engine_value(n) if eng is not None else None  # a spindle-named one mapped back
+        if ev is not None:
+            t += f" ({ev[0] * f:+.2f})"
         parts.append(t + f" {unit}")
     footer = ("four-step (engine):  " + ",  ".join(parts[:4]) + "\n" + " " * 21 + ",  ".join(parts[4:]))
     side = "head" if getattr(result, "tool_side", False) else "table"
