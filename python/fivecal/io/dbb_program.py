@@ -268,10 +268,19 @@ def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed
     out = [f"(setup {O.comment_text(setup)}: bar {bar.length:g} mm, {', '.join(moving)} moving, {len(entries)} planned "
            f"poses, {npts} path points, bar length within {tolerance * 1e3:g} um between them)",
            path_mode, "G94", f"G0 {rows(approach)[0]}", f"G1 {path[0]} F{feed:g} (feed-in)", "G93"]
+    # A block's travel: the largest of the balls' motion relative to each
+    # other, the linear axes' travel, and the rotary turn as an arc of the bar's
+    # length. In a four-step setup the balls turn together about one on the
+    # axis (no relative motion, no linear move): timing those blocks by the
+    # relative motion alone gave F1e9, blocks the controller runs flat out.
     rel = np.linalg.norm(np.diff(bar.ball(P), axis=0), axis=1)
+    linear = [a for a in letters if not machine.is_rotary(a)]
+    lin = np.linalg.norm(np.diff(np.column_stack([P[a] for a in linear]), axis=0), axis=1)
+    turn = np.abs(np.diff(np.column_stack([P[a] for a in _rotary(machine)]), axis=0)).max(axis=1)
+    travel = np.maximum.reduce([rel, lin, np.radians(turn) * bar.length])
     for i in range(1, npts):
-        # inverse time: 1 / minutes for the block at ``feed`` mm/min of the balls' relative motion
-        out.append(f"G1 {path[i]} F{feed / max(rel[i - 1], 1e-6):.6f}")
+        # inverse time: 1 / minutes for the block at ``feed`` mm/min
+        out.append(f"G1 {path[i]} F{feed / max(travel[i - 1], 1e-6):.6f}")
     out += ["G94", f"G1 {rows(leave)[0]} F{feed:g} (feed-out)"]
     return out
 
@@ -280,8 +289,10 @@ def rotary_dbb_program(machine: Machine, plan: Sequence[Mapping], feed: float = 
                        feed_in: float = 1.5, kins: Optional[str] = None, tolerance: float = 2e-5,
                        path_mode: str = "G61", tcp_off: str = "M429") -> str:
     """ISO G-code for the ball bar setups of ``plan`` in which a rotary axis
-    moves (module text). ``feed``: mm/min of the balls' relative motion on the
-    path (inverse time) and of the feed-in and feed-out; ``tolerance`` (mm):
+    moves (module text). ``feed``: mm/min on the path (inverse time: of the
+    largest of the balls' relative motion, the linear axes' travel and the
+    rotary turn as an arc of the bar's length, which times a four-step setup
+    whose balls turn together) and of the feed-in and feed-out; ``tolerance`` (mm):
     largest change of the nominal bar length along the straight blocks;
     ``path_mode``: ``G61`` (exact stop: the controller runs the blocks as
     written) or e.g. ``G64 P0.0001`` (blending within 0.1 µm, continuous);
