@@ -463,10 +463,11 @@ def check_balls(machine: Machine, kind: str, q: np.ndarray, values: np.ndarray, 
     v = np.abs(np.nan_to_num(np.asarray(values, dtype=float)))
     if not v.size:
         return
-    rep = next((k["report"] for k in _reports().values() if k["name"] == kind), None)
-    if rep is None or not rep["range"]:
+    entry = next((e for e in _reports().values() if e["name"] == kind), None)
+    if entry is None or not entry["report"]["range"]:
         return  # not a kind with an instrument range: the core names a wrong type
-    limit, what = rep["range"], rep["range_what"]
+    # named as fivecal.ball_dataset's argument: readings (one row) or measured (three)
+    limit, what = entry["report"]["range"], ("readings", "measured")[entry["rows"] > 1]
     k = int(np.argmax(v.max(axis=1) if v.ndim == 2 else v))
     if v.reshape(v.shape[0], -1)[k].max() > limit:
         raise ValueError(f"{where}: {what}[{k}] is {v.reshape(v.shape[0], -1)[k].max():.6g} mm, beyond the "
