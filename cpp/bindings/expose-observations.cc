@@ -14,6 +14,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "fivecal/observations/ball_mount.h"
 #include "fivecal/observations/columns.h"
 #include "fivecal/observations/dataset.h"
 #include "fivecal/observations/registry.h"
@@ -58,9 +59,14 @@ void BindObservations(py::module_& m) {
              const Eigen::Vector3d& tool_ball, const Eigen::Vector3d& table_ball, double length,
              const Eigen::MatrixXd& values, const std::optional<Eigen::MatrixXd>& sigma) {
             Dataset d(m);
-            ObservationType t = type == "dbb" ? ObservationType::kDbb : ObservationType::kBall3d;
-            if (type != "dbb" && type != "ball3d")
-              throw std::invalid_argument("ball samples: type must be 'dbb' or 'ball3d'");
+            const ObservationKind* kind = FindKind(type);
+            if (!kind || !dynamic_cast<const BallMountKind*>(kind)) {
+              std::string names;
+              for (const ObservationKind* k : ObservationKinds())
+                if (dynamic_cast<const BallMountKind*>(k)) names += (names.empty() ? "'" : " or '") + std::string(k->name()) + "'";
+              throw std::invalid_argument("ball samples: type must be " + names);
+            }
+            const ObservationType t = kind->type();
             d.AppendBallSamples(t, setup, axes, dirs ? &*dirs : nullptr, tool_ball, table_ball,
                                 length, values);
             if (sigma) {
@@ -100,12 +106,9 @@ void BindObservations(py::module_& m) {
               const Observation& o = d.observations[i];
               axes.row(i) = o.axes.transpose();
               type[i] = static_cast<int>(o.type);
-              target[i] = o.type == ObservationType::kFacet      ? d.artefact.FacetIndex(o.target)
-                          : o.type == ObservationType::kSphere   ? d.artefact.SphereIndex(o.target)
-                          : o.type == ObservationType::kCylinder ? d.artefact.CylinderIndex(o.target)
-                                                                 : -1;
-              if (o.type == ObservationType::kDbb || o.type == ObservationType::kBall3d)
-                ball.push_back(static_cast<int>(i));
+              const ObservationKind& kind = KindOf(o);
+              target[i] = kind.ArtefactTarget(d, o);
+              if (dynamic_cast<const BallMountKind*>(&kind)) ball.push_back(static_cast<int>(i));
             }
             const Eigen::Index k = static_cast<Eigen::Index>(ball.size());
             const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -113,7 +116,7 @@ void BindObservations(py::module_& m) {
             RowMajor measured = RowMajor::Constant(k, 3, nan), tool(k, 3), table(k, 3);
             for (Eigen::Index j = 0; j < k; ++j) {
               const Observation& o = d.observations[ball[j]];
-              if (o.type == ObservationType::kDbb) {
+              if (static_cast<const BallMountKind&>(KindOf(o)).has_length()) {
                 reading[j] = o.reading;
                 length[j] = o.length;
               } else {
@@ -172,11 +175,45 @@ void BindObservations(py::module_& m) {
       d["json_keys"] = std::vector<std::string>(keys.begin(), keys.end());
       const auto plan = k->plan_keys();
       d["plan_keys"] = std::vector<std::string>(plan.begin(), plan.end());
+      d["probe_touch"] = k->probe_touch();
+      d["length_reference"] = k->LengthReference();
+      // Samples of a tool ball and a table ball on one mounting: Dataset.balls
+      // and the "ball" rows of Dataset.columns.
+      d["ball_mount"] = dynamic_cast<const BallMountKind*>(k) != nullptr;
+      d["instrument_key"] = k->instrument_key() ? py::object(py::str(k->instrument_key())) : py::object(py::none());
+      // What reports, plots and plausibility checks show of the kind
+      // (KindReport, kind.h): Python names no kind, it reads these.
+      const KindReport r = k->Report();
+      auto str = [](const char* c) { return c ? py::object(py::str(c)) : py::object(py::none()); };
+      py::dict rep;
+      rep["target_list"] = str(r.target_list);
+      rep["setup_key"] = str(r.setup_key);
+      rep["setup_heading"] = str(r.setup_heading);
+      rep["count_word"] = str(r.count_word);
+      rep["indexed"] = r.indexed;
+      rep["components"] = r.components;
+      rep["component_label"] = str(r.component_label);
+      rep["component_frame"] = str(r.component_frame);
+      rep["component_caption"] = str(r.component_caption);
+      rep["recorded_deviation"] = str(r.recorded_deviation);
+      rep["range_field"] = str(r.range_field);
+      rep["range"] = r.range;
+      rep["range_note"] = str(r.range_note);
+      rep["range_what"] = str(r.range_what);
+      rep["figures"] = str(r.figures);
+      d["report"] = rep;
       out.append(d);
     }
     return out;
   });
 
+  // A planned touch's contact point and outward normal, from its kind; None
+  // for an entry of a kind that touches no surface.
+  m.def("planned_contact", [](const Dataset& d, const std::string& entry) -> py::object {
+    Eigen::Vector3d p, n;
+    if (!PlannedContact(d, entry, &p, &n)) return py::none();
+    return py::make_tuple(p, n);
+  }, py::arg("dataset"), py::arg("entry_json"));
   m.def("noise_classes", &NoiseClasses);
   // class -> "mm" | "rad": which simulator noise levels are in rad.
   m.def("noise_class_units", [] {

@@ -188,14 +188,15 @@ def ball_dataset(machine, type: str, axes: Mapping, tool_ball, table_ball, lengt
     m = Machine.from_dict(machine)
     q = m.axes_matrix(axes)
     d = m.directions_matrix(directions, q.shape[0])
-    if type == "dbb":
-        if readings is None:
-            raise ValueError("ball_dataset: 'readings' missing for type dbb")
-        values = np.asarray(readings, dtype=float).reshape(-1, 1)
-    else:
-        if measured is None:
-            raise ValueError("ball_dataset: 'measured' missing for type ball3d")
-        values = np.asarray(measured, dtype=float).reshape(-1, 3)
+    kinds = {k["name"]: k for k in _core.observation_kinds() if k["ball_mount"]}
+    if type not in kinds:
+        raise ValueError(f"ball_dataset: type {type!r}: expected one of {', '.join(map(repr, kinds))}")
+    # the kind's own value: readings (one row) or measured displacements (three)
+    rows, arg = kinds[type]["rows"], ("readings", "measured")[kinds[type]["rows"] > 1]
+    given = readings if rows == 1 else measured
+    if given is None:
+        raise ValueError(f"ball_dataset: {arg!r} missing for type {type}")
+    values = np.asarray(given, dtype=float).reshape(-1, rows)
     plausibility.check_balls(m, type, q, values, "ball_dataset")
     sig = None
     if sigma is not None:

@@ -262,26 +262,13 @@ def candidate_plan(machine, artefact: Mapping, indexations: Sequence[Mapping[str
                                         float(min_dot), [str(t) for t in (targets or [])])
     plan = json.loads(text)
     if accessible is not None:
-        facets = {f["id"]: f for f in artefact.get("facets", [])}
-        spheres = {s["id"]: s for s in artefact.get("spheres", [])}
-        cylinders = {c["id"]: c for c in artefact.get("cylinders", [])}
         _, axis = m.tool_pose({a: q[:, i] for i, a in enumerate(m.axis_names)})
         keep_plan, keep_groups = [], []
         for e, g in zip(plan, groups):
-            if e["type"] == "facet":
-                f = facets[e["target"]]
-                ok = accessible(e["point"], f["normal"], axis[g])
-            elif e["type"] == "cylinder":
-                c = cylinders[e["target"]]
-                ax = np.asarray(c["axis"], float)
-                w = np.asarray(e["point"], float) - np.asarray(c["point"], float)
-                radial = w - ax * (w @ ax)
-                n = radial / np.linalg.norm(radial) * (-1.0 if c.get("inside") else 1.0)
-                ok = accessible(e["point"], n, axis[g])
-            else:
-                s = spheres[e["target"]]
-                n = np.asarray(e["normal"], float)
-                ok = accessible(np.asarray(s["center"], float) + s["radius"] * n, n, axis[g])
+            # where the stylus meets the surface and the surface's outward
+            # normal there: the touch's kind knows (the registry)
+            contact = _core.planned_contact(setup, dumps(e))
+            ok = contact is None or accessible(contact[0], contact[1], axis[g])
             if ok:
                 keep_plan.append(e)
                 keep_groups.append(g)

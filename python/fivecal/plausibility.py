@@ -158,6 +158,22 @@ def _code(name: str) -> int:
     return _kinds()[name][0]
 
 
+def _reports() -> dict:
+    """type code -> the kind's registry entry (name, report pieces, ...)."""
+    from . import _core
+    return {int(k["code"]): k for k in _core.observation_kinds()}
+
+
+def _codes_where(test) -> list:
+    """Type codes of the kinds whose registry entry passes ``test``."""
+    return [c for c, k in _reports().items() if test(k)]
+
+
+def _target_lists() -> dict:
+    """type code -> the artefact list its touches name (``facets``, ...)."""
+    return {c: k["report"]["target_list"] for c, k in _reports().items() if k["report"]["target_list"]}
+
+
 def _codes_with(keys) -> list:
     """Type codes of the kinds that have any of ``keys``."""
     return [c for c, k in _kinds().values() if k & set(keys)]
@@ -201,20 +217,23 @@ def _dict_columns(machine: Machine, entries: Sequence, artefact) -> dict:
     # to the core, which names it; here it only has no kind.
     types = np.array([kinds[e["type"]][0] if isinstance(e, dict) and isinstance(e.get("type"), str)
                       and e["type"] in kinds else -1 for e in entries], dtype=int)
-    facet, sphere, cyl, dbb, ball3d = (_code(n) for n in ("facet", "sphere", "cylinder", "dbb", "ball3d"))
+    lists = _target_lists()
     ids = {}
     if isinstance(artefact, Mapping):
-        for code, key in ((facet, "facets"), (sphere, "spheres"), (cyl, "cylinders")):
+        for code, key in lists.items():
             for k, x in enumerate(artefact.get(key) or []):
                 if isinstance(x, Mapping):
                     ids.setdefault((code, str(x.get("id"))), k)
-    target = np.array([ids.get((int(t), str(e.get("target"))), -1) if t in (facet, sphere, cyl) else -1
+    target = np.array([ids.get((int(t), str(e.get("target"))), -1) if t in lists else -1
                        for t, e in zip(types, entries)], dtype=int)
+    # a ball-mount kind's own value: a reading with a bar length, or a measured displacement
+    ranged = {f: _codes_where(lambda k, f=f: k["ball_mount"] and k["report"]["range_field"] == f)
+              for f in ("reading", "measured")}
     measured = _optional_rows(entries, "measured")
-    measured[types != ball3d] = math.nan
+    measured[~np.isin(types, ranged["measured"])] = math.nan
     return {"axes": _axis_columns(machine, entries), "type": types, "target": target,
             "ball": np.arange(len(entries)),
-            "reading": np.where(types == dbb, _optional_column(entries, "reading"), math.nan),
+            "reading": np.where(np.isin(types, ranged["reading"]), _optional_column(entries, "reading"), math.nan),
             "length": _optional_column(entries, "length"), "measured": measured,
             "tool_ball": _optional_rows(entries, "tool_ball"), "table_ball": _optional_rows(entries, "table_ball"),
             "positions": _key_positions(entries, range(len(entries)), types)}
@@ -268,8 +287,8 @@ def check_loaded(ds, where: str = "dataset") -> None:
     cols["axes"] = {a: cols["axes"][:, k] for k, a in enumerate(m.axis_names)}
     # The kinds' other positions (a tracker's pose, a station, a target point) are
     # not among the columns: the few observations that have them go through JSON.
-    extra = [c for c in _codes_with(POSITION_KEYS + LENGTH_KEYS)
-             if c not in (_code("dbb"), _code("ball3d"))]
+    balls = _codes_where(lambda k: k["ball_mount"])
+    extra = [c for c in _codes_with(POSITION_KEYS + LENGTH_KEYS) if c not in balls]
     rows = np.flatnonzero(np.isin(cols["type"], extra))
     if rows.size:
         obs = json.loads(ds._core.subset(rows.tolist()).to_json())["observations"]
@@ -329,28 +348,24 @@ def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lamb
 
     # Instrument ranges (rows of the ball fields: cols["ball"]).
     ball_types = cols["type"][cols["ball"]]
-    dbb = np.flatnonzero(ball_types == _code("dbb"))
-    if dbb.size:
-        r = cols["reading"][dbb]
-        k = int(np.argmax(np.abs(np.nan_to_num(r))))
-        if abs(r[k]) > DBB_RANGE:
-            big = int((np.abs(r) > DBB_RANGE).sum())
-            row = ix(cols["ball"][dbb[k]])
-            raise ValueError(f"{where}: observations[{row}].reading = {r[k]:.6g} mm ({big} of the "
-                             f"{r.size} ball bar readings checked are beyond ±{DBB_RANGE:g} mm; a ballbar "
-                             "measures about ±1 mm): "
-                             "readings look like µm: divide by 1000 (a reading is the bar length minus "
-                             "its nominal length, in mm)")
-    b3 = np.flatnonzero(ball_types == _code("ball3d"))
-    if b3.size:
-        mv = cols["measured"][b3]
-        a = np.abs(np.nan_to_num(mv)).max(axis=1)
-        k = int(np.argmax(a))
-        if a[k] > BALL3D_RANGE:
-            row = ix(cols["ball"][b3[k]])
-            raise ValueError(f"{where}: observations[{row}].measured = {mv[k].tolist()} mm is beyond "
-                             f"an R-test / 3D ball sensor's range (a few mm, {BALL3D_RANGE:g} mm here): "
-                             "displacements look like µm: divide by 1000")
+    for code, k in _reports().items():
+        rep = k["report"]
+        if not (k["ball_mount"] and rep["range_field"] in ("reading", "measured")):
+            continue
+        sel = np.flatnonzero(ball_types == code)
+        if not sel.size:
+            continue
+        field, limit = rep["range_field"], rep["range"]
+        v = cols[field][sel]
+        a = np.abs(np.nan_to_num(v)).reshape(v.shape[0], -1).max(axis=1)
+        j = int(np.argmax(a))
+        if a[j] > limit:
+            big = int((a > limit).sum())
+            row = ix(cols["ball"][sel[j]])
+            value = f"{v[j]:.6g}" if v.ndim == 1 else f"{v[j].tolist()}"
+            raise ValueError(f"{where}: observations[{row}].{field} = {value} mm ({big} of the {a.size} "
+                             f"{k['label']} values checked are beyond ±{limit:g} mm; {rep['range_note']}): "
+                             f"{rep['range_what']} look like µm: divide by 1000")
     _check_touches(machine, d, cols, where)
 
 
@@ -363,8 +378,10 @@ def _check_touches(machine: Machine, d: Mapping, cols: dict, where: str) -> None
     r = _num(probe.get("tip_radius", 0.0)) if isinstance(probe, Mapping) else 0.0
     if not math.isfinite(r):
         return
-    facet, sphere, cyl = _code("facet"), _code("sphere"), _code("cylinder")
-    idx = np.flatnonzero(np.isin(cols["type"], (facet, sphere, cyl)))
+    # the touch kinds by the artefact list they touch
+    code = {key: c for c, key in _target_lists().items()}
+    facet, sphere, cyl = (code.get(key, -2) for key in ("facets", "spheres", "cylinders"))
+    idx = np.flatnonzero(np.isin(cols["type"], list(code.values())))
     if not idx.size:
         return
     sub = {a: c[idx] for a, c in cols["axes"].items()}
@@ -446,7 +463,11 @@ def check_balls(machine: Machine, kind: str, q: np.ndarray, values: np.ndarray, 
     v = np.abs(np.nan_to_num(np.asarray(values, dtype=float)))
     if not v.size:
         return
-    limit, what = (DBB_RANGE, "readings") if kind == "dbb" else (BALL3D_RANGE, "measured")
+    entry = next((e for e in _reports().values() if e["name"] == kind), None)
+    if entry is None or not entry["report"]["range"]:
+        return  # not a kind with an instrument range: the core names a wrong type
+    # named as fivecal.ball_dataset's argument: readings (one row) or measured (three)
+    limit, what = entry["report"]["range"], ("readings", "measured")[entry["rows"] > 1]
     k = int(np.argmax(v.max(axis=1) if v.ndim == 2 else v))
     if v.reshape(v.shape[0], -1)[k].max() > limit:
         raise ValueError(f"{where}: {what}[{k}] is {v.reshape(v.shape[0], -1)[k].max():.6g} mm, beyond the "

@@ -19,6 +19,24 @@ class Kind final : public BallMountKind {
   ObservationType type() const override { return ObservationType::kBall3d; }
   const char* name() const override { return "ball3d"; }
   const char* label() const override { return "3D ball displacement"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.setup_key = "setup";
+    r.setup_heading = "R-test / 3D ball setups";
+    r.count_word = "sample";
+    r.components = {"dx", "dy", "dz"};
+    r.component_label = "R-test / 3D ball";
+    r.component_frame = "workpiece (table) frame";
+    r.component_caption =
+        "R-test / 3D ball: recorded deviation and residual after the fit per component (dx, dy, dz, "
+        "workpiece frame) against the rotary angle, one line per setup / indexation group.";
+    r.recorded_deviation = "measured";
+    r.range_field = "measured";
+    r.range = 5.0;  // R-test / 3D ball sensors measure a few mm
+    r.range_note = "an R-test / 3D ball sensor measures a few mm";
+    r.range_what = "displacements";
+    return r;
+  }
   int rows() const override { return 3; }
   // R-test / CapBall displacement sensors.
   double default_sigma() const override { return 0.001; }
@@ -31,6 +49,12 @@ class Kind final : public BallMountKind {
     static const json absent;  // by reference: o.value(key, json()) copies the array
     auto it = o.find("measured");
     ob->measured = ReadVector3(it == o.end() ? absent : *it, w + ".measured");
+  }
+  bool ReadFlat(const FlatObservation& f, const Artefact&, Observation* ob) const override {
+    using F = FlatObservation;
+    if (!f.only({F::kSetup, F::kMeasured, F::kToolBall, F::kTableBall}) || !f.has(F::kMeasured)) return false;
+    ob->measured = f.measured;
+    return ReadFlatMount(f, ob);
   }
 
   // The nest (table ball) position always comes with ball3d data: a nest

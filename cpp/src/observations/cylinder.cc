@@ -50,6 +50,11 @@ class Kind final : public ProbeTouchKind {
   ObservationType type() const override { return ObservationType::kCylinder; }
   const char* name() const override { return "cylinder"; }
   const char* label() const override { return "probe touch on a cylinder"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.target_list = "cylinders";
+    return r;
+  }
 
   void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
     for (const Cylinder& c : ds.artefact.cylinders) {
@@ -157,6 +162,15 @@ class Kind final : public ProbeTouchKind {
 
  protected:
   int TargetIndex(const Artefact& a, const std::string& id) const override { return a.CylinderIndex(id); }
+  bool PlannedContact(const Dataset& ds, const json& e, const std::string& w, Eigen::Vector3d* point,
+                      Eigen::Vector3d* normal) const override {
+    const Cylinder& c = ds.artefact.cylinders[RequireTarget(ds, e.value("target", std::string()), w)];
+    *point = ReadVector3(e.value("point", json()), w + ".point");
+    const Eigen::Vector3d a = c.axis.normalized(), d = *point - c.point, radial = d - a * a.dot(d);
+    if (radial.norm() == 0) throw std::invalid_argument(w + ".point: on the cylinder's axis");
+    *normal = radial.normalized() * (c.inside ? -1.0 : 1.0);
+    return true;
+  }
   // The radius and where the axis line is (r, x, y); its tilt only on
   // request (a short section hardly shows it).
   int DefaultTargetParameters() const override { return 3; }

@@ -559,22 +559,24 @@ class EventList {
 // check of ParseObservation and Dataset::Validate accepts outright: one flat
 // object of the known keys, each once, of its plain type (axes and direction
 // objects of single machine axis letters, vectors of three numbers, sigma a
-// number), within the bounds. Anything else (an error, "C1", a sigma per
-// row, a repeated key) returns false and goes the reference way. Only a
-// speed-up for the kinds long traces come in: a kind not named here loads
-// through its own Read, with the same result (LoaderStreaming tests compare).
+// number), within the bounds. The loader reads the common keys (type, axes,
+// direction, sigma, id) and collects the others into a FlatObservation its
+// kind reads (ObservationKind::ReadFlat). Anything else (an error, "C1", a
+// sigma per row, a repeated key, a kind without ReadFlat) returns false and
+// goes the reference way: only a speed-up for the kinds long traces come in
+// (LoaderStreaming tests compare).
 bool FastObservation(const EventList& ev, const Machine& m, const Artefact& artefact, Observation* ob) {
-  enum Key { kType, kTarget, kSetup, kId, kAxes, kDirection, kReading, kLength, kToolBall, kTableBall, kMeasured,
-             kSigma, kNumKeys };
-  static const char* const kNames[kNumKeys] = {"type", "target", "setup", "id", "axes", "direction", "reading",
-                                               "length", "tool_ball", "table_ball", "measured", "sigma"};
+  // The common keys, then the flat form's (FlatObservation::Key + kNumCommon).
+  enum Common { kType, kId, kAxes, kDirection, kSigma, kNumCommon };
+  static const char* const kCommon[kNumCommon] = {"type", "id", "axes", "direction", "sigma"};
+  constexpr int kNumKeys = kNumCommon + FlatObservation::kNumKeys;
   const size_t n = ev.size();
   if (n < 2 || ev[0].kind != Event::kObject || ev[n - 1].kind != Event::kEndObject) return false;
   const int na = m.num_axes();
   unsigned seen = 0;
-  const std::string *type = nullptr, *target = nullptr, *setup = nullptr, *id = nullptr;
-  double reading = 0, length = 0, sigma = 0;
-  Eigen::Vector3d vec[3];  // tool_ball, table_ball, measured
+  const std::string *type = nullptr, *id = nullptr;
+  double sigma = 0;
+  FlatObservation flat;
   ob->axes = Eigen::VectorXd::Zero(na);
   ob->direction = Eigen::VectorXi::Zero(na);
   unsigned given = 0, dir_given = 0;
@@ -583,25 +585,29 @@ bool FastObservation(const EventList& ev, const Machine& m, const Artefact& arte
     if (ev[k].kind != Event::kKey) return false;
     const std::string& name = ev[k++].s;
     int key = 0;
-    while (key < kNumKeys && name != kNames[key]) ++key;
+    while (key < kNumCommon && name != kCommon[key]) ++key;
+    if (key == kNumCommon)
+      while (key < kNumKeys && name != FlatObservation::kNames[key - kNumCommon]) ++key;
     if (key == kNumKeys || (seen & (1u << key))) return false;
     seen |= 1u << key;
     const Event& v = ev[k];
     switch (key) {
       case kType:
-      case kTarget:
-      case kSetup:
-      case kId: {
+      case kId:
+      case kNumCommon + FlatObservation::kTarget:
+      case kNumCommon + FlatObservation::kSetup: {
         if (v.kind != Event::kString) return false;
-        (key == kType ? type : key == kTarget ? target : key == kSetup ? setup : id) = &v.s;
+        (key == kType ? type : key == kId ? id : key == kNumCommon + FlatObservation::kTarget ? flat.target
+                                                                                               : flat.setup) = &v.s;
         ++k;
         break;
       }
-      case kReading:
-      case kLength:
       case kSigma:
+      case kNumCommon + FlatObservation::kReading:
+      case kNumCommon + FlatObservation::kLength:
         if (!v.number()) return false;
-        (key == kReading ? reading : key == kLength ? length : sigma) = v.value();
+        (key == kSigma ? sigma : key == kNumCommon + FlatObservation::kReading ? flat.reading : flat.length) =
+            v.value();
         ++k;
         break;
       case kAxes:
@@ -635,7 +641,10 @@ bool FastObservation(const EventList& ev, const Machine& m, const Artefact& arte
       }
       default: {  // the three vectors
         if (v.kind != Event::kArray || k + 4 >= n || ev[k + 4].kind != Event::kEndArray) return false;
-        Eigen::Vector3d& x = vec[key - kToolBall];
+        const int f = key - kNumCommon;
+        Eigen::Vector3d& x = f == FlatObservation::kToolBall    ? flat.tool_ball
+                             : f == FlatObservation::kTableBall ? flat.table_ball
+                                                                : flat.measured;
         for (int c = 0; c < 3; ++c) {
           const Event& e = ev[k + 1 + c];
           if (!e.number() || !(std::abs(e.value()) <= kMaxLinear)) return false;
@@ -649,46 +658,16 @@ bool FastObservation(const EventList& ev, const Machine& m, const Artefact& arte
   if (k != n - 1 || !type || !(seen & (1u << kAxes))) return false;
   for (int a = 0; a < na; ++a)
     if (!(given & (1u << a)) && m.axis(a).name != 'S') return false;
-  auto only = [&](std::initializer_list<int> keys) {
-    unsigned allowed = 0;
-    for (int key : keys) allowed |= 1u << key;
-    return (seen & ~allowed) == 0;
-  };
-  auto has = [&](int key) { return (seen & (1u << key)) != 0; };
-  if (*type == "facet" || *type == "sphere") {
-    const bool facet = *type == "facet";
-    if (!only({kType, kTarget, kAxes, kDirection, kSigma, kId}) || !target) return false;
-    if ((facet ? artefact.FacetIndex(*target) : artefact.SphereIndex(*target)) < 0) return false;
-    ob->type = facet ? ObservationType::kFacet : ObservationType::kSphere;
-    ob->target = *target;
-  } else if (*type == "dbb") {
-    if (!only({kType, kSetup, kAxes, kDirection, kReading, kLength, kToolBall, kTableBall, kSigma, kId}) ||
-        !has(kReading) || !has(kLength) || !has(kToolBall) || !has(kTableBall))
-      return false;
-    if (!(std::abs(reading) <= kMaxDbbReading) || !(length > 0 && length <= kMaxLinear)) return false;
-    ob->type = ObservationType::kDbb;
-    ob->reading = reading;
-    ob->length = length;
-  } else if (*type == "ball3d") {
-    if (!only({kType, kSetup, kAxes, kDirection, kMeasured, kToolBall, kTableBall, kSigma, kId}) ||
-        !has(kMeasured) || !has(kToolBall) || !has(kTableBall))
-      return false;
-    ob->type = ObservationType::kBall3d;
-    ob->measured = vec[2];
-  } else {
-    return false;
-  }
-  if (ob->type == ObservationType::kDbb || ob->type == ObservationType::kBall3d) {
-    if (setup) {
-      if (setup->find('.') != std::string::npos) return false;
-      ob->setup = *setup;
-    }
-    ob->tool_ball = vec[0];
-    ob->table_ball = vec[1];
-  }
-  if (has(kSigma)) {
+  flat.seen = seen >> kNumCommon;
+  // The kind of the previous observation first: a trace is one kind.
+  static thread_local const ObservationKind* last = nullptr;
+  const ObservationKind* kind = last && *type == last->name() ? last : FindKind(*type);
+  if (!kind || !kind->ReadFlat(flat, artefact, ob)) return false;
+  last = kind;
+  ob->type = kind->type();
+  if (seen & (1u << kSigma)) {
     if (!(sigma >= kMinSigma && sigma <= kMaxSigma)) return false;
-    ob->sigma = Eigen::VectorXd::Constant(ResidualRows(ob->type), sigma);
+    ob->sigma = Eigen::VectorXd::Constant(kind->rows(), sigma);
   }
   if (id) ob->id = *id;
   return true;

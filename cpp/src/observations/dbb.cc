@@ -19,6 +19,19 @@ class Kind final : public BallMountKind {
   ObservationType type() const override { return ObservationType::kDbb; }
   const char* name() const override { return "dbb"; }
   const char* label() const override { return "ball bar length change"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.setup_key = "setup";
+    r.setup_heading = "double ball bar setups";
+    r.count_word = "sample";
+    r.indexed = false;  // a ball bar sweeps the axes
+    r.range_field = "reading";
+    r.range = 2.0;  // a QC20 ballbar measures about +-1 mm
+    r.range_note = "a ballbar measures about ±1 mm";
+    r.range_what = "readings";
+    r.figures = "polar";
+    return r;
+  }
   // A ball bar's resolution-limited reading noise.
   double default_sigma() const override { return 0.0005; }
 
@@ -30,6 +43,16 @@ class Kind final : public BallMountKind {
     ob->length = ReadBounded(o, "length", w, kMaxLinear);
     if (ob->length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
     ReadMount(o, w, ob);
+  }
+  bool ReadFlat(const FlatObservation& f, const Artefact&, Observation* ob) const override {
+    using F = FlatObservation;
+    if (!f.only({F::kSetup, F::kReading, F::kLength, F::kToolBall, F::kTableBall}) || !f.has(F::kReading) ||
+        !f.has(F::kLength))
+      return false;
+    if (!(std::abs(f.reading) <= kMaxDbbReading) || !(f.length > 0 && f.length <= kMaxLinear)) return false;
+    ob->reading = f.reading;
+    ob->length = f.length;
+    return ReadFlatMount(f, ob);
   }
 
   void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,

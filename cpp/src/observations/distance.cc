@@ -26,6 +26,13 @@ class Kind final : public ObservationKind {
   ObservationType type() const override { return ObservationType::kDistance; }
   const char* name() const override { return "distance"; }
   const char* label() const override { return "distance from a station (tracking interferometer, laser tracer)"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.setup_key = "station";
+    r.setup_heading = "distance stations";
+    r.count_word = "reading";
+    return r;
+  }
   // A laser tracer or tracking interferometer: about a micrometre over a
   // machine-tool volume.
   double default_sigma() const override { return 0.001; }

@@ -19,6 +19,11 @@ class Kind final : public ProbeTouchKind {
   ObservationType type() const override { return ObservationType::kFacet; }
   const char* name() const override { return "facet"; }
   const char* label() const override { return "probe touch on a facet"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.target_list = "facets";
+    return r;
+  }
 
   void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
     for (const Facet& f : ds.artefact.facets) t->AddGroup(type(), f.id, {t->Add("facet." + f.id)});
@@ -69,6 +74,13 @@ class Kind final : public ProbeTouchKind {
 
  protected:
   int TargetIndex(const Artefact& a, const std::string& id) const override { return a.FacetIndex(id); }
+  bool PlannedContact(const Dataset& ds, const json& e, const std::string& w, Eigen::Vector3d* point,
+                      Eigen::Vector3d* normal) const override {
+    const Facet& f = ds.artefact.facets[RequireTarget(ds, e.value("target", std::string()), w)];
+    *point = ReadVector3(e.value("point", json()), w + ".point");
+    *normal = f.normal.normalized();
+    return true;
+  }
   int DefaultTargetParameters() const override { return 1; }  // facet.<id>
   void PlannedTouch(const json& e, const std::string& w, const PlanTruth& t, const Observation& ob,
                     Eigen::Vector3d* n_out, Eigen::Vector3d* c, Gap* gap) const override {

@@ -30,6 +30,19 @@ class Kind final : public ObservationKind {
   ObservationType type() const override { return ObservationType::kPoint; }
   const char* name() const override { return "point"; }
   const char* label() const override { return "fixed-frame 3D point (tracker, camera, CMM)"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.setup_key = "instrument";
+    r.setup_heading = "fixed instruments";
+    r.components = {"x", "y", "z"};
+    r.component_label = "tracker / camera point";
+    r.component_frame = "instrument frame";
+    r.component_caption =
+        "Tracker / camera points: deviation from the nominal machine (seen through the fitted "
+        "instrument pose) and residual after the fit per component (instrument frame) against the "
+        "rotary angle, one line per instrument / indexation group.";
+    return r;
+  }
   int rows() const override { return 3; }
   // A laser tracker over a machine-tool volume: a few micrometres.
   double default_sigma() const override { return 0.005; }

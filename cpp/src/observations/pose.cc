@@ -28,6 +28,18 @@ class Kind final : public ObservationKind {
   ObservationType type() const override { return ObservationType::kPose; }
   const char* name() const override { return "pose"; }
   const char* label() const override { return "fixed-frame 6D pose (camera fiducial, 6D tracker)"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.setup_key = "instrument";
+    r.setup_heading = "fixed instruments";
+    r.components = {"x", "y", "z"};
+    r.component_label = "6D pose, position part";
+    r.component_frame = "instrument frame";
+    r.component_caption =
+        "6D poses, position part: deviation from the nominal machine (fitted instrument pose) and "
+        "residual after the fit per component (instrument frame) against the rotary angle.";
+    return r;
+  }
   int rows() const override { return 6; }
   const char* unit_row(int k) const override { return k < 3 ? "mm" : "rad"; }
   // A 6D tracker probe or a camera seeing a fiducial over a machine-tool

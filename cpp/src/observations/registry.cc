@@ -1,6 +1,7 @@
 #include "fivecal/observations/registry.h"
 
 #include <algorithm>
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 
 #include "fivecal/observations/ball3d.h"
@@ -17,10 +18,14 @@
 
 namespace fivecal {
 
-const std::vector<const ObservationKind*>& ObservationKinds() {
-  // THE list of observation kinds. A new kind: its file pair, one line here,
-  // one ObservationType value (docs/adding_an_observation_kind.md).
-  static const std::vector<const ObservationKind*> kinds = {
+namespace {
+
+// The built-in kinds, then those registered by RegisterObservationKind.
+std::vector<const ObservationKind*>& Kinds() {
+  // THE list of built-in observation kinds. A new kind: its file pair, one
+  // line here, one ObservationType value (docs/adding_an_observation_kind.md);
+  // or, outside the core (a test's kind), RegisterObservationKind.
+  static std::vector<const ObservationKind*> kinds = {
       &FacetKind(),
       &SphereKind(),
       &DbbKind(),
@@ -33,16 +38,53 @@ const std::vector<const ObservationKind*>& ObservationKinds() {
   return kinds;
 }
 
+// KindOf's table, indexed by type code; rebuilt when a kind registers.
+std::vector<const ObservationKind*> ByType() {
+  std::vector<const ObservationKind*> v;
+  for (const ObservationKind* k : Kinds()) {
+    const size_t i = static_cast<size_t>(k->type());
+    if (v.size() <= i) v.resize(i + 1, nullptr);
+    v[i] = k;
+  }
+  return v;
+}
+
+std::vector<const ObservationKind*>& ByTypeTable() {
+  static std::vector<const ObservationKind*> v = ByType();
+  return v;
+}
+
+}  // namespace
+
+const std::vector<const ObservationKind*>& ObservationKinds() { return Kinds(); }
+
+ObservationType UnusedObservationType() {
+  int next = 0;
+  for (const ObservationKind* k : Kinds()) next = std::max(next, static_cast<int>(k->type()) + 1);
+  return static_cast<ObservationType>(next);
+}
+
+bool RegisterObservationKind(const ObservationKind& kind) {
+  const std::string name = kind.name();
+  if (name.empty() || name.find('.') != std::string::npos)
+    throw std::invalid_argument("observation kind '" + name + "': a name must be non-empty and have no '.'");
+  for (const ObservationKind* k : Kinds()) {
+    if (k == &kind) return false;
+    if (name == k->name())
+      throw std::invalid_argument("observation kind '" + name + "' is registered already");
+    if (k->type() == kind.type())
+      throw std::invalid_argument("observation kind '" + name + "': its type code " +
+                                  std::to_string(static_cast<int>(kind.type())) + " is " + k->name() + "'s");
+  }
+  if (name == "probe" || name == "instrument")
+    throw std::invalid_argument("observation kind '" + name + "': the name prefixes other set-up parameters");
+  Kinds().push_back(&kind);
+  ByTypeTable() = ByType();
+  return true;
+}
+
 const ObservationKind& KindOf(ObservationType t) {
-  static const std::vector<const ObservationKind*> by_type = [] {
-    std::vector<const ObservationKind*> v;
-    for (const ObservationKind* k : ObservationKinds()) {
-      const size_t i = static_cast<size_t>(k->type());
-      if (v.size() <= i) v.resize(i + 1, nullptr);
-      v[i] = k;
-    }
-    return v;
-  }();
+  const std::vector<const ObservationKind*>& by_type = ByTypeTable();
   const size_t i = static_cast<size_t>(t);
   if (i >= by_type.size() || !by_type[i])
     throw std::logic_error("observation type " + std::to_string(i) + " is not registered");
@@ -108,6 +150,15 @@ bool HasLengthReference(const Dataset& ds) {
   for (const ObservationKind* k : ObservationKinds())
     if (k->ArtefactLengthReference(ds)) return true;
   return false;
+}
+
+bool PlannedContact(const Dataset& ds, const std::string& entry_json, Eigen::Vector3d* point,
+                    Eigen::Vector3d* normal) {
+  const nlohmann::json e = nlohmann::json::parse(entry_json);
+  const ObservationKind* k = e.is_object() && e.contains("type") && e["type"].is_string()
+                                 ? FindKind(e["type"].get<std::string>())
+                                 : nullptr;
+  return k && k->PlannedContact(ds, e, "plan entry", point, normal);
 }
 
 bool IsSetupParameterName(const std::string& name) {

@@ -1,5 +1,6 @@
 #include "fivecal/observations/simulate.h"
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -61,16 +62,13 @@ void InitSlots(SimulationPlan* plan) {
 // d residual / d L = -1. Without any noise the plan stays noise-free.
 void AddScaleBarInputs(SimulationPlan* plan) {
   const Dataset& ds = plan->base;
-  std::set<std::string> probed;
-  for (const Observation& o : ds.observations)
-    if (o.type == ObservationType::kSphere) probed.insert(o.target);
+  std::vector<int> bars;
+  for (const ObservationKind* k : ObservationKinds())
+    for (int b : k->ScaleBarRows(ds)) bars.push_back(b);
+  std::sort(bars.begin(), bars.end());
   bool noisy = false;
   for (const auto& kv : plan->noise.level) noisy = noisy || kv.second > 0;
-  for (size_t b = 0; b < ds.artefact.scale_bars.size(); ++b) {
-    const ScaleBar& bar = ds.artefact.scale_bars[b];
-    if (!probed.count(bar.sphere1) || !probed.count(bar.sphere2)) continue;
-    AddPlanInput(plan, -1 - static_cast<int>(b), 0, -1.0, noisy ? kScaleBarSigma : 0.0);
-  }
+  for (int b : bars) AddPlanInput(plan, -1 - b, 0, -1.0, noisy ? kScaleBarSigma : 0.0);
 }
 
 // Observation i of `ds` with input values `x` (one per input of i, in the

@@ -27,6 +27,11 @@ class Kind final : public ProbeTouchKind {
   ObservationType type() const override { return ObservationType::kSphere; }
   const char* name() const override { return "sphere"; }
   const char* label() const override { return "probe touch on a sphere"; }
+  KindReport Report() const override {
+    KindReport r;
+    r.target_list = "spheres";
+    return r;
+  }
 
   void AddArtefactParameters(const Dataset& ds, ParameterTable* t) const override {
     for (const Sphere& s : ds.artefact.spheres) {
@@ -60,6 +65,14 @@ class Kind final : public ProbeTouchKind {
     const SetupRef r = b.Ref(sp[3]);
     const ProbeTrigger trigger = MakeProbeTrigger(b, o);
     b.Add(new SphereResidual(b.context, o, ds.artefact.spheres[si], ds.tip_radius, c, r, trigger), 1);
+  }
+  std::vector<int> ScaleBarRows(const Dataset& ds) const override {
+    const std::set<std::string> probed = Probed(ds);
+    std::vector<int> out;
+    for (size_t i = 0; i < ds.artefact.scale_bars.size(); ++i)
+      if (probed.count(ds.artefact.scale_bars[i].sphere1) && probed.count(ds.artefact.scale_bars[i].sphere2))
+        out.push_back(static_cast<int>(i));
+    return out;
   }
   void AddArtefactResiduals(ResidualBuilder& b) const override {
     const Dataset& ds = b.dataset;
@@ -173,6 +186,13 @@ class Kind final : public ProbeTouchKind {
 
  protected:
   int TargetIndex(const Artefact& a, const std::string& id) const override { return a.SphereIndex(id); }
+  bool PlannedContact(const Dataset& ds, const json& e, const std::string& w, Eigen::Vector3d* point,
+                      Eigen::Vector3d* normal) const override {
+    const Sphere& s = ds.artefact.spheres[RequireTarget(ds, e.value("target", std::string()), w)];
+    *normal = UnitDirection(ReadVector3(e.value("normal", json()), w + ".normal"), w + ".normal");
+    *point = s.center + s.radius * *normal;
+    return true;
+  }
   // The centre; the radius only on request (a calibrated sphere's is known).
   int DefaultTargetParameters() const override { return 3; }
   void PlannedTouch(const json& e, const std::string& w, const PlanTruth& t, const Observation& ob,

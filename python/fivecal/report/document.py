@@ -28,7 +28,7 @@ from typing import List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .. import guards
+from .. import _core, guards
 from .._version import __version__
 from ..files import make_dirs, write_text
 from ..guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
@@ -104,22 +104,28 @@ def _machine_section(machine) -> str:
             "<th>point (mm)</th></tr>" + "".join(rows) + "</table>")
 
 
-def _setup_counts(obs, kind: str) -> dict:
+def _kinds() -> dict:
+    """name -> what the report shows of the kind (``report`` of
+    ``_core.observation_kinds()``): the report names no kind itself."""
+    return {k["name"]: k["report"] for k in _core.observation_kinds()}
+
+
+def _setup_counts(obs, kind: str, key: str = "setup") -> dict:
     counts: dict = {}
     for o in obs:
         if o.get("type") == kind:
-            k = o.get("setup", "") or "(no setup id)"
+            k = o.get(key, "") or f"(no {key} id)"
             counts[k] = counts.get(k, 0) + 1
     return counts
 
 
-def _dbb_setup_text(dataset) -> str:
+def _dbb_setup_text(dataset, kind: str) -> str:
     """Each DBB setup with its sample count, plane and bar length."""
     try:
         from .polar import MIN_SWEEP, dbb_groups
         from ..procedures.dbb import trace_from_dataset
     except ImportError:  # pragma: no cover - polar is part of the package
-        return ", ".join(f"{k} ({n})" for k, n in _setup_counts(dataset.observations, "dbb").items())
+        return ", ".join(f"{k} ({n})" for k, n in _setup_counts(dataset.observations, kind).items())
     parts = []
     for setup, length, idx in dbb_groups(dataset):
         plane = ""
@@ -136,11 +142,14 @@ def _dbb_setup_text(dataset) -> str:
 
 def _data_section(dataset, result) -> str:
     obs = dataset.observations
+    kinds = _kinds()
     types: dict = {}
     for o in obs:
         types[o["type"]] = types.get(o["type"], 0) + 1
     rot = [a for a in dataset.machine.axis_names if a in "ABCS"]
-    idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs if o["type"] != "dbb"}
+    # a ball bar sweeps the axes: its poses are no indexations
+    indexed = {t for t in types if kinds.get(t, {}).get("indexed", True)}
+    idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs if o["type"] in indexed}
     art = dataset.artefact or {}
     d = dataset.to_dict()
     tip_r = (d.get("probe") or {}).get("tip_radius")
@@ -148,37 +157,39 @@ def _data_section(dataset, result) -> str:
     rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none"),
             ("residual rows", f"{len(result.residuals)} (observations plus scale bars)"),
             ]
-    if set(types) - {"dbb"}:  # a ball bar sweeps the axes: its poses are no indexations
+    if indexed:
         rows.append(("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"))
-    if "facet" in types or "sphere" in types or "cylinder" in types:
+    lists = [(r["target_list"], name) for name, r in kinds.items() if r["target_list"]]
+    if any(kinds.get(t, {}).get("target_list") for t in types):
         rows += [("artefact", ", ".join(_count(len(art.get(k, [])), w) for k, w in
-                                        (("facets", "facet"), ("spheres", "sphere"), ("scale_bars", "scale bar"),
-                                         ("cylinders", "cylinder")))),
+                                        lists + [("scale_bars", "scale bar")])),
                  ("targets touched", f"{len(targets)}" + (f": {', '.join(map(str, targets[:40]))}"
                                                            + (" …" if len(targets) > 40 else "") if targets else "")),
                  ("probe tip radius", f"{tip_r:g} mm" if tip_r is not None else "–")]
-    if "dbb" in types:
-        n = len(_setup_counts(obs, "dbb"))
-        rows.append((f"double ball bar setups ({n})", _dbb_setup_text(dataset)))
-    if "ball3d" in types:
-        c = _setup_counts(obs, "ball3d")
-        rows.append((f"R-test / 3D ball setups ({len(c)})",
-                     ", ".join(f"{k} ({_count(v, 'sample')})" for k, v in c.items())))
-    fixed = {}
-    for o in obs:
-        if o["type"] in ("point", "pose"):
-            fixed.setdefault(o.get("instrument", ""), {}).setdefault(o["type"], 0)
-            fixed[o.get("instrument", "")][o["type"]] += 1
-    if fixed:
-        rows.append((f"fixed instruments ({len(fixed)})",
-                     ", ".join(f"{k} ({', '.join(_count(n, t) for t, n in v.items())})" for k, v in fixed.items())))
-    stations: dict = {}
-    for o in obs:
-        if o["type"] == "distance":
-            stations[o.get("station", "")] = stations.get(o.get("station", ""), 0) + 1
-    if stations:
-        rows.append((f"distance stations ({len(stations)})",
-                     ", ".join(f"{k} ({_count(v, 'reading')})" for k, v in stations.items())))
+    # The observations by set-up id, one row per heading (kinds that share an
+    # instrument's heading, a tracker's points and poses, share its row).
+    headings: dict = {}
+    for name, r in kinds.items():
+        if name in types and r["setup_heading"]:
+            headings.setdefault(r["setup_heading"], []).append(name)
+    for heading, names in headings.items():
+        if len(names) == 1 and kinds[names[0]]["figures"] == "polar":
+            n = len(_setup_counts(obs, names[0]))
+            rows.append((f"{heading} ({n})", _dbb_setup_text(dataset, names[0])))
+            continue
+        by: dict = {}
+        for o in obs:
+            if o["type"] in names:
+                key = kinds[o["type"]]["setup_key"] or "setup"
+                k = o.get(key, "") or f"(no {key} id)"
+                by.setdefault(k, {}).setdefault(o["type"], 0)
+                by[k][o["type"]] += 1
+        if len(names) == 1:
+            word = kinds[names[0]]["count_word"]
+            text = ", ".join(f"{k} ({_count(sum(v.values()), word)})" for k, v in by.items())
+        else:
+            text = ", ".join(f"{k} ({', '.join(_count(n, t) for t, n in v.items())})" for k, v in by.items())
+        rows.append((f"{heading} ({len(by)})", text))
     return '<table class="kv">' + "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in rows) \
         + "</table>"
 
@@ -472,7 +483,7 @@ vectors are these distances along the surface normal, drawn in the workpiece (ta
 
 def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
     """Polar plots from fivecal.report.polar when the data has DBB traces."""
-    if "dbb" not in set(result.dataset.observation_types):
+    if not {n for n, r in _kinds().items() if r["figures"] == "polar"} & set(result.dataset.observation_types):
         return [], None
     try:
         from . import polar  # optional here: the report must come out without it
@@ -507,15 +518,7 @@ def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[str]]:
                          "one colour per rotary indexation (Rahman 2016, Figure 4-7 style). Systematic "
                          "patterns (arrows of one colour pointing the same way) mean unmodelled errors; "
                          "random directions mean probing noise."))
-    captions = {
-        "ball3d": "R-test / 3D ball: recorded deviation and residual after the fit per component (dx, dy, dz, "
-                  "workpiece frame) against the rotary angle, one line per setup / indexation group.",
-        "point": "Tracker / camera points: deviation from the nominal machine (seen through the fitted "
-                 "instrument pose) and residual after the fit per component (instrument frame) against the "
-                 "rotary angle, one line per instrument / indexation group.",
-        "pose": "6D poses, position part: deviation from the nominal machine (fitted instrument pose) and "
-                "residual after the fit per component (instrument frame) against the rotary angle.",
-    }
+    captions = {name: r["component_caption"] for name, r in _kinds().items() if r["components"]}
     for kind, caption in captions.items():
         if kind not in types:
             continue

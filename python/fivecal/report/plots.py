@@ -58,8 +58,9 @@ def _nice_floor(x: float) -> float:
 #: Beyond this many groups (indexations, setups) a plot shows a colour bar, not a legend.
 MAX_LEGEND = 12
 
-#: Observation types of touch probing (the residual-vector figure's data).
-PROBING = ("facet", "sphere", "cylinder")
+#: Observation types of touch probing (the residual-vector figure's data): the
+#: registry's probe-touch kinds.
+PROBING = tuple(k["name"] for k in _core.observation_kinds() if k["probe_touch"])
 
 
 def indexation_labels(dataset, rows=None) -> tuple:
@@ -260,13 +261,19 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
 
 
 # ---- R-test / 3D ball and fixed-frame point data -------------------------------------------------
-# The kinds whose first three residual rows are a 3D deviation, the key that
-# names their setup or instrument, and the frame those components are in.
-COMPONENT_KINDS = {
-    "ball3d": ("setup", "R-test / 3D ball", "workpiece (table) frame"),
-    "point": ("instrument", "tracker / camera point", "instrument frame"),
-    "pose": ("instrument", "6D pose, position part", "instrument frame"),
-}
+# The kinds whose first three residual rows are a 3D deviation (the registry's
+# report pieces): the key that names their setup or instrument, what the
+# figure calls them, and the frame those components are in.
+_COMPONENTS = {k["name"]: k["report"] for k in _core.observation_kinds() if k["report"]["components"]}
+COMPONENT_KINDS = {n: (r["setup_key"], r["component_label"], r["component_frame"]) for n, r in _COMPONENTS.items()}
+
+
+def _component_kind(dataset, kind: Optional[str]) -> str:
+    """``kind``, or the first component kind the dataset holds (the first registered without any)."""
+    if kind is not None:
+        return kind
+    types = set(dataset.observation_types)
+    return next((n for n in COMPONENT_KINDS if n in types), next(iter(COMPONENT_KINDS)))
 
 
 def _natural(label: str) -> tuple:
@@ -305,10 +312,12 @@ def _setup_groups(dataset, rows, who: str, sides: bool) -> tuple:
     return key, angles, labels
 
 
-def component_groups(dataset, kind: str = "ball3d") -> tuple:
-    """How the 3D observations of ``kind`` (``ball3d``, ``point``, ``pose``)
-    are plotted: per setup or instrument, ``(name, rows, angle axis or None,
-    angles, group labels)`` (see :func:`_setup_groups`)."""
+def component_groups(dataset, kind: Optional[str] = None) -> tuple:
+    """How the 3D observations of ``kind`` (one of :data:`COMPONENT_KINDS`;
+    None: the first the dataset holds) are plotted: per setup or instrument,
+    ``(name, rows, angle axis or None, angles, group labels)`` (see
+    :func:`_setup_groups`)."""
+    kind = _component_kind(dataset, kind)
     who = COMPONENT_KINDS[kind][0]
     obs = dataset.observations
     rows = [i for i, o in enumerate(obs) if o.get("type") == kind]
@@ -330,8 +339,9 @@ def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
     the fitted instrument pose and target (every setup value of the fit, no
     machine error): the machine's error signature, not the tracker's placement."""
     obs = result.dataset.observations
-    if kind == "ball3d":
-        return np.array([obs[i]["measured"] for i in rows], float) * 1e3
+    field = _COMPONENTS[kind]["recorded_deviation"]
+    if field:
+        return np.array([obs[i][field] for i in rows], float) * 1e3
     machine = set(result.dataset.machine.parameter_names())
     setup = {k: v for k, v in result.values.items() if k not in machine}
     res, src = _core.predict_residuals(result.dataset._core, setup)
@@ -344,7 +354,7 @@ def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
     return out
 
 
-def component_figure(result, kind: str = "ball3d", title: Optional[str] = None):
+def component_figure(result, kind: Optional[str] = None, title: Optional[str] = None):
     """Per-component deviation of the 3D observations of ``kind`` against the
     rotary angle: for each setup (instrument) a row of what was recorded (for
     a tracker, against the nominal machine) and a row of the residual the fit
@@ -353,6 +363,7 @@ def component_figure(result, kind: str = "ball3d", title: Optional[str] = None):
     beyond). None without such data."""
     plt = _pyplot()
     ds = result.dataset
+    kind = _component_kind(ds, kind)
     setups = component_groups(ds, kind)
     if not setups:
         return None
@@ -362,8 +373,8 @@ def component_figure(result, kind: str = "ball3d", title: Optional[str] = None):
     rec_all = dict(zip(all_rows, _recorded_deviation(result, kind, all_rows)))
     src = np.asarray(result.residual_source)
     res_all = np.asarray(result.residuals)
-    comps = ("dx", "dy", "dz") if kind == "ball3d" else ("x", "y", "z")
-    top = "recorded" if kind == "ball3d" else "recorded − nominal machine"
+    comps = _COMPONENTS[kind]["components"]
+    top = "recorded" if _COMPONENTS[kind]["recorded_deviation"] else "recorded − nominal machine"
     labels_all = sorted({l for *_, labels in setups for l in labels if l}, key=_natural)
     colors = group_colors(max(len(labels_all), 1))
     n = len(setups)
@@ -410,7 +421,7 @@ def component_figure(result, kind: str = "ball3d", title: Optional[str] = None):
     return fig
 
 
-def plot_components(result, path: str, kind: str = "ball3d", title: Optional[str] = None) -> Optional[str]:
+def plot_components(result, path: str, kind: Optional[str] = None, title: Optional[str] = None) -> Optional[str]:
     """Write :func:`component_figure` as a PNG; returns the path (None without such data)."""
     fig = component_figure(result, kind, title)
     if fig is None:

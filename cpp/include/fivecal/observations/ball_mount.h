@@ -70,6 +70,18 @@ class BallMountKind : public ObservationKind {
  protected:
   // Reads setup, tool_ball and table_ball (a kind's Read calls it).
   static void ReadMount(const nlohmann::json& o, const std::string& where, Observation* ob);
+  // The same from the flat form (a kind's ReadFlat calls it): false unless
+  // both balls are given and the setup id is one ReadMount accepts.
+  static bool ReadFlatMount(const FlatObservation& f, Observation* ob) {
+    if (!f.has(FlatObservation::kToolBall) || !f.has(FlatObservation::kTableBall)) return false;
+    if (f.setup) {
+      if (f.setup->find('.') != std::string::npos) return false;
+      ob->setup = *f.setup;
+    }
+    ob->tool_ball = f.tool_ball;
+    ob->table_ball = f.table_ball;
+    return true;
+  }
   // The kind's own fields (checked after the setup id, before the ball
   // positions; written with them).
   virtual void ValidateOwn(const Observation& o, const std::function<std::string()>& where) const = 0;

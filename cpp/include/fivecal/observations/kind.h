@@ -1,9 +1,12 @@
 // ObservationKind: everything the generic code (loader, parameter table,
-// problem builder, analytic batch, simulator, identification report) needs
-// to know about one observation kind, behind one interface. Each kind lives
-// in its own file pair (observations/facet.h|.cc, sphere, dbb, ball3d) and is
-// listed once in observations/registry.cc; docs/adding_an_observation_kind.md
-// walks through adding one.
+// problem builder, analytic batch, simulator, identification report, the
+// Python layer through the bindings) needs to know about one observation
+// kind, split by concern into six interfaces: KindIdentity, KindFileFormat,
+// KindSetup, KindResidual, KindSimulation, KindReporting. Each kind lives in
+// its own file pair (observations/facet.h|.cc, sphere, dbb, ...) and is
+// listed once in observations/registry.cc, or registers itself
+// (RegisterObservationKind); docs/adding_an_observation_kind.md walks
+// through adding one.
 //
 // The per-observation methods are virtual: they run while a file is read or a
 // problem is built, never inside the solver's inner loop. The analytic batch
@@ -17,6 +20,7 @@
 
 #include <Eigen/Core>
 #include <functional>
+#include <initializer_list>
 #include <map>
 #include <nlohmann/json_fwd.hpp>
 #include <set>
@@ -69,11 +73,72 @@ struct ReportContext {
   const KinematicModel* model = nullptr;    // the machine at the fit
 };
 
-class ObservationKind {
- public:
-  virtual ~ObservationKind() = default;
+// What the layers above the core (reports, plots, plausibility checks) show
+// of a kind: they read it through the registry (_core.observation_kinds())
+// and name no kind. Every field has a default that shows nothing.
+struct KindReport {
+  // The artefact list an observation's "target" names ("facets"), nullptr
+  // when the kind touches no artefact.
+  const char* target_list = nullptr;
+  // The file key of Observation::setup ("setup", "instrument", "station"),
+  // nullptr when the kind has none; the report's data section lists the
+  // observations by that id under `setup_heading`, counted in `count_word`s.
+  const char* setup_key = nullptr;
+  const char* setup_heading = nullptr;
+  const char* count_word = "observation";
+  // Whether the poses of its observations are rotary indexations (a ball
+  // bar sweeps the axes: its poses are none).
+  bool indexed = true;
+  // A per-component figure of its first three residual rows: the component
+  // names, what the figure calls the kind, the frame of the components, the
+  // caption, and the file key of what the instrument recorded itself as a
+  // deviation (nullptr: the deviation from the nominal machine is computed).
+  std::vector<std::string> components;
+  const char* component_label = "";
+  const char* component_frame = "";
+  const char* component_caption = "";
+  const char* recorded_deviation = nullptr;
+  // The instrument's range: a value of file field `range_field` beyond
+  // `range` (mm) is a reading in the wrong unit; `range_note` says what the
+  // instrument measures, `range_what` names the values in messages.
+  const char* range_field = nullptr;
+  double range = 0;
+  const char* range_note = "";
+  const char* range_what = "";
+  // Procedure figures the report draws for the kind's data ("polar": the
+  // circular-test plots of report/polar.py), nullptr for none.
+  const char* figures = nullptr;
+};
 
-  // ---- identity ----
+// One observation as the streaming loader reads it without building its
+// JSON document (observations/dataset.cc): the flat form long traces come
+// in, string ids, numbers and 3-vectors under the keys below, each at most
+// once, every number finite and within the loader's bounds (vectors within
+// kMaxLinear). The loader reads type, axes, direction, sigma and id itself.
+struct FlatObservation {
+  enum Key { kTarget, kSetup, kReading, kLength, kToolBall, kTableBall, kMeasured, kNumKeys };
+  static constexpr const char* kNames[kNumKeys] = {"target", "setup", "reading", "length",
+                                                   "tool_ball", "table_ball", "measured"};
+  unsigned seen = 0;  // bit k: key k was given
+  const std::string* target = nullptr;
+  const std::string* setup = nullptr;
+  double reading = 0, length = 0;
+  Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero(), table_ball = Eigen::Vector3d::Zero(),
+                  measured = Eigen::Vector3d::Zero();
+  bool has(Key k) const { return (seen & (1u << k)) != 0; }
+  // Whether every key given is among `keys`.
+  bool only(std::initializer_list<Key> keys) const {
+    unsigned allowed = 0;
+    for (Key k : keys) allowed |= 1u << k;
+    return (seen & ~allowed) == 0;
+  }
+};
+
+// Who the kind is: its type code, name, rows, units and default noise.
+class KindIdentity {
+ public:
+  virtual ~KindIdentity() = default;
+
   virtual ObservationType type() const = 0;
   // The file's "type" and the prefix of the kind's setup parameters.
   virtual const char* name() const = 0;
@@ -101,8 +166,13 @@ class ObservationKind {
   // A plan entry may leave the linear axes to SimulateEntry (the probe
   // touches; a kind whose commands follow from a nominal point).
   virtual bool plan_finds_linear_axes() const { return probe_touch(); }
+};
 
-  // ---- dataset file (docs/formats.md) ----
+// Its fields in the dataset file (docs/formats.md): read, checked, written.
+class KindFileFormat {
+ public:
+  virtual ~KindFileFormat() = default;
+
   // Every key an observation of this kind may have, in the order the
   // "unknown key" message lists them.
   virtual std::vector<const char*> json_keys() const = 0;
@@ -116,11 +186,21 @@ class ObservationKind {
                         const std::function<std::string()>& where) const = 0;
   // Writes the kind's own fields.
   virtual void Write(const Observation& o, nlohmann::json* out) const = 0;
+  // The streaming loader's fast path: the kind's own fields from the flat
+  // form, when Read and Validate would accept them outright; false sends
+  // the observation through Read (whose result and messages are the
+  // reference). Only a speed-up for kinds that come in long traces.
+  virtual bool ReadFlat(const FlatObservation&, const Artefact&, Observation*) const { return false; }
   // Writes the own fields that need the machine (the axis letters of a
   // second pose); called after Write.
   virtual void WriteOnMachine(const Machine&, const Observation&, nlohmann::json* /*out*/) const {}
+};
 
-  // ---- setup parameters ----
+// The set-up parameters it brings (names, order, default set, priors).
+class KindSetup {
+ public:
+  virtual ~KindSetup() = default;
+
   // Parameters that belong to the artefact (one per facet, ...), added in
   // registry order before any observation's.
   virtual void AddArtefactParameters(const Dataset&, ParameterTable*) const {}
@@ -140,8 +220,14 @@ class ObservationKind {
   // Instrument mounting position parameters of `o` (empty when the kind has
   // none): a fit that estimates none of them cannot be adequate.
   virtual std::vector<int> MountPositions(const ParameterTable&, const Observation&) const { return {}; }
+};
 
-  // ---- residual ----
+// Its residual: the templated functor (automatic derivatives) and the
+// analytic batch.
+class KindResidual {
+ public:
+  virtual ~KindResidual() = default;
+
   // Whether the kind has the analytic batch (PrepareAnalytic,
   // EvaluateAnalytic). A kind without it is fitted through its templated
   // functor (automatic derivatives) whenever a dataset holds one of its
@@ -152,12 +238,15 @@ class ObservationKind {
   // Residual rows that belong to the artefact rather than to one observation
   // (sphere: the scale bars), appended after every observation's rows.
   virtual void AddArtefactResiduals(ResidualBuilder&) const {}
+  // The scale bars (indices into the artefact's) whose rows
+  // AddArtefactResiduals adds for `ds`: the simulator draws their lengths.
+  virtual std::vector<int> ScaleBarRows(const Dataset&) const { return {}; }
   // The analytic batch: one prepared row per observation, then the artefact
   // rows; EvaluateAnalytic gets a run of consecutive rows of this kind with
   // the same `variant`. A kind whose analytic() is false leaves both to the
   // defaults, which throw std::logic_error: nothing may call them.
   virtual void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
-                               AnalyticRow* r) const;
+                               AnalyticRow* r) const = 0;
   // PrepareAnalytic for `o` when the batch has just prepared `prev` for the
   // observation `po` before it (of this kind, same table): the streaming fit
   // prepares every row at every pass, and a kind whose rows look up their
@@ -169,9 +258,15 @@ class ObservationKind {
   }
   virtual void AddArtefactAnalyticRows(const Dataset&, const ParameterTable&,
                                        std::vector<AnalyticRow>*, std::vector<int>* /*source*/) const {}
-  virtual void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const;
+  virtual void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const = 0;
+};
 
-  // ---- simulation ----
+// Its simulation: a plan entry's noise-free observation and where the
+// simulator's noise enters.
+class KindSimulation {
+ public:
+  virtual ~KindSimulation() = default;
+
   // Every key of a plan entry of this kind (Simulate spec), in message order.
   virtual std::vector<const char*> plan_keys() const = 0;
   // The noise-free observation the true machine records for a plan entry;
@@ -182,18 +277,12 @@ class ObservationKind {
   // The kind's key among the simulator's noise levels (a spec's "sigma"
   // object, NoiseLevels): its name unless it shares an instrument's noise
   // with other kinds (every probe touch: "probe").
-  virtual const char* noise_class() const { return name(); }
-  // The kind's noise level among the simulator's levels.
-  double NoiseLevel(const NoiseLevels& n) const;
+  virtual const char* noise_class() const = 0;
   // The noise class residual row k draws on: noise_class(), or another for
   // rows in another unit (a pose's rotation rows: "pose_angle"). A class's
   // unit is that of its rows (NoiseClassUnit): the one place that says which
   // levels are in rad.
   virtual const char* noise_class_row(int) const { return noise_class(); }
-  // The noise classes of the kind's rows, each once, in row order.
-  std::vector<std::string> noise_classes() const;
-  // The level of residual row k.
-  double NoiseLevelRow(const NoiseLevels& n, int k) const;
   // The noise inputs of observation i of a plan (SimulationPlan), from a
   // simulated entry (`slot`) or from a recorded observation (`rec`, `slot`
   // null).
@@ -203,16 +292,63 @@ class ObservationKind {
   // noise-free value.
   virtual void ApplyInput(const SimulationPlan& plan, int i, int component, double x,
                           Observation* o) const = 0;
+};
 
-  // ---- report ----
+// What reports, plots, plausibility checks and the design show of it.
+class KindReporting {
+ public:
+  virtual ~KindReporting() = default;
+
   // Whether an observation of this kind fixes the length scale by itself.
   virtual bool LengthReference() const { return false; }
   // Whether the artefact gives a length reference with these observations.
   virtual bool ArtefactLengthReference(const Dataset&) const { return false; }
+  // What reports, plots and plausibility checks show of the kind.
+  virtual KindReport Report() const { return {}; }
+  // The index of observation `o`'s target in its artefact list
+  // (Report().target_list), -1 when the kind has none or it is absent.
+  virtual int ArtefactTarget(const Dataset&, const Observation&) const { return -1; }
+  // The contact point on the artefact of a planned touch `e` of this kind
+  // and the surface's outward unit normal there (workpiece frame): what a
+  // reachability check of a plan needs. False for a kind that touches no
+  // surface; std::invalid_argument naming `where` for a target not there.
+  virtual bool PlannedContact(const Dataset&, const nlohmann::json& /*e*/, const std::string& /*where*/,
+                              Eigen::Vector3d* /*point*/, Eigen::Vector3d* /*normal*/) const {
+    return false;
+  }
   // The tool point of observation `o` at the fit, and its residual rows `r`
   // as a vector in the workpiece frame.
   virtual void ReportVector(const ReportContext& c, const Observation& o, const double* r,
                             Eigen::Vector3d* point, Eigen::Vector3d* vector) const = 0;
+};
+
+// One observation kind: the concerns above, each an interface of its own
+// (generic code may take the one it needs: the loader a KindFileFormat, the
+// report a KindReporting), composed as Pinocchio composes a joint model from
+// its parts. The defaults that cross concerns live here: the noise class is
+// the name, a kind without an analytic batch throws if one is asked of it.
+class ObservationKind : public KindIdentity,
+                        public KindFileFormat,
+                        public KindSetup,
+                        public KindResidual,
+                        public KindSimulation,
+                        public KindReporting {
+ public:
+  // The kind's key among the simulator's noise levels: its name unless it
+  // shares an instrument's noise with other kinds (KindSimulation).
+  const char* noise_class() const override { return name(); }
+  // Without an analytic batch (analytic() false) nothing may call these:
+  // they throw std::logic_error naming the kind.
+  void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
+                       AnalyticRow* r) const override;
+  void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override;
+
+  // The kind's noise level among the simulator's levels.
+  double NoiseLevel(const NoiseLevels& n) const;
+  // The noise classes of the kind's rows, each once, in row order.
+  std::vector<std::string> noise_classes() const;
+  // The level of residual row k.
+  double NoiseLevelRow(const NoiseLevels& n, int k) const;
 };
 
 }  // namespace fivecal

@@ -26,6 +26,11 @@ class ProbeTouchKind : public ObservationKind {
   std::vector<const char*> json_keys() const final { return {"type", "target", "axes", "direction", "sigma", "id"}; }
   void Read(const nlohmann::json& o, const std::string& where, const Dataset& ds, Observation* ob) const final;
   void Write(const Observation&, nlohmann::json*) const final {}  // target: written by the dataset
+  bool ReadFlat(const FlatObservation& f, const Artefact& a, Observation* ob) const final {
+    if (!f.only({FlatObservation::kTarget}) || !f.target || TargetIndex(a, *f.target) < 0) return false;
+    ob->target = *f.target;
+    return true;
+  }
   // A planned touch: its target and where on it ("point"; a sphere's
   // touches say "normal" instead).
   std::vector<const char*> plan_keys() const override { return {"type", "target", "axes", "point", "direction", "id"}; }
@@ -44,6 +49,9 @@ class ProbeTouchKind : public ObservationKind {
   void AddObservationParameters(const Observation& o, ParameterTable* t) const override;
   std::vector<PriorClass> prior_classes() const override { return {ProbeClass()}; }
   const char* PriorClassOfName(const std::string& n) const override;
+  int ArtefactTarget(const Dataset& ds, const Observation& o) const final {
+    return TargetIndex(ds.artefact, o.target);
+  }
 
  protected:
   static PriorClass ProbeClass();

@@ -16,6 +16,17 @@ namespace fivecal {
 // artefact parameters and of the names in messages).
 const std::vector<const ObservationKind*>& ObservationKinds();
 
+// Adds a kind defined outside the core's table (a test's kind, a plug-in):
+// from then on it loads, fits, simulates and reports like a built-in one.
+// Its type() must be a code no other kind has (UnusedObservationType()),
+// its name() a new one. Returns false when `kind` is registered already;
+// throws std::invalid_argument for a name or type code taken by another.
+// Not thread-safe: register before loading or fitting anything (a static
+// initialiser of the kind's own file).
+bool RegisterObservationKind(const ObservationKind& kind);
+// The lowest type code no registered kind has.
+ObservationType UnusedObservationType();
+
 // The kind of a type (every ObservationType is registered).
 const ObservationKind& KindOf(ObservationType t);
 inline const ObservationKind& KindOf(const Observation& o) { return KindOf(o.type); }
@@ -47,6 +58,12 @@ bool IsSetupParameterName(const std::string& name);
 // (ball bar, 3D ball displacement), or an artefact length (a scale bar whose
 // balls were probed).
 bool HasLengthReference(const Dataset& ds);
+
+// The contact point and outward surface normal (workpiece frame) of a
+// planned touch, a plan entry given as JSON text: its kind's
+// PlannedContact. False for an entry of a kind that touches no surface.
+bool PlannedContact(const Dataset& ds, const std::string& entry_json, Eigen::Vector3d* point,
+                    Eigen::Vector3d* normal);
 
 }  // namespace fivecal
 
