@@ -6,7 +6,8 @@ import os
 import sys
 
 from ..dataset import load_dataset
-from ..identification import identify, procedure_of, procedure_values
+from ..identification import identify
+from ..procedures.classify import procedure_of, procedure_values
 from ..progress import busy
 from ..report.document import write_report
 from .common import EXIT_FIT, EXIT_OK, _fit_warning
