@@ -350,7 +350,7 @@ def test_rtest_without_a_fit_writes_a_result_no_consumer_takes_for_errors(tmp_pa
     ds = fivecal.simulate(m, rtest.plan(m, "K1", table_ball=TABLE_BALL), errors=AC_TRUTH,
                           sigma={"ball3d": 0.0005}, seed=4)
     data, out = _save(ds, tmp_path / "k1.json"), tmp_path / "k1_result.json"
-    assert _cli("rtest", data, "--no-identify", "--tolerance", "5", "--out", out) == 1   # K1 exceeds 5 µm
+    assert _cli("rtest", data, "--no-identify", "--tolerance", "5um", "--out", out) == 1   # K1 exceeds 5 µm
     doc = json.loads(out.read_text())
     schema.validate(doc, "result")
     assert doc["procedure"]["values"]["tests"]["K1"]["passes"] is False and doc["parameters"] == {}
