@@ -47,6 +47,13 @@ class Kind final : public ProbeTouchKind {
             {"sphere_radius", 0.01, "mm", "sphere.<id>.r: a calibrated sphere's radius error"},
             ProbeClass()};
   }
+  // Placement (docs/setup_uncertainty.md): a calibrated sphere's radius is
+  // known from its certificate to about a micrometre; a sphere's centre is
+  // where the user's touch-off or the fixture drawing put it (0.1 mm).
+  double DefaultPlacement(const std::string& n) const override {
+    if (n.rfind("sphere.", 0) != 0) return 0.0;
+    return n.size() >= 2 && n.compare(n.size() - 2, 2, ".r") == 0 ? 0.001 : 0.1;
+  }
   const char* PriorClassOfName(const std::string& n) const override {
     if (n.rfind("sphere.", 0) != 0) return ProbeTouchKind::PriorClassOfName(n);
     return n.size() >= 2 && n.compare(n.size() - 2, 2, ".r") == 0 ? "sphere_radius" : "sphere_center";
