@@ -345,7 +345,7 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     forces the accumulated path (ValueError where it cannot run), ``"dense"``
     the dense one. :attr:`Result.fit_path` says which ran.
     ``setup_priors``: every estimated set-up quantity a person places (ball bar
-    and R-test nests, bar lengths, sphere centres and radii, a tracker's pose, a
+    and R-test nests, bar lengths, a calibrated sphere's radius, a tracker's pose, a
     test part's datum) carries its placement uncertainty as a prior row, in
     least squares too (docs/setup_uncertainty.md; the dataset's
     ``setup_uncertainty`` overrides the defaults); ``False`` drops those rows,

@@ -200,7 +200,18 @@ def test_sphere_centre_50um_off(vmc):
     setup = {"sphere.S1.x": 0.050, "sphere.S1.z": -0.050}
     ds = fivecal.simulate(vmc, plan, errors=truth, sigma={"probe": 0.001}, seed=4, setup=setup,
                           artefact={"spheres": [sphere]}, tip_radius=3.0)
+    # A sphere's centre is found by the probing (no placement by default) ...
     r = fivecal.identify(ds, "location")
+    assert "sphere.S1.x" not in r.placement_std
+    _within_or_undetermined(r, truth)
+    for n, v in setup.items():
+        assert abs(r.values[n] - v) < 3 * r.std[n], (n, r.values[n], v, r.std[n])
+    # ... and, declared as placed on a located nest (50 um), the same 50 um
+    # error still comes out within 3 sigma.
+    d = ds.to_dict()
+    d["setup_uncertainty"] = {"class:sphere_center": 0.05}
+    r = fivecal.identify(fivecal.Dataset.from_dict(d), sorted(r.estimated))
+    assert r.placement_std["sphere.S1.x"] == 0.05
     _within_or_undetermined(r, truth)
     for n, v in setup.items():
         assert abs(r.values[n] - v) < 3 * r.std[n], (n, r.values[n], v, r.std[n])
