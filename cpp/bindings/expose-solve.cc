@@ -53,6 +53,7 @@ void BindSolve(py::module_& m) {
       .def_readonly("robust_scale", &Result::robust_scale)
       .def_readonly("prior_std", &Result::prior_std)
       .def_readonly("informed", &Result::informed)
+      .def_readonly("placement", &Result::placement)
       .def_readonly("undetermined", &Result::undetermined)
       .def_readonly("implausible", &Result::implausible)
       .def_readonly("map_fit", &Result::map_fit)
@@ -89,12 +90,13 @@ void BindSolve(py::module_& m) {
          const std::string& robust, double robust_scale, int max_iterations,
          bool allow_unidentifiable, bool include_default_setup, int num_threads,
          double selection_tolerance, const std::map<std::string, double>& priors, bool prior,
-         bool variance_components, const std::string& fit_path) {
+         bool variance_components, const std::string& fit_path, bool setup_priors) {
         IdentifyOptions o = MakeOptions(estimate, fix, initial, robust, robust_scale, max_iterations,
                                         include_default_setup, selection_tolerance,
                                         allow_unidentifiable, num_threads, priors, prior);
         o.variance_components = variance_components;
         o.fit_path = fit_path;
+        o.setup_priors = setup_priors;
         py::gil_scoped_release release;
         return Identify(ds, o);
       },
@@ -103,7 +105,7 @@ void BindSolve(py::module_& m) {
       py::arg("allow_unidentifiable") = false, py::arg("include_default_setup") = true,
       py::arg("num_threads") = 0, py::arg("selection_tolerance") = IdentifyOptions().selection_tolerance,
       py::arg("priors") = std::map<std::string, double>(), py::arg("prior") = false,
-      py::arg("variance_components") = false, py::arg("fit_path") = "auto");
+      py::arg("variance_components") = false, py::arg("fit_path") = "auto", py::arg("setup_priors") = true);
 
   py::class_<UnitResiduals>(m, "UnitResiduals")
       .def_readonly("unit", &UnitResiduals::unit)

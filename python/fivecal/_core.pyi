@@ -86,6 +86,7 @@ class Result:
     robust_scale: float
     prior_std: list[float]
     informed: list[float]
+    placement: list[float]
     undetermined: list[str]
     implausible: list[str]
     map_fit: bool
@@ -104,7 +105,8 @@ def identify(dataset: Dataset, estimate: Sequence[str], fix: Sequence[str], init
              robust: str = "", robust_scale: float = 0.0, max_iterations: int = 200,
              allow_unidentifiable: bool = False, include_default_setup: bool = True,
              num_threads: int = 1, selection_tolerance: float = 0.01,
-             priors: dict = ..., prior: bool = False) -> Result: ...
+             priors: dict = ..., prior: bool = False, variance_components: bool = False,
+             fit_path: str = "auto", setup_priors: bool = True) -> Result: ...
 def resolve_estimate(dataset: Dataset, estimate: Sequence[str], fix: Sequence[str],
                      initial: dict, priors: dict = ...) -> list[str]: ...
 def prior_classes() -> list[dict]: ...

@@ -126,6 +126,9 @@ class Result:
         self.prior_std: dict = {n: float(s) for n, s in zip(self.estimated, core.prior_std)}
         #: posterior sigma / prior sigma: below ``INFORMED_THRESHOLD`` the data informed it
         self.informed: dict = {n: float(s) for n, s in zip(self.estimated, core.informed)}
+        #: placement uncertainty of each estimated set-up quantity that has one
+        #: (its prior row in the fit; docs/setup_uncertainty.md)
+        self.placement_std: dict = {n: float(s) for n, s in zip(self.estimated, core.placement) if s > 0}
         #: estimated parameters this data did not determine (their values are the prior's, not measured)
         self.undetermined: list = list(core.undetermined)
         #: values beyond 5 prior sigmas (flagged, not refused)
@@ -374,7 +377,8 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
              max_iterations: int = 200, num_threads: int = 0,
              selection_tolerance: Optional[float] = None,
              priors: Optional[Mapping[str, float]] = None, prior: bool = False,
-             variance_components: bool = False, fit_path: str = "auto") -> Result:
+             variance_components: bool = False, fit_path: str = "auto",
+             setup_priors: bool = True) -> Result:
     """Fit the machine errors to a dataset.
 
     ``estimate``: parameter names and/or presets (``S1``-``S4`` on ``wCBXfZYSt``,
@@ -411,6 +415,12 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     ``variance_components`` always take the dense path; ``"normal_equations"``
     forces the accumulated path (ValueError where it cannot run), ``"dense"``
     the dense one. :attr:`Result.fit_path` says which ran.
+    ``setup_priors``: every estimated set-up quantity a person places (ball bar
+    and R-test nests, bar lengths, a calibrated sphere's radius, a tracker's pose, a
+    test part's datum) carries its placement uncertainty as a prior row, in
+    least squares too (docs/setup_uncertainty.md; the dataset's
+    ``setup_uncertainty`` overrides the defaults); ``False`` drops those rows,
+    as for a set-up measured beforehand or an analysis of the path alone.
     Raises ValueError when the data cannot determine an explicitly requested
     set, naming the groups and the likely cause.
     """
@@ -421,7 +431,7 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
                           IdentifyOptionsDefaults.selection_tolerance if selection_tolerance is None
                           else float(selection_tolerance),
                           {str(k): float(v) for k, v in (priors or {}).items()}, bool(prior),
-                          bool(variance_components), str(fit_path))
+                          bool(variance_components), str(fit_path), bool(setup_priors))
     return Result(core, ds)
 
 

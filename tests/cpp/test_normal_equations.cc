@@ -206,10 +206,23 @@ TEST(NormalEquations, AutomaticallyForLongDataOnly) {
 
 TEST(NormalEquations, UndeterminedLongDataRefused) {
   // The C axis never turns: its position EY0C moves the nest as the nest's
-  // own position does. Refused on the normal-equation path as on the dense one.
+  // own position does. With the nest's placement prior (50 um) EY0C is known
+  // only as well as the placement, half its plausible size: not determined,
+  // refused on both paths. With the set-up taken as exact the refusal names
+  // the nest too, on the normal-equation path as on the dense one.
   const Dataset ds = RTest(20000, true, {{"EB0A", 3e-5}, {"EY0C", -0.012}}, 6);
   IdentifyOptions o;
   o.estimate = {"EB0A", "EY0C"};
+  for (const char* path : {"dense", "normal_equations"}) {
+    o.fit_path = path;
+    try {
+      Identify(ds, o);
+      ADD_FAILURE() << path << ": EY0C, known only to the nest's placement, was fitted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("{EY0C}"), std::string::npos) << path << ": " << e.what();
+    }
+  }
+  o.setup_priors = false;
   for (const char* path : {"dense", "normal_equations"}) {
     o.fit_path = path;
     try {

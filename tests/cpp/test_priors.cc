@@ -175,6 +175,127 @@ TEST(MapRows, JacobianMatchesFiniteDifferences) {
   }
 }
 
+// Placement priors (priors.h PlacementSigma): the kinds' defaults, the
+// dataset's overrides (a name beats its class), and the refusal of names that
+// are not this dataset's set-up parameters.
+TEST(Placement, DefaultsOverridesAndRefusals) {
+  const Dataset& ds = Tango();
+  const Machine& m = ds.machine();
+  const ParameterTable table(ds);
+  std::string sphere;
+  for (const std::string& n : table.names())
+    if (n.rfind("sphere.", 0) == 0 && n.size() > 2 && n.compare(n.size() - 2, 2, ".x") == 0) sphere = n;
+  ASSERT_FALSE(sphere.empty());
+  const std::string radius = sphere.substr(0, sphere.size() - 2) + ".r";
+  EXPECT_EQ(PlacementSigma(m, "EX0C", {}), 0.0);  // machine errors: PriorScales
+  EXPECT_EQ(PlacementSigma(m, "tip.z", {}), 0.0);
+  EXPECT_EQ(PlacementSigma(m, sphere, {}), 0.0);  // found by the probing, unless declared
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, radius, {}), 0.001);
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, "dbb.W1.table.z", {}), 0.030);
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, "dbb.W1.tool.z", {}), 0.020);
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, "dbb.W1.length", {}), 0.002);
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, "ball3d.K1.table.x", {}), 0.050);
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, "instrument.T1.a", {}), 0.01);
+  EXPECT_EQ(PlacementSigma(m, "instrument.T1.tool_x", {}), 0.0);  // a target offset: no placement
+  const std::map<std::string, double> o = {{"class:sphere_center", 0.02}, {sphere, 0.005}};
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, sphere, o), 0.005);
+  EXPECT_DOUBLE_EQ(PlacementSigma(m, sphere.substr(0, sphere.size() - 1) + "y", o), 0.02);
+  ValidateSetupUncertainty(m, o, "dataset.setup_uncertainty", table.names());
+  auto message = [&](const std::map<std::string, double>& u) {
+    try {
+      ValidateSetupUncertainty(m, u, "dataset.setup_uncertainty", table.names());
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(message({{"sphere.NOPE.x", 0.01}}).find("dataset.setup_uncertainty['sphere.NOPE.x']: unknown set-up"),
+            std::string::npos);
+  EXPECT_NE(message({{"EX0C", 0.01}}).find("machine error"), std::string::npos);
+  EXPECT_NE(message({{"class:mounts", 0.01}}).find("unknown set-up class 'mounts'"), std::string::npos);
+  EXPECT_NE(message({{"class:location_offset", 0.01}}).find("unknown set-up class"), std::string::npos);
+  EXPECT_NE(message({{sphere, 0.0}}).find("finite and > 0"), std::string::npos);
+  EXPECT_NE(message({{sphere, -1.0}}).find("finite and > 0"), std::string::npos);
+}
+
+// The placement rows of a least-squares fit: Problem::AddPriors with +inf
+// (no row) for the parameters without a placement, one row (theta - 0) / u
+// per placed one, checked against finite differences like the MAP rows.
+TEST(Placement, RowsAndJacobianMatchFiniteDifferences) {
+  const Dataset& ds = Tango();
+  const ParameterTable table(ds);
+  std::vector<int> est;
+  for (const char* n : {"EX0C", "EA0C", "tip.z", "facet.F3"}) est.push_back(table.Require(n));
+  for (int i = 0; i < table.size(); ++i)
+    if (table.names()[i].rfind("sphere.", 0) == 0 && est.size() < 9) est.push_back(i);
+  // Sphere centres placed by the dataset, radii by their default (certificate).
+  const std::vector<double> u =
+      PlacementScales(ds.machine(), table.names(), {{"class:sphere_center", 0.05}});
+  const Eigen::VectorXd placement = Eigen::Map<const Eigen::VectorXd>(u.data(), u.size());
+  const Eigen::VectorXd rows = PlacementRows(placement, est);
+  ASSERT_EQ(rows.size(), table.size());
+  std::vector<int> placed;
+  for (int i : est) {
+    if (placement[i] > 0) {
+      placed.push_back(i);
+      EXPECT_EQ(rows[i], placement[i]);
+    } else {
+      EXPECT_TRUE(std::isinf(rows[i])) << table.names()[i];
+    }
+  }
+  ASSERT_GE(placed.size(), 3u);
+  EXPECT_EQ(PlacementRows(placement, {table.Require("EX0C")}).size(), 0);  // none placed: no rows at all
+  Eigen::VectorXd values = Eigen::VectorXd::Zero(table.size());
+  values[table.Require("EX0C")] = 0.02;
+  for (int i : placed) values[i] = 0.03;
+  Problem problem(ds, table, values, est);
+  problem.AddPriors(rows, Eigen::VectorXd::Zero(table.size()));
+  ceres::Problem& cp = problem.ceres_problem();
+  auto eval = [&](std::vector<double>* r, ceres::CRSMatrix* J) {
+    ceres::Problem::EvaluateOptions eo;
+    for (int i : est) eo.parameter_blocks.push_back(const_cast<double*>(&problem.values()[i]));
+    ASSERT_TRUE(cp.Evaluate(eo, nullptr, r, nullptr, J));
+  };
+  std::vector<double> r0;
+  ceres::CRSMatrix J;
+  eval(&r0, &J);
+  const int n = problem.num_rows();
+  ASSERT_EQ(r0.size(), n + placed.size());
+  for (size_t k = 0; k < placed.size(); ++k) EXPECT_NEAR(r0[n + k], 0.03 / placement[placed[k]], 1e-12);
+  Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(r0.size(), est.size());
+  for (int row = 0; row < J.num_rows; ++row)
+    for (int e = J.rows[row]; e < J.rows[row + 1]; ++e) dense(row, J.cols[e]) = J.values[e];
+  double* base = const_cast<double*>(problem.values().data());
+  for (size_t k = 0; k < est.size(); ++k) {
+    const int i = est[k];
+    const double h = 1e-6;
+    const double keep = base[i];
+    std::vector<double> rp, rm;
+    base[i] = keep + h;
+    eval(&rp, nullptr);
+    base[i] = keep - h;
+    eval(&rm, nullptr);
+    base[i] = keep;
+    const double column = dense.col(k).cwiseAbs().maxCoeff();
+    for (size_t row = n; row < r0.size(); ++row) {  // the placement rows: exact
+      const double fd = (rp[row] - rm[row]) / (2 * h);
+      EXPECT_NEAR(dense(row, k), fd, 1e-6 * std::max(1.0, std::abs(fd))) << table.names()[i] << " row " << row;
+    }
+    for (int row = 0; row < n; ++row) {
+      const double fd = (rp[row] - rm[row]) / (2 * h);
+      EXPECT_NEAR(dense(row, k), fd, 1e-4 * std::max(1.0, std::abs(fd)) + 1e-6 * column)
+          << table.names()[i] << " row " << row;
+    }
+  }
+  // The analyses see the same rows: WithPlacementRows appends e_j / u_j.
+  Eigen::VectorXd ue(est.size());
+  for (size_t k = 0; k < est.size(); ++k) ue[k] = placement[est[k]];
+  const Eigen::MatrixXd A = WithPlacementRows(Eigen::MatrixXd::Zero(2, est.size()), ue);
+  ASSERT_EQ(A.rows(), 2 + static_cast<int>(placed.size()));
+  for (size_t k = 0, row = 2; k < est.size(); ++k)
+    if (ue[k] > 0) EXPECT_DOUBLE_EQ(A(row++, k), 1.0 / ue[k]);
+}
+
 TEST(Determination, RatioIsDataSigmaOverPriorAndNoiseTied) {
   // Two parameters, y = a x + b x (the same column): no direction of a - b is
   // seen; a third parameter c is seen with data sigma 0.1 prior.

@@ -68,6 +68,16 @@ class Kind final : public BallMountKind {
   const char* PriorClassOfName(const std::string& n) const override {
     return n.rfind("ball3d.", 0) == 0 ? "mount" : nullptr;
   }
+  // Placement (docs/setup_uncertainty.md): the R-test nest is clamped where
+  // the spindle probe or an edge finder put it, and its readings are zeroed
+  // on a master ball or at a reference pose (about 50 um either way); the
+  // spindle ball sits on the spindle axis to a few um, at the tool length of
+  // a presetter (about 20 um).
+  double DefaultPlacement(const std::string& n) const override {
+    if (!PriorClassOfName(n)) return 0.0;
+    if (n.find(".table.") != std::string::npos) return 0.050;
+    return n.compare(n.size() - 2, 2, ".z") == 0 ? 0.020 : 0.005;
+  }
 
   void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override {
     const Eigen::VectorXd& v = e.v;

@@ -12,6 +12,8 @@
 #include <stdexcept>
 
 #include "fivecal/observations/registry.h"
+#include "fivecal/solve/priors.h"
+#include "fivecal/solve/problem.h"
 #include "json_util.h"
 
 namespace fivecal {
@@ -205,7 +207,8 @@ const json* Find(const json& obj, const char* key) {
 // the order the messages promise (unknown top-level keys first).
 Dataset ParseHead(const json& j) {
   if (!j.is_object()) throw std::invalid_argument("dataset: expected a JSON object");
-  CheckKeys(j, {"machine", "probe", "artefact", "instruments", "observations", "$schema", "_comment"}, "dataset");
+  CheckKeys(j, {"machine", "probe", "artefact", "instruments", "setup_uncertainty", "observations", "$schema", "_comment"},
+            "dataset");
   if (!j.contains("machine")) throw std::invalid_argument("dataset.machine: missing");
   Dataset ds = [&] {
     try {
@@ -320,6 +323,20 @@ Dataset ParseHead(const json& j) {
     }
   }
   if (j.contains("instruments")) ds.instrument_sigma = ReadInstruments(j["instruments"]);
+  if (j.contains("setup_uncertainty")) {
+    // The names are checked against the dataset's set-up parameters once the
+    // observations are read (Validate).
+    const std::string w = "dataset.setup_uncertainty";
+    const json& u = j["setup_uncertainty"];
+    if (!u.is_object())
+      throw std::invalid_argument(w + ": expected an object (set-up parameter or class:<class> -> sigma, "
+                                      "in the parameter's unit)");
+    for (auto it = u.begin(); it != u.end(); ++it) {
+      if (!it->is_number())
+        throw std::invalid_argument(w + "['" + it.key() + "']: expected a number (one sigma, mm or rad)");
+      ds.setup_uncertainty[it.key()] = it->get<double>();
+    }
+  }
   return ds;
 }
 
@@ -919,6 +936,8 @@ void Dataset::Validate() const {
     }
   }
   CheckInstruments(*this, false);
+  if (!setup_uncertainty.empty())
+    ValidateSetupUncertainty(machine_, setup_uncertainty, "dataset.setup_uncertainty", ParameterTable(*this).names());
 }
 
 Dataset Dataset::Subset(const std::vector<int>& indices) const {
@@ -926,10 +945,17 @@ Dataset Dataset::Subset(const std::vector<int>& indices) const {
   d.tip_radius = tip_radius;
   d.artefact = artefact;
   d.instrument_sigma = instrument_sigma;
+  d.setup_uncertainty = setup_uncertainty;
   for (int i : indices) {
     if (i < 0 || i >= static_cast<int>(observations.size()))
       throw std::invalid_argument("subset: observation index " + std::to_string(i) + " out of range");
     d.observations.push_back(observations[i]);
+  }
+  if (!d.setup_uncertainty.empty() && !d.observations.empty()) {
+    // A subset keeps the declared placements of the set-ups it still has.
+    const ParameterTable t(d);
+    for (auto it = d.setup_uncertainty.begin(); it != d.setup_uncertainty.end();)
+      it = it->first.rfind("class:", 0) != 0 && t.Index(it->first) < 0 ? d.setup_uncertainty.erase(it) : std::next(it);
   }
   return d;
 }
@@ -958,6 +984,11 @@ std::string Dataset::ToJson() const {
       }
     }
     j["instruments"] = ins;
+  }
+  if (!setup_uncertainty.empty()) {
+    json u = json::object();
+    for (const auto& [name, s] : setup_uncertainty) u[name] = s;
+    j["setup_uncertainty"] = u;
   }
   if (!artefact.cylinders.empty()) {
     json cyls = json::array();

@@ -64,6 +64,17 @@ class Kind final : public BallMountKind {
     for (const PriorClass& m : BallMountKind::prior_classes()) c.push_back(m);
     return c;
   }
+  // Placement (docs/setup_uncertainty.md): the bar's length comes from its
+  // calibrator to a micrometre or two; the table ball sits on a magnetic nest
+  // placed and centred by hand (tens of um); the tool cup sits in the
+  // spindle taper, on the spindle axis to a few um, at the tool length a
+  // presetter or a touch-off gives (about 20 um).
+  double DefaultPlacement(const std::string& n) const override {
+    if (!PriorClassOfName(n)) return 0.0;
+    if (std::string(PriorClassOfName(n)) == "dbb_length") return 0.002;
+    if (n.find(".table.") != std::string::npos) return 0.030;
+    return n.compare(n.size() - 2, 2, ".z") == 0 ? 0.020 : 0.005;
+  }
   const char* PriorClassOfName(const std::string& n) const override {
     if (n.rfind("dbb.", 0) != 0) return nullptr;
     const std::string length = ".length";

@@ -95,6 +95,7 @@ class Kind final : public ObservationKind {
              "instrument.<station>.length: a distance station's dead length beyond the file's dead_length"}};
   }
   const char* PriorClassOfName(const std::string& n) const override { return fixed_frame::PriorClassOfName(n); }
+  double DefaultPlacement(const std::string& n) const override { return fixed_frame::DefaultPlacement(n); }
   std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const override {
     return t.group(type(), o.setup);
   }

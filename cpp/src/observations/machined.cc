@@ -194,6 +194,16 @@ class Kind final : public ObservationKind {
              "machined.<part>.x|y|z: where a machined test part's measuring datum sits on the table"},
             {"part_angle", 1e-3, "rad", "machined.<part>.a|b|c: how that datum is turned (1 mm over 1 m)"}};
   }
+  // Placement (docs/setup_uncertainty.md): a test part is clamped by eye and
+  // its CMM datum is the CMM's own alignment, so where that datum sits on the
+  // machine is known to about a millimetre and a milliradian: the plausible
+  // size. The row keeps an error confounded with the datum from being fitted
+  // as if the datum were exact; the data find the datum.
+  double DefaultPlacement(const std::string& n) const override {
+    const char* c = PriorClassOfName(n);
+    if (!c) return 0.0;
+    return std::string(c) == "part_angle" ? 1e-3 : 1.0;
+  }
   const char* PriorClassOfName(const std::string& n) const override {
     if (n.rfind("machined.", 0) != 0) return nullptr;
     const std::string f = n.substr(n.rfind('.') + 1);

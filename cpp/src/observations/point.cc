@@ -96,6 +96,7 @@ class Kind final : public ObservationKind {
              "instrument.<id>.tool_x|y|z, .work_x|y|z: where the target it follows really sits"}};
   }
   const char* PriorClassOfName(const std::string& n) const override { return fixed_frame::PriorClassOfName(n); }
+  double DefaultPlacement(const std::string& n) const override { return fixed_frame::DefaultPlacement(n); }
   std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const override {
     return fixed_frame::InstrumentPose(t, o.setup);
   }
@@ -261,6 +262,21 @@ const char* PriorClassOfName(const std::string& n) {
   }
   if (f == "length") return "dead_length";
   return (f == "a" || f == "b" || f == "c") ? "instrument_angle" : "instrument_position";
+}
+
+// A tracker, camera or tracer station on its tripod is set where the plan
+// says by tape and eye: a couple of millimetres and about 10 mrad (0.6 deg),
+// the plausible size of its class. Its pose is what the data find; this row
+// only keeps a machine error confounded with it from being fitted as if the
+// pose were known. Targets and a station's dead length are readings' zeros
+// and the target's own offsets, not placements: no row.
+double DefaultPlacement(const std::string& n) {
+  const char* c = PriorClassOfName(n);
+  if (!c) return 0.0;
+  const std::string cls = c;
+  if (cls == "instrument_position") return 2.0;
+  if (cls == "instrument_angle") return 0.01;
+  return 0.0;
 }
 
 void IdClash(const std::string& id) {

@@ -102,6 +102,7 @@ class Kind final : public ObservationKind {
              "instrument.<id>.tool_a|b|c, .work_a|b|c: correction of a pose target's nominal orientation (3 deg)"}};
   }
   const char* PriorClassOfName(const std::string& n) const override { return fixed_frame::PriorClassOfName(n); }
+  double DefaultPlacement(const std::string& n) const override { return fixed_frame::DefaultPlacement(n); }
   std::vector<int> MountPositions(const ParameterTable& t, const Observation& o) const override {
     return fixed_frame::InstrumentPose(t, o.setup);
   }

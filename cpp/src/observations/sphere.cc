@@ -52,6 +52,15 @@ class Kind final : public ProbeTouchKind {
             {"sphere_radius", 0.01, "mm", "sphere.<id>.r: a calibrated sphere's radius error"},
             ProbeClass()};
   }
+  // Placement (docs/setup_uncertainty.md): a calibrated sphere's radius is
+  // known from its certificate to about a micrometre. Its centre is what the
+  // probing finds: the nominal is a start (a rough touch-off, and a machine
+  // file's pivot moves the workpiece frame it is given in), no placement
+  // unless the dataset declares one (a sphere on a located nest).
+  double DefaultPlacement(const std::string& n) const override {
+    if (n.rfind("sphere.", 0) != 0) return 0.0;
+    return n.size() >= 2 && n.compare(n.size() - 2, 2, ".r") == 0 ? 0.001 : 0.0;
+  }
   const char* PriorClassOfName(const std::string& n) const override {
     if (n.rfind("sphere.", 0) != 0) return ProbeTouchKind::PriorClassOfName(n);
     return n.size() >= 2 && n.compare(n.size() - 2, 2, ".r") == 0 ? "sphere_radius" : "sphere_center";

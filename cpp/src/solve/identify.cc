@@ -155,9 +155,10 @@ Solve RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Vector
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(table.size());
   Solve out;
   out.values = values;
-  // Invalid prior sigmas are left to AddPriors, which names them.
+  // Invalid prior sigmas are left to AddPriors, which names them (+inf: no
+  // row, the estimated parameters without a placement in a least-squares fit).
   bool valid_priors = true;
-  for (int i : est) valid_priors = valid_priors && (!prior_all.size() || (prior_all[i] > 0 && std::isfinite(prior_all[i])));
+  for (int i : est) valid_priors = valid_priors && (!prior_all.size() || prior_all[i] > 0);
   auto run = [&](Problem* pr) {
     // The loop Ceres would run, without Ceres's per-solve overhead (most of
     // a fit's time on a few hundred rows); Ceres where it does not apply.
@@ -369,7 +370,11 @@ namespace {
 struct Setup {
   ParameterTable table;
   Eigen::VectorXd values;  // initial, every table entry
-  Eigen::VectorXd prior;   // prior sigma, every table entry
+  Eigen::VectorXd prior;   // prior sigma (plausible size), every table entry
+  // Placement uncertainty of the set-up quantities (priors.h PlacementSigma;
+  // 0: none), and the prior of a MAP fit: the plausible size, narrowed by the
+  // placement where there is one (1/s^2 = 1/prior^2 + 1/placement^2).
+  Eigen::VectorXd placement, map_prior;
   Request request;
   explicit Setup(const Dataset& ds, const IdentifyOptions& opt) : table(ds) {
     ValidateOptions(opt);
@@ -380,6 +385,14 @@ struct Setup {
     const std::vector<double> p =
         PriorScales(ds.machine(), table.names(), MachinePriors(ds.machine()), opt.priors);
     prior = Eigen::Map<const Eigen::VectorXd>(p.data(), static_cast<Eigen::Index>(p.size()));
+    ValidateSetupUncertainty(ds.machine(), ds.setup_uncertainty, "dataset.setup_uncertainty", table.names());
+    const std::vector<double> u = PlacementScales(ds.machine(), table.names(), ds.setup_uncertainty);
+    placement = Eigen::Map<const Eigen::VectorXd>(u.data(), static_cast<Eigen::Index>(u.size()));
+    if (!opt.setup_priors) placement.setZero();
+    map_prior = prior;
+    for (int i = 0; i < prior.size(); ++i)
+      if (placement[i] > 0)
+        map_prior[i] = 1.0 / std::sqrt(1.0 / (prior[i] * prior[i]) + 1.0 / (placement[i] * placement[i]));
     request = Classify(ds, table, opt);
   }
 };
@@ -476,7 +489,8 @@ Eigen::VectorXd DeclaredSigma(const Dataset& ds, const Observation& o) {
 // evidence maximisations of the same model; they are iterated together.
 Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTable& table,
                            const Eigen::VectorXd& start, const std::vector<int>& est,
-                           const IdentifyOptions& opt, const Eigen::VectorXd& prior_all, bool classes) {
+                           const IdentifyOptions& opt, const Eigen::VectorXd& prior_all, bool classes,
+                           bool map, const Eigen::VectorXd& place) {
   std::map<std::string, std::vector<int>> members;  // class -> positions in est
   const Machine& m = ds.machine();
   if (classes)
@@ -511,7 +525,6 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
   };
   std::map<std::string, VarianceComponent> comp;
   if (members.empty() && factor.empty()) return out;
-  const bool map = prior_all.size() > 0;
   for (int round = 0; round < 60; ++round) {
     for (const auto& [cls, js] : members)
       for (int j : js) out.prior[est[j]] = out.scale[cls] * prior_all[est[j]];
@@ -530,7 +543,7 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
       cur = Gather(out.prior, est);
       Ninv = cur.asDiagonal() * ScaledPosterior(Jw, cur) * cur.asDiagonal();
     } else {
-      Ninv = AnalyzeJacobian(Jw, opt.rank_tolerance).inverse_normal;
+      Ninv = AnalyzeJacobian(WithPlacementRows(Jw, place), opt.rank_tolerance).inverse_normal;
     }
     double change = 0;
     for (const auto& [cls, js] : members) {
@@ -638,14 +651,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     // then select, refit, and select again until the set is stable.
     std::vector<int> all = rq.forced;
     all.insert(all.end(), rq.candidates.begin(), rq.candidates.end());
-    const Solve pre = RunFit(ds, table, values, all, opt, setup.prior, nullptr);
+    const Solve pre = RunFit(ds, table, values, all, opt, setup.map_prior, nullptr);
     Eigen::VectorXd at = setup.values;
     for (int i : all) at[i] = pre.values[i];
     est = SelectAt(ds, setup, at, opt);
     for (int round = 0; round < 4; ++round) {
       Eigen::VectorXd start = setup.values;
       for (int i : est) start[i] = at[i];
-      const Solve fit = RunFit(ds, table, start, est, opt, map ? setup.prior : no_prior, nullptr);
+      const Solve fit = RunFit(ds, table, start, est, opt,
+                               map ? setup.map_prior : PlacementRows(setup.placement, est), nullptr);
       std::vector<int> again = SelectAt(ds, setup, fit.values, opt);
       at = fit.values;
       if (again == est) break;
@@ -664,7 +678,17 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   res.map_fit = map;
   res.explicit_request = !rq.automatic;
   const int p = static_cast<int>(est.size());
-  const Eigen::VectorXd prior = Gather(setup.prior, est);
+  // The prior of each estimated parameter: in a MAP fit that of its rows (a
+  // set-up quantity's narrowed by its placement); in a least-squares fit the
+  // plausible size that scales the determination, the placements entering
+  // as rows of their own (`place`, `ls_rows`).
+  const Eigen::VectorXd prior = Gather(map ? setup.map_prior : setup.prior, est);
+  const Eigen::VectorXd place = map ? Eigen::VectorXd::Zero(p) : Gather(setup.placement, est);
+  const Eigen::VectorXd ls_rows = map ? no_prior : PlacementRows(setup.placement, est);
+  const bool placed = ls_rows.size() > 0;
+  res.placement = std::vector<double>(place.data(), place.data() + p);
+  if (map)
+    for (int j = 0; j < p; ++j) res.placement[j] = setup.placement[est[j]];
 
   auto undetermined_groups = [&](const Determination& d) {
     std::vector<std::vector<std::string>> groups;
@@ -737,8 +761,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     // at the start and, when the start says no, again near the solution
     // (after a MAP fit, well posed whatever the start), so that a rough
     // nominal neither drops nor admits parameters wrongly.
-    Eigen::MatrixXd Jw = weighted_jacobian_at(values);
-    const int num_rows = nep ? nep->num_rows() : static_cast<int>(Jw.rows());
+    Eigen::MatrixXd Jw = WithPlacementRows(weighted_jacobian_at(values), place);
+    const int num_rows = nep ? nep->num_rows() + static_cast<int>((place.array() > 0).count())
+                             : static_cast<int>(Jw.rows());
     if (num_rows < p && !opt.allow_unidentifiable)
       throw std::invalid_argument("identify: " + std::to_string(p) + " parameters but only " +
                                   std::to_string(num_rows) + " residuals");
@@ -751,8 +776,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     };
     const bool start_undetermined = undetermined(Jw);
     if (start_undetermined) {
-      const Solve pre = fit_from(values, setup.prior);
-      const Eigen::MatrixXd Jpre = weighted_jacobian_after(pre);
+      const Solve pre = fit_from(values, setup.map_prior);
+      const Eigen::MatrixXd Jpre = WithPlacementRows(weighted_jacobian_after(pre), place);
       const bool pre_undetermined = undetermined(Jpre);
       if (!pre_undetermined) {
         values = pre.values;
@@ -760,8 +785,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
         // The MAP point may still sit where a weakly seen setup parameter
         // (a sphere with few touches) looks free; the least-squares point
         // decides. Refuse only when it too leaves the set undetermined.
-        const Solve ls = fit_from(pre.values, no_prior);
-        if (undetermined(weighted_jacobian_after(ls)))
+        const Solve ls = fit_from(pre.values, ls_rows);
+        if (undetermined(WithPlacementRows(weighted_jacobian_after(ls), place)))
           throw std::invalid_argument(
               UndeterminedMessage(ds, undetermined_groups(AnalyzeDetermination(Jpre, prior, kDeterminedRatio))));
         values = ls.values;
@@ -771,7 +796,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
 
   // The prior rows of the fit: none (least squares), the documented priors
   // (prior=true), or the hierarchical one of "auto".
-  Eigen::VectorXd fit_prior = map ? setup.prior : no_prior;
+  Eigen::VectorXd fit_prior = map ? setup.map_prior : ls_rows;
   // With variance components the fit runs on a copy whose sigmas are the
   // estimated ones; everything below (covariance, chi-square) uses them.
   // (A copy only then: long data would double their memory.)
@@ -783,7 +808,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   if (rq.automatic || opt.variance_components) {
     weighted_copy = std::make_unique<Dataset>(ds);
     weighted = weighted_copy.get();
-    const Hyper hy = AdaptHyperparameters(ds, weighted_copy.get(), table, values, est, opt, fit_prior, rq.automatic);
+    const Hyper hy =
+        AdaptHyperparameters(ds, weighted_copy.get(), table, values, est, opt, fit_prior, rq.automatic, map, place);
     fit_prior = hy.prior;
     values = hy.values;
     adapt_iterations = hy.iterations;
@@ -817,7 +843,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   const Eigen::VectorXd& sig = nep ? nep->row_sigma() : problem->row_sigma();  // no copy of a data-sized vector
   // Every analysis of Jw below depends on it only through Jw^T Jw (and is
   // invariant to column scaling): one QR serves them all.
-  const Eigen::MatrixXd Rw = TriangularFactor(Jw);
+  const Eigen::MatrixXd Rw = TriangularFactor(placed ? WithPlacementRows(Jw, place) : Jw);
   const Determination det = AnalyzeDetermination(Rw, prior, kDeterminedRatio);
   if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable)
     throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
@@ -873,6 +899,14 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     sigma_dof = res.dof;
   } else {
     res.dof = std::max(0, rows - id.rank);
+    if (placed) {
+      // The placement rows are not data: the parameters the data used are
+      // the rank less the placements' share, sum_j C_jj / u_j^2.
+      double prior_share = 0;
+      for (int j = 0; j < p; ++j)
+        if (place[j] > 0) prior_share += id.inverse_normal(j, j) / (place[j] * place[j]);
+      res.dof = std::max(0, rows - static_cast<int>(std::lround(id.rank - prior_share)));
+    }
     // Without redundancy the residuals (zero) say nothing about the noise:
     // the declared noise stands, an exactly determined fit is not exact.
     const double s2 = res.dof > 0 ? chi2 / res.dof : 1.0;
@@ -882,13 +916,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     // Every row of one declared noise (a plan of probe touches): the mm
     // Jacobian is Jw times that noise, its column-scaled form Jw's, and the
     // condition number id's.
-    const bool one_noise = sig.size() > 0 && (sig.array() == sig[0]).all();
+    // With placement rows, the condition number of the problem they make
+    // well posed (the data's alone is infinite where a placement is confounded).
+    const bool one_noise = placed || (sig.size() > 0 && (sig.array() == sig[0]).all());
     res.condition_number =
         one_noise ? id.condition_number
                   : ConditionNumber(nep ? NormalFactor(nfit.at_solution.JtJ_unweighted)
                                         : Eigen::MatrixXd(sig.asDiagonal() * Jw),
                                     opt.rank_tolerance);
-    sigma_dof = res.n_observations - id.rank;
+    sigma_dof = placed ? res.dof : res.n_observations - id.rank;
     hat = id.inverse_normal;
   }
   res.sigma = sigma_dof > 0 ? std::sqrt(r.squaredNorm() / sigma_dof) : 0.0;
@@ -1046,6 +1082,7 @@ std::string Result::ToJson() const {
       entry["prior_std"] = Finite(prior_std[i]);
       entry["informed"] = Finite(informed[i]);
     }
+    if (i < placement.size() && placement[i] > 0) entry["placement_std"] = Finite(placement[i]);
     params[estimated[i]] = entry;
   }
   for (size_t i = 0; i < names.size(); ++i)

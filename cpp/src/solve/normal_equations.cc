@@ -253,10 +253,9 @@ NormalEquationFit FitNormalEquations(const NormalEquationProblem& pr, const Eige
   if (prior_all.size())
     for (int j = 0; j < p; ++j) {
       const double s = prior_all[est[j]];
-      if (!(s > 0) || !std::isfinite(s))
-        throw std::invalid_argument("problem: prior sigma of parameter " + std::to_string(est[j]) +
-                                    " must be finite and > 0");
-      inv_prior2[j] = 1.0 / (s * s);
+      if (!(s > 0))
+        throw std::invalid_argument("problem: prior sigma of parameter " + std::to_string(est[j]) + " must be > 0");
+      inv_prior2[j] = 1.0 / (s * s);  // +inf: 0, no prior row (priors.h PlacementRows)
     }
   auto theta = [&](const Eigen::VectorXd& v) {
     Eigen::VectorXd t(p);

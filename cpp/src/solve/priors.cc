@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <set>
 #include <stdexcept>
 
 #include "fivecal/observations/registry.h"
@@ -166,6 +168,102 @@ std::vector<double> PriorScales(const Machine& m, const std::vector<std::string>
     out.push_back(s);
   }
   return out;
+}
+
+namespace {
+
+// The kind a set-up parameter name belongs to (nullptr: none, or a machine
+// parameter).
+const ObservationKind* KindOfSetupName(const std::string& name) {
+  for (const ObservationKind* kind : ObservationKinds())
+    if (kind->PriorClassOfName(name)) return kind;
+  return nullptr;
+}
+
+bool IsSetupClass(const std::string& cls) {
+  for (const ObservationKind* kind : ObservationKinds())
+    for (const PriorClass& c : kind->prior_classes())
+      if (c.name == cls) return true;
+  return false;
+}
+
+}  // namespace
+
+Eigen::VectorXd PlacementRows(const Eigen::VectorXd& placement_all, const std::vector<int>& est) {
+  bool any = false;
+  for (int i : est) any = any || placement_all[i] > 0;
+  if (!any) return Eigen::VectorXd();
+  Eigen::VectorXd out = Eigen::VectorXd::Constant(placement_all.size(), std::numeric_limits<double>::infinity());
+  for (int i : est)
+    if (placement_all[i] > 0) out[i] = placement_all[i];
+  return out;
+}
+
+Eigen::MatrixXd WithPlacementRows(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& u) {
+  int n = 0;
+  for (int j = 0; j < u.size(); ++j) n += u[j] > 0;
+  if (n == 0) return Jw;
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(Jw.rows() + n, Jw.cols());
+  out.topRows(Jw.rows()) = Jw;
+  int row = static_cast<int>(Jw.rows());
+  for (int j = 0; j < u.size(); ++j)
+    if (u[j] > 0) out(row++, j) = 1.0 / u[j];
+  return out;
+}
+
+double PlacementSigma(const Machine& m, const std::string& name,
+                      const std::map<std::string, double>& overrides) {
+  if (m.ParameterIndex(name) >= 0) return 0.0;  // machine errors: priors.h PriorScales
+  const ObservationKind* kind = KindOfSetupName(name);
+  if (!kind) return 0.0;
+  auto p = overrides.find(name);
+  if (p != overrides.end()) return p->second;
+  auto c = overrides.find(std::string("class:") + kind->PriorClassOfName(name));
+  if (c != overrides.end()) return c->second;
+  return kind->DefaultPlacement(name);
+}
+
+std::vector<double> PlacementScales(const Machine& m, const std::vector<std::string>& names,
+                                    const std::map<std::string, double>& overrides) {
+  std::vector<double> out;
+  out.reserve(names.size());
+  for (const std::string& n : names) out.push_back(PlacementSigma(m, n, overrides));
+  return out;
+}
+
+void ValidateSetupUncertainty(const Machine& m, const std::map<std::string, double>& u, const std::string& where,
+                              const std::vector<std::string>& names) {
+  for (const auto& [key, value] : u) {
+    const std::string w = where + "['" + key + "']";
+    if (!std::isfinite(value) || !(value > 0))
+      throw std::invalid_argument(w + ": a placement uncertainty must be finite and > 0 (in the parameter's "
+                                  "unit, mm or rad); a quantity known exactly is fixed instead");
+    if (StartsWith(key, "class:")) {
+      const std::string cls = key.substr(6);
+      if (IsSetupClass(cls)) continue;
+      std::string msg = w + ": unknown set-up class '" + cls + "' (set-up classes:";
+      std::set<std::string> listed;
+      for (const ObservationKind* kind : ObservationKinds())
+        for (const PriorClass& c : kind->prior_classes())
+          if (listed.insert(c.name).second) msg += " " + c.name;
+      throw std::invalid_argument(msg + ")");
+    }
+    if (m.ParameterIndex(key) >= 0)
+      throw std::invalid_argument(w + ": '" + key +
+                                  "' is a machine error, not a set-up quantity (its prior belongs in the "
+                                  "machine file's \"priors\")");
+    if (std::find(names.begin(), names.end(), key) != names.end() && KindOfSetupName(key)) continue;
+    std::string best;
+    int best_d = 1 << 30;
+    for (const std::string& n : names) {
+      if (m.ParameterIndex(n) >= 0) continue;
+      const int d = Distance(key, n);
+      if (d < best_d) best_d = d, best = n;
+    }
+    std::string msg = w + ": unknown set-up parameter '" + key + "' (not among this dataset's set-up parameters";
+    if (!best.empty() && best_d <= 3) msg += "; did you mean '" + best + "'?";
+    throw std::invalid_argument(msg + ")");
+  }
 }
 
 }  // namespace fivecal

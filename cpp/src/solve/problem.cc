@@ -398,9 +398,9 @@ double Problem::SigmaOfRow(int source, int k) const {
 void Problem::AddPriors(const Eigen::VectorXd& prior_sigma, const Eigen::VectorXd& prior_mean) {
   if (!prior_blocks_.empty()) throw std::logic_error("problem: priors added twice");
   for (int i : estimated_) {
-    if (!(prior_sigma[i] > 0) || !std::isfinite(prior_sigma[i]))
-      throw std::invalid_argument("problem: prior sigma of parameter " + table_.names()[i] +
-                                  " must be finite and > 0");
+    if (!(prior_sigma[i] > 0))
+      throw std::invalid_argument("problem: prior sigma of parameter " + table_.names()[i] + " must be > 0");
+    if (std::isinf(prior_sigma[i])) continue;  // no prior row (priors.h PlacementRows)
     prior_blocks_.push_back(
         problem_->AddResidualBlock(new PriorCost(prior_mean[i], prior_sigma[i]), nullptr, &values_[i]));
   }

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "fivecal/observations/registry.h"
+#include "fivecal/solve/priors.h"
 #include "fivecal/solve/analytic_residuals.h"
 #include "fivecal/solve/identifiability.h"
 #include "fivecal/solve/problem.h"
@@ -25,7 +26,9 @@ struct Refit::Impl {
   std::vector<int> est;
   Eigen::VectorXd start;
   double robust_scale = 0;
-  Eigen::VectorXd prior;  // per table index when the reference fit was MAP; empty otherwise
+  // Per table index: the MAP fit's prior sigmas, or a least-squares fit's
+  // placement rows (+inf: no row; priors.h PlacementRows); empty: neither.
+  Eigen::VectorXd prior;
 };
 
 Refit::Refit(const Dataset& reference, const IdentifyOptions& options, const Result& fit)
@@ -42,6 +45,10 @@ Refit::Refit(const Dataset& reference, const IdentifyOptions& options, const Res
     // Every refit is the same MAP fit as the reference (its prior rows).
     d.prior = Eigen::VectorXd::Ones(d.table.size());
     for (size_t i = 0; i < d.est.size() && i < fit.prior_std.size(); ++i) d.prior[d.est[i]] = fit.prior_std[i];
+  } else {
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(d.table.size());
+    for (size_t i = 0; i < d.est.size() && i < fit.placement.size(); ++i) u[d.est[i]] = fit.placement[i];
+    d.prior = PlacementRows(u, d.est);
   }
   if (!options.robust.empty() && options.robust != "none" && !(d.robust_scale > 0))
     throw std::invalid_argument("refit: robust loss without a robust scale in the reference result");
@@ -59,9 +66,15 @@ void TrialStd(const Eigen::VectorXd& r, const Eigen::MatrixXd& Jw, const Eigen::
               const std::vector<int>& est, const Eigen::VectorXd& prior_all, const IdentifyOptions& options,
               RefitResult* out) {
   const int rows = static_cast<int>(r.size());
-  if (prior_all.size()) {
+  const int p = static_cast<int>(est.size());
+  // A least-squares fit's placement rows hold +inf where there is no row.
+  bool map = prior_all.size() > 0;
+  Eigen::VectorXd place = Eigen::VectorXd::Zero(p);
+  for (int i = 0; map && i < p; ++i) map = std::isfinite(prior_all[est[i]]);
+  if (prior_all.size() && !map)
+    for (int i = 0; i < p; ++i) place[i] = std::isfinite(prior_all[est[i]]) ? prior_all[est[i]] : 0.0;
+  if (map) {
     // Posterior covariance as Identify's MAP branch.
-    const int p = static_cast<int>(est.size());
     Eigen::VectorXd prior(p);
     for (int i = 0; i < p; ++i) prior[i] = prior_all[est[i]];
     const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
@@ -74,8 +87,12 @@ void TrialStd(const Eigen::VectorXd& r, const Eigen::MatrixXd& Jw, const Eigen::
     out->sigma = std::sqrt(r.squaredNorm() / dof);
     out->std = (k2 * Cs.diagonal()).cwiseMax(0.0).cwiseSqrt().cwiseProduct(prior);
   } else {
-    const Identifiability id = AnalyzeJacobian(Jw, options.rank_tolerance);
-    const int dof = rows - id.rank;
+    const Identifiability id = AnalyzeJacobian(WithPlacementRows(Jw, place), options.rank_tolerance);
+    // As Identify: the placement rows are not data.
+    double prior_share = 0;
+    for (int j = 0; j < p; ++j)
+      if (place[j] > 0) prior_share += id.inverse_normal(j, j) / (place[j] * place[j]);
+    const int dof = rows - static_cast<int>(std::lround(id.rank - prior_share));
     out->sigma = dof > 0 ? std::sqrt(r.squaredNorm() / dof) : 0.0;
     const double s2 = dof > 0 ? r.cwiseProduct(w).squaredNorm() / dof : 0.0;
     out->std = (s2 * id.inverse_normal.diagonal()).cwiseMax(0.0).cwiseSqrt();

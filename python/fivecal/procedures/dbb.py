@@ -834,24 +834,30 @@ def wang_identify(dataset: Union[Dataset, Mapping], estimate: Sequence[str] = WA
                   setup: str = WANG_SETUP, candidates: Sequence[str] = WANG_CANDIDATES,
                   include_ball_placement: bool = True) -> WangIdentification:
     """Fit ``estimate`` (default the paper's four errors; the bar length is
-    added) to every reading of the trace. Then add each further candidate
-    (the other C and A location errors and, with ``include_ball_placement``,
-    the ball placements ``dbb.<setup>.tool|table.x|y|z``) on its own and let
-    the engine say whether this path separates it from the fitted set."""
+    added) to every reading of the trace, with the ball placements
+    ``dbb.<setup>.tool|table.x|y|z`` estimated under their placement
+    uncertainty (docs/setup_uncertainty.md): the table ball's height and
+    offset are not known to the micrometre, and an error this path confounds
+    with them gets the sigma the placement allows instead of a confident
+    wrong value. Then add each further candidate (the other C and A location
+    errors and, with ``include_ball_placement``, the ball placements) on its
+    own to ``estimate`` with the set-up taken as exact, and let the engine
+    say whether the path itself separates it from the fitted set."""
     import warnings
 
     ds = Dataset.from_dict(dataset)
     _dbb_rows(ds, setup)
     estimate = list(estimate)
-    result = identify(ds, estimate)
+    placements = [f"dbb.{setup}.{b}.{c}" for b in ("tool", "table") for c in "xyz"]
+    result = identify(ds, estimate + [p for p in placements if p not in estimate])
     cand = [c for c in candidates if c not in estimate]
     if include_ball_placement:
-        cand += [f"dbb.{setup}.{b}.{c}" for b in ("tool", "table") for c in "xyz"]
+        cand += [p for p in placements if p not in estimate]
     verdicts = {}
     for c in cand:
         with warnings.catch_warnings():  # probing confounded sets on purpose: not a failed fit
             warnings.simplefilter("ignore", guards.FitWarning)
-            r = identify(ds, estimate + [c], allow_unidentifiable=True)
+            r = identify(ds, estimate + [c], allow_unidentifiable=True, setup_priors=False)
         if r.rank < r.n_parameters:
             groups = [list(g) for g in r.unidentifiable if c in g]
             partners = [n for n in (groups[0] if groups else []) if n != c]

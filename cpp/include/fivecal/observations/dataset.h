@@ -127,6 +127,11 @@ class Dataset {
   // observation of that instrument without its own sigma declares; one value
   // per residual row of its kind, or one for all when its rows share a unit.
   std::map<std::string, Eigen::VectorXd> instrument_sigma;
+  // Placement uncertainty of set-up quantities ("setup_uncertainty" in the
+  // file): set-up parameter name or "class:<class>" -> one sigma in the
+  // parameter's unit (mm, rad), overriding the kinds' defaults (priors.h
+  // PlacementSigma; docs/setup_uncertainty.md).
+  std::map<std::string, double> setup_uncertainty;
 
   // Throws std::invalid_argument naming the observation index and field.
   void Validate() const;

@@ -217,6 +217,11 @@ class KindSetup {
   virtual bool IsParameterName(const std::string& rest) const = 0;
   virtual std::vector<PriorClass> prior_classes() const { return {}; }
   virtual const char* PriorClassOfName(const std::string& name) const = 0;
+  // The placement uncertainty (one sigma, in the parameter's unit) a
+  // person's set-up gives the kind's parameter `name` when the dataset
+  // declares none (priors.h PlacementSigma); 0: not a placed quantity (the
+  // data find it, as a reading zero or an artefact's unknown position).
+  virtual double DefaultPlacement(const std::string& /*name*/) const { return 0.0; }
   // Instrument mounting position parameters of `o` (empty when the kind has
   // none): a fit that estimates none of them cannot be adequate.
   virtual std::vector<int> MountPositions(const ParameterTable&, const Observation&) const { return {}; }

@@ -103,6 +103,9 @@ void ReportPoint(const ReportContext& c, const Observation& o, const double* r, 
                  Eigen::Vector3d* vector);
 // The prior class of any instrument.<id>.<field> name (nullptr otherwise).
 const char* PriorClassOfName(const std::string& name);
+// The placement uncertainty of an instrument's pose (point, pose and distance
+// share it): docs/setup_uncertainty.md.
+double DefaultPlacement(const std::string& name);
 // The refusal of an id two kinds would give different parameters under one
 // name (a station and a tracker both called "L1").
 [[noreturn]] void IdClash(const std::string& id);

@@ -45,6 +45,12 @@ struct IdentifyOptions {
   // MAP fit (prior rows) for explicit lists too; "auto" always fits under the
   // priors, explicit lists and "location" are plain least squares by default.
   bool prior = false;
+  // Placement priors on the estimated set-up quantities (priors.h
+  // PlacementSigma, the dataset's "setup_uncertainty"). false: every set-up
+  // quantity is taken as exact where it is not estimated freely -- what a
+  // set-up measured beforehand allows, and what an identifiability analysis
+  // of the path alone ("which errors can this test separate") wants.
+  bool setup_priors = true;
   // Estimate the noise of each instrument group (probe touches, ball bar,
   // ball3d) from the residuals (variance components) instead of trusting the
   // declared sigmas; the covariance then uses the estimated noise.
@@ -106,6 +112,10 @@ struct Result {
   // Priors and statistical guards (priors.h). Per estimated parameter:
   std::vector<double> prior_std;      // prior sigma used (scaling, MAP rows)
   std::vector<double> informed;       // std / prior_std; < kInformedThreshold: informed by the data
+  // Placement uncertainty of each estimated set-up quantity (priors.h
+  // PlacementSigma; 0: none, and for every machine error): its prior row in
+  // this fit (a MAP fit's prior_std already holds it, combined).
+  std::vector<double> placement;
   std::vector<std::string> undetermined;  // estimated, but not determined by this data
   std::vector<std::string> implausible;   // |value| > kImplausibleSigmas prior sigmas
   // estimate "auto": the factor (0.001-1) the data put on each machine-error

@@ -20,6 +20,7 @@
 #ifndef FIVECAL_PRIORS_H_
 #define FIVECAL_PRIORS_H_
 
+#include <Eigen/Core>
 #include <map>
 #include <string>
 #include <vector>
@@ -34,6 +35,43 @@ struct PriorClass {
   std::string unit;
   std::string description;  // what it covers and why this size
 };
+
+// Placement uncertainty of the set-up quantities a person places (a ball on
+// its nest, a ball bar's calibrated length, a sphere's certified radius, a
+// tracker on its tripod): one sigma about the nominal the dataset gives, in
+// the parameter's unit. Unlike the plausible size above (which scales the
+// identifiability analysis and the MAP rows of "auto"), it is what the user
+// knows of the set-up, and it enters EVERY fit that estimates the parameter
+// as one prior row (theta_j - 0) / u_j: least squares becomes a MAP fit in
+// the set-up parameters only. A machine error confounded with a placement
+// then gets the sigma the placement allows instead of being fitted as if the
+// set-up were exact (or refused as confounded). Defaults come from each
+// observation kind (ObservationKind::DefaultPlacement; docs/setup_uncertainty.md
+// lists and argues them); a dataset overrides them in "setup_uncertainty"
+// (parameter name or "class:<prior class>" -> sigma), a name beating its class.
+// 0: the quantity is not a placement (the data find it), no prior row.
+double PlacementSigma(const Machine& m, const std::string& name,
+                      const std::map<std::string, double>& dataset_overrides);
+std::vector<double> PlacementScales(const Machine& m, const std::vector<std::string>& names,
+                                    const std::map<std::string, double>& dataset_overrides);
+
+// Throws std::invalid_argument naming `where` and the key unless every key is
+// a set-up parameter among `names` (not a machine error: their priors belong
+// in the machine file) or "class:<class>" of a set-up parameter class, and
+// every value is finite and > 0 (a quantity known exactly is fixed, not given
+// a zero uncertainty).
+// The prior rows of a least-squares fit: per table entry the placement sigma
+// of each estimated parameter that has one and +inf (no row) elsewhere;
+// empty when no estimated parameter has one (the plain fit, no per-row or
+// per-parameter cost).
+Eigen::VectorXd PlacementRows(const Eigen::VectorXd& placement_all, const std::vector<int>& est);
+// Jw (weighted Jacobian, or any factor R with R^T R = Jw^T Jw) with one row
+// e_j / u_j appended per column j whose u_j > 0: the placement rows as the
+// analyses (rank, determination, covariance) see them.
+Eigen::MatrixXd WithPlacementRows(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& u);
+
+void ValidateSetupUncertainty(const Machine& m, const std::map<std::string, double>& u, const std::string& where,
+                              const std::vector<std::string>& names);
 
 // The documented default table (docs/identification.md lists the same).
 const std::vector<PriorClass>& PriorClasses();
