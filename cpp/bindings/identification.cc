@@ -206,6 +206,23 @@ void BindIdentification(py::module_& m) {
       .def_readonly("adequate", &Result::adequate)
       .def_readonly("adequacy", &Result::adequacy)
       .def_readonly("finite", &Result::finite)
+      .def_readonly("seeks_machine_errors", &Result::seeks_machine_errors)
+      .def_readonly("identified_machine_errors", &Result::identified_machine_errors)
+      .def_readonly("held", &Result::held)
+      .def_property_readonly("not_determined",
+                             [](const Result& r) {
+                               py::list out;
+                               for (const NotDetermined& f : r.not_determined) {
+                                 py::dict d;
+                                 d["family"] = f.family;
+                                 d["machine"] = f.machine;
+                                 d["estimated"] = f.estimated;
+                                 d["names"] = f.names;
+                                 d["why"] = f.why;
+                                 out.append(d);
+                               }
+                               return out;
+                             })
       .def_property_readonly("verdict", &Result::verdict)
       .def("to_json", &Result::ToJson);
 
@@ -234,6 +251,9 @@ void BindIdentification(py::module_& m) {
   // other unknown name, so a typo such as EX0C.x is never silently dropped.
   m.def("is_setup_parameter_name", &IsSetupParameterName, py::arg("name"));
   m.def("informed_threshold", []() { return kInformedThreshold; });
+  m.def("absent_class_scale", []() { return kAbsentClassScale; });
+  m.def("identified_ratio", []() { return kIdentifiedRatio; });
+  m.def("significant_sigmas", []() { return kSignificantSigmas; });
 
   m.def(
       "identify",
