@@ -249,8 +249,8 @@ class Result:
         machine_names = set(m.parameter_names())
         und, part, impl, held = set(fd.undetermined), set(fd.partly), set(fd.implausible), set(fd.held)
         # One row per parameter the data told something about; those it did not
-        # are summarised per family below (hundreds of rows would bury the rest).
-        shown = [n for n in self.estimated if n not in und or n in impl]
+        # (or held near 0) are summarised below (hundreds of rows would bury the rest).
+        shown = [n for n in self.estimated if (n not in und and n not in held) or n in impl]
         if shown:
             lines.append(f"  {'parameter':<18}{'value':>14}{'std':>12}"
                          + (f"{'prior':>12}{'informed':>10}" if with_prior else "") + "  unit")

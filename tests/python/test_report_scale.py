@@ -173,7 +173,9 @@ def dbb_trace(n):
 def test_report_of_1e5_ball_bar_samples_stays_under_1_gb(tmp_path):
     """``identify --report`` on 10^5 samples: peak memory of the process
     under 1 GB (a full SVD of the trace made a 10^5 x 10^5 matrix: 74 GB,
-    MemoryError), the report written, in well under a minute."""
+    MemoryError), the report written, in well under a minute. (The
+    'location' fit: the default 'auto' fit of 10^5 samples alone takes minutes
+    on a shared machine; the report path is the same.)"""
     path = tmp_path / "trace.parquet"
     fivecal.save_dataset(dbb_trace(100_000), path)
     # A process of its own runs the command: its children's peak is the command's alone.
@@ -183,13 +185,14 @@ def test_report_of_1e5_ball_bar_samples_stays_under_1_gb(tmp_path):
              "time.perf_counter() - t); sys.stderr.write(p.stderr)")
     env = dict(os.environ, FIVECAL_PROGRESS="0")
     p = subprocess.run([sys.executable, "-c", watch, sys.executable, "-m", "fivecal", "identify", str(path),
-                        "--report", str(tmp_path / "rep")], capture_output=True, text=True, env=env, timeout=600)
+                        "--estimate", "location", "--report", str(tmp_path / "rep")], capture_output=True,
+                       text=True, env=env, timeout=600)
     rc, peak_kb, took = p.stdout.split()
     peak_mb = int(peak_kb) / 1024  # ru_maxrss is in KB on Linux
-    assert int(rc) in (0, 1), p.stderr
+    assert int(rc) == 0, p.stderr
     assert "internal error" not in p.stderr and (tmp_path / "rep" / "report.html").is_file(), p.stderr
     assert peak_mb < 1024, f"peak RSS {peak_mb:.0f} MB"
     for f in os.listdir(tmp_path / "rep"):
         if f.endswith(".png"):
             assert max(png_size(tmp_path / "rep" / f)) <= plots.MAX_FIGURE_PX, f
-    assert float(took) < 120, took
+    assert float(took) < 60, took

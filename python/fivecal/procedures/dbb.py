@@ -191,10 +191,9 @@ def ball_positions(ds: Dataset, setup: str, rows=None):
     ds = Dataset.from_dict(ds)
     idx = _dbb_rows(ds, setup) if rows is None else [int(i) for i in rows]
     m = ds.machine
-    obs = [ds.observations[i] for i in idx]
-    q = np.array([[o["axes"].get(a, 0.0) for a in m.axis_names] for o in obs])
-    tool = np.asarray(obs[0]["tool_ball"], float)
-    table = np.asarray(obs[0]["table_ball"], float)
+    q = ds._core.columns()["axes"][idx]  # machine axis order, without a dict per sample
+    tool = np.asarray(ds.observations[idx[0]]["tool_ball"], float)
+    table = np.asarray(ds.observations[idx[0]]["table_ball"], float)
     S, B = _core.dbb_ball_positions(m._core, q, tool, table)
     return np.asarray(S), np.asarray(B), idx
 

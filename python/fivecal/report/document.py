@@ -280,7 +280,8 @@ def _findings_section(result, fd) -> str:
                      "determined)</small> " + names(sep)))
     if fd.absent:
         rows.append(("Error classes the data show no sign of", "<small>(held near 0 in the point "
-                     "estimate)</small> " + _e(", ".join(c.replace("_", " ") for c in fd.absent))))
+                     "estimate)</small> " + _e(", ".join(c.replace("_", " ") for c in fd.absent))
+                     + (f"; determined there, so held near 0: {names(fd.held)}" if fd.held else "")))
     if fd.implausible:
         rows.append(("Implausible", "<small>(far outside the plausible size: check units, setup, the "
                      "nominal)</small> " + names(fd.implausible)))
@@ -438,7 +439,7 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
     other = [n for n in est if n not in mach]
 
     fd = guards.findings(result)
-    und, part, impl = set(fd.undetermined), set(fd.partly), set(fd.implausible)
+    und, part, impl, held = set(fd.undetermined), set(fd.partly), set(fd.implausible), set(fd.held)
     prior = getattr(result, "prior_std", None) or {}
 
     def row(n: str) -> str:
@@ -448,7 +449,7 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
         notes = []
         if n in und:
             notes.append("NOT DETERMINED by this data: value arbitrary, never compensated")
-        elif n in set(fd.held):
+        elif n in held:
             notes.append("held near 0: its class shows no sign in the data")
         elif n in part:
             notes.append("informed only in part by the data")
@@ -482,7 +483,7 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
             + ("<th>prior σ</th><th>informed (σ/prior σ)</th>" if prior else "")
             + ("<th>true</th><th>z</th>" if truth is not None else "")
             + "<th>notes</th></tr>")
-    told = lambda n: n not in und or n in impl  # noqa: E731
+    told = lambda n: (n not in und and n not in held) or n in impl  # noqa: E731
     return (head + "".join(row(n) for n in mach if told(n)), head + "".join(row(n) for n in other if told(n)),
             head + "".join(row(n) for n in mach + other if not told(n)))
 
@@ -496,8 +497,8 @@ def _parameter_section(result, machine, truth) -> Tuple[str, str]:
     out = ["<p>Values in µm, µrad, µm/m (µm/m per mm of travel for linear error-motion slopes, "
            "µrad/rad for rotary ones); files keep mm and rad. u: one-sigma standard uncertainty; "
            "U: expanded uncertainty (k = 2). Sign conventions: see the notes at the end."
-           + (f" The {_count(n_und, 'parameter')} the data did not determine are listed at the end." if n_und
-              else "") + "</p>",
+           + (f" The {_count(n_und, 'parameter')} the data did not determine (or held near 0) are listed at the "
+              "end." if n_und else "") + "</p>",
            "<h3>Machine errors</h3>",
            f"<table>{mach_rows}</table>" if n_mach else
            "<p>None determined by this data: no values to show.</p>"]
@@ -513,8 +514,8 @@ def _parameter_section(result, machine, truth) -> Tuple[str, str]:
                        f"<td>{_e(unit)}</td></tr>")
         out.append("</table>")
     rest = ("" if not n_und else
-            f"<details id='undetermined'><summary>Every parameter not determined by this data ({n_und}; values "
-            "arbitrary, never compensated)</summary><table>" + und_rows + "</table></details>")
+            f"<details id='undetermined'><summary>Every parameter this data did not determine or held near 0 "
+            f"({n_und})</summary><table>" + und_rows + "</table></details>")
     return "".join(out), rest
 
 

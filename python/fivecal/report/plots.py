@@ -72,7 +72,7 @@ def plot_parameters(result, path: str, names=None, truth: Optional[Mapping[str, 
         v = np.array([result.values[n] for n in ns]) * f
         s = np.array([result.std[n] for n in ns]) * f
         y = np.arange(len(ns))
-        ax.barh(y, v, xerr=2 * s, color="#4c78a8", ecolor="#222", capsize=3, label="identified")
+        ax.barh(y, v, xerr=2 * s, color="#4c78a8", ecolor="#222", capsize=3, label="estimate")
         if truth is not None:
             t = np.array([truth.get(n, 0.0) for n in ns]) * f
             ax.scatter(t, y, marker="|", s=300, color="#e45756", zorder=3, label="true")
@@ -493,8 +493,8 @@ def plot_residual_histogram(result, path: str) -> str:
 def plot_correlation(result, path: str, names=None, title: str = "Parameter correlation") -> str:
     """The correlation of the estimated parameters (or of ``names``, a subset
     of them). Up to :data:`CORRELATION_MATRIX_MAX` parameters, the matrix as a
-    colour map from -1 (blue) to +1 (red), pairs beyond ±0.9 marked with their
-    value up to 30 parameters; beyond, the :data:`CORRELATION_PAIRS` pairs of
+    colour map from -1 (blue) to +1 (red), every pair marked with its value up
+    to 12 parameters and pairs beyond ±0.9 up to 30; beyond, the :data:`CORRELATION_PAIRS` pairs of
     largest |r| as bars (a matrix of a hundred names has unreadable labels)."""
     plt = _pyplot()
     est = list(result.estimated)
@@ -528,9 +528,9 @@ def plot_correlation(result, path: str, names=None, title: str = "Parameter corr
     ax.set_yticks(np.arange(n), names, fontsize=fs)
     for i in range(n):
         for j in range(n):
-            if n <= 30 and i != j and abs(C[i, j]) >= 0.9:
+            if i != j and (n <= 12 or (n <= 30 and abs(C[i, j]) >= 0.9)):
                 ax.text(j, i, f"{C[i, j]:.2f}", ha="center", va="center", fontsize=max(fs - 2, 4),
-                        color="w")
+                        color="w" if abs(C[i, j]) >= 0.6 else "k")
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03, label="correlation coefficient")
     ax.set_title(title)
     fig.tight_layout()

@@ -468,10 +468,12 @@ def dbb_panels(result) -> tuple:
     return panels, skipped
 
 
-def dbb_figure(result, title: Optional[str] = None):
+def dbb_figure(result, title: Optional[str] = None, panels=None):
     """The report's ball bar Figure: one polar panel per DBB setup, plane
-    and bar length (never two on one panel). None without DBB data."""
-    panels, _ = dbb_panels(result)
+    and bar length (never two on one panel). None without DBB data.
+    ``panels``: those of :func:`dbb_panels` when already made."""
+    if panels is None:
+        panels, _ = dbb_panels(result)
     if not panels:
         return None
     ncols = 1 if len(panels) == 1 else (2 if len(panels) in (2, 4) else 3)
@@ -489,7 +491,7 @@ def report_figures(result, out_dir: str) -> list:
     out = []
     panels, skipped = dbb_panels(result)
     if panels:
-        fig = dbb_figure(result)
+        fig = dbb_figure(result, panels=panels)
         path = os.path.join(out_dir, "dbb_polar.png")
         save_capped(fig, path, 100)
         setups = ", ".join(p["setup"] or "(none)" for p in panels)
