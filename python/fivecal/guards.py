@@ -77,7 +77,7 @@ class Assessment:
     #: what the data could not tell, one dict per family of parameters (family,
     #: machine, estimated, names, why: the measurement that would tell it)
     not_determined: List[dict] = field(default_factory=list)
-    #: a fit for machine errors that determined none of them
+    #: a fit for machine errors that identified none of them
     nothing_identified: bool = False
 
     @property
@@ -140,7 +140,7 @@ def _fields(source) -> Optional[dict]:
                 "noise_estimated": bool(getattr(source, "variance_components", None)),
                 "chi2": chi2 if _finite(chi2) else None, "dof": getattr(source, "dof", None),
                 "p": getattr(source, "chi2_p", None),
-                "determined": getattr(source, "identified_machine_errors", None),
+                "identified": getattr(source, "identified_machine_errors", None),
                 "map_fit": bool(getattr(source, "map_fit", False)),
                 "not_determined": list(getattr(source, "not_determined", None) or [])}
     if isinstance(source, Mapping) and isinstance(source.get("parameters"), Mapping) and (
@@ -164,7 +164,7 @@ def _fields(source) -> Optional[dict]:
                 "adequate": source.get("adequate"), "adequacy": source.get("adequacy") or "",
                 "noise_estimated": bool(source.get("variance_components")),
                 "chi2": c.get("value") if _finite(c.get("value")) else None, "dof": c.get("dof"),
-                "p": c.get("p"), "determined": source.get("identified_machine_errors"),
+                "p": c.get("p"), "identified": source.get("identified_machine_errors"),
                 "map_fit": bool(source.get("map_fit")),
                 "not_determined": [f for f in source.get("not_determined") or [] if isinstance(f, Mapping)]}
     return None
@@ -230,7 +230,7 @@ def assess(source: Any) -> Assessment:
                       + (f" ({words})" if words else ""))
         if f["adequacy"]:
             reason += f"; likely cause: {f['adequacy']}"
-    nothing = verdict == "undetermined" and f["determined"] == 0
+    nothing = verdict == "undetermined" and f["identified"] == 0
     if nothing:
         machine = sum(int(x.get("estimated", 0)) for x in f["not_determined"] if x.get("machine", True))
         reason = ("no machine error identified: the data determined none of the "
