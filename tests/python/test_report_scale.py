@@ -23,6 +23,7 @@ import pytest
 import fivecal
 from fivecal import cli as fivecal_cli
 from fivecal.report import plots
+from test_long_data_fit import rtest
 from test_report import run_chromium
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
@@ -173,14 +174,17 @@ def dbb_trace(n):
                                 readings=readings, setup="C1")
 
 
-def test_report_of_1e5_ball_bar_samples_stays_under_1_gb(tmp_path):
-    """``identify --report`` on 10^5 samples: peak memory of the process
-    under 1 GB (a full SVD of the trace made a 10^5 x 10^5 matrix: 74 GB,
-    MemoryError), the report written, in well under a minute. (The
-    'location' fit: the default 'auto' fit of 10^5 samples alone takes minutes
-    on a shared machine; the report path is the same.)"""
-    path = tmp_path / "trace.parquet"
-    fivecal.save_dataset(dbb_trace(100_000), path)
+@pytest.mark.parametrize("kind", ["dbb", "ball3d"])
+def test_report_of_1e5_samples_stays_under_1_gb(tmp_path, kind):
+    """``identify --report`` on 10^5 ball bar or R-test samples: peak memory
+    of the process under 1 GB (a full SVD of the ball bar trace made a
+    10^5 x 10^5 matrix: 74 GB, MemoryError), the report written, in well
+    under a minute. (The 'location' fit: the default 'auto' fit of 10^5
+    samples alone takes minutes on a shared machine; the report path is the
+    same.)"""
+    path = tmp_path / "samples.parquet"
+    fivecal.save_dataset(dbb_trace(100_000) if kind == "dbb" else rtest(fivecal.Machine.load(C600U), 100_000),
+                         path)
     # A process of its own runs the command: its children's peak is the command's alone.
     watch = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
              "p = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
