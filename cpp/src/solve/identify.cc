@@ -440,7 +440,8 @@ std::string WhyNotDetermined(const Dataset& ds, const std::vector<AxisSeen>& see
         }
       if (axes.empty()) continue;
       const bool one = axes.size() == 1;
-      const bool same = std::all_of(counts.begin(), counts.end(), [&](const std::string& c) { return c == counts[0]; });
+      const bool same =
+          std::all_of(counts.begin(), counts.end(), [&](const std::string& c) { return c == counts[0]; });
       const std::string what = rotary ? " indexation" : " position";
       const std::string seen_at = " seen at " + (same ? counts[0] : JoinAnd(counts)) + what +
                                   (same && counts[0] == "1" ? "" : "s") + (same && !one ? " each" : "");
