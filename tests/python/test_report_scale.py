@@ -144,9 +144,9 @@ def test_reports_fit_on_one_screen_before_their_details(reports, tmp_path):
 
 def test_report_takes_a_few_times_the_fit(tmp_path):
     """The report of an example costs a small multiple of the command without
-    it (matplotlib's import and three small figures), not the several times of
-    figures thousands of pixels wide (7x before). Timed back to back, so that
-    the load of a shared machine weighs on both."""
+    it (matplotlib's import and three small figures), not the 6-8 times of
+    figures thousands of pixels wide. Timed back to back, so that the load of a
+    shared machine weighs on both."""
     table, side = EXAMPLES["probing"]
     ds = tmp_path / "probing.json"
     assert fivecal_cli.main(["import", "probing", os.path.join(EX, table), "--sidecar", os.path.join(EX, side),
@@ -159,7 +159,8 @@ def test_report_takes_a_few_times_the_fit(tmp_path):
         t0 = time.perf_counter()
         assert run("identify", ds, "--report", tmp_path / f"rep{k}").returncode == 1
         with_report.append(time.perf_counter() - t0)
-    assert min(with_report) < 3.0 * min(alone), (with_report, alone)
+    # about 3x now (matplotlib's import and a 3D figure on a 0.2 s fit), 6-8x before
+    assert min(with_report) < 4.5 * min(alone), (with_report, alone)
 
 
 def dbb_trace(n):
