@@ -205,6 +205,8 @@ void BindIdentification(py::module_& m) {
       .def_readonly("chi2_p", &Result::chi2_p)
       .def_readonly("adequate", &Result::adequate)
       .def_readonly("adequacy", &Result::adequacy)
+      .def_readonly("plausible", &Result::plausible)
+      .def_readonly("plausibility", &Result::plausibility)
       .def_readonly("finite", &Result::finite)
       .def_readonly("seeks_machine_errors", &Result::seeks_machine_errors)
       .def_readonly("identified_machine_errors", &Result::identified_machine_errors)

@@ -3,7 +3,9 @@ the refusal every consumer (report, compensation, error table, G-code, the
 command line) applies before it hands values to a machine.
 
 A result is usable when the solver converged, every value and uncertainty
-is finite, the residuals agree with the declared instrument noise (chi-square
+is finite, no machine error the data determined lies far beyond its
+plausible size (a 100 mm pivot says the machine file is wrong, not the
+machine), the residuals agree with the declared instrument noise (chi-square
 test, when the fit reports it), every parameter the user asked for was
 determined by the data and, for a fit for machine errors, the data
 identified at least one of them: determined it to a tenth of its plausible
@@ -30,12 +32,13 @@ __all__ = ["FitWarning", "UnusableResultError", "CorrectionLimitError", "Assessm
            "require_usable", "VERDICTS"]
 
 #: the verdicts of a fit, best first
-VERDICTS = ("ok", "not_converged", "non_finite", "inadequate", "undetermined")
+VERDICTS = ("ok", "not_converged", "non_finite", "implausible", "inadequate", "undetermined")
 
 
 class FitWarning(UserWarning):
     """:func:`fivecal.identify` returned a result that is not usable (not
-    converged, non-finite, inadequate or undetermined); the message says why."""
+    converged, non-finite, implausible, inadequate or undetermined); the
+    message says why."""
 
 
 class UnusableResultError(ValueError):
@@ -137,6 +140,8 @@ def _fields(source) -> Optional[dict]:
                 "undetermined": getattr(source, "undetermined", None),
                 "implausible": list(getattr(source, "implausible", []) or []),
                 "adequate": getattr(source, "adequate", None), "adequacy": getattr(source, "adequacy", ""),
+                "plausible": getattr(source, "plausible", None),
+                "plausibility": getattr(source, "plausibility", "") or "",
                 "noise_estimated": bool(getattr(source, "variance_components", None)),
                 "chi2": chi2 if _finite(chi2) else None, "dof": getattr(source, "dof", None),
                 "p": getattr(source, "chi2_p", None),
@@ -162,6 +167,7 @@ def _fields(source) -> Optional[dict]:
                 "undetermined": source.get("undetermined"),
                 "implausible": list(source.get("implausible") or []),
                 "adequate": source.get("adequate"), "adequacy": source.get("adequacy") or "",
+                "plausible": source.get("plausible"), "plausibility": source.get("plausibility") or "",
                 "noise_estimated": bool(source.get("variance_components")),
                 "chi2": c.get("value") if _finite(c.get("value")) else None, "dof": c.get("dof"),
                 "p": c.get("p"), "identified": source.get("identified_machine_errors"),
@@ -206,6 +212,8 @@ def assess(source: Any) -> Assessment:
             verdict = "non_finite"
         elif not f["converged"]:
             verdict = "not_converged"
+        elif f["plausible"] is False:
+            verdict = "implausible"
         elif f["adequate"] is False:
             verdict = "inadequate"
         elif confounded or (f["undetermined"] is None and undetermined):
@@ -220,6 +228,12 @@ def assess(source: Any) -> Assessment:
         it = f["iterations"]
         reason = ("the fit did not converge" + (f" in {it} iterations" if it else "")
                   + ": its values are not a solution of the problem")
+    elif verdict == "implausible":
+        reason = ("values far outside their plausible size: "
+                  + (f["plausibility"] or (name_list(f["implausible"]) + ": likely cause: the machine file's "
+                                           "nominal geometry (axis points and directions) is not the machine's, "
+                                           "or a value is in the wrong unit; correct the machine file and fit "
+                                           "again")))
     elif verdict == "inadequate":
         words = _chi2_words(f["chi2"], f["dof"], f["p"])
         if f.get("noise_estimated"):

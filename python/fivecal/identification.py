@@ -57,7 +57,8 @@ class Result:
         self.informed: dict = {n: float(s) for n, s in zip(self.estimated, core.informed)}
         #: estimated parameters this data did not determine (their values are the prior's, not measured)
         self.undetermined: list = list(core.undetermined)
-        #: values beyond 5 prior sigmas (flagged, not refused)
+        #: values beyond 5 prior sigmas (flagged; a determined machine error among them makes
+        #: the fit not usable: :attr:`plausible`)
         self.implausible: list = list(core.implausible)
         #: True when the fit had prior rows (estimate "auto" or prior=True)
         self.map_fit: bool = core.map_fit
@@ -83,6 +84,11 @@ class Result:
         self.adequacy: str = core.adequacy
         #: every value and std finite
         self.finite: bool = core.finite
+        #: False when the data put a machine error far beyond its plausible size (a 100 mm
+        #: pivot): the machine file's nominal geometry is wrong; ``plausibility`` names the
+        #: values and the likely cause (verdict "implausible")
+        self.plausible: bool = core.plausible
+        self.plausibility: str = core.plausibility
         #: machine errors the data identified: determined (not :attr:`held`) to a tenth of
         #: their prior sigma, or beyond 2 sigma of 0; a fit for machine errors with none is
         #: not usable (verdict "undetermined")
@@ -94,7 +100,7 @@ class Result:
         #: offsets, location angles, scale gains, error motions of one degree, backlash,
         #: set-up): family, machine, estimated, names and why (the measurement that would tell it)
         self.not_determined: list = list(core.not_determined)
-        #: "ok", "not_converged", "inadequate", "non_finite" or "undetermined"
+        #: "ok", "not_converged", "implausible", "inadequate", "non_finite" or "undetermined"
         self.verdict: str = core.verdict
 
     def machine_errors(self, force: bool = False, include_undetermined: bool = False) -> dict:
@@ -384,7 +390,7 @@ def verdict_lines(result, fd: "guards.Findings") -> list:
                 "Do not compensate a machine with these values."]
     adequacy = (f"the residuals agree with the declared instrument noise ({noise})" if noise else
                 "no chi-square test against the declared noise was reported")
-    return [f"Usable: the fit converged in {it} iterations; {adequacy}."]
+    return [f"OK (usable): the fit converged in {it} iterations; {adequacy}."]
 
 
 #: how reports show a residual of each row unit

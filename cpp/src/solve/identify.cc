@@ -493,6 +493,50 @@ std::vector<NotDetermined> NotDeterminedFamilies(const Dataset& ds, const std::v
   return out;
 }
 
+// The machine errors the data put far beyond their plausible size
+// (kImplausibleSigmas prior sigmas), undetermined ones left out (their
+// values are arbitrary), and the likely cause: no machine is 100 mm off its
+// drawing, so its nominal geometry in the machine file is wrong (or a unit).
+// Empty when every determined machine error is plausible. Set-up values far
+// off stay flags: a person placed them, the machine file did not.
+std::string ImplausibleCause(const Machine& m, const Result& res, const Eigen::VectorXd& values,
+                             const std::vector<int>& est, const Eigen::VectorXd& prior) {
+  constexpr size_t kShown = 4;
+  std::vector<std::string> shown;
+  std::vector<std::string> axes;
+  size_t count = 0;
+  for (size_t j = 0; j < res.estimated.size(); ++j) {
+    const std::string& n = res.estimated[j];
+    const int i = m.ParameterIndex(n);
+    if (i < 0 || m.parameters()[i].kind == ParameterKind::kTip) continue;
+    if (std::find(res.undetermined.begin(), res.undetermined.end(), n) != res.undetermined.end()) continue;
+    const double v = values[est[j]];
+    if (!(std::abs(v) > kImplausibleSigmas * prior[j])) continue;
+    const ParameterInfo& p = m.parameters()[i];
+    const std::string axis(1, m.axis(p.axis).name);
+    if (std::find(axes.begin(), axes.end(), axis) == axes.end()) axes.push_back(axis);
+    if (++count > kShown) continue;
+    char buf[160];
+    if (p.kind == ParameterKind::kLocation)
+      std::snprintf(buf, sizeof buf, "%s = %.6g %s (%.3g times its plausible size, %.3g %s)", n.c_str(),
+                    v * 1e6 * (p.angular() ? 1.0 : 1e-3), p.angular() ? "urad" : "um", std::abs(v) / prior[j],
+                    prior[j] * 1e6 * (p.angular() ? 1.0 : 1e-3), p.angular() ? "urad" : "um");
+    else
+      std::snprintf(buf, sizeof buf, "%s = %.4g (%.3g times its plausible size)", n.c_str(), v,
+                    std::abs(v) / prior[j]);
+    shown.push_back(buf);
+  }
+  if (count == 0) return "";
+  std::string list;
+  for (size_t k = 0; k < shown.size(); ++k) list += (k ? ", " : "") + shown[k];
+  if (count > kShown) list += " and " + std::to_string(count - kShown) + " more";
+  const bool one = axes.size() == 1;
+  return list + ": likely cause: the machine file (machine \"" + m.name() + "\"): its nominal geometry of " +
+         (one ? "axis " : "axes ") + JoinAnd(axes) + " (" + (one ? "its point or direction" :
+                                                             "their points or directions") +
+         ") is not the machine's, or a value is in the wrong unit; correct the machine file and fit again";
+}
+
 void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const ParameterTable& table,
                    const Eigen::VectorXd& r, Result* res) {
   const Machine& m = ds.machine();
@@ -1100,6 +1144,8 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
     if (i >= 0 && ds.machine().parameters()[i].kind != ParameterKind::kTip) res.seeks_machine_errors = true;
   }
   res.not_determined = NotDeterminedFamilies(ds, res.estimated, res.undetermined, res.unidentifiable);
+  res.plausibility = ImplausibleCause(ds.machine(), res, values, est, prior);
+  res.plausible = res.plausibility.empty();
 
   // Adequacy: residuals against the declared noise.
   const double ratio = res.dof > 0 ? chi2 / res.dof : 0.0;
@@ -1174,6 +1220,9 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
 std::string Result::verdict() const {
   if (!finite) return "non_finite";
   if (!converged) return "not_converged";
+  // Before adequacy: a misfit that follows from a wrong nominal geometry is
+  // best told by its cause.
+  if (!plausible) return "implausible";
   if (!adequate) return "inadequate";
   if (explicit_request && !undetermined.empty()) return "undetermined";
   // Set-up quantities alone (a stylus tip, a sphere centre) are no
@@ -1266,6 +1315,8 @@ std::string Result::ToJson() const {
   j["chi2"] = {{"value", Finite(chi2)}, {"dof", dof}, {"p", Finite(chi2_p)}};
   j["adequate"] = adequate;
   j["adequacy"] = adequacy;
+  j["plausible"] = plausible;
+  j["plausibility"] = plausibility;
   j["finite"] = finite;
   j["verdict"] = verdict();
   json corr = json::array();

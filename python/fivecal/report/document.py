@@ -35,7 +35,7 @@ from ..guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
 from ..identification import MICRO_UNITS, noise_lines, verdict_lines
 from ..units import display_scale
 from . import plots
-from .history import sections as _history_sections
+from .history import sections_and_standing as _history_sections
 from .markup import _e, _img_tag, table_html
 
 __all__ = ["write_report", "Section"]
@@ -184,11 +184,14 @@ def _data_section(dataset, result) -> str:
         + "</table>"
 
 
-def _verdict_banner(result, fd) -> str:
-    """The verdict at the top of the report, with its grade: red NOT USABLE
-    when the fit is not usable (never green then), amber USABLE WITH
-    RESERVATIONS, green USABLE only for a usable fit with nothing left
-    undetermined or inseparable."""
+def _verdict_banner(result, fd, standing=None) -> str:
+    """The verdict at the top of the report, with its grade in one word: red
+    NOT USABLE when the fit is not usable (never green then), red FAIL when a
+    usable calibration fails its tolerances (the history's pass / fail),
+    amber UNDECIDED or ALARM (undecided against a tolerance; a change the
+    history's CUSUM detected at this calibration) and amber OK WITH
+    RESERVATIONS, green OK only for a usable fit with nothing left
+    undetermined or inseparable that passes whatever it was graded against."""
     a = fd.assessment
     if not a.usable:
         return (f"<div class='box bad' id='verdict'><b>NOT USABLE — {_e(a.verdict.replace('_', ' '))}.</b> "
@@ -206,9 +209,25 @@ def _verdict_banner(result, fd) -> str:
         notes.append(f"implausible values: {', '.join(fd.implausible)}")
     if fd.inseparable:
         notes.append(f"{len(fd.inseparable)} pairs with |r| ≥ {_NEAR_R:g}")
-    grade = "USABLE WITH RESERVATIONS" if cls == "warn" else "USABLE"
-    text = " ".join(verdict_lines(result, fd))
-    return (f"<div class='box {cls}' id='verdict'><b>{grade}.</b> {_e(text)}"
+    grade = "OK WITH RESERVATIONS" if cls == "warn" else "OK"
+    head = []
+    if standing is not None and standing.grade == "fail":
+        cls, grade = "bad", "FAIL"
+        head.append("out of tolerance: " + _e(guards.name_list(standing.failed) or "see Pass / fail")
+                    + " (see <a href='#history-grade'>Pass / fail</a>)")
+    elif standing is not None and standing.alarms:
+        cls, grade = "warn", "ALARM"
+        head.append("the calibration history detected a change at this calibration: "
+                    + _e(guards.name_list(standing.alarms)) + " (see Calibration history)")
+    elif standing is not None and standing.grade == "undecided":
+        cls, grade = "warn", "UNDECIDED"
+        head.append("within the uncertainty of a tolerance limit (see <a href='#history-grade'>Pass / fail</a>)")
+    elif standing is not None and standing.grade == "pass":
+        notes.insert(0, "within every tolerance")
+    # the grade stands in bold before it: the fit's own words without "OK (usable)"
+    text = "Usable: " + " ".join(verdict_lines(result, fd)).split(": ", 1)[-1]
+    return (f"<div class='box {cls}' id='verdict'><b>{grade}.</b> "
+            + "".join(f"<b>{h}.</b> " for h in head) + _e(text)
             + (f" {_e('; '.join(notes))}." if notes else "") + "</div>")
 
 
@@ -663,12 +682,16 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
                         + (f"; with {len(cnames)} parameters, the {plots.CORRELATION_PAIRS} pairs of largest |r|."
                            if len(cnames) > plots.CORRELATION_MATRIX_MAX else ".")))
     figs += list(figures)
+    standing = None
     if history is not None:
-        sections = list(sections) + _history_sections(history, machine_id, out_dir, result, embed_images)
+        extra, standing = _history_sections(history, machine_id, out_dir, result, embed_images)
+        sections = list(sections) + extra
 
     title = title or f"fivecal identification report — {machine.name}"
     if not fd.assessment.usable:
         title += " — NOT USABLE"
+    elif standing is not None and standing.grade == "fail":
+        title += " — FAIL"
     now = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     body = [f"<h1>{_e(title)}</h1>",
             f"<div class='sub'>fivecal {__version__} · {now} · {_e(machine.name)} "
@@ -676,7 +699,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
             f"{result.rms * 1e3:.3f} µm</div>"]
     # What a reader needs first (the verdict and a compact summary) fits on one
     # screen; the details follow in #details, the longest lists collapsed.
-    body.append(_verdict_banner(result, fd))
+    body.append(_verdict_banner(result, fd, standing))
     if summary:
         body.append(f"<div class='box'>{_e(summary)}</div>")
     nav = ["findings", "machine", "data", "fit", "identifiability", "parameters"] + \

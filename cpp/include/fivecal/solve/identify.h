@@ -132,6 +132,12 @@ struct Result {
   bool adequate = true;
   std::string adequacy;               // the likely cause when not adequate
   bool finite = true;                 // every value and std finite
+  // Machine errors the data determined far beyond their plausible size
+  // (implausible, undetermined ones left out): a 100 mm pivot is the machine
+  // file's nominal geometry, not the machine. Not usable ("implausible");
+  // `plausibility` names the values and the likely cause.
+  bool plausible = true;
+  std::string plausibility;
   bool explicit_request = false;      // no "auto": undetermined parameters make the verdict
   // The fit was to find machine errors (some were estimated, or "auto" /
   // "location" was asked for); with none of them determined it identified
@@ -143,8 +149,9 @@ struct Result {
   std::vector<std::string> held;
   std::vector<NotDetermined> not_determined;  // one per family with undetermined parameters
   std::string fit_path;               // the path that ran: "dense" or "normal_equations"
-  // "ok", "not_converged", "inadequate", "non_finite" or "undetermined"
-  // (requested parameters undetermined, or no machine error determined).
+  // "ok", "not_converged", "implausible", "inadequate", "non_finite" or
+  // "undetermined" (requested parameters undetermined, or no machine error
+  // determined).
   std::string verdict() const;
 
   std::string ToJson() const;
