@@ -433,7 +433,11 @@ def finding_lines(fd: "guards.Findings") -> list:
     # an unconverged, non-finite or inadequate fit identified nothing; one that left
     # requested parameters undetermined did determine the others
     trusted = fd.assessment.verdict in ("ok", "undetermined")
-    out = [f"identified: {n} parameter{'s' if n != 1 else ''}" if trusted else
+    # set-up names are dotted (tip.x, sphere.S1.x); machine errors never are
+    setup = sum(1 for x in fd.identified if "." in x)
+    split = ("" if not setup else " (set-up values only, no machine error)" if setup == n else
+             f" ({n - setup} machine error{'s' if n - setup != 1 else ''}, {setup} set-up value{'s' if setup != 1 else ''})")
+    out = [f"identified: {n} parameter{'s' if n != 1 else ''}{split}" if trusted else
            f"identified: none (the fit is not usable; {n} parameter{'s' if n != 1 else ''} estimated "
            "without a trustworthy value)"]
     if fd.partly:

@@ -179,8 +179,8 @@ def dbb_trace(n):
 def test_report_of_1e5_samples_stays_under_1_gb(tmp_path, kind):
     """``identify --report`` on 10^5 ball bar or R-test samples: peak memory
     of the process under 1 GB (a full SVD of the ball bar trace made a
-    10^5 x 10^5 matrix: 74 GB, MemoryError), the report written, in well
-    under a minute. (The 'location' fit: the default 'auto' fit of 10^5
+    10^5 x 10^5 matrix: 74 GB, MemoryError), the report written, in a
+    minute or so (a quadratic step would take hours). (The 'location' fit: the default 'auto' fit of 10^5
     samples alone takes minutes on a shared machine; the report path is the
     same.)"""
     path = tmp_path / "samples.parquet"
@@ -203,4 +203,5 @@ def test_report_of_1e5_samples_stays_under_1_gb(tmp_path, kind):
     for f in os.listdir(tmp_path / "rep"):
         if f.endswith(".png"):
             assert max(png_size(tmp_path / "rep" / f)) <= plots.MAX_FIGURE_PX, f
-    assert float(took) < 60, took
+    # about 40 s alone; 86 s was seen with eight builds and test runs sharing two cores
+    assert float(took) < 150, took
