@@ -251,6 +251,10 @@ def assess(source: Any) -> Assessment:
                   + (f"{machine} machine errors estimated" if machine else "machine errors")
                   + f" to a tenth of its plausible size or beyond {SIGNIFICANT_SIGMAS:g}σ of 0 (set-up values "
                   "alone are no calibration)")
+        if undetermined and not f["map_fit"]:
+            # an explicit request: the parameters asked for and not determined come first
+            reason = (f"the data did not determine {name_list(undetermined)} (their values are arbitrary, "
+                      f"not measured); {reason}")
     elif verdict == "undetermined":
         names = undetermined or confounded
         reason = ("the data did not determine "

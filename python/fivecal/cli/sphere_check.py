@@ -2,20 +2,17 @@
 from __future__ import annotations
 
 import argparse
-import warnings
 
 from ..dataset import load_dataset
 from ..files import write_text
 from ..procedures import sphere_check
-from .common import _fit_warning, fit_status
+from .common import fit_status
 
 
 def _sphere_check(args) -> int:
     ds = load_dataset(args.dataset)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", category=_fit_warning())  # judged once below, in one line
-        check = sphere_check.evaluate(ds, previous=args.previous, calibrated_stylus=not args.free_stylus,
-                                      backlash=False if args.no_backlash else None, sphere=args.sphere)
+    check = sphere_check.evaluate(ds, previous=args.previous, calibrated_stylus=not args.free_stylus,
+                                  backlash=False if args.no_backlash else None, sphere=args.sphere)
     print(check.report())
     if args.out:
         write_text(args.out, sphere_check.to_json(check) + "\n")
