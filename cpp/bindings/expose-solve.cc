@@ -65,7 +65,26 @@ void BindSolve(py::module_& m) {
       .def_readonly("chi2_p", &Result::chi2_p)
       .def_readonly("adequate", &Result::adequate)
       .def_readonly("adequacy", &Result::adequacy)
+      .def_readonly("plausible", &Result::plausible)
+      .def_readonly("plausibility", &Result::plausibility)
       .def_readonly("finite", &Result::finite)
+      .def_readonly("seeks_machine_errors", &Result::seeks_machine_errors)
+      .def_readonly("identified_machine_errors", &Result::identified_machine_errors)
+      .def_readonly("held", &Result::held)
+      .def_property_readonly("not_determined",
+                             [](const Result& r) {
+                               py::list out;
+                               for (const NotDetermined& f : r.not_determined) {
+                                 py::dict d;
+                                 d["family"] = f.family;
+                                 d["machine"] = f.machine;
+                                 d["estimated"] = f.estimated;
+                                 d["names"] = f.names;
+                                 d["why"] = f.why;
+                                 out.append(d);
+                               }
+                               return out;
+                             })
       .def_property_readonly("verdict", &Result::verdict)
       .def("to_json", &Result::ToJson);
 
@@ -82,6 +101,9 @@ void BindSolve(py::module_& m) {
     return out;
   });
   m.def("informed_threshold", []() { return kInformedThreshold; });
+  m.def("absent_class_scale", []() { return kAbsentClassScale; });
+  m.def("identified_ratio", []() { return kIdentifiedRatio; });
+  m.def("significant_sigmas", []() { return kSignificantSigmas; });
 
   m.def(
       "identify",

@@ -97,6 +97,11 @@ class Result:
     adequate: bool
     adequacy: str
     finite: bool
+    seeks_machine_errors: bool
+    identified_machine_errors: int
+    held: list[str]
+    @property
+    def not_determined(self) -> list[dict]: ...  # family, machine, estimated, names, why
     @property
     def verdict(self) -> str: ...
     def to_json(self) -> str: ...

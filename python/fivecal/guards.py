@@ -3,9 +3,15 @@ the refusal every consumer (report, compensation, error table, G-code, the
 command line) applies before it hands values to a machine.
 
 A result is usable when the solver converged, every value and uncertainty
-is finite, the residuals agree with the declared instrument noise (chi-square
-test, when the fit reports it) and every parameter the user asked for was
-determined by the data. Anything else is refused with the reason in plain
+is finite, no machine error the data determined lies far beyond its
+plausible size (a 100 mm pivot says the machine file is wrong, not the
+machine), the residuals agree with the declared instrument noise (chi-square
+test, when the fit reports it), every parameter the user asked for was
+determined by the data and, for a fit for machine errors, the data
+identified at least one of them: determined it to a tenth of its plausible
+size, or found it beyond 2σ of 0 (set-up values alone, a stylus tip or a
+sphere centre, are no calibration; nor is a value held near 0 because its
+whole class shows no sign in the data). Anything else is refused with the reason in plain
 words unless the caller forces it (``force=True``, ``--force``).
 
 Works on a :class:`fivecal.Result`, on the result JSON (a dict or a file
@@ -20,16 +26,19 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, List, Mapping, Optional
 
+from . import _core
+
 __all__ = ["FitWarning", "UnusableResultError", "CorrectionLimitError", "Assessment", "assess",
            "require_usable", "VERDICTS"]
 
 #: the verdicts of a fit, best first
-VERDICTS = ("ok", "not_converged", "non_finite", "inadequate", "undetermined")
+VERDICTS = ("ok", "not_converged", "non_finite", "implausible", "inadequate", "undetermined")
 
 
 class FitWarning(UserWarning):
     """:func:`fivecal.identify` returned a result that is not usable (not
-    converged, non-finite, inadequate or undetermined); the message says why."""
+    converged, non-finite, implausible, inadequate or undetermined); the
+    message says why."""
 
 
 class UnusableResultError(ValueError):
@@ -68,6 +77,11 @@ class Assessment:
     undetermined: List[str] = field(default_factory=list)  # never export these as measured
     implausible: List[str] = field(default_factory=list)
     judged: bool = True               # False for a plain name -> value mapping
+    #: what the data could not tell, one dict per family of parameters (family,
+    #: machine, estimated, names, why: the measurement that would tell it)
+    not_determined: List[dict] = field(default_factory=list)
+    #: a fit for machine errors that identified none of them
+    nothing_identified: bool = False
 
     @property
     def usable(self) -> bool:
@@ -126,9 +140,14 @@ def _fields(source) -> Optional[dict]:
                 "undetermined": getattr(source, "undetermined", None),
                 "implausible": list(getattr(source, "implausible", []) or []),
                 "adequate": getattr(source, "adequate", None), "adequacy": getattr(source, "adequacy", ""),
+                "plausible": getattr(source, "plausible", None),
+                "plausibility": getattr(source, "plausibility", "") or "",
                 "noise_estimated": bool(getattr(source, "variance_components", None)),
                 "chi2": chi2 if _finite(chi2) else None, "dof": getattr(source, "dof", None),
-                "p": getattr(source, "chi2_p", None)}
+                "p": getattr(source, "chi2_p", None),
+                "identified": getattr(source, "identified_machine_errors", None),
+                "map_fit": bool(getattr(source, "map_fit", False)),
+                "not_determined": list(getattr(source, "not_determined", None) or [])}
     if isinstance(source, Mapping) and isinstance(source.get("parameters"), Mapping) and (
             "converged" in source or "verdict" in source):
         values, std = {}, {}
@@ -148,9 +167,12 @@ def _fields(source) -> Optional[dict]:
                 "undetermined": source.get("undetermined"),
                 "implausible": list(source.get("implausible") or []),
                 "adequate": source.get("adequate"), "adequacy": source.get("adequacy") or "",
+                "plausible": source.get("plausible"), "plausibility": source.get("plausibility") or "",
                 "noise_estimated": bool(source.get("variance_components")),
                 "chi2": c.get("value") if _finite(c.get("value")) else None, "dof": c.get("dof"),
-                "p": c.get("p")}
+                "p": c.get("p"), "identified": source.get("identified_machine_errors"),
+                "map_fit": bool(source.get("map_fit")),
+                "not_determined": [f for f in source.get("not_determined") or [] if isinstance(f, Mapping)]}
     return None
 
 
@@ -172,7 +194,11 @@ def assess(source: Any) -> Assessment:
         return Assessment("ok", judged=False)
     confounded = _flat(f["unidentifiable"])
     undetermined = _flat(f["undetermined"]) if f["undetermined"] is not None else []
-    undetermined += [n for n in confounded if n not in undetermined]
+    if not f["map_fit"] or f["undetermined"] is None:
+        # A least-squares fit's confounded groups are undetermined as a whole. A
+        # MAP fit's groups are of the data alone: its posterior (undetermined)
+        # already says which members the data, with the others' priors, narrowed.
+        undetermined += [n for n in confounded if n not in undetermined]
     bad = [n for n, v in f["values"].items() if not _finite(v)] + \
           [n for n, s in f["std"].items() if not _finite(s) and _finite(f["values"].get(n))]
     if f["rms"] is not None and not _finite(f["rms"]):
@@ -186,6 +212,8 @@ def assess(source: Any) -> Assessment:
             verdict = "non_finite"
         elif not f["converged"]:
             verdict = "not_converged"
+        elif f["plausible"] is False:
+            verdict = "implausible"
         elif f["adequate"] is False:
             verdict = "inadequate"
         elif confounded or (f["undetermined"] is None and undetermined):
@@ -200,6 +228,12 @@ def assess(source: Any) -> Assessment:
         it = f["iterations"]
         reason = ("the fit did not converge" + (f" in {it} iterations" if it else "")
                   + ": its values are not a solution of the problem")
+    elif verdict == "implausible":
+        reason = ("values far outside their plausible size: "
+                  + (f["plausibility"] or (name_list(f["implausible"]) + ": likely cause: the machine file's "
+                                           "nominal geometry (axis points and directions) is not the machine's, "
+                                           "or a value is in the wrong unit; correct the machine file and fit "
+                                           "again")))
     elif verdict == "inadequate":
         words = _chi2_words(f["chi2"], f["dof"], f["p"])
         if f.get("noise_estimated"):
@@ -210,12 +244,24 @@ def assess(source: Any) -> Assessment:
                       + (f" ({words})" if words else ""))
         if f["adequacy"]:
             reason += f"; likely cause: {f['adequacy']}"
+    nothing = verdict == "undetermined" and f["identified"] == 0
+    if nothing:
+        machine = sum(int(x.get("estimated", 0)) for x in f["not_determined"] if x.get("machine", True))
+        reason = ("no machine error identified: the data determined none of the "
+                  + (f"{machine} machine errors estimated" if machine else "machine errors")
+                  + f" to a tenth of its plausible size or beyond {SIGNIFICANT_SIGMAS:g}σ of 0 (set-up values "
+                  "alone are no calibration)")
+        if undetermined and not f["map_fit"]:
+            # an explicit request: the parameters asked for and not determined come first
+            reason = (f"the data did not determine {name_list(undetermined)} (their values are arbitrary, "
+                      f"not measured); {reason}")
     elif verdict == "undetermined":
         names = undetermined or confounded
         reason = ("the data did not determine "
                   + (name_list(names) if names else "some of the requested parameters")
                   + " (their values are arbitrary, not measured)")
-    return Assessment(verdict, reason, undetermined, f["implausible"])
+    return Assessment(verdict, reason, undetermined, f["implausible"], not_determined=f["not_determined"],
+                      nothing_identified=nothing)
 
 
 def require_usable(source: Any, force: bool = False, what: str = "this result") -> Assessment:
@@ -230,10 +276,15 @@ def require_usable(source: Any, force: bool = False, what: str = "this result") 
 
 #: posterior σ / prior σ above which a determined parameter counts as informed
 #: only in part: the data narrowed its plausible range less than tenfold (the
-#: fit itself calls a parameter undetermined above about 0.45)
-PARTLY_INFORMED = 0.1
-#: class scale (estimate 'auto') below which the data show no sign of a class of errors
-ABSENT_CLASS_SCALE = 0.01
+#: fit itself calls a parameter undetermined above about 0.45); the core's
+#: kIdentifiedRatio
+PARTLY_INFORMED = _core.identified_ratio()
+#: |value| / σ below which a value does not differ from 0 (kSignificantSigmas): a
+#: machine error informed only in part and not significant identifies nothing
+SIGNIFICANT_SIGMAS = _core.significant_sigmas()
+#: class scale (estimate 'auto') below which the data show no sign of a class of
+#: errors (the core's kAbsentClassScale): its parameters' values are held near 0
+ABSENT_CLASS_SCALE = _core.absent_class_scale()
 #: |r| at or above which two estimates are treated as not separable in practice
 NEAR_SINGULAR_R = 0.999
 
@@ -251,6 +302,7 @@ class Findings:
     inseparable: List[tuple]          # (name, name, r) with |r| >= NEAR_SINGULAR_R
     informed: dict                    # name -> posterior σ / prior σ (empty without priors)
     absent: List[str] = field(default_factory=list)  # auto: classes the data show no sign of
+    held: List[str] = field(default_factory=list)    # determined there, values held near 0
 
 
 def findings(result) -> Findings:
@@ -262,7 +314,9 @@ def findings(result) -> Findings:
     informed = {n: float(v) for n, v in (getattr(result, "informed", None) or {}).items() if _finite(v)}
     undetermined = [n for n in est if n in set(a.undetermined)] + \
                    [n for n in a.undetermined if n not in est]
-    und = set(undetermined)
+    # determined in a class the data show no sign of: the value is the class prior's 0, not measured
+    held = [n for n in getattr(result, "held", None) or [] if n in est and n not in set(undetermined)]
+    und = set(undetermined) | set(held)
     partly = [n for n in est if n not in und and informed.get(n, 0.0) > PARTLY_INFORMED]
     identified = [n for n in est if n not in und and n not in set(partly)]
     pairs = []
@@ -272,4 +326,4 @@ def findings(result) -> Findings:
         pairs = sorted(((est[i], est[j], float(C[i, j])) for i, j in zip(ii, jj)), key=lambda p: -abs(p[2]))
     # a class whose prior the evidence shrank to the floor (see docs/identification.md)
     absent = sorted(c for c, f in (getattr(result, "class_scales", None) or {}).items() if f < ABSENT_CLASS_SCALE)
-    return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed, absent)
+    return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed, absent, held)

@@ -131,7 +131,8 @@ class Result:
         self.placement_std: dict = {n: float(s) for n, s in zip(self.estimated, core.placement) if s > 0}
         #: estimated parameters this data did not determine (their values are the prior's, not measured)
         self.undetermined: list = list(core.undetermined)
-        #: values beyond 5 prior sigmas (flagged, not refused)
+        #: values beyond 5 prior sigmas (flagged; a determined machine error among them makes
+        #: the fit not usable: :attr:`plausible`)
         self.implausible: list = list(core.implausible)
         #: True when the fit had prior rows (estimate "auto" or prior=True)
         self.map_fit: bool = core.map_fit
@@ -157,7 +158,23 @@ class Result:
         self.adequacy: str = core.adequacy
         #: every value and std finite
         self.finite: bool = core.finite
-        #: "ok", "not_converged", "inadequate", "non_finite" or "undetermined"
+        #: False when the data put a machine error far beyond its plausible size (a 100 mm
+        #: pivot): the machine file's nominal geometry is wrong; ``plausibility`` names the
+        #: values and the likely cause (verdict "implausible")
+        self.plausible: bool = core.plausible
+        self.plausibility: str = core.plausibility
+        #: machine errors the data identified: determined (not :attr:`held`) to a tenth of
+        #: their prior sigma, or beyond 2 sigma of 0; a fit for machine errors with none is
+        #: not usable (verdict "undetermined")
+        self.identified_machine_errors: int = core.identified_machine_errors
+        #: estimate "auto": parameters determined in a class the data show no sign of
+        #: (:attr:`class_scales`): their values are held near 0, not measured
+        self.held: list = list(core.held)
+        #: what the data could not tell, one dict per family of parameters (location
+        #: offsets, location angles, scale gains, error motions of one degree, backlash,
+        #: set-up): family, machine, estimated, names and why (the measurement that would tell it)
+        self.not_determined: list = list(core.not_determined)
+        #: "ok", "not_converged", "implausible", "inadequate", "non_finite" or "undetermined"
         self.verdict: str = core.verdict
 
     def machine_errors(self, force: bool = False, include_undetermined: bool = False) -> dict:
@@ -198,32 +215,35 @@ class Result:
         r, _ = _core.predict_residuals(dataset._core, self.values)
         return np.asarray(r)
 
-    def residual_table(self) -> list:
-        """One dict per residual row: ``row``, ``observation`` (its index in
+    def residual_table(self, rows=None) -> list:
+        """One dict per residual row (or per row of ``rows``, in that order):
+        ``row``, ``observation`` (its index in
         the dataset, -1 for a scale bar), ``id`` (the observation's id, or
         ``scale_bar``), ``type``, ``target`` (facet / sphere id or setup),
         ``component`` (``x y z`` for ball3d and point rows, ``x y z rx ry rz``
         for pose rows, else empty) and ``residual`` (mm, rad for a pose's
         ``rx ry rz``, as :attr:`residuals`)."""
+        src = np.asarray(self.residual_source, dtype=int)
+        res = np.asarray(self.residuals)
+        # rows of one observation are consecutive: j = position within its run
+        start = np.r_[True, src[1:] != src[:-1]] if src.size else np.zeros(0, bool)
+        first = np.maximum.accumulate(np.where(start, np.arange(src.size), 0)) if src.size else src
+        run = np.diff(np.r_[np.flatnonzero(start), src.size])
+        size = np.repeat(run, run)
+        j = np.arange(src.size) - first
         obs = self.dataset.observations
-        seen, rows = {}, []
-        src = np.asarray(self.residual_source)
-        counts = {}
-        for k in src:
-            counts[int(k)] = counts.get(int(k), 0) + 1
-        for row, (k, r) in enumerate(zip(src, np.asarray(self.residuals))):
-            k = int(k)
-            j = seen.get(k, 0)
-            seen[k] = j + 1
+        out = []
+        for row in (range(src.size) if rows is None else (int(i) for i in rows)):
+            k, n = int(src[row]), int(size[row])
             o = obs[k] if 0 <= k < len(obs) else {}
-            rows.append({"row": row, "observation": k,
-                         "id": o.get("id", "") if k >= 0 else "scale_bar",
-                         "type": o.get("type", "scale_bar"),
-                         "target": o.get("target", o.get("setup", "")),
-                         "component": ("xyz"[j] if counts[k] == 3 and k >= 0 else
-                                       ("x", "y", "z", "rx", "ry", "rz")[j] if counts[k] == 6 and k >= 0 else ""),
-                         "residual": float(r)})
-        return rows
+            out.append({"row": row, "observation": k,
+                        "id": o.get("id", "") if k >= 0 else "scale_bar",
+                        "type": o.get("type", "scale_bar"),
+                        "target": o.get("target", o.get("setup", "")),
+                        "component": ("xyz"[j[row]] if n == 3 and k >= 0 else
+                                      ("x", "y", "z", "rx", "ry", "rz")[j[row]] if n == 6 and k >= 0 else ""),
+                        "residual": float(res[row])})
+        return out
 
     def row_units(self) -> np.ndarray:
         """The unit of every residual row ("mm"; "rad" for a pose's rotation
@@ -305,16 +325,24 @@ class Result:
         lines.append("")
         prior = getattr(self, "prior_std", None) or {}
         with_prior = bool(prior)
-        lines.append(f"  {'parameter':<18}{'value':>14}{'std':>12}"
-                     + (f"{'prior':>12}{'informed':>10}" if with_prior else "") + "  unit")
         negative = {x["name"] for x in m.axes if min(x["direction"]) < -0.5 and max(x["direction"]) < 0.5}
         machine_names = set(m.parameter_names())
-        und, part, impl = set(fd.undetermined), set(fd.partly), set(fd.implausible)
-        for n in self.estimated:
+        und, part, impl, held = set(fd.undetermined), set(fd.partly), set(fd.implausible), set(fd.held)
+        # One row per parameter the data told something about; those it did not
+        # (or held near 0) are summarised below (hundreds of rows would bury the rest).
+        shown = [n for n in self.estimated if (n not in und and n not in held) or n in impl]
+        if shown:
+            lines.append(f"  {'parameter':<18}{'value':>14}{'std':>12}"
+                         + (f"{'prior':>12}{'informed':>10}" if with_prior else "") + "  unit")
+        else:
+            lines.append("  no parameter was determined by this data: no values to show")
+        for n in shown:
             f, unit = display_scale(n)
             notes = []
             if n in und:
                 notes.append("NOT DETERMINED by this data")
+            elif n in held:
+                notes.append("held near 0: its class shows no sign in the data")
             elif n in part:
                 notes.append("informed only in part")
             if n in impl:
@@ -330,10 +358,7 @@ class Result:
                          + (f"  ({'; '.join(notes)})" if notes else ""))
         lines.append("")
         lines += ["  " + t for t in finding_lines(fd)]
-        if self.unidentifiable:
-            lines.append("  confounded (not separable with this data):")
-            for g in self.unidentifiable:
-                lines.append("    " + ", ".join(g))
+        lines += ["  " + t for t in confounded_lines(self.unidentifiable)]
         if self.outliers:
             ids = self.residual_table()
             lines.append(f"  robust loss flagged {len(self.outliers)} outlier rows: "
@@ -446,7 +471,7 @@ def verdict_lines(result, fd: "guards.Findings") -> list:
                 "Do not compensate a machine with these values."]
     adequacy = (f"the residuals agree with the declared instrument noise ({noise})" if noise else
                 "no chi-square test against the declared noise was reported")
-    return [f"Usable: the fit converged in {it} iterations; {adequacy}."]
+    return [f"OK (usable): the fit converged in {it} iterations; {adequacy}."]
 
 
 #: how reports show a residual of each row unit
@@ -489,7 +514,11 @@ def finding_lines(fd: "guards.Findings") -> list:
     # an unconverged, non-finite or inadequate fit identified nothing; one that left
     # requested parameters undetermined did determine the others
     trusted = fd.assessment.verdict in ("ok", "undetermined")
-    out = [f"identified: {n} parameter{'s' if n != 1 else ''}" if trusted else
+    # set-up names are dotted (tip.x, sphere.S1.x); machine errors never are
+    setup = sum(1 for x in fd.identified if "." in x)
+    split = ("" if not setup else " (set-up values only, no machine error)" if setup == n else
+             f" ({n - setup} machine error{'s' if n - setup != 1 else ''}, {setup} set-up value{'s' if setup != 1 else ''})")
+    out = [f"identified: {n} parameter{'s' if n != 1 else ''}{split}" if trusted else
            f"identified: none (the fit is not usable; {n} parameter{'s' if n != 1 else ''} estimated "
            "without a trustworthy value)"]
     if fd.partly:
@@ -497,11 +526,11 @@ def finding_lines(fd: "guards.Findings") -> list:
                    f"{1 / guards.PARTLY_INFORMED:g}-fold): "
                    + ", ".join(fd.partly))
     if fd.undetermined:
-        out.append("not determined by this data (values arbitrary, never used for compensation): "
-                   + ", ".join(fd.undetermined))
+        out += not_determined_lines(fd)
     if fd.absent:
         out.append("error classes the data show no sign of (held near 0 in the point estimate): "
-                   + ", ".join(c.replace("_", " ") for c in fd.absent))
+                   + ", ".join(c.replace("_", " ") for c in fd.absent)
+                   + (f"; determined there, so held near 0: {guards.name_list(fd.held)}" if fd.held else ""))
     if fd.implausible:
         out.append("implausible (far outside the plausible size; check units and setup): "
                    + ", ".join(fd.implausible))
@@ -510,6 +539,39 @@ def finding_lines(fd: "guards.Findings") -> list:
         out.append(f"pairs the data cannot separate (|r| ≥ {guards.NEAR_SINGULAR_R:g}): "
                    + ", ".join(f"{x}/{y} (r = {r:+.4f})" for x, y, r in shown)
                    + (f" and {len(fd.inseparable) - len(shown)} more" if len(fd.inseparable) > len(shown) else ""))
+    return out
+
+
+def not_determined_lines(fd: "guards.Findings") -> list:
+    """What the data could not tell: one line per family of parameters
+    (location offsets, location angles, scale gains, error motions of one
+    degree, backlash, set-up) with how many of the family it left undetermined
+    and the measurement that would determine them (the core's analysis), never
+    one line per parameter."""
+    families = fd.assessment.not_determined
+    head = "not determined by this data (values arbitrary, never used for compensation)"
+    if not families:  # a result that does not say per family (an older result file)
+        return [f"{head}: {guards.name_list(fd.undetermined)}"]
+    out = [f"{head}; per family, with what would determine it:"]
+    for f in families:
+        n, of = len(f.get("names", [])), f.get("estimated")
+        out.append(f"  {f['family']} ({n}{f' of {of}' if of else ''}): {f['why']}")
+    return out
+
+
+#: confounded groups a text report lists (all of them: result.json, "unidentifiable")
+SHOWN_GROUPS = 5
+
+
+def confounded_lines(groups) -> list:
+    """The confounded groups, a few and each capped (a single undetermined
+    parameter is no group: the family lines cover it)."""
+    real = [g for g in groups if len(g) > 1]
+    if not real:
+        return []
+    out = [f"confounded (only combinations are determined): {len(real)} group{'s' if len(real) != 1 else ''}"
+           + (f", the first {SHOWN_GROUPS}" if len(real) > SHOWN_GROUPS else "") + ":"]
+    out += ["  {" + guards.name_list(g) + "}" for g in real[:SHOWN_GROUPS]]
     return out
 
 

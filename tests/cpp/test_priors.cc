@@ -389,6 +389,42 @@ TEST(IdentifyPriors, AutoIsAMapFitThatListsWhatTheDataDidNotDetermine) {
   EXPECT_EQ(j.find("NaN"), std::string::npos);
 }
 
+TEST(IdentifyPriors, AutoThatDeterminesNoMachineErrorIsNotUsableAndSaysWhatWouldTellIt) {
+  // Eight touches at the first indexation: the set-up is seen, no machine error is.
+  std::vector<int> first;
+  for (int i = 0; i < 8; ++i) first.push_back(i);
+  const Dataset few = Tango().Subset(first);
+  IdentifyOptions o;
+  o.estimate = {"auto"};
+  const Result r = Identify(few, o);
+  EXPECT_TRUE(r.converged);
+  EXPECT_TRUE(r.seeks_machine_errors);
+  EXPECT_EQ(r.identified_machine_errors, 0);
+  EXPECT_EQ(r.verdict(), "undetermined");
+  // One entry per family, each with its cause and the measurement that would tell it.
+  ASSERT_FALSE(r.not_determined.empty());
+  size_t named = 0;
+  for (const NotDetermined& f : r.not_determined) {
+    EXPECT_FALSE(f.names.empty()) << f.family;
+    EXPECT_LE(f.names.size(), static_cast<size_t>(f.estimated)) << f.family;
+    EXPECT_NE(f.why.find(": "), std::string::npos) << f.family << ": " << f.why;
+    named += f.names.size();
+  }
+  EXPECT_GE(named, r.estimated.size() - 1);
+  const auto offsets = std::find_if(r.not_determined.begin(), r.not_determined.end(),
+                                    [](const NotDetermined& f) { return f.family == "location offsets"; });
+  ASSERT_NE(offsets, r.not_determined.end());
+  EXPECT_NE(offsets->why.find("indexations: measure at 3 or more indexations of each"), std::string::npos)
+      << offsets->why;
+  const std::string j = r.ToJson();
+  EXPECT_NE(j.find("\"not_determined\""), std::string::npos);
+  EXPECT_NE(j.find("\"identified_machine_errors\": 0"), std::string::npos);
+  // The whole plan determines machine errors: usable.
+  const Result all = Identify(Tango(), o);
+  EXPECT_GT(all.identified_machine_errors, 0);
+  EXPECT_EQ(all.verdict(), "ok");
+}
+
 TEST(IdentifyPriors, ChiSquareAgainstTheDeclaredNoise) {
   // The simulated noise (0.6 um) against the declared one (the simulator's
   // 0.6 um, or the 1 um default when a file declares none): adequate,

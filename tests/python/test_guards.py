@@ -189,12 +189,12 @@ def test_report_of_a_good_fit_says_what_was_identified(good, tmp_path):
     doc = open(fivecal.write_report(good, tmp_path / "g"), encoding="utf-8").read()
     body = doc[doc.index("<main>"):]
     first_box = re.search(r"<div class='box (\w+)'[^>]*>(.*?)</div>", body, re.S)
-    assert first_box.group(1) == "ok" and "Usable" in first_box.group(2)
+    assert first_box.group(1) == "ok" and first_box.group(2).startswith("<b>OK.</b> Usable: the fit converged")
     findings = doc[doc.index("id='findings'"):doc.index("id='machine'")]
     assert "Identified" in findings and "EX0C" in findings and "Not determined by this data" in findings
     assert "No confounded groups" in doc
     text = good.report()
-    assert text.splitlines()[1].startswith("  Usable") and "identified: 52 parameters" in text
+    assert text.splitlines()[1].startswith("  OK (usable)") and "identified: 52 parameters" in text
 
 
 def test_reports_name_undetermined_and_implausible(good, tmp_path):

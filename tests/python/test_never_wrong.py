@@ -125,8 +125,10 @@ def test_d_rough_nominal_gives_the_same_set_and_values(estimate):
         shift = -53.0 if n == "EX0C" else 0.0  # the same physical C axis line
         assert abs(rough.values[n] - shift - good.values[n]) < 0.1 * good.std[n] + 1e-9, n
         assert rough.std[n] == pytest.approx(good.std[n], rel=1e-3), n
-    # The 53 mm offset is far outside its prior: flagged, not refused.
+    # The 53 mm offset is far outside its prior: flagged, and the fit is not usable (the machine file).
     assert "EX0C" in rough.implausible and "EX0C" not in good.implausible
+    assert rough.verdict == "implausible" and "machine file" in rough.assessment().reason
+    assert good.plausible and good.verdict != "implausible"
 
 
 def test_d_rough_nominal_auto_flags_the_implausible_offset():

@@ -343,6 +343,201 @@ std::string UndeterminedMessage(const Dataset& ds, std::vector<std::vector<std::
                "estimate 'auto' (every error under its prior, the undetermined ones listed).";
 }
 
+// -- What the data could not tell, per family -------------------------------
+// Families are the prior classes gathered as a reader names them (motions and
+// tilts of one degree together); they come in this order.
+const char* const kFamilies[] = {"location offsets", "location angles", "scale gains",
+                                 "error motions of degree 1", "error motions of degree 2",
+                                 "error motions of degree 3", "backlash", "set-up"};
+
+std::string FamilyOf(const Machine& m, const std::string& n) {
+  const int i = m.ParameterIndex(n);
+  if (i < 0 || m.parameters()[i].kind == ParameterKind::kTip) return "set-up";
+  const std::string c = PriorClassOf(m, n);
+  if (c == "location_offset") return "location offsets";
+  if (c == "location_angle") return "location angles";
+  if (c == "scale_gain") return "scale gains";
+  if (c.rfind("backlash_", 0) == 0) return "backlash";
+  return "error motions of degree " + std::to_string(m.parameters()[i].degree);
+}
+
+// How each axis was seen by the data: distinct positions (capped: only
+// "fewer than needed" matters) and the move directions recorded.
+struct AxisSeen {
+  int positions = 0;
+  bool forward = false, backward = false;
+};
+
+std::vector<AxisSeen> SeenAxes(const Dataset& ds) {
+  constexpr size_t kEnough = 8;
+  const int na = ds.machine().num_axes();
+  std::vector<std::set<long long>> at(na);
+  std::vector<AxisSeen> seen(na);
+  for (const Observation& o : ds.observations)
+    for (int k = 0; k < na && k < o.axes.size(); ++k) {
+      if (at[k].size() < kEnough) at[k].insert(std::llround(o.axes[k] * 1000.0));  // 1 um, 0.001 deg
+      if (k < o.direction.size()) {
+        seen[k].forward = seen[k].forward || o.direction[k] > 0;
+        seen[k].backward = seen[k].backward || o.direction[k] < 0;
+      }
+    }
+  for (int k = 0; k < na; ++k) seen[k].positions = static_cast<int>(at[k].size());
+  return seen;
+}
+
+std::string JoinAnd(const std::vector<std::string>& v) {
+  std::string s;
+  for (size_t i = 0; i < v.size(); ++i) s += (i == 0 ? "" : i + 1 == v.size() ? " and " : ", ") + v[i];
+  return s;
+}
+
+// The positions an axis must take for the data to tell a family's parameter
+// of it apart from the others: a rotary axis line needs three indexations
+// (two fix a circle's chord, not its centre), a degree-d error motion d + 1
+// positions of a linear axis and d + 2 of a rotary one (its constant and
+// location take one more), a squareness or gain two positions.
+int PositionsNeeded(const Machine& m, const ParameterInfo& p) {
+  const bool rotary = m.axis(p.axis).rotary();
+  if (p.kind == ParameterKind::kLocation) return rotary ? 3 : 2;
+  if (p.kind == ParameterKind::kMotion) return rotary ? p.degree + 2 : p.degree + 1;
+  return 2;
+}
+
+// Why a family's parameters were not determined, and what would determine
+// them: from how the data saw the axes they belong to (too few positions or
+// indexations, one move direction), the length reference, and the groups
+// the determination analysis found them confounded in (GroupCause).
+std::string WhyNotDetermined(const Dataset& ds, const std::vector<AxisSeen>& seen, const std::string& family,
+                             const std::vector<std::string>& names,
+                             const std::vector<std::vector<std::string>>& groups) {
+  const Machine& m = ds.machine();
+  if (family == "scale gains" && !HasLengthReference(ds))
+    return "no length reference (no scale bar or ball-bar length in the data): add a scale bar between two "
+           "spheres, or a ball bar of calibrated length";
+  std::map<int, int> need;  // axis -> positions needed
+  for (const std::string& n : names) {
+    const int i = m.ParameterIndex(n);
+    if (i < 0 || m.parameters()[i].kind == ParameterKind::kTip) continue;
+    const ParameterInfo& p = m.parameters()[i];
+    need[p.axis] = std::max(need[p.axis], PositionsNeeded(m, p));
+  }
+  if (family == "backlash") {
+    std::vector<std::string> one_way;
+    for (const auto& [k, _] : need)
+      if (!(seen[k].forward && seen[k].backward)) one_way.push_back(std::string(1, m.axis(k).name));
+    if (!one_way.empty())
+      return JoinAnd(one_way) + (one_way.size() == 1 ? " was" : " were") +
+             " approached from one direction only (or none recorded): approach each axis from both "
+             "sides and record the direction of the last move";
+  } else {
+    for (const bool rotary : {true, false}) {
+      std::vector<std::string> axes, counts;
+      int needed = 0;
+      for (const auto& [k, n] : need)
+        if (m.axis(k).rotary() == rotary && seen[k].positions < n) {
+          axes.push_back(std::string(1, m.axis(k).name));
+          counts.push_back(std::to_string(seen[k].positions));
+          needed = std::max(needed, n);
+        }
+      if (axes.empty()) continue;
+      const bool one = axes.size() == 1;
+      const bool same =
+          std::all_of(counts.begin(), counts.end(), [&](const std::string& c) { return c == counts[0]; });
+      const std::string what = rotary ? " indexation" : " position";
+      const std::string seen_at = " seen at " + (same ? counts[0] : JoinAnd(counts)) + what +
+                                  (same && counts[0] == "1" ? "" : "s") + (same && !one ? " each" : "");
+      if (rotary)
+        return JoinAnd(axes) + seen_at + ": measure at " + std::to_string(needed) + " or more indexations of " +
+               (one ? "it" : "each") + " (probe a sphere, or take R-test or ball-bar samples, at each)";
+      return JoinAnd(axes) + seen_at + ": measure at " + std::to_string(needed) +
+             " or more positions spread along " + (one ? "its" : "each one's") + " travel";
+    }
+  }
+  // Every axis was seen enough: the parameters are confounded (with the
+  // set-up, with each other) or seen too weakly for their plausible size.
+  std::set<std::string> mine(names.begin(), names.end());
+  std::vector<std::string> with;
+  for (const auto& g : groups)
+    if (std::any_of(g.begin(), g.end(), [&](const std::string& n) { return mine.count(n) > 0; }))
+      with.insert(with.end(), g.begin(), g.end());
+  if (with.empty()) with = names;
+  const std::string cause = GroupCause(ds, with);
+  if (family == "set-up")
+    return cause + ": measure them apart (a qualified stylus, a calibrated sphere or mount) and fix them, or "
+                   "add measurements from other directions and set-ups";
+  if (cause.rfind("confounded with the setup", 0) == 0)
+    return cause + ": add measurements that move them differently (a second artefact position, another "
+                   "set-up), or fix set-up values measured apart";
+  return cause + ": add poses that move them differently, over a longer travel or a larger radius";
+}
+
+std::vector<NotDetermined> NotDeterminedFamilies(const Dataset& ds, const std::vector<std::string>& estimated,
+                                                 const std::vector<std::string>& undetermined,
+                                                 const std::vector<std::vector<std::string>>& groups) {
+  const Machine& m = ds.machine();
+  const std::set<std::string> und(undetermined.begin(), undetermined.end());
+  std::vector<NotDetermined> out;
+  const std::vector<AxisSeen> seen = SeenAxes(ds);
+  for (const char* family : kFamilies) {
+    NotDetermined f;
+    f.family = family;
+    f.machine = f.family != "set-up";
+    for (const std::string& n : estimated)
+      if (FamilyOf(m, n) == f.family) {
+        ++f.estimated;
+        if (und.count(n)) f.names.push_back(n);
+      }
+    if (f.names.empty()) continue;
+    f.why = WhyNotDetermined(ds, seen, f.family, f.names, groups);
+    out.push_back(std::move(f));
+  }
+  return out;
+}
+
+// The machine errors the data put far beyond their plausible size
+// (kImplausibleSigmas prior sigmas), undetermined ones left out (their
+// values are arbitrary), and the likely cause: no machine is 100 mm off its
+// drawing, so its nominal geometry in the machine file is wrong (or a unit).
+// Empty when every determined machine error is plausible. Set-up values far
+// off stay flags: a person placed them, the machine file did not.
+std::string ImplausibleCause(const Machine& m, const Result& res, const Eigen::VectorXd& values,
+                             const std::vector<int>& est, const Eigen::VectorXd& prior) {
+  constexpr size_t kShown = 4;
+  std::vector<std::string> shown;
+  std::vector<std::string> axes;
+  size_t count = 0;
+  for (size_t j = 0; j < res.estimated.size(); ++j) {
+    const std::string& n = res.estimated[j];
+    const int i = m.ParameterIndex(n);
+    if (i < 0 || m.parameters()[i].kind == ParameterKind::kTip) continue;
+    if (std::find(res.undetermined.begin(), res.undetermined.end(), n) != res.undetermined.end()) continue;
+    const double v = values[est[j]];
+    if (!(std::abs(v) > kImplausibleSigmas * prior[j])) continue;
+    const ParameterInfo& p = m.parameters()[i];
+    const std::string axis(1, m.axis(p.axis).name);
+    if (std::find(axes.begin(), axes.end(), axis) == axes.end()) axes.push_back(axis);
+    if (++count > kShown) continue;
+    char buf[160];
+    if (p.kind == ParameterKind::kLocation)
+      std::snprintf(buf, sizeof buf, "%s = %.6g %s (%.3g times its plausible size, %.3g %s)", n.c_str(),
+                    v * 1e6 * (p.angular() ? 1.0 : 1e-3), p.angular() ? "urad" : "um", std::abs(v) / prior[j],
+                    prior[j] * 1e6 * (p.angular() ? 1.0 : 1e-3), p.angular() ? "urad" : "um");
+    else
+      std::snprintf(buf, sizeof buf, "%s = %.4g (%.3g times its plausible size)", n.c_str(), v,
+                    std::abs(v) / prior[j]);
+    shown.push_back(buf);
+  }
+  if (count == 0) return "";
+  std::string list;
+  for (size_t k = 0; k < shown.size(); ++k) list += (k ? ", " : "") + shown[k];
+  if (count > kShown) list += " and " + std::to_string(count - kShown) + " more";
+  const bool one = axes.size() == 1;
+  return list + ": likely cause: the machine file (machine \"" + m.name() + "\"): its nominal geometry of " +
+         (one ? "axis " : "axes ") + JoinAnd(axes) + " (" + (one ? "its point or direction" :
+                                                             "their points or directions") +
+         ") is not the machine's, or a value is in the wrong unit; correct the machine file and fit again";
+}
+
 void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const ParameterTable& table,
                    const Eigen::VectorXd& r, Result* res) {
   const Machine& m = ds.machine();
@@ -970,6 +1165,29 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   } else {
     for (int c : det.undetermined) res.undetermined.push_back(res.estimated[c]);
   }
+  // The machine errors the data identified (kIdentifiedRatio). A MAP fit's
+  // data-only groups are no verdict on their members: the posterior,
+  // `undetermined`, says which ones the data, with the others' priors,
+  // narrowed; one in a class the data show no sign of is held near 0.
+  res.seeks_machine_errors = rq.location || rq.automatic;
+  for (int j = 0; j < p; ++j) {
+    const std::string& n = res.estimated[j];
+    if (std::find(res.undetermined.begin(), res.undetermined.end(), n) != res.undetermined.end()) continue;
+    const int i = ds.machine().ParameterIndex(n);
+    const bool machine = i >= 0 && ds.machine().parameters()[i].kind != ParameterKind::kTip;
+    const auto scale = machine ? res.class_scales.find(PriorClassOf(ds.machine(), n)) : res.class_scales.end();
+    if (scale != res.class_scales.end() && scale->second < kAbsentClassScale) res.held.push_back(n);
+    else if (machine && (!(res.informed[j] > kIdentifiedRatio) ||
+                         std::abs(values[est[j]]) >= kSignificantSigmas * res.std[j]))
+      ++res.identified_machine_errors;
+  }
+  for (const std::string& n : res.estimated) {
+    const int i = ds.machine().ParameterIndex(n);
+    if (i >= 0 && ds.machine().parameters()[i].kind != ParameterKind::kTip) res.seeks_machine_errors = true;
+  }
+  res.not_determined = NotDeterminedFamilies(ds, res.estimated, res.undetermined, res.unidentifiable);
+  res.plausibility = ImplausibleCause(ds.machine(), res, values, est, prior);
+  res.plausible = res.plausibility.empty();
 
   // Adequacy: residuals against the declared noise.
   const double ratio = res.dof > 0 ? chi2 / res.dof : 0.0;
@@ -1044,8 +1262,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
 std::string Result::verdict() const {
   if (!finite) return "non_finite";
   if (!converged) return "not_converged";
+  // Before adequacy: a misfit that follows from a wrong nominal geometry is
+  // best told by its cause.
+  if (!plausible) return "implausible";
   if (!adequate) return "inadequate";
   if (explicit_request && !undetermined.empty()) return "undetermined";
+  // Set-up quantities alone (a stylus tip, a sphere centre) are no
+  // calibration: a fit for machine errors that determined none of them is
+  // not usable, whatever it says of the set-up.
+  if (seeks_machine_errors && identified_machine_errors == 0) return "undetermined";
   return "ok";
 }
 
@@ -1108,6 +1333,13 @@ std::string Result::ToJson() const {
   j["iterations"] = iterations;
   j["estimated"] = estimated;
   j["undetermined"] = undetermined;
+  j["identified_machine_errors"] = identified_machine_errors;
+  j["held"] = held;
+  json nd = json::array();
+  for (const NotDetermined& f : not_determined)
+    nd.push_back({{"family", f.family}, {"machine", f.machine}, {"estimated", f.estimated},
+                  {"names", f.names}, {"why", f.why}});
+  j["not_determined"] = nd;
   j["implausible"] = implausible;
   j["map_fit"] = map_fit;
   if (!variance_components.empty()) {
@@ -1126,6 +1358,8 @@ std::string Result::ToJson() const {
   j["chi2"] = {{"value", Finite(chi2)}, {"dof", dof}, {"p", Finite(chi2_p)}};
   j["adequate"] = adequate;
   j["adequacy"] = adequacy;
+  j["plausible"] = plausible;
+  j["plausibility"] = plausibility;
   j["finite"] = finite;
   j["verdict"] = verdict();
   json corr = json::array();

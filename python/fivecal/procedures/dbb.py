@@ -228,16 +228,17 @@ def _dbb_rows(ds: Dataset, setup: str):
     return idx
 
 
-def ball_positions(ds: Dataset, setup: str):
+def ball_positions(ds: Dataset, setup: str, rows=None):
     """Nominal spindle-ball and table-ball positions in F (N x 3 each, mm) and
-    the observation indices of one DBB setup."""
+    the observation indices of one DBB setup (or of ``rows``, indices of its
+    observations: a report splits a setup by bar length without copying the
+    dataset)."""
     ds = Dataset.from_dict(ds)
-    idx = _dbb_rows(ds, setup)
+    idx = _dbb_rows(ds, setup) if rows is None else [int(i) for i in rows]
     m = ds.machine
-    obs = [ds.observations[i] for i in idx]
-    q = np.array([[o["axes"].get(a, 0.0) for a in m.axis_names] for o in obs])
-    tool = np.asarray(obs[0]["tool_ball"], float)
-    table = np.asarray(obs[0]["table_ball"], float)
+    q = ds._core.columns()["axes"][idx]  # machine axis order, without a dict per sample
+    tool = np.asarray(ds.observations[idx[0]]["tool_ball"], float)
+    table = np.asarray(ds.observations[idx[0]]["table_ball"], float)
     S, B = _core.dbb_ball_positions(m._core, q, tool, table)
     return np.asarray(S), np.asarray(B), idx
 
@@ -245,12 +246,13 @@ def ball_positions(ds: Dataset, setup: str):
 _PLANES = {0: ("Y", "Z"), 1: ("Z", "X"), 2: ("X", "Y")}
 
 
-def trace_from_dataset(ds: Union[Dataset, Mapping], setup: str) -> Trace:
-    """The readings of one DBB setup as a polar trace: the angle of the moving
-    ball about the stationary one, in the plane the moving ball sweeps (YZ,
-    ZX or XY: measured from the first axis towards the second)."""
+def trace_from_dataset(ds: Union[Dataset, Mapping], setup: str, rows=None) -> Trace:
+    """The readings of one DBB setup (or of its observations ``rows``) as a
+    polar trace: the angle of the moving ball about the stationary one, in the
+    plane the moving ball sweeps (YZ, ZX or XY: measured from the first axis
+    towards the second)."""
     ds = Dataset.from_dict(ds)
-    S, B, idx = ball_positions(ds, setup)
+    S, B, idx = ball_positions(ds, setup, rows)
     moving, fixed = (B, S) if np.ptp(B, axis=0).sum() >= np.ptp(S, axis=0).sum() else (S, B)
     rel = moving - fixed
     _, _, vt = np.linalg.svd(rel - rel.mean(axis=0), full_matrices=False)

@@ -35,7 +35,7 @@ from ..guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
 from ..identification import MICRO_UNITS, noise_lines, verdict_lines
 from ..units import display_scale
 from . import plots
-from .history import sections as _history_sections
+from .history import sections_and_standing as _history_sections
 from .markup import _e, _img_tag, table_html
 
 __all__ = ["write_report", "Section"]
@@ -62,6 +62,8 @@ figure{margin:1em 0 1.6em}figure img{max-width:100%;border:1px solid #e3e3e3}
 figcaption{color:#555;font-size:0.9em;margin-top:4px}
 nav a{margin-right:12px}small,.muted{color:#777}
 details summary{cursor:pointer;color:#4c78a8}
+ul.families{margin:2px 0 0;padding-left:1.2em}ul.families li{margin:1px 0}
+table.findings td:first-child{white-space:normal;width:13em}
 pre{background:#f6f6f6;padding:8px;overflow-x:auto;font-size:0.85em}
 """
 
@@ -131,7 +133,7 @@ def _dbb_setup_text(dataset, kind: str) -> str:
         plane = ""
         if len(idx) >= 3:
             try:
-                t = trace_from_dataset(dataset.subset(idx), setup)
+                t = trace_from_dataset(dataset, setup, idx)
                 plane = (f", plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
                          f", no circle: the balls sweep {np.ptp(t.angles):.2g}°")
             except ValueError:
@@ -151,8 +153,7 @@ def _data_section(dataset, result) -> str:
     indexed = {t for t in types if kinds.get(t, {}).get("indexed", True)}
     idx = {tuple(round(float(o["axes"].get(a, 0.0)), 1) for a in rot) for o in obs if o["type"] in indexed}
     art = dataset.artefact or {}
-    d = dataset.to_dict()
-    tip_r = (d.get("probe") or {}).get("tip_radius")
+    tip_r = (dataset._view().get("probe") or {}).get("tip_radius")  # the shared view: no copy of 10^5 observations
     targets = sorted({o.get("target") for o in obs if o.get("target")}, key=str)
     rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none"),
             ("residual rows", f"{len(result.residuals)} (observations plus scale bars)"),
@@ -194,10 +195,14 @@ def _data_section(dataset, result) -> str:
         + "</table>"
 
 
-def _verdict_banner(result, fd) -> str:
-    """The verdict at the top of the report: red when the fit is not usable
-    (never green then), amber when usable with reservations, green only for a
-    usable fit with nothing left undetermined or inseparable."""
+def _verdict_banner(result, fd, standing=None) -> str:
+    """The verdict at the top of the report, with its grade in one word: red
+    NOT USABLE when the fit is not usable (never green then), red FAIL when a
+    usable calibration fails its tolerances (the history's pass / fail),
+    amber UNDECIDED or ALARM (undecided against a tolerance; a change the
+    history's CUSUM detected at this calibration) and amber OK WITH
+    RESERVATIONS, green OK only for a usable fit with nothing left
+    undetermined or inseparable that passes whatever it was graded against."""
     a = fd.assessment
     if not a.usable:
         return (f"<div class='box bad' id='verdict'><b>NOT USABLE — {_e(a.verdict.replace('_', ' '))}.</b> "
@@ -215,46 +220,102 @@ def _verdict_banner(result, fd) -> str:
         notes.append(f"implausible values: {', '.join(fd.implausible)}")
     if fd.inseparable:
         notes.append(f"{len(fd.inseparable)} pairs with |r| ≥ {_NEAR_R:g}")
-    text = " ".join(verdict_lines(result, fd))
-    return (f"<div class='box {cls}' id='verdict'><b>{_e(text)}</b>"
+    grade = "OK WITH RESERVATIONS" if cls == "warn" else "OK"
+    head = []
+    if standing is not None and standing.grade == "fail":
+        cls, grade = "bad", "FAIL"
+        head.append("out of tolerance: " + _e(guards.name_list(standing.failed) or "see Pass / fail")
+                    + " (see <a href='#history-grade'>Pass / fail</a>)")
+    elif standing is not None and standing.alarms:
+        cls, grade = "warn", "ALARM"
+        head.append("the calibration history detected a change at this calibration: "
+                    + _e(guards.name_list(standing.alarms)) + " (see Calibration history)")
+    elif standing is not None and standing.grade == "undecided":
+        cls, grade = "warn", "UNDECIDED"
+        head.append("within the uncertainty of a tolerance limit (see <a href='#history-grade'>Pass / fail</a>)")
+    elif standing is not None and standing.grade == "pass":
+        notes.insert(0, "within every tolerance")
+    # the grade stands in bold before it: the fit's own words without "OK (usable)"
+    text = "Usable: " + " ".join(verdict_lines(result, fd)).split(": ", 1)[-1]
+    return (f"<div class='box {cls}' id='verdict'><b>{grade}.</b> "
+            + "".join(f"<b>{h}.</b> " for h in head) + _e(text)
             + (f" {_e('; '.join(notes))}." if notes else "") + "</div>")
+
+
+#: names a summary row lists before "and N more" (every one: the Parameters section)
+_SHOWN_NAMES = 24
+#: confounded groups the Identifiability section lists (every one: result.json)
+_SHOWN_GROUPS = 10
+
+
+def _not_determined_html(fd) -> str:
+    """What the data could not tell, one line per family with the
+    measurement that would tell it (identification.not_determined_lines)."""
+    families = fd.assessment.not_determined
+    if not families:
+        return _e(_name_list(fd.undetermined)) if fd.undetermined else "none"
+    items = []
+    for f in families:
+        n, of = len(f.get("names", [])), f.get("estimated")
+        items.append(f"<li><b>{_e(f['family'])}</b> ({n}{f' of {of}' if of else ''}): {_e(f['why'])}</li>")
+    return "<ul class='families'>" + "".join(items) + "</ul>"
+
+
+def _name_list(names, limit: int = _SHOWN_NAMES) -> str:
+    names = list(names)
+    return ", ".join(names[:limit]) + (f" and {len(names) - limit} more" if len(names) > limit else "")
 
 
 def _findings_section(result, fd) -> str:
     """What was identified, what was informed only in part, what the data
-    could not tell: the plain-words summary under the verdict."""
+    could not tell (one line per family, with what would tell it): the
+    compact summary under the verdict, before the details."""
     machine_names = set(result.dataset.machine.parameter_names())
 
     def names(lst):
-        # machine errors by name; the many setup values (probe tip, artefact) as a count
+        # machine errors by name (the first few); the many setup values (probe tip, artefact) as a count
         mach = [n for n in lst if n in machine_names and not n.startswith("tip.")]
         setup = len(lst) - len(mach)
-        text = ", ".join(f"<code>{_e(n)}</code>" for n in mach)
+        text = ", ".join(f"<code>{_e(n)}</code>" for n in mach[:_SHOWN_NAMES])
+        if len(mach) > _SHOWN_NAMES:
+            text += f" and {len(mach) - _SHOWN_NAMES} more (see Parameters)"
         if setup:
-            rest = ", ".join(n for n in lst if n not in mach)
-            rest = rest if len(rest) <= 160 else rest[:rest.rfind(",", 0, 160)] + " …"
+            rest = _name_list([n for n in lst if n not in mach], 6)
             text += (" and " if text else "") + _count(setup, "setup parameter") + f" ({_e(rest)})"
         return text or "none"
 
     trusted = fd.assessment.verdict in ("ok", "undetermined")  # see identification.finding_lines
-    rows = [("Identified", names(fd.identified) if trusted else
+    types: dict = {}
+    for t in result.dataset.observation_types:
+        types[t] = types.get(t, 0) + 1
+    chi2 = getattr(result, "chi2", None)
+    fit = (f"{_count(len(result.dataset), 'observation')} ({', '.join(f'{n} {t}' for t, n in types.items())}); "
+           f"{result.n_parameters} parameters estimated; residual rms {result.rms * 1e3:.3f} µm, "
+           f"σ̂ {result.sigma * 1e3:.3f} µm"
+           + (f"; χ² {chi2:.4g} for {getattr(result, 'dof', '?')} degrees of freedom" if chi2 is not None
+              and np.isfinite(chi2) else ""))
+    rows = [("Data and fit", _e(fit)),
+            ("Identified", names(fd.identified) if trusted else
              f"none: the fit is not usable ({len(fd.identified)} parameters estimated without a "
              "trustworthy value)")]
     if fd.informed or fd.partly:
-        rows.append((f"Informed only in part (the data narrowed the plausible range less than "
-                     f"{1 / _PARTLY:g}-fold)", names(fd.partly)))
-    rows.append(("Not determined by this data (values arbitrary; never compensated)",
-                 names(fd.undetermined)))
+        rows.append(("Informed only in part", f"<small>(the data narrowed the plausible range less than "
+                     f"{1 / _PARTLY:g}-fold)</small> " + names(fd.partly)))
+    rows.append((f"Not determined by this data ({len(fd.undetermined)})",
+                 "<small>Values arbitrary, never compensated. Per family, why and what measurement "
+                 "would determine them:</small>" + _not_determined_html(fd) if fd.undetermined else "none"))
     if fd.inseparable:
         sep = sorted({n for a, b, _ in fd.inseparable for n in (a, b)})
-        rows.append((f"Not separable from one another (|r| ≥ {_NEAR_R:g}; only combinations are determined)",
-                     names(sep)))
+        rows.append(("Not separable from one another", f"<small>(|r| ≥ {_NEAR_R:g}; only combinations are "
+                     "determined)</small> " + names(sep)))
     if fd.absent:
-        rows.append(("Error classes the data show no sign of (held near 0 in the point estimate)",
-                     _e(", ".join(c.replace("_", " ") for c in fd.absent))))
-    rows.append(("Implausible (far outside the plausible size: check units, setup, the nominal)",
-                 names(fd.implausible)))
-    return ('<table class="kv">' + "".join(f"<tr><td>{_e(k)}</td><td>{v}</td></tr>" for k, v in rows)
+        rows.append(("Error classes the data show no sign of", "<small>(held near 0 in the point "
+                     "estimate)</small> " + _e(", ".join(c.replace("_", " ") for c in fd.absent))
+                     + (f"; determined there, so held near 0: {names(fd.held)}" if fd.held else "")))
+    if fd.implausible:
+        rows.append(("Implausible", "<small>(far outside the plausible size: check units, setup, the "
+                     "nominal)</small> " + names(fd.implausible)))
+    return ('<table class="kv findings">' + "".join(f"<tr><td>{_e(k)}</td><td>{v}</td></tr>" for k, v in rows)
             + "</table>")
 
 
@@ -299,7 +360,8 @@ def _fit_section(result) -> str:
 
 def _largest_residuals(result, n: int = 10) -> str:
     """The rows with the largest |residual|, named by observation id (all rows: residuals.csv)."""
-    rows = sorted(result.residual_table(), key=lambda r: -abs(r["residual"]))[:n]
+    top = np.argsort(-np.abs(np.asarray(result.residuals)), kind="stable")[:n]
+    rows = result.residual_table(top)
     if not rows:
         return ""
     return (f"<p>The {len(rows)} largest residuals (every row with its observation id: "
@@ -324,12 +386,17 @@ def _strong_pairs(result, threshold: float = 0.9, limit: int = 20) -> List[Tuple
 
 def _identifiability_section(result) -> str:
     parts = []
-    if result.unidentifiable:
+    real = [g for g in result.unidentifiable if len(g) > 1]
+    if real:
         parts.append('<div class="box warn">These groups are <b>confounded</b>: the data cannot separate '
                      "their members; only combinations are determined. Fix all but one member of each "
                      "group, or add measurements that move them differently.</div><ul>")
-        for g in result.unidentifiable:
-            parts.append("<li>{" + ", ".join(f"<code>{_e(n)}</code>" for n in g) + "}</li>")
+        for g in real[:_SHOWN_GROUPS]:
+            parts.append("<li>{" + ", ".join(f"<code>{_e(n)}</code>" for n in g[:_SHOWN_NAMES])
+                         + (f" and {len(g) - _SHOWN_NAMES} more" if len(g) > _SHOWN_NAMES else "") + "}</li>")
+        if len(real) > _SHOWN_GROUPS:
+            parts.append(f"<li>and {len(real) - _SHOWN_GROUPS} more groups (every one: <code>unidentifiable</code> "
+                         "in result.json)</li>")
         parts.append("</ul>")
     fd = guards.findings(result)
     group = {n: i for i, g in enumerate(result.unidentifiable) for n in g}
@@ -344,10 +411,10 @@ def _identifiability_section(result) -> str:
                      "only their combinations are determined (condition number "
                      f"{result.condition_number:.3g}). Fix all but one of each pair or add "
                      "measurements that move them differently.</div>")
-    if fd.undetermined and not result.unidentifiable:
-        parts.append('<div class="box warn">Not determined by this data: '
-                     + ", ".join(f"<code>{_e(n)}</code>" for n in fd.undetermined)
-                     + ". Their values are arbitrary and are never used for compensation.</div>")
+    if fd.undetermined and not real:
+        parts.append(f'<div class="box warn">{_count(len(fd.undetermined), "parameter")} not determined by '
+                     "this data (per family at the top, every one at the end); their values are arbitrary "
+                     "and are never used for compensation.</div>")
     if not result.unidentifiable and not fd.inseparable and not fd.undetermined:
         if fd.assessment.usable:
             parts.append(f'<div class="box ok">No confounded groups: the {len(result.estimated)} estimated '
@@ -357,7 +424,10 @@ def _identifiability_section(result) -> str:
             parts.append(f'<div class="box bad">No confounded group was found, but the fit is not usable '
                          f"({_e(fd.assessment.reason)}), so separability says nothing about these "
                          "values.</div>")
-    pairs = [p for p in _strong_pairs(result, limit=100000) if abs(p[2]) < _NEAR_R]
+    # pairs of parameters the data determined (an undetermined one's value is the prior's)
+    und = set(fd.undetermined)
+    pairs = [p for p in _strong_pairs(result, limit=100000)
+             if abs(p[2]) < _NEAR_R and p[0] not in und and p[1] not in und]
     machine_names = set(result.dataset.machine.parameter_names())  # includes tip.x|y|z
     both = [p for p in pairs if p[0] in machine_names and p[1] in machine_names][:20]
     mixed: dict = {}
@@ -370,7 +440,7 @@ def _identifiability_section(result) -> str:
         parts.append(f"<h3>Strongly correlated pairs (0.9 ≤ |r| &lt; {_NEAR_R:g})</h3><p class='muted'>"
                      "Their uncertainties are inflated by the correlation.</p>")
     rows = [(a, b, f"{r:+.3f}") for a, b, r in both]
-    for m, lst in mixed.items():
+    for m, lst in list(mixed.items())[:20]:
         o, r = lst[0]
         more = f" and {len(lst) - 1} more setup parameters (|r| ≥ 0.9)" if len(lst) > 1 else ""
         rows.append((m, o + more, f"{r:+.3f}"))
@@ -386,7 +456,10 @@ def _identifiability_section(result) -> str:
     return "".join(parts)
 
 
-def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tuple[str, str]:
+def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tuple[str, str, str]:
+    """Table rows: the machine errors and the setup parameters the data
+    determined (and implausible ones), then every parameter it did not
+    determine (for the collapsed list at the end of the report)."""
     machine_names = set(machine.parameter_names())
     confounded = {n: g for g in result.unidentifiable for n in g}
     negative = _negative_axes(machine)
@@ -396,7 +469,7 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
     other = [n for n in est if n not in mach]
 
     fd = guards.findings(result)
-    und, part, impl = set(fd.undetermined), set(fd.partly), set(fd.implausible)
+    und, part, impl, held = set(fd.undetermined), set(fd.partly), set(fd.implausible), set(fd.held)
     prior = getattr(result, "prior_std", None) or {}
 
     def row(n: str) -> str:
@@ -406,12 +479,14 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
         notes = []
         if n in und:
             notes.append("NOT DETERMINED by this data: value arbitrary, never compensated")
+        elif n in held:
+            notes.append("held near 0: its class shows no sign in the data")
         elif n in part:
             notes.append("informed only in part by the data")
         if n in impl:
             notes.append("IMPLAUSIBLE: far outside its plausible size")
-        if n in confounded:
-            notes.append("confounded with " + ", ".join(x for x in confounded[n] if x != n))
+        if n in confounded and len(confounded[n]) > 1:
+            notes.append("confounded with " + _name_list([x for x in confounded[n] if x != n], 3))
         if len(n) == 4 and n[0] == "E" and n[1] == n[2] and n[3] == "1" and n[2] in negative:
             notes.append("axis moves along a negative basis vector: positive shortens the travel")
         if np.isfinite(sig) and sig < 2:
@@ -438,19 +513,28 @@ def _parameter_rows(result, machine, truth: Optional[Mapping[str, float]]) -> Tu
             + ("<th>prior σ</th><th>informed (σ/prior σ)</th>" if prior else "")
             + ("<th>true</th><th>z</th>" if truth is not None else "")
             + "<th>notes</th></tr>")
-    return head + "".join(row(n) for n in mach), head + "".join(row(n) for n in other)
+    told = lambda n: (n not in und and n not in held) or n in impl  # noqa: E731
+    return (head + "".join(row(n) for n in mach if told(n)), head + "".join(row(n) for n in other if told(n)),
+            head + "".join(row(n) for n in mach + other if not told(n)))
 
 
-def _parameter_section(result, machine, truth) -> str:
-    mach_rows, other_rows = _parameter_rows(result, machine, truth)
+def _parameter_section(result, machine, truth) -> Tuple[str, str]:
+    """The Parameters section (what the data determined) and the collapsed
+    list of every parameter it did not determine, for the end of the report."""
+    mach_rows, other_rows, und_rows = _parameter_rows(result, machine, truth)
     fixed = {n: v for n, v in result.values.items() if n not in result.std}
+    n_mach, n_other, n_und = (r.count("<tr") - 1 for r in (mach_rows, other_rows, und_rows))
     out = ["<p>Values in µm, µrad, µm/m (µm/m per mm of travel for linear error-motion slopes, "
            "µrad/rad for rotary ones); files keep mm and rad. u: one-sigma standard uncertainty; "
-           "U: expanded uncertainty (k = 2). Sign conventions: see the notes at the end.</p>",
-           "<h3>Machine errors</h3><table>", mach_rows, "</table>",
-           f"<details{' open' if other_rows.count('<tr') <= 13 else ''}><summary>Setup parameters (probe tip, "
-           f"artefact, ball bar): {other_rows.count('<tr') - 1}</summary><table>",
-           other_rows, "</table></details>"]
+           "U: expanded uncertainty (k = 2). Sign conventions: see the notes at the end."
+           + (f" The {_count(n_und, 'parameter')} the data did not determine (or held near 0) are listed at the "
+              "end." if n_und else "") + "</p>",
+           "<h3>Machine errors</h3>",
+           f"<table>{mach_rows}</table>" if n_mach else
+           "<p>None determined by this data: no values to show.</p>"]
+    if n_other:
+        out += [f"<details{' open' if n_other <= 12 else ''}><summary>Setup parameters (probe tip, "
+                f"artefact, ball bar): {n_other}</summary><table>", other_rows, "</table></details>"]
     if fixed:
         out.append("<h3>Fixed at non-zero values (not estimated)</h3><table><tr><th>parameter</th>"
                    "<th>value</th><th>unit</th></tr>")
@@ -459,7 +543,10 @@ def _parameter_section(result, machine, truth) -> str:
             out.append(f"<tr class='fixed'><td>{_e(n)}</td><td class='num'>{_fmt(v * f)}</td>"
                        f"<td>{_e(unit)}</td></tr>")
         out.append("</table>")
-    return "".join(out)
+    rest = ("" if not n_und else
+            f"<details id='undetermined'><summary>Every parameter this data did not determine or held near 0 "
+            f"({n_und})</summary><table>" + und_rows + "</table></details>")
+    return "".join(out), rest
 
 
 _CONVENTIONS = """
@@ -577,46 +664,61 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     p = os.path.join(out_dir, "residual_histogram.png")
     plots.plot_residual_histogram(result, p)
     figs.append((p, "Distribution of the residuals with the normal density of the a-posteriori σ̂."))
-    mnames = [n for n in result.estimated if n in machine_names and not n.startswith("tip.")]
-    if mnames:
-        p = os.path.join(out_dir, "parameters.png")
-        plots.plot_parameters(result, p, names=mnames, truth=truth,
-                              title="Identified machine errors (error bars ±2σ)")
-        figs.append((p, "Identified machine errors with ±2σ error bars, one panel per unit"
+    fd = guards.findings(result)
+    # Only what the data determined: an undetermined value is the prior's, and
+    # a hundred of them made plots thousands of pixels wide with nothing to read.
+    und = set(fd.undetermined) | set(fd.held)
+    mnames = [n for n in result.estimated if n in machine_names and not n.startswith("tip.") and n not in und]
+    pages = plots.parameter_pages(mnames)
+    for k, page in enumerate(pages):
+        p = os.path.join(out_dir, "parameters.png" if k == 0 else f"parameters_{k + 1}.png")
+        of = f" ({k + 1} of {len(pages)})" if len(pages) > 1 else ""
+        plots.plot_parameters(result, p, names=page, truth=truth,
+                              title=f"Machine errors the data determined (error bars ±2σ){of}")
+        figs.append((p, f"Machine errors the data determined{of}, with ±2σ error bars, one panel per unit"
                         + (", true values in red." if truth else ".")))
-    cnames = [n for n in result.estimated if n in machine_names]
+    cnames = mnames
     if len(cnames) >= 2:
         p = os.path.join(out_dir, "correlation.png")
-        plots.plot_correlation(result, p, names=cnames, title="Correlation of the machine parameters")
-        figs.append((p, "Correlation coefficients between the estimated machine parameters (setup "
-                        "parameters omitted; strongly correlated pairs are listed under Identifiability)."))
+        plots.plot_correlation(result, p, names=cnames, title="Correlation of the determined machine parameters")
+        figs.append((p, "Correlation coefficients between the machine parameters the data determined (setup "
+                        "parameters omitted; strongly correlated pairs are listed under Identifiability)"
+                        + (f"; with {len(cnames)} parameters, the {plots.CORRELATION_PAIRS} pairs of largest |r|."
+                           if len(cnames) > plots.CORRELATION_MATRIX_MAX else ".")))
     figs += list(figures)
+    standing = None
     if history is not None:
-        sections = list(sections) + _history_sections(history, machine_id, out_dir, result, embed_images)
+        extra, standing = _history_sections(history, machine_id, out_dir, result, embed_images)
+        sections = list(sections) + extra
 
-    fd = guards.findings(result)
     title = title or f"fivecal identification report — {machine.name}"
     if not fd.assessment.usable:
         title += " — NOT USABLE"
+    elif standing is not None and standing.grade == "fail":
+        title += " — FAIL"
     now = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     body = [f"<h1>{_e(title)}</h1>",
             f"<div class='sub'>fivecal {__version__} · {now} · {_e(machine.name)} "
             f"(<code>{_e(machine.topology)}</code>) · {len(ds)} observations · residual rms "
             f"{result.rms * 1e3:.3f} µm</div>"]
-    body.append(_verdict_banner(result, fd))
+    # What a reader needs first (the verdict and a compact summary) fits on one
+    # screen; the details follow in #details, the longest lists collapsed.
+    body.append(_verdict_banner(result, fd, standing))
     if summary:
         body.append(f"<div class='box'>{_e(summary)}</div>")
     nav = ["findings", "machine", "data", "fit", "identifiability", "parameters"] + \
           [f"extra{i}" for i in range(len(sections))] + ["plots", "conventions", "files"]
     labels = ["What the data told", "Machine", "Data", "Fit", "Identifiability", "Parameters"] + \
              [t for t, _ in sections] + ["Plots", "Conventions", "Files"]
-    body.append("<nav>" + "".join(f"<a href='#{a}'>{_e(b)}</a>" for a, b in zip(nav, labels)) + "</nav>")
+    params, undetermined = _parameter_section(result, machine, truth)
     body += ["<h2 id='findings'>What the data told</h2>", _findings_section(result, fd),
+             "<nav>" + "".join(f"<a href='#{a}'>{_e(b)}</a>" for a, b in zip(nav, labels)) + "</nav>",
+             "<div id='details'>",
              "<h2 id='machine'>Machine</h2>", _machine_section(machine),
              "<h2 id='data'>Data</h2>", _data_section(ds, result),
              "<h2 id='fit'>Fit</h2>", _fit_section(result), _largest_residuals(result),
              "<h2 id='identifiability'>Identifiability</h2>", _identifiability_section(result),
-             "<h2 id='parameters'>Parameters</h2>", _parameter_section(result, machine, truth)]
+             "<h2 id='parameters'>Parameters</h2>", params]
     for i, (t, h) in enumerate(sections):
         body += [f"<h2 id='extra{i}'>{_e(t)}</h2>", h]
     body.append("<h2 id='plots'>Plots</h2>")
@@ -634,7 +736,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
              "".join(f"<li><a href='{_e(f)}'>{_e(f)}</a></li>" for f in sorted(os.listdir(out_dir))
                      if f not in ("result.json", "report.html") and not f.startswith("_")
                      and os.path.splitext(f)[1] in (".json", ".txt", ".csv", ".nc")),
-             "</ul>"]
+             "</ul>", undetermined, "</div>"]
     doc = ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
            "<meta name='viewport' content='width=device-width, initial-scale=1'>"
            f"<title>{_e(title)}</title><style>{_CSS}</style></head><body><main>\n"

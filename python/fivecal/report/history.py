@@ -28,11 +28,29 @@ class History:
     time: Optional[object] = None
 
 
+@dataclass
+class Standing:
+    """Where the report's calibration stands in its history, for the banner
+    at the top of the report: its grade against the tolerances (``pass``,
+    ``fail``, ``undecided``; None without tolerances), the failing items, and
+    the parameters whose CUSUM alarm fires at this calibration."""
+    grade: Optional[str] = None
+    failed: Tuple[str, ...] = ()
+    alarms: Tuple[str, ...] = ()
+
+
 def sections(history, machine_id: Optional[str], out_dir: str, result=None,
              embed: bool = True) -> List[Tuple[str, str]]:
     """(title, HTML) sections for the report; empty when the store holds no
     calibration of the machine. ``result``: the identification the report is
     about; when it is not in the store it is shown as the newest entry."""
+    return sections_and_standing(history, machine_id, out_dir, result, embed)[0]
+
+
+def sections_and_standing(history, machine_id: Optional[str], out_dir: str, result=None,
+                          embed: bool = True) -> Tuple[List[Tuple[str, str]], Standing]:
+    """:func:`sections` and the :class:`Standing` of the report's
+    calibration (a FAIL 7,000 pixels below a green banner was missed)."""
     h = history if isinstance(history, History) else History(history, machine_id)
     if machine_id:
         h.machine_id = machine_id
@@ -60,8 +78,9 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
         if machine is None:
             machine = result.dataset.machine
     if not cals:
-        return []
+        return [], Standing()
     out = []
+    standing = Standing()
     usable = [c for c in cals if c.usable]
     charts = detect(usable, false_alarm_rate=h.false_alarm_rate) if len(usable) >= 2 else {}
     parts = [f"<p>{len(cals)} calibrations of <b>{_e(h.machine_id)}</b> from {_e(cals[0].time)} to "
@@ -89,6 +108,8 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
     # changes, so the comparison is not graded
     if this is None:
         this = usable[-1] if usable else cals[-1]
+    if any(c is this for c in usable):  # identity: a Calibration holds arrays
+        standing.alarms = tuple(n for n, c in charts.items() if any(c.times[i] == this.time for i in c.alarms))
     before = [c for c in usable if c is not this and time_key(c.time) <= time_key(this.time)]
     if any(c is this for c in usable) and before:       # identity: a Calibration holds arrays
         cmp = compare(before[-1], this, machine=machine)
@@ -120,11 +141,14 @@ def sections(history, machine_id: Optional[str], out_dir: str, result=None,
         if g.volumetric:
             rows.append(["volumetric (largest)", f"{g.volumetric['max'] * 1e3:.3f}", "",
                          f"{g.volumetric['tolerance'] * 1e3:g}", "µm", g.volumetric["grade"]])
+        standing.grade = g.verdict
+        standing.failed = tuple([n for n, p in g.parameters.items() if p["grade"] == "fail"]
+                                + (["volumetric"] if g.volumetric and g.volumetric["grade"] == "fail" else []))
         cls = {"pass": "ok", "fail": "bad"}.get(g.verdict, "warn")
         which = "This calibration" if result is not None else "Latest calibration"
-        out.append(("Pass / fail", f"<div class='box {cls}'>{which} ({_e(this.time)}): <b>{g.verdict.upper()}</b>"
+        out.append(("Pass / fail", f"<div class='box {cls}' id='history-grade'>{which} ({_e(this.time)}): <b>{g.verdict.upper()}</b>"
                     + ("" if this.usable else f" (the fit itself is not usable: {_e(this.verdict)})")
                     + " (pass: |value| + 2u within the tolerance; fail: |value| − 2u beyond it; otherwise "
                     "undecided).</div>" + table_html(["item", "value", "U = 2u", "tolerance", "unit", "grade"],
                                                      rows, [False, True, True, True, False, False])))
-    return out
+    return out, standing

@@ -11,35 +11,79 @@ from ..files import save_figure
 from ..units import display_scale
 
 
+#: the largest width or height of a report figure, in pixels: a figure of
+#: many panels gets pages or a smaller resolution, never thousands of pixels
+MAX_FIGURE_PX = 2400
+#: parameters per page of the parameter bars (each page stays readable)
+PARAMETERS_PER_PAGE = 36
+#: parameters up to which the correlation is drawn as a matrix; beyond, the
+#: strongest pairs as bars (a 130 x 130 matrix has unreadable labels)
+CORRELATION_MATRIX_MAX = 40
+#: pairs the bar form of the correlation shows
+CORRELATION_PAIRS = 30
+
+
+def save_capped(fig, path: str, dpi: float) -> str:
+    """Save ``fig`` at ``dpi``, lowered where needed so that neither side
+    exceeds :data:`MAX_FIGURE_PX` pixels."""
+    w, h = fig.get_size_inches()
+    return save_figure(fig, path, dpi=min(dpi, MAX_FIGURE_PX / max(w, h, 1e-9)))
+
+
+def parameter_pages(names: Sequence[str], per_page: int = PARAMETERS_PER_PAGE) -> list:
+    """``names`` in pages of at most ``per_page`` for :func:`plot_parameters`,
+    grouped by display unit first so that a unit's panel is split only when it
+    alone exceeds a page."""
+    by_unit: dict = {}
+    for n in names:
+        by_unit.setdefault(display_scale(n)[1], []).append(n)
+    pages, page = [], []
+    for ns in by_unit.values():
+        for k in range(0, len(ns), per_page):
+            chunk = ns[k:k + per_page]
+            if page and len(page) + len(chunk) > per_page:
+                pages.append(page)
+                page = []
+            page += chunk
+    return pages + ([page] if page else [])
+
+
 def plot_parameters(result, path: str, names=None, truth: Optional[Mapping[str, float]] = None,
                     title: str = "Identified parameters (±2σ)") -> str:
     """Horizontal bars of the identified values in report units with ±2σ error
-    bars, one panel per unit, and the true values when known."""
+    bars, one panel per unit (at most three side by side, further units on
+    more rows), and the true values when known. At most
+    :data:`MAX_FIGURE_PX` pixels a side: give many parameters in pages
+    (:func:`parameter_pages`)."""
     plt = _pyplot()
     names = [n for n in (names or result.estimated) if n in result.std]
     groups = {}
     for n in names:
         groups.setdefault(display_scale(n)[1], []).append(n)
-    fig, axes = plt.subplots(1, len(groups), figsize=(4.2 * len(groups), 0.35 * max(map(len, groups.values())) + 1.6),
-                             squeeze=False)
-    for ax, (unit, ns) in zip(axes[0], groups.items()):
+    items = list(groups.items()) or [("", [])]
+    ncols = min(3, len(items))
+    nrows = -(-len(items) // ncols)
+    heights = [max(len(ns) for _, ns in items[r * ncols:(r + 1) * ncols]) for r in range(nrows)]
+    fig = plt.figure(figsize=(4.6 * ncols + 0.4, sum(0.3 * h + 1.1 for h in heights) + 0.7), layout="constrained")
+    grid = fig.add_gridspec(nrows, ncols, height_ratios=[0.3 * h + 1.1 for h in heights])
+    axes = [fig.add_subplot(grid[k // ncols, k % ncols]) for k in range(len(items))]
+    for ax, (unit, ns) in zip(axes, items):
         f = np.array([display_scale(n)[0] for n in ns])
         v = np.array([result.values[n] for n in ns]) * f
         s = np.array([result.std[n] for n in ns]) * f
         y = np.arange(len(ns))
-        ax.barh(y, v, xerr=2 * s, color="#4c78a8", ecolor="#222", capsize=3, label="identified")
+        ax.barh(y, v, xerr=2 * s, color="#4c78a8", ecolor="#222", capsize=3, label="estimate")
         if truth is not None:
             t = np.array([truth.get(n, 0.0) for n in ns]) * f
             ax.scatter(t, y, marker="|", s=300, color="#e45756", zorder=3, label="true")
         ax.set_yticks(y, ns)
-        ax.invert_yaxis()
+        ax.set_ylim(len(ns) - 0.5, -0.5)
         ax.axvline(0, color="#888", lw=0.8)
         ax.set_xlabel(unit)
         ax.grid(axis="x", alpha=0.3)
-    axes[0][0].legend(loc="best", fontsize=8)
+    axes[0].legend(loc="best", fontsize=8)
     fig.suptitle(title)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=120)
+    save_capped(fig, path, 120)
     plt.close(fig)
     return path
 
@@ -256,7 +300,7 @@ def plot_residual_vectors(result, path: str, magnification: Optional[float] = No
     get a legend, more a colour bar. Only touch-probing observations are
     drawn when there are any (``kinds`` chooses others)."""
     fig = residual_vectors_figure(result, magnification, title, legend, kinds)
-    save_figure(fig, path, dpi=110)
+    save_capped(fig, path, 110)
     return path
 
 
@@ -332,6 +376,24 @@ def component_groups(dataset, kind: Optional[str] = None) -> tuple:
     return out
 
 
+def _first_rows(res, src, rows, k: int = 3) -> np.ndarray:
+    """The first ``k`` residual rows of each observation in ``rows`` (NaN
+    where it has fewer), in one pass over the rows (a scan of every row per
+    observation is quadratic: 3 x 10^10 comparisons for 10^5 R-test samples)."""
+    src, res = np.asarray(src), np.asarray(res)
+    out = np.full((len(rows), k), np.nan)
+    if not src.size:
+        return out
+    firsts = np.flatnonzero(np.r_[True, src[1:] != src[:-1]])  # an observation's rows are consecutive
+    counts = np.diff(np.r_[firsts, src.size])
+    where = dict(zip(src[firsts].tolist(), zip(firsts.tolist(), counts.tolist())))
+    for n, i in enumerate(rows):
+        first, count = where.get(int(i), (0, 0))
+        if count >= k:
+            out[n] = res[first:first + k]
+    return out
+
+
 def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
     """What the instrument saw beyond the nominal machine, µm. An R-test
     records deviations itself. A tracker records absolute positions in its own
@@ -345,13 +407,7 @@ def _recorded_deviation(result, kind: str, rows) -> np.ndarray:
     machine = set(result.dataset.machine.parameter_names())
     setup = {k: v for k, v in result.values.items() if k not in machine}
     res, src = _core.predict_residuals(result.dataset._core, setup)
-    out = np.full((len(rows), 3), np.nan)
-    src = np.asarray(src)
-    for n, i in enumerate(rows):
-        r = np.asarray(res)[src == i]
-        if r.size >= 3:
-            out[n] = -r[:3] * 1e3
-    return out
+    return -_first_rows(res, src, rows) * 1e3
 
 
 def component_figure(result, kind: Optional[str] = None, title: Optional[str] = None):
@@ -371,8 +427,6 @@ def component_figure(result, kind: Optional[str] = None, title: Optional[str] = 
     title = title or f"{what_kind}: deviation per component"
     all_rows = [i for _, rs, *_ in setups for i in rs]
     rec_all = dict(zip(all_rows, _recorded_deviation(result, kind, all_rows)))
-    src = np.asarray(result.residual_source)
-    res_all = np.asarray(result.residuals)
     comps = _COMPONENTS[kind]["components"]
     top = "recorded" if _COMPONENTS[kind]["recorded_deviation"] else "recorded − nominal machine"
     labels_all = sorted({l for *_, labels in setups for l in labels if l}, key=_natural)
@@ -381,11 +435,7 @@ def component_figure(result, kind: Optional[str] = None, title: Optional[str] = 
     fig, axes = plt.subplots(2 * n, 3, figsize=(14.5, 1.4 + 3.1 * n), squeeze=False, layout="constrained")
     for s_i, (name, rows, key, angles, labels) in enumerate(setups):
         rec = np.array([rec_all[i] for i in rows])
-        left = np.full((len(rows), 3), np.nan)
-        for k, i in enumerate(rows):
-            r = res_all[src == i]
-            if r.size >= 3:
-                left[k] = r[:3] * 1e3
+        left = _first_rows(result.residuals, result.residual_source, rows) * 1e3
         groups = list(dict.fromkeys(labels))
         for row, (data, what) in enumerate(((rec, top), (left, "residual after the fit"))):
             for c, comp in enumerate(comps):
@@ -426,7 +476,7 @@ def plot_components(result, path: str, kind: Optional[str] = None, title: Option
     fig = component_figure(result, kind, title)
     if fig is None:
         return None
-    save_figure(fig, path, dpi=110)
+    save_capped(fig, path, 110)
     return path
 
 
@@ -452,35 +502,55 @@ def plot_residual_histogram(result, path: str) -> str:
     ax.set_ylabel("count")
     ax.set_title(f"Residuals{of}: rms {result.rms * 1e3:.3f} µm, σ̂ {result.sigma * 1e3:.3f} µm")
     fig.tight_layout()
-    save_figure(fig, path, dpi=120)
+    save_capped(fig, path, 120)
     plt.close(fig)
     return path
 
 
 def plot_correlation(result, path: str, names=None, title: str = "Parameter correlation") -> str:
-    """The correlation matrix of the estimated parameters (or of ``names``,
-    a subset of them) as a colour map from -1 (blue) to +1 (red); for up to
-    30 parameters, pairs beyond ±0.9 are marked with their value."""
+    """The correlation of the estimated parameters (or of ``names``, a subset
+    of them). Up to :data:`CORRELATION_MATRIX_MAX` parameters, the matrix as a
+    colour map from -1 (blue) to +1 (red), every pair marked with its value up
+    to 12 parameters and pairs beyond ±0.9 up to 30; beyond, the :data:`CORRELATION_PAIRS` pairs of
+    largest |r| as bars (a matrix of a hundred names has unreadable labels)."""
     plt = _pyplot()
     est = list(result.estimated)
     names = [n for n in (names or est) if n in est]
     idx = [est.index(n) for n in names]
-    C = np.asarray(result.correlation)[np.ix_(idx, idx)] if idx else np.zeros((0, 0))
+    C = np.nan_to_num(np.asarray(result.correlation)[np.ix_(idx, idx)]) if idx else np.zeros((0, 0))
     n = len(names)
+    if n > CORRELATION_MATRIX_MAX:
+        ii, jj = np.triu_indices(n, 1)
+        top = np.argsort(-np.abs(C[ii, jj]), kind="stable")[:CORRELATION_PAIRS]
+        r = C[ii[top], jj[top]]
+        labels = [f"{names[i]} / {names[j]}" for i, j in zip(ii[top], jj[top])]
+        fig, ax = plt.subplots(figsize=(9.0, 0.3 * len(top) + 1.6), layout="constrained")
+        y = np.arange(len(top))
+        ax.barh(y, r, color=np.where(r >= 0, "#d6604d", "#4393c3"))
+        ax.set_yticks(y, labels, fontsize=8)
+        ax.set_ylim(len(top) - 0.5, -0.5)
+        ax.set_xlim(-1.05, 1.05)
+        ax.axvline(0, color="#888", lw=0.8)
+        ax.set_xlabel("correlation coefficient r")
+        ax.grid(axis="x", alpha=0.3)
+        ax.set_title(f"{title}: the {len(top)} pairs of largest |r| among {n} parameters", fontsize=11)
+        save_capped(fig, path, 110)
+        plt.close(fig)
+        return path
     size = min(13.0, max(5.0, 0.22 * n + 2.5))
     fig, ax = plt.subplots(figsize=(size + 1.2, size))
     im = ax.imshow(C, cmap="RdBu_r", vmin=-1, vmax=1, interpolation="nearest")
-    fs = 9 if n <= 25 else (7 if n <= 45 else 5.5)
+    fs = 9 if n <= 25 else 7
     ax.set_xticks(np.arange(n), names, rotation=90, fontsize=fs)
     ax.set_yticks(np.arange(n), names, fontsize=fs)
     for i in range(n):
         for j in range(n):
-            if n <= 30 and i != j and abs(C[i, j]) >= 0.9:
+            if i != j and (n <= 12 or (n <= 30 and abs(C[i, j]) >= 0.9)):
                 ax.text(j, i, f"{C[i, j]:.2f}", ha="center", va="center", fontsize=max(fs - 2, 4),
-                        color="w")
+                        color="w" if abs(C[i, j]) >= 0.6 else "k")
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03, label="correlation coefficient")
     ax.set_title(title)
     fig.tight_layout()
-    save_figure(fig, path, dpi=110)
+    save_capped(fig, path, 110)
     plt.close(fig)
     return path

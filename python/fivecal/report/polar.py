@@ -35,7 +35,7 @@ from ..figures import _pyplot
 from ..files import save_figure
 from ..procedures.dbb import Trace, trace_from_dataset
 from ..units import display_scale
-from .plots import _limits
+from .plots import _limits, save_capped
 
 _NICE = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0)
 CW_COLOR, CCW_COLOR = "#1f5fbf", "#d62728"
@@ -454,7 +454,7 @@ def dbb_panels(result) -> tuple:
         if len(idx) < 3:
             skipped.append(f"{setup or '(no setup id)'} ({len(idx)} samples)")
             continue
-        t = trace_from_dataset(ds.subset(idx), setup)
+        t = trace_from_dataset(ds, setup, idx)
         if np.ptp(t.angles) < MIN_SWEEP:
             skipped.append(f"{setup or '(no setup id)'} (the balls sweep {np.ptp(t.angles):.3g}° about "
                            "each other: no circle to draw)")
@@ -469,10 +469,12 @@ def dbb_panels(result) -> tuple:
     return panels, skipped
 
 
-def dbb_figure(result, title: Optional[str] = None):
+def dbb_figure(result, title: Optional[str] = None, panels=None):
     """The report's ball bar Figure: one polar panel per DBB setup, plane
-    and bar length (never two on one panel). None without DBB data."""
-    panels, _ = dbb_panels(result)
+    and bar length (never two on one panel). None without DBB data.
+    ``panels``: those of :func:`dbb_panels` when already made."""
+    if panels is None:
+        panels, _ = dbb_panels(result)
     if not panels:
         return None
     ncols = 1 if len(panels) == 1 else (2 if len(panels) in (2, 4) else 3)
@@ -490,9 +492,9 @@ def report_figures(result, out_dir: str) -> list:
     out = []
     panels, skipped = dbb_panels(result)
     if panels:
-        fig = dbb_figure(result)
+        fig = dbb_figure(result, panels=panels)
         path = os.path.join(out_dir, "dbb_polar.png")
-        save_figure(fig, path, dpi=100)
+        save_capped(fig, path, 100)
         setups = ", ".join(p["setup"] or "(none)" for p in panels)
         cap = (f"Double ball bar setups {setups}: one polar panel per setup, plane and bar length, the recorded "
                "readings and what the identified model leaves unexplained (deviations from the nominal bar "
@@ -504,7 +506,7 @@ def report_figures(result, out_dir: str) -> list:
     fig = dbb_residual_figure(result)
     if fig is not None:
         path = os.path.join(out_dir, "dbb_residuals.png")
-        save_figure(fig, path, dpi=100)
+        save_capped(fig, path, 100)
         cap = ("Double ball bar residuals after the fit against the sample index (recording order), one panel "
                "per setup, plane and bar length.")
         if skipped and not panels:
@@ -535,7 +537,7 @@ def dbb_residual_figure(result, title: str = "Double ball bar: residuals after t
         ax = axes[k // ncols][k % ncols]
         where = "too few samples for a plane"
         if len(idx) >= 3:
-            t = trace_from_dataset(ds.subset(idx), setup)
+            t = trace_from_dataset(ds, setup, idx)
             where = (f"plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
                      f"no circle (the balls sweep {np.ptp(t.angles):.2g}°)")
         r = np.array([resid.get(i, np.nan) for i in idx]) * 1e3

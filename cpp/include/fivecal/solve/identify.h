@@ -84,6 +84,18 @@ struct UnitResiduals {
   double dof = 0;                       // the unit's share of the degrees of freedom
 };
 
+// What the data could not tell, for one family of parameters (the prior
+// classes gathered as a reader names them: location offsets, location angles,
+// scale gains, error motions of one degree, backlash, set-up), with the
+// likely cause and the measurement that would tell it.
+struct NotDetermined {
+  std::string family;               // "location offsets", "error motions of degree 2", "set-up" ...
+  bool machine = true;              // machine errors (false: set-up quantities)
+  int estimated = 0;                // the family's estimated parameters
+  std::vector<std::string> names;   // those of them the data did not determine
+  std::string why;                  // likely cause: the measurement that would determine them
+};
+
 struct Result {
   std::vector<std::string> names;     // every parameter of the problem
   Eigen::VectorXd values;             // every parameter (fitted or fixed)
@@ -130,9 +142,26 @@ struct Result {
   bool adequate = true;
   std::string adequacy;               // the likely cause when not adequate
   bool finite = true;                 // every value and std finite
+  // Machine errors the data determined far beyond their plausible size
+  // (implausible, undetermined ones left out): a 100 mm pivot is the machine
+  // file's nominal geometry, not the machine. Not usable ("implausible");
+  // `plausibility` names the values and the likely cause.
+  bool plausible = true;
+  std::string plausibility;
   bool explicit_request = false;      // no "auto": undetermined parameters make the verdict
+  // The fit was to find machine errors (some were estimated, or "auto" /
+  // "location" was asked for); with none of them determined it identified
+  // nothing, and the verdict says so ("undetermined").
+  bool seeks_machine_errors = false;
+  int identified_machine_errors = 0;  // determined, not `held`, and precise or significant (kIdentifiedRatio)
+  // Estimate "auto": parameters the data determined in a class they show no
+  // sign of (kAbsentClassScale): their values are held near 0, not measured.
+  std::vector<std::string> held;
+  std::vector<NotDetermined> not_determined;  // one per family with undetermined parameters
   std::string fit_path;               // the path that ran: "dense" or "normal_equations"
-  // "ok", "not_converged", "inadequate", "non_finite" or "undetermined".
+  // "ok", "not_converged", "implausible", "inadequate", "non_finite" or
+  // "undetermined" (requested parameters undetermined, or no machine error
+  // determined).
   std::string verdict() const;
 
   std::string ToJson() const;

@@ -89,6 +89,18 @@ constexpr double kRotaryReferenceTravel = 1.0;    // rad
 // same criterion on the MAP result is informed < kInformedThreshold.
 constexpr double kDeterminedRatio = 0.5;
 constexpr double kInformedThreshold = 0.4472135954999579;  // 1 / sqrt(5)
+// Estimate "auto": a class of machine errors whose evidence scale (the
+// hierarchical prior's factor) ends below this shows no sign in the data; the
+// point estimates of its parameters are held near 0 by that scale, so even a
+// determined one is no measured value.
+constexpr double kAbsentClassScale = 0.01;
+// A determined machine error is identified when the data narrowed its
+// plausible range tenfold (posterior sigma at most kIdentifiedRatio x prior
+// sigma) or found it beyond kSignificantSigmas of 0; an imprecise value that
+// does not differ from 0 tells nothing. A fit for machine errors that
+// identified none is not usable.
+constexpr double kIdentifiedRatio = 0.1;
+constexpr double kSignificantSigmas = 2.0;
 // Values beyond this many prior sigmas are flagged as implausible.
 constexpr double kImplausibleSigmas = 5.0;
 
