@@ -83,7 +83,7 @@ def test_dbb_circular(work, monkeypatch, capsys):
     from fivecal.procedures import dbb
 
     args = ["dbb", "circular", "--machine", os.path.join(MACHINES, "c600u.json"), "--simulate",
-            "EXX1=2e-5,EC0Y=3e-5", "--radius", "100"]
+            "EXX1=1e-4,EC0Y=3e-5", "--radius", "100"]
     assert fivecal_cli.main(args) == 0
     capsys.readouterr()
     real = dbb.circular_test

@@ -109,8 +109,9 @@ def test_ball_bar_command_recovers_the_truth(procedure, truth, tmp_path):
     doc = json.loads(out.read_text())
     if procedure == "circular":
         # EXX1 alone is not determined by a circle (the mean scale goes into the
-        # bar length): the result says so, and the backlash of each axis is measured
-        assert "EXX1" in doc["undetermined"]
+        # bar length): the result says so, or gives it the sigma the bar length's
+        # placement prior allows (2 um on 100 mm: 2e-5); the backlashes are measured
+        assert "EXX1" in doc["undetermined"] or doc["parameters"]["EXX1"]["std"] >= 1.5e-5, doc["parameters"]["EXX1"]
         truth = {n: v for n, v in truth.items() if n != "EXX1"}
         diag = doc["procedure"]["values"]["diagnosis"]
         # scale mismatch X-Y: EXX1 - EYY1 (mm/mm), within 3 sigma of the diagnosis
@@ -156,7 +157,7 @@ def test_ac_trunnion_plan_simulate_four_step_export_and_history(tmp_path):
     _ok(_run("simulate", plan, "--out", ds))
     out = tmp_path / "result.json"
     r = _ok(_run("dbb", "four-step", ds, "--out", out))
-    assert "Usable" in r.stdout
+    assert "OK (usable)" in r.stdout or "Usable" in r.stdout, r.stdout[-1500:]
     doc = json.loads(out.read_text())
     schema.validate(doc, "result", "four-step result")
     for n, z in _z(doc, truth, VMC).items():

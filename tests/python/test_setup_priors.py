@@ -18,6 +18,7 @@ import pytest
 
 import fivecal
 from fivecal.procedures import dbb, rtest
+from fivecal.procedures.sphere_check import spindle_names
 
 from shared_machines import TABLE_HEAD
 
@@ -66,7 +67,9 @@ def test_wang_table_ball_50um_off_is_refused_or_within_4_sigma(vmc, tmp_path, ax
         res = doc["result"] if "result" in doc else doc
         params = res["parameters"]
         undetermined = set(res.get("undetermined", []))
-        for n, v in TRUTH_WANG.items():
+        # the command reports under the names every command uses (EX0S = -EX0C here)
+        m = vmc if isinstance(vmc, fivecal.Machine) else fivecal.Machine.from_dict(vmc)
+        for n, v in spindle_names(m, TRUTH_WANG).items():
             if n in undetermined:
                 continue
             z = (params[n]["value"] - v) / params[n]["std"]

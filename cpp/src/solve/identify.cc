@@ -1218,6 +1218,15 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
                      "e.g. 'auto') or the declared noise is too small";
   }
 
+  // A misfit whose cause the residuals name (a set-up left fixed, a unit
+  // mistake) is told by that cause: the values it drives far off are its
+  // symptom, and "the machine file" would send the user to the wrong file.
+  if (!res.adequate && !res.plausible &&
+      (res.adequacy.rfind("instrument setup not estimated", 0) == 0 || res.adequacy.rfind("unit mistake", 0) == 0)) {
+    res.adequacy += "; it drives values beyond their plausible size: " + res.plausibility;
+    res.plausible = true;
+  }
+
   // With the noise estimated the chi-square passes by construction; what is
   // left to judge is how far each group's noise is from its declaration.
   // Variance components would otherwise absorb any misfit as "noise": beyond
