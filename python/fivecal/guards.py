@@ -317,6 +317,13 @@ def findings(result) -> Findings:
     # determined in a class the data show no sign of: the value is the class prior's 0, not measured
     held = [n for n in getattr(result, "held", None) or [] if n in est and n not in set(undetermined)]
     und = set(undetermined) | set(held)
+    # A placed set-up quantity is judged against its placement, not against its
+    # plausible size: one the data narrowed little below what its placement
+    # already told is known from the placement, not identified by the data.
+    std = dict(getattr(result, "std", None) or {})
+    for n, s in (getattr(result, "placement_std", None) or {}).items():
+        if n in std and s > 0 and _finite(std[n]):
+            informed[n] = max(informed.get(n, 0.0), float(std[n]) / float(s))
     partly = [n for n in est if n not in und and informed.get(n, 0.0) > PARTLY_INFORMED]
     identified = [n for n in est if n not in und and n not in set(partly)]
     pairs = []

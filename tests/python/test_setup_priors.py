@@ -271,3 +271,16 @@ def test_setup_uncertainty_round_trips_and_unknown_names_are_refused(vmc, tmp_pa
     p = _cli("identify", path, "--estimate", "EX0C")
     assert p.returncode == 2, p.stdout + p.stderr
     assert "setup_uncertainty" in p.stderr + p.stdout
+
+
+def test_set_up_values_known_from_their_placement_are_not_counted_as_identified(vmc):
+    # before: judged against their plausible size (2 mm), the ball placements the
+    # Wang path leaves to their 30 um placement prior counted as "identified"
+    # (the report said "identified: 9 parameters")
+    from fivecal import guards
+    r = dbb.wang_identify(_wang(vmc, {"dbb.W1.table.y": 0.050})).result
+    fd = guards.findings(r)
+    from_placement = [n for n in r.placement_std if r.std[n] > guards.PARTLY_INFORMED * r.placement_std[n]]
+    assert from_placement, r.placement_std
+    assert not set(from_placement) & set(fd.identified), (from_placement, fd.identified)
+    assert set(from_placement) <= set(fd.partly) | set(fd.undetermined)

@@ -273,6 +273,8 @@ def test_sscanss_fit_does_not_depend_on_where_the_instrument_stood(sscanss, tmp_
     with pytest.warns(UserWarning, match="not usable"):
         bad = fivecal.identify(ds, ESTIMATE, fix="instrument.T1.work_z", variance_components=True)
     assert bad.verdict == "implausible" and not bad.usable
+    # the other place to look is named: the tracker's pose (before: only the machine file)
+    assert "a set-up is far from where the dataset places it (instrument.T1)" in bad.plausibility
 
 
 def test_joint_layout_with_axis_letters_and_a_header_option_for_another_kind(tmp_path):

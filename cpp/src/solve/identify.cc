@@ -532,10 +532,23 @@ std::string ImplausibleCause(const Machine& m, const Result& res, const Eigen::V
   for (size_t k = 0; k < shown.size(); ++k) list += (k ? ", " : "") + shown[k];
   if (count > kShown) list += " and " + std::to_string(count - kShown) + " more";
   const bool one = axes.size() == 1;
+  // The placed set-ups of the fit (an instrument started from the wrong pose
+  // turns the machine as well): named as the other place to look.
+  std::vector<std::string> placed;
+  for (size_t j = 0; j < res.estimated.size() && j < res.placement.size(); ++j) {
+    if (!(res.placement[j] > 0.0)) continue;
+    const std::string& n = res.estimated[j];
+    const size_t a = n.find('.'), b = a == std::string::npos ? a : n.find('.', a + 1);
+    const std::string owner = n.substr(0, b);
+    if (std::find(placed.begin(), placed.end(), owner) == placed.end()) placed.push_back(owner);
+  }
   return list + ": likely cause: the machine file (machine \"" + m.name() + "\"): its nominal geometry of " +
          (one ? "axis " : "axes ") + JoinAnd(axes) + " (" + (one ? "its point or direction" :
                                                              "their points or directions") +
-         ") is not the machine's, or a value is in the wrong unit; correct the machine file and fit again";
+         ") is not the machine's, or a value is in the wrong unit; correct the machine file and fit again" +
+         (placed.empty() ? std::string()
+                         : "; if the machine file is right, a set-up is far from where the dataset places it (" +
+                               JoinAnd(placed) + ")");
 }
 
 void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const ParameterTable& table,
