@@ -21,7 +21,7 @@ cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DFIVECAL_SANITIZE=ON \
   -DFIVECAL_BUILD_PYTHON=OFF -DFIVECAL_BUILD_TESTS=ON "${launcher[@]}" >/dev/null
 # Only the test binary: the benchmark built alongside in the plain build is
 # not run by ctest.
-cmake --build "$BUILD" -j "$JOBS" --target fivecal_tests
+cmake --build "$BUILD" -j "$JOBS" --target fivecal_tests fivecal_kind_plugin_tests
 
 # Suppressions cover leaks inside third-party libraries only (see the file).
 export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1:check_initialization_order=1"
