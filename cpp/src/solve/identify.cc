@@ -1211,10 +1211,12 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
       mounts = true;
       if (std::find(est.begin(), est.end(), c) != est.end()) mount_estimated = true;
     }
+  bool cause_named = false;  // the residuals name the cause: a set-up left fixed, a unit
   if (!res.adequate) {
     const double x = std::sqrt(ratio);
     char buf[64];
     std::snprintf(buf, sizeof buf, "%.3g", x);
+    cause_named = (mounts && !mount_estimated) || (x > 200 && x < 5000);
     if (mounts && !mount_estimated)
       res.adequacy = "instrument setup not estimated (ball3d/dbb mount: estimate its tool and "
                      "table ball positions, e.g. ball3d.<setup>.table.x|y|z); residuals are " +
@@ -1234,8 +1236,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   // A misfit whose cause the residuals name (a set-up left fixed, a unit
   // mistake) is told by that cause: the values it drives far off are its
   // symptom, and "the machine file" would send the user to the wrong file.
-  if (!res.adequate && !res.plausible &&
-      (res.adequacy.rfind("instrument setup not estimated", 0) == 0 || res.adequacy.rfind("unit mistake", 0) == 0)) {
+  if (cause_named && !res.plausible) {
     res.adequacy += "; it drives values beyond their plausible size: " + res.plausibility;
     res.plausible = true;
   }
