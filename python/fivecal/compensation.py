@@ -29,7 +29,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _core, gcode, guards, schema
+from . import _core, files, gcode, guards, schema
 from .guards import CorrectionLimitError, UnusableResultError
 from .machine import Machine
 from .progress import Progress
@@ -64,8 +64,6 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
     undetermined = set(guards.assess(source).undetermined)  # never exported as if measured
     if isinstance(source, (str, os.PathLike)):
         where = os.fspath(source)
-        from . import files
-
         source = schema.validate(files.read_json(where, "result"), "errors", where)
     if hasattr(source, "values") and hasattr(source, "estimated"):  # a Result
         source = dict(source.values)
@@ -110,8 +108,6 @@ def usable_errors(source, machine: Machine, force: bool = False,
     if isinstance(source, (str, os.PathLike)):
         # a malformed file is bad input whatever its verdict: name the bad key
         # first, not a refusal that --force would only trade for it
-        from . import files
-
         schema.validate(files.read_json(os.fspath(source), "result"), "errors", os.fspath(source))
     guards.require_usable(source, force, what)
     return load_errors(source, machine)
@@ -432,8 +428,6 @@ def compensate_gcode_file(path: Union[str, os.PathLike], out: Union[str, os.Path
     which maps every byte to itself). The guards of :func:`compensate_gcode`
     (``force``, ``max_correction``, ``max_correction_deg``) apply before
     anything is written."""
-    from . import files
-
     path = os.fspath(path)
     files.check_outputs([("program", path)], [("out", out)])
     text = files.read_bytes(path, "G-code program").decode("latin-1")
@@ -513,8 +507,6 @@ def error_table(result, machine: Union[Machine, Mapping],
     machine = Machine.from_dict(machine)
     std: Dict[str, float] = {}
     if isinstance(result, (str, os.PathLike)):
-        from . import files
-
         result = schema.validate(files.read_json(result, "result"), "errors", os.fspath(result))
     guards.require_usable(result, force, "this identification result")
     if hasattr(result, "std") and hasattr(result, "estimated"):
@@ -552,8 +544,6 @@ def write_error_table(path: Union[str, os.PathLike], result, machine: Union[Mach
     header (JSON ``not_determined``); an unusable result is refused unless
     ``force``, and a forced table says so in its header (JSON ``usable``)."""
     machine = Machine.from_dict(machine)
-    from . import files
-
     if isinstance(result, (str, os.PathLike)):
         src = os.fspath(result)
         result = schema.validate(files.read_json(src, "result"), "errors", src)

@@ -270,8 +270,6 @@ class Result:
         import csv
         import io
 
-        from . import files
-
         f = io.StringIO(newline="")
         w = csv.writer(f)
         w.writerow(["row", "observation", "id", "type", "target", "component", "residual_um"])

@@ -31,6 +31,7 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
+from . import _core
 from .machine import Machine, RadiansWarning
 from .units import UnitsWarning, looks_like_radians, radians_message
 
@@ -148,7 +149,6 @@ OTHER_KEYS = ("type", "target", "setup", "instrument", "station", "part", "featu
 @functools.lru_cache(maxsize=None)
 def _kinds() -> dict:
     """name -> (type code, the keys of its observations and plan entries), from the registry."""
-    from . import _core
     return {k["name"]: (int(k["code"]), set(k["json_keys"]) | set(k["plan_keys"]))
             for k in _core.observation_kinds()}
 
@@ -160,7 +160,6 @@ def _code(name: str) -> int:
 
 def _reports() -> dict:
     """type code -> the kind's registry entry (name, report pieces, ...)."""
-    from . import _core
     return {int(k["code"]): k for k in _core.observation_kinds()}
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import re
 from functools import lru_cache
 
+from . import _core
+
 _MOTION = re.compile(r"^E([XYZABC])([XYZABCS])([123])$")
 _LOCATION = re.compile(r"^E([XYZABC])0([XYZABCS])$")
 _BACKLASH = re.compile(r"^E([XYZABC])([XYZABCS])b$")
@@ -34,12 +36,7 @@ def display_scale(name: str) -> tuple[float, str]:
 @lru_cache(maxsize=None)
 def _setup_unit(name: str) -> str:
     # The unit the setup parameter's kind declares (its prior class).
-    try:
-        from . import _core
-
-        return _core.setup_parameter_unit(name)
-    except (ImportError, AttributeError):
-        return ""
+    return _core.setup_parameter_unit(name)
 
 
 def format_value(name: str, value: float) -> str:

@@ -34,6 +34,7 @@ import numpy as np
 from .. import files
 from ..schema import validate as validate_document
 from .._version import __version__
+from ..dataset import Dataset, load_dataset
 from ..machine import Machine
 from ..units import _BACKLASH, _LOCATION, _MOTION
 
@@ -164,8 +165,6 @@ def dataset_digest(dataset) -> str:
     its dict, or a path): the JSON the core writes for the loaded dataset,
     keys sorted and no spaces, so the same data give the same digest whatever
     the file's layout, key order or number formatting."""
-    from ..dataset import Dataset, load_dataset
-
     if isinstance(dataset, (str, os.PathLike)):
         dataset = load_dataset(os.fspath(dataset))
     elif not isinstance(dataset, Dataset):
@@ -673,9 +672,7 @@ def _nullable(x):
 
 def _machine_json(machine) -> str:
     if isinstance(machine, (str, os.PathLike)):
-        from ..files import read_json
-
-        machine = read_json(os.fspath(machine), "machine")
+        machine = files.read_json(os.fspath(machine), "machine")
         if "machine" in machine and "axes" not in machine:   # a dataset: its machine
             machine = machine["machine"]
     if hasattr(machine, "to_dict"):

@@ -43,6 +43,7 @@ import numpy as np
 
 from .. import _core
 from ..machine import Machine, RadiansWarning
+from . import linuxcnc as L
 from . import nc_options as O
 
 _PLANES = {"XY": ("G17", "X", "Y", "IJ"), "ZX": ("G18", "Z", "X", "KI"), "YZ": ("G19", "Y", "Z", "JK")}
@@ -249,7 +250,6 @@ def _rotary_setup(machine: Machine, setup: str, entries: Sequence[Mapping], feed
     P = _path(bar, Q, tolerance)
     npts = len(P[letters[0]])
     if kins:
-        from . import linuxcnc as L
         kk = L._kins(kins)
         names = ["X", "Y", "Z", L.TILT[kk], "C"]
 

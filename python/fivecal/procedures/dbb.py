@@ -22,10 +22,11 @@ from typing import Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from .. import _core, guards
+from .. import _core, files, guards
 from ..dataset import Dataset
 from ..identification import finding_lines, identify, verdict_lines
 from ..machine import Machine, RadiansWarning
+from ..simulation import simulate
 from ..units import column_unit, display_scale, looks_like_radians, radians_message
 from .sphere_check import spindle_equivalent
 
@@ -149,8 +150,6 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
     radians give one :class:`fivecal.RadiansWarning`.
     """
     path = os.fspath(path)
-    from .. import files
-
     text = files.read_text(path, "trace CSV")
     rows = []
     header = None
@@ -207,8 +206,6 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
 
 def write_trace_csv(trace: Trace, path: Union[str, os.PathLike]) -> None:
     import io
-
-    from .. import files
 
     f = io.StringIO(newline="")
     w = csv.writer(f)
@@ -753,8 +750,6 @@ def wang_patterns(machine: Union[Machine, Mapping], errors: Mapping[str, float],
                   capture=(90.0, 450.0), **path_options) -> dict:
     """Noise-free traces of the Wang path for each error alone (name -> value),
     with their harmonics: the patterns of Wang et al. Section 4."""
-    from ..simulation import simulate
-
     m = Machine.from_dict(machine)
     plan = wang_plan(m, capture=capture, **path_options)
     phi = np.array([e["tracking"] for e in plan])

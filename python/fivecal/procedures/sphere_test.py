@@ -25,6 +25,7 @@ import numpy as np
 
 from .. import _core
 from ..dataset import Dataset, dumps
+from ..design import candidate_plan
 from ..identification import result_document
 from ..machine import Machine
 from ..units import display_scale
@@ -60,7 +61,6 @@ def sphere_plan(machine, sphere: Mapping, indexations: Sequence[Mapping[str, flo
     at each indexation along every :func:`sphere_points` direction that faces
     the probe (normal . tool axis >= ``min_dot``: at or above the sphere's
     equator as seen from the spindle) and keeps the axes within ``limits``."""
-    from ..design import candidate_plan
     art = {"spheres": [dict(sphere)]}
     plan, _ = candidate_plan(machine, art, indexations, tip_radius=tip_radius, limits=limits, min_dot=min_dot,
                              sphere_normals=sphere_points(rings, pole), directions=directions)

@@ -32,6 +32,8 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..machine import Machine
+from ..simulation import simulate
 # the design layer's rule (an axis an indexation does not name is at 0), re-exported
 from ..design import rotary_directions
 
@@ -85,13 +87,11 @@ KX8_MACHINE = {
 
 def hu40t_machine():
     """The HU40T-like :class:`fivecal.Machine` (``HU40T_MACHINE``)."""
-    from ..machine import Machine
     return Machine.from_dict(HU40T_MACHINE)
 
 
 def kx8_machine():
     """The KX8-like :class:`fivecal.Machine` (``KX8_MACHINE``)."""
-    from ..machine import Machine
     return Machine.from_dict(KX8_MACHINE)
 
 
@@ -800,7 +800,6 @@ def hu40t_dataset(errors: Optional[Mapping[str, float]] = None, seed: int = 1,
     :func:`hu40t_plan`, :func:`hu40t_setup`, errors :func:`thesis_s3_errors`
     by default plus :data:`STYLUS_OFFSETS` (unless ``errors`` sets ``tip.*``),
     3 mm stylus ball, 0.6 µm probing noise."""
-    from ..simulation import simulate
     machine = hu40t_machine()
     art = artefact if artefact is not None else octagonal_table()
     return simulate(machine, plan if plan is not None else hu40t_plan(art, machine),
@@ -817,7 +816,6 @@ def kx8_curved_dataset(strategy: str = "S1+S2", top: bool = True,
     ``setup`` is given): the thesis' touches spread over 3 mm along the
     curved surface. Fit it with the cylinder target, or with the thesis'
     planar facets through :func:`kx8_as_facets`."""
-    from ..simulation import simulate
     machine = kx8_machine()
     art, plan = kx8_curved(kx8_cylinder_table(), kx8_plan(kx8_cylinder_table(), machine, strategy=strategy,
                                                          top=top), machine)
@@ -831,7 +829,6 @@ def kx8_dataset(strategy: str = "S1+S2", top: bool = True,
                 sigma: float = PROBE_SIGMA):
     """Simulate the KX8 experiment of chapter 5 (:func:`kx8_plan`,
     :func:`kx8_errors`, :func:`kx8_setup`)."""
-    from ..simulation import simulate
     machine = kx8_machine()
     art = kx8_cylinder_table()
     return simulate(machine, kx8_plan(art, machine, strategy=strategy, top=top),

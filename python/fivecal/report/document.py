@@ -33,8 +33,9 @@ from .._version import __version__
 from ..files import make_dirs, write_text
 from ..guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
 from ..identification import MICRO_UNITS, noise_lines, verdict_lines
+from ..procedures.dbb import trace_from_dataset
 from ..units import display_scale
-from . import plots
+from . import plots, polar
 from .history import sections_and_standing as _history_sections
 from .markup import _e, _img_tag, table_html
 
@@ -123,18 +124,13 @@ def _setup_counts(obs, kind: str, key: str = "setup") -> dict:
 
 def _dbb_setup_text(dataset, kind: str) -> str:
     """Each DBB setup with its sample count, plane and bar length."""
-    try:
-        from .polar import MIN_SWEEP, dbb_groups
-        from ..procedures.dbb import trace_from_dataset
-    except ImportError:  # pragma: no cover - polar is part of the package
-        return ", ".join(f"{k} ({n})" for k, n in _setup_counts(dataset.observations, kind).items())
     parts = []
-    for setup, length, idx in dbb_groups(dataset):
+    for setup, length, idx in polar.dbb_groups(dataset):
         plane = ""
         if len(idx) >= 3:
             try:
                 t = trace_from_dataset(dataset, setup, idx)
-                plane = (f", plane {t.plane}" if np.ptp(t.angles) >= MIN_SWEEP else
+                plane = (f", plane {t.plane}" if np.ptp(t.angles) >= polar.MIN_SWEEP else
                          f", no circle: the balls sweep {np.ptp(t.angles):.2g}°")
             except ValueError:
                 plane = ""
@@ -572,13 +568,6 @@ def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
     """Polar plots from fivecal.report.polar when the data has DBB traces."""
     if not {n for n, r in _kinds().items() if r["figures"] == "polar"} & set(result.dataset.observation_types):
         return [], None
-    try:
-        from . import polar  # optional here: the report must come out without it
-    except ImportError:
-        return [], ("The data holds double ball bar traces; polar plots appear here once the "
-                    "<code>fivecal.report.polar</code> module is installed.")
-    if not hasattr(polar, "report_figures"):
-        return [], "fivecal.report.polar has no report_figures()."
     try:
         out = []
         for f in list(polar.report_figures(result, out_dir) or []):
