@@ -11,6 +11,7 @@ import numpy as np
 
 from . import _core, _json, files, plausibility, schema
 from .machine import Machine
+from .views import Viewable
 
 #: Dataset file formats besides JSON, as (is_format(path), read(path),
 #: name suffixes, write(ds, path)): io/columnar.py registers Parquet (the
@@ -76,7 +77,7 @@ def dumps(obj, path: str = "dataset") -> str:
     return _json.dumps(obj, path)
 
 
-class Dataset:
+class Dataset(Viewable):
     """A validated dataset. Build with :func:`load_dataset`, :meth:`from_dict`
     or :func:`fivecal.simulate`."""
 

@@ -11,6 +11,7 @@ import numpy as np
 from . import _core, files, guards, schema
 from .dataset import Dataset
 from .units import display_scale
+from .views import Viewable
 
 
 #: Result files list ``residual_ids`` for datasets of at most this many observations.
@@ -87,7 +88,7 @@ def write_result(path, result: Union["Result", Mapping], procedure: str = "ident
     files.write_text(path, result_json(result, procedure, values) + "\n")
 
 
-class Result:
+class Result(Viewable):
     """Identified parameters (mm, rad), their one-sigma uncertainties,
     residuals and the identifiability diagnosis."""
 

@@ -17,6 +17,7 @@ import numpy as np
 from . import _core, schema
 from .units import looks_like_radians, radians_message
 from . import files
+from .views import Viewable
 
 ArrayLike = Union[float, np.ndarray, list]
 
@@ -25,7 +26,7 @@ class RadiansWarning(UserWarning):
     """Rotary axis values look like radians where degrees are expected."""
 
 
-class Machine:
+class Machine(Viewable):
     """A machine tool: topology, axes and tool, with forward and inverse kinematics.
 
     Build one with :meth:`load` (JSON file) or :meth:`from_dict`. The topology

@@ -20,7 +20,7 @@ LAYERS = {
     "fivecal.design": 0, "fivecal.figures": 0, "fivecal.files": 0, "fivecal.gcode": 0, "fivecal.guards": 0, "fivecal.manual": 0,
     "fivecal.identification": 0, "fivecal.machine": 0, "fivecal.plausibility": 0, "fivecal.progress": 0,
     "fivecal.schema": 0, "fivecal.simulation": 0, "fivecal.tolerances": 0, "fivecal.uncertainty": 0,
-    "fivecal.units": 0,
+    "fivecal.units": 0, "fivecal.views": 0,
     # 1: files of the world outside, the named procedures, the calibration history
     "fivecal.io": 1, "fivecal.procedures": 1, "fivecal.history": 1,
     # 2: what a user reads (and the demo, which writes a report)

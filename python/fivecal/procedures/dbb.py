@@ -27,6 +27,7 @@ from ..dataset import Dataset
 from ..identification import finding_lines, identify, verdict_lines
 from ..machine import Machine, RadiansWarning
 from ..simulation import simulate
+from ..views import Viewable
 from ..units import column_unit, display_scale, looks_like_radians, radians_message
 from .sphere_check import spindle_equivalent
 
@@ -310,7 +311,7 @@ def _step_plane(step) -> tuple:
     return tuple("XYZ"[int(np.argmax(np.abs(np.asarray(e))))] for e in (step.e1, step.e2))
 
 
-class FourStepResult:
+class FourStepResult(Viewable):
     """The four-step PIGEs, the per-step fits and (optionally) the general
     engine's fit of the same readings."""
 
@@ -762,7 +763,7 @@ def wang_patterns(machine: Union[Machine, Mapping], errors: Mapping[str, float],
 
 
 @dataclass
-class WangIdentification:
+class WangIdentification(Viewable):
     """Least-squares identification from a whole Wang trace, and what the
     path can and cannot separate: each further candidate is classified as
     ``no effect`` (its column is zero on this path), ``confounded`` (exactly,
@@ -1007,7 +1008,7 @@ def trim_overshoot(trace: Trace, data_arc: float = 360.0, feed_in: Optional[floa
                         float(t["arc_end"]))
 
 
-class CircularResult:
+class CircularResult(Viewable):
     """ISO 230-4 values per run and the least-squares diagnosis."""
 
     def __init__(self, core, plane: str, feed: Optional[float], traces: list, trimmed: Sequence = (),

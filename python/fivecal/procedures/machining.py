@@ -34,6 +34,7 @@ import numpy as np
 
 from .. import _core
 from ..identification import result_document
+from ..views import Viewable
 from ..machine import Machine
 from ..units import display_scale
 
@@ -146,7 +147,7 @@ def first_order(L: float, H: float, errors=None, setup: Optional[Mapping[str, fl
                                                     g(WORKPIECE_SETUP[3:])))
 
 
-class MachiningResult:
+class MachiningResult(Viewable):
     """Parameters identified from machining errors, with uncertainties."""
 
     def __init__(self, core, machine: Machine, tests: Sequence[Mapping]):

@@ -39,6 +39,7 @@ from ..dataset import Dataset
 from ..identification import identify as fit
 from ..identification import result_document
 from ..machine import Machine
+from ..views import Viewable
 from .sphere_check import pivot_parameters
 
 TESTS = ("K1", "K2", "K3", "K4")
@@ -142,7 +143,7 @@ class KTest:
 
 
 @dataclass
-class RTestResult:
+class RTestResult(Viewable):
     tests: Dict[str, KTest]
     result: object = None                   #: the fivecal.Result when identified
     estimated: List[str] = field(default_factory=list)

@@ -31,6 +31,7 @@ from ..dataset import Dataset
 from ..files import read_json
 from ..identification import identify, result_document
 from ..machine import Machine
+from ..views import Viewable
 from . import sphere_test
 
 #: default range of a rotary axis (degrees) when the caller gives none: a
@@ -164,7 +165,7 @@ def plan(machine: Union[Machine, Mapping], sphere: Mapping, *, tip_radius: float
 
 
 @dataclass
-class SphereCheck:
+class SphereCheck(Viewable):
     """Result of :func:`evaluate` (mm, rad)."""
 
     result: object                       #: the fivecal.Result of the fit

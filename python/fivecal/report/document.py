@@ -151,9 +151,9 @@ def _data_section(dataset, result) -> str:
     art = dataset.artefact or {}
     tip_r = (dataset._view().get("probe") or {}).get("tip_radius")  # the shared view: no copy of 10^5 observations
     targets = sorted({o.get("target") for o in obs if o.get("target")}, key=str)
-    rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none"),
-            ("residual rows", f"{len(result.residuals)} (observations plus scale bars)"),
-            ]
+    rows = [("observations", ", ".join(f"{n} {t}" for t, n in types.items()) or "none")]
+    if result is not None:  # a dataset alone (its notebook view) has no residuals yet
+        rows.append(("residual rows", f"{len(result.residuals)} (observations plus scale bars)"))
     if indexed:
         rows.append(("rotary indexations", f"{len(idx)} distinct ({', '.join(rot)})" if rot else "–"))
     lists = [(r["target_list"], name) for name, r in kinds.items() if r["target_list"]]
@@ -578,6 +578,16 @@ def _dbb_figures(result, out_dir: str) -> Tuple[List[Figure], Optional[str]]:
         return [], f"DBB polar plots could not be drawn: {_e(type(e).__name__)}: {_e(e)}"
 
 
+def determined_machine_errors(result, fd) -> List[str]:
+    """The estimated machine errors the data determined, the ones the
+    parameter and correlation plots show: an undetermined value is the
+    prior's, and a hundred of them made plots thousands of pixels wide with
+    nothing to read."""
+    machine_names = set(result.dataset.machine.parameter_names())
+    und = set(fd.undetermined) | set(fd.held)
+    return [n for n in result.estimated if n in machine_names and not n.startswith("tip.") and n not in und]
+
+
 def _kind_figures(result, out_dir: str) -> Tuple[List[Figure], List[str]]:
     """The figures chosen by the kinds of data present: residual vectors for
     touch probing (facet, sphere), per-component deviations for ball3d
@@ -642,7 +652,6 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     make_dirs(out_dir)
     ds = result.dataset
     machine = ds.machine
-    machine_names = set(machine.parameter_names())
     if write_result_json:
         result.save(os.path.join(out_dir, "result.json"), procedure, procedure_values)
     result.write_residuals(os.path.join(out_dir, "residuals.csv"))
@@ -654,10 +663,7 @@ def write_report(result, out_dir: Union[str, os.PathLike], title: Optional[str] 
     plots.plot_residual_histogram(result, p)
     figs.append((p, "Distribution of the residuals with the normal density of the a-posteriori σ̂."))
     fd = guards.findings(result)
-    # Only what the data determined: an undetermined value is the prior's, and
-    # a hundred of them made plots thousands of pixels wide with nothing to read.
-    und = set(fd.undetermined) | set(fd.held)
-    mnames = [n for n in result.estimated if n in machine_names and not n.startswith("tip.") and n not in und]
+    mnames = determined_machine_errors(result, fd)
     pages = plots.parameter_pages(mnames)
     for k, page in enumerate(pages):
         p = os.path.join(out_dir, "parameters.png" if k == 0 else f"parameters_{k + 1}.png")

@@ -50,6 +50,13 @@ def parameter_pages(names: Sequence[str], per_page: int = PARAMETERS_PER_PAGE) -
 
 def plot_parameters(result, path: str, names=None, truth: Optional[Mapping[str, float]] = None,
                     title: str = "Identified parameters (±2σ)") -> str:
+    """Write :func:`parameters_figure` as a PNG; returns the path."""
+    save_capped(parameters_figure(result, names, truth, title), path, 120)
+    return path
+
+
+def parameters_figure(result, names=None, truth: Optional[Mapping[str, float]] = None,
+                      title: str = "Identified parameters (±2σ)"):
     """Horizontal bars of the identified values in report units with ±2σ error
     bars, one panel per unit (at most three side by side, further units on
     more rows), and the true values when known. At most
@@ -83,9 +90,7 @@ def plot_parameters(result, path: str, names=None, truth: Optional[Mapping[str, 
         ax.grid(axis="x", alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
     fig.suptitle(title)
-    save_capped(fig, path, 120)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def _nice_floor(x: float) -> float:
@@ -481,9 +486,15 @@ def plot_components(result, path: str, kind: Optional[str] = None, title: Option
 
 
 def plot_residual_histogram(result, path: str) -> str:
+    """Write :func:`residual_histogram_figure` as a PNG; returns the path."""
+    save_capped(residual_histogram_figure(result), path, 120)
+    return path
+
+
+def residual_histogram_figure(result):
     """Histogram of the residuals of the mm rows (µm) with the normal density
     of their a-posteriori sigma (a pose's rotation rows, in rad, are left
-    out: in µm they would pile up at 0); writes ``path`` (PNG) and returns it."""
+    out: in µm they would pile up at 0)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.5))
     r = np.asarray(result.residuals) * 1e3
@@ -502,9 +513,7 @@ def plot_residual_histogram(result, path: str) -> str:
     ax.set_ylabel("count")
     ax.set_title(f"Residuals{of}: rms {result.rms * 1e3:.3f} µm, σ̂ {result.sigma * 1e3:.3f} µm")
     fig.tight_layout()
-    save_capped(fig, path, 120)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def plot_correlation(result, path: str, names=None, title: str = "Parameter correlation") -> str:
@@ -554,3 +563,79 @@ def plot_correlation(result, path: str, names=None, title: str = "Parameter corr
     save_capped(fig, path, 110)
     plt.close(fig)
     return path
+
+
+def axes_figure(dataset, title: Optional[str] = None):
+    """Each axis' command (mm, degrees) at every observation of a dataset,
+    one panel per axis, one colour per observation kind: where the test
+    moved the machine."""
+    plt = _pyplot()
+    names = list(dataset.machine.axis_names)
+    types = list(dataset.observation_types)
+    kinds = list(dict.fromkeys(types))
+    Q = dataset.axes()
+    rotary = {a["name"] for a in dataset.machine.axes if a["type"] == "rotary"}
+    ncols = min(3, max(1, len(names)))
+    nrows = -(-len(names) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, squeeze=False, figsize=(4.2 * ncols, 2.6 * nrows + 0.6),
+                             layout="constrained")
+    colors = group_colors(len(kinds))
+    index = np.arange(len(types))
+    for k, a in enumerate(names):
+        ax = axes[k // ncols][k % ncols]
+        q = np.asarray(Q[a], float)
+        for kind, c in zip(kinds, colors):
+            sel = np.array([t == kind for t in types], dtype=bool)
+            ax.plot(index[sel], q[sel], ".", ms=3, color=c, label=kind)
+        unit = "deg" if a in rotary else "mm"
+        ax.set_title(f"{a} ({unit})", fontsize=10)
+        ax.set_xlabel("observation")
+        ax.grid(alpha=0.3)
+    for k in range(len(names), nrows * ncols):
+        axes[k // ncols][k % ncols].set_visible(False)
+    if kinds:
+        axes[0][0].legend(fontsize=8, markerscale=3)
+    fig.suptitle(title or f"Axis commands of {len(types)} observations on {dataset.machine.name}")
+    return fig
+
+
+def machine_figure(machine, title: Optional[str] = None):
+    """The machine at its zero pose, in the machine frame F, in three views
+    (x-y, x-z, y-z): each rotary axis as a solid line through its point along
+    its direction, each linear axis as a dashed arrow from the origin along
+    its positive direction, the tool tip as a red dot."""
+    plt = _pyplot()
+    fig, axs = plt.subplots(1, 3, figsize=(13, 4.6), layout="constrained")
+    tip = np.asarray(machine.tip, float)
+    pts = [np.zeros(3), tip] + [np.asarray(a.get("point", [0, 0, 0]), float) for a in machine.axes]
+    span = max(float(np.ptp(np.array(pts), axis=0).max()), 100.0)
+    colors = group_colors(len(machine.axes))
+    planes = ((0, 1), (0, 2), (1, 2))
+    for k, (a, c) in enumerate(zip(machine.axes, colors)):
+        d = np.asarray(a["direction"], float)
+        # axes along one line (C, Z and the spindle on a vertical machine)
+        # get different lengths so each name stays readable at its end
+        size = span * (0.35 + 0.08 * k)
+        if a["type"] == "rotary":
+            p = np.asarray(a.get("point", [0, 0, 0]), float)
+            seg, style, label = np.array([p - size * d, p + size * d]), "-", f"{a['name']}: rotary axis line"
+        else:
+            seg, style, label = np.array([np.zeros(3), size * d]), "--", f"{a['name']}: linear, + direction"
+        for n, (ax, (i, j)) in enumerate(zip(axs, planes)):
+            ax.plot(seg[:, i], seg[:, j], style, color=c, lw=2, label=label if n == 0 else None)
+            if np.hypot(*(seg[1, [i, j]] - seg[0, [i, j]])) > 1e-9:  # not seen end-on
+                ax.annotate(a["name"], seg[1, [i, j]], color=c, fontsize=10, fontweight="bold",
+                            xytext=(3, 3), textcoords="offset points")
+            else:
+                ax.plot(*seg[1, [i, j]], "o", mfc="none", color=c, ms=6 + 3 * k)
+    for ax, (i, j) in zip(axs, planes):
+        ax.plot(tip[i], tip[j], "o", color="#d62728", ms=6, label="tool tip" if ax is axs[0] else None)
+        ax.set_xlabel(f"{'xyz'[i]} (mm)")
+        ax.set_ylabel(f"{'xyz'[j]} (mm)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"{'xyz'[i]}-{'xyz'[j]} view", fontsize=10)
+        ax.grid(alpha=0.3)
+    fig.legend(loc="outside right center", fontsize=8)
+    fig.suptitle(title or f"{machine.name} ({machine.topology}) at its zero pose, machine frame F "
+                 "(an axis seen end-on: a circle)")
+    return fig
