@@ -24,7 +24,8 @@ PY=${PYTHON:-python3}
 source scripts/ccache_env.sh
 command -v cmake >/dev/null 2>&1 || $PY -m pip install -q cmake
 command -v ninja >/dev/null 2>&1 || $PY -m pip install -q ninja
-# fleet: Dask and pyarrow, which the calibration history tests use
+# test: pytest and what the tests run (nbclient and ipykernel for the example
+# notebook); fleet: Dask and pyarrow, which the calibration history tests use
 $PY -m pip install -q --disable-pip-version-check ".[test,fleet]"
 command -v pyenv >/dev/null 2>&1 && pyenv rehash || true
 echo "fivecal: installed ($($PY -c 'import fivecal; print(fivecal.__version__)'))"
