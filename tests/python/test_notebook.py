@@ -17,6 +17,7 @@ import fivecal
 from fivecal import views
 from fivecal.procedures import dbb, rtest
 from fivecal.procedures import sphere_check as sc
+from fivecal.report import plots
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 EXAMPLES = os.path.join(ROOT, "examples")
@@ -200,3 +201,11 @@ def test_example_notebook_runs_clean(tmp_path, monkeypatch):
     # the printed comparison with the truth: every value within 3 sigma
     sig = [float(line.rsplit("(", 1)[1].split(" ")[0]) for line in text.splitlines() if " σ)" in line]
     assert len(sig) == 8 and max(sig) < 3, text
+
+
+def test_group_labels_of_a_k4_path_are_rounded(rtest_data):
+    """The inverse puts the tilt at 1e-14° where the plan said 0°: the
+    figure's group key reads "A 0°", once (seen on the R-test figure)."""
+    _, _, labels = plots._setup_groups(rtest_data, list(range(len(rtest_data))), "setup", False)
+    assert labels and not any("e-" in lab or "-0°" in lab for lab in labels), sorted(set(labels))
+    assert "A 0°" in labels

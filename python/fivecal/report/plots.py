@@ -356,7 +356,8 @@ def _setup_groups(dataset, rows, who: str, sides: bool) -> tuple:
     labels = []
     for n, i in enumerate(rows):
         parts = [f"{obs[i]['target']} target"] if sides else []
-        parts += [f"{a} {pos[a][n]:g}°" for a in steps]
+        # rounded as the groups are: an inverse's 1e-14° is 0°, and one group
+        parts += [f"{a} {round(float(pos[a][n]), 3) + 0.0:g}°" for a in steps]
         labels.append(", ".join(parts))
     return key, angles, labels
 
