@@ -87,7 +87,7 @@ def test_procedure_results_show_the_verdict_and_their_report(machine, rtest_data
     assert "id='verdict'" in h and "R-test report" in h and "R1  " in h and _value_cell(r.result, "EY0C") in h
     bare = rtest.evaluate(rtest_data, identify=False)
     h = bare._repr_html_()
-    assert "No machine-error fit" in h and "R1  " in h
+    assert "No identification" in h and "R1  " in h
     with pytest.raises(ValueError, match="no fit to draw"):
         bare.plot()
     ball = {"id": "S1", "center": [60.0, 40.0, 30.0], "radius": 12.5}
@@ -112,7 +112,7 @@ def _circle(direction, seed):
 def test_circular_test_html_and_plot():
     res = dbb.circular_test([_circle(+1, 1), _circle(-1, 2)], 100.0, "XY", 1000)
     h = res._repr_html_()
-    assert "Circular test" in h and "circular deviation G" in h and "No machine-error fit" in h
+    assert "Circular test" in h and "circular deviation G" in h and "No identification" in h
     figs = res.plot()
     assert len(figs) == 1 and isinstance(figs[0], Figure)
 
@@ -209,3 +209,20 @@ def test_group_labels_of_a_k4_path_are_rounded(rtest_data):
     _, _, labels = plots._setup_groups(rtest_data, list(range(len(rtest_data))), "setup", False)
     assert labels and not any("e-" in lab or "-0°" in lab for lab in labels), sorted(set(labels))
     assert "A 0°" in labels
+
+
+def test_four_step_ball_bar_html_and_plot(machine):
+    """A procedure whose fit is the general engine's (``engine``): its
+    verdict and machine errors, the method's own report, the fit's figures."""
+    truth = {"EY0A": 0.0342, "EZ0A": -0.0353, "EX0C": 0.0013, "EY0C": -0.0525}
+    ds = fivecal.simulate(machine, dbb.four_step_plan(machine), errors=truth, sigma={"dbb": 0.0003}, seed=11)
+    res = dbb.jiang_cripps(ds)
+    h = res._repr_html_()
+    assert "Four-step ball bar test" in h and "id='verdict'" in h and "<code>EY0C</code>" in h
+    assert _value_cell(res.engine, "EY0C") in h and "Four-step ball bar test report" in h
+    figs = res.plot()
+    assert figs and all(isinstance(f, Figure) for f in figs)
+    without = dbb.jiang_cripps(ds, engine=False)
+    assert "No identification" in without._repr_html_()
+    with pytest.raises(ValueError, match="no fit to draw"):
+        without.plot()

@@ -106,7 +106,8 @@ def procedure_html(obj) -> str:
     then the procedure's own report, folded."""
     fit = _fit_of(obj)
     parts = _fit_parts(fit) if fit is not None else [
-        "<div class='box'>No machine-error fit in this result: the procedure's own values below.</div>"]
+        "<div class='box'>No identification (<code>fivecal.identify</code>) in this result: its verdict "
+        "and machine errors come with one; the procedure's own values are below.</div>"]
     text = obj.report()
     parts.append(f"<details{'' if fit is not None else ' open'}><summary>{_e(_PROCEDURES[type(obj)])} "
                  f"report</summary><pre>{_e(text)}</pre></details>")
