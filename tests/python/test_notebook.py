@@ -17,7 +17,7 @@ import fivecal
 from fivecal import views
 from fivecal.procedures import dbb, rtest
 from fivecal.procedures import sphere_check as sc
-from fivecal.report import plots
+from fivecal.report import notebook, plots
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 EXAMPLES = os.path.join(ROOT, "examples")
@@ -226,3 +226,12 @@ def test_four_step_ball_bar_html_and_plot(machine):
     assert "No identification" in without._repr_html_()
     with pytest.raises(ValueError, match="no fit to draw"):
         without.plot()
+
+
+def test_a_large_dataset_is_counted_not_read(machine, rtest_data, monkeypatch):
+    """Beyond LARGE_DATASET observations the view counts them per kind and
+    does not read every observation as the report's data table does."""
+    monkeypatch.setattr(notebook, "LARGE_DATASET", 10)
+    monkeypatch.setattr(notebook, "_data_section", lambda *a: pytest.fail("read every observation"))
+    h = rtest_data._repr_html_()
+    assert f"{len(rtest_data)} ball3d." in h and "write_report" in h

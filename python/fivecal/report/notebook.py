@@ -75,10 +75,23 @@ def result_html(result: Result) -> str:
                  f"parameters estimated, residual rms {result.rms * 1e3:.3f} µm", *_fit_parts(result))
 
 
+#: beyond this many observations a dataset's view counts them per kind only:
+#: the report's data table reads every observation (minutes for 10^6)
+LARGE_DATASET = 20000
+
+
 @views.html.register(Dataset)
 def dataset_html(ds: Dataset) -> str:
     m = ds.machine
-    return _view(f"Dataset: {len(ds)} observations on {m.name} ({m.topology})", _data_section(ds, None))
+    title = f"Dataset: {len(ds)} observations on {m.name} ({m.topology})"
+    if len(ds) <= LARGE_DATASET:
+        return _view(title, _data_section(ds, None))
+    counts: dict = {}
+    for t in ds.observation_types:
+        counts[t] = counts.get(t, 0) + 1
+    return _view(title, f"<p>{_e(', '.join(f'{n} {t}' for t, n in counts.items()))}. Setups, indexations and "
+                        "targets: the data table of <code>fivecal.write_report</code> (it reads every "
+                        "observation).</p>")
 
 
 @views.html.register(Machine)

@@ -574,7 +574,7 @@ def axes_figure(dataset, title: Optional[str] = None):
     names = list(dataset.machine.axis_names)
     types = list(dataset.observation_types)
     kinds = list(dict.fromkeys(types))
-    Q = dataset.axes()
+    Q = np.asarray(dataset._core.columns()["axes"], float)  # machine axis order, no dict per observation
     rotary = {a["name"] for a in dataset.machine.axes if a["type"] == "rotary"}
     ncols = min(3, max(1, len(names)))
     nrows = -(-len(names) // ncols)
@@ -582,11 +582,12 @@ def axes_figure(dataset, title: Optional[str] = None):
                              layout="constrained")
     colors = group_colors(len(kinds))
     index = np.arange(len(types))
+    T = np.asarray(types)
     for k, a in enumerate(names):
         ax = axes[k // ncols][k % ncols]
-        q = np.asarray(Q[a], float)
+        q = Q[:, k]
         for kind, c in zip(kinds, colors):
-            sel = np.array([t == kind for t in types], dtype=bool)
+            sel = T == kind
             ax.plot(index[sel], q[sel], ".", ms=3, color=c, label=kind)
         unit = "deg" if a in rotary else "mm"
         ax.set_title(f"{a} ({unit})", fontsize=10)
