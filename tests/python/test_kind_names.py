@@ -36,6 +36,7 @@ import re
 import pytest
 
 from fivecal import _core
+from fivecal.io import tables
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 KINDS = [k["name"] for k in _core.observation_kinds()]
@@ -314,3 +315,18 @@ def test_kinds_sharing_an_import_share_its_table():
         assert len({repr((k["table"]["layout"], k["table"]["columns"])) for k in ks}) == 1, name
         if len(ks) > 1:
             assert all(k["probe_touch"] and k["report"]["target_list"] for k in ks), name
+
+
+@pytest.mark.parametrize("kind,option,owners", [
+    ("probing", {"length": 100.0}, "a dbb import, not probing"),
+    ("machined", {"tool_ball": [0, 0, 1]}, "a dbb or ball3d import, not machined"),
+    ("distance", {"instrument_origin": [0, 0, 0]}, "a point or pose import, not distance"),
+    ("point", {"target_rotation": [0, 0, 0]}, "a pose import, not point"),
+])
+def test_an_option_of_another_import_is_refused_naming_the_imports_that_take_it(kind, option, owners):
+    """Which import takes which option is each kind's table's (its options),
+    so the refusal names the imports the registry says take it."""
+    key = next(iter(option))
+    with pytest.raises(ValueError, match=rf"^--{key.replace('_', '-')}: {key} belongs to {owners}$"):
+        tables.read_table(ROOT / "examples/import/probing.csv", kind, ROOT / "examples/machines/c600u.json",
+                          **option)
