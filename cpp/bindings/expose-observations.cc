@@ -202,6 +202,41 @@ void BindObservations(py::module_& m) {
       rep["range_what"] = str(r.range_what);
       rep["figures"] = str(r.figures);
       d["report"] = rep;
+      // Its instrument table (KindTable, kind.h): fivecal import reads a
+      // table of any kind through these and names no kind.
+      const KindTable tb = k->Table();
+      py::dict tab;
+      tab["name"] = tb.name.empty() ? std::string(k->name()) : tb.name;
+      tab["aliases"] = tb.aliases;
+      tab["row_aliases"] = tb.row_aliases;
+      tab["layout"] = tb.layout;
+      py::list cols;
+      for (const TableColumn& c : tb.columns) {
+        py::dict cd;
+        cd["name"] = c.name;
+        cd["field"] = c.field;
+        cd["index"] = c.index < 0 ? py::object(py::none()) : py::object(py::int_(c.index));
+        cd["quantity"] = c.quantity;
+        cd["measured"] = c.measured;
+        cd["required"] = c.required;
+        cd["alias"] = c.alias.empty() ? py::object(py::none()) : py::object(py::str(c.alias));
+        cd["sidecar"] = c.sidecar.empty() ? py::object(py::none()) : py::object(py::str(c.sidecar));
+        cd["missing"] = c.missing;
+        cd["range"] = c.range;
+        cd["range_message"] = c.range_message;
+        cols.append(cd);
+      }
+      tab["columns"] = cols;
+      tab["expected"] = tb.expected;
+      tab["options"] = tb.options;
+      py::dict ha;
+      for (const auto& [from, to] : tb.header_aliases) ha[py::str(from)] = to;
+      tab["header_aliases"] = ha;
+      py::dict dirs;
+      for (const auto& [key, what] : tb.directions) dirs[py::str(key)] = what;
+      tab["directions"] = dirs;
+      tab["checks"] = tb.checks;
+      d["table"] = tab;
       out.append(d);
     }
     return out;

@@ -36,6 +36,7 @@ import re
 import pytest
 
 from fivecal import _core
+from fivecal.io import tables
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 KINDS = [k["name"] for k in _core.observation_kinds()]
@@ -74,19 +75,22 @@ BY_DESIGN = {
     "python/fivecal/procedures/sphere_check.py", "python/fivecal/procedures/tango.py",
     "python/fivecal/procedures/machining.py", "python/fivecal/procedures/classify.py",
     "python/fivecal/io/dbb_program.py", "python/fivecal/report/polar.py",
+    # the NC programs of the touch probe's and the R-test's tests: a G38.2
+    # cycle over facet and sphere touches (the exact crossing of the probe
+    # line with a plane or a sphere, collision lifts over spheres) and an
+    # R-test path with a dwell per ball3d sample; which program runs which
+    # plan entry type is this file's table (PLAN_PROGRAMS)
+    "python/fivecal/io/nc_programs.py",
+    # the readings of those programs lined up with their plan: the R-test
+    # nest's readings at the dwells (ball3d) and LinuxCNC's probe log of a
+    # facet and sphere cycle
+    "python/fivecal/io/plan_readings.py",
 }
 
-#: Files that still name kinds (file -> the kinds it names). Only shrinks.
-PENDING = {
-    # the table importer's per-kind column layouts
-    "python/fivecal/io/tables.py": {"facet", "sphere", "cylinder", "dbb", "ball3d", "point", "pose",
-                                    "distance", "machined"},
-    "python/fivecal/io/plan_readings.py": {"facet", "sphere", "ball3d"},
-    "python/fivecal/io/nc_programs.py": {"facet", "sphere", "ball3d"},
-    "python/fivecal/io/linuxcnc.py": {"facet"},
-    "python/fivecal/cli/export.py": {"facet", "sphere", "dbb", "ball3d"},
-    "python/fivecal/cli/import_.py": {"ball3d"},
-}
+#: Files that still name kinds (file -> the kinds it names). Only shrinks:
+#: empty since the registry exports each kind's instrument table (KindTable,
+#: observations/kind.h), which fivecal.io.tables reads.
+PENDING: dict = {}
 
 
 # ---- the scan --------------------------------------------------------------------------------------
@@ -272,3 +276,57 @@ def test_the_scan_fails_on_a_kind_named_in_generic_code(tmp_path):
     (tmp_path / "cpp/src/observations/dbb.cc").write_text('bool F() { return DbbKind().rows() == 1; }\n')
     found = scan(tmp_path)
     assert found == {"python/fivecal/report/new.py": {"dbb": [2]}}
+
+
+# ---- the data Python reads instead of naming kinds -------------------------------------------------
+
+#: a joint layout's columns: they give the axes, not a file key
+_JOINT_COLUMNS = {"joint", "position", "home", "joint_type"}
+
+
+@pytest.mark.parametrize("kind", _core.observation_kinds(), ids=lambda k: k["name"])
+def test_each_kind_exports_a_table_of_its_own_keys(kind):
+    """The registry's instrument table of a kind (what fivecal.io.tables reads)
+    fills the kind's own file keys only, in its layout's terms."""
+    t = kind["table"]
+    assert t["layout"] in ("touch", "mount", "instrument", "station", "generic")
+    keys = set(kind["json_keys"]) | {"approach"}
+    for c in t["columns"]:
+        assert c["field"] in keys | _JOINT_COLUMNS, (kind["name"], c)
+        assert c["quantity"] in ("length", "rotation", "text", "joint"), c
+        assert (c["range"] > 0) == bool(c["range_message"]), c
+        if c["range_message"]:
+            # the message formats with what the importer hands it
+            assert c["range_message"].format(value=1.5, limit=2.0, limit_m=0.002, column=c["name"])
+    # a vector's entries are 0, 1, 2 in order
+    for field in {c["field"] for c in t["columns"] if c["index"] is not None}:
+        assert [c["index"] for c in t["columns"] if c["field"] == field] == [0, 1, 2], (kind["name"], field)
+    assert set(t["header_aliases"].values()) <= keys | {k + "_" for k in keys} | {"reference_"}
+    assert set(t["directions"]) <= keys
+
+
+def test_kinds_sharing_an_import_share_its_table():
+    """One probing log for every probe touch: the kinds of one import name
+    agree on its layout and columns, so a row's target alone says its kind."""
+    by_name: dict = {}
+    for k in _core.observation_kinds():
+        by_name.setdefault(k["table"]["name"], []).append(k)
+    for name, ks in by_name.items():
+        assert len({repr((k["table"]["layout"], k["table"]["columns"])) for k in ks}) == 1, name
+        if len(ks) > 1:
+            assert all(k["probe_touch"] and k["report"]["target_list"] for k in ks), name
+
+
+@pytest.mark.parametrize("kind,option,owners", [
+    ("probing", {"length": 100.0}, "a dbb import, not probing"),
+    ("machined", {"tool_ball": [0, 0, 1]}, "a dbb or ball3d import, not machined"),
+    ("distance", {"instrument_origin": [0, 0, 0]}, "a point or pose import, not distance"),
+    ("point", {"target_rotation": [0, 0, 0]}, "a pose import, not point"),
+])
+def test_an_option_of_another_import_is_refused_naming_the_imports_that_take_it(kind, option, owners):
+    """Which import takes which option is each kind's table's (its options),
+    so the refusal names the imports the registry says take it."""
+    key = next(iter(option))
+    with pytest.raises(ValueError, match=rf"^--{key.replace('_', '-')}: {key} belongs to {owners}$"):
+        tables.read_table(ROOT / "examples/import/probing.csv", kind, ROOT / "examples/machines/c600u.json",
+                          **option)

@@ -54,14 +54,90 @@ print(json.dumps({"z": z, "html": html, "converged": bool(r.converged)}))
 '''
 
 
-@pytest.mark.skipif(not PLUGIN, reason="the test-only module is built by scripts/dev_build.sh "
-                                        "(CMake target _core_kind_plugin)")
-def test_test_only_kind_runs_through_load_identify_and_report(tmp_path):
+# The kind's instrument table: no table of its own in the registry, so the
+# generic reader takes it under its name, a column per file key (axes, setup,
+# measured_x|y|z); the CLI and the Python call read it to the simulated data,
+# and its bad cells are refused naming the line and the column.
+TABLE_SCRIPT = r'''
+import csv, io, json, subprocess, sys
+import fivecal
+from fivecal import io as fio
+
+out = sys.argv[1]
+machine = {"name": "c600u", "topology": "wCAfXYZSt", "axes": {
+  "C": {"type": "rotary", "direction": [0, 0, -1], "point": [0, 0, 0]},
+  "A": {"type": "rotary", "direction": [-1, 0, 0], "point": [0, 0, 0]},
+  "X": {"type": "linear", "direction": [1, 0, 0]}, "Y": {"type": "linear", "direction": [0, 1, 0]},
+  "Z": {"type": "linear", "direction": [0, 0, 1]},
+  "S": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 0]}}, "tool": {"tip": [0, 0, 150]}}
+json.dump(machine, open(out + "/m.json", "w"))
+plan = [{"type": "stylus3d", "setup": "M1" if (c // 45) % 2 else "M2",
+         "axes": {"A": a, "C": c, "X": 50 + c / 10, "Y": -20, "Z": 10 - a / 3}}
+        for a in (-60, -30, 0, 30) for c in range(0, 360, 45)]
+errors = {"EY0C": 0.02, "EZ0C": -0.01, "EB0C": 4e-5, "EXX1": 2e-5}
+ds = fivecal.simulate(machine, plan, errors=errors, sigma={"stylus3d": 0.002}, seed=5)
+sim = ds.to_dict()["observations"]
+rows = [["X", "Y", "Z", "A", "C", "setup", "measured_x_um", "measured_y_um", "measured_z_um"]]
+for o in sim:
+    rows.append([repr(o["axes"][a]) for a in "XYZAC"] + [o["setup"]] + [repr(v * 1000) for v in o["measured"]])
+text = "".join(",".join(r) + "\n" for r in rows)
+open(out + "/t.csv", "w").write(text)
+got = fio.import_dataset(out + "/t.csv", "stylus3d", machine).to_dict()["observations"]
+same = all(g["type"] == "stylus3d" and g["setup"] == o["setup"] and
+           max(abs(x - y) for x, y in zip(g["measured"], o["measured"])) < 1e-12 and
+           all(abs(g["axes"][a] - o["axes"][a]) < 1e-9 for a in "XYZAC") for g, o in zip(got, sim))
+cli = subprocess.run([sys.executable, "-m", "fivecal", "import", "stylus3d", out + "/t.csv", "--machine",
+                      out + "/m.json", "--out", out + "/ds.json"], capture_output=True, text=True)
+back = fivecal.load_dataset(out + "/ds.json").to_dict()["observations"] if cli.returncode == 0 else []
+r = fivecal.identify(fivecal.load_dataset(out + "/ds.json"), estimate=list(errors))
+z = {n: (r.values[n] - errors.get(n, 0.0)) / r.std[n] for n in errors}
+bad = {}
+for name, lines in {"cell": [rows[0], rows[1], rows[2][:7] + ["abc"] + rows[2][8:]],
+                    "column": [rows[0][:8] + ["measured_w_um"], rows[1]]}.items():
+    open(out + "/bad.csv", "w").write("".join(",".join(r) + "\n" for r in lines))
+    try:
+        fio.import_dataset(out + "/bad.csv", "stylus3d", machine)
+        bad[name] = None
+    except ValueError as e:
+        bad[name] = str(e)
+print(json.dumps({"n": len(got), "same": same, "cli": cli.returncode, "cli_out": cli.stdout + cli.stderr,
+                  "back": len(back), "z": z, "bad": bad, "kinds": list(fio.KINDS)}))
+'''
+
+
+def _plugin_site(tmp_path):
+    """The package beside the test-only module, and the environment that imports it."""
     pkg = tmp_path / "site" / "fivecal"
     shutil.copytree(ROOT / "python" / "fivecal", pkg,
                     ignore=shutil.ignore_patterns("_core*.so", "__pycache__"))
     shutil.copy(PLUGIN[0], pkg / PLUGIN[0].name)
-    env = dict(os.environ, PYTHONPATH=str(tmp_path / "site"), MPLBACKEND="Agg")
+    return dict(os.environ, PYTHONPATH=str(tmp_path / "site"), MPLBACKEND="Agg")
+
+
+@pytest.mark.skipif(not PLUGIN, reason="the test-only module is built by scripts/dev_build.sh "
+                                        "(CMake target _core_kind_plugin)")
+def test_test_only_kind_is_imported_from_a_table(tmp_path):
+    env = _plugin_site(tmp_path)
+    p = subprocess.run([sys.executable, "-c", TABLE_SCRIPT, str(tmp_path)], env=env, capture_output=True,
+                       text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    out = json.loads(p.stdout.strip().splitlines()[-1])
+    assert "stylus3d" in out["kinds"]
+    assert out["n"] == 32 and out["same"], out
+    assert out["cli"] == 0 and out["back"] == 32, out["cli_out"]
+    assert "32 observations (32 stylus3d)" in out["cli_out"]
+    # the imported data identify the truth
+    assert all(abs(v) < 4 for v in out["z"].values()), out["z"]
+    assert out["bad"]["cell"] is not None and "bad.csv:3: column 'measured_y_um': 'abc' is not a number" \
+        in out["bad"]["cell"], out["bad"]
+    assert out["bad"]["column"] is not None and "column 'measured_w_um': unknown column 'measured_w' for a " \
+        "stylus3d import" in out["bad"]["column"], out["bad"]
+
+
+@pytest.mark.skipif(not PLUGIN, reason="the test-only module is built by scripts/dev_build.sh "
+                                        "(CMake target _core_kind_plugin)")
+def test_test_only_kind_runs_through_load_identify_and_report(tmp_path):
+    env = _plugin_site(tmp_path)
     p = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path)], env=env, capture_output=True, text=True,
                        timeout=600)
     assert p.returncode == 0, p.stderr[-3000:]

@@ -37,6 +37,24 @@ class Kind final : public BallMountKind {
     r.range_what = "displacements";
     return r;
   }
+  // R-test / 3D ball triples: axes and the displacement dx dy dz; the balls
+  // from the sidecar unless columns give them.
+  KindTable Table() const override {
+    KindTable t;
+    t.aliases = {"rtest", "r-test"};
+    t.row_aliases = {"rtest", "r-test"};
+    t.layout = "mount";
+    t.columns = MountColumns();
+    const char* names[3] = {"dx", "dy", "dz"};
+    for (int i = 0; i < 3; ++i)
+      t.columns.push_back(TableColumn(names[i], "measured", i).Measured().Required().Range(
+          Report().range,
+          "{value:.6g} mm is beyond an R-test / 3D ball sensor's range (a few mm, refused beyond {limit:g} mm); "
+          "displacements look like µm: name the column {column}_um or give --units um"));
+    t.expected = "dx_um dy_um dz_um [id]";
+    t.options = {"tool_ball", "table_ball"};
+    return t;
+  }
   int rows() const override { return 3; }
   // R-test / CapBall displacement sensors.
   double default_sigma() const override { return 0.001; }

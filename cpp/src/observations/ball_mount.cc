@@ -20,6 +20,14 @@ namespace {
 const char* kXYZ[3] = {"x", "y", "z"};
 }  // namespace
 
+std::vector<TableColumn> BallMountKind::MountColumns() {
+  std::vector<TableColumn> c = {TableColumn("id", "id").Text(), TableColumn("sigma", "sigma").Measured(),
+                                TableColumn("setup", "setup").Text()};
+  for (const char* ball : {"tool_ball", "table_ball"})
+    for (int i = 0; i < 3; ++i) c.push_back(TableColumn(std::string(ball) + "_" + kXYZ[i], ball, i).Sidecar(ball));
+  return c;
+}
+
 void BallMountKind::ReadMount(const json& o, const std::string& w, Observation* ob) {
   ob->setup = ReadSetup(o, w);
   // By reference: o.value(key, json()) copies the array, per sample of a trace.

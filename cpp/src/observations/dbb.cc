@@ -32,6 +32,22 @@ class Kind final : public BallMountKind {
     r.figures = "polar";
     return r;
   }
+  // A ball bar trace: axes and the reading; the bar length and the balls
+  // from the sidecar unless columns give them.
+  KindTable Table() const override {
+    KindTable t;
+    t.layout = "mount";
+    t.columns = MountColumns();
+    t.columns.push_back(TableColumn("reading", "reading").Measured().Required().Range(
+        Report().range,
+        "reading {value:.6g} mm is beyond a ballbar's range (about ±1 mm, refused beyond ±{limit:g} mm); "
+        "readings look like µm: name the column reading_um or give --units um"));
+    t.columns.push_back(TableColumn("length", "length").Sidecar(
+        "length", "no bar length: give --length MM, 'length' in the sidecar or a 'length' column"));
+    t.expected = "reading_um [id]";
+    t.options = {"length", "tool_ball", "table_ball"};
+    return t;
+  }
   // A ball bar's resolution-limited reading noise.
   double default_sigma() const override { return 0.0005; }
 

@@ -33,6 +33,23 @@ class Kind final : public ObservationKind {
     r.count_word = "reading";
     return r;
   }
+  // A tracer's table: axes, the reading and the station it came from (a
+  // column, else the only or the --station one); each station's nominal
+  // place and dead length from the sidecar.
+  KindTable Table() const override {
+    KindTable t;
+    t.aliases = {"tracer", "multilateration"};
+    t.layout = "station";
+    t.columns = {TableColumn("id", "id").Text(), TableColumn("sigma", "sigma").Measured(),
+                 TableColumn("reading", "reading").Measured().Required().Range(
+                     kMaxLinear,
+                     "{value:.6g} mm is beyond any interferometer's range; readings look like µm: name the "
+                     "column reading_um or give --units um"),
+                 TableColumn("station", "station").Text()};
+    t.expected = "reading [station] [id] [sigma]";
+    t.options = {"stations", "station", "instrument", "target", "target_point"};
+    return t;
+  }
   // A laser tracer or tracking interferometer: about a micrometre over a
   // machine-tool volume.
   double default_sigma() const override { return 0.001; }

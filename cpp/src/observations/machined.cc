@@ -109,6 +109,27 @@ class Kind final : public ObservationKind {
   double default_sigma() const override { return 0.003; }
   bool analytic() const override { return false; }
   bool plan_finds_linear_axes() const override { return true; }
+  // A CMM report of a machined test part, one face per row, columns named
+  // after the file keys (the generic reader) with a CMM report's own names.
+  KindTable Table() const override {
+    KindTable t;
+    t.aliases = {"machining", "cmm"};
+    t.columns = {TableColumn("point", "point").Required(), TableColumn("normal", "normal").Required(),
+                 TableColumn("measured", "measured")
+                     .Measured()
+                     .Required()
+                     .Range(2.0,  // mm: this far from nominal is a unit mistake, not a machining error
+                            "deviation {value:.6g} mm: a machined face is not that far from nominal (refused "
+                            "beyond ±{limit:g} mm); deviations look like µm: name the column measured_um or "
+                            "give --units um")};
+    t.expected =
+        "point_x point_y point_z normal_x normal_y normal_z measured [part] [feature] [reference_<axis> ...] "
+        "[id] [sigma]";
+    t.header_aliases = {{"deviation", "measured"}, {"dev", "measured"}, {"ref_", "reference_"}};
+    t.directions = {{"normal", "a face normal"}, {"reference_normal", "a face normal"}};
+    t.checks = {"part_feature"};
+    return t;
+  }
 
   std::vector<const char*> json_keys() const override {
     return {"type", "part", "feature", "axes", "direction", "point", "normal", "measured", "reference_axes",

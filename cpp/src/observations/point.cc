@@ -25,6 +25,34 @@ const char* kXYZ[3] = {"x", "y", "z"};
 std::string Prefix(const Observation& o) { return "instrument." + o.setup; }
 std::string TargetPrefix(const Observation& o) { return Prefix(o) + "." + o.target + "_"; }
 
+}  // namespace
+
+KindTable fixed_frame::InstrumentTable(bool sigma) {
+  KindTable t;
+  t.layout = "instrument";
+  t.columns = {TableColumn("id", "id").Text()};
+  if (sigma) t.columns.push_back(TableColumn("sigma", "sigma").Measured());
+  const char* xyz[3] = {"x", "y", "z"};
+  for (int i = 0; i < 3; ++i)
+    t.columns.push_back(TableColumn(std::string("measured_") + xyz[i], "measured", i)
+                            .Measured()
+                            .Required()
+                            .Alias((std::string("m") + xyz[i]).c_str())
+                            .Range(kMaxLinear,
+                                   "{value:.6g} mm is beyond any instrument's range ({limit_m:g} m); coordinates "
+                                   "look like µm: name the column {column}_um or give --units um"));
+  // a circle-point-analysis layout: one joint moved per row, the others at home
+  t.columns.push_back(TableColumn("joint", "joint").Text());
+  t.columns.push_back(TableColumn("position", "position").Quantity("joint"));
+  t.columns.push_back(TableColumn("home", "home").Quantity("joint"));
+  t.columns.push_back(TableColumn("joint_type", "joint_type").Text());
+  t.options = {"instrument", "target", "target_point", "instrument_origin", "instrument_angles", "align",
+               "joints"};
+  return t;
+}
+
+namespace {
+
 class Kind final : public ObservationKind {
  public:
   ObservationType type() const override { return ObservationType::kPoint; }
@@ -42,6 +70,15 @@ class Kind final : public ObservationKind {
         "instrument pose) and residual after the fit per component (instrument frame) against the "
         "rotary angle, one line per instrument / indexation group.";
     return r;
+  }
+  // A tracker's, camera's or CMM's table: axes (or a joint layout) and the
+  // measured coordinates; the instrument's pose from the sidecar or a rigid
+  // alignment.
+  KindTable Table() const override {
+    KindTable t = fixed_frame::InstrumentTable(true);
+    t.aliases = {"tracker"};
+    t.expected = "measured_x measured_y measured_z [id] [sigma]";
+    return t;
   }
   int rows() const override { return 3; }
   // A laser tracker over a machine-tool volume: a few micrometres.

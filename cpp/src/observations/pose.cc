@@ -40,6 +40,23 @@ class Kind final : public ObservationKind {
         "residual after the fit per component (instrument frame) against the rotary angle.";
     return r;
   }
+  // The point's table and the measured orientation, a rotation vector (rad
+  // unless the header says otherwise). Its rows differ in unit, so one sigma
+  // column cannot weigh them: its noise is the kind's default or the
+  // dataset's instruments entry.
+  KindTable Table() const override {
+    KindTable t = fixed_frame::InstrumentTable(false);
+    t.aliases = {"6d"};
+    const char* xyz[3] = {"x", "y", "z"};
+    for (int i = 0; i < 3; ++i)
+      t.columns.push_back(TableColumn(std::string("measured_r") + xyz[i], "measured_rotation", i)
+                              .Quantity("rotation")
+                              .Required()
+                              .Alias((std::string("mr") + xyz[i]).c_str()));
+    t.expected = "measured_x measured_y measured_z measured_rx measured_ry measured_rz [id]";
+    t.options.push_back("target_rotation");
+    return t;
+  }
   int rows() const override { return 6; }
   const char* unit_row(int k) const override { return k < 3 ? "mm" : "rad"; }
   // A 6D tracker probe or a camera seeing a fiducial over a machine-tool

@@ -15,6 +15,20 @@ namespace fivecal {
 
 using namespace json_util;
 
+// ---- instrument table (fivecal import probing) ------------------------------------
+
+KindTable ProbeTouchKind::Table() const {
+  KindTable t;
+  t.name = "probing";
+  t.aliases = {"touch", "probe"};
+  t.layout = "touch";
+  t.columns = {TableColumn("id", "id").Text(), TableColumn("sigma", "sigma").Measured(),
+               TableColumn("target", "target").Text().Required(), TableColumn("type", "type").Text(),
+               TableColumn("approach", "approach").Text()};
+  t.expected = "target [approach] [id]";
+  return t;
+}
+
 // ---- trigger model (probe_trigger.h) ------------------------------------------
 
 const char* const kProbeParameterNames[kProbeTerms] = {"probe.pretravel", "probe.axial",   "probe.lobe.c2",

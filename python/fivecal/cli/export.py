@@ -3,6 +3,7 @@ fivecal.io.linuxcnc, fivecal.io.controllers and the NC programs of the test plan
 from __future__ import annotations
 
 import argparse
+import json
 import os
 
 from .. import files
@@ -53,8 +54,6 @@ def _run(args) -> int:
 
 
 def _run_kinematics(args) -> int:
-    import json
-
     machine = _read_machine(args.machine)
     errors = usable_errors(args.result, machine, args.force, args.result)
     volume = _volume(args.volume) if args.volume else None
@@ -105,32 +104,32 @@ def _write_or_print(text: str, out, message: str) -> int:
     return 0
 
 
-_PLAN_KINDS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb": "dbb"}
-
-
 def _run_program(args) -> int:
     O.check_cli(args)
     machine, plan, artefact, tip = _read_spec(args.spec)
     types = sorted({str(e.get("type")) for e in plan})
-    kind = args.kind
-    if kind == "auto":
-        kinds = {_PLAN_KINDS.get(t) for t in types}
-        if kinds == {"probing", "sphere"}:
-            kinds = {"probing"}  # facet and sphere touches: one G38.2 cycle in plan order
-        if len(kinds) != 1 or None in kinds:
+    # the program runs the plan's entries (its kind: --kind, else the one
+    # nc_programs.PLAN_PROGRAMS gives the plan's entry types)
+    program = args.kind
+    if program == "auto":
+        programs = {N.PLAN_PROGRAMS.get(t) for t in types}
+        if programs == set(N.TOUCH_PROGRAMS):
+            programs = {N.TOUCH_PROGRAMS[0]}  # facet and sphere touches: one G38.2 cycle in plan order
+        if len(programs) != 1 or None in programs:
             raise ValueError(f"{args.spec}: plan entries of type {', '.join(types)}; a program runs facet "
                              "and sphere touches (together or apart), ball3d or dbb entries: give --kind or "
                              "split the plan")
-        kind = kinds.pop()
-    need_kins = kind in ("probing", "sphere") or (kind == "rtest" and args.mode == "tcp")
+        program = programs.pop()
+    touches = program in N.TOUCH_PROGRAMS
+    need_kins = touches or (program == "rtest" and args.mode == "tcp")
     if need_kins and not args.kins:
-        raise ValueError(f"--kins: a {kind} program{' in tcp mode' if kind == 'rtest' else ''} runs with "
+        raise ValueError(f"--kins: a {program} program{' in tcp mode' if program == 'rtest' else ''} runs with "
                          "LinuxCNC's tool-centre-point kinematics; give xyzac-trt or xyzbc-trt")
-    if kind in ("probing", "sphere") and not tip > 0:
+    if touches and not tip > 0:
         raise ValueError(f"{args.spec}: probe.tip_radius: the stylus ball radius (mm) is needed for the "
                          "contact points")
     try:
-        text = _program_text(args, kind, machine, plan, artefact, tip)
+        text = _program_text(args, program, machine, plan, artefact, tip)
     except O.OptionError as e:
         # a plan-dependent bound a writer checks: name the option as typed
         if e.option == "tip_radius":
@@ -138,23 +137,24 @@ def _run_program(args) -> int:
         raise e.for_cli() from None
     blocks = sum(1 for ln in text.splitlines() if ln[:1] in "GM")
     return _write_or_print(text, args.out,
-                           f"{kind} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
+                           f"{program} program, {len(plan)} plan entries, {blocks} blocks: written to {args.out}")
 
 
-def _program_text(args, kind, machine, plan, artefact, tip) -> str:
+def _program_text(args, program, machine, plan, artefact, tip) -> str:
     # an option left out takes the writer's default for this kind of program
     opt = lambda name, default: default if getattr(args, name) is None else getattr(args, name)  # noqa: E731
     touch = dict(clearance=args.clearance, overtravel=args.overtravel, feed=opt("feed", 60.0),
                  retract=args.retract, safe=args.safe, dwell=opt("dwell", 0.0), log=args.log)
     # with spheres on the artefact (a scale bar beside the facets, as in
     # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
-    if kind == "probing" and (any(e.get("type") == "sphere" for e in plan) or artefact.get("spheres")):
+    mixed, spheres = N.TOUCH_PROGRAMS
+    if program == mixed and (N.touches_a_sphere(plan) or artefact.get("spheres")):
         return N.touch_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
-    if kind == "probing":
+    if program == mixed:
         return L.probing_program(machine, args.kins, plan, artefact, tip, **touch)
-    if kind == "sphere":
+    if program == spheres:
         return N.sphere_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
-    if kind == "rtest":
+    if program == "rtest":
         return N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=opt("feed", 500.0),
                                dwell=opt("dwell", 1.0), subdivide=args.subdivide)
     feed = opt("feed", 1000.0)
@@ -252,7 +252,7 @@ def register(sub) -> None:
         "  fivecal export program rtest_spec.json --mode tcp --kins xyzac-trt --out k4.ngc\n"
         "  fivecal export program fourstep_spec.json --feed 500 --out fourstep.ngc")
     pp.add_argument("spec", help="simulation spec JSON: machine (object or path), plan, artefact, probe")
-    pp.add_argument("--kind", default="auto", choices=["auto", "probing", "sphere", "rtest", "dbb"],
+    pp.add_argument("--kind", default="auto", choices=["auto", *N.PROGRAMS],
                     help="program kind (default: from the plan's entry types; probing takes facet and "
                     "sphere touches together)")
     pp.add_argument("--kins", choices=list(L.KINS), help="LinuxCNC kinematics (needed for probing, "

@@ -43,7 +43,7 @@ def _run(args) -> int:
     if args.kind == "probe-log" and not args.plan:
         raise ValueError("--plan: a probe-log import needs the plan the program was written from")
     if args.plan:
-        if args.kind not in ("rtest", "ball3d", "probe-log"):
+        if args.kind not in P.PLANNED:
             raise ValueError(f"--plan: lines up R-test readings (rtest) or a LinuxCNC probe log (probe-log), "
                              f"not a {args.kind} table")
         return _run_planned(args)

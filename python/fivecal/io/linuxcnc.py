@@ -558,6 +558,14 @@ def export(result, machine: Machine, kins: str, out_dir: str, old_pins: Optional
 
 # ---- probing programs (G38.2) and LinuxCNC's probe log ---------------------
 
+def _plane_touch() -> str:
+    """The observation kind of a touch on one of the artefact's facets (a
+    plane, what a G38.2 line of these programs probes): the registry's probe
+    touch whose targets are the artefact's "facets"."""
+    return next(k["name"] for k in _core.observation_kinds()
+                if k["probe_touch"] and k["report"]["target_list"] == "facets")
+
+
 def _facets(artefact: Mapping) -> Dict[str, dict]:
     facets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
     if not facets:
@@ -574,10 +582,11 @@ def _touch_geometry(machine: Machine, kins: str, plan: Sequence[Mapping], artefa
     mp = match(machine, k)
     tilt = TILT[k]
     facets = _facets(artefact)
+    plane = _plane_touch()
     origin = np.asarray(mp["origin"], dtype=float) + np.asarray(workpiece_shift, dtype=float)
     out = []
     for i, t in enumerate(plan):
-        if t.get("type") != "facet":
+        if t.get("type") != plane:
             raise ValueError(f"plan[{i}]: type '{t.get('type')}': only facet touches become G38.2 moves")
         f = facets.get(t.get("target"))
         if f is None:
@@ -808,9 +817,10 @@ def read_probe_log(source: str, machine: Machine, kins: str, plan: Sequence[Mapp
     j = inverse(k, pins, world)
     q = commands(machine, k, j)
     obs = []
+    plane = _plane_touch()
     for i, t in enumerate(plan):
         axes = {a: float(q[a][i]) for a in machine.axis_names}
-        o = {"type": t.get("type", "facet"), "target": t["target"], "axes": axes, "id": f"touch{i + 1}"}
+        o = {"type": t.get("type", plane), "target": t["target"], "axes": axes, "id": f"touch{i + 1}"}
         if t.get("direction"):  # the side each rotary axis was approached from (reversal errors)
             o["direction"] = dict(t["direction"])
         obs.append(o)
@@ -899,8 +909,9 @@ def probe_depths(machine: Machine, kins: str, plan: Sequence[Mapping], artefact:
     cycle's feed); anything else means the trip was early or late."""
     obs = read_probe_log(log, machine, kins, plan, pins)
     facets = _facets(artefact)
+    plane = _plane_touch()
     for o in obs:
-        if o["type"] != "facet" or o["target"] not in facets:
+        if o["type"] != plane or o["target"] not in facets:
             raise ValueError(f"{o['id']}: probe depths are of facet touches, got {o['type']} {o['target']!r}")
     return _touch_residuals(machine, artefact, tip_radius, obs, errors)
 
@@ -919,13 +930,14 @@ def probe_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], ar
         if (t, c) not in poses:
             poses.append((t, c))
     ids = list(_facets(artefact))
+    plane = _plane_touch()
     out = []
     for t, c in poses:
         jj = np.array([[0, 0, 0, t, c], [1, 0, 0, t, c], [0, 1, 0, t, c], [0, 0, 1, t, c]], float)
         q = commands(machine, k, jj)
         # the core's facet residual at the four joint points: h at the first,
         # its differences d(residual)/d(joint xyz) the rows g
-        touches = [{"type": "facet", "target": f, "axes": {a: float(q[a][i]) for a in machine.axis_names}}
+        touches = [{"type": plane, "target": f, "axes": {a: float(q[a][i]) for a in machine.axis_names}}
                    for i in range(4) for f in ids]
         r = _touch_residuals(machine, artefact, tip_radius, touches, errors).reshape(4, len(ids))
         g = (r[1:] - r[0]).T

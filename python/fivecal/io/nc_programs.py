@@ -42,6 +42,21 @@ from . import linuxcnc as L
 from . import nc_options as O
 
 
+#: The programs fivecal writes, and the one each plan entry type runs in
+#: (``fivecal export program --kind``): the probing cycle (facet and sphere
+#: touches in plan order), the sphere cycle, an R-test K test, a ball bar
+#: test (fivecal.io.dbb_program).
+PROGRAMS = ("probing", "sphere", "rtest", "dbb")
+PLAN_PROGRAMS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb": "dbb"}
+#: the touch programs: a plan of facet and sphere touches runs in the first
+TOUCH_PROGRAMS = ("probing", "sphere")
+
+
+def touches_a_sphere(plan: Sequence[Mapping]) -> bool:
+    """Whether a plan touches a sphere (its probing cycle keeps out of the spheres)."""
+    return any(e.get("type") == "sphere" for e in plan)
+
+
 def _f(v: float) -> str:
     s = f"{v:.6f}"
     return "0.000000" if float(s) == 0.0 else s

@@ -32,6 +32,9 @@ from . import linuxcnc as L
 from . import nc_programs as N
 from . import tables as T
 
+#: the imports that line readings up with a plan (``fivecal import KIND
+#: --plan``): an R-test's nest readings, LinuxCNC's probe log
+PLANNED = ("rtest", "ball3d", "probe-log")
 #: how far an axis column of a readings file may be from the plan's command
 #: (mm or degrees): a logger's rounding, not another pose
 AXIS_TOLERANCE = 1e-3

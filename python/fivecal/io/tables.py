@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import io
 import math
 import os
 import re
@@ -40,58 +41,65 @@ import sys
 import warnings
 from typing import Iterable, Mapping, Optional, Sequence, Union
 
-from .. import plausibility, simulation
+from .. import _core, files, plausibility, schema, simulation
 from .. import units as _units
 from ..dataset import Dataset
 from ..machine import Machine, RadiansWarning
+from ..units import looks_like_radians, radians_message
+from . import alignment
 
-KINDS = ("probing", "dbb", "ball3d", "point", "pose", "distance", "machined", "fivecal")
-ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal",
-           "tracker": "point", "6d": "pose", "tracer": "distance", "multilateration": "distance",
-           "machining": "machined", "cmm": "machined"}
-#: the fixed-instrument kinds: a target followed by an instrument standing in F
-_FIXED = ("point", "pose")
-#: the probe-touch observation types a probing log's targets name
-_TOUCHES = ("facet", "sphere", "cylinder")
-
-_VECTORS = {"tool_ball": ("tool_ball_x", "tool_ball_y", "tool_ball_z"),
-            "table_ball": ("table_ball_x", "table_ball_y", "table_ball_z")}
-_LENGTH_FIELDS = {"reading", "length", "sigma", "dx", "dy", "dz"} | set(_VECTORS["tool_ball"]) | \
-    set(_VECTORS["table_ball"])
-#: lengths the ``units`` option applies to: what the instrument measured
-_MEASURED = {"reading", "sigma", "dx", "dy", "dz"}
-_TEXT_FIELDS = {"id", "type", "target", "setup", "approach"}
-_COMMON = {"id", "sigma", "setup"}
-_FIELDS = {
-    "probing": {"id", "sigma", "target", "type", "approach"},
-    "dbb": _COMMON | {"reading", "length"} | set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"]),
-    "ball3d": _COMMON | {"dx", "dy", "dz"} | set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"]),
-}
-_REQUIRED = {"probing": ("target",), "dbb": ("reading",), "ball3d": ("dx", "dy", "dz")}
-# (the fivecal and machined tables take their columns from the registry: see _generic_columns)
-# The measured coordinates are not named x y z: those are axis letters.
-_MEASURED_XYZ = ("measured_x", "measured_y", "measured_z")
-_SHORT = {"mx": "measured_x", "my": "measured_y", "mz": "measured_z"}
+#: the import of rows in fivecal's own terms (a ``type`` column, any
+#: registered kind): the one table that is no kind's
+GENERIC = "fivecal"
+#: what a generic table's rows need besides their type
+_GENERIC_EXPECTED = "type and the keys of each row's type (target, setup, reading, measured_x ...) [id]"
 #: a circle-point-analysis layout: one joint moved per row, the others at home
 _JOINT_FIELDS = {"joint", "position", "home", "joint_type"}
-_FIELDS["point"] = {"id", "sigma"} | set(_MEASURED_XYZ) | _JOINT_FIELDS
-_REQUIRED["point"] = _MEASURED_XYZ
-_LENGTH_FIELDS |= set(_MEASURED_XYZ)
-_MEASURED |= set(_MEASURED_XYZ)
-# pose: the point's columns and the measured orientation, a rotation vector
-# (rad unless the header says otherwise). A pose's rows differ in unit, so a
-# single sigma column cannot weigh them: its noise is the kind's default or
-# the dataset's instruments entry.
-_MEASURED_ROT = ("measured_rx", "measured_ry", "measured_rz")
-_SHORT.update({"mrx": "measured_rx", "mry": "measured_ry", "mrz": "measured_rz"})
-_FIELDS["pose"] = (_FIELDS["point"] - {"sigma"}) | set(_MEASURED_ROT)
-_REQUIRED["pose"] = _MEASURED_XYZ + _MEASURED_ROT
-# distance: one reading per row from the station the row names (or the only one)
-_FIELDS["distance"] = {"id", "sigma", "reading", "station"}
-_REQUIRED["distance"] = ("reading",)
-_TEXT_FIELDS.add("station")
 _JOINT_TYPES = {"prismatic": "linear", "linear": "linear", "translational": "linear",
                 "revolute": "rotary", "rotary": "rotary", "rotational": "rotary"}
+#: sidecar keys and options every import takes
+_COMMON_OPTIONS = {"probe", "artefact", "setup", "sigma", "header"}
+
+
+def _imports() -> dict:
+    """import name -> its table, from the registry (each kind's ``table``:
+    layout, columns, the sidecar options it takes; kinds of one name share
+    it, ``kinds`` lists them), in registry order, then the generic table.
+    Read at each call: a kind may register itself after this module loads."""
+    out: dict = {}
+    for k in _core.observation_kinds():
+        t = k["table"]
+        out.setdefault(t["name"], dict(t, kinds=[]))["kinds"].append(k["name"])
+    every = [n for t in out.values() for n in t["kinds"]]
+    out[GENERIC] = {"name": GENERIC, "aliases": ["generic"], "row_aliases": [], "layout": "generic",
+                    "columns": [], "expected": _GENERIC_EXPECTED, "options": ["length", "tool_ball", "table_ball"],
+                    "header_aliases": {}, "directions": {}, "checks": [], "kinds": every}
+    return out
+
+
+def _aliases(imports: Mapping) -> dict:
+    """Other name of an import -> its name."""
+    return {a: name for name, t in imports.items() for a in t["aliases"]}
+
+
+def _spec(table: Mapping) -> dict:
+    """A table's columns by header name."""
+    return {c["name"]: c for c in table["columns"]}
+
+
+def _touch_kinds() -> dict:
+    """The probe-touch kinds (a probing log's rows) -> their artefact list."""
+    return {k["name"]: k["report"]["target_list"] for k in _core.observation_kinds() if k["probe_touch"]}
+
+
+def _either(names: Sequence[str], word: str = "or") -> str:
+    """``a, b or c``."""
+    names = list(names)
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} {word} {names[-1]}"
+
+
+KINDS = tuple(_imports())
+ALIASES = _aliases(_imports())
 
 
 def _axis_list(machine: Machine, skip_s: bool = False) -> str:
@@ -101,17 +109,21 @@ def _axis_list(machine: Machine, skip_s: bool = False) -> str:
 
 
 class _Column:
-    """One header cell: the fivecal field it feeds and its unit factor."""
+    """One header cell: the fivecal field it feeds, its unit factor and the
+    registry's record of its column (None for an axis or direction column)."""
 
     def __init__(self, index: int, header: str, field: str, unit: Optional[str]):
         self.index, self.header, self.field, self.unit = index, header, field, unit
         self.factor = 1.0
+        self.spec: Optional[dict] = None
 
 
 def canonical_kind(kind: str) -> str:
-    k = ALIASES.get(kind.strip().lower(), kind.strip().lower())
-    if k not in KINDS:
-        raise ValueError(f"import: unknown kind '{kind}' (kinds: {', '.join(KINDS)}, rtest = ball3d)")
+    imports = _imports()
+    k = _aliases(imports).get(kind.strip().lower(), kind.strip().lower())
+    if k not in imports:
+        others = ", ".join(f"{t['aliases'][0]} = {n}" for n, t in imports.items() if t["aliases"] and n != GENERIC)
+        raise ValueError(f"import: unknown kind '{kind}' (kinds: {', '.join(imports)}; {others})")
     return k
 
 
@@ -197,7 +209,7 @@ def _split_unit(header: str):
 # --------------------------------------------------------------------------
 # Header to columns
 # --------------------------------------------------------------------------
-def _field(name: str, machine: Machine, kind: str, where: str) -> str:
+def _field(name: str, machine: Machine, kind: str, where: str, imports: Mapping) -> str:
     """The fivecal field of a column name (case-insensitive); ValueError when unknown."""
     axes = machine.axis_names
     low = name.strip().lower()
@@ -216,13 +228,15 @@ def _field(name: str, machine: Machine, kind: str, where: str) -> str:
             raise ValueError(f"{where}: direction column of unknown axis '{letter}' "
                              f"(the machine's axes: {_axis_list(machine)})")
         return "dir_" + letter
-    if kind in _FIXED and low in _SHORT and _SHORT[low] in _FIELDS[kind]:
-        return _SHORT[low]
-    if low in _FIELDS[kind]:
+    fields = _spec(imports[kind])
+    short = {c["alias"]: c["name"] for c in fields.values() if c["alias"]}
+    if low in short:
+        return short[low]
+    if low in fields:
         return low
-    known = sorted(_FIELDS[kind]) + list(axes) + [f"dir_{a}" for a in axes]
+    known = sorted(fields) + list(axes) + [f"dir_{a}" for a in axes]
     close = difflib.get_close_matches(low, known, n=1)
-    other = [k for k in KINDS if low in _FIELDS.get(k, ())]
+    other = [k for k, t in imports.items() if t["layout"] != "generic" and low in _spec(t)]
     hint = f"; did you mean '{close[0]}'?" if close else ""
     if other and not close:
         hint = f"; it belongs to a {other[0]} import"
@@ -267,27 +281,32 @@ def _named_headers(headers: Sequence[str], where: str, rename: Mapping[str, str]
 
 
 def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, rename: Mapping[str, str],
-             ignore: Iterable[str], length_unit: Optional[str], angle_unit: Optional[str]) -> list:
+             ignore: Iterable[str], length_unit: Optional[str], angle_unit: Optional[str], imports: Mapping) -> list:
+    spec = _spec(imports[kind])
     cols, seen = [], {}
     for i, h, name, unit, cw in _named_headers(headers, where, rename, ignore):
-        field = _field(name, machine, kind, cw)
+        field = _field(name, machine, kind, cw, imports)
         if field in seen:
             raise ValueError(f"{where}: columns '{seen[field]}' and '{h}' both give {field}")
         seen[field] = h
         c = _Column(i, h, field, unit)
-        quantity = "angle" if (len(field) == 1 and machine.is_rotary(field)) or field in _MEASURED_ROT else \
-            "length" if field in _LENGTH_FIELDS or len(field) == 1 else None
+        c.spec = spec.get(field)
+        q = c.spec["quantity"] if c.spec else None
+        rotation = q == "rotation"
+        quantity = "angle" if (len(field) == 1 and machine.is_rotary(field)) or rotation else \
+            "length" if q == "length" or len(field) == 1 else None
         if quantity and unit is not None:
             c.factor, _ = _units.column_unit(h, quantity, where)
-            if field in _MEASURED_ROT:
+            if rotation:
                 c.factor *= math.pi / 180.0  # angle columns scale to degrees; a rotation vector is in rad
-        elif field in _MEASURED_ROT:
+        elif rotation:
             c.factor = 1.0  # a rotation vector is in rad unless its header says otherwise
         elif quantity == "angle":
             c.factor = _units.ANGLE_SUFFIXES[angle_unit or "deg"]
         elif quantity == "length":
-            c.factor = _units.LENGTH_SUFFIXES[(length_unit if field in _MEASURED else None) or "mm"]
-        elif unit is not None and field in ("position", "home"):
+            measured = bool(c.spec and c.spec["measured"])
+            c.factor = _units.LENGTH_SUFFIXES[(length_unit if measured else None) or "mm"]
+        elif unit is not None and q == "joint":
             raise ValueError(f"{cw}: {field} takes the unit of the moving joint (mm for a linear one, degrees "
                              "or --angle-units for a rotary one); name the column without a unit")
         elif unit is not None:
@@ -309,22 +328,29 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
     if missing:
         raise ValueError(f"{where}: no column for axis {', '.join(missing)} (expected a column per machine "
                          f"axis: {_axis_list(machine)}; S may be left out)")
-    for r in _REQUIRED[kind]:
+    for r in (c["name"] for c in imports[kind]["columns"] if c["required"]):
         if r not in seen:
-            raise ValueError(f"{where}: no '{r}' column; a {kind} import expects {_expected(machine, kind)}")
+            raise ValueError(f"{where}: no '{r}' column; a {kind} import expects "
+                             f"{_expected(machine, kind, imports)}")
     return cols
 
 
-def _expected(machine: Machine, kind: str) -> str:
+def _expected(machine: Machine, kind: str, imports: Mapping) -> str:
     axes = _axis_list(machine, skip_s=True)
-    rest = {"probing": "target [approach] [id]", "dbb": "reading_um [id]",
-            "ball3d": "dx_um dy_um dz_um [id]", "point": "measured_x measured_y measured_z [id] [sigma]",
-            "pose": "measured_x measured_y measured_z measured_rx measured_ry measured_rz [id]",
-            "distance": "reading [station] [id] [sigma]",
-            "machined": "point_x point_y point_z normal_x normal_y normal_z measured [part] [feature] "
-                        "[reference_<axis> ...] [id] [sigma]",
-            "fivecal": "type and the keys of each row's type (target, setup, reading, measured_x ...) [id]"}[kind]
+    t = imports[kind]
+    rest = t["expected"] or " ".join(
+        [f"{k}" for k in _generic_keys(t)] + ["[id]"])
     return f"the columns {axes} {rest}"
+
+
+def _generic_keys(table: Mapping) -> list:
+    """A kind's own file keys (a table without an ``expected`` text: the
+    generic reader's columns, named after them)."""
+    keys = []
+    for k in _core.observation_kinds():
+        if k["name"] in table["kinds"]:
+            keys += [x for x in k["json_keys"] if x not in ("type", "axes", "direction", "id") and x not in keys]
+    return keys
 
 
 # --------------------------------------------------------------------------
@@ -366,16 +392,8 @@ def read_sidecar(path: Union[str, os.PathLike]) -> dict:
     """A small JSON file of what a table does not hold: ``probe``, ``artefact``
     (as in a dataset), ``setup``, ``length``, ``tool_ball``, ``table_ball``,
     ``sigma`` (mm); checked against ``import.schema.json``."""
-    from .. import files, schema
-
     path = os.fspath(path)
     return schema.validate(files.read_json(path, "import sidecar"), "import", path)
-
-
-_POINT_OPTIONS = ("instrument", "target", "target_point", "instrument_origin", "instrument_angles", "align",
-                  "header", "joints", "target_rotation")
-#: a distance import's own options (its target options are the point's)
-_DISTANCE_OPTIONS = ("stations", "station")
 
 
 def read_table(path: Union[str, os.PathLike], kind: str, machine: Union[Machine, Mapping, str], *,
@@ -431,9 +449,10 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
           header=None, instrument=None, target=None, target_point=None, instrument_origin=None,
           instrument_angles=None, align=None, target_rotation=None, station=None):
     """(dataset dict, the line of each observation)."""
-    from .. import files
-
     kind = canonical_kind(kind)
+    imports = _imports()
+    table = imports[kind]
+    layout = table["layout"]
     path = os.fspath(path)
     if not isinstance(machine, Machine):
         machine = Machine.load(machine) if isinstance(machine, (str, os.PathLike)) else Machine.from_dict(machine)
@@ -448,24 +467,11 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         if value is not None:
             side[key] = value
             origin[key] = f"--{key.replace('_', '-')}"
-    if kind not in _FIXED + ("distance",):
-        for key in _POINT_OPTIONS + _DISTANCE_OPTIONS:
-            if key in side and key != "header":
-                raise ValueError(f"{origin[key]}: {key} belongs to a point, pose or distance import, not {kind}")
-    if kind == "distance":
-        for key in ("instrument_origin", "instrument_angles", "align", "joints", "target_rotation"):
-            if key in side:
-                raise ValueError(f"{origin[key]}: {key} belongs to a point or pose import; a distance "
-                                 "station's place is 'stations' in the sidecar")
-    elif "stations" in side or "station" in side:
-        key = "stations" if "stations" in side else "station"
-        raise ValueError(f"{origin[key]}: {key} belongs to a distance import, not {kind}")
-    if kind == "machined":
-        for key in ("length", "tool_ball", "table_ball"):
-            if side.get(key) is not None:
-                raise ValueError(f"{origin[key]}: {key} belongs to a ball bar or R-test import, not machined")
-    if kind == "point" and "target_rotation" in side:
-        raise ValueError(f"{origin['target_rotation']}: target_rotation belongs to a pose import, not point")
+    # an option of another import: each table says which it takes
+    for key in side:
+        owners = [n for n, t in imports.items() if n != GENERIC and key in t["options"]]
+        if owners and key not in _COMMON_OPTIONS and key not in table["options"] and side[key] is not None:
+            raise ValueError(f"{origin[key]}: {key} belongs to a {_either(owners)} import, not {kind}")
     # checked once here, so that a bad value is named where it was given
     for key in ("tool_ball", "table_ball", "target_point", "instrument_origin", "instrument_angles",
                 "target_rotation"):
@@ -484,9 +490,9 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
                          f"{_units.unit_list('angle')})")
     if decimal not in (None, "comma", "point"):
         raise ValueError(f"import: decimal '{decimal}': expected comma or point")
-    if kind in _FIXED:
+    if layout == "instrument":
         _point_setup(side, origin, machine)
-    if kind == "distance":
+    if layout == "station":
         _distance_setup(side, origin, machine)
     _sidecar_sizes(side, origin, machine)
 
@@ -497,7 +503,7 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         given = _header_names(given, origin["header"])
     if not lines:
         raise ValueError(f"{path}: no header and no data; a {kind} table needs a header row naming "
-                         f"{_expected(machine, kind)}")
+                         f"{_expected(machine, kind, imports)}")
     if given is not None:
         # the names come from the option: every line of the file is data
         hline, first = lines[0]
@@ -516,23 +522,24 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         hwhere, hdesc = f"{path}:{hline}", f"line {hline}"
     if all(_is_number(h) for h in headers):
         raise ValueError(f"{hwhere}: no header row (this line holds numbers); the first line must name "
-                         f"the columns: {_expected(machine, kind)}, or give the names with --header / "
+                         f"the columns: {_expected(machine, kind, imports)}, or give the names with --header / "
                          "'header' in the sidecar")
-    generic = kind in ("fivecal", "machined")
+    generic = layout == "generic"
     if generic:
         registry, text_keys = _registered(), _text_keys()
         cols = _generic_columns(headers, machine, kind, hwhere, columns or {}, ignore, units and units.lower(),
-                                angle_units and angle_units.lower(), registry, text_keys)
+                                angle_units and angle_units.lower(), registry, text_keys, imports)
     else:
         cols = _columns(headers, machine, kind, hwhere, columns or {}, ignore,
-                        units and units.lower(), angle_units and angle_units.lower())
+                        units and units.lower(), angle_units and angle_units.lower(), imports)
     decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
     if decimal == "comma" and delim == ",":
         raise ValueError(f"{path}: a decimal comma needs another column separator than ',' (';', tab or spaces)")
     artefact = side.get("artefact") or {}
     targets = {}
+    touch_kinds = _touch_kinds()
     if isinstance(artefact, Mapping):
-        for key, typ in (("facets", "facet"), ("spheres", "sphere"), ("cylinders", "cylinder")):
+        for typ, key in touch_kinds.items():
             for t in artefact.get(key) or []:
                 if isinstance(t, Mapping) and "id" in t:
                     targets[str(t["id"])] = typ
@@ -543,15 +550,15 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
         if len(cells) != len(headers):
             raise ValueError(f"{path}:{lineno}: {len(cells)} cells, the header ({hdesc}) has "
                              f"{len(headers)} columns ({', '.join(headers)})")
-        if kind in _FIXED:
-            o = _point_row(cells, cols, machine, kind, side, decimal_comma, angle_units, f"{path}:{lineno}")
-        elif kind == "distance":
-            o = _distance_row(cells, cols, machine, side, decimal_comma, f"{path}:{lineno}")
+        if layout == "instrument":
+            o = _point_row(cells, cols, machine, table, side, decimal_comma, angle_units, f"{path}:{lineno}")
+        elif layout == "station":
+            o = _distance_row(cells, cols, machine, table, side, decimal_comma, f"{path}:{lineno}")
         elif generic:
             o = _generic_row(cells, cols, machine, kind, side, decimal_comma, f"{path}:{lineno}", registry,
-                             text_keys)
+                             text_keys, imports)
         else:
-            o = _row(cells, cols, machine, kind, side, targets, decimal_comma, f"{path}:{lineno}")
+            o = _row(cells, cols, machine, table, side, targets, decimal_comma, f"{path}:{lineno}", imports)
         oid = o.get("id") or f"{base}:{lineno}"
         if oid in ids:
             raise ValueError(f"{path}:{lineno}: id '{oid}' already used on line {ids[oid]}")
@@ -565,10 +572,10 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     if generic:
         _angle_checks(obs, cols, machine, path, lineno_of)
     d = {"machine": machine.to_dict(), "observations": obs}
-    if kind in _FIXED:
+    if layout == "instrument":
         _joint_homes(obs, machine, side, origin)
         d["_comment"] = _place_instrument(obs, machine, side, origin, path)
-    touches = any(o["type"] in _TOUCHES for o in obs)
+    touches = any(o["type"] in touch_kinds for o in obs)
     if touches and "probe" not in side:
         raise ValueError(f"{path}: probe touches need the probe tip radius: give 'probe': "
                          '{"tip_radius": R} (mm) in the sidecar')
@@ -695,28 +702,21 @@ def _row_sigma(o: dict, vals: Mapping, side: Mapping) -> None:
         o["sigma"] = side["sigma"]
 
 
-def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_comma: bool, angle_units,
+def _point_row(cells, cols, machine: Machine, table: Mapping, side: Mapping, decimal_comma: bool, angle_units,
                where: str) -> dict:
     axes, direction, vals, text = _instrument_cells(cells, cols, machine, decimal_comma, where)
-    measured = []
-    for k in _MEASURED_XYZ:
-        v, vw = vals[k]
-        if abs(v) > plausibility.REFUSE_POSITION:
-            raise ValueError(f"{vw}: {v:.6g} mm is beyond any instrument's range "
-                             f"({plausibility.REFUSE_POSITION / 1e3:g} m); coordinates look like µm: name the "
-                             f"column {k}_um or give --units um")
-        measured.append(v)
-    o = {"type": kind, "instrument": side["instrument"], "target": side["target"],
-         "target_point": list(side["target_point"]), "axes": axes, "measured": measured}
-    if kind == "pose":
-        rot = [vals[k][0] for k in _MEASURED_ROT]
+    o = {"type": table["kinds"][0], "instrument": side["instrument"], "target": side["target"],
+         "target_point": list(side["target_point"]), "axes": axes}
+    _fill(o, vals, table, side, where, o["type"])
+    rotation = [c for c in table["columns"] if c["quantity"] == "rotation"]
+    if rotation:
+        rot = o[rotation[0]["field"]]
         if math.sqrt(sum(v * v for v in rot)) > math.pi + 1e-9:
             # a rotation vector is at most half a turn long: longer ones are degrees read as rad
-            raise ValueError(f"{vals[_MEASURED_ROT[0]][1].rsplit(': column', 1)[0]}: measured rotation "
+            raise ValueError(f"{vals[rotation[0]['name']][1].rsplit(': column', 1)[0]}: measured rotation "
                              f"{_fmt(rot)} is longer than π rad, which no rotation vector is; degrees? name "
-                             "the columns measured_rx_deg ... or convert to rad")
-        o["measured_rotation"] = rot
-        if side.get("target_rotation") is not None:
+                             f"the columns {rotation[0]['name']}_deg ... or convert to rad")
+        if "target_rotation" in table["options"] and side.get("target_rotation") is not None:
             o["target_rotation"] = list(side["target_rotation"])
     if "id" in text:
         o["id"] = text["id"][0]
@@ -762,7 +762,8 @@ def _distance_setup(side: dict, origin: dict, machine: Machine) -> None:
                          f"({', '.join(stations)})")
 
 
-def _distance_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: bool, where: str) -> dict:
+def _distance_row(cells, cols, machine: Machine, table: Mapping, side: Mapping, decimal_comma: bool,
+                  where: str) -> dict:
     axes, direction, vals, text = _instrument_cells(cells, cols, machine, decimal_comma, where)
     stations = side["stations"]
     if "station" in text:
@@ -776,13 +777,11 @@ def _distance_row(cells, cols, machine: Machine, side: Mapping, decimal_comma: b
     else:
         raise ValueError(f"{where}: no station column and {len(stations)} stations in the sidecar; add a "
                          "'station' column or give --station")
-    r, rw = vals["reading"]
-    if abs(r) > plausibility.REFUSE_POSITION:
-        raise ValueError(f"{rw}: {r:.6g} mm is beyond any interferometer's range; readings look like µm: "
-                         "name the column reading_um or give --units um")
     st = stations[sid]
-    o = {"type": "distance", "station": sid, "target": side["target"], "target_point": list(side["target_point"]),
-         "axes": axes, "reading": r, "station_position": list(st["position"])}
+    o = {"type": table["kinds"][0], "station": sid, "target": side["target"],
+         "target_point": list(side["target_point"]), "axes": axes}
+    _fill(o, vals, table, side, where, o["type"])
+    o["station_position"] = list(st["position"])
     if st.get("dead_length") is not None:
         o["dead_length"] = float(st["dead_length"])
     if side.get("instrument") is not None:
@@ -866,8 +865,6 @@ def _joint_homes(obs: list, machine: Machine, side: Mapping, origin: Mapping) ->
 def _place_instrument(obs: list, machine: Machine, side: Mapping, origin: Mapping, path: str) -> str:
     """Set each observation's instrument_origin / instrument_angles and say how
     they were found (the dataset's ``_comment``, printed by ``fivecal import``)."""
-    from . import alignment
-
     inst = side["instrument"]
     pose = [side.get("instrument_origin"), side.get("instrument_angles")]
     if any(v is not None for v in pose):
@@ -878,7 +875,8 @@ def _place_instrument(obs: list, machine: Machine, side: Mapping, origin: Mappin
         note = (f"instrument {inst}: nominal pose the identity (align off): its frame is taken as the machine "
                 "frame, the fit must find the whole pose")
     else:
-        plan = [{"type": "point", "instrument": inst, "target": o["target"], "target_point": o["target_point"],
+        # the nominal machine's view of each target through an identity pose
+        plan = [{"type": o["type"], "instrument": inst, "target": o["target"], "target_point": o["target_point"],
                  "axes": o["axes"], "instrument_origin": [0.0, 0.0, 0.0], "instrument_angles": [0.0, 0.0, 0.0]}
                 for o in obs]
         nominal = [p["measured"] for p in simulation.simulate(machine, plan).to_dict()["observations"]]
@@ -908,13 +906,15 @@ def _is_number(cell: str) -> bool:
         return False
 
 
-def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mapping, decimal_comma: bool,
-         where: str) -> dict:
+def _row(cells, cols, machine: Machine, table: Mapping, side: Mapping, targets: Mapping, decimal_comma: bool,
+         where: str, imports: Mapping) -> dict:
+    """One row of a probing log (its target says the kind) or of a ball
+    mounting's table."""
     axes, direction, vals, text, empty = {}, {}, {}, {}, {}
     for c in cols:
         cw = f"{where}: column '{c.header}'"
         cell = cells[c.index]
-        if c.field in _TEXT_FIELDS:
+        if c.spec and c.spec["quantity"] == "text":
             s = cell.strip()
             if not s:
                 if c.field == "approach":
@@ -938,16 +938,10 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
             axes[c.field] = v
         else:
             vals[c.field] = (v, cw)
-    typ = text.get("type", kind)
-    if kind == "probing" or typ in _TOUCHES:
-        typ = _touch_type(text, typ, targets, where)
-    elif typ == "rtest":
-        typ = "ball3d"
-    if typ not in _TOUCHES + ("dbb", "ball3d"):
-        raise ValueError(f"{where}: column 'type': '{typ}' is not facet, sphere, cylinder, dbb or ball3d")
-    balls = set(_VECTORS["tool_ball"]) | set(_VECTORS["table_ball"])
-    used = {"facet": {"sigma"}, "sphere": {"sigma"}, "cylinder": {"sigma"}, "dbb": {"reading", "length", "sigma"} | balls,
-            "ball3d": {"dx", "dy", "dz", "sigma"} | balls}[typ]
+    touch = table["layout"] == "touch"
+    typ = _touch_type(text, text.get("type"), targets, where) if touch else table["kinds"][0]
+    own = imports[_table_of(typ, imports)]
+    used = {c["name"] for c in own["columns"] if c["quantity"] != "text"}
     for f, (v, fw) in vals.items():
         if f not in used:
             raise ValueError(f"{fw}: a {typ} row has no {f} (leave the cell empty)")
@@ -963,64 +957,84 @@ def _row(cells, cols, machine: Machine, kind: str, side: Mapping, targets: Mappi
         direction.update(_approach(text["approach"], machine, f"{where}: column 'approach'"))
     if direction:
         o["direction"] = direction
-    if typ in _TOUCHES:
+    if touch:
         o["target"] = text["target"]
     else:
         setup = text.get("setup", side.get("setup"))
         if setup:
             o["setup"] = str(setup)
-        for key, comps in _VECTORS.items():
-            if all(k in vals for k in comps):
-                o[key] = [vals[k][0] for k in comps]
-            elif any(k in vals for k in comps):
-                raise ValueError(f"{where}: {key} needs the three columns {', '.join(comps)}")
-            elif side.get(key) is not None:
-                o[key] = side[key]
-            else:
-                raise ValueError(f"{where}: no {key} for this {typ} sample: give --{key.replace('_', '-')} "
-                                 f"X,Y,Z (mm), '{key}' in the sidecar, or the columns {', '.join(comps)}")
-        if typ == "dbb":
-            r, rw = _value(vals, "reading", where, typ, empty)
-            if abs(r) > plausibility.DBB_RANGE:
-                raise ValueError(f"{rw}: reading {r:.6g} mm is beyond a ballbar's range (about ±1 mm, refused "
-                                 f"beyond ±{plausibility.DBB_RANGE:g} mm); readings look like µm: name the "
-                                 "column reading_um or give --units um")
-            o["reading"] = r
-            if "length" in vals:
-                o["length"] = vals["length"][0]
-            elif side.get("length") is not None:
-                o["length"] = side["length"]
-            else:
-                raise ValueError(f"{where}: no bar length: give --length MM, 'length' in the sidecar or a "
-                                 "'length' column")
-        else:
-            m = []
-            for k in ("dx", "dy", "dz"):
-                v, vw = _value(vals, k, where, typ, empty)
-                if abs(v) > plausibility.BALL3D_RANGE:
-                    raise ValueError(f"{vw}: {v:.6g} mm is beyond an R-test / 3D ball sensor's range (a few mm, "
-                                     f"refused beyond {plausibility.BALL3D_RANGE:g} mm); displacements look like "
-                                     f"µm: name the column {k}_um or give --units um")
-                m.append(v)
-            o["measured"] = m
+        _fill(o, vals, own, side, where, typ)
     _row_sigma(o, vals, side)
     return o
 
 
+def _table_of(typ: str, imports: Mapping) -> str:
+    """The import whose table reads rows of kind ``typ``."""
+    return next(n for n, t in imports.items() if n != GENERIC and typ in t["kinds"])
+
+
+def _fill(o: dict, vals: Mapping, table: Mapping, side: Mapping, where: str, typ: str) -> None:
+    """The observation's measured and set-up values from the row's number
+    cells (``vals``: column name -> (value, where)) as the table's columns
+    say: a column per value or per entry of a vector, else the sidecar's (or
+    option's) value, else the column's message; each value within its
+    column's range (beyond it the unit is wrong)."""
+    groups: dict = {}
+    for c in table["columns"]:
+        if c["quantity"] not in ("text", "joint") and c["field"] != "sigma":
+            groups.setdefault(c["field"], []).append(c)
+    for field, cs in groups.items():
+        names = [c["name"] for c in cs]
+        vector = cs[0]["index"] is not None
+        given = [n for n in names if n in vals]
+        if vector and given and len(given) < len(names):
+            raise ValueError(f"{where}: {field} needs the three columns {', '.join(names)}")
+        if not given:
+            key = cs[0]["sidecar"]
+            if key and side.get(key) is not None:
+                o[field] = side[key]
+                continue
+            if cs[0]["missing"]:
+                raise ValueError(f"{where}: {cs[0]['missing']}")
+            if key:
+                raise ValueError(f"{where}: no {field} for this {typ} sample: give --{key.replace('_', '-')} "
+                                 f"X,Y,Z (mm), '{key}' in the sidecar, or the columns {', '.join(names)}")
+            if not cs[0]["required"]:
+                continue
+        values = []
+        for c in cs:
+            v, vw = _value(vals, c["name"], where, typ)
+            _in_range(c, v, vw)
+            values.append(v)
+        o[field] = values if vector else values[0]
+
+
+def _in_range(column: Mapping, value: float, where: str) -> None:
+    """Refuse a value beyond its column's range with the column's message."""
+    limit = column["range"]
+    if limit and abs(value) > limit:
+        raise ValueError(f"{where}: " + column["range_message"].format(value=value, limit=limit,
+                                                                        limit_m=limit / 1e3,
+                                                                        column=column["name"]))
+
+
 def _touch_type(text, typ, targets, where) -> str:
+    """The kind of a probe touch: its target's (the artefact list that holds
+    it); a ``type`` cell naming another touch kind is refused."""
+    kinds = _touch_kinds()
     t = text.get("target")
     if not t:
-        raise ValueError(f"{where}: no target for a probe touch (a 'target' column naming a facet, sphere or "
-                         "cylinder)")
+        raise ValueError(f"{where}: no target for a probe touch (a 'target' column naming a {_either(kinds)})")
     known = targets.get(t)
     if known is None:
         if not targets:
             raise ValueError(f"{where}: target '{t}': no artefact given; a probing import needs the artefact's "
-                             "facets, spheres or cylinders and the probe tip radius in a sidecar (--sidecar FILE)")
+                             f"{_either(list(kinds.values()))} and the probe tip radius in a sidecar "
+                             "(--sidecar FILE)")
         close = difflib.get_close_matches(t, sorted(targets), n=1)
-        raise ValueError(f"{where}: column 'target': '{t}' is not a facet, sphere or cylinder of the artefact "
+        raise ValueError(f"{where}: column 'target': '{t}' is not a {_either(kinds)} of the artefact "
                          f"({', '.join(sorted(targets))})" + (f"; did you mean '{close[0]}'?" if close else ""))
-    if typ in _TOUCHES and typ != known:
+    if typ in kinds and typ != known:
         raise ValueError(f"{where}: column 'type': '{typ}' but target '{t}' is a {known}")
     return known
 
@@ -1047,8 +1061,8 @@ _SIZES = {"length": (plausibility.BAR_LENGTH, "no ball bar is that long"),
           "instrument_origin": (plausibility.REFUSE_POSITION, "no instrument is that far from the machine"),
           "station_position": (plausibility.REFUSE_POSITION, "no station is that far from the machine"),
           "axis": (plausibility.REFUSE_POSITION, "beyond any machine tool")}
-for _k, _c in _VECTORS.items():
-    _SIZES.update({c: _SIZES[_k] for c in _c})
+for _k in ("tool_ball", "table_ball"):
+    _SIZES.update({f"{_k}_{c}": _SIZES[_k] for c in "xyz"})
 
 
 def _size(key: str, value, where: str) -> None:
@@ -1112,21 +1126,33 @@ def _positive(value, what: str) -> float:
 #   a list of another length -> ``<key>_1 ... _n`` (``sigma_1`` .. ``sigma_6``);
 #   ``axes``                -> the axis letters; ``direction`` -> ``dir_<letter>``;
 #   another axes object ``<p>_axes`` -> ``<p>_<letter>`` (``reference_A``).
-#: the ball3d displacement's names of the first fivecal tables
-_GENERIC_ALIASES = {"dx": ("measured", 0), "dy": ("measured", 1), "dz": ("measured", 2)}
-_TYPE_ALIASES = {"rtest": "ball3d", "r-test": "ball3d"}
-#: keys whose numbers are what the instrument measured: ``--units`` applies to them
-_GENERIC_MEASURED = {"reading", "measured", "sigma"}
 _XYZ = "xyz"
-#: a machined-feature (CMM) report: other names of its columns
-_MACHINED_ALIASES = {"deviation": "measured", "dev": "measured"}
-_MACHINED_RANGE = 2.0  # mm: a machined face this far from nominal is a unit mistake, not a machining error
+
+
+def _entry_names(imports: Mapping) -> dict:
+    """A kind table's own name of a vector entry (``dx``: the first entry of
+    ``measured``) -> (key, index): the generic table reads them too."""
+    out = {}
+    for t in imports.values():
+        for c in t["columns"]:
+            i = c["index"]
+            if i is not None and i < 3 and c["name"] != f"{c['field']}_{_XYZ[i]}":
+                out.setdefault(c["name"], (c["field"], i))
+    return out
+
+
+def _measured_keys(imports: Mapping) -> set:
+    """Keys whose numbers are what an instrument measured: ``--units`` applies to them."""
+    return {c["field"] for t in imports.values() for c in t["columns"] if c["measured"]}
+
+
+def _row_aliases(imports: Mapping) -> dict:
+    """Other names a row's type cell may give a kind -> the kind."""
+    return {a: t["kinds"][0] for t in imports.values() for a in t["row_aliases"]}
 
 
 def _registered() -> dict:
     """name -> the registry's record of each observation kind."""
-    from .. import _core
-
     return {k["name"]: k for k in _core.observation_kinds()}
 
 
@@ -1138,8 +1164,6 @@ class _Keys(set):
 
 
 def _text_keys() -> _Keys:
-    from .. import schema
-
     s = schema.load_schema("dataset")
     common = schema.load_schema("common")["$defs"]
     out = _Keys({"id", "type"})
@@ -1167,12 +1191,18 @@ class _GColumn:
 
 def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: Mapping[str, str],
                      ignore: Iterable[str], length_unit: Optional[str], angle_unit: Optional[str],
-                     registry: Mapping, text_keys: set) -> list:
+                     registry: Mapping, text_keys: set, imports: Mapping) -> list:
+    table = imports[kind]
+    generic = kind == GENERIC
     keys = set()
-    for k in (registry.values() if kind == "fivecal" else [registry[kind]]):
+    for k in (registry.values() if generic else [registry[n] for n in table["kinds"]]):
         keys |= set(k["json_keys"])
     keys -= {"axes", "direction"}
     axes = machine.axis_names
+    entries, measured = _entry_names(imports), _measured_keys(imports)
+    # a table's own other names: a whole name, or a prefix (a name ending in _)
+    renames = {a: b for a, b in table["header_aliases"].items() if not a.endswith("_")}
+    prefixes = {a: b for a, b in table["header_aliases"].items() if a.endswith("_")}
 
     def resolve(name: str, cw: str):
         low, up = name.strip().lower(), name.strip().upper()
@@ -1191,14 +1221,14 @@ def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: M
             return "direction", letter
         if low == "approach":
             return "approach", None
-        if kind == "machined":
-            low = _MACHINED_ALIASES.get(low, low)
-            if low.startswith("ref_"):
-                low = "reference_" + low[4:]
-        if low in keys or (kind == "fivecal" and low == "type"):
+        low = renames.get(low, low)
+        for a, b in prefixes.items():
+            if low.startswith(a):
+                low = b + low[len(a):]
+        if low in keys or (generic and low == "type"):
             return low, None
-        if low in _GENERIC_ALIASES and _GENERIC_ALIASES[low][0] in keys:
-            return _GENERIC_ALIASES[low]
+        if low in entries and entries[low][0] in keys:
+            return entries[low]
         if "_" in low:
             base, suffix = low.rsplit("_", 1)
             if base in keys and len(suffix) == 1 and suffix in _XYZ:
@@ -1208,11 +1238,11 @@ def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: M
             letter = "S" if suffix.upper() == "C1" else suffix.upper()
             if base + "_axes" in keys and letter in axes:
                 return base + "_axes", letter
-        names = sorted(keys | ({"type"} if kind == "fivecal" else set())) + list(axes) + \
+        names = sorted(keys | ({"type"} if generic else set())) + list(axes) + \
             [f"dir_{a}" for a in axes]
         close = difflib.get_close_matches(low, names, n=1)
         hint = f"; did you mean '{close[0]}'?" if close else ""
-        what = "a fivecal table (a key of a registered observation kind)" if kind == "fivecal" else \
+        what = f"a {GENERIC} table (a key of a registered observation kind)" if generic else \
             f"a {kind} import"
         raise ValueError(f"{cw}: unknown column '{name}' for {what}{hint} (rename it with --column FIELD=HEADER "
                          f"or skip it with --ignore '{name}')")
@@ -1234,16 +1264,17 @@ def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: M
         elif field in text_keys or field in ("type", "approach", "direction"):
             if unit is not None:
                 raise ValueError(f"{cw}: {field} has no unit, got '{unit}'")
-        elif kind == "machined" and field in ("normal", "reference_normal"):
+        elif field in table["directions"]:
             if unit is not None:
-                raise ValueError(f"{cw}: a face normal is a direction and has no unit, got '{unit}'")
+                raise ValueError(f"{cw}: {table['directions'][field]} is a direction and has no unit, "
+                                 f"got '{unit}'")
         elif unit is not None:
             try:
                 factor = _units.column_unit(h, "length", where)[0]
             except ValueError:
                 raise ValueError(f"{cw}: only axis columns take an angle unit here; give {field} in the unit "
                                  "of the dataset file (`fivecal docs formats`)") from None
-        elif field in _GENERIC_MEASURED:
+        elif field in measured:
             factor = _units.LENGTH_SUFFIXES[length_unit or "mm"]
         cols.append(_GColumn(i, h.strip(), field, part, factor))
     fields = {f for f, _ in seen}
@@ -1251,19 +1282,21 @@ def _generic_columns(headers, machine: Machine, kind: str, where: str, rename: M
     if missing:
         raise ValueError(f"{where}: no column for axis {', '.join(missing)} (expected a column per machine "
                          f"axis: {_axis_list(machine)}; S may be left out)")
-    if kind == "fivecal" and "type" not in fields:
-        raise ValueError(f"{where}: no 'type' column; a fivecal import expects {_expected(machine, kind)}")
-    if kind == "machined":
-        for r in ("point", "normal", "measured"):
-            if r not in fields:
-                raise ValueError(f"{where}: no '{r}' column; a machined import expects "
-                                 f"{_expected(machine, kind)}")
+    if generic and "type" not in fields:
+        raise ValueError(f"{where}: no 'type' column; a {kind} import expects {_expected(machine, kind, imports)}")
+    for r in (c["name"] for c in table["columns"] if c["required"]):
+        if r not in fields:
+            raise ValueError(f"{where}: no '{r}' column; a {kind} import expects "
+                             f"{_expected(machine, kind, imports)}")
     return cols
 
 
 def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_comma: bool, where: str,
-                 registry: Mapping, text_keys: set) -> dict:
-    """One observation of a generic (``fivecal``) or ``machined`` table."""
+                 registry: Mapping, text_keys: set, imports: Mapping) -> dict:
+    """One observation of the generic (``fivecal``) table, or of a kind's
+    table read by the generic reader (its columns named after its file keys)."""
+    table = imports[kind]
+    aliases = _row_aliases(imports)
     text, parts, empty = {}, {}, {}
     for c in cols:
         cw = f"{where}: column '{c.header}'"
@@ -1284,21 +1317,21 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
             v *= c.factor
         parts.setdefault(c.key, {})[c.part] = (v, cw)
     # the row's kind
-    if kind == "fivecal":
+    if kind == GENERIC:
         if "type" not in text:
             raise ValueError(f"{empty.get(('type', None), where)}: empty cell (the row's observation type is "
                              f"expected: {', '.join(registry)})")
         typ, tw = text.pop("type")
-        typ = _TYPE_ALIASES.get(typ, typ)
+        typ = aliases.get(typ, typ)
         if typ not in registry:
             close = difflib.get_close_matches(typ, sorted(registry), n=1)
             raise ValueError(f"{tw}: '{typ}' is not an observation type ({', '.join(registry)})"
                              + (f"; did you mean '{close[0]}'?" if close else ""))
     else:
-        typ = kind
-        if "type" in text and _TYPE_ALIASES.get(text["type"][0], text["type"][0]) != kind:
+        typ = table["kinds"][0]
+        if "type" in text and aliases.get(text["type"][0], text["type"][0]) != typ:
             raise ValueError(f"{text['type'][1]}: '{text['type'][0]}' in a {kind} import (a table of several "
-                             "kinds is a fivecal import)")
+                             f"kinds is a {GENERIC} import)")
         text.pop("type", None)
     keys = set(registry[typ]["json_keys"])
     for key, (_, cw) in list(text.items()):
@@ -1358,13 +1391,21 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
             o[key] = list(side[key]) if isinstance(side[key], (list, tuple)) else side[key]
     if isinstance(o.get("sigma"), (int, float)) and not o["sigma"] > 0:
         raise ValueError(f"{parts['sigma'][None][1]}: sigma {o['sigma']:g} mm must be > 0")
-    if typ == "machined":
-        _machined_checks(o, parts, text, empty, side, machine, where)
+    own = imports[_table_of(typ, imports)]
+    for check in own["checks"]:
+        _ROW_CHECKS[check](o, parts, text, side, machine, where)
+    if kind != GENERIC:
+        # the instrument's range: a table of the kind's own (a fivecal table's
+        # rows go to the dataset's checks as they are)
+        for c in own["columns"]:
+            got = parts.get(c["field"], {})
+            if c["index"] in got:
+                _in_range(c, *got[c["index"]])
     return o
 
 
-def _machined_checks(o: dict, parts, text, empty, side: Mapping, machine: Machine, where: str) -> None:
-    """A CMM report's feature: the part (column, else --setup / the sidecar's
+def _part_feature_checks(o: dict, parts, text, side: Mapping, machine: Machine, where: str) -> None:
+    """A machined part's feature: the part (column, else --setup / the sidecar's
     setup, else P1), the feature (default: a step when the row has a reference
     cut, else a face), and the sizes that betray a unit mistake."""
     if "part" not in o:
@@ -1405,17 +1446,15 @@ def _machined_checks(o: dict, parts, text, empty, side: Mapping, machine: Machin
         if not machine.is_rotary(a) and abs(v) > plausibility.REFUSE_POSITION:
             raise ValueError(f"{parts['reference_axes'][a][1]}: {v:.6g} mm is beyond any machine tool; "
                              f"positions look like µm: name the column reference_{a}_um")
-    if "measured" in o and not isinstance(o["measured"], list) and abs(o["measured"]) > _MACHINED_RANGE:
-        raise ValueError(f"{parts['measured'][None][1]}: deviation {o['measured']:.6g} mm: a machined face is "
-                         f"not that far from nominal (refused beyond ±{_MACHINED_RANGE:g} mm); deviations look "
-                         "like µm: name the column measured_um or give --units um")
+
+
+#: The named row checks a kind's table asks for (its ``checks``).
+_ROW_CHECKS = {"part_feature": _part_feature_checks}
 
 
 def _angle_checks(obs: list, cols, machine: Machine, path: str, lines: list) -> None:
     """Rotary columns of an axes object other than ``axes`` (a step's
     reference cut) that look like radians warn as the axes do."""
-    from ..units import looks_like_radians, radians_message
-
     for c in cols:
         if not c.key.endswith("_axes") or not machine.is_rotary(c.part):
             continue
@@ -1503,8 +1542,6 @@ def write_table(dataset, path: Union[str, os.PathLike], *, delimiter: str = ",")
     ``fivecal import fivecal`` reads back to the same observations; returns
     the sidecar (probe, artefact) that goes with it. Numbers are written to
     round trip exactly."""
-    from .. import files
-
     doc = dataset.to_dict() if hasattr(dataset, "to_dict") else dict(dataset)
     registry = _registered()
     machine = Machine.from_dict(doc["machine"])
@@ -1561,8 +1598,7 @@ def write_table(dataset, path: Union[str, os.PathLike], *, delimiter: str = ",")
             return repr(v)
         return str(v)
 
-    import io as _io
-    buf = _io.StringIO()
+    buf = io.StringIO()
     w = csv.writer(buf, delimiter=delimiter, lineterminator="\n")
     w.writerow(columns)
     for row in cells:
@@ -1627,8 +1663,6 @@ def _warn(message: str, category) -> None:
 
 def write_dataset(path: Union[str, os.PathLike], out: Union[str, os.PathLike], kind: str, machine, **options):
     """Import ``path`` and write the dataset JSON ``out`` (atomically); returns the Dataset."""
-    from .. import files
-
     ds = import_dataset(path, kind, machine, **options)
     doc = ds.to_dict()
     if ds.import_note:

@@ -41,6 +41,9 @@ Vec3<T> BallDistance(const ParameterAccess& access, const PoseData& pose, T cons
 
 class BallMountKind : public ObservationKind {
  public:
+  // The columns of every ball mounting's table: id, sigma, setup and the
+  // tool and table balls (a column each, else the sidecar's).
+  static std::vector<TableColumn> MountColumns();
   void Validate(const Dataset& ds, const Observation& o,
                 const std::function<std::string()>& where) const final;
   void Write(const Observation& o, nlohmann::json* out) const override;

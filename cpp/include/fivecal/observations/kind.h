@@ -25,6 +25,7 @@
 #include <nlohmann/json_fwd.hpp>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "fivecal/observations/dataset.h"
@@ -108,6 +109,67 @@ struct KindReport {
   // Procedure figures the report draws for the kind's data ("polar": the
   // circular-test plots of report/polar.py), nullptr for none.
   const char* figures = nullptr;
+};
+
+// One column of a kind's instrument table (`fivecal import`, docs/import.md,
+// python/fivecal/io/tables.py): the header name, the observation's file key
+// it fills (`index`: its entry in a vector key, -1 the value itself), and
+// how a cell is read. The table importer reads these and names no kind.
+struct TableColumn {
+  std::string name, field;
+  int index = -1;
+  // "length" (mm unless the header or --units says otherwise), "rotation"
+  // (a rotation vector, rad unless the header says otherwise), "text",
+  // "joint" (a joint layout's value, in the unit of the joint it moves).
+  std::string quantity = "length";
+  bool measured = false;  // what the instrument measured: --units applies
+  bool required = false;  // the header must name it
+  std::string alias;      // a shorter header users write ("mx")
+  // The sidecar key / option that stands in when the header lacks the
+  // column, and the message when neither gives it.
+  std::string sidecar, missing;
+  // |value| (mm) beyond `range` is a reading in the wrong unit, refused with
+  // `range_message` (a Python format string of value, limit, limit_m,
+  // column).
+  double range = 0;
+  std::string range_message;
+
+  TableColumn(std::string n, std::string f, int i = -1) : name(std::move(n)), field(std::move(f)), index(i) {}
+  TableColumn& Text() { quantity = "text"; return *this; }
+  TableColumn& Quantity(const char* q) { quantity = q; return *this; }
+  TableColumn& Measured() { measured = true; return *this; }
+  TableColumn& Required() { required = true; return *this; }
+  TableColumn& Alias(const char* a) { alias = a; return *this; }
+  TableColumn& Sidecar(const char* key, const char* msg = "") { sidecar = key; missing = msg; return *this; }
+  TableColumn& Range(double limit, const char* msg) { range = limit; range_message = msg; return *this; }
+};
+
+// A kind's instrument table: the import it belongs to and its columns.
+// Kinds with the same `name` share one import (the probe touches: a probing
+// log names facets, spheres and cylinders); a kind that declares none is
+// read by the generic reader under its own name, its columns named after
+// its file keys (json_keys), so a new kind is importable with no Python edit.
+struct KindTable {
+  std::string name;                      // empty: the kind's own name
+  std::vector<std::string> aliases;      // other names of the import ("rtest")
+  std::vector<std::string> row_aliases;  // other names a row's type cell may give the kind
+  // The reader of its rows (tables.py): "touch" (a probe touch naming its
+  // artefact target), "mount" (a ball on a mounting), "instrument" (a fixed
+  // instrument following a target), "station" (a distance from a station),
+  // "generic" (columns named after the file keys).
+  std::string layout = "generic";
+  std::vector<TableColumn> columns;
+  std::string expected;                  // the columns after the axes, for messages
+  // The sidecar keys and options the import takes beyond the common ones
+  // (probe, artefact, setup, sigma, header).
+  std::vector<std::string> options;
+  // Generic layout: other header names of a key ("deviation" -> "measured";
+  // a name ending in "_" renames a prefix), the vector keys that are
+  // directions (no unit; key -> what a message calls it), and named row
+  // checks of the importer.
+  std::vector<std::pair<std::string, std::string>> header_aliases;
+  std::vector<std::pair<std::string, std::string>> directions;
+  std::vector<std::string> checks;
 };
 
 // One observation as the streaming loader reads it without building its
@@ -194,6 +256,8 @@ class KindFileFormat {
   // Writes the own fields that need the machine (the axis letters of a
   // second pose); called after Write.
   virtual void WriteOnMachine(const Machine&, const Observation&, nlohmann::json* /*out*/) const {}
+  // Its instrument table (fivecal import); the default: the generic reader.
+  virtual KindTable Table() const { return {}; }
 };
 
 // The set-up parameters it brings (names, order, default set, priors).

@@ -89,6 +89,10 @@ void ValidateTarget(const Observation& o, const std::function<std::string()>& wh
 // "instrument" (a name without '.') into Observation::setup, and the nominal
 // pose "instrument_origin" (mm) and "instrument_angles" (degrees in the file).
 void ReadInstrument(const nlohmann::json& o, const std::string& where, Observation* ob);
+// The instrument table of a fixed instrument following a target (point,
+// pose): id, the measured coordinates and the joint layout's columns (one
+// joint moved per row); `sigma`: whether a sigma column weighs its rows.
+KindTable InstrumentTable(bool sigma);
 void ValidateInstrument(const Observation& o, const std::function<std::string()>& where);
 void WriteInstrument(const Observation& o, nlohmann::json* out);
 // The instrument pose instrument.<id>.x|y|z|a|b|c (one group per id).

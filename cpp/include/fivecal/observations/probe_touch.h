@@ -20,6 +20,9 @@ class ProbeTouchKind : public ObservationKind {
   // Touch probe noise: a good kinematic touch-trigger probe's repeatability.
   double default_sigma() const override { return 0.001; }
   bool probe_touch() const override { return true; }
+  // One probing log for every probe touch: each row names its target, whose
+  // artefact list says the kind.
+  KindTable Table() const final;
 
   // A touch names its target, one of the artefact's <name()>s; the file has
   // nothing else of the kind's own.
