@@ -179,12 +179,8 @@ def test_no_import_cycle_between_sibling_packages():
 
 
 #: modules still allowed a function-local fivecal import (path relative to
-#: python/fivecal). Empty but for the two another branch hoists in parallel:
-#: removed at merge.
-LOCAL_IMPORT_ALLOWED = {
-    "io/tables.py",     # removed at merge (hoisted on the io branch)
-    "io/linuxcnc.py",   # removed at merge (hoisted on the io branch)
-}
+#: python/fivecal): none.
+LOCAL_IMPORT_ALLOWED: set = set()
 
 
 def _local_imports(name: str, path: str):
