@@ -133,7 +133,8 @@ def _header_names(line: str) -> list:
 
 
 def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
-                   sweep: Optional[float] = None, start: float = 0.0) -> Trace:
+                   sweep: Optional[float] = None, start: float = 0.0, units: Optional[str] = None,
+                   angle_units: Optional[str] = None) -> Trace:
     """Read ``angle, reading`` rows (deg, mm) from a CSV file.
 
     Separators: comma, semicolon, tab or spaces; a header line and ``#``
@@ -146,8 +147,14 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
     column, or the unit in brackets (``reading [um]``); another suffix is
     refused naming the column. Without a unit, readings beyond ±2 mm are
     refused as µm (a ballbar measures about ±1 mm), and angles that look like
-    radians give one :class:`fivecal.RadiansWarning`.
+    radians give one :class:`fivecal.RadiansWarning`. ``units`` (``mm``,
+    ``um``) and ``angle_units`` (``deg``, ``rad``) name the unit of columns
+    whose header names none; a header naming another unit is refused.
+    A readings-only file with a signed ``sweep`` (deg, negative = clockwise)
+    runs that way from ``start``.
     """
+    given = {"length": _unit_factor_of(units, "units", {"mm": 1.0, "um": 1e-3, "µm": 1e-3}),
+             "angle": _unit_factor_of(angle_units, "angle units", {"deg": 1.0, "rad": 180.0 / math.pi})}
     path = os.fspath(path)
     from .. import files
 
@@ -181,6 +188,15 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
         names = []  # a title line, not column names
     kinds = ["length"] if a.shape[1] == 1 else ["angle", "length"]
     units = [column_unit(n, k, path) for n, k in zip(names, kinds)] if names else [(1.0, None)] * len(kinds)
+    for j, k in enumerate(kinds):
+        if given[k] is None:
+            continue
+        factor, named = units[j]
+        if named is not None and abs(factor - given[k][0]) > 1e-12 * factor:
+            opt = "--units" if k == "length" else "--angle-units"
+            raise ValueError(f"{path}: column '{names[j]}' is in {named} but {opt} says {given[k][1]}; "
+                             "drop the option or fix the header")
+        units[j] = (given[k][0], given[k][1])
     for j, (factor, _) in enumerate(units):
         a[:, j] *= factor
     readings = a[:, -1]
@@ -195,14 +211,29 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
         if sweep is None:
             raise ValueError(f"{path}: one column (readings only); give the sweep angle to space "
                              "the samples evenly (Jiang & Cripps eq. 2)")
+        if not (isinstance(sweep, (int, float)) and math.isfinite(sweep) and 10.0 <= abs(sweep) <= 3600.0):
+            raise ValueError(f"{path}: sweep {sweep!r} deg; a readings-only trace needs the signed angle its "
+                             "samples sweep, 10 to 3600 deg (negative: clockwise)")
+        if not math.isfinite(start):
+            raise ValueError(f"{path}: start angle {start!r} is not finite")
         n = a.shape[0] - 1
         angles = start + np.arange(a.shape[0]) / n * sweep
-        return Trace(angles, readings, label=label or os.path.basename(path))
+        return Trace(angles, readings, 1 if sweep > 0 else -1, label=label or os.path.basename(path))
     if units[0][1] is None and looks_like_radians(a[:, 0]):
         col = names[0] if names else "angle"
         warnings.warn(radians_message(f"{path}: column '{col}'", a[:, 0]) +
                       f" or name the column {col.split('_')[0]}_rad", RadiansWarning, stacklevel=2)
     return Trace(a[:, 0], readings, label=label or os.path.basename(path))
+
+
+def _unit_factor_of(text: Optional[str], what: str, table: Mapping[str, float]):
+    """(factor to mm or deg, unit) of a unit option, None when not given."""
+    if text is None:
+        return None
+    key = str(text).strip()
+    if key not in table:
+        raise ValueError(f"{what}: '{key}'; give one of {', '.join(table)}")
+    return table[key], key
 
 
 def write_trace_csv(trace: Trace, path: Union[str, os.PathLike]) -> None:
@@ -952,10 +983,16 @@ _DIAG_LABELS = {
     "scale_mismatch": ("scale mismatch {a1}-{a2}", 1e6, "µm/m"),
     "squareness": ("squareness {a1}{a2} (angle - 90°)", 1e6, "µrad"),
     "servo_mismatch": ("servo mismatch (lag {a1} - lag {a2}) x feed", 1e3, "µm"),
-    "backlash.1": ("backlash {a1} (offset in the direction of motion)", 1e3, "µm"),
-    "backlash.2": ("backlash {a2} (offset in the direction of motion)", 1e3, "µm"),
-    "reversal_spike.1": ("reversal spike {a1} (height, outward > 0)", 1e3, "µm"),
-    "reversal_spike.2": ("reversal spike {a2} (height, outward > 0)", 1e3, "µm"),
+    "backlash.1+": ("backlash {a1}+ (reversal at the +{a1} end; offset along the motion)", 1e3, "µm"),
+    "backlash.1-": ("backlash {a1}- (reversal at the -{a1} end; offset along the motion)", 1e3, "µm"),
+    "backlash.2+": ("backlash {a2}+ (reversal at the +{a2} end; offset along the motion)", 1e3, "µm"),
+    "backlash.2-": ("backlash {a2}- (reversal at the -{a2} end; offset along the motion)", 1e3, "µm"),
+    "backlash.1": ("backlash {a1} (mean of {a1}+ and {a1}-)", 1e3, "µm"),
+    "backlash.2": ("backlash {a2} (mean of {a2}+ and {a2}-)", 1e3, "µm"),
+    "reversal_spike.1+": ("reversal spike {a1}+ (height, outward > 0)", 1e3, "µm"),
+    "reversal_spike.1-": ("reversal spike {a1}- (height, outward > 0)", 1e3, "µm"),
+    "reversal_spike.2+": ("reversal spike {a2}+ (height, outward > 0)", 1e3, "µm"),
+    "reversal_spike.2-": ("reversal spike {a2}- (height, outward > 0)", 1e3, "µm"),
     "lateral_play.1": ("lateral play along {a1} (at {a2} reversals)", 1e3, "µm"),
     "lateral_play.2": ("lateral play along {a2} (at {a1} reversals)", 1e3, "µm"),
     "straightness.1": ("straightness {a1} (bow along {a2}, peak-valley)", 1e3, "µm"),
@@ -970,8 +1007,10 @@ _DIAG_LABELS = {
 #: Short names of the ranked diagnoses (a cyclic error is ranked by its amplitude).
 _RANK_LABELS = {
     "scale_mismatch": "scale mismatch {a1}-{a2}", "squareness": "squareness {a1}{a2}",
-    "servo_mismatch": "servo mismatch", "backlash.1": "backlash {a1}", "backlash.2": "backlash {a2}",
-    "reversal_spike.1": "reversal spikes {a1}", "reversal_spike.2": "reversal spikes {a2}",
+    "servo_mismatch": "servo mismatch", "backlash.1+": "backlash {a1}+", "backlash.1-": "backlash {a1}-",
+    "backlash.2+": "backlash {a2}+", "backlash.2-": "backlash {a2}-",
+    "reversal_spike.1+": "reversal spikes {a1}+", "reversal_spike.1-": "reversal spikes {a1}-",
+    "reversal_spike.2+": "reversal spikes {a2}+", "reversal_spike.2-": "reversal spikes {a2}-",
     "lateral_play.1": "lateral play {a1}", "lateral_play.2": "lateral play {a2}",
     "straightness.1": "straightness {a1}", "straightness.2": "straightness {a2}",
     "radial_play.1": "radial play {a1}", "radial_play.2": "radial play {a2}",
@@ -1031,12 +1070,24 @@ class CircularResult:
         d = core.diagnosis
         self.diagnosis: dict = {n: float(v) for n, v in zip(d.names, np.asarray(d.values))}
         self.diagnosis_std: dict = {n: float(s) for n, s in zip(d.names, np.asarray(d.std))}
+        #: values the core derives from the fitted ones (backlash.k: the mean of its two ends)
+        self.derived: tuple = tuple(d.derived_names)
+        self.diagnosis.update(zip(d.derived_names, map(float, np.asarray(d.derived_values))))
+        self.diagnosis_std.update(zip(d.derived_names, map(float, np.asarray(d.derived_std))))
+        #: the largest circular deviation G of the runs (mm), what the percentages refer to
+        self.circularity: float = float(d.circularity)
         self.not_fitted: list = list(d.not_fitted)
         #: extended diagnoses left out as below the significance threshold ("name (z sigma)")
         self.not_significant: list = list(d.not_significant)
         self.diagnosis_rms: float = d.rms
         #: (diagnosis, contribution to circularity in mm), largest first
         self.ranking: list = [(n, float(c)) for n, c in zip(d.ranking, np.asarray(d.contribution))]
+        #: contribution of each ranked diagnosis in percent of the circularity
+        self.ranking_percent: dict = {n: float(p) for n, p in zip(d.ranking, np.asarray(d.contribution_percent))}
+        #: thermal compensation applied to the readings (None: none), as given
+        self.thermal: Optional[dict] = None
+        #: standard the values are named and graded by (STANDARDS)
+        self.standard: str = "ISO 230-4"
         #: pitches (mm) the cyclic errors were fitted with (0 = none), and those found by the search
         self.cyclic_pitch: tuple = (0.0, 0.0)
         self.cyclic_pitch_searched: dict = {}
@@ -1066,8 +1117,14 @@ class CircularResult:
     def ranking_lines(self, top: Optional[int] = None) -> list:
         a1, a2 = self.plane[0], self.plane[1]
         rows = self.ranking[:top] if top else self.ranking
-        return [f"{i + 1:2d}. {_RANK_LABELS.get(n, n).format(a1=a1, a2=a2):<22}{c * 1e3:7.2f} µm"
-                for i, (n, c) in enumerate(rows)]
+        return [f"{i + 1:2d}. {_RANK_LABELS.get(n, n).format(a1=a1, a2=a2):<22}{self.ranking_percent[n]:5.0f} %"
+                f"{c * 1e3:8.2f} µm" for i, (n, c) in enumerate(rows)]
+
+    def label(self, name: str, short: bool = False) -> str:
+        """The name ballbar users know for diagnosis ``name`` in this plane."""
+        a1, a2 = self.plane[0], self.plane[1]
+        text = _RANK_LABELS.get(name) if short else None
+        return (text or _DIAG_LABELS.get(name, (name,))[0]).format(a1=a1, a2=a2)
 
     @property
     def servo_mismatch_ms(self) -> Optional[float]:
@@ -1133,7 +1190,8 @@ class CircularResult:
             L += textwrap.wrap("not significant, left out: " + ", ".join(self.not_significant), 100,
                                initial_indent="    ", subsequent_indent="      ")
         L.append(f"    residual rms after the diagnosis {self.diagnosis_rms * 1e3:.3f} µm")
-        L += ["", "  ranking by contribution to circularity (circular deviation of the term alone):"]
+        L += ["", f"  ranking by contribution to circularity (circular deviation of the term alone, in % of the "
+              f"circularity {self.circularity * 1e3:.2f} µm; ranges of separate terms do not add up):"]
         L += ["    " + line for line in self.ranking_lines()]
         return "\n".join(L)
 
