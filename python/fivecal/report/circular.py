@@ -129,7 +129,7 @@ def write_circular_report(result, out_dir: Union[str, os.PathLike], *, grade: Op
         body.append("<p>Thermal compensation: readings referred to 20 °C with the bar's expansion "
                     f"{t['bar_expansion'] * 1e6:g} µm/m/K at {t['bar_temperature']:g} °C and the machine's "
                     f"{t['machine_expansion'] * 1e6:g} µm/m/K at {t['machine_temperature']:g} °C "
-                    "(docs/dbb.md, \"Thermal compensation\").</p>")
+                    "(`fivecal docs dbb`, thermal compensation).</p>")
     else:
         body.append("<p>No thermal compensation: the readings are as recorded.</p>")
     body += ["<h2 id='other'>Set-up and derived values</h2>",
