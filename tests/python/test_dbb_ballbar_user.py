@@ -212,6 +212,18 @@ def test_readings_only_needs_sweep_and_direction_and_says_so(tmp_path):
                        "--direction", "cw", "--start", 90, cwd=tmp_path)
     assert rc == 0, err
     assert "CW " in out
+    # recorded with 90 deg of feed-in and feed-out: the whole arc as --sweep, the arcs removed as usual
+    deg, r = run(1, 21, step=0.5)
+    full = np.r_[r[-181:-1], r, r[1:181]]  # the circle is periodic: the overshoot repeats its ends
+    np.savetxt(tmp_path / "over_ccw.txt", full * 1e3, fmt="%.4f")
+    rc, out, err = cli("dbb", "circular", "over_ccw.txt", "--radius", R, "--sweep", 540, "--start", -90,
+                       "--units", "um", "--out", "over.json", cwd=tmp_path)
+    assert rc == 0, err
+    assert "feed-in 90.0° (180 samples) and feed-out 90.0° (180 samples) removed" in out
+    over = json.loads((tmp_path / "over.json").read_text())["procedure"]["values"]
+    one = dbb.circular_test([dbb.Trace(deg, r, 1, "CCW")], R)
+    for n in ("backlash.1+", "squareness", "scale_mismatch"):
+        assert over["diagnosis"][n]["value"] == pytest.approx(one.diagnosis[n], abs=2e-7), n
 
 
 def test_tolerances_per_diagnostic_grade_and_exit_1_on_fail(tmp_path):

@@ -735,7 +735,14 @@ def register(sub) -> None:
                          epilog="examples:\n"
                          "  fivecal dbb circular cw.csv ccw.csv --radius 100 --plane XY --feed 1000 --plot xy.png\n"
                          "  fivecal dbb circular --machine c600u.json --simulate EXX1=2e-5,EC0Y=3e-5,EXXb=0.002 "
-                         "--radius 100")
+                         "--radius 100\n"
+                         "  fivecal dbb circular ren_cw.txt ren_ccw.txt --radius 100 --sweep 360 --units um "
+                         "(readings only)\n"
+                         "  fivecal dbb circular cw.csv ccw.csv --radius 100 --tolerance G=15um,backlash=4um "
+                         "--html report/\n"
+                         "  fivecal dbb circular cw.csv ccw.csv --radius 100 --sidecar conditions.json "
+                         "(thermal compensation)\n"
+                         "  fivecal dbb circular test.b5r   (Renishaw's diagnostics, as written)")
     pc.add_argument("runs", nargs="*", help="run files: CSV (angle, reading) or readings only with --sweep, one "
                     "or two runs; or one Renishaw .b5r file (its diagnostics)")
     pc.add_argument("--radius", type=POSITIVE, default=None,
