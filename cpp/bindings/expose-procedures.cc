@@ -255,7 +255,10 @@ void BindProcedures(py::module_& m) {
       .def_readonly("circularity", &CircularDiagnosis::circularity)
       .def_readonly("derived_names", &CircularDiagnosis::derived_names)
       .def_readonly("derived_values", &CircularDiagnosis::derived_values)
-      .def_readonly("derived_std", &CircularDiagnosis::derived_std);
+      .def_readonly("derived_std", &CircularDiagnosis::derived_std)
+      .def_readonly("dropped_names", &CircularDiagnosis::dropped_names)
+      .def_readonly("dropped_values", &CircularDiagnosis::dropped_values)
+      .def_readonly("dropped_std", &CircularDiagnosis::dropped_std);
   py::class_<CircularTestResult>(m, "CircularTestResult")
       .def_readonly("nominal_radius", &CircularTestResult::nominal_radius)
       .def_readonly("runs", &CircularTestResult::runs)

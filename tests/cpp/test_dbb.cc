@@ -538,6 +538,10 @@ TEST(CircularTest, TermsTheDataDoNotShowAreDropped) {
   const CircularDiagnosis d = AnalyzeCircularTest(runs, 100, 0, o).diagnosis;
   EXPECT_EQ(d.names.size(), 10u);  // backlash at both ends of both axes
   EXPECT_EQ(d.not_significant.size(), 12u);
+  // each left out with its |value| and std, all below the threshold
+  ASSERT_EQ(d.dropped_names.size(), 12u);
+  for (Eigen::Index j = 0; j < d.dropped_values.size(); ++j)
+    EXPECT_LT(d.dropped_values[j], 3.0 * d.dropped_std[j]) << d.dropped_names[j];
   CircularDiagnosisOptions none;
   none.reversal_spikes = none.lateral_play = none.straightness = none.radial_play = false;
   const CircularDiagnosis classic = AnalyzeCircularTest(runs, 100, 0, none).diagnosis;

@@ -237,9 +237,16 @@ def test_tolerances_per_diagnostic_grade_and_exit_1_on_fail(tmp_path):
     assert rc == 1 and "FAIL against the tolerances: backlash X+" in err
     g = json.loads((tmp_path / "r.json").read_text())["procedure"]["values"]["grade"]
     assert [i["name"] for i in g["items"]] == ["backlash.1+"] and g["grade"] == "FAIL"
-    # a diagnosis the data did not determine is never a PASS
-    rc, out, err = cli(*base, "--tolerance", "reversal_spike.X+=5um", cwd=tmp_path)
-    assert rc == 1 and "not determined" in err
+    # a diagnosis below 3σ passes only when |value| + 3σ is within the tolerance; one the data did not
+    # determine, or not fitted at all (no cyclic pitch given), is never a PASS
+    rc, out, err = cli(*base, "--tolerance", "reversal_spike.X+=5um", "--out", "s.json", cwd=tmp_path)
+    assert rc == 0, err
+    item = json.loads((tmp_path / "s.json").read_text())["procedure"]["values"]["grade"]["items"][0]
+    assert item["grade"] == "PASS" and item["shown"].startswith("not significant")
+    assert item["value"] + 3 * item["std"] <= 0.005
+    for tol in ("reversal_spike.X+=0.001um", "cyclic_error=2um"):
+        rc, out, err = cli(*base, "--tolerance", tol, cwd=tmp_path)
+        assert rc == 1 and "not determined" in err, (tol, err)
     for tol, msg in (("wobble=3um", "--tolerance wobble: a circular test grades"),
                      ("squareness=20", "implausibly large"), ("backlash.Z+=3um", "'Z' is not an axis of the XY"),
                      ("scale_mismatch=3urad", "unknown or wrong unit")):

@@ -433,6 +433,7 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
   // with scale mismatch), so one below the threshold is dropped, the least
   // significant first, and the fit repeated. A cyclic error is judged by its
   // two components together (Mahalanobis norm).
+  std::vector<double> dropped_v, dropped_s;
   if (o.significance > 0) {
     for (;;) {
       double worst = std::numeric_limits<double>::infinity();
@@ -457,6 +458,10 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
       if (at < 0 || worst >= o.significance) break;
       const std::string& nm = names[keep[at]];
       const bool is_cyc = nm.rfind("cyclic_error", 0) == 0;
+      const double sd_at = std::sqrt(std::max(cov(at, at), 0.0));
+      dropped_v.push_back(is_cyc ? std::hypot(x[at], x[at + 1]) : std::abs(x[at]));
+      dropped_s.push_back(is_cyc ? std::max(sd_at, std::sqrt(std::max(cov(at + 1, at + 1), 0.0))) : sd_at);
+      d.dropped_names.push_back(is_cyc ? nm.substr(0, nm.size() - 4) : nm);
       std::ostringstream m;
       m.precision(2);
       m << (is_cyc ? nm.substr(0, nm.size() - 4) : nm) << " (" << worst << " sigma)";
@@ -465,6 +470,8 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
       fit();
     }
   }
+  d.dropped_values = Eigen::Map<Eigen::VectorXd>(dropped_v.data(), dropped_v.size());
+  d.dropped_std = Eigen::Map<Eigen::VectorXd>(dropped_s.data(), dropped_s.size());
   d.rms = std::sqrt(res_v.squaredNorm() / total);
   for (size_t j = 0; j < keep.size(); ++j) d.names.push_back(names[keep[j]]);
   d.values = x;

@@ -1074,6 +1074,9 @@ class CircularResult:
         self.derived: tuple = tuple(d.derived_names)
         self.diagnosis.update(zip(d.derived_names, map(float, np.asarray(d.derived_values))))
         self.diagnosis_std.update(zip(d.derived_names, map(float, np.asarray(d.derived_std))))
+        #: diagnoses left out as not significant: name -> (|value|, std) in the fit they left
+        self.dropped: dict = {n: (float(v), float(sd)) for n, v, sd in
+                              zip(d.dropped_names, np.asarray(d.dropped_values), np.asarray(d.dropped_std))}
         #: the largest circular deviation G of the runs (mm), what the percentages refer to
         self.circularity: float = float(d.circularity)
         self.not_fitted: list = list(d.not_fitted)
@@ -1243,12 +1246,12 @@ class CircularResult:
         if rest and rest[:1] not in "12":
             raise ValueError(f"--tolerance {name}: '{rest[:1]}' is not an axis of the {self.plane} plane "
                              f"({self.plane[0]} or {self.plane[1]}, or 1 / 2)")
-        ranked = [n for n, _ in self.ranking]
+        known = [n for n, _ in self.ranking] + list(self.dropped)
         if not rest:
-            return [n for n in ranked if n.split(".")[0] == kind] or [kind]
-        if full in ranked:
+            return [n for n in known if n.split(".")[0] == kind] or [kind]
+        if full in known:
             return [full]
-        split = [n for n in ranked if n in (full + "+", full + "-")]
+        split = [n for n in known if n in (full + "+", full + "-")]
         return split or [full]
 
     def _graded_value(self, name: str):
@@ -1265,10 +1268,11 @@ class CircularResult:
         the diagnoses (|value| in mm, mm/mm or rad; a cyclic error by its
         amplitude): ``{"grade": "PASS"|"FAIL"|"NOT DETERMINED", "items":
         [{name, label, run, value, std, tolerance, grade, shown,
-        tolerance_shown}]}``. A diagnosis the data did not determine (not
-        fitted, or below 3 standard uncertainties and left out) is NOT
-        DETERMINED, never a PASS; a value that is missing (H of a single run)
-        is refused."""
+        tolerance_shown}]}``. A diagnosis left out as below 3 standard
+        uncertainties passes only when |value| + 3 std (in the fit it left)
+        is within the tolerance; otherwise, and for one not fitted at all,
+        it is NOT DETERMINED, never a PASS. A value that is missing (H of a
+        single run) is refused."""
         items = []
         for name, tol in tolerances.items():
             kind = self.tolerance_dimension(name)
@@ -1294,6 +1298,15 @@ class CircularResult:
             for target in self._targets(name):
                 got = self._graded_value(target)
                 label = self.label(target, short=True)
+                if got is None and target in self.dropped:
+                    # below 3σ and left out: a PASS only when even |value| + 3σ is within the tolerance
+                    v, sd = self.dropped[target]
+                    ok = v + 3 * sd <= tol
+                    items.append({"name": target, "label": label, "run": "both", "value": v, "std": sd,
+                                  "tolerance": float(tol), "grade": "PASS" if ok else "NOT DETERMINED",
+                                  "shown": f"not significant: |{v * f:.2f}| ± {sd * f:.2f} {unit}",
+                                  "tolerance_shown": f"{tol * f:.2f} {unit}"})
+                    continue
                 if got is None:
                     items.append({"name": target, "label": label, "run": "both", "value": None, "std": None,
                                   "tolerance": float(tol), "grade": "NOT DETERMINED", "shown": "not determined",
@@ -1325,6 +1338,7 @@ class CircularResult:
                 "ranking": [{"diagnosis": n, "contribution": c, "percent": self.ranking_percent[n]}
                             for n, c in self.ranking],
                 "circularity": self.circularity, "derived": list(self.derived),
+                "dropped": {n: {"value": v, "std": sd} for n, (v, sd) in self.dropped.items()},
                 "thermal": self.thermal, "standard": self.standard,
                 "overshoot_removed": [vars(t) for t in self.trimmed],
                 "machine": self.machine, "date": self.date, "samples": self.samples}

@@ -188,6 +188,11 @@ struct CircularDiagnosis {
   Eigen::VectorXd values, std;     // mm, mm/mm, rad
   std::vector<std::string> not_fitted;  // with the reason in the text
   std::vector<std::string> not_significant;  // extended diagnoses dropped below options.significance
+  // Each dropped diagnosis (a name, or the group cyclic_error.k) with its
+  // |value| (a cyclic error's amplitude) and standard uncertainty in the fit
+  // it was dropped from: a tolerance can still be graded by |value| + 3 std.
+  std::vector<std::string> dropped_names;
+  Eigen::VectorXd dropped_values, dropped_std;
   double rms = 0.0;                // residual after the fit (mm)
   // Diagnoses (a name, or the group "cyclic_error.k" of its .cos/.sin
   // parameters) in decreasing contribution to circularity (mm).
