@@ -250,7 +250,15 @@ void BindProcedures(py::module_& m) {
       .def_readonly("not_significant", &CircularDiagnosis::not_significant)
       .def_readonly("rms", &CircularDiagnosis::rms)
       .def_readonly("ranking", &CircularDiagnosis::ranking)
-      .def_readonly("contribution", &CircularDiagnosis::contribution);
+      .def_readonly("contribution", &CircularDiagnosis::contribution)
+      .def_readonly("contribution_percent", &CircularDiagnosis::contribution_percent)
+      .def_readonly("circularity", &CircularDiagnosis::circularity)
+      .def_readonly("derived_names", &CircularDiagnosis::derived_names)
+      .def_readonly("derived_values", &CircularDiagnosis::derived_values)
+      .def_readonly("derived_std", &CircularDiagnosis::derived_std)
+      .def_readonly("dropped_names", &CircularDiagnosis::dropped_names)
+      .def_readonly("dropped_values", &CircularDiagnosis::dropped_values)
+      .def_readonly("dropped_std", &CircularDiagnosis::dropped_std);
   py::class_<CircularTestResult>(m, "CircularTestResult")
       .def_readonly("nominal_radius", &CircularTestResult::nominal_radius)
       .def_readonly("runs", &CircularTestResult::runs)
@@ -339,6 +347,34 @@ void BindProcedures(py::module_& m) {
         py::arg("table_ball"), py::arg("length"), py::arg("poses"),
         "Poses (N x num_axes) with the linear axes moved along the bar to the nominal `length` "
         "(dbb_setup.h BarLengthCommands).");
+  m.def(
+      "diagnosis_contribution",
+      [](const std::string& name, double value, double radius, double spike_width, double cyclic_pitch1,
+         double cyclic_pitch2) {
+        CircularDiagnosisOptions o;
+        o.spike_width = spike_width;
+        o.cyclic_pitch1 = cyclic_pitch1;
+        o.cyclic_pitch2 = cyclic_pitch2;
+        return DiagnosisContribution(name, value, radius, o);
+      },
+      py::arg("name"), py::arg("value"), py::arg("radius"), py::arg("spike_width") = 3.0,
+      py::arg("cyclic_pitch1") = 0.0, py::arg("cyclic_pitch2") = 0.0,
+      "Contribution to circularity (mm) of one diagnosis alone (circular_test.h DiagnosisContribution).");
+  m.def(
+      "compensate_bar_temperature",
+      [](const Eigen::VectorXd& readings, double nominal_length, double alpha_bar, double t_bar,
+         double alpha_machine, double t_machine, double t_ref) {
+        BarThermal th;
+        th.alpha_bar = alpha_bar;
+        th.t_bar = t_bar;
+        th.alpha_machine = alpha_machine;
+        th.t_machine = t_machine;
+        th.t_ref = t_ref;
+        return CompensateBarTemperature(readings, nominal_length, th);
+      },
+      py::arg("readings"), py::arg("nominal_length"), py::arg("alpha_bar"), py::arg("t_bar"),
+      py::arg("alpha_machine"), py::arg("t_machine"), py::arg("t_ref") = 20.0,
+      "Ball bar readings referred to 20 deg C (circular_test.h CompensateBarTemperature).");
   m.def("trace_harmonics", &TraceHarmonics, py::arg("angles"), py::arg("values"),
         py::arg("max_order"));
 

@@ -442,6 +442,10 @@ def circular_test(runs: Sequence[tuple[np.ndarray, np.ndarray, int]], radius: fl
                   straightness: bool = True, radial_play: bool = True, cyclic_pitch1: float = 0.0,
                   cyclic_pitch2: float = 0.0, significance: float = 3.0, search_cyclic_pitch1: bool = False,
                   search_cyclic_pitch2: bool = False) -> CircularTestResult: ...
+def diagnosis_contribution(name: str, value: float, radius: float, spike_width: float = 3.0,
+                           cyclic_pitch1: float = 0.0, cyclic_pitch2: float = 0.0) -> float: ...
+def compensate_bar_temperature(readings: np.ndarray, nominal_length: float, alpha_bar: float, t_bar: float,
+                               alpha_machine: float, t_machine: float, t_ref: float = 20.0) -> np.ndarray: ...
 
 class WangFourPoint:
     singular_values: np.ndarray

@@ -403,7 +403,8 @@ TEST(CircularTest, DiagnosisRecoversInjectedErrors) {
   const CircularTestResult res = AnalyzeCircularTest(runs, R, 2000);
   const CircularDiagnosis& d = res.diagnosis;
   const std::map<std::string, double> truth = {{"scale_mismatch", 30e-6}, {"squareness", 40e-6},
-                                               {"backlash.1", 0.002},      {"backlash.2", -0.003},
+                                               {"backlash.1+", 0.002},     {"backlash.2+", -0.003},
+                                               {"backlash.1-", 0.002},     {"backlash.2-", -0.003},
                                                {"servo_mismatch", feed * 0.0002}, {"centre.1", -0.004},
                                                {"centre.2", 0.003}};
   for (const auto& [n, v] : truth) {
@@ -481,7 +482,7 @@ TEST(CircularTest, ExtendedDiagnosesAreRecoveredAndRankedFirst) {
   };
   const double p = 0.006, w = 3.0, pitch = 10.0;
   std::vector<Case> cases = {
-      {"reversal_spike.1", {{"reversal_spike.1", p}}, [&](double deg, int s) {
+      {"reversal_spike.1", {{"reversal_spike.1+", p}, {"reversal_spike.1-", p}}, [&](double deg, int s) {
          // stick after the reversal of axis 1 at 0 / 180 deg, decaying over w deg
          double t = s * deg;
          const double dphi = t - 180.0 * std::floor(t / 180.0);
@@ -520,7 +521,8 @@ TEST(CircularTest, ExtendedDiagnosesAreRecoveredAndRankedFirst) {
                                                                               << d.values[i];
     }
     ASSERT_FALSE(d.ranking.empty());
-    EXPECT_EQ(d.ranking[0], c.name);
+    // a split diagnosis (spikes at the + and - end) ranks by either end
+    EXPECT_EQ(d.ranking[0].substr(0, c.name.size()), c.name);
     EXPECT_LT(d.rms, 1.2 * sigma) << c.name;
   }
 }
@@ -534,8 +536,12 @@ TEST(CircularTest, TermsTheDataDoNotShowAreDropped) {
   CircularDiagnosisOptions o;
   o.cyclic_pitch1 = o.cyclic_pitch2 = 10.0;
   const CircularDiagnosis d = AnalyzeCircularTest(runs, 100, 0, o).diagnosis;
-  EXPECT_EQ(d.names.size(), 8u);
-  EXPECT_EQ(d.not_significant.size(), 10u);
+  EXPECT_EQ(d.names.size(), 10u);  // backlash at both ends of both axes
+  EXPECT_EQ(d.not_significant.size(), 12u);
+  // each left out with its |value| and std, all below the threshold
+  ASSERT_EQ(d.dropped_names.size(), 12u);
+  for (Eigen::Index j = 0; j < d.dropped_values.size(); ++j)
+    EXPECT_LT(d.dropped_values[j], 3.0 * d.dropped_std[j]) << d.dropped_names[j];
   CircularDiagnosisOptions none;
   none.reversal_spikes = none.lateral_play = none.straightness = none.radial_play = false;
   const CircularDiagnosis classic = AnalyzeCircularTest(runs, 100, 0, none).diagnosis;
@@ -544,15 +550,16 @@ TEST(CircularTest, TermsTheDataDoNotShowAreDropped) {
   // everything kept: radial play shares cos 2phi with scale mismatch
   o.significance = 0;
   const CircularDiagnosis all = AnalyzeCircularTest(runs, 100, 0, o).diagnosis;
-  EXPECT_EQ(all.names.size(), 20u);
+  EXPECT_EQ(all.names.size(), 24u);
   EXPECT_GT(all.std[i], 3 * classic.std[i]);
   // a quarter arc, one direction: what it cannot carry is named, nothing throws
   CircularRun arc;
   arc.angles = Eigen::VectorXd::LinSpaced(181, 10, 100);
   arc.readings = Eigen::VectorXd::Zero(181);
   const CircularDiagnosis q = AnalyzeCircularTest({arc}, 100, 0, o).diagnosis;
-  EXPECT_FALSE(q.Has("backlash.1"));
-  EXPECT_FALSE(q.Has("reversal_spike.1"));
+  EXPECT_FALSE(q.Has("backlash.1+"));
+  EXPECT_FALSE(q.Has("backlash.1-"));
+  EXPECT_FALSE(q.Has("reversal_spike.1+"));
   EXPECT_FALSE(q.Has("lateral_play.1"));
 }
 
@@ -746,5 +753,48 @@ TEST(TraceHarmonics, RecoversCoefficients) {
   EXPECT_NEAR(h(4, 0), 0.0, 1e-12);
 }
 
+
+TEST(CircularTest, BacklashAtEachEndAndItsContribution) {
+  // X loses 5 um at its + end and 1 um at its - end: the two ends are told
+  // apart, their mean is the derived backlash.1, and the ranking and its
+  // percentages follow the contributions (a step of 2 b).
+  const double R = 100, sigma = 0.0003;
+  auto err = [&](double deg, int s) {
+    const double phi = deg * kPi / 180, v1 = -s * SgnD(std::sin(phi));
+    return Eigen::Vector2d((std::cos(phi) > 0 ? 0.005 : 0.001) * v1, 0.0);
+  };
+  std::vector<CircularRun> runs = {ErrorRun(-1, R, err, sigma, 71), ErrorRun(+1, R, err, sigma, 72)};
+  const CircularTestResult res = AnalyzeCircularTest(runs, R);
+  const CircularDiagnosis& d = res.diagnosis;
+  EXPECT_NEAR(d.Get("backlash.1+"), 0.005, 1e-4);
+  EXPECT_NEAR(d.Get("backlash.1-"), 0.001, 1e-4);
+  ASSERT_EQ(d.derived_names.size(), 2u);
+  EXPECT_EQ(d.derived_names[0], "backlash.1");
+  EXPECT_NEAR(d.derived_values[0], 0.5 * (d.Get("backlash.1+") + d.Get("backlash.1-")), 1e-15);
+  EXPECT_EQ(d.ranking[0], "backlash.1+");
+  EXPECT_NEAR(d.contribution[0], DiagnosisContribution("backlash.1+", d.Get("backlash.1+"), R), 2e-4);
+  const double G = std::max(res.runs[0].circular_deviation, res.runs[1].circular_deviation);
+  EXPECT_DOUBLE_EQ(d.circularity, G);
+  EXPECT_NEAR(d.contribution_percent[0], 100 * d.contribution[0] / G, 1e-9);
+  EXPECT_NEAR(DiagnosisContribution("squareness", 40e-6, R), R * 40e-6, 1e-12);
+  EXPECT_NEAR(DiagnosisContribution("backlash.2-", 0.002, R), 0.004, 2e-6);
+  EXPECT_THROW(DiagnosisContribution("wobble", 1.0, R), std::invalid_argument);
+}
+
+TEST(CircularTest, BarTemperatureCompensation) {
+  BarThermal th;
+  th.alpha_bar = 1e-6;
+  th.t_bar = 23;
+  th.alpha_machine = 11.5e-6;
+  th.t_machine = 23;
+  const Eigen::VectorXd r = CompensateBarTemperature(Eigen::Vector2d(0.0, 0.001), 100, th);
+  EXPECT_NEAR(r[0], 100 * (1 + 3e-6) / (1 + 34.5e-6) - 100, 1e-12);
+  EXPECT_NEAR(r[1] - r[0], 0.001 / (1 + 34.5e-6), 1e-12);
+  th.alpha_machine = 11.5;  // ppm/K given as 1/K
+  EXPECT_THROW(CompensateBarTemperature(r, 100, th), std::invalid_argument);
+  th.alpha_machine = 11.5e-6;
+  th.t_bar = 296;  // kelvin
+  EXPECT_THROW(CompensateBarTemperature(r, 100, th), std::invalid_argument);
+}
 }  // namespace
 }  // namespace fivecal

@@ -203,6 +203,52 @@ bool CircularDiagnosis::Has(const std::string& name) const {
 
 namespace {
 
+// The column of diagnosis `nm` (the header's list) at path angle deg on a run
+// in direction s: the radial deviation per unit of its value.
+double TermColumn(const std::string& nm, double deg, int s, double R, const CircularDiagnosisOptions& o) {
+  const double phi = deg * kRad, c = std::cos(phi), sn = std::sin(phi);
+  // Motion signs on the circle x1 = R cos phi, x2 = R sin phi traversed in direction s.
+  const double v1 = -s * Sgn(sn), v2 = s * Sgn(c);
+  if (nm == "radius") return 1.0;
+  if (nm == "centre.1") return c;
+  if (nm == "centre.2") return sn;
+  if (nm == "scale_mismatch") return 0.5 * R * std::cos(2 * phi);
+  if (nm == "squareness") return -0.5 * R * std::sin(2 * phi);
+  if (nm == "servo_mismatch") return 0.5 * s * std::sin(2 * phi);
+  const size_t dot = nm.find('.');
+  if (dot == std::string::npos || dot + 1 >= nm.size() || (nm[dot + 1] != '1' && nm[dot + 1] != '2'))
+    throw std::invalid_argument("circular diagnosis: unknown diagnosis '" + nm + "'");
+  const int ax = nm[dot + 1] == '1' ? 1 : 2;
+  const char end = nm.back();  // '+' or '-' for the split diagnoses
+  const double along = ax == 1 ? c : sn;
+  const bool split = end == '+' || end == '-';
+  if (split && !(end == '+' ? along > 0 : along < 0) && nm.rfind("reversal_spike", 0) != 0) return 0.0;
+  const std::string kind = nm.substr(0, dot);
+  if (kind == "backlash" && split) return ax == 1 ? c * v1 : sn * v2;
+  if (kind == "reversal_spike" && split) {
+    // Angle travelled since the last reversal of the axis (axis 1 at
+    // 0/180 deg, axis 2 at 90/270 deg) and where that reversal was.
+    const double phi0 = ax == 1 ? 0.0 : 90.0;
+    const double t = s * (deg - phi0);
+    const double dphi = t - 180.0 * std::floor(t / 180.0);
+    const double rev = (deg - s * dphi) * kRad;
+    const int at = ax == 1 ? Sgn(std::cos(rev)) : Sgn(std::sin(rev));
+    if (at != (end == '+' ? 1 : -1)) return 0.0;
+    return along * at * std::exp(-dphi / o.spike_width);
+  }
+  if (kind == "lateral_play" && !split) return ax == 1 ? c * v2 : sn * v1;
+  if (kind == "straightness" && !split) return ax == 1 ? sn * c * c : c * sn * sn;
+  if (kind == "radial_play" && !split) return std::abs(along);
+  if (kind == "cyclic_error") {
+    const double pitch = ax == 1 ? o.cyclic_pitch1 : o.cyclic_pitch2;
+    if (!(pitch > 0)) throw std::invalid_argument("circular diagnosis: " + nm + " needs the cyclic pitch");
+    const double arg = 2.0 * 3.14159265358979323846 * R * along / pitch;
+    if (nm.size() > 4 && nm.compare(nm.size() - 4, 4, ".cos") == 0) return along * std::cos(arg);
+    if (nm.size() > 4 && nm.compare(nm.size() - 4, 4, ".sin") == 0) return along * std::sin(arg);
+  }
+  throw std::invalid_argument("circular diagnosis: unknown diagnosis '" + nm + "'");
+}
+
 // The analysis with the cyclic pitches as given in options (no search).
 CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, double R, double feed,
                                        const CircularDiagnosisOptions& options) {
@@ -269,15 +315,16 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
     if (!(p >= 0) || !std::isfinite(p))
       throw std::invalid_argument("circular test: cyclic_pitch must be >= 0 mm (0 = not fitted)");
   std::vector<std::string> names = {"radius", "centre.1", "centre.2", "scale_mismatch", "squareness",
-                                    "servo_mismatch", "backlash.1", "backlash.2"};
+                                    "servo_mismatch", "backlash.1+", "backlash.1-", "backlash.2+",
+                                    "backlash.2-"};
   const int n_base = static_cast<int>(names.size());
-  if (o.reversal_spikes) names.insert(names.end(), {"reversal_spike.1", "reversal_spike.2"});
+  if (o.reversal_spikes)
+    names.insert(names.end(), {"reversal_spike.1+", "reversal_spike.1-", "reversal_spike.2+", "reversal_spike.2-"});
   if (o.lateral_play) names.insert(names.end(), {"lateral_play.1", "lateral_play.2"});
   if (o.straightness) names.insert(names.end(), {"straightness.1", "straightness.2"});
   if (o.radial_play) names.insert(names.end(), {"radial_play.1", "radial_play.2"});
   if (o.cyclic_pitch1 > 0) names.insert(names.end(), {"cyclic_error.1.cos", "cyclic_error.1.sin"});
   if (o.cyclic_pitch2 > 0) names.insert(names.end(), {"cyclic_error.2.cos", "cyclic_error.2.sin"});
-  const double two_pi = 2.0 * 3.14159265358979323846;
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(total, names.size());
   // Motion signs of both axes per row: a reversal-dependent term needs both
   // signs inside the data.
@@ -286,50 +333,23 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
   std::vector<int> run_of(total);
   int row = 0;
   for (size_t k = 0; k < runs.size(); ++k) {
-    const double s = dirs[k];
+    const int s = dirs[k];
     for (int i = 0; i < runs[k].angles.size(); ++i, ++row) {
-      const double deg = runs[k].angles[i], phi = deg * kRad, c = std::cos(phi), sn = std::sin(phi);
-      // Motion signs on the circle x1 = R cos phi, x2 = R sin phi traversed in direction s.
-      const double v1 = -s * Sgn(sn), v2 = s * Sgn(c);
-      motion(row, 0) = static_cast<int>(v1);
-      motion(row, 1) = static_cast<int>(v2);
-      A.row(row).head(n_base) << 1.0, c, sn, 0.5 * R * std::cos(2 * phi), -0.5 * R * std::sin(2 * phi),
-          0.5 * s * std::sin(2 * phi), c * v1, sn * v2;
-      for (size_t j = n_base; j < names.size(); ++j) {
-        const std::string& nm = names[j];
-        const int ax = nm[nm.find('.') + 1] == '1' ? 1 : 2;
-        double v = 0.0;
-        if (nm.rfind("reversal_spike", 0) == 0) {
-          // Angle travelled since the last reversal of the axis (axis 1 at
-          // 0/180 deg, axis 2 at 90/270 deg) and where that reversal was.
-          const double phi0 = ax == 1 ? 0.0 : 90.0;
-          double t = s * (deg - phi0);
-          const double dphi = t - 180.0 * std::floor(t / 180.0);
-          const double rev = (deg - s * dphi) * kRad;
-          const double decay = std::exp(-dphi / o.spike_width);
-          v = ax == 1 ? c * Sgn(std::cos(rev)) * decay : sn * Sgn(std::sin(rev)) * decay;
-        } else if (nm.rfind("lateral_play", 0) == 0) {
-          v = ax == 1 ? c * v2 : sn * v1;
-        } else if (nm.rfind("straightness", 0) == 0) {
-          v = ax == 1 ? sn * c * c : c * sn * sn;
-        } else if (nm.rfind("radial_play", 0) == 0) {
-          v = ax == 1 ? std::abs(c) : std::abs(sn);
-        } else if (nm.rfind("cyclic_error", 0) == 0) {
-          const double pitch = ax == 1 ? o.cyclic_pitch1 : o.cyclic_pitch2;
-          const double x = R * (ax == 1 ? c : sn), proj = ax == 1 ? c : sn;
-          const double arg = two_pi * x / pitch;
-          v = proj * (nm.compare(nm.size() - 3, 3, "cos") == 0 ? std::cos(arg) : std::sin(arg));
-        }
-        A(row, j) = v;
-      }
+      const double deg = runs[k].angles[i], phi = deg * kRad;
+      motion(row, 0) = -s * Sgn(std::sin(phi));
+      motion(row, 1) = s * Sgn(std::cos(phi));
+      for (size_t j = 0; j < names.size(); ++j) A(row, j) = TermColumn(names[j], deg, s, R, o);
       y[row] = runs[k].readings[i];
       run_of[row] = static_cast<int>(k);
     }
   }
   CircularDiagnosis& d = res.diagnosis;
-  auto reverses = [&](int axis) {
+  // Whether the axis moves both ways inside the data; with a column, only
+  // on the rows where that column is not zero (a split backlash' half).
+  auto reverses = [&](int axis, int col = -1) {
     bool pos = false, neg = false;
     for (int i = 0; i < total; ++i) {
+      if (col >= 0 && A(i, col) == 0.0) continue;
       pos |= motion(i, axis - 1) > 0;
       neg |= motion(i, axis - 1) < 0;
     }
@@ -341,8 +361,8 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
       d.not_fitted.push_back("servo_mismatch (needs a CW and a CCW run: with one direction it cannot be told from squareness)");
       continue;
     }
-    if (names[j].rfind("backlash", 0) == 0 && !reverses(names[j].back() - '0')) {
-      d.not_fitted.push_back(names[j] + " (the axis never reverses inside the data)");
+    if (names[j].rfind("backlash", 0) == 0 && !reverses(names[j][9] - '0', j)) {
+      d.not_fitted.push_back(names[j] + " (the axis never reverses at that end of its travel inside the data)");
       continue;
     }
     keep.push_back(j);
@@ -361,7 +381,7 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
   };
   if (!full_rank(keep))
     throw std::invalid_argument("circular test: the samples cover too little of the circle to separate "
-                                "centre offset, scale mismatch, squareness and backlash");
+                                "centre offset, scale mismatch, squareness and backlash at each end of the axes");
   for (size_t j = n_base; j < names.size(); ++j) {
     const std::string& nm = names[j];
     const int ax = nm[nm.find('.') + 1] == '1' ? 1 : 2;
@@ -413,6 +433,7 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
   // with scale mismatch), so one below the threshold is dropped, the least
   // significant first, and the fit repeated. A cyclic error is judged by its
   // two components together (Mahalanobis norm).
+  std::vector<double> dropped_v, dropped_s;
   if (o.significance > 0) {
     for (;;) {
       double worst = std::numeric_limits<double>::infinity();
@@ -437,6 +458,10 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
       if (at < 0 || worst >= o.significance) break;
       const std::string& nm = names[keep[at]];
       const bool is_cyc = nm.rfind("cyclic_error", 0) == 0;
+      const double sd_at = std::sqrt(std::max(cov(at, at), 0.0));
+      dropped_v.push_back(is_cyc ? std::hypot(x[at], x[at + 1]) : std::abs(x[at]));
+      dropped_s.push_back(is_cyc ? std::max(sd_at, std::sqrt(std::max(cov(at + 1, at + 1), 0.0))) : sd_at);
+      d.dropped_names.push_back(is_cyc ? nm.substr(0, nm.size() - 4) : nm);
       std::ostringstream m;
       m.precision(2);
       m << (is_cyc ? nm.substr(0, nm.size() - 4) : nm) << " (" << worst << " sigma)";
@@ -445,6 +470,8 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
       fit();
     }
   }
+  d.dropped_values = Eigen::Map<Eigen::VectorXd>(dropped_v.data(), dropped_v.size());
+  d.dropped_std = Eigen::Map<Eigen::VectorXd>(dropped_s.data(), dropped_s.size());
   d.rms = std::sqrt(res_v.squaredNorm() / total);
   for (size_t j = 0; j < keep.size(); ++j) d.names.push_back(names[keep[j]]);
   d.values = x;
@@ -483,6 +510,23 @@ CircularTestResult AnalyzeGivenPitches(const std::vector<CircularRun>& runs, dou
     d.ranking.push_back(contrib[j].second);
     d.contribution[j] = contrib[j].first;
   }
+  for (const CircularRunResult& r : res.runs) d.circularity = std::max(d.circularity, r.circular_deviation);
+  d.contribution_percent = d.circularity > 0 ? Eigen::VectorXd(d.contribution * (100.0 / d.circularity))
+                                             : Eigen::VectorXd::Zero(d.contribution.size());
+  // backlash.k: the mean of its two ends, for comparison with one E11b.
+  std::vector<double> dv, ds;
+  for (int ax = 1; ax <= 2; ++ax) {
+    const std::string b = "backlash." + std::to_string(ax);
+    const auto p = std::find(d.names.begin(), d.names.end(), b + "+");
+    const auto m = std::find(d.names.begin(), d.names.end(), b + "-");
+    if (p == d.names.end() || m == d.names.end()) continue;
+    const Eigen::Index ip = p - d.names.begin(), im = m - d.names.begin();
+    d.derived_names.push_back(b);
+    dv.push_back(0.5 * (x[ip] + x[im]));
+    ds.push_back(0.5 * std::sqrt(std::max(0.0, cov(ip, ip) + cov(im, im) + 2.0 * cov(ip, im))));
+  }
+  d.derived_values = Eigen::Map<Eigen::VectorXd>(dv.data(), dv.size());
+  d.derived_std = Eigen::Map<Eigen::VectorXd>(ds.data(), ds.size());
   (void)feed;  // the feed only converts servo_mismatch to a time (dtau = l / v), done by callers
   res.cyclic_pitch1 = o.cyclic_pitch1;
   res.cyclic_pitch2 = o.cyclic_pitch2;
@@ -619,6 +663,69 @@ CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, dou
   res.cyclic_pitches_tried1 = tried[0];
   res.cyclic_pitches_tried2 = tried[1];
   return res;
+}
+
+double DiagnosisContribution(const std::string& name, double value, double R,
+                             const CircularDiagnosisOptions& options) {
+  if (!(R > 0) || !std::isfinite(R))
+    throw std::invalid_argument("diagnosis contribution: nominal radius must be > 0 mm");
+  if (!std::isfinite(value))
+    throw std::invalid_argument("diagnosis contribution: " + name + ": value is not finite");
+  // A cyclic error's value is its amplitude: the .cos column carries it.
+  const std::string col = name.rfind("cyclic_error", 0) == 0 && name.size() == 14 ? name + ".cos" : name;
+  CircularDiagnosisOptions o = options;
+  if (col.rfind("cyclic_error.1", 0) == 0 && !(o.cyclic_pitch1 > 0)) o.cyclic_pitch1 = R / 10.0;
+  if (col.rfind("cyclic_error.2", 0) == 0 && !(o.cyclic_pitch2 > 0)) o.cyclic_pitch2 = R / 10.0;
+  if (col == "radius" || col.rfind("centre", 0) == 0) return 0.0;
+  // Dense enough for a reversal spike of spike_width and a cyclic pitch of R / 10.
+  const int n = 7200;
+  double worst = 0.0;
+  for (int s : {1, -1}) {
+    Eigen::MatrixXd B(n, 3);
+    Eigen::VectorXd t(n);
+    for (int i = 0; i < n; ++i) {
+      const double deg = s * 360.0 * i / n, phi = deg * kRad;
+      B.row(i) << 1.0, std::cos(phi), std::sin(phi);
+      t[i] = value * TermColumn(col, deg, s, R, o);
+    }
+    const Eigen::VectorXd r = t - B * B.colPivHouseholderQr().solve(t);
+    worst = std::max(worst, r.maxCoeff() - r.minCoeff());
+  }
+  return worst;
+}
+
+Eigen::VectorXd CompensateBarTemperature(const Eigen::VectorXd& readings, double L, const BarThermal& th) {
+  const std::string w = "thermal compensation: ";
+  if (!(L > 0) || !std::isfinite(L)) throw std::invalid_argument(w + "nominal length must be > 0 mm");
+  auto alpha = [&](double a, const char* field) {
+    if (!std::isfinite(a) || std::abs(a) > 1e-4) {
+      std::ostringstream m;
+      m << w << field << " = " << a << " /K; a thermal expansion coefficient is a few 1e-6 /K "
+        << "(steel 11.5e-6, invar 1e-6): give it in 1/K, not ppm/K";
+      throw std::invalid_argument(m.str());
+    }
+  };
+  auto temp = [&](double t, const char* field) {
+    if (!std::isfinite(t) || t < -20.0 || t > 60.0) {
+      std::ostringstream m;
+      m << w << field << " = " << t << " deg C; expected -20 .. 60 deg C (a workshop temperature in deg C)";
+      throw std::invalid_argument(m.str());
+    }
+  };
+  alpha(th.alpha_bar, "bar expansion coefficient");
+  alpha(th.alpha_machine, "machine expansion coefficient");
+  temp(th.t_bar, "bar temperature");
+  temp(th.t_machine, "machine temperature");
+  temp(th.t_ref, "reference temperature");
+  const double bar = L * (1.0 + th.alpha_bar * (th.t_bar - th.t_ref));
+  const double scale = 1.0 + th.alpha_machine * (th.t_machine - th.t_ref);
+  Eigen::VectorXd out(readings.size());
+  for (Eigen::Index i = 0; i < readings.size(); ++i) {
+    if (!std::isfinite(readings[i]))
+      throw std::invalid_argument(w + "readings[" + std::to_string(i) + "] is not finite");
+    out[i] = (bar + readings[i]) / scale - L;
+  }
+  return out;
 }
 
 Eigen::MatrixXd TraceHarmonics(const Eigen::VectorXd& angles_deg, const Eigen::VectorXd& values,

@@ -27,6 +27,8 @@ from ..identification import identify, write_result
 from ..machine import Machine
 from ..procedures import dbb
 from ..procedures.sphere_check import spindle_equivalent
+from ..io import b5r
+from ..report.circular import write_circular_report
 from ..report.polar import (dbb_groups, plane_name, plot_circular_test, plot_four_step, plot_polar, plot_polar_grid,
                             plot_volumetric, plot_wang_patterns)
 from ..simulation import simulate
@@ -315,27 +317,109 @@ def _run_word(direction: int) -> str:
     return "CCW" if direction > 0 else ("CW" if direction < 0 else "no net turn")
 
 
+#: Largest bare tolerance of a diagnosis in its file unit: 1 mm of a length,
+#: 1 mrad of squareness, 1 mm/m of scale mismatch (a bare µm number left in a script).
+_BARE_LIMITS = {("length", None, 0): 1.0, ("angle", None, 0): 1e-3, ("length", "length", 1): 1e-3}
+
+
 def _circular_tolerances(items) -> dict:
-    """``--tolerance G=15um,H=5um``: ISO 230-4 values (G, F, H) with a unit;
-    a bare number is mm, refused above 1 mm (µm written without its unit)."""
+    """``--tolerance G=15um,backlash.X+=4um,squareness=20urad``: ISO 230-4
+    values (G, F, H) and diagnoses with a unit; a bare number is in the file
+    unit (mm, rad, mm/mm), refused when implausibly large."""
     out = {}
     for text in items or ():
         for item in [t for t in str(text).split(",") if t.strip()]:
             if "=" not in item:
                 raise ValueError(f"--tolerance: expected NAME=VALUE (e.g. G=15um), got '{item.strip()}'")
             k, v = (x.strip() for x in item.split("=", 1))
-            if k not in dbb.CircularResult.TOLERANCE_NAMES:
-                raise ValueError(f"--tolerance {k}: a circular test grades G (circular deviation), F (radial "
-                                 "deviation) and H (hysteresis)")
+            kind, den, degree = dbb.CircularResult.tolerance_dimension(k)
             if k in out:
                 raise ValueError(f"--tolerance: {k} is given twice")
-            out[k] = parse_value(v, f"--tolerance {k}", "length", bare_limit=1.0,
-                                 limit_hint=", a ball bar value")
+            out[k] = parse_value(v, f"--tolerance {k}", kind, den, degree,
+                                 bare_limit=_BARE_LIMITS[(kind, den, degree)], limit_hint=", a ball bar value")
     return out
+
+
+def _direction_words(text, n: int):
+    """``--direction cw,ccw``: one run direction per file (+1 CCW, -1 CW)."""
+    if text is None:
+        return [None] * n
+    words = [w.strip().lower() for w in str(text).split(",")]
+    table = {"ccw": 1, "cw": -1}
+    if len(words) != n or any(w not in table for w in words):
+        raise ValueError(f"--direction {text}: give cw or ccw for each of the {n} run file(s), comma separated "
+                         "(e.g. --direction cw,ccw)")
+    return [table[w] for w in words]
+
+
+def _read_run(path: str, args, direction):
+    """One run file: two columns (angle, reading) or readings only with
+    --sweep (the arc the samples span, deg), --start and the direction."""
+    one_column = args.sweep is not None
+    if one_column:
+        d = direction or dbb.claimed_direction(path)
+        if not d:
+            raise ValueError(f"{path}: readings only; say which way it runs: --direction cw|ccw (one per file) "
+                             "or a file name with cw / ccw in it")
+        return dbb.read_trace_csv(path, sweep=d * args.sweep, start=args.start, units=args.units,
+                                  angle_units=args.angle_units)
+    t = dbb.read_trace_csv(path, units=args.units, angle_units=args.angle_units)
+    if direction and t.direction and direction != t.direction:
+        raise ValueError(f"{path}: --direction says {_run_word(direction)} but its angles run "
+                         f"{_run_word(t.direction)}")
+    return t
+
+
+def _thermal(args) -> dict:
+    """The thermal compensation from --sidecar ("thermal") and the options;
+    a value given both ways is refused."""
+    th = {}
+    if args.sidecar:
+        side = read_json(args.sidecar, "circular test sidecar")
+        if not isinstance(side, dict):
+            raise ValueError(f"{args.sidecar}: expected an object with \"thermal\"")
+        unknown = [k for k in side if k not in ("thermal", "machine", "date", "feed")]
+        if unknown:
+            raise ValueError(f"{args.sidecar}: {unknown[0]}: unknown key (expected thermal, machine, date, feed)")
+        th = dict(side.get("thermal") or {})
+        for k in ("machine", "date", "feed"):
+            if k in side:
+                opt = {"machine": "machine_name"}.get(k, k)
+                if getattr(args, opt) is not None:
+                    raise ValueError(f"{args.sidecar}: {k} is also given on the command line; give it once")
+                setattr(args, opt, side[k])
+    for key, opt in (("bar_expansion", "bar_expansion"), ("bar_temperature", "bar_temperature"),
+                     ("machine_expansion", "machine_expansion"), ("machine_temperature", "machine_temperature")):
+        v = getattr(args, opt)
+        if v is None:
+            continue
+        if key in th:
+            raise ValueError(f"--{opt.replace('_', '-')}: also in {args.sidecar} (thermal.{key}); give it once")
+        th[key] = v
+    if th:
+        th = dbb.check_thermal(th)
+    return th
+
+
+def _expansion(text) -> float:
+    """An expansion coefficient: ``11.5ppm`` (µm/m/K) or a number in 1/K."""
+    t = str(text).strip().lower().replace("/k", "").replace("µm/m", "ppm").replace("um/m", "ppm")
+    try:
+        return float(t[:-3]) * 1e-6 if t.endswith("ppm") else float(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}': give 1/K (11.5e-6) or ppm/K (11.5ppm)") from None
 
 
 def _circular(args) -> int:
     tolerances = _circular_tolerances(args.tolerance)
+    standard = dbb.check_standard(args.standard)
+    thermal = _thermal(args)
+    if args.sweep is not None and not args.runs:
+        raise ValueError("--sweep: for readings-only run files; give the files")
+    if any(str(p).lower().endswith(".b5r") for p in args.runs):
+        return _b5r(args, tolerances)
+    if args.radius is None:
+        raise ValueError("--radius: required (the nominal radius = bar length, mm)")
     traces, ds = [], None
     if args.simulate is not None:
         m = _machine(args.machine)
@@ -352,8 +436,8 @@ def _circular(args) -> int:
     else:
         if not args.runs:
             raise ValueError("give one or two CSV files (angle, reading), --dataset or --simulate")
-        for path in args.runs:
-            t = dbb.read_trace_csv(path)
+        for path, d in zip(args.runs, _direction_words(args.direction, len(args.runs))):
+            t = _read_run(path, args, d)
             # the direction is the data's; a file named cw / ccw that turns the other way is refused
             dbb.check_direction(t, path)
             t.label = _run_word(t.direction) + f" ({os.path.basename(path)})"
@@ -369,7 +453,8 @@ def _circular(args) -> int:
         ds = ds.subset([i for sid in setups for i in dbb.ball_positions(ds, sid)[2]])
     if len(traces) > 2:
         raise ValueError(f"{len(traces)} runs; give one or two (CW and CCW)")
-    res = dbb.circular_test(traces, args.radius, args.plane, args.feed, **_diagnosis_options(args))
+    res = dbb.circular_test(traces, args.radius, args.plane, args.feed, thermal=thermal or None,
+                            standard=standard, **_diagnosis_options(args))
     print(res.report())
     fit = None
     if ds is not None:
@@ -387,8 +472,7 @@ def _circular(args) -> int:
     if grade is not None:
         print("\n  grade against the tolerances: " + grade["grade"])
         for i in grade["items"]:
-            print(f"    {i['name']} {i['run']:<7}{i['value'] * 1e3:9.3f} µm  "
-                  f"tolerance {i['tolerance'] * 1e3:.3f} µm  "
+            print(f"    {i['label']:<24}{i['run']:<8}{i['shown']:>22}  tolerance {i['tolerance_shown']:>12}  "
                   f"{i['grade']}")
     if args.out:
         # without a machine there is no machine-error fit: the document carries
@@ -409,13 +493,37 @@ def _circular(args) -> int:
     verdicts = [("ISO 230-4 values", _values_verdict(values, std))]
     if fit is not None:
         verdicts.append(("machine errors", fit.assessment()))
-    rc = fit_status("dbb circular", verdicts, args.force, (args.out, args.plot))
-    if rc == EXIT_OK and grade is not None and grade["grade"] == "FAIL":
-        bad = [f"{i['name']} {i['run']} {i['value'] * 1e3:.3f} µm > {i['tolerance'] * 1e3:.3f} µm"
-               for i in grade["items"] if i["grade"] == "FAIL"]
-        print(f"fivecal dbb circular: FAIL against the tolerances: {'; '.join(bad)}", file=sys.stderr)
+    rc = fit_status("dbb circular", verdicts, args.force, (args.out, args.plot, args.html))
+    if args.html:
+        reason = "" if rc == EXIT_OK else "the ISO 230-4 values or the machine-error fit are not usable (see the " \
+            "command's output)"
+        path = write_circular_report(res, args.html, grade=grade, usable=rc == EXIT_OK, reason=reason,
+                                     scale=args.scale, sources=list(args.runs) or [args.dataset or "simulated"])
+        print(f"HTML report written to {path}")
+    if rc == EXIT_OK and grade is not None and grade["grade"] != "PASS":
+        bad = [f"{i['label']} {i['run']} {i['shown']} > {i['tolerance_shown']}" if i["grade"] == "FAIL" else
+               f"{i['label']} not determined (not fitted or below 3σ; --all-diagnoses grades it)"
+               for i in grade["items"] if i["grade"] != "PASS"]
+        print(f"fivecal dbb circular: {grade['grade']} against the tolerances: {'; '.join(bad)}", file=sys.stderr)
         return EXIT_FIT
     return rc
+
+
+def _b5r(args, tolerances) -> int:
+    """A Renishaw .b5r file: its header and the diagnostics Renishaw's
+    software computed, read and ranked; the raw trace is not read (its
+    layout is not public: docs/dbb.md, "Renishaw .b5r files")."""
+    if len(args.runs) != 1:
+        raise ValueError("a .b5r file holds a whole test: give one .b5r file alone")
+    if tolerances:
+        raise ValueError("--tolerance: a .b5r file's diagnostics are Renishaw's, read as written; grade them in "
+                         "Renishaw's software or give the trace as CSV")
+    doc = b5r.read_b5r(args.runs[0], nominal_radius=args.radius)
+    print(doc.report())
+    if args.out:
+        write_result(args.out, _NO_FIT, "circular", {"b5r": doc.to_dict()})
+        print(f"\nresult written to {args.out}")
+    return EXIT_OK
 
 
 # ---- volumetric --------------------------------------------------------------
@@ -627,9 +735,46 @@ def register(sub) -> None:
                          epilog="examples:\n"
                          "  fivecal dbb circular cw.csv ccw.csv --radius 100 --plane XY --feed 1000 --plot xy.png\n"
                          "  fivecal dbb circular --machine c600u.json --simulate EXX1=2e-5,EC0Y=3e-5,EXXb=0.002 "
-                         "--radius 100")
-    pc.add_argument("runs", nargs="*", help="CSV files (angle, reading): one or two runs")
-    pc.add_argument("--radius", type=POSITIVE, required=True, help="nominal radius = bar length (mm)")
+                         "--radius 100\n"
+                         "  fivecal dbb circular ren_cw.txt ren_ccw.txt --radius 100 --sweep 360 --units um "
+                         "(readings only)\n"
+                         "  fivecal dbb circular cw.csv ccw.csv --radius 100 --tolerance G=15um,backlash=4um "
+                         "--html report/\n"
+                         "  fivecal dbb circular cw.csv ccw.csv --radius 100 --sidecar conditions.json "
+                         "(thermal compensation)\n"
+                         "  fivecal dbb circular test.b5r   (Renishaw's diagnostics, as written)")
+    pc.add_argument("runs", nargs="*", help="run files: CSV (angle, reading) or readings only with --sweep, one "
+                    "or two runs; or one Renishaw .b5r file (its diagnostics)")
+    pc.add_argument("--radius", type=POSITIVE, default=None,
+                    help="nominal radius = bar length (mm); required except for a .b5r file (which names it)")
+    pc.add_argument("--sweep", type=_float_type(10.0), default=None, metavar="DEG",
+                    help="readings-only files: the arc the samples span, deg (360, or 360 + feed-in + feed-out "
+                    "when the recording includes the overshoot arcs, removed as usual)")
+    pc.add_argument("--start", type=FINITE, default=0.0, metavar="DEG",
+                    help="readings-only files: angle of the first sample, deg (default 0)")
+    pc.add_argument("--direction", metavar="cw|ccw[,...]",
+                    help="run direction of each file (readings-only files need it unless the file name says cw or "
+                    "ccw; two-column files are checked against it)")
+    pc.add_argument("--units", choices=["mm", "um"], default=None,
+                    help="unit of the readings when the file's header names none (default mm)")
+    pc.add_argument("--angle-units", choices=["deg", "rad"], default=None,
+                    help="unit of the angle column when the header names none (default deg)")
+    pc.add_argument("--sidecar", metavar="JSON",
+                    help="test conditions: {\"thermal\": {bar_expansion, bar_temperature, machine_expansion, "
+                    "machine_temperature}, \"machine\", \"date\", \"feed\"}")
+    pc.add_argument("--bar-expansion", type=_expansion, default=None, metavar="ALPHA",
+                    help="thermal compensation: the bar's expansion coefficient, 1/K or ppm/K (11.5ppm)")
+    pc.add_argument("--bar-temperature", type=FINITE, default=None, metavar="DEGC", help="bar temperature, °C")
+    pc.add_argument("--machine-expansion", type=_expansion, default=None, metavar="ALPHA",
+                    help="thermal compensation: the machine scales' expansion coefficient, 1/K or ppm/K")
+    pc.add_argument("--machine-temperature", type=FINITE, default=None, metavar="DEGC",
+                    help="machine temperature, °C")
+    pc.add_argument("--standard", default="ISO 230-4",
+                    help="standard the values follow: ISO 230-4 (ASME B5.54, JIS B 6194 and GB/T 17421.4 are "
+                    "refused: their definitions are not public, `fivecal docs dbb`)")
+    pc.add_argument("--html", metavar="DIR", help="write the HTML report (verdict, polar plot, diagnosis) here")
+    pc.add_argument("--scale", type=POSITIVE, default=None,
+                    help="polar plot ring spacing in µm (default automatic; stated on the plot)")
     pc.add_argument("--plane", default="XY", help="XY, YZ or ZX (angles from the first axis to the second)")
     pc.add_argument("--feed", type=POSITIVE, default=None, help="feed (mm/min): servo mismatch as a time")
     pc.add_argument("--dataset", help="dataset JSON instead of CSV files")
@@ -638,7 +783,10 @@ def register(sub) -> None:
                     "(identify's, the result's parameters)")
     pc.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
                     help="grade ISO 230-4 values: G (circular deviation of each run), F (largest |radial "
-                    "deviation|), H (hysteresis), with a unit (G=15um); FAIL exits 1")
+                    "deviation|), H (hysteresis), and diagnoses by name, kind or axis letter (backlash=4um, "
+                    "backlash.X+=4um, squareness=20urad, scale_mismatch=10um/m, cyclic_error=2um), with a unit; "
+                    "a bare number is in the file unit (mm, rad); FAIL or a toleranced diagnosis not determined "
+                    "exits 1")
     pc.add_argument("--simulate", metavar="ERRORS", help="simulate CW and CCW runs with these errors")
     pc.add_argument("--sigma", type=SIGMA, default=0.0003, help="simulated reading noise, mm")
     pc.add_argument("--seed", type=SEED, default=1, help="random seed, 0 <= seed < 2^64 (default 1)")

@@ -135,7 +135,8 @@ def _header_names(line: str) -> list:
 
 
 def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
-                   sweep: Optional[float] = None, start: float = 0.0) -> Trace:
+                   sweep: Optional[float] = None, start: float = 0.0, units: Optional[str] = None,
+                   angle_units: Optional[str] = None) -> Trace:
     """Read ``angle, reading`` rows (deg, mm) from a CSV file.
 
     Separators: comma, semicolon, tab or spaces; a header line and ``#``
@@ -148,8 +149,14 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
     column, or the unit in brackets (``reading [um]``); another suffix is
     refused naming the column. Without a unit, readings beyond ±2 mm are
     refused as µm (a ballbar measures about ±1 mm), and angles that look like
-    radians give one :class:`fivecal.RadiansWarning`.
+    radians give one :class:`fivecal.RadiansWarning`. ``units`` (``mm``,
+    ``um``) and ``angle_units`` (``deg``, ``rad``) name the unit of columns
+    whose header names none; a header naming another unit is refused.
+    A readings-only file with a signed ``sweep`` (deg, negative = clockwise)
+    runs that way from ``start``.
     """
+    given = {"length": _unit_factor_of(units, "units", {"mm": 1.0, "um": 1e-3, "µm": 1e-3}),
+             "angle": _unit_factor_of(angle_units, "angle units", {"deg": 1.0, "rad": 180.0 / math.pi})}
     path = os.fspath(path)
     text = files.read_text(path, "trace CSV")
     rows = []
@@ -181,6 +188,15 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
         names = []  # a title line, not column names
     kinds = ["length"] if a.shape[1] == 1 else ["angle", "length"]
     units = [column_unit(n, k, path) for n, k in zip(names, kinds)] if names else [(1.0, None)] * len(kinds)
+    for j, k in enumerate(kinds):
+        if given[k] is None:
+            continue
+        factor, named = units[j]
+        if named is not None and abs(factor - given[k][0]) > 1e-12 * factor:
+            opt = "--units" if k == "length" else "--angle-units"
+            raise ValueError(f"{path}: column '{names[j]}' is in {named} but {opt} says {given[k][1]}; "
+                             "drop the option or fix the header")
+        units[j] = (given[k][0], given[k][1])
     for j, (factor, _) in enumerate(units):
         a[:, j] *= factor
     readings = a[:, -1]
@@ -195,14 +211,29 @@ def read_trace_csv(path: Union[str, os.PathLike], label: Optional[str] = None,
         if sweep is None:
             raise ValueError(f"{path}: one column (readings only); give the sweep angle to space "
                              "the samples evenly (Jiang & Cripps eq. 2)")
+        if not (isinstance(sweep, (int, float)) and math.isfinite(sweep) and 10.0 <= abs(sweep) <= 3600.0):
+            raise ValueError(f"{path}: sweep {sweep!r} deg; a readings-only trace needs the signed angle its "
+                             "samples sweep, 10 to 3600 deg (negative: clockwise)")
+        if not math.isfinite(start):
+            raise ValueError(f"{path}: start angle {start!r} is not finite")
         n = a.shape[0] - 1
         angles = start + np.arange(a.shape[0]) / n * sweep
-        return Trace(angles, readings, label=label or os.path.basename(path))
+        return Trace(angles, readings, 1 if sweep > 0 else -1, label=label or os.path.basename(path))
     if units[0][1] is None and looks_like_radians(a[:, 0]):
         col = names[0] if names else "angle"
         warnings.warn(radians_message(f"{path}: column '{col}'", a[:, 0]) +
                       f" or name the column {col.split('_')[0]}_rad", RadiansWarning, stacklevel=2)
     return Trace(a[:, 0], readings, label=label or os.path.basename(path))
+
+
+def _unit_factor_of(text: Optional[str], what: str, table: Mapping[str, float]):
+    """(factor to mm or deg, unit) of a unit option, None when not given."""
+    if text is None:
+        return None
+    key = str(text).strip()
+    if key not in table:
+        raise ValueError(f"{what}: '{key}'; give one of {', '.join(table)}")
+    return table[key], key
 
 
 def write_trace_csv(trace: Trace, path: Union[str, os.PathLike]) -> None:
@@ -948,10 +979,16 @@ _DIAG_LABELS = {
     "scale_mismatch": ("scale mismatch {a1}-{a2}", 1e6, "µm/m"),
     "squareness": ("squareness {a1}{a2} (angle - 90°)", 1e6, "µrad"),
     "servo_mismatch": ("servo mismatch (lag {a1} - lag {a2}) x feed", 1e3, "µm"),
-    "backlash.1": ("backlash {a1} (offset in the direction of motion)", 1e3, "µm"),
-    "backlash.2": ("backlash {a2} (offset in the direction of motion)", 1e3, "µm"),
-    "reversal_spike.1": ("reversal spike {a1} (height, outward > 0)", 1e3, "µm"),
-    "reversal_spike.2": ("reversal spike {a2} (height, outward > 0)", 1e3, "µm"),
+    "backlash.1+": ("backlash {a1}+ (reversal at the +{a1} end; offset along the motion)", 1e3, "µm"),
+    "backlash.1-": ("backlash {a1}- (reversal at the -{a1} end; offset along the motion)", 1e3, "µm"),
+    "backlash.2+": ("backlash {a2}+ (reversal at the +{a2} end; offset along the motion)", 1e3, "µm"),
+    "backlash.2-": ("backlash {a2}- (reversal at the -{a2} end; offset along the motion)", 1e3, "µm"),
+    "backlash.1": ("backlash {a1} (mean of {a1}+ and {a1}-)", 1e3, "µm"),
+    "backlash.2": ("backlash {a2} (mean of {a2}+ and {a2}-)", 1e3, "µm"),
+    "reversal_spike.1+": ("reversal spike {a1}+ (height, outward > 0)", 1e3, "µm"),
+    "reversal_spike.1-": ("reversal spike {a1}- (height, outward > 0)", 1e3, "µm"),
+    "reversal_spike.2+": ("reversal spike {a2}+ (height, outward > 0)", 1e3, "µm"),
+    "reversal_spike.2-": ("reversal spike {a2}- (height, outward > 0)", 1e3, "µm"),
     "lateral_play.1": ("lateral play along {a1} (at {a2} reversals)", 1e3, "µm"),
     "lateral_play.2": ("lateral play along {a2} (at {a1} reversals)", 1e3, "µm"),
     "straightness.1": ("straightness {a1} (bow along {a2}, peak-valley)", 1e3, "µm"),
@@ -966,8 +1003,10 @@ _DIAG_LABELS = {
 #: Short names of the ranked diagnoses (a cyclic error is ranked by its amplitude).
 _RANK_LABELS = {
     "scale_mismatch": "scale mismatch {a1}-{a2}", "squareness": "squareness {a1}{a2}",
-    "servo_mismatch": "servo mismatch", "backlash.1": "backlash {a1}", "backlash.2": "backlash {a2}",
-    "reversal_spike.1": "reversal spikes {a1}", "reversal_spike.2": "reversal spikes {a2}",
+    "servo_mismatch": "servo mismatch", "backlash.1+": "backlash {a1}+", "backlash.1-": "backlash {a1}-",
+    "backlash.2+": "backlash {a2}+", "backlash.2-": "backlash {a2}-",
+    "reversal_spike.1+": "reversal spikes {a1}+", "reversal_spike.1-": "reversal spikes {a1}-",
+    "reversal_spike.2+": "reversal spikes {a2}+", "reversal_spike.2-": "reversal spikes {a2}-",
     "lateral_play.1": "lateral play {a1}", "lateral_play.2": "lateral play {a2}",
     "straightness.1": "straightness {a1}", "straightness.2": "straightness {a2}",
     "radial_play.1": "radial play {a1}", "radial_play.2": "radial play {a2}",
@@ -1027,12 +1066,27 @@ class CircularResult(Viewable):
         d = core.diagnosis
         self.diagnosis: dict = {n: float(v) for n, v in zip(d.names, np.asarray(d.values))}
         self.diagnosis_std: dict = {n: float(s) for n, s in zip(d.names, np.asarray(d.std))}
+        #: values the core derives from the fitted ones (backlash.k: the mean of its two ends)
+        self.derived: tuple = tuple(d.derived_names)
+        self.diagnosis.update(zip(d.derived_names, map(float, np.asarray(d.derived_values))))
+        self.diagnosis_std.update(zip(d.derived_names, map(float, np.asarray(d.derived_std))))
+        #: diagnoses left out as not significant: name -> (|value|, std) in the fit they left
+        self.dropped: dict = {n: (float(v), float(sd)) for n, v, sd in
+                              zip(d.dropped_names, np.asarray(d.dropped_values), np.asarray(d.dropped_std))}
+        #: the largest circular deviation G of the runs (mm), what the percentages refer to
+        self.circularity: float = float(d.circularity)
         self.not_fitted: list = list(d.not_fitted)
         #: extended diagnoses left out as below the significance threshold ("name (z sigma)")
         self.not_significant: list = list(d.not_significant)
         self.diagnosis_rms: float = d.rms
         #: (diagnosis, contribution to circularity in mm), largest first
         self.ranking: list = [(n, float(c)) for n, c in zip(d.ranking, np.asarray(d.contribution))]
+        #: contribution of each ranked diagnosis in percent of the circularity
+        self.ranking_percent: dict = {n: float(p) for n, p in zip(d.ranking, np.asarray(d.contribution_percent))}
+        #: thermal compensation applied to the readings (None: none), as given
+        self.thermal: Optional[dict] = None
+        #: standard the values are named and graded by (STANDARDS)
+        self.standard: str = "ISO 230-4"
         #: pitches (mm) the cyclic errors were fitted with (0 = none), and those found by the search
         self.cyclic_pitch: tuple = (0.0, 0.0)
         self.cyclic_pitch_searched: dict = {}
@@ -1062,8 +1116,14 @@ class CircularResult(Viewable):
     def ranking_lines(self, top: Optional[int] = None) -> list:
         a1, a2 = self.plane[0], self.plane[1]
         rows = self.ranking[:top] if top else self.ranking
-        return [f"{i + 1:2d}. {_RANK_LABELS.get(n, n).format(a1=a1, a2=a2):<22}{c * 1e3:7.2f} µm"
-                for i, (n, c) in enumerate(rows)]
+        return [f"{i + 1:2d}. {_RANK_LABELS.get(n, n).format(a1=a1, a2=a2):<22}{self.ranking_percent[n]:5.0f} %"
+                f"{c * 1e3:8.2f} µm" for i, (n, c) in enumerate(rows)]
+
+    def label(self, name: str, short: bool = False) -> str:
+        """The name ballbar users know for diagnosis ``name`` in this plane."""
+        a1, a2 = self.plane[0], self.plane[1]
+        text = _RANK_LABELS.get(name) if short else None
+        return (text or _DIAG_LABELS.get(name, (name,))[0]).format(a1=a1, a2=a2)
 
     @property
     def servo_mismatch_ms(self) -> Optional[float]:
@@ -1110,16 +1170,16 @@ class CircularResult(Viewable):
         L += ["", "  diagnosis (least squares on every reading; formulas: `fivecal docs dbb`, section Diagnosis):"]
         for n in self.diagnosis:
             label, f, unit = _DIAG_LABELS[n]
-            L.append(f"    {label.format(a1=a1, a2=a2):<52}{self.diagnosis[n] * f:>10.3f} ± "
+            L.append(f"    {label.format(a1=a1, a2=a2):<64}{self.diagnosis[n] * f:>10.3f} ± "
                      f"{self.diagnosis_std[n] * f:.3f} {unit}")
         if self.servo_mismatch_ms is not None:
-            L.append(f"    {'servo mismatch as a lag difference':<52}{self.servo_mismatch_ms:>10.4f} ms "
+            L.append(f"    {'servo mismatch as a lag difference':<64}{self.servo_mismatch_ms:>10.4f} ms "
                      f"(feed {self.feed:g} mm/min)")
         for k, ax in ((1, a1), (2, a2)):
             amp = self.cyclic_amplitude(k)
             if amp is not None:
                 how = "found" if k in self.cyclic_pitch_searched else "given"
-                L.append(f"    {f'cyclic error {ax} amplitude':<52}{amp[0] * 1e3:>10.3f} ± {amp[1] * 1e3:.3f} µm "
+                L.append(f"    {f'cyclic error {ax} amplitude':<64}{amp[0] * 1e3:>10.3f} ± {amp[1] * 1e3:.3f} µm "
                          f"(pitch {self.cyclic_pitch[k - 1]:.4g} mm, {how})")
         for nf in self.not_fitted:
             L.append(f"    not fitted: {nf}")
@@ -1129,7 +1189,8 @@ class CircularResult(Viewable):
             L += textwrap.wrap("not significant, left out: " + ", ".join(self.not_significant), 100,
                                initial_indent="    ", subsequent_indent="      ")
         L.append(f"    residual rms after the diagnosis {self.diagnosis_rms * 1e3:.3f} µm")
-        L += ["", "  ranking by contribution to circularity (circular deviation of the term alone):"]
+        L += ["", f"  ranking by contribution to circularity (circular deviation of the term alone, in % of the "
+              f"circularity {self.circularity * 1e3:.2f} µm; ranges of separate terms do not add up):"]
         L += ["    " + line for line in self.ranking_lines()]
         return "\n".join(L)
 
@@ -1146,33 +1207,116 @@ class CircularResult(Viewable):
         return d
 
     #: what a circular test's tolerance may name: ISO 230-4 circular deviation
-    #: G (each run), radial deviation F (largest |F| of any run), hysteresis H
+    #: G (each run), radial deviation F (largest |F| of any run), hysteresis H;
+    #: and every diagnosis (DIAGNOSIS_TOLERANCES) by its name, its kind (all of
+    #: that kind), or with the axis letter of the plane (backlash.X+)
     TOLERANCE_NAMES = ("G", "F", "H")
+    #: diagnosis kind -> the dimension of its tolerance (kind, denominator, degree)
+    DIAGNOSIS_TOLERANCES = {"scale_mismatch": ("length", "length", 1), "squareness": ("angle", None, 0),
+                            "servo_mismatch": ("length", None, 0), "backlash": ("length", None, 0),
+                            "reversal_spike": ("length", None, 0), "lateral_play": ("length", None, 0),
+                            "straightness": ("length", None, 0), "radial_play": ("length", None, 0),
+                            "cyclic_error": ("length", None, 0)}
+
+    @classmethod
+    def tolerance_dimension(cls, name: str):
+        """(kind, denominator, degree) of a tolerance name, ValueError naming it when unknown."""
+        if name in cls.TOLERANCE_NAMES:
+            return "length", None, 0
+        kind = name.split(".", 1)[0]
+        if kind not in cls.DIAGNOSIS_TOLERANCES:
+            raise ValueError(f"--tolerance {name}: a circular test grades G (circular deviation), F (radial "
+                             "deviation), H (hysteresis) and the diagnoses " +
+                             ", ".join(cls.DIAGNOSIS_TOLERANCES) + " (e.g. backlash.X+=4um, squareness=20urad, "
+                             "scale_mismatch=10um/m)")
+        return cls.DIAGNOSIS_TOLERANCES[kind]
+
+    def _targets(self, name: str) -> list:
+        """The ranked diagnoses a tolerance name grades: an exact name, a
+        kind (every one of it), or the plane's axis letter for 1 / 2."""
+        kind, _, rest = name.partition(".")
+        for k, ax in ((1, self.plane[0]), (2, self.plane[1])):
+            if rest[:1].upper() == ax and ax not in "12":
+                rest = str(k) + rest[1:]
+        full = f"{kind}.{rest}" if rest else kind
+        if rest and rest[:1] not in "12":
+            raise ValueError(f"--tolerance {name}: '{rest[:1]}' is not an axis of the {self.plane} plane "
+                             f"({self.plane[0]} or {self.plane[1]}, or 1 / 2)")
+        known = [n for n, _ in self.ranking] + list(self.dropped)
+        if not rest:
+            return [n for n in known if n.split(".")[0] == kind] or [kind]
+        if full in known:
+            return [full]
+        split = [n for n in known if n in (full + "+", full + "-")]
+        return split or [full]
+
+    def _graded_value(self, name: str):
+        """(|value| in mm, mm/mm or rad, its std) of a ranked diagnosis, None when not fitted."""
+        if name.startswith("cyclic_error") and name.count(".") == 1:
+            amp = self.cyclic_amplitude(int(name[-1]))
+            return amp
+        if name not in self.diagnosis:
+            return None
+        return abs(self.diagnosis[name]), self.diagnosis_std[name]
 
     def grade(self, tolerances: Mapping[str, float]) -> dict:
-        """PASS / FAIL of each toleranced ISO 230-4 value (mm): ``{"grade":
-        "PASS"|"FAIL", "items": [{name, run, value, tolerance, grade}]}``;
-        a value that is missing (H of a single run) is refused."""
+        """PASS / FAIL of each toleranced value: the ISO 230-4 values (mm) and
+        the diagnoses (|value| in mm, mm/mm or rad; a cyclic error by its
+        amplitude): ``{"grade": "PASS"|"FAIL"|"NOT DETERMINED", "items":
+        [{name, label, run, value, std, tolerance, grade, shown,
+        tolerance_shown}]}``. A diagnosis left out as below 3 standard
+        uncertainties passes only when |value| + 3 std (in the fit it left)
+        is within the tolerance; otherwise, and for one not fitted at all,
+        it is NOT DETERMINED, never a PASS. A value that is missing (H of a
+        single run) is refused."""
         items = []
         for name, tol in tolerances.items():
-            if name not in self.TOLERANCE_NAMES:
-                raise ValueError(f"--tolerance {name}: a circular test grades "
-                                 f"{', '.join(self.TOLERANCE_NAMES)} (circular deviation, radial deviation, "
-                                 "hysteresis)")
-            if name == "H":
-                if self.hysteresis is None:
-                    raise ValueError("--tolerance H: hysteresis needs a CW and a CCW run")
-                pairs = [("CW/CCW", float(self.hysteresis))]
-            else:
-                pairs = [("CCW" if r.direction > 0 else "CW",
-                          float(r.circular_deviation) if name == "G" else
-                          max(abs(float(r.radial_deviation_max)), abs(float(r.radial_deviation_min))))
-                         for r in self.runs]
-            for run, v in pairs:
+            kind = self.tolerance_dimension(name)
+            if name in self.TOLERANCE_NAMES:
+                if name == "H":
+                    if self.hysteresis is None:
+                        raise ValueError("--tolerance H: hysteresis needs a CW and a CCW run")
+                    pairs = [("CW/CCW", float(self.hysteresis))]
+                else:
+                    pairs = [("CCW" if r.direction > 0 else "CW",
+                              float(r.circular_deviation) if name == "G" else
+                              max(abs(float(r.radial_deviation_max)), abs(float(r.radial_deviation_min))))
+                             for r in self.runs]
+                for run, v in pairs:
+                    ok = math.isfinite(v) and v <= tol
+                    items.append({"name": name, "label": {"G": "circular deviation G", "F": "radial deviation F",
+                                                          "H": "hysteresis H"}[name],
+                                  "run": run, "value": v, "std": None, "tolerance": float(tol),
+                                  "grade": "PASS" if ok else "FAIL", "shown": f"{v * 1e3:.2f} µm",
+                                  "tolerance_shown": f"{tol * 1e3:.2f} µm"})
+                continue
+            f, unit = (1e6, "µrad") if kind[0] == "angle" else ((1e6, "µm/m") if kind[1] else (1e3, "µm"))
+            for target in self._targets(name):
+                got = self._graded_value(target)
+                label = self.label(target, short=True)
+                if got is None and target in self.dropped:
+                    # below 3σ and left out: a PASS only when even |value| + 3σ is within the tolerance
+                    v, sd = self.dropped[target]
+                    ok = v + 3 * sd <= tol
+                    items.append({"name": target, "label": label, "run": "both", "value": v, "std": sd,
+                                  "tolerance": float(tol), "grade": "PASS" if ok else "NOT DETERMINED",
+                                  "shown": f"not significant: |{v * f:.2f}| ± {sd * f:.2f} {unit}",
+                                  "tolerance_shown": f"{tol * f:.2f} {unit}"})
+                    continue
+                if got is None:
+                    items.append({"name": target, "label": label, "run": "both", "value": None, "std": None,
+                                  "tolerance": float(tol), "grade": "NOT DETERMINED", "shown": "not determined",
+                                  "tolerance_shown": f"{tol * f:.2f} {unit}"})
+                    continue
+                v, sd = got
                 ok = math.isfinite(v) and v <= tol
-                items.append({"name": name, "run": run, "value": v, "tolerance": float(tol),
-                              "grade": "PASS" if ok else "FAIL"})
-        return {"grade": "FAIL" if any(i["grade"] == "FAIL" for i in items) else "PASS", "items": items}
+                items.append({"name": target, "label": label, "run": "both", "value": float(v), "std": float(sd),
+                              "tolerance": float(tol), "grade": "PASS" if ok else "FAIL",
+                              "shown": f"{v * f:.2f} ± {sd * f:.2f} {unit}",
+                              "tolerance_shown": f"{tol * f:.2f} {unit}"})
+        grades = {i["grade"] for i in items}
+        overall = "FAIL" if "FAIL" in grades else ("NOT DETERMINED" if "NOT DETERMINED" in grades else "PASS")
+        return {"grade": overall, "items": items}
 
     def to_dict(self) -> dict:
         return {"plane": self.plane, "nominal_radius": self.nominal_radius, "feed": self.feed,
@@ -1187,7 +1331,11 @@ class CircularResult(Viewable):
                 "servo_mismatch_ms": self.servo_mismatch_ms, "not_fitted": self.not_fitted,
                 "not_significant": self.not_significant, "cyclic_pitch": list(self.cyclic_pitch),
                 "diagnosis_rms": self.diagnosis_rms,
-                "ranking": [{"diagnosis": n, "contribution": c} for n, c in self.ranking],
+                "ranking": [{"diagnosis": n, "contribution": c, "percent": self.ranking_percent[n]}
+                            for n, c in self.ranking],
+                "circularity": self.circularity, "derived": list(self.derived),
+                "dropped": {n: {"value": v, "std": sd} for n, (v, sd) in self.dropped.items()},
+                "thermal": self.thermal, "standard": self.standard,
                 "overshoot_removed": [vars(t) for t in self.trimmed],
                 "machine": self.machine, "date": self.date, "samples": self.samples}
 
@@ -1197,7 +1345,8 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
                   feed_in: Optional[float] = None, reversal_spikes: bool = True, spike_width: float = 3.0,
                   lateral_play: bool = True, straightness: bool = True, radial_play: bool = True,
                   cyclic_pitch=None, significance: float = 3.0, machine=None,
-                  date: Optional[str] = None) -> CircularResult:
+                  date: Optional[str] = None, thermal: Optional[Mapping[str, float]] = None,
+                  standard: str = "ISO 230-4") -> CircularResult:
     """ISO 230-4 circular deviation, radial deviation, LSC centre and radius per
     run, hysteresis of a CW/CCW pair, and the least-squares diagnosis of
     centre offset, scale mismatch, squareness, backlash per axis, servo
@@ -1209,8 +1358,19 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
     to a lag difference in ms. ``trim``: runs sweeping more than
     ``data_arc`` have their feed-in and feed-out arcs removed first
     (:func:`trim_overshoot`). ``machine`` (a name or a Machine) and ``date``
-    go into the report and plot header."""
+    go into the report and plot header. ``thermal``: ``bar_expansion``,
+    ``machine_expansion`` (1/K), ``bar_temperature``, ``machine_temperature``
+    (deg C): the readings are referred to 20 deg C first (C++
+    ``CompensateBarTemperature``, docs/dbb.md "Thermal compensation").
+    ``standard``: the standard the values are named and graded by
+    (:data:`STANDARDS`; only those whose definitions are public)."""
+    standard = check_standard(standard)
     runs = [r for r in runs if r is not None]
+    th = check_thermal(thermal) if thermal else None
+    if th:
+        runs = [Trace(r.angles, np.asarray(_core.compensate_bar_temperature(
+            r.readings, float(radius), th["bar_expansion"], th["bar_temperature"], th["machine_expansion"],
+            th["machine_temperature"])), r.direction, r.label) for r in runs]
     for i, r in enumerate(runs):
         span = float(r.angles.max() - r.angles.min()) if r.angles.size else 0.0
         if span < MIN_CIRCLE_SWEEP:
@@ -1259,8 +1419,61 @@ def circular_test(runs: Iterable[Trace], radius: float, plane: str = "XY",
     name = machine.name if isinstance(machine, Machine) else machine
     res = CircularResult(core, plane, feed, runs, trimmed, name, date)
     res.cyclic_pitch = (float(core.cyclic_pitch1), float(core.cyclic_pitch2))
+    res.thermal = th
+    res.standard = standard
     res.cyclic_pitch_searched = {k: (res.cyclic_pitch[k - 1] or None) for k in (1, 2) if search[k - 1]}
     return res
+
+
+#: Standards a circular test is evaluated by. ISO 230-4's definitions (G, F,
+#: H, the least-squares circle) are the ones fivecal implements; the others
+#: map to the reason fivecal refuses them (docs/dbb.md, "Standards").
+STANDARDS = {"ISO 230-4": None,
+             "ASME B5.54": "its definitions of the circular test values are not public (the standard is sold by "
+                           "ASME and no public text states them), so fivecal cannot claim to compute them",
+             "JIS B 6194": "its definitions are not public (JIS text is sold; no public text states them), so "
+                           "fivecal cannot claim to compute them",
+             "GB/T 17421.4": "its text is not public to fivecal (SAC sells it); it has ISO 230-4's title and "
+                             "scope, but without its text fivecal cannot confirm that its definitions are ISO's: "
+                             "evaluate by ISO 230-4"}
+
+
+def check_standard(text: str) -> str:
+    """The canonical name of a standard (``iso230-4``, ``ISO 230-4`` ...);
+    ValueError naming it and why for one whose definitions are not public."""
+    key = "".join(c for c in str(text).upper() if c.isalnum())
+    for name, why in STANDARDS.items():
+        if "".join(c for c in name if c.isalnum()) == key:
+            if why:
+                raise ValueError(f"standard {name}: not implemented: {why}")
+            return name
+    raise ValueError(f"standard {text!r}: unknown; fivecal evaluates by ISO 230-4 (known but not implemented: "
+                     + ", ".join(n for n, w in STANDARDS.items() if w) + ")")
+
+
+#: The keys of a thermal compensation (a sidecar's "thermal" object).
+THERMAL_KEYS = ("bar_expansion", "bar_temperature", "machine_expansion", "machine_temperature")
+
+
+def check_thermal(thermal: Mapping) -> dict:
+    """The four numbers of a thermal compensation, ValueError naming a
+    missing, unknown or non-numeric key (ranges are the core's)."""
+    if not isinstance(thermal, Mapping):
+        raise ValueError(f"thermal: expected an object with {', '.join(THERMAL_KEYS)}")
+    unknown = [k for k in thermal if k not in THERMAL_KEYS]
+    if unknown:
+        raise ValueError(f"thermal.{unknown[0]}: unknown key (expected {', '.join(THERMAL_KEYS)})")
+    missing = [k for k in THERMAL_KEYS if k not in thermal]
+    if missing:
+        raise ValueError(f"thermal.{missing[0]}: missing; a thermal compensation needs {', '.join(THERMAL_KEYS)} "
+                         "(expansion in 1/K, temperatures in deg C; 0 expansion = not compensated)")
+    out = {}
+    for k in THERMAL_KEYS:
+        v = thermal[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"thermal.{k}: expected a finite number, got {v!r}")
+        out[k] = float(v)
+    return out
 
 
 @dataclass

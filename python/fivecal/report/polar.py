@@ -273,12 +273,12 @@ def plot_polar_grid(panels: Sequence[Mapping], path: str, title: str = "", ncols
     return path
 
 
-def circular_test_figure(result, title: Optional[str] = None):
+def circular_test_figure(result, title: Optional[str] = None, scale: Optional[float] = None):
     """The matplotlib Figure of :func:`plot_circular_test` (not saved)."""
     traces, notes, a1, a2 = _circular_parts(result)
     return polar_figure(traces, result.nominal_radius,
                         title or f"Circular test {result.plane}, R {result.nominal_radius:g} mm",
-                        annotations=notes, plane=(a1, a2), header=result.header_line())
+                        scale=scale, annotations=notes, plane=(a1, a2), header=result.header_line())
 
 
 def _circular_parts(result):
@@ -298,14 +298,17 @@ def _circular_parts(result):
     a1, a2 = result.plane[0], result.plane[1]
     rows = [("scale_mismatch", f"scale mismatch {a1}-{a2}", 1e6, "µm/m"),
             ("squareness", f"squareness {a1}{a2}", 1e6, "µrad"),
-            ("backlash.1", f"backlash {a1}", 1e3, "µm"),
-            ("backlash.2", f"backlash {a2}", 1e3, "µm"),
+            ("backlash.1+", f"backlash {a1}+", 1e3, "µm"),
+            ("backlash.1-", f"backlash {a1}-", 1e3, "µm"),
+            ("backlash.2+", f"backlash {a2}+", 1e3, "µm"),
+            ("backlash.2-", f"backlash {a2}-", 1e3, "µm"),
             ("servo_mismatch", "servo mismatch", 1e3, "µm"),
             ("centre.1", f"centre offset {a1}", 1e3, "µm"),
             ("centre.2", f"centre offset {a2}", 1e3, "µm")]
     # the extended diagnoses that survived the significance test (few, usually none)
     for k, ax, other in ((1, a1, a2), (2, a2, a1)):
-        rows += [(f"reversal_spike.{k}", f"reversal spike {ax}", 1e3, "µm"),
+        rows += [(f"reversal_spike.{k}+", f"reversal spike {ax}+", 1e3, "µm"),
+                 (f"reversal_spike.{k}-", f"reversal spike {ax}-", 1e3, "µm"),
                  (f"lateral_play.{k}", f"lateral play {ax}", 1e3, "µm"),
                  (f"straightness.{k}", f"straightness {ax}", 1e3, "µm"),
                  (f"radial_play.{k}", f"radial play {ax}", 1e3, "µm")]
@@ -326,11 +329,12 @@ def _circular_parts(result):
     return traces, notes, a1, a2
 
 
-def plot_circular_test(result, path: str, title: Optional[str] = None) -> str:
+def plot_circular_test(result, path: str, title: Optional[str] = None, scale: Optional[float] = None) -> str:
     """CW/CCW polar plot of a :class:`fivecal.procedures.dbb.CircularResult`: a
     header with machine, date, feed, radius and sample count, the ISO 230-4
-    values, the diagnosis and the five largest contributions beside it."""
-    fig = circular_test_figure(result, title)
+    values, the diagnosis and the five largest contributions beside it.
+    ``scale``: ring spacing in µm (default automatic); the plot states it."""
+    fig = circular_test_figure(result, title, scale)
     save_figure(fig, path, dpi=110)
     return path
 

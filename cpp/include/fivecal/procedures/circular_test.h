@@ -45,7 +45,17 @@
 //  * backlash: x1 = x1_cmd + b1 sgn(dx1/dt) (fivecal's E11b: the axis sits
 //    b1 ahead of its command in the direction it moves; the step seen at the
 //    reversal is 2 b1; b < 0 is the usual lagging lost motion). The motion
-//    signs come from the recorded order of the samples.
+//    signs come from the recorded order of the samples. As ballbar software
+//    does, it is split by the end of the travel where the axis reverses:
+//    backlash.1+ is b1 on the half of the circle around the + end of axis 1
+//    (cos phi > 0, the reversal at phi = 0), backlash.1- around its - end
+//    (cos phi < 0, the reversal at 180 deg); column cos phi sgn(dx1/dt) on
+//    that half, 0 on the other. The axis error jumps where the halves meet
+//    (axis 1 at 90/270 deg), at right angles to the bar, so the radial trace
+//    stays continuous there. Their mean is reported as backlash.k (derived,
+//    with the covariance of both). Lateral play is not split: with the
+//    backlash split, the four quadrant levels of s|cos phi| leave one
+//    combination for lateral play (L1+ - L1- = B1- - B1+ as columns).
 // The diagnoses ballbar users know beyond these (docs/dbb.md, "Planar
 // circular tests"), each a linear term of the same fit; e_k is the position
 // error of axis k, x1 = R cos phi, x2 = R sin phi about the pivot, and the
@@ -55,6 +65,8 @@
 //    and catches up with a decay over the path angle w (spike_width):
 //    e1 = p1 sgn(cos phi_r) exp(-dphi / w), dphi = angle travelled since
 //    phi_r; column cos phi sgn(cos phi_r) exp(-dphi/w) (sin for axis 2).
+//    Split as backlash: reversal_spike.1+ the spikes after the reversal at
+//    the + end (phi_r = 0), .1- at the - end (180 deg).
 //  * lateral play of axis k (L_k): the carriage of the other axis shifts
 //    along axis k (perpendicular to its own travel) when that other axis
 //    reverses: e1 = L1 sgn(dx2/dt) -> d = s L1 |cos phi|,
@@ -76,7 +88,10 @@
 // Ranking: each diagnosis' contribution to circularity is the circular
 // deviation (range about its own least-squares circle, as G) of the fitted
 // term's radial deviation alone, the largest over the runs; centre and radius
-// are set-up and are not ranked.
+// are set-up and are not ranked. As a percentage it is that contribution over
+// the circularity (the largest G of the runs) times 100, the figure ballbar
+// software ranks by; the percentages need not add up to 100 (ranges of
+// separate terms do not add).
 // Parameters the data cannot carry (servo mismatch and lateral play from one
 // direction only; a backlash, lateral play or spike whose axis never reverses
 // inside the data; any term the samples cannot separate from the others) are
@@ -167,17 +182,28 @@ struct CircularRunResult {
 
 struct CircularDiagnosis {
   std::vector<std::string> names;  // radius, centre.1, centre.2, scale_mismatch, squareness,
-                                   // servo_mismatch, backlash.k, reversal_spike.k, lateral_play.k,
+                                   // servo_mismatch, backlash.k+, backlash.k-, reversal_spike.k+|-, lateral_play.k,
                                    // straightness.k, radial_play.k, cyclic_error.k.cos|sin
                                    // (k = 1, 2; those fitted)
   Eigen::VectorXd values, std;     // mm, mm/mm, rad
   std::vector<std::string> not_fitted;  // with the reason in the text
   std::vector<std::string> not_significant;  // extended diagnoses dropped below options.significance
+  // Each dropped diagnosis (a name, or the group cyclic_error.k) with its
+  // |value| (a cyclic error's amplitude) and standard uncertainty in the fit
+  // it was dropped from: a tolerance can still be graded by |value| + 3 std.
+  std::vector<std::string> dropped_names;
+  Eigen::VectorXd dropped_values, dropped_std;
   double rms = 0.0;                // residual after the fit (mm)
   // Diagnoses (a name, or the group "cyclic_error.k" of its .cos/.sin
   // parameters) in decreasing contribution to circularity (mm).
   std::vector<std::string> ranking;
   Eigen::VectorXd contribution;
+  Eigen::VectorXd contribution_percent;  // contribution / circularity x 100
+  double circularity = 0.0;              // the largest G of the runs (mm)
+  // Values derived from the fitted ones with their covariance: backlash.k,
+  // the mean of backlash.k+ and backlash.k- (when both are fitted).
+  std::vector<std::string> derived_names;
+  Eigen::VectorXd derived_values, derived_std;
   double Get(const std::string& name) const;
   bool Has(const std::string& name) const;
 };
@@ -200,6 +226,32 @@ struct CircularTestResult {
 CircularTestResult AnalyzeCircularTest(const std::vector<CircularRun>& runs, double nominal_radius,
                                        double feed = 0.0 /* mm/min, 0 = unknown */,
                                        const CircularDiagnosisOptions& options = CircularDiagnosisOptions());
+
+// The contribution to circularity (mm) of one diagnosis of the given value
+// (mm, mm/mm, rad; servo_mismatch in mm) on a full circle of radius R: the
+// circular deviation of its term alone, as the ranking computes it, the
+// larger of a CCW and a CW run. For the diagnoses read from another program
+// (a .b5r file) and for tolerances. Throws std::invalid_argument naming an
+// unknown diagnosis.
+double DiagnosisContribution(const std::string& name, double value, double nominal_radius,
+                             const CircularDiagnosisOptions& options = CircularDiagnosisOptions());
+
+// Thermal compensation of a ball bar reading: the bar at t_bar (deg C) has
+// grown by L alpha_bar (t_bar - t_ref), so the distance between the balls is
+// D = L (1 + alpha_bar (t_bar - t_ref)) + reading; the machine at t_machine
+// carries a scale expanded by alpha_machine (t_machine - t_ref), so the
+// distance at the reference temperature is D / (1 + alpha_machine
+// (t_machine - t_ref)). Returned: that distance minus L, per reading (mm).
+// alpha in 1/K (steel 11.5e-6); |alpha| above 1e-4 /K is refused (a value in
+// ppm/K given as 1/K), temperatures outside -20 .. 60 deg C too; the error
+// names the field.
+struct BarThermal {
+  double alpha_bar = 0.0, t_bar = 20.0;
+  double alpha_machine = 0.0, t_machine = 20.0;
+  double t_ref = 20.0;
+};
+Eigen::VectorXd CompensateBarTemperature(const Eigen::VectorXd& readings, double nominal_length,
+                                         const BarThermal& thermal);
 
 // Fourier coefficients of a trace by least squares on
 // [1, cos phi, sin phi, ..., cos K phi, sin K phi] (works for uneven sampling;
