@@ -35,17 +35,16 @@ from typing import Dict, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
+from .. import _core
 from ..dataset import Dataset
-from ..identification import identify as fit
-from ..identification import result_document
+from ..identification import Result, result_document, warn_when_unusable
 from ..machine import Machine
-from .sphere_check import pivot_parameters
 
 TESTS = ("K1", "K2", "K3", "K4")
 
 
 def _rotary(machine: Machine) -> List[str]:
-    return [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+    return list(_core.checked_rotary_axes(machine._core))
 
 
 def _roles(machine: Machine) -> Dict[str, str]:
@@ -200,8 +199,9 @@ def location_errors(machine: Machine) -> List[str]:
     axis line) an R-test of both rotary axes can see: for each rotary axis the
     two positions across it and the two tilts (a position that is the
     spindle's offset under another name carries the spindle's name, as in
-    ``identify --estimate location``: :func:`fivecal.procedures.sphere_check.spindle_equivalent`)."""
-    return [n for a in _rotary(machine) for n in pivot_parameters(machine, a, backlash=False)]
+    ``identify --estimate location``: :func:`fivecal.procedures.sphere_check.spindle_equivalent`).
+    The core's list (``procedures/rtest.h`` RTestLocationErrors)."""
+    return list(_core.rtest_location_errors(machine._core))
 
 
 def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
@@ -210,24 +210,16 @@ def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
     in X, Y and Z, and, with ``identify``, the location errors of the rotary
     axes fitted to all tests at once (``estimate``: default
     :func:`location_errors`; each mounting's ball positions are part of the
-    fit, as for any ball3d data). Raises ValueError without ball3d data."""
+    fit, as for any ball3d data). The evaluation is the core's
+    (``procedures/rtest.h`` EvaluateRTest). Raises ValueError without ball3d data."""
     ds = Dataset.from_dict(dataset)
-    obs = ds.observations
-    groups: Dict[str, list] = {}
-    for o in obs:
-        if o.get("type") == "ball3d":
-            groups.setdefault(o.get("setup", "") or "(no setup)", []).append(o["measured"])
-    if not groups:
-        raise ValueError("R-test: the dataset has no ball3d observations")
-    tests = {}
-    for name, rows in groups.items():
-        d = np.asarray(rows, float)
-        tests[name] = KTest(name, len(d), d.max(axis=0) - d.min(axis=0), d)
+    core = _core.rtest(ds._core, bool(identify), [str(n) for n in (estimate or [])])
+    tests = {g.name: KTest(g.name, len(g.observations), np.asarray(g.ranges), np.asarray(g.deviations))
+             for g in core.tests}
     out = RTestResult(tests)
-    if identify:
-        est = list(estimate or location_errors(ds.machine))
-        out.result = fit(ds, est)
-        out.estimated = est
+    if core.identified:
+        out.result = warn_when_unusable(Result(core.fit, ds))
+        out.estimated = list(core.estimated)
     return out
 
 
