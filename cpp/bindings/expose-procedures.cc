@@ -489,6 +489,23 @@ void BindProcedures(py::module_& m) {
       .def_readonly("fit", &RTestResult::fit);
   m.def("rtest_location_errors", &RTestLocationErrors, py::arg("machine"));
   m.def(
+      "rtest_axis_roles",
+      [](const Machine& mc) {
+        const RTestRoles r = RTestAxisRoles(mc);
+        py::dict d;
+        d["turn"] = std::string(1, r.turn);
+        d["tilt"] = std::string(1, r.tilt);
+        return d;
+      },
+      py::arg("machine"));
+  m.def(
+      "rtest_sequence",
+      [](const Machine& mc, const std::string& test, double step, double tilt,
+         const std::pair<double, double>& tilt_range) {
+        return RTestSequence(mc, test, step, tilt, tilt_range.first, tilt_range.second);
+      },
+      py::arg("machine"), py::arg("test"), py::arg("step"), py::arg("tilt"), py::arg("tilt_range"));
+  m.def(
       "rtest",
       [](const Dataset& ds, bool identify, const std::vector<std::string>& estimate) {
         RTestOptions o;

@@ -284,3 +284,63 @@ def test_sphere_check_refuses_bad_input_naming_the_field(check_data):
         _core.rtest(rds._core, estimate=["EX0S", ""])
     with pytest.raises(ValueError, match="EQ0Q"):
         rtest.evaluate(rds, estimate=["EQ0Q"])
+
+
+# ---------------------------------------------------------------------------
+# The K tests' rotary poses (was rtest._roles and rtest._sequence)
+# ---------------------------------------------------------------------------
+def _old_roles(machine):
+    rot = _old_rotary_axes(machine)
+    if len(rot) != 2:
+        raise ValueError(f"R-test K tests: machine {machine.name!r} has {len(rot)} rotary axes "
+                         f"({', '.join(rot) or 'none'}); the tests are defined for two")
+    axes = machine.to_dict()["axes"]
+    z = [abs(float(np.asarray(axes[a]["direction"], float)[2])) for a in rot]
+    turn = rot[int(np.argmax(z))]
+    return {"turn": turn, "tilt": [a for a in rot if a != turn][0]}
+
+
+def _old_sequence(machine, test, step, tilt, tilt_range):
+    r = _old_roles(machine)
+    turn, tl = r["turn"], r["tilt"]
+    full = list(np.arange(0.0, 360.0 + 1e-9, step))
+    if test == "K1":
+        return [{turn: float(c), tl: 0.0} for c in full]
+    if test == "K2":
+        lo, hi = tilt_range
+        return [{turn: 0.0, tl: float(a)} for a in np.arange(lo, hi + 1e-9, step)]
+    if test == "K3":
+        return [{turn: float(c), tl: float(tilt)} for c in full]
+    if test == "K4":
+        return [{turn: float(c), tl: float(tilt * np.sin(np.radians(c)))} for c in full]
+    raise ValueError(test)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_k_test_poses_equal_the_old_python(name):
+    m = _machine(name)
+    rng = np.random.default_rng(11)
+    assert rtest._roles(m) == _old_roles(m)
+    for _ in range(4):
+        step = float(rng.choice([0.7, 5.0, 7.3, 15.0, 22.5]))
+        tilt = float(rng.uniform(-90, 90))
+        tilt_range = tuple(sorted(float(x) for x in rng.uniform(-120, 120, 2)))
+        for t in rtest.TESTS:
+            new, old = rtest._sequence(m, t, step, tilt, tilt_range), _old_sequence(m, t, step, tilt, tilt_range)
+            assert len(new) == len(old) and all(list(a) == list(b) for a, b in zip(new, old)), (t, step)
+            _close([v for e in new for v in e.values()], [v for e in old for v in e.values()])
+
+
+def test_k_test_poses_refuse_bad_input_naming_the_field():
+    m = _machine("c600u")
+    for kw, field in [(dict(test="K5"), "test"), (dict(step=0.0), "step"), (dict(step=float("nan")), "step"),
+                      (dict(tilt=float("inf")), "tilt"), (dict(tilt_range=(30.0, -30.0)), "tilt_range")]:
+        args = dict(test="K2", step=15.0, tilt=-45.0, tilt_range=(-90.0, 90.0)) | kw
+        with pytest.raises(ValueError, match=rf"^{field}: "):
+            _core.rtest_sequence(m._core, **args)
+    three = fivecal.Machine.from_dict({"name": "3ax", "topology": "wfXYZt",
+                                       "axes": {a: {"type": "linear", "direction": d} for a, d in
+                                                (("X", [1, 0, 0]), ("Y", [0, 1, 0]), ("Z", [0, 0, 1]))},
+                                       "tool": {"tip": [0, 0, 100]}})
+    with pytest.raises(ValueError, match="has 0 rotary axes \\(none\\); the tests are defined for two"):
+        _core.rtest_axis_roles(three._core)

@@ -49,31 +49,17 @@ def _rotary(machine: Machine) -> List[str]:
 
 def _roles(machine: Machine) -> Dict[str, str]:
     """The turning axis (the one nearest the table normal / tool axis, +Z at
-    the zero pose) and the tilting axis of the machine."""
-    rot = _rotary(machine)
-    if len(rot) != 2:
-        raise ValueError(f"R-test K tests: machine {machine.name!r} has {len(rot)} rotary axes "
-                         f"({', '.join(rot) or 'none'}); the tests are defined for two")
-    axes = machine.to_dict()["axes"]
-    z = [abs(float(np.asarray(axes[a]["direction"], float)[2])) for a in rot]
-    turn = rot[int(np.argmax(z))]
-    return {"turn": turn, "tilt": [a for a in rot if a != turn][0]}
+    the zero pose) and the tilting axis of the machine (the core's
+    ``procedures/rtest.h`` RTestAxisRoles)."""
+    return dict(_core.rtest_axis_roles(machine._core))
 
 
 def _sequence(machine: Machine, test: str, step: float, tilt: float, tilt_range) -> List[Dict[str, float]]:
+    """The rotary poses of K test ``test`` (the core's RTestSequence)."""
     r = _roles(machine)
-    turn, tl = r["turn"], r["tilt"]
-    full = list(np.arange(0.0, 360.0 + 1e-9, step))
-    if test == "K1":
-        return [{turn: float(c), tl: 0.0} for c in full]
-    if test == "K2":
-        lo, hi = tilt_range
-        return [{turn: 0.0, tl: float(a)} for a in np.arange(lo, hi + 1e-9, step)]
-    if test == "K3":
-        return [{turn: float(c), tl: float(tilt)} for c in full]
-    if test == "K4":
-        return [{turn: float(c), tl: float(tilt * np.sin(np.radians(c)))} for c in full]
-    raise ValueError(f"test: {test!r} is not an R-test K test (tests: {', '.join(TESTS)})")
+    lo, hi = tilt_range
+    seq = np.asarray(_core.rtest_sequence(machine._core, str(test), float(step), float(tilt), (float(lo), float(hi))))
+    return [{r["turn"]: float(c), r["tilt"]: float(a)} for c, a in seq]
 
 
 def tip_offset(machine: Machine, axes: Mapping[str, float], tool_ball) -> np.ndarray:

@@ -29,6 +29,25 @@ namespace fivecal {
 // aside, topology order) PivotParameters(axis, false), spindle-named.
 std::vector<std::string> RTestLocationErrors(const Machine& m);
 
+// The two rotary axes of a K test: the turning axis (the one nearest the
+// table normal / tool axis, the largest |z| of its direction at the zero
+// pose, the first in topology order on a tie) and the tilting axis. Throws
+// std::invalid_argument unless the machine has exactly two (spindle aside).
+struct RTestRoles {
+  char turn = 'C', tilt = 'A';
+};
+RTestRoles RTestAxisRoles(const Machine& m);
+
+// The rotary poses of K test `test` (rows: turning, tilting axis, degrees):
+//   K1  turn 0, step, ... 360, tilt 0
+//   K2  turn 0, tilt tilt_min, tilt_min + step, ... tilt_max
+//   K3  as K1 with the tilting axis at `tilt`
+//   K4  as K1 with the tilting axis at tilt * sin(turn)
+// Throws std::invalid_argument naming the field: test, step (finite, >= 360
+// / 100000 deg: at most 100000 samples a turn), tilt, tilt_range.
+Eigen::MatrixXd RTestSequence(const Machine& m, const std::string& test, double step, double tilt,
+                              double tilt_min, double tilt_max);
+
 struct RTestOptions {
   bool identify = true;
   std::vector<std::string> estimate;  // empty: RTestLocationErrors
