@@ -196,14 +196,13 @@ TEST(SphereCheck, RefusesBadInputNamingTheField) {
 // One K test's ball3d plan: the rotary poses, the linear axes from the
 // nominal inverse so that the ball stays centred on the nominal machine.
 json KTestPlan(const Machine& m, const std::string& test, const Eigen::Vector3d& ball) {
-  const int c = m.AxisIndex('C'), a = m.AxisIndex('A');
+  const RTestRoles roles = RTestAxisRoles(m);
+  const int c = m.AxisIndex(roles.turn), a = m.AxisIndex(roles.tilt);
   json plan = json::array();
   Eigen::VectorXd prev = Eigen::VectorXd::Zero(m.num_axes());
-  for (int k = 0; k <= 24; ++k) {
-    double cv = 15.0 * k, av = 0.0;
-    if (test == "K2") cv = 0.0, av = -90.0 + 7.5 * k;
-    if (test == "K3") av = -45.0;
-    if (test == "K4") av = -45.0 * std::sin(cv * M_PI / 180.0);
+  const Eigen::MatrixXd seq = RTestSequence(m, test, test == "K2" ? 7.5 : 15.0, -45.0, -90.0, 90.0);
+  for (int k = 0; k < seq.rows(); ++k) {
+    const double cv = seq(k, 0), av = seq(k, 1);
     Eigen::VectorXd start = prev;
     start[c] = cv;
     start[a] = av;
@@ -211,14 +210,42 @@ json KTestPlan(const Machine& m, const std::string& test, const Eigen::Vector3d&
                                                 nullptr, start);
     json axes, dir;
     for (int i = 0; i < m.num_axes(); ++i) axes[std::string(1, m.axis(i).name)] = q(0, i);
-    dir["C"] = cv >= prev[c] ? 1 : -1;
-    dir["A"] = av >= prev[a] ? 1 : -1;
+    dir[std::string(1, roles.turn)] = cv >= prev[c] ? 1 : -1;
+    dir[std::string(1, roles.tilt)] = av >= prev[a] ? 1 : -1;
     plan.push_back({{"type", "ball3d"}, {"setup", test}, {"axes", axes}, {"direction", dir},
                     {"tool_ball", {m.tip().x(), m.tip().y(), m.tip().z()}},
                     {"table_ball", {ball.x(), ball.y(), ball.z()}}});
     prev = q.row(0).transpose();
   }
   return plan;
+}
+
+TEST(RTest, KTestPoses) {
+  const Machine m = Machine::FromJson(MachineJson("c600u").dump());
+  const RTestRoles r = RTestAxisRoles(m);
+  EXPECT_EQ(r.turn, 'C');  // C along -Z: the table's normal
+  EXPECT_EQ(r.tilt, 'A');
+  const Eigen::MatrixXd k1 = RTestSequence(m, "K1", 30.0, -45.0, -90.0, 90.0);
+  ASSERT_EQ(k1.rows(), 13);  // 0, 30, ... 360: the full turn closes
+  EXPECT_DOUBLE_EQ(k1(12, 0), 360.0);
+  EXPECT_EQ(k1.col(1).cwiseAbs().maxCoeff(), 0.0);
+  const Eigen::MatrixXd k2 = RTestSequence(m, "K2", 15.0, -45.0, -60.0, 30.0);
+  ASSERT_EQ(k2.rows(), 7);
+  EXPECT_DOUBLE_EQ(k2(0, 1), -60.0);
+  EXPECT_DOUBLE_EQ(k2(6, 1), 30.0);
+  EXPECT_EQ(k2.col(0).cwiseAbs().maxCoeff(), 0.0);
+  const Eigen::MatrixXd k4 = RTestSequence(m, "K4", 15.0, -30.0, -90.0, 90.0);
+  EXPECT_NEAR(k4.col(1).minCoeff(), -30.0, 1e-12);
+  EXPECT_NEAR(k4.col(1).maxCoeff(), 30.0, 1e-12);
+  EXPECT_NEAR(k4(6, 1), -30.0, 1e-12);  // C = 90
+  EXPECT_EQ(Message([&] { RTestSequence(m, "K5", 15, 0, -90, 90); }).rfind("test: 'K5'", 0), 0u);
+  EXPECT_EQ(Message([&] { RTestSequence(m, "K1", 0.001, 0, -90, 90); }).rfind("step: ", 0), 0u);
+  EXPECT_EQ(Message([&] { RTestSequence(m, "K2", 15, 0, 90, -90); }).rfind("tilt_range: ", 0), 0u);
+  const Machine three = Machine::FromJson(
+      R"({"name": "3ax", "topology": "wfXYZt", "axes": {"X": {"type": "linear", "direction": [1, 0, 0]},
+          "Y": {"type": "linear", "direction": [0, 1, 0]}, "Z": {"type": "linear", "direction": [0, 0, 1]}},
+          "tool": {"tip": [0, 0, 100]}})");
+  EXPECT_NE(Message([&] { RTestAxisRoles(three); }).find("the tests are defined for two"), std::string::npos);
 }
 
 TEST(RTest, RangesAndLocationErrorsWithin3Sigma) {
