@@ -184,6 +184,11 @@ TEST(SphereCheck, RefusesBadInputNamingTheField) {
   EXPECT_EQ(Message([&] { EvaluateSphereCheck(ds, o); }).rfind("previous.EA0C: value", 0), 0u);
   o.previous = {{"EA0C", {0.0, -1e-6}}};
   EXPECT_EQ(Message([&] { EvaluateSphereCheck(ds, o); }).rfind("previous.EA0C: std", 0), 0u);
+  // an entry the check does not compare with is not read
+  o.previous = {{"sphere.S1.x", {std::nan(""), 0.0}}, {"EX0C", {0.0, 0.0}}};
+  const SphereCheckResult r = EvaluateSphereCheck(ds, o);
+  ASSERT_EQ(r.change.size(), 1u);
+  EXPECT_EQ(r.change[0].name, "EX0S");  // the previous EX0C under the spindle's name
   // no rotary motion: nothing to check
   Dataset still = ds;
   for (Observation& ob : still.observations) {

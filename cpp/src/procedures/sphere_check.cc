@@ -120,11 +120,6 @@ SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOption
   if (options.backlash < -1 || options.backlash > 1)
     throw std::invalid_argument("backlash: " + std::to_string(options.backlash) +
                                 " (expected -1: where reached from both sides, 0: no, 1: yes)");
-  for (const auto& [name, p] : options.previous) {
-    if (!std::isfinite(p.first)) throw std::invalid_argument("previous." + name + ": value is not finite");
-    if (!(p.second >= 0) || !std::isfinite(p.second))
-      throw std::invalid_argument("previous." + name + ": std must be a finite number >= 0");
-  }
   std::set<std::string> spheres;
   for (const Observation& o : obs)
     if (o.type == ObservationType::kSphere) spheres.insert(o.target);
@@ -161,6 +156,18 @@ SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOption
     }
     const bool backlash = options.backlash < 0 ? (up && down) : options.backlash == 1;
     for (const std::string& n : PivotParameters(m, m.axis(i).name, backlash)) out.estimate.push_back(n);
+  }
+
+  // the previous values this check compares with must be numbers; others
+  // (a previous identify's set-up, its other errors) are not read
+  for (const auto& [name, p] : options.previous) {
+    const auto used = [&](const std::string& n) {
+      return std::find(out.estimate.begin(), out.estimate.end(), n) != out.estimate.end();
+    };
+    if (!used(name) && !used(SpindleEquivalent(m, name))) continue;
+    if (!std::isfinite(p.first)) throw std::invalid_argument("previous." + name + ": value is not finite");
+    if (!(p.second >= 0) || !std::isfinite(p.second))
+      throw std::invalid_argument("previous." + name + ": std must be a finite number >= 0");
   }
 
   IdentifyOptions io;

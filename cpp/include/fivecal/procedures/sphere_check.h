@@ -104,8 +104,9 @@ struct SphereCheckResult {
 
 // Throws std::invalid_argument naming the field: no touches of a sphere, an
 // unknown `sphere`, no rotary axis moved, `backlash` not -1/0/1, a previous
-// value not finite or a std < 0; a per-position centre that does not
-// converge; and whatever Identify refuses.
+// value of a checked parameter not finite or its std not finite and >= 0
+// (the entries the check does not compare with are not read); a
+// per-position centre that does not converge; and whatever Identify refuses.
 SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOptions& options);
 
 }  // namespace fivecal
