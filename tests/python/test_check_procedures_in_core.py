@@ -273,6 +273,10 @@ def test_sphere_check_refuses_bad_input_naming_the_field(check_data):
     # a previous check written with an infinite value is refused, not turned into an infinite change
     with pytest.raises(ValueError, match=r"previous\.EX0C"):
         sphere_check.evaluate(ds, previous={"parameters": {"EX0C": {"value": float("inf"), "std": 0.0}}})
+    # what the check does not compare with is not read: a previous fit's set-up, any value
+    c = sphere_check.evaluate(ds, previous={"parameters": {"sphere.S1.x": {"value": float("nan"), "std": 0.0},
+                                                           "EY0C": {"value": 0.0, "std": 0.0}}})
+    assert list(c.change) == ["EY0C"]
     # no sphere touches at all: the dataset's ball3d data is not a sphere check
     rds = fivecal.simulate(m, rtest.plan(m, "K1", table_ball=[120.0, -40.0, 80.0], step=30), errors={},
                            sigma={"ball3d": 0.0005}, seed=1)
