@@ -1,7 +1,7 @@
 // Bindings of the procedures (fivecal/procedures/): the double ball bar
 // algorithms (circle fits, the Jiang & Cripps four-step test, the Wang et al.
-// path and planar circular tests), the machine-as-CMM sphere test, machining
-// tests and probing statistics. Inputs are validated in the core
+// path and planar circular tests), the machine-as-CMM sphere test, the
+// sphere check, the R-test, machining tests and probing statistics. Inputs are validated in the core
 // (std::invalid_argument -> ValueError).
 #include <pybind11/eigen.h>
 #include <pybind11/functional.h>
@@ -20,6 +20,8 @@
 #include "fivecal/procedures/dbb_setup.h"
 #include "fivecal/procedures/machining_test.h"
 #include "fivecal/procedures/probing_stats.h"
+#include "fivecal/procedures/rtest.h"
+#include "fivecal/procedures/sphere_check.h"
 #include "fivecal/procedures/sphere_test.h"
 #include "fivecal/procedures/wang_path.h"
 #include "fivecal/solve/identify.h"
@@ -38,6 +40,11 @@ ARemoval ParseRemoval(const std::string& s) {
 
 Eigen::Vector3d OptionalVector(const std::optional<Eigen::Vector3d>& v) {
   return v ? *v : Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+}
+
+char AxisLetter(const std::string& axis) {
+  if (axis.size() != 1) throw std::invalid_argument("axis: '" + axis + "' is not one axis letter");
+  return axis[0];
 }
 
 Eigen::MatrixXd Stack(const std::vector<Eigen::Vector3d>& v) {
@@ -449,6 +456,102 @@ void BindProcedures(py::module_& m) {
       },
       py::arg("setup"), py::arg("plan_json"), py::arg("sphere"), py::arg("names"),
       py::arg("values") = std::map<std::string, double>{}, py::arg("characteristic_length") = 400.0);
+
+  // ---- sphere check and R-test ----------------------------------------------------
+  m.def("spindle_equivalent", &SpindleEquivalent, py::arg("machine"), py::arg("name"));
+  m.def("spindle_names", &SpindleNames, py::arg("machine"), py::arg("errors"));
+  m.def(
+      "checked_rotary_axes",
+      [](const Machine& mc) {
+        std::vector<std::string> out;
+        for (char a : CheckedRotaryAxes(mc)) out.emplace_back(1, a);
+        return out;
+      },
+      py::arg("machine"));
+  m.def(
+      "pivot_parameters",
+      [](const Machine& mc, const std::string& axis, bool backlash) {
+        return PivotParameters(mc, AxisLetter(axis), backlash);
+      },
+      py::arg("machine"), py::arg("axis"), py::arg("backlash") = true);
+
+  py::class_<SphereCheckValue>(m, "SphereCheckValue")
+      .def_readonly("name", &SphereCheckValue::name)
+      .def_readonly("value", &SphereCheckValue::value)
+      .def_readonly("std", &SphereCheckValue::std);
+  py::class_<SphereCheckAxis>(m, "SphereCheckAxis")
+      .def_property_readonly("axis", [](const SphereCheckAxis& a) { return std::string(1, a.axis); })
+      .def_readonly("pivot", &SphereCheckAxis::pivot)
+      .def_readonly("has_backlash", &SphereCheckAxis::has_backlash)
+      .def_readonly("backlash", &SphereCheckAxis::backlash);
+  py::class_<SphereCheckResult>(m, "SphereCheckResult")
+      .def_readonly("fit", &SphereCheckResult::fit)
+      .def_readonly("sphere", &SphereCheckResult::sphere)
+      .def_readonly("estimate", &SphereCheckResult::estimate)
+      .def_readonly("axes", &SphereCheckResult::axes)
+      .def_readonly("change", &SphereCheckResult::change)
+      .def_readonly("positions", &SphereCheckResult::positions)
+      .def_readonly("centres_before", &SphereCheckResult::centres_before)
+      .def_readonly("centres_after", &SphereCheckResult::centres_after)
+      .def_readonly("dispersion_before", &SphereCheckResult::dispersion_before)
+      .def_readonly("dispersion_after", &SphereCheckResult::dispersion_after)
+      .def_readonly("condition_number", &SphereCheckResult::condition_number)
+      .def_readonly("informed", &SphereCheckResult::informed);
+  m.def(
+      "sphere_check",
+      [](const Dataset& ds, const std::string& sphere, bool calibrated_stylus, int backlash,
+         const std::map<std::string, std::pair<double, double>>& previous) {
+        SphereCheckOptions o;
+        o.sphere = sphere;
+        o.calibrated_stylus = calibrated_stylus;
+        o.backlash = backlash;
+        o.previous = previous;
+        py::gil_scoped_release release;
+        return EvaluateSphereCheck(ds, o);
+      },
+      py::arg("dataset"), py::arg("sphere") = "", py::arg("calibrated_stylus") = true, py::arg("backlash") = -1,
+      py::arg("previous") = std::map<std::string, std::pair<double, double>>{},
+      "The sphere check's evaluation (procedures/sphere_check.h EvaluateSphereCheck).");
+
+  py::class_<RTestGroup>(m, "RTestGroup")
+      .def_readonly("name", &RTestGroup::name)
+      .def_readonly("observations", &RTestGroup::observations)
+      .def_readonly("deviations", &RTestGroup::deviations)
+      .def_readonly("ranges", &RTestGroup::ranges);
+  py::class_<RTestResult>(m, "RTestResult")
+      .def_readonly("tests", &RTestResult::tests)
+      .def_readonly("identified", &RTestResult::identified)
+      .def_readonly("estimated", &RTestResult::estimated)
+      .def_readonly("fit", &RTestResult::fit);
+  m.def("rtest_location_errors", &RTestLocationErrors, py::arg("machine"));
+  m.def(
+      "rtest_axis_roles",
+      [](const Machine& mc) {
+        const RTestRoles r = RTestAxisRoles(mc);
+        py::dict d;
+        d["turn"] = std::string(1, r.turn);
+        d["tilt"] = std::string(1, r.tilt);
+        return d;
+      },
+      py::arg("machine"));
+  m.def(
+      "rtest_sequence",
+      [](const Machine& mc, const std::string& test, double step, double tilt,
+         const std::pair<double, double>& tilt_range) {
+        return RTestSequence(mc, test, step, tilt, tilt_range.first, tilt_range.second);
+      },
+      py::arg("machine"), py::arg("test"), py::arg("step"), py::arg("tilt"), py::arg("tilt_range"));
+  m.def(
+      "rtest",
+      [](const Dataset& ds, bool identify, const std::vector<std::string>& estimate) {
+        RTestOptions o;
+        o.identify = identify;
+        o.estimate = estimate;
+        py::gil_scoped_release release;
+        return EvaluateRTest(ds, o);
+      },
+      py::arg("dataset"), py::arg("identify") = true, py::arg("estimate") = std::vector<std::string>{},
+      "The R-test K tests' evaluation (procedures/rtest.h EvaluateRTest).");
 
   // ---- machining tests ------------------------------------------------------------
   py::class_<MachiningTest>(m, "MachiningTest")

@@ -363,6 +363,57 @@ def sphere_test(dataset: Dataset, sphere: str, values: dict) -> SphereTestResult
 def sphere_sensitivity(setup: Dataset, plan_json: str, sphere: str, names: Sequence[str], values: dict = ...,
                        characteristic_length: float = 400.0) -> list[dict]: ...
 
+def spindle_equivalent(machine: Machine, name: str) -> str: ...
+def spindle_names(machine: Machine, errors: Sequence[tuple[str, float]]) -> list[tuple[str, float]]: ...
+def checked_rotary_axes(machine: Machine) -> list[str]: ...
+def pivot_parameters(machine: Machine, axis: str, backlash: bool = True) -> list[str]: ...
+
+class SphereCheckValue:
+    name: str
+    value: float
+    std: float
+
+class SphereCheckAxis:
+    axis: str
+    pivot: list[SphereCheckValue]
+    has_backlash: bool
+    backlash: SphereCheckValue
+
+class SphereCheckResult:
+    fit: Result
+    sphere: str
+    estimate: list[str]
+    axes: list[SphereCheckAxis]
+    change: list[SphereCheckValue]
+    positions: np.ndarray
+    centres_before: np.ndarray
+    centres_after: np.ndarray
+    dispersion_before: float
+    dispersion_after: float
+    condition_number: float
+    informed: list[tuple[str, float]]
+
+def sphere_check(dataset: Dataset, sphere: str = "", calibrated_stylus: bool = True, backlash: int = -1,
+                 previous: dict[str, tuple[float, float]] = ...) -> SphereCheckResult: ...
+
+class RTestGroup:
+    name: str
+    observations: list[int]
+    deviations: np.ndarray
+    ranges: np.ndarray
+
+class RTestResult:
+    tests: list[RTestGroup]
+    identified: bool
+    estimated: list[str]
+    fit: Result
+
+def rtest_location_errors(machine: Machine) -> list[str]: ...
+def rtest_axis_roles(machine: Machine) -> dict[str, str]: ...
+def rtest_sequence(machine: Machine, test: str, step: float, tilt: float,
+                   tilt_range: tuple[float, float]) -> np.ndarray: ...
+def rtest(dataset: Dataset, identify: bool = True, estimate: Sequence[str] = ...) -> RTestResult: ...
+
 class MachiningTest:
     id: str
     point: np.ndarray

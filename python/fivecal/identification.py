@@ -2,8 +2,10 @@
 uncertainties and an identifiability report (C++ core, Ceres)."""
 from __future__ import annotations
 
+import functools
 import json
 import math
+import warnings
 from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -577,18 +579,22 @@ def confounded_lines(groups) -> list:
 def _warn_when_unusable(fit):
     """``identify`` emits a :class:`fivecal.FitWarning` when its result is
     not usable, so a script that goes on learns it at once."""
-    import functools
-    import warnings
-
     @functools.wraps(fit)
     def wrapper(*args, **kwargs):
-        result = fit(*args, **kwargs)
-        a = result.assessment()
-        if not a.usable:
-            warnings.warn(f"fivecal.identify: the result is not usable: {a.reason}", guards.FitWarning,
-                          stacklevel=2)
-        return result
+        return warn_when_unusable(fit(*args, **kwargs))
     return wrapper
+
+
+def warn_when_unusable(result: "Result", stacklevel: int = 2) -> "Result":
+    """``result``, after a :class:`fivecal.FitWarning` when it is not usable:
+    what ``identify`` does, for the procedures whose fit runs in the core
+    (sphere check, R-test). ``stacklevel`` counts from the caller of this
+    function, as :func:`warnings.warn` does (2: its caller's caller)."""
+    a = result.assessment()
+    if not a.usable:
+        warnings.warn(f"fivecal.identify: the result is not usable: {a.reason}", guards.FitWarning,
+                      stacklevel=stacklevel + 1)
+    return result
 
 
 identify = _warn_when_unusable(identify)

@@ -71,8 +71,8 @@ def own_files(kind: str) -> set:
 #: uses; they are not generic by design").
 BY_DESIGN = {
     "cpp/src/procedures/dbb_four_step.cc", "cpp/src/procedures/sphere_test.cc", "cpp/src/design/design.cc",
-    "python/fivecal/procedures/dbb.py", "python/fivecal/procedures/rtest.py",
-    "python/fivecal/procedures/sphere_check.py", "python/fivecal/procedures/tango.py",
+    "cpp/src/procedures/sphere_check.cc", "cpp/src/procedures/rtest.cc",
+    "python/fivecal/procedures/dbb.py", "python/fivecal/procedures/rtest.py", "python/fivecal/procedures/tango.py",
     "python/fivecal/procedures/machining.py", "python/fivecal/procedures/classify.py",
     "python/fivecal/io/dbb_program.py", "python/fivecal/report/polar.py",
     # the NC programs of the touch probe's and the R-test's tests: a G38.2

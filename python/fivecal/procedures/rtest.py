@@ -35,47 +35,32 @@ from typing import Dict, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
+from .. import _core
 from ..dataset import Dataset
-from ..identification import identify as fit
-from ..identification import result_document
+from ..identification import Result, result_document, warn_when_unusable
 from ..machine import Machine
 from ..views import Viewable
-from .sphere_check import pivot_parameters
 
 TESTS = ("K1", "K2", "K3", "K4")
 
 
 def _rotary(machine: Machine) -> List[str]:
-    return [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+    return list(_core.checked_rotary_axes(machine._core))
 
 
 def _roles(machine: Machine) -> Dict[str, str]:
     """The turning axis (the one nearest the table normal / tool axis, +Z at
-    the zero pose) and the tilting axis of the machine."""
-    rot = _rotary(machine)
-    if len(rot) != 2:
-        raise ValueError(f"R-test K tests: machine {machine.name!r} has {len(rot)} rotary axes "
-                         f"({', '.join(rot) or 'none'}); the tests are defined for two")
-    axes = machine.to_dict()["axes"]
-    z = [abs(float(np.asarray(axes[a]["direction"], float)[2])) for a in rot]
-    turn = rot[int(np.argmax(z))]
-    return {"turn": turn, "tilt": [a for a in rot if a != turn][0]}
+    the zero pose) and the tilting axis of the machine (the core's
+    ``procedures/rtest.h`` RTestAxisRoles)."""
+    return dict(_core.rtest_axis_roles(machine._core))
 
 
 def _sequence(machine: Machine, test: str, step: float, tilt: float, tilt_range) -> List[Dict[str, float]]:
+    """The rotary poses of K test ``test`` (the core's RTestSequence)."""
     r = _roles(machine)
-    turn, tl = r["turn"], r["tilt"]
-    full = list(np.arange(0.0, 360.0 + 1e-9, step))
-    if test == "K1":
-        return [{turn: float(c), tl: 0.0} for c in full]
-    if test == "K2":
-        lo, hi = tilt_range
-        return [{turn: 0.0, tl: float(a)} for a in np.arange(lo, hi + 1e-9, step)]
-    if test == "K3":
-        return [{turn: float(c), tl: float(tilt)} for c in full]
-    if test == "K4":
-        return [{turn: float(c), tl: float(tilt * np.sin(np.radians(c)))} for c in full]
-    raise ValueError(f"test: {test!r} is not an R-test K test (tests: {', '.join(TESTS)})")
+    lo, hi = tilt_range
+    seq = np.asarray(_core.rtest_sequence(machine._core, str(test), float(step), float(tilt), (float(lo), float(hi))))
+    return [{r["turn"]: float(c), r["tilt"]: float(a)} for c, a in seq]
 
 
 def tip_offset(machine: Machine, axes: Mapping[str, float], tool_ball) -> np.ndarray:
@@ -201,8 +186,9 @@ def location_errors(machine: Machine) -> List[str]:
     axis line) an R-test of both rotary axes can see: for each rotary axis the
     two positions across it and the two tilts (a position that is the
     spindle's offset under another name carries the spindle's name, as in
-    ``identify --estimate location``: :func:`fivecal.procedures.sphere_check.spindle_equivalent`)."""
-    return [n for a in _rotary(machine) for n in pivot_parameters(machine, a, backlash=False)]
+    ``identify --estimate location``: :func:`fivecal.procedures.sphere_check.spindle_equivalent`).
+    The core's list (``procedures/rtest.h`` RTestLocationErrors)."""
+    return list(_core.rtest_location_errors(machine._core))
 
 
 def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
@@ -211,24 +197,16 @@ def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
     in X, Y and Z, and, with ``identify``, the location errors of the rotary
     axes fitted to all tests at once (``estimate``: default
     :func:`location_errors`; each mounting's ball positions are part of the
-    fit, as for any ball3d data). Raises ValueError without ball3d data."""
+    fit, as for any ball3d data). The evaluation is the core's
+    (``procedures/rtest.h`` EvaluateRTest). Raises ValueError without ball3d data."""
     ds = Dataset.from_dict(dataset)
-    obs = ds.observations
-    groups: Dict[str, list] = {}
-    for o in obs:
-        if o.get("type") == "ball3d":
-            groups.setdefault(o.get("setup", "") or "(no setup)", []).append(o["measured"])
-    if not groups:
-        raise ValueError("R-test: the dataset has no ball3d observations")
-    tests = {}
-    for name, rows in groups.items():
-        d = np.asarray(rows, float)
-        tests[name] = KTest(name, len(d), d.max(axis=0) - d.min(axis=0), d)
+    core = _core.rtest(ds._core, bool(identify), [str(n) for n in (estimate or [])])
+    tests = {g.name: KTest(g.name, len(g.observations), np.asarray(g.ranges), np.asarray(g.deviations))
+             for g in core.tests}
     out = RTestResult(tests)
-    if identify:
-        est = list(estimate or location_errors(ds.machine))
-        out.result = fit(ds, est)
-        out.estimated = est
+    if core.identified:
+        out.result = warn_when_unusable(Result(core.fit, ds))
+        out.estimated = list(core.estimated)
     return out
 
 

@@ -27,9 +27,10 @@ from typing import Dict, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
+from .. import _core
 from ..dataset import Dataset
 from ..files import read_json
-from ..identification import identify, result_document
+from ..identification import Result, result_document, warn_when_unusable
 from ..machine import Machine
 from ..views import Viewable
 from . import sphere_test
@@ -41,7 +42,7 @@ FULL_TURN_AXES = ("C",)
 
 
 def _rotary_axes(machine: Machine) -> List[str]:
-    return [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+    return list(_core.checked_rotary_axes(machine._core))
 
 
 def pivot_parameters(machine: Machine, axis: str, backlash: bool = True) -> List[str]:
@@ -51,15 +52,9 @@ def pivot_parameters(machine: Machine, axis: str, backlash: bool = True) -> List
     ``E<axis><axis>b``. The position along the axis and the zero angle are
     left out: a sphere check cannot tell them from the sphere's own place.
     For an inclined axis the pair of machine directions most across it is
-    used (fivecal's parameters are along the machine axes)."""
-    d = np.abs(np.asarray(machine.to_dict()["axes"][axis]["direction"], float))
-    # The two machine directions most across the axis (for an axis along X:
-    # Y and Z; for an inclined one, the pair with the smallest components):
-    # their position and tilt errors move the axis line; the third is along it.
-    pick = sorted(np.argsort(d, kind="stable")[:2])
-    names = [spindle_equivalent(machine, f"E{'XYZ'[k]}0{axis}") for k in pick] + \
-            [f"E{'ABC'[k]}0{axis}" for k in pick]
-    return names + ([f"E{axis}{axis}b"] if backlash else [])
+    used (fivecal's parameters are along the machine axes). The rule is the
+    core's (``procedures/sphere_check.h`` PivotParameters)."""
+    return list(_core.pivot_parameters(machine._core, str(axis), bool(backlash)))
 
 
 #: positions per rotary axis at most: one a degree over a full turn, far more than a pivot needs
@@ -81,22 +76,10 @@ def spindle_equivalent(machine: Machine, name: str) -> str:
     location selection (docs/identification.md, the thesis' set) names it
     by the spindle, and so does every procedure, so results of different
     commands compare by name. The spindle's value is minus the axis' on the
-    workpiece side (README, sign conventions)."""
-    if len(name) != 4 or name[0] != "E" or name[1] not in "XYZ" or name[2] != "0":
-        return name
-    axis, k = name[3], "XYZ".index(name[1])
-    if "S" not in machine.axis_names or not machine.is_rotary(axis) or axis == "S":
-        return name
-    axes = machine.to_dict()["axes"]
-    chain = machine.workpiece_chain if axis in machine.workpiece_chain else machine.tool_chain
-    for a in chain[:chain.index(axis)]:
-        u = np.abs(np.asarray(axes[a]["direction"], float))
-        if machine.is_rotary(a) and u[k] < 1.0 - 1e-9:
-            return name
-    s = np.abs(np.asarray(axes["S"]["direction"], float))
-    # the spindle's location candidates are its two positions most across its line
-    across = np.argsort(s, kind="stable")[:2]
-    return f"E{name[1]}0S" if k in across else name
+    workpiece side (README, sign conventions). The rule is the core's
+    (``procedures/sphere_check.h`` SpindleEquivalent), used by the core's
+    procedures too."""
+    return _core.spindle_equivalent(machine._core, str(name))
 
 
 def spindle_names(machine: Machine, errors: Mapping[str, float]) -> Dict[str, float]:
@@ -106,11 +89,7 @@ def spindle_names(machine: Machine, errors: Mapping[str, float]) -> Dict[str, fl
     workpiece side (equal errors add up). What a sphere check, an R-test or
     ``identify --estimate location`` of a machine with these errors
     recovers."""
-    out: Dict[str, float] = {}
-    for n, v in errors.items():
-        c = spindle_equivalent(machine, n)
-        out[c] = out.get(c, 0.0) + (v if c == n or n[3] not in machine.workpiece_chain else -float(v))
-    return out
+    return dict(_core.spindle_names(machine._core, [(str(n), float(v)) for n, v in errors.items()]))
 
 
 def positions(machine: Machine, n: int = 5, limits: Optional[Mapping[str, Sequence[float]]] = None
@@ -229,7 +208,11 @@ class SphereCheck(Viewable):
         return "\n".join(L)
 
 
-def _previous_values(previous, machine: Machine) -> Dict[str, tuple]:
+def _previous_values(previous) -> Dict[str, tuple]:
+    """The previous check read into name -> (value, std): a SphereCheck, a
+    Result, a result document (any procedure's, a file or a dict) or a plain
+    mapping name -> value. The core names a table axis' offset that is the
+    spindle's by the spindle too (a check written before the spindle names)."""
     if previous is None:
         return {}
     if isinstance(previous, SphereCheck):
@@ -251,12 +234,6 @@ def _previous_values(previous, machine: Machine) -> Dict[str, tuple]:
                 out[n] = (float(p), 0.0)
         except (KeyError, TypeError, ValueError):
             raise ValueError(f"previous: parameters.{n}: expected a number or {{value, std}}") from None
-    # a check written before the spindle names (EX0C on an A/C trunnion, now
-    # EX0S): the same error, the spindle's value is minus the table axis'
-    for n, (v, s) in list(out.items()):
-        c = spindle_equivalent(machine, n)
-        if c != n and c not in out:
-            out[c] = (spindle_names(machine, {n: v})[c], s)
     return out
 
 
@@ -269,63 +246,21 @@ def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_styl
     positions were reached from both directions). ``previous``: the last
     check (a SphereCheck, a Result, or a result file / dict) for the change of
     each pivot, with the σ of the change from both checks (independent
-    checks). Raises ValueError when the data cannot determine a pivot."""
+    checks). The evaluation is the core's (``procedures/sphere_check.h``
+    EvaluateSphereCheck). Raises ValueError when the data cannot determine a pivot."""
     ds = Dataset.from_dict(dataset)
-    m = ds.machine
-    obs = ds.observations
-    spheres = sorted({o["target"] for o in obs if o.get("type") == "sphere"})
-    if not spheres:
-        raise ValueError("sphere check: the dataset has no sphere touches")
-    sid = sphere or spheres[0]
-    if sid not in spheres:
-        raise ValueError(f"sphere check: no touches of sphere {sid!r} (touched: {', '.join(spheres)})")
-    moved = [a for a in _rotary_axes(m) if np.ptp([float(o["axes"].get(a, 0.0)) for o in obs]) > 1e-6]
-    if not moved:
-        raise ValueError("sphere check: no rotary axis moved between the touches; nothing to check")
-    names = []
-    for a in moved:
-        dirs = {int(o.get("direction", {}).get(a, 0)) for o in obs}
-        both = {1, -1} <= dirs
-        names += pivot_parameters(m, a, backlash=both if backlash is None else backlash)
-    fix = ["tip.x", "tip.y", "tip.z"] if calibrated_stylus else []
-    r = identify(ds, names, fix=fix)
-    std = r.std
-    pivots, lash = {}, {}
-    for a in moved:
-        pivots[a] = {n: (r.values.get(n, 0.0), std.get(n, float("nan")))
-                     for n in pivot_parameters(m, a, backlash=False)}
-        b = f"E{a}{a}b"
-        if b in r.estimated:
-            lash[a] = (r.values.get(b, 0.0), std.get(b, float("nan")))
-    prev = _previous_values(previous, m)
-    change = {}
-    for a in moved:
-        for n, (v, s) in pivots[a].items():
-            if n in prev:
-                change[n] = (v - prev[n][0], float(np.hypot(s, prev[n][1])))
-    # per position: the sphere centre from its touches, nominal and checked model
-    key = [tuple(round(float(o["axes"].get(a, 0.0)), 6) for a in moved) for o in obs]
-    order = list(dict.fromkeys(key))
-    art = {s["id"]: s for s in ds.to_dict()["artefact"].get("spheres", [])}
-    R = float(art[sid]["radius"]) + float(ds._core.tip_radius)
-    c0 = np.asarray(art[sid]["center"], float)
-    before, after, labels = [], [], []
-    Pn, Pi = sphere_test.table_points(ds), sphere_test.table_points(ds, r)
-    for k in order:
-        idx = [i for i, kk in enumerate(key) if kk == k and obs[i].get("target") == sid]
-        if len(idx) < 3:
-            continue
-        before.append(sphere_test.fit_sphere_centre(Pn[idx], R, c0))
-        after.append(sphere_test.fit_sphere_centre(Pi[idx], R, c0))
-        labels.append(", ".join(f"{a} {v:g}°" for a, v in zip(moved, k)))
-    before, after = np.array(before), np.array(after)
-
-    def spread(c):
-        return float(np.linalg.norm(c - c.mean(axis=0), axis=1).max()) if len(c) else 0.0
-
-    informed = {n: float(v) for n, v in (getattr(r, "informed", {}) or {}).items() if n in names}
-    return SphereCheck(r, moved, pivots, lash, change, before, after, labels, spread(before), spread(after),
-                       float(r.condition_number), informed)
+    core = _core.sphere_check(ds._core, sphere or "", bool(calibrated_stylus),
+                              -1 if backlash is None else int(bool(backlash)), _previous_values(previous))
+    r = warn_when_unusable(Result(core.fit, ds))
+    axes = [a.axis for a in core.axes]
+    pivots = {a.axis: {v.name: (v.value, v.std) for v in a.pivot} for a in core.axes}
+    lash = {a.axis: (a.backlash.value, a.backlash.std) for a in core.axes if a.has_backlash}
+    change = {c.name: (c.value, c.std) for c in core.change}
+    pos = np.asarray(core.positions)
+    labels = [", ".join(f"{a} {v:g}°" for a, v in zip(axes, row)) for row in pos]
+    return SphereCheck(r, axes, pivots, lash, change, np.asarray(core.centres_before),
+                       np.asarray(core.centres_after), labels, core.dispersion_before, core.dispersion_after,
+                       float(core.condition_number), dict(core.informed))
 
 
 def to_json(check: SphereCheck) -> str:
