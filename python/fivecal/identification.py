@@ -431,8 +431,10 @@ def identify(dataset: Union[Dataset, Mapping], estimate: Union[str, Sequence[str
     weighed by what they show, :attr:`Result.variance_components` reports each
     group's sigma, and the covariance uses them.
     ``fit_path``: ``"auto"`` (default), ``"dense"`` or ``"normal_equations"``.
-    Long data (rows times estimated parameters above two million: R-test and
-    ball-bar traces, tracker streams) are fitted on normal equations
+    Long data (rows times estimated parameters above two million, or above
+    one hundred thousand when every observation is an R-test or ball-bar
+    sample, which the core then reads as column blocks: R-test and ball-bar
+    traces, tracker streams) are fitted on normal equations
     accumulated from the data in chunks, in memory proportional to the
     parameters squared instead of to rows times parameters, and with
     ``num_threads`` threads (0, the default: every core); the result is the

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "fivecal/solve/identify.h"
+#include "fivecal/solve/long_kernel.h"
 #include "fivecal/solve/normal_equations.h"
 #include "fivecal/solve/problem.h"
 
@@ -632,6 +633,146 @@ TEST(NormalEquations, PerChunkRowsFollowTheSetupOfEachSample) {
     all.Refresh(table, v);
     chunk.Refresh(table, v);
   }
+}
+
+}  // namespace
+}  // namespace fivecal
+
+namespace fivecal {
+namespace {
+
+// A trace of ball-bar samples and one of R-test samples, each over two
+// mountings, some samples with recorded move directions (the backlash).
+Dataset TwoTraces(int n) {
+  Dataset ds(Machine::Load(std::string(FIVECAL_SOURCE_DIR) + "/examples/machines/c600u.json"));
+  const Machine& m = ds.machine();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int kind = 0; kind < 2; ++kind)
+    for (int i = 0; i < n; ++i) {
+      Observation o;
+      o.type = kind == 0 ? ObservationType::kDbb : ObservationType::kBall3d;
+      o.setup = i < n / 2 ? "A" : "B";
+      o.axes = Eigen::VectorXd::Zero(m.num_axes());
+      o.direction = Eigen::VectorXi::Zero(m.num_axes());
+      o.axes[m.AxisIndex('A')] = -90 + 180 * u(rng);
+      o.axes[m.AxisIndex('C')] = 360 * u(rng);
+      o.axes[m.AxisIndex('X')] = -20 + 40 * u(rng);
+      o.axes[m.AxisIndex('Y')] = -20 + 40 * u(rng);
+      o.axes[m.AxisIndex('Z')] = -20 + 40 * u(rng);
+      if (i % 4 == 1) o.direction[m.AxisIndex('C')] = i % 8 == 1 ? 1 : -1;
+      o.tool_ball = Eigen::Vector3d(0, 0, 150);
+      o.table_ball = o.setup == "A" ? Eigen::Vector3d(50, 0, 80) : Eigen::Vector3d(0, 60, 70);
+      o.length = 100.0;
+      o.reading = 1e-3 * u(rng);
+      o.measured = Eigen::Vector3d(1e-3 * u(rng), 0, -1e-3);
+      if (i % 5 == 0) o.sigma = Eigen::VectorXd::Constant(ResidualRows(o.type), 0.002);
+      ds.observations.push_back(o);
+    }
+  return ds;
+}
+
+// The column kernels' derivatives against central differences of their own
+// residuals, at a point away from zero, for machine, tool-ball, table-ball
+// and bar-length columns and a backlash.
+TEST(LongKernel, JacobianMatchesFiniteDifferences) {
+  const Dataset ds = TwoTraces(400);
+  const ParameterTable table(ds);
+  const std::vector<int> est = Indices(
+      table, {"EB0A", "EA0C", "EB0C", "EY0C", "ECCb", "EXX1", "tip.x", "dbb.A.length", "dbb.B.tool.z",
+              "dbb.A.table.x", "ball3d.B.tool.x", "ball3d.A.table.y", "ball3d.B.table.z"});
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  std::mt19937 rng(9);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  for (int i : est) v[i] = (i < ds.machine().num_parameters() ? 1e-4 : 1e-2) * n01(rng);
+  const NormalEquationProblem ne(ds, table, v, est, 2);
+  ASSERT_TRUE(ne.columnar());
+  const NormalEquations acc = ne.Accumulate(v, true);
+  const int p = static_cast<int>(est.size());
+  Eigen::MatrixXd J(ne.num_rows(), p);
+  for (int j = 0; j < p; ++j) {
+    const double h = est[j] < ds.machine().num_parameters() ? 1e-7 : 1e-6;
+    Eigen::VectorXd a = v, b = v;
+    a[est[j]] += h;
+    b[est[j]] -= h;
+    J.col(j) = (ne.Residuals(a) - ne.Residuals(b)) / (2 * h);
+  }
+  const Eigen::VectorXd w = ne.row_sigma().cwiseInverse();
+  const Eigen::MatrixXd Jw = w.asDiagonal() * J;
+  const Eigen::MatrixXd N = Jw.transpose() * Jw;
+  const Eigen::VectorXd g = Jw.transpose() * (w.asDiagonal() * ne.Residuals(v));
+  // Column by column (relative to the column's scale): a wrong or missing
+  // column shows however small its neighbours are.
+  // The probe tip does not carry a ball: its column is zero (index 6).
+  EXPECT_EQ(N(6, 6), 0.0);
+  EXPECT_EQ(acc.JtJ.row(6).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(acc.Jtr[6], 0.0);
+  for (int j = 0; j < p; ++j) {
+    if (j == 6) continue;
+    const double s = std::sqrt(N(j, j));
+    ASSERT_GT(s, 0.0) << table.names()[est[j]];
+    for (int k = 0; k < p; ++k) {
+      if (k == 6) continue;
+      const double sk = s * std::sqrt(N(k, k));
+      EXPECT_NEAR(acc.JtJ(j, k) / sk, N(j, k) / sk, 1e-6) << table.names()[est[j]] << " x " << table.names()[est[k]];
+    }
+    EXPECT_NEAR(acc.Jtr[j] / s, g[j] / s, 1e-6 * (1 + std::abs(g[j] / s))) << table.names()[est[j]];
+  }
+  // The unweighted sums (two declared noises): J^T J in mm.
+  EXPECT_LT((acc.JtJ_unweighted - J.transpose() * J).norm(), 1e-6 * (J.transpose() * J).norm());
+}
+
+// Threads change which thread sums a block, not the sums.
+TEST(LongKernel, ThreadCountDoesNotChangeTheSums) {
+  const Dataset ds = TwoTraces(30000);
+  const ParameterTable table(ds);
+  const std::vector<int> est = Indices(table, {"EB0A", "EA0C", "EB0C", "EY0C", "dbb.A.length", "ball3d.B.table.z"});
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());
+  v[table.Require("EB0C")] = 2e-5;
+  const NormalEquationProblem one(ds, table, v, est, 1);
+  ASSERT_TRUE(one.columnar());
+  const NormalEquations a = one.Accumulate(v, true);
+  for (int threads : {2, 3, 8}) {
+    const NormalEquations b = NormalEquationProblem(ds, table, v, est, threads).Accumulate(v, true);
+    EXPECT_EQ((b.JtJ - a.JtJ).cwiseAbs().maxCoeff(), 0.0) << threads;
+    EXPECT_EQ((b.Jtr - a.Jtr).cwiseAbs().maxCoeff(), 0.0) << threads;
+    EXPECT_EQ((b.JtJ_unweighted - a.JtJ_unweighted).cwiseAbs().maxCoeff(), 0.0) << threads;
+    EXPECT_EQ(b.cost, a.cost) << threads;
+  }
+}
+
+// The SIMD accumulation against the plain sums, at every padded width.
+TEST(LongKernel, AccumulateNormalEqualsPlainSums) {
+  std::mt19937 rng(4);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  for (int p : {1, 4, 8, 9, 17, 30, 33}) {
+    const int ld = PaddedWidth(p), m = 77;
+    std::vector<double> J(static_cast<size_t>(m) * ld, 0.0), r(m), N(static_cast<size_t>(p) * ld, 0.0), g(p, 0.0);
+    Eigen::MatrixXd Je(m, p);
+    for (int i = 0; i < m; ++i) {
+      r[i] = n01(rng);
+      for (int j = 0; j < p; ++j) Je(i, j) = J[static_cast<size_t>(i) * ld + j] = n01(rng);
+    }
+    AccumulateNormal(J.data(), r.data(), m, p, ld, N.data(), g.data());
+    const Eigen::MatrixXd Ne = Je.transpose() * Je;
+    const Eigen::VectorXd ge = Je.transpose() * Eigen::Map<Eigen::VectorXd>(r.data(), m);
+    for (int a = 0; a < p; ++a) {
+      for (int b = 0; b < p; ++b) EXPECT_NEAR(N[static_cast<size_t>(a) * ld + b], Ne(a, b), 1e-12 * m) << p;
+      for (int b = p; b < ld; ++b) EXPECT_EQ(N[static_cast<size_t>(a) * ld + b], 0.0) << p;
+      EXPECT_NEAR(g[a], ge[a], 1e-12 * m) << p;
+    }
+  }
+  EXPECT_NE(std::string(NormalKernelIsa()), "");
+}
+
+// Data with a kind that has no column kernel keep the prepared rows.
+TEST(LongKernel, MixedDataKeepThePreparedRows) {
+  const Dataset traces = TwoTraces(50);
+  const ParameterTable t0(traces);
+  EXPECT_TRUE(NormalEquationProblem(traces, t0, Eigen::VectorXd::Zero(t0.size()), Indices(t0, {"EB0A"}), 1).columnar());
+  const Dataset mixed = EveryKind();
+  const ParameterTable t1(mixed);
+  EXPECT_FALSE(NormalEquationProblem(mixed, t1, Eigen::VectorXd::Zero(t1.size()), Indices(t1, {"EB0A"}), 1).columnar());
 }
 
 }  // namespace

@@ -230,3 +230,31 @@ def test_an_undetermined_request_on_templated_kinds_is_refused_on_both_paths():
     with pytest.warns(fivecal.FitWarning, match="did not determine"):
         s = fivecal.identify(ds, list(pk.TRUTH), fit_path="normal_equations", allow_unidentifiable=True)
     assert s.verdict == d.verdict and s.undetermined == d.undetermined and "instrument.T1.tool_y" in s.undetermined
+
+
+# ---- the column kernel (solve/long_kernel.h): truth and coverage ----
+
+def test_the_column_kernel_recovers_the_truth_with_honest_sigmas(c600u):
+    # Simulated R-test traces of a machine with known errors and 0.5 um
+    # noise, fitted on the normal-equation path (the kind's column block):
+    # every value within 4 sigma of the truth, and over 40 traces the
+    # one-sigma intervals cover about 68 % (binomial: 0.68 +- 0.15 at 3 sd).
+    z = []
+    for seed in range(40):
+        r = fivecal.identify(rtest(c600u, 1500, seed=100 + seed), list(TRUE), fit_path="normal_equations",
+                             default_setup=False, num_threads=2)
+        assert r.verdict == "ok" and r.fit_path == "normal_equations"
+        z += [(r.values[k] - TRUE[k]) / r.std[k] for k in TRUE]
+    z = np.abs(np.array(z))
+    assert z.max() < 4.0, z.max()
+    assert 0.55 < np.mean(z < 1.0) < 0.81, np.mean(z < 1.0)
+
+
+def test_the_column_kernel_does_not_depend_on_the_thread_count(c600u):
+    ds = rtest(c600u, 20_000, seed=7)
+    a = fivecal.identify(ds, list(TRUE), fit_path="normal_equations", num_threads=1)
+    for threads in (2, 3):
+        b = fivecal.identify(ds, list(TRUE), fit_path="normal_equations", num_threads=threads)
+        for k in TRUE:
+            assert b.values[k] == a.values[k] and b.std[k] == a.std[k], (threads, k)
+        np.testing.assert_array_equal(b.residuals, a.residuals)

@@ -2,12 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
 #include "fivecal/model/kinematic_model.h"
 #include "fivecal/observations/simulate.h"
+#include "fivecal/model/kinematics.h"
 #include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/solve/long_kernel.h"
 #include "fivecal/solve/problem.h"
 #include "fivecal/observations/registry.h"
 #include "json_util.h"
@@ -18,6 +21,186 @@ using namespace json_util;
 
 namespace {
 const char* kXYZ[3] = {"x", "y", "z"};
+
+// A trace as columns: per sample its axis readings (internal units), its
+// readings and the index of its mounting; per mounting the balls and the
+// table entries of its parameters. No per-sample row is prepared at a pass.
+//
+// Rows per sample R: 3, the displacement d = P - (table + dt) - measured
+// (gradient in P: the identity); 1, the distance |P - (table + dt)| -
+// (constant + length) (gradient u, the unit ball-to-ball vector). With the
+// tool ball at tool_ball + dtool acting as the tip, dP/d(dtool) is the
+// kinematic model's tip columns; the table offset enters as -gradient.
+template <int R>
+class MountRun final : public LongRun {
+ public:
+  struct Mount {
+    Eigen::Vector3d tool_ball, table_ball;
+    int idx[7];
+  };
+  // Where column j of a mounting's rows comes from.
+  enum Source : int { kZero, kMachine, kTool, kTable, kLength };
+
+  MountRun(const Dataset& ds, const ParameterTable& t, const ObservationKind& kind, const std::vector<int>& est,
+           int begin, int end)
+      : na_(ds.machine().num_axes()), n_(end - begin), p_(static_cast<int>(est.size())),
+        np_(ds.machine().num_parameters()), tip0_(ds.machine().tip_index()) {
+    const Machine& m = ds.machine();
+    q_.resize(static_cast<size_t>(n_) * na_);
+    reading_.resize(static_cast<size_t>(n_) * R);
+    mount_.resize(n_);
+    bool any_dir = false;
+    for (int i = 0; i < n_; ++i) {
+      const Observation& o = ds.observations[begin + i];
+      AxisValuesToInternal(m, o.axes.data(), q_.data() + static_cast<size_t>(i) * na_);
+      if (!any_dir && (o.direction.array() != 0).any()) {
+        any_dir = true;
+        dir_.assign(static_cast<size_t>(n_) * na_, 0);
+      }
+      if (any_dir) std::copy(o.direction.data(), o.direction.data() + na_, dir_.data() + static_cast<size_t>(i) * na_);
+      if constexpr (R == 3)
+        for (int c = 0; c < 3; ++c) reading_[static_cast<size_t>(i) * R + c] = o.measured[c];
+      else
+        reading_[i] = o.length + o.reading;
+      // A trace is one mounting: the previous sample's first.
+      int k = mounts_.empty() ? -1 : mount_[i > 0 ? i - 1 : 0];
+      auto same = [&](int j) {
+        return setups_[j] == o.setup && mounts_[j].tool_ball == o.tool_ball && mounts_[j].table_ball == o.table_ball;
+      };
+      if (k < 0 || !same(k)) {
+        k = -1;
+        for (int j = 0; j < static_cast<int>(mounts_.size()) && k < 0; ++j)
+          if (same(j)) k = j;
+        if (k < 0) {
+          Mount mt;
+          mt.tool_ball = o.tool_ball;
+          mt.table_ball = o.table_ball;
+          const std::vector<int>& g = t.group(kind.type(), o.setup);
+          for (int c = 0; c < 7; ++c) mt.idx[c] = g[c];
+          k = static_cast<int>(mounts_.size());
+          mounts_.push_back(mt);
+          setups_.push_back(o.setup);
+          for (int j = 0; j < p_; ++j) {
+            const int e = est[j];
+            int src = kZero, arg = 0;
+            if (e < np_) {
+              // The probe tip's offsets do not carry the ball.
+              if (!(e >= tip0_ && e < tip0_ + 3)) src = kMachine, arg = e;
+            } else {
+              for (int c = 0; c < 3; ++c) {
+                if (e == mt.idx[1 + c]) src = kTool, arg = c;
+                if (e == mt.idx[4 + c]) src = kTable, arg = c;
+              }
+              if (e == mt.idx[0] && mt.idx[0] >= 0) src = kLength;
+            }
+            source_.push_back(src);
+            arg_.push_back(arg);
+          }
+        }
+      }
+      mount_[i] = k;
+    }
+  }
+
+  int rows_per_sample() const override { return R; }
+
+  void Evaluate(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end, double* r, double* J,
+                int ld) const override {
+    const int nm = static_cast<int>(mounts_.size());
+    // Per mounting at these values: the tool ball (the tip) and the table ball.
+    Eigen::Vector3d tip[8], target[8];
+    std::vector<Eigen::Vector3d> tips, targets;
+    Eigen::Vector3d* tp = tip;
+    Eigen::Vector3d* tg = target;
+    if (nm > 8) {
+      tips.resize(nm);
+      targets.resize(nm);
+      tp = tips.data();
+      tg = targets.data();
+    }
+    double length[8];
+    std::vector<double> lengths(nm > 8 ? nm : 0);
+    double* ln = nm > 8 ? lengths.data() : length;
+    for (int k = 0; k < nm; ++k) {
+      const Mount& mt = mounts_[k];
+      for (int c = 0; c < 3; ++c) {
+        tp[k][c] = mt.tool_ball[c] + v[mt.idx[1 + c]];
+        tg[k][c] = mt.table_ball[c] + v[mt.idx[4 + c]];
+      }
+      ln[k] = mt.idx[0] >= 0 ? v[mt.idx[0]] : 0.0;
+    }
+    // dP/dtheta of the sample, every machine column (only the estimated
+    // ones and the tip's are written).
+    double Jf[3 * 128];
+    std::vector<double> big;
+    double* jf = Jf;
+    if (np_ > 128) {
+      big.resize(3 * static_cast<size_t>(np_));
+      jf = big.data();
+    }
+    for (int s = begin; s < end; ++s) {
+      const int k = mount_[s];
+      const double* q = q_.data() + static_cast<size_t>(s) * na_;
+      const int* d = dir_.empty() ? nullptr : dir_.data() + static_cast<size_t>(s) * na_;
+      const double* rd = reading_.data() + static_cast<size_t>(s) * R;
+      Eigen::Vector3d P;
+      if (J) model.ToolPointJacobian(q, d, tp[k], &P, jf);
+      else P = model.ToolPoint(q, d, tp[k]);
+      double* out = r + static_cast<size_t>(s - begin) * R;
+      Eigen::Matrix<double, R, 3> G;
+      if constexpr (R == 3) {
+        for (int c = 0; c < 3; ++c) out[c] = P[c] - tg[k][c] - rd[c];
+        G.setIdentity();
+      } else {
+        const Eigen::Vector3d dd = P - tg[k];
+        const double len = dd.norm();
+        out[0] = len - rd[0] - ln[k];
+        G = (dd / len).transpose();
+      }
+      if (!J) continue;
+      const int* src = source_.data() + static_cast<size_t>(k) * p_;
+      const int* arg = arg_.data() + static_cast<size_t>(k) * p_;
+      for (int row = 0; row < R; ++row) {
+        double* jr = J + (static_cast<size_t>(s - begin) * R + row) * ld;
+        const double g0 = G(row, 0), g1 = G(row, 1), g2 = G(row, 2);
+        for (int j = 0; j < p_; ++j) {
+          double x = 0.0;
+          switch (src[j]) {
+            case kMachine: {
+              const double* c = jf + 3 * arg[j];
+              x = g0 * c[0] + g1 * c[1] + g2 * c[2];
+              break;
+            }
+            case kTool: {
+              const double* c = jf + 3 * (tip0_ + arg[j]);
+              x = g0 * c[0] + g1 * c[1] + g2 * c[2];
+              break;
+            }
+            case kTable:
+              x = -G(row, arg[j]);
+              break;
+            case kLength:
+              x = -1.0;
+              break;
+            default:
+              break;
+          }
+          jr[j] = x;
+        }
+      }
+    }
+  }
+
+ private:
+  int na_, n_, p_, np_, tip0_;
+  std::vector<double> q_;
+  std::vector<int> dir_;  // empty: no sample records a move direction
+  std::vector<double> reading_;
+  std::vector<int32_t> mount_;
+  std::vector<Mount> mounts_;
+  std::vector<std::string> setups_;
+  std::vector<int> source_, arg_;  // mounts x p
+};
 }  // namespace
 
 std::vector<TableColumn> BallMountKind::MountColumns() {
@@ -26,6 +209,13 @@ std::vector<TableColumn> BallMountKind::MountColumns() {
   for (const char* ball : {"tool_ball", "table_ball"})
     for (int i = 0; i < 3; ++i) c.push_back(TableColumn(std::string(ball) + "_" + kXYZ[i], ball, i).Sidecar(ball));
   return c;
+}
+
+std::unique_ptr<LongRun> BallMountKind::MakeLongRun(const Dataset& ds, const ParameterTable& t,
+                                                    const std::vector<int>& est, int begin, int end) const {
+  if (rows() == 3) return std::make_unique<MountRun<3>>(ds, t, *this, est, begin, end);
+  if (rows() == 1) return std::make_unique<MountRun<1>>(ds, t, *this, est, begin, end);
+  return nullptr;
 }
 
 void BallMountKind::ReadMount(const json& o, const std::string& w, Observation* ob) {

@@ -220,7 +220,7 @@ std::string DenseReason(const Dataset& ds, const IdentifyOptions& opt, const Req
   if (opt.fit_path == "normal_equations") return "";
   double rows = 0;
   for (const Observation& o : ds.observations) rows += KindOf(o).rows();
-  return rows * static_cast<double>(p) > kNormalEquationElements ? "" : "short data";
+  return rows * static_cast<double>(p) > NormalEquationElements(ds) ? "" : "short data";
 }
 
 // "location": the forced set, then each candidate in priority order while

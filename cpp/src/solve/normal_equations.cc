@@ -12,6 +12,7 @@
 #include "fivecal/model/kinematic_model.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/solve/analytic_residuals.h"
+#include "fivecal/solve/long_kernel.h"
 
 namespace fivecal {
 namespace {
@@ -86,6 +87,74 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
   if (batch_->num_prepared() > n) blocks_.push_back({n, batch_->num_prepared(), row, nr - row});
   else if (row != nr)
     throw std::logic_error("normal equations: residual rows do not add up");
+  // The column kernels, when every observation has one (mixed and small
+  // data keep the prepared rows: a probe touch, a tracker reading).
+  if (batch_->num_prepared() == n && row_unit_.empty() && n > 0) {
+    for (int i = 0; i < n;) {
+      const ObservationKind* kind = &KindOf(ds.observations[i]);
+      int j = i + 1;
+      while (j < n && &KindOf(ds.observations[j]) == kind) ++j;
+      std::unique_ptr<LongRun> run = kind->MakeLongRun(ds, table, estimated_, i, j);
+      if (!run) {
+        long_runs_.clear();
+        break;
+      }
+      long_runs_.push_back({i, j, std::move(run)});
+      i = j;
+    }
+  }
+}
+
+void NormalEquationProblem::LongBlock(const KinematicModel& model, const Eigen::VectorXd& values, const Block& B,
+                                      bool jacobian, bool unweighted, double* residuals, NormalEquations* ne) const {
+  const int p = num_parameters();
+  const int ld = PaddedWidth(p);
+  int max_rows = 1;
+  for (const Run& run : long_runs_) max_rows = std::max(max_rows, run.run->rows_per_sample());
+  const int cap = kChunk * max_rows;
+  // The chunk's rows, row-major; the padding columns stay zero.
+  std::vector<double> r(cap), J(jacobian ? static_cast<size_t>(cap) * ld : 0, 0.0);
+  std::vector<double> N(jacobian ? static_cast<size_t>(p) * ld : 0, 0.0), g(p, 0.0);
+  std::vector<double> Nu(jacobian && unweighted ? static_cast<size_t>(p) * ld : 0, 0.0), gu(p, 0.0);
+  auto run = std::partition_point(long_runs_.begin(), long_runs_.end(), [&](const Run& x) { return x.end <= B.begin; });
+  int row = B.row;
+  double cost = 0;
+  for (; run != long_runs_.end() && run->begin < B.end; ++run) {
+    const int rps = run->run->rows_per_sample();
+    for (int s = std::max(B.begin, run->begin), stop = std::min(B.end, run->end); s < stop;) {
+      const int e = std::min(stop, s + kChunk);
+      const int m = (e - s) * rps;
+      run->run->Evaluate(model, values, s - run->begin, e - run->begin, r.data(), jacobian ? J.data() : nullptr, ld);
+      if (residuals) std::copy(r.begin(), r.begin() + m, residuals + row);
+      if (jacobian && unweighted) AccumulateNormal(J.data(), r.data(), m, p, ld, Nu.data(), gu.data());
+      const double* sig = row_sigma_.data() + row;
+      for (int i = 0; i < m; ++i) {
+        const double w = 1.0 / sig[i];
+        r[i] *= w;
+        cost += r[i] * r[i];
+        if (jacobian) {
+          double* jr = J.data() + static_cast<size_t>(i) * ld;
+          for (int c = 0; c < p; ++c) jr[c] *= w;
+        }
+      }
+      if (jacobian) AccumulateNormal(J.data(), r.data(), m, p, ld, N.data(), g.data());
+      row += m;
+      s = e;
+    }
+  }
+  if (row != B.row + B.rows) throw std::logic_error("normal equations: block rows do not add up");
+  ne->cost = 0.5 * cost;
+  if (!jacobian) return;
+  ne->JtJ.resize(p, p);
+  ne->Jtr = Eigen::Map<const Eigen::VectorXd>(g.data(), p);
+  for (int a = 0; a < p; ++a)
+    for (int b = 0; b < p; ++b) ne->JtJ(a, b) = N[static_cast<size_t>(a) * ld + b];
+  if (unweighted) {
+    ne->JtJ_unweighted.resize(p, p);
+    for (int a = 0; a < p; ++a)
+      for (int b = 0; b < p; ++b) ne->JtJ_unweighted(a, b) = Nu[static_cast<size_t>(a) * ld + b];
+  }
+  ne->JtJ_units.clear();
 }
 
 NormalEquationProblem::~NormalEquationProblem() = default;
@@ -111,6 +180,10 @@ void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, b
       std::vector<AnalyticRow> prepared;  // the thread's chunk of prepared rows
       for (int b; !failed && (b = next++) < nb;) {
         const Block& B = blocks_[b];
+        if (!long_runs_.empty()) {
+          LongBlock(model, values, B, jacobian, unweighted, residuals, &(*partial)[b]);
+          continue;
+        }
         const bool tail = B.begin >= static_cast<int>(ds_.observations.size());
         const int ld = tail ? B.rows : std::min(B.rows, kChunk * max_kind_rows);
         r.resize(ld);
@@ -220,6 +293,24 @@ NormalEquations NormalEquationProblem::Accumulate(const Eigen::VectorXd& values,
   cached_ = out;
   cached_unweighted_ = unweighted;
   return out;
+}
+
+double NormalEquationElements(const Dataset& ds) {
+  if (ds.observations.empty()) return kNormalEquationElements;
+  // Each kind present asked once, on a dataset of no observations (an empty
+  // run costs nothing to make).
+  const Dataset none(ds.machine());
+  const ParameterTable table(none);
+  const ObservationKind* last = nullptr;
+  std::vector<const ObservationKind*> asked;
+  for (const Observation& o : ds.observations) {
+    const ObservationKind* kind = &KindOf(o);
+    if (kind == last || std::find(asked.begin(), asked.end(), kind) != asked.end()) continue;
+    last = kind;
+    asked.push_back(kind);
+    if (!kind->MakeLongRun(none, table, {}, 0, 0)) return kNormalEquationElements;
+  }
+  return kColumnarElements;
 }
 
 Eigen::MatrixXd NormalFactor(const Eigen::MatrixXd& N) {

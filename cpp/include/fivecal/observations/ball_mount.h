@@ -60,6 +60,12 @@ class BallMountKind : public ObservationKind {
   void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
                      Observation* ob, PlanSlot* slot) const final;
   bool LengthReference() const final { return true; }
+  // The column block of a trace and its fused kernel (solve/long_kernel.h):
+  // a mounting with a length has one row, the ball distance less the bar
+  // (|P - table| - (length + reading + <kind>.length)); one without has
+  // three, the ball displacement (P - table - measured).
+  std::unique_ptr<LongRun> MakeLongRun(const Dataset& ds, const ParameterTable& t,
+                                       const std::vector<int>& estimated, int begin, int end) const final;
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const final;
 

@@ -22,6 +22,7 @@
 #include <functional>
 #include <initializer_list>
 #include <map>
+#include <memory>
 #include <nlohmann/json_fwd.hpp>
 #include <set>
 #include <string>
@@ -29,6 +30,7 @@
 #include <vector>
 
 #include "fivecal/observations/dataset.h"
+#include "fivecal/solve/long_kernel.h"
 #include "fivecal/solve/priors.h"
 
 namespace fivecal {
@@ -328,6 +330,15 @@ class KindResidual {
   virtual void AddArtefactAnalyticRows(const Dataset&, const ParameterTable&,
                                        std::vector<AnalyticRow>*, std::vector<int>* /*source*/) const {}
   virtual void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const = 0;
+  // Long traces (solve/long_kernel.h): observations [begin, end) of `ds`,
+  // every one of this kind, as a column block with a fused residual and
+  // Jacobian kernel over the `estimated` table entries. Null (the default):
+  // the kind has none, and its samples go through the analytic batch.
+  virtual std::unique_ptr<LongRun> MakeLongRun(const Dataset& /*ds*/, const ParameterTable& /*t*/,
+                                               const std::vector<int>& /*estimated*/, int /*begin*/,
+                                               int /*end*/) const {
+    return nullptr;
+  }
 };
 
 // Its simulation: a plan entry's noise-free observation and where the

@@ -23,11 +23,13 @@
 #include <vector>
 
 #include "fivecal/observations/dataset.h"
+#include "fivecal/model/kinematic_model.h"
 #include "fivecal/solve/problem.h"
 
 namespace fivecal {
 
 class AnalyticResiduals;
+class LongRun;
 
 // The normal equations of the data rows at one point.
 struct NormalEquations {
@@ -70,6 +72,8 @@ class NormalEquationProblem {
   // 0.5 sum rw^2 at `values`: a pass without derivatives.
   double Cost(const Eigen::VectorXd& values) const;
 
+  // Whether the passes run on the kinds' column blocks (long_kernel.h).
+  bool columnar() const { return !long_runs_.empty(); }
   // Passes over the data so far (a pass with the Jacobian counts in both).
   int jacobian_passes() const { return jacobian_passes_; }
   int residual_passes() const { return residual_passes_; }
@@ -82,6 +86,9 @@ class NormalEquationProblem {
   };
   void Pass(const Eigen::VectorXd& values, bool jacobian, bool unweighted, double* residuals,
             std::vector<NormalEquations>* partial) const;
+  // Block B's sums through the kinds' column kernels (long_runs_).
+  void LongBlock(const KinematicModel& model, const Eigen::VectorXd& values, const Block& B, bool jacobian,
+                 bool unweighted, double* residuals, NormalEquations* ne) const;
 
   const Dataset& ds_;
   std::vector<int> estimated_;
@@ -91,6 +98,15 @@ class NormalEquationProblem {
   std::vector<unsigned char> row_unit_;  // per row: 0 mm, else 1 + other unit; empty when none
   double uniform_sigma_ = 0;  // every row's sigma when they are all equal, else 0
   std::vector<Block> blocks_;
+  // Long traces: when every observation is of a kind with a column kernel
+  // (ObservationKind::MakeLongRun) and the data have no artefact rows, the
+  // runs of consecutive observations of one kind as column blocks, and the
+  // passes take them instead of the prepared rows (long_kernel.h).
+  struct Run {
+    int begin, end;  // observations
+    std::unique_ptr<LongRun> run;
+  };
+  std::vector<Run> long_runs_;
   int num_threads_;
   mutable int jacobian_passes_ = 0, residual_passes_ = 0;
   mutable Eigen::VectorXd cached_values_;
@@ -137,6 +153,17 @@ Eigen::MatrixXd NormalFactor(const Eigen::MatrixXd& N);
 // the analyses) dominate time and memory: at 3e6 rows x 4 unknowns the dense
 // fit takes seconds for a tenth of a second of arithmetic.
 constexpr double kNormalEquationElements = 2e6;
+
+// Traces whose every observation is of a kind with a column kernel
+// (ObservationKind::MakeLongRun: R-test and ball-bar samples) take the
+// normal equations from rows x p above kColumnarElements: a pass then costs
+// the fused kernel alone, several times less than the dense fit's
+// evaluation and copies of J (a 10^4-sample R-test, 1.2e5 elements).
+constexpr double kColumnarElements = 1e5;
+
+// kColumnarElements for such data, else kNormalEquationElements (what
+// identify's automatic fit path compares rows x p with).
+double NormalEquationElements(const Dataset& ds);
 
 }  // namespace fivecal
 
