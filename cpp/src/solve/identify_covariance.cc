@@ -14,6 +14,8 @@ namespace fivecal {
 
 IdentifyCovariance CovarianceAtSolution(const Dataset& ds, const IdentifyOptions& opt, const IdentifyRequest& rq,
                                         const IdentifyFit& fit, const IdentifyDetermination& det) {
+  // The determination is this stage's input so that a covariance taken from
+  // its SVD (bench/NOTES.md, S4) would change no caller; not read today.
   (void)det;
   IdentifyCovariance out;
   const std::vector<int>& est = rq.est;
