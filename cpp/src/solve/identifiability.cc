@@ -25,13 +25,15 @@ constexpr double kEigenConditionBound = 1e4;
 
 // Full-rank, well-conditioned case: rank, condition, log det and
 // (J^T J)^-1 (unscaled) from N without an SVD. False: use the SVD.
-bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, bool inverse, Identifiability* out) {
+bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, bool inverse, Identifiability* out,
+                     Eigen::VectorXd* eigenvalues) {
   const int p = static_cast<int>(Js.cols());
   if (p == 0 || Js.rows() < p) return false;
   const Eigen::MatrixXd N = ScaledNormal(Js);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
   if (eig.info() != Eigen::Success) return false;
   const Eigen::VectorXd lambda = eig.eigenvalues();  // ascending
+  *eigenvalues = lambda;
   if (!(lambda[0] > 0) || lambda[p - 1] > kEigenConditionBound * kEigenConditionBound * lambda[0] ||
       std::sqrt(lambda[0]) <= rank_tolerance * std::sqrt(lambda[p - 1]))
     return false;
@@ -91,11 +93,18 @@ Identifiability Analyze(const Eigen::MatrixXd& J, double rank_tolerance, bool fu
     }
   }
   const Eigen::MatrixXd Js = J * inv_scale.asDiagonal();
-  if (zero_columns.empty() && WellConditioned(Js, rank_tolerance, full, &out)) return out;
+  Eigen::VectorXd lambda;  // of Js^T Js, ascending (empty: not computed)
+  if (zero_columns.empty() && WellConditioned(Js, rank_tolerance, full, &out, &lambda)) return out;
   const Eigen::MatrixXd reduced = TriangularFactor(Js);
   // The singular values first, without vectors (less than half the cost):
-  // of full rank, (Js^T Js)^-1 = R^-1 R^-T needs no V.
-  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, 0);
+  // of full rank, (Js^T Js)^-1 = R^-1 R^-T needs no V. Where the eigenvalues
+  // already put sigma_min below 1e-6 sigma_max (their rounding, p eps
+  // lambda_max, is far below that) the set is rank deficient or nearly so and
+  // V will be needed: one SVD with V instead of two (the singular values are
+  // the same to rounding, 1e-13 relative, either way).
+  const bool vectors = full && (!zero_columns.empty() ||
+                                (lambda.size() == p && p > 0 && lambda[0] < 1e-12 * lambda[p - 1]));
+  Eigen::BDCSVD<Eigen::MatrixXd> svd(reduced, vectors ? Eigen::ComputeFullV : 0);
   const Eigen::VectorXd s = svd.singularValues();
   // Thin SVD of an n x p matrix with n < p has only n singular values.
   out.singular_values = Eigen::VectorXd::Zero(p);
@@ -116,7 +125,7 @@ Identifiability Analyze(const Eigen::MatrixXd& J, double rank_tolerance, bool fu
     out.inverse_normal = inv_scale.asDiagonal() * (X * X.transpose()) * inv_scale.asDiagonal();
     return out;  // nothing confounded
   }
-  svd.compute(reduced, Eigen::ComputeFullV);
+  if (!vectors) svd.compute(reduced, Eigen::ComputeFullV);
 
   // (J^T J)^+ = D V S^-2 V^T D over the retained singular values.
   const Eigen::MatrixXd& V = svd.matrixV();
@@ -411,6 +420,13 @@ Eigen::VectorXd SubsetRatios(const Eigen::MatrixXd& Js, const std::vector<int>& 
   const Eigen::MatrixXd inv = ldlt.solve(Eigen::MatrixXd::Identity(k, k));
   for (int a = 0; a < k; ++a) out[a] = std::sqrt(std::max(inv(a, a), 0.0));
   return out;
+}
+
+Eigen::MatrixXd ScaledPosterior(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& s) {
+  const Eigen::MatrixXd Js = Jw * s.asDiagonal();
+  Eigen::MatrixXd N = Js.transpose() * Js;
+  N.diagonal().array() += 1.0;
+  return N.ldlt().solve(Eigen::MatrixXd::Identity(N.rows(), N.cols()));
 }
 
 }  // namespace fivecal

@@ -94,6 +94,10 @@ std::vector<std::vector<int>> UndeterminedGroups(const Eigen::VectorXd& s, const
 // prior-scaled, noise-weighted Jacobian Js; +inf when the subset is singular.
 Eigen::VectorXd SubsetRatios(const Eigen::MatrixXd& Js, const std::vector<int>& cols);
 
+// (Js^T Js + I)^-1 with Js = Jw diag(s): the posterior covariance of a MAP
+// fit with prior sigmas s, in units of those priors.
+Eigen::MatrixXd ScaledPosterior(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& s);
+
 }  // namespace fivecal
 
 #endif  // FIVECAL_IDENTIFIABILITY_H_
