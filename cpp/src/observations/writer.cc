@@ -34,6 +34,91 @@ void OwnKeys(const Machine& m, const Observation& o, json* jo) {
   kind.WriteOnMachine(m, o, jo);
 }
 
+// One observation's own keys: the kind's flat form when it gives one (no
+// JSON value built: the long traces' kinds), else its Write (OwnKeys).
+// Visit(v, head) calls v.text(key, string), v.number(key, double),
+// v.vector(key, const double[3]) or v.other(key, json) for "target" and
+// "setup" (head) or for the other keys in name order (not head).
+class OwnRow {
+ public:
+  void Fill(const Machine& m, const Observation& o) {
+    using F = FlatObservation;
+    flat_ = F();
+    if (!o.target.empty()) {
+      flat_.target = &o.target;
+      flat_.seen |= 1u << F::kTarget;
+    }
+    if (!o.setup.empty()) {
+      flat_.setup = &o.setup;
+      flat_.seen |= 1u << F::kSetup;
+    }
+    flat_row_ = KindOf(o).WriteFlat(o, &flat_);
+    if (!flat_row_) OwnKeys(m, o, &jo_);
+    type_ = o.type;
+  }
+
+  template <class V>
+  void Visit(V& v, bool head) const {
+    using F = FlatObservation;
+    if (flat_row_) {
+      static constexpr F::Key kHead[] = {F::kTarget, F::kSetup};
+      static constexpr F::Key kRest[] = {F::kLength, F::kMeasured, F::kReading, F::kTableBall, F::kToolBall};
+      auto one = [&](F::Key k) {
+        if (!flat_.has(k)) return;
+        const char* name = F::kNames[k];
+        switch (k) {
+          case F::kTarget: v.text(name, *flat_.target); break;
+          case F::kSetup: v.text(name, *flat_.setup); break;
+          case F::kReading: v.number(name, flat_.reading); break;
+          case F::kLength: v.number(name, flat_.length); break;
+          case F::kToolBall: v.vector(name, flat_.tool_ball.data()); break;
+          case F::kTableBall: v.vector(name, flat_.table_ball.data()); break;
+          case F::kMeasured: v.vector(name, flat_.measured.data()); break;
+          default: break;
+        }
+      };
+      if (head)
+        for (F::Key k : kHead) one(k);
+      else
+        for (F::Key k : kRest) one(k);
+      return;
+    }
+    auto one = [&](const std::string& k, const json& x) {
+      if (x.is_string()) {
+        v.text(k.c_str(), x.get_ref<const std::string&>());
+      } else if (x.is_number_float()) {
+        v.number(k.c_str(), x.get<double>());
+      } else if (x.is_array() && x.size() == 3 &&
+                 std::all_of(x.begin(), x.end(), [](const json& c) { return c.is_number_float(); })) {
+        const double c[3] = {x[0].get<double>(), x[1].get<double>(), x[2].get<double>()};
+        v.vector(k.c_str(), c);
+      } else {
+        v.other(k.c_str(), x);
+      }
+    };
+    if (head) {
+      for (const char* k : {"target", "setup"}) {
+        const auto it = jo_.find(k);
+        if (it != jo_.end() && !it->is_null()) one(k, *it);
+      }
+      return;
+    }
+    for (const auto& [k, x] : jo_.items()) {
+      if (k == "target" || k == "setup" || x.is_null()) continue;
+      if (k == "type" || k == "axes" || k == "direction" || k == "sigma" || k == "id")
+        throw std::logic_error(std::string("dataset writer: kind ") + ObservationTypeName(type_) +
+                               " writes the generic key " + k);
+      one(k, x);
+    }
+  }
+
+ private:
+  FlatObservation flat_;
+  bool flat_row_ = false;
+  json jo_;
+  ObservationType type_ = ObservationType::kFacet;
+};
+
 // Linear axes, then rotary, then the spindle (the order people write them
 // in), other letters last: axis indices in the order both writers put them.
 std::vector<int> AxisOrder(const Machine& m) {
@@ -45,10 +130,6 @@ std::vector<int> AxisOrder(const Machine& m) {
   };
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return rank(a) < rank(b); });
   return order;
-}
-
-bool Generic(const std::string& key) {
-  return key == "type" || key == "axes" || key == "direction" || key == "sigma" || key == "id";
 }
 
 // Whether the noise of `o` is one number (every row the same), as ToJson
@@ -154,19 +235,46 @@ void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_byte
   buf += ",\n \"observations\": [";
   buf.reserve(chunk_bytes + 4096);
 
+  // Puts the own keys out as `, "key": value`.
+  struct Emit {
+    std::string* buf;
+    void key(const char* k) {
+      buf->append(", ");
+      AppendString(k, buf);
+      buf->append(": ");
+    }
+    void text(const char* k, const std::string& v) {
+      key(k);
+      AppendString(v, buf);
+    }
+    void number(const char* k, double x) {
+      key(k);
+      AppendNumber(x, buf);
+    }
+    void vector(const char* k, const double* c) {
+      key(k);
+      buf->push_back('[');
+      AppendNumber(c[0], buf);
+      buf->append(", ");
+      AppendNumber(c[1], buf);
+      buf->append(", ");
+      AppendNumber(c[2], buf);
+      buf->push_back(']');
+    }
+    void other(const char* k, const json& v) {
+      key(k);
+      AppendValue(v, buf);
+    }
+  } emit{&buf};
+
   bool first = true;
-  json own;
+  OwnRow own;
   for (const Observation& o : ds.observations) {
     buf.append(first ? "\n  {\"type\": " : ",\n  {\"type\": ");
     first = false;
     AppendString(ObservationTypeName(o.type), &buf);
-    OwnKeys(m, o, &own);
-    for (const char* k : {"target", "setup"}) {
-      const auto it = own.find(k);
-      if (it == own.end() || it->is_null()) continue;
-      buf.append(", \"").append(k).append("\": ");
-      AppendValue(*it, &buf);
-    }
+    own.Fill(m, o);
+    own.Visit(emit, true);
     buf.append(", \"axes\": {");
     for (int j = 0; j < na; ++j) {
       const int k = order[j];
@@ -184,16 +292,7 @@ void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_byte
       }
       buf.push_back('}');
     }
-    for (const auto& [k, v] : own.items()) {
-      if (k == "target" || k == "setup" || v.is_null()) continue;
-      if (Generic(k))
-        throw std::logic_error(std::string("dataset writer: kind ") + ObservationTypeName(o.type) +
-                               " writes the generic key " + k);
-      buf.append(", ");
-      AppendString(k, &buf);
-      buf.append(": ");
-      AppendValue(v, &buf);
-    }
+    own.Visit(emit, false);
     if (o.sigma.size() > 0) {
       buf.append(", \"sigma\": ");
       if (OneSigma(o)) {
@@ -264,59 +363,66 @@ ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(ds) {
     if (any_dir[k]) dir_col_[k] = add("dir_" + std::string(1, m.axis(k).name), Type::kInt8);
 
   // The kinds' own keys, in the order they first appear.
-  json own;
-  for (size_t i = 0; i < ds.observations.size(); ++i) {
-    OwnKeys(m, ds.observations[i], &own);
-    for (const auto& [key, v] : own.items()) {
-      if (Generic(key))
-        throw std::logic_error("dataset writer: kind " + std::string(ObservationTypeName(ds.observations[i].type)) +
-                               " writes the generic key " + key);
-      KeyColumns kc;
-      if (v.is_string()) {
-        kc.shape = KeyColumns::kText;
-      } else if (v.is_number()) {
-        kc.shape = KeyColumns::kNumber;
+  struct Find {
+    ColumnWriter* w;
+    const Machine& m;
+    std::function<std::string(const std::string&)> where;
+    std::function<int(const std::string&, Type)> add;
+    KeyColumns* Register(const std::string& key, KeyColumns::Shape shape) {
+      static const char* what[] = {"a number", "text", "a 3-vector", "axis commands"};
+      auto it = w->keys_.find(key);
+      if (it != w->keys_.end()) {
+        if (it->second.shape != shape)
+          throw std::invalid_argument(where(key) + ": " + what[shape] + " where an earlier observation has " +
+                                      what[it->second.shape] + " (one column holds one kind of value)");
+        return &it->second;
+      }
+      KeyColumns& k = w->keys_[key];
+      k.shape = shape;
+      if (shape == KeyColumns::kNumber) k.first = add(key, Type::kFloat64);
+      if (shape == KeyColumns::kText) k.first = add(key, Type::kString);
+      if (shape == KeyColumns::kVector) {
+        k.first = add(key + "_x", Type::kFloat64);
+        add(key + "_y", Type::kFloat64);
+        add(key + "_z", Type::kFloat64);
+      }
+      if (shape == KeyColumns::kAxes) k.by_axis.assign(static_cast<size_t>(m.num_axes()), -1);
+      return &k;
+    }
+    void text(const char* k, const std::string&) { Register(k, KeyColumns::kText); }
+    void number(const char* k, double) { Register(k, KeyColumns::kNumber); }
+    void vector(const char* k, const double*) { Register(k, KeyColumns::kVector); }
+    void other(const char* key, const json& v) {
+      const std::string k = key;
+      if (v.is_number()) {
+        Register(k, KeyColumns::kNumber);
       } else if (v.is_array()) {
-        if (v.size() != 3 || !std::all_of(v.begin(), v.end(), [](const json& x) { return x.is_number(); }))
-          throw std::invalid_argument(where(i, key) + ": a list of " + std::to_string(v.size()) +
-                                      " values has no column form (3-vectors of numbers only)");
-        kc.shape = KeyColumns::kVector;
+        throw std::invalid_argument(where(k) + ": a list of " + std::to_string(v.size()) +
+                                    " values has no column form (3-vectors of numbers only)");
       } else if (v.is_object()) {
-        if (key.size() <= 5 || key.compare(key.size() - 5, 5, "_axes") != 0)
-          throw std::invalid_argument(where(i, key) + ": only a set of axis commands (<name>_axes) has a column form");
-        kc.shape = KeyColumns::kAxes;
-      } else if (v.is_null()) {
-        continue;
-      } else {
-        throw std::invalid_argument(where(i, key) + ": true/false has no column form");
-      }
-      auto it = keys_.find(key);
-      if (it == keys_.end()) {
-        it = keys_.emplace(key, kc).first;
-        KeyColumns& k = it->second;
-        if (kc.shape == KeyColumns::kNumber) k.first = add(key, Type::kFloat64);
-        if (kc.shape == KeyColumns::kText) k.first = add(key, Type::kString);
-        if (kc.shape == KeyColumns::kVector) {
-          k.first = add(key + "_x", Type::kFloat64);
-          add(key + "_y", Type::kFloat64);
-          add(key + "_z", Type::kFloat64);
-        }
-        if (kc.shape == KeyColumns::kAxes) k.by_axis.assign(static_cast<size_t>(na), -1);
-      } else if (it->second.shape != kc.shape) {
-        static const char* what[] = {"a number", "text", "a 3-vector", "axis commands"};
-        throw std::invalid_argument(where(i, key) + ": " + what[kc.shape] + " where an earlier observation has " +
-                                    what[it->second.shape] + " (one column holds one kind of value)");
-      }
-      if (kc.shape == KeyColumns::kAxes) {
-        const std::string base = key.substr(0, key.size() - 5);
+        if (k.size() <= 5 || k.compare(k.size() - 5, 5, "_axes") != 0)
+          throw std::invalid_argument(where(k) + ": only a set of axis commands (<name>_axes) has a column form");
+        KeyColumns* kc = Register(k, KeyColumns::kAxes);
+        const std::string base = k.substr(0, k.size() - 5);
         for (const auto& [a, x] : v.items()) {
-          const int k = a.size() == 1 ? m.AxisIndex(a[0]) : -1;
-          if (k < 0) throw std::invalid_argument(where(i, key) + "." + a + ": not an axis letter of the machine");
-          if (!x.is_number()) throw std::invalid_argument(where(i, key) + "." + a + ": expected a number");
-          if (it->second.by_axis[k] < 0) it->second.by_axis[k] = add(base + "_" + a, Type::kFloat64);
+          const int ax = a.size() == 1 ? m.AxisIndex(a[0]) : -1;
+          if (ax < 0) throw std::invalid_argument(where(k) + "." + a + ": not an axis letter of the machine");
+          if (!x.is_number()) throw std::invalid_argument(where(k) + "." + a + ": expected a number");
+          if (kc->by_axis[ax] < 0) kc->by_axis[ax] = add(base + "_" + a, Type::kFloat64);
         }
+      } else if (!v.is_null()) {
+        throw std::invalid_argument(where(k) + ": true/false has no column form");
       }
     }
+  };
+  size_t row = 0;
+  Find find{this, m, [&](const std::string& key) { return where(row, key); },
+            [&](const std::string& name, Type t) { return add(name, t); }};
+  OwnRow own;
+  for (; row < ds.observations.size(); ++row) {
+    own.Fill(m, ds.observations[row]);
+    own.Visit(find, true);
+    own.Visit(find, false);
   }
 
   // The noise last.
@@ -374,7 +480,34 @@ std::vector<ColumnWriter::Block> ColumnWriter::Write(int64_t begin, int64_t end)
     out[c].numbers[r] = x;
     out[c].valid[r] = 1;
   };
-  json own;
+  // Puts the own keys into their columns (found by the constructor).
+  struct Fill {
+    const ColumnWriter* w;
+    const Machine& m;
+    std::function<void(int, size_t, const std::string&)> put_text;
+    std::function<void(int, size_t, double)> put;
+    size_t r = 0;
+    const KeyColumns& Of(const char* k) const {
+      const auto it = w->keys_.find(k);
+      // The kind wrote a key the constructor's walk did not see.
+      if (it == w->keys_.end())
+        throw std::logic_error(std::string("dataset writer: key ") + k + " changed since the columns were found");
+      return it->second;
+    }
+    void text(const char* k, const std::string& v) { put_text(Of(k).first, r, v); }
+    void number(const char* k, double x) { put(Of(k).first, r, x); }
+    void vector(const char* k, const double* c) {
+      const int first = Of(k).first;
+      for (int i = 0; i < 3; ++i) put(first + i, r, c[i]);
+    }
+    void other(const char* k, const json& v) {
+      const KeyColumns& kc = Of(k);
+      if (kc.shape == KeyColumns::kNumber) put(kc.first, r, v.get<double>());
+      if (kc.shape == KeyColumns::kAxes)
+        for (const auto& [a, x] : v.items()) put(kc.by_axis[m.AxisIndex(a[0])], r, x.get<double>());
+    }
+  } fill{this, m, put_text, put};
+  OwnRow own;
   for (size_t r = 0; r < n; ++r) {
     const Observation& o = ds_.observations[static_cast<size_t>(begin) + r];
     for (size_t c = 0; c < columns_.size(); ++c)
@@ -388,31 +521,10 @@ std::vector<ColumnWriter::Block> ColumnWriter::Write(int64_t begin, int64_t end)
         out[dir_col_[k]].valid[r] = 1;
       }
     }
-    OwnKeys(m, o, &own);
-    for (const auto& [key, v] : own.items()) {
-      if (v.is_null()) continue;
-      const auto it = keys_.find(key);
-      if (it == keys_.end()) {
-        // The kind wrote a key the walk in the constructor did not see.
-        throw std::logic_error("dataset writer: observation " + std::to_string(begin + r) + " key " + key +
-                               " changed since the columns were found");
-      }
-      const KeyColumns& kc = it->second;
-      switch (kc.shape) {
-        case KeyColumns::kNumber:
-          put(kc.first, r, v.get<double>());
-          break;
-        case KeyColumns::kText:
-          put_text(kc.first, r, v.get_ref<const std::string&>());
-          break;
-        case KeyColumns::kVector:
-          for (int c = 0; c < 3; ++c) put(kc.first + c, r, v[static_cast<size_t>(c)].get<double>());
-          break;
-        case KeyColumns::kAxes:
-          for (const auto& [a, x] : v.items()) put(kc.by_axis[m.AxisIndex(a[0])], r, x.get<double>());
-          break;
-      }
-    }
+    fill.r = r;
+    own.Fill(m, o);
+    own.Visit(fill, true);
+    own.Visit(fill, false);
     if (o.sigma.size() > 0) {
       if (OneSigma(o)) put(sigma_, r, o.sigma[0]);
       else

@@ -82,7 +82,7 @@ class ColumnWriter {
   };
   const Dataset& ds_;
   std::vector<Spec> columns_;
-  std::map<std::string, KeyColumns> keys_;
+  std::map<std::string, KeyColumns, std::less<>> keys_;  // found by name as the kinds write them
   int id_ = -1, sigma_ = -1, sigma_rows_ = -1;  // sigma_rows_: column of row 1 of per-row noise
   bool numbered_sigma_ = false;
   std::vector<int> axis_col_, dir_col_;  // by machine axis index; dir -1 when no column
