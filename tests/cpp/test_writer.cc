@@ -121,14 +121,16 @@ TEST(DatasetWriter, ColumnsLoadBackAsTheSameObservations) {
     EXPECT_EQ(ThroughColumns(ds, 41).ToJson(), ds.ToJson()) << kind;
     EXPECT_EQ(ThroughColumns(ds, 7).ToJson(), ds.ToJson()) << kind;
   }
+  const Dataset ds = Samples("ball3d", 5);
+  const ColumnWriter w(ds);
   std::vector<std::string> names;
-  for (const ColumnWriter::Spec& s : ColumnWriter(Samples("ball3d", 5)).columns()) names.push_back(s.name);
+  for (const ColumnWriter::Spec& s : w.columns()) names.push_back(s.name);
   const std::vector<std::string> expected = {"type", "id", "X", "Y", "Z", "B", "C", "S", "setup", "measured_x",
                                              "measured_y", "measured_z", "table_ball_x", "table_ball_y",
                                              "table_ball_z", "tool_ball_x", "tool_ball_y", "tool_ball_z", "sigma",
                                              "sigma_x", "sigma_y", "sigma_z"};
   EXPECT_EQ(names, expected);
-  EXPECT_THROW(ColumnWriter(Samples("facet", 3)).Write(2, 1), std::invalid_argument);
+  EXPECT_THROW(w.Write(2, 1), std::invalid_argument);
 }
 
 }  // namespace
