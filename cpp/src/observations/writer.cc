@@ -54,7 +54,7 @@ class OwnRow {
     }
     flat_row_ = KindOf(o).WriteFlat(o, &flat_);
     if (!flat_row_) OwnKeys(m, o, &jo_);
-    type_ = o.type;
+    type_ = ObservationTypeName(o.type);
   }
 
   template <class V>
@@ -106,7 +106,7 @@ class OwnRow {
     for (const auto& [k, x] : jo_.items()) {
       if (k == "target" || k == "setup" || x.is_null()) continue;
       if (k == "type" || k == "axes" || k == "direction" || k == "sigma" || k == "id")
-        throw std::logic_error(std::string("dataset writer: kind ") + ObservationTypeName(type_) +
+        throw std::logic_error(std::string("dataset writer: kind ") + type_ +
                                " writes the generic key " + k);
       one(k, x);
     }
@@ -116,7 +116,7 @@ class OwnRow {
   FlatObservation flat_;
   bool flat_row_ = false;
   json jo_;
-  ObservationType type_ = ObservationType::kFacet;
+  const char* type_ = "";  // the observation's kind, for a message
 };
 
 // Linear axes, then rotary, then the spindle (the order people write them
