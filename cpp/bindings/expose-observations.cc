@@ -19,6 +19,7 @@
 #include "fivecal/observations/dataset.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/observations/simulate.h"
+#include "fivecal/observations/writer.h"
 #include "fivecal/solve/priors.h"
 
 namespace py = pybind11;
@@ -44,6 +45,15 @@ const T* Buffer(py::handle obj, int64_t n, const std::string& what, py::list* ke
   return a.data();
 }
 
+// A numpy array owning `v` (moved, not copied): a written block's column.
+template <typename T, typename C>
+py::array_t<T> Owned(C&& v) {
+  auto* p = new C(std::move(v));
+  py::capsule free(p, [](void* q) { delete reinterpret_cast<C*>(q); });
+  return py::array_t<T>({static_cast<py::ssize_t>(p->size())}, {static_cast<py::ssize_t>(sizeof(T))},
+                        reinterpret_cast<const T*>(p->data()), free);
+}
+
 }  // namespace
 
 void BindObservations(py::module_& m) {
@@ -51,6 +61,15 @@ void BindObservations(py::module_& m) {
       .def_static("from_json", &Dataset::FromJson, py::arg("text"),
                   py::arg("require_observations") = true)
       .def("to_json", &Dataset::ToJson)
+      // write: called with the file's bytes piece by piece (an exception it
+      // raises stops the write and propagates).
+      .def(
+          "write_json",
+          [](const Dataset& d, const py::object& write, size_t chunk_bytes) {
+            WriteDatasetJson(d, [&](const char* p, size_t n) { write(py::bytes(p, n)); }, chunk_bytes);
+          },
+          py::arg("write"), py::arg("chunk_bytes") = size_t{1} << 20)
+      .def("head", &DatasetHead)
       .def("subset", &Dataset::Subset, py::arg("indices"))
       .def_static(
           "balls",
@@ -348,4 +367,48 @@ void BindObservations(py::module_& m) {
           },
           py::arg("kind"), py::arg("rows"), py::arg("numbers"), py::arg("strings"), py::arg("positions") = py::none())
       .def("finish", &ColumnLoader::Finish, py::arg("whole") = true);
+
+  py::class_<ColumnWriter>(m, "ColumnWriter")
+      .def(py::init<const Dataset&>(), py::arg("dataset"), py::keep_alive<1, 2>(),
+           py::call_guard<py::gil_scoped_release>())
+      .def_property_readonly("rows", &ColumnWriter::rows)
+      .def_property_readonly("columns",
+                             [](const ColumnWriter& w) {
+                               py::list out;
+                               for (const ColumnWriter::Spec& s : w.columns())
+                                 out.append(py::make_tuple(s.name, s.type == ColumnWriter::Type::kString ? "string"
+                                                                   : s.type == ColumnWriter::Type::kInt8 ? "int8"
+                                                                                                         : "float64"));
+                               return out;
+                             })
+      .def(
+          "write",
+          // Per column, in `columns` order: float64 (values, valid), int8
+          // (values, valid) or string (int32 offsets, uint8 bytes, valid);
+          // valid is a bool array, or None when every row holds a value.
+          [](const ColumnWriter& w, int64_t begin, int64_t end) {
+            std::vector<ColumnWriter::Block> blocks;
+            {
+              py::gil_scoped_release release;
+              blocks = w.Write(begin, end);
+            }
+            py::list out;
+            for (size_t c = 0; c < blocks.size(); ++c) {
+              ColumnWriter::Block& b = blocks[c];
+              py::object valid = b.valid.empty() ? py::object(py::none()) : py::object(Owned<bool>(std::move(b.valid)));
+              switch (w.columns()[c].type) {
+                case ColumnWriter::Type::kFloat64:
+                  out.append(py::make_tuple(Owned<double>(std::move(b.numbers)), valid));
+                  break;
+                case ColumnWriter::Type::kInt8:
+                  out.append(py::make_tuple(Owned<int8_t>(std::move(b.small)), valid));
+                  break;
+                case ColumnWriter::Type::kString:
+                  out.append(py::make_tuple(Owned<int32_t>(std::move(b.offsets)), Owned<uint8_t>(std::move(b.text)), valid));
+                  break;
+              }
+            }
+            return out;
+          },
+          py::arg("begin"), py::arg("end"));
 }

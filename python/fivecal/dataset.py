@@ -167,13 +167,24 @@ def load_dataset(path: Union[str, os.PathLike]) -> Dataset:
 def save_dataset(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
     """Write a dataset (validated first) in the dataset format (docs/formats.md):
     Parquet when the name ends in ``.parquet`` or ``.pq`` (needs pyarrow),
-    otherwise JSON."""
+    otherwise JSON. Streamed (10^6 observations in seconds, without a copy
+    of the dataset in memory) and atomic: a write that fails or is
+    interrupted leaves ``path`` as it was."""
     ds = Dataset.from_dict(ds)
     for _, _, suffixes, write in _FORMATS:
         if os.fspath(path).lower().endswith(suffixes):
             write(ds, path)
             return
-    files.write_json(path, ds.to_dict())
+    write_json(ds, path)
+
+
+def write_json(ds: Union[Dataset, Mapping], path: Union[str, os.PathLike]) -> None:
+    """Write a dataset as a JSON file whatever the name says: the head
+    indented, then one observation per line, written by the core piece by
+    piece into a temporary file that replaces ``path`` at the end."""
+    ds = Dataset.from_dict(ds)
+    with files.atomic_output(path) as out:
+        ds._core.write_json(out.write)
 
 
 def ball_dataset(machine, type: str, axes: Mapping, tool_ball, table_ball, length: float = 0.0,

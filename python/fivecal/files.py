@@ -1,11 +1,13 @@
 """Reading inputs and writing outputs safely.
 
 Every file the package writes goes through :func:`write_text` /
-:func:`write_bytes` (or :func:`save_figure`): the data goes to a temporary
-file in the destination's folder, is flushed and fsynced, and then replaces
-the destination with ``os.replace``.  An interrupted write (Ctrl-C, SIGTERM,
-a full disk) therefore leaves either the complete old file or the complete
-new one, never an empty or truncated file.
+:func:`write_bytes` (or :func:`save_figure`), or, for a file too large to
+hold in memory whole, :func:`atomic_output` (piece by piece): the data goes
+to a temporary file in the destination's folder, is flushed and fsynced, and
+then replaces the destination with ``os.replace``.  An interrupted write
+(Ctrl-C, SIGTERM, a full disk, an error midway through a stream) therefore
+leaves either the complete old file or the complete new one, never an empty
+or truncated file.
 
 Inputs are read with :func:`read_text` / :func:`read_bytes`: regular files
 (or pipes) up to :data:`MAX_INPUT_BYTES`; devices and directories are
@@ -20,8 +22,9 @@ One guard, :func:`guard_output`, stands before every write: a file read in
 the running transaction, or a database opened with :func:`open_sqlite` (a
 calibration store, read or written, in a transaction or not, while it is
 open), is never overwritten. Writers that produce bytes another library
-makes (Parquet through :func:`write_parquet_table`, figures through
-:func:`save_figure`) go through :func:`write_bytes` like the rest, so no
+makes (Parquet through :func:`write_parquet_table` or, streamed,
+:func:`write_parquet_batches`, figures through :func:`save_figure`) go
+through :func:`atomic_output` like the rest, so no
 module writes a file but through here (tests/python/test_files.py checks
 the source for it).
 """
@@ -375,12 +378,47 @@ def _new_file_mode() -> int:
 _before_replace = None
 
 
-def write_bytes(path: PathLike, data: bytes, label: str = "", durable: bool = True) -> str:
-    """Atomically replace ``path`` (through a symbolic link: its target) with
-    ``data``; returns ``path``.  ValueError (naming ``label``, the option
-    that named the file) when ``path`` is an input (:func:`guard_output`).
-    ``durable=False`` skips the fsyncs (the replace stays atomic): for
-    thousands of generated files that can be made again."""
+class _Output:
+    """The temporary file :func:`atomic_output` writes to: bytes in, nothing
+    else (no seeking back into what is written)."""
+
+    def __init__(self, f):
+        self._f = f
+
+    def write(self, data) -> int:
+        return self._f.write(data)
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+    def flush(self) -> None:
+        self._f.flush()
+
+    @property
+    def closed(self) -> bool:
+        return self._f.closed
+
+    def writable(self) -> bool:
+        return True
+
+    def readable(self) -> bool:
+        return False
+
+    def seekable(self) -> bool:
+        return False
+
+
+@contextlib.contextmanager
+def atomic_output(path: PathLike, label: str = "", durable: bool = True):
+    """A file to write ``path`` through, piece by piece: the pieces go to a
+    temporary file beside it, which replaces ``path`` (through a symbolic
+    link: its target) when the block ends normally. When the block raises or
+    is interrupted (an exception, Ctrl-C, SIGTERM) the temporary file is
+    removed and ``path`` is left as it was, so a long streamed write never
+    leaves a partial file. Yields an object with ``write(bytes)``.
+    ValueError (naming ``label``) when ``path`` is an input
+    (:func:`guard_output`) or cannot be written. ``durable=False`` skips the
+    fsyncs (the replace stays atomic)."""
     path = guard_output(path, label)
     dest = os.path.realpath(path)
     folder = os.path.dirname(dest) or "."
@@ -396,7 +434,7 @@ def write_bytes(path: PathLike, data: bytes, label: str = "", durable: bool = Tr
         raise ValueError(f"{path}: cannot write ({e.strerror})") from None
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            yield _Output(f)
             if _before_replace is not None:
                 _before_replace(f)
             f.flush()
@@ -422,14 +460,24 @@ def write_bytes(path: PathLike, data: bytes, label: str = "", durable: bool = Tr
         elif backup is not None:
             _active[-1].backups.append((dest, backup))
     if not durable:
-        return path
+        return
     with contextlib.suppress(OSError):  # the rename itself durable
         dfd = os.open(folder, os.O_RDONLY)
         try:
             os.fsync(dfd)
         finally:
             os.close(dfd)
-    return path
+
+
+def write_bytes(path: PathLike, data: bytes, label: str = "", durable: bool = True) -> str:
+    """Atomically replace ``path`` (through a symbolic link: its target) with
+    ``data``; returns ``path``.  ValueError (naming ``label``, the option
+    that named the file) when ``path`` is an input (:func:`guard_output`).
+    ``durable=False`` skips the fsyncs (the replace stays atomic): for
+    thousands of generated files that can be made again."""
+    with atomic_output(path, label=label, durable=durable) as out:
+        out.write(data)
+    return os.fspath(path)
 
 
 def write_text(path: PathLike, text: str, encoding: str = "utf-8", label: str = "", durable: bool = True) -> str:
@@ -489,3 +537,18 @@ def write_parquet_table(path: PathLike, table, label: str = "", **kw) -> str:
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, **kw)
     return write_bytes(path, memoryview(sink.getvalue()), label=label)
+
+
+def write_parquet_batches(path: PathLike, schema, batches, label: str = "", **kw) -> str:
+    """A Parquet file of ``schema`` (a pyarrow Schema) from an iterable of
+    record batches, each written as it comes (one row group or more per
+    batch: the file is never whole in memory), through :func:`atomic_output`:
+    a failure midway (in ``batches`` or the write) leaves ``path`` as it was.
+    ``kw``: ``pyarrow.parquet.ParquetWriter`` options."""
+    import pyarrow.parquet as pq
+
+    with atomic_output(path, label=label) as out:
+        with pq.ParquetWriter(out, schema, **kw) as w:
+            for b in batches:
+                w.write_batch(b)
+    return os.fspath(path)

@@ -74,6 +74,12 @@ class Kind final : public BallMountKind {
     ob->measured = f.measured;
     return ReadFlatMount(f, ob);
   }
+  bool WriteFlat(const Observation& o, FlatObservation* f) const override {
+    f->measured = o.measured;
+    f->seen |= 1u << FlatObservation::kMeasured;
+    WriteFlatMount(o, f);
+    return true;
+  }
 
   // The nest (table ball) position always comes with ball3d data: a nest
   // placed to a millimetre, left fixed, turns into location errors of

@@ -70,6 +70,13 @@ class Kind final : public BallMountKind {
     ob->length = f.length;
     return ReadFlatMount(f, ob);
   }
+  bool WriteFlat(const Observation& o, FlatObservation* f) const override {
+    f->reading = o.reading;
+    f->length = o.length;
+    f->seen |= (1u << FlatObservation::kReading) | (1u << FlatObservation::kLength);
+    WriteFlatMount(o, f);
+    return true;
+  }
 
   void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
                     std::set<int>* out) const override {

@@ -91,6 +91,12 @@ class BallMountKind : public ObservationKind {
     ob->table_ball = f.table_ball;
     return true;
   }
+  // Both balls in the flat form (a kind's WriteFlat calls it).
+  static void WriteFlatMount(const Observation& o, FlatObservation* f) {
+    f->tool_ball = o.tool_ball;
+    f->table_ball = o.table_ball;
+    f->seen |= (1u << FlatObservation::kToolBall) | (1u << FlatObservation::kTableBall);
+  }
   // The kind's own fields (checked after the setup id, before the ball
   // positions; written with them).
   virtual void ValidateOwn(const Observation& o, const std::function<std::string()>& where) const = 0;

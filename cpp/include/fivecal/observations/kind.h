@@ -255,6 +255,11 @@ class KindFileFormat {
   // the observation through Read (whose result and messages are the
   // reference). Only a speed-up for kinds that come in long traces.
   virtual bool ReadFlat(const FlatObservation&, const Artefact&, Observation*) const { return false; }
+  // ReadFlat's inverse, the streaming writers' fast path (writer.h): adds
+  // the kind's own fields of `o` to `f` (which holds the generic target and
+  // setup already) when they are exactly what Write and WriteOnMachine
+  // would write; false sends the observation through Write (the reference).
+  virtual bool WriteFlat(const Observation&, FlatObservation*) const { return false; }
   // Writes the own fields that need the machine (the axis letters of a
   // second pose); called after Write.
   virtual void WriteOnMachine(const Machine&, const Observation&, nlohmann::json* /*out*/) const {}

@@ -1,0 +1,539 @@
+#include "fivecal/observations/writer.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "fivecal/observations/kind.h"
+#include "fivecal/observations/registry.h"
+#include "json_util.h"
+
+namespace fivecal {
+namespace {
+
+using json_util::json;
+
+// The kind's own keys of one observation, as Dataset::ToJson writes them:
+// the generic writer's "target" and "setup" first (a kind may rename them:
+// the machined features call them "feature" and "part"), then the kind's
+// Write and WriteOnMachine. Type, axes, direction, noise and id are not in
+// it: both writers below put those out themselves, without a JSON value
+// per number. `jo` is reused row after row (its map nodes stay, which
+// halves the allocations per row): a key an earlier row had and this one
+// lacks is left null, and null means absent.
+void OwnKeys(const Machine& m, const Observation& o, json* jo) {
+  if (!jo->is_object()) *jo = json::object();
+  for (auto& v : *jo) v = nullptr;
+  if (!o.target.empty()) (*jo)["target"] = o.target;
+  if (!o.setup.empty()) (*jo)["setup"] = o.setup;
+  const ObservationKind& kind = KindOf(o);
+  kind.Write(o, jo);
+  kind.WriteOnMachine(m, o, jo);
+}
+
+// One observation's own keys: the kind's flat form when it gives one (no
+// JSON value built: the long traces' kinds), else its Write (OwnKeys).
+// Visit(v, head) calls v.text(key, string), v.number(key, double),
+// v.vector(key, const double[3]) or v.other(key, json) for "target" and
+// "setup" (head) or for the other keys in name order (not head).
+class OwnRow {
+ public:
+  void Fill(const Machine& m, const Observation& o) {
+    using F = FlatObservation;
+    flat_ = F();
+    if (!o.target.empty()) {
+      flat_.target = &o.target;
+      flat_.seen |= 1u << F::kTarget;
+    }
+    if (!o.setup.empty()) {
+      flat_.setup = &o.setup;
+      flat_.seen |= 1u << F::kSetup;
+    }
+    flat_row_ = KindOf(o).WriteFlat(o, &flat_);
+    if (!flat_row_) OwnKeys(m, o, &jo_);
+    type_ = ObservationTypeName(o.type);
+  }
+
+  template <class V>
+  void Visit(V& v, bool head) const {
+    using F = FlatObservation;
+    if (flat_row_) {
+      static constexpr F::Key kHead[] = {F::kTarget, F::kSetup};
+      static constexpr F::Key kRest[] = {F::kLength, F::kMeasured, F::kReading, F::kTableBall, F::kToolBall};
+      auto one = [&](F::Key k) {
+        if (!flat_.has(k)) return;
+        const char* name = F::kNames[k];
+        switch (k) {
+          case F::kTarget: v.text(name, *flat_.target); break;
+          case F::kSetup: v.text(name, *flat_.setup); break;
+          case F::kReading: v.number(name, flat_.reading); break;
+          case F::kLength: v.number(name, flat_.length); break;
+          case F::kToolBall: v.vector(name, flat_.tool_ball.data()); break;
+          case F::kTableBall: v.vector(name, flat_.table_ball.data()); break;
+          case F::kMeasured: v.vector(name, flat_.measured.data()); break;
+          default: break;
+        }
+      };
+      if (head)
+        for (F::Key k : kHead) one(k);
+      else
+        for (F::Key k : kRest) one(k);
+      return;
+    }
+    auto one = [&](const std::string& k, const json& x) {
+      if (x.is_string()) {
+        v.text(k.c_str(), x.get_ref<const std::string&>());
+      } else if (x.is_number_float()) {
+        v.number(k.c_str(), x.get<double>());
+      } else if (x.is_array() && x.size() == 3 &&
+                 std::all_of(x.begin(), x.end(), [](const json& c) { return c.is_number_float(); })) {
+        const double c[3] = {x[0].get<double>(), x[1].get<double>(), x[2].get<double>()};
+        v.vector(k.c_str(), c);
+      } else {
+        v.other(k.c_str(), x);
+      }
+    };
+    if (head) {
+      for (const char* k : {"target", "setup"}) {
+        const auto it = jo_.find(k);
+        if (it != jo_.end() && !it->is_null()) one(k, *it);
+      }
+      return;
+    }
+    for (const auto& [k, x] : jo_.items()) {
+      if (k == "target" || k == "setup" || x.is_null()) continue;
+      if (k == "type" || k == "axes" || k == "direction" || k == "sigma" || k == "id")
+        throw std::logic_error(std::string("dataset writer: kind ") + type_ +
+                               " writes the generic key " + k);
+      one(k, x);
+    }
+  }
+
+ private:
+  FlatObservation flat_;
+  bool flat_row_ = false;
+  json jo_;
+  const char* type_ = "";  // the observation's kind, for a message
+};
+
+// Linear axes, then rotary, then the spindle (the order people write them
+// in), other letters last: axis indices in the order both writers put them.
+std::vector<int> AxisOrder(const Machine& m) {
+  std::vector<int> order(static_cast<size_t>(m.num_axes()));
+  for (int k = 0; k < m.num_axes(); ++k) order[k] = k;
+  auto rank = [&](int k) {
+    const size_t p = std::string("XYZABCS").find(m.axis(k).name);
+    return std::make_pair(p == std::string::npos ? 7 : static_cast<int>(p), m.axis(k).name);
+  };
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return rank(a) < rank(b); });
+  return order;
+}
+
+// Whether the noise of `o` is one number (every row the same), as ToJson
+// writes it.
+bool OneSigma(const Observation& o) { return (o.sigma.array() == o.sigma[0]).all(); }
+
+// ---------------------------------------------------------------- JSON text
+
+// The shortest text that reads back as the same double (std::to_chars), with
+// ".0" on an integral value as nlohmann writes it, so that a reader keeps it
+// a float.
+void AppendNumber(double x, std::string* out) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, x);
+  out->append(buf, r.ptr);
+  if (std::find_if(buf, r.ptr, [](char c) { return c == '.' || c == 'e' || c == 'n' || c == 'i'; }) == r.ptr)
+    out->append(".0");
+}
+
+void AppendString(const std::string& s, std::string* out) {
+  static const char* hex = "0123456789abcdef";
+  out->push_back('"');
+  for (const char c : s) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '"' || c == '\\') {
+      out->push_back('\\');
+      out->push_back(c);
+    } else if (u < 0x20) {
+      out->append("\\u00");
+      out->push_back(hex[u >> 4]);
+      out->push_back(hex[u & 15]);
+    } else {
+      out->push_back(c);
+    }
+  }
+  out->push_back('"');
+}
+
+void AppendValue(const json& v, std::string* out) {
+  switch (v.type()) {
+    case json::value_t::number_float:
+      AppendNumber(v.get<double>(), out);
+      return;
+    case json::value_t::string:
+      AppendString(v.get_ref<const std::string&>(), out);
+      return;
+    case json::value_t::array: {
+      out->push_back('[');
+      bool first = true;
+      for (const json& x : v) {
+        if (!first) out->append(", ");
+        first = false;
+        AppendValue(x, out);
+      }
+      out->push_back(']');
+      return;
+    }
+    case json::value_t::object: {
+      out->push_back('{');
+      bool first = true;
+      for (const auto& [k, x] : v.items()) {
+        if (!first) out->append(", ");
+        first = false;
+        AppendString(k, out);
+        out->append(": ");
+        AppendValue(x, out);
+      }
+      out->push_back('}');
+      return;
+    }
+    default:
+      out->append(v.dump());  // integers, true/false, null
+  }
+}
+
+// ToJson of no observations is the head as ToJson writes it (the same keys,
+// numbers and defaults): one writer of the head, not two.
+json Head(const Dataset& ds) {
+  json head = json::parse(ds.Subset({}).ToJson());
+  head.erase("observations");
+  return head;
+}
+
+}  // namespace
+
+std::map<std::string, std::string> DatasetHead(const Dataset& ds) {
+  const json head = Head(ds);
+  std::map<std::string, std::string> out;
+  for (const auto& [k, v] : head.items()) out[k] = v.dump();
+  return out;
+}
+
+void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_bytes) {
+  const Machine& m = ds.machine();
+  const int na = m.num_axes();
+  const std::vector<int> order = AxisOrder(m);
+  std::vector<std::string> letters;
+  for (int k = 0; k < na; ++k) letters.push_back(std::string(1, m.axis(k).name));
+
+  // "{\n ...\n}" (never empty: the machine is there), reopened for the observations.
+  std::string buf = Head(ds).dump(1);
+  buf.resize(buf.size() - 2);
+  buf += ",\n \"observations\": [";
+  buf.reserve(chunk_bytes + 4096);
+
+  // Puts the own keys out as `, "key": value`.
+  struct Emit {
+    std::string* buf;
+    void key(const char* k) {
+      buf->append(", ");
+      AppendString(k, buf);
+      buf->append(": ");
+    }
+    void text(const char* k, const std::string& v) {
+      key(k);
+      AppendString(v, buf);
+    }
+    void number(const char* k, double x) {
+      key(k);
+      AppendNumber(x, buf);
+    }
+    void vector(const char* k, const double* c) {
+      key(k);
+      buf->push_back('[');
+      AppendNumber(c[0], buf);
+      buf->append(", ");
+      AppendNumber(c[1], buf);
+      buf->append(", ");
+      AppendNumber(c[2], buf);
+      buf->push_back(']');
+    }
+    void other(const char* k, const json& v) {
+      key(k);
+      AppendValue(v, buf);
+    }
+  } emit{&buf};
+
+  bool first = true;
+  OwnRow own;
+  for (const Observation& o : ds.observations) {
+    buf.append(first ? "\n  {\"type\": " : ",\n  {\"type\": ");
+    first = false;
+    AppendString(ObservationTypeName(o.type), &buf);
+    own.Fill(m, o);
+    own.Visit(emit, true);
+    buf.append(", \"axes\": {");
+    for (int j = 0; j < na; ++j) {
+      const int k = order[j];
+      buf.append(j ? ", \"" : "\"").append(letters[k]).append("\": ");
+      AppendNumber(o.axes[k], &buf);
+    }
+    buf.push_back('}');
+    if ((o.direction.array() != 0).any()) {
+      buf.append(", \"direction\": {");
+      bool firstd = true;
+      for (const int k : order) {
+        if (o.direction[k] == 0) continue;
+        buf.append(firstd ? "\"" : ", \"").append(letters[k]).append(o.direction[k] > 0 ? "\": 1" : "\": -1");
+        firstd = false;
+      }
+      buf.push_back('}');
+    }
+    own.Visit(emit, false);
+    if (o.sigma.size() > 0) {
+      buf.append(", \"sigma\": ");
+      if (OneSigma(o)) {
+        AppendNumber(o.sigma[0], &buf);
+      } else {
+        buf.push_back('[');
+        for (int r = 0; r < o.sigma.size(); ++r) {
+          if (r) buf.append(", ");
+          AppendNumber(o.sigma[r], &buf);
+        }
+        buf.push_back(']');
+      }
+    }
+    if (!o.id.empty()) {
+      buf.append(", \"id\": ");
+      AppendString(o.id, &buf);
+    }
+    buf.push_back('}');
+    if (buf.size() >= chunk_bytes) {
+      sink(buf.data(), buf.size());
+      buf.clear();
+    }
+  }
+  buf.append(ds.observations.empty() ? "]\n}\n" : "\n ]\n}\n");
+  sink(buf.data(), buf.size());
+}
+
+// ---------------------------------------------------------------- columns
+
+ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(ds) {
+  const Machine& m = ds.machine();
+  const int na = m.num_axes();
+  auto add = [&](const std::string& name, Type t) {
+    columns_.push_back({name, t});
+    return static_cast<int>(columns_.size()) - 1;
+  };
+  auto where = [&](size_t i, const std::string& key) {
+    return "observations[" + std::to_string(i) + "] (" + ObservationTypeName(ds.observations[i].type) + "), " + key;
+  };
+
+  // What the rows hold: decides the generic columns, which come first.
+  bool any_id = false, one_sigma = false;
+  std::vector<bool> any_dir(static_cast<size_t>(na), false);
+  int row_sigmas = 0;
+  for (const Observation& o : ds.observations) {
+    any_id |= !o.id.empty();
+    for (int k = 0; k < na; ++k) any_dir[k] = any_dir[k] || o.direction[k] != 0;
+    if (o.sigma.size() == 0) continue;
+    if (OneSigma(o)) {
+      one_sigma = true;
+    } else {
+      row_sigmas = std::max(row_sigmas, static_cast<int>(o.sigma.size()));
+      // Three values read as a vector (sigma_x|y|z, as the CSV tables write
+      // them) unless some observation has another number of rows.
+      numbered_sigma_ |= o.sigma.size() != 3;
+    }
+  }
+  if (row_sigmas > 9)
+    throw std::invalid_argument("sigma: " + std::to_string(row_sigmas) +
+                                " values per observation have no column form (sigma_1 to sigma_9)");
+  add("type", Type::kString);
+  if (any_id) id_ = add("id", Type::kString);
+  const std::vector<int> order = AxisOrder(m);
+  axis_col_.assign(static_cast<size_t>(na), -1);
+  dir_col_.assign(static_cast<size_t>(na), -1);
+  for (int k : order) axis_col_[k] = add(std::string(1, m.axis(k).name), Type::kFloat64);
+  for (int k : order)
+    if (any_dir[k]) dir_col_[k] = add("dir_" + std::string(1, m.axis(k).name), Type::kInt8);
+
+  // The kinds' own keys, in the order they first appear.
+  struct Find {
+    ColumnWriter* w;
+    const Machine& m;
+    std::function<std::string(const std::string&)> where;
+    std::function<int(const std::string&, Type)> add;
+    KeyColumns* Register(const std::string& key, KeyColumns::Shape shape) {
+      static const char* what[] = {"a number", "text", "a 3-vector", "axis commands"};
+      auto it = w->keys_.find(key);
+      if (it != w->keys_.end()) {
+        if (it->second.shape != shape)
+          throw std::invalid_argument(where(key) + ": " + what[shape] + " where an earlier observation has " +
+                                      what[it->second.shape] + " (one column holds one kind of value)");
+        return &it->second;
+      }
+      KeyColumns& k = w->keys_[key];
+      k.shape = shape;
+      if (shape == KeyColumns::kNumber) k.first = add(key, Type::kFloat64);
+      if (shape == KeyColumns::kText) k.first = add(key, Type::kString);
+      if (shape == KeyColumns::kVector) {
+        k.first = add(key + "_x", Type::kFloat64);
+        add(key + "_y", Type::kFloat64);
+        add(key + "_z", Type::kFloat64);
+      }
+      if (shape == KeyColumns::kAxes) k.by_axis.assign(static_cast<size_t>(m.num_axes()), -1);
+      return &k;
+    }
+    void text(const char* k, const std::string&) { Register(k, KeyColumns::kText); }
+    void number(const char* k, double) { Register(k, KeyColumns::kNumber); }
+    void vector(const char* k, const double*) { Register(k, KeyColumns::kVector); }
+    void other(const char* key, const json& v) {
+      const std::string k = key;
+      if (v.is_number()) {
+        Register(k, KeyColumns::kNumber);
+      } else if (v.is_array()) {
+        throw std::invalid_argument(where(k) + ": a list of " + std::to_string(v.size()) +
+                                    " values has no column form (3-vectors of numbers only)");
+      } else if (v.is_object()) {
+        if (k.size() <= 5 || k.compare(k.size() - 5, 5, "_axes") != 0)
+          throw std::invalid_argument(where(k) + ": only a set of axis commands (<name>_axes) has a column form");
+        KeyColumns* kc = Register(k, KeyColumns::kAxes);
+        const std::string base = k.substr(0, k.size() - 5);
+        for (const auto& [a, x] : v.items()) {
+          const int ax = a.size() == 1 ? m.AxisIndex(a[0]) : -1;
+          if (ax < 0) throw std::invalid_argument(where(k) + "." + a + ": not an axis letter of the machine");
+          if (!x.is_number()) throw std::invalid_argument(where(k) + "." + a + ": expected a number");
+          if (kc->by_axis[ax] < 0) kc->by_axis[ax] = add(base + "_" + a, Type::kFloat64);
+        }
+      } else if (!v.is_null()) {
+        throw std::invalid_argument(where(k) + ": true/false has no column form");
+      }
+    }
+  };
+  size_t row = 0;
+  Find find{this, m, [&](const std::string& key) { return where(row, key); },
+            [&](const std::string& name, Type t) { return add(name, t); }};
+  OwnRow own;
+  for (; row < ds.observations.size(); ++row) {
+    own.Fill(m, ds.observations[row]);
+    own.Visit(find, true);
+    own.Visit(find, false);
+  }
+
+  // The noise last.
+  if (one_sigma) sigma_ = add("sigma", Type::kFloat64);
+  if (row_sigmas) {
+    for (int r = 0; r < row_sigmas; ++r) {
+      const int c = add(numbered_sigma_ ? "sigma_" + std::to_string(r + 1) : std::string("sigma_") + "xyz"[r],
+                        Type::kFloat64);
+      if (r == 0) sigma_rows_ = c;
+    }
+  }
+  // Two keys whose columns share a name (a vector "a" and a number "a_x")
+  // would load as something else.
+  std::vector<std::string> names;
+  for (const Spec& s : columns_) names.push_back(s.name);
+  std::sort(names.begin(), names.end());
+  const auto dup = std::adjacent_find(names.begin(), names.end());
+  if (dup != names.end())
+    throw std::invalid_argument("column " + *dup + ": two keys of the observations would both fill it");
+}
+
+std::vector<ColumnWriter::Block> ColumnWriter::Write(int64_t begin, int64_t end) const {
+  if (begin < 0 || end < begin || end > rows())
+    throw std::invalid_argument("columns: rows " + std::to_string(begin) + " to " + std::to_string(end) +
+                                " outside 0 to " + std::to_string(rows()));
+  const Machine& m = ds_.machine();
+  const int na = m.num_axes();
+  const size_t n = static_cast<size_t>(end - begin);
+  std::vector<Block> out(columns_.size());
+  for (size_t c = 0; c < columns_.size(); ++c) {
+    Block& b = out[c];
+    switch (columns_[c].type) {
+      case Type::kFloat64:
+        b.numbers.assign(n, std::numeric_limits<double>::quiet_NaN());
+        break;
+      case Type::kInt8:
+        b.small.assign(n, 0);  // no direction given: no backlash term, as the loader reads it
+        break;
+      case Type::kString:
+        b.offsets.assign(n + 1, 0);
+        break;
+    }
+    b.valid.assign(n, 0);
+  }
+  // Text columns are filled row after row: each holds its running length.
+  auto put_text = [&](int c, size_t r, const std::string& s) {
+    Block& b = out[c];
+    b.text.append(s);
+    if (b.text.size() > static_cast<size_t>(std::numeric_limits<int32_t>::max()))
+      throw std::invalid_argument("column " + columns_[c].name + ": more than 2 GB of text in one block of rows");
+    b.offsets[r + 1] = static_cast<int32_t>(b.text.size());
+    b.valid[r] = 1;
+  };
+  auto put = [&](int c, size_t r, double x) {
+    out[c].numbers[r] = x;
+    out[c].valid[r] = 1;
+  };
+  // Puts the own keys into their columns (found by the constructor).
+  struct Fill {
+    const ColumnWriter* w;
+    const Machine& m;
+    std::function<void(int, size_t, const std::string&)> put_text;
+    std::function<void(int, size_t, double)> put;
+    size_t r = 0;
+    const KeyColumns& Of(const char* k) const {
+      const auto it = w->keys_.find(k);
+      // The kind wrote a key the constructor's walk did not see.
+      if (it == w->keys_.end())
+        throw std::logic_error(std::string("dataset writer: key ") + k + " changed since the columns were found");
+      return it->second;
+    }
+    void text(const char* k, const std::string& v) { put_text(Of(k).first, r, v); }
+    void number(const char* k, double x) { put(Of(k).first, r, x); }
+    void vector(const char* k, const double* c) {
+      const int first = Of(k).first;
+      for (int i = 0; i < 3; ++i) put(first + i, r, c[i]);
+    }
+    void other(const char* k, const json& v) {
+      const KeyColumns& kc = Of(k);
+      if (kc.shape == KeyColumns::kNumber) put(kc.first, r, v.get<double>());
+      if (kc.shape == KeyColumns::kAxes)
+        for (const auto& [a, x] : v.items()) put(kc.by_axis[m.AxisIndex(a[0])], r, x.get<double>());
+    }
+  } fill{this, m, put_text, put};
+  OwnRow own;
+  for (size_t r = 0; r < n; ++r) {
+    const Observation& o = ds_.observations[static_cast<size_t>(begin) + r];
+    for (size_t c = 0; c < columns_.size(); ++c)
+      if (columns_[c].type == Type::kString) out[c].offsets[r + 1] = out[c].offsets[r];
+    put_text(0, r, ObservationTypeName(o.type));
+    if (id_ >= 0 && !o.id.empty()) put_text(id_, r, o.id);
+    for (int k = 0; k < na; ++k) {
+      put(axis_col_[k], r, o.axes[k]);
+      if (dir_col_[k] >= 0) {
+        out[dir_col_[k]].small[r] = static_cast<int8_t>(o.direction[k]);
+        out[dir_col_[k]].valid[r] = 1;
+      }
+    }
+    fill.r = r;
+    own.Fill(m, o);
+    own.Visit(fill, true);
+    own.Visit(fill, false);
+    if (o.sigma.size() > 0) {
+      if (OneSigma(o)) put(sigma_, r, o.sigma[0]);
+      else
+        for (int k = 0; k < o.sigma.size(); ++k) put(sigma_rows_ + k, r, o.sigma[k]);
+    }
+  }
+  for (Block& b : out)
+    if (std::all_of(b.valid.begin(), b.valid.end(), [](uint8_t v) { return v != 0; })) b.valid.clear();
+  return out;
+}
+
+}  // namespace fivecal
