@@ -12,5 +12,10 @@ if [ ! -f build/dev/CMakeCache.txt ]; then
     -DFIVECAL_BUILD_TESTS=ON -Dpybind11_DIR="$($PY -m pybind11 --cmakedir)" >/dev/null
 fi
 cmake --build build/dev -j "${JOBS:-2}"
-cp build/dev/_core*.so python/fivecal/
+# Copy then rename: overwriting the module in place crashes a Python process
+# that has it loaded (a test run, a bench) instead of leaving it the old file.
+for so in build/dev/_core*.so; do
+  cp "$so" "python/fivecal/.$(basename "$so").tmp"
+  mv -f "python/fivecal/.$(basename "$so").tmp" "python/fivecal/$(basename "$so")"
+done
 echo "built build/dev; module copied to python/fivecal/ (use PYTHONPATH=$PWD/python)"
