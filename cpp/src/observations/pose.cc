@@ -49,6 +49,9 @@ class Kind final : public ObservationKind {
   double default_sigma_row(int k) const override { return k < 3 ? 0.01 : 1e-4; }
   const char* instrument_key() const override { return "instrument"; }
   bool analytic() const override { return false; }
+  // A camera or 6D tracker reports positions in its calibrated length unit:
+  // like a point tracker, its data fix the machine's scale (EXX1 ...).
+  bool LengthReference() const override { return true; }
 
   std::vector<const char*> json_keys() const override {
     return {"type", "instrument", "axes", "direction", "measured", "measured_rotation", "target", "target_point",

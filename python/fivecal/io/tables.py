@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import inspect
 import math
 import os
 import re
@@ -40,10 +41,11 @@ import sys
 import warnings
 from typing import Iterable, Mapping, Optional, Sequence, Union
 
-from .. import plausibility, simulation
+from .. import plausibility, schema, simulation
 from .. import units as _units
 from ..dataset import Dataset
 from ..machine import Machine, RadiansWarning
+from . import rotations as _rot
 
 KINDS = ("probing", "dbb", "ball3d", "point", "pose", "distance", "machined", "fivecal")
 ALIASES = {"rtest": "ball3d", "r-test": "ball3d", "touch": "probing", "probe": "probing", "generic": "fivecal",
@@ -83,9 +85,15 @@ _MEASURED |= set(_MEASURED_XYZ)
 # single sigma column cannot weigh them: its noise is the kind's default or
 # the dataset's instruments entry.
 _MEASURED_ROT = ("measured_rx", "measured_ry", "measured_rz")
-_SHORT.update({"mrx": "measured_rx", "mry": "measured_ry", "mrz": "measured_rz"})
-_FIELDS["pose"] = (_FIELDS["point"] - {"sigma"}) | set(_MEASURED_ROT)
-_REQUIRED["pose"] = _MEASURED_XYZ + _MEASURED_ROT
+_SHORT.update({"mrx": "measured_rx", "mry": "measured_ry", "mrz": "measured_rz",
+               # a camera's or motion-capture log's translation (TUM, EuRoC, ROS): never an axis
+               "tx": "measured_x", "ty": "measured_y", "tz": "measured_z"})
+# Its orientation may also come as a quaternion, a matrix or Euler angles, and
+# its noise as six sigma_x ... sigma_rz columns: io/rotations.py checks which.
+_FIELDS["pose"] = (_FIELDS["point"] - {"sigma"}) | set(_MEASURED_ROT) | _rot.FIELDS
+_REQUIRED["pose"] = _MEASURED_XYZ
+_LENGTH_FIELDS |= _rot.LENGTH_FIELDS
+_MEASURED |= _rot.LENGTH_FIELDS
 # distance: one reading per row from the station the row names (or the only one)
 _FIELDS["distance"] = {"id", "sigma", "reading", "station"}
 _REQUIRED["distance"] = ("reading",)
@@ -275,14 +283,14 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
             raise ValueError(f"{where}: columns '{seen[field]}' and '{h}' both give {field}")
         seen[field] = h
         c = _Column(i, h, field, unit)
-        quantity = "angle" if (len(field) == 1 and machine.is_rotary(field)) or field in _MEASURED_ROT else \
+        quantity = "angle" if (len(field) == 1 and machine.is_rotary(field)) or field in _rot.ANGLE_FIELDS else \
             "length" if field in _LENGTH_FIELDS or len(field) == 1 else None
         if quantity and unit is not None:
             c.factor, _ = _units.column_unit(h, quantity, where)
-            if field in _MEASURED_ROT:
-                c.factor *= math.pi / 180.0  # angle columns scale to degrees; a rotation vector is in rad
-        elif field in _MEASURED_ROT:
-            c.factor = 1.0  # a rotation vector is in rad unless its header says otherwise
+            if field in _rot.ANGLE_FIELDS:
+                c.factor *= math.pi / 180.0  # angle columns scale to degrees; orientations are in rad
+        elif field in _rot.ANGLE_FIELDS:
+            c.factor = 1.0  # rad unless its header (or the sidecar's rotation.unit) says otherwise
         elif quantity == "angle":
             c.factor = _units.ANGLE_SUFFIXES[angle_unit or "deg"]
         elif quantity == "length":
@@ -466,13 +474,23 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
                 raise ValueError(f"{origin[key]}: {key} belongs to a ball bar or R-test import, not machined")
     if kind == "point" and "target_rotation" in side:
         raise ValueError(f"{origin['target_rotation']}: target_rotation belongs to a pose import, not point")
+    if kind != "pose" and side.get("rotation") is not None:
+        raise ValueError(f"{origin['rotation']}: rotation (how the orientation is written) belongs to a pose "
+                         f"import, not {kind}")
+    if side.get("instruments") is not None and kind not in _FIXED + ("distance",):
+        raise ValueError(f"{origin['instruments']}: instruments (noise per instrument) belongs to a point, pose "
+                         f"or distance import, not {kind}")
+    if side.get("sigma") is not None:
+        listed = _rot.sidecar_sigma(side["sigma"], kind, origin["sigma"])
+        if listed is not None:
+            side["sigma"] = listed
     # checked once here, so that a bad value is named where it was given
     for key in ("tool_ball", "table_ball", "target_point", "instrument_origin", "instrument_angles",
                 "target_rotation"):
         if side.get(key) is not None:
             side[key] = _vector3(side[key], origin[key])
     for key in ("length", "sigma"):
-        if side.get(key) is not None:
+        if side.get(key) is not None and not isinstance(side[key], list):
             side[key] = _positive(side[key], origin[key])
     if side.get("setup") is not None and (not isinstance(side["setup"], str) or "." in side["setup"]):
         raise ValueError(f"{origin['setup']}: expected a mounting name without '.', got {side['setup']!r}")
@@ -526,6 +544,8 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     else:
         cols = _columns(headers, machine, kind, hwhere, columns or {}, ignore,
                         units and units.lower(), angle_units and angle_units.lower())
+    if kind == "pose":
+        side["_rotation"] = _rot.prepare(cols, side, origin, hwhere)
     decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
     if decimal == "comma" and delim == ",":
         raise ValueError(f"{path}: a decimal comma needs another column separator than ',' (';', tab or spaces)")
@@ -574,6 +594,8 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
                          '{"tip_radius": R} (mm) in the sidecar')
     if "probe" in side:
         d["probe"] = side["probe"]
+    if side.get("instruments") is not None:
+        d["instruments"] = side["instruments"]  # checked with the dataset, naming the field
     if artefact:
         d["artefact"] = artefact
     return d, lineno_of
@@ -709,13 +731,7 @@ def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_
     o = {"type": kind, "instrument": side["instrument"], "target": side["target"],
          "target_point": list(side["target_point"]), "axes": axes, "measured": measured}
     if kind == "pose":
-        rot = [vals[k][0] for k in _MEASURED_ROT]
-        if math.sqrt(sum(v * v for v in rot)) > math.pi + 1e-9:
-            # a rotation vector is at most half a turn long: longer ones are degrees read as rad
-            raise ValueError(f"{vals[_MEASURED_ROT[0]][1].rsplit(': column', 1)[0]}: measured rotation "
-                             f"{_fmt(rot)} is longer than π rad, which no rotation vector is; degrees? name "
-                             "the columns measured_rx_deg ... or convert to rad")
-        o["measured_rotation"] = rot
+        o["measured_rotation"] = _rot.row_rotation(vals, side["_rotation"], where)
         if side.get("target_rotation") is not None:
             o["target_rotation"] = list(side["target_rotation"])
     if "id" in text:
@@ -723,6 +739,9 @@ def _point_row(cells, cols, machine: Machine, kind: str, side: Mapping, decimal_
     if direction:
         o["direction"] = direction
     _row_sigma(o, vals, side)
+    sigmas = _rot.row_sigma(vals, side.get("_rotation"))
+    if sigmas is not None:
+        o["sigma"] = sigmas
     if "joint" in text:
         o["_joint"] = _joint_of(text, vals, machine, side, angle_units)
     return o
@@ -1579,6 +1598,7 @@ def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options)
     error the dataset checks find in an observation names its file and line.
     ``dataset.import_note`` says how a point import set the instrument's
     nominal pose (empty for other kinds)."""
+    _known_options(options, "import_dataset")
     d, lines = _read(path, kind, machine, **options)
     path = os.fspath(path)
     sidecar = options.get("sidecar")
@@ -1614,6 +1634,26 @@ def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options)
     # how a point import placed the instrument: the user must be able to see it
     ds.import_note = d.get("_comment", "")
     return ds
+
+
+def _known_options(options: Mapping, what: str) -> None:
+    """Refuse an unknown keyword naming it and the accepted ones (a raw
+    TypeError from deep inside names a private function); a sidecar key
+    given as a keyword is told where it belongs."""
+    accepted = [p for p in inspect.signature(read_table).parameters if p not in ("path", "kind", "machine")]
+    for key in sorted(set(options) - set(accepted)):
+        side_keys = sorted(set(_schema_keys()) - set(accepted))
+        if key in side_keys:
+            raise ValueError(f"{what}: '{key}' is a sidecar key, not a keyword: pass sidecar={{'{key}': ...}} "
+                             f"(or a sidecar JSON file; docs/import.md)")
+        close = difflib.get_close_matches(key, accepted, n=1)
+        raise ValueError(f"{what}: unknown keyword '{key}'" + (f" (did you mean '{close[0]}'?)" if close else "")
+                         + f"; accepted: {', '.join(accepted)}")
+
+
+def _schema_keys() -> list:
+    """The keys an import sidecar may hold (import.schema.json)."""
+    return [k for k in schema.load_schema("import").get("properties", {}) if not k.startswith(("$", "_"))]
 
 
 def _warn(message: str, category) -> None:
