@@ -30,7 +30,7 @@ TRUTH = json.load(open(os.path.join(EX, "truth.json")))
 MACHINE = os.path.join(EX, "machine.json")
 LOCATION = ["EA0C", "EB0C"]
 # the figures examples/camera_positioner/README.md states (mm)
-FIT_RMS, HELD_OUT_RMS = 0.096, 0.10
+FIT_RMS, HELD_OUT_RMS = 0.129, 0.121
 
 
 def _import(tmp_path, which):
@@ -79,7 +79,7 @@ def test_location_under_positioner_priors_recovers_the_truth_and_predicts_held_o
         fit = np.asarray(r.residuals).reshape(-1, 6)[:, :3]
         assert np.sqrt(np.mean(fit ** 2)) == pytest.approx(FIT_RMS, abs=0.01)
         held = np.asarray(r.predict(test)).reshape(-1, 6)[:, :3]
-        assert np.sqrt(np.mean(held ** 2)) == pytest.approx(HELD_OUT_RMS, abs=0.015)
+        assert np.sqrt(np.mean(held ** 2)) == pytest.approx(HELD_OUT_RMS, abs=0.01)
         # the instrument's A location is its pose: location says so, it does not drop it silently
         assert {n for n, _ in r.left_out} >= {"EY0A", "EZ0A"}
     ra, rb = results
@@ -152,13 +152,28 @@ def test_a_camera_carries_a_length_reference():
 
 
 def test_variance_components_with_location_fits_what_location_chose(both):
-    ds = both[1]
-    d = ds.to_dict()
+    """The issue's case: camera data at the kind's default noise (10 to 20
+    times too small), machining-centre priors, location with variance
+    components. Location chooses EA0C at the declared noise; at the noise
+    the residuals show it is too weakly seen. That was an error naming
+    "{EA0C}: confounded with each other"; now the fit goes on without it and
+    says why."""
+    d = both[1].to_dict()
+    machine = json.load(open(MACHINE))
+    machine.pop("kind")
+    d["machine"] = machine
     for o in d["observations"]:
-        o.pop("sigma")  # the kind's default noise, 5 to 20 times too small for this camera
+        o.pop("sigma")
     r = fivecal.identify(fivecal.Dataset.from_dict(d), "location", variance_components=True)
-    assert r.converged and set(r.estimated) & set(LOCATION)
-    assert r.variance_components["pose"]["factor"] > 3
+    assert r.converged and "EA0C" not in r.estimated
+    assert r.variance_components["pose"]["factor"] > 5
+    why = dict(r.left_out)["EA0C"]
+    assert "variance components" in why and "too weakly seen" in why
+    assert "EA0C" in r.report()
+    # with the positioner's priors the same request keeps both tilts
+    d["machine"] = json.load(open(MACHINE))
+    r = fivecal.identify(fivecal.Dataset.from_dict(d), "location", variance_components=True)
+    assert {"EA0C", "EB0C"} <= set(r.estimated)
 
 
 def test_a_single_weak_parameter_is_not_confounded_with_each_other(both):
