@@ -16,11 +16,10 @@ the tilts. Two logs of the same poses, as two kinds of software write them:
   millimetres, quaternion scalar first as ``q0 q1 q2 q3`` (the sidecar names
   the order), and the camera's own per-row sigma columns in um and urad.
 
-The truth is in ``truth.json``.
+The truth is ``TRUTH`` and ``SETUP`` below; the camera's noise ``SIGMA``.
 """
 from __future__ import annotations
 
-import json
 import os
 
 import numpy as np
@@ -85,7 +84,6 @@ def write(rows) -> None:
                      + ",".join(f"{x:.6f}" for x in p) + "," + ",".join(f"{x:.9f}" for x in q) + ","
                      + ",".join(su))
     files.write_text(os.path.join(HERE, "camera_wxyz.csv"), "\n".join(lines) + "\n")
-    files.write_json(os.path.join(HERE, "truth.json"), {"errors": TRUTH, "setup": SETUP, "sigma": SIGMA})
 
 if __name__ == "__main__":
     write(simulate())

@@ -553,7 +553,7 @@ def left_out_lines(fd: "guards.Findings") -> list:
     of the machine file's kind (docs/formats.md, Machine)."""
     items = list(fd.left_out.items())
     out = [f"left out by the preset (not estimated; plausible sizes are the priors of the machine's kind, "
-           f"docs/formats.md): {len(items)}"]
+           f"`fivecal docs formats`): {len(items)}"]
     out += [f"  {n}: {why}" for n, why in items[:8]]
     if len(items) > 8:
         out.append(f"  and {len(items) - 8} more: {guards.name_list([n for n, _ in items[8:]])}")

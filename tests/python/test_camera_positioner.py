@@ -13,6 +13,7 @@ single weak parameter is never "confounded with each other", and
 chose."""
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 
@@ -26,7 +27,17 @@ from fivecal.io import import_dataset
 
 ROOT = os.path.join(os.path.dirname(__file__), "..", "..")
 EX = os.path.join(ROOT, "examples", "camera_positioner")
-TRUTH = json.load(open(os.path.join(EX, "truth.json")))
+
+
+def _make_logs():
+    spec = importlib.util.spec_from_file_location("make_logs", os.path.join(EX, "make_logs.py"))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+LOGS = _make_logs()
+TRUTH = {"errors": LOGS.TRUTH, "setup": LOGS.SETUP, "sigma": LOGS.SIGMA}
 MACHINE = os.path.join(EX, "machine.json")
 LOCATION = ["EA0C", "EB0C"]
 # the figures examples/camera_positioner/README.md states (mm)
@@ -38,7 +49,7 @@ def _import(tmp_path, which):
     extra = ["--units", "m", "--ignore", "timestamp"] if which == "camera_xyzw" else ["--ignore", "time_ns"]
     ext = "txt" if which == "camera_xyzw" else "csv"
     args = ["import", "pose", os.path.join(EX, f"{which}.{ext}"), "--machine", MACHINE,
-            "--sidecar", os.path.join(EX, f"{which}.json"), "--out", str(out)] + extra
+            "--sidecar", os.path.join(EX, "import", f"{which}.json"), "--out", str(out)] + extra
     assert main(args) == 0
     return fivecal.load_dataset(str(out))
 
@@ -107,10 +118,7 @@ def test_a_positioners_errors_are_found_under_its_kinds_priors_over_repeated_sim
     """The truth test of the kind: 20 simulations of the positioner; under
     its kind's priors the location preset keeps every true error, each within
     3 sigma, and the sigmas cover (about 95 % within 2 sigma)."""
-    sys_path = os.path.join(EX, "make_logs.py")
-    spec = __import__("importlib.util").util.spec_from_file_location("make_logs", sys_path)
-    mod = __import__("importlib.util").util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = LOGS
     m = fivecal.Machine.load(MACHINE)
     inside = total = 0
     for seed in range(20):
@@ -209,3 +217,4 @@ def test_help_texts_name_the_instrument_pose_and_a_pose_example(capsys):
         main(["import", "--help"])
     out = capsys.readouterr().out
     assert "fivecal import pose camera_xyzw.txt" in out and "qx qy qz qw" in out
+    assert os.path.exists(os.path.join(EX, "import", "camera_xyzw.json"))  # the help's example is real

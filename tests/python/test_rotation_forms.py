@@ -261,8 +261,8 @@ def test_pose_sigma_from_sidecar_columns_and_instruments(tmp_path):
 
 
 @pytest.mark.parametrize("side,cols,match", [
-    ({"sigma": 0.01}, [], r"a pose's rows are in mm and rad, so one number cannot weigh them: give six values"),
-    ({"sigma": [0.01, 0.01, 0.01]}, [], r"sigma: expected 6 values, x y z \(mm\) and rx ry rz \(rad\), got 3"),
+    ({"sigma": 0.01}, [], r"a pose observation.s rows are in mm and rad, so one number cannot weigh them: give 6 values"),
+    ({"sigma": [0.01, 0.01, 0.01]}, [], r"sigma: expected 6 values, one per row \(x y z rx ry rz: mm, mm, mm, rad, rad, rad\), got 3"),
     ({"sigma": [0.01, 0.01, 0.01, 1e-4, 1e-4, 0]}, [], r"sigma\[5\]: sigma 0 must be > 0|sigma"),
     ({}, ["sigma_x", "sigma_y"], r"gives part of a pose's noise; give all six"),
 ])

@@ -140,7 +140,7 @@ def prepare(cols, side: Mapping, origin: Mapping, where: str) -> Spec:
         raise ValueError(f"{where}: no orientation columns; a pose import expects measured_rx measured_ry "
                          "measured_rz (rotation vector), qw qx qy qz (quaternion), r11 ... r33 (matrix) or "
                          "euler_1 euler_2 euler_3 / roll pitch yaw (Euler angles, with rotation.sequence in the "
-                         "sidecar): docs/import.md")
+                         "sidecar): `fivecal docs import`")
     if len(found) > 1:
         a, b = found[0][1], found[1][1]
         raise ValueError(f"{where}: columns '{_header(present, a)}' and '{_header(present, b)}' both give the "
@@ -233,24 +233,29 @@ def row_sigma(vals: Mapping, spec: Optional[Spec]) -> Optional[list]:
 
 
 def sidecar_sigma(value, kind: str, where: str):
-    """The sidecar's (or --sigma's) ``sigma``: one number > 0, or for a pose
-    six values (mm, mm, mm, rad, rad, rad): a pose's rows differ in unit."""
+    """The sidecar's (or --sigma's) ``sigma``: one number > 0, or one per
+    residual row of the kind (the registry's ``row_units``: six for a 6D
+    pose, whose rows are in mm and rad, so that one number cannot weigh
+    them). Returns the list, or None for one number (checked by the caller)."""
+    units = list({k["name"]: k for k in _core.observation_kinds()}.get(kind, {}).get("row_units") or [])
+    mixed = len(set(units)) > 1
     if isinstance(value, (list, tuple)):
-        n = 6 if kind == "pose" else 3 if kind == "point" else None
-        if n is None:
+        if len(units) < 2:
             raise ValueError(f"{where}: expected one number > 0 (mm), got a list")
         try:
             v = [float(x) for x in value]
         except (TypeError, ValueError):
-            raise ValueError(f"{where}: expected {n} numbers > 0, got {value!r}") from None
-        if len(v) != n:
-            what = "x y z (mm) and rx ry rz (rad)" if kind == "pose" else "x y z (mm)"
-            raise ValueError(f"{where}: expected {n} values, {what}, got {len(v)}")
+            raise ValueError(f"{where}: expected {len(units)} numbers > 0, got {value!r}") from None
+        if len(v) != len(units):
+            what = " ".join(f"{'xyz'[i % 3] if u == 'mm' else 'r' + 'xyz'[i % 3]}" for i, u in enumerate(units))
+            raise ValueError(f"{where}: expected {len(units)} values, one per row ({what}: "
+                             f"{', '.join(units)}), got {len(v)}")
         for i, x in enumerate(v):
             if not (math.isfinite(x) and x > 0):
                 raise ValueError(f"{where}[{i}]: sigma {x:g} must be > 0")
         return v
-    if kind == "pose":
-        raise ValueError(f"{where}: a pose's rows are in mm and rad, so one number cannot weigh them: give six "
-                         "values [x, y, z (mm), rx, ry, rz (rad)], or sigma_x ... sigma_rz columns")
-    return None  # the caller checks a single number as before
+    if mixed:
+        raise ValueError(f"{where}: a {kind} observation's rows are in {' and '.join(sorted(set(units)))}, so one "
+                         f"number cannot weigh them: give {len(units)} values ({', '.join(units)}), or "
+                         "sigma_x ... sigma_rz columns")
+    return None

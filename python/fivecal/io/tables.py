@@ -1645,7 +1645,7 @@ def _known_options(options: Mapping, what: str) -> None:
         side_keys = sorted(set(_schema_keys()) - set(accepted))
         if key in side_keys:
             raise ValueError(f"{what}: '{key}' is a sidecar key, not a keyword: pass sidecar={{'{key}': ...}} "
-                             f"(or a sidecar JSON file; docs/import.md)")
+                             f"(or a sidecar JSON file; `fivecal docs import`)")
         close = difflib.get_close_matches(key, accepted, n=1)
         raise ValueError(f"{what}: unknown keyword '{key}'" + (f" (did you mean '{close[0]}'?)" if close else "")
                          + f"; accepted: {', '.join(accepted)}")
