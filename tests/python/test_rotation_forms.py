@@ -210,6 +210,8 @@ def test_bad_quaternion_and_matrix_rows_are_refused_naming_the_line(tmp_path):
     (["qw", "qx", "qy", "qz", "measured_rx", "measured_ry", "measured_rz"], {}, r"both give the orientation"),
     (["tx2"], {}, r"unknown column 'tx2'"),
     (["roll", "pitch", "yaw"], {"rotation": {"form": "euler", "sequence": "ZXZ"}}, r"turns about one axis twice"),
+    (["euler_1", "euler_2", "euler_3"], {"rotation": {"form": "euler", "sequence": "ZZX"}},
+     r"^sidecar rotation\.sequence: 'ZZX' is not an Euler sequence"),
     (["q1", "q2", "q3", "q4"], {"rotation": {"form": "quaternion", "order": "xyz"}},
      r"rotation\.order: 'xyz' is not a quaternion order"),
     (["q1", "q2", "q3", "q4"], {"rotation": {"form": "quaternion", "sequence": "ZYX"}},

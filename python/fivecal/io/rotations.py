@@ -171,7 +171,10 @@ def prepare(cols, side: Mapping, origin: Mapping, where: str) -> Spec:
                              "\"sequence\": \"ZYX\", \"unit\": \"deg\"}} in the sidecar (upper case: intrinsic, "
                              "lower case: extrinsic)")
         spec.sequence = seq.strip()
-        _core.rotation_vectors(np.zeros((0, 3)), "euler", sequence=spec.sequence)  # names a bad sequence
+        try:
+            _core.rotation_vectors(np.zeros((0, 3)), "euler", sequence=spec.sequence)
+        except ValueError as e:  # the core names the field; say which file gave it
+            raise ValueError(f"{rw[:-len('rotation')]}{e}") from None
         if fields == RPY:
             letters = spec.sequence.lower()
             if sorted(letters) != ["x", "y", "z"]:
@@ -213,8 +216,7 @@ def row_rotation(vals: Mapping, spec: Spec, where: str) -> list:
     out, problems = _core.rotation_vectors(v, spec.form, order=spec.order, sequence=spec.sequence,
                                            unit=spec.unit, tolerance=spec.tolerance)
     if problems[0]:
-        cells = ", ".join(f"'{vals[f][1].rsplit(': column ', 1)[-1]}" for f in spec.fields[:1])
-        raise ValueError(f"{where}: {problems[0]} (columns {' '.join(spec.fields)}, from {cells})")
+        raise ValueError(f"{where}: {problems[0]} (columns {' '.join(spec.fields)})")
     return [float(x) for x in out[0]]
 
 
