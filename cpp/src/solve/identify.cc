@@ -227,8 +227,10 @@ std::string DenseReason(const Dataset& ds, const IdentifyOptions& opt, const Req
 // every kept parameter stays determined (data-only sigma below
 // kDeterminedRatio x prior) and the candidate's unit-norm column is not
 // within selection_tolerance of the span of the kept ones.
+// `why` (optional, per column): why a candidate was left out.
 std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
-                                  int num_forced, double tolerance) {
+                                  int num_forced, double tolerance, std::vector<std::string>* why = nullptr) {
+  if (why) why->assign(Jw.cols(), "");
   const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
   std::vector<int> kept;
   for (int c = 0; c < num_forced; ++c) kept.push_back(c);
@@ -255,14 +257,29 @@ std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::Vector
   };
   for (int c = 0; c < num_forced; ++c) push_q(c);
   for (int c = num_forced; c < Jw.cols(); ++c) {
-    if (unit_residual(c) < tolerance) continue;
+    if (unit_residual(c) < tolerance) {
+      if (why) (*why)[c] = "its effect on this data is (nearly) that of the parameters already chosen";
+      continue;
+    }
     std::vector<int> trial = kept;
     trial.push_back(c);
     const Eigen::VectorXd after = SubsetRatios(Js, trial);
-    bool ok = after[trial.size() - 1] < kDeterminedRatio;
+    const double own = after[trial.size() - 1];
+    bool ok = own < kDeterminedRatio;
     for (size_t i = 0; ok && i < kept.size(); ++i)
       if (before[i] < kDeterminedRatio && !(after[i] < kDeterminedRatio)) ok = false;
-    if (!ok) continue;
+    if (!ok) {
+      if (why) {
+        char buf[160];
+        if (own < kDeterminedRatio)
+          std::snprintf(buf, sizeof buf, "it would leave parameters already chosen undetermined");
+        else
+          std::snprintf(buf, sizeof buf, "too weakly seen: the data would pin it to %.2g times its plausible size "
+                        "(prior %.3g)", own, prior[c]);
+        (*why)[c] = buf;
+      }
+      continue;
+    }
     kept = trial;
     before = after;
     push_q(c);
@@ -287,10 +304,13 @@ std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group)
            "cylinder and sphere radii also absorb: fix probe.pretravel (or qualify the probe on a "
            "calibrated sphere with its radius fixed)";
   if (gains > 0 && !HasLengthReference(ds))
-    return "no length reference (no scale bar or ball-bar length in the data): only relative "
-           "scale can be found";
+    return "no length reference (no data of a kind that carries one: scale bar, ball-bar length, "
+           "tracker, camera or interferometer): only relative scale can be found";
   if (machine > 0 && setup > 0)
     return "confounded with the setup (stylus tip, facet offsets, sphere centres, mounts, instrument poses or stations)";
+  // A single parameter is confounded with nothing: it is seen too weakly.
+  if (machine == 1 && group.size() == 1)
+    return "too weakly seen at these poses for its plausible size (its prior)";
   if (machine > 0)
     return "confounded with each other or too weakly seen at these poses for their plausible size";
   return "setup parameters the data do not separate";
@@ -812,18 +832,25 @@ Hyper AdaptHyperparameters(const Dataset& ds, Dataset* scaled, const ParameterTa
 
 // The "location" selection at given values (no fit).
 std::vector<int> SelectAt(const Dataset& ds, const Setup& s, const Eigen::VectorXd& values,
-                          const IdentifyOptions& opt) {
+                          const IdentifyOptions& opt,
+                          std::vector<std::pair<std::string, std::string>>* left_out = nullptr) {
   std::vector<int> all = s.request.forced;
   all.insert(all.end(), s.request.candidates.begin(), s.request.candidates.end());
   Problem probe(ds, s.table, values, all);
   Eigen::VectorXd r;
   Eigen::MatrixXd Jw;
   WeightedJacobian(&probe, &r, &Jw);
+  std::vector<std::string> why;
   const std::vector<int> cols = SelectDetermined(Jw, Gather(s.prior, all),
                                                  static_cast<int>(s.request.forced.size()),
-                                                 opt.selection_tolerance);
+                                                 opt.selection_tolerance, &why);
   std::vector<int> out;
   for (int c : cols) out.push_back(all[c]);
+  if (left_out) {
+    left_out->clear();
+    for (size_t c = s.request.forced.size(); c < all.size(); ++c)
+      if (!why[c].empty()) left_out->emplace_back(s.table.names()[all[c]], why[c]);
+  }
   return out;
 }
 
@@ -850,6 +877,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   const Eigen::VectorXd no_prior;
 
   std::vector<int> est;
+  std::vector<std::pair<std::string, std::string>> left_out;
   if (rq.automatic) {
     est = rq.forced;
     est.insert(est.end(), rq.candidates.begin(), rq.candidates.end());
@@ -868,7 +896,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
       for (int i : est) start[i] = at[i];
       const Solve fit = RunFit(ds, table, start, est, opt,
                                map ? setup.map_prior : PlacementRows(setup.placement, est), nullptr);
-      std::vector<int> again = SelectAt(ds, setup, fit.values, opt);
+      std::vector<int> again = SelectAt(ds, setup, fit.values, opt, &left_out);
       at = fit.values;
       if (again == est) break;
       est = again;
@@ -883,6 +911,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   Result res;
   res.names = table.names();
   for (int i : est) res.estimated.push_back(table.names()[i]);
+  res.left_out = left_out;
   res.map_fit = map;
   res.explicit_request = !rq.automatic;
   const int p = static_cast<int>(est.size());
@@ -1053,8 +1082,32 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   // invariant to column scaling): one QR serves them all.
   const Eigen::MatrixXd Rw = TriangularFactor(placed ? WithPlacementRows(Jw, place) : Jw);
   const Determination det = AnalyzeDetermination(Rw, prior, kDeterminedRatio);
-  if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable)
-    throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
+  if (!map && !det.undetermined.empty() && !opt.allow_unidentifiable) {
+    // "location" chose its set at the declared noise; variance components
+    // may find the noise larger, and a chosen candidate too weakly seen at
+    // the noise the data show. That is the selection's call, not the user's
+    // error: leave it out, say why, and fit the rest.
+    std::set<int> dropped;
+    if (rq.location && opt.variance_components)
+      for (int c : det.undetermined)
+        if (std::find(rq.candidates.begin(), rq.candidates.end(), est[c]) != rq.candidates.end())
+          dropped.insert(c);
+    if (dropped.empty() || dropped.size() == est.size())
+      throw std::invalid_argument(UndeterminedMessage(ds, undetermined_groups(det)));
+    IdentifyOptions again = opt;
+    again.estimate.clear();
+    again.include_default_setup = false;
+    for (size_t c = 0; c < est.size(); ++c)
+      if (!dropped.count(static_cast<int>(c))) again.estimate.push_back(table.names()[est[c]]);
+    Result out = Identify(ds, again);
+    out.left_out = left_out;
+    for (int c : dropped)
+      out.left_out.emplace_back(table.names()[est[c]],
+                                "too weakly seen at the noise estimated from the residuals (variance components): "
+                                "chosen at the declared noise, left out at the estimated one");
+    out.explicit_request = res.explicit_request;
+    return out;
+  }
 
   res.values = values;
   res.residuals = r;
