@@ -8,6 +8,8 @@
 #include "fivecal/model/inverse.h"
 #include "fivecal/model/kinematics.h"
 #include "fivecal/model/machine.h"
+#include "fivecal/model/machine_kinds.h"
+#include "fivecal/model/rotation_forms.h"
 
 namespace py = pybind11;
 using namespace fivecal;
@@ -107,4 +109,49 @@ void BindModel(py::module_& m) {
       },
       py::arg("machine"), py::arg("theta"), py::arg("points"), py::arg("tool_axes"),
       py::arg("start"), py::arg("directions") = py::none());
+
+  m.def("machine_kinds", []() {
+    py::list out;
+    for (const MachineKindInfo& k : MachineKinds()) {
+      py::dict d;
+      d["name"] = k.name;
+      d["description"] = k.description;
+      d["priors"] = k.priors;
+      out.append(d);
+    }
+    return out;
+  }, "The kinds of machine a machine file's \"kind\" names, each with its class priors (docs/identification.md).");
+
+  // Orientations as instruments write them (rotation_forms.h): the importers'
+  // one conversion, to fivecal's rotation vectors and back.
+  auto form = [](const std::string& f, const std::string& order, const std::string& sequence,
+                 const std::string& unit, double tolerance) {
+    RotationForm r;
+    r.form = f;
+    r.order = order;
+    r.sequence = sequence;
+    r.unit = unit;
+    r.tolerance = tolerance;
+    return r;
+  };
+  m.def(
+      "rotation_vectors",
+      [form](const Eigen::MatrixXd& values, const std::string& f, const std::string& order,
+             const std::string& sequence, const std::string& unit, double tolerance) {
+        RotationVectors r = ToRotationVectors(values, form(f, order, sequence, unit, tolerance));
+        return py::make_tuple(r.vectors, r.problems);
+      },
+      py::arg("values"), py::arg("form"), py::arg("order") = "wxyz", py::arg("sequence") = "",
+      py::arg("unit") = "rad", py::arg("tolerance") = 1e-3,
+      "(N x 3 rotation vectors in rad, per row '' or why it is not a rotation) of N rows of a rotation "
+      "form: quaternion (order wxyz or xyzw), matrix (r11..r33 row by row), rotation_vector (unit), "
+      "euler (sequence, e.g. ZYX intrinsic or zyx extrinsic; unit).");
+  m.def(
+      "rotations_from_vectors",
+      [form](const Eigen::MatrixXd& vectors, const std::string& f, const std::string& order,
+             const std::string& sequence, const std::string& unit) {
+        return FromRotationVectors(vectors, form(f, order, sequence, unit, 1e-3));
+      },
+      py::arg("vectors"), py::arg("form"), py::arg("order") = "wxyz", py::arg("sequence") = "",
+      py::arg("unit") = "rad", "N x 3 rotation vectors (rad) in a rotation form (as rotation_vectors).");
 }

@@ -71,6 +71,7 @@ void BindSolve(py::module_& m) {
       .def_readonly("seeks_machine_errors", &Result::seeks_machine_errors)
       .def_readonly("identified_machine_errors", &Result::identified_machine_errors)
       .def_readonly("held", &Result::held)
+      .def_readonly("left_out", &Result::left_out)
       .def_property_readonly("not_determined",
                              [](const Result& r) {
                                py::list out;

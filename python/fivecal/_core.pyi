@@ -28,6 +28,11 @@ def tool_poses(machine: Machine, theta: np.ndarray, axes: np.ndarray,
                with_axes: bool = True) -> tuple[np.ndarray, Optional[np.ndarray]]: ...
 def inverse(machine: Machine, theta: np.ndarray, points: np.ndarray, tool_axes: Optional[np.ndarray],
             start: np.ndarray, directions: Optional[np.ndarray] = None) -> np.ndarray: ...
+def machine_kinds() -> list[dict]: ...
+def rotation_vectors(values: np.ndarray, form: str, order: str = "wxyz", sequence: str = "", unit: str = "rad",
+                     tolerance: float = 1e-3) -> tuple[np.ndarray, list[str]]: ...
+def rotations_from_vectors(vectors: np.ndarray, form: str, order: str = "wxyz", sequence: str = "",
+                           unit: str = "rad") -> np.ndarray: ...
 
 class Dataset:
     @staticmethod
@@ -104,6 +109,7 @@ class Result:
     seeks_machine_errors: bool
     identified_machine_errors: int
     held: list[str]
+    left_out: list[tuple[str, str]]
     @property
     def not_determined(self) -> list[dict]: ...  # family, machine, estimated, names, why
     @property

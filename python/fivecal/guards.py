@@ -303,6 +303,8 @@ class Findings:
     informed: dict                    # name -> posterior σ / prior σ (empty without priors)
     absent: List[str] = field(default_factory=list)  # auto: classes the data show no sign of
     held: List[str] = field(default_factory=list)    # determined there, values held near 0
+    #: estimate "location": candidates its selection left out -> why (never silently)
+    left_out: dict = field(default_factory=dict)
 
 
 def findings(result) -> Findings:
@@ -333,4 +335,6 @@ def findings(result) -> Findings:
         pairs = sorted(((est[i], est[j], float(C[i, j])) for i, j in zip(ii, jj)), key=lambda p: -abs(p[2]))
     # a class whose prior the evidence shrank to the floor (see docs/identification.md)
     absent = sorted(c for c, f in (getattr(result, "class_scales", None) or {}).items() if f < ABSENT_CLASS_SCALE)
-    return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed, absent, held)
+    left_out = {str(n): str(w) for n, w in getattr(result, "left_out", None) or []}
+    return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed, absent, held,
+                    left_out)

@@ -173,6 +173,9 @@ class Result(Viewable):
         #: estimate "auto": parameters determined in a class the data show no sign of
         #: (:attr:`class_scales`): their values are held near 0, not measured
         self.held: list = list(core.held)
+        #: estimate "location": the candidates its selection left out, as (name, why)
+        #: pairs (too weakly seen against the prior, or confounded with those chosen)
+        self.left_out: list = [(str(n), str(w)) for n, w in getattr(core, "left_out", [])]
         #: what the data could not tell, one dict per family of parameters (location
         #: offsets, location angles, scale gains, error motions of one degree, backlash,
         #: set-up): family, machine, estimated, names and why (the measurement that would tell it)
@@ -524,6 +527,8 @@ def finding_lines(fd: "guards.Findings") -> list:
     out = [f"identified: {n} parameter{'s' if n != 1 else ''}{split}" if trusted else
            f"identified: none (the fit is not usable; {n} parameter{'s' if n != 1 else ''} estimated "
            "without a trustworthy value)"]
+    if fd.left_out:
+        out += left_out_lines(fd)
     if fd.partly:
         out.append(f"informed only in part (the data narrowed the prior less than "
                    f"{1 / guards.PARTLY_INFORMED:g}-fold): "
@@ -542,6 +547,19 @@ def finding_lines(fd: "guards.Findings") -> list:
         out.append(f"pairs the data cannot separate (|r| ≥ {guards.NEAR_SINGULAR_R:g}): "
                    + ", ".join(f"{x}/{y} (r = {r:+.4f})" for x, y, r in shown)
                    + (f" and {len(fd.inseparable) - len(shown)} more" if len(fd.inseparable) > len(shown) else ""))
+    return out
+
+
+def left_out_lines(fd: "guards.Findings") -> list:
+    """Which candidates a preset (estimate "location") left out and why: a
+    preset never drops an error silently. The plausible sizes are the priors
+    of the machine file's kind (docs/formats.md, Machine)."""
+    items = list(fd.left_out.items())
+    out = [f"left out by the preset (not estimated; plausible sizes are the priors of the machine's kind, "
+           f"`fivecal docs formats`): {len(items)}"]
+    out += [f"  {n}: {why}" for n, why in items[:8]]
+    if len(items) > 8:
+        out.append(f"  and {len(items) - 8} more: {guards.name_list([n for n, _ in items[8:]])}")
     return out
 
 

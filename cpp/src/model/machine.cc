@@ -1,4 +1,5 @@
 #include "fivecal/model/machine.h"
+#include "fivecal/model/machine_kinds.h"
 
 #include <Eigen/Geometry>
 
@@ -284,7 +285,7 @@ Machine Machine::FromJson(const std::string& text) {
 namespace {
 Machine ParseMachine(const json& j) {
   if (!j.is_object()) throw std::invalid_argument("machine: expected a JSON object");
-  CheckKeys(j, {"name", "topology", "axes", "tool", "priors", "$schema"}, "machine");
+  CheckKeys(j, {"name", "topology", "axes", "tool", "priors", "kind", "$schema"}, "machine");
   if (j.contains("name") && !j["name"].is_string())
     throw std::invalid_argument("machine.name: expected a string");
   std::string name = j.value("name", std::string("unnamed"));
@@ -359,6 +360,14 @@ Machine ParseMachine(const json& j) {
         throw std::invalid_argument(where + ": must be a finite number > 0 (one sigma, mm or rad)");
       m.priors[key] = v;
     }
+  }
+  // The kind's class priors (machine_kinds.h) under the file's own, which win
+  // key by key; a written machine carries them as explicit class priors.
+  if (j.contains("kind")) {
+    if (!j["kind"].is_string())
+      throw std::invalid_argument("machine.kind: expected a string (machining_centre, positioner, robot, cmm)");
+    for (const auto& [key, v] : MachineKindPriors(CanonicalMachineKind(j["kind"].get<std::string>(), "machine.kind")))
+      m.priors.emplace(key, v);
   }
   return m;
 }

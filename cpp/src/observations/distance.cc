@@ -47,7 +47,7 @@ class Kind final : public ObservationKind {
                      "column reading_um or give --units um"),
                  TableColumn("station", "station").Text()};
     t.expected = "reading [station] [id] [sigma]";
-    t.options = {"stations", "station", "instrument", "target", "target_point"};
+    t.options = {"stations", "station", "instrument", "target", "target_point", "instruments"};
     return t;
   }
   // A laser tracer or tracking interferometer: about a micrometre over a

@@ -41,13 +41,16 @@ KindTable fixed_frame::InstrumentTable(bool sigma) {
                             .Range(kMaxLinear,
                                    "{value:.6g} mm is beyond any instrument's range ({limit_m:g} m); coordinates "
                                    "look like µm: name the column {column}_um or give --units um"));
+  // a camera's or motion-capture log's translation (TUM, EuRoC, ROS): never an axis
+  t.header_aliases = {{"tx", "measured_x"}, {"ty", "measured_y"}, {"tz", "measured_z"}};
   // a circle-point-analysis layout: one joint moved per row, the others at home
   t.columns.push_back(TableColumn("joint", "joint").Text());
   t.columns.push_back(TableColumn("position", "position").Quantity("joint"));
   t.columns.push_back(TableColumn("home", "home").Quantity("joint"));
   t.columns.push_back(TableColumn("joint_type", "joint_type").Text());
+  // instruments: the noise per instrument, copied into the dataset
   t.options = {"instrument", "target", "target_point", "instrument_origin", "instrument_angles", "align",
-               "joints"};
+               "joints", "instruments"};
   return t;
 }
 

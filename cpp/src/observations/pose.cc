@@ -40,10 +40,18 @@ class Kind final : public ObservationKind {
         "residual after the fit per component (instrument frame) against the rotary angle.";
     return r;
   }
-  // The point's table and the measured orientation, a rotation vector (rad
-  // unless the header says otherwise). Its rows differ in unit, so one sigma
-  // column cannot weigh them: its noise is the kind's default or the
-  // dataset's instruments entry.
+  // The point's table and the measured orientation (measured_rotation), in
+  // any form a camera, motion capture or tracker writes it: a rotation
+  // vector (rad unless the header or the sidecar's rotation.unit says
+  // otherwise), a quaternion (qw qx qy qz, or q0..q3 / q1..q4 with
+  // rotation.order), a matrix (r11 ... r33, row by row) or Euler angles
+  // (euler_1..3 or roll pitch yaw, with rotation.sequence). The importer
+  // reads the columns of the "rotation" quantity's key through
+  // python/fivecal/io/rotations.py, which tells the form from the columns
+  // given; none is required alone. Its rows differ in unit, so one sigma
+  // column cannot weigh them: its noise is six sigma_x ... sigma_rz columns,
+  // six values in the sidecar, the dataset's instruments entry or the kind's
+  // default.
   KindTable Table() const override {
     KindTable t = fixed_frame::InstrumentTable(false);
     t.aliases = {"6d"};
@@ -51,10 +59,23 @@ class Kind final : public ObservationKind {
     for (int i = 0; i < 3; ++i)
       t.columns.push_back(TableColumn(std::string("measured_r") + xyz[i], "measured_rotation", i)
                               .Quantity("rotation")
-                              .Required()
                               .Alias((std::string("mr") + xyz[i]).c_str()));
+    for (const char* q : {"qw", "qx", "qy", "qz", "q0", "q1", "q2", "q3", "q4"})
+      t.columns.push_back(TableColumn(q, "measured_rotation").Quantity("number"));
+    for (int i = 1; i <= 3; ++i)
+      for (int j = 1; j <= 3; ++j)
+        t.columns.push_back(
+            TableColumn("r" + std::to_string(i) + std::to_string(j), "measured_rotation").Quantity("number"));
+    for (const char* e : {"euler_1", "euler_2", "euler_3", "roll", "pitch", "yaw"})
+      t.columns.push_back(TableColumn(e, "measured_rotation").Quantity("rotation"));
+    // per-row noise, one per residual row: mm (--units applies), then rad
+    for (int i = 0; i < 3; ++i)
+      t.columns.push_back(TableColumn(std::string("sigma_") + xyz[i], "sigma", i).Measured());
+    for (int i = 0; i < 3; ++i)
+      t.columns.push_back(TableColumn(std::string("sigma_r") + xyz[i], "sigma", 3 + i).Quantity("rotation"));
     t.expected = "measured_x measured_y measured_z measured_rx measured_ry measured_rz [id]";
     t.options.push_back("target_rotation");
+    t.options.push_back("rotation");
     return t;
   }
   int rows() const override { return 6; }
@@ -66,6 +87,9 @@ class Kind final : public ObservationKind {
   double default_sigma_row(int k) const override { return k < 3 ? 0.01 : 1e-4; }
   const char* instrument_key() const override { return "instrument"; }
   bool analytic() const override { return false; }
+  // A camera or 6D tracker reports positions in its calibrated length unit:
+  // like a point tracker, its data fix the machine's scale (EXX1 ...).
+  bool LengthReference() const override { return true; }
 
   std::vector<const char*> json_keys() const override {
     return {"type", "instrument", "axes", "direction", "measured", "measured_rotation", "target", "target_point",

@@ -62,6 +62,26 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   clock("fit");
   const IdentifyDetermination determination = DetermineAtSolution(ds, opt, request, fit);
   clock("determination");
+  if (!determination.drop.empty()) {
+    // The candidates "location" chose at the declared noise that the
+    // estimated noise leaves too weakly seen: fit the rest as an explicit
+    // set, and say what was left out and why.
+    IdentifyOptions again = opt;
+    again.estimate.clear();
+    again.include_default_setup = false;
+    for (size_t c = 0; c < request.est.size(); ++c)
+      if (std::find(determination.drop.begin(), determination.drop.end(), static_cast<int>(c)) ==
+          determination.drop.end())
+        again.estimate.push_back(request.estimated[c]);
+    Result out = Identify(ds, again);
+    out.left_out = request.left_out;
+    for (int c : determination.drop)
+      out.left_out.emplace_back(request.estimated[c],
+                                "too weakly seen at the noise estimated from the residuals (variance components): "
+                                "chosen at the declared noise, left out at the estimated one");
+    out.explicit_request = !request.automatic;
+    return out;
+  }
   const IdentifyCovariance covariance = CovarianceAtSolution(ds, opt, request, fit, determination);
   clock("covariance");
   Result result = JudgeResult(ds, opt, request, fit, determination, covariance);
@@ -145,6 +165,9 @@ std::string Result::ToJson() const {
   j["undetermined"] = undetermined;
   j["identified_machine_errors"] = identified_machine_errors;
   j["held"] = held;
+  json lo = json::array();
+  for (const auto& [name, why] : left_out) lo.push_back({name, why});
+  j["left_out"] = lo;
   json nd = json::array();
   for (const NotDetermined& f : not_determined)
     nd.push_back({{"family", f.family}, {"machine", f.machine}, {"estimated", f.estimated},

@@ -37,10 +37,13 @@ std::string GroupCause(const Dataset& ds, const std::vector<std::string>& group)
            "cylinder and sphere radii also absorb: fix probe.pretravel (or qualify the probe on a "
            "calibrated sphere with its radius fixed)";
   if (gains > 0 && !HasLengthReference(ds))
-    return "no length reference (no scale bar or ball-bar length in the data): only relative "
-           "scale can be found";
+    return "no length reference (no data of a kind that carries one: scale bar, ball-bar length, "
+           "tracker, camera or interferometer): only relative scale can be found";
   if (machine > 0 && setup > 0)
     return "confounded with the setup (stylus tip, facet offsets, sphere centres, mounts, instrument poses or stations)";
+  // A single parameter is confounded with nothing: it is seen too weakly.
+  if (machine == 1 && group.size() == 1)
+    return "too weakly seen at these poses for its plausible size (its prior)";
   if (machine > 0)
     return "confounded with each other or too weakly seen at these poses for their plausible size";
   return "setup parameters the data do not separate";
@@ -108,8 +111,18 @@ IdentifyDetermination DetermineAtSolution(const Dataset& ds, const IdentifyOptio
   IdentifyDetermination out;
   out.determination = AnalyzeDetermination(fit.factor, rq.prior, kDeterminedRatio);
   out.groups = GroupNames(out.determination, rq.estimated);
-  if (!rq.map && !out.determination.undetermined.empty() && !opt.allow_unidentifiable)
-    throw std::invalid_argument(UndeterminedMessage(ds, out.groups));
+  if (!rq.map && !out.determination.undetermined.empty() && !opt.allow_unidentifiable) {
+    // "location" chose its set at the declared noise; variance components
+    // may find the noise larger, and a chosen candidate too weakly seen at
+    // the noise the data show. That is the selection's call, not the user's
+    // error: Identify leaves it out, says why, and fits the rest.
+    if (rq.location && opt.variance_components)
+      for (int c : out.determination.undetermined)
+        if (std::find(rq.candidates.begin(), rq.candidates.end(), rq.est[c]) != rq.candidates.end())
+          out.drop.push_back(c);
+    if (out.drop.empty() || out.drop.size() == rq.est.size())
+      throw std::invalid_argument(UndeterminedMessage(ds, out.groups));
+  }
   return out;
 }
 

@@ -1,6 +1,7 @@
 #include "fivecal/solve/identify_request.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <set>
 #include <stdexcept>
@@ -94,8 +95,10 @@ Request Classify(const Dataset& ds, const ParameterTable& table, const IdentifyO
 // every kept parameter stays determined (data-only sigma below
 // kDeterminedRatio x prior) and the candidate's unit-norm column is not
 // within selection_tolerance of the span of the kept ones.
+// `why` (optional, per column): why a candidate was left out.
 std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
-                                  int num_forced, double tolerance) {
+                                  int num_forced, double tolerance, std::vector<std::string>* why = nullptr) {
+  if (why) why->assign(Jw.cols(), "");
   const Eigen::MatrixXd Js = Jw * prior.asDiagonal();
   std::vector<int> kept;
   for (int c = 0; c < num_forced; ++c) kept.push_back(c);
@@ -122,14 +125,29 @@ std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::Vector
   };
   for (int c = 0; c < num_forced; ++c) push_q(c);
   for (int c = num_forced; c < Jw.cols(); ++c) {
-    if (unit_residual(c) < tolerance) continue;
+    if (unit_residual(c) < tolerance) {
+      if (why) (*why)[c] = "its effect on this data is (nearly) that of the parameters already chosen";
+      continue;
+    }
     std::vector<int> trial = kept;
     trial.push_back(c);
     const Eigen::VectorXd after = SubsetRatios(Js, trial);
-    bool ok = after[trial.size() - 1] < kDeterminedRatio;
+    const double own = after[trial.size() - 1];
+    bool ok = own < kDeterminedRatio;
     for (size_t i = 0; ok && i < kept.size(); ++i)
       if (before[i] < kDeterminedRatio && !(after[i] < kDeterminedRatio)) ok = false;
-    if (!ok) continue;
+    if (!ok) {
+      if (why) {
+        char buf[160];
+        if (own < kDeterminedRatio)
+          std::snprintf(buf, sizeof buf, "it would leave parameters already chosen undetermined");
+        else
+          std::snprintf(buf, sizeof buf, "too weakly seen: the data would pin it to %.2g times its plausible size "
+                        "(prior %.3g)", own, prior[c]);
+        (*why)[c] = buf;
+      }
+      continue;
+    }
     kept = trial;
     before = after;
     push_q(c);
@@ -139,18 +157,25 @@ std::vector<int> SelectDetermined(const Eigen::MatrixXd& Jw, const Eigen::Vector
 
 // The "location" selection at given values (no fit).
 std::vector<int> SelectAt(const Dataset& ds, const IdentifyRequest& s, const Eigen::VectorXd& values,
-                          const IdentifyOptions& opt) {
+                          const IdentifyOptions& opt,
+                          std::vector<std::pair<std::string, std::string>>* left_out = nullptr) {
   std::vector<int> all = s.forced;
   all.insert(all.end(), s.candidates.begin(), s.candidates.end());
   Problem probe(ds, s.table, values, all);
   Eigen::VectorXd r;
   Eigen::MatrixXd Jw;
   WeightedJacobian(&probe, &r, &Jw);
+  std::vector<std::string> why;
   const std::vector<int> cols = SelectDetermined(Jw, Gather(s.prior_all, all),
                                                  static_cast<int>(s.forced.size()),
-                                                 opt.selection_tolerance);
+                                                 opt.selection_tolerance, &why);
   std::vector<int> out;
   for (int c : cols) out.push_back(all[c]);
+  if (left_out) {
+    left_out->clear();
+    for (size_t c = s.forced.size(); c < all.size(); ++c)
+      if (!why[c].empty()) left_out->emplace_back(s.table.names()[all[c]], why[c]);
+  }
   return out;
 }
 
@@ -213,7 +238,7 @@ IdentifyRequest ResolveRequest(const Dataset& ds, const IdentifyOptions& opt) {
       for (int i : est) start[i] = at[i];
       const SingleFit fit = RunFit(ds, table, start, est, opt,
                                    rq.map ? rq.map_prior_all : PlacementRows(rq.placement_all, est), nullptr);
-      std::vector<int> again = SelectAt(ds, rq, fit.values, opt);
+      std::vector<int> again = SelectAt(ds, rq, fit.values, opt, &rq.left_out);
       at = fit.values;
       if (again == est) break;
       est = again;

@@ -271,6 +271,7 @@ Result JudgeResult(const Dataset& ds, const IdentifyOptions& opt, const Identify
   res.estimated = rq.estimated;
   res.map_fit = map;
   res.explicit_request = !rq.automatic;
+  res.left_out = rq.left_out;
   res.placement = std::vector<double>(rq.place.data(), rq.place.data() + p);
   if (map)
     for (int j = 0; j < p; ++j) res.placement[j] = rq.placement_all[est[j]];

@@ -66,10 +66,16 @@ def _identify(args) -> int:
 def register(sub) -> None:
     pi = sub.add_parser("identify", help="fit machine errors to a dataset",
                         formatter_class=argparse.RawDescriptionHelpFormatter,
-                        description="Estimate the listed parameters plus the default setup set "
-                        "(tip, touched facets, sphere centres, DBB lengths) and print a report.",
+                        description="Estimate the listed parameters plus the default setup set the data "
+                        "imply (the probe tip, touched facets, sphere centres, ball-bar lengths, R-test "
+                        "nests, each fixed instrument's pose instrument.<id>.x|y|z|a|b|c with its target's offsets "
+                        "and, for a 6D pose, the target's orientation, each distance station's place and dead "
+                        "length), minus --fix, and print a report. Presets (location ...) say which of their "
+                        "parameters they left out and why; which sizes count as plausible follows the machine "
+                        "file's kind (machining_centre, positioner, robot, cmm: `fivecal docs formats`).",
                         epilog="example:\n  fivecal identify tango.json --estimate S3 --out result.json\n"
-                        "  fivecal identify fivecal_demo/dataset.json --estimate S3 --robust huber")
+                        "  fivecal identify fivecal_demo/dataset.json --estimate S3 --robust huber\n"
+                        "  fivecal identify camera.json --estimate location --variance-components")
     pi.add_argument("dataset", help="dataset, JSON or Parquet (format: `fivecal docs formats`)")
     pi.add_argument("--estimate", default="auto",
                     help="parameter names and/or presets S1 S2 S3 S4 location auto, comma separated "

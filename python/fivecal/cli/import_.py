@@ -89,6 +89,10 @@ def register(sub) -> None:
         "  fivecal import probe-log probe-log.txt --plan check_plan.json --kins xyzac-trt --out ds.json\n"
         "  fivecal import point tracker.csv --machine table.json --target work --target-point 0,50,0 "
         "--out ds.json\n"
+        "  fivecal import pose camera_xyzw.txt --machine machine.json --sidecar import/camera_xyzw.json --units m "
+        "--ignore timestamp --out ds.json\n"
+        "      (a camera's 6D log: quaternion columns qx qy qz qw, or q0..q3 with \"rotation\": {\"form\": "
+        "\"quaternion\", \"order\": \"wxyz\"} in the sidecar; examples/camera_positioner)\n"
         "  fivecal import machined cmm_report.csv --machine c600u.json --setup P1 --out ds.json")
     p.add_argument("kind", metavar="KIND", choices=list(KINDS) + ["rtest", "tracker", "6d", "tracer", "probe-log"],
                    help="probing | dbb | ball3d (rtest) | point (tracker) | pose (6d) | distance (tracer) | "

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import inspect
 import io
 import math
 import os
@@ -47,6 +48,7 @@ from ..dataset import Dataset
 from ..machine import Machine, RadiansWarning
 from ..units import looks_like_radians, radians_message
 from . import alignment
+from . import rotations as _rot
 
 #: the import of rows in fivecal's own terms (a ``type`` column, any
 #: registered kind): the one table that is no kind's
@@ -85,6 +87,18 @@ def _aliases(imports: Mapping) -> dict:
 def _spec(table: Mapping) -> dict:
     """A table's columns by header name."""
     return {c["name"]: c for c in table["columns"]}
+
+
+def _orientation(table: Mapping) -> Optional[str]:
+    """The file key a table's ``rotation`` columns fill other than the noise
+    (an orientation, read by io/rotations.py in whichever form the columns
+    give: rotation vector, quaternion, matrix, Euler angles), or None."""
+    return next((c["field"] for c in table["columns"] if c["quantity"] == "rotation" and c["field"] != "sigma"),
+                None)
+
+
+#: what a message says a sidecar key is, where its name does not say it
+_OPTION_WHAT = {"rotation": " (how the orientation is written)", "instruments": " (noise per instrument)"}
 
 
 def _touch_kinds() -> dict:
@@ -230,6 +244,7 @@ def _field(name: str, machine: Machine, kind: str, where: str, imports: Mapping)
         return "dir_" + letter
     fields = _spec(imports[kind])
     short = {c["alias"]: c["name"] for c in fields.values() if c["alias"]}
+    short.update(imports[kind]["header_aliases"])
     if low in short:
         return short[low]
     if low in fields:
@@ -298,9 +313,9 @@ def _columns(headers: Sequence[str], machine: Machine, kind: str, where: str, re
         if quantity and unit is not None:
             c.factor, _ = _units.column_unit(h, quantity, where)
             if rotation:
-                c.factor *= math.pi / 180.0  # angle columns scale to degrees; a rotation vector is in rad
+                c.factor *= math.pi / 180.0  # angle columns scale to degrees; orientations are in rad
         elif rotation:
-            c.factor = 1.0  # a rotation vector is in rad unless its header says otherwise
+            c.factor = 1.0  # rad unless its header (or the sidecar's rotation.unit) says otherwise
         elif quantity == "angle":
             c.factor = _units.ANGLE_SUFFIXES[angle_unit or "deg"]
         elif quantity == "length":
@@ -471,14 +486,20 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     for key in side:
         owners = [n for n, t in imports.items() if n != GENERIC and key in t["options"]]
         if owners and key not in _COMMON_OPTIONS and key not in table["options"] and side[key] is not None:
-            raise ValueError(f"{origin[key]}: {key} belongs to a {_either(owners)} import, not {kind}")
+            raise ValueError(f"{origin[key]}: {key}{_OPTION_WHAT.get(key, '')} belongs to a {_either(owners)} "
+                             f"import, not {kind}")
+    if side.get("sigma") is not None:
+        # one number, or one per residual row of a kind whose rows differ in unit
+        listed = _rot.sidecar_sigma(side["sigma"], kind, origin["sigma"])
+        if listed is not None:
+            side["sigma"] = listed
     # checked once here, so that a bad value is named where it was given
     for key in ("tool_ball", "table_ball", "target_point", "instrument_origin", "instrument_angles",
                 "target_rotation"):
         if side.get(key) is not None:
             side[key] = _vector3(side[key], origin[key])
     for key in ("length", "sigma"):
-        if side.get(key) is not None:
+        if side.get(key) is not None and not isinstance(side[key], list):
             side[key] = _positive(side[key], origin[key])
     if side.get("setup") is not None and (not isinstance(side["setup"], str) or "." in side["setup"]):
         raise ValueError(f"{origin['setup']}: expected a mounting name without '.', got {side['setup']!r}")
@@ -532,6 +553,9 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
     else:
         cols = _columns(headers, machine, kind, hwhere, columns or {}, ignore,
                         units and units.lower(), angle_units and angle_units.lower(), imports)
+    if _orientation(table):
+        # the orientation in whichever form the columns give (io/rotations.py)
+        side["_rotation"] = _rot.prepare(cols, side, origin, hwhere)
     decimal_comma = decimal == "comma" or (decimal is None and delim != ",")
     if decimal == "comma" and delim == ",":
         raise ValueError(f"{path}: a decimal comma needs another column separator than ',' (';', tab or spaces)")
@@ -581,6 +605,8 @@ def _read(path, kind, machine, *, sidecar=None, units=None, angle_units=None, co
                          '{"tip_radius": R} (mm) in the sidecar')
     if "probe" in side:
         d["probe"] = side["probe"]
+    if side.get("instruments") is not None:
+        d["instruments"] = side["instruments"]  # checked with the dataset, naming the field
     if artefact:
         d["artefact"] = artefact
     return d, lineno_of
@@ -708,14 +734,9 @@ def _point_row(cells, cols, machine: Machine, table: Mapping, side: Mapping, dec
     o = {"type": table["kinds"][0], "instrument": side["instrument"], "target": side["target"],
          "target_point": list(side["target_point"]), "axes": axes}
     _fill(o, vals, table, side, where, o["type"])
-    rotation = [c for c in table["columns"] if c["quantity"] == "rotation"]
-    if rotation:
-        rot = o[rotation[0]["field"]]
-        if math.sqrt(sum(v * v for v in rot)) > math.pi + 1e-9:
-            # a rotation vector is at most half a turn long: longer ones are degrees read as rad
-            raise ValueError(f"{vals[rotation[0]['name']][1].rsplit(': column', 1)[0]}: measured rotation "
-                             f"{_fmt(rot)} is longer than π rad, which no rotation vector is; degrees? name "
-                             f"the columns {rotation[0]['name']}_deg ... or convert to rad")
+    orientation = _orientation(table)
+    if orientation:
+        o[orientation] = _rot.row_rotation(vals, side["_rotation"], where)
         if "target_rotation" in table["options"] and side.get("target_rotation") is not None:
             o["target_rotation"] = list(side["target_rotation"])
     if "id" in text:
@@ -723,6 +744,9 @@ def _point_row(cells, cols, machine: Machine, table: Mapping, side: Mapping, dec
     if direction:
         o["direction"] = direction
     _row_sigma(o, vals, side)
+    sigmas = _rot.row_sigma(vals, side.get("_rotation"))
+    if sigmas is not None:
+        o["sigma"] = sigmas
     if "joint" in text:
         o["_joint"] = _joint_of(text, vals, machine, side, angle_units)
     return o
@@ -980,8 +1004,9 @@ def _fill(o: dict, vals: Mapping, table: Mapping, side: Mapping, where: str, typ
     option's) value, else the column's message; each value within its
     column's range (beyond it the unit is wrong)."""
     groups: dict = {}
+    orientation = _orientation(table)
     for c in table["columns"]:
-        if c["quantity"] not in ("text", "joint") and c["field"] != "sigma":
+        if c["quantity"] not in ("text", "joint") and c["field"] not in ("sigma", orientation):
             groups.setdefault(c["field"], []).append(c)
     for field, cs in groups.items():
         names = [c["name"] for c in cs]
@@ -1615,6 +1640,7 @@ def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options)
     error the dataset checks find in an observation names its file and line.
     ``dataset.import_note`` says how a point import set the instrument's
     nominal pose (empty for other kinds)."""
+    _known_options(options, "import_dataset")
     d, lines = _read(path, kind, machine, **options)
     path = os.fspath(path)
     sidecar = options.get("sidecar")
@@ -1650,6 +1676,26 @@ def import_dataset(path: Union[str, os.PathLike], kind: str, machine, **options)
     # how a point import placed the instrument: the user must be able to see it
     ds.import_note = d.get("_comment", "")
     return ds
+
+
+def _known_options(options: Mapping, what: str) -> None:
+    """Refuse an unknown keyword naming it and the accepted ones (a raw
+    TypeError from deep inside names a private function); a sidecar key
+    given as a keyword is told where it belongs."""
+    accepted = [p for p in inspect.signature(read_table).parameters if p not in ("path", "kind", "machine")]
+    for key in sorted(set(options) - set(accepted)):
+        side_keys = sorted(set(_schema_keys()) - set(accepted))
+        if key in side_keys:
+            raise ValueError(f"{what}: '{key}' is a sidecar key, not a keyword: pass sidecar={{'{key}': ...}} "
+                             f"(or a sidecar JSON file; `fivecal docs import`)")
+        close = difflib.get_close_matches(key, accepted, n=1)
+        raise ValueError(f"{what}: unknown keyword '{key}'" + (f" (did you mean '{close[0]}'?)" if close else "")
+                         + f"; accepted: {', '.join(accepted)}")
+
+
+def _schema_keys() -> list:
+    """The keys an import sidecar may hold (import.schema.json)."""
+    return [k for k in schema.load_schema("import").get("properties", {}) if not k.startswith(("$", "_"))]
 
 
 def _warn(message: str, category) -> None:

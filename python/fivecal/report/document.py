@@ -294,6 +294,11 @@ def _findings_section(result, fd) -> str:
             ("Identified", names(fd.identified) if trusted else
              f"none: the fit is not usable ({len(fd.identified)} parameters estimated without a "
              "trustworthy value)")]
+    if fd.left_out:
+        rows.append((f"Left out by the preset ({len(fd.left_out)})",
+                     "<small>(not estimated; judged against the priors of the machine's kind)</small> "
+                     + "; ".join(f"<code>{_e(n)}</code>: {_e(w)}" for n, w in list(fd.left_out.items())[:12])
+                     + (f" and {len(fd.left_out) - 12} more" if len(fd.left_out) > 12 else "")))
     if fd.informed or fd.partly:
         rows.append(("Informed only in part", f"<small>(the data narrowed the plausible range less than "
                      f"{1 / _PARTLY:g}-fold)</small> " + names(fd.partly)))

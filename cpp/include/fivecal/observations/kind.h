@@ -121,8 +121,11 @@ struct TableColumn {
   std::string name, field;
   int index = -1;
   // "length" (mm unless the header or --units says otherwise), "rotation"
-  // (a rotation vector, rad unless the header says otherwise), "text",
-  // "joint" (a joint layout's value, in the unit of the joint it moves).
+  // (an angle of an orientation or of its noise, rad unless the header says
+  // otherwise; a table whose `field` has rotation columns reads that
+  // orientation in any form its columns give, python/fivecal/io/rotations.py),
+  // "number" (no unit: a quaternion's or a matrix's entry), "text", "joint" (a
+  // joint layout's value, in the unit of the joint it moves).
   std::string quantity = "length";
   bool measured = false;  // what the instrument measured: --units applies
   bool required = false;  // the header must name it
@@ -165,8 +168,9 @@ struct KindTable {
   // The sidecar keys and options the import takes beyond the common ones
   // (probe, artefact, setup, sigma, header).
   std::vector<std::string> options;
-  // Generic layout: other header names of a key ("deviation" -> "measured";
-  // a name ending in "_" renames a prefix), the vector keys that are
+  // Other header names: of a key in the generic layout ("deviation" ->
+  // "measured"; a name ending in "_" renames a prefix), of a column in the
+  // others ("tx" -> "measured_x"). Generic layout: the vector keys that are
   // directions (no unit; key -> what a message calls it), and named row
   // checks of the importer.
   std::vector<std::pair<std::string, std::string>> header_aliases;

@@ -157,6 +157,9 @@ struct Result {
   // Estimate "auto": parameters the data determined in a class they show no
   // sign of (kAbsentClassScale): their values are held near 0, not measured.
   std::vector<std::string> held;
+  // Estimate "location": the candidates its selection left out, each with why
+  // (too weakly seen for its prior, or confounded with those chosen).
+  std::vector<std::pair<std::string, std::string>> left_out;
   std::vector<NotDetermined> not_determined;  // one per family with undetermined parameters
   std::string fit_path;               // the path that ran: "dense" or "normal_equations"
   // "ok", "not_converged", "implausible", "inadequate", "non_finite" or

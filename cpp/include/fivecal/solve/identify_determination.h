@@ -19,10 +19,15 @@ struct IdentifyDetermination {
   Determination determination;  // columns in estimated order
   // determination.groups by name (Result::unidentifiable).
   std::vector<std::vector<std::string>> groups;
+  // "location" with variance components: chosen candidates (columns) too
+  // weakly seen at the estimated noise; Identify fits again without them.
+  std::vector<int> drop;
 };
 
 // Throws the refusal (UndeterminedMessage) when a least-squares request
-// leaves parameters undetermined, unless allow_unidentifiable.
+// leaves parameters undetermined, unless allow_unidentifiable or all that
+// is undetermined are "location" candidates under variance components
+// (then `drop` names them).
 IdentifyDetermination DetermineAtSolution(const Dataset& ds, const IdentifyOptions& opt,
                                           const IdentifyRequest& rq, const IdentifyFit& fit);
 

@@ -10,6 +10,7 @@
 
 #include <Eigen/Core>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "fivecal/observations/dataset.h"
@@ -35,6 +36,8 @@ struct IdentifyRequest {
   // entry: `initial`, with the "location" selection's solution on `est`).
   std::vector<int> est;
   std::vector<std::string> estimated;  // names of `est`
+  // "location": the candidates its selection left out, each with why.
+  std::vector<std::pair<std::string, std::string>> left_out;
   Eigen::VectorXd start;
   // Per estimated parameter: the prior that scales the determination (a MAP
   // fit's prior rows, a set-up quantity's narrowed by its placement; in least
