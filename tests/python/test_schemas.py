@@ -110,6 +110,10 @@ def _kind_of_example(path):
         return "design"
     if os.sep + "import" + os.sep in path or os.path.basename(path) == "import.json":
         return "import"
+    # an instrument file's sidecar: the JSON named as the file beside it (rtest_log.txt + rtest_log.json)
+    stem = os.path.splitext(path)[0]
+    if any(os.path.isfile(stem + ext) for ext in (".txt", ".csv", ".tsv", ".dat")):
+        return "import"
     if os.path.basename(path).startswith("errors"):
         return "errors"
     return "spec"

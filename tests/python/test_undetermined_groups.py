@@ -15,7 +15,7 @@ import numpy as np
 import fivecal
 from fivecal.procedures import tango
 
-FIXTURE = os.path.join(os.path.dirname(__file__), "..", "data", "undetermined_groups_main.json")
+FIXTURE = os.path.join(os.path.dirname(__file__), "..", "data", "recorded", "undetermined_groups_main.json")
 SIGMA = 0.001  # as test_never_wrong's random plans
 
 
