@@ -112,6 +112,9 @@ def test_without_the_kind_location_says_which_errors_it_left_out_and_why(both):
     assert all(left[n].startswith("too weakly seen") for n in weak)
     text = r.report()
     assert "left out by the preset" in text and weak[0] in text
+    # the one result document keeps what was left out and why (its schema checks the pairs)
+    doc = r.to_dict()
+    assert {n: w for n, w in doc["left_out"]} == left
 
 
 def test_a_positioners_errors_are_found_under_its_kinds_priors_over_repeated_simulations():
