@@ -44,7 +44,7 @@ def run(s, seed, step=0.5, b1=B1, b2=B2, psi=PSI, m=M):
 
 
 def cli(*args, cwd=None):
-    env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "python"))
+    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(_core.__file__)))
     p = subprocess.run([sys.executable, "-m", "fivecal", *map(str, args)], capture_output=True, text=True,
                        env=env, cwd=cwd, timeout=600)
     return p.returncode, p.stdout, p.stderr
