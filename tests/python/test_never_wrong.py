@@ -255,19 +255,16 @@ def test_auto_on_truths_drawn_from_the_priors_coverage_and_prediction():
     assert med["auto"] <= med["location"] and med["auto"] <= med["S3"], med
 
 
-def test_identifiability_analysis_agrees_with_simulation_on_random_plans():
-    """>= 200 random plans (subsets of the Table 4-2 plan) and random explicit
-    requests: an accepted set always comes out with sigma below its prior
-    scale and recovers the truth; a refused set, fitted anyway, leaves some
-    refused parameter with a sigma of the order of its prior (not recovered)."""
+def random_plans():
+    """The 200 random plans (subsets of the Table 4-2 plan) and random explicit
+    requests, as (t, dataset, request); test_undetermined_groups records the
+    groups of the same draws."""
     machine = tango.hu40t_machine()
     art = tango.octagonal_table()
     full_plan = tango.hu40t_plan(art, machine)
     rng = np.random.default_rng(11)
     full_truth = tango.thesis_s3_errors()
     pool = tango.S3_NAMES + ["EZ0C", "EY0C", "EB0B", "EX0B"]
-    accepted = refused = 0
-    misses = 0
     for t in range(200):
         n = int(rng.integers(80, 300))
         idx = sorted(rng.choice(len(full_plan), size=n, replace=False).tolist())
@@ -279,6 +276,20 @@ def test_identifiability_analysis_agrees_with_simulation_on_random_plans():
         truth = {**{m: full_truth.get(m, 0.0) for m in est}, **tango.STYLUS_OFFSETS}
         ds = fivecal.simulate(machine, plan, errors=truth, artefact=art, tip_radius=3.0, sigma=SIGMA,
                               seed=t, setup=tango.hu40t_setup(art))
+        yield t, ds, est
+
+
+def test_identifiability_analysis_agrees_with_simulation_on_random_plans():
+    """>= 200 random plans (subsets of the Table 4-2 plan) and random explicit
+    requests: an accepted set always comes out with sigma below its prior
+    scale and recovers the truth; a refused set, fitted anyway, leaves some
+    refused parameter with a sigma of the order of its prior (not recovered)."""
+    machine = tango.hu40t_machine()
+    full_truth = tango.thesis_s3_errors()
+    accepted = refused = 0
+    misses = 0
+    for t, ds, est in random_plans():
+        truth = {**{m: full_truth.get(m, 0.0) for m in est}, **tango.STYLUS_OFFSETS}
         try:
             r = fivecal.identify(ds, est)
         except ValueError as e:
@@ -297,7 +308,7 @@ def test_identifiability_analysis_agrees_with_simulation_on_random_plans():
             continue
         accepted += 1
         for m in r.estimated:
-            assert r.std[m] < r.prior_std[m], (m, r.std[m], r.prior_std[m], est, n)
+            assert r.std[m] < r.prior_std[m], (m, r.std[m], r.prior_std[m], est, t)
             if m in machine.parameter_names():
                 misses += abs(r.values[m] - truth.get(m, 0.0)) > 3 * r.std[m]
     print(f"accepted {accepted}, refused {refused}, misses beyond 3 sigma {misses}")

@@ -10,13 +10,11 @@ import json
 import os
 import sys
 
-import numpy as np
-
 import fivecal
 from fivecal.procedures import tango
+from test_never_wrong import random_plans
 
 FIXTURE = os.path.join(os.path.dirname(__file__), "..", "data", "recorded", "undetermined_groups_main.json")
-SIGMA = 0.001  # as test_never_wrong's random plans
 
 
 def _outcome(ds, est, **kw):
@@ -49,25 +47,8 @@ def s4_cases():
 
 
 def random_plan_cases():
-    """test_never_wrong's 200 random plans and requests, drawn the same way."""
-    machine = tango.hu40t_machine()
-    art = tango.octagonal_table()
-    full_plan = tango.hu40t_plan(art, machine)
-    rng = np.random.default_rng(11)
-    full_truth = tango.thesis_s3_errors()
-    pool = tango.S3_NAMES + ["EZ0C", "EY0C", "EB0B", "EX0B"]
-    cases = {}
-    for t in range(200):
-        n = int(rng.integers(80, 300))
-        idx = sorted(rng.choice(len(full_plan), size=n, replace=False).tolist())
-        plan = [full_plan[i] for i in idx]
-        k = int(rng.integers(1, 8))
-        est = sorted(rng.choice(pool, size=k, replace=False).tolist())
-        truth = {**{m: full_truth.get(m, 0.0) for m in est}, **tango.STYLUS_OFFSETS}
-        ds = fivecal.simulate(machine, plan, errors=truth, artefact=art, tip_radius=3.0, sigma=SIGMA,
-                              seed=t, setup=tango.hu40t_setup(art))
-        cases[f"plan {t}"] = _outcome(ds, est)
-    return cases
+    """test_never_wrong's 200 random plans and requests, drawn by its generator."""
+    return {f"plan {t}": _outcome(ds, est) for t, ds, est in random_plans()}
 
 
 def _recorded():
