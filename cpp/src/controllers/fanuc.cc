@@ -181,7 +181,7 @@ Eigen::Matrix3d BasicRotation(int axis, double angle) {
 
 constexpr int kCommon = 7;  // 19680, 19681, 19682, 19684, 19686, 19687, 19689
 
-Eigen::Index Size(Type) { return kCommon + 7; }
+Eigen::Index Size(Type t) { return kCommon + (t == kTableRotation ? 6 : 7); }
 
 int FindRow(const Machine& m, const KinematicsTable& t, int axis) {
   for (std::size_t i = 0; i < t.axes.size(); ++i)
