@@ -3,13 +3,19 @@ values at the increment's resolution), old beside new with the change's 1σ
 and the header a user needs; a malformed list is refused by line."""
 from __future__ import annotations
 
+import json
 import math
+import os
 import re
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
-from fivecal.io import fanuc
+import fivecal
+from fivecal.cli import main
+from fivecal.io import controllers as K, fanuc
+from fivecal.procedures import sphere_check as sc
 
 NAMES = ["19680", "19681", "19682", "19684", "19686", "19687", "19689",
          "rotary table position X", "rotary table position Y", "rotary table position Z",
@@ -27,7 +33,7 @@ def _export(increment="IS-C", change=None):
                        "source": f"meaning of {n}; FANUC A-79348E, sheet 82/88", "fixed": fixed})
     ab = SimpleNamespace(model="table-table", rms=0.0021, max=0.0057)
     return SimpleNamespace(values=values, absorption=ab, options={"increment": increment, "path": "1"},
-                           round_trip_max_mm=3e-10, result="result.json")
+                           round_trip_max=3e-10, result="result.json")
 
 
 MACHINE = SimpleNamespace(name="VMC-0656-like", topology="wCAfXYZSt")
@@ -46,7 +52,7 @@ def test_write_read_round_trip(tmp_path):
         assert back[v["name"]] == pytest.approx(round(v["new"], 4), abs=1e-12)
     # Old beside new, the change with its 1σ, the codes never called a change.
     line = next(x for x in text.splitlines() if x.startswith("19704 |"))
-    assert line.split(" | ")[:6] == ["19704", "1", "0.0151", "0.0000", "+0.0151 ± 0.0018", "mm"]
+    assert line.split(" | ")[:6] == ["19704", "1", "0.0151", "0.0000", "+0.0151 ± 0.001800", "mm"]
     assert next(x for x in text.splitlines() if x.startswith("19680 |")).split(" | ")[2:5] == ["12", "12", "(code)"]
     # The header: machine, result, date, model, what the controller cannot absorb.
     head = "\n".join(x for x in text.splitlines() if x.startswith("#"))
@@ -84,3 +90,72 @@ def test_read_refuses_a_malformed_list(tmp_path, body, message):
     p.write_text(body)
     with pytest.raises(ValueError, match=message):
         fanuc.read(str(p))
+
+
+# ---- end to end: simulate, identify, `fivecal export fanuc` -------------------------------------------
+
+MACHINES = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "machines")
+BALL = {"id": "S1", "center": [80.0, 50.0, 60.0], "radius": 12.5}
+#: pivot errors only: everything the FANUC model can absorb (tens of µm)
+PIVOTS = {"EY0A": 0.012, "EZ0A": -0.008, "EX0C": 0.015, "EY0C": -0.01}
+SETS = ["--set", "increment=IS-C", "--set", "tool-length=100", "--set", "axis-order=XYZAC"]
+
+
+@pytest.fixture(scope="module")
+def identified(tmp_path_factory):
+    """A sphere check of c600u with pivot errors and 0.2 µm noise, identified."""
+    d = tmp_path_factory.mktemp("fanuc")
+    m = fivecal.Machine.load(os.path.join(MACHINES, "c600u.json"))
+    plan = sc.plan(m, BALL, tip_radius=3.0)
+    ds = fivecal.simulate(m, plan, errors=PIVOTS, artefact={"spheres": [BALL]}, tip_radius=3.0, sigma=0.0002,
+                          seed=11)
+    fivecal.save_dataset(ds, str(d / "ds.json"))
+    assert main(["sphere-check", str(d / "ds.json"), "--out", str(d / "check.json")]) == 0
+    return d, m
+
+
+def test_cli_export_reproduces_the_erroneous_machine(identified, capsys):
+    d, m = identified
+    out = d / "out"
+    rc = main(["export", "fanuc", str(d / "check.json"), "--machine", os.path.join(MACHINES, "c600u.json"),
+               "--out", str(out), *SETS])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert sorted(os.listdir(out)) == ["export.json", "fanuc.txt"]
+    listed = fanuc.read(str(out / "fanuc.txt"))
+    assert listed["19680"] == 12 and listed["19681"] == 4 and listed["19686"] == 5
+    head = (out / "fanuc.txt").read_text()
+    assert "c600u" in head.lower() or m.name in head
+    assert "check.json" in head and "model: table-table" in head
+    # The list's new values, through the manual's transformation (C++
+    # FanucVendor::ToolPoints), put the tool where the erroneous machine does,
+    # up to the work offset, over the working volume.
+    names = [v["name"] for v in json.load(open(out / "export.json"))["values"]]
+    opts = {"increment": "IS-C", "tool-length": "100", "axis-order": "XYZAC"}
+    poses = K.pose_grid(m)
+    pts = K.vendor_tool_points(m, "fanuc", [listed[n] for n in names], poses, opts)
+    truth = m.tool_point(poses, PIVOTS)
+    diff = truth - pts
+    left = np.linalg.norm(diff - diff.mean(axis=0), axis=1).max()
+    assert left < 1e-3, left
+    # ... and the nominal values do not (the test can fail): the errors are tens of µm.
+    nominal = K.vendor_tool_points(m, "fanuc", [json.load(open(out / "export.json"))["values"][k]["old"]
+                                                for k in range(len(names))], poses, opts)
+    diff0 = truth - nominal
+    assert np.linalg.norm(diff0 - diff0.mean(axis=0), axis=1).max() > 0.01
+
+
+@pytest.mark.parametrize("sets, machine, message", [
+    (SETS[2:], "c600u", "option increment is required"),
+    (SETS + ["--set", "increment=IS-A"], "c600u", "expected IS-B or IS-C"),
+    (SETS[:4], "c600u", "option axis-order is required"),
+    (SETS + ["--set", "sign=+"], "c600u", "unknown option 'sign'"),
+    (SETS, "kx8", "inclined rotary axis"),
+])
+def test_cli_refusals_exit_2_with_the_reason(identified, capsys, sets, machine, message):
+    d, _ = identified
+    rc = main(["export", "fanuc", str(d / "check.json"), "--machine", os.path.join(MACHINES, f"{machine}.json"),
+               "--out", str(d / f"refused-{len(sets)}-{machine}"), *sets])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert message in err

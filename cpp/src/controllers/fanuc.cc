@@ -15,7 +15,7 @@ namespace {
 
 // A-79348E: "FANUC Series 30i-MODEL A, Tool center point control for 5-axis
 // machining, Additional manual" (Jan. 16, 2004), sheet numbers n/88.
-const char* const kManual = "FANUC A-79348E (Series 30i-MODEL A, Tool center point control for 5-axis machining)";
+const char* const kManual = "FANUC A-79348E";
 
 std::string Src(const std::string& what, const std::string& where) {
   return what + "; " + kManual + ", " + where;
@@ -250,6 +250,11 @@ Decoded Decode(const Machine& m, const Setup& s, const Eigen::VectorXd& v) {
 
 }  // namespace
 
+const FanucVendor& Fanuc() {
+  static const FanucVendor fanuc;
+  return fanuc;
+}
+
 std::map<std::string, std::string> FanucVendor::OptionHelp() const {
   return {
       {"increment",
@@ -321,7 +326,7 @@ std::vector<VendorValue> FanucVendor::Values(const Machine& m, const VendorOptio
                            "): the vector from the machine coordinate origin to a point on the " + where +
                            " in the machine coordinate system, all rotation axes at 0 degrees; its parameter "
                            "number is not in the public pages read (look it up in your parameter manual)",
-                       "sheet 59/88, Fig. 1.1 (n); sheets 82/88"),
+                       "sheet 59/88, Fig. 1.1 (n), and the figure on sheet 82/88"),
                    false});
   };
   if (s.type == kTableRotation) {

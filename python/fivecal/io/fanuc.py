@@ -23,7 +23,7 @@ from typing import Any, Dict, List, Mapping
 
 from ..files import read_text
 
-__all__ = ["write", "read", "SUFFIX", "DECIMALS"]
+__all__ = ["write", "read", "resolution", "SUFFIX", "DECIMALS"]
 
 #: The file the export writes: DIR/fanuc.txt.
 SUFFIX = ".txt"
@@ -32,6 +32,12 @@ SUFFIX = ".txt"
 #: 82-84: "Depend on the increment system of the applied axis"; IS-B 0.001
 #: mm, IS-C 0.0001 mm).
 DECIMALS = {"IS-B": 3, "IS-C": 4}
+
+def resolution(options: Mapping[str, str]) -> float:
+    """The least input increment (mm) the list is written to: a value read
+    back differs from the export's by up to half of it."""
+    return 10.0 ** -DECIMALS[dict(options or {}).get("increment", "IS-B")]
+
 
 _HEAD = ("No.", "path", "new", "old", "change ± 1σ", "unit", "meaning; source")
 
@@ -59,7 +65,7 @@ def write(exp: Any, machine: Any) -> Dict[str, str]:
 
     ``exp`` is a ``VendorExport`` (attributes or keys ``values``: dicts with
     name, unit, old, new, change, sigma, source, fixed; ``absorption`` with
-    ``model``, ``rms``, ``max``; ``options``; optionally ``round_trip_max_mm``
+    ``model``, ``rms``, ``max``; ``options``; optionally ``round_trip_max``
     and ``result`` (the result file's name)).
     """
     options = dict(_get(exp, "options", None) or {})
@@ -77,13 +83,15 @@ def write(exp: Any, machine: Any) -> Dict[str, str]:
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "# FANUC Series 30i/31i/32i, tool centre point control for 5-axis machining: parameters by fivecal",
+        "# source: FANUC A-79348E, Series 30i-MODEL A, Tool center point control for 5-axis machining, "
+        "Additional manual (sheets n/88)",
         f"# machine: {name} ({topology})   result: {_get(exp, 'result', None) or '-'}   written: {now}",
         f"# model: {model} (No. 19680 = {_num(code, '', 0)})   path: {path}   "
         f"increment: {increment} ({10.0 ** -decimals:.{decimals}f} mm)",
         f"# tool-point error these parameters cannot absorb, over the working volume: rms {_um(_get(ab, 'rms'))}, "
         f"max {_um(_get(ab, 'max'))}",
     ]
-    rt = _get(exp, "round_trip_max_mm")
+    rt = _get(exp, "round_trip_max", _get(exp, "round_trip_max_mm"))
     if rt is not None:
         lines.append(f"# round trip, the manual's transformation with the new values against fivecal's model: "
                      f"max {_um(rt)} (before rounding to the increment)")
@@ -101,7 +109,8 @@ def write(exp: Any, machine: Any) -> Dict[str, str]:
         if fixed:
             delta = "(code)" if unit == "" else "(unchanged)"
         else:
-            delta = f"{float(change):+.{decimals}f} ± {_num(sigma, unit, decimals)}"
+            # σ is often below the increment: two more decimals, so it is not shown as 0
+            delta = f"{float(change):+.{decimals}f} ± {_num(sigma, unit, decimals + 2)}"
         lines.append(" | ".join([
             str(v["name"]), str(path), _num(v.get("new"), unit, decimals), _num(v.get("old"), unit, decimals),
             delta, unit or "code", str(v.get("source", "")).replace("|", "/"),

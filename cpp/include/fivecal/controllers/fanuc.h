@@ -41,6 +41,9 @@ class FanucVendor : public ControllerVendor {
                              const VendorOptions& o) const override;
 };
 
+// The one instance ControllerVendors() lists.
+const FanucVendor& Fanuc();
+
 }  // namespace controllers
 }  // namespace fivecal
 
