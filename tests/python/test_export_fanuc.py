@@ -159,3 +159,46 @@ def test_cli_refusals_exit_2_with_the_reason(identified, capsys, sets, machine, 
     err = capsys.readouterr().err
     assert rc == 2, err
     assert message in err
+
+
+HEADS = {
+    # C carries B in the head (19680 = 2): B 40 mm off the C axis, the spindle 15 mm off B
+    "head-head": ({"name": "hh", "topology": "wXYfZCBSt", "axes": {
+        "X": {"type": "linear", "direction": [-1, 0, 0]}, "Y": {"type": "linear", "direction": [0, -1, 0]},
+        "Z": {"type": "linear", "direction": [0, 0, 1]},
+        "C": {"type": "rotary", "direction": [0, 0, 1], "point": [0, 0, 300]},
+        "B": {"type": "rotary", "direction": [0, 1, 0], "point": [40, 0, 260]},
+        "S": {"type": "rotary", "direction": [0, 0, 1], "point": [15, 0, 0]}}, "tool": {"tip": [15, 0, 60]}},
+        {"EX0B": 0.02, "EZ0B": -0.015, "EX0C": 0.01, "tip.z": 0.02}, "XYZCB", 2),
+    # B tilts the head, C turns the table (19680 = 21)
+    "table-head": ({"name": "th", "topology": "wCXYfZBSt", "axes": {
+        "C": {"type": "rotary", "direction": [0, 0, -1], "point": [30, -20, 0]},
+        "X": {"type": "linear", "direction": [-1, 0, 0]}, "Y": {"type": "linear", "direction": [0, -1, 0]},
+        "Z": {"type": "linear", "direction": [0, 0, 1]},
+        "B": {"type": "rotary", "direction": [0, -1, 0], "point": [0, 0, 350]},
+        "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 120]}},
+        {"EX0C": 0.02, "EY0C": -0.015, "EX0B": 0.01, "EZ0B": 0.012, "tip.z": -0.01}, "XYZBC", 21),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(HEADS))
+def test_head_types_reproduce_the_erroneous_machine(tmp_path, kind):
+    spec, errors, order, code = HEADS[kind]
+    m = fivecal.Machine.from_dict(spec)
+    opts = {"increment": "IS-C", "tool-length": "100", "holder-offset": "5", "axis-order": order}
+    exp = K.vendor_export(m, "fanuc", errors, options=opts)
+    assert exp.round_trip_max < 1e-9
+    by = {v["name"]: v for v in exp.values}
+    assert by["19680"]["new"] == code and by["19666"]["new"] == 5 and by["19666"]["change"] == 0
+    assert max(abs(v["change"]) for v in exp.values if not v["fixed"]) > 0.005
+    # the errors are all pivots and tool length: the manual's transformation
+    # with the new values is the erroneous machine, up to the work offset
+    poses = exp.absorption.poses
+    pts = K.vendor_tool_points(m, "fanuc", [v["new"] for v in exp.values], poses, opts)
+    diff = m.tool_point(poses, errors) - pts
+    assert np.linalg.norm(diff - diff.mean(axis=0), axis=1).max() < 1e-6
+    # the list of this export reads back to its new values at the increment
+    p = tmp_path / "fanuc.txt"
+    p.write_text(fanuc.write(exp, m)[".txt"])
+    back = fanuc.read(str(p))
+    assert all(back[v["name"]] == pytest.approx(v["new"], abs=5.1e-5) for v in exp.values)
