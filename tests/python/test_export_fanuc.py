@@ -202,3 +202,23 @@ def test_head_types_reproduce_the_erroneous_machine(tmp_path, kind):
     p.write_text(fanuc.write(exp, m)[".txt"])
     back = fanuc.read(str(p))
     assert all(back[v["name"]] == pytest.approx(v["new"], abs=5.1e-5) for v in exp.values)
+
+
+def test_old_values_make_the_change_independent_of_tool_length_and_catch_a_wrong_one(identified, capsys):
+    d, _ = identified
+    base = ["export", "fanuc", str(d / "check.json"), "--machine", os.path.join(MACHINES, "c600u.json")]
+    assert main([*base, "--out", str(d / "first"), *SETS]) == 0
+    first = json.load(open(d / "first" / "export.json"))["values"]
+    old = str(d / "first" / "fanuc.txt")
+    # the same control, stated with a tool length 0.2 mm off: the change is the same
+    sets = [s.replace("tool-length=100", "tool-length=100.2") for s in SETS]
+    assert main([*base, "--out", str(d / "again"), "--old", old, *sets]) == 0
+    again = json.load(open(d / "again" / "export.json"))["values"]
+    for a, b in zip(first, again):
+        assert b["change"] == pytest.approx(a["change"], abs=1e-12)
+        assert b["new"] == pytest.approx(a["new"] + a["change"], abs=1e-4)
+    capsys.readouterr()
+    # 50 mm off: the control's rotary table position is not the machine file's
+    sets = [s.replace("tool-length=100", "tool-length=150") for s in SETS]
+    assert main([*base, "--out", str(d / "wrong"), "--old", old, *sets]) == 2
+    assert "rotary table position Z" in capsys.readouterr().err
