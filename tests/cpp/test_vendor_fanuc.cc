@@ -312,6 +312,10 @@ TEST(VendorFanuc, RefusesWhatTheManualDoesNotDecide) {
   ExpectRefusal([&] { f.Model(tt, o); }, "unknown option 'sign'");
   ExpectRefusal([&] { f.Model(tt, Options("XYZA")); }, "lacks rotary axis C");
   ExpectRefusal([&] { f.Model(tt, Options("XYZAAC")); }, "appears twice");
+  EXPECT_EQ(f.Map(tt, MakeKinematicsTable(tt, Eigen::VectorXd::Zero(tt.num_parameters())), Options("xyzac"))[1], 4);
+  o = Options("XYZAC");
+  o["path"] = "99999999999";
+  ExpectRefusal([&] { f.Model(tt, o); }, "expected a path number");
   // A direction change has no Fanuc parameter: Map refuses to drop it.
   Eigen::VectorXd th = Eigen::VectorXd::Zero(tt.num_parameters());
   th[tt.RequireParameter("EB0C")] = 5e-5;

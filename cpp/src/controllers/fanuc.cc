@@ -1,6 +1,7 @@
 #include "fivecal/controllers/fanuc.h"
 
 #include <Eigen/Dense>
+#include <cctype>
 #include <cmath>
 #include <set>
 #include <sstream>
@@ -148,7 +149,8 @@ Setup Parse(const Machine& m, const VendorOptions& o) {
     throw std::invalid_argument(
         "fanuc: option axis-order is required (--set axis-order=XYZAC): the controlled axes of the path in "
         "their order, which give the controlled-axis numbers Nos. 19681 and 19686");
-  const std::string& ax = order->second;
+  std::string ax = order->second;
+  for (char& c : ax) c = char(std::toupper(static_cast<unsigned char>(c)));
   for (std::size_t i = 0; i < ax.size(); ++i)
     if (ax.find(ax[i]) != i)
       throw std::invalid_argument("fanuc: option axis-order=" + ax + ": axis " + std::string(1, ax[i]) +
@@ -161,7 +163,7 @@ Setup Parse(const Machine& m, const VendorOptions& o) {
   }
   if (o.count("path")) {
     const std::string& p = o.at("path");
-    if (p.empty() || p.find_first_not_of("0123456789") != std::string::npos || std::stoi(p) < 1)
+    if (p.empty() || p.size() > 2 || p.find_first_not_of("0123456789") != std::string::npos || std::stoi(p) < 1)
       throw std::invalid_argument("fanuc: option path=" + p + ": expected a path number 1, 2, ...");
   }
   return s;
