@@ -14,6 +14,7 @@ import pytest
 
 import fivecal
 from fivecal.cli import main
+from fivecal.compensation import load_errors
 from fivecal.io import controllers as K, fanuc
 from fivecal.procedures import sphere_check as sc
 
@@ -222,3 +223,36 @@ def test_old_values_make_the_change_independent_of_tool_length_and_catch_a_wrong
     sets = [s.replace("tool-length=100", "tool-length=150") for s in SETS]
     assert main([*base, "--out", str(d / "wrong"), "--old", old, *sets]) == 2
     assert "rotary table position Z" in capsys.readouterr().err
+
+
+def test_a_wrong_sign_unit_or_doubled_value_is_seen_by_what_the_control_then_does(identified):
+    """What verification after loading compares (docs/controllers.md): the
+    errors a control running the keyed-in values compensates, against the
+    export's predicted change within its uncertainty. The list as written
+    agrees; a sign flipped, a change keyed in µm as mm, or a change applied
+    twice does not."""
+    d, m = identified
+    doc = json.load(open(d / "check.json"))
+    opts = {"increment": "IS-C", "tool-length": "100", "axis-order": "XYZAC"}
+    exp = K.vendor_export(m, "fanuc", load_errors(doc, m), K.result_covariance(doc, m), options=opts)
+    sigma = np.sqrt(np.diag(exp.absorbed["covariance"]))
+    moved = [i for i in range(len(sigma)) if sigma[i] > 0]   # the tool length is held: no σ, no change
+    assert len(moved) >= 4
+    idx = [m.parameter_names().index(exp.absorbed["names"][i]) for i in moved]
+
+    def worst(values):
+        seen = K.vendor_to_theta(m, "fanuc", values, options=opts)["theta"][idx]
+        return np.max(np.abs(seen - np.asarray(exp.absorbed["change"])[moved]) / sigma[moved])
+
+    text = fanuc.write(exp, m)[".txt"]
+    d.joinpath("keyed.txt").write_text(text)
+    keyed = fanuc.read(str(d / "keyed.txt"))
+    good = [keyed[v["name"]] for v in exp.values]
+    assert worst(good) < 3
+    k = int(np.argmax([0 if v["fixed"] else abs(v["change"]) for v in exp.values]))
+    for what, value in [("sign", exp.values[k]["old"] - exp.values[k]["change"]),
+                        ("µm keyed as mm", exp.values[k]["old"] + 1000 * exp.values[k]["change"]),
+                        ("applied twice", exp.values[k]["new"] + exp.values[k]["change"])]:
+        bad = list(good)
+        bad[k] = value
+        assert worst(bad) > 10, what
