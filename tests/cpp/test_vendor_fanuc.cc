@@ -324,6 +324,10 @@ TEST(VendorFanuc, RefusesWhatTheManualDoesNotDecide) {
   Eigen::VectorXd v = f.Map(tt, MakeKinematicsTable(tt, Eigen::VectorXd::Zero(tt.num_parameters())), Options("XYZAC"));
   v[6] = 0;
   ExpectRefusal([&] { f.Table(tt, v, Options("XYZAC")); }, "No. 19689 = 0 in the values");
+  Eigen::VectorXd w = f.Map(hh, MakeKinematicsTable(hh, Eigen::VectorXd::Zero(hh.num_parameters())), Options("XYZCB"));
+  w[7] = 7;
+  ExpectRefusal([&] { f.ToolPoints(hh, w, Eigen::MatrixXd::Zero(1, hh.num_axes()), Options("XYZCB")); },
+                "No. 19666 = 7 in the values, but --set holder-offset=5");
 }
 
 }  // namespace

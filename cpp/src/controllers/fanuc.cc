@@ -244,6 +244,14 @@ Decoded Decode(const Machine& m, const Setup& s, const Eigen::VectorXd& v) {
     d.b = v.segment<3>(kCommon + 3);
   } else {
     d.holder = v[kCommon];
+    // tool-length includes the holder offset the control adds: a file with
+    // another No. 19666 than the options state would place point D elsewhere
+    if (d.holder != s.holder_offset) {
+      std::ostringstream msg;
+      msg << "fanuc: No. 19666 = " << d.holder << " in the values, but --set holder-offset=" << s.holder_offset
+          << " (state the control's tool holder offset, and a tool-length that includes it)";
+      throw std::invalid_argument(msg.str());
+    }
     d.a = v.segment<3>(kCommon + 1);
     d.b = v.segment<3>(kCommon + 4);
   }
