@@ -7,7 +7,9 @@ inch), 1000 (a µm value read as mm), and one component's sign turned. A
 new sphere check with realistic noise, run through `fivecal sphere-check
 --previous --expect`, must name each; over repeated checks a change that
 took effect is not flagged more often than the 3σ rate; bad input exits 2,
-named."""
+named. The export here is the contract's (export.json's `absorbed`, from the
+generic table-table absorption); the last test runs the same recipe through
+every vendor's real `fivecal export <vendor>` once the vendors register."""
 from __future__ import annotations
 
 import json
@@ -18,6 +20,7 @@ import pytest
 
 import fivecal
 from fivecal.cli import main
+from fivecal.cli.export import WRITERS
 from fivecal.io import controllers as K
 from fivecal.procedures import sphere_check as sc
 
@@ -221,3 +224,27 @@ def test_bad_input_exits_2_named(tmp_path, capsys, before):
     assert code == 2
     with pytest.raises(ValueError, match="expect: needs previous"):
         sc.evaluate(fivecal.load_dataset(str(tmp_path / "after.json")), expect=export)
+
+
+@pytest.mark.parametrize("vendor", sorted(WRITERS))
+def test_the_recipe_through_each_vendors_real_export(tmp_path, capsys, before, vendor):
+    """The recipe end to end with `fivecal export <vendor>` itself (each
+    vendor the export registers): its export.json drives the check after
+    loading; as exported the change took effect, with its sign turned it did
+    not. A vendor that cannot export this machine without a stated
+    convention (exit 2, naming it) is skipped, said why."""
+    m, d, _ = before
+    out = tmp_path / vendor
+    code = main(["export", vendor, str(d / "check.json"), "--machine", os.path.join(MACHINES, "c600u.json"),
+                 "--out", str(out)])
+    if code == 2:
+        pytest.skip(f"{vendor}: {capsys.readouterr().err.strip()}")
+    assert code == 0, capsys.readouterr().err
+    export = json.loads((out / "export.json").read_text())
+    assert export["kind"] == sc.EXPORT_KIND and export["machine"] == m.name
+    for f, verdict, status in ((1.0, "took effect", 0), (-1.0, "cause", 1)):
+        fivecal.save_dataset(_touches(m, _after(TRUTH, export, f), 11), str(tmp_path / "after.json"))
+        assert main(["sphere-check", str(tmp_path / "after.json"), "--previous", str(d / "check.json"),
+                     "--expect", str(out), "--out", str(tmp_path / "after_check.json")]) == status
+        v = json.loads((tmp_path / "after_check.json").read_text())["procedure"]["values"]["verification"]
+        assert v["verdict"] == verdict and v["vendor"] == vendor, v["message"]
