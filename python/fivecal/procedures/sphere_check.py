@@ -380,11 +380,20 @@ class ChangeVerification:
             ratio = f"{p['ratio']:.4g} ± {p['ratio_std']:.2g}" if math.isfinite(p["ratio"]) else "-"
             L.append(f"  {n:<10}{p['previous'] * f:>11.2f}{p['expected'] * f:>11.2f}{p['predicted'] * f:>11.2f}"
                      f"{p['now'] * f:>11.2f}{p['predicted_std'] * f:>9.2f}{p['z']:>9.3g}  {ratio:<18}{unit:<4}  "
-                     f"{'as predicted' if p['as_predicted'] else 'NOT as predicted'}: {p['verdict']}")
+                     f"{'as predicted' if p['as_predicted'] else 'NOT as predicted'}: {_row_verdict(p)}")
         if self.not_compared:
             L.append("  not compared (no change): " + ", ".join(self.not_compared))
         L.append(f"  overall ({self.k:g}σ): {self.message}")
         return "\n".join(L)
+
+
+def _row_verdict(p: Mapping) -> str:
+    v, causes = p["verdict"], p.get("causes") or []
+    if v == "cause":
+        return " or ".join(causes)
+    if v == "one of":
+        return "one of " + ", ".join(causes)
+    return v
 
 
 def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0) -> ChangeVerification:
@@ -409,7 +418,8 @@ def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0) -> Cha
     rows = {r["name"]: {key: r[key] for key in ("previous", "previous_std", "expected", "expected_std", "now",
                                                 "now_std", "predicted", "predicted_std", "observed", "observed_std",
                                                 "z", "as_predicted", "ratio", "ratio_std")}
-            | {"verdict": r["outcome"]["verdict"], "message": r["outcome"]["message"]}
+            | {"verdict": r["outcome"]["verdict"], "causes": [c["text"] for c in r["outcome"]["causes"]],
+               "message": r["outcome"]["message"]}
             for r in v["parameters"]}
     o = v["outcome"]
     return ChangeVerification(o["verdict"], o["message"], [c["text"] for c in o["causes"]], rows, v["ratio"],
