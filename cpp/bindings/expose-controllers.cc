@@ -485,9 +485,10 @@ void BindControllers(py::module_& m) {
       [](const Machine& mc, const std::vector<std::string>& previous_names, const Eigen::VectorXd& previous,
          const Eigen::MatrixXd& previous_cov, const std::vector<std::string>& change_names,
          const Eigen::VectorXd& change, const Eigen::MatrixXd& change_cov, const std::vector<std::string>& now_names,
-         const Eigen::VectorXd& now, const Eigen::MatrixXd& now_cov, double k) {
+         const Eigen::VectorXd& now, const Eigen::MatrixXd& now_cov, double k, bool change_covariance) {
         VerifyOptions o;
         o.k = k;
+        o.change_covariance = change_covariance;
         const ChangeVerification v = VerifyChange(mc, {previous_names, previous, previous_cov},
                                                   {change_names, change, change_cov}, {now_names, now, now_cov}, o);
         const auto hyp = [](const Hypothesis& h) {
@@ -545,7 +546,7 @@ void BindControllers(py::module_& m) {
       },
       py::arg("machine"), py::arg("previous_names"), py::arg("previous"), py::arg("previous_covariance"),
       py::arg("change_names"), py::arg("change"), py::arg("change_covariance"), py::arg("now_names"),
-      py::arg("now"), py::arg("now_covariance"), py::arg("k") = 3.0,
+      py::arg("now"), py::arg("now_covariance"), py::arg("k") = 3.0, py::arg("change_covariance") = false,
       "Did a loaded change take effect as predicted (controllers/verify.h)? Names are put under the "
       "check's names; dict parameters (per row previous, expected, now, predicted, observed with std, z, "
       "as_predicted, ratio, ratio_std, outcome), not_compared, hypotheses (cause, text, component, chi2), "

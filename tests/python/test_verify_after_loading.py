@@ -248,3 +248,22 @@ def test_the_recipe_through_each_vendors_real_export(tmp_path, capsys, before, v
                      "--expect", str(out), "--out", str(tmp_path / "after_check.json")]) == status
         v = json.loads((tmp_path / "after_check.json").read_text())["procedure"]["values"]["verification"]
         assert v["verdict"] == verdict and v["vendor"] == vendor, v["message"]
+
+
+def test_the_changes_own_covariance_enters_only_when_asked(before):
+    """By default the two checks' σ decide (the controller runs the exported
+    numbers exactly); change_covariance=True adds the export's covariance
+    of the change: the same verdict here, a wider ratio; an export without
+    one is then refused, named."""
+    m, d, export = before
+    second = sc.evaluate(_touches(m, _after(TRUTH, export), 13), previous=str(d / "check.json"))
+    plain = sc.verify_change(second, str(d / "check.json"), export)
+    with pytest.raises(ValueError, match=r"expect\.EX0S: covariance with EX0S is not finite \(no uncertainty given"):
+        sc.verify_change(second, str(d / "check.json"), export, change_covariance=True)
+    n = len(export["absorbed"]["names"])
+    with_cov = json.loads(json.dumps(export))
+    with_cov["absorbed"]["covariance"] = (np.eye(n) * 0.0005 ** 2).tolist()
+    wide = sc.verify_change(second, str(d / "check.json"), with_cov, change_covariance=True)
+    assert plain.took_effect and wide.took_effect
+    assert wide.ratio_std > plain.ratio_std
+    assert all(wide.parameters[k]["predicted_std"] > p["predicted_std"] for k, p in plain.parameters.items())

@@ -396,7 +396,8 @@ def _row_verdict(p: Mapping) -> str:
     return v
 
 
-def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0) -> ChangeVerification:
+def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0,
+                  change_covariance: bool = False) -> ChangeVerification:
     """Verify after loading (docs/controllers.md): did the change an export
     says the controller's new values compensate (``expect``: its export.json,
     :func:`read_export`) take effect, from the check before loading
@@ -405,8 +406,12 @@ def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0) -> Cha
     within ``k`` σ of the two checks; else the cause the numbers support
     (not applied, sign reversed, applied twice, a unit, the sign of one
     component), "cannot tell" or "differs" with the numbers. The comparison
-    is the core's (``controllers/verify.h`` VerifyChange). ValueError for an
-    export of another machine or of parameters this check does not measure."""
+    is the core's (``controllers/verify.h`` VerifyChange). The export's
+    covariance of the change (how well it corrects the machine) enters only
+    with ``change_covariance``: the controller runs the exported numbers
+    exactly, so by default the two checks' σ alone decide (a wider, weaker
+    test otherwise). ValueError for an export of another machine or of
+    parameters this check does not measure."""
     ex = read_export(expect)
     m = check.result.dataset.machine
     if ex["machine"] != m.name:
@@ -414,7 +419,8 @@ def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0) -> Cha
                          f"{m.name!r}")
     pn, pv, pc = _estimate(previous, "previous")
     nn, nv, nc = _estimate(check, "check")
-    v = _core.verify_change(m._core, pn, pv, pc, ex["names"], ex["change"], ex["covariance"], nn, nv, nc, float(k))
+    v = _core.verify_change(m._core, pn, pv, pc, ex["names"], ex["change"], ex["covariance"], nn, nv, nc, float(k),
+                            bool(change_covariance))
     rows = {r["name"]: {key: r[key] for key in ("previous", "previous_std", "expected", "expected_std", "now",
                                                 "now_std", "predicted", "predicted_std", "observed", "observed_std",
                                                 "z", "as_predicted", "ratio", "ratio_std")}
