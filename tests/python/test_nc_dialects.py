@@ -167,3 +167,23 @@ def test_cli_dialects_and_refusals(tmp_path, capsys, setup):
     assert "quoted string" in capsys.readouterr().err
     with pytest.raises(ValueError, match="dialect: 'okuma'"):
         _program(setup, "okuma")
+
+
+@pytest.mark.parametrize("dialect", ["siemens", "fanuc", "beckhoff"])
+def test_a_mixed_facet_and_sphere_plan_in_each_dialect(dialect):
+    """The TANGO plan (facet touches and the scale bar's spheres, an xyzbc
+    table) in each dialect: the same probing targets as LinuxCNC's, one log
+    record per touch, the B column carrying the tilt."""
+    from fivecal.procedures import tango
+    m, art = tango.hu40t_machine(), tango.octagonal_table()
+    plan = tango.hu40t_plan(art, m)[:60]
+    ref = N.touch_program(m, "xyzbc-trt", plan, art, 3.0)
+    text = N.touch_program(m, "xyzbc-trt", plan, art, 3.0, dialect=dialect)
+    assert np.allclose(_probes(text, dialect), _probes(ref, "linuxcnc"), atol=1e-9)
+    assert len(_probes(text, dialect)) == len(plan)
+    rec = {"siemens": "WRITE(FCERR", "fanuc": "DPRNT[", "beckhoff": "#MSG SAVE ["}[dialect]
+    assert sum(ln.startswith(rec) for ln in text.splitlines()) == len(plan)
+    if dialect == "siemens":
+        # xyzbc: the a column 0, the tilt in b
+        assert all(re.search(r'<< " 0\.000000 -?[\d.]+ -?[\d.]+ 0 0 0"\)$', ln)
+                   for ln in text.splitlines() if ln.startswith("WRITE("))
