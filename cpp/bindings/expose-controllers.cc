@@ -17,6 +17,7 @@
 #include "fivecal/controllers/linuxcnc_5axis.h"
 #include "fivecal/controllers/linuxcnc_trt.h"
 #include "fivecal/controllers/vendor.h"
+#include "fivecal/controllers/verify.h"
 #include "fivecal/model/machine.h"
 
 namespace py = pybind11;
@@ -476,4 +477,78 @@ void BindControllers(py::module_& m) {
       py::arg("options") = VendorOptions{},
       "The fivecal errors of the model a controller runs with these values (its own tool points "
       "absorbed into its model over the poses); rms / max: what that model cannot represent.");
+
+  // Verify after loading (verify.h): the estimates cross as (names, values,
+  // covariance) triples; the answer as a dict the Python layer reports.
+  m.def(
+      "verify_change",
+      [](const Machine& mc, const std::vector<std::string>& previous_names, const Eigen::VectorXd& previous,
+         const Eigen::MatrixXd& previous_cov, const std::vector<std::string>& change_names,
+         const Eigen::VectorXd& change, const Eigen::MatrixXd& change_cov, const std::vector<std::string>& now_names,
+         const Eigen::VectorXd& now, const Eigen::MatrixXd& now_cov, double k, bool change_covariance) {
+        VerifyOptions o;
+        o.k = k;
+        o.change_covariance = change_covariance;
+        const ChangeVerification v = VerifyChange(mc, {previous_names, previous, previous_cov},
+                                                  {change_names, change, change_cov}, {now_names, now, now_cov}, o);
+        const auto hyp = [](const Hypothesis& h) {
+          py::dict d;
+          d["cause"] = ChangeCauseText(h.cause);
+          d["text"] = h.Text();
+          d["component"] = h.component;
+          d["chi2"] = h.chi2;
+          return d;
+        };
+        const auto outcome = [&](const ChangeOutcome& oc) {
+          py::dict d;
+          d["verdict"] = ChangeVerdictName(oc.verdict);
+          py::list causes, unresolved;
+          for (const Hypothesis& h : oc.causes) causes.append(hyp(h));
+          for (const Hypothesis& h : oc.unresolved) unresolved.append(hyp(h));
+          d["causes"] = causes;
+          d["unresolved"] = unresolved;
+          d["message"] = oc.message;
+          return d;
+        };
+        py::list rows, hyps;
+        for (const ParameterChange& r : v.parameters) {
+          py::dict d;
+          d["name"] = r.name;
+          d["previous"] = r.previous;
+          d["previous_std"] = r.previous_std;
+          d["expected"] = r.expected;
+          d["expected_std"] = r.expected_std;
+          d["now"] = r.now;
+          d["now_std"] = r.now_std;
+          d["predicted"] = r.predicted;
+          d["predicted_std"] = r.predicted_std;
+          d["observed"] = r.observed;
+          d["observed_std"] = r.observed_std;
+          d["z"] = r.z;
+          d["as_predicted"] = r.as_predicted;
+          d["ratio"] = r.ratio;
+          d["ratio_std"] = r.ratio_std;
+          d["outcome"] = outcome(r.outcome);
+          rows.append(d);
+        }
+        for (const Hypothesis& h : v.hypotheses) hyps.append(hyp(h));
+        py::dict d;
+        d["parameters"] = rows;
+        d["not_compared"] = v.not_compared;
+        d["hypotheses"] = hyps;
+        d["chi2_limit"] = v.chi2_limit;
+        d["ratio"] = v.ratio;
+        d["ratio_std"] = v.ratio_std;
+        d["k"] = v.k;
+        d["outcome"] = outcome(v.outcome);
+        d["took_effect"] = v.took_effect();
+        return d;
+      },
+      py::arg("machine"), py::arg("previous_names"), py::arg("previous"), py::arg("previous_covariance"),
+      py::arg("change_names"), py::arg("change"), py::arg("change_covariance"), py::arg("now_names"),
+      py::arg("now"), py::arg("now_covariance"), py::arg("k") = 3.0, py::arg("change_covariance") = false,
+      "Did a loaded change take effect as predicted (controllers/verify.h)? Names are put under the "
+      "check's names; dict parameters (per row previous, expected, now, predicted, observed with std, z, "
+      "as_predicted, ratio, ratio_std, outcome), not_compared, hypotheses (cause, text, component, chi2), "
+      "chi2_limit, ratio, ratio_std, k, outcome (verdict, causes, unresolved, message), took_effect.");
 }

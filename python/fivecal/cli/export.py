@@ -237,12 +237,19 @@ def _program_text(args, program, machine, plan, artefact, tip) -> str:
     # with spheres on the artefact (a scale bar beside the facets, as in
     # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
     mixed, spheres = N.TOUCH_PROGRAMS
+    dialect = args.dialect
+    if dialect != "linuxcnc" and not (program == spheres or (program == mixed and (
+            N.touches_a_sphere(plan) or artefact.get("spheres")))):
+        raise ValueError(f"--dialect {dialect}: written for sphere and mixed facet/sphere probing cycles; "
+                         f"a {program} program is LinuxCNC G-code only")
     if program == mixed and (N.touches_a_sphere(plan) or artefact.get("spheres")):
-        return N.touch_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
+        return N.touch_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot,
+                               dialect=dialect, **touch)
     if program == mixed:
         return L.probing_program(machine, args.kins, plan, artefact, tip, **touch)
     if program == spheres:
-        return N.sphere_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot, **touch)
+        return N.sphere_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot,
+                                dialect=dialect, **touch)
     if program == "rtest":
         return N.rtest_program(machine, plan, mode=args.mode, kins=args.kins, feed=opt("feed", 500.0),
                                dwell=opt("dwell", 1.0), subdivide=args.subdivide)
@@ -403,6 +410,11 @@ def register(sub) -> None:
     g.add_argument("--dwell", type=float, default=None, help="seconds: after each indexing "
                    "(default 0); R-test: at each sample (default 1); at most 3600")
     g.add_argument("--log", default="probe-log.txt", help="probe log file name (PROBEOPEN)")
+    g.add_argument("--dialect", default="linuxcnc", choices=list(N.DIALECTS),
+                   help="the controller whose words the sphere / probing cycle is written in: its probing move "
+                   "(G38.2, Siemens MEAS=1, Fanuc G31, Beckhoff G100; Heidenhain: G-code, no public probing "
+                   "move found), log (PROBEOPEN, WRITE, DPRNT, #MSG SAVE; every log reads back as LinuxCNC's) "
+                   "and tool centre point switch (`fivecal docs linuxcnc`; default linuxcnc)")
     g = pp.add_argument_group("R-test and ball bar")
     g.add_argument("--mode", choices=["axes", "tcp"], default="axes", help="R-test words: axis commands "
                    "(joint values with --kins) or world coordinates with TCP on")

@@ -32,7 +32,8 @@ Units: mm, degrees, mm/min; world coordinates are LinuxCNC's (workpiece point
 from __future__ import annotations
 
 import math
-from typing import Dict, List, Mapping, Optional, Sequence
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -50,6 +51,114 @@ PROGRAMS = ("probing", "sphere", "rtest", "dbb")
 PLAN_PROGRAMS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb": "dbb"}
 #: the touch programs: a plan of facet and sphere touches runs in the first
 TOUCH_PROGRAMS = ("probing", "sphere")
+
+
+@dataclass(frozen=True)
+class Dialect:
+    """How one controller writes a probing cycle (``fivecal export program
+    --dialect``): its comments, modal words, tool-centre-point switch, the
+    probing move and how the probed position reaches a log file. Each log
+    line is 'x y z a b c u v w' as LinuxCNC's ``PROBEOPEN`` writes it (the
+    rotary values are the program's own commands), so
+    :func:`fivecal.io.linuxcnc.read_probe_log` reads every dialect's log.
+    ``sources``: where each word's syntax comes from (public manuals)."""
+
+    name: str
+    title: str
+    comment: Callable[[str], str]
+    declare: Tuple[str, ...]          # lines before any statement (Siemens DEF)
+    preamble: str
+    tcp_on: str                       # default tool-centre-point switch ("" none)
+    tcp_off: str
+    open_log: Callable[[str], List[str]]
+    probe: Callable[[str, float], str]
+    record: Callable[[str, Sequence[float]], List[str]]
+    close_log: Callable[[str], List[str]]
+    dwell: Callable[[float], str]
+    end: str
+    notes: Tuple[str, ...] = ()
+    sources: Tuple[str, ...] = ()
+
+
+def _paren(text: str) -> str:
+    return f"({text})"
+
+
+def _semi(text: str) -> str:
+    return f"; {text}"
+
+
+def _rest(rot: Sequence[float]) -> str:
+    return " ".join(_f(v) for v in rot) + " 0 0 0"
+
+
+#: the dialects of :func:`sphere_program` / :func:`touch_program`, by name
+DIALECTS: Dict[str, Dialect] = {d.name: d for d in (
+    Dialect("linuxcnc", "LinuxCNC 2.9", _paren, (), "G21 G90 G94 G17 G40 G49 G54 G61", "M428", "",
+            lambda log: [f"(PROBEOPEN {log})"], lambda xyz, feed: f"G38.2 {xyz} F{feed:g}", lambda log, rot: [],
+            lambda log: ["(PROBECLOSE)"], lambda t: f"G4 P{t:g}", "M2",
+            sources=("LinuxCNC G-code reference: G38.2, PROBEOPEN / PROBECLOSE, G4 P seconds",)),
+    Dialect("siemens", "Siemens SINUMERIK 840D sl / ONE", _semi, ("DEF INT FCERR",), "G71 G90 G94 G17 G40",
+            "TRAORI", "TRAFOOF", lambda log: [],
+            lambda xyz, feed: f"MEAS=1 G01 {xyz} F{feed:g}",
+            lambda log, rot: [f'WRITE(FCERR, "{log}", $AA_MW[X] << " " << $AA_MW[Y] << " " << $AA_MW[Z] << '
+                              f'" {_rest(rot)}")'],
+            lambda log: [], lambda t: f"G4 F{t:g}", "M30",
+            notes=("MEAS=1: measuring with deletion of distance-to-go, probe 1, rising edge; $AA_MW[axis]: the "
+                   "measured position in workpiece coordinates of the axes programmed in the MEAS block; WRITE "
+                   "appends one line to the file",),
+            sources=("SINUMERIK 840D sl programming manual job planning 03/2006 (6FC5398-2BP10-1BA0) section 5.7 "
+                     "Measurements with touch trigger probe (MEAS, MEAW), p. 5-24 (via easymanua.ls)",
+                     "SINUMERIK ONE programming manual job planning, WRITE(<error>, <file name>, <block/data>), "
+                     "p. 566 (via easymanua.ls)")),
+    Dialect("fanuc", "Fanuc Series 30i / 31i", _paren, (), "G21 G90 G94 G17 G40 G49 G54", "G43.4 H1", "G49",
+            lambda log: ["POPEN"], lambda xyz, feed: f"G31 {xyz} F{feed:g}",
+            lambda log, rot: [f"#1={_f(rot[0])}", f"#2={_f(rot[1])}", f"#3={_f(rot[2])}",
+                              "DPRNT[#5061[44]*#5062[44]*#5063[44]*#1[44]*#2[44]*#3[44]*0*0*0]"],
+            lambda log: ["PCLOS"], lambda t: f"G04 X{t:g}", "M30",
+            notes=("G31: skip function, the move ends at the probe's signal; #5061-#5063: the skip position of "
+                   "axes 1-3 (workpiece coordinates); DPRNT prints them to the device POPEN opened ('*' a "
+                   "space, [44] four digits before and after the point); G43.4: tool centre point control "
+                   "type 1 with tool offset H1 (give --tcp-on for another)",),
+            sources=("Fanuc Series 15i/150i-MA programming manual, skip function G31 and #5061-#5080, p. 564 "
+                     "(via cncmanuals.com)",
+                     "Fanuc Series 30i/300i/300is-Model A descriptions B-63942EN/02, appendix B, G43.4 "
+                     "p. 411 (via cncmanuals.com)",
+                     "custom macro B: DPRNT / POPEN / PCLOS (cncci.com; NCT 2000M manual p. 193)")),
+    Dialect("heidenhain", "Heidenhain TNC (no public probing move found: ISO G-code)", _paren, (),
+            "G21 G90 G94 G17 G40 G49 G54 G61", "", "",
+            lambda log: [f"(PROBEOPEN {log})"], lambda xyz, feed: f"G38.2 {xyz} F{feed:g}", lambda log, rot: [],
+            lambda log: ["(PROBECLOSE)"], lambda t: f"G4 P{t:g}", "M2",
+            notes=("Heidenhain TNC: no public source found here gives the syntax of a touch probe move in an "
+                   "arbitrary 3-D direction with its touch point written to a file; this program is ISO "
+                   "G-code with G38.2 probing moves: replace each G38.2 with your TNC's touch probe cycle "
+                   "(the TNC keeps the touch point, stylus not compensated, in Q115-Q117) and switch on "
+                   "tool centre point (TCPM) as your machine does",),
+            sources=("TNC 640 user's manual DIN/ISO programming 34059x-05 (1/2015) section 9.11 Preassigned Q "
+                     "parameters, coordinates after probing Q115-Q119, p. 341 (via manualsdir.com)",)),
+    Dialect("beckhoff", "Beckhoff TwinCAT 3 CNC (ISG kernel)", _semi, (), "G90 G17 G40", "#TRAFO ON", "#TRAFO OFF",
+            lambda log: [f'#FILE NAME [MSG="{log}"]', "#MEAS [TYPE=1]"],
+            lambda xyz, feed: f"G100 {xyz} F{feed:g}",
+            lambda log, rot: [f'#MSG SAVE ["%f %f %f {_rest(rot)}", V.A.MEAS.PCS.VALUE.X, '
+                              "V.A.MEAS.PCS.VALUE.Y, V.A.MEAS.PCS.VALUE.Z]"],
+            lambda log: [], lambda t: f"#TIME {t:g}", "M30",
+            notes=("G100: measuring run (type 1: any axes, feed by F), V.A.MEAS.PCS.VALUE.<axis>: the measured "
+                   "position in program coordinates; #MSG SAVE appends it to the file #FILE NAME [MSG=...] "
+                   "names; the axes must be measuring axes (P-AXIS-00118)",),
+            sources=("Beckhoff TF5200 programming manual: measuring functions and #MEAS [TYPE=..] "
+                     "(infosys.beckhoff.com tf5200_programming_manual 206164491, 207092107), G100 "
+                     "(tccncprogramming 15556655755)",
+                     "TF5200 measurement: V.A.MEAS.PCS.VALUE (tf5200_measurement 342045451); #FILE NAME / "
+                     "#MSG SAVE (tf5225_tc3_cnc_cycles_measurement 312235147); #TRAFO ON (tf5200_programming_manual "
+                     "208436363); #TIME (206132747)")),
+)}
+
+
+def dialect(name: str) -> Dialect:
+    """The dialect ``name`` (ValueError naming the ones there are)."""
+    if name not in DIALECTS:
+        raise ValueError(f"dialect: '{name}' (expected one of {', '.join(DIALECTS)})")
+    return DIALECTS[name]
 
 
 def touches_a_sphere(plan: Sequence[Mapping]) -> bool:
@@ -161,9 +270,9 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
                    tip_radius: float, clearance: float = 1.0, overtravel: float = 1.0,
                    feed: float = 60.0, retract: float = 5.0, safe: float = 100.0,
                    overshoot: float = 1.0, dwell: float = 0.0, arm: str = "", disarm: str = "",
-                   sync: str = "", log: str = "probe-log.txt", tcp_on: str = "M428",
+                   sync: str = "", log: str = "probe-log.txt", tcp_on: Optional[str] = None,
                    workpiece_shift=(0.0, 0.0, 0.0),
-                   before_probe: Optional[Sequence[Sequence[str]]] = None) -> str:
+                   before_probe: Optional[Sequence[Sequence[str]]] = None, dialect: str = "linuxcnc") -> str:
     """An ISO G-code program for LinuxCNC running the sphere touches of
     ``plan`` (``{"type": "sphere", "target": id, "axes": {tilt, C},
     "normal": [...], "direction": {...}}``) on ``artefact["spheres"]``.
@@ -185,19 +294,23 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
     off every sphere of the artefact, as in :func:`touch_program`; check the
     moves against your fixtures). ``sync``, ``arm``,
     ``disarm``, ``before_probe``, ``log`` and ``tcp_on`` as in
-    :func:`fivecal.io.linuxcnc.probing_program`."""
+    :func:`fivecal.io.linuxcnc.probing_program`. ``dialect`` (:data:`DIALECTS`):
+    the same cycle in another controller's words (its probing move, log
+    and tool-centre-point switch; ``tcp_on`` None: the dialect's); the
+    coordinates stay those of ``kins`` (workpiece point − tool tip at the
+    zero pose: set the work offset so)."""
     return _touch_program(machine, kins, plan, artefact, tip_radius, ("sphere",), clearance, overtravel,
                           feed, retract, safe, overshoot, dwell, arm, disarm, sync, log, tcp_on,
-                          workpiece_shift, before_probe)
+                          workpiece_shift, before_probe, dialect)
 
 
 def touch_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
                   tip_radius: float, clearance: float = 1.0, overtravel: float = 1.0,
                   feed: float = 60.0, retract: float = 5.0, safe: float = 100.0,
                   overshoot: float = 1.0, dwell: float = 0.0, arm: str = "", disarm: str = "",
-                  sync: str = "", log: str = "probe-log.txt", tcp_on: str = "M428",
+                  sync: str = "", log: str = "probe-log.txt", tcp_on: Optional[str] = None,
                   workpiece_shift=(0.0, 0.0, 0.0),
-                  before_probe: Optional[Sequence[Sequence[str]]] = None) -> str:
+                  before_probe: Optional[Sequence[Sequence[str]]] = None, dialect: str = "linuxcnc") -> str:
     """One ``G38.2`` program for a plan that mixes facet touches
     (``{"type": "facet", "target": id, "axes": {...}, "point": [...]}``) and
     sphere touches (as in :func:`sphere_program`), in the plan's order, as
@@ -218,11 +331,16 @@ def touch_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact
     observations in plan order."""
     return _touch_program(machine, kins, plan, artefact, tip_radius, ("facet", "sphere"), clearance,
                           overtravel, feed, retract, safe, overshoot, dwell, arm, disarm, sync, log, tcp_on,
-                          workpiece_shift, before_probe)
+                          workpiece_shift, before_probe, dialect)
 
 
 def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, overtravel, feed, retract,
-                   safe, overshoot, dwell, arm, disarm, sync, log, tcp_on, workpiece_shift, before_probe):
+                   safe, overshoot, dwell, arm, disarm, sync, log, tcp_on, workpiece_shift, before_probe,
+                   dialect_name="linuxcnc"):
+    d = dialect(dialect_name)
+    tcp_on = d.tcp_on if tcp_on is None else tcp_on
+    if d.name in ("siemens", "beckhoff") and '"' in str(log):
+        raise O.OptionError("log", f"{log!r}: the file name is written inside a quoted string")
     k = L._kins(kins)
     tilt = L.TILT[k]
     geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
@@ -246,42 +364,50 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     xyz = lambda p: f"X{_f(p[0])} Y{_f(p[1])} Z{_f(p[2])}"  # noqa: E731
     targets = sorted({str(t.get("target")) for t in plan})
     what = "sphere cycle" if kinds == ("sphere",) else "probing cycle"
-    out = [f"(fivecal {what}: {len(geo)} touches on {O.comment_text(', '.join(targets))}, machine "
-           f"{O.comment_text(machine.name)}, {k}-kins)",
-           "(units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose)",
-           f"(stylus ball radius {tip_radius:g} mm; touches approach and retract along the "
-           f"{'sphere' if kinds == ('sphere',) else 'surface'} normal)",
-           "G21 G90 G94 G17 G40 G49 G54 G61"]
+    c = d.comment
+    out = [c(f"fivecal {what}: {len(geo)} touches on {O.comment_text(', '.join(targets))}, machine "
+             f"{O.comment_text(machine.name)}, {k}-kins"),
+           c("units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose"),
+           c(f"stylus ball radius {tip_radius:g} mm; touches approach and retract along the "
+             f"{'sphere' if kinds == ('sphere',) else 'surface'} normal")]
+    if d.name != "linuxcnc":
+        out += [c(f"dialect {d.name}: {O.comment_text(d.title)}"),
+                *[c(O.comment_text(n)) for n in d.notes],
+                *[c("source: " + O.comment_text(src)) for src in d.sources],
+                c("log lines: x y z a b c u v w as LinuxCNC's PROBEOPEN writes them; "
+                  "fivecal.io.linuxcnc.read_probe_log reads them")]
+    out += list(d.declare)
+    out.append(d.preamble)
     if tcp_on:
-        out.append(f"{tcp_on} (tool centre point kinematics on)")
-    out.append(f"(PROBEOPEN {log})")
+        out.append(f"{tcp_on} {c('tool centre point kinematics on')}")
+    out += d.open_log(log)
     last_rot = None   # (tilt, C) joint values the table stands at
     last_dir = None
     hold = v_prev = None  # the retract point and tool axis of the previous touch
-    for i, (t, c, w, n, v) in enumerate(geo):
+    for i, (t, cc, w, n, v) in enumerate(geo):
         start, end = w + clearance * n, w - overtravel * n
         off = w + retract * n
-        rot = (t, c)
-        out.append(f"(touch {i + 1}: {O.comment_text(plan[i]['target'])} direction {' '.join(_f(x) for x in n)})")
+        rot = (t, cc)
+        out.append(c(f"touch {i + 1}: {O.comment_text(plan[i]['target'])} direction {' '.join(_f(x) for x in n)}"))
         if rot != last_rot or dirs[i] != last_dir:
             lift = _clear_lift(hold, v_prev, off, v, safe, balls, i + 1)
             up = off + lift * v
             if hold is not None:
                 out.append(f"G0 {xyz(hold + lift * v_prev)}")
             side = ["+-"[d < 0] if d else "." for d in dirs[i]]
-            out.append(f"(position {tilt} {_f(t)} C {_f(c)}, approached {side[0]}{tilt} {side[1]}C)")
+            out.append(c(f"position {tilt} {_f(t)} C {_f(cc)}, approached {side[0]}{tilt} {side[1]}C"))
             if overshoot > 0 and any(dirs[i]):
                 pre = []
-                for val, d, prev in ((t, dirs[i][0], None if last_rot is None else last_rot[0]),
-                                     (c, dirs[i][1], None if last_rot is None else last_rot[1])):
+                for val, dd, prev in ((t, dirs[i][0], None if last_rot is None else last_rot[0]),
+                                      (cc, dirs[i][1], None if last_rot is None else last_rot[1])):
                     # the move into the position already comes from the planned side
-                    ok = d == 0 or (prev is not None and (val - prev) * d > 1e-9)
-                    pre.append(val if ok else val - d * overshoot)
+                    ok = dd == 0 or (prev is not None and (val - prev) * dd > 1e-9)
+                    pre.append(val if ok else val - dd * overshoot)
                 if tuple(pre) != rot:
-                    out.append(f"G0 {xyz(up)} {tilt}{_f(pre[0])} C{_f(pre[1])} (overshoot)")
-            out.append(f"G0 {xyz(up)} {tilt}{_f(t)} C{_f(c)}")
+                    out.append(f"G0 {xyz(up)} {tilt}{_f(pre[0])} C{_f(pre[1])} {c('overshoot')}")
+            out.append(f"G0 {xyz(up)} {tilt}{_f(t)} C{_f(cc)}")
             if dwell > 0:
-                out.append(f"G4 P{dwell:g}")
+                out.append(d.dwell(dwell))
             last_rot, last_dir = rot, dirs[i]
             out.append(f"G0 {xyz(off)}")
         else:
@@ -297,13 +423,16 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
         out += [sync] if sync else []
         out += list(before_probe[i]) if before_probe is not None else []
         out += [arm] if arm else []
-        out.append(f"G38.2 {xyz(end)} F{feed:g}")
+        out.append(d.probe(xyz(end), feed))
+        out += d.record(log, (t, 0.0, cc) if tilt == "A" else (0.0, t, cc))
         out += [disarm] if disarm else []
         out += [f"G0 {xyz(start)}", f"G0 {xyz(off)}"]
         hold, v_prev = off, v
     if hold is not None:
         out.append(f"G0 {xyz(hold + _clear_lift(hold, v_prev, None, None, safe, balls, len(geo)) * v_prev)}")
-    out += ["(PROBECLOSE)", "M2"]
+    out += d.close_log(log)
+    out += [d.tcp_off] if tcp_on and d.tcp_off else []
+    out.append(d.end)
     return O.check_positions("\n".join(out) + "\n", what)
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import numbers
+import os
 from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence, Union
 
@@ -159,6 +160,8 @@ class SphereCheck(Viewable):
     dispersion_after: float = 0.0        #: the same with the identified model
     condition_number: float = 0.0
     informed: Dict[str, float] = field(default_factory=dict)  #: parameter -> posterior / prior sigma
+    #: ``expect``: did the loaded change take effect (:func:`verify_change`)
+    verification: Optional["ChangeVerification"] = None
 
     def procedure_values(self) -> dict:
         """The check's own values, the ``procedure.values`` of its result
@@ -170,7 +173,8 @@ class SphereCheck(Viewable):
                 "change": {n: {"change": c, "std": s} for n, (c, s) in self.change.items()},
                 "positions": list(self.groups),
                 "dispersion_before": self.dispersion_before, "dispersion_after": self.dispersion_after,
-                "condition_number": self.condition_number, "informed": dict(self.informed)}
+                "condition_number": self.condition_number, "informed": dict(self.informed)} | \
+            ({"verification": self.verification.to_dict()} if self.verification is not None else {})
 
     def to_dict(self) -> dict:
         """The result document (the one every procedure writes): the pivot
@@ -205,6 +209,8 @@ class SphereCheck(Viewable):
         und = list(getattr(r, "undetermined", []) or [])
         if und:
             L.append("  NOT determined by these positions: " + ", ".join(und))
+        if self.verification is not None:
+            L += ["", self.verification.report()]
         return "\n".join(L)
 
 
@@ -237,8 +243,199 @@ def _previous_values(previous) -> Dict[str, tuple]:
     return out
 
 
+#: the ``kind`` of the export document ``fivecal export <vendor> --out DIR`` writes as DIR/export.json
+EXPORT_KIND = "fivecal controller export"
+EXPORT_FILE = "export.json"
+
+
+def _estimate(obj, where: str):
+    """(names, values, covariance) of a check or result: a SphereCheck, a
+    Result, a result document (a file or a dict: ``parameters`` with value
+    and std, ``correlation`` in ``estimated`` order) or a plain mapping
+    name -> value (no uncertainty). A σ the document leaves out (null) is NaN:
+    the core refuses it only where it is compared."""
+    if isinstance(obj, SphereCheck):
+        obj = obj.result
+    if isinstance(obj, Result):
+        names = list(obj.estimated)
+        return names, np.array([obj.values.get(n, 0.0) for n in names]), np.asarray(obj.covariance, float)
+    if not isinstance(obj, Mapping):
+        obj = read_json(obj, where)
+    params = obj.get("parameters", obj)
+    if not isinstance(params, Mapping):
+        raise ValueError(f"{where}: expected a result document with 'parameters'")
+    names, values, std = [], [], []
+    for n, p in params.items():
+        try:
+            if isinstance(p, Mapping):
+                v, sd = p["value"], p.get("std", 0.0 if p.get("fixed") else None)
+            else:
+                v, sd = p, 0.0
+            names.append(str(n))
+            values.append(math.nan if v is None else float(v))
+            std.append(math.nan if sd is None else float(sd))
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{where}: parameters.{n}: expected a number or {{value, std}}") from None
+    cov = np.diag(np.square(std))
+    est, corr = obj.get("estimated"), obj.get("correlation")
+    if isinstance(est, list) and isinstance(corr, list) and len(corr) == len(est):
+        try:
+            R = np.array([[math.nan if x is None else float(x) for x in row] for row in corr], float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: correlation: expected a square matrix of numbers") from None
+        if R.shape != (len(est), len(est)):
+            raise ValueError(f"{where}: correlation: expected {len(est)} x {len(est)} (estimated), got {R.shape}")
+        idx = [names.index(n) if n in names else -1 for n in est]
+        for a, i in enumerate(idx):
+            for b, j in enumerate(idx):
+                if i >= 0 and j >= 0 and i != j:
+                    cov[i, j] = R[a, b] * std[i] * std[j]
+    return names, np.asarray(values, float), cov
+
+
+def read_export(expect) -> dict:
+    """The export document (``fivecal export <vendor> ... --out DIR`` writes
+    DIR/export.json; a path to it or to DIR, or the dict) checked: its
+    ``kind``, ``machine`` and ``absorbed`` (``names``, ``change`` and
+    ``covariance``: the fivecal errors the controller's new values
+    compensate). Returns vendor, machine, path, names, change, covariance
+    (NaN where not given)."""
+    path = None
+    if not isinstance(expect, Mapping):
+        path = os.fspath(expect)
+        if os.path.isdir(path):
+            path = os.path.join(path, EXPORT_FILE)
+        expect = read_json(path, "expect")
+    where = f"expect ({path})" if path else "expect"
+    if expect.get("kind") != EXPORT_KIND:
+        raise ValueError(f"{where}: kind {expect.get('kind')!r}: not a controller export (expected "
+                         f"{EXPORT_KIND!r}: the export.json `fivecal export <vendor> --out DIR` writes)")
+    ab = expect.get("absorbed")
+    if not isinstance(ab, Mapping):
+        raise ValueError(f"{where}: absorbed: expected an object with names, change and covariance")
+    names, change = ab.get("names"), ab.get("change")
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"{where}: absorbed.names: expected a list of parameter names")
+    if not isinstance(change, list) or len(change) != len(names):
+        raise ValueError(f"{where}: absorbed.change: expected {len(names)} numbers (one per absorbed.names)")
+    c = []
+    for i, v in enumerate(change):
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise ValueError(f"{where}: absorbed.change[{i}] ({names[i]}): expected a number, got {v!r}")
+        c.append(float(v))
+    n = len(names)
+    cov = ab.get("covariance")
+    if cov is None:
+        C = np.full((n, n), math.nan)
+    else:
+        if not isinstance(cov, list) or len(cov) != n or not all(isinstance(r, list) and len(r) == n for r in cov):
+            raise ValueError(f"{where}: absorbed.covariance: expected {n} x {n} numbers")
+        try:
+            C = np.array([[math.nan if x is None else float(x) for x in r] for r in cov], float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: absorbed.covariance: expected numbers") from None
+    machine = expect.get("machine")
+    if not isinstance(machine, str) or not machine:
+        raise ValueError(f"{where}: machine: expected the machine's name")
+    return {"path": path, "vendor": str(expect.get("vendor", "")), "machine": machine, "names": list(names),
+            "change": np.asarray(c, float), "covariance": C}
+
+
+@dataclass
+class ChangeVerification:
+    """Did a change loaded into the controller take effect as predicted
+    (:func:`verify_change`; the core's ``controllers/verify.h``)? mm, rad."""
+
+    verdict: str          #: "took effect", "cause", "one of", "cannot tell", "differs"
+    message: str          #: one line a person reads
+    causes: List[str]     #: the causes named (or, "cannot tell", the alternatives not excluded)
+    parameters: Dict[str, dict]  #: check name -> previous, expected, now, predicted, z, ratio, ... with std
+    ratio: float          #: observed / expected change (weighted over the parameters)
+    ratio_std: float
+    k: float
+    not_compared: List[str]
+    export: dict          #: path, vendor, machine of the export
+
+    @property
+    def took_effect(self) -> bool:
+        return self.verdict == "took effect"
+
+    def to_dict(self) -> dict:
+        """The ``procedure.values.verification`` of the check's result document."""
+        return {"expect": self.export.get("path"), "vendor": self.export.get("vendor"),
+                "machine": self.export.get("machine"), "verdict": self.verdict, "took_effect": self.took_effect,
+                "message": self.message, "causes": list(self.causes), "ratio": self.ratio,
+                "ratio_std": self.ratio_std, "k": self.k, "not_compared": list(self.not_compared),
+                "parameters": {n: dict(p) for n, p in self.parameters.items()}}
+
+    def report(self) -> str:
+        e = self.export
+        L = [f"Verify after loading ({e.get('vendor') or 'controller'} export"
+             + (f" {e['path']}" if e.get("path") else "") + f", machine {e.get('machine')}): "
+             "the change expected against the drop this check saw since the previous one",
+             f"  {'parameter':<10}{'previous':>11}{'change':>11}{'predicted':>11}{'now':>11}{'± 1σ':>9}"
+             f"{'z':>9}  {'ratio ± 1σ':<18}unit  this parameter"]
+        for n, p in self.parameters.items():
+            unit, f = ("µrad", 1e6) if n[1] in "ABC" else ("µm", 1e3)
+            ratio = f"{p['ratio']:.4g} ± {p['ratio_std']:.2g}" if math.isfinite(p["ratio"]) else "-"
+            L.append(f"  {n:<10}{p['previous'] * f:>11.2f}{p['expected'] * f:>11.2f}{p['predicted'] * f:>11.2f}"
+                     f"{p['now'] * f:>11.2f}{p['predicted_std'] * f:>9.2f}{p['z']:>9.3g}  {ratio:<18}{unit:<4}  "
+                     f"{'as predicted' if p['as_predicted'] else 'NOT as predicted'}: {_row_verdict(p)}")
+        if self.not_compared:
+            L.append("  not compared (no change): " + ", ".join(self.not_compared))
+        L.append(f"  overall ({self.k:g}σ): {self.message}")
+        return "\n".join(L)
+
+
+def _row_verdict(p: Mapping) -> str:
+    v, causes = p["verdict"], p.get("causes") or []
+    if v == "cause":
+        return " or ".join(causes)
+    if v == "one of":
+        return "one of " + ", ".join(causes)
+    return v
+
+
+def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0,
+                  change_covariance: bool = False) -> ChangeVerification:
+    """Verify after loading (docs/controllers.md): did the change an export
+    says the controller's new values compensate (``expect``: its export.json,
+    :func:`read_export`) take effect, from the check before loading
+    (``previous``: a result document, Result or SphereCheck) and ``check``,
+    the one after? Predicted: previous − change, per parameter and overall,
+    within ``k`` σ of the two checks; else the cause the numbers support
+    (not applied, sign reversed, applied twice, a unit, the sign of one
+    component), "cannot tell" or "differs" with the numbers. The comparison
+    is the core's (``controllers/verify.h`` VerifyChange). The export's
+    covariance of the change (how well it corrects the machine) enters only
+    with ``change_covariance``: the controller runs the exported numbers
+    exactly, so by default the two checks' σ alone decide (a wider, weaker
+    test otherwise). ValueError for an export of another machine or of
+    parameters this check does not measure."""
+    ex = read_export(expect)
+    m = check.result.dataset.machine
+    if ex["machine"] != m.name:
+        raise ValueError(f"expect: the export is for machine {ex['machine']!r}; this check is of machine "
+                         f"{m.name!r}")
+    pn, pv, pc = _estimate(previous, "previous")
+    nn, nv, nc = _estimate(check, "check")
+    v = _core.verify_change(m._core, pn, pv, pc, ex["names"], ex["change"], ex["covariance"], nn, nv, nc, float(k),
+                            bool(change_covariance))
+    rows = {r["name"]: {key: r[key] for key in ("previous", "previous_std", "expected", "expected_std", "now",
+                                                "now_std", "predicted", "predicted_std", "observed", "observed_std",
+                                                "z", "as_predicted", "ratio", "ratio_std")}
+            | {"verdict": r["outcome"]["verdict"], "causes": [c["text"] for c in r["outcome"]["causes"]],
+               "message": r["outcome"]["message"]}
+            for r in v["parameters"]}
+    o = v["outcome"]
+    return ChangeVerification(o["verdict"], o["message"], [c["text"] for c in o["causes"]], rows, v["ratio"],
+                              v["ratio_std"], v["k"], list(v["not_compared"]),
+                              {key: ex[key] for key in ("path", "vendor", "machine")})
+
+
 def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_stylus: bool = True,
-             backlash: Optional[bool] = None, sphere: Optional[str] = None) -> SphereCheck:
+             backlash: Optional[bool] = None, sphere: Optional[str] = None, expect=None,
+             k: float = 3.0) -> SphereCheck:
     """Evaluate a sphere check: fit the pivot parameters of every rotary axis
     that moved (:func:`pivot_parameters`) with the stylus known
     (``calibrated_stylus``: ``tip.*`` fixed) and the sphere's place free.
@@ -246,8 +443,13 @@ def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_styl
     positions were reached from both directions). ``previous``: the last
     check (a SphereCheck, a Result, or a result file / dict) for the change of
     each pivot, with the σ of the change from both checks (independent
-    checks). The evaluation is the core's (``procedures/sphere_check.h``
-    EvaluateSphereCheck). Raises ValueError when the data cannot determine a pivot."""
+    checks). ``expect``: the export.json of a change loaded into the
+    controller since ``previous``: :attr:`SphereCheck.verification` says
+    whether it took effect (:func:`verify_change`, ``k`` σ). The evaluation
+    is the core's (``procedures/sphere_check.h`` EvaluateSphereCheck).
+    Raises ValueError when the data cannot determine a pivot."""
+    if expect is not None and previous is None:
+        raise ValueError("expect: needs previous, the check before loading (the one the change is predicted from)")
     ds = Dataset.from_dict(dataset)
     core = _core.sphere_check(ds._core, sphere or "", bool(calibrated_stylus),
                               -1 if backlash is None else int(bool(backlash)), _previous_values(previous))
@@ -258,9 +460,12 @@ def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_styl
     change = {c.name: (c.value, c.std) for c in core.change}
     pos = np.asarray(core.positions)
     labels = [", ".join(f"{a} {v:g}°" for a, v in zip(axes, row)) for row in pos]
-    return SphereCheck(r, axes, pivots, lash, change, np.asarray(core.centres_before),
-                       np.asarray(core.centres_after), labels, core.dispersion_before, core.dispersion_after,
-                       float(core.condition_number), dict(core.informed))
+    check = SphereCheck(r, axes, pivots, lash, change, np.asarray(core.centres_before),
+                        np.asarray(core.centres_after), labels, core.dispersion_before, core.dispersion_after,
+                        float(core.condition_number), dict(core.informed))
+    if expect is not None:
+        check.verification = verify_change(check, previous, expect, k)
+    return check
 
 
 def to_json(check: SphereCheck) -> str:
@@ -268,4 +473,5 @@ def to_json(check: SphereCheck) -> str:
     return json.dumps(check.to_dict(), indent=1, sort_keys=True, ensure_ascii=False)
 
 
-__all__ = ["plan", "positions", "pivot_parameters", "spindle_equivalent", "spindle_names", "evaluate", "SphereCheck", "to_json"]
+__all__ = ["plan", "positions", "pivot_parameters", "spindle_equivalent", "spindle_names", "evaluate", "SphereCheck",
+           "to_json", "verify_change", "read_export", "ChangeVerification"]
