@@ -1,0 +1,108 @@
+"""Verify after loading, through each controller's own file (issue 32, item
+5): export the identified kinematics for a vendor, "load" its file into a
+simulated machine (the controller then runs what the file says: the file read
+back by the vendor's reader and taken through the vendor's own kinematics,
+``vendor_to_theta``), run the quick sphere check again, and give fivecal the
+old check and the export (``sphere-check --expect``). A file loaded as written
+took effect as predicted; a file altered the way a person slips (a value's
+change with the wrong sign, a change entered in µm where mm are read, the
+change applied twice) is caught and named.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+
+import numpy as np
+import pytest
+
+import fivecal
+from fivecal.cli import main
+from fivecal.cli.export import WRITERS
+from fivecal.io import controllers as K
+from fivecal.procedures import sphere_check as sc
+
+from test_export_vendors import BALL, MACHINES, OPTIONS, TIP, TRUTH, _sets
+
+VENDORS = K.vendors()
+
+
+@pytest.fixture(scope="module")
+def first_check(tmp_path_factory):
+    d = tmp_path_factory.mktemp("verify_vendor")
+    machine_file = os.path.join(MACHINES, "c600u.json")
+    m = fivecal.Machine.load(machine_file)
+    plan = sc.plan(m, BALL, tip_radius=TIP)
+    ds = fivecal.simulate(m, plan, errors=TRUTH, artefact={"spheres": [BALL]}, tip_radius=TIP, sigma=0.001, seed=21)
+    fivecal.save_dataset(ds, str(d / "before.json"))
+    assert main(["sphere-check", str(d / "before.json"), "--out", str(d / "old.json")]) == 0
+    return d, m, plan, machine_file
+
+
+def _load_and_check(d, m, plan, machine_file, vendor, values, tag, capsys, force=False):
+    """The machine after the controller loaded ``values``: its apparent errors
+    are the truth less what the controller's model now compensates."""
+    ran = K.vendor_to_theta(m, vendor, values, options=OPTIONS.get(vendor))
+    after = m.theta(TRUTH) - ran["theta"]
+    names = m.parameter_names()
+    errors = {n: float(v) for n, v in zip(names, after) if v != 0.0}
+    ds = fivecal.simulate(m, plan, errors=errors, artefact={"spheres": [BALL]}, tip_radius=TIP, sigma=0.001,
+                          seed=22)
+    fivecal.save_dataset(ds, str(d / f"after-{tag}.json"))
+    capsys.readouterr()
+    rc = main(["sphere-check", str(d / f"after-{tag}.json"), "--previous", str(d / "old.json"),
+               "--expect", str(d / f"exp-{vendor}" / "export.json"), *(["--force"] if force else [])])
+    return rc, capsys.readouterr().out
+
+
+def _altered(rec, how):
+    """The new values as a person's slip leaves them: every change with its
+    sign turned (a convention stated the wrong way), in inch where the
+    controller reads mm (µm read as mm puts the simulated machine's touches
+    metres away: the export's plausibility guard refuses that change anyway), applied on top of itself, not applied; or one
+    value's change with its sign turned (one line keyed wrongly)."""
+    vals = [v["new"] for v in rec["values"]]
+    f = {"sign": -1.0, "unit": 25.4, "twice": 2.0, "none": 0.0, "one sign": 1.0}[how]
+    for k, v in enumerate(rec["values"]):
+        if not v["fixed"]:
+            vals[k] = v["old"] + f * v["change"]
+    if how == "one sign":
+        k = max((i for i, v in enumerate(rec["values"]) if not v["fixed"]),
+                key=lambda i: abs(rec["values"][i]["change"]) / (rec["values"][i]["sigma"] or 1.0))
+        vals[k] = rec["values"][k]["old"] - rec["values"][k]["change"]
+    return vals
+
+
+@pytest.mark.parametrize("vendor", VENDORS)
+def test_a_file_loaded_as_written_took_effect(first_check, vendor, capsys):
+    d, m, plan, machine_file = first_check
+    out = d / f"exp-{vendor}"
+    assert main(["export", vendor, str(d / "old.json"), "--machine", machine_file, "--out", str(out),
+                 *_sets(vendor)]) == 0
+    f = next(out / n for n in sorted(os.listdir(out)) if n.startswith(vendor))
+    read = WRITERS[vendor].read(str(f))
+    rec = json.load(open(out / "export.json"))
+    values = [read.get(v["name"], v["new"]) for v in rec["values"]]
+    rc, text = _load_and_check(d, m, plan, machine_file, vendor, values, "asis", capsys)
+    assert rc == 0, text
+    assert re.search(r"took effect", text, re.I), text
+
+
+@pytest.mark.parametrize("how,word", [("sign", r"sign"), ("unit", r"unit"), ("twice", r"twice"),
+                                      ("none", r"not applied"), ("one sign", r"sign|differs")])
+@pytest.mark.parametrize("vendor", VENDORS)
+def test_an_altered_file_is_caught_and_named(first_check, vendor, how, word, capsys):
+    d, m, plan, machine_file = first_check
+    out = d / f"exp-{vendor}"
+    if not (out / "export.json").exists():
+        assert main(["export", vendor, str(d / "old.json"), "--machine", machine_file, "--out", str(out),
+                     *_sets(vendor)]) == 0
+    rec = json.load(open(out / "export.json"))
+    values = _altered(rec, how)
+    # a change 25 times too large makes the check itself implausible (exit 1);
+    # with --force it still names the unit
+    rc, text = _load_and_check(d, m, plan, machine_file, vendor, values, f"{vendor}-{how.replace(' ', '-')}",
+                               capsys, force=how == "unit")
+    assert rc == 1, text
+    assert re.search(word, text, re.I), text
