@@ -1,0 +1,90 @@
+"""The Siemens swivel data record as a part program (fivecal.io.siemens): the
+text parses back to the values written, old values and changes sit beside the
+new ones, and malformed programs are refused by line."""
+import math
+
+import pytest
+
+from fivecal import Machine
+from fivecal.io import siemens
+
+EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[2] / "examples" / "machines"
+
+
+def _export(record=2):
+    """An export of a type P record: I2, I3, I4, V1, V2, the type."""
+    vals = []
+    news = [0.0123456789, -0.004, -120.0311, 0.0, 0.0021, 120.0277, -0.0123456789, 0.0019, 0.0034,
+            1e-5, -0.99999999995, 2e-6, -3.3e-5, 4e-6, -0.99999999945]
+    numbers = [4, 5, 6, 15, 16, 17, 18, 19, 20, 7, 8, 9, 10, 11, 12]
+    for i, (k, new) in enumerate(zip(numbers, news)):
+        unit = "1" if k <= 12 and k >= 7 else "mm"
+        old = round(new, 2) if unit == "mm" else round(new)
+        sigma = math.nan if i == 4 else (1.1e-3 if unit == "mm" else 2e-6)
+        vals.append({"name": f"$TC_CARR{k}[{record}]", "unit": unit, "old": old, "new": new,
+                     "change": new - old, "sigma": sigma, "source": "manual", "fixed": False})
+    vals.append({"name": f"$TC_CARR23[{record}]", "unit": "", "old": 80.0, "new": 80.0, "change": 0.0,
+                 "sigma": 0.0, "source": "manual", "fixed": True})
+    return {"values": vals, "result": "result.json", "date": "2026-11-28 05:30 UTC",
+            "absorption": {"model": "table-table", "rms": 0.0012, "max": 0.0034, "rms_old": 0.021, "max_old": 0.05},
+            "round_trip_max_mm": 2e-10}
+
+
+def test_the_program_reads_back_as_written(tmp_path):
+    exp = _export()
+    m = Machine.load(str(EXAMPLES / "hu40t.json"))
+    out = siemens.write(exp, m)
+    assert list(out) == [".MPF"]
+    text = out[".MPF"]
+    back = siemens.parse(text)
+    assert set(back) == {v["name"] for v in exp["values"]}
+    for v in exp["values"]:
+        tol = 5e-7 if v["unit"] == "mm" else 5e-10
+        assert back[v["name"]] == pytest.approx(v["new"], abs=tol), v["name"]
+    assert back["$TC_CARR23[2]"] == ord("P")
+    # old beside new, the change and its sigma, the header's facts
+    assert "$TC_CARR4[2]=0.012346 ; old 0.010000, change +2.35 um +- 1.10 um (1 sigma)" in text
+    assert "1 sigma not determined" in text
+    assert '$TC_CARR23[2]="P" ; kinematics type, old "P"' in text
+    for fact in ("HU40T-like (wCBXfZYSt)", "type P (swivel table)", "result result.json",
+                 "rms 1.20 um, max 3.40 um", "rms 21.00 um, max 50.00 um", "within 0.00 um", "table-table"):
+        assert fact in text, fact
+    assert text.rstrip().endswith("M30 ; end of program")
+    # every statement is a comment, an assignment or the end
+    for line in text.splitlines():
+        assert line.startswith(";") or line.startswith("$TC_CARR") or line.startswith("M30"), line
+
+
+def test_read_takes_a_file_with_block_numbers_and_several_assignments(tmp_path):
+    p = tmp_path / "OLD.MPF"
+    p.write_text("%_N_OLD_MPF\n;PATH=/_N_MPF_DIR\nN100 $TC_CARR10[2]=0 $TC_CARR11[2]=0\n"
+                 "N110 $TC_CARR12[2]=1 ; C axis\nN120 $TC_CARR21[2]=X\nN130 $TC_CARR23[2]=\"m\"\n"
+                 "N135 $TC_CARR34[2]=\"HEAD\"\n\nN140 $TC_CARR4[2]=-1.5E2\nM30\n")
+    assert siemens.read(p) == {"$TC_CARR10[2]": 0.0, "$TC_CARR11[2]": 0.0, "$TC_CARR12[2]": 1.0,
+                               "$TC_CARR23[2]": float(ord("M")), "$TC_CARR4[2]": -150.0}
+
+
+@pytest.mark.parametrize("text,message", [
+    ("$TC_CARR4[1]=1\nG0 X10\n", "line 2: 'G0 X10' is not an assignment"),
+    ("$TC_CARR4[1]=1 X10\n", "line 1: '$TC_CARR4[1]=1 X10' is not an assignment"),
+    ("$TC_CARR4[1]=abc\n", "line 1: $TC_CARR4[1]=abc: not a number"),
+    ("$TC_CARR4[1]=nan\n", "line 1: $TC_CARR4[1]=nan: not a finite number"),
+    ("$TC_CARR23[1]=\"Q\"\n", "the kinematics type T, P or M"),
+    ("$TC_CARR4[1]=1\n$TC_CARR4[1]=2\n", "line 2: $TC_CARR4[1] is set again (first on line 1)"),
+    ("$TC_CARR24[1]=90\n", "line 1: $TC_CARR24[1]=90: a rotary axis offset other than 0"),
+    ("; only a comment\n", "no $TC_CARRk[n]=value assignment"),
+])
+def test_malformed_programs_are_refused_by_line(tmp_path, text, message):
+    p = tmp_path / "BAD.MPF"
+    p.write_text(text)
+    with pytest.raises(ValueError, match=None) as e:
+        siemens.read(p)
+    assert message in str(e.value)
+    assert "BAD.MPF" in str(e.value)
+
+
+def test_an_export_naming_two_records_is_refused():
+    exp = _export()
+    exp["values"][0]["name"] = "$TC_CARR4[3]"
+    with pytest.raises(ValueError, match="swivel data records; one expected"):
+        siemens.write(exp, Machine.load(str(EXAMPLES / "hu40t.json")))
