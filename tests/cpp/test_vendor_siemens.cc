@@ -268,7 +268,7 @@ TEST(VendorSiemens, TheNominalRecordIsTheMachineFile) {
   EXPECT_EQ(names[15].name, "$TC_CARR23[3]");
   EXPECT_TRUE(names[15].fixed);
   EXPECT_EQ(names[0].unit, "mm");
-  EXPECT_NE(names[0].source.find("p. 582"), std::string::npos);
+  EXPECT_NE(names[0].source.find("p. 568"), std::string::npos);
   const Eigen::MatrixXd q = Poses(hu, 30);
   EXPECT_LT(MaxNorm(s.ToolPoints(hu, v, q, kRecord1) - ToolPoints(hu, Eigen::VectorXd::Zero(hu.num_parameters()), q)),
             1e-9);
@@ -283,6 +283,42 @@ TEST(VendorSiemens, TheNominalRecordIsTheMachineFile) {
   EXPECT_EQ(hn[0].name, "$TC_CARR1[1]");
   EXPECT_EQ(hn[6].name, "$TC_CARR15[1]");
   EXPECT_EQ(s.Values(TableHead(), kRecord1).size(), 19u);
+}
+
+TEST(VendorSiemens, TheCommonExportPathRoundTripsAndPropagatesTheCovariance) {
+  const ControllerVendor& s = FindVendor("siemens");
+  EXPECT_EQ(s.Name(), "siemens");
+  for (const Case& c : Cases()) {
+    const Machine& m = c.m;
+    const Eigen::MatrixXd q = Poses(m, 80);
+    const Eigen::VectorXd truth = RandomPivotErrors(m, s.Model(m, kRecord1).model, 29);
+    // an identification's covariance: 5 um / 5 urad on every location parameter
+    Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(m.num_parameters(), m.num_parameters());
+    for (int k = 0; k < m.num_axes(); ++k)
+      for (int j = 0; j < 6; ++j) cov(m.location_index(k, j), m.location_index(k, j)) = j < 3 ? 2.5e-5 : 2.5e-11;
+    const VendorExport ex = ExportToVendor(m, s, truth, cov, q, kRecord1);
+    EXPECT_LT(ex.round_trip_max, 1e-9) << c.name;
+    EXPECT_LT(ex.absorption.max, 1e-9) << c.name;
+    for (size_t i = 0; i < ex.values.size(); ++i) {
+      const Eigen::Index j = Eigen::Index(i);
+      if (ex.values[i].fixed) {
+        EXPECT_EQ(ex.sigma[j], 0.0);
+        continue;
+      }
+      EXPECT_TRUE(std::isfinite(ex.sigma[j])) << c.name << " " << ex.values[i].name;
+      // sizes: a pivot known to 5 um gives offsets known to some um, not mm
+      EXPECT_LT(ex.sigma[j], ex.values[i].unit == "mm" ? 0.05 : 1e-3) << c.name << " " << ex.values[i].name;
+    }
+    // the new record, through the controller's own transformation, is the
+    // erroneous machine up to the work offset
+    const KinematicsTable t = MakeKinematicsTable(m, ex.absorption.theta);
+    Eigen::MatrixXd truth_points = ToolPoints(m, truth, q);
+    truth_points.rowwise() -= ex.absorption.workpiece_shift.transpose();
+    EXPECT_LT(MaxNorm(s.ToolPoints(m, ex.new_values, q, kRecord1) - InTableFrame(t, truth_points)), 1e-8) << c.name;
+    // and what a controller running it does comes back as the same errors
+    const Absorption back = VendorToTheta(m, s, ex.new_values, q, kRecord1);
+    EXPECT_LT(back.max, 1e-8) << c.name;
+  }
 }
 
 void ExpectThrow(const std::function<void()>& f, const std::string& text) {

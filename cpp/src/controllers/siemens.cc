@@ -10,13 +10,13 @@ namespace controllers {
 namespace {
 
 // Where the commissioning manual describes the record (12/2017, §21.7.3
-// p. 582, offset vectors; §21.7 p. 572, TOOLCARRIER <=> TRAORI), and where
+// p. 568, offset vectors; §21.7 p. 572, TOOLCARRIER <=> TRAORI), and where
 // it says what each vector means per type (03/2013 §22.6 p. 502).
 const char kOffsetSource[] =
-    "SINUMERIK Operate commissioning manual 12/2017 (6FC5397-1DP40-6BA1) §21.7.3 p. 582; "
+    "SINUMERIK Operate commissioning manual 12/2017 (6FC5397-1DP40-6BA1) §21.7.3 p. 568; "
     "meaning per kinematics type: 03/2013 (6FC5397-1DP40-3BA1) §22.6 p. 502";
 const char kAxisSource[] =
-    "SINUMERIK Operate commissioning manual 12/2017 (6FC5397-1DP40-6BA1) §21.7.3 p. 582 and the CYCLE800 "
+    "SINUMERIK Operate commissioning manual 12/2017 (6FC5397-1DP40-6BA1) §21.7.3 p. 568 and the CYCLE800 "
     "checklist §21.7.2 (sign for an axis that moves the workpiece); rotation sense: function manual W1 "
     "08/2005 (6FC5397-0BP10-0BA0) §2.5 p. 2-92";
 const char kTypeSource[] =

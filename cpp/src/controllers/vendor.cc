@@ -6,6 +6,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "fivecal/controllers/siemens.h"
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
@@ -13,7 +14,9 @@ namespace controllers {
 
 const std::vector<const ControllerVendor*>& ControllerVendors() {
   // THE list of controller vendors: one line per vendor (vendor.h).
+  static const SiemensVendor siemens;
   static const std::vector<const ControllerVendor*> vendors = {
+      &siemens,
   };
   return vendors;
 }

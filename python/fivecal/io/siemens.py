@@ -102,11 +102,11 @@ def write(exp, machine: Machine) -> Dict[str, str]:
         f"within {um(_get(exp, 'round_trip_max_mm'))}",
         "; each line: the new value; the old one, the change and its 1 sigma from the identification",
         "; offset vectors I1..I4 in mm, rotary axis vectors V1, V2 (directions, unit length)",
-        "; sources: SINUMERIK Operate commissioning manual 12/2017 (6FC5397-1DP40-6BA1) §21.7 pp. 572, 582;",
+        "; sources: SINUMERIK Operate commissioning manual 12/2017 (6FC5397-1DP40-6BA1) §21.7 pp. 568, 572;",
         ";   03/2013 (6FC5397-1DP40-3BA1) §22.6 p. 502; function manual W1 08/2005 (6FC5397-0BP10-0BA0) §2.5",
         "; fine offsets $TC_CARR41..60 (added when SD42974 $SC_TOCARR_FINE_CORRECTION = 1, W1 p. 2-91)",
         ";   are left as they are: new = old + change holds for the sum",
-        "; the values take effect once this program has started (commissioning manual 12/2017 p. 582);",
+        "; the values take effect once this program has started (commissioning manual 12/2017 p. 568);",
         ";   then run the sphere check of docs/controllers.md, 'Verify after loading'",
     ]
     for v in values:

@@ -8,7 +8,7 @@
 // + table (rotary axis 1 the head's). All in the machine axes X, Y, Z at the
 // non-swivelled state, mm. Sources: SINUMERIK Operate commissioning manual
 // 03/2013 (6FC5397-1DP40-3BA1) §22.6 p. 502; 12/2017 (6FC5397-1DP40-6BA1)
-// §21.7 pp. 572, 582; function manual W1 tool offset 08/2005
+// §21.7 pp. 568, 572; function manual W1 tool offset 08/2005
 // (6FC5397-0BP10-0BA0) §2.5 pp. 2-88, 2-91, 2-92 and example §4.1 p. 4-3.
 //
 // The transformation (ToolPoints), from those pages; R_k = rotation about V_k
