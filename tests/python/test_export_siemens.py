@@ -3,6 +3,8 @@ text parses back to the values written, old values and changes sit beside the
 new ones, and malformed programs are refused by line."""
 import math
 
+import numpy as np
+
 import pytest
 
 from fivecal import Machine
@@ -88,3 +90,99 @@ def test_an_export_naming_two_records_is_refused():
     exp["values"][0]["name"] = "$TC_CARR4[3]"
     with pytest.raises(ValueError, match="swivel data records; one expected"):
         siemens.write(exp, Machine.load(str(EXAMPLES / "hu40t.json")))
+
+
+# ---- end to end: a simulated identification through the record and back ----
+
+TRUE = {"EX0C": 0.03, "EY0C": -0.02, "EY0A": 0.015, "EZ0A": -0.012,
+        "EA0C": 3e-5, "EB0C": -2e-5, "EB0A": 2.5e-5, "EC0A": -1.5e-5}
+RECORD = {"record": "1"}
+
+
+def _identified(m, seed):
+    """R-test K1..K4 at three nests (positions measured, so fixed) on a c600u
+    with pivot and direction errors, 0.5 um noise; identify them."""
+    import fivecal
+    from fivecal.procedures import rtest
+    plan, setups = [], ("R1", "R2", "R3")
+    for ball, setup in zip(([80, 30, 10], [-60, -50, 150], [0, 90, 80]), setups):
+        for t in rtest.TESTS:
+            plan += rtest.plan(m, t, table_ball=ball, step=30, setup=setup)
+    ds = fivecal.simulate(m, plan, errors=TRUE, sigma={"ball3d": 0.0005}, seed=seed)
+    r = fivecal.identify(ds, estimate=list(TRUE), fix=[f"ball3d.{s}.table.{c}" for s in setups for c in "xyz"])
+    assert r.converged and not r.undetermined
+    nt = m._core.num_parameters
+    idx = [m._core.parameter_index(n) for n in r.estimated]
+    cov = np.zeros((nt, nt))
+    cov[np.ix_(idx, idx)] = r.covariance
+    return m.theta(r.values), cov
+
+
+def _rigid_fit(a, b):
+    """a moved onto b by the best rigid motion (the work offset a user probes)."""
+    ca, cb = a.mean(0), b.mean(0)
+    u, _, vt = np.linalg.svd((b - cb).T @ (a - ca))
+    rot = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    return (rot @ (a - ca).T).T + cb
+
+
+def _as_export(ex):
+    values = [dict(v, old=o, new=n, change=c, sigma=s) for v, o, n, c, s in
+              zip(ex["values"], ex["old"], ex["new"], ex["change"], ex["sigma"])]
+    return {"values": values, "absorption": ex["absorption"], "round_trip_max_mm": ex["round_trip_max"],
+            "result": "simulated"}
+
+
+def test_a_simulated_identification_exported_reproduces_the_machine(tmp_path):
+    from fivecal import _core
+    from fivecal.io import controllers as K
+    m = Machine.load(str(EXAMPLES / "c600u.json"))
+    theta, cov = _identified(m, seed=1)
+    grid = K.pose_grid(m)
+    q = m.axes_matrix(grid)
+    ex = _core.vendor_export("siemens", m._core, theta, cov, q, RECORD, np.zeros(0))
+    assert ex["round_trip_max"] < 1e-9 and ex["absorption"]["max"] < 1e-9
+    p = tmp_path / "siemens.MPF"
+    p.write_text(siemens.write(_as_export(ex), m)[".MPF"])
+    back = siemens.read(p)
+    new = np.array([back[v["name"]] for v in ex["values"]])
+    assert np.abs(new - np.asarray(ex["new"])).max() < 1e-6
+    # the file's values, through the record's own transformation, are the
+    # erroneous machine up to the work offset; the old record misses by ~50 um
+    truth = m.tool_point(grid, errors=TRUE)
+    sie = np.asarray(_core.vendor_tool_points("siemens", m._core, new, q, RECORD))
+    assert np.linalg.norm(sie - _rigid_fit(truth, sie), axis=1).max() < 1e-3
+    old = np.asarray(_core.vendor_tool_points("siemens", m._core, np.asarray(ex["old"]), q, RECORD))
+    assert np.linalg.norm(old - _rigid_fit(truth, old), axis=1).max() > 0.02
+
+
+def test_the_records_sigma_covers_the_true_record():
+    """Over repeated simulations the new values sit within 3 sigma of the
+    record of the true machine (the record Map gives for the true errors)."""
+    from fivecal import _core
+    from fivecal.io import controllers as K
+    m = Machine.load(str(EXAMPLES / "c600u.json"))
+    q = m.axes_matrix(K.pose_grid(m))
+    truth = np.asarray(_core.vendor_values("siemens", m._core, m.theta(TRUE), RECORD)["map"])
+    z = []
+    for seed in range(1, 9):
+        theta, cov = _identified(m, seed)
+        ex = _core.vendor_export("siemens", m._core, theta, cov, q, RECORD, np.zeros(0))
+        s = np.asarray(ex["sigma"])
+        live = s > 0
+        z.extend(((np.asarray(ex["new"]) - truth)[live] / s[live]).tolist())
+    z = np.abs(np.array(z))
+    assert len(z) == 8 * 15
+    assert np.mean(z < 3) >= 0.95 and z.max() < 5, np.sort(z)[-5:]
+    assert np.mean(z < 1) > 0.5  # and sigma is not inflated
+
+
+def test_the_export_refuses_without_a_record_number_or_with_an_unknown_option():
+    from fivecal import _core
+    m = Machine.load(str(EXAMPLES / "hu40t.json"))
+    th = np.zeros(m._core.num_parameters)
+    q = np.zeros((3, len(m.axis_names)))
+    with pytest.raises(ValueError, match="option record: state the number n"):
+        _core.vendor_export("siemens", m._core, th, np.zeros((0, 0)), q, {}, np.zeros(0))
+    with pytest.raises(ValueError, match="option 'sign'"):
+        _core.vendor_export("siemens", m._core, th, np.zeros((0, 0)), q, {"record": "1", "sign": "-"}, np.zeros(0))
