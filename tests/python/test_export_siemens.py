@@ -20,7 +20,7 @@ def _export(record=2):
             1e-5, -0.99999999995, 2e-6, -3.3e-5, 4e-6, -0.99999999945]
     numbers = [4, 5, 6, 15, 16, 17, 18, 19, 20, 7, 8, 9, 10, 11, 12]
     for i, (k, new) in enumerate(zip(numbers, news)):
-        unit = "1" if k <= 12 and k >= 7 else "mm"
+        unit = "" if 7 <= k <= 12 else "mm"
         old = round(new, 2) if unit == "mm" else round(new)
         sigma = math.nan if i == 4 else (1.1e-3 if unit == "mm" else 2e-6)
         vals.append({"name": f"$TC_CARR{k}[{record}]", "unit": unit, "old": old, "new": new,
@@ -61,9 +61,17 @@ def test_read_takes_a_file_with_block_numbers_and_several_assignments(tmp_path):
     p = tmp_path / "OLD.MPF"
     p.write_text("%_N_OLD_MPF\n;PATH=/_N_MPF_DIR\nN100 $TC_CARR10[2]=0 $TC_CARR11[2]=0\n"
                  "N110 $TC_CARR12[2]=1 ; C axis\nN120 $TC_CARR21[2]=X\nN130 $TC_CARR23[2]=\"m\"\n"
-                 "N135 $TC_CARR34[2]=\"HEAD\"\n\nN140 $TC_CARR4[2]=-1.5E2\nM30\n")
+                 "N135 $TC_CARR34[2]=\"HEAD\"\n\nN140 $TC_CARR4[2]=-1.5E2\nN150 $TC_CARR13[2]=30\n"
+                 "N160 $TC_CARR41[2]=0.002 $TC_CARR24[2]=0\nM30\n")
+    # the record's geometry; angles, fine offsets, names are not what --old compares
     assert siemens.read(p) == {"$TC_CARR10[2]": 0.0, "$TC_CARR11[2]": 0.0, "$TC_CARR12[2]": 1.0,
                                "$TC_CARR23[2]": float(ord("M")), "$TC_CARR4[2]": -150.0}
+    # a vector the type does not use: dropped when 0, refused otherwise
+    p.write_text('$TC_CARR23[1]="P"\n$TC_CARR1[1]=0\n$TC_CARR4[1]=5\n')
+    assert siemens.read(p) == {"$TC_CARR23[1]": float(ord("P")), "$TC_CARR4[1]": 5.0}
+    p.write_text('$TC_CARR23[1]="T"\n$TC_CARR19[1]=2.5\n')
+    with pytest.raises(ValueError, match=r"line 2: \$TC_CARR19\[1\]=2.5: I4 of a type T record is not 0"):
+        siemens.read(p)
 
 
 @pytest.mark.parametrize("text,message", [
@@ -186,3 +194,70 @@ def test_the_export_refuses_without_a_record_number_or_with_an_unknown_option():
         _core.vendor_export("siemens", m._core, th, np.zeros((0, 0)), q, {}, np.zeros(0))
     with pytest.raises(ValueError, match="option 'sign'"):
         _core.vendor_export("siemens", m._core, th, np.zeros((0, 0)), q, {"record": "1", "sign": "-"}, np.zeros(0))
+
+
+def test_cli_export_siemens_end_to_end(tmp_path, capsys):
+    """fivecal export siemens on a simulated identification's result document:
+    exit 0, the .MPF reads back, its values reproduce the erroneous machine
+    up to the work offset through the record's own transformation; --old with
+    that file gives the same change; a missing or unknown option exits 2."""
+    import json
+    from fivecal import _core
+    from fivecal.cli import main
+    from fivecal.identification import result_document
+    from fivecal.io import controllers as K
+    m = Machine.load(str(EXAMPLES / "c600u.json"))
+    # the identification's result document, as `fivecal identify --out` writes it
+    import fivecal
+    from fivecal.procedures import rtest
+    plan, setups = [], ("R1", "R2", "R3")
+    for ball, setup in zip(([80, 30, 10], [-60, -50, 150], [0, 90, 80]), setups):
+        for t in rtest.TESTS:
+            plan += rtest.plan(m, t, table_ball=ball, step=30, setup=setup)
+    ds = fivecal.simulate(m, plan, errors=TRUE, sigma={"ball3d": 0.0005}, seed=3)
+    r = fivecal.identify(ds, estimate=list(TRUE), fix=[f"ball3d.{s}.table.{c}" for s in setups for c in "xyz"])
+    res = tmp_path / "result.json"
+    res.write_text(json.dumps(result_document(r)))
+    machine = str(EXAMPLES / "c600u.json")
+    out = tmp_path / "out"
+    rc = main(["export", "siemens", str(res), "--machine", machine, "--out", str(out), "--set", "record=1"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    mpf = (out / "siemens.MPF").read_text()
+    assert "swivel data record 1" in mpf and "result " + str(res) in mpf
+    rec = json.loads((out / "export.json").read_text())
+    back = siemens.read(out / "siemens.MPF")
+    assert set(back) == {v["name"] for v in rec["values"]}
+    new = np.array([back[v["name"]] for v in rec["values"]])
+    grid = K.pose_grid(m)
+    q = m.axes_matrix(grid)
+    sie = np.asarray(_core.vendor_tool_points("siemens", m._core, new, q, RECORD))
+    truth = m.tool_point(grid, errors=TRUE)
+    assert np.linalg.norm(sie - _rigid_fit(truth, sie), axis=1).max() < 1e-3
+    # the controller now runs that file: exporting the same result against it changes the same
+    out2 = tmp_path / "out2"
+    rc = main(["export", "siemens", str(res), "--machine", machine, "--out", str(out2), "--set", "record=1",
+               "--old", str(out / "siemens.MPF"), "--force"])
+    assert rc == 0, capsys.readouterr().out
+    rec2 = json.loads((out2 / "export.json").read_text())
+    for a, b in zip(rec["values"], rec2["values"]):
+        assert b["change"] == pytest.approx(a["change"], abs=1e-12) and b["old"] == pytest.approx(a["new"], abs=1e-6)
+    # refusals: exit 2 with the message
+    for extra, message in (([], "option record: state the number n"), (["--set", "record=1", "--set", "sign=-"],
+                                                                       "option 'sign'"),
+                           (["--set", "record=first"], "'first' is not a swivel data record number")):
+        rc = main(["export", "siemens", str(res), "--machine", machine, "--out", str(tmp_path / "bad"), *extra])
+        err = capsys.readouterr().err
+        assert rc == 2 and message in err, (rc, err)
+    # a machine without a swivel data record's topology
+    one = tmp_path / "4axis.json"
+    one.write_text(json.dumps({"name": "4ax", "topology": "wCfXYZSt", "axes": {
+        "C": {"type": "rotary", "direction": [0, 0, -1]}, "X": {"type": "linear", "direction": [1, 0, 0]},
+        "Y": {"type": "linear", "direction": [0, 1, 0]}, "Z": {"type": "linear", "direction": [0, 0, 1]},
+        "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 100]}}))
+    errs = tmp_path / "errors.json"
+    errs.write_text(json.dumps({"EX0C": 0.01}))
+    rc = main(["export", "siemens", str(errs), "--machine", str(one), "--out", str(tmp_path / "bad"),
+               "--set", "record=1", "--force"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "has 1 rotary axes" in err, err

@@ -233,7 +233,7 @@ std::vector<VendorValue> SiemensVendor::Values(const Machine& m, const VendorOpt
       VendorValue val;
       val.name = "$TC_CARR" + std::to_string(FirstNumber(v) + c) + idx;
       const bool axis = v[0] == 'V';
-      val.unit = axis ? "1" : "mm";
+      val.unit = axis ? "" : "mm";  // a direction component: changes like an angle in rad
       val.source = std::string(axis ? "rotary axis vector " : "offset vector ") + v + " " + "xyz"[c] + ": " +
                    (axis ? kAxisSource : kOffsetSource);
       out.push_back(val);

@@ -24,7 +24,7 @@ from ..machine import Machine
 #: decimals written: mm to 1 nm, the axis vectors' components to 1e-9 (a
 #: direction rounded to 1e-6 would move a point 500 mm away by 0.5 um); the
 #: variables are REAL (programming guide 04.00 §15.2 p. 15-512)
-DECIMALS = {"mm": 6, "1": 9}
+DECIMALS = {"mm": 6, "": 9}
 #: $TC_CARR23: the kinematics type letter; Values carry its character code
 TYPE_NAMES = {"T": "swivel head", "P": "swivel table", "M": "swivel head + swivel table (mixed)"}
 #: variables whose value is an axis identifier or a string (programming guide
@@ -34,6 +34,13 @@ _NOT_NUMBERS = {21, 22, 34, 35, 36}
 #: rotary axes' zero is the machine file's (W1 08/2005 §2.5: a value not 0
 #: makes that position the initial state)
 _ZERO_ASSUMED = {24, 25, 64, 65}
+#: the record's geometry: I1 1..3, I2 4..6, V1 7..9, V2 10..12, I3 15..17,
+#: I4 18..20, the type 23; what --old compares (the rest of a read-out is
+#: left alone: angles, Hirth gearing, limits, names, fine offsets)
+_GEOMETRY = set(range(1, 13)) | set(range(15, 21)) | {23}
+#: the vectors a type does not use (the manual's TOOLCARRIER <=> TRAORI table,
+#: commissioning manual 12/2017 §21.7 p. 572; as SiemensVendor::Vectors)
+_UNUSED = {"T": {"I4": (18, 19, 20)}, "P": {"I1": (1, 2, 3)}, "M": {}}
 
 _ASSIGN = re.compile(r"\$TC_CARR(\d+)\[(\d+)\]\s*=\s*(\"[^\"]*\"|'[^']*'|[^\s;]+)", re.IGNORECASE)
 _BLOCK_NUMBER = re.compile(r"^N\d+\s*", re.IGNORECASE)
@@ -176,7 +183,22 @@ def parse(text: str, path: str = "<text>") -> Dict[str, float]:
             raise ValueError(f"{path}: line {i}: '{raw.strip()}' is not an assignment $TC_CARRk[n]=value")
     if not out:
         raise ValueError(f"{path}: no $TC_CARRk[n]=value assignment")
-    return out
+    # a vector the record's type does not use is dropped when 0; another
+    # value would be a kinematics fivecal's model of that type does not have
+    for name, code in list(out.items()):
+        m = _ASSIGN.match(name + "=0")
+        if int(m.group(1)) != 23:
+            continue
+        rec, letter = m.group(2), chr(int(code))
+        for vec, numbers in _UNUSED[letter].items():
+            for k in numbers:
+                key = f"$TC_CARR{k}[{rec}]"
+                if out.get(key, 0.0) != 0.0:
+                    raise ValueError(f"{path}: line {where[key]}: {key}={out[key]!r}: {vec} of a type {letter} "
+                                     f"record is not 0; the manual names no {vec} for type {letter} "
+                                     "(commissioning manual 12/2017 §21.7 p. 572), so fivecal has no model of it")
+                out.pop(key, None)
+    return {n: v for n, v in out.items() if int(_ASSIGN.match(n + "=0").group(1)) in _GEOMETRY}
 
 
 def read(path) -> Dict[str, float]:
