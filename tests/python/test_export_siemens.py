@@ -29,7 +29,7 @@ def _export(record=2):
                  "sigma": 0.0, "source": "manual", "fixed": True})
     return {"values": vals, "result": "result.json", "date": "2026-11-28 05:30 UTC",
             "absorption": {"model": "table-table", "rms": 0.0012, "max": 0.0034, "rms_old": 0.021, "max_old": 0.05},
-            "round_trip_max_mm": 2e-10}
+            "round_trip_max": 2e-10}
 
 
 def test_the_program_reads_back_as_written(tmp_path):
@@ -137,7 +137,7 @@ def _rigid_fit(a, b):
 def _as_export(ex):
     values = [dict(v, old=o, new=n, change=c, sigma=s) for v, o, n, c, s in
               zip(ex["values"], ex["old"], ex["new"], ex["change"], ex["sigma"])]
-    return {"values": values, "absorption": ex["absorption"], "round_trip_max_mm": ex["round_trip_max"],
+    return {"values": values, "absorption": ex["absorption"], "round_trip_max": ex["round_trip_max"],
             "result": "simulated"}
 
 
@@ -225,6 +225,7 @@ def test_cli_export_siemens_end_to_end(tmp_path, capsys):
     assert rc == 0, text
     mpf = (out / "siemens.MPF").read_text()
     assert "swivel data record 1" in mpf and "result " + str(res) in mpf
+    assert "within 0.00 um" in mpf and "nan" not in mpf and "=-0.000000 " not in mpf
     rec = json.loads((out / "export.json").read_text())
     back = siemens.read(out / "siemens.MPF")
     assert set(back) == {v["name"] for v in rec["values"]}

@@ -60,16 +60,23 @@ def _num(v) -> float:
         return math.nan
 
 
+def _fixed(value: float, decimals: int) -> str:
+    text = f"{value:.{decimals}f}"
+    # a value that rounds to zero is written 0, not -0
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
+
+
 def _value_text(value: float, unit: str) -> str:
-    return f"{value:.{DECIMALS.get(unit, 6)}f}"
+    return _fixed(value, DECIMALS.get(unit, 6))
 
 
 def _change_text(change: float, sigma: float, unit: str) -> str:
     # reports show um (offsets) and 1e-6 (axis vector components ~ urad)
     scale, label = (1e3, "um") if unit == "mm" else (1e6, "e-6")
-    s = f"change {change * scale:+.2f} {label}"
+    c = _fixed(change * scale, 2)
+    s = f"change {c if c.startswith('-') else '+' + c} {label}"
     if math.isfinite(sigma):
-        return s + f" +- {sigma * scale:.2f} {label} (1 sigma)"
+        return s + f" +- {_fixed(sigma * scale, 2)} {label} (1 sigma)"
     return s + ", 1 sigma not determined (no covariance)"
 
 
@@ -85,7 +92,7 @@ def write(exp, machine: Machine) -> Dict[str, str]:
     to the export's new values. ``exp`` is a ``fivecal.io.controllers``
     vendor export: ``values`` (dicts name, unit, old, new, change, sigma,
     source, fixed), ``absorption`` (model, rms, max, rms_old, max_old, mm),
-    ``round_trip_max_mm``; ``result`` (the result file) and ``date`` when known."""
+    ``round_trip_max`` (mm); ``result`` (the result file) and ``date`` when known."""
     values = list(_get(exp, "values", []))
     if not values:
         raise ValueError("siemens: the export has no values")
@@ -106,7 +113,7 @@ def write(exp, machine: Machine) -> Dict[str, str]:
         f"max {um(_get(ab, 'max'))} (with the nominal record: rms {um(_get(ab, 'rms_old'))}, "
         f"max {um(_get(ab, 'max_old'))})",
         f"; the record's own transformation with the new values reproduces the absorbed model "
-        f"within {um(_get(exp, 'round_trip_max_mm'))}",
+        f"within {um(_get(exp, 'round_trip_max', _get(exp, 'round_trip_max_mm')))}",
         "; each line: the new value; the old one, the change and its 1 sigma from the identification",
         "; offset vectors I1..I4 in mm, rotary axis vectors V1, V2 (directions, unit length)",
         "; sources: SINUMERIK Operate commissioning manual 12/2017 (6FC5397-1DP40-6BA1) §21.7 pp. 568, 572;",
