@@ -121,7 +121,7 @@ def write(exp, machine: Machine) -> Dict[str, str]:
         "; fine offsets $TC_CARR41..60 (added when SD42974 $SC_TOCARR_FINE_CORRECTION = 1, W1 p. 2-91)",
         ";   are left as they are: new = old + change holds for the sum",
         "; the values take effect once this program has started (commissioning manual 12/2017 p. 568);",
-        ";   then run the sphere check of docs/controllers.md, 'Verify after loading'",
+        ";   then run the sphere check: `fivecal docs controllers`, 'Verify after loading'",
     ]
     for v in values:
         name, unit = v["name"], v.get("unit", "")
