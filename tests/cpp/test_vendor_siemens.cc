@@ -34,6 +34,15 @@ Machine HeadHead() {  // C carrying B in the spindle head (type T)
     "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [0,0,50]}})");
 }
 
+Machine NutatingHead() {  // C carrying a B inclined 45 degrees (type T, a nutating head)
+  return Machine::FromJson(R"({"name": "nh", "topology": "wXYfZCBSt", "axes": {
+    "X": {"type": "linear", "direction": [-1,0,0]}, "Y": {"type": "linear", "direction": [0,-1,0]},
+    "Z": {"type": "linear", "direction": [0,0,1]},
+    "C": {"type": "rotary", "direction": [0,0,1], "point": [0,0,400]},
+    "B": {"type": "rotary", "direction": [0,0.7071067811865476,0.7071067811865476], "point": [0,-60,340]},
+    "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [0,-60,120]}})");
+}
+
 Machine TableHead() {  // a table C under a head B (type M)
   return Machine::FromJson(R"({"name": "th", "topology": "wCYfXZBSt", "axes": {
     "C": {"type": "rotary", "direction": [0,0,-1], "point": [5,-3,0]},
@@ -139,7 +148,8 @@ struct Case {
 
 std::vector<Case> Cases() {
   return {{"hu40t", Example("hu40t"), 'P'}, {"c600u", Example("c600u"), 'P'}, {"kx8", Example("kx8"), 'P'},
-          {"vmc0656", Example("vmc0656"), 'P'}, {"head-head", HeadHead(), 'T'}, {"table-head", TableHead(), 'M'}};
+          {"vmc0656", Example("vmc0656"), 'P'}, {"head-head", HeadHead(), 'T'},
+          {"nutating head", NutatingHead(), 'T'}, {"table-head", TableHead(), 'M'}};
 }
 
 TEST(VendorSiemens, RoundTripOnEveryTopology) {
