@@ -374,6 +374,8 @@ TEST(VendorSiemens, Refusals) {
   Eigen::VectorXd t = v;
   t[15] = 'T';
   ExpectThrow([&] { s.ToolPoints(hu, t, q, kRecord1); }, "kinematics type 'T' is not the machine's 'P'");
+  t[15] = 1e300;  // not a character code: said as the number it is
+  ExpectThrow([&] { s.ToolPoints(hu, t, q, kRecord1); }, "kinematics type '1000000");
   Eigen::VectorXd z = v;
   z.segment<3>(9).setZero();
   ExpectThrow([&] { s.Table(hu, z, kRecord1); }, "V1 ($TC_CARR7..9): a zero vector");

@@ -93,6 +93,13 @@ def test_malformed_programs_are_refused_by_line(tmp_path, text, message):
     assert "BAD.MPF" in str(e.value)
 
 
+def test_an_export_without_a_type_letter_is_refused():
+    exp = _export()
+    exp["values"][-1]["new"] = 81.0
+    with pytest.raises(ValueError, match="codes no kinematics type T, P or M"):
+        siemens.write(exp, Machine.load(str(EXAMPLES / "hu40t.json")))
+
+
 def test_an_export_naming_two_records_is_refused():
     exp = _export()
     exp["values"][0]["name"] = "$TC_CARR4[3]"

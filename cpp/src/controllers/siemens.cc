@@ -153,10 +153,13 @@ Record Unpack(const Machine& m, const Eigen::VectorXd& values) {
     r[v] = values.segment<3>(i);
     i += 3;
   }
-  if (values[i] != double(r.type))
-    throw std::invalid_argument("$TC_CARR23: the record's kinematics type '" +
-                                std::string(1, char(int(values[i]))) + "' is not the machine's '" +
+  if (values[i] != double(r.type)) {
+    // the letter when the value is one's character code, else the number
+    const double c = values[i];
+    const std::string given = (c == 'T' || c == 'P' || c == 'M') ? std::string(1, char(int(c))) : std::to_string(c);
+    throw std::invalid_argument("$TC_CARR23: the record's kinematics type '" + given + "' is not the machine's '" +
                                 std::string(1, r.type) + "'");
+  }
   for (const char* v : {"V1", "V2"})
     if (!(r[v].norm() > 0))
       throw std::invalid_argument(std::string(v) + " ($TC_CARR" + std::to_string(FirstNumber(v)) + ".." +

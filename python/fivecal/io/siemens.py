@@ -80,6 +80,12 @@ def _change_text(change: float, sigma: float, unit: str) -> str:
     return s + ", 1 sigma not determined (no covariance)"
 
 
+def _letter(code) -> str:
+    """The kinematics type letter a $TC_CARR23 value codes ('?' for none)."""
+    x = _num(code)
+    return next((t for t in TYPE_NAMES if x == ord(t)), "?")
+
+
 def _record_number(names: List[str]) -> str:
     found = {m.group(2) for m in (_ASSIGN.match(n + "=0") for n in names) if m}
     if len(found) != 1:
@@ -101,7 +107,9 @@ def write(exp, machine: Machine) -> Dict[str, str]:
     type_value = next((v for v in values if v["name"].upper().startswith("$TC_CARR23[")), None)
     if type_value is None:
         raise ValueError("siemens: the export has no kinematics type $TC_CARR23")
-    letter = chr(int(round(_num(type_value["new"]))))
+    letter = _letter(type_value["new"])
+    if letter == "?":
+        raise ValueError(f"siemens: {type_value['name']}: {type_value['new']!r} codes no kinematics type T, P or M")
     date = _get(exp, "date") or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     um = lambda x: f"{1e3 * _num(x):.2f} um"  # noqa: E731
     lines = [
@@ -126,8 +134,7 @@ def write(exp, machine: Machine) -> Dict[str, str]:
     for v in values:
         name, unit = v["name"], v.get("unit", "")
         if v["name"].upper().startswith("$TC_CARR23["):
-            old = _num(v.get("old"))
-            was = chr(int(round(old))) if math.isfinite(old) else "?"
+            was = _letter(v.get("old"))
             lines.append(f'{name}="{letter}" ; kinematics type, old "{was}"')
             continue
         new, old = _num(v["new"]), _num(v.get("old"))
