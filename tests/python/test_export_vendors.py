@@ -31,6 +31,7 @@ TRUTH = {"EY0A": 0.012, "EZ0A": -0.008, "EB0A": 2e-5, "EX0C": 0.015, "EY0C": -0.
 #: where its public manual leaves them open (docs/controllers.md)
 OPTIONS: dict = {}
 OPTIONS["fanuc"] = {"increment": "IS-C", "tool-length": "100", "axis-order": "XYZAC"}
+OPTIONS["siemens"] = {"record": "1"}  # the swivel data record's number: never guessed
 VENDORS = K.vendors()
 
 

@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "fivecal/controllers/fanuc.h"
+#include "fivecal/controllers/siemens.h"
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
@@ -14,8 +15,10 @@ namespace controllers {
 
 const std::vector<const ControllerVendor*>& ControllerVendors() {
   // THE list of controller vendors: one line per vendor (vendor.h).
+  static const SiemensVendor siemens;
   static const std::vector<const ControllerVendor*> vendors = {
       &Fanuc(),
+      &siemens,
   };
   return vendors;
 }

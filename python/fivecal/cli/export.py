@@ -9,7 +9,8 @@ import os
 
 from .. import files
 from ..compensation import usable_errors
-from ..io import controllers as K, dbb_program as D, fanuc, linuxcnc as L, nc_options as O, nc_programs as N
+from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
+from ..io import fanuc, siemens
 from ..io.plan_readings import _read_spec
 from ..tolerances import PATH_OPTION, path_tolerance
 from .common import _read_machine, deprecated_alias
@@ -59,6 +60,7 @@ def _run(args) -> int:
 #: the numerics behind them are the core's one export path (``vendor.h``)
 WRITERS: dict = {
     "fanuc": fanuc,
+    "siemens": siemens,
 }
 
 #: units of vendor values and (limit unit, factor to it) for the plausibility
