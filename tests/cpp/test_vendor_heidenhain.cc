@@ -93,8 +93,6 @@ void ExpectTablesEqual(const KinematicsTable& a, const KinematicsTable& b, doubl
   }
   EXPECT_LT((a.tool_tip - b.tool_tip).norm(), tol);
   EXPECT_LT((a.tool_axis - b.tool_axis).norm(), tol);
-  EXPECT_LT((a.part_origin - b.part_origin).norm(), tol);
-  EXPECT_LT((a.part_rotation - b.part_rotation).norm(), tol);
 }
 
 // (a) The manual's own table (iTNC 530 HSCI technical manual, July 2013,
@@ -180,7 +178,10 @@ TEST(VendorHeidenhain, RoundTripEveryTopology) {
         const Eigen::VectorXd values = h.Map(c.machine, MakeKinematicsTable(c.machine, ab.theta), o);
         ASSERT_EQ(values.size(), Eigen::Index(h.Values(c.machine, o).size()));
         const Eigen::MatrixXd mine = h.ToolPoints(c.machine, values, q, o);
-        const Eigen::MatrixXd theirs = ToolPoints(c.machine, ab.theta, q);
+        // fivecal's tool points in the controller's workpiece frame (vendor.h).
+        const KinematicsTable at = MakeKinematicsTable(c.machine, ab.theta);
+        const Eigen::MatrixXd theirs = Eigen::MatrixXd(
+            (ToolPoints(c.machine, ab.theta, q) * at.part_rotation.transpose()).rowwise() + at.part_origin.transpose());
         EXPECT_LT((mine - theirs).rowwise().norm().maxCoeff(), 1e-9);
         // The errors the rows represent did change the tool points.
         const Eigen::MatrixXd nominal = ToolPoints(c.machine, Eigen::VectorXd::Zero(c.machine.num_parameters()), q);
@@ -188,6 +189,37 @@ TEST(VendorHeidenhain, RoundTripEveryTopology) {
       }
     }
   }
+}
+
+// The common export path with the registered vendor: the round trip it
+// reports, a change where the errors are, its covariance, the old values.
+TEST(VendorHeidenhain, ExportThroughTheRegistry) {
+  const ControllerVendor& v = FindVendor("heidenhain");
+  EXPECT_EQ(&v, &HeidenhainVendor());
+  const Machine m = Machine::Load(Src("examples/machines/c600u.json"));
+  Eigen::VectorXd th = Eigen::VectorXd::Zero(m.num_parameters());
+  th[m.RequireParameter("EY0A")] = 0.02;   // A's pivot 20 um in y
+  th[m.RequireParameter("EX0C")] = -0.015;  // C's 15 um in x
+  const Eigen::MatrixXd cov = 1e-6 * Eigen::MatrixXd::Identity(m.num_parameters(), m.num_parameters());
+  const VendorExport ex = ExportToVendor(m, v, th, cov, Grid(m, 50, 9), Iso(100));
+  EXPECT_LT(ex.round_trip_max, 1e-9);
+  EXPECT_LT(ex.absorption.max, 1e-6);
+  ASSERT_EQ(ex.values.size(), size_t(ex.change.size()));
+  double moved = 0;
+  for (size_t i = 0; i < ex.values.size(); ++i) {
+    EXPECT_TRUE(std::isfinite(ex.sigma[Eigen::Index(i)])) << ex.values[i].name;
+    if (ex.values[i].fixed) EXPECT_EQ(ex.sigma[Eigen::Index(i)], 0) << ex.values[i].name;
+    moved = std::max(moved, std::abs(ex.change[Eigen::Index(i)]));
+  }
+  EXPECT_NEAR(moved, 0.02, 1e-6);
+  // Old values given: new = old + change, and a fixed row that differs is refused.
+  Eigen::VectorXd old = ex.old_values;
+  old[6] += 0.5;  // row 6 Trans X (to the machine datum)
+  const VendorExport ex2 = ExportToVendor(m, v, th, cov, Grid(m, 50, 9), Iso(100), old);
+  EXPECT_LT((ex2.new_values - old - ex.change).norm(), 1e-12);
+  Eigen::VectorXd bad = ex.old_values;
+  bad[0] = 1;  // row 0 ToolAxis
+  EXPECT_THROW(ExportToVendor(m, v, th, cov, Grid(m, 50, 9), Iso(100), bad), std::invalid_argument);
 }
 
 // (c) The way back: Table(Map(t)) == t.
@@ -202,7 +234,11 @@ TEST(VendorHeidenhain, TableOfMapIsTheTable) {
       ao.directions = true;
       const Absorption ab = Absorb(c.machine, vm.model, RandomErrors(c.machine, 7), Grid(c.machine, 40, 5), ao);
       const KinematicsTable t = MakeKinematicsTable(c.machine, ab.theta);
-      ExpectTablesEqual(h.Table(c.machine, h.Map(c.machine, t, o), o), t, 1e-9);
+      const KinematicsTable back = h.Table(c.machine, h.Map(c.machine, t, o), o);
+      ExpectTablesEqual(back, t, 1e-9);
+      // The rows end in the machine frame: the part's frame is the preset's.
+      EXPECT_EQ(back.part_origin, Eigen::Vector3d::Zero());
+      EXPECT_EQ(back.part_rotation, Eigen::Matrix3d::Identity());
       const KinematicsTable n = MakeKinematicsTable(c.machine, Eigen::VectorXd::Zero(c.machine.num_parameters()));
       ExpectTablesEqual(h.Table(c.machine, h.Map(c.machine, n, o), o), n, 1e-12);
     }
@@ -232,7 +268,7 @@ TEST(VendorHeidenhain, NominalRowsAreTheMachineFile) {
       "row 15 MachAxis B", "row 16 Trans A", "row 17 Trans C",
       "row 18 Trans X", "row 19 Trans Y", "row 20 Trans Z", "row 21 Trans A", "row 22 Trans B",
       "row 23 MachAxis C", "row 24 Trans B", "row 25 Trans A",
-      "row 26 Trans X", "row 27 Trans Y", "row 28 Trans Z", "row 29 Trans A", "row 30 Trans B", "row 31 Trans C"};
+      "row 26 Trans X", "row 27 Trans Y", "row 28 Trans Z"};
   EXPECT_EQ(got, want);
   // The tool reference point is 100 mm above the tip (0,0,100): the datum row goes back down.
   EXPECT_NEAR(ValueOf(names, v, "row 7 Trans Z"), -200, 1e-12);
@@ -242,7 +278,7 @@ TEST(VendorHeidenhain, NominalRowsAreTheMachineFile) {
   // iso: B along -y and C along -z are the table's reversed +B, +C: no turn.
   for (const char* r : {"row 13 Trans C", "row 14 Trans A", "row 21 Trans A", "row 22 Trans B"})
     EXPECT_NEAR(ValueOf(names, v, r), 0, 1e-12) << r;
-  // The part frame is the machine frame: its rows go back from C's pivot.
+  // The last rows go back from C's pivot (0,0,0) to the machine datum.
   EXPECT_NEAR(ValueOf(names, v, "row 28 Trans Z"), 0, 1e-12);
   EXPECT_EQ(names[15].unit, "");
   EXPECT_TRUE(names[15].fixed);

@@ -166,8 +166,7 @@ std::vector<HeidenhainRow> Heidenhain::Rows(const Machine& m, const VendorOption
   for (char c : {'X', 'Y', 'Z'}) add("Trans", c, true, false, true, "to the machine datum");
   add("MachBase", 0, false, true, false, "the machine base");
   side(ChainAxes(m, false), false);
-  for (char c : {'X', 'Y', 'Z'}) add("Trans", c, true, false, false, "part frame origin (the preset)");
-  for (char c : {'A', 'B', 'C'}) add("Trans", c, true, false, false, "part frame rotation (the preset)");
+  for (char c : {'X', 'Y', 'Z'}) add("Trans", c, true, false, false, "back to the machine datum");
   return rows;
 }
 
@@ -294,16 +293,11 @@ Eigen::VectorXd Heidenhain::Map(const Machine& m, const KinematicsTable& table, 
   origin.setZero();
   put(0);  // MachBase
   side(part, false);
-  const Eigen::Vector3d d = table.part_origin - origin;
-  put(d.x());
-  put(d.y());
-  put(d.z());
-  // part_rotation = Rx(a) Ry(b) Rz(c)
-  const Eigen::Matrix3d& R = table.part_rotation;
-  const double b = std::asin(std::max(-1.0, std::min(1.0, R(0, 2))));
-  put(std::atan2(-R(1, 2), R(2, 2)) / kDeg);
-  put(b / kDeg);
-  put(std::atan2(-R(0, 1), R(0, 0)) / kDeg);
+  // The workpiece frame the controller knows: the machine frame at the zero
+  // pose, carried by the table axes (the part frame is the preset).
+  put(-origin.x());
+  put(-origin.y());
+  put(-origin.z());
   if (r != rows.size()) throw std::logic_error("heidenhain: row count");
   return v;
 }
@@ -396,9 +390,10 @@ KinematicsTable Heidenhain::Table(const Machine& m, const Eigen::VectorXd& value
   const Pose tool_frame = world;  // the tool reference frame, seen from the machine frame
   t.tool_axis = tool_frame.R.col(ti);
   t.tool_tip = tool_frame.t - opt.tool_length * t.tool_axis;
-  const Pose end = world * after.back();
-  t.part_origin = end.t;
-  t.part_rotation = end.R;
+  // The rows end in the controller's workpiece frame (the machine frame at
+  // the zero pose); where the part sits on the table is the preset, not a row.
+  t.part_origin.setZero();
+  t.part_rotation.setIdentity();
   return t;
 }
 
@@ -448,7 +443,7 @@ Eigen::Vector3d HeidenhainToolPoint(const std::vector<HeidenhainRow>& rows, cons
       },
       table_sense, &base);
   // The tool tip in the tool reference frame: L along -ToolAxis; the tool
-  // point in the last frame (the part frame): T^-1 tip.
+  // point in the last frame (the workpiece frame): T^-1 tip.
   const Eigen::Vector3d tip = -tool_length * Eigen::Vector3d::Unit(ti);
   const Pose inv = after.back().inverse();
   return inv.R * tip + inv.t;

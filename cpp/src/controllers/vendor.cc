@@ -6,6 +6,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "fivecal/controllers/heidenhain.h"
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
@@ -14,6 +15,7 @@ namespace controllers {
 const std::vector<const ControllerVendor*>& ControllerVendors() {
   // THE list of controller vendors: one line per vendor (vendor.h).
   static const std::vector<const ControllerVendor*> vendors = {
+      &HeidenhainVendor(),
   };
   return vendors;
 }

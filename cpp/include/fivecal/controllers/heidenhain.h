@@ -29,8 +29,9 @@
 //   Trans X, Y, Z                            from the last point to the machine datum
 //   MachBase
 //   per table-side axis, from the base outward: as above
-//   Trans X, Y, Z, Trans A, B, C             fivecal's part frame on the last table axis
-//                                            (on the control: the preset)
+//   Trans X, Y, Z                            from the last pivot back to the machine datum:
+//                                            the controller's workpiece frame (vendor.h);
+//                                            the part's own frame is the preset
 //
 // with <L> the axis's own letter (A/X about/along x, B/Y y, C/Z z) and
 // <j>, <k> the next two in cyclic order (L = C: A, B; L = A: B, C; L = B: C, A).
