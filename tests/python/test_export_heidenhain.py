@@ -5,35 +5,27 @@ run through the TNC's own kinematics (the core's, from the manual), put the
 tool where the erroneous machine puts it, up to the work offset."""
 from __future__ import annotations
 
-import types
-
 import numpy as np
 import pytest
 
 from fivecal import Machine, _core
-from fivecal.io import heidenhain as H
+from fivecal.io import controllers as K, heidenhain as H
 
 OPTIONS = {"table-axis-sign": "iso", "tool-length": "100"}
 
 
 def _export(machine: Machine, errors=None, cov_scale=1e-6, options=OPTIONS, seed=1):
-    """The core's export as the writer's ``exp`` (values as dicts)."""
-    theta = machine.theta(errors or {})
-    n = len(theta)
+    """The Python export path (what ``fivecal export heidenhain`` writes)."""
     rng = np.random.default_rng(seed)
-    poses = np.zeros((80, len(machine.axis_names)))
-    for k, a in enumerate(machine.axis_names):
+    poses = {}
+    for a in machine.axis_names:
         lo, hi = {"C": (-180, 180), "A": (-100, 100), "B": (-100, 100), "S": (0, 0)}.get(a, (-200, 200))
-        poses[:, k] = rng.uniform(lo, hi, len(poses))
-    d = _core.vendor_export("heidenhain", machine._core, theta, cov_scale * np.eye(n), poses, options,
-                            np.zeros(0))
-    values = [dict(v, old=float(o), new=float(nw), change=float(c), sigma=float(s))
-              for v, o, nw, c, s in zip(d["values"], d["old"], d["new"], d["change"], d["sigma"])]
-    exp = types.SimpleNamespace(vendor="heidenhain", values=values,
-                                absorption=types.SimpleNamespace(**d["absorption"]),
-                                round_trip_max_mm=d["round_trip_max"], options=dict(options),
-                                result_path="result.json")
-    return exp, poses
+        poses[a] = rng.uniform(lo, hi, 80)
+    n = len(machine.parameter_names())
+    exp = K.vendor_export(machine, "heidenhain", errors or {}, cov_scale * np.eye(n), poses=poses,
+                          options=options)
+    exp.result = "result.json"
+    return exp, machine.axes_matrix(poses)
 
 
 def test_the_vendor_is_registered():

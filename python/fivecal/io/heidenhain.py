@@ -58,12 +58,12 @@ def _get(obj, name: str, default=None):
 def _header(exp, machine) -> List[str]:
     ab = _get(exp, "absorption")
     model = _get(ab, "model", "?")
-    result = _get(exp, "result_path") or _get(exp, "result") or "-"
+    result = _get(exp, "result") or "-"
     lines = [
         "fivecal export heidenhain: kinematics description rows (VALUES TO ENTER, not a file to load:",
         "KinematicsDesign's file format is not public). Columns: the table's NR KEY AXIS COORD (iTNC 530 HSCI",
         "technical manual, July 2013, p. 722), then the old value, the change and its 1 sigma.",
-        f"machine {_get(machine, 'name', '?')} ({_get(machine, 'topology', '?')}); result {result}; "
+        f"machine {machine.name} ({machine.topology}); result {result}; "
         f"written {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}",
         f"absorption model {model}; options " + ", ".join(f"{k}={v}" for k, v in
                                                           sorted((_get(exp, 'options') or {}).items())),
@@ -74,7 +74,7 @@ def _header(exp, machine) -> List[str]:
                      f"max {um(_get(ab, 'max_old', 0))} (Cycle 451's 'measured dispersion'); left after these "
                      f"values (the controller's model cannot absorb it) rms {um(_get(ab, 'rms', 0))} "
                      f"max {um(_get(ab, 'max', 0))} (its 'optimised dispersion')")
-    rt = _get(exp, "round_trip_max_mm")
+    rt = _get(exp, "round_trip_max")
     if rt is not None:
         lines.append(f"round trip: these rows through the TNC's kinematics reproduce fivecal's absorbed model "
                      f"to {1000 * float(rt):.4f} um")
