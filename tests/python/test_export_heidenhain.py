@@ -5,10 +5,16 @@ run through the TNC's own kinematics (the core's, from the manual), put the
 tool where the erroneous machine puts it, up to the work offset."""
 from __future__ import annotations
 
+import json
+import os
+
 import numpy as np
 import pytest
 
+import fivecal
 from fivecal import Machine, _core
+from fivecal.cli import main
+from fivecal.procedures import sphere_check as sc
 from fivecal.io import controllers as K, heidenhain as H
 
 OPTIONS = {"table-axis-sign": "iso", "tool-length": "100"}
@@ -21,9 +27,10 @@ def _export(machine: Machine, errors=None, cov_scale=1e-6, options=OPTIONS, seed
     for a in machine.axis_names:
         lo, hi = {"C": (-180, 180), "A": (-100, 100), "B": (-100, 100), "S": (0, 0)}.get(a, (-200, 200))
         poses[a] = rng.uniform(lo, hi, 80)
-    n = len(machine.parameter_names())
-    exp = K.vendor_export(machine, "heidenhain", errors or {}, cov_scale * np.eye(n), poses=poses,
-                          options=options)
+    names = machine.parameter_names()
+    # the identification's uncertainty on the errors it estimated only
+    cov = np.diag([cov_scale if n in (errors or {}) else 0.0 for n in names])
+    exp = K.vendor_export(machine, "heidenhain", errors or {}, cov, poses=poses, options=options)
     exp.result = "result.json"
     return exp, machine.axes_matrix(poses)
 
@@ -148,3 +155,73 @@ def test_options_are_required_and_checked():
         _core.vendor_values("heidenhain", m._core, theta, {"table-axis-sign": "iso"})
     with pytest.raises(ValueError, match='unknown option "sign"'):
         _core.vendor_values("heidenhain", m._core, theta, dict(OPTIONS, sign="iso"))
+
+
+BALL = {"id": "S1", "center": [80.0, 50.0, 60.0], "radius": 12.5}
+PIVOTS = {"EY0A": 0.012, "EZ0A": -0.008, "EX0C": 0.015, "EY0C": -0.01}
+C600U = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "machines", "c600u.json")
+SETS = ["--set", "table-axis-sign=iso", "--set", "tool-length=100"]
+
+
+@pytest.fixture(scope="module")
+def sphere_check(tmp_path_factory):
+    """A simulated sphere check of c600u with known pivot errors, identified."""
+    d = tmp_path_factory.mktemp("heidenhain")
+    m = Machine.load(C600U)
+    plan = sc.plan(m, BALL, tip_radius=3.0)
+    ds = fivecal.simulate(m, plan, errors=PIVOTS, artefact={"spheres": [BALL]}, tip_radius=3.0, sigma=1e-5,
+                          seed=11)
+    fivecal.save_dataset(ds, str(d / "ds.json"))
+    assert main(["sphere-check", str(d / "ds.json"), "--out", str(d / "check.json")]) == 0
+    return d, m
+
+
+def test_cli_export_on_an_identification_reproduces_the_machine(sphere_check, capsys):
+    """fivecal export heidenhain on the identification exits 0; the .tab's
+    new values, through the TNC's kinematics, put the tool where the
+    erroneous machine puts it, up to the work offset, within 1 um."""
+    d, m = sphere_check
+    out = d / "out"
+    rc = main(["export", "heidenhain", str(d / "check.json"), "--machine", C600U, "--out", str(out), *SETS])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert sorted(os.listdir(out)) == ["export.json", "heidenhain.csv", "heidenhain.tab"]
+    rec = json.load(open(out / "export.json"))
+    back = H.read(str(out / "heidenhain.tab"))
+    assert "check.json" in (out / "heidenhain.tab").read_text().splitlines()[3]
+    values = np.array([back[v["name"]] if v["name"] in back else v["new"] for v in rec["values"]])
+    assert all(v["name"] in back for v in rec["values"] if not v["fixed"])
+    rng = np.random.default_rng(3)
+    poses = {"C": rng.uniform(-180, 180, 60), "A": rng.uniform(-100, 100, 60), "X": rng.uniform(-200, 200, 60),
+             "Y": rng.uniform(-200, 200, 60), "Z": rng.uniform(-200, 200, 60), "S": np.zeros(60)}
+    options = {"table-axis-sign": "iso", "tool-length": "100"}
+    tnc = K.vendor_tool_points(m, "heidenhain", values, poses, options)
+    nominal = K.vendor_tool_points(m, "heidenhain", [v["old"] for v in rec["values"]], poses, options)
+    table = K.kinematics_table(m, PIVOTS)
+    truth = m.tool_point(poses, PIVOTS) @ table["part_rotation"].T + table["part_origin"]
+    for pts, ok in ((tnc, True), (nominal, False)):
+        dev = pts - truth
+        dev -= dev.mean(axis=0)
+        worst = np.linalg.norm(dev, axis=1).max()
+        assert (worst < 1e-3) if ok else (worst > 0.02), worst
+
+
+def test_cli_refuses_a_wrong_option_and_a_missing_one(sphere_check, capsys):
+    d, _ = sphere_check
+    base = ["export", "heidenhain", str(d / "check.json"), "--machine", C600U]
+    assert main([*base, "--out", str(d / "w1"), "--set", "table-axis-sign=ISO", "--set", "tool-length=100"]) == 2
+    assert 'expected iso or carriage, got "ISO"' in capsys.readouterr().err
+    assert main([*base, "--out", str(d / "w2"), "--set", "tool-length=100"]) == 2
+    assert "--set table-axis-sign=iso" in capsys.readouterr().err
+    assert main([*base, "--out", str(d / "w3"), "--set", "table-axis-sign=iso"]) == 2
+    assert "--set tool-length=<mm>" in capsys.readouterr().err
+    assert not any(os.path.exists(d / w) for w in ("w1", "w2", "w3"))
+
+
+def test_an_unsupported_topology_is_refused():
+    m = Machine.from_dict({"name": "4ax", "topology": "wCfXYZSt", "axes": {
+        "C": {"type": "rotary", "direction": [0, 0, -1]}, "X": {"type": "linear", "direction": [1, 0, 0]},
+        "Y": {"type": "linear", "direction": [0, 1, 0]}, "Z": {"type": "linear", "direction": [0, 0, 1]},
+        "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 100]}})
+    with pytest.raises(ValueError, match=r"two rotary axes .*4ax \(wCfXYZSt\) has 1"):
+        K.vendor_export(m, "heidenhain", {}, options=OPTIONS)

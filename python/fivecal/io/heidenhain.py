@@ -46,7 +46,9 @@ def _fmt(v: Optional[float], unit: str) -> str:
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return "-"
     # 1 nm in mm; 1e-9 deg (2e-11 rad) keeps a 500 mm lever below 1 nm.
-    return f"{float(v):.6f}" if unit == "mm" else f"{float(v):.9f}"
+    digits = 6 if unit == "mm" else 9
+    text = f"{float(v):.{digits}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0 else text
 
 
 def _get(obj, name: str, default=None):
@@ -94,7 +96,8 @@ def _rows(exp) -> List[dict]:
 def tab_text(exp, machine) -> str:
     out = [f"; {line}" for line in _header(exp, machine)]
     out.append(f"BEGIN {TAB_NAME} MM")
-    out.append("  ".join(f"{c:<10}" for c in _COLUMNS).rstrip())
+    widths = [4, 9, 5, 16, 16, 14, 14, 4]
+    out.append(" ".join(f"{c:<{w}}" for c, w in zip(_COLUMNS, widths)).rstrip())
     for r in _rows(exp):
         unit = r.get("unit", "")
         if _has_coord(r["key"]):
@@ -102,7 +105,7 @@ def tab_text(exp, machine) -> str:
                      _fmt(r.get("change"), unit), _fmt(r.get("sigma"), unit), unit]
         else:
             cells = [str(r["nr"]), r["key"], r["axis"] or "-", "-", "-", "-", "-", "-"]
-        out.append("  ".join(f"{c:<10}" for c in cells).rstrip())
+        out.append(" ".join(f"{c:<{w}}" for c, w in zip(cells, widths)).rstrip())
     out.append("[END]")
     return "\n".join(out) + "\n"
 
