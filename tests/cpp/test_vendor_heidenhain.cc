@@ -42,6 +42,15 @@ Machine TableHead() {  // C table, B head (the manual's p. 670 kind of machine)
     "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [0,0,20]}})");
 }
 
+Machine SpindleAlongY() {  // a horizontal spindle along +Y (ToolAxis Y), B and A table
+  return Machine::FromJson(R"({"name": "hy", "topology": "wABfXYZSt", "axes": {
+    "A": {"type": "rotary", "direction": [-1,0,0], "point": [0,0,-80]},
+    "B": {"type": "rotary", "direction": [0,-1,0], "point": [10,0,0]},
+    "X": {"type": "linear", "direction": [1,0,0]}, "Y": {"type": "linear", "direction": [0,1,0]},
+    "Z": {"type": "linear", "direction": [0,0,1]},
+    "S": {"type": "rotary", "direction": [0,1,0]}}, "tool": {"tip": [0,150,0]}})");
+}
+
 Machine FourAxis() {
   return Machine::FromJson(R"({"name": "4ax", "topology": "wCfXYZSt", "axes": {
     "C": {"type": "rotary", "direction": [0,0,-1]},
@@ -154,7 +163,8 @@ std::vector<Case> Cases() {
           {"kx8", Machine::Load(Src("examples/machines/kx8.json")), ControllerModel::kTableTable},
           {"vmc0656", Machine::Load(Src("examples/machines/vmc0656.json")), ControllerModel::kTableTable},
           {"head-head", HeadHead(), ControllerModel::kHeadHead},
-          {"table-head", TableHead(), ControllerModel::kTableHead}};
+          {"table-head", TableHead(), ControllerModel::kTableHead},
+          {"spindle along +Y", SpindleAlongY(), ControllerModel::kTableTable}};
 }
 
 // (b) The round trip: random errors -> Absorb into the model the rows can
@@ -366,6 +376,13 @@ TEST(VendorHeidenhain, Refusals) {
     "B": {"type": "rotary", "direction": [0,1,0]}, "S": {"type": "rotary", "direction": [0,0,1]}},
     "tool": {"tip": [0,0,50]}})");
   EXPECT_NO_THROW(h.Values(all_tool, {{"tool-length", "100"}}));
+  // A tool axis the ToolAxis row cannot name.
+  const Machine down = Machine::FromJson(R"({"name": "dn", "topology": "wCAfXYZSt", "axes": {
+    "C": {"type": "rotary", "direction": [0,0,-1]}, "A": {"type": "rotary", "direction": [-1,0,0]},
+    "X": {"type": "linear", "direction": [1,0,0]}, "Y": {"type": "linear", "direction": [0,1,0]},
+    "Z": {"type": "linear", "direction": [0,0,1]}, "S": {"type": "rotary", "direction": [0,0,-1]}},
+    "tool": {"tip": [0,0,-100]}})");
+  EXPECT_HAS(ErrorOf([&] { h.Model(down, Iso()); }), "is not +X, +Y or +Z");
   // A table of another machine, wrong value counts, a tilted linear axis.
   const Machine hu = Machine::Load(Src("examples/machines/hu40t.json"));
   EXPECT_HAS(ErrorOf([&] { h.Map(m, MakeKinematicsTable(hu, Eigen::VectorXd::Zero(hu.num_parameters())), Iso()); }), "kinematics table row");
