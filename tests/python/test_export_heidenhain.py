@@ -225,3 +225,18 @@ def test_an_unsupported_topology_is_refused():
         "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 100]}})
     with pytest.raises(ValueError, match=r"two rotary axes .*4ax \(wCfXYZSt\) has 1"):
         K.vendor_export(m, "heidenhain", {}, options=OPTIONS)
+
+
+def test_cli_refuses_an_unsupported_topology(sphere_check, capsys):
+    """Three rotary axes (C on B on A): the TNC rows written here cover two."""
+    d, _ = sphere_check
+    three = {"name": "cba", "topology": "wCBAfXYZSt", "axes": {
+        "C": {"type": "rotary", "direction": [0, 0, -1]}, "B": {"type": "rotary", "direction": [0, -1, 0]},
+        "A": {"type": "rotary", "direction": [-1, 0, 0]}, "X": {"type": "linear", "direction": [1, 0, 0]},
+        "Y": {"type": "linear", "direction": [0, 1, 0]}, "Z": {"type": "linear", "direction": [0, 0, 1]},
+        "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 150]}}
+    (d / "cba.json").write_text(json.dumps(three))
+    rc = main(["export", "heidenhain", str(d / "check.json"), "--machine", str(d / "cba.json"), "--out",
+               str(d / "w4"), *SETS])
+    assert rc == 2
+    assert "two rotary axes" in capsys.readouterr().err and not os.path.exists(d / "w4")
