@@ -2,14 +2,12 @@
 // table (docs/controllers.md, "Heidenhain TNC").
 //
 // Public source: HEIDENHAIN Technical Manual iTNC 530 HSCI, July 2013 (via
-// easymanua.ls), p. 722 "format of the description table": rows NR, KEY,
-// AXIS, COORD; KEY MachAxis ("from this entry onward, movements by the
-// indicated axis change the positions of previously defined axes or objects
-// relative to subsequent axes or objects. The start of the sequence is always
-// the tool reference point"), Trans ("a transformation of the indicated axis
-// ... by the value entered in the COORD column ... a linear translation as
-// well as a rotation about an axis"), ToolAxis (X, Y, Z: the tool axis),
-// MachBase (the stationary part of the machine). p. 670 prints a table of
+// easymanua.ls), p. 722, the format of the description table: rows NR, KEY,
+// AXIS, COORD; KEY MachAxis (where an axis takes effect: from that row on,
+// the axis moves what the rows before it define relative to what follows;
+// the chain starts at the tool reference point), Trans (a translation along
+// or a rotation about the axis in AXIS by COORD), ToolAxis (X, Y, Z: the
+// tool axis), MachBase (the stationary part of the machine). p. 670 prints a table of
 // this kind for a B head and a C table (Trans X, Trans Z, MachAxis B,
 // MachAxis Y, MachAxis X, MachBase, MachAxis Z, Trans X, Trans Y, MachAxis C).
 //
@@ -38,9 +36,9 @@
 //
 // Reading of the rows (ToolPoints): each row is a transformation of the
 // current coordinate system, its values expressed in that system (the
-// MANUALplus 620 technical manual, January 2012, p. 749: "the position ...
-// of a coordinate system is always expressed in the coordinates of the
-// previous coordinate system"): Trans X v moves the next system by +v along
+// MANUALplus 620 technical manual, January 2012, p. 749: a coordinate
+// system's position is given in the coordinates of the one before it):
+// Trans X v moves the next system by +v along
 // the current x (p. 670's Trans Z 250.051 from the tool reference point to a
 // B pivot above it), Trans A v turns it by +v about the current x (right hand,
 // ISO 841's +A). The manual does not give the sense of a MachAxis row after
