@@ -8,6 +8,7 @@
 
 #include "fivecal/controllers/fanuc.h"
 #include "fivecal/controllers/siemens.h"
+#include "fivecal/controllers/heidenhain.h"
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
@@ -19,6 +20,7 @@ const std::vector<const ControllerVendor*>& ControllerVendors() {
   static const std::vector<const ControllerVendor*> vendors = {
       &Fanuc(),
       &siemens,
+      &HeidenhainVendor(),
   };
   return vendors;
 }

@@ -10,7 +10,7 @@ import os
 from .. import files
 from ..compensation import usable_errors
 from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
-from ..io import fanuc, siemens
+from ..io import fanuc, heidenhain, siemens
 from ..io.plan_readings import _read_spec
 from ..tolerances import PATH_OPTION, path_tolerance
 from .common import _read_machine, deprecated_alias
@@ -61,6 +61,7 @@ def _run(args) -> int:
 WRITERS: dict = {
     "fanuc": fanuc,
     "siemens": siemens,
+    "heidenhain": heidenhain,
 }
 
 #: units of vendor values and (limit unit, factor to it) for the plausibility
