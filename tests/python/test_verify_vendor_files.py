@@ -56,20 +56,31 @@ def _load_and_check(d, m, plan, machine_file, vendor, values, tag, capsys, force
     return rc, capsys.readouterr().out
 
 
-def _altered(rec, how):
+def _altered(m, vendor, rec, how):
     """The new values as a person's slip leaves them: every change with its
     sign turned (a convention stated the wrong way), in inch where the
     controller reads mm (µm read as mm puts the simulated machine's touches
-    metres away: the export's plausibility guard refuses that change anyway), applied on top of itself, not applied; or one
-    value's change with its sign turned (one line keyed wrongly)."""
+    metres away: the export's plausibility guard refuses that change anyway),
+    applied on top of itself, not applied; or one value's change with its
+    sign turned (one line keyed wrongly): the line whose slip moves what the
+    check measures most (a value the work offset absorbs is no slip the
+    check can see)."""
     vals = [v["new"] for v in rec["values"]]
     f = {"sign": -1.0, "unit": 25.4, "twice": 2.0, "none": 0.0, "one sign": 1.0}[how]
     for k, v in enumerate(rec["values"]):
         if not v["fixed"]:
             vals[k] = v["old"] + f * v["change"]
     if how == "one sign":
-        k = max((i for i, v in enumerate(rec["values"]) if not v["fixed"]),
-                key=lambda i: abs(rec["values"][i]["change"]) / (rec["values"][i]["sigma"] or 1.0))
+        names = m.parameter_names()
+        seen = [names.index(n) for n in rec["absorbed"]["names"]]
+        ran = K.vendor_to_theta(m, vendor, vals, options=OPTIONS.get(vendor))["theta"]
+
+        def moved(k):
+            trial = list(vals)
+            trial[k] = rec["values"][k]["old"] - rec["values"][k]["change"]
+            th = K.vendor_to_theta(m, vendor, trial, options=OPTIONS.get(vendor))["theta"]
+            return np.abs(th[seen] - ran[seen]).max()
+        k = max((i for i, v in enumerate(rec["values"]) if not v["fixed"] and v["change"] != 0.0), key=moved)
         vals[k] = rec["values"][k]["old"] - rec["values"][k]["change"]
     return vals
 
@@ -99,7 +110,7 @@ def test_an_altered_file_is_caught_and_named(first_check, vendor, how, word, cap
         assert main(["export", vendor, str(d / "old.json"), "--machine", machine_file, "--out", str(out),
                      *_sets(vendor)]) == 0
     rec = json.load(open(out / "export.json"))
-    values = _altered(rec, how)
+    values = _altered(m, vendor, rec, how)
     # a change 25 times too large makes the check itself implausible (exit 1);
     # with --force it still names the unit
     rc, text = _load_and_check(d, m, plan, machine_file, vendor, values, f"{vendor}-{how.replace(' ', '-')}",

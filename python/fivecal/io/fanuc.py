@@ -98,7 +98,7 @@ def write(exp: Any, machine: Any) -> Dict[str, str]:
     lines += [
         "# Key in the new values (parameter screen, parameter input); the codes (unit 'code') are the mechanism",
         "# as fivecal's machine file has it and must already stand so: they are never changed by an export.",
-        "# Then run the check of docs/controllers.md, 'Verify after loading'.",
+        "# Then run the check of `fivecal docs controllers`, 'Verify after loading'.",
         "# " + " | ".join(_HEAD),
     ]
     for v in values:
