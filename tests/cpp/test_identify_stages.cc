@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -174,6 +175,47 @@ TEST(IdentifyStages, DeterminationNamesTheUndeterminedGroups) {
   EXPECT_TRUE(det3.determination.undetermined.empty());
   EXPECT_TRUE(det3.groups.empty());
   EXPECT_EQ(det3.determination.rank, static_cast<int>(r3.est.size()));
+}
+
+// S4 at its solution: the determination (which takes the eigenvectors of the
+// normal matrix where its decisions clear their rounding bound) names the
+// undetermined columns and groups a one-sided Jacobi SVD of the prior-scaled
+// factor names; and the fit's residuals and Jacobian at its solution, taken
+// from its own last evaluation, are those a fresh evaluation there gives.
+TEST(IdentifyStages, S4DeterminationIsTheJacobiSvdsAndTheFitsJacobianAFreshOne) {
+  const Dataset ds = Tango(false);
+  const IdentifyOptions opt = Options("S4", true);
+  const IdentifyRequest rq = ResolveRequest(ds, opt);
+  IdentifyProblem problem(ds, opt, rq);
+  const IdentifyFit fit = FitRequest(ds, opt, rq, &problem);
+  const IdentifyDetermination det = DetermineAtSolution(ds, opt, rq, fit);
+  const int p = static_cast<int>(rq.est.size());
+
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(fit.factor * rq.prior.asDiagonal(), Eigen::ComputeFullV);
+  const Eigen::VectorXd s = svd.singularValues();
+  const Eigen::MatrixXd& V = svd.matrixV();
+  const double zero = 1e-12 * std::max(s[0], 1.0), weak = 1.0 / kDeterminedRatio;
+  Eigen::VectorXd ratio2 = Eigen::VectorXd::Zero(p), free2 = Eigen::VectorXd::Zero(p);
+  for (int k = 0; k < p; ++k)
+    for (int j = 0; j < p; ++j) {
+      if (s[k] > zero) ratio2[j] += std::abs(V(j, k)) >= 1e-9 ? V(j, k) * V(j, k) / (s[k] * s[k]) : 0.0;
+      else free2[j] += V(j, k) * V(j, k);
+    }
+  std::vector<int> undetermined;
+  std::vector<bool> bad(p, false);
+  for (int j = 0; j < p; ++j)
+    if (free2[j] >= 1e-18 || !(std::sqrt(ratio2[j]) < kDeterminedRatio)) undetermined.push_back(j), bad[j] = true;
+  ASSERT_FALSE(undetermined.empty());
+  EXPECT_EQ(det.determination.undetermined, undetermined);
+  EXPECT_EQ(det.determination.groups, UndeterminedGroups(s, V, bad, zero, weak));
+
+  Problem fresh(ds, rq.table, fit.fit.values, rq.est);
+  Eigen::VectorXd r;
+  Eigen::MatrixXd Jw;
+  WeightedJacobian(&fresh, &r, &Jw);
+  ASSERT_EQ(fit.Jw.rows(), Jw.rows());
+  EXPECT_EQ((fit.Jw - Jw).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ((fit.r - r).cwiseAbs().maxCoeff(), 0.0);
 }
 
 TEST(IdentifyStages, CovarianceIsTheScaledInverseOfTheFactorsNormalMatrix) {

@@ -4,6 +4,7 @@
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 namespace fivecal {
@@ -326,6 +327,95 @@ bool PivotCertificate(const Eigen::LLT<Eigen::MatrixXd>& llt, double trace, doub
 
 }  // namespace
 
+namespace {
+
+// AnalyzeDetermination from the eigenvectors of N = Js^T Js instead of the
+// SVD of Js (Js = `reduced`, N formed from it): a third of the cost on S4's
+// 121 columns (bench/NOTES.md, S4). The eigenpairs of the formed N carry more
+// rounding than Js's singular pairs, so every decision read off them (each
+// ratio against the threshold, each direction's side of `weak`, each weak
+// direction's tie with its neighbour, each group member's side of the
+// 0.1 vmax cut) is accepted only when it stands clear of an error bound: the
+// residual of the eigenpairs against Js itself, |Js^T (Js V) - V Lambda|_F
+// (which holds the forming of N and the eigensolver's error), plus the
+// rounding of that residual. Then the SVD, whose own error is far smaller,
+// takes the same decisions and the groups are that path's. False, `out`
+// untouched: some decision is within the bound, or a direction is (nearly)
+// exactly free; use the SVD.
+bool EigenDetermination(const Eigen::MatrixXd& reduced, const Eigen::MatrixXd& N, double threshold,
+                        Determination* out) {
+  const int p = static_cast<int>(N.cols());
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N);
+  if (eig.info() != Eigen::Success) return false;
+  const Eigen::VectorXd lambda = eig.eigenvalues().reverse();  // descending, as s
+  const Eigen::MatrixXd V = eig.eigenvectors().rowwise().reverse();
+  const double weak = 1.0 / threshold;
+  const Eigen::MatrixXd JV = reduced * V;
+  const double residual = (reduced.transpose() * JV - V * lambda.asDiagonal()).norm();
+  const double err = 2.0 * residual + 2.0 * (p + 1) * std::numeric_limits<double>::epsilon() * lambda[0];
+  if (!(err > 0) || !std::isfinite(err)) return false;
+  // Exactly free (or rounding-level) directions: only the SVD resolves them.
+  if (!(lambda[p - 1] > 100.0 * err)) return false;
+  const Eigen::VectorXd s = lambda.cwiseSqrt();
+  const double tie = 1e-10 * std::max(s[0], 1.0);  // UndeterminedGroups' tie
+  // Each singular value's uncertainty from lambda's: |ds| <= err / (2 s).
+  auto ds = [&](int k) { return err / (2.0 * s[k]) + 1e-12 * s[0]; };
+  int rank = 0;
+  for (int k = 0; k < p; ++k) {
+    if (std::abs(s[k] - weak) <= 2.0 * ds(k)) return false;
+    if (s[k] > weak) ++rank;
+  }
+  // The weak directions (s <= weak) must be single (no tie with a neighbour,
+  // which the SVD could see as a cluster) and their vectors' rounding is
+  // err / (their eigenvalue gap) (Davis-Kahan).
+  Eigen::VectorXd verr = Eigen::VectorXd::Zero(p);
+  for (int k = rank; k < p; ++k) {
+    double gap = INFINITY;
+    if (k > 0) gap = std::min(gap, lambda[k - 1] - lambda[k]);
+    if (k + 1 < p) gap = std::min(gap, lambda[k] - lambda[k + 1]);
+    if (k > rank && s[k - 1] - s[k] <= tie + 2.0 * (ds(k) + ds(k - 1))) return false;
+    if (!(gap > 4.0 * err)) return false;
+    verr[k] = 2.0 * err / gap + 1e-12;
+  }
+  // ratio_j^2 = [N^-1]_jj and its first-order sensitivity |N^-1 e_j|^2 |E|.
+  Eigen::VectorXd ratio2 = Eigen::VectorXd::Zero(p), col2 = Eigen::VectorXd::Zero(p);
+  for (int k = 0; k < p; ++k) {
+    const double inv = 1.0 / lambda[k];
+    for (int j = 0; j < p; ++j) {
+      const double v2 = V(j, k) * V(j, k);
+      if (std::abs(V(j, k)) >= 1e-9) ratio2[j] += v2 * inv;
+      col2[j] += v2 * inv * inv;
+    }
+  }
+  const double t2 = threshold * threshold;
+  std::vector<bool> bad(p, false);
+  std::vector<int> undetermined;
+  for (int j = 0; j < p; ++j) {
+    if (std::abs(ratio2[j] - t2) <= 4.0 * err * col2[j] + 1e-12 * ratio2[j]) return false;
+    if (!(ratio2[j] < t2)) {
+      bad[j] = true;
+      undetermined.push_back(j);
+    }
+  }
+  // Each weak direction's members: |v_j| against 0.1 max |v_bad| clear of
+  // both vectors' rounding (UndeterminedGroups' cut for a weak direction).
+  for (int k = rank; k < p; ++k) {
+    double vmax = 0;
+    for (int j = 0; j < p; ++j)
+      if (bad[j]) vmax = std::max(vmax, std::abs(V(j, k)));
+    for (int j = 0; j < p; ++j)
+      if (bad[j] && std::abs(std::abs(V(j, k)) - 0.1 * vmax) <= 2.0 * verr[k]) return false;
+  }
+  out->singular_values = s;
+  out->rank = rank;
+  out->ratio = ratio2.cwiseSqrt();
+  out->undetermined = undetermined;
+  out->groups = UndeterminedGroups(s, V, bad, 1e-12 * std::max(s[0], 1.0), weak);
+  return true;
+}
+
+}  // namespace
+
 bool CertainlyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold) {
   if (Jw.cols() == 0) return false;
   const Eigen::MatrixXd N = ScaledNormal(Jw * prior.asDiagonal());
@@ -350,7 +440,8 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
     // check below: the eigenvalues are of no use then.
     const Eigen::LLT<Eigen::MatrixXd> llt(N);
     Eigen::VectorXd lambda;  // ascending; empty: not computed or failed
-    if (!PivotCertificate(llt, N.trace(), threshold)) {
+    const bool certainly_undetermined = PivotCertificate(llt, N.trace(), threshold);
+    if (!certainly_undetermined) {
       Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
       if (eig.info() == Eigen::Success) lambda = eig.eigenvalues();
     }
@@ -366,6 +457,7 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
         return out;
       }
     }
+    if (EigenDetermination(reduced, N, threshold, &out)) return out;
   }
   // Divide and conquer (6x faster than Jacobi on S4's 121 columns): what is
   // read off V below depends on its subspaces only, not on the basis the

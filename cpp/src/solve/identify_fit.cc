@@ -291,7 +291,14 @@ IdentifyFit FitRequest(const Dataset& ds, const IdentifyOptions& opt, const Iden
     out.normal_equations = true;
     out.other_units = nep.other_units();
   } else {
-    WeightedJacobian(out.problem.get(), &out.r, &out.Jw);
+    if (out.fit.Jw.size()) {
+      // The fit's own evaluation at its solution: what WeightedJacobian
+      // would compute there again.
+      out.r = out.fit.r;
+      out.Jw = out.fit.Jw;
+    } else {
+      WeightedJacobian(out.problem.get(), &out.r, &out.Jw);
+    }
     out.row_sigma = &out.problem->row_sigma();
     out.row_source = &out.problem->row_source();
     out.num_rows = out.problem->num_rows();

@@ -18,7 +18,8 @@ void WeightedJacobian(Problem* pr, Eigen::VectorXd* r, Eigen::MatrixXd* Jw) {
 
 SingleFit RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
                  const std::vector<int>& est, const IdentifyOptions& opt, const Eigen::VectorXd& prior_all,
-                 std::unique_ptr<Problem>* final_problem, std::unique_ptr<Problem> prepared) {
+                 std::unique_ptr<Problem>* final_problem, std::unique_ptr<Problem> prepared,
+                 const EvaluatedAt* first) {
   const ceres::Solver::Options so = Problem::SolverOptions(opt.max_iterations, opt.num_threads);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(table.size());
   SingleFit out;
@@ -27,12 +28,18 @@ SingleFit RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
   // row, the estimated parameters without a placement in a least-squares fit).
   bool valid_priors = true;
   for (int i : est) valid_priors = valid_priors && (!prior_all.size() || prior_all[i] > 0);
+  bool first_pass = true;
   auto run = [&](Problem* pr) {
     // The loop Ceres would run, without Ceres's per-solve overhead (most of
     // a fit's time on a few hundred rows); Ceres where it does not apply.
     RefitResult own;
-    if (valid_priors && SolveWithoutCeres(*pr, prior_all, opt.max_iterations, &own)) {
+    // The evaluation made before the fit applies to its first pass only.
+    const EvaluatedAt* at_start = first_pass ? first : nullptr;
+    first_pass = false;
+    if (valid_priors && SolveWithoutCeres(*pr, prior_all, opt.max_iterations, &own, true, at_start)) {
       out.values = pr->values();
+      out.r.swap(own.residuals_mm);
+      out.Jw.swap(own.weighted_jacobian);
       out.converged = own.converged;
       out.iterations += own.iterations;
       out.message = own.message;
@@ -44,6 +51,8 @@ SingleFit RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
     ceres::Solver::Summary summary;
     ceres::Solve(so, &pr->ceres_problem(), &summary);
     out.values = pr->values();
+    out.r.resize(0);
+    out.Jw.resize(0, 0);
     out.converged = summary.termination_type == ceres::CONVERGENCE;
     out.iterations += std::max(0, static_cast<int>(summary.iterations.size()) - 1);
     out.message = summary.message;
@@ -94,6 +103,8 @@ std::string DenseReason(const Dataset& ds, const IdentifyOptions& opt, const Ide
 
 namespace {
 
+bool SameValues(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return a.size() == b.size() && a == b; }
+
 SingleFit ToSingleFit(const NormalEquationFit& f) {
   SingleFit s;
   s.values = f.values;
@@ -122,6 +133,10 @@ Eigen::MatrixXd IdentifyProblem::WeightedJacobianAt(const Eigen::VectorXd& at) {
   Eigen::VectorXd r;
   Eigen::MatrixXd Jw;
   WeightedJacobian(kept_.get(), &r, &Jw);
+  start_eval_.at = Gather(at, rq_.est);
+  start_eval_.residuals_mm = r;
+  start_eval_.weighted_jacobian = Jw;
+  start_eval_values_ = at;
   return Jw;
 }
 
@@ -131,7 +146,8 @@ SingleFit IdentifyProblem::FitFrom(const Eigen::VectorXd& start, const Eigen::Ve
   if (nep_) return ToSingleFit(FitNormalEquations(*nep_, start, prior_all, opt_.max_iterations));
   std::unique_ptr<Problem> prepared = kept_ && kept_at_ == start ? std::move(kept_) : nullptr;
   std::unique_ptr<Problem> fitted;
-  const SingleFit fit = RunFit(ds_, rq_.table, start, rq_.est, opt_, prior_all, &fitted, std::move(prepared));
+  const SingleFit fit = RunFit(ds_, rq_.table, start, rq_.est, opt_, prior_all, &fitted, std::move(prepared),
+                               SameValues(start_eval_values_, start) ? &start_eval_ : nullptr);
   kept_.reset();
   if (fitted && fitted->analytic_batch()) {
     kept_ = std::move(fitted);
@@ -141,6 +157,7 @@ SingleFit IdentifyProblem::FitFrom(const Eigen::VectorXd& start, const Eigen::Ve
 }
 
 Eigen::MatrixXd IdentifyProblem::WeightedJacobianAfter(const SingleFit& fit) {
+  if (!nep_ && fit.Jw.size()) return fit.Jw;  // the fit's own evaluation at its solution
   if (nep_ || !kept_ || kept_at_ != fit.values) return WeightedJacobianAt(fit.values);
   Eigen::VectorXd r;
   Eigen::MatrixXd Jw;
@@ -155,8 +172,10 @@ SingleFit IdentifyProblem::FinalFit(const Dataset& weighted, const Eigen::Vector
     *nfit = FitNormalEquations(*nep_, start, prior_all, opt_.max_iterations);
     return ToSingleFit(*nfit);
   }
+  const bool same = &weighted == &ds_;
   return RunFit(weighted, rq_.table, start, rq_.est, opt_, prior_all, problem,
-                &weighted == &ds_ && kept_ && kept_at_ == start ? std::move(kept_) : nullptr);
+                same && kept_ && kept_at_ == start ? std::move(kept_) : nullptr,
+                same && SameValues(start_eval_values_, start) ? &start_eval_ : nullptr);
 }
 
 }  // namespace fivecal

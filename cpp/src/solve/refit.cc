@@ -144,16 +144,20 @@ class DenseRefit {
       : DenseRefit(std::make_unique<AnalyticResiduals>(ds, table, start, est), nullptr, start, est, row_sigma,
                    prior_all, max_iterations) {}
   // On a Problem's batch (SolveWithoutCeres), which must outlive it.
+  // keep: hand out the residuals and weighted Jacobian at the solution;
+  // first: an evaluation at `start` already made.
   DenseRefit(AnalyticResiduals* batch, const Eigen::VectorXd& start, const std::vector<int>& est,
-             const Eigen::VectorXd& row_sigma, const Eigen::VectorXd& prior_all, int max_iterations)
-      : DenseRefit(nullptr, batch, start, est, row_sigma, prior_all, max_iterations) {}
+             const Eigen::VectorXd& row_sigma, const Eigen::VectorXd& prior_all, int max_iterations, bool keep,
+             const EvaluatedAt* first)
+      : DenseRefit(nullptr, batch, start, est, row_sigma, prior_all, max_iterations, keep, first) {}
 
  private:
   DenseRefit(std::unique_ptr<AnalyticResiduals> own, AnalyticResiduals* batch, const Eigen::VectorXd& start,
              const std::vector<int>& est, const Eigen::VectorXd& row_sigma, const Eigen::VectorXd& prior_all,
-             int max_iterations)
+             int max_iterations, bool keep = false, const EvaluatedAt* first = nullptr)
       : own_(std::move(own)), batch_(own_ ? *own_ : *batch), start_(est.size()), w_(row_sigma.cwiseInverse()),
         n_(static_cast<int>(row_sigma.size())), p_(static_cast<int>(est.size())), max_iterations_(max_iterations) {
+    keep_ = keep;
     if (batch_.num_residuals() != n_) throw std::logic_error("refit: batch rows differ from the problem's");
     for (int b = 0; b < p_; ++b) start_[b] = start[est[b]];
     if (prior_all.size()) {
@@ -175,7 +179,10 @@ class DenseRefit {
     for (int b = 0; b < p_; ++b) pos_[b] = b;
     double cost = 0;
     std::vector<int> dense, sparse;
-    const bool ok = Evaluate(start_, &r_, &J_, &cost, false);
+    const bool reuse = first && first->at.size() == p_ && first->at == start_ &&
+                       first->residuals_mm.size() == n_ && first->weighted_jacobian.rows() == n_ &&
+                       first->weighted_jacobian.cols() == p_;
+    const bool ok = reuse ? FromEvaluated(*first, &cost) : Evaluate(start_, &r_, &J_, &cost, false);
     for (int b = 0; b < p_; ++b) {
       const int nnz = ok ? static_cast<int>((J_.col(b).array().abs() > 0.0).count()) : m;
       (4 * nnz >= m ? dense : sparse).push_back(b);
@@ -271,7 +278,7 @@ class DenseRefit {
       // whose model decrease is within the function tolerance: that one
       // nearly always ends the fit, so its Jacobian would be of no use.
       const bool last = model_cost_change <= 10 * kFunctionTolerance * x_cost;
-      if (!Evaluate(cand, &rc_, last ? nullptr : &Jc_, &cand_cost, true)) return false;
+      if (!Evaluate(cand, &rc_, last ? nullptr : &Jc_, &cand_cost, true, 1)) return false;
       const double step_norm = (x - cand).norm();
       if (step_norm <= kParameterTolerance * (x.norm() + kParameterTolerance)) {
         std::snprintf(message, sizeof message, "Parameter tolerance reached. Relative step_norm: %e <= %e.",
@@ -293,6 +300,7 @@ class DenseRefit {
         } else {
           J_.swap(Jc_);
           r_.swap(rc_);
+          std::swap(snap_[0], snap_[1]);
           x_cost = cand_cost;
         }
         rhs.noalias() = J_.transpose() * r_;
@@ -319,8 +327,15 @@ class DenseRefit {
     out->values = best;
     out->initial_cost = initial_cost;
     out->message = message;
+    if (keep_ && snap_[0].at.size() == p_ && snap_[0].at == best) {
+      out->residuals_mm.swap(snap_[0].r_mm);
+      out->weighted_jacobian.swap(snap_[0].Jw);
+    }
     return true;
   }
+
+  // Keep the residuals and weighted Jacobian of the solution (RefitResult).
+  void set_keep_jacobian(bool on) { keep_ = on; }
 
   // Residuals (mm) and Jacobian (unweighted) at `values` (Result::estimated order).
   void EvaluateMm(const Eigen::VectorXd& values, Eigen::VectorXd* r, Eigen::MatrixXd* J) {
@@ -342,12 +357,23 @@ class DenseRefit {
   // Ceres sums it. `scaled`: the Jacobian's columns times scale_ (Ceres's
   // Jacobi scaling, applied after the weights as there). A non-finite
   // Jacobian shows as a non-finite step.
-  bool Evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* r, Eigen::MatrixXd* J, double* cost, bool scaled) {
+  bool Evaluate(const Eigen::VectorXd& x, Eigen::VectorXd* r, Eigen::MatrixXd* J, double* cost, bool scaled,
+                int slot = 0) {
     for (int b = 0; b < p_; ++b) {
       ptrs_[b] = &x[b];
       if (J) cols_[b] = J->col(pos_[b]).data();
     }
     if (!batch_.Evaluate(ptrs_.data(), r->data(), J ? cols_.data() : nullptr)) return false;
+    if (J && keep_) {
+      // The residuals in mm and the weighted, unscaled Jacobian at x, as
+      // WeightedJacobian computes them (the same products), for the caller
+      // that would evaluate them again at the solution.
+      Snapshot& sn = snap_[slot];
+      sn.at = x;
+      sn.r_mm = r->head(n_);
+      sn.Jw.resize(n_, p_);
+      for (int b = 0; b < p_; ++b) sn.Jw.col(b) = J->col(pos_[b]).head(n_).cwiseProduct(w_);
+    }
     r->head(n_).array() *= w_.array();
     double c = 0.5 * r->head(n_).squaredNorm();
     const int np = static_cast<int>(prior_inv_.size());
@@ -366,6 +392,29 @@ class DenseRefit {
       }
       if (scaled)
         for (int b = 0; b < np; ++b) (*J)(n_ + b, pos_[b]) *= scale_[pos_[b]];
+    }
+    return true;
+  }
+
+  // Evaluate(start_, &r_, &J_, cost, false) from an evaluation already made
+  // there (pos_ still the identity): the same products, in the same order.
+  bool FromEvaluated(const EvaluatedAt& e, double* cost) {
+    r_.head(n_) = e.residuals_mm;
+    r_.head(n_).array() *= w_.array();
+    double c = 0.5 * r_.head(n_).squaredNorm();
+    const int np = static_cast<int>(prior_inv_.size());
+    for (int b = 0; b < np; ++b) {
+      r_[n_ + b] = start_[b] * prior_inv_[b];
+      c += 0.5 * r_[n_ + b] * r_[n_ + b];
+    }
+    *cost = c;
+    if (!std::isfinite(c)) return false;
+    J_.topRows(n_) = e.weighted_jacobian;
+    for (int b = 0; b < np; ++b) J_(n_ + b, b) = prior_inv_[b];
+    if (keep_) {
+      snap_[0].at = start_;
+      snap_[0].r_mm = e.residuals_mm;
+      snap_[0].Jw = e.weighted_jacobian;
     }
     return true;
   }
@@ -410,14 +459,22 @@ class DenseRefit {
   int nd_ = 0;            // the columns before it enter most rows
   std::vector<int> rows_;  // NormalMatrix's work space
   std::vector<double> a_;
+  struct Snapshot {
+    Eigen::VectorXd at, r_mm;
+    Eigen::MatrixXd Jw;
+  };
+  bool keep_ = false;
+  Snapshot snap_[2];  // at x (with J_), at the candidate (with Jc_)
 };
 
 }  // namespace
 
-bool SolveWithoutCeres(Problem& problem, const Eigen::VectorXd& prior_all, int max_iterations, RefitResult* out) {
+bool SolveWithoutCeres(Problem& problem, const Eigen::VectorXd& prior_all, int max_iterations, RefitResult* out,
+                       bool keep_jacobian, const EvaluatedAt* first) {
   AnalyticResiduals* batch = problem.analytic_batch();
   if (!batch || problem.estimated().empty()) return false;
-  DenseRefit fit(batch, problem.values(), problem.estimated(), problem.row_sigma(), prior_all, max_iterations);
+  DenseRefit fit(batch, problem.values(), problem.estimated(), problem.row_sigma(), prior_all, max_iterations,
+                 keep_jacobian, first);
   RefitResult r;
   if (!fit.Solve(&r)) return false;
   problem.SetEstimated(r.values);

@@ -19,6 +19,7 @@
 #include "fivecal/solve/identify_request.h"
 #include "fivecal/solve/normal_equations.h"
 #include "fivecal/solve/problem.h"
+#include "fivecal/solve/refit.h"
 
 namespace fivecal {
 
@@ -29,6 +30,10 @@ struct SingleFit {
   int iterations = 0;
   std::string message;
   double initial_cost = 0, final_cost = 0, robust_scale = 0;
+  // Dense fits without Ceres: the residuals (mm) and weighted Jacobian at
+  // `values`, from the fit's own evaluation there (empty otherwise).
+  Eigen::VectorXd r;
+  Eigen::MatrixXd Jw;
 };
 
 // One fit of `est` from `values`: plain least squares, or MAP with
@@ -36,9 +41,11 @@ struct SingleFit {
 // a plain pass first sets the loss scale. `prepared`: a Problem(ds, table,
 // values, est) already made, for the first pass; `final_problem` receives the
 // problem at the solution.
+// `first`: residuals and weighted Jacobian already evaluated at `values`.
 SingleFit RunFit(const Dataset& ds, const ParameterTable& table, const Eigen::VectorXd& values,
                  const std::vector<int>& est, const IdentifyOptions& opt, const Eigen::VectorXd& prior_all,
-                 std::unique_ptr<Problem>* final_problem, std::unique_ptr<Problem> prepared = nullptr);
+                 std::unique_ptr<Problem>* final_problem, std::unique_ptr<Problem> prepared = nullptr,
+                 const EvaluatedAt* first = nullptr);
 
 // Residuals (mm) and the Jacobian with rows divided by their declared noise.
 void WeightedJacobian(Problem* pr, Eigen::VectorXd* r, Eigen::MatrixXd* Jw);
@@ -77,6 +84,10 @@ class IdentifyProblem {
   std::unique_ptr<NormalEquationProblem> nep_;
   std::unique_ptr<Problem> kept_;
   Eigen::VectorXd kept_at_;
+  // The last dense evaluation at a start (WeightedJacobianAt): every fit
+  // from there takes its first evaluation from it.
+  EvaluatedAt start_eval_;
+  Eigen::VectorXd start_eval_values_;  // every table entry
 };
 
 }  // namespace fivecal

@@ -31,6 +31,19 @@ struct RefitResult {
   bool ceres = true;  // solved by Ceres (false: by Session's own loop)
   double initial_cost = 0;  // only SolveWithoutCeres
   std::string message;      // why it stopped (only SolveWithoutCeres)
+  // SolveWithoutCeres with keep_jacobian: the residuals (mm) and the
+  // weighted Jacobian (rows / sigma, estimated order) at `values`, from the
+  // evaluation the fit made there (empty when it made none with derivatives).
+  Eigen::VectorXd residuals_mm;
+  Eigen::MatrixXd weighted_jacobian;
+};
+
+// Residuals (mm) and weighted Jacobian already evaluated at `at` (estimated
+// values, in the problem's estimated order): a fit starting there takes its
+// first evaluation from them.
+struct EvaluatedAt {
+  Eigen::VectorXd at, residuals_mm;
+  Eigen::MatrixXd weighted_jacobian;
 };
 
 // Solves `problem` from its values as Ceres does with
@@ -41,7 +54,11 @@ struct RefitResult {
 // the problem unchanged, where the loop does not reproduce Ceres (robust
 // loss, iteration limit, a failed step): solve it with Ceres then. True: the
 // problem holds the solution; out->values in estimated() order.
-bool SolveWithoutCeres(Problem& problem, const Eigen::VectorXd& prior_all, int max_iterations, RefitResult* out);
+// keep_jacobian: out holds the residuals and weighted Jacobian at the
+// solution. first: an evaluation at the problem's values, used instead of
+// evaluating there again.
+bool SolveWithoutCeres(Problem& problem, const Eigen::VectorXd& prior_all, int max_iterations, RefitResult* out,
+                       bool keep_jacobian = false, const EvaluatedAt* first = nullptr);
 
 class Refit {
  public:
