@@ -109,6 +109,24 @@ Eigen::VectorXd RandomLocation(const Machine& m, unsigned seed) {
   return th;
 }
 
+// Random errors the absorbed model represents: per rotary axis (along a
+// machine axis) its pivot and direction perpendicular to it, and the tool
+// tip (only its length on a head: the kinematics has no sideways tool offset).
+Eigen::VectorXd RandomRepresented(const Machine& m, unsigned seed) {
+  Eigen::VectorXd th = RandomLocation(m, seed);
+  th[m.RequireParameter("EB0X")] = 0;
+  bool head = false;
+  for (int k = 0; k < m.num_axes(); ++k) {
+    const Axis& a = m.axis(k);
+    if (!a.rotary() || a.name == 'S') continue;
+    head = head || m.on_tool_side(k);
+    for (int c = 0; c < 6; ++c)
+      if (std::abs(a.direction[c % 3]) > 0.99) th[m.location_index(k, c)] = 0;
+  }
+  if (head) th[m.tip_index()] = th[m.tip_index() + 1] = 0;
+  return th;
+}
+
 // Random error motions (polynomials) of the linear and rotary axes.
 Eigen::VectorXd RandomMotions(const Machine& m, unsigned seed) {
   std::mt19937 rng(seed);
@@ -207,12 +225,20 @@ TEST(VendorBeckhoff, RoundTripOnEveryTopology) {
       const Eigen::MatrixXd mine = V().ToolPoints(m, v, q, o);
       const Eigen::MatrixXd theirs = fivecal::ToolPoints(m, ab.theta, q);
       EXPECT_LT(MaxNorm(mine - theirs), 1e-9) << m.name() << " seed " << seed;
-      // The errors the model represents are all absorbed: the values
-      // reproduce the erroneous machine up to the work offset.
+      // What the model cannot represent is the absorption's residual.
       Eigen::MatrixXd truth = fivecal::ToolPoints(m, th, q);
       truth.rowwise() -= ab.workpiece_shift.transpose();
-      EXPECT_LT(MaxNorm(mine - truth), 1e-6) << m.name() << " seed " << seed;
+      EXPECT_LT(MaxNorm(mine - truth + ab.residual), 1e-9) << m.name() << " seed " << seed;
       EXPECT_GT(MaxNorm(fivecal::ToolPoints(m, th, q) - fivecal::ToolPoints(m, 0 * th, q)), 1e-2);
+      // The errors it represents are all absorbed: the values reproduce the
+      // erroneous machine up to the work offset.
+      if (m.name() == "KX8-like") continue;  // its A is at 45 deg: RandomRepresented is for machine axes
+      const Eigen::VectorXd rep = RandomRepresented(m, seed);
+      const Absorption ar = Absorb(m, vm.model, rep, q, ao);
+      Eigen::MatrixXd real = fivecal::ToolPoints(m, rep, q);
+      real.rowwise() -= ar.workpiece_shift.transpose();
+      EXPECT_LT(MaxNorm(V().ToolPoints(m, V().Map(m, MakeKinematicsTable(m, ar.theta), o), q, o) - real), 1e-6)
+          << m.name() << " seed " << seed;
     }
   }
 }
@@ -241,7 +267,7 @@ TEST(VendorBeckhoff, TablesCarryTheErrorMotions) {
     const VendorModel vm = V().Model(m, Opts(m));
     const Eigen::MatrixXd q = Poses(m, 150, 9);
     const Eigen::VectorXd motions = RandomMotions(m, 4);
-    const Eigen::VectorXd th = RandomLocation(m, 4) + motions;
+    const Eigen::VectorXd th = RandomRepresented(m, 4) + motions;
     ASSERT_EQ(WithoutErrorMotions(m, th), th - motions);
     AbsorbOptions ao;
     ao.directions = vm.directions;
@@ -271,7 +297,7 @@ TEST(VendorBeckhoff, TablesCarryTheErrorMotions) {
 
 TEST(VendorBeckhoff, TableValuesAreTheErrorMotionsOnTheGrid) {
   const Machine m = Example("hu40t");
-  const VendorOptions o = VolOpts(m, "error", "um,urad", 50, 30);
+  const VendorOptions o = VolOpts(m, "error", "um,urad", 50, 20);
   const Eigen::VectorXd th = Theta(m, {{"EXX1", 2e-5}, {"ECC2", 1e-6}, {"EYZ3", 1e-9}});
   const Eigen::VectorXd v = V().MapMotions(m, th, o);
   const std::vector<VendorValue> names = V().Values(m, o);
@@ -288,9 +314,9 @@ TEST(VendorBeckhoff, TableValuesAreTheErrorMotionsOnTheGrid) {
   const Eigen::VectorXd mapped = V().Map(m, MakeKinematicsTable(m, th), o);
   for (size_t i = 0; i < names.size(); ++i) {
     if (names[i].name == "X[0]") EXPECT_EQ(mapped[Eigen::Index(i)], -200);
-    if (names[i].name == "C[12]") EXPECT_EQ(mapped[Eigen::Index(i)], 180);
+    if (names[i].name == "C[18]") EXPECT_EQ(mapped[Eigen::Index(i)], 180);
   }
-  const Eigen::VectorXd corr = V().MapMotions(m, th, VolOpts(m, "correction", "um,urad", 50, 30));
+  const Eigen::VectorXd corr = V().MapMotions(m, th, VolOpts(m, "correction", "um,urad", 50, 20));
   EXPECT_LT((corr + v).cwiseAbs().maxCoeff(), 1e-15);
 }
 
@@ -322,7 +348,8 @@ TEST(VendorBeckhoff, TableOfMapIsTheTable) {
 // (d) The nominal machine: the machine file's geometry, in the manual's units.
 TEST(VendorBeckhoff, NominalMachineGivesTheMachineFilesGeometry) {
   const Machine m = Example("hu40t");  // wCBXfZYSt: C, B, X on the workpiece side
-  const VendorOptions o = Opts(m, 25);  // channel order XYZBC
+  VendorOptions o = Opts(m, 25);
+  o["axes"] = "XYZBC";
   const Eigen::VectorXd v = V().Map(m, MakeKinematicsTable(m, Eigen::VectorXd::Zero(m.num_parameters())), o);
   const std::vector<VendorValue> names = V().Values(m, o);
   std::map<std::string, double> at;
@@ -418,7 +445,7 @@ TEST(VendorBeckhoff, RefusesWhatItCannotStateOrSupport) {
   // Values of another machine or axis order are refused, naming the value.
   o = Opts(m);
   Eigen::VectorXd v = V().Map(m, MakeKinematicsTable(m, Eigen::VectorXd::Zero(m.num_parameters())), o);
-  v[1] = 3;  // chain[0]
+  v[1] = 0;  // chain[0]: X instead of C
   ExpectThrow([&] { V().Table(m, v, o); }, "kinematik[91].chain[0]");
   ExpectThrow([&] { V().ToolPoints(m, v.head(4), Poses(m, 2), o); }, "values: 4 given");
   // A pose outside the table grid.
