@@ -16,6 +16,7 @@
 #include "fivecal/controllers/kinematics_table.h"
 #include "fivecal/controllers/linuxcnc_5axis.h"
 #include "fivecal/controllers/linuxcnc_trt.h"
+#include "fivecal/controllers/vendor.h"
 #include "fivecal/model/machine.h"
 
 namespace py = pybind11;
@@ -56,6 +57,19 @@ py::dict TrtFitDict(TrtKins kins, const TrtFit& fit) {
   d["rms_held"] = fit.rms_held;
   d["max_held"] = fit.max_held;
   return d;
+}
+
+py::list VendorValueList(const std::vector<VendorValue>& values) {
+  py::list l;
+  for (const VendorValue& v : values) {
+    py::dict d;
+    d["name"] = v.name;
+    d["unit"] = v.unit;
+    d["source"] = v.source;
+    d["fixed"] = v.fixed;
+    l.append(d);
+  }
+  return l;
 }
 
 py::list ParameterList(const std::vector<ControllerParameter>& params) {
@@ -336,4 +350,130 @@ void BindControllers(py::module_& m) {
       py::arg("part_origin"), py::arg("part_rotation"), py::arg("axes"),
       "Tool points (N x 3, part frame) that a kinematics table describes for commands axes (N x "
       "rows, mm / degrees): each axis a screw about its line.");
+
+  // ---- controller vendors (vendor.h): one export path for every vendor ----
+  m.def(
+      "vendor_names",
+      [] {
+        std::vector<std::string> out;
+        for (const ControllerVendor* v : ControllerVendors()) out.push_back(v->Name());
+        return out;
+      },
+      "Names of the registered controller vendors.");
+
+  m.def(
+      "vendor_info",
+      [](const std::string& vendor) {
+        const ControllerVendor& v = FindVendor(vendor);
+        py::dict d;
+        d["name"] = v.Name();
+        d["title"] = v.Title();
+        d["options"] = v.OptionHelp();
+        return d;
+      },
+      py::arg("vendor"), "A vendor's title and the convention options it reads (key -> help).");
+
+  m.def(
+      "vendor_values",
+      [](const std::string& vendor, const Machine& mc, const Eigen::VectorXd& theta, const VendorOptions& o) {
+        const ControllerVendor& v = FindVendor(vendor);
+        if (theta.size() != mc.num_parameters())
+          throw std::invalid_argument("theta: expected " + std::to_string(mc.num_parameters()) + " values, got " +
+                                      std::to_string(theta.size()));
+        py::dict d;
+        d["values"] = VendorValueList(v.Values(mc, o));
+        d["model"] = ControllerModelName(v.Model(mc, o).model);
+        d["map"] = Eigen::VectorXd(v.Map(mc, MakeKinematicsTable(mc, theta), o));
+        return d;
+      },
+      py::arg("vendor"), py::arg("machine"), py::arg("theta"), py::arg("options") = VendorOptions{},
+      "The vendor's values (names, units, sources) for the machine and their numbers for the errors theta.");
+
+  m.def(
+      "vendor_tool_points",
+      [](const std::string& vendor, const Machine& mc, const Eigen::VectorXd& values, const Eigen::MatrixXd& q,
+         const VendorOptions& o) {
+        const ControllerVendor& v = FindVendor(vendor);
+        const size_t nv = v.Values(mc, o).size();
+        if (size_t(values.size()) != nv)
+          throw std::invalid_argument("values: expected " + std::to_string(nv) + " (" + vendor +
+                                      "'s values), got " + std::to_string(values.size()));
+        if (q.cols() != mc.num_axes())
+          throw std::invalid_argument("axes: expected " + std::to_string(mc.num_axes()) + " columns, got " +
+                                      std::to_string(q.cols()));
+        if (!values.allFinite() || !q.allFinite()) throw std::invalid_argument("values / axes: not all finite");
+        return Eigen::MatrixXd(v.ToolPoints(mc, values, q, o));
+      },
+      py::arg("vendor"), py::arg("machine"), py::arg("values"), py::arg("axes"),
+      py::arg("options") = VendorOptions{},
+      "The controller's own kinematics: tool points (N x 3, mm) for its values and the commands (N x axes).");
+
+  m.def(
+      "vendor_export",
+      [](const std::string& vendor, const Machine& mc, const Eigen::VectorXd& theta, const Eigen::MatrixXd& cov,
+         const Eigen::MatrixXd& poses, const VendorOptions& o, const Eigen::VectorXd& old_values) {
+        const ControllerVendor& v = FindVendor(vendor);
+        VendorExport ex;
+        Eigen::MatrixXd absorbed_cov;
+        {
+          py::gil_scoped_release release;
+          ex = ExportToVendor(mc, v, theta, cov, poses, o, old_values);
+          absorbed_cov = AbsorbedCovariance(ex, cov);
+        }
+        const Absorption& ab = ex.absorption;
+        py::dict a;
+        a["model"] = ControllerModelName(ab.model);
+        a["parameters"] = ParameterList(ab.parameters);
+        a["values"] = ab.values;
+        a["held"] = ab.held;
+        a["theta"] = ab.theta;
+        a["workpiece_shift"] = Eigen::Vector3d(ab.workpiece_shift);
+        a["residual"] = ab.residual;
+        a["residual_old"] = ab.residual_old;
+        a["rms"] = ab.rms;
+        a["max"] = ab.max;
+        a["rms_old"] = ab.rms_old;
+        a["max_old"] = ab.max_old;
+        a["trt"] = py::none();
+        py::dict d;
+        d["vendor"] = ex.vendor;
+        d["title"] = v.Title();
+        d["directions"] = ex.model.directions;
+        d["tool_length"] = ex.model.tool_length;
+        d["absorption"] = a;
+        d["values"] = VendorValueList(ex.values);
+        d["old"] = ex.old_values;
+        d["new"] = ex.new_values;
+        d["change"] = ex.change;
+        d["covariance"] = ex.covariance;
+        d["sigma"] = ex.sigma;
+        d["old_minus_nominal"] = ex.old_minus_nominal;
+        d["round_trip"] = ex.round_trip;
+        d["round_trip_max"] = ex.round_trip_max;
+        d["absorbed_covariance"] = absorbed_cov;
+        return d;
+      },
+      py::arg("vendor"), py::arg("machine"), py::arg("theta"), py::arg("covariance"), py::arg("poses"),
+      py::arg("options") = VendorOptions{}, py::arg("old_values") = Eigen::VectorXd(),
+      "One export path for every vendor: absorb theta into the vendor's model over the poses, the "
+      "vendor's values old / new / change with the change's covariance, and the round trip through "
+      "the vendor's own kinematics.");
+
+  m.def(
+      "vendor_to_theta",
+      [](const std::string& vendor, const Machine& mc, const Eigen::VectorXd& values, const Eigen::MatrixXd& poses,
+         const VendorOptions& o) {
+        const Absorption ab = VendorToTheta(mc, FindVendor(vendor), values, poses, o);
+        py::dict d;
+        d["theta"] = ab.theta;
+        d["workpiece_shift"] = Eigen::Vector3d(ab.workpiece_shift);
+        d["rms"] = ab.rms;
+        d["max"] = ab.max;
+        d["held"] = ab.held;
+        return d;
+      },
+      py::arg("vendor"), py::arg("machine"), py::arg("values"), py::arg("poses"),
+      py::arg("options") = VendorOptions{},
+      "The fivecal errors of the model a controller runs with these values (its own tool points "
+      "absorbed into its model over the poses); rms / max: what that model cannot represent.");
 }

@@ -95,6 +95,9 @@ def test_one_test_alone_reports_what_it_cannot_see(c600u):
     for n, v in seen.items():
         assert abs(r.values[n] - v) < 3 * r.std[n], (n, r.values[n], v, r.std[n])
     assert "K1" in only_c.report()
+    # the same request as one string, as identify takes it: the names, not their letters
+    as_text = rtest.evaluate(ds, estimate="EX0C, EY0C,EA0C EB0C")
+    assert as_text.result.values == pytest.approx(r.values)
 
 
 def test_bad_requests(c600u):

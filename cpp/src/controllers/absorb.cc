@@ -178,13 +178,23 @@ std::vector<ControllerParameter> ControllerParameters(const Machine& m, Controll
   return out;
 }
 
-Absorption Absorb(const Machine& m, ControllerModel model, const Eigen::VectorXd& theta_true,
-                  const Eigen::MatrixXd& poses, const AbsorbOptions& options) {
+namespace {
+
+// The absorption of `truth` (N x 3) with the columns it kept (parameters
+// first then the shift, as indices into [phi, shift]) and their Jacobian at
+// the solution, for the sensitivity.
+Absorption AbsorbPoints(const Machine& m, ControllerModel model, const Eigen::MatrixXd& truth,
+                        const Eigen::MatrixXd& poses, const AbsorbOptions& options,
+                        std::vector<Eigen::Index>* kept, Eigen::MatrixXd* jacobian_kept) {
   Absorption ab;
   ab.model = model;
   ab.parameters = ControllerParameters(m, model, options.directions, options.tool_length);
   if (poses.rows() < 1) throw std::invalid_argument("poses: none given");
-  const Eigen::MatrixXd truth = ToolPoints(m, theta_true, poses);  // validates theta and poses
+  if (truth.rows() != poses.rows() || truth.cols() != 3)
+    throw std::invalid_argument("tool points: expected " + std::to_string(poses.rows()) +
+                                " x 3 (one row per pose), got " + std::to_string(truth.rows()) + " x " +
+                                std::to_string(truth.cols()));
+  if (!truth.allFinite()) throw std::invalid_argument("tool points: not all finite");
   const int nt = m.num_parameters();
   const Eigen::Index n = poses.rows(), k = Eigen::Index(ab.parameters.size());
   Eigen::MatrixXd B(nt, k);
@@ -240,10 +250,41 @@ Absorption Absorb(const Machine& m, ControllerModel model, const Eigen::VectorXd
   ab.residual_old.rowwise() -= mean;
   Stats(ab.residual, &ab.rms, &ab.max);
   Stats(ab.residual_old, &ab.rms_old, &ab.max_old);
+  if (kept) *kept = keep;
+  if (jacobian_kept) {
+    jacobian(phi);
+    for (size_t j = 0; j < keep.size(); ++j) Jk.col(Eigen::Index(j)) = J.col(keep[j]);
+    *jacobian_kept = Jk;
+  }
+  return ab;
+}
+
+}  // namespace
+
+Absorption Absorb(const Machine& m, ControllerModel model, const Eigen::VectorXd& theta_true,
+                  const Eigen::MatrixXd& poses, const AbsorbOptions& options) {
+  if (poses.rows() < 1) throw std::invalid_argument("poses: none given");
+  const Eigen::MatrixXd truth = ToolPoints(m, theta_true, poses);  // validates theta and poses
+  std::vector<Eigen::Index> keep;
+  Eigen::MatrixXd Jk;
+  Absorption ab = AbsorbPoints(m, model, truth, poses, options, &keep, &Jk);
+  // Gauss-Newton at the solution: d[phi_kept, shift_kept] = pinv(Jk) dP/dtheta d theta_true.
+  const int nt = m.num_parameters();
+  const Eigen::MatrixXd Jt = Jacobian(m, theta_true, Eigen::MatrixXd::Identity(nt, nt), poses);
+  const Eigen::MatrixXd S = Jk.colPivHouseholderQr().solve(Jt);
+  const Eigen::Index k = Eigen::Index(ab.parameters.size());
+  ab.sensitivity = Eigen::MatrixXd::Zero(k, nt);
+  for (size_t j = 0; j < keep.size(); ++j)
+    if (keep[j] < k) ab.sensitivity.row(keep[j]) = S.row(Eigen::Index(j));
   if (model == ControllerModel::kXyzacTrt || model == ControllerModel::kXyzbcTrt)
     ab.trt = FitTrtPins(m, model == ControllerModel::kXyzacTrt ? TrtKins::kXyzac : TrtKins::kXyzbc,
                         theta_true, poses, options.held_pins);
   return ab;
+}
+
+Absorption AbsorbToolPoints(const Machine& m, ControllerModel model, const Eigen::MatrixXd& truth,
+                            const Eigen::MatrixXd& poses, const AbsorbOptions& options) {
+  return AbsorbPoints(m, model, truth, poses, options, nullptr, nullptr);
 }
 
 }  // namespace controllers

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 
 from .. import files
@@ -51,6 +52,93 @@ def _run(args) -> int:
         print(f"{args.out}: replaced the earlier export ({', '.join(exp.replaced)})")
     print(f"files in {args.out}; recipe: `fivecal docs linuxcnc`")
     return 0
+
+
+#: the controller vendors' file writers (python/fivecal/io/<vendor>.py): each
+#: has ``write(exp, machine) -> {suffix: text}`` and ``read(path) -> {name: value}``;
+#: the numerics behind them are the core's one export path (``vendor.h``)
+WRITERS: dict = {
+}
+
+#: units of vendor values and (limit unit, factor to it) for the plausibility
+#: guard; a direction vector's components change like an angle in rad
+_GUARD_UNITS = {"mm": ("mm", 1.0), "um": ("mm", 1e-3), "µm": ("mm", 1e-3), "0.001mm": ("mm", 1e-3),
+                "0.0001mm": ("mm", 1e-4), "rad": ("rad", 1.0), "urad": ("rad", 1e-6), "µrad": ("rad", 1e-6),
+                "deg": ("rad", math.pi / 180), "0.001deg": ("rad", math.pi / 180e3),
+                "0.0001deg": ("rad", math.pi / 180e4), "": ("rad", 1.0)}
+
+
+def _options(items) -> dict:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise ValueError(f"--set: expected KEY=VALUE, got '{item}'")
+        k, v = item.split("=", 1)
+        if not k.strip():
+            raise ValueError(f"--set: expected KEY=VALUE, got '{item}'")
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _guarded(values, key: str):
+    """(name, change in the guard's unit, guard unit) of the values an export changes."""
+    out = []
+    for v in values:
+        if v["fixed"]:
+            continue
+        if v["unit"] not in _GUARD_UNITS:
+            raise ValueError(f"{v['name']}: unit '{v['unit']}' is not one the plausibility guard knows")
+        unit, f = _GUARD_UNITS[v["unit"]]
+        out.append((v["name"], v[key] * f, unit))
+    return out
+
+
+def _run_vendor(args) -> int:
+    writer = WRITERS[args.vendor]
+    machine = _read_machine(args.machine)
+    errors = usable_errors(args.result, machine, args.force, args.result)
+    try:
+        cov = K.result_covariance(args.result, machine)
+    except ValueError as e:
+        if not args.force:
+            raise ValueError(f"{e}; --force exports without the change's uncertainty") from None
+        cov = None
+    volume = _volume(args.volume) if args.volume else None
+    limits = L.parse_max_change(args.max_change, angular=True)
+    old = writer.read(args.old) if args.old else None
+    exp = K.vendor_export(machine, args.vendor, errors, cov, poses=K.pose_grid(machine, volume),
+                          options=_options(args.set), old=old)
+    exp.result = os.fspath(args.result) if isinstance(args.result, (str, os.PathLike)) else ""
+    if old is not None:
+        # the identification is relative to the machine file: a controller
+        # running other values than the file states has another nominal
+        differs = [dict(v, change=float(d)) for v, d in zip(exp.values, exp.old_minus_nominal)]
+        L.check_changes(f"--old {args.old} against the machine file {args.machine} (the identified errors are "
+                        "relative to the machine file: make it describe what the controller runs, or --force)",
+                        _guarded(differs, "change"), limits, args.force)
+    L.check_changes(f"{args.vendor} values", _guarded(exp.values, "change"), limits, args.force)
+    contents = {f"{args.vendor}{suffix}": text for suffix, text in writer.write(exp, machine).items()}
+    contents["export.json"] = json.dumps(exp.record(), indent=1) + "\n"
+    _write_vendor_folder(args.out, contents)
+    print(exp.report())
+    print(f"written to {args.out}: {', '.join(sorted(contents))}; verify after loading: `fivecal docs controllers`")
+    return 0
+
+
+def _write_vendor_folder(out: str, contents: dict) -> None:
+    """The export's folder, all or nothing; one holding files an export did
+    not write is refused, naming one."""
+    dest = os.path.realpath(out)
+    if os.path.lexists(dest):
+        if not os.path.isdir(dest):
+            raise ValueError(f"--out {out}: exists and is not a folder")
+        own = set(contents) | {"export.json"}
+        foreign = [n for n in sorted(os.listdir(dest))
+                   if n not in own and not any(n.startswith(v + ".") for v in WRITERS)]
+        if foreign:
+            raise ValueError(f"--out {out}: holds {foreign[0]}, which fivecal export did not write; it replaces "
+                             "only a folder of its own files: choose a new or empty folder")
+    files.write_folder(dest, contents, f"--out {out}")
 
 
 def _run_kinematics(args) -> int:
@@ -168,6 +256,41 @@ def _program_text(args, program, machine, plan, artefact, tip) -> str:
     return D.dbb_program(machine, plan, feed=feed, feed_in=args.feed_in, tolerance=tol)
 
 
+def _register_vendor(esub, RD, vendor: str, writer) -> None:
+    info = K.vendor_info(vendor)
+    opts = "\n".join(f"  --set {k}=...  {h}" for k, h in sorted(info["options"].items()))
+    pv = esub.add_parser(
+        vendor, formatter_class=RD, help=info["title"],
+        description=f"{info['title']}: the values that best absorb the identified errors over the working "
+        "volume (least squares through the controller's own kinematic model), old beside new, the change's "
+        "1σ from the identification's covariance, the tool-point error the controller's model cannot absorb, "
+        "and the round trip through the controller's kinematics as the manual defines it. Writes the "
+        f"controller's file(s) and export.json (the record `fivecal sphere-check --expect` verifies after "
+        "loading). Refuses a result that is not usable and a change beyond --max-change unless --force; "
+        "where the public manual leaves a convention open, it asks for it (--set). Sources and recipe: "
+        "`fivecal docs controllers`." + (f"\n\nconventions (--set KEY=VALUE):\n{opts}" if opts else ""),
+        epilog=f"example:\n  fivecal export {vendor} result.json --machine machine.json --out {vendor}-export/")
+    pv.add_argument("result", help="result document of any fivecal procedure (identify, sphere-check, ...; --out)")
+    pv.add_argument("--machine", required=True, help="machine definition JSON (or a dataset JSON): what the "
+                    "controller runs now")
+    pv.add_argument("--out", required=True, help="folder to write the files into (a folder of an earlier "
+                    "export is replaced, all or nothing; one holding other files is refused)")
+    pv.add_argument("--set", action="append", metavar="KEY=VALUE", help="a convention the public manual "
+                    "leaves open (repeat for several; the keys are listed above)")
+    pv.add_argument("--old", metavar="FILE", help=f"the controller's current values: a file of the format "
+                    f"this export writes (default: the machine file's nominal geometry)")
+    pv.add_argument("--volume", metavar="RANGES", help="working volume of the fit, e.g. "
+                    "X=-200:200,B=-90:30 (mm, degrees; default linear +-100, a rotary axis along z a "
+                    "full turn, other rotary axes -90:90)")
+    pv.add_argument("--max-change", default=f"{L.DEFAULT_MAX_CHANGE},{L.DEFAULT_MAX_CHANGE_RAD}",
+                    help=f"plausibility limit on any value's change, MM[,RAD] (default {L.DEFAULT_MAX_CHANGE} "
+                    f"mm, {L.DEFAULT_MAX_CHANGE_RAD} rad; degrees and direction components by their angle; "
+                    "'off' switches it off)")
+    pv.add_argument("--force", action="store_true", help="use a result that is not usable, without a "
+                    "covariance, or exceed --max-change; only to inspect the values")
+    pv.set_defaults(func=_run_vendor, vendor=vendor, out_is_folder=True)
+
+
 def register(sub) -> None:
     """Add ``export`` (with ``export linuxcnc``) to the main parser's subparsers."""
     RD = argparse.RawDescriptionHelpFormatter
@@ -235,6 +358,8 @@ def register(sub) -> None:
     pk.add_argument("--force", action="store_true", help="use a result that is not usable or exceed "
                     "--max-change; only to inspect the values")
     pk.set_defaults(func=_run_kinematics)
+    for vendor, writer in WRITERS.items():
+        _register_vendor(esub, RD, vendor, writer)
     pp = esub.add_parser(
         "program", formatter_class=RD,
         help="ISO G-code that runs a test plan: probing, sphere cycle, R-test, ball bar",

@@ -37,12 +37,13 @@ Units: mm, degrees for rotary commands, rad for angular parameters.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from typing import List, Mapping, Optional, Tuple
 
 import numpy as np
 
-from .. import _core
+from .. import _core, files
 from ..compensation import compensate_poses
 from ..machine import Machine
 
@@ -445,3 +446,207 @@ def export_csv(machine: Machine, ab: Absorption) -> str:
         w.writerow([r["axis"], r["chain"], r["value"], repr(r["old"]), repr(r["new"]), repr(r["change"]),
                     r["siemens"], r["heidenhain"]])
     return buf.getvalue()
+
+
+# ---- controller vendors: one export path for every vendor --------------------
+
+def vendor_names() -> List[str]:
+    """The controller vendors fivecal exports to (``fivecal export <vendor>``)."""
+    return list(_core.vendor_names())
+
+
+def vendor_info(vendor: str) -> dict:
+    """A vendor's title and the convention options it reads (key -> help)."""
+    return dict(_core.vendor_info(vendor))
+
+
+def result_covariance(source, machine: Machine) -> np.ndarray:
+    """(P, P) covariance of the machine's parameters (``machine.parameter_names()``
+    order) from a result document (path, dict or :class:`fivecal.Result`): the
+    estimated parameters' ``std`` and ``correlation``; rows of parameters not
+    estimated, and of set-up parameters the machine does not have, are 0 (what
+    a controller export propagates is the identification's uncertainty of
+    what was estimated). A document without std or correlation is a
+    ValueError naming what is missing."""
+    names = machine.parameter_names()
+    index = {n: i for i, n in enumerate(names)}
+    if hasattr(source, "estimated") and hasattr(source, "std") and hasattr(source, "correlation"):
+        estimated, std, corr = list(source.estimated), dict(source.std), np.asarray(source.correlation, float)
+        where = "result"
+    else:
+        where = os.fspath(source) if isinstance(source, (str, os.PathLike)) else "result"
+        doc = files.read_json(where, "result") if isinstance(source, (str, os.PathLike)) else source
+        if not isinstance(doc, Mapping):
+            raise ValueError(f"{where}: expected a result document (a JSON object)")
+        estimated = list(doc.get("estimated") or [])
+        params = doc.get("parameters") or {}
+        std = {n: p.get("std") for n, p in params.items() if isinstance(p, Mapping)}
+        raw = doc.get("correlation")
+        if not estimated or raw is None:
+            raise ValueError(f"{where}: no 'estimated' parameters with a 'correlation' matrix: the change's "
+                             "uncertainty needs the identification's covariance (a result document of "
+                             "fivecal identify or of a procedure that writes one)")
+        corr = np.array([[np.nan if v is None else v for v in row] for row in raw], dtype=float)
+    n = len(estimated)
+    if corr.shape != (n, n):
+        raise ValueError(f"{where}: correlation is {corr.shape[0]} x {corr.shape[1] if corr.ndim > 1 else 0}, "
+                         f"but {n} parameters are estimated")
+    s = np.array([np.nan if std.get(e) is None else float(std[e]) for e in estimated])
+    cov = np.zeros((len(names), len(names)))
+    keep = [k for k, e in enumerate(estimated) if e in index]
+    for k in keep:
+        if not (math.isfinite(s[k]) and s[k] >= 0):
+            raise ValueError(f"{where}: parameters.{estimated[k]}.std: expected a finite std, got {std.get(estimated[k])!r}")
+    sub = corr[np.ix_(keep, keep)] * np.outer(s[keep], s[keep])
+    if not np.all(np.isfinite(sub)):
+        raise ValueError(f"{where}: correlation: not all finite for the machine's parameters")
+    idx = [index[estimated[k]] for k in keep]
+    cov[np.ix_(idx, idx)] = sub
+    return cov
+
+
+@dataclass
+class VendorExport:
+    """The identified kinematics in a controller vendor's own terms (the
+    core's ``ExportToVendor``): the vendor's values old / new / change with
+    the change's 1σ, the absorption (what the controller's model leaves),
+    the round trip through the vendor's own kinematics, and the fivecal
+    parameters the new values compensate (``absorbed``, for verification
+    after loading)."""
+
+    vendor: str
+    title: str
+    machine: str
+    model: str
+    options: dict
+    values: List[dict]                 # name, unit, source, fixed, old, new, change, sigma
+    absorption: Absorption
+    covariance: np.ndarray = field(repr=False)   # of the change
+    round_trip_max: float = 0.0                  # mm
+    absorbed: dict = field(default_factory=dict, repr=False)  # names, change, covariance
+    old_minus_nominal: np.ndarray = field(default=None, repr=False)
+    result: str = ""                             # the result document it came from (for the files' headers)
+
+    def value(self, name: str) -> dict:
+        for v in self.values:
+            if v["name"] == name:
+                return v
+        raise KeyError(name)
+
+    def record(self) -> dict:
+        """The common export record (``DIR/export.json``) that verification
+        after loading reads (``fivecal sphere-check --expect``)."""
+        ab = self.absorption
+        by = {a: [{"lo": lo, "hi": hi, "rms_mm": r, "max_mm": mx} for lo, hi, r, mx in ab.by_region(a)]
+              for a in ab.poses if a != "S" and np.ptp(ab.poses[a]) > 0}
+        clean = lambda x: None if x is None or not math.isfinite(x) else float(x)  # noqa: E731
+        return {"kind": "fivecal controller export", "vendor": self.vendor, "title": self.title,
+                "machine": self.machine, "result": self.result, "model": self.model, "options": dict(self.options),
+                "values": [{k: (clean(v[k]) if isinstance(v[k], float) else v[k]) for k in v}
+                           for v in self.values],
+                "absorbed": {"names": list(self.absorbed["names"]),
+                             "change": [float(v) for v in self.absorbed["change"]],
+                             "covariance": [[clean(x) for x in row] for row in self.absorbed["covariance"]]},
+                "workpiece_shift_mm": [float(v) for v in ab.workpiece_shift],
+                "residual": {"poses": len(ab.residual), "rms_old_mm": ab.rms_old, "max_old_mm": ab.max_old,
+                             "rms_mm": ab.rms, "max_mm": ab.max, "by_region": by},
+                "round_trip_max_mm": float(self.round_trip_max)}
+
+    def report(self) -> str:
+        """Text summary: values old / new / change ± 1σ, then what the
+        controller's model leaves (the absorption's report)."""
+        lines = [f"{self.title} ({self.machine}; fivecal model {self.model})",
+                 f"{'value':<34}{'unit':<6}{'old':>14}{'new':>14}{'change':>12}{'± 1σ':>10}"]
+        for v in self.values:
+            if v["fixed"]:
+                lines.append(f"{v['name']:<34}{v['unit']:<6}{v['new']:>14g}{'(code)':>26}")
+                continue
+            sig = "" if v["sigma"] is None or not math.isfinite(v["sigma"]) else f"{v['sigma']:.3g}"
+            lines.append(f"{v['name']:<34}{v['unit']:<6}{v['old']:>14.6f}{v['new']:>14.6f}"
+                         f"{v['change']:>+12.6f}{sig:>10}")
+        lines.append(f"round trip through the controller's own kinematics: {1000 * self.round_trip_max:.3g} um "
+                     "at most over the poses")
+        lines.append(self.absorption.report())
+        return "\n".join(lines)
+
+
+def vendor_export(machine: Machine, vendor: str, errors=None, covariance: Optional[np.ndarray] = None,
+                  poses: Optional[Mapping] = None, options: Optional[Mapping[str, str]] = None,
+                  old: Optional[Mapping[str, float]] = None) -> VendorExport:
+    """The identified errors in ``vendor``'s own terms (``fivecal export
+    <vendor>``; docs/controllers.md): the core's one export path (absorb into
+    the model the vendor's kinematics represents over ``poses``, default
+    :func:`pose_grid`; the vendor's values old / new / change; the change's
+    covariance from ``covariance``, the identification's (P, P), see
+    :func:`result_covariance`; the round trip through the vendor's own
+    kinematics). ``options``: the conventions the user states (``--set``);
+    ``old``: the controller's current values by name (default: the nominal
+    machine's), a name the vendor does not have, or a missing one, is a
+    ValueError naming it."""
+    poses = poses if poses is not None else pose_grid(machine)
+    q = machine.axes_matrix(poses)
+    opts = {str(k): str(v) for k, v in (options or {}).items()}
+    theta = machine.theta(errors)
+    cov = np.zeros((0, 0)) if covariance is None else np.asarray(covariance, dtype=float)
+    old_vec = np.zeros(0)
+    if old is not None:
+        info = _core.vendor_values(vendor, machine._core, np.zeros(len(theta)), opts)
+        names = [v["name"] for v in info["values"]]
+        unknown = [n for n in old if n not in names]
+        if unknown:
+            raise ValueError(f"old values: '{unknown[0]}' is not a {vendor} value for machine '{machine.name}' "
+                             f"(its values: {', '.join(names)})")
+        missing = [v["name"] for v in info["values"] if v["name"] not in old and not v["fixed"]]
+        if missing:
+            raise ValueError(f"old values: '{missing[0]}' missing (the controller's current value is needed for "
+                             f"every value it changes{f'; {len(missing) - 1} more' if len(missing) > 1 else ''})")
+        old_vec = np.array([float(old.get(n, info["map"][k])) for k, n in enumerate(names)])
+    d = _core.vendor_export(vendor, machine._core, theta, cov, q, opts, old_vec)
+    a = d["absorption"]
+    params = [Parameter(p["label"], p["unit"], np.asarray(p["column"])) for p in a["parameters"]]
+    ab = Absorption(model=a["model"], parameters=params, values=np.asarray(a["values"]), held=list(a["held"]),
+                    theta=np.asarray(a["theta"]), workpiece_shift=np.asarray(a["workpiece_shift"]),
+                    residual=np.asarray(a["residual"]), residual_old=np.asarray(a["residual_old"]),
+                    poses=machine.axes_dict(q), rms=a["rms"], max=a["max"], rms_old=a["rms_old"],
+                    max_old=a["max_old"])
+    values = []
+    for k, v in enumerate(d["values"]):
+        values.append({"name": v["name"], "unit": v["unit"], "source": v["source"], "fixed": bool(v["fixed"]),
+                       "old": float(d["old"][k]), "new": float(d["new"][k]), "change": float(d["change"][k]),
+                       "sigma": float(d["sigma"][k])})
+    names = machine.parameter_names()
+    theta_abs = np.asarray(a["theta"])
+    moved = [i for i in range(len(names)) if any(abs(p.column[i]) > 0 for p in params)]
+    acov = np.asarray(d["absorbed_covariance"])
+    absorbed = {"names": [names[i] for i in moved], "change": theta_abs[moved],
+                "covariance": acov[np.ix_(moved, moved)] if acov.size else np.full((len(moved), len(moved)), np.nan)}
+    return VendorExport(vendor=vendor, title=d["title"], machine=machine.name, model=a["model"], options=opts,
+                        values=values, absorption=ab, covariance=np.asarray(d["covariance"]),
+                        round_trip_max=float(d["round_trip_max"]), absorbed=absorbed,
+                        old_minus_nominal=np.asarray(d["old_minus_nominal"]))
+
+
+def vendor_tool_points(machine: Machine, vendor: str, values, axes: Mapping,
+                       options: Optional[Mapping[str, str]] = None) -> np.ndarray:
+    """(N, 3) mm: the tool points the controller's own kinematics gives with
+    ``values`` (in the order of its values) for the axis commands ``axes``, in
+    the controller's workpiece frame (docs/controllers.md)."""
+    return np.asarray(_core.vendor_tool_points(vendor, machine._core, np.asarray(values, float),
+                                               machine.axes_matrix(axes),
+                                               {str(k): str(v) for k, v in (options or {}).items()}))
+
+
+def vendor_to_theta(machine: Machine, vendor: str, values, poses: Optional[Mapping] = None,
+                    options: Optional[Mapping[str, str]] = None) -> dict:
+    """What a controller running ``values`` does in fivecal's terms: the
+    errors (name -> value) of the model its kinematics represents, fitted to
+    its own tool points over ``poses``; ``rms_mm`` / ``max_mm``: what that
+    model cannot represent of them (0 for values a fivecal export wrote)."""
+    poses = poses if poses is not None else pose_grid(machine)
+    d = _core.vendor_to_theta(vendor, machine._core, np.asarray(values, float), machine.axes_matrix(poses),
+                              {str(k): str(v) for k, v in (options or {}).items()})
+    names = machine.parameter_names()
+    th = np.asarray(d["theta"])
+    return {"errors": {n: float(v) for n, v in zip(names, th) if v != 0.0}, "theta": th,
+            "workpiece_shift": np.asarray(d["workpiece_shift"]), "rms_mm": float(d["rms"]),
+            "max_mm": float(d["max"]), "held": list(d["held"])}

@@ -192,7 +192,7 @@ def location_errors(machine: Machine) -> List[str]:
 
 
 def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
-             estimate: Optional[Sequence[str]] = None) -> RTestResult:
+             estimate: Union[None, str, Sequence[str]] = None) -> RTestResult:
     """The deviation range of each test (observations grouped by ``setup``)
     in X, Y and Z, and, with ``identify``, the location errors of the rotary
     axes fitted to all tests at once (``estimate``: default
@@ -200,7 +200,10 @@ def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
     fit, as for any ball3d data). The evaluation is the core's
     (``procedures/rtest.h`` EvaluateRTest). Raises ValueError without ball3d data."""
     ds = Dataset.from_dict(dataset)
-    core = _core.rtest(ds._core, bool(identify), [str(n) for n in (estimate or [])])
+    # a string names parameters as identify's does ("EX0C,EY0C"), never its letters
+    names = [s for s in estimate.replace(",", " ").split() if s] if isinstance(estimate, str) else \
+        [str(n) for n in (estimate or [])]
+    core = _core.rtest(ds._core, bool(identify), names)
     tests = {g.name: KTest(g.name, len(g.observations), np.asarray(g.ranges), np.asarray(g.deviations))
              for g in core.tests}
     out = RTestResult(tests)

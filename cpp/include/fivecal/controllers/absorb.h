@@ -80,12 +80,23 @@ struct Absorption {
   Eigen::MatrixXd residual_old;       // N x 3 mm: with the nominal model, mean removed
   double rms = 0, max = 0, rms_old = 0, max_old = 0;
   std::optional<TrtFit> trt;          // the pins, for xyzac-trt / xyzbc-trt
+  // d values / d theta_true (k x num_parameters) at the solution, the
+  // Gauss-Newton linearisation: how the identification's covariance reaches
+  // the controller values (rows of held values are 0). Empty when the truth
+  // came as tool points (AbsorbToolPoints).
+  Eigen::MatrixXd sensitivity;
 };
 
 // The least-squares absorption of the errors `theta` (the identified
 // machine's full parameter vector) over `poses` (N x num_axes, mm / degrees).
 Absorption Absorb(const Machine& m, ControllerModel model, const Eigen::VectorXd& theta,
                   const Eigen::MatrixXd& poses, const AbsorbOptions& options = AbsorbOptions());
+
+// The same absorption of given tool points (N x 3, mm, the part frame) at
+// `poses`, for a truth that is not a fivecal machine (a controller's own
+// kinematics with its values: VendorToTheta). No trt pins, no sensitivity.
+Absorption AbsorbToolPoints(const Machine& m, ControllerModel model, const Eigen::MatrixXd& truth,
+                            const Eigen::MatrixXd& poses, const AbsorbOptions& options = AbsorbOptions());
 
 }  // namespace controllers
 }  // namespace fivecal

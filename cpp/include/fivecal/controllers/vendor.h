@@ -95,8 +95,13 @@ class ControllerVendor {
   }
 
   // The controller's own kinematic transformation from its manual: the tool
-  // points (N x 3, mm, fivecal's part frame at the zero pose) that `values`
-  // give for the machine's commands q (N x m.num_axes(), mm / degrees).
+  // points (N x 3, mm) that `values` give for the machine's commands q
+  // (N x m.num_axes(), mm / degrees), in the controller's workpiece frame:
+  // the machine frame at the zero pose, carried by the workpiece chain (a
+  // controller knows no part frame; the work offset the user probes is it).
+  // fivecal's part frame differs from it by KinematicsTable::part_origin /
+  // part_rotation (a table axis's location error moves the part with it);
+  // ExportToVendor and VendorToTheta apply that, not the vendor.
   virtual Eigen::MatrixXd ToolPoints(const Machine& m, const Eigen::VectorXd& values,
                                      const Eigen::MatrixXd& q, const VendorOptions& o) const = 0;
 };
@@ -133,6 +138,11 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor,
                             const Eigen::VectorXd& theta_e, const Eigen::MatrixXd& theta_covariance,
                             const Eigen::MatrixXd& poses, const VendorOptions& options,
                             const Eigen::VectorXd& old_values = Eigen::VectorXd());
+
+// The covariance (num_parameters square) of the absorbed model's errors
+// (Absorption::theta): what the new values compensate, as fivecal
+// parameters, for verification after loading. Empty covariance: NaN.
+Eigen::MatrixXd AbsorbedCovariance(const VendorExport& ex, const Eigen::MatrixXd& theta_covariance);
 
 // What a controller running `values` does, in fivecal's terms: the vendor's
 // own tool points (ToolPoints(values)) over the poses absorbed into the
