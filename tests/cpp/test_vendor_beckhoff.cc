@@ -145,6 +145,14 @@ Eigen::VectorXd RandomMotions(const Machine& m, unsigned seed) {
 
 double MaxNorm(const Eigen::MatrixXd& d) { return d.rowwise().norm().maxCoeff(); }
 
+// Controller-frame points (vendor.h: the machine frame at the zero pose,
+// carried by the workpiece chain) in the part frame of the model theta,
+// where fivecal's tool points are.
+Eigen::MatrixXd InPart(const Machine& m, const Eigen::VectorXd& theta, const Eigen::MatrixXd& points) {
+  const KinematicsTable t = MakeKinematicsTable(m, theta);
+  return (points.rowwise() - t.part_origin.transpose()) * t.part_rotation;
+}
+
 Eigen::VectorXd Named(const std::vector<VendorValue>& names, const std::map<std::string, double>& set) {
   Eigen::VectorXd v = Eigen::VectorXd::Zero(Eigen::Index(names.size()));
   std::map<std::string, double> left = set;
@@ -222,7 +230,7 @@ TEST(VendorBeckhoff, RoundTripOnEveryTopology) {
       ao.tool_length = vm.tool_length;
       const Absorption ab = Absorb(m, vm.model, th, q, ao);
       const Eigen::VectorXd v = V().Map(m, MakeKinematicsTable(m, ab.theta), o);
-      const Eigen::MatrixXd mine = V().ToolPoints(m, v, q, o);
+      const Eigen::MatrixXd mine = InPart(m, ab.theta, V().ToolPoints(m, v, q, o));
       const Eigen::MatrixXd theirs = fivecal::ToolPoints(m, ab.theta, q);
       EXPECT_LT(MaxNorm(mine - theirs), 1e-9) << m.name() << " seed " << seed;
       // What the model cannot represent is the absorption's residual.
@@ -237,7 +245,8 @@ TEST(VendorBeckhoff, RoundTripOnEveryTopology) {
       const Absorption ar = Absorb(m, vm.model, rep, q, ao);
       Eigen::MatrixXd real = fivecal::ToolPoints(m, rep, q);
       real.rowwise() -= ar.workpiece_shift.transpose();
-      EXPECT_LT(MaxNorm(V().ToolPoints(m, V().Map(m, MakeKinematicsTable(m, ar.theta), o), q, o) - real), 1e-6)
+      EXPECT_LT(MaxNorm(InPart(m, ar.theta, V().ToolPoints(m, V().Map(m, MakeKinematicsTable(m, ar.theta), o), q, o)) -
+                        real), 1e-6)
           << m.name() << " seed " << seed;
     }
   }
@@ -279,7 +288,7 @@ TEST(VendorBeckhoff, TablesCarryTheErrorMotions) {
       for (const char* units : {"mm,rad", "um,urad"}) {
         const VendorOptions o = VolOpts(m, mode, units, 2, 1);
         const Eigen::VectorXd v = V().Map(m, MakeKinematicsTable(m, ab.theta), o) + V().MapMotions(m, th, o);
-        const Eigen::MatrixXd mine = V().ToolPoints(m, v, q, o);
+        const Eigen::MatrixXd mine = InPart(m, ab.theta, V().ToolPoints(m, v, q, o));
         // Linear interpolation (2 mm, 1 deg) of cubics of tens of um, plus the
         // second-order terms of two small errors: well under 0.1 um.
         EXPECT_LT(MaxNorm(mine - model), 1e-4) << m.name() << " " << mode << " " << units;
@@ -289,9 +298,10 @@ TEST(VendorBeckhoff, TablesCarryTheErrorMotions) {
     // table of the wrong sign doubles them.
     const VendorOptions o = VolOpts(m, "error", "mm,rad", 2, 1);
     const Eigen::VectorXd kin = V().Map(m, MakeKinematicsTable(m, ab.theta), o);
-    EXPECT_GT(MaxNorm(V().ToolPoints(m, kin, q, o) - truth), 5e-3) << m.name();
+    const auto part = [&](const Eigen::VectorXd& v) { return InPart(m, ab.theta, V().ToolPoints(m, v, q, o)); };
+    EXPECT_GT(MaxNorm(part(kin) - truth), 5e-3) << m.name();
     const Eigen::VectorXd flipped = kin - V().MapMotions(m, th, o);
-    EXPECT_GT(MaxNorm(V().ToolPoints(m, flipped, q, o) - truth), 1.5 * MaxNorm(V().ToolPoints(m, kin, q, o) - truth));
+    EXPECT_GT(MaxNorm(part(flipped) - truth), 1.5 * MaxNorm(part(kin) - truth));
   }
 }
 
@@ -336,12 +346,14 @@ TEST(VendorBeckhoff, TableOfMapIsTheTable) {
     EXPECT_LT((back.tool_tip - t.tool_tip).norm(), 1e-12);
     EXPECT_LT((back.tool_axis - t.tool_axis).norm(), 1e-12);
     // An erroneous table (its part frame moved by the table axes' errors)
-    // comes back in the part frame: the same tool points.
+    // comes back in the machine frame: the same tool points up to the part frame.
     const KinematicsTable te = MakeKinematicsTable(m, RandomLocation(m, 11));
     const Eigen::MatrixXd q = Poses(m, 40);
     Eigen::MatrixXd qt(q.rows(), Eigen::Index(te.axes.size()));
     for (size_t i = 0; i < te.axes.size(); ++i) qt.col(Eigen::Index(i)) = q.col(m.AxisIndex(te.axes[i].axis));
-    EXPECT_LT(MaxNorm(TableToolPoints(te, qt) - TableToolPoints(V().Table(m, V().Map(m, te, o), o), qt)), 1e-9);
+    const Eigen::MatrixXd back_points = TableToolPoints(V().Table(m, V().Map(m, te, o), o), qt);
+    EXPECT_LT(MaxNorm(TableToolPoints(te, qt) - (back_points.rowwise() - te.part_origin.transpose()) * te.part_rotation),
+              1e-9);
   }
 }
 
@@ -374,7 +386,7 @@ TEST(VendorBeckhoff, NominalMachineGivesTheMachineFilesGeometry) {
   for (const VendorValue& val : names) {
     EXPECT_NE(val.source.find("infosys.beckhoff.com"), std::string::npos) << val.name;
     if (val.name.find("zero_position") != std::string::npos || val.name.find("point") != std::string::npos) {
-      EXPECT_EQ(val.unit, "0.1 um");
+      EXPECT_EQ(val.unit, "0.0001mm");  // 0.1 um, as the export guard names it
     }
   }
 }
@@ -454,6 +466,47 @@ TEST(VendorBeckhoff, RefusesWhatItCannotStateOrSupport) {
   Eigen::MatrixXd q = Poses(m, 1);
   q(0, m.AxisIndex('X')) = 250;
   ExpectThrow([&] { V().ToolPoints(m, vt, q, o); }, "outside the volumetric table's grid");
+}
+
+}  // namespace
+}  // namespace controllers
+}  // namespace fivecal
+
+namespace fivecal {
+namespace controllers {
+namespace {
+
+// The common export path with the tables: the kinematics absorb the location
+// errors, the tables take the error motions, their sigma comes from the
+// motions' covariance, and the round trip holds with both.
+TEST(VendorBeckhoff, ExportCarriesTheTablesThroughTheCommonPath) {
+  EXPECT_EQ(&FindVendor("beckhoff"), &BeckhoffVendor());
+  const Machine m = Example("hu40t");
+  const VendorOptions o = VolOpts(m, "error", "um,urad", 2, 1);
+  const Eigen::VectorXd motions = RandomMotions(m, 8);
+  const Eigen::VectorXd th = RandomRepresented(m, 8) + motions;
+  Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(m.num_parameters(), m.num_parameters());
+  const int exx1 = m.RequireParameter("EXX1"), ex0c = m.RequireParameter("EX0C");
+  cov(exx1, exx1) = 1e-12;  // 1e-6 mm/mm
+  cov(ex0c, ex0c) = 1e-6;   // 1 um
+  const Eigen::MatrixXd q = Poses(m, 120, 12);
+  const VendorExport ex = ExportToVendor(m, BeckhoffVendor(), th, cov, q, o);
+  EXPECT_LT(ex.round_trip_max, 1e-4);
+  const Eigen::VectorXd tables = BeckhoffVendor().MapMotions(m, th, o);
+  const Eigen::VectorXd kin = BeckhoffVendor().Map(m, MakeKinematicsTable(m, ex.absorption.theta), o) -
+                              BeckhoffVendor().Map(m, MakeKinematicsTable(m, Eigen::VectorXd::Zero(m.num_parameters())), o);
+  EXPECT_LT((ex.change - tables - kin).cwiseAbs().maxCoeff(), 1e-9);
+  for (size_t i = 0; i < ex.values.size(); ++i) {
+    const std::string& n = ex.values[i].name;
+    if (n == "EXX[0]") EXPECT_NEAR(ex.sigma[Eigen::Index(i)], 200 * 1e-6 * 1e3, 1e-9);  // X[0] = -200 mm, in um
+    if (n == "EYX[0]" || n == "ECC[3]") EXPECT_EQ(ex.sigma[Eigen::Index(i)], 0.0);
+    if (n == "kinematik[91].axis[3].point[0]") EXPECT_GT(ex.sigma[Eigen::Index(i)], 1.0);  // C pivot: 0.1 um units
+  }
+  // The truth, through Beckhoff's kinematics with the new values.
+  Eigen::MatrixXd truth = fivecal::ToolPoints(m, th, q);
+  truth.rowwise() -= ex.absorption.workpiece_shift.transpose();
+  const Eigen::MatrixXd mine = InPart(m, ex.absorption.theta, BeckhoffVendor().ToolPoints(m, ex.new_values, q, o));
+  EXPECT_LT(MaxNorm(mine - truth), 1e-4);
 }
 
 }  // namespace

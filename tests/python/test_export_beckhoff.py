@@ -30,14 +30,14 @@ def _export(with_tables=True, seed=1):
     for j, v in enumerate((1.3e-5, -2.7e-6, 0.9999999998)):
         add(P + f"zero_orientation[{j}]", v)
     for j, v in enumerate((123.45678, -0.1, 1250003.25)):
-        add(P + f"zero_position[{j}]", v, "0.1 um")
+        add(P + f"zero_position[{j}]", v, "0.0001mm")
     for i in range(5):
         add(P + f"axis[{i}].type", 2 if i >= 3 else 1, fixed=True)
         for j in range(3):
             add(P + f"axis[{i}].orientation[{j}]", rng.gauss(0, 1e-5) + (1.0 if j == i % 3 else 0.0))
         if i >= 3:
             for j in range(3):
-                add(P + f"axis[{i}].point[{j}]", rng.uniform(-2e6, 2e6), "0.1 um")
+                add(P + f"axis[{i}].point[{j}]", rng.uniform(-2e6, 2e6), "0.0001mm")
     if with_tables:
         for axis, unit, grid in (("X", "mm", [-200 + 50 * i for i in range(9)]), ("C", "deg", [-180 + 30 * i for i in range(13)])):
             for i, g in enumerate(grid):
@@ -74,13 +74,25 @@ def test_every_file_reads_back_to_the_values_written(tmp_path, with_tables):
         assert word in lis, word
     line = next(ln for ln in lis.splitlines() if ln.startswith("kinematik[91].zero_position[2]"))
     r = next(r for r in exp.values if r["name"] == "kinematik[91].zero_position[2]")
-    assert f"old {B._num(r['old'])}" in line and "0.1 um" in line and "+-" in line
+    assert f"old {B._num(r['old'])}" in line and "0.0001mm" in line and "+-" in line
     assert "fixed" in next(ln for ln in lis.splitlines() if ln.startswith("kinematik[91].chain[0]"))
     if with_tables:
         csv = out["_volcomp.csv"].splitlines()
         assert "X EXX EYX EZX EAX EBX ECX" in csv and "C EXC EYC EZC EAC EBC ECC" in csv
         assert "#" in csv  # the file break between the axes' blocks
         assert "[EYC]" in out["_etalon.txt"] and "}  // end of EYC" in out["_etalon.txt"]
+
+
+def test_a_channel_list_reads_with_its_tables_beside_it(tmp_path):
+    exp = _export(True)
+    out = B.write(exp, MACHINE)
+    for suffix, text in out.items():
+        (tmp_path / f"beckhoff{suffix}").write_text(text)
+    both = B.read(tmp_path / "beckhoff.lis")
+    assert set(both) == {r["name"] for r in exp.values}
+    assert "EXX[3]" in both and "kinematik[91].zero_position[2]" in both
+    (tmp_path / "beckhoff_volcomp.csv").unlink()
+    assert not any(n.startswith("E") for n in B.read(tmp_path / "beckhoff.lis"))
 
 
 @pytest.mark.parametrize("suffix,bad,lineno_of", [
@@ -137,58 +149,93 @@ def test_the_manuals_isg_csv_example_reads():
 
 def _common_path_present():
     from fivecal import _core
-    try:
-        from fivecal.cli import export as E
-    except ImportError:
-        return False
-    return (hasattr(_core, "vendor_export") and hasattr(_core, "vendor_tool_points")
-            and "beckhoff" in getattr(E, "WRITERS", {}))
+    from fivecal.cli import export as E
+    return hasattr(_core, "vendor_export") and "beckhoff" in E.WRITERS and "beckhoff" in _core.vendor_names()
 
 
-@pytest.mark.skipif(not _common_path_present(), reason="the common vendor export path is not on this branch yet")
-def test_cli_export_reproduces_the_erroneous_machine(tmp_path):
-    """Pivot errors exported through the CLI: exit 0, and the file's new values
-    give, through Beckhoff's own kinematics (C++), the erroneous machine's
-    tool points up to the work offset; a wrong option exits 2 naming it."""
-    import json
+HU40T = "examples/machines/hu40t.json"
+OPTS = {"syntax": "kinematik", "axes": "XYZBC", "tool_length": "0"}
+TABLES = {"volcomp": "error", "volcomp_units": "um,urad", "volcomp_frame": "carriage", "grid.X": "-300:300:2",
+          "grid.Y": "-300:300:2", "grid.Z": "-300:300:2", "grid.B": "-360:360:1", "grid.C": "-360:360:1"}
+
+
+def _cli(tmp_path, errors, opts, out, *extra, machine=HU40T):
     import subprocess
     import sys
+    res = tmp_path / "errors.json"
+    import json
+    res.write_text(json.dumps(errors))
+    sets = [x for k, v in opts.items() for x in ("--set", f"{k}={v}")]
+    return subprocess.run([sys.executable, "-m", "fivecal", "export", "beckhoff", str(res), "--machine", machine,
+                           "--force", "--out", str(tmp_path / out)] + sets + list(extra),
+                          capture_output=True, text=True)
+
+
+def _check_reproduces(tmp_path, out, errors, opts):
+    """The file's new values, through Beckhoff's own kinematics (C++), give the
+    erroneous machine's tool points up to the work offset."""
+    import json
 
     import numpy as np
 
     import fivecal
-    from fivecal import _core
+    from fivecal.io import controllers as K
 
-    truth = {"EX0C": 0.02, "EY0C": -0.015, "EX0B": 0.01, "EZ0B": -0.02, "EA0B": 2e-5, "tip.z": 0.01}
-    res = tmp_path / "errors.json"
-    res.write_text(json.dumps(truth))
-    opts = {"syntax": "kinematik", "axes": "XYZBC", "tool_length": "0"}
-    base = [sys.executable, "-m", "fivecal", "export", "beckhoff", str(res), "--machine",
-            "examples/machines/hu40t.json", "--force"]
-    sets = [x for k, v in opts.items() for x in ("--set", f"{k}={v}")]
-    run = subprocess.run(base + ["--out", str(tmp_path / "out")] + sets, capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    vals = B.read(tmp_path / "out" / "beckhoff.lis")
-    names = [v["name"] for v in json.loads((tmp_path / "out" / "export.json").read_text())["values"]]
+    vals = B.read(tmp_path / out / "beckhoff.lis")
+    names = [v["name"] for v in json.loads((tmp_path / out / "export.json").read_text())["values"]]
     v = np.array([vals[n] for n in names])
-    m = fivecal.Machine.load("examples/machines/hu40t.json")
+    m = fivecal.Machine.load(HU40T)
     rng = np.random.default_rng(1)
-    axes = {"X": rng.uniform(-200, 200, 60), "Y": rng.uniform(-200, 200, 60), "Z": rng.uniform(-200, 200, 60),
-            "B": rng.uniform(-90, 90, 60), "C": rng.uniform(-180, 180, 60), "S": np.zeros(60)}
-    mine = np.asarray(_core.vendor_tool_points("beckhoff", m, v, axes, opts))
-    d = mine - m.tool_point(axes, errors=truth)
+    axes = {"X": rng.uniform(-100, 100, 80), "Y": rng.uniform(-100, 100, 80), "Z": rng.uniform(-100, 100, 80),
+            "B": rng.uniform(-90, 90, 80), "C": rng.uniform(-180, 180, 80), "S": np.zeros(80)}
+    d = K.vendor_tool_points(m, "beckhoff", v, axes, opts) - m.tool_point(axes, errors=errors)
     d -= d.mean(axis=0)
-    assert np.abs(d).max() < 1e-3
-    bad = subprocess.run(base + ["--out", str(tmp_path / "o2")] + sets + ["--set", "colour=red"],
-                         capture_output=True, text=True)
-    assert bad.returncode == 2 and "colour" in bad.stderr
+    return np.abs(d).max()
+
+
+@pytest.mark.skipif(not _common_path_present(), reason="the common vendor export path is not on this branch yet")
+def test_cli_export_reproduces_the_erroneous_machine(tmp_path):
+    """Pivot errors exported through the CLI: exit 0, and the file's values
+    reproduce the erroneous machine through Beckhoff's kinematics to 1 um; a
+    wrong option or an unsupported machine exits 2 naming it."""
+    errors = {"EX0C": 0.02, "EY0C": -0.015, "EX0B": 0.01, "EZ0B": -0.02, "tip.z": 0.01}
+    run = _cli(tmp_path, errors, OPTS, "out")
+    assert run.returncode == 0, run.stderr
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["beckhoff.lis", "export.json"]
+    assert _check_reproduces(tmp_path, "out", errors, OPTS) < 1e-3
+    bad = _cli(tmp_path, errors, dict(OPTS, colour="red"), "o2")
+    assert bad.returncode == 2 and "'colour': not a beckhoff option" in bad.stderr
+    missing = _cli(tmp_path, errors, {k: v for k, v in OPTS.items() if k != "axes"}, "o3")
+    assert missing.returncode == 2 and "--set axes=" in missing.stderr
+    import json
     four_axis = tmp_path / "four.json"
     four_axis.write_text(json.dumps({"name": "4ax", "topology": "wCfXYZSt", "axes": {
         "C": {"type": "rotary", "direction": [0, 0, -1]}, "X": {"type": "linear", "direction": [1, 0, 0]},
         "Y": {"type": "linear", "direction": [0, 1, 0]}, "Z": {"type": "linear", "direction": [0, 0, 1]},
         "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 50]}}))
-    res.write_text(json.dumps({"EX0C": 0.02}))
-    four = subprocess.run([sys.executable, "-m", "fivecal", "export", "beckhoff", str(res), "--machine",
-                           str(four_axis), "--force", "--out", str(tmp_path / "o3"), "--set", "syntax=kinematik",
-                           "--set", "axes=XYZC", "--set", "tool_length=0"], capture_output=True, text=True)
+    four = _cli(tmp_path, {"EX0C": 0.02}, dict(OPTS, axes="XYZC"), "o4", machine=str(four_axis))
     assert four.returncode == 2 and "not supported" in four.stderr
+
+
+@pytest.mark.skipif(not _common_path_present(), reason="the common vendor export path is not on this branch yet")
+def test_cli_export_with_tables_reproduces_error_motions(tmp_path):
+    """Pivots and error motions: the kinematics take the pivots, the TF5280
+    tables the error motions; both files through Beckhoff's kinematics give the
+    erroneous machine to 1 um; --old reads the export back (change 0)."""
+    errors = {"EX0C": 0.02, "EY0C": -0.015, "EX0B": 0.01, "EXX1": 2e-5, "EYX2": 1e-7, "ECC1": 1e-5,
+              "EZY3": 1e-9, "EAZ1": 5e-8}
+    opts = dict(OPTS, **TABLES)
+    run = _cli(tmp_path, errors, opts, "out")
+    assert run.returncode == 0, run.stderr
+    assert {"beckhoff.lis", "beckhoff_volcomp.csv", "beckhoff_etalon.txt"} <= {p.name for p in (tmp_path / "out").iterdir()}
+    assert _check_reproduces(tmp_path, "out", errors, opts) < 1e-3
+    without = _cli(tmp_path, errors, OPTS, "kin_only")
+    assert without.returncode == 0, without.stderr
+    assert _check_reproduces(tmp_path, "kin_only", errors, OPTS) > 5e-3  # the error motions are left
+    again = _cli(tmp_path, errors, opts, "again", "--old", str(tmp_path / "out" / "beckhoff.lis"))
+    assert again.returncode == 0, again.stderr
+    import json
+    rec = json.loads((tmp_path / "again" / "export.json").read_text())
+    new = {v["name"]: v["new"] for v in json.loads((tmp_path / "out" / "export.json").read_text())["values"]}
+    for v in rec["values"]:
+        assert v["old"] == pytest.approx(new[v["name"]], abs=1e-9)

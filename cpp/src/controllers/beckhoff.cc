@@ -209,7 +209,7 @@ Layout MakeLayout(const Machine& m, const Opts& op) {
     Add(L, P + "zero_orientation[" + std::to_string(j) + "]", "", src + "; P-CHAN-00285, 'Description of flange and tool' (556386059)");
   L.zero_position = int(L.values.size());
   for (int j = 0; j < 3; ++j)
-    Add(L, P + "zero_position[" + std::to_string(j) + "]", "0.1 um", src + "; P-CHAN-00286, 'Description of flange and tool' (556386059)");
+    Add(L, P + "zero_position[" + std::to_string(j) + "]", "0.0001mm", src + "; P-CHAN-00286, 'Description of flange and tool' (556386059)");
   L.orientation.assign(m.num_axes(), -1);
   L.point.assign(m.num_axes(), -1);
   for (size_t i = 0; i < op.axes.size(); ++i) {
@@ -222,7 +222,7 @@ Layout MakeLayout(const Machine& m, const Opts& op) {
           src + "; P-CHAN-00292; workpiece-side axes multiplied by -1 (278732555)");
     if (m.axis(k).rotary()) {
       L.point[k] = int(L.values.size());
-      for (int j = 0; j < 3; ++j) Add(L, A + "point[" + std::to_string(j) + "]", "0.1 um", src + "; P-CHAN-00293");
+      for (int j = 0; j < 3; ++j) Add(L, A + "point[" + std::to_string(j) + "]", "0.0001mm", src + "; P-CHAN-00293");
     }
   }
   L.grid_first.assign(m.num_axes(), -1);
@@ -334,12 +334,11 @@ Eigen::VectorXd Beckhoff::Map(const Machine& m, const KinematicsTable& table, co
   Eigen::VectorXd v = Eigen::VectorXd::Zero(Eigen::Index(L.values.size()));
   for (size_t i = 0; i < L.values.size(); ++i)
     if (L.values[i].fixed) v[Eigen::Index(i)] = L.fixed_values[i];
-  // ID 91 works in one coordinate system; fivecal's tool points are in the
-  // part frame, so the table is written in the part frame at the zero pose.
-  const Eigen::Matrix3d Rt = table.part_rotation.transpose();
-  const Eigen::Vector3d o0 = table.part_origin;
-  const Eigen::Vector3d n = Rt * table.tool_axis;
-  const Eigen::Vector3d tip = Rt * (table.tool_tip - o0);
+  // ID 91 describes everything in one coordinate system at the zero
+  // position: the machine frame of the table (vendor.h: the controller's
+  // workpiece frame; the part frame's offset is the work offset's).
+  const Eigen::Vector3d n = table.tool_axis;
+  const Eigen::Vector3d tip = table.tool_tip;
   v.segment<3>(L.zero_orientation) = n;
   v.segment<3>(L.zero_position) = (tip + op.tool_length * n) * kUnit01um;
   for (const TableAxis& r : table.axes) {
@@ -351,8 +350,8 @@ Eigen::VectorXd Beckhoff::Map(const Machine& m, const KinematicsTable& table, co
     // The chain walks from the workpiece: a table axis's vector is the
     // opposite of its carriage's motion (278732555: "multiplied by -1").
     const double sign = r.tool_chain ? 1.0 : -1.0;
-    v.segment<3>(L.orientation[k]) = sign * (Rt * r.direction);
-    if (L.point[k] >= 0) v.segment<3>(L.point[k]) = Rt * (r.point - o0) * kUnit01um;
+    v.segment<3>(L.orientation[k]) = sign * r.direction;
+    if (L.point[k] >= 0) v.segment<3>(L.point[k]) = r.point * kUnit01um;
   }
   return v;
 }

@@ -9,6 +9,7 @@ import os
 
 from .. import files
 from ..compensation import usable_errors
+from ..io import beckhoff
 from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
 from ..io.plan_readings import _read_spec
 from ..tolerances import PATH_OPTION, path_tolerance
@@ -58,6 +59,7 @@ def _run(args) -> int:
 #: has ``write(exp, machine) -> {suffix: text}`` and ``read(path) -> {name: value}``;
 #: the numerics behind them are the core's one export path (``vendor.h``)
 WRITERS: dict = {
+    "beckhoff": beckhoff,
 }
 
 #: units of vendor values and (limit unit, factor to it) for the plausibility

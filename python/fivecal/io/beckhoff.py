@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
+import os
 import re
 from typing import Dict, List, Mapping, Optional, Tuple
 
@@ -61,6 +62,8 @@ def _header(exp, machine, what: str, comment: str) -> List[str]:
     rms = _get(ab, "rms") if ab is not None else None
     mx = _get(ab, "max") if ab is not None else None
     name = _get(machine, "name", "") if not isinstance(machine, str) else machine
+    trip = _get(exp, "round_trip_max")
+    trip = _get(exp, "round_trip_max_mm") if trip is None else trip
     when = _get(exp, "date") or _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         f"fivecal export for Beckhoff TwinCAT 3 CNC: {what}",
@@ -70,9 +73,7 @@ def _header(exp, machine, what: str, comment: str) -> List[str]:
         f"absorption model: {model or 'n/a'}",
         "error the kinematics cannot absorb (over the working volume): "
         + (f"rms {rms * 1e3:.3f} um, max {mx * 1e3:.3f} um" if rms is not None and mx is not None else "n/a"),
-        "round trip through Beckhoff's own kinematics: "
-        + (f"max {_get(exp, 'round_trip_max_mm') * 1e3:.4f} um"
-           if _get(exp, "round_trip_max_mm") is not None else "n/a"),
+        "round trip through Beckhoff's own kinematics: " + (f"max {trip * 1e3:.4f} um" if trip is not None else "n/a"),
         "each value: new, then in the comment the old value, the change and its 1 sigma (from the "
         "identification's covariance)",
     ]
@@ -106,7 +107,7 @@ def _tables(rows: List[dict]) -> Dict[str, dict]:
 def lis_text(exp, machine) -> str:
     rows = _rows(exp)
     lines = _header(exp, machine, "universal kinematics (TF5240, kinematic ID 91), channel parameter list", "#")
-    lines.append("# lengths in 0.1 um (P-CHAN-00286, P-CHAN-00293); orientations are direction vectors")
+    lines.append("# lengths in 0.1 um = 0.0001 mm (P-CHAN-00286, P-CHAN-00293); orientations are direction vectors")
     width = max([len(_get(r, "name")) for r in rows] + [10])
     for r in rows:
         name = _get(r, "name")
@@ -294,15 +295,28 @@ def _read_etalon(text: str, path: str) -> Dict[str, float]:
     return out
 
 
-def read(path) -> Dict[str, float]:
-    """The values a Beckhoff file states (a ``.lis`` channel list, an ISG CSV
-    table file or an Etalon exchange file), by the export's value names."""
+def _read_one(path) -> Dict[str, float]:
     text = files.read_text(path, "beckhoff file")
     body = [ln.strip() for ln in text.splitlines() if ln.strip() and not ln.strip().startswith(("#", "//"))]
     first = body[0] if body else ""
-    p = str(path)
+    p = os.fspath(path)
     if first.startswith(("kinematik[", "trafo[")):
         return _read_lis(text, p)
     if first.startswith("["):
         return _read_etalon(text, p)
     return _read_csv(text, p)
+
+
+def read(path) -> Dict[str, float]:
+    """The values a Beckhoff file states (a ``.lis`` channel list, an ISG CSV
+    table file or an Etalon exchange file), by the export's value names. A
+    ``.lis`` with the ISG CSV tables beside it (``NAME.lis`` and
+    ``NAME_volcomp.csv``, as an export writes them) reads as both: the
+    controller's current kinematics and tables (``--old``)."""
+    out = _read_one(path)
+    p = os.fspath(path)
+    if p.endswith(".lis"):
+        tables = p[: -len(".lis")] + "_volcomp.csv"
+        if os.path.isfile(tables):
+            out.update(_read_one(tables))
+    return out

@@ -10,7 +10,7 @@
 //    (278732555), "Description of flange and tool" (556386059), "Classic
 //    programming modes" (278765451);
 //  * TF5200 channel parameters P-CHAN-00262 (trafo[j].id 91), -00285
-//    zero_orientation, -00286 zero_position (0.1 um), -00289 number_of_axes,
+//    zero_orientation, -00286 zero_position (0.1 um, written as unit 0.0001mm), -00289 number_of_axes,
 //    -00290 chain[k], -00291 axis[k].type (1 translator, 2 rotator), -00292
 //    axis[k].orientation, -00293 axis[k].point (0.1 um);
 //  * TF5280 Volumetric compensation: "List of parameters supported"
