@@ -73,7 +73,7 @@ def _header(exp, machine, what: str, comment: str) -> List[str]:
         f"absorption model: {model or 'n/a'}",
         "error the kinematics cannot absorb (over the working volume): "
         + (f"rms {rms * 1e3:.3f} um, max {mx * 1e3:.3f} um" if rms is not None and mx is not None else "n/a"),
-        "round trip through Beckhoff's own kinematics: " + (f"max {trip * 1e3:.4f} um" if trip is not None else "n/a"),
+        "round trip through Beckhoff's own kinematics: " + (f"max {trip * 1e3:.3g} um" if trip is not None else "n/a"),
         "each value: new, then in the comment the old value, the change and its 1 sigma (from the "
         "identification's covariance)",
     ]
