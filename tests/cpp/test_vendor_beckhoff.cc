@@ -286,17 +286,17 @@ TEST(VendorBeckhoff, TablesCarryTheErrorMotions) {
     const Eigen::MatrixXd model = fivecal::ToolPoints(m, ab.theta + motions, q);
     for (const char* mode : {"error", "correction"})
       for (const char* units : {"mm,rad", "um,urad"}) {
-        const VendorOptions o = VolOpts(m, mode, units, 2, 1);
+        const VendorOptions o = VolOpts(m, mode, units, 10, 5);
         const Eigen::VectorXd v = V().Map(m, MakeKinematicsTable(m, ab.theta), o) + V().MapMotions(m, th, o);
         const Eigen::MatrixXd mine = InPart(m, ab.theta, V().ToolPoints(m, v, q, o));
-        // Linear interpolation (2 mm, 1 deg) of cubics of tens of um, plus the
+        // Linear interpolation (10 mm, 5 deg) of cubics of tens of um, plus the
         // second-order terms of two small errors: well under 0.1 um.
         EXPECT_LT(MaxNorm(mine - model), 1e-4) << m.name() << " " << mode << " " << units;
         EXPECT_LT(MaxNorm(mine - truth), 1e-4) << m.name() << " " << mode << " " << units;
       }
     // The tables matter: without them the error motions are left, and a
     // table of the wrong sign doubles them.
-    const VendorOptions o = VolOpts(m, "error", "mm,rad", 2, 1);
+    const VendorOptions o = VolOpts(m, "error", "mm,rad", 10, 5);
     const Eigen::VectorXd kin = V().Map(m, MakeKinematicsTable(m, ab.theta), o);
     const auto part = [&](const Eigen::VectorXd& v) { return InPart(m, ab.theta, V().ToolPoints(m, v, q, o)); };
     EXPECT_GT(MaxNorm(part(kin) - truth), 5e-3) << m.name();
@@ -482,7 +482,9 @@ namespace {
 TEST(VendorBeckhoff, ExportCarriesTheTablesThroughTheCommonPath) {
   EXPECT_EQ(&FindVendor("beckhoff"), &BeckhoffVendor());
   const Machine m = Example("hu40t");
-  const VendorOptions o = VolOpts(m, "error", "um,urad", 2, 1);
+  // 10 mm and 5 deg: the interpolation stays far below 1 um, and the
+  // change's covariance (values x values) stays small.
+  const VendorOptions o = VolOpts(m, "error", "um,urad", 10, 5);
   const Eigen::VectorXd motions = RandomMotions(m, 8);
   const Eigen::VectorXd th = RandomRepresented(m, 8) + motions;
   Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(m.num_parameters(), m.num_parameters());

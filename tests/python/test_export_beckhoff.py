@@ -155,8 +155,8 @@ def _common_path_present():
 
 HU40T = "examples/machines/hu40t.json"
 OPTS = {"syntax": "kinematik", "axes": "XYZBC", "tool_length": "0"}
-TABLES = {"volcomp": "error", "volcomp_units": "um,urad", "volcomp_frame": "carriage", "grid.X": "-300:300:2",
-          "grid.Y": "-300:300:2", "grid.Z": "-300:300:2", "grid.B": "-360:360:1", "grid.C": "-360:360:1"}
+TABLES = {"volcomp": "error", "volcomp_units": "um,urad", "volcomp_frame": "carriage", "grid.X": "-200:200:10",
+          "grid.Y": "-200:200:10", "grid.Z": "-200:200:10", "grid.B": "-90:90:5", "grid.C": "-180:180:5"}
 
 
 def _cli(tmp_path, errors, opts, out, *extra, machine=HU40T):
