@@ -29,7 +29,9 @@ TIP = 3.0
 TRUTH = {"EY0A": 0.012, "EZ0A": -0.008, "EB0A": 2e-5, "EX0C": 0.015, "EY0C": -0.01, "EAAb": 1e-5, "ECCb": 1.5e-5}
 #: the conventions each vendor needs stated for c600u (A on C, table-table),
 #: where its public manual leaves them open (docs/controllers.md)
-OPTIONS: dict = {}
+OPTIONS: dict = {
+    "beckhoff": {"syntax": "kinematik", "axes": "XYZAC", "tool_length": "0"},
+}
 VENDORS = K.vendor_names()
 
 
