@@ -32,7 +32,7 @@ TRUTH = {"EY0A": 0.012, "EZ0A": -0.008, "EB0A": 2e-5, "EX0C": 0.015, "EY0C": -0.
 OPTIONS: dict = {
     "beckhoff": {"syntax": "kinematik", "axes": "XYZAC", "tool_length": "0"},
 }
-VENDORS = K.vendor_names()
+VENDORS = K.vendors()
 
 
 def test_every_registered_vendor_has_a_writer_and_every_writer_a_vendor():

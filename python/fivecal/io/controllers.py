@@ -450,7 +450,7 @@ def export_csv(machine: Machine, ab: Absorption) -> str:
 
 # ---- controller vendors: one export path for every vendor --------------------
 
-def vendor_names() -> List[str]:
+def vendors() -> List[str]:
     """The controller vendors fivecal exports to (``fivecal export <vendor>``)."""
     return list(_core.vendor_names())
 
