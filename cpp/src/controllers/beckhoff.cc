@@ -290,7 +290,8 @@ std::map<std::string, std::string> Beckhoff::OptionHelp() const {
       {"tool_length", "mm: the tool length the controller's tool table holds for the tool (probe) whose tip fivecal "
                       "identified; zero_position is that tip plus this length along zero_orientation"},
       {"volcomp", "off (default: no TF5280 tables, error motions are left), error (tables hold the error motion, "
-                  "ISO 230-1 sign, with 'negate' not configured) or correction (tables hold its negative)"},
+                  "ISO 230-1 sign, with 'negate' not configured) or correction (tables hold its negative); with "
+                  "tables, also grid.<axis>=START:STOP:STEP for every NC axis (mm, degrees): the table's grid"},
       {"volcomp_units", "with volcomp: units of the table values, mm,rad or um,urad (TF5280's pages do not state them)"},
       {"volcomp_frame", "with volcomp: 'carriage' states that the controller's TF5280 model applies each axis's "
                         "error motion to that axis's own carriage (for a table axis: the table), in the carriage's "
