@@ -33,6 +33,7 @@ OPTIONS: dict = {
     "fanuc": {"increment": "IS-C", "tool-length": "100", "axis-order": "XYZAC"},
     "siemens": {"record": "1"},  # the swivel data record's number: never guessed
     "heidenhain": {"table-axis-sign": "iso", "tool-length": "100"},
+    "beckhoff": {"syntax": "kinematik", "axes": "XYZAC", "tool_length": "0"},
 }
 VENDORS = K.vendors()
 

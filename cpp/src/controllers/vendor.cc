@@ -9,6 +9,7 @@
 #include "fivecal/controllers/fanuc.h"
 #include "fivecal/controllers/siemens.h"
 #include "fivecal/controllers/heidenhain.h"
+#include "fivecal/controllers/beckhoff.h"
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
@@ -21,6 +22,7 @@ const std::vector<const ControllerVendor*>& ControllerVendors() {
       &Fanuc(),
       &siemens,
       &HeidenhainVendor(),
+      &BeckhoffVendor(),
   };
   return vendors;
 }
@@ -78,13 +80,30 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor, co
   ex.model = vendor.Model(m, options);
   ex.values = vendor.Values(m, options);
   const size_t nv = ex.values.size();
-  ex.absorption = Absorb(m, ex.model.model, theta_e, poses, OptionsOf(ex.model));
+  // A vendor that takes the error motions as they are (MapMotions: tables)
+  // gets them; its kinematics absorb the rest, never both.
+  const Eigen::VectorXd motions = vendor.MapMotions(m, theta_e, options);
+  const bool takes_motions = motions.size() > 0;
+  if (takes_motions && size_t(motions.size()) != nv)
+    throw std::logic_error("controller " + vendor.Name() + ": MapMotions gave " + std::to_string(motions.size()) +
+                           " values, Values names " + std::to_string(nv));
+  std::vector<int> motion_params;
+  Eigen::VectorXd theta_k = theta_e, theta_m = Eigen::VectorXd::Zero(nt);
+  if (takes_motions)
+    for (int i = 0; i < nt; ++i)
+      if (m.parameters()[size_t(i)].kind == ParameterKind::kMotion) {
+        motion_params.push_back(i);
+        theta_m[i] = theta_e[i];
+        theta_k[i] = 0;
+      }
+  ex.absorption = Absorb(m, ex.model.model, theta_k, poses, OptionsOf(ex.model));
   const Absorption& ab = ex.absorption;
 
   const Eigen::VectorXd nominal = CheckedMap(vendor, m, MakeKinematicsTable(m, Eigen::VectorXd::Zero(nt)),
                                              options, nv);
   const Eigen::VectorXd absorbed = CheckedMap(vendor, m, MakeKinematicsTable(m, ab.theta), options, nv);
   ex.change = absorbed - nominal;
+  if (takes_motions) ex.change += motions;
   for (size_t i = 0; i < nv; ++i)
     if (ex.values[i].fixed && ex.change[Eigen::Index(i)] != 0.0)
       throw std::logic_error("controller " + vendor.Name() + ": fixed value " + ex.values[i].name +
@@ -124,7 +143,15 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor, co
   for (size_t i = 0; i < nv; ++i)
     if (ex.values[i].fixed) G.row(Eigen::Index(i)).setZero();
   if (have_cov) {
-    const Eigen::MatrixXd GS = G * ab.sensitivity;
+    Eigen::MatrixXd GS = G * ab.sensitivity;
+    // The motions reach the values through MapMotions (linear in the
+    // coefficients: central differences are exact), not through Absorb.
+    for (int i : motion_params) {
+      Eigen::VectorXd up = theta_e, down = theta_e;
+      up[i] += 1e-6;
+      down[i] -= 1e-6;
+      GS.col(i) = (vendor.MapMotions(m, up, options) - vendor.MapMotions(m, down, options)) / 2e-6;
+    }
     ex.covariance = GS * theta_covariance * GS.transpose();
     ex.sigma = ex.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   } else {
@@ -136,8 +163,10 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor, co
   // The round trip, up to a constant (the work offset absorbs one, as it
   // absorbs the workpiece shift): the vendor's own kinematics with the values
   // of the absorbed model against fivecal's tool points of that model.
-  ex.round_trip = InPartFrame(MakeKinematicsTable(m, ab.theta), vendor.ToolPoints(m, absorbed, poses, options)) -
-                  ToolPoints(m, ab.theta, poses);
+  const Eigen::VectorXd with_motions = takes_motions ? Eigen::VectorXd(absorbed + motions) : absorbed;
+  ex.round_trip =
+      InPartFrame(MakeKinematicsTable(m, ab.theta), vendor.ToolPoints(m, with_motions, poses, options)) -
+      ToolPoints(m, ab.theta + theta_m, poses);
   if (ex.round_trip.rows() != poses.rows() || ex.round_trip.cols() != 3)
     throw std::logic_error("controller " + vendor.Name() + ": ToolPoints gave the wrong shape");
   const Eigen::RowVector3d mean = ex.round_trip.colwise().mean();

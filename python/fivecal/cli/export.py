@@ -10,7 +10,7 @@ import os
 from .. import files
 from ..compensation import usable_errors
 from ..io import controllers as K, dbb_program as D, linuxcnc as L, nc_options as O, nc_programs as N
-from ..io import fanuc, heidenhain, siemens
+from ..io import beckhoff, fanuc, heidenhain, siemens
 from ..io.plan_readings import _read_spec
 from ..tolerances import PATH_OPTION, path_tolerance
 from .common import _read_machine, deprecated_alias
@@ -62,6 +62,7 @@ WRITERS: dict = {
     "fanuc": fanuc,
     "siemens": siemens,
     "heidenhain": heidenhain,
+    "beckhoff": beckhoff,
 }
 
 #: units of vendor values and (limit unit, factor to it) for the plausibility

@@ -82,6 +82,18 @@ class ControllerVendor {
   virtual KinematicsTable Table(const Machine& m, const Eigen::VectorXd& values,
                                 const VendorOptions& o) const = 0;
 
+  // Values that come from the error motions of theta (the identified
+  // machine's full parameter vector), which no kinematics table carries:
+  // Beckhoff's volumetric compensation tables. Same length and order as
+  // Values, zero at every entry Map fills; Map(absorbed table) +
+  // MapMotions(theta_e) are the new values, and theta_e's error motions are
+  // then not for Absorb (no double counting). Empty (the default): the
+  // vendor takes no error motions.
+  virtual Eigen::VectorXd MapMotions(const Machine& /*m*/, const Eigen::VectorXd& /*theta*/,
+                                     const VendorOptions& /*o*/) const {
+    return Eigen::VectorXd();
+  }
+
   // The controller's own kinematic transformation from its manual: the tool
   // points (N x 3, mm) that `values` give for the machine's commands q
   // (N x m.num_axes(), mm / degrees), in the controller's workpiece frame:

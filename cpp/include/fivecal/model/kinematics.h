@@ -76,6 +76,18 @@ Mat3<T> AxisAngle(const Eigen::Vector3d& u, const T& q) {
   return R;
 }
 
+// The six error motions of axis k at the command q (mm or rad): e[0..2] =
+// EXk EYk EZk (mm), e[3..5] = EAk EBk ECk (rad), each EDk(q) = sum_d EDkd q^d.
+// The one evaluation of the polynomials: the chain below and whatever
+// tabulates them (Beckhoff's volumetric compensation tables) call it.
+template <typename T>
+void ErrorMotions(const Machine& m, int k, const T* theta, double q, T e[6]) {
+  for (int c = 0; c < 6; ++c) {
+    const T* poly = theta + m.motion_index(k, c, 1);
+    e[c] = ((poly[2] * q + poly[1]) * q + poly[0]) * q;  // Horner
+  }
+}
+
 // T_k(q) for axis k; theta is the full machine parameter vector, q the command
 // in mm or rad, dir the direction of the last move (+1, -1, or 0 = no backlash).
 template <typename T>
@@ -91,12 +103,8 @@ Frame<T> AxisFrame(const Machine& m, int k, const Eigen::Vector3d& p_parent, con
   const int b = m.backlash_index(k);
   if (b >= 0 && dir != 0) qm = qm + theta[b] * double(dir);
 
-  // Error motions: Horner in q for each of the six components.
   T e[6];
-  for (int c = 0; c < 6; ++c) {
-    const T* poly = theta + m.motion_index(k, c, 1);
-    e[c] = ((poly[2] * q + poly[1]) * q + poly[0]) * q;
-  }
+  ErrorMotions(m, k, theta, q, e);
   Frame<T> eps;
   eps.R = RotZYX(e[3], e[4], e[5]);
   eps.t = Vec3<T>(e[0], e[1], e[2]);
