@@ -6,6 +6,7 @@
 
 #include <random>
 
+#include "controller_fixtures.h"
 #include "fivecal/controllers/absorb.h"
 #include "fivecal/controllers/compensate.h"
 #include "fivecal/controllers/kinematics_table.h"
@@ -15,6 +16,9 @@
 namespace fivecal {
 namespace controllers {
 namespace {
+
+using test_fixtures::Poses;
+using test_fixtures::Theta;
 
 Machine HeadHead() {  // B on C in the spindle head, 5axiskins-like
   return Machine::FromJson(R"({"name": "hh", "topology": "wXYfZCBSt", "axes": {
@@ -34,31 +38,13 @@ Machine TableTable() {
     "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [0,0,150]}})");
 }
 
-Eigen::MatrixXd Poses(const Machine& m, int n, unsigned seed = 3) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> lin(-100, 100), tilt(-90, 60), rot(-180, 180);
-  Eigen::MatrixXd q = Eigen::MatrixXd::Zero(n, m.num_axes());
-  for (int i = 0; i < n; ++i)
-    for (int k = 0; k < m.num_axes(); ++k) {
-      const char a = m.axis(k).name;
-      q(i, k) = a == 'S' ? 0.0 : a == 'C' ? rot(rng) : (a == 'A' || a == 'B') ? tilt(rng) : lin(rng);
-    }
-  return q;
-}
-
-Eigen::VectorXd Theta(const Machine& m, const std::map<std::string, double>& e) {
-  Eigen::VectorXd th = Eigen::VectorXd::Zero(m.num_parameters());
-  for (const auto& [n, v] : e) th[m.RequireParameter(n)] = v;
-  return th;
-}
-
 TEST(Controllers, RepresentedErrorsAreAbsorbedExactly) {
   const Machine m = HeadHead();
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.02}, {"EY0C", -0.01}, {"EX0B", -0.01}, {"EZ0B", 0.015}, {"EA0B", 3e-5},
                                        {"EC0B", -2e-5}, {"tip.z", 0.01}});
   AbsorbOptions o;
   o.directions = true;
-  const Absorption ab = Absorb(m, ControllerModel::kHeadHead, th, Poses(m, 80), o);
+  const Absorption ab = Absorb(m, ControllerModel::kHeadHead, th, Poses(m, 80, 3), o);
   EXPECT_GT(ab.max_old, 5e-3);
   EXPECT_LT(ab.max, 1e-9);
   EXPECT_FALSE(ab.trt.has_value());
@@ -68,7 +54,7 @@ TEST(Controllers, UnrepresentedErrorsLeaveAStationaryFit) {
   // The absorber's analytic Jacobian: at the optimum the residual is
   // orthogonal to every finite-difference column of the model.
   const Machine m = TableTable();
-  const Eigen::MatrixXd q = Poses(m, 60);
+  const Eigen::MatrixXd q = Poses(m, 60, 3);
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.03}, {"EA0C", 4e-5}, {"EB0A", -3e-5}, {"EC0Y", 5e-5}});
   AbsorbOptions o;
   o.directions = true;
@@ -89,7 +75,7 @@ TEST(Controllers, UnrepresentedErrorsLeaveAStationaryFit) {
 
 TEST(Controllers, TrtModelCarriesThePinsAndLeavesTheirMap) {
   const Machine m = TableTable();
-  const Eigen::MatrixXd q = Poses(m, 60);
+  const Eigen::MatrixXd q = Poses(m, 60, 3);
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.03}, {"EY0A", -0.02}, {"EA0C", 2e-5}});
   const Absorption ab = Absorb(m, ControllerModel::kXyzacTrt, th, q);
   ASSERT_TRUE(ab.trt.has_value());
@@ -113,7 +99,7 @@ TEST(Controllers, FiveAxisKinsIsTheNominalHeadAndPivotLengthAbsorbsTheSpindle) {
   const Machine m = HeadHead();
   const FiveAxisMapping map = MatchFiveAxis(m);
   EXPECT_EQ(map.pivot_length, 250.0);
-  const Eigen::MatrixXd q = Poses(m, 40);
+  const Eigen::MatrixXd q = Poses(m, 40, 3);
   const Eigen::MatrixXd j = FiveAxisJoints(m, map, q);
   Eigen::MatrixXd w = FiveAxisForward(map.pivot_length, j);
   const Eigen::MatrixXd p = ToolPoints(m, Eigen::VectorXd::Zero(m.num_parameters()), q);
@@ -130,7 +116,7 @@ TEST(Controllers, FiveAxisKinsIsTheNominalHeadAndPivotLengthAbsorbsTheSpindle) {
 
 TEST(Controllers, BatchedCompensationReachesTheTargets) {
   const Machine m = TableTable();
-  const Eigen::MatrixXd q = Poses(m, 30);
+  const Eigen::MatrixXd q = Poses(m, 30, 3);
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.03}, {"EA0C", 4e-5}, {"EXX1", 2e-5}});
   Eigen::MatrixXd P, A;
   ToolPoses(m, Eigen::VectorXd::Zero(m.num_parameters()), q, nullptr, &P, &A);
@@ -157,7 +143,7 @@ TEST(Controllers, KinematicsTableReproducesTheToolPoints) {
     const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.03}, {"EA0C", 4e-5}, {"EC0Y", 5e-5}, {"tip.z", 0.02},
                                          {"EB0C", -2e-5}, {"EY0X", 0.01}});
     const KinematicsTable t = MakeKinematicsTable(m, th);
-    const Eigen::MatrixXd q = Poses(m, 30);
+    const Eigen::MatrixXd q = Poses(m, 30, 3);
     Eigen::MatrixXd qt(q.rows(), Eigen::Index(t.axes.size()));
     for (size_t k = 0; k < t.axes.size(); ++k) qt.col(Eigen::Index(k)) = q.col(m.AxisIndex(t.axes[k].axis));
     EXPECT_LT((TableToolPoints(t, qt) - ToolPoints(m, th, q)).cwiseAbs().maxCoeff(), 1e-9) << m.name();

@@ -5,12 +5,15 @@
 
 #include <random>
 
+#include "controller_fixtures.h"
 #include "fivecal/controllers/linuxcnc_trt.h"
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
 namespace controllers {
 namespace {
+
+using test_fixtures::Poses;
 
 Machine Xyzac(double c_sign = 1.0) {
   return Machine::FromJson(R"({"name": "trt-ac", "topology": "wCAfXYZSt", "axes": {
@@ -30,19 +33,6 @@ Machine Xyzbc() {
     "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [1,2,100]}})");
 }
 
-// Poses over a working volume: linear +-100 mm, tilt -90..60, C full turn.
-Eigen::MatrixXd Poses(const Machine& m, int n, unsigned seed = 3) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> lin(-100, 100), tilt(-90, 60), rot(-180, 180);
-  Eigen::MatrixXd q = Eigen::MatrixXd::Zero(n, m.num_axes());
-  for (int i = 0; i < n; ++i)
-    for (int k = 0; k < m.num_axes(); ++k) {
-      const char a = m.axis(k).name;
-      q(i, k) = a == 'S' ? 0.0 : a == 'C' ? rot(rng) : (a == 'A' || a == 'B') ? tilt(rng) : lin(rng);
-    }
-  return q;
-}
-
 TEST(LinuxcncTrt, InverseInvertsForward) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-50, 50), ang(-180, 180);
@@ -60,7 +50,7 @@ TEST(LinuxcncTrt, InverseInvertsForward) {
 
 TEST(LinuxcncTrt, NominalMachineMapsExactlyOntoPins) {
   const Machine m = Xyzac();
-  const Eigen::MatrixXd q = Poses(m, 60);
+  const Eigen::MatrixXd q = Poses(m, 60, 3);
   const TrtFit fit = FitTrtPins(m, TrtKins::kXyzac, Eigen::VectorXd::Zero(m.num_parameters()), q,
                                 TrtPins{});
   EXPECT_LT(fit.max, 1e-9);
@@ -77,7 +67,7 @@ TEST(LinuxcncTrt, WorkpieceSideLinearAxisAndXyzbc) {
   const TrtMapping map = MatchTrt(m, TrtKins::kXyzbc);
   EXPECT_EQ(map.sign[1], 1.0);  // table Y along -y: the tool moves +y relative to it
   const TrtFit fit = FitTrtPins(m, TrtKins::kXyzbc, Eigen::VectorXd::Zero(m.num_parameters()),
-                                Poses(m, 60), TrtPins{});
+                                Poses(m, 60, 3), TrtPins{});
   EXPECT_LT(fit.max, 1e-9);
   EXPECT_NEAR(fit.pins.x_rot_point, 4.0 - 1.0, 1e-9);
   EXPECT_NEAR(fit.pins.y_rot_point, 9.0 - 2.0, 1e-9);
@@ -89,13 +79,13 @@ TEST(LinuxcncTrt, ReversedRotaryDirectionNegatesJoint) {
   const TrtMapping map = MatchTrt(m, TrtKins::kXyzac);
   EXPECT_EQ(map.sign[4], -1.0);
   const TrtFit fit = FitTrtPins(m, TrtKins::kXyzac, Eigen::VectorXd::Zero(m.num_parameters()),
-                                Poses(m, 40), TrtPins{});
+                                Poses(m, 40, 3), TrtPins{});
   EXPECT_LT(fit.max, 1e-9);
 }
 
 TEST(LinuxcncTrt, PivotErrorsAbsorbedTiltsNot) {
   const Machine m = Xyzac();
-  const Eigen::MatrixXd q = Poses(m, 80);
+  const Eigen::MatrixXd q = Poses(m, 80, 3);
   ErrorModel e(m);
   e.Set("EX0C", 0.03);
   e.Set("EY0C", -0.02);
@@ -140,7 +130,7 @@ TEST(LinuxcncTrt, RefusesMachinesItCannotRepresent) {
     "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [0,0,50]}})");
   EXPECT_THROW(MatchTrt(head, TrtKins::kXyzac), std::invalid_argument);
   const Machine m = Xyzac();
-  Eigen::MatrixXd q = Poses(m, 10);
+  Eigen::MatrixXd q = Poses(m, 10, 3);
   q.col(m.AxisIndex('A')).setZero();
   EXPECT_THROW(FitTrtPins(m, TrtKins::kXyzac, Eigen::VectorXd::Zero(m.num_parameters()), q,
                           TrtPins{}),

@@ -9,6 +9,7 @@
 #include <functional>
 #include <random>
 
+#include "controller_fixtures.h"
 #include "fivecal/controllers/absorb.h"
 #include "fivecal/controllers/beckhoff.h"
 #include "fivecal/controllers/kinematics_table.h"
@@ -21,6 +22,8 @@
 namespace fivecal {
 namespace controllers {
 namespace {
+
+using test_fixtures::Theta;
 
 const Beckhoff& V() { return BeckhoffVendor(); }
 
@@ -84,12 +87,6 @@ Eigen::MatrixXd Poses(const Machine& m, int n, unsigned seed = 5) {
       q(i, k) = a == 'S' ? 0.0 : a == 'C' ? rot(rng) : m.axis(k).rotary() ? tilt(rng) : lin(rng);
     }
   return q;
-}
-
-Eigen::VectorXd Theta(const Machine& m, const std::map<std::string, double>& e) {
-  Eigen::VectorXd th = Eigen::VectorXd::Zero(m.num_parameters());
-  for (const auto& [n, v] : e) th[m.RequireParameter(n)] = v;
-  return th;
 }
 
 // Random location errors of every rotary axis (tens of um, tens of urad),

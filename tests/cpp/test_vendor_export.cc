@@ -8,12 +8,16 @@
 #include <Eigen/Dense>
 #include <random>
 
+#include "controller_fixtures.h"
 #include "fivecal/controllers/vendor.h"
 #include "fivecal/model/kinematics.h"
 
 namespace fivecal {
 namespace controllers {
 namespace {
+
+using test_fixtures::Poses;
+using test_fixtures::Theta;
 
 Machine TableTable() {
   return Machine::FromJson(R"({"name": "tt", "topology": "wCAfXYZSt", "axes": {
@@ -22,24 +26,6 @@ Machine TableTable() {
     "X": {"type": "linear", "direction": [1,0,0]}, "Y": {"type": "linear", "direction": [0,1,0]},
     "Z": {"type": "linear", "direction": [0,0,1]},
     "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [0,0,150]}})");
-}
-
-Eigen::MatrixXd Poses(const Machine& m, int n, unsigned seed = 5) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> lin(-100, 100), tilt(-90, 60), rot(-180, 180);
-  Eigen::MatrixXd q = Eigen::MatrixXd::Zero(n, m.num_axes());
-  for (int i = 0; i < n; ++i)
-    for (int k = 0; k < m.num_axes(); ++k) {
-      const char a = m.axis(k).name;
-      q(i, k) = a == 'S' ? 0.0 : a == 'C' ? rot(rng) : (a == 'A' || a == 'B') ? tilt(rng) : lin(rng);
-    }
-  return q;
-}
-
-Eigen::VectorXd Theta(const Machine& m, const std::map<std::string, double>& e) {
-  Eigen::VectorXd th = Eigen::VectorXd::Zero(m.num_parameters());
-  for (const auto& [n, v] : e) th[m.RequireParameter(n)] = v;
-  return th;
 }
 
 // Values: per rotary row of the table its point and direction, then the
@@ -98,13 +84,12 @@ class TableVendor : public ControllerVendor {
   }
 };
 
-
 TEST(VendorExport, RoundTripChangeAndWayBack) {
   const Machine m = TableTable();
   const TableVendor v;
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.02}, {"EY0C", -0.01}, {"EY0A", 0.015}, {"EZ0A", -0.012},
                                        {"EB0A", 3e-5}, {"EC0A", -2e-5}, {"EC0Y", 4e-6}});
-  const Eigen::MatrixXd q = Poses(m, 60);
+  const Eigen::MatrixXd q = Poses(m, 60, 5);
   const VendorExport ex = ExportToVendor(m, v, th, Eigen::MatrixXd(), q, {});
   EXPECT_LT(ex.round_trip_max, 1e-9);
   EXPECT_EQ(ex.change[0], 0.0);  // the code never changes
@@ -127,7 +112,7 @@ TEST(VendorExport, RoundTripChangeAndWayBack) {
 TEST(VendorExport, SensitivityIsTheDerivativeOfTheAbsorption) {
   const Machine m = TableTable();
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.02}, {"EY0A", 0.015}, {"EC0Y", 4e-6}, {"EB0A", 2e-5}});
-  const Eigen::MatrixXd q = Poses(m, 40);
+  const Eigen::MatrixXd q = Poses(m, 40, 5);
   AbsorbOptions o;
   o.directions = true;
   const Absorption ab = Absorb(m, ControllerModel::kTableTable, th, q, o);
@@ -153,7 +138,7 @@ TEST(VendorExport, CovarianceOfTheChangeIsItsLinearPropagation) {
   const Machine m = TableTable();
   const TableVendor v;
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.02}, {"EY0A", 0.015}});
-  const Eigen::MatrixXd q = Poses(m, 40);
+  const Eigen::MatrixXd q = Poses(m, 40, 5);
   const int nt = m.num_parameters();
   // a covariance on a few parameters, correlated
   Eigen::MatrixXd L = Eigen::MatrixXd::Zero(nt, nt);
@@ -191,7 +176,7 @@ TEST(VendorExport, RefusesWhatItCannotUse) {
   const Machine m = TableTable();
   const TableVendor v;
   const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.02}});
-  const Eigen::MatrixXd q = Poses(m, 20);
+  const Eigen::MatrixXd q = Poses(m, 20, 5);
   const auto message = [](const std::function<void()>& f) {
     try {
       f();
