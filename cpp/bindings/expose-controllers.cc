@@ -85,6 +85,24 @@ py::list ParameterList(const std::vector<ControllerParameter>& params) {
   return l;
 }
 
+// What every absorption hands to Python (controller_absorb, vendor_export).
+py::dict AbsorptionDict(const Absorption& ab) {
+  py::dict d;
+  d["model"] = ControllerModelName(ab.model);
+  d["parameters"] = ParameterList(ab.parameters);
+  d["values"] = ab.values;
+  d["held"] = ab.held;
+  d["theta"] = ab.theta;
+  d["workpiece_shift"] = Eigen::Vector3d(ab.workpiece_shift);
+  d["residual"] = ab.residual;
+  d["residual_old"] = ab.residual_old;
+  d["rms"] = ab.rms;
+  d["max"] = ab.max;
+  d["rms_old"] = ab.rms_old;
+  d["max_old"] = ab.max_old;
+  return d;
+}
+
 }  // namespace
 
 void BindControllers(py::module_& m) {
@@ -216,19 +234,7 @@ void BindControllers(py::module_& m) {
           py::gil_scoped_release release;
           ab = Absorb(mc, model, theta, poses, o);
         }
-        py::dict d;
-        d["model"] = ControllerModelName(ab.model);
-        d["parameters"] = ParameterList(ab.parameters);
-        d["values"] = ab.values;
-        d["held"] = ab.held;
-        d["theta"] = ab.theta;
-        d["workpiece_shift"] = Eigen::Vector3d(ab.workpiece_shift);
-        d["residual"] = ab.residual;
-        d["residual_old"] = ab.residual_old;
-        d["rms"] = ab.rms;
-        d["max"] = ab.max;
-        d["rms_old"] = ab.rms_old;
-        d["max_old"] = ab.max_old;
+        py::dict d = AbsorptionDict(ab);
         d["trt"] = ab.trt ? py::object(TrtFitDict(kins, *ab.trt)) : py::object(py::none());
         return d;
       },
@@ -422,19 +428,7 @@ void BindControllers(py::module_& m) {
           absorbed_cov = AbsorbedCovariance(ex, cov);
         }
         const Absorption& ab = ex.absorption;
-        py::dict a;
-        a["model"] = ControllerModelName(ab.model);
-        a["parameters"] = ParameterList(ab.parameters);
-        a["values"] = ab.values;
-        a["held"] = ab.held;
-        a["theta"] = ab.theta;
-        a["workpiece_shift"] = Eigen::Vector3d(ab.workpiece_shift);
-        a["residual"] = ab.residual;
-        a["residual_old"] = ab.residual_old;
-        a["rms"] = ab.rms;
-        a["max"] = ab.max;
-        a["rms_old"] = ab.rms_old;
-        a["max_old"] = ab.max_old;
+        py::dict a = AbsorptionDict(ab);
         a["trt"] = py::none();
         py::dict d;
         d["vendor"] = ex.vendor;
