@@ -191,17 +191,20 @@ def _data_section(dataset, result) -> str:
         + "</table>"
 
 
-def _verdict_banner(result, fd, standing=None) -> str:
+def _verdict_banner(result, fd, standing=None, anchor: bool = True) -> str:
     """The verdict at the top of the report, with its grade in one word: red
     NOT USABLE when the fit is not usable (never green then), red FAIL when a
     usable calibration fails its tolerances (the history's pass / fail),
     amber UNDECIDED or ALARM (undecided against a tolerance; a change the
     history's CUSUM detected at this calibration) and amber OK WITH
     RESERVATIONS, green OK only for a usable fit with nothing left
-    undetermined or inseparable that passes whatever it was graded against."""
+    undetermined or inseparable that passes whatever it was graded against.
+    ``anchor``: the report's one ``id='verdict'``; a notebook page shows many
+    results, and an id must be unique in a page."""
     a = fd.assessment
+    ident = " id='verdict'" if anchor else ""
     if not a.usable:
-        return (f"<div class='box bad' id='verdict'><b>NOT USABLE — {_e(a.verdict.replace('_', ' '))}.</b> "
+        return (f"<div class='box bad'{ident}><b>NOT USABLE — {_e(a.verdict.replace('_', ' '))}.</b> "
                 f"{_e(a.reason[:1].upper() + a.reason[1:])}. Do not compensate a machine with these "
                 "values: compensation, error tables and G-code refuse this result (force=True / "
                 "<code>--force</code> only to inspect it). The values below are shown for diagnosis.</div>")
@@ -233,7 +236,7 @@ def _verdict_banner(result, fd, standing=None) -> str:
         notes.insert(0, "within every tolerance")
     # the grade stands in bold before it: the fit's own words without "OK (usable)"
     text = "Usable: " + " ".join(verdict_lines(result, fd)).split(": ", 1)[-1]
-    return (f"<div class='box {cls}' id='verdict'><b>{grade}.</b> "
+    return (f"<div class='box {cls}'{ident}><b>{grade}.</b> "
             + "".join(f"<b>{h}.</b> " for h in head) + _e(text)
             + (f" {_e('; '.join(notes))}." if notes else "") + "</div>")
 

@@ -54,7 +54,7 @@ def _fit_parts(result: Result) -> List[str]:
     machine = result.dataset.machine
     mach_rows, other_rows, und_rows = _parameter_rows(result, machine, None)
     n_mach, n_other, n_und = (r.count("<tr") - 1 for r in (mach_rows, other_rows, und_rows))
-    parts = [_verdict_banner(result, fd),
+    parts = [_verdict_banner(result, fd, anchor=False),
              f"<table>{mach_rows}</table>" if n_mach else
              "<p>No machine error determined by this data: no values to show.</p>"]
     tail = []
