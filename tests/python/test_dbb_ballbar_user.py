@@ -353,3 +353,50 @@ def test_html_report_renders_in_chromium_verdict_first_and_goes_into_the_history
     assert rc == 0, err
     rc, out, err = cli("history", "show", "--store", "s.fcdb", 1, cwd=tmp_path)
     assert rc == 0 and "procedure 'circular'" in out
+
+
+def test_volumetric_takes_what_circular_takes_and_gives_each_plane_the_same_numbers(tmp_path):
+    """`dbb volumetric` reads readings-only runs, applies the thermal sidecar and
+    grades tolerances exactly as `dbb circular` does for each plane alone; one
+    verdict covers every plane, and the HTML report links each plane's own."""
+    planes = ("XY", "YZ")
+    for k, p in enumerate(planes):
+        for s, name in ((-1, "cw"), (1, "ccw")):
+            _, r = run(s, 40 + 2 * k + (s > 0))
+            np.savetxt(tmp_path / f"{p}_{name}.txt", r * 1e3, fmt="%.4f")
+    (tmp_path / "side.json").write_text(json.dumps({"thermal": {
+        "bar_expansion": 1e-6, "bar_temperature": 23.0, "machine_expansion": 11.5e-6,
+        "machine_temperature": 23.0}, "machine": "VMC-7"}))
+    common = ["--radius", R, "--sweep", 360, "--units", "um", "--sidecar", "side.json", "--tolerance", "G=30um"]
+    alone = {}
+    for p in planes:
+        rc, _, err = cli("dbb", "circular", f"{p}_cw.txt", f"{p}_ccw.txt", "--plane", p, *common,
+                         "--out", f"{p}.json", cwd=tmp_path)
+        assert rc == 0, err
+        alone[p] = json.loads((tmp_path / f"{p}.json").read_text())["procedure"]["values"]
+    rc, out, err = cli("dbb", "volumetric", "--xy", "XY_cw.txt", "XY_ccw.txt", "--yz", "YZ_cw.txt", "YZ_ccw.txt",
+                       *common, "--html", "rep", "--out", "v.json", cwd=tmp_path)
+    assert rc == 0, err
+    v = json.loads((tmp_path / "v.json").read_text())["procedure"]["values"]
+    for p in planes:
+        got = v["volumetric"]["planes"][p]
+        assert got["thermal"] == alone[p]["thermal"] and got["machine"] == "VMC-7"
+        for n, d in alone[p]["diagnosis"].items():
+            assert got["diagnosis"][n]["value"] == pytest.approx(d["value"], abs=1e-12), (p, n)
+        assert v["grades"][p]["grade"] == alone[p]["grade"]["grade"] == "PASS"
+    html = (tmp_path / "rep" / "report.html").read_text()
+    assert "<b>PASS</b>" in html and "Thermal compensation" in html and "XY/report.html" in html
+    assert (tmp_path / "rep" / "XY" / "report.html").is_file() and (tmp_path / "rep" / "volumetric.png").is_file()
+    # a tolerance one plane fails: exit 1, named by plane, and the page says FAIL
+    rc, out, err = cli("dbb", "volumetric", "--xy", "XY_cw.txt", "XY_ccw.txt", "--yz", "YZ_cw.txt", "YZ_ccw.txt",
+                       *common[:-2], "--tolerance", "backlash=1um", "--html", "bad", cwd=tmp_path)
+    assert rc == 1 and "FAIL against the tolerances" in err and "XY backlash" in err, err
+    assert "— FAIL" in (tmp_path / "bad" / "report.html").read_text()
+    # bad input names the option
+    for argv, msg in ((["--xy", "XY_cw.txt", "--simulate", "EXX1=1e-5", "--machine", "m.json", "--radius", R],
+                       "--simulate both given"),
+                      (["--xy", "XY_cw.txt", "XY_ccw.txt", "--yz", "YZ_cw.txt", "--radius", R, "--sweep", 360,
+                        "--units", "um", "--direction", "cw"], "--direction"),
+                      (["--xy", "XY_cw.txt", "XY_ccw.txt", "XY_cw.txt", "--radius", R], "give one or two")):
+        rc, out, err = cli("dbb", "volumetric", *argv, cwd=tmp_path)
+        assert rc == 2 and msg in err, (argv, err)

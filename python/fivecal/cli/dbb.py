@@ -28,7 +28,7 @@ from ..machine import Machine
 from ..procedures import dbb
 from ..procedures.sphere_check import spindle_equivalent
 from ..io import b5r
-from ..report.circular import write_circular_report
+from ..report.circular import write_circular_report, write_volumetric_report
 from ..report.polar import (dbb_groups, plane_name, plot_circular_test, plot_four_step, plot_polar, plot_polar_grid,
                             plot_volumetric, plot_wang_patterns)
 from ..simulation import simulate
@@ -528,8 +528,18 @@ def _b5r(args, tolerances) -> int:
 
 # ---- volumetric --------------------------------------------------------------
 def _volumetric(args) -> int:
-    results = {}
-    opts = _diagnosis_options(args)
+    """The planes' circular tests, each as ``dbb circular`` reads, corrects
+    and grades one, then combined; one verdict over every plane."""
+    given = [p for p in ("XY", "YZ", "ZX") if getattr(args, p.lower())]
+    if args.simulate is not None and given:
+        raise ValueError(f"--{given[0].lower()}: run files and --simulate both given; give one")
+    if args.simulate is not None and args.sweep is not None:
+        raise ValueError("--sweep: for readings-only run files; --simulate makes its own runs")
+    tolerances = _circular_tolerances(args.tolerance)
+    standard = dbb.check_standard(args.standard)
+    thermal = _thermal(args)
+    opts = dict(_diagnosis_options(args), thermal=thermal or None, standard=standard)
+    results, sources = {}, {}
     if args.simulate is not None:
         m = _machine(args.machine)
         _check_step(args.step, 360.0)
@@ -538,32 +548,44 @@ def _volumetric(args) -> int:
             ds = simulate(m, plan, errors=_values(args.simulate, "--simulate"), sigma={"dbb": args.sigma},
                           seed=args.seed)
             traces = []
-            for sid, label in ((f"{plane}-", "CW"), (f"{plane}+", "CCW")):
+            for sid in (f"{plane}-", f"{plane}+"):
                 t = dbb.trace_from_dataset(ds, sid)
-                t.label = label
+                t.label = _run_word(t.direction) + f" ({sid})"
                 traces.append(t)
             results[plane] = dbb.circular_test(traces, args.radius, plane, args.feed, **opts)
+            sources[plane] = [f"simulated setups {plane}- and {plane}+"]
     else:
-        for plane in ("XY", "YZ", "ZX"):
-            paths = getattr(args, plane.lower()) or []
+        for plane in given:
+            paths = getattr(args, plane.lower())
             if len(paths) > 2:
                 raise ValueError(f"--{plane.lower()}: {len(paths)} files; give one or two (CW and CCW)")
             traces = []
-            for path in paths:
-                t = dbb.read_trace_csv(path)
-                t.label = ("CCW" if t.direction > 0 else "CW") + f" ({os.path.basename(path)})"
+            # --direction names the runs of each plane in the order its files are given
+            for path, d in zip(paths, _direction_words(args.direction, len(paths))):
+                t = _read_run(path, args, d)
+                dbb.check_direction(t, path)
+                t.label = _run_word(t.direction) + f" ({os.path.basename(path)})"
                 traces.append(t)
-            if traces:
-                results[plane] = dbb.circular_test(traces, args.radius, plane, args.feed, **opts)
+            results[plane] = dbb.circular_test(traces, args.radius, plane, args.feed, **opts)
+            sources[plane] = list(paths)
     if len(results) < 2:
         raise ValueError(f"{len(results)} plane(s) given; give the runs of two or three planes (--xy, --yz, --zx "
                          "CSV files) or --simulate with --machine")
     vol = dbb.volumetric_evaluation(results)
     print(vol.report())
+    grades = {p: r.grade(tolerances) for p, r in results.items()} if tolerances else {}
+    for p, g in grades.items():
+        print(f"\n  {p}: grade against the tolerances: {g['grade']}")
+        for i in g["items"]:
+            print(f"    {i['label']:<24}{i['run']:<8}{i['shown']:>22}  tolerance {i['tolerance_shown']:>12}  "
+                  f"{i['grade']}")
     if args.out:
         # the one result document; the planes' ISO 230-4 values and diagnoses are its
         # procedure values (no machine-error fit here: `dbb circular --machine` per plane gives one)
-        write_result(args.out, _NO_FIT, "circular", {"volumetric": vol.to_dict()})
+        values = {"volumetric": vol.to_dict()}
+        if grades:
+            values["grades"] = grades
+        write_result(args.out, _NO_FIT, "circular", values)
         print(f"\nresult written to {args.out}")
     if args.plot:
         plot_volumetric(vol, args.plot)
@@ -571,7 +593,21 @@ def _volumetric(args) -> int:
 
     values = {f"{p} diagnosis {k}": v for p, r in results.items() for k, v in r.diagnosis.items()}
     std = {f"{p} diagnosis {k}": r.diagnosis_std[k] for p, r in results.items() for k in r.diagnosis}
-    return fit_status("dbb volumetric", [("", _values_verdict(values, std))], args.force, (args.out, args.plot))
+    rc = fit_status("dbb volumetric", [("", _values_verdict(values, std))], args.force,
+                    (args.out, args.plot, args.html))
+    if args.html:
+        reason = "" if rc == EXIT_OK else "the ISO 230-4 values are not usable (see the command's output)"
+        path = write_volumetric_report(vol, args.html, grades=grades, usable=rc == EXIT_OK, reason=reason,
+                                       scale=args.scale, sources=sources)
+        print(f"HTML report written to {path}")
+    bad = [f"{p} {i['label']} {i['run']} {i['shown']} > {i['tolerance_shown']}" if i["grade"] == "FAIL" else
+           f"{p} {i['label']} not determined (not fitted or below 3σ; --all-diagnoses grades it)"
+           for p, g in grades.items() for i in g["items"] if i["grade"] != "PASS"]
+    if rc == EXIT_OK and bad:
+        word = "FAIL" if any(g["grade"] == "FAIL" for g in grades.values()) else "NOT DETERMINED"
+        print(f"fivecal dbb volumetric: {word} against the tolerances: {'; '.join(bad)}", file=sys.stderr)
+        return EXIT_FIT
+    return rc
 
 
 # ---- plot ------------------------------------------------------------------
@@ -799,19 +835,55 @@ def register(sub) -> None:
 
     pv = dsub.add_parser("volumetric", formatter_class=RD,
                          help="three-plane circular tests (XY, YZ, ZX): results by plane and combined",
-                         description="Circular tests of two or three planes with one radius, each analysed "
-                         "as 'dbb circular' does, then combined: the largest circular deviation, the width of "
-                         "the shell holding every plane's centred trace (volumetric), the scale mismatch "
-                         "closure and each axis' backlash from the planes that see it.",
+                         description="Circular tests of two or three planes with one radius, each read, "
+                         "corrected and analysed as 'dbb circular' does, then combined: the largest circular "
+                         "deviation, the width of the shell holding every plane's centred trace (volumetric), "
+                         "the scale mismatch closure and each axis' backlash from the planes that see it. "
+                         "Tolerances grade every plane; one verdict covers them all.",
                          epilog="examples:\n"
                          "  fivecal dbb volumetric --xy xy_cw.csv xy_ccw.csv --yz yz_cw.csv yz_ccw.csv "
                          "--zx zx_cw.csv zx_ccw.csv --radius 100 --plot vol.png\n"
+                         "  fivecal dbb volumetric --xy xy_cw.txt xy_ccw.txt --yz yz_cw.txt yz_ccw.txt --radius 100 "
+                         "--sweep 360 --direction cw,ccw --units um   (readings only)\n"
+                         "  fivecal dbb volumetric ... --radius 100 --sidecar conditions.json --tolerance G=15um "
+                         "--html report/\n"
                          "  fivecal dbb volumetric --machine c600u.json --simulate EXX1=2e-5,EZZb=0.002 "
                          "--radius 100")
     for plane in ("xy", "yz", "zx"):
-        pv.add_argument(f"--{plane}", nargs="+", metavar="CSV",
-                        help=f"{plane.upper()} runs (angle, reading): one or two CSV files")
+        pv.add_argument(f"--{plane}", nargs="+", metavar="FILE",
+                        help=f"{plane.upper()} runs: one or two files, two columns (angle, reading) or readings "
+                        "only with --sweep")
     pv.add_argument("--radius", type=POSITIVE, required=True, help="nominal radius = bar length (mm)")
+    pv.add_argument("--sweep", type=_float_type(10.0), default=None, metavar="DEG",
+                    help="readings-only files: the arc the samples span, deg (as for 'dbb circular')")
+    pv.add_argument("--start", type=FINITE, default=0.0, metavar="DEG",
+                    help="readings-only files: angle of the first sample, deg (default 0)")
+    pv.add_argument("--direction", metavar="cw|ccw[,...]",
+                    help="run direction of each plane's files, in the order they are given (the same for every "
+                    "plane); readings-only files need it unless the file name says cw or ccw")
+    pv.add_argument("--units", choices=["mm", "um"], default=None,
+                    help="unit of the readings when a file's header names none (default mm)")
+    pv.add_argument("--angle-units", choices=["deg", "rad"], default=None,
+                    help="unit of the angle column when the header names none (default deg)")
+    pv.add_argument("--sidecar", metavar="JSON",
+                    help="test conditions for every plane: {\"thermal\": {...}, \"machine\", \"date\", "
+                    "\"feed\"} (as for 'dbb circular')")
+    pv.add_argument("--bar-expansion", type=_expansion, default=None, metavar="ALPHA",
+                    help="thermal compensation: the bar's expansion coefficient, 1/K or ppm/K (11.5ppm)")
+    pv.add_argument("--bar-temperature", type=FINITE, default=None, metavar="DEGC", help="bar temperature, °C")
+    pv.add_argument("--machine-expansion", type=_expansion, default=None, metavar="ALPHA",
+                    help="thermal compensation: the machine scales' expansion coefficient, 1/K or ppm/K")
+    pv.add_argument("--machine-temperature", type=FINITE, default=None, metavar="DEGC",
+                    help="machine temperature, °C")
+    pv.add_argument("--standard", default="ISO 230-4",
+                    help="standard the values follow: ISO 230-4 (others are refused, `fivecal docs dbb`)")
+    pv.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
+                    help="grade every plane's ISO 230-4 values and diagnoses, as for 'dbb circular' (G=15um, "
+                    "backlash=4um, ...); FAIL in any plane, or a toleranced diagnosis not determined, exits 1")
+    pv.add_argument("--html", metavar="DIR",
+                    help="write the HTML report here: the combined page and each plane's report in DIR/<plane>/")
+    pv.add_argument("--scale", type=POSITIVE, default=None,
+                    help="polar plot ring spacing in µm of the planes' reports (default automatic)")
     pv.add_argument("--feed", type=POSITIVE, default=None, help="feed (mm/min)")
     pv.add_argument("--machine", help="machine JSON for --simulate")
     pv.add_argument("--simulate", metavar="ERRORS", help="simulate CW and CCW runs in the three planes")

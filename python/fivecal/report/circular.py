@@ -1,7 +1,8 @@
 """The HTML report of a planar circular (ball bar) test, like identify's:
 the verdict first, then the polar plot at its stated scale, the diagnosis
 ranked by contribution to circularity, the ISO 230-4 values and what was
-left out (docs/dbb.md, "The circular test report").
+left out (docs/dbb.md, "The circular test report"); and of a volumetric
+test, the planes' reports under one page that states the combined values.
 
 Only formatting: every number comes from :class:`fivecal.procedures.dbb.
 CircularResult` (the C++ core's analysis) or from the grade it made.
@@ -16,7 +17,7 @@ from .._version import __version__
 from ..files import make_dirs, write_text
 from .document import _CSS
 from .markup import _e, _img_tag, table_html
-from .polar import plot_circular_test
+from .polar import plot_circular_test, plot_volumetric
 
 _VERDICT_CSS = """
 .verdict{border-radius:6px;padding:12px 16px;margin:14px 0;font-size:1.1em}
@@ -138,6 +139,102 @@ def write_circular_report(result, out_dir: Union[str, os.PathLike], *, grade: Op
     if sources:
         body += ["<h2 id='files'>Input</h2>", "<ul>" + "".join(f"<li><code>{_e(s)}</code></li>"
                                                                  for s in sources) + "</ul>"]
+    page = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<title>{_e(title)}</title><style>{_CSS}{_VERDICT_CSS}</style></head><body><main>\n"
+            + "\n".join(body) + "\n</main></body></html>\n")
+    path = os.path.join(out_dir, "report.html")
+    write_text(path, page)
+    return path
+
+
+def volumetric_verdict(vol, grades: Optional[Mapping] = None, usable: bool = True, reason: str = "") -> dict:
+    """The volumetric page's one line: NOT USABLE, FAIL when any plane fails
+    a tolerance, PASS when every plane was graded and passed, else the
+    combined values alone."""
+    if not usable:
+        return {"word": "NOT USABLE", "cls": "fail", "text": reason or "the analysis is not usable"}
+    c = f"combined circularity {_um(vol.circularity)} µm, volumetric {_um(vol.volumetric)} µm"
+    if not grades:
+        return {"word": "NOT GRADED", "cls": "neutral", "text": f"{c}; no tolerance given (--tolerance)"}
+    bad = [f"{p} {i['label']} ({i['grade'].lower()})" for p, g in grades.items() for i in g["items"]
+           if i["grade"] != "PASS"]
+    if not bad:
+        return {"word": "PASS", "cls": "pass", "text": f"{c}; every toleranced value of every plane within its "
+                                                       "tolerance"}
+    word = "FAIL" if any(g["grade"] == "FAIL" for g in grades.values()) else "NOT DETERMINED"
+    return {"word": word, "cls": "fail", "text": f"{c}; " + ", ".join(bad[:6])}
+
+
+def write_volumetric_report(vol, out_dir: Union[str, os.PathLike], *, grades: Optional[Mapping] = None,
+                            usable: bool = True, reason: str = "", scale: Optional[float] = None,
+                            sources: Optional[Mapping[str, Sequence[str]]] = None,
+                            embed_images: bool = True) -> str:
+    """Write ``out_dir/report.html`` for a
+    :class:`~fivecal.procedures.dbb.VolumetricResult`: the verdict over every
+    plane, the planes side by side (``volumetric.png``, one ring spacing),
+    the combined values, and each plane's own circular test report in
+    ``out_dir/<plane>/report.html`` (graded by ``grades[plane]``, the planes'
+    :meth:`grade` results). ``sources``: the input files per plane."""
+    out_dir = os.fspath(out_dir)
+    make_dirs(out_dir)
+    grades = dict(grades or {})
+    sources = dict(sources or {})
+    links = {}
+    for p, r in vol.planes.items():
+        sub = os.path.join(out_dir, p)
+        write_circular_report(r, sub, grade=grades.get(p), usable=usable, reason=reason, scale=scale,
+                              sources=sources.get(p, ()), embed_images=embed_images,
+                              title=f"fivecal circular test report — {p} plane of a volumetric test")
+        links[p] = f"{p}/report.html"
+    png = os.path.join(out_dir, "volumetric.png")
+    plot_volumetric(vol, png)
+    v = volumetric_verdict(vol, grades, usable, reason)
+    title = "fivecal volumetric circular test report"
+    if v["word"] in ("FAIL", "NOT USABLE", "NOT DETERMINED"):
+        title += f" — {v['word']}"
+    now = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    rows = []
+    for row in vol.plane_rows():
+        p = row["plane"]
+        r = vol.planes[p]
+        top = r.label(row["top"][0], short=True) + f" {_um(row['top'][1])} µm" if row["top"] else "-"
+        g = grades.get(p)
+        rows.append((p, _um(row["circularity"]), _um(row["hysteresis"]) if row["hysteresis"] is not None else "-",
+                     top, g["grade"] if g else "not graded", row["samples"]))
+    body = [f"<h1>{_e(title)}</h1>",
+            f"<div class='sub'>fivecal {__version__} · {now} · {_e(vol.header_line())}</div>",
+            f"<div class='verdict {v['cls']}'><b>{_e(v['word'])}</b> — {_e(v['text'])}</div>",
+            "<h2 id='planes'>Planes</h2>",
+            table_html(["plane", "circularity G (µm)", "hysteresis H (µm)", "largest contribution", "grade",
+                        "samples"], rows, [False, True, True, False, False, True]),
+            "<p>Each plane's full report (polar plot, ranked diagnosis, ISO 230-4 values): "
+            + ", ".join(f"<a href='{_e(u)}'>{_e(p)}</a>" for p, u in links.items()) + ".</p>",
+            "<h2 id='plot'>Polar plots</h2>",
+            "<p>The planes at one ring spacing, so that they compare at a glance; the scale is printed on the "
+            "plot.</p>",
+            _img_tag(png, out_dir, embed_images, "polar plots of the planes"),
+            "<h2 id='combined'>Combined values</h2>"]
+    combined = [("combined circularity (largest G of any plane)", f"{_um(vol.circularity)} µm"),
+                ("volumetric (shell about each plane's centre holding every trace)", f"{_um(vol.volumetric)} µm")]
+    c = vol.scale_closure()
+    if c is not None:
+        combined.append(("scale mismatch closure (X-Y)+(Y-Z)+(Z-X), 0 when consistent", f"{c * 1e6:.2f} µm/m"))
+    for ax, vals in sorted(vol.axis_values().items()):
+        combined.append((f"backlash {ax}", ", ".join(f"{x * 1e3:+.2f} ± {s * 1e3:.2f} µm ({p})"
+                                                     for p, x, s in vals)))
+    body.append(table_html(["quantity", "value"], combined, [False, True]))
+    thermal = [r.thermal for r in vol.planes.values() if r.thermal]
+    if thermal:
+        t = thermal[0]
+        body.append("<p>Thermal compensation: readings referred to 20 °C with the bar's expansion "
+                    f"{t['bar_expansion'] * 1e6:g} µm/m/K at {t['bar_temperature']:g} °C and the machine's "
+                    f"{t['machine_expansion'] * 1e6:g} µm/m/K at {t['machine_temperature']:g} °C.</p>")
+    else:
+        body.append("<p>No thermal compensation: the readings are as recorded.</p>")
+    files = [(p, f) for p, fs in sources.items() for f in fs]
+    if files:
+        body += ["<h2 id='files'>Input</h2>", "<ul>" + "".join(f"<li>{_e(p)}: <code>{_e(f)}</code></li>"
+                                                                 for p, f in files) + "</ul>"]
     page = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
             f"<title>{_e(title)}</title><style>{_CSS}{_VERDICT_CSS}</style></head><body><main>\n"
             + "\n".join(body) + "\n</main></body></html>\n")
