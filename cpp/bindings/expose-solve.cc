@@ -72,6 +72,13 @@ void BindSolve(py::module_& m) {
       .def_readonly("identified_machine_errors", &Result::identified_machine_errors)
       .def_readonly("held", &Result::held)
       .def_readonly("left_out", &Result::left_out)
+      .def_property_readonly("left_out_moves",
+                             [](const Result& r) {
+                               py::dict out;
+                               for (const LeftOutMoves& m : r.left_out_moves)
+                                 out[py::str(m.name)] = py::make_tuple(m.plausible, m.moves);
+                               return out;
+                             })
       .def_property_readonly("not_determined",
                              [](const Result& r) {
                                py::list out;

@@ -305,6 +305,42 @@ class Findings:
     held: List[str] = field(default_factory=list)    # determined there, values held near 0
     #: estimate "location": candidates its selection left out -> why (never silently)
     left_out: dict = field(default_factory=dict)
+    #: left-out candidates that, at their plausible size, would move an estimate
+    #: by more than CARRIED_SIGMAS of its σ, largest first
+    carried: List["Carried"] = field(default_factory=list)
+
+
+#: a left-out error of plausible size that moves an estimate by more than this
+#: many of its σ is named: the estimate's σ assumes that error is 0
+CARRIED_SIGMAS = 3.0
+
+
+@dataclass
+class Carried:
+    """A left-out candidate ``name`` of plausible size ``plausible`` would move
+    estimate ``estimate`` by ``shift`` (``sigmas`` of its σ)."""
+    name: str
+    plausible: float
+    estimate: str
+    shift: float
+    sigmas: float
+
+
+def carried(result) -> List[Carried]:
+    """The left-out candidates whose plausible size moves a machine-error
+    estimate beyond CARRIED_SIGMAS of its σ (``Result.left_out_moves``; the result
+    document's ``left_out_moves``), largest first."""
+    std = dict(getattr(result, "std", None) or {})
+    out = []
+    for name, (plausible, moves) in (getattr(result, "left_out_moves", None) or {}).items():
+        for est, a in moves.items():
+            if "." in est:  # a set-up quantity (instrument pose, tip): not compensated, it may absorb
+                continue
+            s = std.get(est)
+            shift = a * plausible
+            if s is not None and _finite(s) and s > 0 and abs(shift) > CARRIED_SIGMAS * s:
+                out.append(Carried(name, plausible, est, shift, shift / s))
+    return sorted(out, key=lambda c: -abs(c.sigmas))
 
 
 def findings(result) -> Findings:
@@ -337,4 +373,4 @@ def findings(result) -> Findings:
     absent = sorted(c for c, f in (getattr(result, "class_scales", None) or {}).items() if f < ABSENT_CLASS_SCALE)
     left_out = {str(n): str(w) for n, w in getattr(result, "left_out", None) or []}
     return Findings(a, identified, partly, undetermined, list(a.implausible), pairs, informed, absent, held,
-                    left_out)
+                    left_out, carried(result))

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _core, files, guards, schema
 from .dataset import Dataset
-from .units import display_scale
+from .units import display_scale, format_value
 from .views import Viewable
 
 
@@ -176,6 +176,11 @@ class Result(Viewable):
         #: estimate "location": the candidates its selection left out, as (name, why)
         #: pairs (too weakly seen against the prior, or confounded with those chosen)
         self.left_out: list = [(str(n), str(w)) for n, w in getattr(core, "left_out", [])]
+        #: what each left-out candidate would do to the estimates were it not 0:
+        #: name -> (its plausible size, {estimate: d(estimate)/d(candidate)}); a real
+        #: value of it is carried into those estimates whatever their sigma says
+        self.left_out_moves: dict = {str(n): (float(p), {str(e): float(a) for e, a in m.items()})
+                                     for n, (p, m) in dict(getattr(core, "left_out_moves", {})).items()}
         #: what the data could not tell, one dict per family of parameters (location
         #: offsets, location angles, scale gains, error motions of one degree, backlash,
         #: set-up): family, machine, estimated, names and why (the measurement that would tell it)
@@ -560,6 +565,16 @@ def left_out_lines(fd: "guards.Findings") -> list:
     out += [f"  {n}: {why}" for n, why in items[:8]]
     if len(items) > 8:
         out.append(f"  and {len(items) - 8} more: {guards.name_list([n for n, _ in items[8:]])}")
+    carried = fd.carried
+    if carried:
+        out.append(f"estimates a left-out error of plausible size would move by more than "
+                   f"{guards.CARRIED_SIGMAS:g} σ (their σ assumes it is 0; a value it really has is carried "
+                   "into them):")
+        for c in carried[:8]:
+            out.append(f"  {c.name} ({format_value(c.name, c.plausible)}) would move {c.estimate} by "
+                       f"{format_value(c.estimate, c.shift)} = {abs(c.sigmas):.3g} σ")
+        if len(carried) > 8:
+            out.append(f"  and {len(carried) - 8} more")
     return out
 
 

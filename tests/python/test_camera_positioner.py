@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import fivecal
-from fivecal import _core
+from fivecal import _core, guards
 from fivecal.cli import main
 from fivecal.io import import_dataset
 
@@ -221,3 +221,39 @@ def test_help_texts_name_the_instrument_pose_and_a_pose_example(capsys):
     out = capsys.readouterr().out
     assert "fivecal import pose camera_xyzw.txt" in out and "qx qy qz qw" in out
     assert os.path.exists(os.path.join(EX, "import", "camera_xyzw.json"))  # the help's example is real
+
+
+def test_location_names_the_left_out_error_its_estimates_would_carry():
+    """EY0C, the turntable's offset from the tilt axis, acts on these frames
+    like the tilt EA0C over a 120 mm lever: location leaves it out. The result
+    says that a real EY0C of plausible size would move EA0C by far more than
+    its σ (which assumes EY0C = 0), and the move it states is what a
+    simulated EY0C really does to the estimate (first order, to a few %)."""
+    mod = LOGS
+    m = fivecal.Machine.load(MACHINE)
+    noise = {"pose": 0.1, "pose_angle": 3e-4}
+
+    def fit(errors):
+        d = fivecal.simulate(m, mod.plan(), errors=errors, setup=mod.SETUP, sigma=noise, seed=7).to_dict()
+        d["instruments"] = {"CAM": {"sigma": [0.1, 0.1, 0.1, 3e-4, 3e-4, 3e-4]}}
+        return fivecal.identify(fivecal.Dataset.from_dict(d), "location")
+
+    r = fit(mod.TRUTH)
+    assert "EY0C" in dict(r.left_out)
+    plausible, moves = r.left_out_moves["EY0C"]
+    assert plausible > 0 and "EA0C" in moves
+    # the lever: an offset of the turntable axis by dy reads as a tilt of about dy / 120 mm
+    assert abs(moves["EA0C"]) == pytest.approx(1 / 120, rel=0.3)
+    carried = {(c.name, c.estimate): c for c in guards.findings(r).carried}
+    assert abs(carried["EY0C", "EA0C"].sigmas) > 10
+    text = r.report()
+    assert "would move EA0C by" in text and "EY0C" in text
+    doc = r.to_dict()
+    assert doc["left_out_moves"]["EY0C"]["moves"]["EA0C"] == pytest.approx(moves["EA0C"])
+    # the truth: the same frames with a real EY0C move EA0C as stated
+    dy = 0.05
+    r2 = fit({**mod.TRUTH, "EY0C": dy})
+    assert r2.estimated == r.estimated
+    seen = r2.values["EA0C"] - r.values["EA0C"]
+    assert seen == pytest.approx(moves["EA0C"] * dy, rel=0.05)
+    assert abs(seen) > 4 * r2.std["EA0C"]  # a confident wrong EA0C, had the result not said so

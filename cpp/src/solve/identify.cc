@@ -75,6 +75,7 @@ Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
         again.estimate.push_back(request.estimated[c]);
     Result out = Identify(ds, again);
     out.left_out = request.left_out;
+    out.left_out_moves = request.left_out_moves;
     for (int c : determination.drop)
       out.left_out.emplace_back(request.estimated[c],
                                 "too weakly seen at the noise estimated from the residuals (variance components): "
@@ -168,6 +169,15 @@ std::string Result::ToJson() const {
   json lo = json::array();
   for (const auto& [name, why] : left_out) lo.push_back({name, why});
   j["left_out"] = lo;
+  if (!left_out_moves.empty()) {
+    json moves = json::object();
+    for (const LeftOutMoves& m : left_out_moves) {
+      json e = json::object();
+      for (const auto& [est, a] : m.moves) e[est] = a;
+      moves[m.name] = {{"plausible", m.plausible}, {"moves", e}};
+    }
+    j["left_out_moves"] = moves;
+  }
   json nd = json::array();
   for (const NotDetermined& f : not_determined)
     nd.push_back({{"family", f.family}, {"machine", f.machine}, {"estimated", f.estimated},

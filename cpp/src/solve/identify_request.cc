@@ -1,5 +1,6 @@
 #include "fivecal/solve/identify_request.h"
 
+#include <Eigen/QR>
 #include <algorithm>
 #include <cstdio>
 #include <cmath>
@@ -179,6 +180,41 @@ std::vector<int> SelectAt(const Dataset& ds, const IdentifyRequest& s, const Eig
   return out;
 }
 
+// What each left-out candidate would do to the estimates if it were not 0:
+// the least-squares change of the estimated set that absorbs its column,
+// d(est)/d(c) = (Je^T Je)^-1 Je^T Jc on the weighted data rows at `at`.
+// Entries below 1e-12 of the largest are dropped (they move nothing).
+std::vector<LeftOutMoves> MovesOfLeftOut(const Dataset& ds, const IdentifyRequest& s, const Eigen::VectorXd& at,
+                                         const std::vector<int>& est) {
+  std::vector<LeftOutMoves> out;
+  std::vector<int> left;
+  for (const auto& lo : s.left_out) left.push_back(s.table.Require(lo.first));
+  if (left.empty() || est.empty()) return out;
+  std::vector<int> all = est;
+  all.insert(all.end(), left.begin(), left.end());
+  Problem probe(ds, s.table, at, all);
+  Eigen::VectorXd r;
+  Eigen::MatrixXd Jw;
+  WeightedJacobian(&probe, &r, &Jw);
+  const Eigen::Index p = static_cast<Eigen::Index>(est.size());
+  // Column-pivoted QR: the chosen set is determined by construction, but a
+  // rank-deficient one must not give infinities here.
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Jw.leftCols(p));
+  const Eigen::MatrixXd A = qr.solve(Jw.rightCols(Jw.cols() - p));
+  for (size_t k = 0; k < left.size(); ++k) {
+    LeftOutMoves m;
+    m.name = s.left_out[k].first;
+    m.plausible = s.prior_all[left[k]];
+    const double big = A.col(static_cast<Eigen::Index>(k)).cwiseAbs().maxCoeff();
+    for (Eigen::Index e = 0; e < p; ++e) {
+      const double a = A(e, static_cast<Eigen::Index>(k));
+      if (std::isfinite(a) && std::abs(a) > 1e-12 * big) m.moves[s.table.names()[est[e]]] = a;
+    }
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
 }  // namespace
 
 Eigen::VectorXd Gather(const Eigen::VectorXd& all, const std::vector<int>& idx) {
@@ -244,6 +280,7 @@ IdentifyRequest ResolveRequest(const Dataset& ds, const IdentifyOptions& opt) {
       est = again;
     }
     for (int i : est) rq.start[i] = at[i];
+    rq.left_out_moves = MovesOfLeftOut(ds, rq, at, est);
   } else {
     est = rq.forced;
   }

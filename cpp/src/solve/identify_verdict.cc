@@ -272,6 +272,7 @@ Result JudgeResult(const Dataset& ds, const IdentifyOptions& opt, const Identify
   res.map_fit = map;
   res.explicit_request = !rq.automatic;
   res.left_out = rq.left_out;
+  res.left_out_moves = rq.left_out_moves;
   res.placement = std::vector<double>(rq.place.data(), rq.place.data() + p);
   if (map)
     for (int j = 0; j < p; ++j) res.placement[j] = rq.placement_all[est[j]];

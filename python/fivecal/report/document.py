@@ -34,7 +34,7 @@ from ..files import make_dirs, write_text
 from ..guards import NEAR_SINGULAR_R as _NEAR_R, PARTLY_INFORMED as _PARTLY
 from ..identification import MICRO_UNITS, noise_lines, verdict_lines
 from ..procedures.dbb import trace_from_dataset
-from ..units import display_scale
+from ..units import display_scale, format_value
 from . import plots, polar
 from .history import sections_and_standing as _history_sections
 from .markup import _e, _img_tag, table_html
@@ -302,6 +302,14 @@ def _findings_section(result, fd) -> str:
                      "<small>(not estimated; judged against the priors of the machine's kind)</small> "
                      + "; ".join(f"<code>{_e(n)}</code>: {_e(w)}" for n, w in list(fd.left_out.items())[:12])
                      + (f" and {len(fd.left_out) - 12} more" if len(fd.left_out) > 12 else "")))
+    if fd.carried:
+        rows.append((f"Carried from what was left out ({len(fd.carried)})",
+                     f"<small>(an estimate's σ assumes the errors left out are 0; at its plausible size each of "
+                     f"these would move the estimate by more than {guards.CARRIED_SIGMAS:g} σ)</small> "
+                     + "; ".join(f"<code>{_e(c.name)}</code> ({_e(format_value(c.name, c.plausible))}) would move "
+                                 f"<code>{_e(c.estimate)}</code> by {_e(format_value(c.estimate, c.shift))} = "
+                                 f"{abs(c.sigmas):.3g} σ" for c in fd.carried[:12])
+                     + (f" and {len(fd.carried) - 12} more" if len(fd.carried) > 12 else "")))
     if fd.informed or fd.partly:
         rows.append(("Informed only in part", f"<small>(the data narrowed the plausible range less than "
                      f"{1 / _PARTLY:g}-fold)</small> " + names(fd.partly)))

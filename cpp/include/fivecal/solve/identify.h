@@ -96,6 +96,16 @@ struct NotDetermined {
   std::string why;                  // likely cause: the measurement that would determine them
 };
 
+// What a candidate the "location" selection left out would do to the
+// estimates if it were not 0: d(estimate)/d(candidate) at the solution (first
+// order, the data's weighted least squares) for each estimate it moves, and
+// its plausible size (prior sigma), at which the report states the moves.
+struct LeftOutMoves {
+  std::string name;
+  double plausible = 0;
+  std::map<std::string, double> moves;
+};
+
 struct Result {
   std::vector<std::string> names;     // every parameter of the problem
   Eigen::VectorXd values;             // every parameter (fitted or fixed)
@@ -160,6 +170,10 @@ struct Result {
   // Estimate "location": the candidates its selection left out, each with why
   // (too weakly seen for its prior, or confounded with those chosen).
   std::vector<std::pair<std::string, std::string>> left_out;
+  // For each candidate left out, what its value would do to the estimates
+  // (LeftOutMoves): a value a left-out error really has is carried into the
+  // estimates it moves, whatever their sigma says.
+  std::vector<LeftOutMoves> left_out_moves;
   std::vector<NotDetermined> not_determined;  // one per family with undetermined parameters
   std::string fit_path;               // the path that ran: "dense" or "normal_equations"
   // "ok", "not_converged", "implausible", "inadequate", "non_finite" or

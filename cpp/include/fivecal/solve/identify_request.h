@@ -38,6 +38,8 @@ struct IdentifyRequest {
   std::vector<std::string> estimated;  // names of `est`
   // "location": the candidates its selection left out, each with why.
   std::vector<std::pair<std::string, std::string>> left_out;
+  // d(estimate)/d(left-out candidate) at the selection's solution (Result::left_out_moves).
+  std::vector<LeftOutMoves> left_out_moves;
   Eigen::VectorXd start;
   // Per estimated parameter: the prior that scales the determination (a MAP
   // fit's prior rows, a set-up quantity's narrowed by its placement; in least
