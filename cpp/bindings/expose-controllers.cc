@@ -68,6 +68,7 @@ py::list VendorValueList(const std::vector<VendorValue>& values) {
     d["unit"] = v.unit;
     d["source"] = v.source;
     d["fixed"] = v.fixed;
+    d["motion"] = v.motion;
     l.append(d);
   }
   return l;
@@ -441,6 +442,7 @@ void BindControllers(py::module_& m) {
         d["new"] = ex.new_values;
         d["change"] = ex.change;
         d["covariance"] = ex.covariance;
+        d["covariance_index"] = ex.covariance_index;
         d["sigma"] = ex.sigma;
         d["old_minus_nominal"] = ex.old_minus_nominal;
         d["round_trip"] = ex.round_trip;

@@ -54,12 +54,16 @@ MAX_CORRECTION_DEG = 0.5
 # ---------------------------------------------------------------------------
 # errors
 # ---------------------------------------------------------------------------
-def load_errors(source, machine: Machine) -> Dict[str, float]:
+def load_errors(source, machine: Machine, tool_offset: bool = False) -> Dict[str, float]:
     """Machine error values (name -> mm / rad) from a result JSON file path, a
     result dict (``{"parameters": {name: {"value": ..}}}``), a plain dict name
-    -> value or a :class:`fivecal.Result`. Setup parameters and the probe
-    stylus offsets ``tip.*`` are dropped; an unknown machine parameter name is
-    a ValueError naming it."""
+    -> value or a :class:`fivecal.Result`. Setup parameters are dropped, and
+    so are the probe stylus offsets ``tip.*`` unless ``tool_offset``: G-code
+    compensation and LinuxCNC pins must not take a stylus offset for a
+    machine error, while a controller vendor's export takes its length along
+    the spindle as the tool length (the core's ``ExportToVendor`` keeps only
+    that component). An unknown machine parameter name is a ValueError
+    naming it."""
     where = "errors"
     undetermined = set(guards.assess(source).undetermined)  # never exported as if measured
     if isinstance(source, (str, os.PathLike)):
@@ -84,7 +88,7 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
     for name, value in source.items():
         if not isinstance(name, str):
             raise ValueError(f"{where}: parameter names must be strings, got {name!r}")
-        if name.startswith("tip.") or ("." in name) or name in undetermined:
+        if name in undetermined or ("." in name and not (tool_offset and name.startswith("tip."))):
             continue  # probe stylus / setup parameters: not machine errors; undetermined: not measured
         if name not in known:
             raise ValueError(f"{where}: '{name}' is not a parameter of machine {machine.name!r} "
@@ -100,8 +104,8 @@ def load_errors(source, machine: Machine) -> Dict[str, float]:
 
 
 def usable_errors(source, machine: Machine, force: bool = False,
-                  what: str = "this identification result") -> Dict[str, float]:
-    """:func:`load_errors` after the guard every consumer applies: a result
+                  what: str = "this identification result", tool_offset: bool = False) -> Dict[str, float]:
+    """:func:`load_errors` (``tool_offset`` as there) after the guard every consumer applies: a result
     that did not converge, holds non-finite values, failed the chi-square test
     or left requested parameters undetermined raises
     :class:`fivecal.UnusableResultError` with the reason, unless ``force``."""
@@ -110,7 +114,7 @@ def usable_errors(source, machine: Machine, force: bool = False,
         # first, not a refusal that --force would only trade for it
         schema.validate(files.read_json(os.fspath(source), "result"), "errors", os.fspath(source))
     guards.require_usable(source, force, what)
-    return load_errors(source, machine)
+    return load_errors(source, machine, tool_offset)
 
 
 def _check_correction(machine: Machine, nominal: np.ndarray, commands: np.ndarray,

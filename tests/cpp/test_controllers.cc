@@ -50,6 +50,29 @@ TEST(Controllers, RepresentedErrorsAreAbsorbedExactly) {
   EXPECT_FALSE(ab.trt.has_value());
 }
 
+// The fit in a controller's frame (PointFrame::kController, what
+// VendorToTheta uses): table location errors move fivecal's part frame, so
+// the same points read in the part frame leave an error the controller-frame
+// fit does not; the controller-frame fit recovers the model exactly.
+TEST(Controllers, ControllerFrameFitRecoversTheModelInItsOwnFrame) {
+  const Machine m = TableTable();
+  const Eigen::MatrixXd q = Poses(m, 60, 4);
+  AbsorbOptions o;
+  o.directions = true;
+  const Eigen::VectorXd th = Theta(m, {{"EX0C", 0.02}, {"EY0A", -0.015}, {"EZ0A", 0.01}, {"EB0A", 4e-5},
+                                       {"EC0A", -3e-5}, {"EA0C", 2e-5}});
+  const Absorption exact = Absorb(m, ControllerModel::kTableTable, th, q, o);
+  ASSERT_LT(exact.max, 1e-9);
+  const KinematicsTable t = MakeKinematicsTable(m, exact.theta);
+  const Eigen::MatrixXd controller =
+      (ToolPoints(m, exact.theta, q) * t.part_rotation.transpose()).rowwise() + t.part_origin.transpose();
+  const Absorption ab = AbsorbToolPoints(m, ControllerModel::kTableTable, controller, q, o, PointFrame::kController);
+  EXPECT_LT(ab.max, 1e-9);
+  EXPECT_LT((ab.theta - exact.theta).cwiseAbs().maxCoeff(), 1e-8);
+  const Absorption part = AbsorbToolPoints(m, ControllerModel::kTableTable, controller, q, o, PointFrame::kPart);
+  EXPECT_GT(part.max, 1e-4);  // the frame's own motion is not a pivot change
+}
+
 TEST(Controllers, UnrepresentedErrorsLeaveAStationaryFit) {
   // The absorber's analytic Jacobian: at the optimum the residual is
   // orthogonal to every finite-difference column of the model.

@@ -9,6 +9,10 @@
 #include <random>
 
 #include "controller_fixtures.h"
+#include "fivecal/controllers/beckhoff.h"
+#include "fivecal/controllers/fanuc.h"
+#include "fivecal/controllers/heidenhain.h"
+#include "fivecal/controllers/siemens.h"
 #include "fivecal/controllers/vendor.h"
 #include "fivecal/model/kinematics.h"
 
@@ -170,6 +174,53 @@ TEST(VendorExport, CovarianceOfTheChangeIsItsLinearPropagation) {
   const Eigen::MatrixXd ac = AbsorbedCovariance(ex, cov);
   EXPECT_EQ(ac.rows(), nt);
   EXPECT_GE(ac.diagonal().minCoeff(), -1e-18);
+}
+
+// One registration style: the registry lists each vendor class's one
+// instance, by the name and title the class states.
+TEST(VendorExport, TheRegistryListsEachVendorsOneInstance) {
+  const std::vector<const ControllerVendor*> want = {&FanucVendor::Instance(), &SiemensVendor::Instance(),
+                                                     &HeidenhainVendor::Instance(), &BeckhoffVendor::Instance()};
+  EXPECT_EQ(ControllerVendors(), want);
+  for (const ControllerVendor* v : want) EXPECT_EQ(&FindVendor(v->Name()), v);
+  EXPECT_EQ(FindVendor("heidenhain").Name(), HeidenhainVendor::kName);
+  EXPECT_EQ(FindVendor("beckhoff").Title(), std::string(BeckhoffVendor::kTitle));
+}
+
+// The tool offset reaches a vendor that holds the tool length along the
+// spindle only (an offset across it is the stylus's), with its covariance
+// projected the same way; a vendor without a tool length takes none of it.
+TEST(VendorExport, ToolOffsetGoesInAlongTheSpindleOnly) {
+  const Machine m = Machine::FromJson(R"({"name": "th", "topology": "wCfXYZBSt", "axes": {
+    "C": {"type": "rotary", "direction": [0,0,-1], "point": [-30,20,0]},
+    "X": {"type": "linear", "direction": [1,0,0]}, "Y": {"type": "linear", "direction": [0,1,0]},
+    "Z": {"type": "linear", "direction": [0,0,1]},
+    "B": {"type": "rotary", "direction": [0,1,0], "point": [0,0,250]},
+    "S": {"type": "rotary", "direction": [0,0,1]}}, "tool": {"tip": [0,0,20]}})");
+  const ControllerVendor& h = FindVendor("heidenhain");
+  const VendorOptions o = {{"table-axis-sign", "iso"}, {"tool-length", "100"}};
+  const Eigen::MatrixXd q = Poses(m, 80, 21);
+  const int nt = m.num_parameters(), tip = m.tip_index();
+  const Eigen::VectorXd along = Theta(m, {{"EX0C", 0.01}, {"tip.z", 0.04}});
+  const Eigen::VectorXd all = Theta(m, {{"EX0C", 0.01}, {"tip.x", 0.03}, {"tip.y", -0.02}, {"tip.z", 0.04}});
+  const Eigen::VectorXd none = Theta(m, {{"EX0C", 0.01}});
+  const VendorExport a = ExportToVendor(m, h, along, Eigen::MatrixXd(), q, o);
+  const VendorExport b = ExportToVendor(m, h, all, Eigen::MatrixXd(), q, o);
+  const VendorExport c = ExportToVendor(m, h, none, Eigen::MatrixXd(), q, o);
+  EXPECT_LT((a.change - b.change).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_GT((a.change - c.change).cwiseAbs().maxCoeff(), 0.039);  // the 40 um tool length is in the values
+  EXPECT_LT(a.absorption.max, 1e-9);
+  // covariance: tip.x alone gives no sigma; tip.z alone gives its own
+  Eigen::MatrixXd cx = Eigen::MatrixXd::Zero(nt, nt), cz = cx;
+  cx(tip, tip) = 1e-4;
+  cz(tip + 2, tip + 2) = 1e-4;
+  EXPECT_LT(ExportToVendor(m, h, along, cx, q, o).sigma.maxCoeff(), 1e-12);
+  EXPECT_NEAR(ExportToVendor(m, h, along, cz, q, o).sigma.maxCoeff(), 1e-2, 1e-6);
+  // Siemens keeps no tool length (tool data): the tool offset changes nothing
+  const ControllerVendor& s = FindVendor("siemens");
+  const VendorOptions so = {{"record", "1"}};
+  EXPECT_LT((ExportToVendor(m, s, all, Eigen::MatrixXd(), q, so).change -
+             ExportToVendor(m, s, none, Eigen::MatrixXd(), q, so).change).cwiseAbs().maxCoeff(), 1e-12);
 }
 
 TEST(VendorExport, RefusesWhatItCannotUse) {

@@ -171,7 +171,7 @@ std::vector<Case> Cases() {
 // represent -> neutral table -> rows -> the rows' own kinematics over a pose
 // grid == the absorbed model's tool points, in both table senses.
 TEST(VendorHeidenhain, RoundTripEveryTopology) {
-  const Heidenhain& h = HeidenhainVendor();
+  const HeidenhainVendor& h = HeidenhainVendor::Instance();
   for (const Case& c : Cases()) {
     for (const std::string sense : {"iso", "carriage"}) {
       SCOPED_TRACE(c.name + " " + sense);
@@ -205,7 +205,7 @@ TEST(VendorHeidenhain, RoundTripEveryTopology) {
 // reports, a change where the errors are, its covariance, the old values.
 TEST(VendorHeidenhain, ExportThroughTheRegistry) {
   const ControllerVendor& v = FindVendor("heidenhain");
-  EXPECT_EQ(&v, &HeidenhainVendor());
+  EXPECT_EQ(&v, &HeidenhainVendor::Instance());
   const Machine m = Machine::Load(Src("examples/machines/c600u.json"));
   Eigen::VectorXd th = Eigen::VectorXd::Zero(m.num_parameters());
   th[m.RequireParameter("EY0A")] = 0.02;   // A's pivot 20 um in y
@@ -234,7 +234,7 @@ TEST(VendorHeidenhain, ExportThroughTheRegistry) {
 
 // (c) The way back: Table(Map(t)) == t.
 TEST(VendorHeidenhain, TableOfMapIsTheTable) {
-  const Heidenhain& h = HeidenhainVendor();
+  const HeidenhainVendor& h = HeidenhainVendor::Instance();
   for (const Case& c : Cases()) {
     for (const std::string sense : {"iso", "carriage"}) {
       SCOPED_TRACE(c.name + " " + sense);
@@ -264,7 +264,7 @@ double ValueOf(const std::vector<VendorValue>& names, const Eigen::VectorXd& v, 
 
 // (d) The nominal machine: hu40t's rows are its machine file's geometry.
 TEST(VendorHeidenhain, NominalRowsAreTheMachineFile) {
-  const Heidenhain& h = HeidenhainVendor();
+  const HeidenhainVendor& h = HeidenhainVendor::Instance();
   const Machine m = Machine::Load(Src("examples/machines/hu40t.json"));  // wCBXfZYSt, B at (0,0,-120), tip z 100
   const VendorOptions o = Iso(100);
   const std::vector<VendorValue> names = h.Values(m, o);
@@ -319,7 +319,7 @@ TEST(VendorHeidenhain, NominalRowsAreTheMachineFile) {
 // A 180 degree row does not jump by 360 with the sign of a small error, so
 // that the change of a value is the small change.
 TEST(VendorHeidenhain, HalfTurnRowsChangeByTheSmallError) {
-  const Heidenhain& h = HeidenhainVendor();
+  const HeidenhainVendor& h = HeidenhainVendor::Instance();
   const Machine m = Machine::Load(Src("examples/machines/hu40t.json"));
   const VendorOptions o = {{"table-axis-sign", "carriage"}, {"tool-length", "100"}};
   const Eigen::VectorXd n = h.Map(m, MakeKinematicsTable(m, Eigen::VectorXd::Zero(m.num_parameters())), o);
@@ -335,7 +335,7 @@ TEST(VendorHeidenhain, HalfTurnRowsChangeByTheSmallError) {
 // A wrong convention is not silently the same: the rows written for iso and
 // run as carriage put the tool elsewhere (the verification recipe sees it).
 TEST(VendorHeidenhain, WrongSenseMovesTheTool) {
-  const Heidenhain& h = HeidenhainVendor();
+  const HeidenhainVendor& h = HeidenhainVendor::Instance();
   const Machine m = Machine::Load(Src("examples/machines/vmc0656.json"));
   const Eigen::VectorXd v = h.Map(m, MakeKinematicsTable(m, Eigen::VectorXd::Zero(m.num_parameters())), Iso());
   const Eigen::MatrixXd q = Grid(m, 20, 4);
@@ -356,7 +356,7 @@ std::string ErrorOf(F f) {
 
 // (e) Refusals.
 TEST(VendorHeidenhain, Refusals) {
-  const Heidenhain& h = HeidenhainVendor();
+  const HeidenhainVendor& h = HeidenhainVendor::Instance();
   const Machine m = Machine::Load(Src("examples/machines/c600u.json"));
   const KinematicsTable t = MakeKinematicsTable(m, Eigen::VectorXd::Zero(m.num_parameters()));
   EXPECT_HAS(ErrorOf([&] { h.Model(FourAxis(), Iso()); }), "two rotary axes");

@@ -36,8 +36,8 @@ def _export(machine: Machine, errors=None, cov_scale=1e-6, options=OPTIONS, seed
 
 
 def test_the_vendor_is_registered():
-    assert "heidenhain" in _core.vendor_names()
-    info = _core.vendor_info("heidenhain")
+    assert "heidenhain" in K.vendors()
+    info = K.vendor_info("heidenhain")
     assert set(info["options"]) == {"table-axis-sign", "tool-length"}
 
 
@@ -130,12 +130,12 @@ def test_file_values_through_the_tnc_kinematics_reproduce_the_machine(tmp_path, 
     back = H.read(str(p))
     values = np.array([back.get(v["name"], v["new"]) for v in exp.values])
     assert sum(v["name"] in back for v in exp.values) >= 20
-    tnc = _core.vendor_tool_points("heidenhain", m._core, values, poses, options)
-    nominal = _core.vendor_tool_points("heidenhain", m._core, np.array([v["old"] for v in exp.values]), poses,
-                                       options)
+    tnc = K.vendor_tool_points(m, "heidenhain", values, m.axes_dict(poses), options)
+    nominal = K.vendor_tool_points(m, "heidenhain", np.array([v["old"] for v in exp.values]), m.axes_dict(poses),
+                                   options)
     # The erroneous machine in the controller's workpiece frame (machine frame at the zero pose).
     theta = m.theta(errors)
-    table = _core.kinematics_table(m._core, theta)
+    table = K.kinematics_table(m, theta)
     truth = (m.tool_point(m.axes_dict(poses), errors) @ np.asarray(table["part_rotation"]).T
              + np.asarray(table["part_origin"]))
     d = tnc - truth

@@ -231,6 +231,10 @@ def test_cli_export_siemens_end_to_end(tmp_path, capsys):
     assert rc == 0, text
     mpf = (out / "siemens.MPF").read_text()
     assert "swivel data record 1" in mpf and "result " + str(res) in mpf
+    # the kinematics type as the record and the .MPF show it: the letter, not its code
+    assert '$TC_CARR23[1]="P"' in mpf.replace(" ", "")
+    type_line = next(ln for ln in text.splitlines() if ln.startswith("$TC_CARR23[1]"))
+    assert type_line.split()[1] == "P" and "80" not in type_line, type_line
     assert "within 0.00 um" in mpf and "nan" not in mpf and "=-0.000000 " not in mpf
     rec = json.loads((out / "export.json").read_text())
     back = siemens.read(out / "siemens.MPF")

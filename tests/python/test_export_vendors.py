@@ -91,11 +91,13 @@ def test_export_writes_the_file_and_the_record_and_reads_back(check, vendor, cap
             assert back[v["name"]] == pytest.approx(v["new"], abs=tol), v["name"]
     # the absorbed fivecal parameters are what verification after loading reads
     assert set(rec["absorbed"]["names"]) >= {"EY0C", "EZ0A"}
+    # and the record says what a sphere check verifies of it: all of it here (no tables)
+    assert rec["sphere_check"] == {"verifies": "kinematics", "unverifiable_values": 0, "unverifiable": None}
     # --old: the file just written is the controller's state; the change is the same
     out2 = d / f"out2-{vendor}"
     src = out / next(f for f in written if f.startswith(vendor))
     rc = main(["export", vendor, str(d / "check.json"), "--machine", os.path.join(MACHINES, "c600u.json"),
-               "--out", str(out2), "--old", str(src), "--force", *_sets(vendor)])
+               "--out", str(out2), "--old", str(src), "--force-old", *_sets(vendor)])
     assert rc == 0, capsys.readouterr().out
     rec2 = json.load(open(out2 / "export.json"))
     for a, b in zip(rec["values"], rec2["values"]):
@@ -176,3 +178,101 @@ def test_result_covariance_is_the_documents_std_and_correlation(check):
     bad.pop("correlation")
     with pytest.raises(ValueError, match="correlation"):
         K.result_covariance(bad, m)
+
+
+@pytest.mark.parametrize("vendor", VENDORS)
+def test_each_guard_has_its_own_switch(check, vendor, capsys):
+    """--old that differs from the machine file and a change beyond
+    --max-change are two refusals with two switches: each lifts its own
+    guard only; --force (as before) lifts both."""
+    d, _, _ = check
+    machine = os.path.join(MACHINES, "c600u.json")
+    first = d / f"guard0-{vendor}"
+    assert main(["export", vendor, str(d / "check.json"), "--machine", machine, "--out", str(first),
+                 *_sets(vendor)]) == 0
+    old = first / next(f for f in sorted(os.listdir(first)) if f.startswith(vendor))
+    # the old values are the new ones of the first export: they differ from
+    # the machine file by the change, and the change is the same again
+    base = ["export", vendor, str(d / "check.json"), "--machine", machine, "--old", str(old),
+            "--max-change", "1e-5,1e-9", *_sets(vendor)]
+    capsys.readouterr()
+    assert main([*base, "--out", str(d / f"guard1-{vendor}"), "--force-change"]) == 2
+    err = capsys.readouterr().err
+    assert "--old" in err and "--force-old" in err, err
+    assert main([*base, "--out", str(d / f"guard2-{vendor}"), "--force-old"]) == 2
+    err = capsys.readouterr().err
+    assert f"{vendor} values (--force-change" in err and "against the machine file" not in err, err
+    assert not os.path.exists(d / f"guard1-{vendor}") and not os.path.exists(d / f"guard2-{vendor}")
+    assert main([*base, "--out", str(d / f"guard3-{vendor}"), "--force-old", "--force-change"]) == 0
+    assert main([*base, "--out", str(d / f"guard4-{vendor}"), "--force"]) == 0
+    capsys.readouterr()
+
+
+#: a C table and a B head: the tool length is determined (the head turns the
+#: tool), unlike on c600u, where it trades with the work offset
+TABLE_HEAD = {"name": "th", "topology": "wCXYfZBSt", "axes": {
+    "C": {"type": "rotary", "direction": [0, 0, -1], "point": [30, -20, 0]},
+    "X": {"type": "linear", "direction": [-1, 0, 0]}, "Y": {"type": "linear", "direction": [0, -1, 0]},
+    "Z": {"type": "linear", "direction": [0, 0, 1]},
+    "B": {"type": "rotary", "direction": [0, -1, 0], "point": [0, 0, 350]},
+    "S": {"type": "rotary", "direction": [0, 0, 1]}}, "tool": {"tip": [0, 0, 120]}}
+HEAD_OPTIONS: dict = {
+    "fanuc": {"increment": "IS-C", "tool-length": "100", "holder-offset": "5", "axis-order": "XYZBC"},
+    "siemens": {"record": "1"},
+    "heidenhain": {"table-axis-sign": "iso", "tool-length": "100"},
+    "beckhoff": {"syntax": "kinematik", "axes": "XYZBC", "tool_length": "0"},
+}
+TOOL_LENGTH_ERROR = 0.05   # mm, along the spindle
+
+
+@pytest.fixture(scope="module")
+def head_check(tmp_path_factory):
+    """Sphere touches on a table-head machine whose tool is 50 µm longer
+    than its machine file says, identified with the tool length free (the
+    stylus's sideways offsets fixed: they trade with the C pivot here), as
+    the result document `fivecal identify --out` writes."""
+    d = tmp_path_factory.mktemp("toollength")
+    machine_file = d / "th.json"
+    machine_file.write_text(json.dumps(TABLE_HEAD))
+    m = fivecal.Machine.load(str(machine_file))
+    plan = sc.plan(m, BALL, tip_radius=TIP)
+    truth = {"tip.z": TOOL_LENGTH_ERROR, "EX0C": 0.01}
+    ds = fivecal.simulate(m, plan, errors=truth, artefact={"spheres": [BALL]}, tip_radius=TIP, sigma=0.001, seed=7)
+    fivecal.save_dataset(ds, str(d / "ds.json"))
+    assert main(["identify", str(d / "ds.json"), "--estimate", "EX0C,EY0C", "--fix", "tip.x,tip.y",
+                 "--out", str(d / "check.json")]) == 0
+    return d, m, str(machine_file)
+
+
+@pytest.mark.parametrize("vendor", VENDORS)
+def test_an_identified_tool_length_error_reaches_the_vendors_tool_length(head_check, vendor, capsys):
+    """From the command line: the tool length identified (tip.z,
+    along the spindle) changes the value that holds the tool's length in the
+    vendor's file by that length, with a σ that carries its uncertainty;
+    Siemens keeps no tool length in the swivel data record (tool data), so
+    nothing of it goes there. Without it (load_errors' default, as LinuxCNC
+    compensation takes it) the change is missing."""
+    from fivecal.cli.export import _GUARD_UNITS
+    d, m, machine_file = head_check
+    doc = json.load(open(d / "check.json"))
+    tip = doc["parameters"]["tip.z"]
+    assert abs(tip["value"] - TOOL_LENGTH_ERROR) < 3 * tip["std"], tip
+    out = d / f"tl-{vendor}"
+    sets = [x for k, v in HEAD_OPTIONS[vendor].items() for x in ("--set", f"{k}={v}")]
+    assert main(["export", vendor, str(d / "check.json"), "--machine", machine_file, "--out", str(out), *sets]) == 0
+    capsys.readouterr()
+    rec = json.load(open(out / "export.json"))
+    without = K.vendor_export(m, vendor, load_errors(doc, m), K.result_covariance(doc, m),
+                              options=HEAD_OPTIONS[vendor])
+    assert "tip.z" not in load_errors(doc, m)
+    mm = lambda v: _GUARD_UNITS[v["unit"]][1] * v["change"]  # noqa: E731
+    diff = [(abs(mm(a) - mm(b)), a) for a, b in zip(rec["values"], without.values)
+            if not a["fixed"] and _GUARD_UNITS[a["unit"]][0] == "mm"]
+    size, value = max(diff, key=lambda x: x[0])
+    if vendor == "siemens":
+        assert size < 1e-9
+        return
+    assert size == pytest.approx(abs(tip["value"]), rel=1e-6), value["name"]
+    sigma_mm = _GUARD_UNITS[value["unit"]][1] * value["sigma"]
+    assert sigma_mm >= 0.9 * tip["std"], (value["name"], sigma_mm, tip["std"])
+    assert abs(size - TOOL_LENGTH_ERROR) < 3 * sigma_mm, (value["name"], size, sigma_mm)

@@ -40,10 +40,13 @@ def first_check(tmp_path_factory):
     return d, m, plan, machine_file
 
 
-def _load_and_check(d, m, plan, machine_file, vendor, values, tag, capsys, force=False):
+def _load_and_check(d, m, plan, machine_file, vendor, values, tag, capsys, force=False, export=None,
+                    options=None):
     """The machine after the controller loaded ``values``: its apparent errors
     are the truth less what the controller's model now compensates."""
-    ran = K.vendor_to_theta(m, vendor, values, options=OPTIONS.get(vendor))
+    options = OPTIONS.get(vendor) if options is None else options
+    export = d / f"exp-{vendor}" if export is None else export
+    ran = K.vendor_to_theta(m, vendor, values, options=options)
     after = m.theta(TRUTH) - ran["theta"]
     names = m.parameter_names()
     errors = {n: float(v) for n, v in zip(names, after) if v != 0.0}
@@ -52,7 +55,7 @@ def _load_and_check(d, m, plan, machine_file, vendor, values, tag, capsys, force
     fivecal.save_dataset(ds, str(d / f"after-{tag}.json"))
     capsys.readouterr()
     rc = main(["sphere-check", str(d / f"after-{tag}.json"), "--previous", str(d / "old.json"),
-               "--expect", str(d / f"exp-{vendor}" / "export.json"), *(["--force"] if force else [])])
+               "--expect", str(export / "export.json"), *(["--force"] if force else [])])
     return rc, capsys.readouterr().out
 
 
@@ -117,3 +120,39 @@ def test_an_altered_file_is_caught_and_named(first_check, vendor, how, word, cap
                                capsys, force=how == "unit")
     assert rc == 1, text
     assert re.search(word, text, re.I), text
+
+
+def test_beckhoff_tables_are_marked_unverifiable_and_the_check_says_it_verified_the_kinematics(first_check, capsys):
+    """The TF5280 tables are not in ``absorbed``: export.json says so in a
+    field (``sphere_check``), and ``sphere-check --expect`` says it verified
+    the kinematics only; an export without tables says nothing of the kind."""
+    d, m, plan, machine_file = first_check
+    tables = {"volcomp": "error", "volcomp_units": "um,urad", "volcomp_frame": "carriage",
+              "grid.X": "-200:200:50", "grid.Y": "-200:200:50", "grid.Z": "-200:200:50", "grid.A": "-90:90:15",
+              "grid.C": "-180:180:30"}
+    options = dict(OPTIONS["beckhoff"], **tables)
+    out = d / "exp-beckhoff-tables"
+    sets = [x for k, v in options.items() for x in ("--set", f"{k}={v}")]
+    assert main(["export", "beckhoff", str(d / "old.json"), "--machine", machine_file, "--out", str(out), *sets]) == 0
+    rec = json.load(open(out / "export.json"))
+    tables_n = sum(1 for v in rec["values"] if v["motion_table"])
+    assert tables_n > 100
+    assert not any(v["motion_table"] for v in rec["values"] if v["name"].startswith("kinematik"))
+    assert rec["sphere_check"]["verifies"] == "kinematics"
+    assert rec["sphere_check"]["unverifiable_values"] == tables_n
+    assert f"the {tables_n} error-motion table values" in rec["sphere_check"]["unverifiable"]
+    values = [v["new"] for v in rec["values"]]
+    rc, text = _load_and_check(d, m, plan, machine_file, "beckhoff", values, "tables", capsys, export=out,
+                               options=options)
+    assert rc == 0, text
+    assert re.search(r"took effect", text, re.I), text
+    assert "verified the kinematics only" in text and f"the {tables_n} error-motion table values" in text
+    # without tables: nothing unverifiable, and no such line
+    plain = d / "exp-beckhoff"
+    if not (plain / "export.json").exists():
+        assert main(["export", "beckhoff", str(d / "old.json"), "--machine", machine_file, "--out", str(plain),
+                     *_sets("beckhoff")]) == 0
+    rec = json.load(open(plain / "export.json"))
+    rc, text = _load_and_check(d, m, plan, machine_file, "beckhoff", [v["new"] for v in rec["values"]],
+                               "no-tables", capsys)
+    assert rc == 0 and "verified the kinematics only" not in text, text

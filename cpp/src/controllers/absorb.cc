@@ -6,6 +6,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "fivecal/controllers/kinematics_table.h"
 #include "fivecal/controllers/linuxcnc_5axis.h"
 #include "fivecal/model/kinematic_model.h"
 #include "fivecal/model/kinematics.h"
@@ -180,11 +181,11 @@ std::vector<ControllerParameter> ControllerParameters(const Machine& m, Controll
 
 namespace {
 
-// The absorption of `truth` (N x 3) with the columns it kept (parameters
-// first then the shift, as indices into [phi, shift]) and their Jacobian at
-// the solution, for the sensitivity.
+// The absorption of `truth` (N x 3, in `frame`) with the columns it kept
+// (parameters first then the shift, as indices into [phi, shift]) and their
+// Jacobian at the solution, for the sensitivity.
 Absorption AbsorbPoints(const Machine& m, ControllerModel model, const Eigen::MatrixXd& truth,
-                        const Eigen::MatrixXd& poses, const AbsorbOptions& options,
+                        const Eigen::MatrixXd& poses, const AbsorbOptions& options, PointFrame frame,
                         std::vector<Eigen::Index>* kept, Eigen::MatrixXd* jacobian_kept) {
   Absorption ab;
   ab.model = model;
@@ -200,10 +201,33 @@ Absorption AbsorbPoints(const Machine& m, ControllerModel model, const Eigen::Ma
   Eigen::MatrixXd B(nt, k);
   for (Eigen::Index c = 0; c < k; ++c) B.col(c) = ab.parameters[c].column;
   const Eigen::VectorXd th0 = Eigen::VectorXd::Zero(nt);
+  const bool controller = frame == PointFrame::kController;
 
+  const auto model_points = [&](const Eigen::VectorXd& theta) -> Eigen::MatrixXd {
+    Eigen::MatrixXd p = ToolPoints(m, theta, poses);
+    if (!controller) return p;
+    const KinematicsTable t = MakeKinematicsTable(m, theta);
+    return (p * t.part_rotation.transpose()).rowwise() + t.part_origin.transpose();
+  };
   Eigen::MatrixXd J(3 * n, k + 3);
   const auto jacobian = [&](const Eigen::VectorXd& phi) {
-    J.leftCols(k) = Jacobian(m, th0 + B * phi, B, poses);
+    const Eigen::VectorXd theta = th0 + B * phi;
+    J.leftCols(k) = Jacobian(m, theta, B, poses);
+    if (controller) {
+      // d(R p + o) = R dp + dR p + do; the part frame is closed-form in
+      // theta, so central differences over the few columns are exact enough
+      const Eigen::MatrixXd p = ToolPoints(m, theta, poses);
+      const Eigen::Matrix3d R = MakeKinematicsTable(m, theta).part_rotation;
+      for (Eigen::Index c = 0; c < k; ++c) {
+        const double h = ab.parameters[size_t(c)].unit == "rad" ? 1e-7 : 1e-5;
+        const KinematicsTable up = MakeKinematicsTable(m, theta + h * B.col(c));
+        const KinematicsTable down = MakeKinematicsTable(m, theta - h * B.col(c));
+        const Eigen::Matrix3d dR = (up.part_rotation - down.part_rotation) / (2 * h);
+        const Eigen::Vector3d dO = (up.part_origin - down.part_origin) / (2 * h);
+        for (Eigen::Index i = 0; i < n; ++i)
+          J.block(3 * i, c, 3, 1) = R * J.block(3 * i, c, 3, 1) + dR * p.row(i).transpose() + dO;
+      }
+    }
     for (Eigen::Index i = 0; i < n; ++i) J.block(3 * i, k, 3, 3).setIdentity();
   };
   Eigen::VectorXd phi = Eigen::VectorXd::Zero(k);
@@ -228,8 +252,9 @@ Absorption AbsorbPoints(const Machine& m, ControllerModel model, const Eigen::Ma
 
   Eigen::Vector3d shift = Eigen::Vector3d::Zero();
   Eigen::MatrixXd Jk(3 * n, Eigen::Index(keep.size()));
-  for (int it = 0; it < 4; ++it) {
-    Eigen::MatrixXd r = truth - ToolPoints(m, th0 + B * phi, poses);
+  // Nearly linear: two or three steps converge; the cap only stops a cycle.
+  for (int it = 0; it < 6; ++it) {
+    Eigen::MatrixXd r = truth - model_points(th0 + B * phi);
     r.rowwise() -= shift.transpose();
     for (size_t j = 0; j < keep.size(); ++j) Jk.col(Eigen::Index(j)) = J.col(keep[j]);
     const Eigen::VectorXd x = Jk.colPivHouseholderQr().solve(Stack(r));
@@ -243,9 +268,9 @@ Absorption AbsorbPoints(const Machine& m, ControllerModel model, const Eigen::Ma
   ab.values = phi;
   ab.theta = th0 + B * phi;
   ab.workpiece_shift = shift;
-  ab.residual = truth - ToolPoints(m, ab.theta, poses);
+  ab.residual = truth - model_points(ab.theta);
   ab.residual.rowwise() -= shift.transpose();
-  ab.residual_old = truth - ToolPoints(m, th0, poses);
+  ab.residual_old = truth - model_points(th0);
   const Eigen::RowVector3d mean = ab.residual_old.colwise().mean();
   ab.residual_old.rowwise() -= mean;
   Stats(ab.residual, &ab.rms, &ab.max);
@@ -267,7 +292,7 @@ Absorption Absorb(const Machine& m, ControllerModel model, const Eigen::VectorXd
   const Eigen::MatrixXd truth = ToolPoints(m, theta_true, poses);  // validates theta and poses
   std::vector<Eigen::Index> keep;
   Eigen::MatrixXd Jk;
-  Absorption ab = AbsorbPoints(m, model, truth, poses, options, &keep, &Jk);
+  Absorption ab = AbsorbPoints(m, model, truth, poses, options, PointFrame::kPart, &keep, &Jk);
   // Gauss-Newton at the solution: d[phi_kept, shift_kept] = pinv(Jk) dP/dtheta d theta_true.
   const int nt = m.num_parameters();
   const Eigen::MatrixXd Jt = Jacobian(m, theta_true, Eigen::MatrixXd::Identity(nt, nt), poses);
@@ -283,8 +308,8 @@ Absorption Absorb(const Machine& m, ControllerModel model, const Eigen::VectorXd
 }
 
 Absorption AbsorbToolPoints(const Machine& m, ControllerModel model, const Eigen::MatrixXd& truth,
-                            const Eigen::MatrixXd& poses, const AbsorbOptions& options) {
-  return AbsorbPoints(m, model, truth, poses, options, nullptr, nullptr);
+                            const Eigen::MatrixXd& poses, const AbsorbOptions& options, PointFrame frame) {
+  return AbsorbPoints(m, model, truth, poses, options, frame, nullptr, nullptr);
 }
 
 }  // namespace controllers

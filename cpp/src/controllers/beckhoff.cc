@@ -174,21 +174,32 @@ struct Layout {
   std::vector<int> orientation, point;   // per machine axis: first of 3 (point: -1 for linear axes)
   std::vector<int> grid_first, table_first;  // per machine axis: first grid position, first table value
   std::vector<int> grid_n;
+  // false: the table entries carry no name, unit or source (Map and
+  // MapMotions, which the export runs once per parameter, read positions only)
+  bool texts = true;
 };
 
 void Add(Layout& L, const std::string& name, const std::string& unit, const std::string& source,
          double fixed = NAN) {
-  VendorValue v;
+  VendorValue& v = L.values.emplace_back();
   v.name = name;
   v.unit = unit;
   v.source = source;
   v.fixed = !std::isnan(fixed);
-  L.values.push_back(v);
   L.fixed_values.push_back(fixed);
 }
 
-Layout MakeLayout(const Machine& m, const Opts& op) {
+// A table entry: its texts only when the layout carries them.
+void AddTable(Layout& L, const std::string& name, const std::string& unit, const std::string& source,
+              double fixed = NAN) {
+  if (L.texts) return Add(L, name, unit, source, fixed);
+  L.values.emplace_back().fixed = !std::isnan(fixed);
+  L.fixed_values.push_back(fixed);
+}
+
+Layout MakeLayout(const Machine& m, const Opts& op, bool texts = true) {
   Layout L;
+  L.texts = texts;
   const std::string src = std::string(kInfosys) + kSrcChain;
   const std::string& P = op.prefix;
   L.channel_of.assign(m.num_axes(), -1);
@@ -229,7 +240,17 @@ Layout MakeLayout(const Machine& m, const Opts& op) {
   L.table_first.assign(m.num_axes(), -1);
   L.grid_n.assign(m.num_axes(), 0);
   if (op.volcomp == VolComp::kOff) return L;
+  // A fine grid lists thousands of values, and the export builds the layout
+  // once per parameter: the texts are made once per table, not per value.
+  size_t total = L.values.size();
+  for (char a : op.axes) total += 7 * size_t(op.grids.at(a).n);
+  L.values.reserve(total);
+  L.fixed_values.reserve(total);
   const std::string tsrc = std::string(kInfosys) + kSrcTables;
+  const std::string arg_src = tsrc + " (the table's argument)";
+  const std::string value_src =
+      tsrc + (op.volcomp == VolComp::kError ? "; the error motion (ISO 230-1 sign), negate not set"
+                                            : "; the correction (minus the error motion)");
   for (char a : op.axes) {
     const int k = m.AxisIndex(a);
     const Grid& g = op.grids.at(a);
@@ -237,15 +258,15 @@ Layout MakeLayout(const Machine& m, const Opts& op) {
     L.grid_n[k] = g.n;
     L.grid_first[k] = int(L.values.size());
     for (int i = 0; i < g.n; ++i)
-      Add(L, arg + "[" + std::to_string(i) + "]", m.axis(k).rotary() ? "deg" : "mm", tsrc + " (the table's argument)",
-          g.at(i));
+      AddTable(L, L.texts ? arg + "[" + std::to_string(i) + "]" : "", m.axis(k).rotary() ? "deg" : "mm", arg_src,
+               g.at(i));
     L.table_first[k] = int(L.values.size());
     for (int c = 0; c < 6; ++c)
-      for (int i = 0; i < g.n; ++i)
-        Add(L, std::string("E") + kComponentLetters[c] + arg + "[" + std::to_string(i) + "]",
-            c < 3 ? op.lin_unit : op.ang_unit,
-            tsrc + (op.volcomp == VolComp::kError ? "; the error motion (ISO 230-1 sign), negate not set"
-                                                  : "; the correction (minus the error motion)"));
+      for (int i = 0; i < g.n; ++i) {
+        AddTable(L, L.texts ? std::string("E") + kComponentLetters[c] + arg + "[" + std::to_string(i) + "]" : "",
+                 c < 3 ? op.lin_unit : op.ang_unit, value_src);
+        L.values.back().motion = true;
+      }
   }
   return L;
 }
@@ -277,12 +298,7 @@ void CheckValues(const Machine& m, const Layout& L, const Eigen::VectorXd& value
 
 }  // namespace
 
-std::string Beckhoff::Title() const {
-  return "Beckhoff TwinCAT 3 CNC / ISG: universal kinematics (TF5240, kinematic ID 91) and volumetric "
-         "compensation tables (TF5280)";
-}
-
-std::map<std::string, std::string> Beckhoff::OptionHelp() const {
+std::map<std::string, std::string> BeckhoffVendor::OptionHelp() const {
   return {
       {"syntax", "the channel parameter list syntax: 'kinematik' (kinematik[91].*, CNC builds V2.11.20xx/28xx) "
                  "or 'trafo[j]' (trafo[j].* with trafo[j].id 91, builds from V3.00)"},
@@ -300,7 +316,7 @@ std::map<std::string, std::string> Beckhoff::OptionHelp() const {
   };
 }
 
-VendorModel Beckhoff::Model(const Machine& m, const VendorOptions& o) const {
+VendorModel BeckhoffVendor::Model(const Machine& m, const VendorOptions& o) const {
   Parse(m, o, OptionHelp());
   int linear = 0, wp = 0, tool = 0;
   std::string letters;
@@ -323,15 +339,15 @@ VendorModel Beckhoff::Model(const Machine& m, const VendorOptions& o) const {
   return vm;
 }
 
-std::vector<VendorValue> Beckhoff::Values(const Machine& m, const VendorOptions& o) const {
+std::vector<VendorValue> BeckhoffVendor::Values(const Machine& m, const VendorOptions& o) const {
   Model(m, o);
   return MakeLayout(m, Parse(m, o, OptionHelp())).values;
 }
 
-Eigen::VectorXd Beckhoff::Map(const Machine& m, const KinematicsTable& table, const VendorOptions& o) const {
+Eigen::VectorXd BeckhoffVendor::Map(const Machine& m, const KinematicsTable& table, const VendorOptions& o) const {
   Model(m, o);
   const Opts op = Parse(m, o, OptionHelp());
-  const Layout L = MakeLayout(m, op);
+  const Layout L = MakeLayout(m, op, false);
   Eigen::VectorXd v = Eigen::VectorXd::Zero(Eigen::Index(L.values.size()));
   for (size_t i = 0; i < L.values.size(); ++i)
     if (L.values[i].fixed) v[Eigen::Index(i)] = L.fixed_values[i];
@@ -357,10 +373,10 @@ Eigen::VectorXd Beckhoff::Map(const Machine& m, const KinematicsTable& table, co
   return v;
 }
 
-Eigen::VectorXd Beckhoff::MapMotions(const Machine& m, const Eigen::VectorXd& theta, const VendorOptions& o) const {
+Eigen::VectorXd BeckhoffVendor::MapMotions(const Machine& m, const Eigen::VectorXd& theta, const VendorOptions& o) const {
   Model(m, o);
   const Opts op = Parse(m, o, OptionHelp());
-  const Layout L = MakeLayout(m, op);
+  const Layout L = MakeLayout(m, op, false);
   if (theta.size() != m.num_parameters())
     throw std::invalid_argument("theta: " + std::to_string(theta.size()) + " values, machine has " +
                                 std::to_string(m.num_parameters()) + " parameters");
@@ -388,7 +404,7 @@ Eigen::VectorXd Beckhoff::MapMotions(const Machine& m, const Eigen::VectorXd& th
   return v;
 }
 
-KinematicsTable Beckhoff::Table(const Machine& m, const Eigen::VectorXd& values, const VendorOptions& o) const {
+KinematicsTable BeckhoffVendor::Table(const Machine& m, const Eigen::VectorXd& values, const VendorOptions& o) const {
   Model(m, o);
   const Opts op = Parse(m, o, OptionHelp());
   const Layout L = MakeLayout(m, op);
@@ -410,7 +426,7 @@ KinematicsTable Beckhoff::Table(const Machine& m, const Eigen::VectorXd& values,
   return t;
 }
 
-Eigen::MatrixXd Beckhoff::ToolPoints(const Machine& m, const Eigen::VectorXd& values, const Eigen::MatrixXd& q,
+Eigen::MatrixXd BeckhoffVendor::ToolPoints(const Machine& m, const Eigen::VectorXd& values, const Eigen::MatrixXd& q,
                                      const VendorOptions& o) const {
   Model(m, o);
   const Opts op = Parse(m, o, OptionHelp());
@@ -501,11 +517,6 @@ Eigen::MatrixXd Beckhoff::ToolPoints(const Machine& m, const Eigen::VectorXd& va
     out.row(row) = x.transpose();
   }
   return out;
-}
-
-const Beckhoff& BeckhoffVendor() {
-  static const Beckhoff vendor;
-  return vendor;
 }
 
 Eigen::VectorXd WithoutErrorMotions(const Machine& m, const Eigen::VectorXd& theta) {

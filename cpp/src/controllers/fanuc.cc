@@ -260,11 +260,6 @@ Decoded Decode(const Machine& m, const Setup& s, const Eigen::VectorXd& v) {
 
 }  // namespace
 
-const FanucVendor& Fanuc() {
-  static const FanucVendor fanuc;
-  return fanuc;
-}
-
 std::map<std::string, std::string> FanucVendor::OptionHelp() const {
   return {
       {"increment",

@@ -111,7 +111,7 @@ void TurnOnto(int i, const Eigen::Vector3d& v_in, double near_deg, double* a_deg
 
 }  // namespace
 
-std::map<std::string, std::string> Heidenhain::OptionHelp() const {
+std::map<std::string, std::string> HeidenhainVendor::OptionHelp() const {
   return {
       {"tool-length",
        "<mm>: the tool table's length L of the tool whose tip the machine file gives (the probe); the "
@@ -124,7 +124,7 @@ std::map<std::string, std::string> Heidenhain::OptionHelp() const {
   };
 }
 
-std::vector<HeidenhainRow> Heidenhain::Rows(const Machine& m, const VendorOptions& o) const {
+std::vector<HeidenhainRow> HeidenhainVendor::Rows(const Machine& m, const VendorOptions& o) const {
   const Options opt = ParseOptions(m, o);
   Model(m, o);
   const int ti = ToolAxisIndex(m);
@@ -170,7 +170,7 @@ std::vector<HeidenhainRow> Heidenhain::Rows(const Machine& m, const VendorOption
   return rows;
 }
 
-VendorModel Heidenhain::Model(const Machine& m, const VendorOptions& o) const {
+VendorModel HeidenhainVendor::Model(const Machine& m, const VendorOptions& o) const {
   ParseOptions(m, o);
   int tool_rot = 0, part_rot = 0;
   for (int k : ChainAxes(m, true)) tool_rot += m.axis(k).rotary();
@@ -193,7 +193,7 @@ VendorModel Heidenhain::Model(const Machine& m, const VendorOptions& o) const {
   return vm;
 }
 
-std::vector<VendorValue> Heidenhain::Values(const Machine& m, const VendorOptions& o) const {
+std::vector<VendorValue> HeidenhainVendor::Values(const Machine& m, const VendorOptions& o) const {
   std::vector<VendorValue> out;
   const std::vector<HeidenhainRow> rows = Rows(m, o);
   for (size_t r = 0; r < rows.size(); ++r) {
@@ -212,7 +212,7 @@ std::vector<VendorValue> Heidenhain::Values(const Machine& m, const VendorOption
   return out;
 }
 
-Eigen::VectorXd Heidenhain::Map(const Machine& m, const KinematicsTable& table, const VendorOptions& o) const {
+Eigen::VectorXd HeidenhainVendor::Map(const Machine& m, const KinematicsTable& table, const VendorOptions& o) const {
   const Options opt = ParseOptions(m, o);
   const std::vector<HeidenhainRow> rows = Rows(m, o);
   const std::vector<int> tool = ChainAxes(m, true), part = ChainAxes(m, false);
@@ -354,7 +354,7 @@ std::vector<Pose> WalkRows(const std::vector<HeidenhainRow>& rows, const Eigen::
 
 }  // namespace
 
-KinematicsTable Heidenhain::Table(const Machine& m, const Eigen::VectorXd& values, const VendorOptions& o) const {
+KinematicsTable HeidenhainVendor::Table(const Machine& m, const Eigen::VectorXd& values, const VendorOptions& o) const {
   const Options opt = ParseOptions(m, o);
   const std::vector<HeidenhainRow> rows = Rows(m, o);
   if (values.size() != Eigen::Index(rows.size()))
@@ -397,7 +397,7 @@ KinematicsTable Heidenhain::Table(const Machine& m, const Eigen::VectorXd& value
   return t;
 }
 
-Eigen::MatrixXd Heidenhain::ToolPoints(const Machine& m, const Eigen::VectorXd& values, const Eigen::MatrixXd& q,
+Eigen::MatrixXd HeidenhainVendor::ToolPoints(const Machine& m, const Eigen::VectorXd& values, const Eigen::MatrixXd& q,
                                        const VendorOptions& o) const {
   const Options opt = ParseOptions(m, o);
   const std::vector<HeidenhainRow> rows = Rows(m, o);
@@ -447,11 +447,6 @@ Eigen::Vector3d HeidenhainToolPoint(const std::vector<HeidenhainRow>& rows, cons
   const Eigen::Vector3d tip = -tool_length * Eigen::Vector3d::Unit(ti);
   const Pose inv = after.back().inverse();
   return inv.R * tip + inv.t;
-}
-
-const Heidenhain& HeidenhainVendor() {
-  static const Heidenhain vendor;
-  return vendor;
 }
 
 }  // namespace controllers

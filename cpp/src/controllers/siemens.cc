@@ -243,7 +243,7 @@ std::vector<VendorValue> SiemensVendor::Values(const Machine& m, const VendorOpt
     }
   VendorValue t;
   t.name = "$TC_CARR23" + idx;
-  t.unit = "";
+  t.unit = "letter";
   t.source = std::string("kinematics type (the letter's character code: 84 T, 80 P, 77 M): ") + kTypeSource;
   t.fixed = true;
   out.push_back(t);

@@ -17,12 +17,11 @@ namespace controllers {
 
 const std::vector<const ControllerVendor*>& ControllerVendors() {
   // THE list of controller vendors: one line per vendor (vendor.h).
-  static const SiemensVendor siemens;
   static const std::vector<const ControllerVendor*> vendors = {
-      &Fanuc(),
-      &siemens,
-      &HeidenhainVendor(),
-      &BeckhoffVendor(),
+      &FanucVendor::Instance(),
+      &SiemensVendor::Instance(),
+      &HeidenhainVendor::Instance(),
+      &BeckhoffVendor::Instance(),
   };
   return vendors;
 }
@@ -74,6 +73,9 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor, co
                                 " (the machine's parameters), got " + std::to_string(theta_covariance.rows()) +
                                 " x " + std::to_string(theta_covariance.cols()));
   if (have_cov && !theta_covariance.allFinite()) throw std::invalid_argument("covariance: not all finite");
+  if (theta_e.size() != nt)
+    throw std::invalid_argument("theta: expected " + std::to_string(nt) + " values (the machine's parameters), got " +
+                                std::to_string(theta_e.size()));
 
   VendorExport ex;
   ex.vendor = vendor.Name();
@@ -88,7 +90,14 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor, co
     throw std::logic_error("controller " + vendor.Name() + ": MapMotions gave " + std::to_string(motions.size()) +
                            " values, Values names " + std::to_string(nv));
   std::vector<int> motion_params;
-  Eigen::VectorXd theta_k = theta_e, theta_m = Eigen::VectorXd::Zero(nt);
+  // The tool offset: its length along the tool axis for a model that holds
+  // the tool length, nothing otherwise (vendor.h); the same projection
+  // carries the covariance (through the sensitivity below).
+  Eigen::MatrixXd P = Eigen::MatrixXd::Identity(nt, nt);
+  const Eigen::Vector3d axis = m.tool_axis().normalized();
+  P.block<3, 3>(m.tip_index(), m.tip_index()) =
+      ex.model.tool_length ? Eigen::Matrix3d(axis * axis.transpose()) : Eigen::Matrix3d(Eigen::Matrix3d::Zero());
+  Eigen::VectorXd theta_k = P * theta_e, theta_m = Eigen::VectorXd::Zero(nt);
   if (takes_motions)
     for (int i = 0; i < nt; ++i)
       if (m.parameters()[size_t(i)].kind == ParameterKind::kMotion) {
@@ -97,6 +106,7 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor, co
         theta_k[i] = 0;
       }
   ex.absorption = Absorb(m, ex.model.model, theta_k, poses, OptionsOf(ex.model));
+  ex.absorption.sensitivity = ex.absorption.sensitivity * P;
   const Absorption& ab = ex.absorption;
 
   const Eigen::VectorXd nominal = CheckedMap(vendor, m, MakeKinematicsTable(m, Eigen::VectorXd::Zero(nt)),
@@ -142,21 +152,27 @@ VendorExport ExportToVendor(const Machine& m, const ControllerVendor& vendor, co
   }
   for (size_t i = 0; i < nv; ++i)
     if (ex.values[i].fixed) G.row(Eigen::Index(i)).setZero();
+  for (size_t i = 0; i < nv; ++i)
+    if (!ex.values[i].motion) ex.covariance_index.push_back(Eigen::Index(i));
+  const Eigen::Index nc = Eigen::Index(ex.covariance_index.size());
   if (have_cov) {
     Eigen::MatrixXd GS = G * ab.sensitivity;
-    // The motions reach the values through MapMotions (linear in the
-    // coefficients: central differences are exact), not through Absorb.
+    // The motions reach the values through MapMotions (nearly linear in
+    // the coefficients: central differences are exact to rounding), not through Absorb.
     for (int i : motion_params) {
       Eigen::VectorXd up = theta_e, down = theta_e;
       up[i] += 1e-6;
       down[i] -= 1e-6;
       GS.col(i) = (vendor.MapMotions(m, up, options) - vendor.MapMotions(m, down, options)) / 2e-6;
     }
-    ex.covariance = GS * theta_covariance * GS.transpose();
-    ex.sigma = ex.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+    // diag(GS C GS^T) row by row: nv x nt work, never nv x nv
+    const Eigen::MatrixXd GSC = GS * theta_covariance;
+    ex.sigma = GSC.cwiseProduct(GS).rowwise().sum().cwiseMax(0.0).cwiseSqrt();
+    Eigen::MatrixXd GSk(nc, nt);
+    for (Eigen::Index r = 0; r < nc; ++r) GSk.row(r) = GS.row(ex.covariance_index[size_t(r)]);
+    ex.covariance = GSk * theta_covariance * GSk.transpose();
   } else {
-    ex.covariance = Eigen::MatrixXd::Constant(Eigen::Index(nv), Eigen::Index(nv),
-                                              std::numeric_limits<double>::quiet_NaN());
+    ex.covariance = Eigen::MatrixXd::Constant(nc, nc, std::numeric_limits<double>::quiet_NaN());
     ex.sigma = Eigen::VectorXd::Constant(Eigen::Index(nv), std::numeric_limits<double>::quiet_NaN());
   }
 
@@ -197,59 +213,9 @@ Absorption VendorToTheta(const Machine& m, const ControllerVendor& vendor, const
   const Eigen::MatrixXd points = vendor.ToolPoints(m, values, poses, options);
   if (points.rows() != poses.rows() || points.cols() != 3)
     throw std::logic_error("controller " + vendor.Name() + ": ToolPoints gave the wrong shape");
-  // Fitted in the controller's frame: fivecal's tool points moved out of the
-  // part frame of the model being fitted (the part frame moves with a table
-  // axis's location errors), so the frame's own derivative enters the
-  // Jacobian; central differences over the model's few columns, started
-  // from the part-frame absorption (which also names the held columns).
-  const AbsorbOptions ao = OptionsOf(vm);
-  Absorption ab = AbsorbToolPoints(m, vm.model, points, poses, ao);
-  const auto controller_frame = [&](const Eigen::VectorXd& theta) {
-    const KinematicsTable t = MakeKinematicsTable(m, theta);
-    return Eigen::MatrixXd((ToolPoints(m, theta, poses) * t.part_rotation.transpose()).rowwise() +
-                           t.part_origin.transpose());
-  };
-  std::vector<Eigen::Index> cols;
-  for (size_t c = 0; c < ab.parameters.size(); ++c)
-    if (std::find(ab.held.begin(), ab.held.end(), ab.parameters[c].label) == ab.held.end())
-      cols.push_back(Eigen::Index(c));
-  const Eigen::Index n = poses.rows(), kc = Eigen::Index(cols.size());
-  Eigen::VectorXd phi = ab.values;
-  Eigen::Vector3d shift = ab.workpiece_shift;
-  Eigen::MatrixXd B(m.num_parameters(), Eigen::Index(ab.parameters.size()));
-  for (size_t c = 0; c < ab.parameters.size(); ++c) B.col(Eigen::Index(c)) = ab.parameters[c].column;
-  const auto stack = [](const Eigen::MatrixXd& r) {
-    Eigen::MatrixXd rt = r.transpose();
-    return Eigen::VectorXd(Eigen::Map<Eigen::VectorXd>(rt.data(), rt.size()));
-  };
-  Eigen::MatrixXd model_points;
-  for (int it = 0; it < 6; ++it) {
-    model_points = controller_frame(B * phi);
-    Eigen::MatrixXd r = points - model_points;
-    r.rowwise() -= shift.transpose();
-    Eigen::MatrixXd J(3 * n, kc + 3);
-    for (Eigen::Index j = 0; j < kc; ++j) {
-      const double h = ab.parameters[size_t(cols[size_t(j)])].unit == "rad" ? 1e-7 : 1e-5;
-      Eigen::VectorXd up = phi, down = phi;
-      up[cols[size_t(j)]] += h;
-      down[cols[size_t(j)]] -= h;
-      J.col(j) = stack(controller_frame(B * up) - controller_frame(B * down)) / (2 * h);
-    }
-    for (Eigen::Index i = 0; i < n; ++i) J.block(3 * i, kc, 3, 3).setIdentity();
-    const Eigen::VectorXd x = J.colPivHouseholderQr().solve(stack(r));
-    for (Eigen::Index j = 0; j < kc; ++j) phi[cols[size_t(j)]] += x[j];
-    shift += x.tail<3>();
-    if (x.cwiseAbs().maxCoeff() < 1e-12) break;
-  }
-  ab.values = phi;
-  ab.theta = B * phi;
-  ab.workpiece_shift = shift;
-  ab.residual = points - controller_frame(ab.theta);
-  ab.residual.rowwise() -= shift.transpose();
-  const Eigen::VectorXd norms = ab.residual.rowwise().norm();
-  ab.rms = n ? std::sqrt(norms.squaredNorm() / double(n)) : 0.0;
-  ab.max = n ? norms.maxCoeff() : 0.0;
-  return ab;
+  // Fitted in the controller's frame (vendor.h, ToolPoints): the part frame
+  // of the model being fitted moves with a table axis's location errors.
+  return AbsorbToolPoints(m, vm.model, points, poses, OptionsOf(vm), PointFrame::kController);
 }
 
 }  // namespace controllers

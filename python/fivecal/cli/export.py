@@ -101,7 +101,9 @@ def _guarded(values, key: str):
 def _run_vendor(args) -> int:
     writer = WRITERS[args.vendor]
     machine = _read_machine(args.machine)
-    errors = usable_errors(args.result, machine, args.force, args.result)
+    # the identified tool offset goes in: its length along the spindle is
+    # the controller's tool length (the core drops what lies across it)
+    errors = usable_errors(args.result, machine, args.force, args.result, tool_offset=True)
     try:
         cov = K.result_covariance(args.result, machine)
     except ValueError as e:
@@ -119,9 +121,10 @@ def _run_vendor(args) -> int:
         # running other values than the file states has another nominal
         differs = [dict(v, change=float(d)) for v, d in zip(exp.values, exp.old_minus_nominal)]
         L.check_changes(f"--old {args.old} against the machine file {args.machine} (the identified errors are "
-                        "relative to the machine file: make it describe what the controller runs, or --force)",
-                        _guarded(differs, "change"), limits, args.force)
-    L.check_changes(f"{args.vendor} values", _guarded(exp.values, "change"), limits, args.force)
+                        "relative to the machine file: make it describe what the controller runs, or --force-old)",
+                        _guarded(differs, "change"), limits, args.force or args.force_old)
+    L.check_changes(f"{args.vendor} values (--force-change writes them anyway)", _guarded(exp.values, "change"),
+                    limits, args.force or args.force_change)
     contents = {f"{args.vendor}{suffix}": text for suffix, text in writer.write(exp, machine).items()}
     contents["export.json"] = json.dumps(exp.record(), indent=1) + "\n"
     _write_vendor_folder(args.out, contents)
@@ -278,8 +281,9 @@ def _register_vendor(esub, RD, vendor: str, writer) -> None:
         "1σ from the identification's covariance, the tool-point error the controller's model cannot absorb, "
         "and the round trip through the controller's kinematics as the manual defines it. Writes the "
         f"controller's file(s) and export.json (the record `fivecal sphere-check --expect` verifies after "
-        "loading). Refuses a result that is not usable and a change beyond --max-change unless --force; "
-        "where the public manual leaves a convention open, it asks for it (--set). Sources and recipe: "
+        "loading). Refuses a result that is not usable, a change beyond --max-change (unless --force-change) "
+        "and --old values that differ from the machine file by more (unless --force-old); --force lifts all "
+        "of these. Where the public manual leaves a convention open, it asks for it (--set). Sources and recipe: "
         "`fivecal docs controllers`." + (f"\n\nconventions (--set KEY=VALUE):\n{opts}" if opts else ""),
         epilog=f"example:\n  fivecal export {vendor} result.json --machine machine.json --out {vendor}-export/")
     pv.add_argument("result", help="result document of any fivecal procedure (identify, sphere-check, ...; --out)")
@@ -298,8 +302,13 @@ def _register_vendor(esub, RD, vendor: str, writer) -> None:
                     help=f"plausibility limit on any value's change, MM[,RAD] (default {L.DEFAULT_MAX_CHANGE} "
                     f"mm, {L.DEFAULT_MAX_CHANGE_RAD} rad; degrees and direction components by their angle; "
                     "'off' switches it off)")
-    pv.add_argument("--force", action="store_true", help="use a result that is not usable, without a "
-                    "covariance, or exceed --max-change; only to inspect the values")
+    pv.add_argument("--force-change", action="store_true", help="write a change beyond --max-change (the "
+                    "other guards stay)")
+    pv.add_argument("--force-old", action="store_true", help="take --old values that differ from the machine "
+                    "file's nominal beyond --max-change (e.g. a controller whose origin is not the machine "
+                    "file's; the other guards stay)")
+    pv.add_argument("--force", action="store_true", help="all of --force-change and --force-old, and use a "
+                    "result that is not usable or has no covariance; only to inspect the values")
     pv.set_defaults(func=_run_vendor, vendor=vendor, out_is_folder=True)
 
 

@@ -450,6 +450,15 @@ def export_csv(machine: Machine, ab: Absorption) -> str:
 
 # ---- controller vendors: one export path for every vendor --------------------
 
+def code_text(value: float, unit: str) -> str:
+    """A fixed value as the controller shows it: a ``letter`` (unit of a
+    code that is a letter, stored as its character code) as the letter."""
+    if unit == "letter":
+        code = int(round(value))
+        return chr(code) if 32 < code < 127 else f"? (code {value:g})"
+    return f"{value:g}"
+
+
 def vendors() -> List[str]:
     """The controller vendors fivecal exports to (``fivecal export <vendor>``)."""
     return list(_core.vendor_names())
@@ -519,9 +528,13 @@ class VendorExport:
     machine: str
     model: str
     options: dict
-    values: List[dict]                 # name, unit, source, fixed, old, new, change, sigma
+    values: List[dict]                 # name, unit, source, fixed, motion_table, old, new, change, sigma
     absorption: Absorption
-    covariance: np.ndarray = field(repr=False)   # of the change
+    # of the change of the values covariance_names lists: all but the
+    # error-motion table entries (their σ is in values; their values x values
+    # covariance, hundreds of MB on a fine grid, is not kept)
+    covariance: np.ndarray = field(repr=False)
+    covariance_names: List[str] = field(default_factory=list, repr=False)
     round_trip_max: float = 0.0                  # mm
     absorbed: dict = field(default_factory=dict, repr=False)  # names, change, covariance
     old_minus_nominal: np.ndarray = field(default=None, repr=False)
@@ -550,7 +563,17 @@ class VendorExport:
                 "workpiece_shift_mm": [float(v) for v in ab.workpiece_shift],
                 "residual": {"poses": len(ab.residual), "rms_old_mm": ab.rms_old, "max_old_mm": ab.max_old,
                              "rms_mm": ab.rms, "max_mm": ab.max, "by_region": by},
-                "round_trip_max_mm": float(self.round_trip_max)}
+                "round_trip_max_mm": float(self.round_trip_max),
+                "sphere_check": self.sphere_check()}
+
+    def sphere_check(self) -> dict:
+        """What ``fivecal sphere-check --expect`` can verify of this export:
+        the kinematics (``absorbed``); never the error-motion tables."""
+        tables = sum(1 for v in self.values if v.get("motion_table"))
+        return {"verifies": "kinematics", "unverifiable_values": tables,
+                "unverifiable": None if not tables else
+                f"the {tables} error-motion table values (values[].motion_table): a sphere check does not see "
+                "linear-axis error motions; verify them with a volumetric test (R-test, ball bar, tracker)"}
 
     def report(self) -> str:
         """Text summary: values old / new / change ± 1σ, then what the
@@ -559,7 +582,8 @@ class VendorExport:
                  f"{'value':<34}{'unit':<6}{'old':>14}{'new':>14}{'change':>12}{'± 1σ':>10}"]
         for v in self.values:
             if v["fixed"]:
-                lines.append(f"{v['name']:<34}{v['unit']:<6}{v['new']:>14g}{'(code)':>26}")
+                unit = "" if v["unit"] == "letter" else v["unit"]
+                lines.append(f"{v['name']:<34}{unit:<6}{code_text(v['new'], v['unit']):>14}{'(code)':>26}")
                 continue
             sig = "" if v["sigma"] is None or not math.isfinite(v["sigma"]) else f"{v['sigma']:.3g}"
             lines.append(f"{v['name']:<34}{v['unit']:<6}{v['old']:>14.6f}{v['new']:>14.6f}"
@@ -612,8 +636,8 @@ def vendor_export(machine: Machine, vendor: str, errors=None, covariance: Option
     values = []
     for k, v in enumerate(d["values"]):
         values.append({"name": v["name"], "unit": v["unit"], "source": v["source"], "fixed": bool(v["fixed"]),
-                       "old": float(d["old"][k]), "new": float(d["new"][k]), "change": float(d["change"][k]),
-                       "sigma": float(d["sigma"][k])})
+                       "motion_table": bool(v["motion"]), "old": float(d["old"][k]), "new": float(d["new"][k]),
+                       "change": float(d["change"][k]), "sigma": float(d["sigma"][k])})
     names = machine.parameter_names()
     theta_abs = np.asarray(a["theta"])
     moved = [i for i in range(len(names)) if any(abs(p.column[i]) > 0 for p in params)]
@@ -622,6 +646,7 @@ def vendor_export(machine: Machine, vendor: str, errors=None, covariance: Option
                 "covariance": acov[np.ix_(moved, moved)] if acov.size else np.full((len(moved), len(moved)), np.nan)}
     return VendorExport(vendor=vendor, title=d["title"], machine=machine.name, model=a["model"], options=opts,
                         values=values, absorption=ab, covariance=np.asarray(d["covariance"]),
+                        covariance_names=[values[int(i)]["name"] for i in d["covariance_index"]],
                         round_trip_max=float(d["round_trip_max"]), absorbed=absorbed,
                         old_minus_nominal=np.asarray(d["old_minus_nominal"]))
 

@@ -337,8 +337,12 @@ def read_export(expect) -> dict:
     machine = expect.get("machine")
     if not isinstance(machine, str) or not machine:
         raise ValueError(f"{where}: machine: expected the machine's name")
+    # what the export says a sphere check cannot verify (its error-motion
+    # tables); an export written before the field existed says nothing
+    unverifiable = (expect.get("sphere_check") or {}).get("unverifiable")
     return {"path": path, "vendor": str(expect.get("vendor", "")), "machine": machine, "names": list(names),
-            "change": np.asarray(c, float), "covariance": C}
+            "change": np.asarray(c, float), "covariance": C,
+            "unverifiable": unverifiable if isinstance(unverifiable, str) else None}
 
 
 @dataclass
@@ -384,6 +388,8 @@ class ChangeVerification:
         if self.not_compared:
             L.append("  not compared (no change): " + ", ".join(self.not_compared))
         L.append(f"  overall ({self.k:g}σ): {self.message}")
+        if e.get("unverifiable"):
+            L.append(f"  verified the kinematics only; not verified: {e['unverifiable']}")
         return "\n".join(L)
 
 
@@ -430,7 +436,7 @@ def verify_change(check: "SphereCheck", previous, expect, k: float = 3.0,
     o = v["outcome"]
     return ChangeVerification(o["verdict"], o["message"], [c["text"] for c in o["causes"]], rows, v["ratio"],
                               v["ratio_std"], v["k"], list(v["not_compared"]),
-                              {key: ex[key] for key in ("path", "vendor", "machine")})
+                              {key: ex[key] for key in ("path", "vendor", "machine", "unverifiable")})
 
 
 def evaluate(dataset: Union[Dataset, Mapping], *, previous=None, calibrated_stylus: bool = True,

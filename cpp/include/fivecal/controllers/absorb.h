@@ -92,11 +92,19 @@ struct Absorption {
 Absorption Absorb(const Machine& m, ControllerModel model, const Eigen::VectorXd& theta,
                   const Eigen::MatrixXd& poses, const AbsorbOptions& options = AbsorbOptions());
 
-// The same absorption of given tool points (N x 3, mm, the part frame) at
+// The frame given tool points are in: fivecal's part frame, or a
+// controller's workpiece frame (vendor.h, ToolPoints): the part frame of the
+// model being fitted carried by its KinematicsTable part_origin /
+// part_rotation. A table axis's location error moves the part frame, so in
+// the controller frame the frame's own derivative enters the Jacobian.
+enum class PointFrame { kPart, kController };
+
+// The same absorption of given tool points (N x 3, mm, in `frame`) at
 // `poses`, for a truth that is not a fivecal machine (a controller's own
 // kinematics with its values: VendorToTheta). No trt pins, no sensitivity.
 Absorption AbsorbToolPoints(const Machine& m, ControllerModel model, const Eigen::MatrixXd& truth,
-                            const Eigen::MatrixXd& poses, const AbsorbOptions& options = AbsorbOptions());
+                            const Eigen::MatrixXd& poses, const AbsorbOptions& options = AbsorbOptions(),
+                            PointFrame frame = PointFrame::kPart);
 
 }  // namespace controllers
 }  // namespace fivecal

@@ -44,10 +44,12 @@
 namespace fivecal {
 namespace controllers {
 
-class Beckhoff : public ControllerVendor {
+class BeckhoffVendor final : public RegisteredVendor<BeckhoffVendor> {
  public:
-  std::string Name() const override { return "beckhoff"; }
-  std::string Title() const override;
+  static constexpr const char* kName = "beckhoff";
+  static constexpr const char* kTitle =
+      "Beckhoff TwinCAT 3 CNC / ISG: universal kinematics (TF5240, kinematic ID 91) and volumetric "
+      "compensation tables (TF5280)";
   std::map<std::string, std::string> OptionHelp() const override;
   VendorModel Model(const Machine& m, const VendorOptions& o) const override;
   std::vector<VendorValue> Values(const Machine& m, const VendorOptions& o) const override;
@@ -59,9 +61,6 @@ class Beckhoff : public ControllerVendor {
   Eigen::MatrixXd ToolPoints(const Machine& m, const Eigen::VectorXd& values, const Eigen::MatrixXd& q,
                              const VendorOptions& o) const override;
 };
-
-// The one instance ControllerVendors() lists.
-const Beckhoff& BeckhoffVendor();
 
 // theta with every error-motion coefficient set to 0: what Absorb takes when
 // the tables carry the error motions.

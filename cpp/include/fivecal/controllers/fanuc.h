@@ -26,12 +26,11 @@
 namespace fivecal {
 namespace controllers {
 
-class FanucVendor : public ControllerVendor {
+class FanucVendor final : public RegisteredVendor<FanucVendor> {
  public:
-  std::string Name() const override { return "fanuc"; }
-  std::string Title() const override {
-    return "FANUC Series 30i/31i/32i: tool centre point control for 5-axis machining parameters";
-  }
+  static constexpr const char* kName = "fanuc";
+  static constexpr const char* kTitle =
+      "FANUC Series 30i/31i/32i: tool centre point control for 5-axis machining parameters";
   std::map<std::string, std::string> OptionHelp() const override;
   VendorModel Model(const Machine& m, const VendorOptions& o) const override;
   std::vector<VendorValue> Values(const Machine& m, const VendorOptions& o) const override;
@@ -40,9 +39,6 @@ class FanucVendor : public ControllerVendor {
   Eigen::MatrixXd ToolPoints(const Machine& m, const Eigen::VectorXd& values, const Eigen::MatrixXd& q,
                              const VendorOptions& o) const override;
 };
-
-// The one instance ControllerVendors() lists.
-const FanucVendor& Fanuc();
 
 }  // namespace controllers
 }  // namespace fivecal

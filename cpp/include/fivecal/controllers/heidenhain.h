@@ -66,12 +66,10 @@ struct HeidenhainRow {
   std::string role;        // what the row places, for the source text and the docs
 };
 
-class Heidenhain : public ControllerVendor {
+class HeidenhainVendor final : public RegisteredVendor<HeidenhainVendor> {
  public:
-  std::string Name() const override { return "heidenhain"; }
-  std::string Title() const override {
-    return "Heidenhain TNC 640 / TNC7 / iTNC 530: kinematics description table";
-  }
+  static constexpr const char* kName = "heidenhain";
+  static constexpr const char* kTitle = "Heidenhain TNC 640 / TNC7 / iTNC 530: kinematics description table";
   std::map<std::string, std::string> OptionHelp() const override;
   VendorModel Model(const Machine& m, const VendorOptions& o) const override;
   std::vector<VendorValue> Values(const Machine& m, const VendorOptions& o) const override;
@@ -95,9 +93,6 @@ class Heidenhain : public ControllerVendor {
 Eigen::Vector3d HeidenhainToolPoint(const std::vector<HeidenhainRow>& rows, const Eigen::VectorXd& coord,
                                     const std::map<char, double>& q, double tool_length, char tool_axis,
                                     int table_sense);
-
-// The registered instance (ControllerVendors() lists &HeidenhainVendor()).
-const Heidenhain& HeidenhainVendor();
 
 }  // namespace controllers
 }  // namespace fivecal

@@ -50,12 +50,11 @@
 namespace fivecal {
 namespace controllers {
 
-class SiemensVendor : public ControllerVendor {
+class SiemensVendor final : public RegisteredVendor<SiemensVendor> {
  public:
-  std::string Name() const override { return "siemens"; }
-  std::string Title() const override {
-    return "Siemens SINUMERIK 840D sl / ONE: swivel data record (TOOLCARRIER, CYCLE800 / TRAORI)";
-  }
+  static constexpr const char* kName = "siemens";
+  static constexpr const char* kTitle =
+      "Siemens SINUMERIK 840D sl / ONE: swivel data record (TOOLCARRIER, CYCLE800 / TRAORI)";
   std::map<std::string, std::string> OptionHelp() const override;
   VendorModel Model(const Machine& m, const VendorOptions& o) const override;
   std::vector<VendorValue> Values(const Machine& m, const VendorOptions& o) const override;

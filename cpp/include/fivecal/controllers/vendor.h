@@ -13,9 +13,10 @@
 // covariance onto their change, and evaluate the vendor's own kinematics
 // with the new values over the poses (the round trip).
 //
-// Adding a vendor: a ControllerVendor subclass in cpp/src/controllers/<name>.cc
-// with its header, one line in ControllerVendors() (vendor.cc), a writer of
-// its file format in python/fivecal/io/<name>.py.
+// Adding a vendor: a RegisteredVendor<XVendor> subclass (below) in
+// cpp/src/controllers/<name>.cc with its header, one line
+// `&XVendor::Instance()` in ControllerVendors() (vendor.cc), a writer of its
+// file format in python/fivecal/io/<name>.py.
 //
 // Units: mm, degrees for rotary commands; each value in its VendorValue::unit.
 #ifndef FIVECAL_CONTROLLERS_VENDOR_H_
@@ -36,11 +37,18 @@ namespace controllers {
 // One value the controller stores, named as its manual names it.
 struct VendorValue {
   std::string name;    // "$TC_CARR4[1]", "19703", "kinematik[91].axis[2].point[0]", ...
-  std::string unit;    // "mm", "deg", "" (a code: a kinematics type, an axis type)
+  // "mm", "deg", "" (a code: an axis type, a number), "letter" (a code that
+  // is a letter: the value is its character code, 80 for "P"; shown and
+  // written as the letter)
+  std::string unit;
   std::string source;  // manual, edition, section and page
   // A code or a value fixed by the topology (a type letter, an axis number):
   // written, never changed by an export, not part of the covariance.
   bool fixed = false;
+  // An error-motion table entry (MapMotions fills it, Map never does): a
+  // volumetric compensation that a sphere check cannot verify, and whose
+  // covariance with other values is not kept (VendorExport::covariance).
+  bool motion = false;
 };
 
 // Conventions the user states where the public manual does not decide them
@@ -106,6 +114,21 @@ class ControllerVendor {
                                      const Eigen::MatrixXd& q, const VendorOptions& o) const = 0;
 };
 
+// What every vendor shares, written once: its one instance (what
+// ControllerVendors() lists) and Name / Title from the class's constants
+// kName and kTitle; the vendor writes only what differs (its options,
+// model, values, map, way back and kinematics).
+template <class Derived>
+class RegisteredVendor : public ControllerVendor {
+ public:
+  static const Derived& Instance() {
+    static const Derived vendor;
+    return vendor;
+  }
+  std::string Name() const final { return Derived::kName; }
+  std::string Title() const final { return Derived::kTitle; }
+};
+
 // The registered vendors, and one by name (std::invalid_argument listing the names).
 const std::vector<const ControllerVendor*>& ControllerVendors();
 const ControllerVendor& FindVendor(const std::string& name);
@@ -117,9 +140,15 @@ struct VendorExport {
   std::vector<VendorValue> values;
   Eigen::VectorXd old_values;   // the controller's current values (given, or the nominal machine's)
   Eigen::VectorXd new_values;   // old + change
-  Eigen::VectorXd change;       // Map(absorbed table) - Map(nominal table)
-  Eigen::MatrixXd covariance;   // of the change, from the identification's covariance (0 for fixed values)
-  Eigen::VectorXd sigma;        // sqrt(diag(covariance))
+  Eigen::VectorXd change;       // Map(absorbed table) - Map(nominal table) (+ MapMotions)
+  // The change's 1 sigma of every value, from the identification's
+  // covariance (0 for fixed values), and the covariance of the values
+  // covariance_index lists: every value but the error-motion table entries
+  // (VendorValue::motion), whose values x values covariance a fine grid
+  // would make hundreds of MB and no consumer reads.
+  Eigen::VectorXd sigma;
+  std::vector<Eigen::Index> covariance_index;
+  Eigen::MatrixXd covariance;
   // The round trip: the vendor's own kinematics with the new values, against
   // the absorbed model's tool points plus the workpiece shift (what fivecal's
   // compensated controller runs), over the poses; N x 3 mm and its max norm.
@@ -130,7 +159,10 @@ struct VendorExport {
   Eigen::VectorXd old_minus_nominal;
 };
 
-// theta_e: the identified machine's full parameter vector (errors; nominal 0);
+// theta_e: the identified machine's full parameter vector (errors; nominal 0;
+// of the tool offset tip.* only the length along the tool axis is taken, and
+// only by a vendor whose model holds the tool length: an offset across the
+// spindle is the stylus's, not the machine's, and no vendor value holds it);
 // theta_covariance: its covariance (num_parameters square; zero rows for
 // parameters not estimated; an empty matrix: sigma NaN); poses: N x num_axes;
 // old_values: the controller's current values (empty: the nominal machine's).
