@@ -201,7 +201,9 @@ def touch_cycle(plan: Sequence[Mapping], artefact: Mapping) -> bool:
 def _setup(machine: Machine, artefact: Mapping, tip_radius: float):
     """The core's dataset of a plan's machine, artefact and stylus (no
     observations): what the kinds answer the writers' questions from."""
-    d = {"machine": machine.to_dict(), "probe": {"tip_radius": float(tip_radius)}, "artefact": dict(artefact or {}),
+    # the targets' geometry only: a scale bar's length moves no stylus (and may name balls left out)
+    art = {k: v for k, v in (artefact or {}).items() if k != "scale_bars"}
+    d = {"machine": machine.to_dict(), "probe": {"tip_radius": float(tip_radius)}, "artefact": art,
          "observations": []}
     return _core.Dataset.from_json(_json.dumps(d, "dataset"), False)
 
