@@ -42,18 +42,20 @@ from . import linuxcnc as L
 from . import nc_options as O
 
 
-#: The programs fivecal writes (``fivecal export program --kind``): the
-#: probing cycle (every probe touch, in plan order), the sphere cycle, an
-#: R-test K test, a ball bar test (fivecal.io.dbb_program).
-PROGRAMS = ("probing", "sphere", "rtest", "dbb")
 #: The registry's word on each kind (``_core.nc_kinds()``, observations/
 #: nc_geometry.h): the program its plan entries run in, whether it is a probe
 #: touch, the artefact list its targets are in.
 NC_KINDS: Dict[str, dict] = {k["name"]: k for k in _core.nc_kinds()}
 #: plan entry type -> the program it runs in
 PLAN_PROGRAMS: Dict[str, str] = {n: k["program"] for n, k in NC_KINDS.items() if k["program"]}
-#: the touch programs: a plan of probe touches of several kinds runs in the first
+#: the touch programs: a plan of probe touches of several kinds runs in the
+#: first (the probing cycle, every probe touch in plan order), the second is
+#: the sphere cycle
 TOUCH_PROGRAMS = ("probing", "sphere")
+#: The programs fivecal writes (``fivecal export program --kind``): the touch
+#: programs, then those of the other kinds' entries in the registry's order
+#: (an R-test K test, a ball bar test: fivecal.io.dbb_program)
+PROGRAMS = tuple(dict.fromkeys([*TOUCH_PROGRAMS, *PLAN_PROGRAMS.values()]))
 
 
 def program_kinds(program: str) -> List[str]:
