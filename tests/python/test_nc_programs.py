@@ -356,6 +356,33 @@ def test_a_cylinder_touch_plan_gets_a_probing_program_for_free():
     assert max(abs(o["axes"][a] - w["axes"][a]) for o, w in zip(nominal, want) for a in "XYZ") > 0.01
 
 
+def test_a_cylinder_plan_through_the_command_line(tmp_path, capsys):
+    """`fivecal export program` picks the probing cycle for a cylinder plan
+    (the registry's program of its kind) and `fivecal import probe-log
+    --plan` reads its log back, each log line checked against its touch's
+    probe line."""
+    from fivecal.cli import main
+    from fivecal.io import plan_readings
+    m = _machine()
+    art, plan = _cylinder_plan()
+    spec = _spec(tmp_path, "cyl.json", m.to_dict(), plan, artefact=art, probe={"tip_radius": 3.0})
+    out = str(tmp_path / "cyl.ngc")
+    assert main(["export", "program", spec, "--kins", KINS, "--out", out]) == 0
+    assert open(out).read() == N.touch_program(m, KINS, plan, art, 3.0)
+    assert main(["export", "program", spec, "--kins", KINS, "--dialect", "siemens"]) == 0
+    assert capsys.readouterr().out.count("MEAS=1 G01") == len(plan)
+    pins = L.nominal_pins(m, KINS)
+    log = tmp_path / "probe-log.txt"
+    log.write_text(N.touch_log(m, KINS, plan, art, 3.0, pins, errors=TRUE_LOCATION))
+    d = plan_readings.probe_log_dataset(str(log), spec, KINS)
+    assert d["observations"] == L.read_probe_log(str(log), m, KINS, plan, pins)
+    # a log of another plan (the touches in another order) is refused naming the line
+    rows = log.read_text().splitlines()
+    log.write_text("\n".join([rows[1], rows[0], *rows[2:]]) + "\n")
+    with pytest.raises(ValueError, match=r"probe-log.txt:1"):
+        plan_readings.probe_log_dataset(str(log), spec, KINS)
+
+
 def test_a_cylinder_touch_that_starts_inside_or_misses_is_refused():
     m = _machine()
     art, plan = _cylinder_plan()
