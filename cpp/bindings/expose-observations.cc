@@ -17,6 +17,7 @@
 #include "fivecal/observations/ball_mount.h"
 #include "fivecal/observations/columns.h"
 #include "fivecal/observations/dataset.h"
+#include "fivecal/observations/nc_geometry.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/observations/simulate.h"
 #include "fivecal/observations/writer.h"
@@ -411,4 +412,52 @@ void BindObservations(py::module_& m) {
             return out;
           },
           py::arg("begin"), py::arg("end"));
+}
+
+// What the NC program writers ask of a plan's kinds (observations/
+// nc_geometry.h): io/nc_programs.py and io/plan_readings.py name no kind.
+void BindNcGeometry(py::module_& m) {
+  // Per kind: the program family its plan entries run in (None: no program
+  // writes them) and whether it is a probe touch.
+  m.def("nc_kinds", [] {
+    py::list out;
+    for (const ObservationKind* k : ObservationKinds()) {
+      py::dict d;
+      d["name"] = k->name();
+      const char* p = NcProgram(*k);
+      d["program"] = p ? py::object(py::str(p)) : py::object(py::none());
+      d["touch"] = dynamic_cast<const ProbeTouchKind*>(k) != nullptr;
+      d["target_list"] = k->Report().target_list ? py::object(py::str(k->Report().target_list))
+                                                 : py::object(py::none());
+      out.append(d);
+    }
+    return out;
+  });
+  // Per plan entry: (contact point, outward normal, clearance radius) of a
+  // probe touch, None for an entry of another kind.
+  m.def(
+      "planned_touch_contacts",
+      [](const Dataset& d, const std::string& plan_json) {
+        py::list out;
+        for (const auto& c : PlannedTouchContacts(d, plan_json))
+          out.append(c ? py::object(py::make_tuple(c->point, c->normal, c->clearance)) : py::object(py::none()));
+        return out;
+      },
+      py::arg("dataset"), py::arg("plan_json"));
+  // (id, centre, radius) of every ball the moves keep out of.
+  m.def("clearance_balls", [](const Dataset& d) {
+    py::list out;
+    for (const ClearanceBall& b : ArtefactClearanceBalls(d)) out.append(py::make_tuple(b.id, b.centre, b.radius));
+    return out;
+  }, py::arg("dataset"));
+  // (inside, s, normal): where the stylus centre on p + s d first reaches
+  // the target's surface.
+  m.def(
+      "probe_line_crossing",
+      [](const Dataset& d, const std::string& type, const std::string& target, const Eigen::Vector3d& p,
+         const Eigen::Vector3d& dir) {
+        const ProbeCrossing c = CrossProbeLine(d, type, target, p, dir);
+        return py::make_tuple(c.inside, c.s, c.normal);
+      },
+      py::arg("dataset"), py::arg("type"), py::arg("target"), py::arg("p"), py::arg("d"));
 }

@@ -512,6 +512,16 @@ void BindProcedures(py::module_& m) {
       py::arg("dataset"), py::arg("sphere") = "", py::arg("calibrated_stylus") = true, py::arg("backlash") = -1,
       py::arg("previous") = std::map<std::string, std::pair<double, double>>{},
       "The sphere check's evaluation (procedures/sphere_check.h EvaluateSphereCheck).");
+  m.def(
+      "sphere_check_positions",
+      [](const Machine& mc, int n, const std::map<std::string, std::pair<double, double>>& limits) {
+        std::vector<std::pair<std::string, std::vector<double>>> out;
+        for (auto& [a, v] : SphereCheckPositions(mc, n, limits)) out.emplace_back(std::string(1, a), std::move(v));
+        return out;
+      },
+      py::arg("machine"), py::arg("n"), py::arg("limits") = std::map<std::string, std::pair<double, double>>{},
+      "A sphere check's positions per rotary axis (procedures/sphere_check.h SphereCheckPositions).");
+  m.attr("sphere_check_max_positions") = kMaxSphereCheckPositions;
 
   py::class_<RTestGroup>(m, "RTestGroup")
       .def_readonly("name", &RTestGroup::name)
@@ -541,6 +551,14 @@ void BindProcedures(py::module_& m) {
         return RTestSequence(mc, test, step, tilt, tilt_range.first, tilt_range.second);
       },
       py::arg("machine"), py::arg("test"), py::arg("step"), py::arg("tilt"), py::arg("tilt_range"));
+  m.def(
+      "rtest_path_commands",
+      [](const Machine& mc, const Eigen::MatrixXd& rotary, const Eigen::VectorXd& start,
+         const Eigen::Vector3d& table_ball, const Eigen::Vector3d& tool_ball, bool chain) {
+        return RTestPathCommands(mc, rotary, start, table_ball, tool_ball, chain);
+      },
+      py::arg("machine"), py::arg("rotary"), py::arg("start"), py::arg("table_ball"), py::arg("tool_ball"),
+      py::arg("chain"), "An R-test path's axis commands (procedures/rtest.h RTestPathCommands).");
   m.def(
       "rtest",
       [](const Dataset& ds, bool identify, const std::vector<std::string>& estimate) {

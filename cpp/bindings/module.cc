@@ -11,6 +11,7 @@ namespace py = pybind11;
 
 void BindModel(py::module_& m);
 void BindObservations(py::module_& m);
+void BindNcGeometry(py::module_& m);
 void BindSolve(py::module_& m);
 void BindUncertainty(py::module_& m);
 void BindProcedures(py::module_& m);
@@ -29,6 +30,7 @@ PYBIND11_MODULE(_core, m) {
 
   BindModel(m);
   BindObservations(m);
+  BindNcGeometry(m);
   BindSolve(m);
   BindUncertainty(m);
   BindProcedures(m);

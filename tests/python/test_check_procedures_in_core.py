@@ -1,7 +1,11 @@
 """The sphere check's and the R-test's evaluation moved from Python into the
 core (issue 29, item 2: ``procedures/sphere_check.h`` EvaluateSphereCheck,
 ``procedures/rtest.h`` EvaluateRTest, and the spindle naming rule
-SpindleEquivalent / SpindleNames / PivotParameters beside them). The Python
+SpindleEquivalent / SpindleNames / PivotParameters beside them), and so did
+their plans' numbers: the sphere check's positions spread over each rotary
+axis' range (SphereCheckPositions) and the linear axes of an R-test path
+(RTestPathCommands, for the plan and for the program's points between two
+samples). The Python
 they replaced is frozen here, only here, and the library's answers on
 random cases must equal it to about 1e-12 relative. Bad input is refused at
 the core boundary with a ValueError naming the field."""
@@ -16,6 +20,7 @@ import pytest
 import fivecal
 from fivecal import _core
 from fivecal.identification import identify
+from fivecal.io import nc_programs
 from fivecal.procedures import rtest, sphere_check, sphere_test
 
 MACHINES = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "machines")
@@ -348,3 +353,124 @@ def test_k_test_poses_refuse_bad_input_naming_the_field():
                                        "tool": {"tip": [0, 0, 100]}})
     with pytest.raises(ValueError, match="has 0 rotary axes \\(none\\); the tests are defined for two"):
         _core.rtest_axis_roles(three._core)
+
+
+# ---------------------------------------------------------------------------
+# The plans' numbers (was sphere_check.positions, the linear axes of
+# rtest.plan with rtest.tip_offset, and nc_programs.rtest_points' subdivision)
+# ---------------------------------------------------------------------------
+def _old_positions(machine, n=5, limits=None):
+    out = {}
+    for a in _old_rotary_axes(machine):
+        lo, hi = (limits or {}).get(a, (-180.0, 180.0) if a in ("C",) else (-90.0, 90.0))
+        lo, hi = float(lo), float(hi)
+        if not hi > lo:
+            raise ValueError(f"limits.{a}: ({lo:g}, {hi:g}) is not a range")
+        full = hi - lo >= 360.0 - 1e-9
+        k = int(n)
+        out[a] = [float(v) for v in (np.linspace(lo, hi, k, endpoint=False) if full else np.linspace(lo, hi, k))]
+    return out
+
+
+def _old_tip_offset(machine, axes, tool_ball):
+    q = {a: np.array([float(v)]) for a, v in axes.items()}
+    return machine.tool_point(q)[0] - machine.tool_point(q, tip=np.asarray(tool_ball, float))[0]
+
+
+def _old_rtest_plan(m, test, table_ball, tool_ball=None, step=15.0, tilt=-45.0, tilt_range=(-90.0, 90.0)):
+    seq = rtest._sequence(m, test, float(step), float(tilt), tilt_range)
+    tb = np.asarray(table_ball, float)
+    tool = np.asarray(tool_ball if tool_ball is not None else m.tip, float)
+    entries = []
+    prev = {a: 0.0 for a in m.axis_names}
+    for k, rot in enumerate(seq):
+        start = dict(prev)
+        start.update(rot)
+        lin = m.inverse([tb + _old_tip_offset(m, start, tool)], start=start)
+        axes = {a: float(v[0]) for a, v in lin.items()}
+        axes.update(rot)
+        direction = {a: (1 if rot[a] >= prev.get(a, 0.0) else -1) for a in rot}
+        entries.append({"axes": axes, "direction": direction})
+        prev = axes
+    return entries
+
+
+def _old_rtest_points(machine, entries, subdivide):
+    rot = [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+    full = lambda axes: {a: float(axes.get(a, 0.0)) for a in machine.axis_names if a != "S"}  # noqa: E731
+    pts = []
+    for i, e in enumerate(entries):
+        q = full(e["axes"])
+        if i and subdivide:
+            q0 = pts[-1]["axes"]
+            tb = np.asarray(e["table_ball"], float)
+            for s in np.arange(1, subdivide + 1) / (subdivide + 1):
+                r = {a: q0[a] + s * (q[a] - q0[a]) for a in rot}
+                at = {**q0, **r}
+                lin = machine.inverse([tb + _old_tip_offset(machine, at, e["tool_ball"])], start=at)
+                pts.append({"axes": {**{a: float(v[0]) for a, v in lin.items() if a != "S"}, **r}, "sample": None})
+        pts.append({"axes": q, "sample": i, "id": e.get("id")})
+    return pts
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_sphere_check_positions_equal_the_old_python(name):
+    m = _machine(name)
+    rng = np.random.default_rng(13)
+    rot = _old_rotary_axes(m)
+    cases = [(5, None), (3, None), (360, None), (7, {"C": (0.0, 360.0)}), (4, {"C": (-30.0, 300.0)})]
+    for _ in range(6):
+        lim = {a: tuple(sorted(float(x) for x in rng.uniform(-200, 200, 2))) for a in rot if rng.integers(0, 2)}
+        cases.append((int(rng.integers(3, 40)), lim | {"X": (0.0, 1.0)}))
+    for n, lim in cases:
+        new, old = sphere_check.positions(m, n, lim), _old_positions(m, n, lim)
+        assert list(new) == list(old)
+        for a in old:
+            assert len(new[a]) == len(old[a]) == n
+            _close(new[a], old[a])
+    with pytest.raises(ValueError, match=rf"^limits\.{rot[0]}: \(30, -30\) is not a range$"):
+        sphere_check.positions(m, 5, {rot[0]: (30, -30)})
+    with pytest.raises(ValueError, match=r"^n: 361 positions per axis"):
+        _core.sphere_check_positions(m._core, 361, {})
+    with pytest.raises(ValueError, match=r"^n: 2 positions per axis"):
+        sphere_check.positions(m, 2)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_rtest_plan_axes_equal_the_old_python(name):
+    m = _machine(name)
+    rng = np.random.default_rng(17)
+    for _ in range(3):
+        ball = [float(x) for x in rng.uniform([60, -80, 40], [160, 80, 140])]
+        tool = None if rng.integers(0, 2) else [float(x) for x in rng.uniform(-5, 5, 3) + m.tip]
+        step = float(rng.choice([5.0, 7.3, 15.0, 30.0]))
+        tilt = float(rng.uniform(-60, 60))
+        for t in rtest.TESTS:
+            new = rtest.plan(m, t, table_ball=ball, tool_ball=tool, step=step, tilt=tilt)
+            old = _old_rtest_plan(m, t, ball, tool, step, tilt)
+            assert len(new) == len(old)
+            for e, o in zip(new, old):
+                assert list(e["axes"]) == list(o["axes"]) and e["direction"] == o["direction"]
+                _close(list(e["axes"].values()), list(o["axes"].values()))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_rtest_program_points_equal_the_old_python(name):
+    m = _machine(name)
+    plan = [e for t in ("K1", "K4") for e in rtest.plan(m, t, table_ball=[110.0, -30.0, 70.0], step=45.0)]
+    for sub in (0, 1, 4):
+        new, old = nc_programs.rtest_points(m, plan, subdivide=sub), _old_rtest_points(m, plan, sub)
+        assert [(p["sample"], list(p["axes"])) for p in new] == [(p["sample"], list(p["axes"])) for p in old]
+        _close([v for p in new for v in p["axes"].values()], [v for p in old for v in p["axes"].values()])
+
+
+def test_rtest_path_commands_refuse_bad_input_naming_the_field():
+    m = _machine("c600u")
+    na = len(m.axis_names)
+    with pytest.raises(ValueError, match=r"^rotary: 2 columns"):
+        _core.rtest_path_commands(m._core, np.zeros((3, 2)), np.zeros(na), np.ones(3), np.ones(3), True)
+    with pytest.raises(ValueError, match=r"^start: 1 values"):
+        _core.rtest_path_commands(m._core, np.zeros((3, na)), np.zeros(1), np.ones(3), np.ones(3), True)
+    with pytest.raises(ValueError, match=r"^table_ball: not finite"):
+        _core.rtest_path_commands(m._core, np.zeros((3, na)), np.zeros(na), np.array([0, np.nan, 0]), np.ones(3),
+                                  True)

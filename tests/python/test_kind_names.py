@@ -75,16 +75,6 @@ BY_DESIGN = {
     "python/fivecal/procedures/dbb.py", "python/fivecal/procedures/rtest.py", "python/fivecal/procedures/tango.py",
     "python/fivecal/procedures/machining.py", "python/fivecal/procedures/classify.py",
     "python/fivecal/io/dbb_program.py", "python/fivecal/report/polar.py",
-    # the NC programs of the touch probe's and the R-test's tests: a G38.2
-    # cycle over facet and sphere touches (the exact crossing of the probe
-    # line with a plane or a sphere, collision lifts over spheres) and an
-    # R-test path with a dwell per ball3d sample; which program runs which
-    # plan entry type is this file's table (PLAN_PROGRAMS)
-    "python/fivecal/io/nc_programs.py",
-    # the readings of those programs lined up with their plan: the R-test
-    # nest's readings at the dwells (ball3d) and LinuxCNC's probe log of a
-    # facet and sphere cycle
-    "python/fivecal/io/plan_readings.py",
 }
 
 #: Files that still name kinds (file -> the kinds it names). Only shrinks:

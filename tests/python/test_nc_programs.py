@@ -299,6 +299,114 @@ def test_mixed_tango_log_reads_back_into_facet_and_sphere_touches_that_fit():
         assert abs(r.values[name] - truth) < 3 * r.std[name], (name, r.values[name], truth, r.std[name])
 
 
+def _cylinder_plan():
+    """Touches of a boss and a bore on the table (cylinder sections, a kind
+    the program writers never name) at three C and two A positions, each
+    point given in the workpiece frame around the section."""
+    art = {"cylinders": [{"id": "Z1", "point": [55.0, 25.0, 0.0], "axis": [0, 0, 1], "radius": 20.0},
+                         {"id": "H1", "point": [-40.0, -20.0, 0.0], "axis": [0, 0, 1], "radius": 15.0,
+                          "inside": True}]}
+    plan = []
+    for a in (0.0, -20.0):
+        for c in (-90.0, 0.0, 120.0):
+            for cyl in art["cylinders"]:
+                for t in (0.3, 2.4, 4.4):
+                    # the side of the section facing the probe after C turned it
+                    phi = t - math.radians(c)
+                    x, y, _ = cyl["point"]
+                    r = cyl["radius"]
+                    plan.append({"type": "cylinder", "target": cyl["id"], "axes": {"A": a, "C": c},
+                                 "point": [x + r * math.cos(phi), y + r * math.sin(phi), 12.0],
+                                 "direction": {"A": 1, "C": 1}})
+    return art, plan
+
+
+def test_a_cylinder_touch_plan_gets_a_probing_program_for_free():
+    """A probe-touch kind the writers do not name runs through them as its
+    kind answers (issue 29): a cylinder plan becomes one G38.2 cycle, aimed
+    along each touch's surface normal at the simulator's own contact point;
+    the trip log the module's trigger model writes for a machine with
+    location errors reads back into the observations fivecal.simulate
+    records for that plan on that machine (to the log's 6 decimals)."""
+    m = _machine()
+    art, plan = _cylinder_plan()
+    pins = L.nominal_pins(m, KINS)
+    prog = N.touch_program(m, KINS, plan, art, 3.0, clearance=0.5, overtravel=0.8, retract=4.0)
+    assert prog.count("G38.2") == len(plan) and "(PROBEOPEN probe-log.txt)" in prog
+    assert N.PLAN_PROGRAMS["cylinder"] == N.TOUCH_PROGRAMS[0] and not N.touches_a_sphere(plan)
+    # every probe move runs along its touch's normal through the contact (the nominal tool point)
+    probes = [b for b in _blocks(prog) if b[1] == 38.2]
+    geo = N._geometry(m, KINS, plan, art, 3.0)
+    assert len(probes) == len(geo)
+    for (_, _, pos, _, _), (_, _, w, n, _) in zip(probes, geo):
+        np.testing.assert_allclose([pos[a] for a in "XYZ"], w - 0.8 * n, atol=1e-6)
+    errors = dict(TRUE_LOCATION)
+    log = N.touch_log(m, KINS, plan, art, 3.0, pins, errors=errors)
+    sim = N.touch_sim_lines(m, KINS, plan, art, 3.0, pins, errors=errors)
+    assert len(sim) == len(plan) and all(len(lines) == 4 for lines in sim)
+    obs = L.read_probe_log(log, m, KINS, plan, pins)
+    truth = fivecal.simulate(m, plan, errors=errors, artefact=art, tip_radius=3.0, sigma=0.0, seed=1)
+    want = truth.to_dict()["observations"]
+    assert [(o["type"], o["target"]) for o in obs] == [(o["type"], o["target"]) for o in want]
+    for o, w in zip(obs, want):
+        for a in m.axis_names:
+            assert abs(o["axes"].get(a, 0.0) - w["axes"].get(a, 0.0)) < 3e-6, (a, o, w)
+    # the errors show: on the nominal machine the same touches read back elsewhere
+    nominal = L.read_probe_log(N.touch_log(m, KINS, plan, art, 3.0, pins), m, KINS, plan, pins)
+    assert max(abs(o["axes"][a] - w["axes"][a]) for o, w in zip(nominal, want) for a in "XYZ") > 0.01
+
+
+def test_a_cylinder_plan_through_the_command_line(tmp_path, capsys):
+    """`fivecal export program` picks the probing cycle for a cylinder plan
+    (the registry's program of its kind) and `fivecal import probe-log
+    --plan` reads its log back, each log line checked against its touch's
+    probe line."""
+    from fivecal.cli import main
+    from fivecal.io import plan_readings
+    m = _machine()
+    art, plan = _cylinder_plan()
+    spec = _spec(tmp_path, "cyl.json", m.to_dict(), plan, artefact=art, probe={"tip_radius": 3.0})
+    out = str(tmp_path / "cyl.ngc")
+    assert main(["export", "program", spec, "--kins", KINS, "--out", out]) == 0
+    assert open(out).read() == N.touch_program(m, KINS, plan, art, 3.0)
+    assert main(["export", "program", spec, "--kins", KINS, "--dialect", "siemens"]) == 0
+    assert capsys.readouterr().out.count("MEAS=1 G01") == len(plan)
+    pins = L.nominal_pins(m, KINS)
+    log = tmp_path / "probe-log.txt"
+    log.write_text(N.touch_log(m, KINS, plan, art, 3.0, pins, errors=TRUE_LOCATION))
+    d = plan_readings.probe_log_dataset(str(log), spec, KINS)
+    assert d["observations"] == L.read_probe_log(str(log), m, KINS, plan, pins)
+    # a log of another plan (the touches in another order) is refused naming the line
+    rows = log.read_text().splitlines()
+    log.write_text("\n".join([rows[1], rows[0], *rows[2:]]) + "\n")
+    with pytest.raises(ValueError, match=r"probe-log.txt:1"):
+        plan_readings.probe_log_dataset(str(log), spec, KINS)
+
+
+def test_a_cylinder_touch_that_starts_inside_or_misses_is_refused():
+    m = _machine()
+    art, plan = _cylinder_plan()
+    pins = L.nominal_pins(m, KINS)
+    # A 0, C 0 (the workpiece frame is the machine's): the C line moved 2 mm
+    # along the touch's normal one way or the other puts the boss into the
+    # stylus' start or out of its reach
+    touch = plan[6]
+    assert touch["axes"] == {"A": 0.0, "C": 0.0} and touch["target"] == "Z1"
+    said = []
+    for sign in (1.0, -1.0):
+        shift = {"EX0C": sign * 2.0 * math.cos(0.3), "EY0C": sign * 2.0 * math.sin(0.3)}
+        with pytest.raises(ValueError) as e:
+            N.touch_log(m, KINS, [touch], art, 3.0, pins, errors=shift, clearance=0.1, overtravel=0.1)
+        said.append(str(e.value))
+    assert sorted(x.split(" (")[0] for x in said) == [
+        "touch 1: the probe move misses cylinder Z1 on this machine",
+        "touch 1: the stylus is already on or in cylinder Z1 at the start of the probe move"]
+    with pytest.raises(ValueError, match=r"plan\[0\]: target 'Z9' is not a cylinder of the artefact"):
+        N.touch_program(m, KINS, [dict(plan[0], target="Z9")], art, 3.0)
+    with pytest.raises(ValueError, match=r"plan\[0\]: type 'cylinder': a sphere cycle runs sphere touches"):
+        N.sphere_program(m, KINS, plan, art, 3.0)
+
+
 def test_mixed_program_refusals():
     m, art, plan = _tango()
     with pytest.raises(ValueError, match=r"plan\[1\]: type 'ball3d'"):
@@ -697,7 +805,14 @@ def test_a_program_position_no_machine_reaches_is_refused(tmp_path, capsys):
     spec = _spec(tmp_path, "sphere.json", m.to_dict(), plan, artefact=far, probe={"tip_radius": 3.0})
     assert main(["export", "program", spec, "--kins", KINS]) == 2
     err = capsys.readouterr().err
-    assert "sphere cycle: line " in err and "moves X to 1e+09, beyond any machine tool" in err, err
+    # the artefact itself is refused (its kind reads it for the contact points)
+    assert "spheres[0].center[0]: 1e+09 mm is implausible" in err and "look like µm" in err, err
+    # a sphere at the edge of any machine's reach: the touches beyond it are refused in the program
+    edge = {"spheres": [dict(art["spheres"][0], center=[99999.0, 0.0, 40.0])]}
+    spec = _spec(tmp_path, "edge.json", m.to_dict(), plan, artefact=edge, probe={"tip_radius": 3.0})
+    assert main(["export", "program", spec, "--kins", KINS]) == 2
+    err = capsys.readouterr().err
+    assert "sphere cycle: line " in err and "beyond any machine tool" in err, err
     for shift in ([np.nan, 0, 0], [0, 0], [2e5, 0, 0]):
         with pytest.raises(ValueError, match="^workpiece_shift: expected"):
             N.sphere_program(m, KINS, plan, art, 3.0, workpiece_shift=shift)

@@ -157,6 +157,8 @@ class Kind final : public BallMountKind {
   Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d&) const override {
     return Eigen::Vector3d(r[0], r[1], r[2]);
   }
+  // NC programs: an R-test path with a dwell per sample (nc_programs.rtest_program).
+  const char* nc_program() const override { return "rtest"; }
 };
 
 }  // namespace

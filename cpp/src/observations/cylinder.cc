@@ -212,6 +212,10 @@ class Kind final : public ProbeTouchKind {
     const Axis est = AxisOf(cyl, sv);
     *gap = [=](const Eigen::Vector3d& P) { return s * Radial(est, P).norm(); };
   }
+
+  // NC programs (defined at the end of this file).
+  ProbeCrossing CrossProbeLine(const Dataset& ds, const std::string& target, const Eigen::Vector3d& p,
+                               const Eigen::Vector3d& d) const override;
 };
 
 }  // namespace
@@ -221,4 +225,36 @@ const ObservationKind& CylinderKind() {
   return kind;
 }
 
+}  // namespace fivecal
+
+// ---- What an NC program needs (io/nc_programs.py) ----------------------------------
+
+namespace fivecal {
+namespace {
+
+// The stylus centre meets the nominal cylinder moved out by the stylus
+// radius (radius R + r outside a boss, R - r in a bore): the line's radial
+// part w + s v (across the axis) reaches that radius, the first root from
+// outside a boss, the outward one from inside a bore.
+ProbeCrossing Kind::CrossProbeLine(const Dataset& ds, const std::string& target, const Eigen::Vector3d& p,
+                                   const Eigen::Vector3d& d) const {
+  const Cylinder& cyl = ds.artefact.cylinders[RequireTarget(ds, target, "target")];
+  const double zero[5] = {0, 0, 0, 0, 0};
+  const Axis ax = AxisOf(cyl, zero);
+  const double side = cyl.inside ? -1.0 : 1.0;
+  const double rr = ax.R + side * ds.tip_radius;
+  const Eigen::Vector3d w = Radial(ax, p), v = d - ax.a * d.dot(ax.a);
+  const double a = v.dot(v), b = 2 * v.dot(w), cc = w.dot(w) - rr * rr;
+  const double disc = b * b - 4 * a * cc;
+  ProbeCrossing c;
+  c.inside = side * cc <= 0;
+  c.s = a > 0 && disc >= 0 ? (-b - side * std::sqrt(disc)) / (2 * a) : std::numeric_limits<double>::infinity();
+  if (c.s < 0) c.s = std::numeric_limits<double>::infinity();  // a boss behind the line's start
+  const Eigen::Vector3d q = std::isfinite(c.s) ? Eigen::Vector3d(p + c.s * d) : p;
+  const Eigen::Vector3d radial = Radial(ax, q);
+  c.normal = side * radial / radial.norm();
+  return c;
+}
+
+}  // namespace
 }  // namespace fivecal

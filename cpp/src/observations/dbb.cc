@@ -174,6 +174,8 @@ class Kind final : public BallMountKind {
   Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d& d) const override {
     return r[0] * d.normalized();
   }
+  // NC programs: a ball bar path (dbb_program).
+  const char* nc_program() const override { return "dbb"; }
 };
 
 }  // namespace

@@ -105,6 +105,10 @@ class Kind final : public ProbeTouchKind {
     *gap = [=](const Eigen::Vector3d& P) { return n.dot(P - f.point) - off; };
     *n_out = n;
   }
+
+  // NC programs (defined at the end of this file).
+  ProbeCrossing CrossProbeLine(const Dataset& ds, const std::string& target, const Eigen::Vector3d& p,
+                               const Eigen::Vector3d& d) const override;
 };
 
 }  // namespace
@@ -114,4 +118,26 @@ const ObservationKind& FacetKind() {
   return kind;
 }
 
+}  // namespace fivecal
+
+// ---- What an NC program needs (io/nc_programs.py) ----------------------------------
+
+namespace fivecal {
+namespace {
+
+// The stylus centre meets the facet's plane moved out by the stylus radius:
+// n.(p + s d - (a + r n)) = 0, coming from outside (n.d < 0).
+ProbeCrossing Kind::CrossProbeLine(const Dataset& ds, const std::string& target, const Eigen::Vector3d& p,
+                                   const Eigen::Vector3d& d) const {
+  const Facet& f = ds.artefact.facets[RequireTarget(ds, target, "target")];
+  ProbeCrossing c;
+  c.normal = f.normal.normalized();
+  const Eigen::Vector3d q0 = f.point + ds.tip_radius * c.normal;
+  const double h0 = c.normal.dot(p - q0), dn = c.normal.dot(d);
+  c.inside = h0 <= 0;
+  c.s = dn < 0 ? -h0 / dn : std::numeric_limits<double>::infinity();
+  return c;
+}
+
+}  // namespace
 }  // namespace fivecal

@@ -299,4 +299,45 @@ void ProbeTouchKind::ApplyInput(const SimulationPlan& plan, int i, int, double x
   o->axes = plan.start[i] + s * plan.approach[i];
 }
 
+// ---- What an NC program needs (io/nc_programs.py) -------------------------------
+
+namespace {
+// The observation fields a planned touch's geometry reads (one place to
+// repoint when the observation's fields move).
+void SetTouchTarget(Observation* ob, ObservationType type, const std::string& target) {
+  ob->type = type;
+  ob->target = target;
+}
+}  // namespace
+
+TouchContact ProbeTouchKind::PlannedTouchContact(const Dataset& ds, const json& e, const std::string& w) const {
+  if (!e.is_object()) throw std::invalid_argument(w + ": expected a plan entry (an object)");
+  if (!e.contains("target") || !e["target"].is_string()) throw std::invalid_argument(w + ".target: missing");
+  const std::string target = e["target"].get<std::string>();
+  RequireTarget(ds, target, w);
+  // The nominal set-up: every set-up parameter zero, the nominal machine.
+  PlanTruth truth;
+  truth.dataset = &ds;
+  truth.theta = Eigen::VectorXd::Zero(ds.machine().num_parameters());
+  truth.tip = ds.machine().tip();
+  truth.setup = [](const std::string&) { return 0.0; };
+  Observation ob;
+  SetTouchTarget(&ob, type(), target);
+  Eigen::Vector3d n, c;
+  Gap gap;
+  PlannedTouch(e, w, truth, ob, &n, &c, &gap);
+  TouchContact out;
+  out.normal = n;
+  out.point = c - ds.tip_radius * n;  // PlannedTouch gives the stylus centre
+  for (const ClearanceBall& b : ClearanceBalls(ds))
+    if (b.id == target) out.clearance = b.radius;
+  return out;
+}
+
+ProbeCrossing ProbeTouchKind::CrossProbeLine(const Dataset&, const std::string&, const Eigen::Vector3d&,
+                                             const Eigen::Vector3d&) const {
+  throw std::invalid_argument(std::string("a probe line's crossing with a ") + name() +
+                              " target is not modelled (no simulated trip for this kind)");
+}
+
 }  // namespace fivecal

@@ -234,6 +234,13 @@ class Kind final : public ProbeTouchKind {
     *gap = [=](const Eigen::Vector3d& P) { return (P - c).norm(); };
     *n_out = n;
   }
+
+  // NC programs (defined at the end of this file).
+  ProbeCrossing CrossProbeLine(const Dataset& ds, const std::string& target, const Eigen::Vector3d& p,
+                               const Eigen::Vector3d& d) const override;
+  // The sphere cycle; its spheres are the balls the moves keep out of.
+  const char* nc_program() const override { return "sphere"; }
+  std::vector<ClearanceBall> ClearanceBalls(const Dataset& ds) const override;
 };
 
 }  // namespace
@@ -243,4 +250,35 @@ const ObservationKind& SphereKind() {
   return kind;
 }
 
+}  // namespace fivecal
+
+// ---- What an NC program needs (io/nc_programs.py) ----------------------------------
+
+namespace fivecal {
+namespace {
+
+std::vector<ClearanceBall> Kind::ClearanceBalls(const Dataset& ds) const {
+  std::vector<ClearanceBall> out;
+  for (const Sphere& s : ds.artefact.spheres) out.push_back({s.id, s.center, s.radius});
+  return out;
+}
+
+// The stylus centre meets the sphere grown by the stylus radius:
+// |p + s d - c| = R + r, the first root coming from outside.
+ProbeCrossing Kind::CrossProbeLine(const Dataset& ds, const std::string& target, const Eigen::Vector3d& p,
+                                   const Eigen::Vector3d& d) const {
+  const Sphere& sp = ds.artefact.spheres[RequireTarget(ds, target, "target")];
+  const double rr = sp.radius + ds.tip_radius;
+  const Eigen::Vector3d w = p - sp.center;
+  const double a = d.dot(d), b = (2 * d).dot(w), cc = w.dot(w) - rr * rr;
+  const double disc = b * b - 4 * a * cc;
+  ProbeCrossing c;
+  c.inside = cc <= 0;
+  c.s = disc >= 0 ? (-b - std::sqrt(disc)) / (2 * a) : std::numeric_limits<double>::infinity();
+  const Eigen::Vector3d q = std::isfinite(c.s) ? Eigen::Vector3d(p + c.s * d) : p;
+  c.normal = (q - sp.center) / (q - sp.center).norm();
+  return c;
+}
+
+}  // namespace
 }  // namespace fivecal

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "fivecal/model/inverse.h"
+#include "fivecal/model/kinematics.h"
 #include "fivecal/procedures/sphere_check.h"
 
 namespace fivecal {
@@ -102,6 +104,40 @@ RTestResult EvaluateRTest(const Dataset& ds, const RTestOptions& options) {
     io.estimate = out.estimated;
     out.fit = Identify(ds, io);
     out.identified = true;
+  }
+  return out;
+}
+
+Eigen::MatrixXd RTestPathCommands(const Machine& m, const Eigen::MatrixXd& rotary, const Eigen::VectorXd& start,
+                                  const Eigen::Vector3d& table_ball, const Eigen::Vector3d& tool_ball, bool chain) {
+  const int na = m.num_axes();
+  if (rotary.cols() != na)
+    throw std::invalid_argument("rotary: " + std::to_string(rotary.cols()) + " columns, the machine has " +
+                                std::to_string(na) + " axes");
+  if (start.size() != na)
+    throw std::invalid_argument("start: " + std::to_string(start.size()) + " values, the machine has " +
+                                std::to_string(na) + " axes");
+  for (int k = 0; k < 3; ++k) {
+    if (!std::isfinite(table_ball[k])) throw std::invalid_argument("table_ball: not finite");
+    if (!std::isfinite(tool_ball[k])) throw std::invalid_argument("tool_ball: not finite");
+  }
+  const Eigen::VectorXd theta = Eigen::VectorXd::Zero(m.num_parameters());
+  Eigen::MatrixXd out(rotary.rows(), na);
+  Eigen::VectorXd from = start;
+  for (Eigen::Index i = 0; i < rotary.rows(); ++i) {
+    RowMatrixXd q = from.transpose();
+    for (int k = 0; k < na; ++k)
+      if (m.axis(k).rotary() && m.axis(k).name != 'S') q(0, k) = rotary(i, k);
+    double tip[3], ball[3];
+    ToolPosesRowMajor(m, theta, q, nullptr, tip, nullptr);
+    ToolPosesRowMajor(m, theta, q, nullptr, ball, nullptr, &tool_ball);
+    Eigen::MatrixXd target(1, 3);
+    for (int c = 0; c < 3; ++c) target(0, c) = table_ball[c] + (tip[c] - ball[c]);
+    const Eigen::VectorXd q0 = q.row(0).transpose();
+    out.row(i) = InverseKinematics(m, theta, target, nullptr, q0).row(0);
+    for (int k = 0; k < na; ++k)
+      if (m.axis(k).rotary() && m.axis(k).name != 'S') out(i, k) = rotary(i, k);
+    if (chain) from = out.row(i).transpose();
   }
   return out;
 }

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <set>
 #include <stdexcept>
@@ -245,6 +246,34 @@ SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOption
     if (std::find(out.estimate.begin(), out.estimate.end(), r.estimated[i]) != out.estimate.end() &&
         i < r.informed.size())
       out.informed.emplace_back(r.estimated[i], r.informed[i]);
+  return out;
+}
+
+std::vector<std::pair<char, std::vector<double>>> SphereCheckPositions(
+    const Machine& m, int n, const std::map<std::string, std::pair<double, double>>& limits) {
+  if (n < 3 || n > kMaxSphereCheckPositions)
+    throw std::invalid_argument("n: " + std::to_string(n) + " positions per axis; expected a whole number from 3 (a "
+                                "pivot needs at least 3) to " + std::to_string(kMaxSphereCheckPositions));
+  std::vector<std::pair<char, std::vector<double>>> out;
+  for (char a : CheckedRotaryAxes(m)) {
+    const auto it = limits.find(std::string(1, a));
+    // a table's or a head's C turns a full turn; a tilting axis +-90 deg
+    const std::pair<double, double> range =
+        it != limits.end() ? it->second : (a == 'C' ? std::make_pair(-180.0, 180.0) : std::make_pair(-90.0, 90.0));
+    const double lo = range.first, hi = range.second;
+    if (!(hi > lo)) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "(%g, %g)", lo, hi);
+      throw std::invalid_argument(std::string("limits.") + a + ": " + buf + " is not a range");
+    }
+    const bool full = hi - lo >= 360.0 - 1e-9;
+    // numpy's linspace: i * step + lo, the end point set exactly
+    const double step = (hi - lo) / (full ? n : n - 1);
+    std::vector<double> v(n);
+    for (int i = 0; i < n; ++i) v[i] = i * step + lo;
+    if (!full) v[n - 1] = hi;
+    out.emplace_back(a, std::move(v));
+  }
   return out;
 }
 

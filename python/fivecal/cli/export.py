@@ -245,11 +245,10 @@ def _program_text(args, program, machine, plan, artefact, tip) -> str:
     # TANGO) even a facet-only plan takes the cycle whose moves keep out of them
     mixed, spheres = N.TOUCH_PROGRAMS
     dialect = args.dialect
-    if dialect != "linuxcnc" and not (program == spheres or (program == mixed and (
-            N.touches_a_sphere(plan) or artefact.get("spheres")))):
+    if dialect != "linuxcnc" and not (program == spheres or (program == mixed and N.touch_cycle(plan, artefact))):
         raise ValueError(f"--dialect {dialect}: written for sphere and mixed facet/sphere probing cycles; "
                          f"a {program} program is LinuxCNC G-code only")
-    if program == mixed and (N.touches_a_sphere(plan) or artefact.get("spheres")):
+    if program == mixed and N.touch_cycle(plan, artefact):
         return N.touch_program(machine, args.kins, plan, artefact, tip, overshoot=args.overshoot,
                                dialect=dialect, **touch)
     if program == mixed:

@@ -31,26 +31,43 @@ Units: mm, degrees, mm/min; world coordinates are LinuxCNC's (workpiece point
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .. import _core, _json
 from ..machine import Machine
-from ..procedures.rtest import tip_offset
 from . import linuxcnc as L
 from . import nc_options as O
 
 
-#: The programs fivecal writes, and the one each plan entry type runs in
-#: (``fivecal export program --kind``): the probing cycle (facet and sphere
-#: touches in plan order), the sphere cycle, an R-test K test, a ball bar
-#: test (fivecal.io.dbb_program).
-PROGRAMS = ("probing", "sphere", "rtest", "dbb")
-PLAN_PROGRAMS = {"facet": "probing", "sphere": "sphere", "ball3d": "rtest", "dbb": "dbb"}
-#: the touch programs: a plan of facet and sphere touches runs in the first
+#: The registry's word on each kind (``_core.nc_kinds()``, observations/
+#: nc_geometry.h): the program its plan entries run in, whether it is a probe
+#: touch, the artefact list its targets are in.
+NC_KINDS: Dict[str, dict] = {k["name"]: k for k in _core.nc_kinds()}
+#: plan entry type -> the program it runs in
+PLAN_PROGRAMS: Dict[str, str] = {n: k["program"] for n, k in NC_KINDS.items() if k["program"]}
+#: the touch programs: a plan of probe touches of several kinds runs in the
+#: first (the probing cycle, every probe touch in plan order), the second is
+#: the sphere cycle
 TOUCH_PROGRAMS = ("probing", "sphere")
+#: The programs fivecal writes (``fivecal export program --kind``): the touch
+#: programs, then those of the other kinds' entries in the registry's order
+#: (an R-test K test, a ball bar test: fivecal.io.dbb_program)
+PROGRAMS = tuple(dict.fromkeys([*TOUCH_PROGRAMS, *PLAN_PROGRAMS.values()]))
+
+
+def program_kinds(program: str) -> List[str]:
+    """The plan entry types a program runs (registry order): a probing
+    cycle runs every probe touch, any other program its own kinds' entries."""
+    if program == TOUCH_PROGRAMS[0]:
+        return [n for n, k in NC_KINDS.items() if k["touch"]]
+    return [n for n, p in PLAN_PROGRAMS.items() if p == program]
+
+
+def _kind_words(kinds: Sequence[str], last: str = "and") -> str:
+    return ", ".join(kinds[:-1]) + f" {last} " + kinds[-1] if len(kinds) > 1 else "".join(kinds)
 
 
 @dataclass(frozen=True)
@@ -162,8 +179,9 @@ def dialect(name: str) -> Dialect:
 
 
 def touches_a_sphere(plan: Sequence[Mapping]) -> bool:
-    """Whether a plan touches a sphere (its probing cycle keeps out of the spheres)."""
-    return any(e.get("type") == "sphere" for e in plan)
+    """Whether a plan touches a target of the sphere cycle's kinds (its
+    probing cycle keeps out of those solids)."""
+    return any(PLAN_PROGRAMS.get(e.get("type")) == TOUCH_PROGRAMS[1] for e in plan)
 
 
 def _f(v: float) -> str:
@@ -171,46 +189,72 @@ def _f(v: float) -> str:
     return "0.000000" if float(s) == 0.0 else s
 
 
-def _as_facets(plan: Sequence[Mapping], artefact: Mapping, kinds=("sphere",)):
-    """Each sphere touch as a touch of the tangent plane at its nominal
-    contact point: what the facet probing geometry of fivecal.io.linuxcnc
-    works with (approach and retract along the touch direction). Facet
-    touches (when ``kinds`` has "facet") pass through to their facet."""
-    what = " and ".join(kinds)
-    spheres = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
-    afacets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
-    fplan, facets = [], {}
+def touch_cycle(plan: Sequence[Mapping], artefact: Mapping) -> bool:
+    """Whether a probing plan runs as :func:`touch_program` (any probe
+    touch; the moves keep out of the artefact's balls) rather than as
+    :func:`fivecal.io.linuxcnc.probing_program` (touches of facets, no solid
+    modelled): it touches anything but facets, or the artefact has balls
+    (a scale bar beside the facets, as in TANGO)."""
+    plane = L._plane_touch()
+    balls = any((artefact or {}).get(NC_KINDS[k]["target_list"]) for k in program_kinds(TOUCH_PROGRAMS[1]))
+    return balls or any(e.get("type") != plane for e in plan)
+
+
+def _setup(machine: Machine, artefact: Mapping, tip_radius: float):
+    """The core's dataset of a plan's machine, artefact and stylus (no
+    observations): what the kinds answer the writers' questions from."""
+    # the targets' geometry only: a scale bar's length moves no stylus (and may name balls left out)
+    art = {k: v for k, v in (artefact or {}).items() if k != "scale_bars"}
+    d = {"machine": machine.to_dict(), "probe": {"tip_radius": float(tip_radius)}, "artefact": art,
+         "observations": []}
+    return _core.Dataset.from_json(_json.dumps(d, "dataset"), False)
+
+
+@dataclass(frozen=True)
+class Touch:
+    """A planned touch as the program runs it (its kind's contact geometry,
+    ``_core.planned_touch_contacts``): the nominal contact point on the
+    surface and the outward normal there (workpiece frame), and the radius
+    of the ball around its target the moves keep out of (0: none)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    clearance: float
+
+
+def _touches(machine: Machine, plan: Sequence[Mapping], artefact: Mapping, tip_radius: float, cycle: str,
+             setup=None) -> List[Touch]:
+    """The touches of ``plan`` for the ``cycle`` program (``sphere`` or
+    ``probing``), each entry's kind answering for its target; ValueError
+    naming the entry of another type or with a target the artefact lacks."""
+    runs = program_kinds(cycle)
     for i, t in enumerate(plan):
         kind = t.get("type")
-        if kind not in kinds:
-            cycle = "sphere cycle" if kinds == ("sphere",) else "probing cycle"
-            raise ValueError(f"plan[{i}]: type '{kind}': a {cycle} runs {what} touches")
-        if kind == "facet":
-            f = afacets.get(t.get("target"))
-            if f is None:
-                raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a facet of the artefact")
-            facets[f["id"]] = f
-            fplan.append(dict(t))
-            continue
-        if not spheres:
-            raise ValueError("artefact: no spheres (a sphere touch needs the sphere's centre and radius)")
-        s = spheres.get(t.get("target"))
-        if s is None:
-            raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a sphere of the artefact")
-        n = np.asarray(t.get("normal", ()), dtype=float)
-        if n.shape != (3,) or not np.isfinite(n).all() or np.linalg.norm(n) < 1e-12:
-            raise ValueError(f"plan[{i}].normal: expected the touch direction [x, y, z], got {t.get('normal')!r}")
-        n = n / np.linalg.norm(n)
-        fid = f"{t['target']}#{i + 1}"
-        p = np.asarray(s["center"], dtype=float) + float(s["radius"]) * n
-        facets[fid] = {"id": fid, "point": p.tolist(), "normal": n.tolist()}
-        fplan.append({"type": "facet", "target": fid, "axes": t.get("axes", {})})
-    return fplan, {"facets": list(facets.values())}
+        if kind not in runs:
+            raise ValueError(f"plan[{i}]: type '{kind}': a {cycle} cycle runs {_kind_words(runs)} touches")
+        where = NC_KINDS[kind]["target_list"]
+        targets = {x.get("id") for x in (artefact or {}).get(where) or []}
+        if not targets:
+            raise ValueError(f"artefact: no {where} (a {kind} touch needs its target's geometry)")
+        if t.get("target") not in targets:
+            raise ValueError(f"plan[{i}]: target '{t.get('target')}' is not a {kind} of the artefact")
+    setup = setup if setup is not None else _setup(machine, artefact, tip_radius)
+    return [Touch(np.asarray(c[0], float), np.asarray(c[1], float), float(c[2]))
+            for c in _core.planned_touch_contacts(setup, _json.dumps([dict(t) for t in plan], "plan"))]
 
 
-def _geometry(machine, kins, plan, artefact, tip_radius, workpiece_shift=(0.0, 0.0, 0.0), kinds=("sphere",)):
-    fplan, fart = _as_facets(plan, artefact, kinds)
-    return L._touch_geometry(machine, kins, fplan, fart, tip_radius, workpiece_shift)
+def _geometry(machine, kins, plan, artefact, tip_radius, workpiece_shift=(0.0, 0.0, 0.0), cycle="probing",
+              touches=None):
+    """Per touch (joint tilt, joint C, stylus-centre world point, normal,
+    tool axis): each touch as one of the plane tangent to its target at the
+    contact point, the plane probing geometry of fivecal.io.linuxcnc."""
+    if touches is None:
+        touches = _touches(machine, plan, artefact, tip_radius, cycle)
+    plane = L._plane_touch()
+    fplan = [{"type": plane, "target": f"#{i + 1}", "axes": t.get("axes", {})} for i, t in enumerate(plan)]
+    planes = [{"id": f"#{i + 1}", "point": c.point.tolist(), "normal": c.normal.tolist()}
+              for i, c in enumerate(touches)]
+    return L._touch_geometry(machine, kins, fplan, {"facets": planes}, tip_radius, workpiece_shift)
 
 
 def _joint_directions(machine: Machine, kins: str, plan: Sequence[Mapping]):
@@ -227,11 +271,12 @@ def _joint_directions(machine: Machine, kins: str, plan: Sequence[Mapping]):
     return out
 
 
-def _lift(entry: Mapping, spheres: Mapping, tip_radius: float, retract: float, safe: float) -> float:
+def _lift(touch: Touch, tip_radius: float, retract: float, safe: float) -> float:
     """How far along the tool axis the move to or from this touch's retract
-    point is lifted between two touches of one rotary position."""
-    if entry.get("type") == "sphere":
-        return float(spheres[entry["target"]]["radius"]) + tip_radius + retract
+    point is lifted between two touches of one rotary position: over a ball
+    target by its stylus-centre radius, else to the safe height."""
+    if touch.clearance > 0:
+        return touch.clearance + tip_radius + retract
     return safe
 
 
@@ -299,7 +344,7 @@ def sphere_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefac
     and tool-centre-point switch; ``tcp_on`` None: the dialect's); the
     coordinates stay those of ``kins`` (workpiece point − tool tip at the
     zero pose: set the work offset so)."""
-    return _touch_program(machine, kins, plan, artefact, tip_radius, ("sphere",), clearance, overtravel,
+    return _touch_program(machine, kins, plan, artefact, tip_radius, TOUCH_PROGRAMS[1], clearance, overtravel,
                           feed, retract, safe, overshoot, dwell, arm, disarm, sync, log, tcp_on,
                           workpiece_shift, before_probe, dialect)
 
@@ -329,12 +374,12 @@ def touch_program(machine: Machine, kins: str, plan: Sequence[Mapping], artefact
     modelled: check the moves against your fixtures. The log reads back
     with :func:`fivecal.io.linuxcnc.read_probe_log` into facet and sphere
     observations in plan order."""
-    return _touch_program(machine, kins, plan, artefact, tip_radius, ("facet", "sphere"), clearance,
+    return _touch_program(machine, kins, plan, artefact, tip_radius, TOUCH_PROGRAMS[0], clearance,
                           overtravel, feed, retract, safe, overshoot, dwell, arm, disarm, sync, log, tcp_on,
                           workpiece_shift, before_probe, dialect)
 
 
-def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, overtravel, feed, retract,
+def _touch_program(machine, kins, plan, artefact, tip_radius, cycle, clearance, overtravel, feed, retract,
                    safe, overshoot, dwell, arm, disarm, sync, log, tcp_on, workpiece_shift, before_probe,
                    dialect_name="linuxcnc"):
     d = dialect(dialect_name)
@@ -343,7 +388,9 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
         raise O.OptionError("log", f"{log!r}: the file name is written inside a quoted string")
     k = L._kins(kins)
     tilt = L.TILT[k]
-    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
+    setup = _setup(machine, artefact, tip_radius)
+    touches = _touches(machine, plan, artefact, tip_radius, cycle, setup)
+    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, cycle, touches)
     if before_probe is not None and len(before_probe) != len(geo):
         raise ValueError(f"before_probe: {len(before_probe)} entries for {len(geo)} touches")
     O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel, feed=feed, retract=retract,
@@ -351,25 +398,24 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
     O.check_probe_lines(log, arm, disarm, sync, tcp_on, before_probe)
     if retract < clearance:
         raise O.OptionError("retract", f"{retract} mm is less than the clearance {clearance} mm")
-    spheres = {sp["id"]: sp for sp in (artefact or {}).get("spheres", [])}
-    touched = sorted((float(spheres[t["target"]]["radius"]), t["target"]) for t in plan if t.get("type") == "sphere")
+    touched = sorted((c.clearance, str(t["target"]), str(t["type"])) for t, c in zip(plan, touches) if c.clearance > 0)
     if touched:
-        # past the radius the G38.2 of a probe that does not trip ends beyond the sphere's centre
-        O.at_most("overtravel", overtravel, touched[0][0], f"the radius of sphere {touched[0][1]}")
+        # past the radius the G38.2 of a probe that does not trip ends beyond the ball's centre
+        O.at_most("overtravel", overtravel, touched[0][0], f"the radius of {touched[0][2]} {touched[0][1]}")
     dirs = _joint_directions(machine, k, plan)
     origin = np.asarray(L.match(machine, k)["origin"], float) + np.asarray(workpiece_shift, float)
-    # every sphere of the artefact stands in the way, touched in this plan or not
-    balls = [(sp["id"], np.asarray(sp["center"], float) - origin, float(sp["radius"]) + tip_radius + clearance)
-             for sp in spheres.values()]
+    # every ball of the artefact stands in the way, touched in this plan or not
+    balls = [(name, np.asarray(c, float) - origin, float(r) + tip_radius + clearance)
+             for name, c, r in _core.clearance_balls(setup)]
     xyz = lambda p: f"X{_f(p[0])} Y{_f(p[1])} Z{_f(p[2])}"  # noqa: E731
     targets = sorted({str(t.get("target")) for t in plan})
-    what = "sphere cycle" if kinds == ("sphere",) else "probing cycle"
+    what = f"{cycle} cycle"
     c = d.comment
     out = [c(f"fivecal {what}: {len(geo)} touches on {O.comment_text(', '.join(targets))}, machine "
              f"{O.comment_text(machine.name)}, {k}-kins"),
            c("units mm and degrees; world coordinates = workpiece point - tool tip at the zero pose"),
            c(f"stylus ball radius {tip_radius:g} mm; touches approach and retract along the "
-             f"{'sphere' if kinds == ('sphere',) else 'surface'} normal")]
+             f"{'sphere' if cycle == TOUCH_PROGRAMS[1] else 'surface'} normal")]
     if d.name != "linuxcnc":
         out += [c(f"dialect {d.name}: {O.comment_text(d.title)}"),
                 *[c(O.comment_text(n)) for n in d.notes],
@@ -415,8 +461,7 @@ def _touch_program(machine, kins, plan, artefact, tip_radius, kinds, clearance, 
             # along the tool axis, over a sphere by its stylus-centre radius
             # (the straight move between them stays outside it), to the safe
             # height when a facet is involved (its solid can be anywhere below)
-            lift = max(_lift(plan[i - 1], spheres, tip_radius, retract, safe),
-                       _lift(plan[i], spheres, tip_radius, retract, safe))
+            lift = max(_lift(touches[i - 1], tip_radius, retract, safe), _lift(touches[i], tip_radius, retract, safe))
             lift = _clear_lift(hold, v, off, v, lift, balls, i + 1)
             out += [f"G0 {xyz(hold + lift * v)}", f"G0 {xyz(off + lift * v)}", f"G0 {xyz(off)}"]
         out.append(f"G0 {xyz(start)}")
@@ -450,7 +495,7 @@ def sphere_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], a
     G38.2 runs a straight joint line, so the crossing is exact (location
     errors)."""
     return _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
-                          workpiece_shift, ("sphere",))
+                          workpiece_shift, TOUCH_PROGRAMS[1])
 
 
 def touch_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], artefact: Mapping,
@@ -461,16 +506,16 @@ def touch_trigger_model(machine: Machine, kins: str, plan: Sequence[Mapping], ar
     :func:`touch_program`: a facet touch trips where the stylus ball reaches
     the facet's plane (``g``, ``h``: that plane in the linear joints)."""
     return _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
-                          workpiece_shift, ("facet", "sphere"))
+                          workpiece_shift, TOUCH_PROGRAMS[0])
 
 
 def _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clearance, overtravel,
-                   workpiece_shift, kinds):
+                   workpiece_shift, cycle):
     k = L._kins(kins)
     O.check(tip_radius=tip_radius, clearance=clearance, overtravel=overtravel)
-    spheres = {s["id"]: s for s in (artefact or {}).get("spheres", [])}
-    facets = {f["id"]: f for f in (artefact or {}).get("facets", [])}
-    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, kinds)
+    setup = _setup(machine, artefact, tip_radius)
+    touches = _touches(machine, plan, artefact, tip_radius, cycle, setup)
+    geo = _geometry(machine, k, plan, artefact, tip_radius, workpiece_shift, cycle, touches)
     out = []
     for i, (t, c, w, n, _) in enumerate(geo):
         ws, we = w + clearance * n, w - overtravel * n
@@ -480,29 +525,11 @@ def _trigger_model(machine, kins, plan, artefact, tip_radius, pins, errors, clea
         dirs = {a: np.full(len(jj), float(v)) for a, v in (plan[i].get("direction") or {}).items()}
         p = machine.tool_point(L.commands(machine, k, jj), errors=errors, directions=dirs or None)
         ps, d = p[0], p[1] - p[0]
-        target = plan[i]["target"]
-        if plan[i]["type"] == "sphere":
-            centre = np.asarray(spheres[target]["center"], dtype=float)
-            rr = float(spheres[target]["radius"]) + float(tip_radius)
-            # |ps + s d - centre| = rr, the first crossing from outside
-            a, b, cc = float(d @ d), float(2 * d @ (ps - centre)), float((ps - centre) @ (ps - centre) - rr * rr)
-            disc = b * b - 4 * a * cc
-            inside = cc <= 0
-            sc = (-b - math.sqrt(disc)) / (2 * a) if disc >= 0 else math.inf
-            q = ps + sc * d if math.isfinite(sc) else ps
-            nc = (q - centre) / np.linalg.norm(q - centre)
-            what = f"sphere {target}"
-        else:
-            # the ball centre's distance to the facet's plane (stylus radius
-            # off): n . (ps + s d - point) = tip_radius
-            nc = np.asarray(facets[target]["normal"], dtype=float)
-            nc = nc / np.linalg.norm(nc)
-            q0 = np.asarray(facets[target]["point"], dtype=float) + float(tip_radius) * nc
-            h0, dn = float(nc @ (ps - q0)), float(nc @ d)
-            inside = h0 <= 0
-            sc = -h0 / dn if dn < 0 else math.inf
-            q = ps + sc * d if math.isfinite(sc) else ps
-            what = f"facet {target}"
+        # where the stylus centre first reaches the target (its kind's exact crossing)
+        inside, sc, nc = _core.probe_line_crossing(setup, str(plan[i]["type"]), str(plan[i]["target"]), ps, d)
+        nc = np.asarray(nc, float)
+        q = ps + sc * d if np.isfinite(sc) else ps
+        what = f"{plan[i]['type']} {plan[i]['target']}"
         if inside:
             raise ValueError(f"touch {i + 1}: the stylus is already on or in {what} at the "
                              f"start of the probe move (clearance {clearance} mm too small for the errors)")
@@ -573,12 +600,13 @@ def _log(kins: str, model) -> str:
 
 def _rtest_setups(plan: Sequence[Mapping]) -> Dict[str, List[Mapping]]:
     out: Dict[str, List[Mapping]] = {}
+    runs = _kind_words(program_kinds("rtest"), "or")
     for i, p in enumerate(plan):
-        if p.get("type") != "ball3d":
-            raise ValueError(f"plan[{i}]: type '{p.get('type')}': an R-test program needs ball3d entries")
+        if PLAN_PROGRAMS.get(p.get("type")) != "rtest":
+            raise ValueError(f"plan[{i}]: type '{p.get('type')}': an R-test program needs {runs} entries")
         out.setdefault(str(p.get("setup", "")), []).append(p)
     if not out:
-        raise ValueError("plan: no ball3d entries")
+        raise ValueError(f"plan: no {runs} entries")
     return out
 
 
@@ -593,18 +621,21 @@ def rtest_points(machine: Machine, entries: Sequence[Mapping], subdivide: int = 
     the nominal inverse kinematics (the ball stays in the nest there too)."""
     O.check(subdivide=subdivide)
     rot = [a for a in machine.axis_names if machine.is_rotary(a) and a != "S"]
+    names = list(machine.axis_names)
     pts = []
     for i, e in enumerate(entries):
         q = _full(machine, e["axes"])
         if i and subdivide:
             q0 = pts[-1]["axes"]
-            tb = np.asarray(e["table_ball"], float)
-            for s in np.arange(1, subdivide + 1) / (subdivide + 1):
-                r = {a: q0[a] + s * (q[a] - q0[a]) for a in rot}
-                at = {**q0, **r}
-                lin = machine.inverse([tb + tip_offset(machine, at, e["tool_ball"])], start=at)
-                pts.append({"axes": {**{a: float(v[0]) for a, v in lin.items() if a != "S"}, **r},
-                            "sample": None})
+            fractions = np.arange(1, subdivide + 1) / (subdivide + 1)
+            steps = [{a: q0[a] + s * (q[a] - q0[a]) for a in rot} for s in fractions]
+            rotary = np.array([[r.get(a, 0.0) for a in names] for r in steps])
+            start = np.array([q0.get(a, 0.0) for a in names])
+            # the linear axes that keep the ball in the nest there (the core's RTestPathCommands)
+            lin = np.asarray(_core.rtest_path_commands(machine._core, rotary, start, np.asarray(e["table_ball"], float),
+                                                       np.asarray(e["tool_ball"], float), False))
+            for r, row in zip(steps, lin):
+                pts.append({"axes": {**{a: float(v) for a, v in zip(names, row) if a != "S"}, **r}, "sample": None})
         pts.append({"axes": q, "sample": i, "id": e.get("id")})
     return pts
 

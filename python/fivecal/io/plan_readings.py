@@ -12,7 +12,7 @@ LOG --plan PLAN --kins K``; docs/linuxcnc.md).
   plan's commands. The axes, direction, balls and mounting of each
   observation come from the plan.
 * :func:`probe_log_dataset`: LinuxCNC's ``PROBEOPEN`` log of a program
-  ``fivecal export program`` wrote for a sphere or facet plan, through
+  ``fivecal export program`` wrote for a plan of probe touches, through
   :func:`fivecal.io.linuxcnc.read_probe_log`: every line must be its touch
   of the plan (the rotary positions the plan commands, a position on that
   touch's probe line), so a log in another order, with lines missing, or of
@@ -46,11 +46,12 @@ def read_plan(path: str):
 
 
 def _program_order(plan) -> List[Tuple[int, dict]]:
-    """The ball3d entries as rtest_program runs them: grouped by mounting in
-    the order the mountings first appear."""
+    """The entries an R-test program runs (their kind's program, the
+    registry's), as rtest_program runs them: grouped by mounting in the order
+    the mountings first appear."""
     groups: Dict[str, list] = {}
     for i, e in enumerate(plan):
-        if e.get("type") == "ball3d":
+        if N.PLAN_PROGRAMS.get(e.get("type")) == "rtest":
             groups.setdefault(str(e.get("setup", "")), []).append((i, e))
     return [x for g in groups.values() for x in g]
 
@@ -208,23 +209,24 @@ def rtest_readings(path, plan_path, *, units: Optional[str] = None, delimiter: O
 
 
 def probe_log_dataset(path, plan_path, kins: str, pins_hal: Optional[str] = None) -> dict:
-    """A sphere / facet dataset dict from LinuxCNC's probe log of the program
-    of ``plan_path``; ``pins_hal``: the HAL file with the kinematics pins the
+    """A dataset dict of probe touches (facet, sphere, cylinder: the plan's
+    kinds) from LinuxCNC's probe log of the program of ``plan_path``; ``pins_hal``: the HAL file with the kinematics pins the
     controller ran with (default the machine's nominal pins)."""
     if not kins:
         raise ValueError("--kins: the LinuxCNC kinematics the program ran with (xyzac-trt or xyzbc-trt) "
                          "turns the logged world positions into axis readings")
     machine, plan, artefact, tip = read_plan(plan_path)
     pins = L.read_hal_pins(pins_hal, kins) if pins_hal else L.nominal_pins(machine, kins)
-    kinds = {e.get("type") for e in plan}
-    if not kinds <= {"facet", "sphere"}:
-        raise ValueError(f"--plan {plan_path}: entries of type {', '.join(sorted(map(str, kinds)))}; a probe "
-                         "log lines up with a facet or sphere plan")
+    touch = N.program_kinds(N.TOUCH_PROGRAMS[0])
+    types = {str(e.get("type")) for e in plan}
+    if not types <= set(touch):
+        raise ValueError(f"--plan {plan_path}: entries of type {', '.join(sorted(types))}; a probe "
+                         f"log lines up with a plan of probe touches ({N._kind_words(touch, 'or')})")
     path = os.fspath(path)
     if not os.path.exists(path):
         raise ValueError(f"{path}: no such probe log")
     # each line is checked against the probe line its touch's G38.2 ran along
-    geo = N._geometry(machine, kins, plan, artefact, tip, kinds=("facet", "sphere"))
+    geo = N._geometry(machine, kins, plan, artefact, tip, cycle=N.TOUCH_PROGRAMS[0])
     obs = L.read_probe_log(path, machine, kins, plan, pins, touches=[(w, n) for _, _, w, n, _ in geo])
     d = {"machine": machine.to_dict(), "observations": obs}
     if artefact:

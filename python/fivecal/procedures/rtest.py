@@ -63,15 +63,6 @@ def _sequence(machine: Machine, test: str, step: float, tilt: float, tilt_range)
     return [{r["turn"]: float(c), r["tilt"]: float(a)} for c, a in seq]
 
 
-def tip_offset(machine: Machine, axes: Mapping[str, float], tool_ball) -> np.ndarray:
-    """Tool tip minus tool ball in the workpiece frame at the rotary pose of
-    ``axes`` (mm): what to add to a target of the tool ball to get the target
-    of the tip, which the inverse kinematics places. A table axis turns this
-    offset with the part, so it is not the machine-frame tip - ball."""
-    q = {a: np.array([float(v)]) for a, v in axes.items()}
-    return machine.tool_point(q)[0] - machine.tool_point(q, tip=np.asarray(tool_ball, float))[0]
-
-
 #: smallest step (deg) of a K test's samples: 100000 a turn, the plans' bound on entries
 MIN_STEP = 360.0 / 100_000
 
@@ -99,14 +90,17 @@ def plan(machine: Union[Machine, Mapping], test: str, *, table_ball: Sequence[fl
     if tb.shape != (3,) or not np.isfinite(tb).all():
         raise ValueError(f"table_ball: expected [x, y, z] mm, got {table_ball!r}")
     tool = np.asarray(tool_ball if tool_ball is not None else m.tip, float)
+    # the linear axes that keep the ball in the nest, each sample solved from the one before (the core's
+    # RTestPathCommands)
+    rotary = np.zeros((len(seq), len(m.axis_names)))
+    for k, rot in enumerate(seq):
+        for a, v in rot.items():
+            rotary[k, m.axis_names.index(a)] = v
+    cmds = np.asarray(_core.rtest_path_commands(m._core, rotary, np.zeros(len(m.axis_names)), tb, tool, True))
     entries = []
     prev = {a: 0.0 for a in m.axis_names}
     for k, rot in enumerate(seq):
-        start = dict(prev)
-        start.update(rot)
-        lin = m.inverse([tb + tip_offset(m, start, tool)], start=start)
-        axes = {a: float(v[0]) for a, v in lin.items()}
-        axes.update(rot)
+        axes = {a: float(cmds[k, i]) for i, a in enumerate(m.axis_names)}
         direction = {a: (1 if rot[a] >= prev.get(a, 0.0) else -1) for a in rot}
         entries.append({"type": "ball3d", "setup": setup or test, "axes": axes, "direction": direction,
                         "tool_ball": [float(x) for x in tool], "table_ball": [float(x) for x in tb],
@@ -213,4 +207,4 @@ def evaluate(dataset: Union[Dataset, Mapping], identify: bool = True,
     return out
 
 
-__all__ = ["TESTS", "plan", "tip_offset", "evaluate", "location_errors", "KTest", "RTestResult"]
+__all__ = ["TESTS", "plan", "evaluate", "location_errors", "KTest", "RTestResult"]

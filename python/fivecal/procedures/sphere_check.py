@@ -36,12 +36,6 @@ from ..machine import Machine
 from ..views import Viewable
 from . import sphere_test
 
-#: default range of a rotary axis (degrees) when the caller gives none: a
-#: full turn for an axis that can (a table C, a spindle-side C), ±90° for a
-#: tilting axis. Real limits come from the caller (``limits``).
-FULL_TURN_AXES = ("C",)
-
-
 def _rotary_axes(machine: Machine) -> List[str]:
     return list(_core.checked_rotary_axes(machine._core))
 
@@ -59,7 +53,7 @@ def pivot_parameters(machine: Machine, axis: str, backlash: bool = True) -> List
 
 
 #: positions per rotary axis at most: one a degree over a full turn, far more than a pivot needs
-MAX_POSITIONS = 360
+MAX_POSITIONS = _core.sphere_check_max_positions
 
 
 def spindle_equivalent(machine: Machine, name: str) -> str:
@@ -96,22 +90,20 @@ def spindle_names(machine: Machine, errors: Mapping[str, float]) -> Dict[str, fl
 def positions(machine: Machine, n: int = 5, limits: Optional[Mapping[str, Sequence[float]]] = None
               ) -> Dict[str, List[float]]:
     """``n`` positions of each rotary axis spread over its range (``limits``
-    axis -> (min, max) degrees; default a full turn for C, ±90° otherwise)."""
+    axis -> (min, max) degrees; default a full turn for C, ±90° otherwise).
+    The rule is the core's (``procedures/sphere_check.h`` SphereCheckPositions)."""
     # bounded here, not only by the command line: n = 10**9 would build the plan before anything is said
     if isinstance(n, bool) or not isinstance(n, numbers.Real) or not (n == int(n) if math.isfinite(n) else False) \
             or not 3 <= n <= MAX_POSITIONS:
         raise ValueError(f"n: {n!r} positions per axis; expected a whole number from 3 (a pivot needs at "
                          f"least 3) to {MAX_POSITIONS}")
-    out = {}
-    for a in _rotary_axes(machine):
-        lo, hi = (limits or {}).get(a, (-180.0, 180.0) if a in FULL_TURN_AXES else (-90.0, 90.0))
-        lo, hi = float(lo), float(hi)
-        if not hi > lo:
-            raise ValueError(f"limits.{a}: ({lo:g}, {hi:g}) is not a range")
-        full = hi - lo >= 360.0 - 1e-9
-        k = int(n)
-        out[a] = [float(v) for v in (np.linspace(lo, hi, k, endpoint=False) if full else np.linspace(lo, hi, k))]
-    return out
+    rotary = set(_rotary_axes(machine))
+    lim = {}
+    for a, v in (limits or {}).items():
+        if a in rotary:
+            lo, hi = v
+            lim[a] = (float(lo), float(hi))
+    return {a: [float(x) for x in v] for a, v in _core.sphere_check_positions(machine._core, int(n), lim)}
 
 
 def plan(machine: Union[Machine, Mapping], sphere: Mapping, *, tip_radius: float, n: int = 5,

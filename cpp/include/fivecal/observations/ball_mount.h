@@ -114,6 +114,12 @@ class BallMountKind : public ObservationKind {
  private:
   // The fields of a prepared row that come from the sample itself.
   static void PrepareSample(const Observation& o, AnalyticRow* r);
+
+  // ---- What an NC program needs (io/nc_programs.py, io/dbb_program.py) ----
+ public:
+  // The program family the kind's plan entries run in (an R-test path, a
+  // ball bar path); nullptr: no program writes them.
+  virtual const char* nc_program() const { return nullptr; }
 };
 
 }  // namespace fivecal

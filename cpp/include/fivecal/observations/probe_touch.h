@@ -8,12 +8,41 @@
 #ifndef FIVECAL_OBSERVATIONS_PROBE_TOUCH_H_
 #define FIVECAL_OBSERVATIONS_PROBE_TOUCH_H_
 
+#include <cmath>
 #include <functional>
+#include <limits>
+#include <string>
+#include <vector>
 
 #include "fivecal/observations/kind.h"
 #include "fivecal/observations/probe_trigger.h"
 
 namespace fivecal {
+
+// A planned touch as an NC program writer needs it (ProbeTouchKind::
+// PlannedTouchContact), workpiece frame, mm.
+struct TouchContact {
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();    // nominal contact point on the surface
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // outward unit normal there: the stylus comes in along -normal
+  // The radius of the ball around the target the moves keep out of (its
+  // ClearanceBalls entry), 0 when none is modelled.
+  double clearance = 0;
+};
+
+// A target's solid as the program's moves see it: a ball.
+struct ClearanceBall {
+  std::string id;
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  double radius = 0;
+};
+
+// The first crossing of a probe line with a target (ProbeTouchKind::
+// CrossProbeLine).
+struct ProbeCrossing {
+  bool inside = false;  // the line starts on or inside the target's offset surface
+  double s = 0;         // the crossing p + s d (infinite: none ahead)
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // outward unit surface normal at the crossing
+};
 
 class ProbeTouchKind : public ObservationKind {
  public:
@@ -79,6 +108,25 @@ class ProbeTouchKind : public ObservationKind {
   // the sensitivity of the touch.
   virtual void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d& P0,
                              const std::string& where, Eigen::Vector3d* n, Gap* gap) const = 0;
+
+  // ---- What an NC program needs (io/nc_programs.py; docs/adding_an_observation_kind.md) ----
+ public:
+  // The program family the kind's plan entries run in: "probing" (one
+  // G38.2 cycle of every probe touch, in plan order); a kind with a cycle of
+  // its own names it (the sphere: "sphere").
+  virtual const char* nc_program() const { return "probing"; }
+  // A planned touch `e` at its pose, from PlannedTouch (the simulator's
+  // nominal geometry, so the program aims where the simulation touches).
+  TouchContact PlannedTouchContact(const Dataset& ds, const nlohmann::json& e, const std::string& where) const;
+  // The balls around the kind's targets in `ds` that the program's moves
+  // keep out of (a sphere's); none by default: other solids are not modelled.
+  virtual std::vector<ClearanceBall> ClearanceBalls(const Dataset&) const { return {}; }
+  // Where the stylus centre on the line p + s d (workpiece frame) first
+  // reaches the nominal surface of `target` (one stylus radius off it):
+  // the exact crossing a simulated probe trips at. The default throws
+  // std::invalid_argument: a kind without it gets no simulated trip log.
+  virtual ProbeCrossing CrossProbeLine(const Dataset& ds, const std::string& target, const Eigen::Vector3d& p,
+                                       const Eigen::Vector3d& d) const;
 };
 
 // The trigger term in the analytic batch: PrepareProbeTrigger fills the

@@ -48,6 +48,22 @@ RTestRoles RTestAxisRoles(const Machine& m);
 Eigen::MatrixXd RTestSequence(const Machine& m, const std::string& test, double step, double tilt,
                               double tilt_min, double tilt_max);
 
+// The axis commands of an R-test path (rtest.py plans them,
+// nc_programs.rtest_program subdivides them): per row of `rotary` (N x
+// num_axes, the rotary axes' commands but the spindle's; other columns are
+// not read) the commands that put the tool ball on the table ball on the
+// nominal machine. The tool ball is `tool_ball` (F at the zero pose), the
+// table ball `table_ball` (workpiece frame); the tool tip's target is the
+// table ball plus tip - ball turned with the rotary pose,
+//   target = table_ball + P(q, tip) - P(q, tool_ball)
+// (P: the tool point in the workpiece frame at the row's pose q), and the
+// linear axes (and the spindle) come from InverseKinematics started at q.
+// q takes its other axes from `start` for the first row and then, with
+// `chain`, from the previous row's commands (a path), else from `start`
+// again (points between two samples).
+Eigen::MatrixXd RTestPathCommands(const Machine& m, const Eigen::MatrixXd& rotary, const Eigen::VectorXd& start,
+                                  const Eigen::Vector3d& table_ball, const Eigen::Vector3d& tool_ball, bool chain);
+
 struct RTestOptions {
   bool identify = true;
   std::vector<std::string> estimate;  // empty: RTestLocationErrors

@@ -109,6 +109,20 @@ struct SphereCheckResult {
 // per-position centre that does not converge; and whatever Identify refuses.
 SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOptions& options);
 
+// The positions of a sphere check's plan: `n` commands (degrees) of each
+// rotary axis (CheckedRotaryAxes order) spread evenly over its range,
+// `limits` axis -> (min, max) or, for an axis it does not name, a full turn
+// (-180, 180) for C and (-90, 90) for any other (a tilting axis). A range of
+// a full turn or more takes n positions without its end (the start again):
+//   min + i (max - min) / n,        i = 0 .. n-1
+// and a shorter one both ends:
+//   min + i (max - min) / (n - 1),  i = 0 .. n-1  (the last exactly max)
+// Throws std::invalid_argument naming the field: n outside 3 (a pivot needs
+// three) .. kMaxSphereCheckPositions, limits.<axis> not a range (max > min).
+constexpr int kMaxSphereCheckPositions = 360;
+std::vector<std::pair<char, std::vector<double>>> SphereCheckPositions(
+    const Machine& m, int n, const std::map<std::string, std::pair<double, double>>& limits);
+
 }  // namespace fivecal
 
 #endif  // FIVECAL_PROCEDURES_SPHERE_CHECK_H_
