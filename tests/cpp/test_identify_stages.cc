@@ -272,5 +272,62 @@ TEST(IdentifyStages, VerdictOfTheChainedStagesIsIdentifys) {
   }
 }
 
+
+// The start's determinacy from one normal matrix (AnyUndetermined) is the
+// certificate-or-analysis it replaces: determined (S3), undetermined (S4),
+// and a column no row sees.
+TEST(IdentifyStages, AnyUndeterminedIsTheCertificateOrTheAnalysis) {
+  for (const bool s3 : {true, false}) {
+    const Dataset ds = Tango(s3);
+    const IdentifyOptions opt = Options(s3 ? "S3" : "S4", true);
+    const IdentifyRequest rq = ResolveRequest(ds, opt);
+    IdentifyProblem problem(ds, opt, rq);
+    Eigen::MatrixXd J = problem.WeightedJacobianAt(rq.start);
+    auto old = [&](const Eigen::MatrixXd& A) {
+      return CertainlyUndetermined(A, rq.prior, kDeterminedRatio) ||
+             !AnalyzeDetermination(A, rq.prior, kDeterminedRatio).undetermined.empty();
+    };
+    EXPECT_EQ(AnyUndetermined(J, rq.prior, kDeterminedRatio), !s3);
+    EXPECT_EQ(AnyUndetermined(J, rq.prior, kDeterminedRatio), old(J));
+    J.col(3).setZero();
+    EXPECT_TRUE(AnyUndetermined(J, rq.prior, kDeterminedRatio));
+    EXPECT_EQ(AnyUndetermined(J, rq.prior, kDeterminedRatio), old(J));
+    // Fewer rows than columns: undetermined, as before.
+    const Eigen::MatrixXd few = J.topRows(J.cols() / 2);
+    EXPECT_TRUE(AnyUndetermined(few, rq.prior, kDeterminedRatio));
+  }
+}
+
+// The unweighted condition number (the scale bar's row has another sigma
+// than the touches) taken from the fit's factor and that row is the one of
+// the rows themselves, and an unweighted Jacobian of dependent columns is
+// still infinitely ill-conditioned.
+TEST(IdentifyStages, UnweightedConditionNumberFromTheFactorIsTheRowsOne) {
+  for (const bool s3 : {true, false}) {
+    const Dataset ds = Tango(s3);
+    const IdentifyOptions opt = Options(s3 ? "S3" : "S4", true);
+    const IdentifyRequest rq = ResolveRequest(ds, opt);
+    IdentifyProblem problem(ds, opt, rq);
+    const IdentifyFit fit = FitRequest(ds, opt, rq, &problem);
+    ASSERT_FALSE(rq.placed);
+    const Eigen::VectorXd& sig = *fit.row_sigma;
+    ASSERT_FALSE((sig.array() == sig[0]).all());  // else the weighted one is reported
+    const IdentifyCovariance cov = CovarianceAtSolution(ds, opt, rq, fit, DetermineAtSolution(ds, opt, rq, fit));
+    const double rows = ConditionNumber(Eigen::MatrixXd(sig.asDiagonal() * fit.Jw), opt.rank_tolerance);
+    EXPECT_NEAR(cov.condition_number, rows, 1e-9 * rows);
+  }
+  // Two equal columns: rank deficient whichever way it is computed.
+  const Dataset ds = Tango(true);
+  IdentifyOptions opt = Options("S3");
+  const IdentifyRequest rq = ResolveRequest(ds, opt);
+  IdentifyProblem problem(ds, opt, rq);
+  IdentifyFit fit = FitRequest(ds, opt, rq, &problem);
+  fit.Jw.col(1) = fit.Jw.col(0);
+  fit.factor = TriangularFactor(fit.Jw);
+  opt.allow_unidentifiable = true;
+  const IdentifyCovariance cov = CovarianceAtSolution(ds, opt, rq, fit, DetermineAtSolution(ds, opt, rq, fit));
+  EXPECT_FALSE(std::isfinite(cov.condition_number)) << cov.condition_number;
+}
+
 }  // namespace
 }  // namespace fivecal

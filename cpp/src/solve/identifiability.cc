@@ -422,6 +422,45 @@ bool CertainlyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& pri
   return PivotCertificate(Eigen::LLT<Eigen::MatrixXd>(N), N.trace(), threshold);
 }
 
+namespace {
+
+// AnalyzeDetermination's quick answer on N = Js^T Js and its Cholesky
+// factor: true when every direction is clearly above `weak` and every ratio
+// below the threshold (the usual case); `ratio` and `lambda` (ascending)
+// then hold the ratios and eigenvalues. False: the quick path cannot say.
+bool QuickDetermined(const Eigen::MatrixXd& N, const Eigen::LLT<Eigen::MatrixXd>& llt, bool certainly_undetermined,
+                     double threshold, Eigen::VectorXd* ratio, Eigen::VectorXd* lambda) {
+  const int p = static_cast<int>(N.cols());
+  const double weak = 1.0 / threshold;
+  // A column the pivots already show undetermined would fail the ratio
+  // check below: the eigenvalues are of no use then.
+  if (certainly_undetermined) return false;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
+  if (eig.info() != Eigen::Success) return false;
+  *lambda = eig.eigenvalues();
+  if (!(lambda->size() == p && (*lambda)[0] > 1.01 * weak * weak + 1e-12 * (*lambda)[p - 1])) return false;
+  *ratio = llt.info() == Eigen::Success
+               ? Eigen::VectorXd(llt.solve(Eigen::MatrixXd::Identity(p, p)).diagonal().cwiseMax(0.0).cwiseSqrt())
+               : Eigen::VectorXd::Constant(p, INFINITY);
+  return (ratio->array() < threshold).all();
+}
+
+}  // namespace
+
+bool AnyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold) {
+  const int p = static_cast<int>(Jw.cols());
+  if (p == 0) return false;
+  // CertainlyUndetermined's N, which AnalyzeDetermination's quick path
+  // would form again from a QR factor of the same Js: the same matrix to
+  // rounding, without the QR of all the rows.
+  const Eigen::MatrixXd N = ScaledNormal(Jw * prior.asDiagonal());
+  const Eigen::LLT<Eigen::MatrixXd> llt(N);
+  if (PivotCertificate(llt, N.trace(), threshold)) return true;
+  Eigen::VectorXd ratio, lambda;
+  if (Jw.rows() >= p && QuickDetermined(N, llt, false, threshold, &ratio, &lambda)) return false;
+  return !AnalyzeDetermination(Jw, prior, threshold).undetermined.empty();
+}
+
 Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior,
                                    double threshold) {
   Determination out;
@@ -436,26 +475,13 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
   // 1 / sigma_min < threshold, and they come from the Cholesky factor of N.
   if (reduced.rows() >= p) {
     const Eigen::MatrixXd N = ScaledNormal(reduced);
-    // A column the pivots already show undetermined would fail the ratio
-    // check below: the eigenvalues are of no use then.
     const Eigen::LLT<Eigen::MatrixXd> llt(N);
-    Eigen::VectorXd lambda;  // ascending; empty: not computed or failed
-    const bool certainly_undetermined = PivotCertificate(llt, N.trace(), threshold);
-    if (!certainly_undetermined) {
-      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
-      if (eig.info() == Eigen::Success) lambda = eig.eigenvalues();
-    }
-    if (lambda.size() == p && lambda[0] > 1.01 * weak * weak + 1e-12 * lambda[p - 1]) {
-      const Eigen::VectorXd ratio =
-          llt.info() == Eigen::Success
-              ? Eigen::VectorXd(llt.solve(Eigen::MatrixXd::Identity(p, p)).diagonal().cwiseMax(0.0).cwiseSqrt())
-              : Eigen::VectorXd::Constant(p, INFINITY);
-      if ((ratio.array() < threshold).all()) {
-        out.singular_values = lambda.reverse().cwiseSqrt();
-        out.rank = p;
-        out.ratio = ratio;
-        return out;
-      }
+    Eigen::VectorXd ratio, lambda;
+    if (QuickDetermined(N, llt, PivotCertificate(llt, N.trace(), threshold), threshold, &ratio, &lambda)) {
+      out.singular_values = lambda.reverse().cwiseSqrt();
+      out.rank = p;
+      out.ratio = ratio;
+      return out;
     }
     if (EigenDetermination(reduced, N, threshold, &out)) return out;
   }

@@ -4,6 +4,9 @@
 #include <cmath>
 #include <map>
 #include <string>
+#include <vector>
+
+#include <Eigen/Cholesky>
 
 #include "fivecal/solve/identifiability.h"
 #include "fivecal/solve/priors.h"
@@ -11,6 +14,42 @@
 #include "solve/residual_units.h"
 
 namespace fivecal {
+namespace {
+
+// Above this the condition number is taken from the rows themselves: one
+// formed from J^T J carries a relative error of about eps kappa^2.
+constexpr double kNormalConditionBound = 1e6;
+
+// The condition number of the unweighted Jacobian J = S Jw (S the rows'
+// sigmas) without another pass over the rows: with s0 the sigma of most
+// rows and R the fit's factor (R^T R = Jw^T Jw),
+//   J^T J = s0^2 R^T R + sum_{i: s_i != s0} (s_i^2 - s0^2) jw_i^T jw_i,
+// a few rank-one terms (TANGO: the scale bar's row). ConditionNumber reads
+// J through J^T J only (column norms, eigenvalues or the singular values of
+// a triangular factor), so the Cholesky factor of that sum serves for it.
+// The rows themselves where many differ, where the sum is not numerically
+// positive definite, or where it is too ill-conditioned for J^T J.
+double UnweightedConditionNumber(const Eigen::MatrixXd& R, const Eigen::MatrixXd& Jw, const Eigen::VectorXd& sig,
+                                 double rank_tolerance) {
+  const Eigen::Index p = Jw.cols(), n = Jw.rows();
+  auto rows = [&] { return ConditionNumber(Eigen::MatrixXd(sig.asDiagonal() * Jw), rank_tolerance); };
+  if (p == 0 || n != sig.size() || R.cols() != p) return rows();
+  const double s0 = sig[0];
+  std::vector<Eigen::Index> other;
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (sig[i] != s0) other.push_back(i);
+  if (4 * static_cast<Eigen::Index>(other.size()) > n) return rows();
+  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(p, p);
+  N.selfadjointView<Eigen::Lower>().rankUpdate(R.transpose(), s0 * s0);
+  for (Eigen::Index i : other)
+    N.selfadjointView<Eigen::Lower>().rankUpdate(Jw.row(i).transpose(), sig[i] * sig[i] - s0 * s0);
+  const Eigen::LLT<Eigen::MatrixXd> llt(N);
+  if (llt.info() != Eigen::Success) return rows();
+  const double c = ConditionNumber(llt.matrixU(), rank_tolerance);
+  return c < kNormalConditionBound ? c : rows();
+}
+
+}  // namespace
 
 IdentifyCovariance CovarianceAtSolution(const Dataset& ds, const IdentifyOptions& opt, const IdentifyRequest& rq,
                                         const IdentifyFit& fit, const IdentifyDetermination& det) {
@@ -99,9 +138,8 @@ IdentifyCovariance CovarianceAtSolution(const Dataset& ds, const IdentifyOptions
     const bool one_noise = rq.placed || (sig.size() > 0 && (sig.array() == sig[0]).all());
     out.condition_number =
         one_noise ? id.condition_number
-                  : ConditionNumber(nep ? NormalFactor(fit.nfit.at_solution.JtJ_unweighted)
-                                        : Eigen::MatrixXd(sig.asDiagonal() * fit.Jw),
-                                    opt.rank_tolerance);
+                  : nep ? ConditionNumber(NormalFactor(fit.nfit.at_solution.JtJ_unweighted), opt.rank_tolerance)
+                        : UnweightedConditionNumber(Rw, fit.Jw, sig, opt.rank_tolerance);
     sigma_dof = rq.placed ? out.dof : fit.num_rows - id.rank;
     hat = id.inverse_normal;
   }

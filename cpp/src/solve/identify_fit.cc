@@ -232,10 +232,7 @@ IdentifyFit FitRequest(const Dataset& ds, const IdentifyOptions& opt, const Iden
     // Here only whether everything is determined matters (the groups only
     // for a refusal): the Cholesky certificate settles most undetermined
     // sets without the QR and SVD of AnalyzeDetermination.
-    auto undetermined = [&](const Eigen::MatrixXd& J) {
-      return CertainlyUndetermined(J, prior, kDeterminedRatio) ||
-             !AnalyzeDetermination(J, prior, kDeterminedRatio).undetermined.empty();
-    };
+    auto undetermined = [&](const Eigen::MatrixXd& J) { return AnyUndetermined(J, prior, kDeterminedRatio); };
     const bool start_undetermined = undetermined(Jw);
     if (start_undetermined) {
       const SingleFit pre = problem->FitFrom(values, rq.map_prior_all);

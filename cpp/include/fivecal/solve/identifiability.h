@@ -82,6 +82,12 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
 // the scaled normal matrix instead of a QR and an SVD.
 bool CertainlyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold);
 
+// CertainlyUndetermined(Jw, prior, threshold) ||
+// !AnalyzeDetermination(Jw, prior, threshold).undetermined.empty(), with one
+// normal matrix of the rows for both where the quick paths decide (a
+// determined start of a fit: no QR of the rows).
+bool AnyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold);
+
 // The groups of AnalyzeDetermination from an SVD of Js (s descending, V its
 // right singular vectors): the `bad` columns joined when they share a weak
 // direction (s <= weak; exactly free when s <= zero). Depends on the
