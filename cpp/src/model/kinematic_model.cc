@@ -175,21 +175,25 @@ FIVECAL_ISA_CLONES void KinematicModel::Chain(const std::vector<int>& chain, con
   for (int k : chain) {
     const AxisConstants& A = axes_[k];
     Factor* F = kRecord ? &factors[i] : nullptr;
+    // Only the frames a written column reads are recorded (Columns skips an
+    // axis without wanted columns): a fit of a few location errors records
+    // one or two axes, not the whole chain, per sample.
+    const bool rec_loc = kRecord && A.want_location, rec_motion = kRecord && A.want_motion;
     if (i++ == 0) {
       // The chain starts at F: its first frame is E itself.
-      if (kRecord) F->R_before.setIdentity();
+      if (rec_loc) F->R_before.setIdentity();
       *t = A.tE;
       *R = A.RE;
     } else {
-      if (kRecord) F->R_before = *R;
+      if (rec_loc) F->R_before = *R;
       *t += *R * A.tE;
       // R . Rz(EC0) Ry(EB0) Rx(EA0), skipping the zero angles.
       if (A.loc_rot[2]) RotateAbout<2>(R, A.loc_sin[2], A.loc_cos[2]);
       if (A.loc_rot[1]) RotateAbout<1>(R, A.loc_sin[1], A.loc_cos[1]);
       if (A.loc_rot[0]) RotateAbout<0>(R, A.loc_sin[0], A.loc_cos[0]);
     }
-    if (kRecord) F->oE = *t;
-    if (kRecord) F->backlash_w = *R * A.direction;
+    if (rec_loc) F->oE = *t;
+    if (rec_loc && (A.location_mask & (1u << 6))) F->backlash_w = *R * A.direction;
     const double qk = q[k];
     const double qm = (dir && dir[k] != 0) ? qk + A.backlash * dir[k] : qk;
     if (A.rotary) {
@@ -205,7 +209,7 @@ FIVECAL_ISA_CLONES void KinematicModel::Chain(const std::vector<int>& chain, con
     } else {
       *t += *R * (A.direction * qm);
     }
-    if (kRecord) {
+    if (rec_motion) {
       F->R_afterM = *R;
       F->qpow[0] = 1.0;
       F->qpow[1] = qk;
@@ -219,29 +223,29 @@ FIVECAL_ISA_CLONES void KinematicModel::Chain(const std::vector<int>& chain, con
         e[c] = ((p[2] * qk + p[1]) * qk + p[0]) * qk;
       }
       if (A.motion_t) *t += R->col(0) * e[0] + R->col(1) * e[1] + R->col(2) * e[2];
-      if (kRecord) F->oEps = *t;
+      if (rec_motion) F->oEps = *t;
       if (A.motion_r) {
         // R . Rz(e5) Ry(e4) Rx(e3), recording each factor's axis on the way.
         double s, c;
-        if (kRecord) F->epsW[2] = R->col(2);
+        if (rec_motion) F->epsW[2] = R->col(2);
         if (A.motion[5]) {
           SinCos(e[5], &s, &c);
           RotateAbout<2>(R, s, c);
         }
-        if (kRecord) F->epsW[1] = R->col(1);
+        if (rec_motion) F->epsW[1] = R->col(1);
         if (A.motion[4]) {
           SinCos(e[4], &s, &c);
           RotateAbout<1>(R, s, c);
         }
-        if (kRecord) F->epsW[0] = R->col(0);
+        if (rec_motion) F->epsW[0] = R->col(0);
         if (A.motion[3]) {
           SinCos(e[3], &s, &c);
           RotateAbout<0>(R, s, c);
         }
-      } else if (kRecord) {
+      } else if (rec_motion) {
         for (int c = 0; c < 3; ++c) F->epsW[c] = R->col(c);
       }
-    } else if (kRecord) {
+    } else if (rec_motion) {
       F->oEps = *t;
       for (int c = 0; c < 3; ++c) F->epsW[c] = R->col(c);
     }

@@ -34,6 +34,7 @@ __attribute__((always_inline)) inline void Rows(const double* J, const double* r
 FIVECAL_SIMD_CLONES void AccumulateNormal(const double* J, const double* r, int m, int p, int ld, double* N,
                                           double* g) {
   switch (ld) {
+    case 4: return Rows<4>(J, r, m, p, N, g);
     case 8: return Rows<8>(J, r, m, p, N, g);
     case 16: return Rows<16>(J, r, m, p, N, g);
     case 24: return Rows<24>(J, r, m, p, N, g);

@@ -210,24 +210,34 @@ MonteCarloResult MonteCarlo(const SimulationPlan& plan, const IdentifyOptions& i
     const int o = plan.input_observation[k];
     if (o >= 0 && (o >= static_cast<int>(plan.approach.size()) || plan.approach[o].size() == 0)) axes_only = false;
   }
+  // A worker takes up to 16 consecutive trials at a time: the rows of
+  // `samples` (column-major) and `usable` of neighbouring trials share cache
+  // lines, which two threads taking every other trial would pass back and
+  // forth on every write. Fewer when the trials are few, so that the last
+  // batches still spread over the threads. Which thread runs a trial
+  // changes nothing in it (its seed is its own).
+  const int kTake = std::max(1, std::min(16, M / (8 * T)));
   auto worker = [&] {
     std::unique_ptr<Refit::Session> session;
     for (;;) {
       if (cancel.load()) return;
-      const int t = next.fetch_add(1);
-      if (t >= M) return;
-      try {
-        if (!session) {
-          session = std::make_unique<Refit::Session>(refit);
-          session->set_axes_only(axes_only);
+      const int t0 = next.fetch_add(kTake);
+      if (t0 >= M) return;
+      const int t1 = std::min(M, t0 + kTake);
+      for (int t = t0; t < t1 && !cancel.load(); ++t) {
+        try {
+          if (!session) {
+            session = std::make_unique<Refit::Session>(refit);
+            session->set_axes_only(axes_only);
+          }
+          run_trial(*session, t);
+        } catch (const std::exception&) {
+          usable[t] = -1;
         }
-        run_trial(*session, t);
-      } catch (const std::exception&) {
-        usable[t] = -1;
-      }
-      if (done.fetch_add(1) + 1 == M) {
-        std::lock_guard<std::mutex> lock(mu);
-        cv.notify_all();
+        if (done.fetch_add(1) + 1 == M) {
+          std::lock_guard<std::mutex> lock(mu);
+          cv.notify_all();
+        }
       }
     }
   };

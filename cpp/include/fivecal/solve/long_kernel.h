@@ -32,8 +32,11 @@ class ParameterTable;
 
 // Width of a chunk's Jacobian rows: p estimated parameters padded to a
 // multiple of 8 (one AVX-512 register of doubles, two AVX2 ones), the
-// padding columns zero.
-inline int PaddedWidth(int p) { return (p + 7) / 8 * 8; }
+// padding columns zero; up to 4 parameters (a location fit of a trace) a
+// width of 4, one AVX2 register, rather than 8 whose upper half would
+// multiply zeros. Each entry of N is the same sum of the same products in
+// the same order at either width.
+inline int PaddedWidth(int p) { return p <= 4 ? 4 : (p + 7) / 8 * 8; }
 
 class LongRun {
  public:
@@ -49,8 +52,8 @@ class LongRun {
                         double* r, double* J, int ld) const = 0;
 };
 
-// N += J^T J, g += J^T r over m rows of J (row-major, stride ld, a multiple
-// of 8; the columns from p on zero). N is p x ld row-major: row a holds
+// N += J^T J, g += J^T r over m rows of J (row-major, stride ld: 4 or a
+// multiple of 8; the columns from p on zero). N is p x ld row-major: row a holds
 // sum J_a J_b for every b < ld (the padding columns stay zero).
 void AccumulateNormal(const double* J, const double* r, int m, int p, int ld, double* N, double* g);
 
