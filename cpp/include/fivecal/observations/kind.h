@@ -228,6 +228,10 @@ class KindIdentity {
   // noise for. Kinds with different keys ("instrument", "station") give an
   // id parameters of different meaning, so one id may not serve both.
   virtual const char* instrument_key() const { return nullptr; }
+  // The empty payload of an observation of this kind (payloads.h): the
+  // loaders and the simulator set it before the kind reads into it. A kind
+  // defined outside the core keeps its numbers in a KindOwnData.
+  virtual ObservationPayload NewPayload() const { return KindOwnData{}; }
   // A probe touch: needs dataset.probe.tip_radius, and a plan entry may leave
   // the linear axes to the simulator.
   virtual bool probe_touch() const { return false; }
