@@ -16,7 +16,7 @@ using namespace json_util;
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 // Parameters, per instrument (Observation::setup): its pose
 // instrument.<id>.x|y|z|a|b|c, and the offsets of the target it follows on
-// each side (Observation::target), instrument.<id>.tool_x|y|z and
+// each side (the payload's target), instrument.<id>.tool_x|y|z and
 // .work_x|y|z: one tracker may follow a target on the tool and one on the
 // table. The pose kind shares both groups (fixed_frame, point.h).
 const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
