@@ -176,8 +176,8 @@ class Kind final : public ObservationKind {
     const Eigen::VectorXd theta = v.head(m.num_parameters());
     const PoseData pose(m, o);
     *point = TargetInF<double>(m, theta.data(), pose.q.data(), pose.dir.data(), d.on_tool, target);
-    const Eigen::Vector3d d = *point - station;
-    *vector = d.norm() > 0 ? Eigen::Vector3d(r[0] * d / d.norm()) : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d sight = *point - station;
+    *vector = sight.norm() > 0 ? Eigen::Vector3d(r[0] * sight / sight.norm()) : Eigen::Vector3d::Zero();
   }
 
  private:
