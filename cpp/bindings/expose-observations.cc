@@ -136,14 +136,15 @@ void BindObservations(py::module_& m) {
             RowMajor measured = RowMajor::Constant(k, 3, nan), tool(k, 3), table(k, 3);
             for (Eigen::Index j = 0; j < k; ++j) {
               const Observation& o = d.observations[ball[j]];
+              const BallMountData& b = o.data<BallMountData>();
               if (static_cast<const BallMountKind&>(KindOf(o)).has_length()) {
-                reading[j] = o.reading;
-                length[j] = o.length;
+                reading[j] = b.reading;
+                length[j] = b.length;
               } else {
-                measured.row(j) = o.measured.transpose();
+                measured.row(j) = b.measured.transpose();
               }
-              tool.row(j) = o.tool_ball.transpose();
-              table.row(j) = o.table_ball.transpose();
+              tool.row(j) = b.tool_ball.transpose();
+              table.row(j) = b.table_ball.transpose();
             }
             py::dict out;
             out["axes"] = axes;

@@ -71,8 +71,8 @@ TEST(Columns, Ball3dRowsReadAsTheirJsonObservations) {
   const Observation& o = ds.observations[1];
   EXPECT_EQ(o.type, ObservationType::kBall3d);
   EXPECT_EQ(o.setup, "R1");
-  EXPECT_EQ(o.measured, Eigen::Vector3d(0.002, 0, 0));
-  EXPECT_EQ(o.tool_ball, Eigen::Vector3d(0, 0, 100));
+  EXPECT_EQ(o.data<BallMountData>().measured, Eigen::Vector3d(0.002, 0, 0));
+  EXPECT_EQ(o.data<BallMountData>().tool_ball, Eigen::Vector3d(0, 0, 100));
   // The same observation from JSON: identical dataset text.
   const Dataset js = Dataset::FromJson(ds.ToJson());
   EXPECT_EQ(js.ToJson(), ds.ToJson());

@@ -123,8 +123,9 @@ TEST(Design, CandidatePlanFacesTheProbe) {
     if (o.type != ObservationType::kFacet) continue;
     Eigen::MatrixXd P, A;
     ToolPoses(m, Eigen::VectorXd::Zero(m.num_parameters()), o.axes.transpose(), nullptr, &P, &A);
-    const Facet& f = pool.ds.artefact.facets[pool.ds.artefact.FacetIndex(o.target)];
-    EXPECT_GE(f.normal.dot(A.row(0).transpose()), -1e-12) << o.target;
+    const std::string& target = o.data<TouchData>().target;
+    const Facet& f = pool.ds.artefact.facets[pool.ds.artefact.FacetIndex(target)];
+    EXPECT_GE(f.normal.dot(A.row(0).transpose()), -1e-12) << target;
   }
   // Axis limits remove touches.
   const json base = {{"machine", MachineJson("hu40t")}, {"probe", {{"tip_radius", 3.0}}},

@@ -243,7 +243,7 @@ TEST(LoaderBoundary, SpecSeedIsAnIntegerBelowTwoToThe64) {
   const Dataset a = Simulate(spec.dump());
   spec["seed"] = 5.0;  // integral float: the same seed
   const Dataset b = Simulate(spec.dump());
-  EXPECT_EQ(a.observations[2].reading, b.observations[2].reading);
+  EXPECT_EQ(a.observations[2].data<BallMountData>().reading, b.observations[2].data<BallMountData>().reading);
   for (const char* bad : {"-1", "18446744073709551616", "1.5", "\"7\"", "1e300"}) {
     std::string text = spec.dump();
     const size_t at = text.find(R"("seed":5.0)");
@@ -600,8 +600,8 @@ TEST(LoaderStreaming, EveryFieldFormConvertsAsTheDocumentParserReadsIt) {
   EXPECT_EQ(ds.observations[3].setup, "");
   EXPECT_EQ(ds.observations[3].sigma, Eigen::Vector3d(0.001, 0.002, 0.003));
   EXPECT_EQ(ds.observations[4].sigma, Eigen::Vector3d::Constant(1.0));
-  EXPECT_EQ(ds.observations[5].length, 150.0);
-  EXPECT_EQ(ds.observations[5].tool_ball, Eigen::Vector3d(0.5, 0, 0));
+  EXPECT_EQ(ds.observations[5].data<BallMountData>().length, 150.0);
+  EXPECT_EQ(ds.observations[5].data<BallMountData>().tool_ball, Eigen::Vector3d(0.5, 0, 0));
 }
 
 TEST(LoaderStreaming, MessagesAreThoseOfTheDocumentOrder) {

@@ -67,10 +67,10 @@ TEST(MachinedKind, StepOfOneFaceAtTwoTablePositionsIsThePapersEquation6) {
   const double L = 150, H = 60, xi = 4e-5;
   const Dataset ds = Simulate(Spec(json::array({Test1(L, H)}), {{"EA0C", xi}}).dump());
   const double h = -2 * xi * L;
-  EXPECT_NEAR(-ds.observations[0].reading, h, 1e-3 * std::abs(h));
+  EXPECT_NEAR(-ds.observations[0].data<MachinedData>().measured, h, 1e-3 * std::abs(h));
   const Dataset off = Simulate(
       Spec(json::array({Test1(L, H)}), {{"EA0C", xi}}, {{"machined.P1.y", 2.0}, {"machined.P1.c", 1e-3}}).dump());
-  EXPECT_NEAR(off.observations[0].reading, ds.observations[0].reading, 1e-12);
+  EXPECT_NEAR(off.observations[0].data<MachinedData>().measured, ds.observations[0].data<MachinedData>().measured, 1e-12);
   // The plan's programme put the nominal tool on the point: the commands of
   // the two cuts differ only where the table turned the point.
   EXPECT_NEAR(ds.observations[0].axes[ds.machine().AxisIndex('Y')], -H, 1e-9);
@@ -160,8 +160,8 @@ TEST(MachinedKind, NoiseClassIsItsOwn) {
   EXPECT_EQ(plan.input_sigma[0], 0.002);
   EXPECT_EQ(plan.sensitivity[0], -1.0);
   const Dataset a = AddNoise(plan, 5), b = Simulate(spec.dump());
-  EXPECT_EQ(a.observations[1].reading, b.observations[1].reading);
-  EXPECT_NE(a.observations[0].reading, a.observations[1].reading);
+  EXPECT_EQ(a.observations[1].data<MachinedData>().measured, b.observations[1].data<MachinedData>().measured);
+  EXPECT_NE(a.observations[0].data<MachinedData>().measured, a.observations[1].data<MachinedData>().measured);
   spec["sigma"] = {{"probe", 0.002}};
   EXPECT_EQ(BuildSimulationPlan(spec.dump()).input_sigma[0], 0.0);
 }

@@ -28,6 +28,7 @@ Dataset RTest(int n, bool fixed_c, const std::map<std::string, double>& truth, u
   for (int i = 0; i < n; ++i) {
     Observation o;
     o.type = ObservationType::kBall3d;
+    o.payload = BallMountData{};
     o.setup = "R1";
     o.axes = Eigen::VectorXd::Zero(m.num_axes());
     o.direction = Eigen::VectorXi::Zero(m.num_axes());
@@ -36,8 +37,8 @@ Dataset RTest(int n, bool fixed_c, const std::map<std::string, double>& truth, u
     o.axes[m.AxisIndex('X')] = -20 + 40 * u(rng);
     o.axes[m.AxisIndex('Y')] = -20 + 40 * u(rng);
     o.axes[m.AxisIndex('Z')] = -20 + 40 * u(rng);
-    o.tool_ball = Eigen::Vector3d(0, 0, 150);
-    o.table_ball = Eigen::Vector3d(50, 0, 80);
+    o.data<BallMountData>().tool_ball = Eigen::Vector3d(0, 0, 150);
+    o.data<BallMountData>().table_ball = Eigen::Vector3d(50, 0, 80);
     // Two declared noises: the unweighted J^T J is then not a multiple of the weighted one.
     if (second_instrument && i % 3 == 0) o.sigma = Eigen::VectorXd::Constant(3, 0.002);
     ds.observations.push_back(o);
@@ -45,7 +46,7 @@ Dataset RTest(int n, bool fixed_c, const std::map<std::string, double>& truth, u
   std::vector<int> src;
   const Eigen::VectorXd r = PredictResiduals(ds, truth, &src);
   for (int i = 0; i < n; ++i)
-    for (int c = 0; c < 3; ++c) ds.observations[i].measured[c] = r[3 * i + c] + noise(rng);
+    for (int c = 0; c < 3; ++c) ds.observations[i].data<BallMountData>().measured[c] = r[3 * i + c] + noise(rng);
   return ds;
 }
 
@@ -287,6 +288,29 @@ TEST(NormalEquations, DerivativesOnlyAtAcceptedPoints) {
 namespace fivecal {
 namespace {
 
+// A Monte Carlo trial's edit of the readings of any kind's observation (its
+// payload's recorded values moved by draws).
+template <class Draw>
+void MoveReadings(Observation* o, Draw&& draw) {
+  std::visit(
+      [&](auto& d) {
+        using D = std::decay_t<decltype(d)>;
+        if constexpr (std::is_same_v<D, BallMountData>) {
+          d.reading += draw();
+          for (int c = 0; c < 3; ++c) d.measured[c] += draw();
+        } else if constexpr (std::is_same_v<D, PointData>) {
+          for (int c = 0; c < 3; ++c) d.measured[c] += draw();
+        } else if constexpr (std::is_same_v<D, PoseTargetData>) {
+          for (int c = 0; c < 3; ++c) d.measured[c] += draw(), d.measured_rotation[c] += 0.01 * draw();
+        } else if constexpr (std::is_same_v<D, DistanceData>) {
+          d.reading += draw();
+        } else if constexpr (std::is_same_v<D, MachinedData>) {
+          d.measured += draw();
+        }
+      },
+      o->payload);
+}
+
 // Observations of every registered kind on the c600u, several of each,
 // interleaved (analytic and templated rows alternate), with the scale bar
 // whose rows follow the observations.
@@ -427,8 +451,7 @@ TEST(NormalEquations, TheBatchOfEveryKindRefreshes) {
   std::mt19937 rng(4);
   std::normal_distribution<double> n01(0.0, 1e-3);
   for (Observation& o : ds.observations) {
-    o.reading += n01(rng);
-    for (int c = 0; c < 3; ++c) o.measured[c] += n01(rng), o.measured_rotation[c] += 0.01 * n01(rng);
+    MoveReadings(&o, [&] { return n01(rng); });
     o.axes[0] += n01(rng);
   }
   for (int i : est) v[i] = n01(rng);
@@ -468,14 +491,14 @@ TEST(NormalEquations, LongTrackerDataTakeTheStreamingPath) {
     o.axes[m.AxisIndex('A')] = -90 * u(rng);
     o.axes[m.AxisIndex('C')] = 360 * u(rng);
     for (char a : {'X', 'Y', 'Z'}) o.axes[m.AxisIndex(a)] = -100 + 200 * u(rng);
-    o.measured.setZero();
+    o.data<PointData>().measured.setZero();
   }
   const std::map<std::string, double> truth = {{"EB0A", 3e-5}, {"EA0C", 4e-5}, {"EY0C", -0.012},
                                                {"instrument.T1.x", 0.2}};
   std::vector<int> src;
   const Eigen::VectorXd r = PredictResiduals(ds, truth, &src);  // predicted - 0
   for (int i = 0; i < n; ++i)
-    for (int c = 0; c < 3; ++c) ds.observations[i].measured[c] = r[3 * i + c] + noise(rng);
+    for (int c = 0; c < 3; ++c) ds.observations[i].data<PointData>().measured[c] = r[3 * i + c] + noise(rng);
   IdentifyOptions o;
   o.estimate = {"EB0A", "EA0C", "EY0C"};
   // The tool reflector's offsets move it as the tracker's position does
@@ -584,8 +607,7 @@ TEST(NormalEquations, PassesHoldAChunkOfPreparedRowsPerThread) {
     ExpectSameRows(all, chunk, v, est, round);
     // Readings and axes edited in place, then refreshed.
     for (Observation& o : ds.observations) {
-      o.reading += n01(rng);
-      for (int c = 0; c < 3; ++c) o.measured[c] += n01(rng);
+      MoveReadings(&o, [&] { return n01(rng); });
       o.axes[0] += n01(rng);
     }
     all.Refresh(table, v);
@@ -652,6 +674,7 @@ Dataset TwoTraces(int n) {
     for (int i = 0; i < n; ++i) {
       Observation o;
       o.type = kind == 0 ? ObservationType::kDbb : ObservationType::kBall3d;
+      o.payload = BallMountData{};
       o.setup = i < n / 2 ? "A" : "B";
       o.axes = Eigen::VectorXd::Zero(m.num_axes());
       o.direction = Eigen::VectorXi::Zero(m.num_axes());
@@ -661,11 +684,12 @@ Dataset TwoTraces(int n) {
       o.axes[m.AxisIndex('Y')] = -20 + 40 * u(rng);
       o.axes[m.AxisIndex('Z')] = -20 + 40 * u(rng);
       if (i % 4 == 1) o.direction[m.AxisIndex('C')] = i % 8 == 1 ? 1 : -1;
-      o.tool_ball = Eigen::Vector3d(0, 0, 150);
-      o.table_ball = o.setup == "A" ? Eigen::Vector3d(50, 0, 80) : Eigen::Vector3d(0, 60, 70);
-      o.length = 100.0;
-      o.reading = 1e-3 * u(rng);
-      o.measured = Eigen::Vector3d(1e-3 * u(rng), 0, -1e-3);
+      BallMountData& b = o.data<BallMountData>();
+      b.tool_ball = Eigen::Vector3d(0, 0, 150);
+      b.table_ball = o.setup == "A" ? Eigen::Vector3d(50, 0, 80) : Eigen::Vector3d(0, 60, 70);
+      b.length = 100.0;
+      b.reading = 1e-3 * u(rng);
+      b.measured = Eigen::Vector3d(1e-3 * u(rng), 0, -1e-3);
       if (i % 5 == 0) o.sigma = Eigen::VectorXd::Constant(ResidualRows(o.type), 0.002);
       ds.observations.push_back(o);
     }

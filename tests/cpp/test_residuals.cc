@@ -925,7 +925,7 @@ TEST(ResidualIdentify, RecoversTableLocationErrorsFromNoiseFreeDbbCircles) {
   const NamedValues setup = {{"dbb.length", 0.0042}};
   const Dataset ds = Simulate(Spec(kTableJson, truth, setup, TableDbbPlan(m)));
   // The bar length is what the simulated machine reads.
-  for (const Observation& o : ds.observations) EXPECT_LT(std::abs(o.reading), 0.1);
+  for (const Observation& o : ds.observations) EXPECT_LT(std::abs(o.data<BallMountData>().reading), 0.1);
 
   IdentifyOptions opt;
   opt.estimate = kTableLocation;

@@ -362,8 +362,8 @@ class Pool {
     std::map<std::tuple<int, std::string, std::string>, std::vector<int>> cache;
     for (int i = 0; i < n; ++i) {
       const Observation& o = ds.observations[i];
-      if (o.type == ObservationType::kSphere) sphere_of_[i] = ds.artefact.SphereIndex(o.target);
-      const auto key = std::make_tuple(static_cast<int>(o.type), o.target, o.setup);
+      if (o.type == ObservationType::kSphere) sphere_of_[i] = ds.artefact.SphereIndex(o.data<TouchData>().target);
+      const auto key = std::make_tuple(static_cast<int>(o.type), PayloadTarget(o), o.setup);
       auto it = cache.find(key);
       if (it == cache.end()) {
         const Dataset one = ds.Subset({i});

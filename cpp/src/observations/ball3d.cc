@@ -66,16 +66,16 @@ class Kind final : public BallMountKind {
     ReadMount(o, w, ob);
     static const json absent;  // by reference: o.value(key, json()) copies the array
     auto it = o.find("measured");
-    ob->measured = ReadVector3(it == o.end() ? absent : *it, w + ".measured");
+    ob->data<BallMountData>().measured = ReadVector3(it == o.end() ? absent : *it, w + ".measured");
   }
   bool ReadFlat(const FlatObservation& f, const Artefact&, Observation* ob) const override {
     using F = FlatObservation;
     if (!f.only({F::kSetup, F::kMeasured, F::kToolBall, F::kTableBall}) || !f.has(F::kMeasured)) return false;
-    ob->measured = f.measured;
+    ob->data<BallMountData>().measured = f.measured;
     return ReadFlatMount(f, ob);
   }
   bool WriteFlat(const Observation& o, FlatObservation* f) const override {
-    f->measured = o.measured;
+    f->measured = o.data<BallMountData>().measured;
     f->seen |= 1u << FlatObservation::kMeasured;
     WriteFlatMount(o, f);
     return true;
@@ -126,8 +126,9 @@ class Kind final : public BallMountKind {
 
   bool has_length() const override { return false; }
   void SetSample(const Eigen::MatrixXd& values, int r, double, Observation* o) const override {
-    o->measured = values.row(r).transpose();
-    for (int c = 0; c < 3; ++c) RequireFinite(o->measured[c], "ball samples: measured[" + std::to_string(r) + "]");
+    Eigen::Vector3d& measured = o->data<BallMountData>().measured;
+    measured = values.row(r).transpose();
+    for (int c = 0; c < 3; ++c) RequireFinite(measured[c], "ball samples: measured[" + std::to_string(r) + "]");
   }
 
   std::vector<const char*> plan_keys() const override {
@@ -137,22 +138,22 @@ class Kind final : public BallMountKind {
     for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
-    o->measured[c] = plan.measured0[i][c] + x;
+    o->data<BallMountData>().measured[c] = plan.base.observations[i].data<BallMountData>().measured[c] + x;
   }
 
  protected:
   void ValidateOwn(const Observation& o, const std::function<std::string()>& w) const override {
     for (int c = 0; c < 3; ++c)
-      if (!(std::abs(o.measured[c]) <= kMaxLinear))
-        RequireBounded(o.measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
+      if (!(std::abs(o.data<BallMountData>().measured[c]) <= kMaxLinear))
+        RequireBounded(o.data<BallMountData>().measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
   }
-  void WriteOwn(const Observation& o, json* jo) const override { (*jo)["measured"] = Array3(o.measured); }
+  void WriteOwn(const Observation& o, json* jo) const override { (*jo)["measured"] = Array3(o.data<BallMountData>().measured); }
   void AddFunctor(ResidualBuilder& b, const Observation& o, const MountRefs& refs) const override {
     b.Add(new Ball3dResidual(b.context, o, refs), 3);
   }
   void SimulateReading(const json&, const std::string&, const PlanTruth&, const std::string&,
                        const Eigen::Vector3d& d, Observation* ob) const override {
-    ob->measured = d;
+    ob->data<BallMountData>().measured = d;
   }
   Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d&) const override {
     return Eigen::Vector3d(r[0], r[1], r[2]);

@@ -52,6 +52,7 @@ class MountRun final : public LongRun {
     bool any_dir = false;
     for (int i = 0; i < n_; ++i) {
       const Observation& o = ds.observations[begin + i];
+      const BallMountData& b = o.data<BallMountData>();
       AxisValuesToInternal(m, o.axes.data(), q_.data() + static_cast<size_t>(i) * na_);
       if (!any_dir && (o.direction.array() != 0).any()) {
         any_dir = true;
@@ -59,13 +60,13 @@ class MountRun final : public LongRun {
       }
       if (any_dir) std::copy(o.direction.data(), o.direction.data() + na_, dir_.data() + static_cast<size_t>(i) * na_);
       if constexpr (R == 3)
-        for (int c = 0; c < 3; ++c) reading_[static_cast<size_t>(i) * R + c] = o.measured[c];
+        for (int c = 0; c < 3; ++c) reading_[static_cast<size_t>(i) * R + c] = b.measured[c];
       else
-        reading_[i] = o.length + o.reading;
+        reading_[i] = b.length + b.reading;
       // A trace is one mounting: the previous sample's first.
       int k = mounts_.empty() ? -1 : mount_[i > 0 ? i - 1 : 0];
       auto same = [&](int j) {
-        return setups_[j] == o.setup && mounts_[j].tool_ball == o.tool_ball && mounts_[j].table_ball == o.table_ball;
+        return setups_[j] == o.setup && mounts_[j].tool_ball == b.tool_ball && mounts_[j].table_ball == b.table_ball;
       };
       if (k < 0 || !same(k)) {
         k = -1;
@@ -73,8 +74,8 @@ class MountRun final : public LongRun {
           if (same(j)) k = j;
         if (k < 0) {
           Mount mt;
-          mt.tool_ball = o.tool_ball;
-          mt.table_ball = o.table_ball;
+          mt.tool_ball = b.tool_ball;
+          mt.table_ball = b.table_ball;
           const std::vector<int>& g = t.group(kind.type(), o.setup);
           for (int c = 0; c < 7; ++c) mt.idx[c] = g[c];
           k = static_cast<int>(mounts_.size());
@@ -226,8 +227,9 @@ void BallMountKind::ReadMount(const json& o, const std::string& w, Observation* 
     auto it = o.find(key);
     return it == o.end() ? absent : *it;
   };
-  ob->tool_ball = ReadVector3(member("tool_ball"), w + ".tool_ball");
-  ob->table_ball = ReadVector3(member("table_ball"), w + ".table_ball");
+  BallMountData& d = ob->data<BallMountData>();
+  d.tool_ball = ReadVector3(member("tool_ball"), w + ".tool_ball");
+  d.table_ball = ReadVector3(member("table_ball"), w + ".table_ball");
 }
 
 void BallMountKind::Validate(const Dataset&, const Observation& o,
@@ -235,17 +237,19 @@ void BallMountKind::Validate(const Dataset&, const Observation& o,
   if (o.setup.find('.') != std::string::npos)
     throw std::invalid_argument(w() + ".setup: " + Quote(o.setup) + " must not contain '.'");
   ValidateOwn(o, w);
+  const BallMountData& d = o.data<BallMountData>();
   for (int c = 0; c < 3; ++c) {
-    if (!(std::abs(o.tool_ball[c]) <= kMaxLinear))
-      RequireBounded(o.tool_ball[c], kMaxLinear, w() + ".tool_ball[" + std::to_string(c) + "]");
-    if (!(std::abs(o.table_ball[c]) <= kMaxLinear))
-      RequireBounded(o.table_ball[c], kMaxLinear, w() + ".table_ball[" + std::to_string(c) + "]");
+    if (!(std::abs(d.tool_ball[c]) <= kMaxLinear))
+      RequireBounded(d.tool_ball[c], kMaxLinear, w() + ".tool_ball[" + std::to_string(c) + "]");
+    if (!(std::abs(d.table_ball[c]) <= kMaxLinear))
+      RequireBounded(d.table_ball[c], kMaxLinear, w() + ".table_ball[" + std::to_string(c) + "]");
   }
 }
 
 void BallMountKind::Write(const Observation& o, json* jo) const {
-  (*jo)["tool_ball"] = Array3(o.tool_ball);
-  (*jo)["table_ball"] = Array3(o.table_ball);
+  const BallMountData& d = o.data<BallMountData>();
+  (*jo)["tool_ball"] = Array3(d.tool_ball);
+  (*jo)["table_ball"] = Array3(d.table_ball);
   WriteOwn(o, jo);
 }
 
@@ -314,24 +318,26 @@ void BallMountKind::PrepareAnalyticAfter(const Dataset& ds, const ParameterTable
 }
 
 void BallMountKind::PrepareSample(const Observation& o, AnalyticRow* r) {
-  r->a = o.table_ball;
-  r->tool_ball = o.tool_ball;
-  r->measured = o.measured;
-  r->constant = o.length + o.reading;
+  const BallMountData& d = o.data<BallMountData>();
+  r->a = d.table_ball;
+  r->tool_ball = d.tool_ball;
+  r->measured = d.measured;
+  r->constant = d.length + d.reading;
 }
 
 void BallMountKind::SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
                                   PlanSlot*) const {
   const Machine& m = t.dataset->machine();
   ob->setup = ReadSetup(e, w);
-  ob->tool_ball = ReadVector3(e.value("tool_ball", json()), w + ".tool_ball");
-  ob->table_ball = ReadVector3(e.value("table_ball", json()), w + ".table_ball");
+  BallMountData& d = ob->data<BallMountData>();
+  d.tool_ball = ReadVector3(e.value("tool_ball", json()), w + ".tool_ball");
+  d.table_ball = ReadVector3(e.value("table_ball", json()), w + ".table_ball");
   const std::string prefix = std::string(name()) + (ob->setup.empty() ? "" : "." + ob->setup);
   const Eigen::Vector3d tool_true =
-      ob->tool_ball + Eigen::Vector3d(t.setup(prefix + ".tool.x"), t.setup(prefix + ".tool.y"),
+      d.tool_ball + Eigen::Vector3d(t.setup(prefix + ".tool.x"), t.setup(prefix + ".tool.y"),
                                       t.setup(prefix + ".tool.z"));
   const Eigen::Vector3d table_true =
-      ob->table_ball + Eigen::Vector3d(t.setup(prefix + ".table.x"), t.setup(prefix + ".table.y"),
+      d.table_ball + Eigen::Vector3d(t.setup(prefix + ".table.x"), t.setup(prefix + ".table.y"),
                                        t.setup(prefix + ".table.z"));
   std::vector<int> dir(ob->direction.data(), ob->direction.data() + m.num_axes());
   const Eigen::Vector3d P = ToolAtCommand(m, t.theta, ob->axes, dir, tool_true);
@@ -345,9 +351,10 @@ void BallMountKind::ReportVector(const ReportContext& c, const Observation& o, c
   const PoseData pose(ds.machine(), o);
   const auto& mt = c.table->group(type(), o.setup);
   Eigen::Vector3d t = c.model->tip();
-  Eigen::Vector3d table_ball = o.table_ball;
+  const BallMountData& d = o.data<BallMountData>();
+  Eigen::Vector3d table_ball = d.table_ball;
   for (int k = 0; k < 3; ++k) {
-    t[k] = o.tool_ball[k] + values[mt[1 + k]];
+    t[k] = d.tool_ball[k] + values[mt[1 + k]];
     table_ball[k] += values[mt[4 + k]];
   }
   *point = c.model->ToolPoint(pose.q.data(), pose.dir.data(), t);
@@ -388,6 +395,7 @@ void Dataset::AppendBallSamples(ObservationType type, const std::string& setup,
   for (int r = 0; r < n; ++r) {
     Observation o;
     o.type = type;
+    o.payload = BallMountData{};
     o.setup = setup;
     o.axes = axes.row(r).transpose();
     o.direction = dirs ? Eigen::VectorXi(dirs->row(r).transpose()) : Eigen::VectorXi::Zero(na);
@@ -397,8 +405,9 @@ void Dataset::AppendBallSamples(ObservationType type, const std::string& setup,
       if (std::abs(o.direction[k]) > 1)
         throw std::invalid_argument("ball samples: directions must be -1, 0 or +1");
     }
-    o.tool_ball = tool_ball;
-    o.table_ball = table_ball;
+    BallMountData& d = o.data<BallMountData>();
+    d.tool_ball = tool_ball;
+    d.table_ball = table_ball;
     o.sigma = sig;
     kind->SetSample(values, r, length, &o);
     observations.push_back(std::move(o));

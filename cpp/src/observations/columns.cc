@@ -201,6 +201,7 @@ void ColumnLoader::Add(const ColumnBatch& b) {
     placed_[static_cast<size_t>(at)] = 1;
     Observation& ob = ds_.observations[static_cast<size_t>(at)];
     ob.type = kind->type();
+    ob.payload = kind->NewPayload();
     ob.axes = Eigen::VectorXd::Zero(na);
     ob.direction = Eigen::VectorXi::Zero(na);
     bool any_null = false;

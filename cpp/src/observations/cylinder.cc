@@ -87,10 +87,10 @@ class Kind final : public ProbeTouchKind {
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
     const Dataset& ds = b.dataset;
-    const auto& g = b.table.group(type(), o.target);
+    const auto& g = b.table.group(type(), o.data<TouchData>().target);
     const SetupRef s[5] = {b.Ref(g[0]), b.Ref(g[1]), b.Ref(g[2]), b.Ref(g[3]), b.Ref(g[4])};
     const ProbeTrigger trigger = MakeProbeTrigger(b, o);
-    b.Add(new CylinderResidual(b.context, o, ds.artefact.cylinders[ds.artefact.CylinderIndex(o.target)],
+    b.Add(new CylinderResidual(b.context, o, ds.artefact.cylinders[ds.artefact.CylinderIndex(o.data<TouchData>().target)],
                                ds.tip_radius, s, trigger),
           1);
   }
@@ -98,12 +98,12 @@ class Kind final : public ProbeTouchKind {
   // measured: (side s, tip radius, 0), idx: r x y rx ry.
   void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
                        AnalyticRow* r) const override {
-    const Cylinder& c = ds.artefact.cylinders[ds.artefact.CylinderIndex(o.target)];
+    const Cylinder& c = ds.artefact.cylinders[ds.artefact.CylinderIndex(o.data<TouchData>().target)];
     r->a = c.point;
     r->n = c.axis;
     r->constant = c.radius;
     r->measured = Eigen::Vector3d(c.inside ? -1.0 : 1.0, ds.tip_radius, 0.0);
-    for (int k = 0; k < 5; ++k) r->idx[k] = t.group(type(), o.target)[k];
+    for (int k = 0; k < 5; ++k) r->idx[k] = t.group(type(), o.data<TouchData>().target)[k];
     PrepareProbeTrigger(ds, t, o, r);
   }
   void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override {
@@ -151,9 +151,9 @@ class Kind final : public ProbeTouchKind {
                     Eigen::Vector3d* vector) const override {
     const Dataset& ds = *c.dataset;
     const Eigen::Vector3d P = FittedTipCentre(c, o);
-    const Cylinder& cyl = ds.artefact.cylinders[ds.artefact.CylinderIndex(o.target)];
+    const Cylinder& cyl = ds.artefact.cylinders[ds.artefact.CylinderIndex(o.data<TouchData>().target)];
     double sv[5];
-    const auto& g = c.table->group(type(), o.target);
+    const auto& g = c.table->group(type(), o.data<TouchData>().target);
     for (int k = 0; k < 5; ++k) sv[k] = (*c.values)[g[k]];
     const Eigen::Vector3d radial = Radial(AxisOf(cyl, sv), P);
     *point = P;
@@ -178,7 +178,7 @@ class Kind final : public ProbeTouchKind {
                     Eigen::Vector3d* n_out, Eigen::Vector3d* c_out, Gap* gap) const override {
     const Dataset& ds = *t.dataset;
     const double r = ds.tip_radius;
-    const int ci = RequireTarget(ds, ob.target, w);
+    const int ci = RequireTarget(ds, ob.data<TouchData>().target, w);
     const Cylinder& cyl = ds.artefact.cylinders[ci];
     if (!e.contains("point"))
       throw std::invalid_argument(w + ".point: missing (where to touch the cylinder, workpiece frame)");
@@ -200,14 +200,14 @@ class Kind final : public ProbeTouchKind {
   void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d& P0,
                      const std::string& w, Eigen::Vector3d* n_out, Gap* gap) const override {
     const Dataset& ds = *rec.dataset;
-    const Cylinder& cyl = ds.artefact.cylinders[ds.artefact.CylinderIndex(o.target)];
+    const Cylinder& cyl = ds.artefact.cylinders[ds.artefact.CylinderIndex(o.data<TouchData>().target)];
     const double zero[5] = {0, 0, 0, 0, 0};
     const Eigen::Vector3d radial = Radial(AxisOf(cyl, zero), P0);
     if (radial.norm() < 1e-9) throw std::invalid_argument(w + ": touch on the cylinder's axis");
     const double s = cyl.inside ? -1.0 : 1.0;
     *n_out = s * radial.normalized();
     double sv[5];
-    const auto& g = rec.table->group(type(), o.target);
+    const auto& g = rec.table->group(type(), o.data<TouchData>().target);
     for (int k = 0; k < 5; ++k) sv[k] = rec.values[g[k]];
     const Axis est = AxisOf(cyl, sv);
     *gap = [=](const Eigen::Vector3d& P) { return s * Radial(est, P).norm(); };

@@ -41,6 +41,29 @@ int Artefact::SphereIndex(const std::string& id) const {
   return -1;
 }
 
+void Observation::WrongPayload(const char* wanted) const {
+  std::string type_name;
+  try {
+    type_name = ObservationTypeName(type);
+  } catch (const std::exception&) {
+    type_name = "code " + std::to_string(static_cast<int>(type));
+  }
+  throw std::invalid_argument("observation" + (id.empty() ? std::string() : " " + Quote(id)) + " of type " +
+                              Quote(type_name) + " holds " + PayloadName(payload) + ", not " + wanted);
+}
+
+const std::string& PayloadTarget(const Observation& o) {
+  static const std::string none;
+  struct Visitor {
+    const std::string& operator()(const TouchData& d) const { return d.target; }
+    const std::string& operator()(const FixedTargetData& d) const { return d.target; }
+    const std::string& operator()(const MachinedData& d) const { return d.feature; }
+    const std::string& operator()(const BallMountData&) const { return none; }
+    const std::string& operator()(const KindOwnData&) const { return none; }
+  };
+  return std::visit(Visitor(), o.payload);
+}
+
 const std::string* InstrumentId(const Observation& o) {
   return KindOf(o).instrument_key() ? &o.setup : nullptr;
 }
@@ -402,6 +425,7 @@ Observation ParseObservation(const Dataset& ds, const json& o, size_t i, std::ve
     throw std::invalid_argument(w() + ".type: unknown type " + Quote(type) + " (" + KindList() + ")" +
                                 DidYouMean(type, KindNames()));
   ob.type = kind->type();
+  ob.payload = kind->NewPayload();
   CheckKeysOf(o, kind->json_keys(), w);
   const json* axes = Find(o, "axes");
   if (!axes || !axes->is_object())
@@ -679,7 +703,9 @@ bool FastObservation(const EventList& ev, const Machine& m, const Artefact& arte
   // The kind of the previous observation first: a trace is one kind.
   static thread_local const ObservationKind* last = nullptr;
   const ObservationKind* kind = last && *type == last->name() ? last : FindKind(*type);
-  if (!kind || !kind->ReadFlat(flat, artefact, ob)) return false;
+  if (!kind) return false;
+  ob->payload = kind->NewPayload();
+  if (!kind->ReadFlat(flat, artefact, ob)) return false;
   last = kind;
   ob->type = kind->type();
   if (seen & (1u << kSigma)) {
@@ -1003,7 +1029,6 @@ std::string Dataset::ToJson() const {
   for (const Observation& o : observations) {
     json jo;
     jo["type"] = ObservationTypeName(o.type);
-    if (!o.target.empty()) jo["target"] = o.target;
     if (!o.setup.empty()) jo["setup"] = o.setup;
     json ax = json::object(), dir = json::object();
     for (int k = 0; k < machine_.num_axes(); ++k) {

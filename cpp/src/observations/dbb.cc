@@ -55,9 +55,10 @@ class Kind final : public BallMountKind {
     return {"type", "setup", "axes", "direction", "reading", "length", "tool_ball", "table_ball", "sigma", "id"};
   }
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
-    ob->reading = ReadBounded(o, "reading", w, kMaxDbbReading);
-    ob->length = ReadBounded(o, "length", w, kMaxLinear);
-    if (ob->length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
+    BallMountData& d = ob->data<BallMountData>();
+    d.reading = ReadBounded(o, "reading", w, kMaxDbbReading);
+    d.length = ReadBounded(o, "length", w, kMaxLinear);
+    if (d.length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
     ReadMount(o, w, ob);
   }
   bool ReadFlat(const FlatObservation& f, const Artefact&, Observation* ob) const override {
@@ -66,13 +67,15 @@ class Kind final : public BallMountKind {
         !f.has(F::kLength))
       return false;
     if (!(std::abs(f.reading) <= kMaxDbbReading) || !(f.length > 0 && f.length <= kMaxLinear)) return false;
-    ob->reading = f.reading;
-    ob->length = f.length;
+    BallMountData& d = ob->data<BallMountData>();
+    d.reading = f.reading;
+    d.length = f.length;
     return ReadFlatMount(f, ob);
   }
   bool WriteFlat(const Observation& o, FlatObservation* f) const override {
-    f->reading = o.reading;
-    f->length = o.length;
+    const BallMountData& d = o.data<BallMountData>();
+    f->reading = d.reading;
+    f->length = d.length;
     f->seen |= (1u << FlatObservation::kReading) | (1u << FlatObservation::kLength);
     WriteFlatMount(o, f);
     return true;
@@ -131,9 +134,10 @@ class Kind final : public BallMountKind {
 
   bool has_length() const override { return true; }
   void SetSample(const Eigen::MatrixXd& values, int r, double length, Observation* o) const override {
-    o->length = length;
-    o->reading = values(r, 0);
-    RequireFinite(o->reading, "ball samples: readings[" + std::to_string(r) + "]");
+    BallMountData& d = o->data<BallMountData>();
+    d.length = length;
+    d.reading = values(r, 0);
+    RequireFinite(d.reading, "ball samples: readings[" + std::to_string(r) + "]");
   }
 
   std::vector<const char*> plan_keys() const override {
@@ -143,18 +147,20 @@ class Kind final : public BallMountKind {
     AddPlanInput(plan, i, 0, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int, double x, Observation* o) const override {
-    o->reading = plan.reading0[i] + x;
+    o->data<BallMountData>().reading = plan.base.observations[i].data<BallMountData>().reading + x;
   }
 
  protected:
   void ValidateOwn(const Observation& o, const std::function<std::string()>& w) const override {
-    if (!(std::abs(o.reading) <= kMaxDbbReading)) RequireBounded(o.reading, kMaxDbbReading, w() + ".reading");
-    if (!(o.length > 0 && o.length <= kMaxLinear))
+    const BallMountData& d = o.data<BallMountData>();
+    if (!(std::abs(d.reading) <= kMaxDbbReading)) RequireBounded(d.reading, kMaxDbbReading, w() + ".reading");
+    if (!(d.length > 0 && d.length <= kMaxLinear))
       throw std::invalid_argument(w() + ".length: must be > 0 and <= 1e5 mm");
   }
   void WriteOwn(const Observation& o, json* jo) const override {
-    (*jo)["reading"] = o.reading;
-    (*jo)["length"] = o.length;
+    const BallMountData& d = o.data<BallMountData>();
+    (*jo)["reading"] = d.reading;
+    (*jo)["length"] = d.length;
   }
   void AddFunctor(ResidualBuilder& b, const Observation& o, const MountRefs& refs) const override {
     b.Add(new DbbResidual(b.context, o, refs), 1);
@@ -162,12 +168,13 @@ class Kind final : public BallMountKind {
   void SimulateReading(const json& e, const std::string& w, const PlanTruth& t, const std::string& prefix,
                        const Eigen::Vector3d& d, Observation* ob) const override {
     if (!e.contains("length")) throw std::invalid_argument(w + ".length: missing (nominal bar length, mm)");
-    ob->length = ReadBounded(e, "length", w, kMaxLinear);
-    if (!(ob->length > 0)) throw std::invalid_argument(w + ".length: must be > 0 mm");
-    ob->reading = d.norm() - ob->length - t.setup(prefix + ".length");
+    BallMountData& bar = ob->data<BallMountData>();
+    bar.length = ReadBounded(e, "length", w, kMaxLinear);
+    if (!(bar.length > 0)) throw std::invalid_argument(w + ".length: must be > 0 mm");
+    bar.reading = d.norm() - bar.length - t.setup(prefix + ".length");
     // What the loader would refuse, refused here, naming the plan entry.
-    if (!(std::abs(ob->reading) <= kMaxDbbReading))
-      throw std::invalid_argument(w + ": the simulated reading " + std::to_string(ob->reading) +
+    if (!(std::abs(bar.reading) <= kMaxDbbReading))
+      throw std::invalid_argument(w + ": the simulated reading " + std::to_string(bar.reading) +
                                   " mm is beyond a ball bar's range (|reading| <= 100 mm); is the "
                                   "bar length the ball distance at these axes?");
   }

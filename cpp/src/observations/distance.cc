@@ -55,6 +55,7 @@ class Kind final : public ObservationKind {
   double default_sigma() const override { return 0.001; }
   const char* instrument_key() const override { return "station"; }
   bool analytic() const override { return false; }
+  ObservationPayload NewPayload() const override { return DistanceData{}; }
 
   std::vector<const char*> json_keys() const override {
     return {"type", "station", "axes", "direction", "reading", "target", "target_point", "station_position",
@@ -63,29 +64,31 @@ class Kind final : public ObservationKind {
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
     ReadOwn(o, w, ob);
     if (!o.contains("reading")) throw std::invalid_argument(w + ".reading: missing (the distance reading, mm)");
-    ob->reading = ReadBounded(o, "reading", w, kMaxLinear);
+    ob->data<DistanceData>().reading = ReadBounded(o, "reading", w, kMaxLinear);
   }
   void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
+    const DistanceData& d = o.data<DistanceData>();
     if (o.setup.empty() || o.setup.find('.') != std::string::npos)
       throw std::invalid_argument(w() + ".station: the station id must be a non-empty name without '.'");
-    if (o.instrument.empty() || o.instrument.find('.') != std::string::npos)
+    if (d.tracer.empty() || d.tracer.find('.') != std::string::npos)
       throw std::invalid_argument(w() + ".instrument: the tracer's name must be a non-empty name without '.'");
-    if (!(std::abs(o.reading) <= kMaxLinear)) RequireBounded(o.reading, kMaxLinear, w() + ".reading");
-    if (!(std::abs(o.length) <= kMaxLinear)) RequireBounded(o.length, kMaxLinear, w() + ".dead_length");
+    if (!(std::abs(d.reading) <= kMaxLinear)) RequireBounded(d.reading, kMaxLinear, w() + ".reading");
+    if (!(std::abs(d.dead_length) <= kMaxLinear)) RequireBounded(d.dead_length, kMaxLinear, w() + ".dead_length");
     for (int c = 0; c < 3; ++c)
-      if (!(std::abs(o.instrument_origin[c]) <= kMaxLinear))
-        RequireBounded(o.instrument_origin[c], kMaxLinear, w() + ".station_position[" + std::to_string(c) + "]");
-    fixed_frame::ValidateTarget(o, w);
+      if (!(std::abs(d.station[c]) <= kMaxLinear))
+        RequireBounded(d.station[c], kMaxLinear, w() + ".station_position[" + std::to_string(c) + "]");
+    fixed_frame::ValidateTarget(d, w);
   }
   void Write(const Observation& o, json* jo) const override {
+    const DistanceData& d = o.data<DistanceData>();
     // The generic writer put the station id under "setup".
     jo->erase("setup");
     (*jo)["station"] = o.setup;
-    (*jo)["reading"] = o.reading;
-    (*jo)["target_point"] = Array3(o.target_point);
-    (*jo)["station_position"] = Array3(o.instrument_origin);
-    if (o.length != 0.0) (*jo)["dead_length"] = o.length;
-    if (o.instrument != kDefaultTracer) (*jo)["instrument"] = o.instrument;
+    (*jo)["reading"] = d.reading;
+    fixed_frame::WriteTarget(d, jo);
+    (*jo)["station_position"] = Array3(d.station);
+    if (d.dead_length != 0.0) (*jo)["dead_length"] = d.dead_length;
+    if (d.tracer != kDefaultTracer) (*jo)["instrument"] = d.tracer;
   }
 
   // ---- setup: the station's position and dead length, and the tracer's
@@ -99,12 +102,12 @@ class Kind final : public ObservationKind {
       idx.push_back(t->Add(Prefix(o) + "length"));
       t->AddGroup(type(), o.setup, idx);
     }
-    fixed_frame::AddTargetOffsets(o.instrument, o.target, t);
+    fixed_frame::AddTargetOffsets(o.data<DistanceData>().tracer, o.data<DistanceData>().target, t);
   }
   void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
                     std::set<int>* out) const override {
     for (int i : t.group(type(), o.setup)) out->insert(i);
-    for (int i : fixed_frame::TargetOffsets(t, o.instrument, o.target)) out->insert(i);
+    for (int i : fixed_frame::TargetOffsets(t, o.data<DistanceData>().tracer, o.data<DistanceData>().target)) out->insert(i);
   }
   bool IsParameterName(const std::string&) const override { return false; }  // instrument.*
   std::vector<PriorClass> prior_classes() const override {
@@ -119,7 +122,7 @@ class Kind final : public ObservationKind {
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
     const auto& g = b.table.group(type(), o.setup);
-    const auto& tg = fixed_frame::TargetOffsets(b.table, o.instrument, o.target);
+    const auto& tg = fixed_frame::TargetOffsets(b.table, o.data<DistanceData>().tracer, o.data<DistanceData>().target);
     StationRefs refs;
     for (int c = 0; c < 3; ++c) {
       refs.position[c] = b.Ref(g[c]);
@@ -137,66 +140,69 @@ class Kind final : public ObservationKind {
   void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
                      PlanSlot*) const override {
     ReadOwn(e, w, ob);
-    const std::string pre = Prefix(*ob), tpre = "instrument." + ob->instrument + "." + ob->target + "_";
-    Eigen::Vector3d station = ob->instrument_origin, target = ob->target_point;
+    DistanceData& d = ob->data<DistanceData>();
+    const std::string pre = Prefix(*ob), tpre = "instrument." + d.tracer + "." + d.target + "_";
+    Eigen::Vector3d station = d.station, target = d.target_point;
     for (int c = 0; c < 3; ++c) {
       station[c] += t.setup(pre + kXYZ[c]);
       target[c] += t.setup(tpre + kXYZ[c]);
     }
     const Machine& m = t.dataset->machine();
     const PoseData pose(m, *ob);
-    const Eigen::Vector3d P = TargetInF<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), ob->on_tool,
+    const Eigen::Vector3d P = TargetInF<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), d.on_tool,
                                                 target);
-    ob->reading = (P - station).norm() - ob->length - t.setup(pre + "length");
+    d.reading = (P - station).norm() - d.dead_length - t.setup(pre + "length");
   }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
     AddPlanInput(plan, i, 0, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int, double x, Observation* o) const override {
-    o->reading = plan.reading0[i] + x;
+    o->data<DistanceData>().reading = plan.base.observations[i].data<DistanceData>().reading + x;
   }
 
   // ---- report: the residual along the line of sight, at the target ----
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
+    const DistanceData& d = o.data<DistanceData>();
     const Machine& m = c.dataset->machine();
     const Eigen::VectorXd& v = *c.values;
     const auto& g = c.table->group(type(), o.setup);
-    const auto& tg = fixed_frame::TargetOffsets(*c.table, o.instrument, o.target);
-    Eigen::Vector3d station = o.instrument_origin, target = o.target_point;
+    const auto& tg = fixed_frame::TargetOffsets(*c.table, d.tracer, d.target);
+    Eigen::Vector3d station = d.station, target = d.target_point;
     for (int k = 0; k < 3; ++k) {
       station[k] += v[g[k]];
       target[k] += v[tg[k]];
     }
     const Eigen::VectorXd theta = v.head(m.num_parameters());
     const PoseData pose(m, o);
-    *point = TargetInF<double>(m, theta.data(), pose.q.data(), pose.dir.data(), o.on_tool, target);
-    const Eigen::Vector3d d = *point - station;
-    *vector = d.norm() > 0 ? Eigen::Vector3d(r[0] * d / d.norm()) : Eigen::Vector3d::Zero();
+    *point = TargetInF<double>(m, theta.data(), pose.q.data(), pose.dir.data(), d.on_tool, target);
+    const Eigen::Vector3d sight = *point - station;
+    *vector = sight.norm() > 0 ? Eigen::Vector3d(r[0] * sight / sight.norm()) : Eigen::Vector3d::Zero();
   }
 
  private:
   static void ReadOwn(const json& o, const std::string& w, Observation* ob) {
     if (!o.contains("station") || !o["station"].is_string())
       throw std::invalid_argument(w + ".station: missing (the station's name, a string such as \"L1\")");
+    DistanceData* d = &ob->data<DistanceData>();
     ob->setup = o["station"].get<std::string>();
     if (ob->setup.empty() || ob->setup.find('.') != std::string::npos)
       throw std::invalid_argument(w + ".station: " + Quote(ob->setup) + " must be a non-empty name without '.'");
-    ob->instrument = kDefaultTracer;
+    d->tracer = kDefaultTracer;
     if (o.contains("instrument")) {
       if (!o["instrument"].is_string())
         throw std::invalid_argument(w + ".instrument: expected a string (the tracer whose target the station follows)");
-      ob->instrument = o["instrument"].get<std::string>();
-      if (ob->instrument.empty() || ob->instrument.find('.') != std::string::npos)
-        throw std::invalid_argument(w + ".instrument: " + Quote(ob->instrument) +
+      d->tracer = o["instrument"].get<std::string>();
+      if (d->tracer.empty() || d->tracer.find('.') != std::string::npos)
+        throw std::invalid_argument(w + ".instrument: " + Quote(d->tracer) +
                                     " must be a non-empty name without '.'");
     }
-    fixed_frame::ReadTarget(o, w, ob);
+    fixed_frame::ReadTarget(o, w, d);
     if (!o.contains("station_position"))
       throw std::invalid_argument(w + ".station_position: missing (the station's nominal position in the machine "
                                   "frame, [x, y, z] mm)");
-    ob->instrument_origin = ReadVector3(o["station_position"], w + ".station_position");
-    if (o.contains("dead_length")) ob->length = ReadBounded(o, "dead_length", w, kMaxLinear);
+    d->station = ReadVector3(o["station_position"], w + ".station_position");
+    if (o.contains("dead_length")) d->dead_length = ReadBounded(o, "dead_length", w, kMaxLinear);
   }
 };
 

@@ -38,18 +38,18 @@ class Kind final : public ProbeTouchKind {
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
     const Dataset& ds = b.dataset;
-    const int fi = ds.artefact.FacetIndex(o.target);
-    const SetupRef off = b.Ref(b.table.group(type(), o.target)[0]);
+    const int fi = ds.artefact.FacetIndex(o.data<TouchData>().target);
+    const SetupRef off = b.Ref(b.table.group(type(), o.data<TouchData>().target)[0]);
     const ProbeTrigger trigger = MakeProbeTrigger(b, o);
     b.Add(new FacetResidual(b.context, o, ds.artefact.facets[fi], ds.tip_radius, off, trigger), 1);
   }
   void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
                        AnalyticRow* r) const override {
-    const Facet& f = ds.artefact.facets[ds.artefact.FacetIndex(o.target)];
+    const Facet& f = ds.artefact.facets[ds.artefact.FacetIndex(o.data<TouchData>().target)];
     r->a = f.point;
     r->n = f.normal;
     r->constant = ds.tip_radius;
-    r->idx[0] = t.group(type(), o.target)[0];
+    r->idx[0] = t.group(type(), o.data<TouchData>().target)[0];
     PrepareProbeTrigger(ds, t, o, r);
   }
   void EvaluateAnalytic(AnalyticEval& e, const AnalyticRow* rows, int count) const override {
@@ -69,7 +69,7 @@ class Kind final : public ProbeTouchKind {
                     Eigen::Vector3d* vector) const override {
     const Dataset& ds = *c.dataset;
     *point = FittedTipCentre(c, o);
-    *vector = r[0] * ds.artefact.facets[ds.artefact.FacetIndex(o.target)].normal;
+    *vector = r[0] * ds.artefact.facets[ds.artefact.FacetIndex(o.data<TouchData>().target)].normal;
   }
 
  protected:
@@ -86,7 +86,7 @@ class Kind final : public ProbeTouchKind {
                     Eigen::Vector3d* n_out, Eigen::Vector3d* c, Gap* gap) const override {
     const Dataset& ds = *t.dataset;
     const double r = ds.tip_radius;
-    const int fi = RequireTarget(ds, ob.target, w);
+    const int fi = RequireTarget(ds, ob.data<TouchData>().target, w);
     const Facet& f = ds.artefact.facets[fi];
     const Eigen::Vector3d n = f.normal;
     Eigen::Vector3d p = e.contains("point") ? ReadVector3(e["point"], w + ".point") : f.point;
@@ -99,9 +99,9 @@ class Kind final : public ProbeTouchKind {
   void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d&,
                      const std::string&, Eigen::Vector3d* n_out, Gap* gap) const override {
     const Dataset& ds = *rec.dataset;
-    const Facet& f = ds.artefact.facets[ds.artefact.FacetIndex(o.target)];
+    const Facet& f = ds.artefact.facets[ds.artefact.FacetIndex(o.data<TouchData>().target)];
     const Eigen::Vector3d n = f.normal;
-    const double off = rec.values[rec.table->group(type(), o.target)[0]];
+    const double off = rec.values[rec.table->group(type(), o.data<TouchData>().target)[0]];
     *gap = [=](const Eigen::Vector3d& P) { return n.dot(P - f.point) - off; };
     *n_out = n;
   }

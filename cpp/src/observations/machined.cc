@@ -15,10 +15,8 @@ namespace {
 
 using namespace json_util;
 
-// The file names the part ("part", kept in Observation::setup) and the
-// feature ("feature", kept in Observation::target); the point is
-// Observation::target_point, the measured deviation Observation::reading.
-// The rest lives in Observation::own under these names:
+// The file names the part ("part", kept in Observation::setup); the rest is
+// the payload (MachinedData), under these file keys:
 const char* kNormal = "normal";
 const char* kRefAxes = "reference_axes";    // step: machine axis order, mm / degrees
 const char* kRefPoint = "reference_point";  // step
@@ -27,39 +25,38 @@ const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
 // A measured deviation beyond this is no machining error but a wrong nominal.
 constexpr double kMaxDeviation = 100.0;  // mm
 
-bool IsStep(const Observation& o) { return o.target == "step"; }
+bool IsStep(const Observation& o) { return o.data<MachinedData>().step(); }
 std::string Prefix(const Observation& o) { return "machined." + o.setup; }
 
-const Eigen::VectorXd& Own(const Observation& o, const char* key, const std::function<std::string()>& w,
-                           int size) {
-  const auto it = o.own.find(key);
-  if (it == o.own.end() || it->second.size() != size)
-    throw std::invalid_argument(w() + "." + key + ": missing (" + std::to_string(size) + " numbers)");
-  return it->second;
+// A step's reference point or normal, or the message that it has none.
+const Eigen::Vector3d& Reference(const std::optional<Eigen::Vector3d>& v, const char* key,
+                                 const std::function<std::string()>& w) {
+  if (!v) throw std::invalid_argument(w() + "." + key + ": missing (3 numbers)");
+  return *v;
 }
 
 // A face of observation `o` in internal units: the cut at `axes` (reference
 // = false) or at `reference_axes`.
 MachinedFace FaceOf(const Machine& m, const Observation& o, bool reference) {
+  const MachinedData& d = o.data<MachinedData>();
   MachinedFace f;
-  const auto own = [&](const char* key) -> const Eigen::VectorXd& { return o.own.at(key); };
-  const Eigen::VectorXd& axes = reference ? own(kRefAxes) : o.axes;
+  const Eigen::VectorXd& axes = reference ? d.reference_axes : o.axes;
   f.q.resize(m.num_axes());
   AxisValuesToInternal(m, axes.data(), f.q.data());
   // The reference cut was reached the same way as the first (its own approach directions are not recorded).
   f.dir.assign(o.direction.data(), o.direction.data() + o.direction.size());
-  f.point = reference ? Eigen::Vector3d(own(kRefPoint)) : o.target_point;
-  f.normal = Eigen::Vector3d(own(reference ? kRefNormal : kNormal)).normalized();
+  f.point = reference ? d.reference_point.value() : d.point;
+  f.normal = (reference ? d.reference_normal.value() : d.normal).normalized();
   return f;
 }
 
 // Whether the part's datum matters to first order: a face, or a step whose
 // two faces differ in point or normal.
 bool SeesDatum(const Observation& o) {
-  if (!IsStep(o)) return true;
-  return !(Eigen::Vector3d(o.own.at(kRefPoint)) - o.target_point).isZero(1e-9) ||
-         !(Eigen::Vector3d(o.own.at(kRefNormal)).normalized() - Eigen::Vector3d(o.own.at(kNormal)).normalized())
-              .isZero(1e-12);
+  const MachinedData& d = o.data<MachinedData>();
+  if (!d.step()) return true;
+  return !(d.reference_point.value() - d.point).isZero(1e-9) ||
+         !(d.reference_normal.value().normalized() - d.normal.normalized()).isZero(1e-12);
 }
 
 Eigen::Vector3d ReadNormal(const json& o, const char* key, const std::string& w) {
@@ -137,51 +134,56 @@ class Kind final : public ObservationKind {
   }
   void Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const override {
     ReadOwn(ds.machine(), o, w, false, ob);
-    ob->reading = ReadBounded(o, "measured", w, kMaxDeviation);
+    ob->data<MachinedData>().measured = ReadBounded(o, "measured", w, kMaxDeviation);
   }
+  ObservationPayload NewPayload() const override { return MachinedData{}; }
   void Validate(const Dataset& ds, const Observation& o, const std::function<std::string()>& w) const override {
     if (o.setup.empty() || o.setup.find('.') != std::string::npos)
       throw std::invalid_argument(w() + ".part: the part id must be a non-empty name without '.'");
-    if (o.target != "face" && o.target != "step")
-      throw std::invalid_argument(w() + ".feature: " + Quote(o.target) + " is neither \"face\" nor \"step\"");
-    if (!(std::abs(o.reading) <= kMaxDeviation)) RequireBounded(o.reading, kMaxDeviation, w() + ".measured");
+    const MachinedData& d = o.data<MachinedData>();
+    if (d.feature != "face" && d.feature != "step")
+      throw std::invalid_argument(w() + ".feature: " + Quote(d.feature) + " is neither \"face\" nor \"step\"");
+    if (!(std::abs(d.measured) <= kMaxDeviation)) RequireBounded(d.measured, kMaxDeviation, w() + ".measured");
     auto vec = [&](const Eigen::Vector3d& v, const char* field, bool unit) {
       for (int c = 0; c < 3; ++c)
         if (!(std::abs(v[c]) <= kMaxLinear)) RequireBounded(v[c], kMaxLinear, w() + "." + field);
       if (unit && !(v.norm() > 1e-9)) throw std::invalid_argument(w() + "." + field + ": zero vector");
     };
-    vec(o.target_point, "point", false);
-    vec(Own(o, kNormal, w, 3), kNormal, true);
-    const bool step = IsStep(o);
-    for (const char* key : {kRefAxes, kRefPoint, kRefNormal})
-      if (!step && o.own.count(key))
-        throw std::invalid_argument(w() + "." + key + ": only a step has a reference cut");
+    vec(d.point, "point", false);
+    vec(d.normal, kNormal, true);
+    const bool step = d.step();
+    const bool has[3] = {d.reference_axes.size() > 0, d.reference_point.has_value(), d.reference_normal.has_value()};
+    const char* keys[3] = {kRefAxes, kRefPoint, kRefNormal};
+    for (int k = 0; k < 3; ++k)
+      if (!step && has[k]) throw std::invalid_argument(w() + "." + keys[k] + ": only a step has a reference cut");
     if (!step) return;
     const Machine& m = ds.machine();
-    const Eigen::VectorXd& ref = Own(o, kRefAxes, w, m.num_axes());
+    const Eigen::VectorXd& ref = d.reference_axes;
+    if (ref.size() != m.num_axes())
+      throw std::invalid_argument(w() + "." + kRefAxes + ": missing (" + std::to_string(m.num_axes()) + " numbers)");
     for (int k = 0; k < m.num_axes(); ++k)
       RequireBounded(ref[k], m.axis(k).rotary() ? kMaxRotaryDeg : kMaxLinear,
                      w() + "." + kRefAxes + "." + std::string(1, m.axis(k).name));
-    vec(Own(o, kRefPoint, w, 3), kRefPoint, false);
-    vec(Own(o, kRefNormal, w, 3), kRefNormal, true);
+    vec(Reference(d.reference_point, kRefPoint, w), kRefPoint, false);
+    vec(Reference(d.reference_normal, kRefNormal, w), kRefNormal, true);
   }
   void Write(const Observation& o, json* jo) const override {
-    // The generic writer put the part under "setup" and the feature under "target".
+    // The generic writer put the part under "setup".
     jo->erase("setup");
-    jo->erase("target");
+    const MachinedData& d = o.data<MachinedData>();
     (*jo)["part"] = o.setup;
-    (*jo)["feature"] = o.target;
-    (*jo)["point"] = Array3(o.target_point);
-    (*jo)["normal"] = Array3(o.own.at(kNormal));
-    (*jo)["measured"] = o.reading;
-    if (!IsStep(o)) return;
-    (*jo)["reference_point"] = Array3(o.own.at(kRefPoint));
-    (*jo)["reference_normal"] = Array3(o.own.at(kRefNormal));
+    (*jo)["feature"] = d.feature;
+    (*jo)["point"] = Array3(d.point);
+    (*jo)["normal"] = Array3(d.normal);
+    (*jo)["measured"] = d.measured;
+    if (!d.step()) return;
+    (*jo)["reference_point"] = Array3(d.reference_point.value());
+    (*jo)["reference_normal"] = Array3(d.reference_normal.value());
   }
   void WriteOnMachine(const Machine& m, const Observation& o, json* jo) const override {
     if (!IsStep(o)) return;
     json ax = json::object();
-    const Eigen::VectorXd& ref = o.own.at(kRefAxes);
+    const Eigen::VectorXd& ref = o.data<MachinedData>().reference_axes;
     for (int k = 0; k < m.num_axes(); ++k) ax[std::string(1, m.axis(k).name)] = ref[k];
     (*jo)[kRefAxes] = ax;
   }
@@ -241,7 +243,7 @@ class Kind final : public ObservationKind {
     const Machine& m = b.dataset.machine();
     std::shared_ptr<const MachinedFace> reference;
     if (IsStep(o)) reference = std::make_shared<const MachinedFace>(FaceOf(m, o, true));
-    b.Add(new MachinedResidual(b.context, FaceOf(m, o, false), reference, o.reading, refs), 1);
+    b.Add(new MachinedResidual(b.context, FaceOf(m, o, false), reference, o.data<MachinedData>().measured, refs), 1);
   }
 
   // ---- simulation: the plan gives the rotary axes of each cut; the linear
@@ -254,23 +256,24 @@ class Kind final : public ObservationKind {
                      PlanSlot*) const override {
     const Machine& m = t.dataset->machine();
     ReadOwn(m, e, w, true, ob);
+    MachinedData& md = ob->data<MachinedData>();
     Eigen::VectorXd given;
-    if (!ReadPose(m, e.at("axes"), w + ".axes", true, &given)) ob->axes = CutCommands(m, ob->target_point, ob->axes);
-    if (IsStep(*ob) && !ReadPose(m, e.at(kRefAxes), w + "." + kRefAxes, true, &given))
-      ob->own[kRefAxes] = CutCommands(m, Eigen::Vector3d(ob->own[kRefPoint]), ob->own[kRefAxes]);
+    if (!ReadPose(m, e.at("axes"), w + ".axes", true, &given)) ob->axes = CutCommands(m, md.point, ob->axes);
+    if (md.step() && !ReadPose(m, e.at(kRefAxes), w + "." + kRefAxes, true, &given))
+      md.reference_axes = CutCommands(m, md.reference_point.value(), md.reference_axes);
     const std::string pre = Prefix(*ob) + ".";
     Eigen::Vector3d d;
     for (int c = 0; c < 3; ++c) d[c] = t.setup(pre + kFields[c]);
     const Eigen::Matrix3d R = RotZYX(t.setup(pre + "a"), t.setup(pre + "b"), t.setup(pre + "c"));
     double u = MachinedDeviation<double>(m, t.theta.data(), FaceOf(m, *ob, false), d, R);
     if (IsStep(*ob)) u -= MachinedDeviation<double>(m, t.theta.data(), FaceOf(m, *ob, true), d, R);
-    ob->reading = u;
+    md.measured = u;
   }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
     AddPlanInput(plan, i, 0, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int, double x, Observation* o) const override {
-    o->reading = plan.reading0[i] + x;
+    o->data<MachinedData>().measured = plan.base.observations[i].data<MachinedData>().measured + x;
   }
 
   // ---- report: the deviation along the face's normal, at the cut's tool point ----
@@ -294,13 +297,14 @@ class Kind final : public ObservationKind {
       throw std::invalid_argument(w + ".part: " + Quote(ob->setup) + " must be a non-empty name without '.'");
     if (!o.contains("feature") || !o["feature"].is_string())
       throw std::invalid_argument(w + ".feature: missing (\"face\" or \"step\")");
-    ob->target = o["feature"].get<std::string>();
-    if (ob->target != "face" && ob->target != "step")
-      throw std::invalid_argument(w + ".feature: " + Quote(ob->target) + " is neither \"face\" nor \"step\"" +
-                                  DidYouMean(ob->target, {"face", "step"}));
-    ob->target_point = ReadVector3(o.value("point", json()), w + ".point");
-    ob->own[kNormal] = ReadNormal(o, kNormal, w);
-    if (!IsStep(*ob)) {
+    MachinedData& d = ob->data<MachinedData>();
+    d.feature = o["feature"].get<std::string>();
+    if (d.feature != "face" && d.feature != "step")
+      throw std::invalid_argument(w + ".feature: " + Quote(d.feature) + " is neither \"face\" nor \"step\"" +
+                                  DidYouMean(d.feature, {"face", "step"}));
+    d.point = ReadVector3(o.value("point", json()), w + ".point");
+    d.normal = ReadNormal(o, kNormal, w);
+    if (!d.step()) {
       for (const char* key : {kRefAxes, kRefPoint, kRefNormal})
         if (o.contains(key)) throw std::invalid_argument(w + "." + key + ": only a step has a reference cut");
       return;
@@ -309,10 +313,9 @@ class Kind final : public ObservationKind {
       throw std::invalid_argument(w + "." + kRefAxes + ": missing (the axes of the step's other cut)");
     Eigen::VectorXd ref;
     ReadPose(m, o[kRefAxes], w + "." + kRefAxes, plan, &ref);
-    ob->own[kRefAxes] = ref;
-    ob->own[kRefPoint] = o.contains(kRefPoint) ? ReadVector3(o[kRefPoint], w + "." + kRefPoint)
-                                               : Eigen::Vector3d(ob->target_point);
-    ob->own[kRefNormal] = o.contains(kRefNormal) ? ReadNormal(o, kRefNormal, w) : Eigen::Vector3d(ob->own[kNormal]);
+    d.reference_axes = ref;
+    d.reference_point = o.contains(kRefPoint) ? ReadVector3(o[kRefPoint], w + "." + kRefPoint) : d.point;
+    d.reference_normal = o.contains(kRefNormal) ? ReadNormal(o, kRefNormal, w) : d.normal;
   }
 };
 

@@ -16,14 +16,14 @@ using namespace json_util;
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 // Parameters, per instrument (Observation::setup): its pose
 // instrument.<id>.x|y|z|a|b|c, and the offsets of the target it follows on
-// each side (Observation::target), instrument.<id>.tool_x|y|z and
+// each side (the payload's target), instrument.<id>.tool_x|y|z and
 // .work_x|y|z: one tracker may follow a target on the tool and one on the
 // table. The pose kind shares both groups (fixed_frame, point.h).
 const char* kFields[6] = {"x", "y", "z", "a", "b", "c"};
 const char* kXYZ[3] = {"x", "y", "z"};
 
 std::string Prefix(const Observation& o) { return "instrument." + o.setup; }
-std::string TargetPrefix(const Observation& o) { return Prefix(o) + "." + o.target + "_"; }
+std::string TargetPrefix(const Observation& o) { return Prefix(o) + "." + o.data<PointData>().target + "_"; }
 
 }  // namespace
 
@@ -96,22 +96,26 @@ class Kind final : public ObservationKind {
     return {"type", "instrument", "axes", "direction", "measured", "target", "target_point",
             "instrument_origin", "instrument_angles", "sigma", "id"};
   }
+  ObservationPayload NewPayload() const override { return PointData{}; }
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
-    fixed_frame::ReadInstrument(o, w, ob);
-    fixed_frame::ReadTarget(o, w, ob);
-    ob->measured = ReadVector3(o.value("measured", json()), w + ".measured");
+    PointData& d = ob->data<PointData>();
+    fixed_frame::ReadInstrument(o, w, ob, &d);
+    fixed_frame::ReadTarget(o, w, &d);
+    d.measured = ReadVector3(o.value("measured", json()), w + ".measured");
   }
   void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
-    fixed_frame::ValidateInstrument(o, w);
+    const PointData& d = o.data<PointData>();
+    fixed_frame::ValidateInstrument(o, d, w);
     for (int c = 0; c < 3; ++c)
-      if (!(std::abs(o.measured[c]) <= kMaxLinear))
-        RequireBounded(o.measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
-    fixed_frame::ValidateTarget(o, w);
+      if (!(std::abs(d.measured[c]) <= kMaxLinear))
+        RequireBounded(d.measured[c], kMaxLinear, w() + ".measured[" + std::to_string(c) + "]");
+    fixed_frame::ValidateTarget(d, w);
   }
   void Write(const Observation& o, json* jo) const override {
-    fixed_frame::WriteInstrument(o, jo);
-    (*jo)["target_point"] = Array3(o.target_point);
-    (*jo)["measured"] = Array3(o.measured);
+    const PointData& d = o.data<PointData>();
+    fixed_frame::WriteInstrument(o, d, jo);
+    fixed_frame::WriteTarget(d, jo);
+    (*jo)["measured"] = Array3(d.measured);
   }
 
   // ---- setup: the instrument's pose and the target's offsets, always
@@ -119,12 +123,12 @@ class Kind final : public ObservationKind {
   // enough to be fixed) ----
   void AddObservationParameters(const Observation& o, ParameterTable* t) const override {
     fixed_frame::AddInstrumentPose(o.setup, t);
-    fixed_frame::AddTargetOffsets(o.setup, o.target, t);
+    fixed_frame::AddTargetOffsets(o.setup, o.data<PointData>().target, t);
   }
   void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
                     std::set<int>* out) const override {
     for (int i : fixed_frame::InstrumentPose(t, o.setup)) out->insert(i);
-    for (int i : fixed_frame::TargetOffsets(t, o.setup, o.target)) out->insert(i);
+    for (int i : fixed_frame::TargetOffsets(t, o.setup, o.data<PointData>().target)) out->insert(i);
   }
   bool IsParameterName(const std::string&) const override { return false; }  // instrument.* and target.*
   std::vector<PriorClass> prior_classes() const override {
@@ -143,14 +147,14 @@ class Kind final : public ObservationKind {
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
     const auto& g = fixed_frame::InstrumentPose(b.table, o.setup);
-    const auto& tg = fixed_frame::TargetOffsets(b.table, o.setup, o.target);
+    const auto& tg = fixed_frame::TargetOffsets(b.table, o.setup, o.data<PointData>().target);
     InstrumentRefs refs;
     for (int c = 0; c < 3; ++c) {
       refs.position[c] = b.Ref(g[c]);
       refs.angle[c] = b.Ref(g[3 + c]);
       refs.target[c] = b.Ref(tg[c]);
     }
-    b.Add(new PointResidual(b.context, o, refs), 3);
+    b.Add(new PointResidual(b.context, o, o.data<PointData>(), refs), 3);
   }
 
   // ---- simulation ----
@@ -160,10 +164,11 @@ class Kind final : public ObservationKind {
   }
   void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
                      PlanSlot*) const override {
-    fixed_frame::ReadInstrument(e, w, ob);
-    fixed_frame::ReadTarget(e, w, ob);
+    PointData& d = ob->data<PointData>();
+    fixed_frame::ReadInstrument(e, w, ob, &d);
+    fixed_frame::ReadTarget(e, w, &d);
     const std::string pre = Prefix(*ob) + ".", tpre = TargetPrefix(*ob);
-    Observation truth = *ob;
+    PointData truth = d;
     for (int c = 0; c < 3; ++c) {
       truth.instrument_origin[c] += t.setup(pre + kFields[c]);
       truth.instrument_angles[c] += t.setup(pre + kFields[3 + c]);
@@ -172,20 +177,20 @@ class Kind final : public ObservationKind {
     const Machine& m = t.dataset->machine();
     const PoseData pose(m, *ob);
     const double ang[3] = {truth.instrument_angles[0], truth.instrument_angles[1], truth.instrument_angles[2]};
-    ob->measured = PointInInstrument<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), ob->on_tool,
-                                             truth.target_point, truth.instrument_origin, ang);
+    d.measured = PointInInstrument<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), d.on_tool,
+                                           truth.target_point, truth.instrument_origin, ang);
   }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
     for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
-    o->measured[c] = plan.measured0[i][c] + x;
+    o->data<PointData>().measured[c] = plan.base.observations[i].data<PointData>().measured[c] + x;
   }
 
   // ---- report: the residual turned into F, at the target's place ----
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
-    fixed_frame::ReportPoint(c, o, r, point, vector);
+    fixed_frame::ReportPoint(c, o, o.data<PointData>(), r, point, vector);
   }
 };
 
@@ -198,54 +203,59 @@ const ObservationKind& PointKind() {
 
 namespace fixed_frame {
 
-void ReadTarget(const json& o, const std::string& w, Observation* ob) {
+void ReadTarget(const json& o, const std::string& w, FixedTargetData* d) {
   if (!o.contains("target") || !o["target"].is_string())
     throw std::invalid_argument(w + ".target: missing (\"tool\" or \"work\": the side that carries the target)");
-  ob->target = o["target"].get<std::string>();
-  if (ob->target != "tool" && ob->target != "work")
-    throw std::invalid_argument(w + ".target: " + Quote(ob->target) + " is neither \"tool\" nor \"work\"");
-  ob->on_tool = ob->target == "tool";
-  ob->target_point = ReadVector3(o.value("target_point", json()), w + ".target_point");
+  d->target = o["target"].get<std::string>();
+  if (d->target != "tool" && d->target != "work")
+    throw std::invalid_argument(w + ".target: " + Quote(d->target) + " is neither \"tool\" nor \"work\"");
+  d->on_tool = d->target == "tool";
+  d->target_point = ReadVector3(o.value("target_point", json()), w + ".target_point");
 }
 
-void ValidateTarget(const Observation& o, const std::function<std::string()>& w) {
-  if (o.target != "tool" && o.target != "work")
-    throw std::invalid_argument(w() + ".target: " + Quote(o.target) + " is neither \"tool\" nor \"work\"");
+void ValidateTarget(const FixedTargetData& d, const std::function<std::string()>& w) {
+  if (d.target != "tool" && d.target != "work")
+    throw std::invalid_argument(w() + ".target: " + Quote(d.target) + " is neither \"tool\" nor \"work\"");
   for (int c = 0; c < 3; ++c)
-    if (!(std::abs(o.target_point[c]) <= kMaxLinear))
-      RequireBounded(o.target_point[c], kMaxLinear, w() + ".target_point[" + std::to_string(c) + "]");
+    if (!(std::abs(d.target_point[c]) <= kMaxLinear))
+      RequireBounded(d.target_point[c], kMaxLinear, w() + ".target_point[" + std::to_string(c) + "]");
 }
 
-void ReadInstrument(const json& o, const std::string& w, Observation* ob) {
+void WriteTarget(const FixedTargetData& d, json* jo) {
+  if (!d.target.empty()) (*jo)["target"] = d.target;
+  (*jo)["target_point"] = Array3(d.target_point);
+}
+
+void ReadInstrument(const json& o, const std::string& w, Observation* ob, PointData* d) {
   if (!o.contains("instrument") || !o["instrument"].is_string())
     throw std::invalid_argument(w + ".instrument: missing (the instrument's name, a string such as \"T1\")");
   ob->setup = o["instrument"].get<std::string>();
   if (ob->setup.empty() || ob->setup.find('.') != std::string::npos)
     throw std::invalid_argument(w + ".instrument: " + Quote(ob->setup) + " must be a non-empty name without '.'");
   if (o.contains("instrument_origin"))
-    ob->instrument_origin = ReadVector3(o["instrument_origin"], w + ".instrument_origin");
+    d->instrument_origin = ReadVector3(o["instrument_origin"], w + ".instrument_origin");
   if (o.contains("instrument_angles"))
-    ob->instrument_angles = ReadVector3(o["instrument_angles"], w + ".instrument_angles", 360.0) * kDegToRad;
+    d->instrument_angles = ReadVector3(o["instrument_angles"], w + ".instrument_angles", 360.0) * kDegToRad;
 }
 
-void ValidateInstrument(const Observation& o, const std::function<std::string()>& w) {
+void ValidateInstrument(const Observation& o, const PointData& d, const std::function<std::string()>& w) {
   if (o.setup.empty() || o.setup.find('.') != std::string::npos)
     throw std::invalid_argument(w() + ".instrument: the instrument id must be a non-empty name without '.'");
   auto bounded = [&](const Eigen::Vector3d& v, double bound, const char* field) {
     for (int c = 0; c < 3; ++c)
       if (!(std::abs(v[c]) <= bound)) RequireBounded(v[c], bound, w() + "." + field + "[" + std::to_string(c) + "]");
   };
-  bounded(o.instrument_origin, kMaxLinear, "instrument_origin");
-  bounded(o.instrument_angles, 2 * 3.14159265358979323846, "instrument_angles");
+  bounded(d.instrument_origin, kMaxLinear, "instrument_origin");
+  bounded(d.instrument_angles, 2 * 3.14159265358979323846, "instrument_angles");
 }
 
-void WriteInstrument(const Observation& o, json* jo) {
-  // The generic writer put the instrument id under "setup" and the side
-  // under "target"; the file calls the id "instrument".
+void WriteInstrument(const Observation& o, const PointData& d, json* jo) {
+  // The generic writer put the instrument id under "setup"; the file calls
+  // it "instrument".
   jo->erase("setup");
   (*jo)["instrument"] = o.setup;
-  if (!o.instrument_origin.isZero()) (*jo)["instrument_origin"] = Array3(o.instrument_origin);
-  if (!o.instrument_angles.isZero()) (*jo)["instrument_angles"] = Array3(o.instrument_angles / kDegToRad);
+  if (!d.instrument_origin.isZero()) (*jo)["instrument_origin"] = Array3(d.instrument_origin);
+  if (!d.instrument_angles.isZero()) (*jo)["instrument_angles"] = Array3(d.instrument_angles / kDegToRad);
 }
 
 // Both groups live under kPoint whichever kind adds them, so that a point and
@@ -279,18 +289,18 @@ const std::vector<int>& TargetOffsets(const ParameterTable& t, const std::string
   return t.group(ObservationType::kPoint, id + "." + side);
 }
 
-void ReportPoint(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
-                 Eigen::Vector3d* vector) {
+void ReportPoint(const ReportContext& c, const Observation& o, const PointData& d, const double* r,
+                 Eigen::Vector3d* point, Eigen::Vector3d* vector) {
   const Eigen::VectorXd& v = *c.values;
   const auto& g = InstrumentPose(*c.table, o.setup);
-  Observation at = o;
+  Eigen::Vector3d origin = d.instrument_origin, angles = d.instrument_angles;
   for (int k = 0; k < 3; ++k) {
-    at.instrument_origin[k] += v[g[k]];
-    at.instrument_angles[k] += v[g[3 + k]];
+    origin[k] += v[g[k]];
+    angles[k] += v[g[3 + k]];
   }
-  const Eigen::Matrix3d R = RotZYX(at.instrument_angles[0], at.instrument_angles[1], at.instrument_angles[2]);
+  const Eigen::Matrix3d R = RotZYX(angles[0], angles[1], angles[2]);
   *vector = R * Eigen::Vector3d(r[0], r[1], r[2]);
-  *point = R * (o.measured + Eigen::Vector3d(r[0], r[1], r[2])) + at.instrument_origin;
+  *point = R * (d.measured + Eigen::Vector3d(r[0], r[1], r[2])) + origin;
 }
 
 const char* PriorClassOfName(const std::string& n) {

@@ -20,8 +20,8 @@ const char* kABC[3] = {"a", "b", "c"};
 // The target frame's orientation corrections instrument.<id>.<side>_a|b|c,
 // one group per id and side (a point observation of the same target has no
 // use for them).
-std::string AngleKey(const Observation& o) { return o.setup + "." + o.target; }
-std::string AnglePrefix(const Observation& o) { return "instrument." + o.setup + "." + o.target + "_"; }
+std::string AngleKey(const Observation& o) { return o.setup + "." + o.data<PoseTargetData>().target; }
+std::string AnglePrefix(const Observation& o) { return "instrument." + o.setup + "." + o.data<PoseTargetData>().target + "_"; }
 
 class Kind final : public ObservationKind {
  public:
@@ -90,6 +90,7 @@ class Kind final : public ObservationKind {
   // A camera or 6D tracker reports positions in its calibrated length unit:
   // like a point tracker, its data fix the machine's scale (EXX1 ...).
   bool LengthReference() const override { return true; }
+  ObservationPayload NewPayload() const override { return PoseTargetData{}; }
 
   std::vector<const char*> json_keys() const override {
     return {"type", "instrument", "axes", "direction", "measured", "measured_rotation", "target", "target_point",
@@ -97,26 +98,29 @@ class Kind final : public ObservationKind {
   }
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
     ReadOwn(o, w, ob);
-    ob->measured = ReadVector3(o.value("measured", json()), w + ".measured");
-    ob->measured_rotation = ReadVector3(o.value("measured_rotation", json()), w + ".measured_rotation", kTwoPi);
+    PoseTargetData& d = ob->data<PoseTargetData>();
+    d.measured = ReadVector3(o.value("measured", json()), w + ".measured");
+    d.measured_rotation = ReadVector3(o.value("measured_rotation", json()), w + ".measured_rotation", kTwoPi);
   }
   void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
-    fixed_frame::ValidateInstrument(o, w);
+    const PoseTargetData& d = o.data<PoseTargetData>();
+    fixed_frame::ValidateInstrument(o, d, w);
     auto bounded = [&](const Eigen::Vector3d& v, double bound, const char* field) {
       for (int c = 0; c < 3; ++c)
         if (!(std::abs(v[c]) <= bound)) RequireBounded(v[c], bound, w() + "." + field + "[" + std::to_string(c) + "]");
     };
-    bounded(o.measured, kMaxLinear, "measured");
-    bounded(o.measured_rotation, kTwoPi, "measured_rotation");
-    bounded(o.target_rotation, kTwoPi, "target_rotation");
-    fixed_frame::ValidateTarget(o, w);
+    bounded(d.measured, kMaxLinear, "measured");
+    bounded(d.measured_rotation, kTwoPi, "measured_rotation");
+    bounded(d.target_rotation, kTwoPi, "target_rotation");
+    fixed_frame::ValidateTarget(d, w);
   }
   void Write(const Observation& o, json* jo) const override {
-    fixed_frame::WriteInstrument(o, jo);
-    (*jo)["target_point"] = Array3(o.target_point);
-    (*jo)["measured"] = Array3(o.measured);
-    (*jo)["measured_rotation"] = Array3(o.measured_rotation);
-    if (!o.target_rotation.isZero()) (*jo)["target_rotation"] = Array3(o.target_rotation);
+    const PoseTargetData& d = o.data<PoseTargetData>();
+    fixed_frame::WriteInstrument(o, d, jo);
+    fixed_frame::WriteTarget(d, jo);
+    (*jo)["measured"] = Array3(d.measured);
+    (*jo)["measured_rotation"] = Array3(d.measured_rotation);
+    if (!d.target_rotation.isZero()) (*jo)["target_rotation"] = Array3(d.target_rotation);
   }
 
   // ---- setup: the instrument's pose, the target's offsets (shared with the
@@ -124,7 +128,7 @@ class Kind final : public ObservationKind {
   // a fiducial's orientation on a spindle or a table is never known exactly ----
   void AddObservationParameters(const Observation& o, ParameterTable* t) const override {
     fixed_frame::AddInstrumentPose(o.setup, t);
-    fixed_frame::AddTargetOffsets(o.setup, o.target, t);
+    fixed_frame::AddTargetOffsets(o.setup, o.data<PoseTargetData>().target, t);
     if (!t->has_group(type(), AngleKey(o))) {
       std::vector<int> idx;
       for (const char* f : kABC) idx.push_back(t->Add(AnglePrefix(o) + f));
@@ -134,7 +138,7 @@ class Kind final : public ObservationKind {
   void DefaultSetup(const Dataset&, const ParameterTable& t, const Observation& o,
                     std::set<int>* out) const override {
     for (int i : fixed_frame::InstrumentPose(t, o.setup)) out->insert(i);
-    for (int i : fixed_frame::TargetOffsets(t, o.setup, o.target)) out->insert(i);
+    for (int i : fixed_frame::TargetOffsets(t, o.setup, o.data<PoseTargetData>().target)) out->insert(i);
     for (int i : t.group(type(), AngleKey(o))) out->insert(i);
   }
   bool IsParameterName(const std::string&) const override { return false; }  // instrument.*
@@ -150,7 +154,7 @@ class Kind final : public ObservationKind {
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
     const auto& g = fixed_frame::InstrumentPose(b.table, o.setup);
-    const auto& tg = fixed_frame::TargetOffsets(b.table, o.setup, o.target);
+    const auto& tg = fixed_frame::TargetOffsets(b.table, o.setup, o.data<PoseTargetData>().target);
     const auto& ag = b.table.group(type(), AngleKey(o));
     PoseRefs refs;
     for (int c = 0; c < 3; ++c) {
@@ -170,8 +174,9 @@ class Kind final : public ObservationKind {
   void SimulateEntry(const json& e, const std::string& w, const PlanTruth& t, Observation* ob,
                      PlanSlot*) const override {
     ReadOwn(e, w, ob);
+    PoseTargetData& d = ob->data<PoseTargetData>();
     const std::string pre = "instrument." + ob->setup + ".", tpre = AnglePrefix(*ob);
-    Observation truth = *ob;
+    PoseTargetData truth = d;
     double tang[3];
     for (int c = 0; c < 3; ++c) {
       truth.instrument_origin[c] += t.setup(pre + kXYZ[c]);
@@ -185,9 +190,9 @@ class Kind final : public ObservationKind {
     const Eigen::Matrix3d target_R =
         RotationOfVector<double>(truth.target_rotation) * RotZYX(tang[0], tang[1], tang[2]);
     Eigen::Matrix3d R;
-    PoseInInstrument<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), ob->on_tool, truth.target_point,
-                             target_R, truth.instrument_origin, ang, &ob->measured, &R);
-    ob->measured_rotation = VectorOfRotation<double>(R);
+    PoseInInstrument<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), d.on_tool, truth.target_point,
+                             target_R, truth.instrument_origin, ang, &d.measured, &R);
+    d.measured_rotation = VectorOfRotation<double>(R);
   }
   const char* noise_class_row(int k) const override { return k < 3 ? "pose" : "pose_angle"; }
   // Rotation noise is a small rotation of the reading in the target frame,
@@ -198,30 +203,32 @@ class Kind final : public ObservationKind {
     for (int c = 0; c < 6; ++c) AddPlanInput(plan, i, c, -1.0, NoiseLevelRow(plan->noise, c));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
+    PoseTargetData& d = o->data<PoseTargetData>();
     if (c < 3) {
-      o->measured[c] = plan.measured0[i][c] + x;
+      d.measured[c] = plan.base.observations[i].data<PoseTargetData>().measured[c] + x;
       return;
     }
     // Composed onto the reading's current orientation: each rotation input
     // is applied once, in input order, starting from the noise-free one.
     Eigen::Vector3d e = Eigen::Vector3d::Zero();
     e[c - 3] = x;
-    o->measured_rotation =
-        VectorOfRotation<double>(RotationOfVector<double>(o->measured_rotation) * RotationOfVector<double>(e));
+    d.measured_rotation =
+        VectorOfRotation<double>(RotationOfVector<double>(d.measured_rotation) * RotationOfVector<double>(e));
   }
 
   // ---- report: the position rows, as the point kind's ----
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
-    fixed_frame::ReportPoint(c, o, r, point, vector);
+    fixed_frame::ReportPoint(c, o, o.data<PoseTargetData>(), r, point, vector);
   }
 
  private:
   static void ReadOwn(const json& o, const std::string& w, Observation* ob) {
-    fixed_frame::ReadInstrument(o, w, ob);
-    fixed_frame::ReadTarget(o, w, ob);
+    PoseTargetData& d = ob->data<PoseTargetData>();
+    fixed_frame::ReadInstrument(o, w, ob, &d);
+    fixed_frame::ReadTarget(o, w, &d);
     if (o.contains("target_rotation"))
-      ob->target_rotation = ReadVector3(o["target_rotation"], w + ".target_rotation", kTwoPi);
+      d.target_rotation = ReadVector3(o["target_rotation"], w + ".target_rotation", kTwoPi);
   }
 };
 

@@ -160,15 +160,20 @@ Eigen::Vector3d ProbeTouchKind::FittedTipCentre(const ReportContext& c, const Ob
 }
 
 void ProbeTouchKind::Read(const json& o, const std::string& w, const Dataset& ds, Observation* ob) const {
-  ob->target = ReadString(o, "target", w);
-  RequireTarget(ds, ob->target, w);
+  ob->data<TouchData>().target = ReadString(o, "target", w);
+  RequireTarget(ds, ob->data<TouchData>().target, w);
+}
+
+void ProbeTouchKind::Write(const Observation& o, json* jo) const {
+  const std::string& target = o.data<TouchData>().target;
+  if (!target.empty()) (*jo)["target"] = target;
 }
 
 void ProbeTouchKind::DefaultSetup(const Dataset& ds, const ParameterTable& t, const Observation& o,
                                   std::set<int>* out) const {
   const int tip = ds.machine().tip_index();
   for (int c = 0; c < 3; ++c) out->insert(tip + c);
-  const auto& g = t.group(type(), o.target);
+  const auto& g = t.group(type(), o.data<TouchData>().target);
   for (int k = 0; k < DefaultTargetParameters(); ++k) out->insert(g[k]);
 }
 
@@ -176,7 +181,7 @@ void ProbeTouchKind::Validate(const Dataset& ds, const Observation& o,
                               const std::function<std::string()>& where) const {
   if (ds.tip_radius <= 0)
     throw std::invalid_argument("dataset.probe.tip_radius: missing or zero but the dataset has probe touches");
-  RequireTarget(ds, o.target, where());
+  RequireTarget(ds, o.data<TouchData>().target, where());
 }
 
 
@@ -188,7 +193,7 @@ void ProbeTouchKind::SimulateEntry(const json& e, const std::string& w, const Pl
   if (ds.tip_radius <= 0)
     throw std::invalid_argument("simulate.probe.tip_radius: missing or zero, but " + w + " is a probe touch");
   if (!e.contains("target") || !e["target"].is_string()) throw std::invalid_argument(w + ".target: missing");
-  ob->target = e["target"].get<std::string>();
+  ob->data<TouchData>().target = e["target"].get<std::string>();
   Eigen::Vector3d n, c;
   Gap gap;
   PlannedTouch(e, w, t, *ob, &n, &c, &gap);

@@ -46,14 +46,7 @@ void InitSlots(SimulationPlan* plan) {
   plan->start.resize(n);
   plan->approach.assign(n, Eigen::VectorXd());
   plan->s0.assign(n, 0.0);
-  plan->reading0.assign(n, 0.0);
-  plan->measured0.assign(n, Eigen::Vector3d::Zero());
-  for (size_t i = 0; i < n; ++i) {
-    const Observation& o = plan->base.observations[i];
-    plan->start[i] = o.axes;
-    plan->reading0[i] = o.reading;
-    plan->measured0[i] = o.measured;
-  }
+  for (size_t i = 0; i < n; ++i) plan->start[i] = plan->base.observations[i].axes;
 }
 
 // The calibrated length of every scale bar the fit has a row for (the
@@ -274,6 +267,7 @@ SimulationPlan PlanSpec(const json& spec) {
     CheckKeys(e, kind->plan_keys(), w);
     Observation ob;
     ob.type = kind->type();
+    ob.payload = kind->NewPayload();
     ob.axes = Eigen::VectorXd::Zero(na);
     ob.direction = Eigen::VectorXi::Zero(na);
     if (e.contains("id")) ob.id = ReadString(e, "id", w);

@@ -18,7 +18,7 @@ using namespace json_util;
 std::set<std::string> Probed(const Dataset& ds) {
   std::set<std::string> probed;
   for (const Observation& o : ds.observations)
-    if (o.type == ObservationType::kSphere) probed.insert(o.target);
+    if (o.type == ObservationType::kSphere) probed.insert(o.data<TouchData>().target);
   return probed;
 }
 
@@ -68,8 +68,8 @@ class Kind final : public ProbeTouchKind {
 
   void AddResidual(ResidualBuilder& b, const Observation& o) const override {
     const Dataset& ds = b.dataset;
-    const int si = ds.artefact.SphereIndex(o.target);
-    const auto& sp = b.table.group(type(), o.target);
+    const int si = ds.artefact.SphereIndex(o.data<TouchData>().target);
+    const auto& sp = b.table.group(type(), o.data<TouchData>().target);
     const SetupRef c[3] = {b.Ref(sp[0]), b.Ref(sp[1]), b.Ref(sp[2])};
     const SetupRef r = b.Ref(sp[3]);
     const ProbeTrigger trigger = MakeProbeTrigger(b, o);
@@ -105,10 +105,10 @@ class Kind final : public ProbeTouchKind {
   // centre offsets of sphere 1 then 2).
   void PrepareAnalytic(const Dataset& ds, const ParameterTable& t, const Observation& o,
                        AnalyticRow* r) const override {
-    const int si = ds.artefact.SphereIndex(o.target);
+    const int si = ds.artefact.SphereIndex(o.data<TouchData>().target);
     r->a = ds.artefact.spheres[si].center;
     r->constant = ds.artefact.spheres[si].radius + ds.tip_radius;
-    for (int c = 0; c < 4; ++c) r->idx[c] = t.group(type(), o.target)[c];
+    for (int c = 0; c < 4; ++c) r->idx[c] = t.group(type(), o.data<TouchData>().target)[c];
     PrepareProbeTrigger(ds, t, o, r);
   }
   void AddArtefactAnalyticRows(const Dataset& ds, const ParameterTable& t, std::vector<AnalyticRow>* rows,
@@ -185,9 +185,9 @@ class Kind final : public ProbeTouchKind {
                     Eigen::Vector3d* vector) const override {
     const Dataset& ds = *c.dataset;
     const Eigen::Vector3d P = FittedTipCentre(c, o);
-    const auto& sp = c.table->group(type(), o.target);
+    const auto& sp = c.table->group(type(), o.data<TouchData>().target);
     const Eigen::VectorXd& values = *c.values;
-    const Eigen::Vector3d centre = ds.artefact.spheres[ds.artefact.SphereIndex(o.target)].center +
+    const Eigen::Vector3d centre = ds.artefact.spheres[ds.artefact.SphereIndex(o.data<TouchData>().target)].center +
                                    Eigen::Vector3d(values[sp[0]], values[sp[1]], values[sp[2]]);
     *point = P;
     *vector = r[0] * (P - centre).normalized();
@@ -208,7 +208,7 @@ class Kind final : public ProbeTouchKind {
                     Eigen::Vector3d* n_out, Eigen::Vector3d* c, Gap* gap) const override {
     const Dataset& ds = *t.dataset;
     const double r = ds.tip_radius;
-    const int si = RequireTarget(ds, ob.target, w);
+    const int si = RequireTarget(ds, ob.data<TouchData>().target, w);
     const Sphere& s = ds.artefact.spheres[si];
     if (!e.contains("normal")) throw std::invalid_argument(w + ".normal: missing (touch direction from the centre)");
     const Eigen::Vector3d n = UnitDirection(ReadVector3(e["normal"], w + ".normal"), w + ".normal");
@@ -224,12 +224,12 @@ class Kind final : public ProbeTouchKind {
   void RecordedTouch(const RecordedContext& rec, const Observation& o, const Eigen::Vector3d& P0,
                      const std::string& w, Eigen::Vector3d* n_out, Gap* gap) const override {
     const Dataset& ds = *rec.dataset;
-    const int si = ds.artefact.SphereIndex(o.target);
+    const int si = ds.artefact.SphereIndex(o.data<TouchData>().target);
     const Sphere& sp = ds.artefact.spheres[si];
     Eigen::Vector3d n = P0 - sp.center;
     if (n.norm() < 1e-9) throw std::invalid_argument(w + ": touch at the sphere centre");
     n.normalize();
-    const auto& ix = rec.table->group(type(), o.target);
+    const auto& ix = rec.table->group(type(), o.data<TouchData>().target);
     const Eigen::Vector3d c = sp.center + Eigen::Vector3d(rec.values[ix[0]], rec.values[ix[1]], rec.values[ix[2]]);
     *gap = [=](const Eigen::Vector3d& P) { return (P - c).norm(); };
     *n_out = n;

@@ -17,8 +17,8 @@ namespace {
 using json_util::json;
 
 // The kind's own keys of one observation, as Dataset::ToJson writes them:
-// the generic writer's "target" and "setup" first (a kind may rename them:
-// the machined features call them "feature" and "part"), then the kind's
+// the generic writer's "setup" first (a kind may rename it: the machined
+// features call it "part"), then the kind's
 // Write and WriteOnMachine. Type, axes, direction, noise and id are not in
 // it: both writers below put those out themselves, without a JSON value
 // per number. `jo` is reused row after row (its map nodes stay, which
@@ -27,7 +27,6 @@ using json_util::json;
 void OwnKeys(const Machine& m, const Observation& o, json* jo) {
   if (!jo->is_object()) *jo = json::object();
   for (auto& v : *jo) v = nullptr;
-  if (!o.target.empty()) (*jo)["target"] = o.target;
   if (!o.setup.empty()) (*jo)["setup"] = o.setup;
   const ObservationKind& kind = KindOf(o);
   kind.Write(o, jo);
@@ -44,10 +43,6 @@ class OwnRow {
   void Fill(const Machine& m, const Observation& o) {
     using F = FlatObservation;
     flat_ = F();
-    if (!o.target.empty()) {
-      flat_.target = &o.target;
-      flat_.seen |= 1u << F::kTarget;
-    }
     if (!o.setup.empty()) {
       flat_.setup = &o.setup;
       flat_.seen |= 1u << F::kSetup;

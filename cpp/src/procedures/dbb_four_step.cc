@@ -174,15 +174,17 @@ FourStepStep AnalyzeStep(const Dataset& ds, const FourStepPair& t, const std::st
       throw std::invalid_argument(wo + ": " + std::string(1, m.axis(t.carrier).name) + " = " +
                                   std::to_string(o.axes[t.carrier]) + " deg; the " + std::string(1, axis) +
                                   " steps are run with the axis carrying " + std::string(1, axis) + " at 0");
-    if ((o.tool_ball - o0.tool_ball).norm() > 1e-12 || (o.table_ball - o0.table_ball).norm() > 1e-12 ||
-        o.length != o0.length)
+    const BallMountData &b = o.data<BallMountData>(), &b0 = o0.data<BallMountData>();
+    if ((b.tool_ball - b0.tool_ball).norm() > 1e-12 || (b.table_ball - b0.table_ball).norm() > 1e-12 ||
+        b.length != b0.length)
       throw std::invalid_argument(wo + ": tool_ball, table_ball and length must be the same for "
                                   "every sample of one ball-bar mounting");
   }
   const Eigen::Vector3d n = carrier ? t.n_carrier : t.n_carried;
   PlaneBasis(n, &st.e1, &st.e2);
   st.normal = n;
-  st.spindle_ball = FixedBall(m, t, o0.axes, o0.tool_ball, o0.table_ball);
+  const BallMountData& mount = o0.data<BallMountData>();
+  st.spindle_ball = FixedBall(m, t, o0.axes, mount.tool_ball, mount.table_ball);
   // The carried axis at carrier = 0: its zero-pose line, in the frame carrying the pair.
   const Eigen::Vector3d p_axis = m.axis(moving).point;
 
@@ -215,7 +217,8 @@ FourStepStep AnalyzeStep(const Dataset& ds, const FourStepPair& t, const std::st
   Eigen::Vector3d b0 = Eigen::Vector3d::Zero();
   for (int i = 0; i < N; ++i) {
     const Observation& o = ds.observations[st.observations[i]];
-    const Eigen::Vector3d b = MovingBall(m, t, o.axes, o.tool_ball, o.table_ball);
+    const BallMountData& ball = o.data<BallMountData>();
+    const Eigen::Vector3d b = MovingBall(m, t, o.axes, ball.tool_ball, ball.table_ball);
     if (i == 0) b0 = b;
     const Eigen::Vector3d rel = b - O;
     double a = std::atan2(rel.dot(st.e2), rel.dot(st.e1));
@@ -235,7 +238,7 @@ FourStepStep AnalyzeStep(const Dataset& ds, const FourStepPair& t, const std::st
   const double offset = it == opt.length_offsets.end() ? 0.0 : it->second;
   st.points.resize(N, 2);
   for (int i = 0; i < N; ++i) {
-    const double L = o0.length + offset + ds.observations[st.observations[i]].reading;
+    const double L = mount.length + offset + ds.observations[st.observations[i]].data<BallMountData>().reading;
     double r = L;  // eqs. 3-4: R_n + d_i
     if (st.extended) {
       if (!(L > st.arm))

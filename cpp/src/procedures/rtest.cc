@@ -95,7 +95,7 @@ RTestResult EvaluateRTest(const Dataset& ds, const RTestOptions& options) {
   for (RTestGroup& g : out.tests) {
     g.deviations.resize(g.observations.size(), 3);
     for (size_t k = 0; k < g.observations.size(); ++k)
-      g.deviations.row(k) = ds.observations[g.observations[k]].measured.transpose();
+      g.deviations.row(k) = ds.observations[g.observations[k]].data<BallMountData>().measured.transpose();
     g.ranges = (g.deviations.colwise().maxCoeff() - g.deviations.colwise().minCoeff()).transpose();
   }
   if (options.identify) {

@@ -123,7 +123,7 @@ SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOption
                                 " (expected -1: where reached from both sides, 0: no, 1: yes)");
   std::set<std::string> spheres;
   for (const Observation& o : obs)
-    if (o.type == ObservationType::kSphere) spheres.insert(o.target);
+    if (o.type == ObservationType::kSphere) spheres.insert(o.data<TouchData>().target);
   if (spheres.empty()) throw std::invalid_argument("sphere check: the dataset has no sphere touches");
   SphereCheckResult out;
   out.sphere = options.sphere.empty() ? *spheres.begin() : options.sphere;
@@ -213,7 +213,7 @@ SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOption
       members.emplace_back();
       it = keys.end() - 1;
     }
-    if (obs[j].type == ObservationType::kSphere && obs[j].target == out.sphere)
+    if (obs[j].type == ObservationType::kSphere && obs[j].data<TouchData>().target == out.sphere)
       members[it - keys.begin()].push_back(static_cast<int>(j));
   }
   const Sphere& sphere = ds.artefact.spheres[si];

@@ -218,7 +218,7 @@ SphereTestResult SphereTest(const Dataset& ds, const std::string& sphere,
   ds.Validate();
   std::set<std::string> touched;
   for (const Observation& o : ds.observations)
-    if (o.type == ObservationType::kSphere) touched.insert(o.target);
+    if (o.type == ObservationType::kSphere) touched.insert(o.data<TouchData>().target);
   SphereTestResult r;
   r.sphere = sphere;
   if (r.sphere.empty()) {
@@ -231,7 +231,7 @@ SphereTestResult SphereTest(const Dataset& ds, const std::string& sphere,
   if (si < 0) throw std::invalid_argument("sphere_test: no sphere '" + r.sphere + "' in the artefact");
   for (int i = 0; i < static_cast<int>(ds.observations.size()); ++i) {
     const Observation& o = ds.observations[i];
-    if (o.type == ObservationType::kSphere && o.target == r.sphere) r.observations.push_back(i);
+    if (o.type == ObservationType::kSphere && o.data<TouchData>().target == r.sphere) r.observations.push_back(i);
   }
   if (r.observations.size() < 4)
     throw std::invalid_argument("sphere_test: sphere '" + r.sphere + "' has " +

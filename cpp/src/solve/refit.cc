@@ -499,7 +499,7 @@ RefitResult Refit::Fit(const Dataset& ds, bool with_std) const {
     throw std::invalid_argument("refit: " + std::to_string(b.size()) + " observations, the reference has " +
                                 std::to_string(a.size()));
   for (size_t i = 0; i < a.size(); ++i)
-    if (a[i].type != b[i].type || a[i].target != b[i].target || a[i].setup != b[i].setup ||
+    if (a[i].type != b[i].type || PayloadTarget(a[i]) != PayloadTarget(b[i]) || a[i].setup != b[i].setup ||
         a[i].axes.size() != b[i].axes.size())
       throw std::invalid_argument("refit: observations[" + std::to_string(i) +
                                   "] differs from the reference (type, target or setup)");

@@ -22,6 +22,13 @@ namespace {
 
 using nlohmann::json;
 
+// ---- step 1: its data ----------------------------------------------------------------------------------
+// A kind outside the core has no struct among the core's payloads: its
+// observations carry the generic KindOwnData (ObservationKind::NewPayload's
+// default), its numbers under names of its choosing, here its file key.
+const Eigen::VectorXd& Measured(const Observation& o) { return o.data<KindOwnData>().values.at("measured"); }
+Eigen::VectorXd& Measured(Observation* o) { return o->data<KindOwnData>().values["measured"]; }
+
 // ---- step 2: the residual ---------------------------------------------------------------------------
 // "stylus3d" (a made-up instrument): the 3D position of a stylus on the
 // spindle, read in the workpiece frame by a fixture on the table. The
@@ -36,7 +43,7 @@ using nlohmann::json;
 class Stylus3dResidual {
  public:
   Stylus3dResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const SetupRef d[3])
-      : access_(ctx), pose_(*ctx->machine, o), tip_(ctx->machine->tip()), measured_(o.measured) {
+      : access_(ctx), pose_(*ctx->machine, o), tip_(ctx->machine->tip()), measured_(Measured(o)) {
     for (int c = 0; c < 3; ++c) d_[c] = d[c];
   }
 
@@ -95,15 +102,19 @@ class Stylus3dKind final : public ObservationKind {
   }
   void Read(const json& o, const std::string& w, const Dataset&, Observation* ob) const override {
     ob->setup = o.value("setup", std::string());
-    ob->measured = ReadXYZ(o, "measured", w);
+    Measured(ob) = ReadXYZ(o, "measured", w);
   }
   void Validate(const Dataset&, const Observation& o, const std::function<std::string()>& w) const override {
     if (o.setup.find('.') != std::string::npos) throw std::invalid_argument(w() + ".setup: no '.' in an id");
-    if (!o.measured.allFinite()) throw std::invalid_argument(w() + ".measured: not finite");
+    const auto& own = o.data<KindOwnData>().values;
+    const auto m = own.find("measured");
+    if (m == own.end() || m->second.size() != 3) throw std::invalid_argument(w() + ".measured: missing ([x, y, z] mm)");
+    if (!m->second.allFinite()) throw std::invalid_argument(w() + ".measured: not finite");
   }
   void Write(const Observation& o, json* out) const override {
     if (!o.setup.empty()) (*out)["setup"] = o.setup;
-    (*out)["measured"] = {o.measured[0], o.measured[1], o.measured[2]};
+    const Eigen::VectorXd& m = Measured(o);
+    (*out)["measured"] = {m[0], m[1], m[2]};
   }
 
   // its setup parameters: the stylus offset of each mounting, estimated by default
@@ -148,19 +159,19 @@ class Stylus3dKind final : public ObservationKind {
     const PoseData pose(m, *ob);
     Eigen::Vector3d P;
     ToolInWorkpiece<double>(m, t.theta.data(), pose.q.data(), pose.dir.data(), tip, &P);
-    ob->measured = P;
+    Measured(ob) = P;
   }
   void AddInputs(SimulationPlan* plan, int i, const PlanSlot*, const RecordedContext*) const override {
     for (int c = 0; c < 3; ++c) AddPlanInput(plan, i, c, -1.0, NoiseLevel(plan->noise));
   }
   void ApplyInput(const SimulationPlan& plan, int i, int c, double x, Observation* o) const override {
-    o->measured[c] = plan.measured0[i][c] + x;
+    Measured(o)[c] = Measured(plan.base.observations[i])[c] + x;
   }
 
   // its report: the residual is already a vector in the workpiece frame
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const override {
-    *point = o.measured;
+    *point = Measured(o);
     (void)c;
     *vector = Eigen::Vector3d(r[0], r[1], r[2]);
   }

@@ -19,8 +19,8 @@ namespace fivecal {
 class Ball3dResidual {
  public:
   Ball3dResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const MountRefs& refs)
-      : access_(ctx), pose_(*ctx->machine, o), tool_ball_(o.tool_ball), table_ball_(o.table_ball),
-        measured_(o.measured), refs_(refs) {}
+      : access_(ctx), pose_(*ctx->machine, o), tool_ball_(o.data<BallMountData>().tool_ball),
+        table_ball_(o.data<BallMountData>().table_ball), measured_(o.data<BallMountData>().measured), refs_(refs) {}
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {

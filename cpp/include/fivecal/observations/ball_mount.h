@@ -60,6 +60,7 @@ class BallMountKind : public ObservationKind {
   void SimulateEntry(const nlohmann::json& e, const std::string& where, const PlanTruth& t,
                      Observation* ob, PlanSlot* slot) const final;
   bool LengthReference() const final { return true; }
+  ObservationPayload NewPayload() const final { return BallMountData{}; }
   // The column block of a trace and its fused kernel (solve/long_kernel.h):
   // a mounting with a length has one row, the ball distance less the bar
   // (|P - table| - (length + reading + <kind>.length)); one without has
@@ -87,14 +88,16 @@ class BallMountKind : public ObservationKind {
       if (f.setup->find('.') != std::string::npos) return false;
       ob->setup = *f.setup;
     }
-    ob->tool_ball = f.tool_ball;
-    ob->table_ball = f.table_ball;
+    BallMountData& d = ob->data<BallMountData>();
+    d.tool_ball = f.tool_ball;
+    d.table_ball = f.table_ball;
     return true;
   }
   // Both balls in the flat form (a kind's WriteFlat calls it).
   static void WriteFlatMount(const Observation& o, FlatObservation* f) {
-    f->tool_ball = o.tool_ball;
-    f->table_ball = o.table_ball;
+    const BallMountData& d = o.data<BallMountData>();
+    f->tool_ball = d.tool_ball;
+    f->table_ball = d.table_ball;
     f->seen |= (1u << FlatObservation::kToolBall) | (1u << FlatObservation::kTableBall);
   }
   // The kind's own fields (checked after the setup id, before the ball

@@ -7,9 +7,11 @@
 #include <Eigen/Core>
 #include <map>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "fivecal/model/machine.h"
+#include "fivecal/observations/payloads.h"
 
 namespace fivecal {
 
@@ -67,45 +69,48 @@ int ResidualRows(ObservationType t);
 // particular instrument (each kind's file says which).
 double DefaultSigma(ObservationType t);
 
-// One observation; the fields a kind does not use stay at their defaults.
+// One observation: a common header that every kind has and generic code
+// reads (type, id, axes, direction, sigma, setup), and the payload its kind
+// owns (payloads.h), read only by that kind's code through data<T>().
 struct Observation {
   ObservationType type = ObservationType::kFacet;
-  std::string target;  // facet or sphere id; point: "tool" or "work", the side carrying the target
-  std::string setup;   // DBB / ball3d mounting id ("" = the default setup); point: the instrument id
+  std::string id;      // optional user label, kept through load and save
+  // The mounting (dbb, ball3d), instrument (point, pose), station (distance)
+  // or part (machined) id; "" = the kind's default set-up.
+  std::string setup;
   Eigen::VectorXd axes;       // machine axis order, mm / degrees
   Eigen::VectorXi direction;  // last move direction per axis: -1, 0, +1
-  double reading = 0.0;       // dbb: length change, mm
-  double length = 0.0;        // dbb: nominal bar length, mm
-  Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero();   // in F at the zero pose
-  Eigen::Vector3d table_ball = Eigen::Vector3d::Zero();  // workpiece frame
-  Eigen::Vector3d measured = Eigen::Vector3d::Zero();    // ball3d displacement; point: instrument frame
-  // point: the target (tool side: in F at the zero pose; workpiece side: in
-  // the workpiece frame), the side that carries it, and the instrument's
-  // nominal pose in F (origin mm, angles a b c rad: Rz(c) Ry(b) Rx(a)).
-  Eigen::Vector3d target_point = Eigen::Vector3d::Zero();
-  bool on_tool = true;
-  Eigen::Vector3d instrument_origin = Eigen::Vector3d::Zero();
-  Eigen::Vector3d instrument_angles = Eigen::Vector3d::Zero();
-  // pose: the measured orientation of the target frame in the instrument
-  // frame, and the target frame's nominal orientation on its carrying side
-  // (rotation vectors, rad).
-  Eigen::Vector3d measured_rotation = Eigen::Vector3d::Zero();
-  Eigen::Vector3d target_rotation = Eigen::Vector3d::Zero();
-  // distance: `setup` is the station id, `instrument_origin` its nominal
-  // position in F, `length` its nominal dead length, `reading` the distance
-  // reading; `instrument` names the tracer whose target offsets every one of
-  // its stations shares.
-  std::string instrument;
-  // A kind's own numbers that no field above holds, by a name of the kind's
-  // choosing (its file key, say): a new kind keeps them here, so that it
-  // adds no field to this struct. Read, validated and written by the kind.
-  std::map<std::string, Eigen::VectorXd> own;
   // Declared noise (one sigma, mm): empty = DefaultSigma(type); otherwise one
   // value per residual row (ResidualRows(type)), finite and > 0. A file's
   // single number is expanded to every row.
   Eigen::VectorXd sigma;
-  std::string id;  // optional user label, kept through load and save
+  // The kind's own data: set to its kind's empty payload
+  // (ObservationKind::NewPayload) before the kind reads into it.
+  ObservationPayload payload;
+
+  // The payload as the kind's struct T; std::invalid_argument naming the
+  // observation's type (and id) when it holds another.
+  template <class T>
+  const T& data() const {
+    if (const T* p = std::get_if<T>(&payload)) return *p;
+    WrongPayload(T::kName);
+  }
+  template <class T>
+  T& data() {
+    if (T* p = std::get_if<T>(&payload)) return *p;
+    WrongPayload(T::kName);
+  }
+
+ private:
+  [[noreturn]] void WrongPayload(const char* wanted) const;
 };
+
+// The name a payload gives the thing its observation is about, whatever
+// the kind (a touch's artefact id, a fixed-frame target's side, a machined
+// feature), "" for a payload without one: what tells two observations of
+// one type and set-up apart when code that is not about a kind compares
+// them (a refit's reference, the design's cache).
+const std::string& PayloadTarget(const Observation& o);
 
 // The instrument id of an observation whose kind has one (point and pose:
 // "instrument", distance: "station"), else nullptr.

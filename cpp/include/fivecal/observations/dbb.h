@@ -19,8 +19,9 @@ namespace fivecal {
 class DbbResidual {
  public:
   DbbResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const MountRefs& refs)
-      : access_(ctx), pose_(*ctx->machine, o), tool_ball_(o.tool_ball), table_ball_(o.table_ball),
-        target_length_(o.length + o.reading), refs_(refs) {}
+      : access_(ctx), pose_(*ctx->machine, o), tool_ball_(o.data<BallMountData>().tool_ball),
+        table_ball_(o.data<BallMountData>().table_ball),
+        target_length_(o.data<BallMountData>().length + o.data<BallMountData>().reading), refs_(refs) {}
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {

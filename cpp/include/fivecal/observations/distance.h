@@ -34,27 +34,32 @@ struct StationRefs {
 class DistanceResidual {
  public:
   DistanceResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const StationRefs& refs)
-      : access_(ctx), pose_(*ctx->machine, o), o_(o), refs_(refs) {}
+      : access_(ctx), pose_(*ctx->machine, o), target_point_(o.data<DistanceData>().target_point),
+        station_(o.data<DistanceData>().station),
+        distance_(o.data<DistanceData>().dead_length + o.data<DistanceData>().reading),
+        on_tool_(o.data<DistanceData>().on_tool), refs_(refs) {}
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {
     std::vector<T> theta;
     access_.Theta(p, &theta);
-    const Vec3<T> target = WithCorrections<T>(access_, p, o_.target_point, refs_.target);
-    const Vec3<T> station = WithCorrections<T>(access_, p, o_.instrument_origin, refs_.position);
-    const Vec3<T> P = TargetInF<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(), o_.on_tool,
+    const Vec3<T> target = WithCorrections<T>(access_, p, target_point_, refs_.target);
+    const Vec3<T> station = WithCorrections<T>(access_, p, station_, refs_.position);
+    const Vec3<T> P = TargetInF<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(), on_tool_,
                                    target);
     // The target never sits on the station (validated readings are
     // distances of a tracer to a reflector hundreds of mm away), so the norm
     // is differentiable here.
-    residual[0] = (P - station).norm() - (T(o_.length + o_.reading) + access_.Setup(p, refs_.length));
+    residual[0] = (P - station).norm() - (T(distance_) + access_.Setup(p, refs_.length));
     return true;
   }
 
  private:
   const ParameterAccess access_;
   const PoseData pose_;
-  const Observation o_;
+  const Eigen::Vector3d target_point_, station_;
+  const double distance_;  // the file's dead length plus the reading
+  const bool on_tool_;
   const StationRefs refs_;
 };
 

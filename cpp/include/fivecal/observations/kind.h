@@ -8,6 +8,12 @@
 // (RegisterObservationKind); docs/adding_an_observation_kind.md walks
 // through adding one.
 //
+// A kind owns its data: every observation carries the kind's payload (its
+// struct among payloads.h's alternatives, made by NewPayload()), which only
+// the kind's methods read, through Observation::data<T>(). The generic code
+// handles the common header (type, id, setup, axes, direction, sigma) and
+// hands the whole observation to the kind.
+//
 // The per-observation methods are virtual: they run while a file is read or a
 // problem is built, never inside the solver's inner loop. The analytic batch
 // calls a kind once per run of consecutive rows of that kind
@@ -228,6 +234,10 @@ class KindIdentity {
   // noise for. Kinds with different keys ("instrument", "station") give an
   // id parameters of different meaning, so one id may not serve both.
   virtual const char* instrument_key() const { return nullptr; }
+  // The empty payload of an observation of this kind (payloads.h): the
+  // loaders and the simulator set it before the kind reads into it. A kind
+  // defined outside the core keeps its numbers in a KindOwnData.
+  virtual ObservationPayload NewPayload() const { return KindOwnData{}; }
   // A probe touch: needs dataset.probe.tip_radius, and a plan entry may leave
   // the linear axes to the simulator.
   virtual bool probe_touch() const { return false; }
@@ -244,15 +254,17 @@ class KindFileFormat {
   // Every key an observation of this kind may have, in the order the
   // "unknown key" message lists them.
   virtual std::vector<const char*> json_keys() const = 0;
-  // Reads the kind's own fields (type, axes, direction, sigma and id are read
-  // by the loader); `where` is "dataset.observations[i]".
+  // Reads the kind's own fields into its payload, which the loader has set
+  // to NewPayload() (type, axes, direction, sigma and id are read by the
+  // loader); `where` is "dataset.observations[i]".
   virtual void Read(const nlohmann::json& o, const std::string& where, const Dataset& ds,
                     Observation* ob) const = 0;
   // Checks the kind's own fields of an observation built in code; `where()`
   // gives "observations[i]" (built only for a message).
   virtual void Validate(const Dataset& ds, const Observation& o,
                         const std::function<std::string()>& where) const = 0;
-  // Writes the kind's own fields.
+  // Writes the kind's own fields: every key of its payload (the dataset
+  // writes the common header only).
   virtual void Write(const Observation& o, nlohmann::json* out) const = 0;
   // The streaming loader's fast path: the kind's own fields from the flat
   // form, when Read and Validate would accept them outright; false sends

@@ -82,19 +82,21 @@ Vec3<T> PointInInstrument(const Machine& m, const T* theta, const double* q, con
 // whichever kind brings it (a tracker's point and pose observations of one
 // target share them).
 namespace fixed_frame {
-// "target" ("tool" or "work", into Observation::target and on_tool) and
+// "target" ("tool" or "work", into the payload's target and on_tool) and
 // "target_point" of a file's observation; `where` names it.
-void ReadTarget(const nlohmann::json& o, const std::string& where, Observation* ob);
-void ValidateTarget(const Observation& o, const std::function<std::string()>& where);
+void ReadTarget(const nlohmann::json& o, const std::string& where, FixedTargetData* d);
+void ValidateTarget(const FixedTargetData& d, const std::function<std::string()>& where);
+void WriteTarget(const FixedTargetData& d, nlohmann::json* out);
 // "instrument" (a name without '.') into Observation::setup, and the nominal
-// pose "instrument_origin" (mm) and "instrument_angles" (degrees in the file).
-void ReadInstrument(const nlohmann::json& o, const std::string& where, Observation* ob);
+// pose "instrument_origin" (mm) and "instrument_angles" (degrees in the file)
+// into `d`, the payload of `ob`.
+void ReadInstrument(const nlohmann::json& o, const std::string& where, Observation* ob, PointData* d);
 // The instrument table of a fixed instrument following a target (point,
 // pose): id, the measured coordinates and the joint layout's columns (one
 // joint moved per row); `sigma`: whether a sigma column weighs its rows.
 KindTable InstrumentTable(bool sigma);
-void ValidateInstrument(const Observation& o, const std::function<std::string()>& where);
-void WriteInstrument(const Observation& o, nlohmann::json* out);
+void ValidateInstrument(const Observation& o, const PointData& d, const std::function<std::string()>& where);
+void WriteInstrument(const Observation& o, const PointData& d, nlohmann::json* out);
 // The instrument pose instrument.<id>.x|y|z|a|b|c (one group per id).
 const std::vector<int>& AddInstrumentPose(const std::string& id, ParameterTable* t);
 const std::vector<int>& InstrumentPose(const ParameterTable& t, const std::string& id);
@@ -103,8 +105,8 @@ const std::vector<int>& AddTargetOffsets(const std::string& id, const std::strin
 const std::vector<int>& TargetOffsets(const ParameterTable& t, const std::string& id, const std::string& side);
 // The point kind's report: residual rows r[0..2] (instrument frame) turned
 // into F, at the measured target's place.
-void ReportPoint(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
-                 Eigen::Vector3d* vector);
+void ReportPoint(const ReportContext& c, const Observation& o, const PointData& d, const double* r,
+                 Eigen::Vector3d* point, Eigen::Vector3d* vector);
 // The prior class of any instrument.<id>.<field> name (nullptr otherwise).
 const char* PriorClassOfName(const std::string& name);
 // The placement uncertainty of an instrument's pose (point, pose and distance
@@ -117,19 +119,22 @@ double DefaultPlacement(const std::string& name);
 
 class PointResidual {
  public:
-  PointResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const InstrumentRefs& refs)
-      : access_(ctx), pose_(*ctx->machine, o), o_(o), refs_(refs) {}
+  // `d`: the payload of `o` (a point's, or a pose's point part).
+  PointResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const PointData& d,
+                const InstrumentRefs& refs)
+      : access_(ctx), pose_(*ctx->machine, o), target_point_(d.target_point), origin_(d.instrument_origin),
+        angles_(d.instrument_angles), measured_(d.measured), on_tool_(d.on_tool), refs_(refs) {}
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {
     std::vector<T> theta;
     access_.Theta(p, &theta);
-    const Vec3<T> target = WithCorrections<T>(access_, p, o_.target_point, refs_.target);
-    const Vec3<T> origin = WithCorrections<T>(access_, p, o_.instrument_origin, refs_.position);
-    const Vec3<T> ang = WithCorrections<T>(access_, p, o_.instrument_angles, refs_.angle);
+    const Vec3<T> target = WithCorrections<T>(access_, p, target_point_, refs_.target);
+    const Vec3<T> origin = WithCorrections<T>(access_, p, origin_, refs_.position);
+    const Vec3<T> ang = WithCorrections<T>(access_, p, angles_, refs_.angle);
     const Vec3<T> r = PointInInstrument<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(),
-                                           o_.on_tool, target, origin, ang.data()) -
-                      o_.measured.template cast<T>();
+                                           on_tool_, target, origin, ang.data()) -
+                      measured_.template cast<T>();
     for (int i = 0; i < 3; ++i) residual[i] = r[i];
     return true;
   }
@@ -137,7 +142,8 @@ class PointResidual {
  private:
   const ParameterAccess access_;
   const PoseData pose_;
-  const Observation o_;
+  const Eigen::Vector3d target_point_, origin_, angles_, measured_;
+  const bool on_tool_;
   const InstrumentRefs refs_;
 };
 

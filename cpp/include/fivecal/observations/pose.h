@@ -64,24 +64,26 @@ Vec3<T> VectorOfRotation(const Mat3<T>& R) {
 class PoseResidual {
  public:
   PoseResidual(std::shared_ptr<const ResidualContext> ctx, const Observation& o, const PoseRefs& refs)
-      : access_(ctx), pose_(*ctx->machine, o), o_(o), refs_(refs),
-        measured_RT_(RotationOfVector<double>(o.measured_rotation).transpose()),
-        target_R0_(RotationOfVector<double>(o.target_rotation)) {}
+      : access_(ctx), pose_(*ctx->machine, o), target_point_(o.data<PoseTargetData>().target_point),
+        origin_(o.data<PoseTargetData>().instrument_origin), angles_(o.data<PoseTargetData>().instrument_angles),
+        measured_(o.data<PoseTargetData>().measured), on_tool_(o.data<PoseTargetData>().on_tool), refs_(refs),
+        measured_RT_(RotationOfVector<double>(o.data<PoseTargetData>().measured_rotation).transpose()),
+        target_R0_(RotationOfVector<double>(o.data<PoseTargetData>().target_rotation)) {}
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {
     std::vector<T> theta;
     access_.Theta(p, &theta);
-    const Vec3<T> target = WithCorrections<T>(access_, p, o_.target_point, refs_.point.target);
-    const Vec3<T> origin = WithCorrections<T>(access_, p, o_.instrument_origin, refs_.point.position);
-    const Vec3<T> ang = WithCorrections<T>(access_, p, o_.instrument_angles, refs_.point.angle);
+    const Vec3<T> target = WithCorrections<T>(access_, p, target_point_, refs_.point.target);
+    const Vec3<T> origin = WithCorrections<T>(access_, p, origin_, refs_.point.position);
+    const Vec3<T> ang = WithCorrections<T>(access_, p, angles_, refs_.point.angle);
     const Vec3<T> tang = WithCorrections<T>(access_, p, Eigen::Vector3d::Zero(), refs_.target_angle);
     const Mat3<T> target_R = target_R0_.template cast<T>() * RotZYX(tang[0], tang[1], tang[2]);
     Vec3<T> P;
     Mat3<T> R;
-    PoseInInstrument<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(), o_.on_tool, target,
+    PoseInInstrument<T>(access_.machine(), theta.data(), pose_.q.data(), pose_.dir.data(), on_tool_, target,
                         target_R, origin, ang.data(), &P, &R);
-    const Vec3<T> rp = P - o_.measured.template cast<T>();
+    const Vec3<T> rp = P - measured_.template cast<T>();
     const Mat3<T> misfit = measured_RT_.template cast<T>() * R;
     const Vec3<T> rr = VectorOfRotation<T>(misfit);
     for (int i = 0; i < 3; ++i) {
@@ -94,7 +96,8 @@ class PoseResidual {
  private:
   const ParameterAccess access_;
   const PoseData pose_;
-  const Observation o_;
+  const Eigen::Vector3d target_point_, origin_, angles_, measured_;
+  const bool on_tool_;
   const PoseRefs refs_;
   const Eigen::Matrix3d measured_RT_, target_R0_;
 };

@@ -57,10 +57,11 @@ class ProbeTouchKind : public ObservationKind {
   // nothing else of the kind's own.
   std::vector<const char*> json_keys() const final { return {"type", "target", "axes", "direction", "sigma", "id"}; }
   void Read(const nlohmann::json& o, const std::string& where, const Dataset& ds, Observation* ob) const final;
-  void Write(const Observation&, nlohmann::json*) const final {}  // target: written by the dataset
+  void Write(const Observation& o, nlohmann::json* out) const final;
+  ObservationPayload NewPayload() const final { return TouchData{}; }
   bool ReadFlat(const FlatObservation& f, const Artefact& a, Observation* ob) const final {
     if (!f.only({FlatObservation::kTarget}) || !f.target || TargetIndex(a, *f.target) < 0) return false;
-    ob->target = *f.target;
+    ob->data<TouchData>().target = *f.target;
     return true;
   }
   // A planned touch: its target and where on it ("point"; a sphere's
@@ -82,7 +83,7 @@ class ProbeTouchKind : public ObservationKind {
   std::vector<PriorClass> prior_classes() const override { return {ProbeClass()}; }
   const char* PriorClassOfName(const std::string& n) const override;
   int ArtefactTarget(const Dataset& ds, const Observation& o) const final {
-    return TargetIndex(ds.artefact, o.target);
+    return TargetIndex(ds.artefact, o.data<TouchData>().target);
   }
 
  protected:
@@ -98,7 +99,7 @@ class ProbeTouchKind : public ObservationKind {
   // the report draws the touch's residual.
   static Eigen::Vector3d FittedTipCentre(const ReportContext& c, const Observation& o);
   using Gap = std::function<double(const Eigen::Vector3d&)>;
-  // A planned touch on target ob->target: the surface normal n at the touch,
+  // A planned touch on target ob->data<TouchData>().target: the surface normal n at the touch,
   // the nominal tip-centre target c, and the signed distance of the true
   // surface from a tip centre P (zero at the touch).
   virtual void PlannedTouch(const nlohmann::json& e, const std::string& where, const PlanTruth& t,

@@ -54,7 +54,8 @@ struct NoiseLevels {
 Dataset Simulate(const std::string& spec_json);
 
 // A measurement plan resolved once, for re-drawing the noise many times
-// (Monte Carlo). `base` holds the noise-free readings; every noisy dataset
+// (Monte Carlo). `base` holds the noise-free readings (a kind's ApplyInput
+// reads its own from base's payload); every noisy dataset
 // differs from it only in the readings, along each observation's noise
 // direction:
 //   probe touch: the trigger position s along the nominal approach line,
@@ -80,8 +81,6 @@ struct SimulationPlan {
   std::vector<Eigen::VectorXd> start;      // per observation (touches; else the axes)
   std::vector<Eigen::VectorXd> approach;   // per observation, per mm of approach (touches; else empty)
   std::vector<double> s0;                  // per observation: noise-free trigger position (touches)
-  std::vector<double> reading0;            // per observation: noise-free DBB reading
-  std::vector<Eigen::Vector3d> measured0;  // per observation: noise-free ball3d displacement
   std::vector<int> input_observation;      // per input: observation index, or -1 - b for scale bar b
   std::vector<int> input_component;        // per input: 0 (touch, dbb, bar) or 0..2 (ball3d)
   Eigen::VectorXd sensitivity;             // per input: d residual / d input
