@@ -311,7 +311,8 @@ namespace {
 // repoint when the observation's fields move).
 void SetTouchTarget(Observation* ob, ObservationType type, const std::string& target) {
   ob->type = type;
-  ob->target = target;
+  ob->payload = TouchData{};
+  ob->data<TouchData>().target = target;
 }
 }  // namespace
 
