@@ -90,7 +90,8 @@ def test_tolerance_options_are_named_for_what_they_grade(monkeypatch):
                 assert o == "--volumetric-tolerance", (path, o)
             # every tolerance takes a unit and says a bare number is in the file unit
             assert re.search(r"\bum\b|µm|urad|unit", h), (path, o, a.help)
-    assert set(seen[T.VALUE_OPTION]) == {"fivecal identify", "fivecal history trend", "fivecal rtest", "fivecal dbb circular"}
+    assert set(seen[T.VALUE_OPTION]) == {"fivecal identify", "fivecal history trend", "fivecal rtest", "fivecal dbb circular",
+                                          "fivecal dbb volumetric"}
     assert seen[T.CHANGE_OPTION] == ["fivecal history compare"]
     assert seen[T.PATH_OPTION] == ["fivecal export program"]
 

@@ -879,7 +879,8 @@ def register(sub) -> None:
                     help="standard the values follow: ISO 230-4 (others are refused, `fivecal docs dbb`)")
     pv.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
                     help="grade every plane's ISO 230-4 values and diagnoses, as for 'dbb circular' (G=15um, "
-                    "backlash=4um, ...); FAIL in any plane, or a toleranced diagnosis not determined, exits 1")
+                    "backlash=4um, squareness=20urad, ...), with a unit; a bare number is in the file unit (mm, rad); "
+                    "FAIL in any plane, or a toleranced diagnosis not determined, exits 1")
     pv.add_argument("--html", metavar="DIR",
                     help="write the HTML report here: the combined page and each plane's report in DIR/<plane>/")
     pv.add_argument("--scale", type=POSITIVE, default=None,
