@@ -688,6 +688,40 @@ def _add_four_step_options(pj) -> None:
     pj.add_argument("--force", action="store_true", help=_FORCE_HELP)
 
 
+def _add_run_options(p, which: str) -> None:
+    """What reads and corrects a circular test's run files, shared by
+    ``dbb circular`` and ``dbb volumetric`` (one plane's files, or each
+    plane's): readings-only files, units, the test conditions and the
+    thermal compensation, the standard. ``which``: whose directions
+    --direction gives."""
+    finite = _float_type()
+    p.add_argument("--sweep", type=_float_type(10.0), default=None, metavar="DEG",
+                   help="readings-only files: the arc the samples span, deg (360, or 360 + feed-in + feed-out "
+                   "when the recording includes the overshoot arcs, removed as usual)")
+    p.add_argument("--start", type=finite, default=0.0, metavar="DEG",
+                   help="readings-only files: angle of the first sample, deg (default 0)")
+    p.add_argument("--direction", metavar="cw|ccw[,...]",
+                   help=f"run direction of {which} (readings-only files need it unless the file name says cw or "
+                   "ccw; two-column files are checked against it)")
+    p.add_argument("--units", choices=["mm", "um"], default=None,
+                   help="unit of the readings when the file's header names none (default mm)")
+    p.add_argument("--angle-units", choices=["deg", "rad"], default=None,
+                   help="unit of the angle column when the header names none (default deg)")
+    p.add_argument("--sidecar", metavar="JSON",
+                   help="test conditions: {\"thermal\": {bar_expansion, bar_temperature, machine_expansion, "
+                   "machine_temperature}, \"machine\", \"date\", \"feed\"}")
+    p.add_argument("--bar-expansion", type=_expansion, default=None, metavar="ALPHA",
+                   help="thermal compensation: the bar's expansion coefficient, 1/K or ppm/K (11.5ppm)")
+    p.add_argument("--bar-temperature", type=finite, default=None, metavar="DEGC", help="bar temperature, °C")
+    p.add_argument("--machine-expansion", type=_expansion, default=None, metavar="ALPHA",
+                   help="thermal compensation: the machine scales' expansion coefficient, 1/K or ppm/K")
+    p.add_argument("--machine-temperature", type=finite, default=None, metavar="DEGC",
+                   help="machine temperature, °C")
+    p.add_argument("--standard", default="ISO 230-4",
+                   help="standard the values follow: ISO 230-4 (ASME B5.54, JIS B 6194 and GB/T 17421.4 are "
+                   "refused: their definitions are not public, `fivecal docs dbb`)")
+
+
 def register(sub) -> None:
     """Add the ``dbb`` subcommand group to the main parser's subparsers."""
     FINITE = _float_type()
@@ -783,31 +817,7 @@ def register(sub) -> None:
                     "or two runs; or one Renishaw .b5r file (its diagnostics)")
     pc.add_argument("--radius", type=POSITIVE, default=None,
                     help="nominal radius = bar length (mm); required except for a .b5r file (which names it)")
-    pc.add_argument("--sweep", type=_float_type(10.0), default=None, metavar="DEG",
-                    help="readings-only files: the arc the samples span, deg (360, or 360 + feed-in + feed-out "
-                    "when the recording includes the overshoot arcs, removed as usual)")
-    pc.add_argument("--start", type=FINITE, default=0.0, metavar="DEG",
-                    help="readings-only files: angle of the first sample, deg (default 0)")
-    pc.add_argument("--direction", metavar="cw|ccw[,...]",
-                    help="run direction of each file (readings-only files need it unless the file name says cw or "
-                    "ccw; two-column files are checked against it)")
-    pc.add_argument("--units", choices=["mm", "um"], default=None,
-                    help="unit of the readings when the file's header names none (default mm)")
-    pc.add_argument("--angle-units", choices=["deg", "rad"], default=None,
-                    help="unit of the angle column when the header names none (default deg)")
-    pc.add_argument("--sidecar", metavar="JSON",
-                    help="test conditions: {\"thermal\": {bar_expansion, bar_temperature, machine_expansion, "
-                    "machine_temperature}, \"machine\", \"date\", \"feed\"}")
-    pc.add_argument("--bar-expansion", type=_expansion, default=None, metavar="ALPHA",
-                    help="thermal compensation: the bar's expansion coefficient, 1/K or ppm/K (11.5ppm)")
-    pc.add_argument("--bar-temperature", type=FINITE, default=None, metavar="DEGC", help="bar temperature, °C")
-    pc.add_argument("--machine-expansion", type=_expansion, default=None, metavar="ALPHA",
-                    help="thermal compensation: the machine scales' expansion coefficient, 1/K or ppm/K")
-    pc.add_argument("--machine-temperature", type=FINITE, default=None, metavar="DEGC",
-                    help="machine temperature, °C")
-    pc.add_argument("--standard", default="ISO 230-4",
-                    help="standard the values follow: ISO 230-4 (ASME B5.54, JIS B 6194 and GB/T 17421.4 are "
-                    "refused: their definitions are not public, `fivecal docs dbb`)")
+    _add_run_options(pc, "each file")
     pc.add_argument("--html", metavar="DIR", help="write the HTML report (verdict, polar plot, diagnosis) here")
     pc.add_argument("--scale", type=POSITIVE, default=None,
                     help="polar plot ring spacing in µm (default automatic; stated on the plot)")
@@ -854,29 +864,8 @@ def register(sub) -> None:
                         help=f"{plane.upper()} runs: one or two files, two columns (angle, reading) or readings "
                         "only with --sweep")
     pv.add_argument("--radius", type=POSITIVE, required=True, help="nominal radius = bar length (mm)")
-    pv.add_argument("--sweep", type=_float_type(10.0), default=None, metavar="DEG",
-                    help="readings-only files: the arc the samples span, deg (as for 'dbb circular')")
-    pv.add_argument("--start", type=FINITE, default=0.0, metavar="DEG",
-                    help="readings-only files: angle of the first sample, deg (default 0)")
-    pv.add_argument("--direction", metavar="cw|ccw[,...]",
-                    help="run direction of each plane's files, in the order they are given (the same for every "
-                    "plane); readings-only files need it unless the file name says cw or ccw")
-    pv.add_argument("--units", choices=["mm", "um"], default=None,
-                    help="unit of the readings when a file's header names none (default mm)")
-    pv.add_argument("--angle-units", choices=["deg", "rad"], default=None,
-                    help="unit of the angle column when the header names none (default deg)")
-    pv.add_argument("--sidecar", metavar="JSON",
-                    help="test conditions for every plane: {\"thermal\": {...}, \"machine\", \"date\", "
-                    "\"feed\"} (as for 'dbb circular')")
-    pv.add_argument("--bar-expansion", type=_expansion, default=None, metavar="ALPHA",
-                    help="thermal compensation: the bar's expansion coefficient, 1/K or ppm/K (11.5ppm)")
-    pv.add_argument("--bar-temperature", type=FINITE, default=None, metavar="DEGC", help="bar temperature, °C")
-    pv.add_argument("--machine-expansion", type=_expansion, default=None, metavar="ALPHA",
-                    help="thermal compensation: the machine scales' expansion coefficient, 1/K or ppm/K")
-    pv.add_argument("--machine-temperature", type=FINITE, default=None, metavar="DEGC",
-                    help="machine temperature, °C")
-    pv.add_argument("--standard", default="ISO 230-4",
-                    help="standard the values follow: ISO 230-4 (others are refused, `fivecal docs dbb`)")
+    _add_run_options(pv, "each plane's files, in the order they are given (the same for every "
+                     "plane)")
     pv.add_argument("--tolerance", action="append", metavar="NAME=VALUE",
                     help="grade every plane's ISO 230-4 values and diagnoses, as for 'dbb circular' (G=15um, "
                     "backlash=4um, squareness=20urad, ...), with a unit; a bare number is in the file unit (mm, rad); "

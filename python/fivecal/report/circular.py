@@ -48,6 +48,15 @@ def verdict(result, grade: Optional[Mapping] = None, usable: bool = True, reason
     return {"word": grade["grade"], "cls": "fail", "text": f"{c}; {names}"}
 
 
+def _thermal_html(t: Optional[Mapping]) -> str:
+    if not t:
+        return "<p>No thermal compensation: the readings are as recorded.</p>"
+    return ("<p>Thermal compensation: readings referred to 20 °C with the bar's expansion "
+            f"{t['bar_expansion'] * 1e6:g} µm/m/K at {t['bar_temperature']:g} °C and the machine's "
+            f"{t['machine_expansion'] * 1e6:g} µm/m/K at {t['machine_temperature']:g} °C "
+            "(`fivecal docs dbb`, thermal compensation).</p>")
+
+
 def _diagnosis_rows(result) -> list:
     rows = []
     for i, (n, c) in enumerate(result.ranking):
@@ -125,14 +134,7 @@ def write_circular_report(result, out_dir: Union[str, os.PathLike], *, grade: Op
                          for r in result.runs], [False, True, True, True, False, True])]
     if result.hysteresis is not None:
         body.append(f"<p>Circular hysteresis H {_um(result.hysteresis)} µm.</p>")
-    if result.thermal:
-        t = result.thermal
-        body.append("<p>Thermal compensation: readings referred to 20 °C with the bar's expansion "
-                    f"{t['bar_expansion'] * 1e6:g} µm/m/K at {t['bar_temperature']:g} °C and the machine's "
-                    f"{t['machine_expansion'] * 1e6:g} µm/m/K at {t['machine_temperature']:g} °C "
-                    "(`fivecal docs dbb`, thermal compensation).</p>")
-    else:
-        body.append("<p>No thermal compensation: the readings are as recorded.</p>")
+    body.append(_thermal_html(result.thermal))
     body += ["<h2 id='other'>Set-up and derived values</h2>",
              table_html(["quantity", "value"], other, [False, True]),
              f"<p>Residual rms after the diagnosis {result.diagnosis_rms * 1e3:.3f} µm.</p>"]
@@ -223,14 +225,8 @@ def write_volumetric_report(vol, out_dir: Union[str, os.PathLike], *, grades: Op
         combined.append((f"backlash {ax}", ", ".join(f"{x * 1e3:+.2f} ± {s * 1e3:.2f} µm ({p})"
                                                      for p, x, s in vals)))
     body.append(table_html(["quantity", "value"], combined, [False, True]))
-    thermal = [r.thermal for r in vol.planes.values() if r.thermal]
-    if thermal:
-        t = thermal[0]
-        body.append("<p>Thermal compensation: readings referred to 20 °C with the bar's expansion "
-                    f"{t['bar_expansion'] * 1e6:g} µm/m/K at {t['bar_temperature']:g} °C and the machine's "
-                    f"{t['machine_expansion'] * 1e6:g} µm/m/K at {t['machine_temperature']:g} °C.</p>")
-    else:
-        body.append("<p>No thermal compensation: the readings are as recorded.</p>")
+    # one bar and one machine: every plane was corrected alike
+    body.append(_thermal_html(next((r.thermal for r in vol.planes.values() if r.thermal), None)))
     files = [(p, f) for p, fs in sources.items() for f in fs]
     if files:
         body += ["<h2 id='files'>Input</h2>", "<ul>" + "".join(f"<li>{_e(p)}: <code>{_e(f)}</code></li>"
