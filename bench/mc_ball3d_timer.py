@@ -25,6 +25,7 @@ sys.path.insert(0, sys.argv[1]); sys.path.insert(0, sys.argv[2])
 import numpy as np, fivecal
 from fivecal import uncertainty
 from fivecal.procedures import tango
+from run import ball3d_dataset
 what = json.loads(sys.argv[3])
 out = {}
 if what["mc"]:
@@ -37,17 +38,7 @@ if what["mc"]:
         out[f"mc_t{th}_cpu_ms_per_trial"] = 1e3 * (time.process_time() - c) / what["trials"]
         out[f"mc_t{th}_std"] = [float(r.std[k]) for k in r.names]
 for n in what["sizes"]:
-    m = fivecal.Machine.load(os.path.join(sys.argv[2], "..", "examples", "machines", "c600u.json"))
-    true = {"EB0A": 3e-5, "EA0C": 4e-5, "EB0C": -2e-5, "EY0C": -0.012}
-    rng = np.random.default_rng(1)
-    rot = {"X": np.zeros(n), "Y": np.zeros(n), "Z": np.zeros(n), "A": rng.uniform(-90, 90, n),
-           "C": rng.uniform(0, 360, n)}
-    tool, table = [0.0, 0.0, 150.0], [50.0, 0.0, 80.0]
-    _, tool_axes = m.tool_pose(rot, tip=tool)
-    axes = m.inverse(np.tile(table, (n, 1)), tool_axes=tool_axes, start={k: v[0] for k, v in rot.items()})
-    meas = m.tool_point(axes, true, tip=tool) - np.array(table) + rng.normal(0, 5e-4, (n, 3))
-    ds = fivecal.ball_dataset(m, "ball3d", axes, tool, table, measured=meas, setup="R1")
-    names = list(true)
+    _, ds, names, *_ = ball3d_dataset(n)
     fivecal.identify(ds, names, default_setup=False)  # warm
     ts, cs = [], []
     for _ in range(3 if n < 10**6 else 1):

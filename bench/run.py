@@ -276,7 +276,11 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
             **agree, "note": note}
 
 
-def case_ball3d(n, repeat, baseline_repeat):
+def ball3d_dataset(n):
+    """The ball3d case's data: an R-test on the C600U-like machine, n samples
+    at random (A, C), four location errors, 0.5 µm noise. Returns the
+    machine, the dataset, the estimated names, the axes, both balls and the
+    measured displacements (what the baselines fit)."""
     m = fivecal.Machine.load(os.path.join(HERE, "..", "examples", "machines", "c600u.json"))
     true = {"EB0A": 3e-5, "EA0C": 4e-5, "EB0C": -2e-5, "EY0C": -0.012}
     rng = np.random.default_rng(1)
@@ -288,7 +292,11 @@ def case_ball3d(n, repeat, baseline_repeat):
     axes = m.inverse(np.tile(table, (n, 1)), tool_axes=tool_axes, start={k: v[0] for k, v in rot.items()})
     meas = m.tool_point(axes, true, tip=tool) - np.array(table) + rng.normal(0, 5e-4, (n, 3))
     ds = fivecal.ball_dataset(m, "ball3d", axes, tool, table, measured=meas, setup="R1")
-    names = list(true)
+    return m, ds, list(true), axes, tool, table, meas
+
+
+def case_ball3d(n, repeat, baseline_repeat):
+    m, ds, names, axes, tool, table, meas = ball3d_dataset(n)
     t_f, runs_f, r = timed(lambda: fivecal.identify(ds, names, default_setup=False), repeat)
     assert r.verdict == "ok", r.verdict
     out = {"case": f"ball3d_fit_{n}", "size": {"samples": n, "rows": 3 * n, "unknowns": len(names)},

@@ -29,17 +29,7 @@ def _agree(r, names, x, cost, jacobians, start=None):
 
 
 def _ball3d(n=400):
-    m = fivecal.Machine.load(os.path.join(ROOT, "examples", "machines", "c600u.json"))
-    true = {"EB0A": 3e-5, "EA0C": 4e-5, "EB0C": -2e-5, "EY0C": -0.012}
-    rng = np.random.default_rng(1)
-    rot = {"X": np.zeros(n), "Y": np.zeros(n), "Z": np.zeros(n), "A": rng.uniform(-90, 90, n),
-           "C": rng.uniform(0, 360, n)}
-    tool, table = [0.0, 0.0, 150.0], [50.0, 0.0, 80.0]
-    _, tool_axes = m.tool_pose(rot, tip=tool)
-    axes = m.inverse(np.tile(table, (n, 1)), tool_axes=tool_axes, start={k: v[0] for k, v in rot.items()})
-    meas = m.tool_point(axes, true, tip=tool) - np.array(table) + rng.normal(0, 5e-4, (n, 3))
-    ds = fivecal.ball_dataset(m, "ball3d", axes, tool, table, measured=meas, setup="R1")
-    names = list(true)
+    m, ds, names, axes, tool, table, meas = bench.ball3d_dataset(n)
     r = fivecal.identify(ds, names, default_setup=False, fit_path="normal_equations")
     q = m.axes_matrix(axes)
     for i, a in enumerate(m.axis_names):
