@@ -41,7 +41,7 @@ def first_check(tmp_path_factory):
 
 
 def _load_and_check(d, m, plan, machine_file, vendor, values, tag, capsys, force=False, export=None,
-                    options=None):
+                    options=None, out=None):
     """The machine after the controller loaded ``values``: its apparent errors
     are the truth less what the controller's model now compensates."""
     options = OPTIONS.get(vendor) if options is None else options
@@ -55,7 +55,8 @@ def _load_and_check(d, m, plan, machine_file, vendor, values, tag, capsys, force
     fivecal.save_dataset(ds, str(d / f"after-{tag}.json"))
     capsys.readouterr()
     rc = main(["sphere-check", str(d / f"after-{tag}.json"), "--previous", str(d / "old.json"),
-               "--expect", str(export / "export.json"), *(["--force"] if force else [])])
+               "--expect", str(export / "export.json"), *(["--force"] if force else []),
+               *(["--out", str(out)] if out else [])])
     return rc, capsys.readouterr().out
 
 
@@ -143,8 +144,11 @@ def test_beckhoff_tables_are_marked_unverifiable_and_the_check_says_it_verified_
     assert f"the {tables_n} error-motion table values" in rec["sphere_check"]["unverifiable"]
     values = [v["new"] for v in rec["values"]]
     rc, text = _load_and_check(d, m, plan, machine_file, "beckhoff", values, "tables", capsys, export=out,
-                               options=options)
+                               options=options, out=d / "after-tables-result.json")
     assert rc == 0, text
+    # the result document keeps it too: a "took effect" record read later must not claim the tables
+    verification = json.load(open(d / "after-tables-result.json"))["procedure"]["values"]["verification"]
+    assert verification["took_effect"] and f"the {tables_n} error-motion table values" in verification["unverifiable"]
     assert re.search(r"took effect", text, re.I), text
     assert "verified the kinematics only" in text and f"the {tables_n} error-motion table values" in text
     # without tables: nothing unverifiable, and no such line
@@ -154,5 +158,6 @@ def test_beckhoff_tables_are_marked_unverifiable_and_the_check_says_it_verified_
                      *_sets("beckhoff")]) == 0
     rec = json.load(open(plain / "export.json"))
     rc, text = _load_and_check(d, m, plan, machine_file, "beckhoff", [v["new"] for v in rec["values"]],
-                               "no-tables", capsys)
+                               "no-tables", capsys, out=d / "after-no-tables-result.json")
     assert rc == 0 and "verified the kinematics only" not in text, text
+    assert json.load(open(d / "after-no-tables-result.json"))["procedure"]["values"]["verification"]["unverifiable"] is None

@@ -362,7 +362,9 @@ class ChangeVerification:
                 "machine": self.export.get("machine"), "verdict": self.verdict, "took_effect": self.took_effect,
                 "message": self.message, "causes": list(self.causes), "ratio": self.ratio,
                 "ratio_std": self.ratio_std, "k": self.k, "not_compared": list(self.not_compared),
-                "parameters": {n: dict(p) for n, p in self.parameters.items()}}
+                "parameters": {n: dict(p) for n, p in self.parameters.items()},
+                # a record that says "took effect" must keep what the check could not see
+                "unverifiable": self.export.get("unverifiable")}
 
     def report(self) -> str:
         e = self.export
