@@ -16,6 +16,7 @@ import pytest
 import fivecal
 from fivecal.cli import main
 from fivecal.procedures import tango
+from fivecal.units import looks_like_radians
 
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
@@ -510,12 +511,13 @@ def test_a_column_that_first_appears_in_a_later_piece_is_in_every_row_group(tmp_
         for k in ("id", "sigma", "direction"):
             o.pop(k, None)
     ds = fivecal.Dataset.from_dict(d)
-    scans = []
-    real = fivecal._core.ColumnWriter.scan
-    monkeypatch.setattr(fivecal._core.ColumnWriter, "scan", lambda self, *a: scans.append(1) or real(self, *a))
+    written = []
+    real = columnar._piece_batches
+    monkeypatch.setattr(columnar, "_piece_batches", lambda *a: written.append(1) or real(*a))
     _, out = _convert_both_ways(ds, tmp_path, 6)
     assert out["piece"][0] == out["whole"][0]
-    assert len(scans) > 7  # a first pass ended early, then every piece scanned
+    # 7 pieces: the first pass wrote 3 before the piece of observation 20
+    assert len(written) == 3 + 7
     names = pq.read_schema(tmp_path / "piece.parquet").names
     assert {"id", "sigma", "dir_C"} <= set(names)
 
@@ -563,6 +565,7 @@ def test_the_plausibility_checks_see_the_whole_file_not_a_piece(tmp_path):
     axes = {"X": np.zeros(n), "Y": np.zeros(n), "Z": np.full(n, -20.0), "B": b, "C": np.zeros(n), "S": np.zeros(n)}
     ds = fivecal.ball_dataset(m, "ball3d", axes, [0, 0, 100], [100, 0, 0], measured=np.zeros((n, 3)), setup="R1")
     fivecal.save_dataset(ds, tmp_path / "sweep.json")
+    assert looks_like_radians(b[:10]) and not looks_like_radians(b)  # a piece would mislead
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         fivecal.load_dataset(tmp_path / "sweep.json")
@@ -573,9 +576,10 @@ def test_the_plausibility_checks_see_the_whole_file_not_a_piece(tmp_path):
     assert piece == whole == []
     # and a trace in radians is warned about once, as by the whole load
     axes["B"] = np.radians(b)
-    ds = fivecal.ball_dataset(m, "ball3d", axes, [0, 0, 100], [100, 0, 0], measured=np.zeros((n, 3)), setup="R1")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
+        ds = fivecal.ball_dataset(m, "ball3d", axes, [0, 0, 100], [100, 0, 0], measured=np.zeros((n, 3)),
+                                  setup="R1")
         fivecal.save_dataset(ds, tmp_path / "rad.json")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

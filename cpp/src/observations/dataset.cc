@@ -964,9 +964,9 @@ class FastText {
   }
 
   // The text from `keep` on stays in the buffer, followed by more of the
-  // file; `keep` (and the cursor) move with it. False at the file's end.
-  bool Refill(const char** keep) {
-    if (eof_) return false;
+  // file (eof() once it is all read); `keep` and the cursor move with it.
+  void Refill(const char** keep) {
+    if (eof_) return;
     const size_t kept = static_cast<size_t>(end_ - *keep), at = static_cast<size_t>(p_ - *keep);
     if (kept + chunk_ > own_.size()) {
       std::vector<char> bigger(kept + chunk_);
@@ -981,7 +981,6 @@ class FastText {
     *keep = begin_;
     p_ = begin_ + at;
     end_ = begin_ + kept + got;
-    return got > 0;
   }
 
   const char*& cursor() { return p_; }
@@ -1208,7 +1207,8 @@ class FastDataset {
       head = json::object();
       const Status st = Head();
       if (st == Status::kOk) break;
-      if (st == Status::kGiveUp || !t_->Refill(&keep)) return false;
+      if (st == Status::kGiveUp) return false;
+      t_->Refill(&keep);  // kMore comes only before the file's end: a retry sees more, or its end
     }
     if (!head.contains("machine")) return false;
     try {
@@ -1229,7 +1229,7 @@ class FastDataset {
       bool end = false;
       const Status st = Lex(&end);
       if (st == Status::kMore) {
-        if (!t_->Refill(&keep)) return Step::kGiveUp;
+        t_->Refill(&keep);
         t_->cursor() = keep;
         continue;
       }
@@ -1247,8 +1247,8 @@ class FastDataset {
       const char* keep = t_->cursor();
       const Status st = Tail();
       if (st == Status::kOk) return true;
-      if (st == Status::kGiveUp || !t_->Refill(&keep)) return false;
-      t_->cursor() = keep;
+      if (st == Status::kGiveUp) return false;
+      t_->Refill(&keep);  // the cursor stays where Tail left it
     }
   }
 
