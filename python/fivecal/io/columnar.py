@@ -398,8 +398,8 @@ def convert(src: Union[str, os.PathLike], dst: Union[str, os.PathLike], rows: in
     (``rows`` observations, one row group, at a time: memory holds a piece,
     whatever the file's length) and write what :func:`fivecal.save_dataset`
     of the whole dataset writes, byte for byte; the checks are those of
-    :func:`fivecal.load_dataset`, and a message names the row of the file as
-    the whole load does (a failure reads the file whole again for it).
+    :func:`fivecal.load_dataset`, and a message is the whole load's (a
+    failure converts the whole file again, which says what is wrong).
     Atomic: a failure leaves ``dst`` as it was. Files up to ``stream_bytes``
     (default :data:`STREAM_BYTES`), and a layout the piece readers do not
     take, convert whole."""
@@ -421,13 +421,12 @@ def convert(src: Union[str, os.PathLike], dst: Union[str, os.PathLike], rows: in
             if to_parquet:
                 return _stream_to_parquet(src, dst, rows)
             return _stream_to_json(src, dst, rows, from_parquet)
-        except _Whole:
+        except (_Whole, ValueError):
+            # The whole convert decides: a file of another layout, and the
+            # messages of a bad one (the schema's first, then the rows of the
+            # file, then the output's), or a piece that failed for want of a
+            # member the file gives after its observations.
             pass
-        except ValueError:
-            # The message the whole load gives (load_dataset: the schema's
-            # first, rows of the file); an error of the output, after it.
-            load_dataset(src)
-            raise
     ds = load_dataset(src)
     if to_parquet:
         write_parquet(ds, dst, rows=rows)
