@@ -1,6 +1,6 @@
 """Time fivecal.save_dataset and `fivecal convert` on long traces.
 
-    python bench/save_dataset.py [--repeat R] [--out FILE] [N ...]   (default: 1000000)
+    python bench/save_dataset.py [--repeat R] [--modes M,M] [--out FILE] [N ...]   (default: 1000000)
 
 N ball3d (R-test) samples of one mounting on the HU40T, built from arrays
 (fivecal.ball_dataset, not timed). Each measurement runs in a fresh process,
@@ -90,9 +90,13 @@ def main(argv):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sizes", nargs="*", type=lambda a: int(float(a)), default=None)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--modes", default=",".join(MODES), help="comma-separated, of " + ", ".join(MODES))
     ap.add_argument("--out", default=os.path.join(HERE, "save_dataset.json"))
     args = ap.parse_args(argv)
     args.sizes = args.sizes or [1_000_000]
+    modes = [m for m in args.modes.split(",") if m]
+    if not modes or set(modes) - set(MODES):
+        ap.error(f"--modes: expected some of {', '.join(MODES)}")
     warnings.simplefilter("ignore")
     doc = {"machine": {"cpu": platform.processor(), "cores": os.cpu_count(), "python": platform.python_version(),
                        "fivecal": fivecal.__version__, "platform": platform.platform(),
@@ -111,7 +115,7 @@ def main(argv):
             # lend its peak to every measuring child.
             subprocess.run([sys.executable, os.path.abspath(__file__), "--prepare", str(n), tmp], check=True)
             entry = {"observations": n, "modes": {}}
-            for mode in MODES:
+            for mode in modes:
                 runs = []
                 for _ in range(args.repeat):
                     out = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", mode, str(n), tmp],

@@ -17,6 +17,7 @@
 #include "fivecal/observations/ball_mount.h"
 #include "fivecal/observations/columns.h"
 #include "fivecal/observations/dataset.h"
+#include "fivecal/observations/dataset_reader.h"
 #include "fivecal/observations/nc_geometry.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/observations/simulate.h"
@@ -370,8 +371,43 @@ void BindObservations(py::module_& m) {
           py::arg("kind"), py::arg("rows"), py::arg("numbers"), py::arg("strings"), py::arg("positions") = py::none())
       .def("finish", &ColumnLoader::Finish, py::arg("whole") = true);
 
+  // A JSON dataset file piece by piece (fivecal convert): `streamable` false
+  // means load it whole (the reference messages); next(rows) gives the next
+  // piece as a Dataset, None at the end (or when it turns out not
+  // streamable: check `streamable` again).
+  py::class_<DatasetFileReader>(m, "DatasetFileReader")
+      .def(py::init<const std::string&, size_t>(), py::arg("path"), py::arg("buffer_bytes") = size_t{1} << 22,
+           py::call_guard<py::gil_scoped_release>())
+      .def_property_readonly("streamable", &DatasetFileReader::streamable)
+      .def_property_readonly("observations_read", &DatasetFileReader::observations_read)
+      .def_property_readonly("head", &DatasetFileReader::head_json)
+      .def(
+          "next",
+          [](DatasetFileReader& r, size_t rows) {
+            if (rows < 1) throw std::invalid_argument("rows: expected a positive number of observations per piece");
+            return r.Next(rows);
+          },
+          py::call_guard<py::gil_scoped_release>(),
+          py::arg("rows"));
+
+  // The JSON text of a dataset written piece by piece (DatasetJsonWriter):
+  // write(bytes) receives it.
+  py::class_<DatasetJsonWriter>(m, "DatasetJsonWriter")
+      .def(py::init([](const Dataset& head, const py::object& write, size_t chunk_bytes) {
+             return std::make_unique<DatasetJsonWriter>(
+                 head, [write](const char* p, size_t n) { write(py::bytes(p, n)); }, chunk_bytes);
+           }),
+           py::arg("head"), py::arg("write"), py::arg("chunk_bytes") = size_t{1} << 20)
+      .def("add", py::overload_cast<const Dataset&>(&DatasetJsonWriter::Add), py::arg("piece"))
+      .def("finish", &DatasetJsonWriter::Finish);
+
   py::class_<ColumnWriter>(m, "ColumnWriter")
       .def(py::init<const Dataset&>(), py::arg("dataset"), py::keep_alive<1, 2>(),
+           py::call_guard<py::gil_scoped_release>())
+      // A writer of pieces: scan(piece) each (True when the columns
+      // changed), then write(begin, end, piece).
+      .def(py::init<>())
+      .def("scan", &ColumnWriter::Scan, py::arg("piece"), py::arg("offset") = 0,
            py::call_guard<py::gil_scoped_release>())
       .def_property_readonly("rows", &ColumnWriter::rows)
       .def_property_readonly("columns",
@@ -388,11 +424,11 @@ void BindObservations(py::module_& m) {
           // Per column, in `columns` order: float64 (values, valid), int8
           // (values, valid) or string (int32 offsets, uint8 bytes, valid);
           // valid is a bool array, or None when every row holds a value.
-          [](const ColumnWriter& w, int64_t begin, int64_t end) {
+          [](const ColumnWriter& w, int64_t begin, int64_t end, const Dataset* piece) {
             std::vector<ColumnWriter::Block> blocks;
             {
               py::gil_scoped_release release;
-              blocks = w.Write(begin, end);
+              blocks = piece ? w.Write(*piece, begin, end) : w.Write(begin, end);
             }
             py::list out;
             for (size_t c = 0; c < blocks.size(); ++c) {
@@ -412,7 +448,7 @@ void BindObservations(py::module_& m) {
             }
             return out;
           },
-          py::arg("begin"), py::arg("end"));
+          py::arg("begin"), py::arg("end"), py::arg("piece") = nullptr);
 }
 
 // What the NC program writers ask of a plan's kinds (observations/

@@ -22,6 +22,7 @@ and give a confident wrong answer. These checks run where data comes in
 from __future__ import annotations
 
 import functools
+import json
 import math
 import numbers
 import os
@@ -278,12 +279,17 @@ def check_loaded(ds, where: str = "dataset") -> None:
     """All magnitude checks of a validated :class:`fivecal.Dataset`, on every
     observation: the core hands the observations over as arrays (10^6 in a
     fraction of a second) and a message names the first offending row."""
-    import json
+    check_loaded_pieces(ds, [loaded_columns(ds)], where)
 
-    head = json.loads(ds._core.subset([]).to_json())  # machine, probe, artefact: no observations
+
+def loaded_columns(ds, offset: int = 0) -> dict:
+    """What :func:`check_loaded` reads of the observations of ``ds``, their
+    rows counted from ``offset`` (a piece of a dataset read piece by piece)."""
     cols = ds._core.columns()
     m = ds.machine
     cols["axes"] = {a: cols["axes"][:, k] for k, a in enumerate(m.axis_names)}
+    if offset:
+        cols["ball"] = cols["ball"] + offset
     # The kinds' other positions (a tracker's pose, a station, a target point) are
     # not among the columns: the few observations that have them go through JSON.
     balls = _codes_where(lambda k: k["ball_mount"])
@@ -291,8 +297,34 @@ def check_loaded(ds, where: str = "dataset") -> None:
     rows = np.flatnonzero(np.isin(cols["type"], extra))
     if rows.size:
         obs = json.loads(ds._core.subset(rows.tolist()).to_json())["observations"]
-        cols["positions"] = _key_positions(obs, rows, cols["type"][rows])
-    _check_columns(m, head, cols, where)
+        cols["positions"] = _key_positions(obs, rows + offset, cols["type"][rows])
+    return cols
+
+
+def check_loaded_pieces(head, parts, where: str = "dataset") -> None:
+    """:func:`check_loaded` of a dataset read piece by piece: ``head`` one of
+    its pieces (machine, probe, artefact), ``parts`` the
+    :func:`loaded_columns` of every piece in order, as if of the whole."""
+    if not parts:
+        return
+    if len(parts) == 1:
+        cols = parts[0]
+    else:
+        cols = {}
+        for key in parts[0]:
+            if key == "axes":
+                cols[key] = {a: np.concatenate([p[key][a] for p in parts]) for a in parts[0][key]}
+            elif key != "positions":
+                cols[key] = np.concatenate([p[key] for p in parts])
+        positions = {}
+        for p in parts:
+            for key, (r, v) in p.get("positions", {}).items():
+                positions.setdefault(key, []).append((r, v))
+        if positions:
+            cols["positions"] = {key: (np.concatenate([r for r, _ in x]), np.concatenate([v for _, v in x]))
+                                 for key, x in positions.items()}
+    d = json.loads(head._core.subset([]).to_json())  # machine, probe, artefact: no observations
+    _check_columns(head.machine, d, cols, where)
 
 
 def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "dataset",

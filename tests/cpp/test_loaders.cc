@@ -4,7 +4,13 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <unistd.h>
+
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <numeric>
+#include <optional>
 #include <cmath>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -13,6 +19,7 @@
 #include <vector>
 
 #include "fivecal/observations/dataset.h"
+#include "fivecal/observations/dataset_reader.h"
 #include "fivecal/solve/identify.h"
 #include "fivecal/model/machine.h"
 #include "fivecal/solve/problem.h"
@@ -667,6 +674,132 @@ TEST(LoaderStreaming, MessagesAreThoseOfTheDocumentOrder) {
   d["observations"][1]["target"] = "S9";
   ExpectInvalid([&] { Dataset::FromJson(InOrder(d, {"machine", "observations", "artefact"})); },
                 {"dataset.observations[1].target: unknown sphere 'S9'"});
+}
+
+// ---- The fast reader and the file read piece by piece -----------------------
+
+TEST(LoaderFast, EveryNumberAndStringFormReadsAsTheDocumentParserReadsIt) {
+  // The fast reader parses numbers and strings itself (std::from_chars, its
+  // own escapes); it must read each as the document parser does, and give
+  // up (to the SAX stream) on what it does not handle.
+  const std::vector<std::string> numbers = {"0", "-0", "-0.0", "7", "-7", "1E2", "1e-7", "-2.5E+1", "0.1",
+                                            "12345", "99.999999999999999999", "2.5e-300", "1.7976931348623157e2"};
+  const std::vector<std::string> ids = {R"("plain")", R"("q\"uote\\back\/slash")", R"("tab\tnl\nret\r\b\f")",
+                                        R"("\u00e9t\u00e9")", "\"\xc3\xa9t\xc3\xa9\"", R"("")"};
+  const json d = SmallDataset();
+  std::string obs;
+  for (size_t i = 0; i < numbers.size() + ids.size(); ++i) {
+    const std::string x = i < numbers.size() ? numbers[i] : "1";
+    const std::string id = i < numbers.size() ? R"("n")" : ids[i - numbers.size()];
+    obs += std::string(i ? ",\n" : "") + R"({"type": "ball3d", "setup": "R1", "axes": {"X": )" + x +
+           R"(, "Y": 2, "Z": -5, "B": 30, "C": 0, "S": 0}, "measured": [)" + x + R"(, 0, 0], "tool_ball": [0, 0, )" +
+           x + R"(], "table_ball": [0, 0, 100], "sigma": 0.001, "direction": {"X": 1, "C": -1.0}, "id": )" + id + "}";
+  }
+  const std::string head = "\"machine\": " + d["machine"].dump() + ", \"probe\": {\"tip_radius\": 3}";
+  const std::string fast = "{" + head + ", \"observations\": [" + obs + "]}";
+  const std::string document = "{\"observations\": [" + obs + "], " + head + "}";
+  const Dataset a = Dataset::FromJson(fast), b = Dataset::FromJson(document);
+  EXPECT_EQ(a.ToJson(), b.ToJson());
+  ASSERT_EQ(a.observations.size(), numbers.size() + ids.size());
+  const int ax = a.machine().AxisIndex('X');
+  for (size_t i = 0; i < numbers.size(); ++i) {
+    const double x = std::stod(numbers[i]);
+    EXPECT_EQ(a.observations[i].axes[ax], x) << numbers[i];
+    // -0 is an integer to a JSON parser (+0.0); -0.0 keeps its sign
+    if (numbers[i].find_first_of(".eE") != std::string::npos)
+      EXPECT_EQ(std::signbit(a.observations[i].axes[ax]), std::signbit(x)) << numbers[i];
+  }
+  EXPECT_EQ(a.observations[numbers.size() + 1].id, "q\"uote\\back/slash");
+  EXPECT_EQ(a.observations[numbers.size() + 3].id, "\xc3\xa9t\xc3\xa9");
+  // A byte order mark is skipped, as the document parser skips it.
+  EXPECT_EQ(Dataset::FromJson("\xEF\xBB\xBF" + fast).ToJson(), a.ToJson());
+  // Invalid numbers and literals are the document parser's to name.
+  for (const std::string& bad : {"01", "1.", ".5", "-", "1e", "+1", "0x10", "NaN", "tru"}) {
+    std::string text = fast;
+    text.replace(text.find("\"Y\": 2"), 6, "\"Y\": " + bad);
+    ExpectInvalid([&] { Dataset::FromJson(text); }, {"invalid JSON"});
+  }
+}
+
+// `text` in a temporary file; the file's path.
+std::string TempFile(const std::string& text) {
+  char name[] = "/tmp/fivecal_loader_XXXXXX";
+  const int fd = mkstemp(name);
+  EXPECT_GE(fd, 0);
+  EXPECT_EQ(write(fd, text.data(), text.size()), static_cast<ssize_t>(text.size()));
+  close(fd);
+  return name;
+}
+
+// Every piece of the file read piece by piece, joined, as ToJson; "" when
+// the reader says the file does not stream.
+std::string ReadInPieces(const std::string& path, size_t rows, size_t buffer, std::vector<size_t>* sizes = nullptr) {
+  DatasetFileReader r(path, buffer);
+  std::optional<Dataset> whole;
+  while (std::optional<Dataset> piece = r.Next(rows)) {
+    if (sizes) sizes->push_back(piece->observations.size());
+    if (!whole) whole.emplace(piece->Subset({}));
+    for (Observation& o : piece->observations) whole->observations.push_back(std::move(o));
+  }
+  if (!r.streamable() || !whole) return "";
+  return whole->ToJson();
+}
+
+TEST(LoaderFast, AFileReadPieceByPieceIsTheWholeFile) {
+  // Many observations of every flat kind and some of others (through the
+  // reference reader), a buffer far smaller than the file: pieces of any
+  // size join up to what Dataset::FromJson loads, observations crossing the
+  // buffer's refills included.
+  json d = SmallDataset();
+  json& o = d["observations"];
+  const json base = o;
+  for (int i = 0; i < 300; ++i) {
+    json x = base[i % base.size()];
+    x["axes"]["X"] = 0.37 * i;
+    if (i % 7 == 0) x["id"] = "id " + std::to_string(i);
+    if (i % 11 == 0) x["sigma"] = 0.002;
+    o.push_back(x);
+  }
+  const std::string text = InOrder(d, {"machine", "probe", "artefact", "observations"});
+  const std::string path = TempFile(text);
+  const std::string expected = Dataset::FromJson(text).ToJson();
+  std::vector<size_t> sizes;
+  EXPECT_EQ(ReadInPieces(path, 7, 4096, &sizes), expected);
+  EXPECT_EQ(sizes.front(), 7u);
+  EXPECT_EQ(std::accumulate(sizes.begin(), sizes.end(), size_t{0}), o.size());
+  EXPECT_EQ(ReadInPieces(path, 1000, 4096), expected);
+  EXPECT_EQ(ReadInPieces(path, 1, 1 << 20), expected);
+  std::remove(path.c_str());
+
+  // A bad observation is named by its index in the file, in any piece.
+  json bad = d;
+  bad["observations"][250]["axes"]["X"] = 2e5;
+  const std::string bad_text = InOrder(bad, {"machine", "probe", "artefact", "observations"});
+  const std::string bad_path = TempFile(bad_text);
+  const std::string whole_message = MessageOf([&] { Dataset::FromJson(bad_text); });
+  EXPECT_NE(whole_message.find("observations[250].axes.X"), std::string::npos) << whole_message;
+  EXPECT_EQ(MessageOf([&] { ReadInPieces(bad_path, 7, 4096); }), whole_message);
+  std::remove(bad_path.c_str());
+
+  // What does not stream says so, or fails a piece's checks (a probe given
+  // after the observations): the caller loads it whole. Members after the
+  // observations, no observations, a string beyond ASCII, a syntax error.
+  for (const std::string& t :
+       {InOrder(d, {"machine", "artefact", "observations", "probe"}),
+        InOrder(d, {"observations", "machine", "probe", "artefact"}),
+        std::string(text).replace(text.find("\"id 0\""), 6, "\"id \xc3\xa9\""),
+        text.substr(0, text.size() - 2),
+        text + "x"}) {
+    const std::string p = TempFile(t);
+    std::string got;
+    try {
+      got = ReadInPieces(p, 7, 4096);
+    } catch (const std::invalid_argument&) {
+    }
+    EXPECT_EQ(got, "");
+    std::remove(p.c_str());
+  }
+  EXPECT_THROW(DatasetFileReader("/nonexistent/x.json"), std::invalid_argument);
 }
 
 }  // namespace

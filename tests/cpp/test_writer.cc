@@ -4,6 +4,8 @@
 // the same observations (the flat fast path and the JSON path alike).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -131,6 +133,75 @@ TEST(DatasetWriter, ColumnsLoadBackAsTheSameObservations) {
                                              "sigma_x", "sigma_y", "sigma_z"};
   EXPECT_EQ(names, expected);
   EXPECT_THROW(w.Write(2, 1), std::invalid_argument);
+}
+
+// Consecutive pieces of `ds` (the head with observations [b, e)).
+std::vector<Dataset> Pieces(const Dataset& ds, size_t rows) {
+  std::vector<Dataset> out;
+  for (size_t b = 0; b < ds.observations.size(); b += rows) {
+    std::vector<int> idx;
+    for (size_t i = b; i < std::min(ds.observations.size(), b + rows); ++i) idx.push_back(static_cast<int>(i));
+    out.push_back(ds.Subset(idx));
+  }
+  return out;
+}
+
+TEST(DatasetWriter, PiecesWriteWhatTheWholeWrites) {
+  // fivecal convert writes a file it reads piece by piece: the same text and
+  // the same columns as the whole dataset's, whatever the piece size.
+  for (const char* kind : {"ball3d", "facet"}) {
+    const Dataset ds = Samples(kind, 41);
+    int n = 0;
+    const std::string whole = Written(ds, 1 << 20, &n);
+    const ColumnWriter all(ds);
+    for (size_t rows : {1, 7, 41}) {
+      std::string text;
+      DatasetJsonWriter w(ds, [&](const char* p, size_t k) { text.append(p, k); }, 64);
+      ColumnWriter cw;
+      bool first = true;
+      size_t offset = 0;
+      const std::vector<Dataset> pieces = Pieces(ds, rows);
+      for (const Dataset& piece : pieces) {
+        w.Add(piece);
+        const bool changed = cw.Scan(piece, static_cast<int64_t>(offset));
+        if (first) EXPECT_TRUE(changed);
+        first = false;
+        offset += piece.observations.size();
+      }
+      w.Finish();
+      EXPECT_EQ(text, whole) << kind << " " << rows;
+      ASSERT_EQ(cw.columns().size(), all.columns().size()) << kind << " " << rows;
+      offset = 0;
+      for (const Dataset& piece : pieces) {
+        const int64_t k = static_cast<int64_t>(piece.observations.size());
+        const auto a = cw.Write(piece, 0, k), b = all.Write(static_cast<int64_t>(offset), static_cast<int64_t>(offset) + k);
+        for (size_t c = 0; c < a.size(); ++c) {
+          EXPECT_EQ(cw.columns()[c].name, all.columns()[c].name);
+          EXPECT_EQ(a[c].text, b[c].text);
+          EXPECT_EQ(a[c].offsets, b[c].offsets);
+          EXPECT_EQ(a[c].small, b[c].small);
+          EXPECT_EQ(a[c].valid, b[c].valid);
+          ASSERT_EQ(a[c].numbers.size(), b[c].numbers.size());
+          for (size_t r = 0; r < a[c].numbers.size(); ++r)
+            EXPECT_TRUE(a[c].numbers[r] == b[c].numbers[r] || (std::isnan(a[c].numbers[r]) && std::isnan(b[c].numbers[r])));
+        }
+        offset += piece.observations.size();
+      }
+    }
+  }
+  // A column the first piece lacks (ids from observation 4 on) changes the
+  // columns when its piece is scanned: a streamed writer starts again.
+  const Dataset ds = Samples("ball3d", 9);
+  ColumnWriter cw;
+  const std::vector<Dataset> pieces = Pieces(ds, 2);  // ids at 0, 4, 8
+  EXPECT_TRUE(cw.Scan(pieces[0]));
+  EXPECT_FALSE(cw.Scan(pieces[1], 2));
+  EXPECT_FALSE(cw.Scan(pieces[2], 4));
+  const Dataset late = Samples("ball3d", 9).Subset({1, 2, 3, 4});
+  ColumnWriter cl;
+  EXPECT_TRUE(cl.Scan(late.Subset({0, 1})));
+  EXPECT_TRUE(cl.Scan(late.Subset({2, 3}), 2));  // the id of sample 4
+  EXPECT_EQ(cl.columns()[1].name, "id");
 }
 
 }  // namespace

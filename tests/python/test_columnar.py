@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ import pytest
 import fivecal
 from fivecal.cli import main
 from fivecal.procedures import tango
+from fivecal.units import looks_like_radians
 
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
@@ -460,3 +462,130 @@ def test_the_streaming_fit_of_a_parquet_trace_prepares_no_row_per_sample(tmp_pat
         assert abs(d.values[k] - s.values[k]) < 1e-9 * d.std[k], k
         assert s.std[k] == pytest.approx(d.std[k], rel=1e-8), k
     np.testing.assert_allclose(s.residuals, d.residuals, atol=1e-9 * d.rms)
+
+
+# ---- fivecal convert, piece by piece -------------------------------------------------------------
+
+def _convert_both_ways(ds, tmp_path, rows):
+    """(JSON, whole Parquet, streamed Parquet, whole JSON back, streamed JSON
+    back) bytes; `rows` observations per piece and per row group."""
+    src = tmp_path / "src.json"
+    fivecal.save_dataset(ds, src)
+    out = {}
+    for mode, limit in (("whole", 1 << 40), ("piece", 0)):
+        pq_path, js_path = tmp_path / f"{mode}.parquet", tmp_path / f"{mode}.json"
+        assert columnar.convert(src, pq_path, rows=rows, stream_bytes=limit) == len(ds)
+        assert columnar.convert(pq_path, js_path, rows=rows, stream_bytes=limit) == len(ds)
+        out[mode] = (pq_path.read_bytes(), js_path.read_bytes())
+    return src.read_bytes(), out
+
+
+@pytest.mark.parametrize("rows", [1, 7, 1000])
+def test_convert_in_pieces_writes_what_the_whole_writes(dataset, tmp_path, rows):
+    # Every kind (ids, every form of sigma, backlash directions, mountings,
+    # instruments): the streamed convert writes the bytes the whole one does,
+    # which save_dataset writes, and JSON comes back byte for byte.
+    text, out = _convert_both_ways(dataset, tmp_path, rows)
+    assert out["piece"][0] == out["whole"][0]
+    assert out["piece"][1] == out["whole"][1] == text
+    assert columnar.read_parquet(tmp_path / "piece.parquet").to_dict() == dataset.to_dict()
+
+
+def test_convert_in_pieces_of_the_default_size_is_save_dataset(tmp_path, monkeypatch):
+    ds = _balls()
+    fivecal.save_dataset(ds, tmp_path / "saved.parquet")
+    fivecal.save_dataset(ds, tmp_path / "src.json")
+    monkeypatch.setattr(columnar, "STREAM_BYTES", 0)
+    assert main(["convert", str(tmp_path / "src.json"), str(tmp_path / "out.parquet")]) == 0
+    assert (tmp_path / "out.parquet").read_bytes() == (tmp_path / "saved.parquet").read_bytes()
+    assert main(["convert", str(tmp_path / "out.parquet"), str(tmp_path / "back.json")]) == 0
+    assert (tmp_path / "back.json").read_bytes() == (tmp_path / "src.json").read_bytes()
+
+
+def test_a_column_that_first_appears_in_a_later_piece_is_in_every_row_group(tmp_path, monkeypatch):
+    # ids, sigmas and backlash directions only from observation 20 on: the
+    # first pass finds the columns changed and a second pass writes the file
+    # with the whole dataset's columns.
+    d = _balls().to_dict()
+    for o in d["observations"][:20]:
+        for k in ("id", "sigma", "direction"):
+            o.pop(k, None)
+    ds = fivecal.Dataset.from_dict(d)
+    written = []
+    real = columnar._piece_batches
+    monkeypatch.setattr(columnar, "_piece_batches", lambda *a: written.append(1) or real(*a))
+    _, out = _convert_both_ways(ds, tmp_path, 6)
+    assert out["piece"][0] == out["whole"][0]
+    # 7 pieces: the first pass wrote 3 before the piece of observation 20
+    assert len(written) == 3 + 7
+    names = pq.read_schema(tmp_path / "piece.parquet").names
+    assert {"id", "sigma", "dir_C"} <= set(names)
+
+
+def test_a_bad_observation_in_any_piece_is_named_by_its_row_and_nothing_is_written(tmp_path):
+    ds = _balls()
+    d = ds.to_dict()
+    d["observations"][23]["axes"]["X"] = 2e5
+    src = tmp_path / "bad.json"
+    src.write_text(json.dumps(d))
+    with pytest.raises(ValueError) as whole:
+        fivecal.load_dataset(src)
+    assert "observations[23].axes.X" in str(whole.value)
+    for dst in ("out.parquet", "out.json"):
+        with pytest.raises(ValueError) as piece:
+            columnar.convert(src, tmp_path / dst, rows=5, stream_bytes=0)
+        assert str(piece.value) == str(whole.value)
+        assert not os.path.exists(tmp_path / dst)
+        assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
+    assert main(["convert", str(src), str(tmp_path / "out.parquet")]) == 2
+
+
+def test_a_file_that_does_not_stream_converts_whole(tmp_path):
+    # The head after the observations, a string beyond ASCII: the whole load.
+    ds = _balls()
+    d = ds.to_dict()
+    src = tmp_path / "tail.json"
+    src.write_text(json.dumps({"observations": d["observations"], **{k: v for k, v in d.items() if k != "observations"}}))
+    columnar.convert(src, tmp_path / "a.parquet", rows=4, stream_bytes=0)
+    columnar.convert(src, tmp_path / "b.parquet", rows=4, stream_bytes=1 << 40)
+    assert (tmp_path / "a.parquet").read_bytes() == (tmp_path / "b.parquet").read_bytes()
+    d["observations"][30]["id"] = "ré"
+    src.write_text(json.dumps(d))
+    columnar.convert(src, tmp_path / "c.parquet", rows=4, stream_bytes=0)
+    assert columnar.read_parquet(tmp_path / "c.parquet").observations[30]["id"] == "ré"
+
+
+def test_the_plausibility_checks_see_the_whole_file_not_a_piece(tmp_path):
+    # A slow rotary sweep: its first samples alone (B within 2 pi, spanning
+    # more than 1, not round) look like radians, the whole sweep does not:
+    # the streamed convert warns as the whole load does (not at all).
+    m = tango.hu40t_machine()
+    n = 400
+    b = np.linspace(0.123, 89.9, n)
+    axes = {"X": np.zeros(n), "Y": np.zeros(n), "Z": np.full(n, -20.0), "B": b, "C": np.zeros(n), "S": np.zeros(n)}
+    ds = fivecal.ball_dataset(m, "ball3d", axes, [0, 0, 100], [100, 0, 0], measured=np.zeros((n, 3)), setup="R1")
+    fivecal.save_dataset(ds, tmp_path / "sweep.json")
+    assert looks_like_radians(b[:10]) and not looks_like_radians(b)  # a piece would mislead
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fivecal.load_dataset(tmp_path / "sweep.json")
+        whole = [str(x.message) for x in caught]
+        caught.clear()
+        columnar.convert(tmp_path / "sweep.json", tmp_path / "sweep.parquet", rows=10, stream_bytes=0)
+        piece = [str(x.message) for x in caught]
+    assert piece == whole == []
+    # and a trace in radians is warned about once, as by the whole load
+    axes["B"] = np.radians(b)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = fivecal.ball_dataset(m, "ball3d", axes, [0, 0, 100], [100, 0, 0], measured=np.zeros((n, 3)),
+                                  setup="R1")
+        fivecal.save_dataset(ds, tmp_path / "rad.json")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fivecal.load_dataset(tmp_path / "rad.json")
+        whole = [str(x.message) for x in caught]
+        caught.clear()
+        columnar.convert(tmp_path / "rad.json", tmp_path / "rad.parquet", rows=10, stream_bytes=0)
+        piece = [str(x.message) for x in caught]
+    assert len(whole) == 1 and piece == whole

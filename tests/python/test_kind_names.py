@@ -325,3 +325,43 @@ def test_an_option_of_another_import_is_refused_naming_the_imports_that_take_it(
     with pytest.raises(ValueError, match=rf"^--{key.replace('_', '-')}: {key} belongs to {owners}$"):
         tables.read_table(ROOT / "examples/import/probing.csv", kind, ROOT / "examples/machines/c600u.json",
                           **option)
+
+
+# ---- a kind's file keys ----------------------------------------------------------------------------
+
+#: Keys of every observation (the common header, read and written by the
+#: generic code), and keys of the artefact that some kinds also have (a
+#: scale bar's length, a facet's point and normal).
+HEADER_KEYS = {"type", "axes", "direction", "sigma", "id", "setup", "target"}
+ARTEFACT_KEYS = {"length", "point", "normal"}
+
+#: The loaders and writers: they know a kind's own keys from its flat form
+#: (ObservationKind::flat_keys) and its Read and Write, never by name.
+KEY_BLIND = ["cpp/src/observations/dataset.cc", "cpp/src/observations/writer.cc",
+             "cpp/include/fivecal/observations/kind.h", "cpp/include/fivecal/observations/writer.h"]
+
+
+def kind_keys() -> set:
+    keys = set()
+    for k in _core.observation_kinds():
+        keys |= set(k["json_keys"])
+    return keys - HEADER_KEYS - ARTEFACT_KEYS
+
+
+def cpp_key_literals(text: str, keys) -> list:
+    """(line, key) of every string literal of C++ source that is one of ``keys``."""
+    text = _strip_cpp_comments(text)
+    return [(text.count("\n", 0, m.start()) + 1, m.group(1))
+            for m in re.finditer(r'"([A-Za-z_]+)"', text) if m.group(1) in keys]
+
+
+@pytest.mark.parametrize("path", KEY_BLIND)
+def test_the_loaders_and_writers_name_no_kinds_own_key(path):
+    found = cpp_key_literals((ROOT / path).read_text(), kind_keys())
+    assert not found, f"{path} names a kind's file keys {found}: let the kind declare them (flat_keys)"
+
+
+def test_the_key_scan_finds_a_planted_key():
+    assert {"tool_ball", "reading"} <= kind_keys()
+    planted = 'const char* k = "tool_ball";  // "reading" in a comment is docs\nf.set("setup");'
+    assert cpp_key_literals(planted, kind_keys()) == [(1, "tool_ball")]

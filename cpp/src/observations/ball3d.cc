@@ -68,15 +68,22 @@ class Kind final : public BallMountKind {
     auto it = o.find("measured");
     ob->data<BallMountData>().measured = ReadVector3(it == o.end() ? absent : *it, w + ".measured");
   }
+  enum Slot { kMeasured = kFlatOwn };
+  const std::vector<FlatKey>& flat_keys() const override {
+    static const std::vector<FlatKey> keys = [] {
+      std::vector<FlatKey> k = MountFlatKeys();
+      k.push_back({"measured", FlatKey::kVector});
+      return k;
+    }();
+    return keys;
+  }
   bool ReadFlat(const FlatObservation& f, const Artefact&, Observation* ob) const override {
-    using F = FlatObservation;
-    if (!f.only({F::kSetup, F::kMeasured, F::kToolBall, F::kTableBall}) || !f.has(F::kMeasured)) return false;
-    ob->data<BallMountData>().measured = f.measured;
+    if (!f.has(kMeasured)) return false;
+    ob->data<BallMountData>().measured = f.vector(kMeasured);
     return ReadFlatMount(f, ob);
   }
   bool WriteFlat(const Observation& o, FlatObservation* f) const override {
-    f->measured = o.data<BallMountData>().measured;
-    f->seen |= 1u << FlatObservation::kMeasured;
+    f->set_vector(kMeasured, o.data<BallMountData>().measured);
     WriteFlatMount(o, f);
     return true;
   }

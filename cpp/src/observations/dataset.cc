@@ -4,6 +4,11 @@
 #include <cstdio>
 #include <cstring>
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cstdint>
+#include <tuple>
 #include <exception>
 #include <functional>
 #include <memory>
@@ -11,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
+#include "fivecal/observations/dataset_reader.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/solve/priors.h"
 #include "fivecal/solve/problem.h"
@@ -601,21 +607,43 @@ class EventList {
 // object of the known keys, each once, of its plain type (axes and direction
 // objects of single machine axis letters, vectors of three numbers, sigma a
 // number), within the bounds. The loader reads the common keys (type, axes,
-// direction, sigma, id) and collects the others into a FlatObservation its
-// kind reads (ObservationKind::ReadFlat). Anything else (an error, "C1", a
-// sigma per row, a repeated key, a kind without ReadFlat) returns false and
-// goes the reference way: only a speed-up for the kinds long traces come in
+// direction, sigma, id) and collects the others, which must be the kind's
+// flat keys (ObservationKind::flat_keys), into a FlatObservation the kind
+// reads (ObservationKind::ReadFlat). Anything else (an error, "C1", a sigma
+// per row, a repeated key, a kind without ReadFlat) returns false and goes
+// the reference way: only a speed-up for the kinds long traces come in
 // (LoaderStreaming tests compare).
 bool FastObservation(const EventList& ev, const Machine& m, const Artefact& artefact, Observation* ob) {
-  // The common keys, then the flat form's (FlatObservation::Key + kNumCommon).
+  // The common keys, then the kind's flat keys (slot + kNumCommon).
   enum Common { kType, kId, kAxes, kDirection, kSigma, kNumCommon };
   static const char* const kCommon[kNumCommon] = {"type", "id", "axes", "direction", "sigma"};
-  constexpr int kNumKeys = kNumCommon + FlatObservation::kNumKeys;
   const size_t n = ev.size();
   if (n < 2 || ev[0].kind != Event::kObject || ev[n - 1].kind != Event::kEndObject) return false;
+  // The kind first (the writers put "type" first): its keys are the others'.
+  const std::string* type = nullptr;
+  if (ev[1].kind == Event::kKey && ev[1].s == "type") {
+    if (ev[2].kind != Event::kString) return false;
+    type = &ev[2].s;
+  } else {
+    int depth = 0;
+    for (size_t k = 1; k + 1 < n && !type; ++k) {
+      const Event::Kind e = ev[k].kind;
+      if (e == Event::kObject || e == Event::kArray) ++depth;
+      else if (e == Event::kEndObject || e == Event::kEndArray) --depth;
+      else if (depth == 0 && e == Event::kKey && ev[k].s == "type") type = ev[k + 1].kind == Event::kString ? &ev[k + 1].s : nullptr;
+    }
+    if (!type) return false;
+  }
+  // The kind of the previous observation first: a trace is one kind.
+  static thread_local const ObservationKind* last = nullptr;
+  const ObservationKind* kind = last && *type == last->name() ? last : FindKind(*type);
+  if (!kind) return false;
+  const std::vector<FlatKey>& keys = kind->flat_keys();
+  const int num_flat = static_cast<int>(keys.size());
+  if (num_flat == 0 || num_flat > FlatObservation::kMaxKeys) return false;
   const int na = m.num_axes();
   unsigned seen = 0;
-  const std::string *type = nullptr, *id = nullptr;
+  const std::string* id = nullptr;
   double sigma = 0;
   FlatObservation flat;
   ob->axes = Eigen::VectorXd::Zero(na);
@@ -628,27 +656,22 @@ bool FastObservation(const EventList& ev, const Machine& m, const Artefact& arte
     int key = 0;
     while (key < kNumCommon && name != kCommon[key]) ++key;
     if (key == kNumCommon)
-      while (key < kNumKeys && name != FlatObservation::kNames[key - kNumCommon]) ++key;
-    if (key == kNumKeys || (seen & (1u << key))) return false;
+      while (key < kNumCommon + num_flat && name != keys[key - kNumCommon].name) ++key;
+    if (key == kNumCommon + num_flat || (seen & (1u << key))) return false;
     seen |= 1u << key;
     const Event& v = ev[k];
     switch (key) {
       case kType:
+        ++k;  // read above
+        break;
       case kId:
-      case kNumCommon + FlatObservation::kTarget:
-      case kNumCommon + FlatObservation::kSetup: {
         if (v.kind != Event::kString) return false;
-        (key == kType ? type : key == kId ? id : key == kNumCommon + FlatObservation::kTarget ? flat.target
-                                                                                               : flat.setup) = &v.s;
+        id = &v.s;
         ++k;
         break;
-      }
       case kSigma:
-      case kNumCommon + FlatObservation::kReading:
-      case kNumCommon + FlatObservation::kLength:
         if (!v.number()) return false;
-        (key == kSigma ? sigma : key == kNumCommon + FlatObservation::kReading ? flat.reading : flat.length) =
-            v.value();
+        sigma = v.value();
         ++k;
         break;
       case kAxes:
@@ -680,30 +703,37 @@ bool FastObservation(const EventList& ev, const Machine& m, const Artefact& arte
         ++k;
         break;
       }
-      default: {  // the three vectors
-        if (v.kind != Event::kArray || k + 4 >= n || ev[k + 4].kind != Event::kEndArray) return false;
-        const int f = key - kNumCommon;
-        Eigen::Vector3d& x = f == FlatObservation::kToolBall    ? flat.tool_ball
-                             : f == FlatObservation::kTableBall ? flat.table_ball
-                                                                : flat.measured;
-        for (int c = 0; c < 3; ++c) {
-          const Event& e = ev[k + 1 + c];
-          if (!e.number() || !(std::abs(e.value()) <= kMaxLinear)) return false;
-          x[c] = e.value();
+      default: {  // one of the kind's flat keys
+        const int slot = key - kNumCommon;
+        switch (keys[slot].shape) {
+          case FlatKey::kText:
+            if (v.kind != Event::kString) return false;
+            flat.set_text(slot, &v.s);
+            ++k;
+            break;
+          case FlatKey::kNumber:
+            if (!v.number()) return false;
+            flat.set_number(slot, v.value());
+            ++k;
+            break;
+          case FlatKey::kVector:
+            if (v.kind != Event::kArray || k + 4 >= n || ev[k + 4].kind != Event::kEndArray) return false;
+            for (int c = 0; c < 3; ++c) {
+              const Event& e = ev[k + 1 + c];
+              if (!e.number() || !(std::abs(e.value()) <= kMaxLinear)) return false;
+              flat.values[slot][c] = e.value();
+            }
+            flat.seen |= 1u << slot;
+            k += 5;
+            break;
         }
-        k += 5;
         break;
       }
     }
   }
-  if (k != n - 1 || !type || !(seen & (1u << kAxes))) return false;
+  if (k != n - 1 || !(seen & (1u << kAxes))) return false;
   for (int a = 0; a < na; ++a)
     if (!(given & (1u << a)) && m.axis(a).name != 'S') return false;
-  flat.seen = seen >> kNumCommon;
-  // The kind of the previous observation first: a trace is one kind.
-  static thread_local const ObservationKind* last = nullptr;
-  const ObservationKind* kind = last && *type == last->name() ? last : FindKind(*type);
-  if (!kind) return false;
   ob->payload = kind->NewPayload();
   if (!kind->ReadFlat(flat, artefact, ob)) return false;
   last = kind;
@@ -909,10 +939,486 @@ size_t CountTypeKeys(const std::string& text) {
   }
   return most;
 }
+// ---------------------------------------------------------------- fast text
+
+// A JSON reader for the common layout of dataset files, faster than the
+// SAX parser for long traces: numbers go through std::from_chars (no
+// locale, no temporary string), keys and strings are copied into the event
+// list's reused storage, and nothing is allocated per observation but the
+// Observation itself. It reads the text as it is, or a file piece by piece
+// (a buffer refilled as it goes, whatever the file's size). Anything it
+// does not handle (a \u escape, a byte outside ASCII in a string, a number
+// beyond 64 bits, invalid JSON, an uncommon layout) makes it give up
+// (Status::kGiveUp) and the caller takes the reference path, so its result
+// and messages are never its own.
+class FastText {
+ public:
+  enum class Status { kOk, kMore, kGiveUp };
+
+  // Over a whole text (no refill).
+  FastText(const char* data, size_t size) : begin_(data), p_(data), end_(data + size), eof_(true) {}
+  // Over a file, read in pieces of at least `chunk` bytes.
+  FastText(std::FILE* f, size_t chunk) : file_(f), chunk_(chunk), eof_(false) {
+    own_.resize(chunk_);
+    begin_ = p_ = end_ = own_.data();
+  }
+
+  // The text from `keep` on stays in the buffer, followed by more of the
+  // file (eof() once it is all read); `keep` and the cursor move with it.
+  void Refill(const char** keep) {
+    if (eof_) return;
+    const size_t kept = static_cast<size_t>(end_ - *keep), at = static_cast<size_t>(p_ - *keep);
+    if (kept + chunk_ > own_.size()) {
+      std::vector<char> bigger(kept + chunk_);
+      std::memcpy(bigger.data(), *keep, kept);
+      own_.swap(bigger);
+    } else {
+      std::memmove(own_.data(), *keep, kept);
+    }
+    const size_t got = std::fread(own_.data() + kept, 1, own_.size() - kept, file_);
+    if (got < own_.size() - kept) eof_ = true;
+    begin_ = own_.data();
+    *keep = begin_;
+    p_ = begin_ + at;
+    end_ = begin_ + kept + got;
+  }
+
+  const char*& cursor() { return p_; }
+  const char* end() const { return end_; }
+  bool eof() const { return eof_; }
+  // Kept in the buffer across a refill by the caller.
+  const char* begin() const { return begin_; }
+
+  // Skips white space; kMore at the buffer's end (the caller refills).
+  Status SkipSpace() {
+    while (p_ < end_ && (*p_ == ' ' || *p_ == '\n' || *p_ == '\r' || *p_ == '\t')) ++p_;
+    return p_ < end_ ? Status::kOk : More();
+  }
+
+  // One string (the cursor on its quote) into `out`.
+  Status String(std::string* out) {
+    const char* s = p_ + 1;
+    const char* q = s;
+    while (q < end_) {
+      const auto c = static_cast<unsigned char>(*q);
+      if (c == '"') {
+        out->assign(s, q);
+        p_ = q + 1;
+        return Status::kOk;
+      }
+      if (c == '\\' || c < 0x20 || c >= 0x80) break;
+      ++q;
+    }
+    if (q == end_) return More();
+    // Escapes, spelled out (\u and bytes beyond ASCII: the reference path).
+    out->assign(s, q);
+    while (q < end_) {
+      const auto c = static_cast<unsigned char>(*q);
+      if (c == '"') {
+        p_ = q + 1;
+        return Status::kOk;
+      }
+      if (c < 0x20 || c >= 0x80) return Status::kGiveUp;
+      if (c != '\\') {
+        out->push_back(*q++);
+        continue;
+      }
+      if (q + 1 >= end_) return More();
+      switch (q[1]) {
+        case '"': out->push_back('"'); break;
+        case '\\': out->push_back('\\'); break;
+        case '/': out->push_back('/'); break;
+        case 'b': out->push_back('\b'); break;
+        case 'f': out->push_back('\f'); break;
+        case 'n': out->push_back('\n'); break;
+        case 'r': out->push_back('\r'); break;
+        case 't': out->push_back('\t'); break;
+        default: return Status::kGiveUp;
+      }
+      q += 2;
+    }
+    return More();
+  }
+
+  // One number (the cursor on its first character) as an event: an integer
+  // as kInt (negative) or kUint, as the SAX parser gives them, else kFloat.
+  Status Number(Event* e) {
+    const char* s = p_;
+    const char* q = s;
+    // The JSON grammar: -?(0|[1-9][0-9]*)(.[0-9]+)?([eE][+-]?[0-9]+)?
+    auto digits = [&] {
+      const char* d = q;
+      while (q < end_ && *q >= '0' && *q <= '9') ++q;
+      return q - d;
+    };
+    if (q < end_ && *q == '-') ++q;
+    if (q < end_ && *q == '0') ++q;
+    else if (digits() == 0) return q == end_ ? More() : Status::kGiveUp;
+    bool integral = true;
+    if (q < end_ && *q == '.') {
+      ++q;
+      integral = false;
+      if (digits() == 0) return q == end_ ? More() : Status::kGiveUp;
+    }
+    if (q < end_ && (*q == 'e' || *q == 'E')) {
+      ++q;
+      integral = false;
+      if (q < end_ && (*q == '+' || *q == '-')) ++q;
+      if (digits() == 0) return q == end_ ? More() : Status::kGiveUp;
+    }
+    if (q == end_) return More();  // the number may go on
+    if (integral) {
+      if (*s == '-') {
+        e->kind = Event::kInt;
+        if (std::from_chars(s, q, e->i).ec != std::errc()) return Status::kGiveUp;
+      } else {
+        e->kind = Event::kUint;
+        if (std::from_chars(s, q, e->u).ec != std::errc()) return Status::kGiveUp;
+      }
+    } else {
+      e->kind = Event::kFloat;
+      const auto r = std::from_chars(s, q, e->d);
+      if (r.ec != std::errc() || r.ptr != q || !std::isfinite(e->d)) return Status::kGiveUp;
+    }
+    p_ = q;
+    return Status::kOk;
+  }
+
+  // One value into `ev` (depth: containers open around it).
+  Status Value(EventList* ev, int depth) {
+    Status st = SkipSpace();
+    if (st != Status::kOk) return st;
+    const char c = *p_;
+    if (c == '{' || c == '[') {
+      if (depth + 1 > kMaxDepth) return Status::kGiveUp;
+      const bool object = c == '{';
+      ev->Add(object ? Event::kObject : Event::kArray);
+      ++p_;
+      if ((st = SkipSpace()) != Status::kOk) return st;
+      if (*p_ == (object ? '}' : ']')) {
+        ++p_;
+        ev->Add(object ? Event::kEndObject : Event::kEndArray);
+        return Status::kOk;
+      }
+      for (;;) {
+        if (object) {
+          if ((st = SkipSpace()) != Status::kOk) return st;
+          if (*p_ != '"') return Status::kGiveUp;
+          if ((st = String(&ev->Add(Event::kKey).s)) != Status::kOk) return st;
+          if ((st = SkipSpace()) != Status::kOk) return st;
+          if (*p_ != ':') return Status::kGiveUp;
+          ++p_;
+        }
+        if ((st = Value(ev, depth + 1)) != Status::kOk) return st;
+        if ((st = SkipSpace()) != Status::kOk) return st;
+        if (*p_ == ',') {
+          ++p_;
+          continue;
+        }
+        if (*p_ != (object ? '}' : ']')) return Status::kGiveUp;
+        ++p_;
+        ev->Add(object ? Event::kEndObject : Event::kEndArray);
+        return Status::kOk;
+      }
+    }
+    if (c == '"') return String(&ev->Add(Event::kString).s);
+    if (c == '-' || (c >= '0' && c <= '9')) return Number(&ev->Add(Event::kFloat));
+    for (const auto& [word, kind, truth] : {std::make_tuple("true", Event::kBool, true),
+                                            std::make_tuple("false", Event::kBool, false),
+                                            std::make_tuple("null", Event::kNull, false)}) {
+      const size_t len = std::strlen(word);
+      if (c != word[0]) continue;
+      if (static_cast<size_t>(end_ - p_) < len + 1) return More();
+      if (std::memcmp(p_, word, len) != 0) return Status::kGiveUp;
+      p_ += len;
+      ev->Add(kind).b = truth;
+      return Status::kOk;
+    }
+    return Status::kGiveUp;
+  }
+
+  // Skips one value (the head's members: parsed by the reference parser
+  // from the span), without checking it beyond its nesting and strings.
+  Status Skip() {
+    Status st = SkipSpace();
+    if (st != Status::kOk) return st;
+    int depth = 0;
+    const char* q = p_;
+    while (q < end_) {
+      const char c = *q;
+      if (c == '"') {
+        for (++q; q < end_ && *q != '"'; ++q)
+          if (*q == '\\' && ++q == end_) break;
+        if (q >= end_) return More();
+        ++q;
+        if (depth == 0) break;
+        continue;
+      }
+      if (c == '{' || c == '[') {
+        if (++depth > kMaxDepth) return Status::kGiveUp;
+      } else if (c == '}' || c == ']') {
+        if (depth == 0) break;  // the end of the object that holds the value
+        if (--depth == 0) {
+          ++q;
+          break;
+        }
+      } else if (depth == 0 && (c == ',' || c == ' ' || c == '\n' || c == '\r' || c == '\t')) {
+        break;
+      }
+      ++q;
+    }
+    if (q >= end_) return More();
+    p_ = q;
+    return Status::kOk;
+  }
+
+ private:
+  Status More() const { return eof_ ? Status::kGiveUp : Status::kMore; }
+
+  const char* begin_ = nullptr;
+  const char* p_ = nullptr;
+  const char* end_ = nullptr;
+  std::FILE* file_ = nullptr;
+  size_t chunk_ = 0;
+  bool eof_ = true;
+  std::vector<char> own_;
+};
+
+// A dataset text of the common layout through FastText: the head's members
+// (each parsed by the reference parser from its span), then the
+// observations one by one, then what follows them. Messages and results are
+// those of the SAX stream (DatasetStream), which it mirrors; anything it
+// does not handle gives up and the caller takes that path.
+class FastDataset {
+ public:
+  enum class Step { kObservation, kEnd, kGiveUp };
+  using Status = FastText::Status;
+
+  FastDataset(FastText* t, bool whole) : t_(t), whole_(whole) {}
+
+  json head = json::object();
+  std::exception_ptr error;  // the first bad observation (whole text: reported after the head)
+
+  // Everything up to the observations' '['; false: give up.
+  bool Start() {
+    for (;;) {
+      const char* keep = t_->begin();
+      t_->cursor() = keep;
+      head = json::object();
+      const Status st = Head();
+      if (st == Status::kOk) break;
+      if (st == Status::kGiveUp) return false;
+      t_->Refill(&keep);  // kMore comes only before the file's end: a retry sees more, or its end
+    }
+    if (!head.contains("machine")) return false;
+    try {
+      ds_ = std::make_unique<Dataset>(ParseHead(head));
+    } catch (...) {
+      return false;  // the document path names what is wrong, in order
+    }
+    artefact_known_ = head.contains("artefact");
+    return true;
+  }
+  const Dataset& dataset() const { return *ds_; }
+  size_t index() const { return index_; }
+
+  // The next observation into `ob`.
+  Step Next(Observation* ob) {
+    for (;;) {
+      const char* keep = t_->cursor();
+      bool end = false;
+      const Status st = Lex(&end);
+      if (st == Status::kMore) {
+        t_->Refill(&keep);
+        t_->cursor() = keep;
+        continue;
+      }
+      if (st == Status::kGiveUp) return Step::kGiveUp;
+      if (end) return Step::kEnd;
+      if (!Convert(ob)) return Step::kGiveUp;
+      return Step::kObservation;
+    }
+  }
+
+  // After the observations: the members that follow (whole text only: a
+  // piece reader has handed out the head already) and the end of the text.
+  bool Finish() {
+    for (;;) {
+      const char* keep = t_->cursor();
+      const Status st = Tail();
+      if (st == Status::kOk) return true;
+      if (st == Status::kGiveUp) return false;
+      t_->Refill(&keep);  // the cursor stays where Tail left it
+    }
+  }
+
+ private:
+  Status Head() {
+    const char*& p = t_->cursor();
+    if (t_->end() - p < 3) return t_->eof() ? Status::kGiveUp : Status::kMore;
+    if (std::memcmp(p, "\xEF\xBB\xBF", 3) == 0) p += 3;  // a byte order mark, as the SAX parser skips it
+    Status st = t_->SkipSpace();
+    if (st != Status::kOk) return st;
+    if (*p++ != '{') return Status::kGiveUp;
+    for (;;) {
+      if ((st = Member(true)) != Status::kOk) return st;
+      if (in_observations_) return Status::kOk;
+      if ((st = t_->SkipSpace()) != Status::kOk) return st;
+      if (*p != ',') return Status::kGiveUp;  // no observations: the document decides
+      ++p;
+    }
+  }
+  // One member of the dataset object; the observations' '[' opens them.
+  Status Member(bool before) {
+    const char*& p = t_->cursor();
+    Status st = t_->SkipSpace();
+    if (st != Status::kOk) return st;
+    if (*p != '"') return Status::kGiveUp;
+    if ((st = t_->String(&key_)) != Status::kOk) return st;
+    if ((st = t_->SkipSpace()) != Status::kOk) return st;
+    if (*p++ != ':') return Status::kGiveUp;
+    if ((st = t_->SkipSpace()) != Status::kOk) return st;
+    if (key_ == "observations") {
+      if (!before || *p != '[') return Status::kGiveUp;
+      ++p;
+      in_observations_ = true;
+      return Status::kOk;
+    }
+    if (head.contains(key_)) return Status::kGiveUp;  // repeated key
+    const char* v = p;
+    if ((st = t_->Skip()) != Status::kOk) return st;
+    try {
+      head[key_] = json::parse(v, p);
+    } catch (...) {
+      return Status::kGiveUp;
+    }
+    return Status::kOk;
+  }
+  // Up to the next observation (recorded in ev_) or the array's end.
+  Status Lex(bool* end) {
+    const char*& p = t_->cursor();
+    Status st = t_->SkipSpace();
+    if (st != Status::kOk) return st;
+    if (!first_) {
+      if (*p == ']') {
+        ++p;
+        *end = true;
+        return Status::kOk;
+      }
+      if (*p != ',') return Status::kGiveUp;
+      ++p;
+    } else if (*p == ']') {
+      ++p;
+      *end = true;
+      return Status::kOk;
+    }
+    ev_.Clear();
+    if ((st = t_->Value(&ev_, 2)) != Status::kOk) return st;
+    first_ = false;
+    return Status::kOk;
+  }
+  Status Tail() {
+    const char*& p = t_->cursor();
+    while (!closed_) {
+      Status st = t_->SkipSpace();
+      if (st != Status::kOk) return st;
+      if (*p == '}') {
+        ++p;
+        closed_ = true;
+        break;
+      }
+      if (*p != ',' || !whole_) return Status::kGiveUp;
+      const char* keep = p++;
+      if ((st = Member(false)) != Status::kOk) {
+        p = keep;
+        return st;
+      }
+    }
+    for (;;) {
+      while (p < t_->end() && (*p == ' ' || *p == '\n' || *p == '\r' || *p == '\t')) ++p;
+      if (p < t_->end()) return Status::kGiveUp;  // more than white space after the document
+      if (t_->eof()) return Status::kOk;
+      return Status::kMore;
+    }
+  }
+  bool Convert(Observation* ob) {
+    const size_t i = index_++;
+    if (error) return true;  // the rest is only parsed (a syntax error further on wins)
+    if (!artefact_known_) {
+      // A probe touch's target may be defined further on: the document decides.
+      for (size_t k = 1; k + 1 < ev_.size(); ++k) {
+        if (ev_[k].kind != Event::kKey || ev_[k].s != "type" || ev_[k + 1].kind != Event::kString) continue;
+        const ObservationKind* kind = FindKind(ev_[k + 1].s);
+        if (kind && kind->probe_touch()) return false;
+      }
+    }
+    *ob = Observation();
+    if (FastObservation(ev_, ds_->machine(), ds_->artefact, ob)) return true;
+    try {
+      ev_.Replay(&b_);
+      *ob = ParseObservation(*ds_, b_.root, i, &given_);
+    } catch (...) {
+      error = std::current_exception();
+    }
+    return true;
+  }
+
+  FastText* t_;
+  bool whole_;
+  bool in_observations_ = false, first_ = true, closed_ = false;
+  bool artefact_known_ = false;
+  std::string key_;
+  EventList ev_;
+  ValueBuilder b_;
+  size_t index_ = 0;
+  std::unique_ptr<Dataset> ds_;
+  std::vector<bool> given_;
+};
+
+// "observations[k]" of a piece's message as the file's index k + offset.
+std::string ShiftRows(const std::string& msg, size_t offset) {
+  static const std::string needle = "observations[";
+  std::string out;
+  size_t at = 0;
+  for (size_t hit; (hit = msg.find(needle, at)) != std::string::npos;) {
+    const size_t digits = hit + needle.size();
+    size_t stop = digits;
+    while (stop < msg.size() && std::isdigit(static_cast<unsigned char>(msg[stop]))) ++stop;
+    out.append(msg, at, digits - at);
+    if (stop > digits && stop < msg.size() && msg[stop] == ']') {
+      out += std::to_string(std::stoull(msg.substr(digits, stop - digits)) + offset);
+      at = stop;
+    } else {
+      at = digits;
+    }
+  }
+  out.append(msg, at, std::string::npos);
+  return out;
+}
+
 }  // namespace
 
 Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
   return Guard("dataset", [&] {
+    {
+      FastText t(text.data(), text.size());
+      FastDataset f(&t, true);
+      if (f.Start()) {
+        std::vector<Observation> observations;
+        observations.reserve(CountTypeKeys(text));
+        FastDataset::Step step;
+        for (Observation ob; (step = f.Next(&ob)) == FastDataset::Step::kObservation;)
+          if (!f.error) observations.push_back(std::move(ob));
+        if (step == FastDataset::Step::kEnd && f.Finish()) {
+          Dataset ds = ParseHead(f.head);
+          if (f.error) std::rethrow_exception(f.error);
+          ds.observations = std::move(observations);
+          Finish(&ds, require_observations);
+          return ds;
+        }
+      }
+    }
+    // Not the fast reader's: the SAX stream, which gives up to the document.
     DatasetStream s;
     s.observations.reserve(CountTypeKeys(text));
     const bool parsed = json::sax_parse(text, &s);
@@ -924,6 +1430,79 @@ Dataset Dataset::FromJson(const std::string& text, bool require_observations) {
     Finish(&ds, require_observations);
     return ds;
   });
+}
+
+struct DatasetFileReader::Impl {
+  std::FILE* file = nullptr;
+  std::unique_ptr<FastText> text;
+  std::unique_ptr<FastDataset> reader;
+  // Per instrument id: the file key that named it first, and where (the
+  // check Dataset::Validate makes within a piece, across pieces).
+  std::map<std::string, const char*> instrument_ids;
+  ~Impl() {
+    if (file) std::fclose(file);
+  }
+};
+
+DatasetFileReader::DatasetFileReader(const std::string& path, size_t buffer_bytes) : impl_(new Impl) {
+  impl_->file = std::fopen(path.c_str(), "rb");
+  if (!impl_->file)
+    throw std::invalid_argument(path + ": cannot read dataset (" + std::strerror(errno) + ")");
+  impl_->text = std::make_unique<FastText>(impl_->file, std::max<size_t>(buffer_bytes, 4096));
+  impl_->reader = std::make_unique<FastDataset>(impl_->text.get(), false);
+  streamable_ = impl_->reader->Start();
+}
+
+DatasetFileReader::~DatasetFileReader() = default;
+
+std::string DatasetFileReader::head_json() const { return impl_->reader->head.dump(); }
+
+std::optional<Dataset> DatasetFileReader::Next(size_t rows) {
+  if (!streamable_ || done_) return std::nullopt;
+  const bool got = Guard("dataset", [&] {
+    FastDataset& f = *impl_->reader;
+    Dataset d = f.dataset();
+    d.observations.reserve(std::min<size_t>(rows, size_t{1} << 20));
+    while (d.observations.size() < rows) {
+      Observation ob;
+      const FastDataset::Step step = f.Next(&ob);
+      if (step == FastDataset::Step::kGiveUp) return streamable_ = false;
+      if (f.error) std::rethrow_exception(f.error);
+      if (step == FastDataset::Step::kEnd) {
+        if (!f.Finish()) return streamable_ = false;
+        done_ = true;
+        break;
+      }
+      d.observations.push_back(std::move(ob));
+    }
+    if (!d.observations.empty()) {
+      try {
+        d.Validate();
+        CheckInstruments(d, false);
+      } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(ShiftRows(e.what(), read_));
+      }
+      for (const Observation& o : d.observations)
+        if (const char* key = KindOf(o).instrument_key())
+          if (std::strcmp(impl_->instrument_ids.emplace(o.setup, key).first->second, key) != 0)
+            return streamable_ = false;  // the whole file's check names both
+    }
+    read_ += d.observations.size();
+    if (done_) {
+      // No observation, or an instrument declared and never used: the whole
+      // file's messages.
+      if (read_ == 0) return streamable_ = false;
+      for (const auto& kv : d.instrument_sigma)
+        if (!impl_->instrument_ids.count(kv.first)) return streamable_ = false;
+    }
+    if (d.observations.empty()) return false;
+    piece_.emplace(std::move(d));
+    return true;
+  });
+  if (!got) return std::nullopt;
+  std::optional<Dataset> out = std::move(piece_);
+  piece_.reset();
+  return out;
 }
 
 void Dataset::Validate() const {

@@ -61,22 +61,29 @@ class Kind final : public BallMountKind {
     if (d.length <= 0) throw std::invalid_argument(w + ".length: must be > 0 mm");
     ReadMount(o, w, ob);
   }
+  enum Slot { kReading = kFlatOwn, kLength };
+  const std::vector<FlatKey>& flat_keys() const override {
+    static const std::vector<FlatKey> keys = [] {
+      std::vector<FlatKey> k = MountFlatKeys();
+      k.push_back({"reading", FlatKey::kNumber});
+      k.push_back({"length", FlatKey::kNumber});
+      return k;
+    }();
+    return keys;
+  }
   bool ReadFlat(const FlatObservation& f, const Artefact&, Observation* ob) const override {
-    using F = FlatObservation;
-    if (!f.only({F::kSetup, F::kReading, F::kLength, F::kToolBall, F::kTableBall}) || !f.has(F::kReading) ||
-        !f.has(F::kLength))
-      return false;
-    if (!(std::abs(f.reading) <= kMaxDbbReading) || !(f.length > 0 && f.length <= kMaxLinear)) return false;
+    if (!f.has(kReading) || !f.has(kLength)) return false;
+    const double reading = f.number(kReading), length = f.number(kLength);
+    if (!(std::abs(reading) <= kMaxDbbReading) || !(length > 0 && length <= kMaxLinear)) return false;
     BallMountData& d = ob->data<BallMountData>();
-    d.reading = f.reading;
-    d.length = f.length;
+    d.reading = reading;
+    d.length = length;
     return ReadFlatMount(f, ob);
   }
   bool WriteFlat(const Observation& o, FlatObservation* f) const override {
     const BallMountData& d = o.data<BallMountData>();
-    f->reading = d.reading;
-    f->length = d.length;
-    f->seen |= (1u << FlatObservation::kReading) | (1u << FlatObservation::kLength);
+    f->set_number(kReading, d.reading);
+    f->set_number(kLength, d.length);
     WriteFlatMount(o, f);
     return true;
   }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -36,46 +37,36 @@ void OwnKeys(const Machine& m, const Observation& o, json* jo) {
 // One observation's own keys: the kind's flat form when it gives one (no
 // JSON value built: the long traces' kinds), else its Write (OwnKeys).
 // Visit(v, head) calls v.text(key, string), v.number(key, double),
-// v.vector(key, const double[3]) or v.other(key, json) for "target" and
-// "setup" (head) or for the other keys in name order (not head).
+// v.vector(key, const double[3]) or v.other(key, json) for the keys that go
+// before the axes (head: a target, a set-up id) or for the others in name
+// order (not head), as Dataset::ToJson's JSON object orders them.
 class OwnRow {
  public:
   void Fill(const Machine& m, const Observation& o) {
-    using F = FlatObservation;
-    flat_ = F();
-    if (!o.setup.empty()) {
-      flat_.setup = &o.setup;
-      flat_.seen |= 1u << F::kSetup;
+    const ObservationKind& kind = KindOf(o);
+    flat_ = FlatObservation();
+    flat_row_ = kind.WriteFlat(o, &flat_);
+    if (flat_row_) {
+      keys_ = &kind.flat_keys();
+      order_ = &OrderOf(kind);
+    } else {
+      OwnKeys(m, o, &jo_);
     }
-    flat_row_ = KindOf(o).WriteFlat(o, &flat_);
-    if (!flat_row_) OwnKeys(m, o, &jo_);
     type_ = ObservationTypeName(o.type);
   }
 
   template <class V>
   void Visit(V& v, bool head) const {
-    using F = FlatObservation;
     if (flat_row_) {
-      static constexpr F::Key kHead[] = {F::kTarget, F::kSetup};
-      static constexpr F::Key kRest[] = {F::kLength, F::kMeasured, F::kReading, F::kTableBall, F::kToolBall};
-      auto one = [&](F::Key k) {
-        if (!flat_.has(k)) return;
-        const char* name = F::kNames[k];
-        switch (k) {
-          case F::kTarget: v.text(name, *flat_.target); break;
-          case F::kSetup: v.text(name, *flat_.setup); break;
-          case F::kReading: v.number(name, flat_.reading); break;
-          case F::kLength: v.number(name, flat_.length); break;
-          case F::kToolBall: v.vector(name, flat_.tool_ball.data()); break;
-          case F::kTableBall: v.vector(name, flat_.table_ball.data()); break;
-          case F::kMeasured: v.vector(name, flat_.measured.data()); break;
-          default: break;
+      for (const int k : head ? order_->head : order_->rest) {
+        if (!flat_.has(k)) continue;
+        const FlatKey& key = (*keys_)[k];
+        switch (key.shape) {
+          case FlatKey::kText: v.text(key.name, flat_.text(k)); break;
+          case FlatKey::kNumber: v.number(key.name, flat_.number(k)); break;
+          case FlatKey::kVector: v.vector(key.name, flat_.values[k]); break;
         }
-      };
-      if (head)
-        for (F::Key k : kHead) one(k);
-      else
-        for (F::Key k : kRest) one(k);
+      }
       return;
     }
     auto one = [&](const std::string& k, const json& x) {
@@ -108,8 +99,26 @@ class OwnRow {
   }
 
  private:
+  // A kind's flat slots in the order the writers put them.
+  struct Order {
+    std::vector<int> head, rest;
+  };
+  const Order& OrderOf(const ObservationKind& kind) {
+    auto it = orders_.find(&kind);
+    if (it != orders_.end()) return it->second;
+    Order& o = orders_[&kind];
+    const std::vector<FlatKey>& keys = kind.flat_keys();
+    for (int k = 0; k < static_cast<int>(keys.size()); ++k) (keys[k].head ? o.head : o.rest).push_back(k);
+    std::sort(o.rest.begin(), o.rest.end(),
+              [&](int a, int b) { return std::strcmp(keys[a].name, keys[b].name) < 0; });
+    return o;
+  }
+
   FlatObservation flat_;
   bool flat_row_ = false;
+  const std::vector<FlatKey>* keys_ = nullptr;
+  const Order* order_ = nullptr;
+  std::map<const ObservationKind*, Order> orders_;
   json jo_;
   const char* type_ = "";  // the observation's kind, for a message
 };
@@ -217,152 +226,182 @@ std::map<std::string, std::string> DatasetHead(const Dataset& ds) {
   return out;
 }
 
-void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_bytes) {
-  const Machine& m = ds.machine();
-  const int na = m.num_axes();
-  const std::vector<int> order = AxisOrder(m);
-  std::vector<std::string> letters;
-  for (int k = 0; k < na; ++k) letters.push_back(std::string(1, m.axis(k).name));
+namespace {
 
-  // "{\n ...\n}" (never empty: the machine is there), reopened for the observations.
-  std::string buf = Head(ds).dump(1);
-  buf.resize(buf.size() - 2);
-  buf += ",\n \"observations\": [";
-  buf.reserve(chunk_bytes + 4096);
+// Puts the own keys out as `, "key": value`.
+struct Emit {
+  std::string* buf;
+  void key(const char* k) {
+    buf->append(", ");
+    AppendString(k, buf);
+    buf->append(": ");
+  }
+  void text(const char* k, const std::string& v) {
+    key(k);
+    AppendString(v, buf);
+  }
+  void number(const char* k, double x) {
+    key(k);
+    AppendNumber(x, buf);
+  }
+  void vector(const char* k, const double* c) {
+    key(k);
+    buf->push_back('[');
+    AppendNumber(c[0], buf);
+    buf->append(", ");
+    AppendNumber(c[1], buf);
+    buf->append(", ");
+    AppendNumber(c[2], buf);
+    buf->push_back(']');
+  }
+  void other(const char* k, const json& v) {
+    key(k);
+    AppendValue(v, buf);
+  }
+};
 
-  // Puts the own keys out as `, "key": value`.
-  struct Emit {
-    std::string* buf;
-    void key(const char* k) {
-      buf->append(", ");
-      AppendString(k, buf);
-      buf->append(": ");
-    }
-    void text(const char* k, const std::string& v) {
-      key(k);
-      AppendString(v, buf);
-    }
-    void number(const char* k, double x) {
-      key(k);
-      AppendNumber(x, buf);
-    }
-    void vector(const char* k, const double* c) {
-      key(k);
-      buf->push_back('[');
-      AppendNumber(c[0], buf);
-      buf->append(", ");
-      AppendNumber(c[1], buf);
-      buf->append(", ");
-      AppendNumber(c[2], buf);
-      buf->push_back(']');
-    }
-    void other(const char* k, const json& v) {
-      key(k);
-      AppendValue(v, buf);
-    }
-  } emit{&buf};
+}  // namespace
 
-  bool first = true;
+struct DatasetJsonWriter::State {
   OwnRow own;
-  for (const Observation& o : ds.observations) {
-    buf.append(first ? "\n  {\"type\": " : ",\n  {\"type\": ");
-    first = false;
-    AppendString(ObservationTypeName(o.type), &buf);
-    own.Fill(m, o);
-    own.Visit(emit, true);
-    buf.append(", \"axes\": {");
-    for (int j = 0; j < na; ++j) {
-      const int k = order[j];
-      buf.append(j ? ", \"" : "\"").append(letters[k]).append("\": ");
-      AppendNumber(o.axes[k], &buf);
+  std::vector<std::string> letters;
+  std::vector<int> order;
+};
+
+DatasetJsonWriter::DatasetJsonWriter(const Dataset& head, ByteSink sink, size_t chunk_bytes)
+    : sink_(std::move(sink)), chunk_bytes_(chunk_bytes), machine_(head.machine()), state_(new State) {
+  const int na = machine_.num_axes();
+  state_->order = AxisOrder(machine_);
+  for (int k = 0; k < na; ++k) state_->letters.push_back(std::string(1, machine_.axis(k).name));
+  // "{\n ...\n}" (never empty: the machine is there), reopened for the observations.
+  buf_ = Head(head).dump(1);
+  buf_.resize(buf_.size() - 2);
+  buf_ += ",\n \"observations\": [";
+  buf_.reserve(chunk_bytes + 4096);
+}
+
+DatasetJsonWriter::~DatasetJsonWriter() = default;
+
+void DatasetJsonWriter::Add(const Dataset& piece) {
+  if (piece.machine().num_axes() != machine_.num_axes())
+    throw std::invalid_argument("dataset writer: a piece of " + std::to_string(piece.machine().num_axes()) +
+                                " axes for a head of " + std::to_string(machine_.num_axes()));
+  for (const Observation& o : piece.observations) Add(o);
+}
+
+void DatasetJsonWriter::Add(const Observation& o) {
+  const int na = machine_.num_axes();
+  const std::vector<int>& order = state_->order;
+  const std::vector<std::string>& letters = state_->letters;
+  std::string& buf = buf_;
+  Emit emit{&buf};
+  buf.append(written_ ? ",\n  {\"type\": " : "\n  {\"type\": ");
+  ++written_;
+  AppendString(ObservationTypeName(o.type), &buf);
+  OwnRow& own = state_->own;
+  own.Fill(machine_, o);
+  own.Visit(emit, true);
+  buf.append(", \"axes\": {");
+  for (int j = 0; j < na; ++j) {
+    const int k = order[j];
+    buf.append(j ? ", \"" : "\"").append(letters[k]).append("\": ");
+    AppendNumber(o.axes[k], &buf);
+  }
+  buf.push_back('}');
+  if ((o.direction.array() != 0).any()) {
+    buf.append(", \"direction\": {");
+    bool firstd = true;
+    for (const int k : order) {
+      if (o.direction[k] == 0) continue;
+      buf.append(firstd ? "\"" : ", \"").append(letters[k]).append(o.direction[k] > 0 ? "\": 1" : "\": -1");
+      firstd = false;
     }
     buf.push_back('}');
-    if ((o.direction.array() != 0).any()) {
-      buf.append(", \"direction\": {");
-      bool firstd = true;
-      for (const int k : order) {
-        if (o.direction[k] == 0) continue;
-        buf.append(firstd ? "\"" : ", \"").append(letters[k]).append(o.direction[k] > 0 ? "\": 1" : "\": -1");
-        firstd = false;
+  }
+  own.Visit(emit, false);
+  if (o.sigma.size() > 0) {
+    buf.append(", \"sigma\": ");
+    if (OneSigma(o)) {
+      AppendNumber(o.sigma[0], &buf);
+    } else {
+      buf.push_back('[');
+      for (int r = 0; r < o.sigma.size(); ++r) {
+        if (r) buf.append(", ");
+        AppendNumber(o.sigma[r], &buf);
       }
-      buf.push_back('}');
-    }
-    own.Visit(emit, false);
-    if (o.sigma.size() > 0) {
-      buf.append(", \"sigma\": ");
-      if (OneSigma(o)) {
-        AppendNumber(o.sigma[0], &buf);
-      } else {
-        buf.push_back('[');
-        for (int r = 0; r < o.sigma.size(); ++r) {
-          if (r) buf.append(", ");
-          AppendNumber(o.sigma[r], &buf);
-        }
-        buf.push_back(']');
-      }
-    }
-    if (!o.id.empty()) {
-      buf.append(", \"id\": ");
-      AppendString(o.id, &buf);
-    }
-    buf.push_back('}');
-    if (buf.size() >= chunk_bytes) {
-      sink(buf.data(), buf.size());
-      buf.clear();
+      buf.push_back(']');
     }
   }
-  buf.append(ds.observations.empty() ? "]\n}\n" : "\n ]\n}\n");
-  sink(buf.data(), buf.size());
+  if (!o.id.empty()) {
+    buf.append(", \"id\": ");
+    AppendString(o.id, &buf);
+  }
+  buf.push_back('}');
+  if (buf.size() >= chunk_bytes_) {
+    sink_(buf.data(), buf.size());
+    buf.clear();
+  }
+}
+
+void DatasetJsonWriter::Finish() {
+  buf_.append(written_ ? "\n ]\n}\n" : "]\n}\n");
+  sink_(buf_.data(), buf_.size());
+  buf_.clear();
+}
+
+void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_bytes) {
+  DatasetJsonWriter w(ds, sink, chunk_bytes);
+  w.Add(ds);
+  w.Finish();
 }
 
 // ---------------------------------------------------------------- columns
 
-ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(ds) {
-  const Machine& m = ds.machine();
+ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(&ds) {
+  Scan(ds);
+}
+
+bool ColumnWriter::Scan(const Dataset& ds, int64_t offset) {
+  if (!machine_) machine_ = std::make_shared<const Machine>(ds.machine());
+  const Machine& m = *machine_;
   const int na = m.num_axes();
-  auto add = [&](const std::string& name, Type t) {
-    columns_.push_back({name, t});
-    return static_cast<int>(columns_.size()) - 1;
-  };
+  if (ds.machine().num_axes() != na)
+    throw std::invalid_argument("columns: a piece of " + std::to_string(ds.machine().num_axes()) +
+                                " axes after pieces of " + std::to_string(na));
   auto where = [&](size_t i, const std::string& key) {
-    return "observations[" + std::to_string(i) + "] (" + ObservationTypeName(ds.observations[i].type) + "), " + key;
+    return "observations[" + std::to_string(static_cast<int64_t>(i) + offset) + "] (" +
+           ObservationTypeName(ds.observations[i].type) + "), " + key;
   };
 
   // What the rows hold: decides the generic columns, which come first.
-  bool any_id = false, one_sigma = false;
-  std::vector<bool> any_dir(static_cast<size_t>(na), false);
-  int row_sigmas = 0;
+  any_dir_.resize(static_cast<size_t>(na), false);
   for (const Observation& o : ds.observations) {
-    any_id |= !o.id.empty();
-    for (int k = 0; k < na; ++k) any_dir[k] = any_dir[k] || o.direction[k] != 0;
+    any_id_ |= !o.id.empty();
+    for (int k = 0; k < na; ++k) any_dir_[k] = any_dir_[k] || o.direction[k] != 0;
     if (o.sigma.size() == 0) continue;
     if (OneSigma(o)) {
-      one_sigma = true;
+      one_sigma_ = true;
     } else {
-      row_sigmas = std::max(row_sigmas, static_cast<int>(o.sigma.size()));
+      row_sigmas_ = std::max(row_sigmas_, static_cast<int>(o.sigma.size()));
       // Three values read as a vector (sigma_x|y|z, as the CSV tables write
       // them) unless some observation has another number of rows.
       numbered_sigma_ |= o.sigma.size() != 3;
     }
   }
-  if (row_sigmas > 9)
-    throw std::invalid_argument("sigma: " + std::to_string(row_sigmas) +
+  if (row_sigmas_ > 9)
+    throw std::invalid_argument("sigma: " + std::to_string(row_sigmas_) +
                                 " values per observation have no column form (sigma_1 to sigma_9)");
-  add("type", Type::kString);
-  if (any_id) id_ = add("id", Type::kString);
-  const std::vector<int> order = AxisOrder(m);
-  axis_col_.assign(static_cast<size_t>(na), -1);
-  dir_col_.assign(static_cast<size_t>(na), -1);
-  for (int k : order) axis_col_[k] = add(std::string(1, m.axis(k).name), Type::kFloat64);
-  for (int k : order)
-    if (any_dir[k]) dir_col_[k] = add("dir_" + std::string(1, m.axis(k).name), Type::kInt8);
 
-  // The kinds' own keys, in the order they first appear.
+  // The kinds' own keys, in the order they first appear (column indices
+  // within own_, placed after the generic columns by Layout).
   struct Find {
     ColumnWriter* w;
     const Machine& m;
     std::function<std::string(const std::string&)> where;
-    std::function<int(const std::string&, Type)> add;
+    int add(const std::string& name, Type t) {
+      w->own_.push_back({name, t});
+      return static_cast<int>(w->own_.size()) - 1;
+    }
     KeyColumns* Register(const std::string& key, KeyColumns::Shape shape) {
       static const char* what[] = {"a number", "text", "a 3-vector", "axis commands"};
       auto it = w->keys_.find(key);
@@ -411,39 +450,72 @@ ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(ds) {
     }
   };
   size_t row = 0;
-  Find find{this, m, [&](const std::string& key) { return where(row, key); },
-            [&](const std::string& name, Type t) { return add(name, t); }};
+  Find find{this, m, [&](const std::string& key) { return where(row, key); }};
   OwnRow own;
   for (; row < ds.observations.size(); ++row) {
     own.Fill(m, ds.observations[row]);
     own.Visit(find, true);
     own.Visit(find, false);
   }
+  return Layout();
+}
+
+bool ColumnWriter::Layout() {
+  const Machine& m = *machine_;
+  const int na = m.num_axes();
+  std::vector<Spec> columns;
+  auto add = [&](const std::string& name, Type t) {
+    columns.push_back({name, t});
+    return static_cast<int>(columns.size()) - 1;
+  };
+  add("type", Type::kString);
+  id_ = any_id_ ? add("id", Type::kString) : -1;
+  const std::vector<int> order = AxisOrder(m);
+  axis_col_.assign(static_cast<size_t>(na), -1);
+  dir_col_.assign(static_cast<size_t>(na), -1);
+  for (int k : order) axis_col_[k] = add(std::string(1, m.axis(k).name), Type::kFloat64);
+  for (int k : order)
+    if (any_dir_[k]) dir_col_[k] = add("dir_" + std::string(1, m.axis(k).name), Type::kInt8);
+  own_base_ = static_cast<int>(columns.size());
+  for (const Spec& s : own_) columns.push_back(s);
 
   // The noise last.
-  if (one_sigma) sigma_ = add("sigma", Type::kFloat64);
-  if (row_sigmas) {
-    for (int r = 0; r < row_sigmas; ++r) {
-      const int c = add(numbered_sigma_ ? "sigma_" + std::to_string(r + 1) : std::string("sigma_") + "xyz"[r],
-                        Type::kFloat64);
-      if (r == 0) sigma_rows_ = c;
-    }
+  sigma_ = one_sigma_ ? add("sigma", Type::kFloat64) : -1;
+  sigma_rows_ = -1;
+  for (int r = 0; r < row_sigmas_; ++r) {
+    const int c = add(numbered_sigma_ ? "sigma_" + std::to_string(r + 1) : std::string("sigma_") + "xyz"[r],
+                      Type::kFloat64);
+    if (r == 0) sigma_rows_ = c;
   }
   // Two keys whose columns share a name (a vector "a" and a number "a_x")
   // would load as something else.
   std::vector<std::string> names;
-  for (const Spec& s : columns_) names.push_back(s.name);
+  for (const Spec& s : columns) names.push_back(s.name);
   std::sort(names.begin(), names.end());
   const auto dup = std::adjacent_find(names.begin(), names.end());
   if (dup != names.end())
     throw std::invalid_argument("column " + *dup + ": two keys of the observations would both fill it");
+  const bool changed = columns.size() != columns_.size() ||
+                       !std::equal(columns.begin(), columns.end(), columns_.begin(), [](const Spec& a, const Spec& b) {
+                         return a.name == b.name && a.type == b.type;
+                       });
+  columns_ = std::move(columns);
+  return changed;
 }
 
 std::vector<ColumnWriter::Block> ColumnWriter::Write(int64_t begin, int64_t end) const {
-  if (begin < 0 || end < begin || end > rows())
+  if (!ds_) throw std::logic_error("columns: the writer was made without a dataset (Write(piece, ...))");
+  return Write(*ds_, begin, end);
+}
+
+std::vector<ColumnWriter::Block> ColumnWriter::Write(const Dataset& ds, int64_t begin, int64_t end) const {
+  const int64_t rows = static_cast<int64_t>(ds.observations.size());
+  if (!machine_ || ds.machine().num_axes() != machine_->num_axes())
+    throw std::invalid_argument("columns: a dataset the writer has not scanned");
+  if (begin < 0 || end < begin || end > rows)
     throw std::invalid_argument("columns: rows " + std::to_string(begin) + " to " + std::to_string(end) +
-                                " outside 0 to " + std::to_string(rows()));
-  const Machine& m = ds_.machine();
+                                " outside 0 to " + std::to_string(rows));
+  const Machine& m = *machine_;
   const int na = m.num_axes();
   const size_t n = static_cast<size_t>(end - begin);
   std::vector<Block> out(columns_.size());
@@ -489,22 +561,22 @@ std::vector<ColumnWriter::Block> ColumnWriter::Write(int64_t begin, int64_t end)
         throw std::logic_error(std::string("dataset writer: key ") + k + " changed since the columns were found");
       return it->second;
     }
-    void text(const char* k, const std::string& v) { put_text(Of(k).first, r, v); }
-    void number(const char* k, double x) { put(Of(k).first, r, x); }
+    void text(const char* k, const std::string& v) { put_text(w->own_base_ + Of(k).first, r, v); }
+    void number(const char* k, double x) { put(w->own_base_ + Of(k).first, r, x); }
     void vector(const char* k, const double* c) {
-      const int first = Of(k).first;
+      const int first = w->own_base_ + Of(k).first;
       for (int i = 0; i < 3; ++i) put(first + i, r, c[i]);
     }
     void other(const char* k, const json& v) {
       const KeyColumns& kc = Of(k);
-      if (kc.shape == KeyColumns::kNumber) put(kc.first, r, v.get<double>());
+      if (kc.shape == KeyColumns::kNumber) put(w->own_base_ + kc.first, r, v.get<double>());
       if (kc.shape == KeyColumns::kAxes)
-        for (const auto& [a, x] : v.items()) put(kc.by_axis[m.AxisIndex(a[0])], r, x.get<double>());
+        for (const auto& [a, x] : v.items()) put(w->own_base_ + kc.by_axis[m.AxisIndex(a[0])], r, x.get<double>());
     }
   } fill{this, m, put_text, put};
   OwnRow own;
   for (size_t r = 0; r < n; ++r) {
-    const Observation& o = ds_.observations[static_cast<size_t>(begin) + r];
+    const Observation& o = ds.observations[static_cast<size_t>(begin) + r];
     for (size_t c = 0; c < columns_.size(); ++c)
       if (columns_[c].type == Type::kString) out[c].offsets[r + 1] = out[c].offsets[r];
     put_text(0, r, ObservationTypeName(o.type));

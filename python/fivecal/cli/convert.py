@@ -3,15 +3,16 @@ from __future__ import annotations
 
 import argparse
 
-from ..dataset import load_dataset, save_dataset
+from ..io.columnar import convert
 from .common import EXIT_OK
 
 
 def _convert(args) -> int:
-    ds = load_dataset(args.dataset)
-    save_dataset(ds, args.out)
+    # Piece by piece between JSON and Parquet: a trace of any length in the
+    # memory of one piece.
+    n = convert(args.dataset, args.out)
     fmt = "Parquet" if args.out.lower().endswith((".parquet", ".pq")) else "JSON"
-    print(f"{args.dataset} -> {args.out}: {len(ds)} observations ({fmt})")
+    print(f"{args.dataset} -> {args.out}: {n} observations ({fmt})")
     return EXIT_OK
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 from typing import Iterable, Union
 
 import numpy as np
@@ -26,7 +27,7 @@ from ..dataset import Dataset, load_dataset, register_format, write_json
 from .. import schema
 
 __all__ = ["FORMAT_VERSION", "UNITS", "is_parquet", "read_parquet", "iter_datasets", "write_parquet",
-           "json_to_parquet", "parquet_to_json", "dataset_columns"]
+           "json_to_parquet", "parquet_to_json", "convert", "dataset_columns", "STREAM_BYTES"]
 
 FORMAT_VERSION = "1"
 # What the numbers of a fivecal file are in (docs/formats.md, "Units"): a file
@@ -316,12 +317,12 @@ def read_parquet(path: Union[str, os.PathLike], check: bool = True):
     return ds
 
 
-def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000) -> Iterable:
+def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000, check: bool = True) -> Iterable:
     """The Parquet dataset in consecutive pieces of at most ``rows``
     observations, each a :class:`fivecal.Dataset` with the file's machine,
     artefact and instruments: a trace too long to hold whole (10^7 samples
     are about 6 GB loaded) read piece by piece. Messages name the row of the
-    file."""
+    file. ``check``: run the plausibility checks (units) on each piece."""
     path = os.fspath(path)
     try:
         pa = _pyarrow()
@@ -351,7 +352,8 @@ def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000) -> Itera
         del loader, batch
         ds = Dataset(core)
         del core
-        plausibility.check_loaded(ds, where=path)
+        if check:
+            plausibility.check_loaded(ds, where=path)
         yield ds
         del ds
 
@@ -362,13 +364,186 @@ def iter_datasets(path: Union[str, os.PathLike], rows: int = 1_000_000) -> Itera
 
 def json_to_parquet(src: Union[str, os.PathLike], dst: Union[str, os.PathLike]) -> None:
     """A JSON dataset file as a Parquet one (lossless: :func:`parquet_to_json`
-    gives the same dataset back)."""
-    write_parquet(load_dataset(src), dst)
+    gives the same dataset back), piece by piece (:func:`convert`)."""
+    convert(src, dst, to_parquet=True)
 
 
 def parquet_to_json(src: Union[str, os.PathLike], dst: Union[str, os.PathLike]) -> None:
-    """A Parquet dataset file as a JSON one (streamed by the core)."""
-    write_json(read_parquet(src), dst)
+    """A Parquet dataset file as a JSON one, piece by piece (:func:`convert`)."""
+    if not is_parquet(src):
+        read_parquet(src)  # says what the file is not
+    convert(src, dst, to_parquet=False)
+
+
+#: Files up to this size convert whole (they fit in memory; JSON text then
+#: goes through the schema as :func:`fivecal.load_dataset` checks it).
+STREAM_BYTES = schema.BIG_TEXT
+
+
+class _Whole(Exception):
+    """The input is of a layout the piece readers leave to the whole load
+    (a JSON head after its observations, a string beyond ASCII, ...)."""
+
+
+class _Restart(Exception):
+    """A later piece has columns the first pieces lacked."""
+
+
+def convert(src: Union[str, os.PathLike], dst: Union[str, os.PathLike], rows: int = _BATCH_ROWS,
+            to_parquet: Union[bool, None] = None, stream_bytes: Union[int, None] = None) -> int:
+    """Write dataset file ``src`` (JSON or Parquet, recognised by its
+    content) as ``dst``: Parquet when ``to_parquet`` (by default: when its
+    name ends in .parquet or .pq), else JSON; returns the number of
+    observations. JSON to Parquet and Parquet to JSON go piece by piece
+    (``rows`` observations, one row group, at a time: memory holds a piece,
+    whatever the file's length) and write what :func:`fivecal.save_dataset`
+    of the whole dataset writes, byte for byte; the checks are those of
+    :func:`fivecal.load_dataset`, and a message is the whole load's (a
+    failure converts the whole file again, which says what is wrong).
+    Atomic: a failure leaves ``dst`` as it was. Files up to ``stream_bytes``
+    (default :data:`STREAM_BYTES`), and a layout the piece readers do not
+    take, convert whole."""
+    src = os.fspath(src)
+    if to_parquet is None:
+        to_parquet = os.fspath(dst).lower().endswith((".parquet", ".pq"))
+    if rows < 1:
+        raise ValueError(f"rows: expected a positive number of observations per piece, got {rows}")
+    from_parquet = is_parquet(src)
+    limit = STREAM_BYTES if stream_bytes is None else stream_bytes
+    try:
+        st = os.stat(src)
+        streams = stat.S_ISREG(st.st_mode) and st.st_size > limit and from_parquet != to_parquet
+    except OSError:
+        streams = False  # the whole load names the problem
+    if streams:
+        files.note_input(src)
+        try:
+            if to_parquet:
+                return _stream_to_parquet(src, dst, rows)
+            return _stream_to_json(src, dst, rows, from_parquet)
+        except (_Whole, ValueError):
+            # The whole convert decides: a file of another layout, and the
+            # messages of a bad one (the schema's first, then the rows of the
+            # file, then the output's), or a piece that failed for want of a
+            # member the file gives after its observations.
+            pass
+    ds = load_dataset(src)
+    if to_parquet:
+        write_parquet(ds, dst, rows=rows)
+    else:
+        write_json(ds, dst)
+    return len(ds)
+
+
+def _pieces(src: str, rows: int, from_parquet: bool, checks: list):
+    """The file's pieces of ``rows`` observations; appends what the
+    plausibility checks read of each to ``checks`` (run on the whole at the
+    end, as load_dataset runs them)."""
+    offset = 0
+    if from_parquet:
+        source = iter_datasets(src, rows, check=False)
+    else:
+        reader = _core.DatasetFileReader(src)
+        if not reader.streamable:
+            raise _Whole
+        head = json.loads(reader.head)
+        schema.validate(dict(head, observations=[]), "dataset", src)
+
+        def read():
+            while True:
+                try:
+                    core = reader.next(rows)
+                except ValueError as e:
+                    raise ValueError(f"{src}: {e}") from None
+                if core is None:
+                    if not reader.streamable:
+                        raise _Whole
+                    return
+                yield Dataset(core)
+                del core
+        source = read()
+    for ds in source:
+        checks.append(plausibility.loaded_columns(ds, offset))
+        offset += len(ds)
+        yield ds
+        del ds
+
+
+def _stream_to_json(src: str, dst, rows: int, from_parquet: bool) -> int:
+    checks, n, head = [], 0, None
+    with files.atomic_output(dst) as out:
+        writer = None
+        for piece in _pieces(src, rows, from_parquet, checks):
+            if writer is None:
+                writer, head = _core.DatasetJsonWriter(piece._core, out.write), piece.subset([])
+            writer.add(piece._core)
+            n += len(piece)
+            del piece
+        if writer is None:
+            raise _Whole  # no observations: the whole load says so
+        plausibility.check_loaded_pieces(head, checks, where=src)
+        writer.finish()
+    return n
+
+
+def _piece_batches(pa, writer, schema_, piece, rows: int):
+    n = len(piece)
+    for start in range(0, n, rows):
+        stop = min(n, start + rows)
+        arrays = []
+        for field, col in zip(schema_, writer.write(start, stop, piece._core)):
+            if pa.types.is_string(field.type):
+                offsets, data, valid = col
+                arrays.append(pa.StringArray.from_buffers(stop - start, pa.py_buffer(offsets), pa.py_buffer(data),
+                                                          _bitmap(pa, valid)))
+            else:
+                values, valid = col
+                arrays.append(pa.Array.from_buffers(field.type, stop - start,
+                                                    [_bitmap(pa, valid), pa.py_buffer(values)]))
+        yield pa.RecordBatch.from_arrays(arrays, schema=schema_)
+
+
+def _stream_to_parquet(src: str, dst, rows: int) -> int:
+    pa = _pyarrow()
+    writer = _core.ColumnWriter()
+    # A first pass writes with the columns of the pieces read so far; when a
+    # later piece brings a column (an id, a direction, a kind's key), it reads
+    # on only to find the columns of the whole, and a second pass writes.
+    for scanning in (True, False):
+        checks = []
+        pieces = _pieces(src, rows, False, checks)
+        first = next(pieces, None)
+        if first is None:
+            raise _Whole  # no observations: the whole load says so
+        if scanning:
+            writer.scan(first._core)
+        schema_ = _arrow_schema(pa, writer, first)
+        head = first.subset([])
+        held = [first]
+        del first
+        count = [0]
+
+        def batches():
+            piece = held.pop()
+            while piece is not None:
+                if scanning and count[0] and writer.scan(piece._core, count[0]):
+                    count[0] += len(piece)
+                    raise _Restart
+                yield from _piece_batches(pa, writer, schema_, piece, rows)
+                count[0] += len(piece)
+                piece = None  # gone before the next is read
+                piece = next(pieces, None)
+            plausibility.check_loaded_pieces(head, checks, where=src)
+
+        try:
+            files.write_parquet_batches(dst, schema_, batches(), compression="zstd")
+            return count[0]
+        except _Restart:
+            for piece in pieces:
+                writer.scan(piece._core, count[0])
+                count[0] += len(piece)
+                del piece
+    raise AssertionError("unreachable: the second pass has every column")
 
 
 # load_dataset and save_dataset read and write Parquet through this

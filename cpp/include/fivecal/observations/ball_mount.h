@@ -80,25 +80,32 @@ class BallMountKind : public ObservationKind {
  protected:
   // Reads setup, tool_ball and table_ball (a kind's Read calls it).
   static void ReadMount(const nlohmann::json& o, const std::string& where, Observation* ob);
-  // The same from the flat form (a kind's ReadFlat calls it): false unless
-  // both balls are given and the setup id is one ReadMount accepts.
+  // The flat form's slots every mounting has (flat_keys() starts with
+  // MountFlatKeys()); a kind's own keys follow from kFlatOwn.
+  enum MountSlot { kFlatSetup, kFlatToolBall, kFlatTableBall, kFlatOwn };
+  static std::vector<FlatKey> MountFlatKeys() {
+    return {{"setup", FlatKey::kText, true}, {"tool_ball", FlatKey::kVector}, {"table_ball", FlatKey::kVector}};
+  }
+  // The mounting from the flat form (a kind's ReadFlat calls it): false
+  // unless both balls are given and the setup id is one ReadMount accepts.
   static bool ReadFlatMount(const FlatObservation& f, Observation* ob) {
-    if (!f.has(FlatObservation::kToolBall) || !f.has(FlatObservation::kTableBall)) return false;
-    if (f.setup) {
-      if (f.setup->find('.') != std::string::npos) return false;
-      ob->setup = *f.setup;
+    if (!f.has(kFlatToolBall) || !f.has(kFlatTableBall)) return false;
+    if (f.has(kFlatSetup)) {
+      if (f.text(kFlatSetup).find('.') != std::string::npos) return false;
+      ob->setup = f.text(kFlatSetup);
     }
     BallMountData& d = ob->data<BallMountData>();
-    d.tool_ball = f.tool_ball;
-    d.table_ball = f.table_ball;
+    d.tool_ball = f.vector(kFlatToolBall);
+    d.table_ball = f.vector(kFlatTableBall);
     return true;
   }
-  // Both balls in the flat form (a kind's WriteFlat calls it).
+  // The set-up id (when there is one) and both balls in the flat form (a
+  // kind's WriteFlat calls it).
   static void WriteFlatMount(const Observation& o, FlatObservation* f) {
     const BallMountData& d = o.data<BallMountData>();
-    f->tool_ball = d.tool_ball;
-    f->table_ball = d.table_ball;
-    f->seen |= (1u << FlatObservation::kToolBall) | (1u << FlatObservation::kTableBall);
+    if (!o.setup.empty()) f->set_text(kFlatSetup, &o.setup);
+    f->set_vector(kFlatToolBall, d.tool_ball);
+    f->set_vector(kFlatTableBall, d.table_ball);
   }
   // The kind's own fields (checked after the setup id, before the ball
   // positions; written with them).

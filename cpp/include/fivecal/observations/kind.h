@@ -184,27 +184,51 @@ struct KindTable {
   std::vector<std::string> checks;
 };
 
+// A file key of the flat form a kind declares (KindFileFormat::flat_keys):
+// its name, what its value is, and whether the writers put it before the
+// axes (an observation's target or set-up id) or after the direction (the
+// rest). The loaders and writers know a kind's keys only from this table.
+struct FlatKey {
+  enum Shape : unsigned char { kNumber, kVector, kText };
+  const char* name;
+  Shape shape = kNumber;
+  bool head = false;
+};
+
 // One observation as the streaming loader reads it without building its
-// JSON document (observations/dataset.cc): the flat form long traces come
-// in, string ids, numbers and 3-vectors under the keys below, each at most
-// once, every number finite and within the loader's bounds (vectors within
-// kMaxLinear). The loader reads type, axes, direction, sigma and id itself.
+// JSON document (observations/dataset.cc), and as the streaming writers
+// (writer.h) put it out: the values of the kind's flat keys, slot k holding
+// the kind's flat_keys()[k], each given at most once; every number finite
+// and within the loader's bounds (vectors within kMaxLinear). The common
+// header (type, axes, direction, sigma, id) is not in it: the loader and the
+// writers handle it themselves.
 struct FlatObservation {
-  enum Key { kTarget, kSetup, kReading, kLength, kToolBall, kTableBall, kMeasured, kNumKeys };
-  static constexpr const char* kNames[kNumKeys] = {"target", "setup", "reading", "length",
-                                                   "tool_ball", "table_ball", "measured"};
-  unsigned seen = 0;  // bit k: key k was given
-  const std::string* target = nullptr;
-  const std::string* setup = nullptr;
-  double reading = 0, length = 0;
-  Eigen::Vector3d tool_ball = Eigen::Vector3d::Zero(), table_ball = Eigen::Vector3d::Zero(),
-                  measured = Eigen::Vector3d::Zero();
-  bool has(Key k) const { return (seen & (1u << k)) != 0; }
-  // Whether every key given is among `keys`.
-  bool only(std::initializer_list<Key> keys) const {
+  static constexpr int kMaxKeys = 8;
+  unsigned seen = 0;  // bit k: slot k was given
+  double values[kMaxKeys][3] = {};
+  const std::string* texts[kMaxKeys] = {};
+  bool has(int k) const { return (seen & (1u << k)) != 0; }
+  // Whether every slot given is among `keys`.
+  bool only(std::initializer_list<int> keys) const {
     unsigned allowed = 0;
-    for (Key k : keys) allowed |= 1u << k;
+    for (int k : keys) allowed |= 1u << k;
     return (seen & ~allowed) == 0;
+  }
+  double number(int k) const { return values[k][0]; }
+  Eigen::Vector3d vector(int k) const { return {values[k][0], values[k][1], values[k][2]}; }
+  const std::string& text(int k) const { return *texts[k]; }
+  void set_number(int k, double x) {
+    values[k][0] = x;
+    seen |= 1u << k;
+  }
+  void set_vector(int k, const Eigen::Vector3d& x) {
+    for (int c = 0; c < 3; ++c) values[k][c] = x[c];
+    seen |= 1u << k;
+  }
+  // `s` must outlive the flat form (the observation's own string).
+  void set_text(int k, const std::string* s) {
+    texts[k] = s;
+    seen |= 1u << k;
   }
 };
 
@@ -266,15 +290,26 @@ class KindFileFormat {
   // Writes the kind's own fields: every key of its payload (the dataset
   // writes the common header only).
   virtual void Write(const Observation& o, nlohmann::json* out) const = 0;
+  // The kind's flat form: the keys the streaming loader's fast path and the
+  // streaming writers read and write without a JSON value, at most
+  // FlatObservation::kMaxKeys (the writers put the head keys first in this
+  // order, then the others by name, as Write's JSON object orders them);
+  // empty (the default): the kind has none, and its observations go through
+  // Read and Write. Only a speed-up for kinds that come in long traces.
+  virtual const std::vector<FlatKey>& flat_keys() const {
+    static const std::vector<FlatKey> none;
+    return none;
+  }
   // The streaming loader's fast path: the kind's own fields from the flat
-  // form, when Read and Validate would accept them outright; false sends
-  // the observation through Read (whose result and messages are the
-  // reference). Only a speed-up for kinds that come in long traces.
+  // form (slot k: flat_keys()[k]), when Read and Validate would accept them
+  // outright; false sends the observation through Read (whose result and
+  // messages are the reference).
   virtual bool ReadFlat(const FlatObservation&, const Artefact&, Observation*) const { return false; }
-  // ReadFlat's inverse, the streaming writers' fast path (writer.h): adds
-  // the kind's own fields of `o` to `f` (which holds the generic target and
-  // setup already) when they are exactly what Write and WriteOnMachine
-  // would write; false sends the observation through Write (the reference).
+  // ReadFlat's inverse, the streaming writers' fast path (writer.h): fills
+  // `f` (empty) with the kind's own fields of `o` (its set-up id or target
+  // included) when they are exactly what the writer's "setup", Write and
+  // WriteOnMachine would write; false sends the observation through Write
+  // (the reference).
   virtual bool WriteFlat(const Observation&, FlatObservation*) const { return false; }
   // Writes the own fields that need the machine (the axis letters of a
   // second pose); called after Write.

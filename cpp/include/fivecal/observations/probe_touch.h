@@ -59,9 +59,20 @@ class ProbeTouchKind : public ObservationKind {
   void Read(const nlohmann::json& o, const std::string& where, const Dataset& ds, Observation* ob) const final;
   void Write(const Observation& o, nlohmann::json* out) const final;
   ObservationPayload NewPayload() const final { return TouchData{}; }
+  // The flat form: the target alone (slot 0).
+  const std::vector<FlatKey>& flat_keys() const final {
+    static const std::vector<FlatKey> keys = {{"target", FlatKey::kText, true}};
+    return keys;
+  }
   bool ReadFlat(const FlatObservation& f, const Artefact& a, Observation* ob) const final {
-    if (!f.only({FlatObservation::kTarget}) || !f.target || TargetIndex(a, *f.target) < 0) return false;
-    ob->data<TouchData>().target = *f.target;
+    if (!f.has(0) || TargetIndex(a, f.text(0)) < 0) return false;
+    ob->data<TouchData>().target = f.text(0);
+    return true;
+  }
+  bool WriteFlat(const Observation& o, FlatObservation* f) const final {
+    if (!o.setup.empty()) return false;  // not a touch's key: the reference writer says so
+    const std::string& target = o.data<TouchData>().target;
+    if (!target.empty()) f->set_text(0, &target);
     return true;
   }
   // A planned touch: its target and where on it ("point"; a sphere's

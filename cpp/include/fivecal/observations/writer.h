@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -33,6 +34,30 @@ using ByteSink = std::function<void(const char* data, size_t size)>;
 // loads back (Dataset::FromJson) as the same dataset: ToJson of both is the
 // same text.
 void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_bytes = size_t{1} << 20);
+
+// WriteDatasetJson piece by piece: the head of `head` (its observations are
+// not written), then the observations Add is given, one piece or one
+// observation at a time (pieces of one file, each with the head's machine),
+// then Finish. The text is the same as WriteDatasetJson of the whole.
+class DatasetJsonWriter {
+ public:
+  DatasetJsonWriter(const Dataset& head, ByteSink sink, size_t chunk_bytes = size_t{1} << 20);
+  ~DatasetJsonWriter();
+  DatasetJsonWriter(const DatasetJsonWriter&) = delete;
+  DatasetJsonWriter& operator=(const DatasetJsonWriter&) = delete;
+  void Add(const Dataset& piece);
+  void Add(const Observation& o);
+  void Finish();
+
+ private:
+  struct State;
+  ByteSink sink_;
+  size_t chunk_bytes_;
+  Machine machine_;
+  std::unique_ptr<State> state_;
+  std::string buf_;
+  size_t written_ = 0;
+};
 
 // The head of a dataset file (everything but the observations) as JSON text:
 // what a columnar file carries as its metadata, one entry per key.
@@ -66,25 +91,46 @@ class ColumnWriter {
   // names the observation and key of a value no column can hold. The dataset
   // must outlive the writer.
   explicit ColumnWriter(const Dataset& ds);
+  // A writer of pieces (a file read piece by piece): Scan each piece, then
+  // Write it; the columns are those of the pieces scanned so far together,
+  // the same as the whole dataset's once every piece is scanned.
+  ColumnWriter() = default;
+  // Adds what the observations of `piece` hold (`offset`: the index of its
+  // first observation in the whole, for messages); true when the columns
+  // changed (the first piece's scan always changes them).
+  bool Scan(const Dataset& piece, int64_t offset = 0);
 
   const std::vector<Spec>& columns() const { return columns_; }
-  int64_t rows() const { return static_cast<int64_t>(ds_.observations.size()); }
-  // Rows [begin, end) of every column, in columns() order.
+  int64_t rows() const { return ds_ ? static_cast<int64_t>(ds_->observations.size()) : 0; }
+  // Rows [begin, end) of every column, in columns() order: of the dataset
+  // the writer was made with, or of a piece it has scanned (or one whose
+  // rows hold nothing beyond the columns).
   std::vector<Block> Write(int64_t begin, int64_t end) const;
+  std::vector<Block> Write(const Dataset& piece, int64_t begin, int64_t end) const;
 
  private:
   // Where a kind's own key goes: one column, three (a vector) or one per
-  // machine axis (<name>_axes).
+  // machine axis (<name>_axes); indices into own_.
   struct KeyColumns {
     enum Shape { kNumber, kText, kVector, kAxes } shape = kNumber;
     int first = -1;            // column of a number or text, of component x of a vector
     std::vector<int> by_axis;  // kAxes: column of each machine axis, -1 when no row gives it
   };
-  const Dataset& ds_;
-  std::vector<Spec> columns_;
+  // columns_ from what the scans found; whether they changed.
+  bool Layout();
+
+  const Dataset* ds_ = nullptr;
+  std::shared_ptr<const Machine> machine_;
+  // What the scans found.
+  bool any_id_ = false, one_sigma_ = false, numbered_sigma_ = false;
+  std::vector<bool> any_dir_;
+  int row_sigmas_ = 0;
+  std::vector<Spec> own_;  // the kinds' own columns, in the order they first appear
   std::map<std::string, KeyColumns, std::less<>> keys_;  // found by name as the kinds write them
+  // The layout.
+  std::vector<Spec> columns_;
+  int own_base_ = 0;  // column of own_[0]
   int id_ = -1, sigma_ = -1, sigma_rows_ = -1;  // sigma_rows_: column of row 1 of per-row noise
-  bool numbered_sigma_ = false;
   std::vector<int> axis_col_, dir_col_;  // by machine axis index; dir -1 when no column
 };
 
