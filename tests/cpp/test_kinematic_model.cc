@@ -139,6 +139,24 @@ TEST_P(KinematicModelTest, LanesMatchTheGeneralChain) {
                          static_cast<int>(wanted.size()), J.data(), dtip.data());
     model.ToolPointLanes(q.data(), with_dir ? dir.data() : nullptr, tip.data(), P0.data(), nullptr, 0, nullptr,
                          nullptr);
+    // A sample's numbers do not depend on its lane (the held and the
+    // per-chunk batches group samples differently): the batch rotated by 3.
+    std::vector<double> qr(q.size()), dr(dir.size()), tr(tip.size()), Pr(3 * W), Jr(J.size()), dtr(9 * W);
+    auto at = [&](int l) { return (l + 3) % W; };
+    for (int l = 0; l < W; ++l) {
+      for (int k = 0; k < na; ++k) {
+        qr[k * W + l] = q[k * W + at(l)];
+        dr[k * W + l] = dir[k * W + at(l)];
+      }
+      for (int c = 0; c < 3; ++c) tr[c * W + l] = tip[c * W + at(l)];
+    }
+    model.ToolPointLanes(qr.data(), with_dir ? dr.data() : nullptr, tr.data(), Pr.data(), wanted.data(),
+                         static_cast<int>(wanted.size()), Jr.data(), dtr.data());
+    for (int l = 0; l < W; ++l) {
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(Pr[c * W + l], P[c * W + at(l)]) << "trial " << trial;
+      for (size_t j = 0; j < 3 * wanted.size(); ++j) ASSERT_EQ(Jr[j * W + l], J[j * W + at(l)]) << "trial " << trial;
+      for (int c = 0; c < 9; ++c) ASSERT_EQ(dtr[c * W + l], dtip[c * W + at(l)]) << "trial " << trial;
+    }
     for (int l = 0; l < W; ++l) {
       const Eigen::Vector3d t(tip[l], tip[W + l], tip[2 * W + l]);
       Eigen::Vector3d Pref;

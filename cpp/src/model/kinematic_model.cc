@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 #include "fivecal/model/kinematics.h"
@@ -353,9 +354,34 @@ namespace {
 
 constexpr int W = KinematicModel::kLanes;
 
-// One number per sample of the batch; element-wise operators, which the
-// compiler turns into vector instructions (the loops have a fixed trip count).
-struct alignas(64) LV {
+// One number per sample of the batch, with element-wise operators. With
+// GCC and Clang a vector type: every operation is one instruction over all
+// the lanes, so a sample's result does not depend on its lane (loops over
+// lane arrays were vectorised in part, and a multiply-add fused in one lane
+// and not in another changed the last bit with the batch's position).
+#if defined(__GNUC__)
+typedef double LaneVector __attribute__((vector_size(W * sizeof(double))));
+struct LV {
+  LaneVector v;
+  static FIVECAL_LANE_INLINE LV All(double x) {
+    LV r;
+    r.v = x - LaneVector{};
+    return r;
+  }
+  static FIVECAL_LANE_INLINE LV Load(const double* p) {
+    LV r;
+    std::memcpy(&r.v, p, sizeof r.v);
+    return r;
+  }
+  FIVECAL_LANE_INLINE void Store(double* p) const { std::memcpy(p, &v, sizeof v); }
+};
+FIVECAL_LANE_INLINE LV operator+(LV a, const LV& b) { return {a.v + b.v}; }
+FIVECAL_LANE_INLINE LV operator-(LV a, const LV& b) { return {a.v - b.v}; }
+FIVECAL_LANE_INLINE LV operator*(LV a, const LV& b) { return {a.v * b.v}; }
+FIVECAL_LANE_INLINE LV operator*(LV a, double s) { return {a.v * s}; }
+FIVECAL_LANE_INLINE LV operator+(LV a, double s) { return {a.v + s}; }
+#else
+struct LV {
   double v[W];
   static FIVECAL_LANE_INLINE LV All(double x) {
     LV r;
@@ -387,11 +413,12 @@ FIVECAL_LANE_INLINE LV operator*(LV a, double s) {
   for (int l = 0; l < W; ++l) a.v[l] *= s;
   return a;
 }
-FIVECAL_LANE_INLINE LV operator*(double s, LV a) { return a * s; }
 FIVECAL_LANE_INLINE LV operator+(LV a, double s) {
   for (int l = 0; l < W; ++l) a.v[l] += s;
   return a;
 }
+#endif
+FIVECAL_LANE_INLINE LV operator*(double s, LV a) { return a * s; }
 
 struct LVec {
   LV c[3];
@@ -442,29 +469,51 @@ FIVECAL_LANE_INLINE void SinCosCommandLanes(const LV& x, LV* s, LV* c) {
   bool small = true;
   for (int l = 0; l < W; ++l) small &= std::abs(x.v[l]) < 1e5;
   if (!small) {
-    for (int l = 0; l < W; ++l) SinCosCommand(x.v[l], &s->v[l], &c->v[l]);
+    for (int l = 0; l < W; ++l) {
+      double sl, cl;
+      SinCosCommand(x.v[l], &sl, &cl);
+      s->v[l] = sl;
+      c->v[l] = cl;
+    }
     return;
   }
   constexpr double kTwoOverPi = 6.36619772367581382433e-01;
   constexpr double kPio2_1 = 1.57079632673412561417e+00;
   constexpr double kPio2_2 = 6.07710050630396597660e-11;
   constexpr double kPio2_3 = 2.02226624871116645580e-21;
+  const LV t = x * kTwoOverPi;
+  LV kd, quad;
+  for (int l = 0; l < W; ++l) {  // exact: the rounding to the nearest quadrant
+    kd.v[l] = std::trunc(t.v[l] + (t.v[l] >= 0 ? 0.5 : -0.5));
+    quad.v[l] = kd.v[l] - 4.0 * std::floor(kd.v[l] * 0.25);  // 0..3
+  }
+  const LV r = ((x - kd * kPio2_1) - kd * kPio2_2) - kd * kPio2_3;
+  const LV r2 = r * r;
+  // SinCosCommand's polynomials, by Horner's rule from the highest term.
+  static constexpr double kSin[7] = {-1.0 / 6, 1.0 / 120, -1.0 / 5040, 1.0 / 362880, -1.0 / 39916800,
+                                     1.0 / 6227020800, -1.0 / 1307674368000.0};
+  static constexpr double kCos[9] = {1.0, -0.5, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800,
+                                     1.0 / 479001600, -1.0 / 87178291200.0, 1.0 / 20922789888000.0};
+  LV ps = LV::All(kSin[6]), pc = LV::All(kCos[8]);
+  for (int i = 5; i >= 0; --i) ps = ps * r2 + kSin[i];
+  for (int i = 7; i >= 0; --i) pc = pc * r2 + kCos[i];
+  const LV sr = r + r * r2 * ps, cr = pc;
+  for (int l = 0; l < W; ++l) {  // exact: the quadrant's swap and signs
+    const double q = quad.v[l];
+    const bool odd = q == 1.0 || q == 3.0;
+    const double a = odd ? cr.v[l] : sr.v[l], b = odd ? sr.v[l] : cr.v[l];
+    s->v[l] = q >= 2.0 ? -a : a;
+    c->v[l] = (q == 1.0 || q == 2.0) ? -b : b;
+  }
+}
+
+// SinCos of small angles (error motions), lane by lane.
+FIVECAL_LANE_INLINE void SinCosLanes(const LV& x, LV* s, LV* c) {
   for (int l = 0; l < W; ++l) {
-    const double t = x.v[l] * kTwoOverPi;
-    const double kd = std::trunc(t + (t >= 0 ? 0.5 : -0.5));
-    const double r = ((x.v[l] - kd * kPio2_1) - kd * kPio2_2) - kd * kPio2_3;
-    const double r2 = r * r;
-    const double sr =
-        r + r * r2 * (-1.0 / 6 + r2 * (1.0 / 120 + r2 * (-1.0 / 5040 + r2 * (1.0 / 362880 +
-        r2 * (-1.0 / 39916800 + r2 * (1.0 / 6227020800 + r2 * (-1.0 / 1307674368000.0)))))));
-    const double cr =
-        1.0 + r2 * (-0.5 + r2 * (1.0 / 24 + r2 * (-1.0 / 720 + r2 * (1.0 / 40320 + r2 * (-1.0 / 3628800 +
-        r2 * (1.0 / 479001600 + r2 * (-1.0 / 87178291200.0 + r2 * (1.0 / 20922789888000.0))))))));
-    const double quad = kd - 4.0 * std::floor(kd * 0.25);  // 0..3, exact
-    const bool odd = quad == 1.0 || quad == 3.0;
-    const double a = odd ? cr : sr, b = odd ? sr : cr;
-    s->v[l] = quad >= 2.0 ? -a : a;
-    c->v[l] = (quad == 1.0 || quad == 2.0) ? -b : b;
+    double sl, cl;
+    SinCos(x.v[l], &sl, &cl);
+    s->v[l] = sl;
+    c->v[l] = cl;
   }
 }
 
@@ -579,17 +628,17 @@ FIVECAL_LANE_INLINE void KinematicModel::ChainLanes(const std::vector<int>& chai
         LV s, c;
         if (rec_motion) F->epsW[2] = f->R.col[2];
         if (A.motion[5]) {
-          for (int l = 0; l < W; ++l) SinCos(e[5].v[l], &s.v[l], &c.v[l]);
+          SinCosLanes(e[5], &s, &c);
           f->R.Rotate(2, s, c);
         }
         if (rec_motion) F->epsW[1] = f->R.col[1];
         if (A.motion[4]) {
-          for (int l = 0; l < W; ++l) SinCos(e[4].v[l], &s.v[l], &c.v[l]);
+          SinCosLanes(e[4], &s, &c);
           f->R.Rotate(1, s, c);
         }
         if (rec_motion) F->epsW[0] = f->R.col[0];
         if (A.motion[3]) {
-          for (int l = 0; l < W; ++l) SinCos(e[3].v[l], &s.v[l], &c.v[l]);
+          SinCosLanes(e[3], &s, &c);
           f->R.Rotate(0, s, c);
         }
       } else if (rec_motion) {
