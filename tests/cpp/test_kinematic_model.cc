@@ -97,6 +97,88 @@ TEST_P(KinematicModelTest, PointAndJacobianMatchJetKinematics) {
 
 INSTANTIATE_TEST_SUITE_P(Machines, KinematicModelTest, ::testing::Values(0, 1, 2));
 
+// ToolPointLanes (the long-data kernel's batched chain) against the general
+// ToolPointJacobian, sample by sample: random errors, poses (rotary commands
+// over several turns), backlash directions and tips per lane, and a random
+// set of wanted columns of every kind (location, error motion, backlash,
+// tip) restricted as a fit restricts them. A wanted column the batched
+// chain skipped, a frame recorded in the wrong place or a lane mixed up
+// with its neighbour shows here.
+TEST_P(KinematicModelTest, LanesMatchTheGeneralChain) {
+  const Machine m = Machine::FromJson(kMachines[GetParam()]);
+  std::mt19937 rng(11 + GetParam());
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const int np = m.num_parameters(), na = m.num_axes();
+  constexpr int W = KinematicModel::kLanes;
+  for (int trial = 0; trial < 30; ++trial) {
+    Eigen::VectorXd theta = RandomTheta(m, rng);
+    // Some trials with the errors of whole axes zero: the shared-frame path.
+    if (trial % 3 == 1)
+      for (int i = 0; i < np; ++i)
+        if (m.parameters()[i].axis >= 0 && !m.axis(m.parameters()[i].axis).rotary()) theta[i] = 0.0;
+    std::vector<int> wanted;
+    for (int i = 0; i < np; ++i)
+      if (u(rng) > (trial % 2 ? 0.6 : 0.9)) wanted.push_back(i);
+    KinematicModel model(m, theta.data());
+    model.RestrictJacobian(wanted);
+    const bool with_dir = trial % 4 != 0;
+    std::vector<double> q(static_cast<size_t>(na) * W), dir(static_cast<size_t>(na) * W), tip(3 * W);
+    std::vector<std::vector<double>> qs(W, std::vector<double>(na));
+    std::vector<std::vector<int>> ds(W, std::vector<int>(na));
+    for (int l = 0; l < W; ++l) {
+      for (int k = 0; k < na; ++k) {
+        qs[l][k] = m.axis(k).rotary() ? u(rng) * (trial % 5 == 0 ? 40.0 : 1.0) * M_PI : u(rng) * 300.0;
+        ds[l][k] = with_dir ? static_cast<int>(std::lround(1.4 * u(rng))) : 0;
+        q[k * W + l] = qs[l][k];
+        dir[k * W + l] = ds[l][k];
+      }
+      for (int c = 0; c < 3; ++c) tip[c * W + l] = model.tip()[c] + 50.0 * u(rng);
+    }
+    std::vector<double> P(3 * W), P0(3 * W), J(3 * W * wanted.size() + 1), dtip(9 * W);
+    model.ToolPointLanes(q.data(), with_dir ? dir.data() : nullptr, tip.data(), P.data(), wanted.data(),
+                         static_cast<int>(wanted.size()), J.data(), dtip.data());
+    model.ToolPointLanes(q.data(), with_dir ? dir.data() : nullptr, tip.data(), P0.data(), nullptr, 0, nullptr,
+                         nullptr);
+    // A sample's numbers do not depend on its lane (the held and the
+    // per-chunk batches group samples differently): the batch rotated by 3.
+    std::vector<double> qr(q.size()), dr(dir.size()), tr(tip.size()), Pr(3 * W), Jr(J.size()), dtr(9 * W);
+    auto at = [&](int l) { return (l + 3) % W; };
+    for (int l = 0; l < W; ++l) {
+      for (int k = 0; k < na; ++k) {
+        qr[k * W + l] = q[k * W + at(l)];
+        dr[k * W + l] = dir[k * W + at(l)];
+      }
+      for (int c = 0; c < 3; ++c) tr[c * W + l] = tip[c * W + at(l)];
+    }
+    model.ToolPointLanes(qr.data(), with_dir ? dr.data() : nullptr, tr.data(), Pr.data(), wanted.data(),
+                         static_cast<int>(wanted.size()), Jr.data(), dtr.data());
+    for (int l = 0; l < W; ++l) {
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(Pr[c * W + l], P[c * W + at(l)]) << "trial " << trial;
+      for (size_t j = 0; j < 3 * wanted.size(); ++j) ASSERT_EQ(Jr[j * W + l], J[j * W + at(l)]) << "trial " << trial;
+      for (int c = 0; c < 9; ++c) ASSERT_EQ(dtr[c * W + l], dtip[c * W + at(l)]) << "trial " << trial;
+    }
+    for (int l = 0; l < W; ++l) {
+      const Eigen::Vector3d t(tip[l], tip[W + l], tip[2 * W + l]);
+      Eigen::Vector3d Pref;
+      Eigen::MatrixXd Jref(3, np);
+      model.ToolPointJacobian(qs[l].data(), with_dir ? ds[l].data() : nullptr, t, &Pref, Jref.data());
+      for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(P[c * W + l], Pref[c], 1e-12 * (1 + Pref.norm())) << "trial " << trial << " lane " << l;
+        EXPECT_EQ(P0[c * W + l], P[c * W + l]) << "the point without J, trial " << trial;
+      }
+      for (size_t j = 0; j < wanted.size(); ++j) {
+        const double scale = 1 + Jref.col(wanted[j]).norm() + Pref.norm() * (m.parameters()[wanted[j]].angular() ? 1 : 0);
+        for (int c = 0; c < 3; ++c)
+          EXPECT_NEAR(J[(3 * j + c) * W + l], Jref(c, wanted[j]), 1e-12 * scale)
+              << m.parameters()[wanted[j]].name << " row " << c << " trial " << trial << " lane " << l;
+      }
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+          EXPECT_NEAR(dtip[(3 * r + c) * W + l], Jref(r, m.tip_index() + c), 1e-12) << "dtip trial " << trial;
+    }
+  }
+}
+
 TEST_P(KinematicModelTest, ProbeFrameRotationIsTheNominalChainFramesRotation) {
   // The probe-lobing rotation takes the product of the rotary axes' own
   // rotations for the nominal chain frames: bit for bit the same.

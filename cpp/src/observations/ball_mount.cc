@@ -107,6 +107,7 @@ class MountRun final : public LongRun {
 
   void Evaluate(const KinematicModel& model, const Eigen::VectorXd& v, int begin, int end, double* r, double* J,
                 int ld) const override {
+    constexpr int W = KinematicModel::kLanes;
     const int nm = static_cast<int>(mounts_.size());
     // Per mounting at these values: the tool ball (the tip) and the table ball.
     Eigen::Vector3d tip[8], target[8];
@@ -130,63 +131,85 @@ class MountRun final : public LongRun {
       }
       ln[k] = mt.idx[0] >= 0 ? v[mt.idx[0]] : 0.0;
     }
-    // dP/dtheta of the sample, every machine column (only the estimated
-    // ones and the tip's are written).
-    double Jf[3 * 128];
-    std::vector<double> big;
-    double* jf = Jf;
-    if (np_ > 128) {
-      big.resize(3 * static_cast<size_t>(np_));
-      jf = big.data();
-    }
-    for (int s = begin; s < end; ++s) {
-      const int k = mount_[s];
-      const double* q = q_.data() + static_cast<size_t>(s) * na_;
-      const int* d = dir_.empty() ? nullptr : dir_.data() + static_cast<size_t>(s) * na_;
-      const double* rd = reading_.data() + static_cast<size_t>(s) * R;
-      Eigen::Vector3d P;
-      if (J) model.ToolPointJacobian(q, d, tp[k], &P, jf);
-      else P = model.ToolPoint(q, d, tp[k]);
-      double* out = r + static_cast<size_t>(s - begin) * R;
-      Eigen::Matrix<double, R, 3> G;
-      if constexpr (R == 3) {
-        for (int c = 0; c < 3; ++c) out[c] = P[c] - tg[k][c] - rd[c];
-        G.setIdentity();
-      } else {
-        const Eigen::Vector3d dd = P - tg[k];
-        const double len = dd.norm();
-        out[0] = len - rd[0] - ln[k];
-        G = (dd / len).transpose();
+    // The machine columns asked of the kinematic model (the same for every
+    // mounting: a machine parameter is kMachine in each) and each one's slot.
+    std::vector<int> columns;
+    std::vector<int> slot(p_, -1);
+    if (J && nm > 0)
+      for (int j = 0; j < p_; ++j)
+        if (source_[j] == kMachine) {
+          slot[j] = static_cast<int>(columns.size());
+          columns.push_back(arg_[j]);
+        }
+    const int nc = static_cast<int>(columns.size());
+    // One batch of W samples (the last one padded with its last sample):
+    // inputs and outputs of KinematicModel::ToolPointLanes.
+    alignas(64) double qb[64 * W], db[64 * W], tb[3 * W], Pb[3 * W], dtb[9 * W];
+    std::vector<double> jb(static_cast<size_t>(3 * W) * std::max(nc, 1));
+    if (na_ > 64) throw std::logic_error("ball mount: more than 64 axes");
+    const bool has_dir = !dir_.empty();
+    for (int s0 = begin; s0 < end; s0 += W) {
+      const int count = std::min(W, end - s0);
+      for (int l = 0; l < W; ++l) {
+        const int s = s0 + std::min(l, count - 1);
+        const double* q = q_.data() + static_cast<size_t>(s) * na_;
+        for (int a = 0; a < na_; ++a) qb[a * W + l] = q[a];
+        if (has_dir) {
+          const int* d = dir_.data() + static_cast<size_t>(s) * na_;
+          for (int a = 0; a < na_; ++a) db[a * W + l] = d[a];
+        }
+        const Eigen::Vector3d& t = tp[mount_[s]];
+        for (int c = 0; c < 3; ++c) tb[c * W + l] = t[c];
       }
-      if (!J) continue;
-      const int* src = source_.data() + static_cast<size_t>(k) * p_;
-      const int* arg = arg_.data() + static_cast<size_t>(k) * p_;
-      for (int row = 0; row < R; ++row) {
-        double* jr = J + (static_cast<size_t>(s - begin) * R + row) * ld;
-        const double g0 = G(row, 0), g1 = G(row, 1), g2 = G(row, 2);
-        for (int j = 0; j < p_; ++j) {
-          double x = 0.0;
-          switch (src[j]) {
-            case kMachine: {
-              const double* c = jf + 3 * arg[j];
-              x = g0 * c[0] + g1 * c[1] + g2 * c[2];
-              break;
+      model.ToolPointLanes(qb, has_dir ? db : nullptr, tb, Pb, columns.data(), nc, J ? jb.data() : nullptr,
+                           J ? dtb : nullptr);
+      for (int l = 0; l < count; ++l) {
+        const int s = s0 + l;
+        const int k = mount_[s];
+        const double* rd = reading_.data() + static_cast<size_t>(s) * R;
+        const Eigen::Vector3d P(Pb[l], Pb[W + l], Pb[2 * W + l]);
+        double* out = r + static_cast<size_t>(s - begin) * R;
+        Eigen::Matrix<double, R, 3> G;
+        if constexpr (R == 3) {
+          for (int c = 0; c < 3; ++c) out[c] = P[c] - tg[k][c] - rd[c];
+          G.setIdentity();
+        } else {
+          const Eigen::Vector3d dd = P - tg[k];
+          const double len = dd.norm();
+          out[0] = len - rd[0] - ln[k];
+          G = (dd / len).transpose();
+        }
+        if (!J) continue;
+        const int* src = source_.data() + static_cast<size_t>(k) * p_;
+        const int* arg = arg_.data() + static_cast<size_t>(k) * p_;
+        for (int row = 0; row < R; ++row) {
+          double* jr = J + (static_cast<size_t>(s - begin) * R + row) * ld;
+          const double g0 = G(row, 0), g1 = G(row, 1), g2 = G(row, 2);
+          for (int j = 0; j < p_; ++j) {
+            double x = 0.0;
+            switch (src[j]) {
+              case kMachine: {
+                const double* c = jb.data() + static_cast<size_t>(3 * slot[j]) * W + l;
+                x = g0 * c[0] + g1 * c[W] + g2 * c[2 * W];
+                break;
+              }
+              case kTool: {
+                // dP/dtip column arg[j]: rows r at dtb[(3 r + arg) W + l].
+                const double* c = dtb + arg[j] * W + l;
+                x = g0 * c[0] + g1 * c[3 * W] + g2 * c[6 * W];
+                break;
+              }
+              case kTable:
+                x = -G(row, arg[j]);
+                break;
+              case kLength:
+                x = -1.0;
+                break;
+              default:
+                break;
             }
-            case kTool: {
-              const double* c = jf + 3 * (tip0_ + arg[j]);
-              x = g0 * c[0] + g1 * c[1] + g2 * c[2];
-              break;
-            }
-            case kTable:
-              x = -G(row, arg[j]);
-              break;
-            case kLength:
-              x = -1.0;
-              break;
-            default:
-              break;
+            jr[j] = x;
           }
-          jr[j] = x;
         }
       }
     }

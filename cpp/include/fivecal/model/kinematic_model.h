@@ -53,6 +53,25 @@ class KinematicModel {
   // others are left as they are.
   void RestrictJacobian(const std::vector<int>& wanted_parameters);
 
+  // The long-data kernel's form of ToolPoint / ToolPointJacobian: kLanes
+  // samples at once as structure of arrays (entry l of a block of kLanes is
+  // sample l), so that the chain runs as SIMD over samples. The same chain
+  // and the same columns (a gtest compares them to 1e-12 at random poses and
+  // errors); what it saves: the frames stay one shared matrix until the first
+  // commanded rotation (a column of linear axes is a sum of vectors), each
+  // rotary command's sine and cosine once per sample, and only the columns
+  // asked for are formed.
+  //   q:    q[k kLanes + l], axis k (machine order) of sample l, mm / rad;
+  //   dir:  likewise, -1 / 0 / +1 (null: no backlash direction);
+  //   tip:  tip[c kLanes + l], the tool point at the zero pose (F);
+  //   P:    P[c kLanes + l], the tool point in the workpiece frame.
+  // With J: for the machine parameter columns[j] (one RestrictJacobian
+  // wants, or a tip.x|y|z), dP_c/dtheta at J[(3 j + c) kLanes + l]; with
+  // dtip too: dP_r/dtip_c at dtip[(3 r + c) kLanes + l].
+  static constexpr int kLanes = 8;
+  void ToolPointLanes(const double* q, const double* dir, const double* tip, double* P, const int* columns,
+                      int num_columns, double* J, double* dtip) const;
+
  private:
   struct AxisConstants {
     Eigen::Matrix3d RE;     // Rz(EC0) Ry(EB0) Rx(EA0)
@@ -89,6 +108,11 @@ class KinematicModel {
   };
 
   static constexpr int kMaxChain = 8;
+  struct LaneFrame;   // ToolPointLanes' running frame and recorded factors
+  struct LaneFactor;
+  template <bool kRecord>
+  void ChainLanes(const std::vector<int>& chain, const double* q, const double* dir, LaneFrame* frame,
+                  LaneFactor* factors) const;
   template <bool kRecord>
   void Chain(const std::vector<int>& chain, const double* q, const int* dir, Eigen::Matrix3d* R,
              Eigen::Vector3d* t, Eigen::Vector3d* p_last, Factor* factors) const;
