@@ -257,7 +257,23 @@ void BindObservations(py::module_& m) {
       py::dict dirs;
       for (const auto& [key, what] : tb.directions) dirs[py::str(key)] = what;
       tab["directions"] = dirs;
-      tab["checks"] = tb.checks;
+      py::list rules;
+      for (const TableRule& r : tb.rules) {
+        py::dict rd;
+        rd["rule"] = r.rule;
+        rd["keys"] = r.keys;
+        rd["values"] = r.values;
+        rd["value"] = r.value;
+        rd["option"] = r.option;
+        rd["if_key"] = r.if_key;
+        rd["then"] = r.then;
+        rd["chars"] = r.chars;
+        rd["size"] = r.size;
+        rd["limit"] = r.limit;
+        rd["message"] = r.message;
+        rules.append(rd);
+      }
+      tab["rules"] = rules;
       d["table"] = tab;
       out.append(d);
     }

@@ -218,7 +218,7 @@ def test_the_pending_list_only_shrinks():
 @pytest.mark.parametrize("module", [
     "python/fivecal/plausibility.py", "python/fivecal/design.py", "python/fivecal/report/document.py",
     "python/fivecal/report/plots.py", "python/fivecal/dataset.py", "cpp/bindings/identification.cc",
-    "cpp/src/observations/simulate.cc", "cpp/src/observations/dataset.cc"])
+    "cpp/src/observations/simulate.cc", "cpp/src/observations/dataset.cc", "python/fivecal/io/tables.py"])
 def test_the_generic_layers_name_no_kind(module):
     """The modules issue 29 found naming kinds now ask the registry."""
     assert module not in PENDING and module not in BY_DESIGN
@@ -365,3 +365,34 @@ def test_the_key_scan_finds_a_planted_key():
     assert {"tool_ball", "reading"} <= kind_keys()
     planted = 'const char* k = "tool_ball";  // "reading" in a comment is docs\nf.set("setup");'
     assert cpp_key_literals(planted, kind_keys()) == [(1, "tool_ball")]
+
+
+#: words a kind's rules use that the importer also uses as words of its own:
+#: "point" is the value of --decimal (a decimal point)
+_IMPORTER_WORDS = {"point"}
+
+
+def _code_strings(path: pathlib.Path) -> list:
+    """(line, text) of the string literals of a module, docstrings left out."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    docs = {id(n.body[0].value) for n in ast.walk(tree)
+            if isinstance(n, (ast.Module, ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and n.body
+            and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+    return [(n.lineno, n.value) for n in ast.walk(tree)
+            if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs]
+
+
+def test_the_importer_names_no_key_or_value_of_a_kinds_rules():
+    """A kind's table checks are its table's rules in the registry
+    (KindTable::rules); the importer applies them and names none of the keys
+    or values they are about (the machined kind's part, feature, face, step,
+    reference cut and normals used to be a branch of tables.py)."""
+    words = set()
+    for k in _core.observation_kinds():
+        for r in k["table"]["rules"]:
+            words |= set(r["keys"]) | set(r["values"]) | {r["if_key"], r["value"], r["then"], r["option"]}
+    words -= {"", "setup", "id", "type", "sigma"} | _IMPORTER_WORDS  # the common header's keys
+    assert words, "no kind declares table rules: the test would check nothing"
+    found = sorted((line, w) for line, text in _code_strings(ROOT / "python/fivecal/io/tables.py")
+                   for w in words if re.search(rf"(?<![A-Za-z_]){re.escape(w)}(?![A-Za-z])", text))
+    assert not found, f"python/fivecal/io/tables.py names what a kind's table rules are about: {found}"

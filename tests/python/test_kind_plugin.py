@@ -91,16 +91,21 @@ cli = subprocess.run([sys.executable, "-m", "fivecal", "import", "stylus3d", out
 back = fivecal.load_dataset(out + "/ds.json").to_dict()["observations"] if cli.returncode == 0 else []
 r = fivecal.identify(fivecal.load_dataset(out + "/ds.json"), estimate=list(errors))
 z = {n: (r.values[n] - errors.get(n, 0.0)) / r.std[n] for n in errors}
+# the kind's own table rules (stylus3d.cc's Table()): a default mounting, no '.' in it, the stylus's range
+open(out + "/d.csv", "w").write(",".join(rows[0]) + "\n" + ",".join(rows[1][:5] + [""] + rows[1][6:]) + "\n")
+default = fio.read_table(out + "/d.csv", "stylus3d", machine)["observations"][0].get("setup")
 bad = {}
 for name, lines in {"cell": [rows[0], rows[1], rows[2][:7] + ["abc"] + rows[2][8:]],
-                    "column": [rows[0][:8] + ["measured_w_um"], rows[1]]}.items():
+                    "column": [rows[0][:8] + ["measured_w_um"], rows[1]],
+                    "dot": [rows[0], rows[1][:5] + ["M.1"] + rows[1][6:]],
+                    "range": [rows[0][:6] + ["measured_x"] + rows[0][7:], rows[1][:6] + ["30000"] + rows[1][7:]]}.items():
     open(out + "/bad.csv", "w").write("".join(",".join(r) + "\n" for r in lines))
     try:
         fio.import_dataset(out + "/bad.csv", "stylus3d", machine)
         bad[name] = None
     except ValueError as e:
         bad[name] = str(e)
-print(json.dumps({"n": len(got), "same": same, "cli": cli.returncode, "cli_out": cli.stdout + cli.stderr,
+print(json.dumps({"n": len(got), "same": same, "default": default, "cli": cli.returncode, "cli_out": cli.stdout + cli.stderr,
                   "back": len(back), "z": z, "bad": bad, "kinds": list(fio.KINDS)}))
 '''
 
@@ -132,6 +137,12 @@ def test_test_only_kind_is_imported_from_a_table(tmp_path):
         in out["bad"]["cell"], out["bad"]
     assert out["bad"]["column"] is not None and "column 'measured_w_um': unknown column 'measured_w' for a " \
         "stylus3d import" in out["bad"]["column"], out["bad"]
+    # the kind's own table rules, declared in its file alone, applied naming the cell
+    assert out["default"] == "M1"
+    assert "bad.csv:2: column 'setup': mounting 'M.1': a mounting id has no '.'" in (out["bad"]["dot"] or ""), \
+        out["bad"]
+    assert "bad.csv:2: column 'measured_x': 30000 mm is beyond the fixture's reach; name the column measured_x_um" \
+        in (out["bad"]["range"] or ""), out["bad"]
 
 
 @pytest.mark.skipif(not PLUGIN, reason="the test-only module is built by scripts/dev_build.sh "

@@ -124,7 +124,31 @@ class Kind final : public ObservationKind {
         "[id] [sigma]";
     t.header_aliases = {{"deviation", "measured"}, {"dev", "measured"}, {"ref_", "reference_"}};
     t.directions = {{"normal", "a face normal"}, {"reference_normal", "a face normal"}};
-    t.checks = {"part_feature"};
+    // The part: a column, else --setup / the sidecar's setup, else P1. The
+    // feature: a step when the row has a reference cut, else a face.
+    const std::vector<std::string> reference = {kRefAxes, kRefPoint, kRefNormal};
+    t.rules = {
+        TableRule("default", {"part"}).Option("setup").Value("P1"),
+        TableRule("no_char", {"part"}).Chars(".").Message("part '{value}': a part name has no '.'"),
+        TableRule("default", {"feature"}).If(kRefAxes, "step").Value("face"),
+        TableRule("one_of", {"feature"}).Values({"face", "step"}),
+        TableRule("excludes", reference)
+            .If("feature")
+            .Value("face")
+            .Message("a face has no reference cut (leave the cell empty, or say 'step' in the feature column)"),
+        TableRule("requires", {kRefAxes})
+            .If("feature")
+            .Value("step")
+            .Message("a step needs the axes of its reference cut: columns reference_<axis> (or ref_<axis>) for "
+                     "{axes}"),
+        TableRule("size", {"point", kNormal, kRefPoint, kRefNormal}).Size(3),
+        TableRule("nonzero", {kNormal, kRefNormal})
+            .Message("the face normal {value} is zero (the outward normal of the face, part frame)"),
+        // a coordinate this large is µm typed as mm, not a part on a machine
+        TableRule("limit", {"point", kRefPoint})
+            .Limit(kMaxLinear)
+            .Message("{value:.6g} mm is beyond any machine tool; coordinates look like µm: name the column "
+                     "{column}_um")};
     return t;
   }
 

@@ -7,15 +7,15 @@
 #include <limits>
 #include <numeric>
 
+#include "solve/dense.h"
+
 namespace fivecal {
 namespace {
 
-// N = Js^T Js (both triangles) of the column-scaled Jacobian.
-Eigen::MatrixXd ScaledNormal(const Eigen::MatrixXd& Js) {
-  Eigen::MatrixXd N = Eigen::MatrixXd::Zero(Js.cols(), Js.cols());
-  N.selfadjointView<Eigen::Lower>().rankUpdate(Js.transpose());
-  return N.selfadjointView<Eigen::Lower>();
-}
+// N = Js^T Js (both triangles) of the column-scaled Jacobian. The dense
+// decompositions below run on the widest instruction set the CPU has
+// (solve/dense.h).
+Eigen::MatrixXd ScaledNormal(const Eigen::MatrixXd& Js) { return dense::Gram(Js); }
 
 // Below this condition number the singular values are taken from the
 // eigenvalues of the scaled normal matrix N = Js^T Js: their relative error is
@@ -31,17 +31,16 @@ bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, bool inve
   const int p = static_cast<int>(Js.cols());
   if (p == 0 || Js.rows() < p) return false;
   const Eigen::MatrixXd N = ScaledNormal(Js);
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
-  if (eig.info() != Eigen::Success) return false;
-  const Eigen::VectorXd lambda = eig.eigenvalues();  // ascending
+  Eigen::VectorXd lambda;  // ascending
+  if (!dense::SymmetricEigen(N, false, &lambda, nullptr)) return false;
   *eigenvalues = lambda;
   if (!(lambda[0] > 0) || lambda[p - 1] > kEigenConditionBound * kEigenConditionBound * lambda[0] ||
       std::sqrt(lambda[0]) <= rank_tolerance * std::sqrt(lambda[p - 1]))
     return false;
-  Eigen::LLT<Eigen::MatrixXd> llt;
+  dense::Cholesky llt;
   if (inverse) {
-    llt.compute(N);
-    if (llt.info() != Eigen::Success) return false;
+    llt = dense::Llt(N);
+    if (!llt.ok) return false;
   }
   out->singular_values = lambda.reverse().cwiseSqrt();
   out->rank = p;
@@ -51,7 +50,7 @@ bool WellConditioned(const Eigen::MatrixXd& Js, double rank_tolerance, bool inve
   out->log_det_per_parameter = logdet / p;
   if (!inverse) return true;
   const Eigen::VectorXd inv_scale = out->column_norms.cwiseInverse();
-  out->inverse_normal = llt.solve(Eigen::MatrixXd::Identity(p, p));
+  out->inverse_normal = llt.Inverse();
   out->inverse_normal = inv_scale.asDiagonal() * out->inverse_normal * inv_scale.asDiagonal();
   return true;
 }
@@ -63,8 +62,7 @@ Identifiability Analyze(const Eigen::MatrixXd& J, double rank_tolerance, bool fu
 Eigen::MatrixXd TriangularFactor(const Eigen::MatrixXd& A) {
   const Eigen::Index p = A.cols();
   if (A.rows() <= p) return A;
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr(A);
-  return qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+  return dense::QrR(A);
 }
 
 Identifiability AnalyzeJacobian(const Eigen::MatrixXd& J, double rank_tolerance) {
@@ -184,9 +182,9 @@ bool ClearlyFullRank(const Eigen::MatrixXd& J, double margin) {
   // the 1e-3 between margin and the rank tolerance. L_jj^2 carries an
   // absolute rounding error of about p eps, far below margin^2. A third of
   // the cost of a pivoted QR.
-  const Eigen::LLT<Eigen::MatrixXd> llt(ScaledNormal(J * inv_scale.asDiagonal()));
-  if (llt.info() != Eigen::Success) return false;
-  const Eigen::VectorXd d = llt.matrixLLT().diagonal();
+  const dense::Cholesky llt = dense::Llt(ScaledNormal(J * inv_scale.asDiagonal()));
+  if (!llt.ok) return false;
+  const Eigen::VectorXd d = llt.Diagonal();
   return d.minCoeff() > margin * d.maxCoeff();
 }
 
@@ -317,12 +315,12 @@ namespace {
 // makes column j undetermined. The margin covers the pivots' rounding, about
 // p eps lambda_max <= p eps trace(N) in absolute terms; a failed Cholesky (a
 // pivot at or below zero) is the same certificate for its column.
-bool PivotCertificate(const Eigen::LLT<Eigen::MatrixXd>& llt, double trace, double threshold) {
+bool PivotCertificate(const dense::Cholesky& llt, double trace, double threshold) {
   const double weak2 = 1.0 / (threshold * threshold);
   const double slack = 1e-10 * trace;
   if (!std::isfinite(slack) || !(slack < 0.5 * weak2)) return false;
-  if (llt.info() != Eigen::Success) return true;
-  return llt.matrixLLT().diagonal().cwiseAbs2().minCoeff() < 0.99 * weak2 - slack;
+  if (!llt.ok) return true;
+  return llt.Diagonal().cwiseAbs2().minCoeff() < 0.99 * weak2 - slack;
 }
 
 }  // namespace
@@ -345,13 +343,14 @@ namespace {
 bool EigenDetermination(const Eigen::MatrixXd& reduced, const Eigen::MatrixXd& N, double threshold,
                         Determination* out) {
   const int p = static_cast<int>(N.cols());
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N);
-  if (eig.info() != Eigen::Success) return false;
-  const Eigen::VectorXd lambda = eig.eigenvalues().reverse();  // descending, as s
-  const Eigen::MatrixXd V = eig.eigenvectors().rowwise().reverse();
+  Eigen::VectorXd ascending;
+  Eigen::MatrixXd vectors;
+  if (!dense::SymmetricEigen(N, true, &ascending, &vectors)) return false;
+  const Eigen::VectorXd lambda = ascending.reverse();  // descending, as s
+  const Eigen::MatrixXd V = vectors.rowwise().reverse();
   const double weak = 1.0 / threshold;
-  const Eigen::MatrixXd JV = reduced * V;
-  const double residual = (reduced.transpose() * JV - V * lambda.asDiagonal()).norm();
+  const Eigen::MatrixXd JV = dense::Product(reduced, V);
+  const double residual = (dense::TransposeProduct(reduced, JV) - V * lambda.asDiagonal()).norm();
   const double err = 2.0 * residual + 2.0 * (p + 1) * std::numeric_limits<double>::epsilon() * lambda[0];
   if (!(err > 0) || !std::isfinite(err)) return false;
   // Exactly free (or rounding-level) directions: only the SVD resolves them.
@@ -419,7 +418,7 @@ bool EigenDetermination(const Eigen::MatrixXd& reduced, const Eigen::MatrixXd& N
 bool CertainlyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, double threshold) {
   if (Jw.cols() == 0) return false;
   const Eigen::MatrixXd N = ScaledNormal(Jw * prior.asDiagonal());
-  return PivotCertificate(Eigen::LLT<Eigen::MatrixXd>(N), N.trace(), threshold);
+  return PivotCertificate(dense::Llt(N), N.trace(), threshold);
 }
 
 namespace {
@@ -428,20 +427,17 @@ namespace {
 // factor: true when every direction is clearly above `weak` and every ratio
 // below the threshold (the usual case); `ratio` and `lambda` (ascending)
 // then hold the ratios and eigenvalues. False: the quick path cannot say.
-bool QuickDetermined(const Eigen::MatrixXd& N, const Eigen::LLT<Eigen::MatrixXd>& llt, bool certainly_undetermined,
+bool QuickDetermined(const Eigen::MatrixXd& N, const dense::Cholesky& llt, bool certainly_undetermined,
                      double threshold, Eigen::VectorXd* ratio, Eigen::VectorXd* lambda) {
   const int p = static_cast<int>(N.cols());
   const double weak = 1.0 / threshold;
   // A column the pivots already show undetermined would fail the ratio
   // check below: the eigenvalues are of no use then.
   if (certainly_undetermined) return false;
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(N, Eigen::EigenvaluesOnly);
-  if (eig.info() != Eigen::Success) return false;
-  *lambda = eig.eigenvalues();
+  if (!dense::SymmetricEigen(N, false, lambda, nullptr)) return false;
   if (!(lambda->size() == p && (*lambda)[0] > 1.01 * weak * weak + 1e-12 * (*lambda)[p - 1])) return false;
-  *ratio = llt.info() == Eigen::Success
-               ? Eigen::VectorXd(llt.solve(Eigen::MatrixXd::Identity(p, p)).diagonal().cwiseMax(0.0).cwiseSqrt())
-               : Eigen::VectorXd::Constant(p, INFINITY);
+  *ratio = llt.ok ? Eigen::VectorXd(llt.Inverse().diagonal().cwiseMax(0.0).cwiseSqrt())
+                  : Eigen::VectorXd::Constant(p, INFINITY);
   return (ratio->array() < threshold).all();
 }
 
@@ -454,7 +450,7 @@ bool AnyUndetermined(const Eigen::MatrixXd& Jw, const Eigen::VectorXd& prior, do
   // would form again from a QR factor of the same Js: the same matrix to
   // rounding, without the QR of all the rows.
   const Eigen::MatrixXd N = ScaledNormal(Jw * prior.asDiagonal());
-  const Eigen::LLT<Eigen::MatrixXd> llt(N);
+  const dense::Cholesky llt = dense::Llt(N);
   if (PivotCertificate(llt, N.trace(), threshold)) return true;
   Eigen::VectorXd ratio, lambda;
   if (Jw.rows() >= p && QuickDetermined(N, llt, false, threshold, &ratio, &lambda)) return false;
@@ -475,7 +471,7 @@ Determination AnalyzeDetermination(const Eigen::MatrixXd& Jw, const Eigen::Vecto
   // 1 / sigma_min < threshold, and they come from the Cholesky factor of N.
   if (reduced.rows() >= p) {
     const Eigen::MatrixXd N = ScaledNormal(reduced);
-    const Eigen::LLT<Eigen::MatrixXd> llt(N);
+    const dense::Cholesky llt = dense::Llt(N);
     Eigen::VectorXd ratio, lambda;
     if (QuickDetermined(N, llt, PivotCertificate(llt, N.trace(), threshold), threshold, &ratio, &lambda)) {
       out.singular_values = lambda.reverse().cwiseSqrt();

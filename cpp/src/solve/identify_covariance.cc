@@ -11,6 +11,7 @@
 #include "fivecal/solve/identifiability.h"
 #include "fivecal/solve/priors.h"
 #include "fivecal/uncertainty/gum.h"
+#include "solve/dense.h"
 #include "solve/residual_units.h"
 
 namespace fivecal {
@@ -43,9 +44,9 @@ double UnweightedConditionNumber(const Eigen::MatrixXd& R, const Eigen::MatrixXd
   N.selfadjointView<Eigen::Lower>().rankUpdate(R.transpose(), s0 * s0);
   for (Eigen::Index i : other)
     N.selfadjointView<Eigen::Lower>().rankUpdate(Jw.row(i).transpose(), sig[i] * sig[i] - s0 * s0);
-  const Eigen::LLT<Eigen::MatrixXd> llt(N);
-  if (llt.info() != Eigen::Success) return rows();
-  const double c = ConditionNumber(llt.matrixU(), rank_tolerance);
+  const dense::Cholesky llt = dense::Llt(N);
+  if (!llt.ok) return rows();
+  const double c = ConditionNumber(llt.L.triangularView<Eigen::Lower>().transpose(), rank_tolerance);
   return c < kNormalConditionBound ? c : rows();
 }
 

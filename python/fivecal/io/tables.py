@@ -75,7 +75,7 @@ def _imports() -> dict:
     every = [n for t in out.values() for n in t["kinds"]]
     out[GENERIC] = {"name": GENERIC, "aliases": ["generic"], "row_aliases": [], "layout": "generic",
                     "columns": [], "expected": _GENERIC_EXPECTED, "options": ["length", "tool_ball", "table_ball"],
-                    "header_aliases": {}, "directions": {}, "checks": [], "kinds": every}
+                    "header_aliases": {}, "directions": {}, "rules": [], "kinds": every}
     return out
 
 
@@ -1376,13 +1376,15 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
     for key, got in parts.items():
         if key == "axes" or key == "direction" or key.endswith("_axes"):
             o[key] = {p: v for p, (v, _) in got.items()}
-            if key == "axes":
+            if key != "direction":
+                # another axes object (``<p>_axes``) is read from ``<p>_<letter>`` columns
+                prefix = key[:-len("axes")]
                 for a, v in o[key].items():
                     if not machine.is_rotary(a) and abs(v) > plausibility.REFUSE_POSITION:
                         cw = got[a][1]
                         raise ValueError(f"{cw}: {v:.6g} mm is beyond any machine tool "
                                          f"({plausibility.REFUSE_POSITION / 1e3:g} m); positions look like µm: "
-                                         f"name the column {a}_um")
+                                         f"name the column {prefix}{a}_um")
             continue
         if None in got and len(got) > 1:
             other = next(cw for p, (_, cw) in got.items() if p is not None)
@@ -1417,8 +1419,7 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
     if isinstance(o.get("sigma"), (int, float)) and not o["sigma"] > 0:
         raise ValueError(f"{parts['sigma'][None][1]}: sigma {o['sigma']:g} mm must be > 0")
     own = imports[_table_of(typ, imports)]
-    for check in own["checks"]:
-        _ROW_CHECKS[check](o, parts, text, side, machine, where)
+    _apply_rules(o, parts, text, side, machine, where, own["rules"])
     if kind != GENERIC:
         # the instrument's range: a table of the kind's own (a fivecal table's
         # rows go to the dataset's checks as they are)
@@ -1429,52 +1430,75 @@ def _generic_row(cells, cols, machine: Machine, kind: str, side: Mapping, decima
     return o
 
 
-def _part_feature_checks(o: dict, parts, text, side: Mapping, machine: Machine, where: str) -> None:
-    """A machined part's feature: the part (column, else --setup / the sidecar's
-    setup, else P1), the feature (default: a step when the row has a reference
-    cut, else a face), and the sizes that betray a unit mistake."""
-    if "part" not in o:
-        part = side.get("setup") or "P1"
-        if "." in str(part):
-            raise ValueError(f"{where}: part '{part}': a part name has no '.'")
-        o["part"] = str(part)
-    elif "." in o["part"]:
-        raise ValueError(f"{text['part'][1]}: part '{o['part']}': a part name has no '.'")
-    reference = [k for k in ("reference_axes", "reference_point", "reference_normal") if k in o]
-    if "feature" not in o:
-        o["feature"] = "step" if "reference_axes" in o else "face"
-    feature = o["feature"]
-    if feature not in ("face", "step"):
-        close = difflib.get_close_matches(feature, ["face", "step"], n=1)
-        raise ValueError(f"{text['feature'][1]}: '{feature}' is neither face nor step"
-                         + (f"; did you mean '{close[0]}'?" if close else ""))
-    if feature == "face" and reference:
-        cw = next(iter(parts[reference[0]].values()))[1]
-        raise ValueError(f"{cw}: a face has no reference cut (leave the cell empty, or say 'step' in the "
-                         "feature column)")
-    if feature == "step" and "reference_axes" not in o:
-        raise ValueError(f"{where}: a step needs the axes of its reference cut: columns reference_<axis> "
-                         f"(or ref_<axis>) for {_axis_list(machine, skip_s=True)}")
-    for key in ("point", "normal", "reference_point", "reference_normal"):
-        if key in o and len(o[key]) != 3:
-            raise ValueError(f"{where}: {key} needs the three columns {key}_x {key}_y {key}_z")
-    for key in ("normal", "reference_normal"):
-        if key in o and not math.sqrt(sum(v * v for v in o[key])) > 1e-9:
-            raise ValueError(f"{parts[key][0][1]}: the face normal {_fmt(o[key])} is zero (the outward normal "
-                             "of the face, part frame)")
-    for key in ("point", "reference_point"):
-        for i, v in enumerate(o.get(key, ())):
-            if abs(v) > plausibility.REFUSE_POSITION:
-                raise ValueError(f"{parts[key][i][1]}: {v:.6g} mm is beyond any machine tool; coordinates "
-                                 f"look like µm: name the column {key}_{_XYZ[i]}_um")
-    for a, v in (o.get("reference_axes") or {}).items():
-        if not machine.is_rotary(a) and abs(v) > plausibility.REFUSE_POSITION:
-            raise ValueError(f"{parts['reference_axes'][a][1]}: {v:.6g} mm is beyond any machine tool; "
-                             f"positions look like µm: name the column reference_{a}_um")
+def _cell(parts, text, key: str, where: str) -> str:
+    """Where a row's value of ``key`` was given: its (first) cell, else the line."""
+    if key in text:
+        return text[key][1]
+    if parts.get(key):
+        return next(iter(parts[key].values()))[1]
+    return where
 
 
-#: The named row checks a kind's table asks for (its ``checks``).
-_ROW_CHECKS = {"part_feature": _part_feature_checks}
+def _entry(key: str, i: int, n: int) -> str:
+    """The column of entry ``i`` of an ``n``-vector ``key`` (``point_y``), without unit."""
+    return f"{key}_{_XYZ[i]}" if n == 3 else f"{key}_{i + 1}"
+
+
+def _apply_rules(o: dict, parts, text, side: Mapping, machine: Machine, where: str, rules) -> None:
+    """The rules a kind's table declares (the registry's ``table.rules``:
+    defaults, allowed values, keys that must or must not come together,
+    vector sizes, nonzero vectors, plausible sizes), in order, each refusal
+    naming the cell (else the line) it is about."""
+    for r in rules:
+        keys, rule, message = r["keys"], r["rule"], r["message"]
+        if rule == "default":
+            key = keys[0]
+            if key in o:
+                continue
+            if r["option"] and side.get(r["option"]):
+                o[key] = str(side[r["option"]])
+            else:
+                o[key] = r["then"] if r["if_key"] and r["if_key"] in o else r["value"]
+        elif rule == "no_char":
+            key = keys[0]
+            if key in o and any(ch in str(o[key]) for ch in r["chars"]):
+                raise ValueError(f"{_cell(parts, text, key, where)}: " + message.format(value=o[key]))
+        elif rule == "one_of":
+            key = keys[0]
+            if key in o and o[key] not in r["values"]:
+                close = difflib.get_close_matches(str(o[key]), r["values"], n=1)
+                allowed = f"neither {_either(r['values'], 'nor')}" if len(r["values"]) == 2 else \
+                    f"not one of {', '.join(r['values'])}"
+                raise ValueError(f"{_cell(parts, text, key, where)}: '{o[key]}' is {allowed}"
+                                 + (f"; did you mean '{close[0]}'?" if close else ""))
+        elif rule in ("excludes", "requires"):
+            if o.get(r["if_key"]) != r["value"]:
+                continue
+            given = [k for k in keys if k in o]
+            if rule == "excludes" and given:
+                raise ValueError(f"{_cell(parts, text, given[0], where)}: " + message.format(value=r["value"]))
+            if rule == "requires" and len(given) < len(keys):
+                raise ValueError(f"{where}: " + message.format(axes=_axis_list(machine, skip_s=True)))
+        elif rule == "size":
+            for key in keys:
+                if key in o and len(o[key]) != r["size"]:
+                    count = "three" if r["size"] == 3 else str(r["size"])
+                    names = " ".join(_entry(key, i, r["size"]) for i in range(r["size"]))
+                    raise ValueError(f"{where}: {key} needs the {count} columns {names}")
+        elif rule == "nonzero":
+            for key in keys:
+                if key in o and not math.sqrt(sum(v * v for v in o[key])) > 1e-9:
+                    raise ValueError(f"{_cell(parts, text, key, where)}: " + message.format(value=_fmt(o[key])))
+        elif rule == "limit":
+            for key in keys:
+                value = o.get(key, ())
+                for i, v in enumerate(value if isinstance(value, (list, tuple)) else [value]):
+                    if abs(v) > r["limit"]:
+                        cw = parts.get(key, {}).get(i if isinstance(value, (list, tuple)) else None, (0, where))[1]
+                        column = _entry(key, i, len(value)) if isinstance(value, (list, tuple)) else key
+                        raise ValueError(f"{cw}: " + message.format(value=v, column=column))
+        else:
+            raise RuntimeError(f"{where}: the kind's table declares an unknown rule '{rule}' (a bug in the kind)")
 
 
 def _angle_checks(obs: list, cols, machine: Machine, path: str, lines: list) -> None:

@@ -116,6 +116,19 @@ class Stylus3dKind final : public ObservationKind {
     const Eigen::VectorXd& m = Measured(o);
     (*out)["measured"] = {m[0], m[1], m[2]};
   }
+  // its instrument table: read by the generic reader (a column per file key);
+  // the rules each row must meet are its own, applied by the importer, which
+  // names no kind's key
+  KindTable Table() const override {
+    KindTable t;
+    t.rules = {TableRule("default", {"setup"}).Value("M1"),
+               TableRule("no_char", {"setup"}).Chars(".").Message("mounting '{value}': a mounting id has no '.'"),
+               // the fixture's reach: a position beyond it is µm typed as mm
+               TableRule("limit", {"measured"})
+                   .Limit(2000.0)
+                   .Message("{value:.6g} mm is beyond the fixture's reach; name the column {column}_um")};
+    return t;
+  }
 
   // its setup parameters: the stylus offset of each mounting, estimated by default
   void AddObservationParameters(const Observation& o, ParameterTable* t) const override {

@@ -155,6 +155,43 @@ struct TableColumn {
   TableColumn& Range(double limit, const char* msg) { range = limit; range_message = msg; return *this; }
 };
 
+// A rule of a kind's table (generic layout) that the importer applies to
+// every row, naming the cell it fails on: the kind's own checks declared as
+// data, so that python/fivecal/io/tables.py applies them without naming any
+// kind's key. `message` is a Python format string; the fields it may use are
+// given per rule ({value}: the offending value, {axes}: the machine's axes
+// but S, {column}: the column a value belongs in, without unit).
+//   "default"  a row without keys[0] takes the sidecar key / option `option`
+//              when given, else `then` when the row has `if_key`, else `value`;
+//   "one_of"   keys[0] is one of `values` (else "'x' is neither a nor b",
+//              with a did-you-mean);
+//   "no_char"  the text of keys[0] holds none of `chars` ({value});
+//   "excludes" when the row's `if_key` is `value`, it has none of `keys`
+//              (the message names the first cell given);
+//   "requires" when the row's `if_key` is `value`, it has every one of `keys`
+//              ({axes});
+//   "size"     each of `keys` present has `size` entries;
+//   "nonzero"  each vector of `keys` present is not of zero length ({value});
+//   "limit"    each entry of `keys` present is within `limit` (mm), beyond
+//              it a unit mistake ({value}, {column}).
+struct TableRule {
+  std::string rule;
+  std::vector<std::string> keys, values;
+  std::string value, option, if_key, then, chars, message;
+  int size = 0;
+  double limit = 0;
+
+  TableRule(std::string r, std::vector<std::string> k) : rule(std::move(r)), keys(std::move(k)) {}
+  TableRule& Value(const char* v) { value = v; return *this; }
+  TableRule& Values(std::vector<std::string> v) { values = std::move(v); return *this; }
+  TableRule& Option(const char* o) { option = o; return *this; }
+  TableRule& If(const char* key, const char* then_value = "") { if_key = key; then = then_value; return *this; }
+  TableRule& Chars(const char* c) { chars = c; return *this; }
+  TableRule& Size(int n) { size = n; return *this; }
+  TableRule& Limit(double mm) { limit = mm; return *this; }
+  TableRule& Message(const char* m) { message = m; return *this; }
+};
+
 // A kind's instrument table: the import it belongs to and its columns.
 // Kinds with the same `name` share one import (the probe touches: a probing
 // log names facets, spheres and cylinders); a kind that declares none is
@@ -177,11 +214,11 @@ struct KindTable {
   // Other header names: of a key in the generic layout ("deviation" ->
   // "measured"; a name ending in "_" renames a prefix), of a column in the
   // others ("tx" -> "measured_x"). Generic layout: the vector keys that are
-  // directions (no unit; key -> what a message calls it), and named row
-  // checks of the importer.
+  // directions (no unit; key -> what a message calls it), and the rules each
+  // row must meet, in the order the importer applies them.
   std::vector<std::pair<std::string, std::string>> header_aliases;
   std::vector<std::pair<std::string, std::string>> directions;
-  std::vector<std::string> checks;
+  std::vector<TableRule> rules;
 };
 
 // A file key of the flat form a kind declares (KindFileFormat::flat_keys):
