@@ -264,7 +264,8 @@ void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_byte
 
   bool first = true;
   OwnRow own;
-  for (const Observation& o : ds.observations) {
+  // Block rows (dataset.h TraceBlock) through one scratch observation.
+  ds.ForEachRow([&](size_t, const Observation& o) {
     buf.append(first ? "\n  {\"type\": " : ",\n  {\"type\": ");
     first = false;
     AppendString(ObservationTypeName(o.type), &buf);
@@ -310,8 +311,8 @@ void WriteDatasetJson(const Dataset& ds, const ByteSink& sink, size_t chunk_byte
       sink(buf.data(), buf.size());
       buf.clear();
     }
-  }
-  buf.append(ds.observations.empty() ? "]\n}\n" : "\n ]\n}\n");
+  });
+  buf.append(ds.size() == 0 ? "]\n}\n" : "\n ]\n}\n");
   sink(buf.data(), buf.size());
 }
 
@@ -324,18 +325,19 @@ ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(ds) {
     columns_.push_back({name, t});
     return static_cast<int>(columns_.size()) - 1;
   };
+  Observation scratch;
   auto where = [&](size_t i, const std::string& key) {
-    return "observations[" + std::to_string(i) + "] (" + ObservationTypeName(ds.observations[i].type) + "), " + key;
+    return "observations[" + std::to_string(i) + "] (" + ObservationTypeName(ds.Row(i, &scratch).type) + "), " + key;
   };
 
   // What the rows hold: decides the generic columns, which come first.
   bool any_id = false, one_sigma = false;
   std::vector<bool> any_dir(static_cast<size_t>(na), false);
   int row_sigmas = 0;
-  for (const Observation& o : ds.observations) {
+  ds.ForEachRow([&](size_t, const Observation& o) {
     any_id |= !o.id.empty();
     for (int k = 0; k < na; ++k) any_dir[k] = any_dir[k] || o.direction[k] != 0;
-    if (o.sigma.size() == 0) continue;
+    if (o.sigma.size() == 0) return;
     if (OneSigma(o)) {
       one_sigma = true;
     } else {
@@ -344,7 +346,7 @@ ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(ds) {
       // them) unless some observation has another number of rows.
       numbered_sigma_ |= o.sigma.size() != 3;
     }
-  }
+  });
   if (row_sigmas > 9)
     throw std::invalid_argument("sigma: " + std::to_string(row_sigmas) +
                                 " values per observation have no column form (sigma_1 to sigma_9)");
@@ -414,8 +416,9 @@ ColumnWriter::ColumnWriter(const Dataset& ds) : ds_(ds) {
   Find find{this, m, [&](const std::string& key) { return where(row, key); },
             [&](const std::string& name, Type t) { return add(name, t); }};
   OwnRow own;
-  for (; row < ds.observations.size(); ++row) {
-    own.Fill(m, ds.observations[row]);
+  Observation row_scratch;
+  for (; row < ds.size(); ++row) {
+    own.Fill(m, ds.Row(row, &row_scratch));
     own.Visit(find, true);
     own.Visit(find, false);
   }
@@ -503,8 +506,9 @@ std::vector<ColumnWriter::Block> ColumnWriter::Write(int64_t begin, int64_t end)
     }
   } fill{this, m, put_text, put};
   OwnRow own;
+  Observation scratch;
   for (size_t r = 0; r < n; ++r) {
-    const Observation& o = ds_.observations[static_cast<size_t>(begin) + r];
+    const Observation& o = ds_.Row(static_cast<size_t>(begin) + r, &scratch);
     for (size_t c = 0; c < columns_.size(); ++c)
       if (columns_[c].type == Type::kString) out[c].offsets[r + 1] = out[c].offsets[r];
     put_text(0, r, ObservationTypeName(o.type));

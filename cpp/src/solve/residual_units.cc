@@ -14,11 +14,15 @@ namespace {
 // The unit of every row ("mm" for a scale bar row), from the kinds.
 std::vector<const char*> RowUnits(const Dataset& ds, const std::vector<int>& source) {
   std::vector<const char*> unit(source.size(), "mm");
-  std::vector<int> seen(ds.observations.size(), 0);
+  const int n = static_cast<int>(ds.size());  // column-block rows too
+  std::vector<int> seen(static_cast<size_t>(n), 0);
+  const ObservationKind* kind = nullptr;
+  int last = -1;
   for (size_t i = 0; i < source.size(); ++i) {
     const int s = source[i];
-    if (s < 0 || s >= static_cast<int>(ds.observations.size())) continue;
-    unit[i] = KindOf(ds.observations[s]).unit_row(seen[s]++);
+    if (s < 0 || s >= n) continue;
+    if (s != last) kind = &KindOf(ds.TypeOf(static_cast<size_t>(s))), last = s;
+    unit[i] = kind->unit_row(seen[s]++);
   }
   return unit;
 }
@@ -30,13 +34,14 @@ bool SameUnit(const char* a, const char* b) { return std::strcmp(a, b) == 0; }
 Eigen::VectorXd PositionScaledResiduals(const Dataset& ds, const Eigen::VectorXd& r, const Eigen::VectorXd& sigma,
                                         const std::vector<int>& source) {
   const std::vector<const char*> unit = RowUnits(ds, source);
-  const int n_obs = static_cast<int>(ds.observations.size());
+  const int n_obs = static_cast<int>(ds.size());
   auto own = [&](int s) { return s >= 0 && s < n_obs; };
   // The observation's position noise: its rows of the first unit.
-  std::vector<double> ref(ds.observations.size(), 0.0);
+  std::vector<double> ref(static_cast<size_t>(n_obs), 0.0);
   for (size_t i = 0; i < source.size(); ++i) {
     const int s = source[i];
-    if (own(s) && SameUnit(unit[i], KindOf(ds.observations[s]).unit_row(0))) ref[s] = std::max(ref[s], sigma[i]);
+    if (own(s) && SameUnit(unit[i], KindOf(ds.TypeOf(static_cast<size_t>(s))).unit_row(0)))
+      ref[s] = std::max(ref[s], sigma[i]);
   }
   Eigen::VectorXd out = r;
   for (size_t i = 0; i < source.size(); ++i) {

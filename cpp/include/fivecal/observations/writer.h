@@ -68,7 +68,7 @@ class ColumnWriter {
   explicit ColumnWriter(const Dataset& ds);
 
   const std::vector<Spec>& columns() const { return columns_; }
-  int64_t rows() const { return static_cast<int64_t>(ds_.observations.size()); }
+  int64_t rows() const { return static_cast<int64_t>(ds_.size()); }
   // Rows [begin, end) of every column, in columns() order.
   std::vector<Block> Write(int64_t begin, int64_t end) const;
 
