@@ -54,6 +54,11 @@ class StageClock {
 Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   StageClock clock;
   ds.Validate();
+  // Requests that select on the dense Jacobian ("location", "auto") build
+  // a per-observation problem while resolving: blocks expanded first.
+  if (!ds.blocks.empty())
+    for (const std::string& n : opt.estimate)
+      if (n == "location" || n == "auto") return Identify(ds.Expanded(), opt);
   const IdentifyRequest request = ResolveRequest(ds, opt);
   clock("request");
   // Column blocks (dataset.h TraceBlock) are fitted where they lie only by
