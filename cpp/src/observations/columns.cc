@@ -470,6 +470,17 @@ Dataset ColumnLoader::Finish(bool whole) {
   // become Observations.
   int64_t split = 0;
   for (int64_t at : object_at_) split = std::max(split, at + 1);
+  // Rows that change mounting every few rows make blocks of a few rows,
+  // each of a dozen vectors: fewer than 64 rows a block on average, they
+  // are Observations.
+  int64_t block_rows = 0, blocks = 0;
+  for (const Segment& g : segments_) {
+    const int64_t end = g.start + static_cast<int64_t>(g.block.size());
+    if (end <= split) continue;  // Observations anyway
+    block_rows += end - std::max(g.start, split);
+    ++blocks;
+  }
+  if (blocks * 64 > block_rows) split = total_;
   std::sort(segments_.begin(), segments_.end(), [](const Segment& a, const Segment& b) { return a.start < b.start; });
   std::vector<Segment> kept;
   for (Segment& g : segments_) {

@@ -1043,12 +1043,28 @@ void Dataset::Validate() const {
 const Observation& Dataset::Row(size_t i, Observation* scratch) const {
   if (i < observations.size()) return observations[i];
   size_t r = i - observations.size();
-  for (const TraceBlock& b : blocks) {
-    if (r < b.size()) {
-      FillRow(b, r, scratch);
+  // Rows are mostly asked in order (a writer, a walk): the block of the
+  // previous call on this dataset is tried first, so that a dataset of
+  // many blocks is not searched from the start for every row.
+  thread_local const Dataset* hint_ds = nullptr;
+  thread_local const TraceBlock* hint_data = nullptr;
+  thread_local size_t hint_block = 0, hint_start = 0;
+  size_t k = 0, start = 0;
+  if (hint_ds == this && hint_data == blocks.data() && hint_block < blocks.size() && hint_start <= r) {
+    k = hint_block;
+    start = hint_start;
+  }
+  for (; k < blocks.size(); ++k) {
+    const TraceBlock& b = blocks[k];
+    if (r - start < b.size()) {
+      hint_ds = this;
+      hint_data = blocks.data();
+      hint_block = k;
+      hint_start = start;
+      FillRow(b, r - start, scratch);
       return *scratch;
     }
-    r -= b.size();
+    start += b.size();
   }
   throw std::out_of_range("dataset: observation " + std::to_string(i) + " of " + std::to_string(size()));
 }
