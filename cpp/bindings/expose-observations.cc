@@ -14,6 +14,8 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <nlohmann/json.hpp>
+
 #include "fivecal/observations/ball_mount.h"
 #include "fivecal/observations/columns.h"
 #include "fivecal/observations/dataset.h"
@@ -99,9 +101,14 @@ void BindObservations(py::module_& m) {
                                             (rows == 1 ? "1" : "1 or " + std::to_string(rows)) + ", got " +
                                             std::to_string(sigma->rows()) + " x " +
                                             std::to_string(sigma->cols()));
-              for (Eigen::Index r = 0; r < n; ++r)
-                d.observations[r].sigma = sigma->cols() == rows ? Eigen::VectorXd(sigma->row(r).transpose())
-                                                                : Eigen::VectorXd::Constant(rows, (*sigma)(r, 0));
+              // The samples are one column block (AppendBallSamples).
+              if (n > 0) {
+                TraceBlock& b = d.blocks.back();
+                b.sigma.assign(static_cast<size_t>(rows), std::vector<double>(static_cast<size_t>(n)));
+                for (Eigen::Index k = 0; k < rows; ++k)
+                  for (Eigen::Index r = 0; r < n; ++r)
+                    b.sigma[k][r] = (*sigma)(r, sigma->cols() == rows ? k : 0);
+              }
             }
             d.Validate();  // names the sample of a sigma out of range
             return d;
@@ -116,27 +123,32 @@ void BindObservations(py::module_& m) {
           // has axes, a type code (ObservationType order) and a target index
           // (facet, sphere or cylinder, else -1); the ball-bar and 3D ball fields only
           // exist for the rows listed in "ball" (NaN where not of its type).
-          [](const Dataset& d) {
-            const Eigen::Index n = static_cast<Eigen::Index>(d.observations.size());
+          // include_blocks=false: the per-object observations only (the
+          // blocks then through block_columns(), without a copy).
+          [](const Dataset& d, bool include_blocks) {
+            // Column-block rows too (dataset.h TraceBlock), in order.
+            const Eigen::Index n = static_cast<Eigen::Index>(include_blocks ? d.size() : d.observations.size());
             const int na = d.machine().num_axes();
             using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
             RowMajor axes(n, na);
             Eigen::VectorXi type(n), target(n);
             std::vector<int> ball;
-            for (Eigen::Index i = 0; i < n; ++i) {
-              const Observation& o = d.observations[i];
+            d.ForEachRow([&](size_t row, const Observation& o) {
+              if (row >= static_cast<size_t>(n)) return;
+              const Eigen::Index i = static_cast<Eigen::Index>(row);
               axes.row(i) = o.axes.transpose();
               type[i] = static_cast<int>(o.type);
               const ObservationKind& kind = KindOf(o);
               target[i] = kind.ArtefactTarget(d, o);
               if (dynamic_cast<const BallMountKind*>(&kind)) ball.push_back(static_cast<int>(i));
-            }
+            });
             const Eigen::Index k = static_cast<Eigen::Index>(ball.size());
             const double nan = std::numeric_limits<double>::quiet_NaN();
             Eigen::VectorXd reading = Eigen::VectorXd::Constant(k, nan), length = reading;
             RowMajor measured = RowMajor::Constant(k, 3, nan), tool(k, 3), table(k, 3);
+            Observation scratch;
             for (Eigen::Index j = 0; j < k; ++j) {
-              const Observation& o = d.observations[ball[j]];
+              const Observation& o = d.Row(static_cast<size_t>(ball[j]), &scratch);
               const BallMountData& b = o.data<BallMountData>();
               if (static_cast<const BallMountKind&>(KindOf(o)).has_length()) {
                 reading[j] = b.reading;
@@ -158,14 +170,77 @@ void BindObservations(py::module_& m) {
             out["tool_ball"] = tool;
             out["table_ball"] = table;
             return out;
+          },
+          py::arg("include_blocks") = true)
+      .def(
+          "block_columns",
+          // Each column block as numpy views of its columns (read-only, no
+          // copy; they keep the dataset alive): "type", "setup", "first" (the
+          // dataset index of its first row), "rows", "axes" (axis letter ->
+          // values, file units), "directions" (the same, int8; empty when no
+          // row has one), "values" (the kind's per-row values by file column:
+          // reading, measured_x ...), "sigma" (per residual row: one value or
+          // one per row, NaN = default; empty: the default) and "shared" (the
+          // kind's JSON fields every row shares, as a file writes them).
+          [](py::object self) {
+            const Dataset& d = self.cast<const Dataset&>();
+            auto view = [&](const auto& v) {
+              using T = typename std::decay_t<decltype(v)>::value_type;
+              py::array_t<T> a({static_cast<py::ssize_t>(v.size())}, {static_cast<py::ssize_t>(sizeof(T))}, v.data(),
+                               self);
+              py::detail::array_proxy(a.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+              return a;
+            };
+            py::list out;
+            size_t first = d.observations.size();
+            Observation row;
+            for (const TraceBlock& b : d.blocks) {
+              const ObservationKind& kind = KindOf(b.type);
+              py::dict blk;
+              blk["type"] = ObservationTypeName(b.type);
+              blk["setup"] = b.setup;
+              blk["first"] = first;
+              blk["rows"] = b.size();
+              py::dict axes, dirs, values;
+              for (size_t k = 0; k < b.axes.size(); ++k) {
+                const std::string a(1, d.machine().axis(static_cast<int>(k)).name);
+                axes[a.c_str()] = view(b.axes[k]);
+                if (!b.direction.empty()) dirs[a.c_str()] = view(b.direction[k]);
+              }
+              for (size_t v = 0; v < b.values.size(); ++v)
+                values[kind.block_value_name(static_cast<int>(v)).c_str()] = view(b.values[v]);
+              py::list sigma;
+              for (const auto& c : b.sigma) sigma.append(view(c));
+              blk["axes"] = axes;
+              blk["directions"] = dirs;
+              blk["values"] = values;
+              blk["sigma"] = sigma;
+              nlohmann::json j = nlohmann::json::object();
+              if (b.size()) {
+                d.FillRow(b, 0, &row);
+                kind.Write(row, &j);
+              }
+              blk["shared"] = py::module_::import("json").attr("loads")(j.dump());
+              out.append(blk);
+              first += b.size();
+            }
+            return out;
           })
       .def_property_readonly("machine", &Dataset::machine)
       .def_readonly("tip_radius", &Dataset::tip_radius)
       .def_property_readonly("num_observations",
-                             [](const Dataset& d) { return d.observations.size(); })
+                             [](const Dataset& d) { return d.size(); })
+      // How many observations are held as column blocks (dataset.h
+      // TraceBlock) rather than one object each.
+      .def_property_readonly("num_block_rows", [](const Dataset& d) { return d.block_rows(); })
+      .def_property_readonly("num_blocks", [](const Dataset& d) { return d.blocks.size(); })
+      .def("pack_traces", &Dataset::PackTraces, py::arg("min_rows") = 0)
+      .def("expanded", &Dataset::Expanded)
       .def_property_readonly("observation_types", [](const Dataset& d) {
         std::vector<std::string> t;
+        t.reserve(d.size());
         for (const auto& o : d.observations) t.push_back(ObservationTypeName(o.type));
+        for (const TraceBlock& b : d.blocks) t.insert(t.end(), b.size(), ObservationTypeName(b.type));
         return t;
       });
 

@@ -285,11 +285,15 @@ def check_loaded(ds, where: str = "dataset") -> None:
 def loaded_columns(ds, offset: int = 0) -> dict:
     """What :func:`check_loaded` reads of the observations of ``ds``, their
     rows counted from ``offset`` (a piece of a dataset read piece by piece)."""
-    cols = ds._core.columns()
+    # Long traces held as column blocks are checked on views of their
+    # columns (no per-row arrays of 10^7 samples); the other rows as arrays.
+    blocks = ds._core.block_columns() if ds._core.num_block_rows else []
+    cols = ds._core.columns(include_blocks=not blocks)
     m = ds.machine
     cols["axes"] = {a: cols["axes"][:, k] for k, a in enumerate(m.axis_names)}
     if offset:
         cols["ball"] = cols["ball"] + offset
+        blocks = [dict(b, first=b["first"] + offset) for b in blocks]
     # The kinds' other positions (a tracker's pose, a station, a target point) are
     # not among the columns: the few observations that have them go through JSON.
     balls = _codes_where(lambda k: k["ball_mount"])
@@ -298,6 +302,7 @@ def loaded_columns(ds, offset: int = 0) -> dict:
     if rows.size:
         obs = json.loads(ds._core.subset(rows.tolist()).to_json())["observations"]
         cols["positions"] = _key_positions(obs, rows + offset, cols["type"][rows])
+    cols["blocks"] = blocks
     return cols
 
 
@@ -314,17 +319,18 @@ def check_loaded_pieces(head, parts, where: str = "dataset") -> None:
         for key in parts[0]:
             if key == "axes":
                 cols[key] = {a: np.concatenate([p[key][a] for p in parts]) for a in parts[0][key]}
-            elif key != "positions":
+            elif key not in ("positions", "blocks"):
                 cols[key] = np.concatenate([p[key] for p in parts])
         positions = {}
         for p in parts:
             for key, (r, v) in p.get("positions", {}).items():
                 positions.setdefault(key, []).append((r, v))
+        cols["blocks"] = [b for p in parts for b in p.get("blocks", ())]
         if positions:
             cols["positions"] = {key: (np.concatenate([r for r, _ in x]), np.concatenate([v for _, v in x]))
                                  for key, x in positions.items()}
     d = json.loads(head._core.subset([]).to_json())  # machine, probe, artefact: no observations
-    _check_columns(head.machine, d, cols, where)
+    _check_columns(head.machine, d, cols, where, blocks=cols.get("blocks", ()))
 
 
 def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "dataset",
@@ -342,14 +348,40 @@ def check_dataset(d: Mapping, machine: Optional[Machine] = None, where: str = "d
                    (lambda i: i) if indices is None else (lambda i: int(indices[i])))
 
 
-def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lambda i: i) -> None:
+def _block_positions(machine: Machine, blocks, vals: list, fields: list) -> None:
+    """:func:`_positions` of column blocks (``Dataset.block_columns``): the
+    largest of each linear axis column, and the positions and lengths every
+    row of a block shares."""
+    for b in blocks:
+        first = b["first"]
+        for a, v in b["axes"].items():
+            if not machine.is_rotary(a):
+                _largest(v, lambda i, j, a=a, first=first: f"observations[{first + i}].axes.{a}", vals, fields)
+        for key, v in b["shared"].items():
+            if key in ("tool_ball", "table_ball") + POSITION_KEYS:
+                for j, x in enumerate(_vec(v)):
+                    vals.append(x)
+                    fields.append(f"observations[{first}].{key}[{j}]")
+            elif key in ("length",) + LENGTH_KEYS:
+                vals.append(_num(v))
+                fields.append(f"observations[{first}].{key}")
+
+
+def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lambda i: i, blocks=()) -> None:
     """The checks of :func:`check_dataset` on the columns of the observations
-    (``Dataset.columns`` or :func:`_dict_columns`); ``d`` gives the artefact
-    and the probe."""
-    check_rotary(machine, cols["axes"], f"{where}: observations[*].axes")
+    (``Dataset.columns`` or :func:`_dict_columns`, and the column blocks of
+    ``Dataset.block_columns``); ``d`` gives the artefact and the probe."""
+    axes = cols["axes"]
+    if blocks:
+        # The rotary columns whole (what looks like radians is a property
+        # of all the values); the linear ones are checked block by block.
+        axes = {a: np.concatenate([np.asarray(axes[a], float)] + [b["axes"][a] for b in blocks])
+                for a in machine.axis_names if machine.is_rotary(a)}
+    check_rotary(machine, axes, f"{where}: observations[*].axes")
 
     # Positions and lengths: a dataset in µm.
     vals, fields = _positions(machine, cols, "observations", ix)
+    _block_positions(machine, blocks, vals, fields)
     art = d.get("artefact") or {}
     if isinstance(art, Mapping):
         for k, s in enumerate(art.get("spheres") or []):
@@ -383,18 +415,34 @@ def _check_columns(machine: Machine, d: Mapping, cols: dict, where: str, ix=lamb
         rep = k["report"]
         if not (k["ball_mount"] and rep["range_field"] in ("reading", "measured")):
             continue
-        sel = np.flatnonzero(ball_types == code)
-        if not sel.size:
-            continue
         field, limit = rep["range_field"], rep["range"]
-        v = cols[field][sel]
-        a = np.abs(np.nan_to_num(v)).reshape(v.shape[0], -1).max(axis=1)
-        j = int(np.argmax(a))
-        if a[j] > limit:
-            big = int((a > limit).sum())
-            row = ix(cols["ball"][sel[j]])
-            value = f"{v[j]:.6g}" if v.ndim == 1 else f"{v[j].tolist()}"
-            raise ValueError(f"{where}: observations[{row}].{field} = {value} mm ({big} of the {a.size} "
+        # Per source (the object rows, each block): the largest |value| of a
+        # row, its row and value, and how many rows are beyond the range.
+        worst, big, total = None, 0, 0
+        sel = np.flatnonzero(ball_types == code)
+        if sel.size:
+            v = cols[field][sel]
+            a = np.abs(np.nan_to_num(v)).reshape(v.shape[0], -1).max(axis=1)
+            j = int(np.argmax(a))
+            worst = (a[j], ix(cols["ball"][sel[j]]), f"{v[j]:.6g}" if v.ndim == 1 else f"{v[j].tolist()}")
+            big, total = int((a > limit).sum()), a.size
+        for b in blocks:
+            if b["type"] != k["name"] or not b["rows"]:
+                continue
+            named = [c for c in b["values"] if c == field or c.startswith(field + "_")]
+            a = None
+            for c in named:
+                x = np.abs(np.nan_to_num(b["values"][c]))
+                a = x if a is None else np.maximum(a, x)
+            if a is None:
+                continue
+            j = int(np.argmax(a))
+            row = [float(b["values"][c][j]) for c in named]
+            if worst is None or a[j] > worst[0]:
+                worst = (a[j], b["first"] + j, f"{row[0]:.6g}" if len(row) == 1 else f"{row}")
+            big, total = big + int((a > limit).sum()), total + a.size
+        if worst is not None and worst[0] > limit:
+            raise ValueError(f"{where}: observations[{worst[1]}].{field} = {worst[2]} mm ({big} of the {total} "
                              f"{k['label']} values checked are beyond ±{limit:g} mm; {rep['range_note']}): "
                              f"{rep['range_what']} look like µm: divide by 1000")
     _check_touches(machine, d, cols, where)

@@ -150,8 +150,12 @@ TEST(LoaderFields, BallSamplesCarryTheirSigma) {
                        Eigen::Vector3d(0, 0, 100), 0.0, Eigen::MatrixXd::Zero(2, 3), 0.002);
   ds.AppendBallSamples(ObservationType::kDbb, "A1", axes, nullptr, Eigen::Vector3d::Zero(),
                        Eigen::Vector3d(0, 0, 100), 100.0, Eigen::MatrixXd::Zero(2, 1));
-  EXPECT_EQ(ds.observations[1].sigma, Eigen::Vector3d::Constant(0.002));
-  EXPECT_EQ(ds.observations[2].sigma.size(), 0);
+  // Array samples are column blocks (dataset.h TraceBlock), read by row.
+  ASSERT_EQ(ds.size(), 4u);
+  EXPECT_TRUE(ds.observations.empty());
+  Observation row;
+  EXPECT_EQ(ds.Row(1, &row).sigma, Eigen::Vector3d::Constant(0.002));
+  EXPECT_EQ(ds.Row(2, &row).sigma.size(), 0);
   ExpectInvalid([&] {
     ds.AppendBallSamples(ObservationType::kDbb, "A1", axes, nullptr, Eigen::Vector3d::Zero(),
                          Eigen::Vector3d(0, 0, 100), 100.0, Eigen::MatrixXd::Zero(2, 1), -1.0);

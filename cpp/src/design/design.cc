@@ -140,7 +140,10 @@ struct Columns {
   int n_machine = 0;
 };
 
-Columns ResolveColumns(const Dataset& ds, const ParameterTable& table, const DesignOptions& opt) {
+Columns ResolveColumns(const Dataset& given_ds, const ParameterTable& table, const DesignOptions& opt) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   const std::vector<std::string> names = ResolveEstimate(ds, ResolveOptions(opt));
   Columns c;
   for (int pass = 0; pass < 2; ++pass)
@@ -237,8 +240,11 @@ std::string DesignResult::ToJson() const {
 
 namespace {
 
-PlanQuality AssessColumns(const Dataset& ds, const DesignOptions& opt, const Columns& cols,
+PlanQuality AssessColumns(const Dataset& given_ds, const DesignOptions& opt, const Columns& cols,
                           const ParameterTable& table) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   PlanQuality q;
   q.parameters = cols.names;
   q.n_parameters = static_cast<int>(cols.names.size());
@@ -295,7 +301,10 @@ PlanQuality AssessColumns(const Dataset& ds, const DesignOptions& opt, const Col
 
 }  // namespace
 
-PlanQuality AssessPlan(const Dataset& ds, const DesignOptions& opt, const std::vector<int>* subset) {
+PlanQuality AssessPlan(const Dataset& given_ds, const DesignOptions& opt, const std::vector<int>* subset) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   CheckOptions(opt);
   if (subset) {
     const Dataset sub = ds.Subset(*subset);
@@ -802,8 +811,11 @@ class Selection {
 
 }  // namespace
 
-DesignResult DesignPlan(const Dataset& ds, const std::vector<int>& group, const DesignOptions& opt,
+DesignResult DesignPlan(const Dataset& given_ds, const std::vector<int>& group, const DesignOptions& opt,
                         const SearchOptions& search) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   CheckOptions(opt);
   ds.Validate();
   const int n = static_cast<int>(ds.observations.size());
@@ -971,8 +983,11 @@ DesignResult DesignPlan(const Dataset& ds, const std::vector<int>& group, const 
 
 namespace internal {
 
-std::vector<ScoreCheck> CheckDesignScores(const Dataset& ds, const std::vector<int>& group, const DesignOptions& opt,
+std::vector<ScoreCheck> CheckDesignScores(const Dataset& given_ds, const std::vector<int>& group, const DesignOptions& opt,
                                           int states, unsigned seed) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   CheckOptions(opt);
   ds.Validate();
   if (group.size() != ds.observations.size() || std::any_of(group.begin(), group.end(), [](int g) { return g < 0; }))

@@ -46,6 +46,25 @@ class MountRun final : public LongRun {
       : na_(ds.machine().num_axes()), n_(end - begin), p_(static_cast<int>(est.size())),
         np_(ds.machine().num_parameters()), tip0_(ds.machine().tip_index()) {
     const Machine& m = ds.machine();
+    if (static_cast<size_t>(begin) >= ds.observations.size() && n_ > 0) {
+      // Rows of a column block: its columns are borrowed, not copied (the
+      // block outlives the run: both belong to the fit's dataset).
+      size_t at = ds.observations.size();
+      const TraceBlock* b = nullptr;
+      for (const TraceBlock& x : ds.blocks) {
+        if (at == static_cast<size_t>(begin)) b = &x;
+        at += x.size();
+      }
+      if (!b || b->size() != static_cast<size_t>(n_))
+        throw std::logic_error("ball run: rows " + std::to_string(begin) + " to " + std::to_string(end) +
+                               " are not one column block");
+      block_ = b;
+      for (int k = 0; k < na_; ++k) scale_[k] = m.axis(k).rotary() ? (M_PI / 180.0) : 1.0;
+      Observation first;
+      ds.FillRow(*b, 0, &first);
+      AddMount(t, kind, est, first);
+      return;
+    }
     q_.resize(static_cast<size_t>(n_) * na_);
     reading_.resize(static_cast<size_t>(n_) * R);
     mount_.resize(n_);
@@ -72,35 +91,42 @@ class MountRun final : public LongRun {
         k = -1;
         for (int j = 0; j < static_cast<int>(mounts_.size()) && k < 0; ++j)
           if (same(j)) k = j;
-        if (k < 0) {
-          Mount mt;
-          mt.tool_ball = b.tool_ball;
-          mt.table_ball = b.table_ball;
-          const std::vector<int>& g = t.group(kind.type(), o.setup);
-          for (int c = 0; c < 7; ++c) mt.idx[c] = g[c];
-          k = static_cast<int>(mounts_.size());
-          mounts_.push_back(mt);
-          setups_.push_back(o.setup);
-          for (int j = 0; j < p_; ++j) {
-            const int e = est[j];
-            int src = kZero, arg = 0;
-            if (e < np_) {
-              // The probe tip's offsets do not carry the ball.
-              if (!(e >= tip0_ && e < tip0_ + 3)) src = kMachine, arg = e;
-            } else {
-              for (int c = 0; c < 3; ++c) {
-                if (e == mt.idx[1 + c]) src = kTool, arg = c;
-                if (e == mt.idx[4 + c]) src = kTable, arg = c;
-              }
-              if (e == mt.idx[0] && mt.idx[0] >= 0) src = kLength;
-            }
-            source_.push_back(src);
-            arg_.push_back(arg);
-          }
-        }
+        if (k < 0) k = AddMount(t, kind, est, o);
       }
       mount_[i] = k;
     }
+  }
+
+  // A new mounting (o's) and where its rows' Jacobian columns come from.
+  int AddMount(const ParameterTable& t, const ObservationKind& kind, const std::vector<int>& est,
+               const Observation& o) {
+    const BallMountData& b = o.data<BallMountData>();
+    Mount mt;
+    mt.tool_ball = b.tool_ball;
+    mt.table_ball = b.table_ball;
+    const std::vector<int>& g = t.group(kind.type(), o.setup);
+    for (int c = 0; c < 7; ++c) mt.idx[c] = g[c];
+    const int k = static_cast<int>(mounts_.size());
+    mounts_.push_back(mt);
+    setups_.push_back(o.setup);
+    for (int j = 0; j < p_; ++j) {
+      const int e = est[j];
+      int src = kZero, arg = 0;
+      if (e < np_) {
+        // The probe tip's offsets do not carry the ball.
+        if (!(e >= tip0_ && e < tip0_ + 3)) src = kMachine, arg = e;
+      } else {
+        for (int c = 0; c < 3; ++c) {
+          if (e == mt.idx[1 + c]) src = kTool, arg = c;
+          if (e == mt.idx[4 + c]) src = kTable, arg = c;
+        }
+        if (e == mt.idx[0] && mt.idx[0] >= 0) src = kLength;
+      }
+      source_.push_back(src);
+      arg_.push_back(arg);
+    }
+    block_length_ = b.length;
+    return k;
   }
 
   int rows_per_sample() const override { return R; }
@@ -147,26 +173,45 @@ class MountRun final : public LongRun {
     alignas(64) double qb[64 * W], db[64 * W], tb[3 * W], Pb[3 * W], dtb[9 * W];
     std::vector<double> jb(static_cast<size_t>(3 * W) * std::max(nc, 1));
     if (na_ > 64) throw std::logic_error("ball mount: more than 64 axes");
-    const bool has_dir = !dir_.empty();
+    // A block (one mounting) is read from its columns in file units; other
+    // runs from the copies the constructor made in internal units.
+    const bool has_dir = block_ ? !block_->direction.empty() : !dir_.empty();
+    auto mount_of = [&](int s) { return block_ ? 0 : mount_[s]; };
     for (int s0 = begin; s0 < end; s0 += W) {
       const int count = std::min(W, end - s0);
       for (int l = 0; l < W; ++l) {
         const int s = s0 + std::min(l, count - 1);
-        const double* q = q_.data() + static_cast<size_t>(s) * na_;
-        for (int a = 0; a < na_; ++a) qb[a * W + l] = q[a];
-        if (has_dir) {
-          const int* d = dir_.data() + static_cast<size_t>(s) * na_;
-          for (int a = 0; a < na_; ++a) db[a * W + l] = d[a];
+        if (block_) {
+          for (int a = 0; a < na_; ++a) qb[a * W + l] = block_->axes[a][s] * scale_[a];
+          if (has_dir)
+            for (int a = 0; a < na_; ++a) db[a * W + l] = block_->direction[a][s];
+        } else {
+          const double* q = q_.data() + static_cast<size_t>(s) * na_;
+          for (int a = 0; a < na_; ++a) qb[a * W + l] = q[a];
+          if (has_dir) {
+            const int* d = dir_.data() + static_cast<size_t>(s) * na_;
+            for (int a = 0; a < na_; ++a) db[a * W + l] = d[a];
+          }
         }
-        const Eigen::Vector3d& t = tp[mount_[s]];
+        const Eigen::Vector3d& t = tp[mount_of(s)];
         for (int c = 0; c < 3; ++c) tb[c * W + l] = t[c];
       }
       model.ToolPointLanes(qb, has_dir ? db : nullptr, tb, Pb, columns.data(), nc, J ? jb.data() : nullptr,
                            J ? dtb : nullptr);
       for (int l = 0; l < count; ++l) {
         const int s = s0 + l;
-        const int k = mount_[s];
-        const double* rd = reading_.data() + static_cast<size_t>(s) * R;
+        const int k = mount_of(s);
+        double rb[3];
+        const double* rd;
+        if (block_) {
+          if constexpr (R == 3)
+            for (int c = 0; c < 3; ++c) rb[c] = block_->values[c][s];
+          else
+            rb[0] = block_length_ + block_->values[0][s];
+          rd = rb;
+        } else {
+          rd = reading_.data() + static_cast<size_t>(s) * R;
+        }
         const Eigen::Vector3d P(Pb[l], Pb[W + l], Pb[2 * W + l]);
         double* out = r + static_cast<size_t>(s - begin) * R;
         Eigen::Matrix<double, R, 3> G;
@@ -217,6 +262,10 @@ class MountRun final : public LongRun {
 
  private:
   int na_, n_, p_, np_, tip0_;
+  // Borrowed rows of a column block (one mounting), or null: the copies below.
+  const TraceBlock* block_ = nullptr;
+  double scale_[16] = {};
+  double block_length_ = 0.0;
   std::vector<double> q_;
   std::vector<int> dir_;  // empty: no sample records a move direction
   std::vector<double> reading_;
@@ -384,7 +433,42 @@ void BallMountKind::ReportVector(const ReportContext& c, const Observation& o, c
   *vector = ReportRows(r, *point - table_ball);
 }
 
+std::string BallMountKind::block_value_name(int v) const {
+  return has_length() ? std::string("reading") : std::string("measured_") + kXYZ[v];
+}
+
+double BallMountKind::block_value_bound(int) const { return has_length() ? kMaxDbbReading : kMaxLinear; }
+
+ObservationPayload BallMountKind::BlockCommon(const Observation& o) const {
+  BallMountData d = o.data<BallMountData>();
+  d.measured.setZero();
+  d.reading = 0.0;
+  return d;
+}
+
+bool BallMountKind::BlockShares(const ObservationPayload& common, const Observation& o) const {
+  const BallMountData* c = std::get_if<BallMountData>(&common);
+  const BallMountData* d = std::get_if<BallMountData>(&o.payload);
+  return c && d && c->tool_ball == d->tool_ball && c->table_ball == d->table_ball && c->length == d->length;
+}
+
+void BallMountKind::BlockValues(const Observation& o, double* v) const {
+  const BallMountData& d = o.data<BallMountData>();
+  if (has_length()) v[0] = d.reading;
+  else
+    for (int c = 0; c < 3; ++c) v[c] = d.measured[c];
+}
+
+void BallMountKind::SetBlockValues(const double* v, Observation* o) const {
+  BallMountData& d = o->data<BallMountData>();
+  if (has_length()) d.reading = v[0];
+  else
+    for (int c = 0; c < 3; ++c) d.measured[c] = v[c];
+}
+
 // Here rather than in dataset.cc: array samples are the ball kinds' own.
+// They go into a column block of their own (dataset.h TraceBlock): no
+// Observation per sample.
 void Dataset::AppendBallSamples(ObservationType type, const std::string& setup,
                                 const Eigen::MatrixXd& axes, const Eigen::MatrixXi* dirs,
                                 const Eigen::Vector3d& tool_ball, const Eigen::Vector3d& table_ball,
@@ -412,29 +496,39 @@ void Dataset::AppendBallSamples(ObservationType type, const std::string& setup,
     throw std::invalid_argument("ball samples: length must be > 0 mm");
   if (sigma != 0.0 && !(sigma >= kMinSigma && sigma <= kMaxSigma))
     throw std::invalid_argument("ball samples: sigma must be a finite number > 0 mm (0 = the default)");
-  const Eigen::VectorXd sig =
-      sigma > 0 ? Eigen::VectorXd::Constant(width, sigma) : Eigen::VectorXd();
-  observations.reserve(observations.size() + n);
-  for (int r = 0; r < n; ++r) {
-    Observation o;
-    o.type = type;
-    o.payload = BallMountData{};
-    o.setup = setup;
-    o.axes = axes.row(r).transpose();
-    o.direction = dirs ? Eigen::VectorXi(dirs->row(r).transpose()) : Eigen::VectorXi::Zero(na);
-    for (int k = 0; k < na; ++k) {
-      RequireFinite(o.axes[k], "ball samples: axes." + std::string(1, machine_.axis(k).name) + "[" +
-                                   std::to_string(r) + "]");
-      if (std::abs(o.direction[k]) > 1)
+  for (int k = 0; k < na; ++k)
+    for (int r = 0; r < n; ++r) {
+      RequireFinite(axes(r, k), "ball samples: axes." + std::string(1, machine_.axis(k).name) + "[" +
+                                    std::to_string(r) + "]");
+      if (dirs && std::abs((*dirs)(r, k)) > 1)
         throw std::invalid_argument("ball samples: directions must be -1, 0 or +1");
     }
-    BallMountData& d = o.data<BallMountData>();
-    d.tool_ball = tool_ball;
-    d.table_ball = table_ball;
-    o.sigma = sig;
-    kind->SetSample(values, r, length, &o);
-    observations.push_back(std::move(o));
+  for (int c = 0; c < width; ++c)
+    for (int r = 0; r < n; ++r)
+      RequireFinite(values(r, c), std::string("ball samples: ") + (width == 1 ? "readings[" : "measured[") +
+                                      std::to_string(r) + "]");
+  if (n == 0) return;
+  TraceBlock b;
+  b.type = type;
+  b.setup = setup;
+  BallMountData common;
+  common.tool_ball = tool_ball;
+  common.table_ball = table_ball;
+  if (kind->has_length()) common.length = length;
+  b.common = common;
+  b.axes.resize(na);
+  for (int k = 0; k < na; ++k) b.axes[k].assign(axes.col(k).data(), axes.col(k).data() + n);
+  if (dirs && (dirs->array() != 0).any()) {
+    b.direction.resize(na);
+    for (int k = 0; k < na; ++k) {
+      b.direction[k].resize(n);
+      for (int r = 0; r < n; ++r) b.direction[k][r] = static_cast<int8_t>((*dirs)(r, k));
+    }
   }
+  b.values.resize(width);
+  for (int c = 0; c < width; ++c) b.values[c].assign(values.col(c).data(), values.col(c).data() + n);
+  if (sigma > 0) b.sigma.assign(width, std::vector<double>(1, sigma));
+  blocks.push_back(std::move(b));
 }
 
 }  // namespace fivecal

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -139,10 +140,11 @@ std::vector<Column> Roles(const ObservationKind& kind, const Machine& m, const C
 
 }  // namespace
 
-ColumnLoader::ColumnLoader(Dataset head, int64_t rows, int64_t first_row) : ds_(std::move(head)), first_(first_row) {
+ColumnLoader::ColumnLoader(Dataset head, int64_t rows, int64_t first_row)
+    : ds_(std::move(head)), first_(first_row), total_(rows) {
   if (rows < 0) throw std::invalid_argument("columns: negative row count");
   ds_.observations.clear();
-  ds_.observations.resize(static_cast<size_t>(rows));
+  ds_.blocks.clear();
   placed_.assign(static_cast<size_t>(rows), 0);
 }
 
@@ -191,15 +193,9 @@ void ColumnLoader::Add(const ColumnBatch& b) {
 
   std::string w = RowName(*kind, 0);
   const size_t w_prefix = w.size() - 1;
-  for (int64_t i = 0; i < b.rows; ++i) {
-    const int64_t at = b.positions ? b.positions[i] : next_ + i;
-    const int64_t row = first_ + at;  // what messages call it
-    if (at < 0 || at >= total)
-      throw std::invalid_argument(RowName(*kind, row) + ": row outside the " + std::to_string(total) + " announced");
-    if (placed_[static_cast<size_t>(at)])
-      throw std::invalid_argument(RowName(*kind, row) + ": row given twice");
-    placed_[static_cast<size_t>(at)] = 1;
-    Observation& ob = ds_.observations[static_cast<size_t>(at)];
+  // One row read as an Observation through the kind (the reference: its
+  // checks and messages are a JSON file's).
+  auto read_row = [&](int64_t i, int64_t row, Observation& ob) {
     ob.type = kind->type();
     ob.payload = kind->NewPayload();
     ob.axes = Eigen::VectorXd::Zero(na);
@@ -308,6 +304,160 @@ void ColumnLoader::Add(const ColumnBatch& b) {
       }
       read(o);
     }
+    };
+
+  // A kind kept in columns: its rows go into blocks, read column by column;
+  // the first row of each block (and any row a column check refuses) goes
+  // through read_row, for the kind's own checks and messages.
+  const int nv = kind->block_values();
+  bool columnar = nv > 0;
+  std::vector<const Column*> value_col(static_cast<size_t>(std::max(nv, 0)), nullptr);
+  for (int v = 0; v < nv; ++v)
+    for (const Column& c : cols)
+      if (c.number && c.name == kind->block_value_name(v)) value_col[static_cast<size_t>(v)] = &c;
+  for (const Column* c : value_col)
+    // A missing or partly null value column: the rows' own messages.
+    if (!c || (c->number->valid && std::find(c->number->valid, c->number->valid + b.rows, 0) != c->number->valid + b.rows))
+      columnar = false;
+  // The columns a block's rows share: every one but the axes, directions,
+  // noise, values and id.
+  std::vector<const Column*> shared_num, shared_txt;
+  std::vector<std::string> shared_names;
+  std::vector<const Column*> axis_col, dir_col, sigma_col;
+  const Column* id_col = nullptr;
+  for (const Column& c : cols) {
+    if (c.role == Role::kAxis) axis_col.push_back(&c);
+    else if (c.role == Role::kDirection) dir_col.push_back(&c);
+    else if (c.role == Role::kSigma) sigma_col.push_back(&c);
+    else if (c.role == Role::kScalar && c.key == "id") id_col = &c;
+    else if (std::find(value_col.begin(), value_col.end(), &c) != value_col.end()) continue;
+    else (c.number ? shared_num : shared_txt).push_back(&c);
+  }
+  for (const Column* c : shared_num) shared_names.push_back(c->name);
+  for (const Column* c : shared_txt) shared_names.push_back("text:" + c->name);
+  auto text_of = [](const Column& c, int64_t i) {
+    return std::string(c.text->data + c.text->offsets[i], static_cast<size_t>(c.text->offsets[i + 1] - c.text->offsets[i]));
+  };
+  auto same_shared = [&](const Segment& g, int64_t i) {
+    for (size_t k = 0; k < shared_num.size(); ++k) {
+      const bool null = shared_num[k]->Null(i);
+      if (null != (g.shared_null[k] != 0)) return false;
+      if (!null && !(shared_num[k]->number->values[i] == g.shared_numbers[k])) return false;
+    }
+    for (size_t k = 0; k < shared_txt.size(); ++k) {
+      const size_t f = shared_num.size() + k;
+      const bool null = shared_txt[k]->Null(i);
+      if (null != (g.shared_null[f] != 0)) return false;
+      if (null) continue;
+      const StringColumn& t = *shared_txt[k]->text;
+      const std::string& x = g.shared_texts[k];
+      const size_t len = static_cast<size_t>(t.offsets[i + 1] - t.offsets[i]);
+      if (len != x.size() || x.compare(0, len, t.data + t.offsets[i], len) != 0) return false;
+    }
+    return true;
+  };
+  const int rows_per = kind->rows();
+  std::vector<double> vals(static_cast<size_t>(std::max(nv, 1))), sig(static_cast<size_t>(rows_per));
+  std::vector<double> q(static_cast<size_t>(na));
+  std::vector<int> dirs(static_cast<size_t>(na));
+  // A block a previous batch opened takes this batch's rows only when the
+  // batch has the same shared columns.
+  bool joinable = !segments_.empty() && segments_.back().block.type == kind->type() &&
+                  segments_.back().shared_names == shared_names;
+  std::string id;
+
+  for (int64_t i = 0; i < b.rows; ++i) {
+    const int64_t at = b.positions ? b.positions[i] : next_ + i;
+    const int64_t row = first_ + at;  // what messages call it
+    if (at < 0 || at >= total)
+      throw std::invalid_argument(RowName(*kind, row) + ": row outside the " + std::to_string(total) + " announced");
+    if (placed_[static_cast<size_t>(at)])
+      throw std::invalid_argument(RowName(*kind, row) + ": row given twice");
+    placed_[static_cast<size_t>(at)] = 1;
+    if (!columnar) {
+      object_at_.push_back(at);
+      objects_.emplace_back();
+      read_row(i, row, objects_.back());
+      continue;
+    }
+    Segment* g = segments_.empty() ? nullptr : &segments_.back();
+    const bool joins = joinable && g && g->start + static_cast<int64_t>(g->block.size()) == at && same_shared(*g, i);
+    if (!joins) {
+      Observation ob;
+      read_row(i, row, ob);
+      segments_.emplace_back();
+      g = &segments_.back();
+      g->start = at;
+      g->block.type = kind->type();
+      g->block.setup = ob.setup;
+      g->block.common = kind->BlockCommon(ob);
+      g->block.axes.resize(static_cast<size_t>(na));
+      g->block.values.resize(static_cast<size_t>(nv));
+      // The first block of a file of one kind: every row, at most (a trace
+      // of one mounting grows without a copy; untouched capacity costs no
+      // memory). Later blocks grow as vectors do.
+      if (!b.positions && at == 0) {
+        const size_t rest = static_cast<size_t>(total);
+        for (auto& c : g->block.axes) c.reserve(rest);
+        for (auto& c : g->block.values) c.reserve(rest);
+      }
+      for (const Column* c : shared_num) {
+        g->shared_null.push_back(c->Null(i) ? 1 : 0);
+        g->shared_numbers.push_back(c->Null(i) ? 0.0 : c->number->values[i]);
+      }
+      for (const Column* c : shared_txt) {
+        g->shared_null.push_back(c->Null(i) ? 1 : 0);
+        g->shared_texts.push_back(c->Null(i) ? std::string() : text_of(*c, i));
+      }
+      g->shared_names = shared_names;
+      joinable = true;
+      kind->BlockValues(ob, vals.data());
+      PushBlockRow(&g->block, na, ob.axes.data(), ob.direction.data(), vals.data(), rows_per,
+                   ob.sigma.size() ? ob.sigma.data() : nullptr, &ob.id);
+      continue;
+    }
+    // Column checks; a row one refuses is read through the kind, whose
+    // message names the row and the column as a per-object row's does.
+    bool bad = false;
+    std::fill(q.begin(), q.end(), 0.0);
+    std::fill(dirs.begin(), dirs.end(), 0);
+    for (const Column* c : axis_col) {
+      if (c->Null(i)) {
+        bad = bad || m.axis(c->index).name != 'S';
+        continue;
+      }
+      const double x = c->number->values[i];
+      const bool rot = m.axis(c->index).rotary();
+      if (!(std::abs(x) <= (rot ? kMaxRotaryDeg : kMaxLinear))) bad = true;
+      q[static_cast<size_t>(c->index)] = x;
+    }
+    for (const Column* c : dir_col) {
+      if (c->Null(i)) continue;
+      const double x = c->number->values[i];
+      if (!(x == -1.0 || x == 0.0 || x == 1.0)) bad = true;
+      else dirs[static_cast<size_t>(c->index)] = static_cast<int>(x);
+    }
+    for (int v = 0; v < nv; ++v) {
+      const double x = value_col[static_cast<size_t>(v)]->number->values[i];
+      if (!(std::abs(x) <= kind->block_value_bound(v))) bad = true;
+      vals[static_cast<size_t>(v)] = x;
+    }
+    int given = 0;
+    for (const Column* c : sigma_col) {
+      if (c->Null(i)) continue;
+      if (c->index < 0) std::fill(sig.begin(), sig.end(), c->number->values[i]);
+      else sig[static_cast<size_t>(c->index)] = c->number->values[i];
+      given += c->index < 0 ? rows_per : 1;
+    }
+    if (given != 0 && given != rows_per) bad = true;
+    if (bad) {
+      Observation ob;
+      read_row(i, row, ob);
+      Fail(*kind, row, "?", "refused by a column check the kind accepts (a bug)");
+    }
+    if (id_col && !id_col->Null(i)) id = text_of(*id_col, i);
+    else id.clear();
+    PushBlockRow(&g->block, na, q.data(), dirs.data(), vals.data(), rows_per, given ? sig.data() : nullptr, &id);
   }
   if (!b.positions) next_ += b.rows;
 }
@@ -315,8 +465,60 @@ void ColumnLoader::Add(const ColumnBatch& b) {
 Dataset ColumnLoader::Finish(bool whole) {
   for (size_t r = 0; r < placed_.size(); ++r)
     if (!placed_[r]) throw std::invalid_argument("row " + std::to_string(first_ + static_cast<int64_t>(r)) + ": no observation");
+  // The dataset's order is the per-object observations, then the blocks
+  // (dataset.h TraceBlock): block rows before the last per-object row
+  // become Observations.
+  int64_t split = 0;
+  for (int64_t at : object_at_) split = std::max(split, at + 1);
+  // Rows that change mounting every few rows make blocks of a few rows,
+  // each of a dozen vectors: fewer than 64 rows a block on average, they
+  // are Observations.
+  int64_t block_rows = 0, blocks = 0;
+  for (const Segment& g : segments_) {
+    const int64_t end = g.start + static_cast<int64_t>(g.block.size());
+    if (end <= split) continue;  // Observations anyway
+    block_rows += end - std::max(g.start, split);
+    ++blocks;
+  }
+  if (blocks * 64 > block_rows) split = total_;
+  std::sort(segments_.begin(), segments_.end(), [](const Segment& a, const Segment& b) { return a.start < b.start; });
+  std::vector<Segment> kept;
+  for (Segment& g : segments_) {
+    const int64_t n = static_cast<int64_t>(g.block.size());
+    const int64_t k = std::min(n, std::max<int64_t>(0, split - g.start));
+    for (int64_t r = 0; r < k; ++r) {
+      object_at_.push_back(g.start + r);
+      objects_.emplace_back();
+      ds_.FillRow(g.block, static_cast<size_t>(r), &objects_.back());
+    }
+    if (k == n) continue;
+    if (k > 0) {
+      // A noise column of one value is every row's: it stays.
+      auto drop = [k](auto& cols) {
+        for (auto& c : cols)
+          if (c.size() > 1) c.erase(c.begin(), c.begin() + k);
+      };
+      drop(g.block.axes);
+      drop(g.block.direction);
+      drop(g.block.values);
+      drop(g.block.sigma);
+      if (!g.block.ids.empty()) g.block.ids.erase(g.block.ids.begin(), g.block.ids.begin() + k);
+      g.start += k;
+    }
+    kept.push_back(std::move(g));
+  }
+  segments_.clear();
+  std::vector<size_t> order(objects_.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return object_at_[a] < object_at_[b]; });
+  ds_.observations.reserve(objects_.size());
+  for (size_t i : order) ds_.observations.push_back(std::move(objects_[i]));
+  objects_.clear();
+  object_at_.clear();
+  for (Segment& g : kept) ds_.blocks.push_back(std::move(g.block));
   ds_.Validate();
   // An instrument noise no observation uses is a typo, as in a JSON file.
+  Observation first;
   for (const auto& kv : ds_.instrument_sigma) {
     if (!whole) break;
     bool named = false;
@@ -326,11 +528,55 @@ Dataset ColumnLoader::Finish(bool whole) {
           named = true;
           break;
         }
+    for (const TraceBlock& b : ds_.blocks)
+      if (!named && b.size()) {
+        ds_.FillRow(b, 0, &first);
+        if (const std::string* id = InstrumentId(first)) named = *id == kv.first;
+      }
     if (!named)
       throw std::invalid_argument("dataset.instruments." + kv.first + ": no observation names this instrument");
   }
   placed_.clear();
   return std::move(ds_);
+}
+
+void PushBlockRow(TraceBlock* b, int na, const double* axes, const int* direction, const double* values, int rows,
+                  const double* sigma, const std::string* id) {
+  const size_t n = b->size();
+  for (int k = 0; k < na; ++k) b->axes[static_cast<size_t>(k)].push_back(axes[k]);
+  bool dir = false;
+  for (int k = 0; direction && k < na; ++k) dir = dir || direction[k] != 0;
+  if (dir && b->direction.empty()) b->direction.assign(static_cast<size_t>(na), std::vector<int8_t>(n, 0));
+  if (!b->direction.empty())
+    for (int k = 0; k < na; ++k) b->direction[static_cast<size_t>(k)].push_back(static_cast<int8_t>(direction ? direction[k] : 0));
+  for (size_t c = 0; c < b->values.size(); ++c) b->values[c].push_back(values[c]);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (sigma && b->sigma.empty())
+    // Until a row differs, one value per column stands for every row
+    // (NaN: the rows before declared none).
+    b->sigma.assign(static_cast<size_t>(rows), std::vector<double>(1, n == 0 ? 0.0 : nan));
+  if (!b->sigma.empty()) {
+    bool constant = b->sigma[0].size() == 1;
+    for (int k = 0; k < rows && constant; ++k) {
+      const double x = sigma ? sigma[k] : nan;
+      const double was = b->sigma[static_cast<size_t>(k)][0];
+      constant = n == 0 || x == was;
+    }
+    if (constant && n == 0)
+      for (int k = 0; k < rows; ++k) b->sigma[static_cast<size_t>(k)][0] = sigma[k];
+    if (!constant) {
+      for (int k = 0; k < rows; ++k) {
+        std::vector<double>& c = b->sigma[static_cast<size_t>(k)];
+        if (c.size() == 1 && n != 1) c.assign(n, c[0]);
+        c.push_back(sigma ? sigma[k] : nan);
+      }
+    }
+  }
+  // Ids only once a row has one (the rows before: none).
+  if (!b->ids.empty() || (id && !id->empty())) {
+    b->ids.resize(n);
+    b->ids.push_back(id ? *id : std::string());
+  }
 }
 
 }  // namespace fivecal

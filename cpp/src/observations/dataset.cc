@@ -11,11 +11,13 @@
 #include <tuple>
 #include <exception>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <set>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
+#include "fivecal/observations/columns.h"
 #include "fivecal/observations/dataset_reader.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/solve/priors.h"
@@ -198,9 +200,18 @@ void CheckInstruments(const Dataset& ds, bool loaded) {
   if (ds.instrument_sigma.empty()) return;
   std::map<std::string, std::set<const ObservationKind*>> kinds;
   std::vector<std::string> ids;
-  for (const Observation& o : ds.observations)
+  auto note = [&](const Observation& o) {
     if (const std::string* id = InstrumentId(o))
       if (kinds[*id].insert(&KindOf(o)).second && kinds[*id].size() == 1) ids.push_back(*id);
+  };
+  for (const Observation& o : ds.observations) note(o);
+  // A block's rows share their set-up: its first row stands for all.
+  Observation first;
+  for (const TraceBlock& b : ds.blocks)
+    if (b.size()) {
+      ds.FillRow(b, 0, &first);
+      note(first);
+    }
   for (const auto& [id, s] : ds.instrument_sigma) {
     const std::string w = "dataset.instruments." + id + ".sigma";
     auto it = kinds.find(id);
@@ -1506,16 +1517,16 @@ std::optional<Dataset> DatasetFileReader::Next(size_t rows) {
 }
 
 void Dataset::Validate() const {
-  if (observations.empty()) throw std::invalid_argument("dataset.observations: empty; nothing to fit");
+  if (observations.empty() && block_rows() == 0)
+    throw std::invalid_argument("dataset.observations: empty; nothing to fit");
   ValidateScaleBars(artefact);
   if (!(std::isfinite(tip_radius) && tip_radius >= 0 && tip_radius <= kMaxLinear))
     throw std::invalid_argument("dataset.probe.tip_radius: must be >= 0 and <= 1e5 mm");
   const int na = machine_.num_axes();
   // Per instrument id: the file key that named it first, and where.
   std::map<std::string, std::pair<const char*, size_t>> instrument_ids;
-  for (size_t i = 0; i < observations.size(); ++i) {
-    const Observation& o = observations[i];
-    // Built only for a message: this loop runs over every sample of a trace.
+  auto check = [&](size_t i, const Observation& o) {
+    // Built only for a message: this runs over every sample of a trace.
     auto w = [i] { return "observations[" + std::to_string(i) + "]"; };
     if (o.axes.size() != na || o.direction.size() != na)
       throw std::invalid_argument(w() + ".axes: expected " + std::to_string(na) + " axis values (" +
@@ -1539,10 +1550,183 @@ void Dataset::Validate() const {
                                     "]; its parameters instrument." + o.setup +
                                     ".* would mean two things: give them different names");
     }
+  };
+  for (size_t i = 0; i < observations.size(); ++i) check(i, observations[i]);
+  // Blocks: the first row through the kind (set-up and shared payload,
+  // which every row has), then column by column; a row a column check
+  // refuses goes through the per-row check for the same message a
+  // per-object observation would give.
+  size_t base = observations.size();
+  Observation scratch;
+  for (size_t bi = 0; bi < blocks.size(); ++bi) {
+    const TraceBlock& b = blocks[bi];
+    const size_t n = b.size();
+    const ObservationKind& kind = KindOf(b.type);
+    const int nv = kind.block_values(), rows = kind.rows();
+    const std::string wb = "dataset block " + std::to_string(bi) + " (" + kind.name() + ")";
+    if (nv <= 0) throw std::invalid_argument(wb + ": a " + kind.name() + " observation is not kept in columns");
+    if (static_cast<int>(b.axes.size()) != na || static_cast<int>(b.values.size()) != nv ||
+        !(b.direction.empty() || static_cast<int>(b.direction.size()) == na) ||
+        !(b.sigma.empty() || static_cast<int>(b.sigma.size()) == rows) || !(b.ids.empty() || b.ids.size() == n))
+      throw std::invalid_argument(wb + ": columns do not match the machine's axes and the kind's values");
+    for (const auto& c : b.axes)
+      if (c.size() != n) throw std::invalid_argument(wb + ": axis columns of different lengths");
+    for (const auto& c : b.values)
+      if (c.size() != n) throw std::invalid_argument(wb + ": value columns of different lengths");
+    for (const auto& c : b.direction)
+      if (c.size() != n) throw std::invalid_argument(wb + ": direction columns of different lengths");
+    for (const auto& c : b.sigma)
+      if (c.size() != n && c.size() != 1) throw std::invalid_argument(wb + ": sigma columns of different lengths");
+    if (n == 0) continue;
+    FillRow(b, 0, &scratch);
+    check(base, scratch);
+    auto row_check = [&](size_t r) {
+      FillRow(b, r, &scratch);
+      check(base + r, scratch);
+      throw std::logic_error(wb + ": row " + std::to_string(r) + " refused by a column check only");
+    };
+    for (int k = 0; k < na; ++k) {
+      const double bound = machine_.axis(k).rotary() ? kMaxRotaryDeg : kMaxLinear;
+      const double* x = b.axes[k].data();
+      for (size_t r = 0; r < n; ++r)
+        if (!(std::abs(x[r]) <= bound)) row_check(r);
+    }
+    for (const auto& c : b.direction)
+      for (size_t r = 0; r < n; ++r)
+        if (c[r] < -1 || c[r] > 1) row_check(r);
+    for (int v = 0; v < nv; ++v) {
+      const double bound = kind.block_value_bound(v);
+      const double* x = b.values[v].data();
+      for (size_t r = 0; r < n; ++r)
+        if (!(std::abs(x[r]) <= bound)) row_check(r);
+    }
+    for (const auto& c : b.sigma)
+      for (size_t r = 0; r < c.size(); ++r)
+        if (!(std::isnan(c[r]) || (c[r] >= kMinSigma && c[r] <= kMaxSigma))) row_check(r);
+    if (!b.sigma.empty())
+      // A row declares all its rows' noise or none.
+      for (size_t r = 0; r < n; ++r) {
+        const bool none = std::isnan(b.sigma_at(0, r));
+        for (int k = 1; k < rows; ++k)
+          if (std::isnan(b.sigma_at(k, r)) != none)
+            throw std::invalid_argument("observations[" + std::to_string(base + r) +
+                                        "].sigma: give every residual row's noise or none");
+      }
+    base += n;
   }
   CheckInstruments(*this, false);
   if (!setup_uncertainty.empty())
     ValidateSetupUncertainty(machine_, setup_uncertainty, "dataset.setup_uncertainty", ParameterTable(*this).names());
+}
+
+const Observation& Dataset::Row(size_t i, Observation* scratch) const {
+  if (i < observations.size()) return observations[i];
+  size_t r = i - observations.size();
+  // Rows are mostly asked in order (a writer, a walk): the block of the
+  // previous call on this dataset is tried first, so that a dataset of
+  // many blocks is not searched from the start for every row.
+  thread_local const Dataset* hint_ds = nullptr;
+  thread_local const TraceBlock* hint_data = nullptr;
+  thread_local size_t hint_block = 0, hint_start = 0;
+  size_t k = 0, start = 0;
+  if (hint_ds == this && hint_data == blocks.data() && hint_block < blocks.size() && hint_start <= r) {
+    k = hint_block;
+    start = hint_start;
+  }
+  for (; k < blocks.size(); ++k) {
+    const TraceBlock& b = blocks[k];
+    if (r - start < b.size()) {
+      hint_ds = this;
+      hint_data = blocks.data();
+      hint_block = k;
+      hint_start = start;
+      FillRow(b, r - start, scratch);
+      return *scratch;
+    }
+    start += b.size();
+  }
+  throw std::out_of_range("dataset: observation " + std::to_string(i) + " of " + std::to_string(size()));
+}
+
+void Dataset::FillRow(const TraceBlock& b, size_t r, Observation* o) const {
+  const int na = static_cast<int>(b.axes.size());
+  const ObservationKind& kind = KindOf(b.type);
+  o->type = b.type;
+  if (b.ids.empty()) o->id.clear();
+  else o->id = b.ids[r];
+  o->setup = b.setup;
+  o->axes.resize(na);
+  o->direction.resize(na);
+  for (int k = 0; k < na; ++k) {
+    o->axes[k] = b.axes[k][r];
+    o->direction[k] = b.direction.empty() ? 0 : b.direction[k][r];
+  }
+  if (b.sigma.empty() || std::isnan(b.sigma_at(0, r))) {
+    o->sigma.resize(0);
+  } else {
+    o->sigma.resize(static_cast<Eigen::Index>(b.sigma.size()));
+    for (size_t k = 0; k < b.sigma.size(); ++k) o->sigma[static_cast<Eigen::Index>(k)] = b.sigma_at(static_cast<int>(k), r);
+  }
+  o->payload = b.common;
+  double v[16];
+  const int nv = static_cast<int>(b.values.size());
+  for (int c = 0; c < nv && c < 16; ++c) v[c] = b.values[c][r];
+  kind.SetBlockValues(v, o);
+}
+
+void Dataset::ExpandBlocks() {
+  if (blocks.empty()) return;
+  observations.reserve(size());
+  for (const TraceBlock& b : blocks)
+    for (size_t r = 0, n = b.size(); r < n; ++r) {
+      Observation o;
+      FillRow(b, r, &o);
+      observations.push_back(std::move(o));
+    }
+  blocks.clear();
+  blocks.shrink_to_fit();
+}
+
+Dataset Dataset::Expanded() const {
+  Dataset d = *this;
+  d.ExpandBlocks();
+  return d;
+}
+
+void Dataset::AppendBlockRow(const Observation& o) {
+  const ObservationKind& kind = KindOf(o);
+  const int nv = kind.block_values(), na = machine_.num_axes(), rows = kind.rows();
+  if (nv <= 0) throw std::invalid_argument(std::string("dataset: a ") + kind.name() + " observation is not kept in columns");
+  if (o.axes.size() != na || o.direction.size() != na)
+    throw std::invalid_argument("dataset: a block row needs " + std::to_string(na) + " axes and directions");
+  if (blocks.empty() || blocks.back().type != o.type || blocks.back().setup != o.setup ||
+      !kind.BlockShares(blocks.back().common, o)) {
+    TraceBlock b;
+    b.type = o.type;
+    b.setup = o.setup;
+    b.common = kind.BlockCommon(o);
+    b.axes.resize(na);
+    b.values.resize(nv);
+    blocks.push_back(std::move(b));
+  }
+  double v[16];
+  kind.BlockValues(o, v);
+  PushBlockRow(&blocks.back(), na, o.axes.data(), o.direction.data(), v, rows, o.sigma.size() ? o.sigma.data() : nullptr,
+               &o.id);
+}
+
+size_t Dataset::PackTraces(size_t min_rows) {
+  size_t j = observations.size();
+  while (j > 0 && KindOf(observations[j - 1]).block_values() > 0) --j;
+  const size_t moved = observations.size() - j;
+  if (moved == 0 || moved < min_rows) return 0;
+  std::vector<TraceBlock> later;
+  later.swap(blocks);
+  for (size_t i = j; i < observations.size(); ++i) AppendBlockRow(observations[i]);
+  observations.resize(j);
+  observations.shrink_to_fit();
+  for (TraceBlock& b : later) blocks.push_back(std::move(b));
+  return moved;
 }
 
 Dataset Dataset::Subset(const std::vector<int>& indices) const {
@@ -1551,12 +1735,23 @@ Dataset Dataset::Subset(const std::vector<int>& indices) const {
   d.artefact = artefact;
   d.instrument_sigma = instrument_sigma;
   d.setup_uncertainty = setup_uncertainty;
+  // Block rows stay in blocks unless a per-object row follows one (the
+  // order of `indices` is the subset's, and block rows follow the others).
+  const size_t n = size(), n_obj = observations.size();
+  bool object_after_block = false, seen_block = false;
   for (int i : indices) {
-    if (i < 0 || i >= static_cast<int>(observations.size()))
+    if (i < 0 || static_cast<size_t>(i) >= n)
       throw std::invalid_argument("subset: observation index " + std::to_string(i) + " out of range");
-    d.observations.push_back(observations[i]);
+    if (static_cast<size_t>(i) >= n_obj) seen_block = true;
+    else if (seen_block) object_after_block = true;
   }
-  if (!d.setup_uncertainty.empty() && !d.observations.empty()) {
+  Observation scratch;
+  for (int i : indices) {
+    const Observation& o = Row(static_cast<size_t>(i), &scratch);
+    if (static_cast<size_t>(i) < n_obj || object_after_block) d.observations.push_back(o);
+    else d.AppendBlockRow(o);
+  }
+  if (!d.setup_uncertainty.empty() && d.size() > 0) {
     // A subset keeps the declared placements of the set-ups it still has.
     const ParameterTable t(d);
     for (auto it = d.setup_uncertainty.begin(); it != d.setup_uncertainty.end();)
@@ -1605,7 +1800,7 @@ std::string Dataset::ToJson() const {
     j["artefact"]["cylinders"] = cyls;
   }
   json obs = json::array();
-  for (const Observation& o : observations) {
+  ForEachRow([&](size_t, const Observation& o) {
     json jo;
     jo["type"] = ObservationTypeName(o.type);
     if (!o.setup.empty()) jo["setup"] = o.setup;
@@ -1631,7 +1826,7 @@ std::string Dataset::ToJson() const {
     }
     if (!o.id.empty()) jo["id"] = o.id;
     obs.push_back(jo);
-  }
+  });
   j["observations"] = obs;
   return j.dump();
 }

@@ -147,6 +147,8 @@ void ObservationKind::EvaluateAnalytic(AnalyticEval&, const AnalyticRow*, int) c
 bool HasLengthReference(const Dataset& ds) {
   for (const Observation& o : ds.observations)
     if (KindOf(o).LengthReference()) return true;
+  for (const TraceBlock& b : ds.blocks)
+    if (KindOf(b.type).LengthReference()) return true;
   for (const ObservationKind* k : ObservationKinds())
     if (k->ArtefactLengthReference(ds)) return true;
   return false;

@@ -345,8 +345,11 @@ SimulationPlan PlanSpec(const json& spec) {
 
 }  // namespace
 
-SimulationPlan PlanFromDataset(const Dataset& ds, const std::map<std::string, double>& values,
+SimulationPlan PlanFromDataset(const Dataset& given_ds, const std::map<std::string, double>& values,
                                const NoiseLevels& noise) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   ds.Validate();
   const Machine& m = ds.machine();
   const ParameterTable table(ds);

@@ -286,7 +286,8 @@ void DatasetJsonWriter::Add(const Dataset& piece) {
   if (piece.machine().num_axes() != machine_.num_axes())
     throw std::invalid_argument("dataset writer: a piece of " + std::to_string(piece.machine().num_axes()) +
                                 " axes for a head of " + std::to_string(machine_.num_axes()));
-  for (const Observation& o : piece.observations) Add(o);
+  // Block rows (dataset.h TraceBlock) through one scratch observation.
+  piece.ForEachRow([&](size_t, const Observation& o) { Add(o); });
 }
 
 void DatasetJsonWriter::Add(const Observation& o) {
@@ -370,15 +371,15 @@ bool ColumnWriter::Scan(const Dataset& ds, int64_t offset) {
                                 " axes after pieces of " + std::to_string(na));
   auto where = [&](size_t i, const std::string& key) {
     return "observations[" + std::to_string(static_cast<int64_t>(i) + offset) + "] (" +
-           ObservationTypeName(ds.observations[i].type) + "), " + key;
+           ObservationTypeName(ds.TypeOf(i)) + "), " + key;
   };
 
   // What the rows hold: decides the generic columns, which come first.
   any_dir_.resize(static_cast<size_t>(na), false);
-  for (const Observation& o : ds.observations) {
+  ds.ForEachRow([&](size_t, const Observation& o) {
     any_id_ |= !o.id.empty();
     for (int k = 0; k < na; ++k) any_dir_[k] = any_dir_[k] || o.direction[k] != 0;
-    if (o.sigma.size() == 0) continue;
+    if (o.sigma.size() == 0) return;
     if (OneSigma(o)) {
       one_sigma_ = true;
     } else {
@@ -387,7 +388,7 @@ bool ColumnWriter::Scan(const Dataset& ds, int64_t offset) {
       // them) unless some observation has another number of rows.
       numbered_sigma_ |= o.sigma.size() != 3;
     }
-  }
+  });
   if (row_sigmas_ > 9)
     throw std::invalid_argument("sigma: " + std::to_string(row_sigmas_) +
                                 " values per observation have no column form (sigma_1 to sigma_9)");
@@ -452,8 +453,9 @@ bool ColumnWriter::Scan(const Dataset& ds, int64_t offset) {
   size_t row = 0;
   Find find{this, m, [&](const std::string& key) { return where(row, key); }};
   OwnRow own;
-  for (; row < ds.observations.size(); ++row) {
-    own.Fill(m, ds.observations[row]);
+  Observation row_scratch;
+  for (; row < ds.size(); ++row) {
+    own.Fill(m, ds.Row(row, &row_scratch));
     own.Visit(find, true);
     own.Visit(find, false);
   }
@@ -509,7 +511,7 @@ std::vector<ColumnWriter::Block> ColumnWriter::Write(int64_t begin, int64_t end)
 }
 
 std::vector<ColumnWriter::Block> ColumnWriter::Write(const Dataset& ds, int64_t begin, int64_t end) const {
-  const int64_t rows = static_cast<int64_t>(ds.observations.size());
+  const int64_t rows = static_cast<int64_t>(ds.size());
   if (!machine_ || ds.machine().num_axes() != machine_->num_axes())
     throw std::invalid_argument("columns: a dataset the writer has not scanned");
   if (begin < 0 || end < begin || end > rows)
@@ -575,8 +577,9 @@ std::vector<ColumnWriter::Block> ColumnWriter::Write(const Dataset& ds, int64_t 
     }
   } fill{this, m, put_text, put};
   OwnRow own;
+  Observation scratch;
   for (size_t r = 0; r < n; ++r) {
-    const Observation& o = ds.observations[static_cast<size_t>(begin) + r];
+    const Observation& o = ds.Row(static_cast<size_t>(begin) + r, &scratch);
     for (size_t c = 0; c < columns_.size(); ++c)
       if (columns_[c].type == Type::kString) out[c].offsets[r + 1] = out[c].offsets[r];
     put_text(0, r, ObservationTypeName(o.type));

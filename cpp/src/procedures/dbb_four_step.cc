@@ -126,7 +126,10 @@ Eigen::VectorXd PlaceFixedBall(const Machine& m, const FourStepPair& t, const Ei
   return out;
 }
 
-std::string SetupList(const Dataset& ds) {
+std::string SetupList(const Dataset& given_ds) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   std::vector<std::string> s;
   for (const Observation& o : ds.observations)
     if (o.type == ObservationType::kDbb && std::find(s.begin(), s.end(), o.setup) == s.end())
@@ -139,9 +142,12 @@ std::string SetupList(const Dataset& ds) {
 // One step: readings -> points in the plane of the axis -> circle fit.
 // o_prime: the ideal rotation centre O' (the spindle ball of the step without
 // the extension); null for that step itself.
-FourStepStep AnalyzeStep(const Dataset& ds, const FourStepPair& t, const std::string& setup, bool carrier,
+FourStepStep AnalyzeStep(const Dataset& given_ds, const FourStepPair& t, const std::string& setup, bool carrier,
                          const Eigen::Vector3d* o_prime, const Eigen::Vector2d& pivot_offset,
                          const FourStepOptions& opt) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   const Machine& m = ds.machine();
   const std::string w = "four-step: setup '" + setup + "'";
   FourStepStep st;
@@ -430,7 +436,10 @@ double FourStepResult::Get(const std::string& name) const {
   throw std::invalid_argument("four-step result: no parameter '" + name + "'");
 }
 
-FourStepResult AnalyzeFourStep(const Dataset& ds, const FourStepOptions& opt_in) {
+FourStepResult AnalyzeFourStep(const Dataset& given_ds, const FourStepOptions& opt_in) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   const FourStepPair t = RequireFourStepPair(ds.machine(), "four-step");
   FourStepOptions opt = opt_in;
   const std::vector<std::string> def = t.DefaultSetups(ds.machine());

@@ -72,7 +72,10 @@ Eigen::MatrixXd RTestSequence(const Machine& m, const std::string& test, double 
   return out;
 }
 
-RTestResult EvaluateRTest(const Dataset& ds, const RTestOptions& options) {
+RTestResult EvaluateRTest(const Dataset& given_ds, const RTestOptions& options) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   for (size_t i = 0; i < options.estimate.size(); ++i)
     if (options.estimate[i].empty())
       throw std::invalid_argument("estimate[" + std::to_string(i) + "]: an empty parameter name");

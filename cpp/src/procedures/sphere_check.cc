@@ -115,7 +115,10 @@ std::vector<std::string> PivotParameters(const Machine& m, char axis, bool backl
   return out;
 }
 
-SphereCheckResult EvaluateSphereCheck(const Dataset& ds, const SphereCheckOptions& options) {
+SphereCheckResult EvaluateSphereCheck(const Dataset& given_ds, const SphereCheckOptions& options) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   const Machine& m = ds.machine();
   const auto& obs = ds.observations;
   if (options.backlash < -1 || options.backlash > 1)

@@ -174,8 +174,11 @@ SphereCentreFit FitSphereCentre(const Eigen::MatrixXd& P, double radius, const E
   return f;
 }
 
-Eigen::MatrixXd TablePoints(const Dataset& ds, const std::map<std::string, double>& values,
+Eigen::MatrixXd TablePoints(const Dataset& given_ds, const std::map<std::string, double>& values,
                             const std::vector<int>& indices) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   const Machine& m = ds.machine();
   const Eigen::VectorXd theta = MachineTheta(m, values);
   const Eigen::Vector3d tip = TipWithOffsets<double>(m, theta.data());
@@ -213,8 +216,11 @@ std::string SphereTestResult::ToJson() const {
   return j.dump();
 }
 
-SphereTestResult SphereTest(const Dataset& ds, const std::string& sphere,
+SphereTestResult SphereTest(const Dataset& given_ds, const std::string& sphere,
                             const std::map<std::string, double>& values) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   ds.Validate();
   std::set<std::string> touched;
   for (const Observation& o : ds.observations)

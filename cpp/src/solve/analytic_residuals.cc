@@ -174,18 +174,33 @@ AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& ta
     }
     for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(i);
   }
+  // Column-block rows (dataset.h TraceBlock) are never prepared here: their
+  // kind's column kernel evaluates them (NormalEquationProblem). Only the
+  // bookkeeping of their rows.
+  int n_all = n;
+  for (const TraceBlock& b : ds.blocks) {
+    const ObservationKind& kind = KindOf(b.type);
+    if (all || !kind.analytic())
+      throw std::logic_error("analytic residuals: column blocks need the column kernel (Dataset::Expanded first)");
+    const int nb = static_cast<int>(b.size());
+    if (runs_.empty() || runs_.back().kind != &kind) runs_.push_back({&kind, n_all, n_all, false, -1});
+    runs_.back().end = n_all + nb;
+    for (int r = 0; r < nb; ++r)
+      for (int k = 0; k < kind.rows(); ++k) row_source_.push_back(n_all + r);
+    n_all += nb;
+  }
   held_observations_ = static_cast<int>(rows_.size());
   for (const ObservationKind* kind : ObservationKinds())
     kind->AddArtefactAnalyticRows(ds, table, &rows_, &row_source_);
   // The artefact rows: runs of their own after the observations'.
   for (int j = held_observations_; j < static_cast<int>(rows_.size()); ++j) {
     const AnalyticRow& r = rows_[j];
-    const int i = n + (j - held_observations_);
+    const int i = n_all + (j - held_observations_);
     if (j == held_observations_ || runs_.back().kind != r.kind || rows_[runs_.back().held].variant != r.variant)
       runs_.push_back({r.kind, i, i, r.piece_begin >= 0, j});
     runs_.back().end = i + 1;
   }
-  num_prepared_ = n + static_cast<int>(rows_.size()) - held_observations_;
+  num_prepared_ = n_all + static_cast<int>(rows_.size()) - held_observations_;
   set_num_residuals(static_cast<int>(row_source_.size()));
   CountHeld(static_cast<int64_t>(rows_.size()));
 }

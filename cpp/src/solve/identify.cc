@@ -54,8 +54,20 @@ class StageClock {
 Result Identify(const Dataset& ds, const IdentifyOptions& opt) {
   StageClock clock;
   ds.Validate();
+  // Requests that select on the dense Jacobian ("location", "auto") build
+  // a per-observation problem while resolving: blocks expanded first.
+  if (!ds.blocks.empty())
+    for (const std::string& n : opt.estimate)
+      if (n == "location" || n == "auto") return Identify(ds.Expanded(), opt);
   const IdentifyRequest request = ResolveRequest(ds, opt);
   clock("request");
+  // Column blocks (dataset.h TraceBlock) are fitted where they lie only by
+  // the column kernels on the normal equations; a fit that needs a
+  // per-observation problem (dense Jacobian, templated functors, prepared
+  // rows) gets the blocks expanded, the one place it happens.
+  if (!ds.blocks.empty() &&
+      (!DenseReason(ds, opt, request).empty() || NormalEquationElements(ds) != kColumnarElements))
+    return Identify(ds.Expanded(), opt);
   IdentifyProblem problem(ds, opt, request);
   clock("problem");
   const IdentifyFit fit = FitRequest(ds, opt, request, &problem);
@@ -105,8 +117,10 @@ std::string Result::verdict() const {
   return "ok";
 }
 
-Eigen::VectorXd PredictResiduals(const Dataset& ds, const std::map<std::string, double>& values,
+Eigen::VectorXd PredictResiduals(const Dataset& given_ds, const std::map<std::string, double>& values,
                                  std::vector<int>* source) {
+  const ExpandedView expanded_ds(given_ds);  // a functor per observation
+  const Dataset& ds = *expanded_ds;
   ds.Validate();
   const ParameterTable table(ds);
   Eigen::VectorXd v = Eigen::VectorXd::Zero(table.size());

@@ -98,6 +98,7 @@ std::string DenseReason(const Dataset& ds, const IdentifyOptions& opt, const Ide
   if (opt.fit_path == "normal_equations") return "";
   double rows = 0;
   for (const Observation& o : ds.observations) rows += KindOf(o).rows();
+  for (const TraceBlock& b : ds.blocks) rows += static_cast<double>(b.size()) * KindOf(b.type).rows();
   return rows * static_cast<double>(p) > NormalEquationElements(ds) ? "" : "short data";
 }
 

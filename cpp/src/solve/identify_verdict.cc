@@ -52,6 +52,17 @@ std::vector<AxisSeen> SeenAxes(const Dataset& ds) {
         seen[k].backward = seen[k].backward || o.direction[k] < 0;
       }
     }
+  // Column blocks column by column (dataset.h TraceBlock).
+  for (const TraceBlock& b : ds.blocks)
+    for (int k = 0; k < na && k < static_cast<int>(b.axes.size()); ++k) {
+      for (size_t r = 0; r < b.axes[k].size() && at[k].size() < kEnough; ++r)
+        at[k].insert(std::llround(b.axes[k][r] * 1000.0));
+      if (k < static_cast<int>(b.direction.size()))
+        for (const int8_t d : b.direction[k]) {
+          seen[k].forward = seen[k].forward || d > 0;
+          seen[k].backward = seen[k].backward || d < 0;
+        }
+    }
   for (int k = 0; k < na; ++k) seen[k].positions = static_cast<int>(at[k].size());
   return seen;
 }
@@ -225,21 +236,20 @@ std::string ImplausibleCause(const Machine& m, const Result& res, const Eigen::V
 void FillResiduals(const Dataset& ds, const Eigen::VectorXd& values, const ParameterTable& table,
                    const Eigen::VectorXd& r, Result* res) {
   const Machine& m = ds.machine();
-  const int n = static_cast<int>(ds.observations.size());
+  const int n = static_cast<int>(ds.size());  // column-block rows too
   res->residual_vectors = Eigen::MatrixXd::Zero(n, 3);
   res->points = Eigen::MatrixXd::Zero(n, 3);
   const KinematicModel model(m, values.data());
   const ReportContext ctx{&ds, &table, &values, &model};
   int row = 0;
-  for (int i = 0; i < n; ++i) {
-    const Observation& o = ds.observations[i];
+  ds.ForEachRow([&](size_t i, const Observation& o) {
     const ObservationKind& kind = KindOf(o);
     Eigen::Vector3d P, v;
     kind.ReportVector(ctx, o, r.data() + row, &P, &v);
-    res->points.row(i) = P.transpose();
-    res->residual_vectors.row(i) = v.transpose();
+    res->points.row(static_cast<Eigen::Index>(i)) = P.transpose();
+    res->residual_vectors.row(static_cast<Eigen::Index>(i)) = v.transpose();
     row += kind.rows();
-  }
+  });
 }
 
 // A group's sigma x 1e3 is in um; a group of rad rows (NoiseGroup: its class
@@ -350,10 +360,18 @@ Result JudgeResult(const Dataset& ds, const IdentifyOptions& opt, const Identify
   const double ratio = res.dof > 0 ? chi2 / res.dof : 0.0;
   res.adequate = !(res.chi2_p < 1e-3 && ratio > 2.0);
   bool mounts = false, mount_estimated = false;
-  for (const Observation& o : ds.observations)
+  auto mount_of = [&](const Observation& o) {
     for (int c : KindOf(o).MountPositions(table, o)) {
       mounts = true;
       if (std::find(est.begin(), est.end(), c) != est.end()) mount_estimated = true;
+    }
+  };
+  for (const Observation& o : ds.observations) mount_of(o);
+  Observation first;  // a column block's rows share one mounting
+  for (const TraceBlock& b : ds.blocks)
+    if (b.size()) {
+      ds.FillRow(b, 0, &first);
+      mount_of(first);
     }
   bool cause_named = false;  // the residuals name the cause: a set-up left fixed, a unit
   if (!res.adequate) {

@@ -40,7 +40,8 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
   // thread, not one per sample (analytic_residuals.h, RowStorage).
   batch_ = std::make_unique<AnalyticResiduals>(ds, table, values, estimated_, RowStorage::kPerChunk);
   const int nr = batch_->num_residuals();
-  const int n = static_cast<int>(ds.observations.size());
+  // Every observation, per-object and column-block rows (dataset.h).
+  const int n = static_cast<int>(ds.size());
   const int nb = std::max(1, std::min(kBlocks, (n + kChunk - 1) / kChunk));
   // One walk over the observations (of long data, hundreds of MB): each
   // row's sigma as Problem weighs it, the row units as the residual summary
@@ -51,8 +52,8 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
   Block B{0, static_cast<int>((static_cast<long long>(n) * 1) / nb), 0, 0};
   const ObservationKind* last = nullptr;
   std::vector<std::string> unit_of;  // of `last`'s rows
-  for (int i = 0; i < n; ++i) {
-    const Observation& o = ds.observations[i];
+  ds.ForEachRow([&](size_t row_index, const Observation& o) {
+    const int i = static_cast<int>(row_index);
     const ObservationKind* kind = &KindOf(o);
     const int rows = kind->rows();
     if (kind != last) {
@@ -79,7 +80,7 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
       if (++b == nb) break;
       B = Block{B.end, static_cast<int>((static_cast<long long>(n) * (b + 1)) / nb), row, 0};
     }
-  }
+  });
   // As Problem weighs them: a scale bar's length row at kScaleBarSigma.
   for (int r = row; r < nr; ++r) row_sigma_[r] = kScaleBarSigma;
   uniform_sigma_ = nr > 0 && row_sigma_.maxCoeff() == row_sigma_.minCoeff() ? row_sigma_[0] : 0.0;
@@ -89,13 +90,24 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
     throw std::logic_error("normal equations: residual rows do not add up");
   // The column kernels, when every observation has one (mixed and small
   // data keep the prepared rows: a probe touch, a tracker reading).
+  // A column block is a run of its own, which borrows its columns.
+  const int n_obj = static_cast<int>(ds.observations.size());
   if (batch_->num_prepared() == n && row_unit_.empty() && n > 0) {
+    size_t block = 0;
     for (int i = 0; i < n;) {
-      const ObservationKind* kind = &KindOf(ds.observations[i]);
+      const ObservationKind* kind;
       int j = i + 1;
-      while (j < n && &KindOf(ds.observations[j]) == kind) ++j;
+      if (i < n_obj) {
+        kind = &KindOf(ds.observations[i]);
+        while (j < n_obj && &KindOf(ds.observations[j]) == kind) ++j;
+      } else {
+        kind = &KindOf(ds.blocks[block].type);
+        j = i + static_cast<int>(ds.blocks[block++].size());
+      }
       std::unique_ptr<LongRun> run = kind->MakeLongRun(ds, table, estimated_, i, j);
       if (!run) {
+        if (!ds.blocks.empty())
+          throw std::logic_error("normal equations: a column block of a kind without a column kernel");
         long_runs_.clear();
         break;
       }
@@ -103,6 +115,10 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
       i = j;
     }
   }
+  // Column blocks have no prepared rows: the column kernels are their only
+  // evaluation (Identify expands the blocks of data that cannot use them).
+  if (!ds.blocks.empty() && long_runs_.empty())
+    throw std::logic_error("normal equations: column blocks need every observation on a column kernel");
 }
 
 void NormalEquationProblem::LongBlock(const KinematicModel& model, const Eigen::VectorXd& values, const Block& B,
@@ -184,7 +200,7 @@ void NormalEquationProblem::Pass(const Eigen::VectorXd& values, bool jacobian, b
           LongBlock(model, values, B, jacobian, unweighted, residuals, &(*partial)[b]);
           continue;
         }
-        const bool tail = B.begin >= static_cast<int>(ds_.observations.size());
+        const bool tail = B.begin >= static_cast<int>(ds_.size());
         const int ld = tail ? B.rows : std::min(B.rows, kChunk * max_kind_rows);
         r.resize(ld);
         if (jacobian) {
@@ -296,15 +312,17 @@ NormalEquations NormalEquationProblem::Accumulate(const Eigen::VectorXd& values,
 }
 
 double NormalEquationElements(const Dataset& ds) {
-  if (ds.observations.empty()) return kNormalEquationElements;
+  if (ds.size() == 0) return kNormalEquationElements;
   // Each kind present asked once, on a dataset of no observations (an empty
   // run costs nothing to make).
   const Dataset none(ds.machine());
   const ParameterTable table(none);
   const ObservationKind* last = nullptr;
   std::vector<const ObservationKind*> asked;
-  for (const Observation& o : ds.observations) {
-    const ObservationKind* kind = &KindOf(o);
+  std::vector<const ObservationKind*> kinds;
+  for (const Observation& o : ds.observations) kinds.push_back(&KindOf(o));
+  for (const TraceBlock& b : ds.blocks) kinds.push_back(&KindOf(b.type));
+  for (const ObservationKind* kind : kinds) {
     if (kind == last || std::find(asked.begin(), asked.end(), kind) != asked.end()) continue;
     last = kind;
     asked.push_back(kind);

@@ -86,6 +86,13 @@ ParameterTable::ParameterTable(const Dataset& ds) {
   num_machine_ = size();
   for (const ObservationKind* kind : ObservationKinds()) kind->AddArtefactParameters(ds, this);
   for (const Observation& o : ds.observations) KindOf(o).AddObservationParameters(o, this);
+  // A column block's rows share their set-up: its first row brings them.
+  Observation first;
+  for (const TraceBlock& b : ds.blocks)
+    if (b.size()) {
+      ds.FillRow(b, 0, &first);
+      KindOf(first).AddObservationParameters(first, this);
+    }
 }
 
 int ParameterTable::Index(const std::string& name) const {
@@ -113,6 +120,12 @@ int ParameterTable::Require(const std::string& name) const {
 std::vector<int> ParameterTable::DefaultSetup(const Dataset& ds) const {
   std::set<int> s;
   for (const Observation& o : ds.observations) KindOf(o).DefaultSetup(ds, *this, o, &s);
+  Observation first;
+  for (const TraceBlock& b : ds.blocks)
+    if (b.size()) {
+      ds.FillRow(b, 0, &first);
+      KindOf(first).DefaultSetup(ds, *this, first, &s);
+    }
   return std::vector<int>(s.begin(), s.end());
 }
 
@@ -240,6 +253,10 @@ Problem::Problem(const Dataset& ds, const ParameterTable& table, const Eigen::Ve
     : ds_(ds), table_(table), values_(values), estimated_(estimated) {
   if (values_.size() != table.size())
     throw std::invalid_argument("problem: expected " + std::to_string(table.size()) + " values");
+  // A residual functor per observation: column blocks must be expanded by
+  // the caller first (Dataset::Expanded), never silently left out.
+  if (!ds.blocks.empty())
+    throw std::logic_error("problem: the dataset holds column blocks; expand them first (Dataset::Expanded)");
   block_of_.assign(table.size(), -1);
   for (size_t i = 0; i < estimated_.size(); ++i) block_of_[estimated_[i]] = static_cast<int>(i);
 

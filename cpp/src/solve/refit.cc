@@ -18,7 +18,9 @@
 namespace fivecal {
 
 struct Refit::Impl {
-  Impl(const Dataset& ref, const IdentifyOptions& o) : reference(ref), table(ref), options(o) {}
+  // The reference as Observations (its column blocks expanded): refits
+  // run through Problem's functors and the dense batch.
+  Impl(const Dataset& ref, const IdentifyOptions& o) : reference(ref.Expanded()), table(reference), options(o) {}
   Dataset reference;
   ParameterTable table;
   IdentifyOptions options;
@@ -491,7 +493,10 @@ std::unique_ptr<Problem> Refit::MakeProblem(const Dataset& ds) const {
   return problem;
 }
 
-RefitResult Refit::Fit(const Dataset& ds, bool with_std) const {
+RefitResult Refit::Fit(const Dataset& given_ds, bool with_std) const {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   const Impl& d = *impl_;
   const auto& a = d.reference.observations;
   const auto& b = ds.observations;

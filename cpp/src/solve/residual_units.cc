@@ -14,11 +14,25 @@ namespace {
 // The unit of every row ("mm" for a scale bar row), from the kinds.
 std::vector<const char*> RowUnits(const Dataset& ds, const std::vector<int>& source) {
   std::vector<const char*> unit(source.size(), "mm");
-  std::vector<int> seen(ds.observations.size(), 0);
+  const int n = static_cast<int>(ds.size());  // column-block rows too
+  std::vector<int> seen(static_cast<size_t>(n), 0);
+  // The kind of observation s: a block's from a cursor that follows the
+  // rows (they come in order), not a search over the blocks per row.
+  const size_t n_obj = ds.observations.size();
+  size_t block = 0, block_start = n_obj;
+  auto kind_at = [&](size_t s) -> const ObservationKind& {
+    if (s < n_obj) return KindOf(ds.observations[s]);
+    if (s < block_start) block = 0, block_start = n_obj;
+    while (s - block_start >= ds.blocks[block].size()) block_start += ds.blocks[block++].size();
+    return KindOf(ds.blocks[block].type);
+  };
+  const ObservationKind* kind = nullptr;
+  int last = -1;
   for (size_t i = 0; i < source.size(); ++i) {
     const int s = source[i];
-    if (s < 0 || s >= static_cast<int>(ds.observations.size())) continue;
-    unit[i] = KindOf(ds.observations[s]).unit_row(seen[s]++);
+    if (s < 0 || s >= n) continue;
+    if (s != last) kind = &kind_at(static_cast<size_t>(s)), last = s;
+    unit[i] = kind->unit_row(seen[s]++);
   }
   return unit;
 }
@@ -30,13 +44,18 @@ bool SameUnit(const char* a, const char* b) { return std::strcmp(a, b) == 0; }
 Eigen::VectorXd PositionScaledResiduals(const Dataset& ds, const Eigen::VectorXd& r, const Eigen::VectorXd& sigma,
                                         const std::vector<int>& source) {
   const std::vector<const char*> unit = RowUnits(ds, source);
-  const int n_obs = static_cast<int>(ds.observations.size());
+  const int n_obs = static_cast<int>(ds.size());
   auto own = [&](int s) { return s >= 0 && s < n_obs; };
   // The observation's position noise: its rows of the first unit.
-  std::vector<double> ref(ds.observations.size(), 0.0);
+  std::vector<double> ref(static_cast<size_t>(n_obs), 0.0);
+  const char* first_unit = "";
   for (size_t i = 0; i < source.size(); ++i) {
     const int s = source[i];
-    if (own(s) && SameUnit(unit[i], KindOf(ds.observations[s]).unit_row(0))) ref[s] = std::max(ref[s], sigma[i]);
+    if (!own(s)) continue;
+    // An observation's rows are consecutive: its first row has its kind's
+    // first unit (no kind lookup per row).
+    if (i == 0 || source[i - 1] != s) first_unit = unit[i];
+    if (SameUnit(unit[i], first_unit)) ref[s] = std::max(ref[s], sigma[i]);
   }
   Eigen::VectorXd out = r;
   for (size_t i = 0; i < source.size(); ++i) {

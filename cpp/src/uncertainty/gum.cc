@@ -340,7 +340,10 @@ std::string GumResult::ToJson() const {
   return j.dump(1);
 }
 
-Sensitivity SensitivityMatrix(const Dataset& ds, const Result& fit) {
+Sensitivity SensitivityMatrix(const Dataset& given_ds, const Result& fit) {
+  // Works on Observation objects: column blocks expanded (dataset.h).
+  const ExpandedView expanded_ds(given_ds);
+  const Dataset& ds = *expanded_ds;
   ds.Validate();
   const ParameterTable table(ds);
   if (fit.names != table.names())

@@ -70,6 +70,16 @@ class BallMountKind : public ObservationKind {
   void ReportVector(const ReportContext& c, const Observation& o, const double* r, Eigen::Vector3d* point,
                     Eigen::Vector3d* vector) const final;
 
+  // Column blocks: a block is one mounting (set-up, balls, bar length); the
+  // per-row values are the reading (dbb) or the measured x y z (ball3d).
+  int block_values() const final { return has_length() ? 1 : 3; }
+  std::string block_value_name(int v) const final;
+  double block_value_bound(int v) const final;
+  ObservationPayload BlockCommon(const Observation& o) const final;
+  bool BlockShares(const ObservationPayload& common, const Observation& o) const final;
+  void BlockValues(const Observation& o, double* v) const final;
+  void SetBlockValues(const double* v, Observation* o) const final;
+
   // Whether the mounting has a length parameter (<kind>[.<setup>].length)
   // and samples a bar length.
   virtual bool has_length() const = 0;

@@ -50,8 +50,21 @@ struct ColumnBatch {
   const int64_t* positions = nullptr;
 };
 
+// Appends one row to a column block (dataset.h TraceBlock): `axes` and
+// `direction` (null: all 0) na values, `values` the kind's per-row values,
+// `sigma` its rows' declared noise (null: the default), `id` (null or "":
+// none). A noise every row shares stays one value per column.
+void PushBlockRow(TraceBlock* b, int na, const double* axes, const int* direction, const double* values,
+                  int rows, const double* sigma, const std::string* id);
+
 // Builds a dataset of `rows` observations from batches. Messages name the
 // kind, the row and the column: "ball3d row 17, column measured_y: NaN".
+//
+// Rows of a kind kept in columns (ObservationKind::block_values() > 0:
+// dbb, ball3d) go straight into column blocks, one per run of consecutive
+// file rows of one mounting, with no Observation per row; Finish() turns
+// the block rows that precede a per-object row into Observations, so that
+// the dataset's order (per-object observations, then blocks) is the file's.
 class ColumnLoader {
  public:
   // `head`: machine, probe, artefact and instruments, no observations.
@@ -69,6 +82,22 @@ class ColumnLoader {
   std::vector<uint8_t> placed_;
   int64_t next_ = 0;
   int64_t first_ = 0;
+  int64_t total_ = 0;
+  // Rows read as Observations, with their dataset positions.
+  std::vector<int64_t> object_at_;
+  std::vector<Observation> objects_;
+  // Column blocks: the position of each one's first row; the values of the
+  // columns its rows share (numbers, then texts; a null as NaN / absent),
+  // which a following row must repeat to join it.
+  struct Segment {
+    int64_t start = 0;
+    TraceBlock block;
+    std::vector<double> shared_numbers;
+    std::vector<std::string> shared_texts;
+    std::vector<uint8_t> shared_null;
+    std::vector<std::string> shared_names;  // of the batch that opened it
+  };
+  std::vector<Segment> segments_;
 };
 
 }  // namespace fivecal

@@ -5,7 +5,9 @@
 #define FIVECAL_DATASET_H_
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <map>
+#include <memory>
 #include <string>
 #include <variant>
 #include <vector>
@@ -116,6 +118,51 @@ const std::string& PayloadTarget(const Observation& o);
 // "instrument", distance: "station"), else nullptr.
 const std::string* InstrumentId(const Observation& o);
 
+// A long trace held as columns (issue 30): the samples of one columnar kind
+// (ObservationKind::block_values() > 0: dbb, ball3d) and one set-up, with
+// no Observation per sample. 10^7 R-test samples take 72 B each here
+// (six axes, three readings) instead of an Observation's 312 B + heap.
+//
+// Row order: a dataset's observation index i runs over `observations`
+// first (0 .. observations.size() - 1), then over the blocks' rows, block
+// after block (Dataset::size(), Row()). A loader only puts rows into blocks
+// when this order is the file's (the trailing rows of a trace file, which
+// is every row of an R-test or ball-bar trace); rows of a columnar kind
+// before a per-object row stay Observations. Messages therefore name block
+// rows by the same index as a per-object row ("observations[i]", or the
+// file row), and save -> load keeps the order, the ids and the values.
+//
+// Axes are kept in file units (mm, degrees), not the kernel's internal
+// ones: a save writes them back bit for bit, messages quote what the file
+// said, and the conversion (a multiply per rotary axis) costs nothing
+// beside the kinematic chain the kernel evaluates per sample.
+struct TraceBlock {
+  ObservationType type = ObservationType::kBall3d;
+  std::string setup;
+  // What every row shares (a mounting's balls, a bar length): the kind's
+  // payload with its per-row values zero (ObservationKind::BlockCommon).
+  ObservationPayload common;
+  // Machine axis order, one column of size() values each.
+  std::vector<std::vector<double>> axes;
+  // Empty: no row records a move direction; else one column per axis.
+  std::vector<std::vector<int8_t>> direction;
+  // The kind's per-row values (block_values() columns: dbb the reading,
+  // ball3d the measured x y z).
+  std::vector<std::vector<double>> values;
+  // Declared noise: empty = the default for every row; otherwise one column
+  // per residual row, each of one value (every row's) or of size() values,
+  // NaN in a row that declares none (sigma_at()).
+  std::vector<std::vector<double>> sigma;
+  // Empty: no row has an id; else one per row ("" = none).
+  std::vector<std::string> ids;
+
+  size_t size() const { return axes.empty() ? 0 : axes[0].size(); }
+  double sigma_at(int k, size_t r) const {
+    const std::vector<double>& c = sigma[static_cast<size_t>(k)];
+    return c.size() == 1 ? c[0] : c[r];
+  }
+};
+
 class Dataset {
  public:
   explicit Dataset(Machine machine) : machine_(std::move(machine)) {}
@@ -128,6 +175,11 @@ class Dataset {
   double tip_radius = 0.0;
   Artefact artefact;
   std::vector<Observation> observations;
+  // Long traces as column blocks; their rows follow `observations` (see
+  // TraceBlock for the order). Code that reads samples one at a time uses
+  // size() / Row() / ForEachRow(); code that needs Observation objects
+  // calls Expanded() (or ExpandBlocks()) at its entry.
+  std::vector<TraceBlock> blocks;
   // Declared noise per instrument id ("instruments" in the file): what an
   // observation of that instrument without its own sigma declares; one value
   // per residual row of its kind, or one for all when its rows share a unit.
@@ -149,11 +201,86 @@ class Dataset {
                          const Eigen::MatrixXi* dirs, const Eigen::Vector3d& tool_ball,
                          const Eigen::Vector3d& table_ball, double length,
                          const Eigen::MatrixXd& values, double sigma = 0.0);
-  // A dataset with only the observations at `indices` (same machine and artefact).
+  // A dataset with only the observations at `indices` (same machine and
+  // artefact); block rows stay in blocks (consecutive rows of one block one
+  // block), and follow the per-object observations as everywhere.
   Dataset Subset(const std::vector<int>& indices) const;
+
+  // Every observation, per-object and block rows.
+  size_t size() const { return observations.size() + block_rows(); }
+  size_t block_rows() const {
+    size_t n = 0;
+    for (const TraceBlock& b : blocks) n += b.size();
+    return n;
+  }
+  // Observation i (0 <= i < size()): a per-object one itself, a block row
+  // filled into *scratch (reused row after row: no allocation once its
+  // vectors have their sizes).
+  const Observation& Row(size_t i, Observation* scratch) const;
+  // The type of observation i, without filling a row.
+  ObservationType TypeOf(size_t i) const {
+    if (i < observations.size()) return observations[i].type;
+    size_t r = i - observations.size();
+    for (const TraceBlock& b : blocks) {
+      if (r < b.size()) return b.type;
+      r -= b.size();
+    }
+    return ObservationType::kFacet;  // out of range: as an empty Observation
+  }
+  // Row r of block b as an observation, into *o.
+  void FillRow(const TraceBlock& b, size_t r, Observation* o) const;
+  // f(i, observation) for every observation in order (block rows through
+  // one scratch observation: f must not keep a reference to it).
+  template <class F>
+  void ForEachRow(F&& f) const {
+    size_t i = 0;
+    for (const Observation& o : observations) f(i++, o);
+    Observation scratch;
+    for (const TraceBlock& b : blocks)
+      for (size_t r = 0, n = b.size(); r < n; ++r) {
+        FillRow(b, r, &scratch);
+        f(i++, static_cast<const Observation&>(scratch));
+      }
+  }
+  // THE expansion: a copy whose blocks are Observations (same order), for
+  // the code that works on Observation objects (procedures, design, refit,
+  // simulation, the dense fit paths). A dataset without blocks is copied
+  // as it is.
+  Dataset Expanded() const;
+  void ExpandBlocks();
+  // The reverse: the trailing observations of columnar kinds (after the
+  // last per-object one of another kind or shape) into blocks, in order.
+  // What a loader that builds Observations calls so that long data fit and
+  // save as columns. Returns the rows moved (none when fewer than
+  // min_rows would move).
+  size_t PackTraces(size_t min_rows = 0);
+  // Appends observation o as the next row of the dataset's last block, or
+  // of a new block (o of a columnar kind, every per-object observation
+  // before it): the building step of PackTraces, Subset and loaders.
+  void AppendBlockRow(const Observation& o);
 
  private:
   Machine machine_;
+};
+
+// `ds` itself, or its expansion (Dataset::Expanded) when it holds column
+// blocks: what a consumer of Observation objects takes at its entry
+// (`const ExpandedView view(given); const Dataset& ds = *view;`), so that
+// no such consumer leaves block rows out.
+class ExpandedView {
+ public:
+  explicit ExpandedView(const Dataset& ds) : p_(&ds) {
+    if (!ds.blocks.empty()) {
+      own_ = std::make_unique<Dataset>(ds.Expanded());
+      p_ = own_.get();
+    }
+  }
+  const Dataset& operator*() const { return *p_; }
+  const Dataset* operator->() const { return p_; }
+
+ private:
+  std::unique_ptr<Dataset> own_;
+  const Dataset* p_;
 };
 
 }  // namespace fivecal

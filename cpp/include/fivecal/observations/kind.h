@@ -353,6 +353,23 @@ class KindFileFormat {
   virtual void WriteOnMachine(const Machine&, const Observation&, nlohmann::json* /*out*/) const {}
   // Its instrument table (fivecal import); the default: the generic reader.
   virtual KindTable Table() const { return {}; }
+
+  // Long traces as column blocks (dataset.h TraceBlock). A kind opts in by
+  // giving its per-row values a count > 0 (the default 0: its samples stay
+  // Observations) and the five methods below, all from its own file.
+  virtual int block_values() const { return 0; }
+  // The file column of per-row value v ("reading", "measured_x"), for
+  // messages, and its bound: a finite |x| <= bound (mm) is accepted.
+  virtual std::string block_value_name(int) const { return ""; }
+  virtual double block_value_bound(int) const { return 0; }
+  // What a block of `o` shares: its payload with the per-row values zero.
+  virtual ObservationPayload BlockCommon(const Observation& o) const { return o.payload; }
+  // Whether `o` may be a row of a block whose rows share `common`.
+  virtual bool BlockShares(const ObservationPayload& /*common*/, const Observation& /*o*/) const { return false; }
+  // o's per-row values (block_values() of them), and their inverse: o's
+  // payload already holds the block's `common`, the values go in.
+  virtual void BlockValues(const Observation& /*o*/, double* /*v*/) const {}
+  virtual void SetBlockValues(const double* /*v*/, Observation* /*o*/) const {}
 };
 
 // The set-up parameters it brings (names, order, default set, priors).

@@ -101,7 +101,7 @@ class ColumnWriter {
   bool Scan(const Dataset& piece, int64_t offset = 0);
 
   const std::vector<Spec>& columns() const { return columns_; }
-  int64_t rows() const { return ds_ ? static_cast<int64_t>(ds_->observations.size()) : 0; }
+  int64_t rows() const { return ds_ ? static_cast<int64_t>(ds_->size()) : 0; }
   // Rows [begin, end) of every column, in columns() order: of the dataset
   // the writer was made with, or of a piece it has scanned (or one whose
   // rows hold nothing beyond the columns).
