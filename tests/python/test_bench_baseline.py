@@ -384,7 +384,15 @@ def test_every_case_of_the_committed_bench_carries_both_ratios_or_says_why_not()
         assert r["jax_compile_s"] > 0, case
         # the baselines' figures are medians of at least 5 runs too (the numpy
         # Monte Carlo: 5 single re-fits times the trial count)
-        assert len(r["runs_baseline_s"]) >= 5 and len(r["runs_jax_s"]) >= 5, case
+        # The harness's options run the slowest baselines fewer times (minutes
+        # to half an hour a run on 2 cores: the 'auto' cases' numpy and JAX,
+        # --auto-baselines / --auto-jax-runs; the 10^6-sample numpy fit,
+        # --numpy-runs-1e6); such a case's note says how many numpy runs its
+        # median has, and the README prints both counts.
+        reduced = case.startswith("tango_auto") or case == "ball3d_fit_1000000"
+        n_b, n_j = len(r["runs_baseline_s"]), len(r["runs_jax_s"])
+        assert n_b >= 5 or (reduced and n_b >= 1 and f"median of {n_b} run(s)" in r.get("note", "")), case
+        assert n_j >= 5 or (case.startswith("tango_auto") and n_j >= 1), case
         per_trial = case.startswith("monte_carlo")
         assert r["baseline_s"] == pytest.approx(statistics.median(r["runs_baseline_s"])
                                                 * (r["size"]["trials"] if per_trial else 1)), case

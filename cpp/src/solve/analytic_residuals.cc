@@ -95,54 +95,6 @@ AnalyticEval::AnalyticEval(const Machine& m, const Eigen::VectorXd& values, cons
   const int np = m.num_parameters();
   for (size_t b = 0; b < estimated.size(); ++b)
     if (estimated[b] < np) machine_blocks_.emplace_back(static_cast<int>(b), estimated[b]);
-  if (jac)
-    for (const auto& [b, idx] : machine_blocks_)
-      if (!(idx >= tip0_ && idx < tip0_ + 3)) columns_.push_back(idx);
-}
-
-void AnalyticEval::FillLanes(const AnalyticRow* first, const Eigen::Vector3d& tip) {
-  constexpr int W = KinematicModel::kLanes;
-  const int na = model_.machine().num_axes();
-  const int nc = static_cast<int>(columns_.size());
-  lanes_.resize(static_cast<size_t>(W) * (2 * na + 3 + 3 + 3 * nc + 9));
-  double* q = lanes_.data();
-  double* dir = q + na * W;
-  double* tp = dir + na * W;
-  double* P = tp + 3 * W;
-  double* J = P + 3 * W;
-  double* dtip = J + 3 * nc * W;
-  const long avail = run_end_ - first;
-  bool any_dir = false;
-  for (int l = 0; l < W; ++l) {
-    // The last batch of a run repeats its last row in the lanes past it.
-    const AnalyticRow& r = first[std::min<long>(l, avail - 1)];
-    for (int k = 0; k < na; ++k) q[k * W + l] = r.q[k];
-    const bool has = static_cast<int>(r.dir.size()) == na;
-    for (int k = 0; k < na; ++k) {
-      dir[k * W + l] = has ? r.dir[k] : 0.0;
-      any_dir = any_dir || (has && r.dir[k] != 0);
-    }
-    for (int c = 0; c < 3; ++c) tp[c * W + l] = tip[c];
-  }
-  model_.ToolPointLanes(q, any_dir ? dir : nullptr, tp, P, columns_.data(), nc, jacobians ? J : nullptr,
-                        jacobians ? dtip : nullptr);
-  lane_first_ = first;
-  lane_tip_ = tip;
-}
-
-void AnalyticEval::FromLane(int l, Eigen::Vector3d* P) {
-  constexpr int W = KinematicModel::kLanes;
-  const int na = model_.machine().num_axes();
-  const int nc = static_cast<int>(columns_.size());
-  const double* p = lanes_.data() + static_cast<size_t>(W) * (2 * na + 3);
-  for (int c = 0; c < 3; ++c) (*P)[c] = p[c * W + l];
-  if (!jacobians) return;
-  const double* J = p + 3 * W;
-  for (int j = 0; j < nc; ++j)
-    for (int c = 0; c < 3; ++c) J_(c, columns_[j]) = J[(3 * j + c) * W + l];
-  const double* dtip = J + 3 * nc * W;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) J_(r, tip0_ + c) = dtip[(3 * r + c) * W + l];
 }
 
 AnalyticResiduals::AnalyticResiduals(const Dataset& ds, const ParameterTable& table,
@@ -320,13 +272,8 @@ void AnalyticResiduals::EvaluateRun(AnalyticEval& e, const Run& run, int begin, 
                                     std::vector<AnalyticRow>* scratch) const {
   if (run.held >= 0) {
     const AnalyticRow* rows = rows_.data() + run.held + (begin - run.begin);
-    if (run.templated) {
-      EvaluateTemplated(e, rows, end - begin);
-    } else {
-      e.SetRun(rows, rows + (end - begin));
-      run.kind->EvaluateAnalytic(e, rows, end - begin);
-      e.SetRun(nullptr, nullptr);
-    }
+    if (run.templated) EvaluateTemplated(e, rows, end - begin);
+    else run.kind->EvaluateAnalytic(e, rows, end - begin);
     return;
   }
   // Rows of an analytic kind prepared per chunk: from the observations,
@@ -339,9 +286,7 @@ void AnalyticResiduals::EvaluateRun(AnalyticEval& e, const Run& run, int begin, 
     // predecessor (of this run's kind) in the chunk.
     AnalyticRow* rows = scratch->data();
     for (int k = 0; k < c; ++k) PrepareRow(*table_, *run.kind, s + k, k > 0 ? rows + k - 1 : nullptr, rows + k);
-    e.SetRun(rows, rows + c);
     run.kind->EvaluateAnalytic(e, rows, c);
-    e.SetRun(nullptr, nullptr);
   }
 }
 

@@ -79,29 +79,10 @@ class AnalyticEval {
     if (b >= 0 && jacobians[b]) jacobians[b][r] += value;
   }
   // The tool point of a row's pose for a tool tip at `tip` (F, zero pose),
-  // with dP/dtheta kept for Chain when derivatives are wanted. Within the
-  // rows of SetRun, computed KinematicModel::kLanes rows at a time
-  // (ToolPointLanes) on the first row of each batch, for that row's tip;
-  // a later row asking for another tip starts a batch of its own.
+  // with dP/dtheta kept for Chain when derivatives are wanted.
   void ToolPoint(const AnalyticRow& r, const Eigen::Vector3d& tip, Eigen::Vector3d* P) {
-    if (&r >= run_begin_ && &r < run_end_) {
-      long l = &r - lane_first_;
-      if (!lane_first_ || l < 0 || l >= KinematicModel::kLanes || tip != lane_tip_) {
-        FillLanes(&r, tip);
-        l = 0;
-      }
-      FromLane(static_cast<int>(l), P);
-      return;
-    }
     if (jacobians) model_.ToolPointJacobian(r.q.data(), r.dir.data(), tip, P, J_.data());
     else *P = model_.ToolPoint(r.q.data(), r.dir.data(), tip);
-  }
-  // The consecutive rows [begin, end) the kind is about to evaluate, in
-  // order (null: none; ToolPoint then takes one row at a time).
-  void SetRun(const AnalyticRow* begin, const AnalyticRow* end) {
-    run_begin_ = begin;
-    run_end_ = end;
-    lane_first_ = nullptr;
   }
   // The probe tip at the current values.
   const Eigen::Vector3d& probe_tip() const { return model_.tip(); }
@@ -125,23 +106,11 @@ class AnalyticEval {
   }
 
  private:
-  void FillLanes(const AnalyticRow* first, const Eigen::Vector3d& tip);
-  void FromLane(int l, Eigen::Vector3d* P);
-
   const KinematicModel& model_;
   const std::vector<int>& block_of_;
   std::vector<std::pair<int, int>> machine_blocks_;  // (block, theta index)
   int tip0_;
   Eigen::Matrix<double, 3, Eigen::Dynamic> J_;
-  // The batch of ToolPointLanes: rows from lane_first_, all at lane_tip_;
-  // columns_ the estimated machine columns but the tip's (those come from
-  // dtip).
-  const AnalyticRow* run_begin_ = nullptr;
-  const AnalyticRow* run_end_ = nullptr;
-  const AnalyticRow* lane_first_ = nullptr;
-  Eigen::Vector3d lane_tip_;
-  std::vector<int> columns_;
-  std::vector<double> lanes_;  // q, dir, tip, P, J, dtip of the batch
 };
 
 // Prepared rows alive in this process: those every batch holds, plus those
