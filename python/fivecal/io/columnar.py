@@ -80,14 +80,16 @@ def _arrow_schema(pa, writer, ds) -> "pyarrow.Schema":
                      metadata={k.encode(): v.encode() for k, v in meta.items()})
 
 
-def _batches(pa, writer, schema, rows: int):
-    """The dataset's rows as record batches of at most ``rows``, each built
+def _batches(pa, writer, schema, rows: int, piece=None):
+    """The dataset's rows (or, with ``piece``, that piece's rows, for a writer
+    that has scanned it) as record batches of at most ``rows``, each built
     from the core's column buffers (no Python object per row)."""
-    n = writer.rows
+    n = writer.rows if piece is None else len(piece)
+    extra = () if piece is None else (piece._core,)
     for start in range(0, n, rows):
         stop = min(n, start + rows)
         arrays = []
-        for field, col in zip(schema, writer.write(start, stop)):
+        for field, col in zip(schema, writer.write(start, stop, *extra)):
             if pa.types.is_string(field.type):
                 offsets, data, valid = col
                 arrays.append(pa.StringArray.from_buffers(stop - start, pa.py_buffer(offsets), pa.py_buffer(data),
@@ -486,21 +488,6 @@ def _stream_to_json(src: str, dst, rows: int, from_parquet: bool) -> int:
     return n
 
 
-def _piece_batches(pa, writer, schema_, piece, rows: int):
-    n = len(piece)
-    for start in range(0, n, rows):
-        stop = min(n, start + rows)
-        arrays = []
-        for field, col in zip(schema_, writer.write(start, stop, piece._core)):
-            if pa.types.is_string(field.type):
-                offsets, data, valid = col
-                arrays.append(pa.StringArray.from_buffers(stop - start, pa.py_buffer(offsets), pa.py_buffer(data),
-                                                          _bitmap(pa, valid)))
-            else:
-                values, valid = col
-                arrays.append(pa.Array.from_buffers(field.type, stop - start,
-                                                    [_bitmap(pa, valid), pa.py_buffer(values)]))
-        yield pa.RecordBatch.from_arrays(arrays, schema=schema_)
 
 
 def _stream_to_parquet(src: str, dst, rows: int) -> int:
@@ -529,7 +516,7 @@ def _stream_to_parquet(src: str, dst, rows: int) -> int:
                 if scanning and count[0] and writer.scan(piece._core, count[0]):
                     count[0] += len(piece)
                     raise _Restart
-                yield from _piece_batches(pa, writer, schema_, piece, rows)
+                yield from _batches(pa, writer, schema_, rows, piece)
                 count[0] += len(piece)
                 piece = None  # gone before the next is read
                 piece = next(pieces, None)
