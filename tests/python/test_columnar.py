@@ -556,6 +556,18 @@ def test_a_file_that_does_not_stream_converts_whole(tmp_path):
     assert columnar.read_parquet(tmp_path / "c.parquet").observations[30]["id"] == "ré"
 
 
+def _warnings_of_load_and_streamed_convert(tmp_path, name):
+    """The warnings of loading <name>.json whole, and of converting it to
+    Parquet in pieces of 10 rows."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fivecal.load_dataset(tmp_path / f"{name}.json")
+        whole = [str(x.message) for x in caught]
+        caught.clear()
+        columnar.convert(tmp_path / f"{name}.json", tmp_path / f"{name}.parquet", rows=10, stream_bytes=0)
+        return whole, [str(x.message) for x in caught]
+
+
 def test_the_plausibility_checks_see_the_whole_file_not_a_piece(tmp_path):
     # A slow rotary sweep: its first samples alone (B within 2 pi, spanning
     # more than 1, not round) look like radians, the whole sweep does not:
@@ -567,13 +579,7 @@ def test_the_plausibility_checks_see_the_whole_file_not_a_piece(tmp_path):
     ds = fivecal.ball_dataset(m, "ball3d", axes, [0, 0, 100], [100, 0, 0], measured=np.zeros((n, 3)), setup="R1")
     fivecal.save_dataset(ds, tmp_path / "sweep.json")
     assert looks_like_radians(b[:10]) and not looks_like_radians(b)  # a piece would mislead
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        fivecal.load_dataset(tmp_path / "sweep.json")
-        whole = [str(x.message) for x in caught]
-        caught.clear()
-        columnar.convert(tmp_path / "sweep.json", tmp_path / "sweep.parquet", rows=10, stream_bytes=0)
-        piece = [str(x.message) for x in caught]
+    whole, piece = _warnings_of_load_and_streamed_convert(tmp_path, "sweep")
     assert piece == whole == []
     # and a trace in radians is warned about once, as by the whole load
     axes["B"] = np.radians(b)
@@ -582,11 +588,5 @@ def test_the_plausibility_checks_see_the_whole_file_not_a_piece(tmp_path):
         ds = fivecal.ball_dataset(m, "ball3d", axes, [0, 0, 100], [100, 0, 0], measured=np.zeros((n, 3)),
                                   setup="R1")
         fivecal.save_dataset(ds, tmp_path / "rad.json")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        fivecal.load_dataset(tmp_path / "rad.json")
-        whole = [str(x.message) for x in caught]
-        caught.clear()
-        columnar.convert(tmp_path / "rad.json", tmp_path / "rad.parquet", rows=10, stream_bytes=0)
-        piece = [str(x.message) for x in caught]
+    whole, piece = _warnings_of_load_and_streamed_convert(tmp_path, "rad")
     assert len(whole) == 1 and piece == whole
