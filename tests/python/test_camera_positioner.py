@@ -13,6 +13,7 @@ single weak parameter is never "confounded with each other", and
 chose."""
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import os
@@ -24,6 +25,7 @@ import fivecal
 from fivecal import _core, guards
 from fivecal.cli import main
 from fivecal.io import import_dataset
+from fivecal.report import document
 
 ROOT = os.path.join(os.path.dirname(__file__), "..", "..")
 EX = os.path.join(ROOT, "examples", "camera_positioner")
@@ -257,3 +259,24 @@ def test_location_names_the_left_out_error_its_estimates_would_carry():
     seen = r2.values["EA0C"] - r.values["EA0C"]
     assert seen == pytest.approx(moves["EA0C"] * dy, rel=0.05)
     assert abs(seen) > 4 * r2.std["EA0C"]  # a confident wrong EA0C, had the result not said so
+
+
+def test_the_report_banner_is_amber_when_a_left_out_error_is_carried():
+    """A result whose only reservation is a left-out error carried into an
+    estimate beyond its σ is not a green OK: the banner says OK WITH
+    RESERVATIONS and names the estimate. The same findings without the
+    carried error are green (so the test sees the carried error, not another
+    reservation)."""
+    m = fivecal.Machine.load(MACHINE)
+    d = fivecal.simulate(m, LOGS.plan(), errors=LOGS.TRUTH, setup=LOGS.SETUP,
+                         sigma={"pose": 0.1, "pose_angle": 3e-4}, seed=7).to_dict()
+    d["instruments"] = {"CAM": {"sigma": [0.1, 0.1, 0.1, 3e-4, 3e-4, 3e-4]}}
+    r = fivecal.identify(fivecal.Dataset.from_dict(d), "location")
+    fd = guards.findings(r)
+    assert any(c.estimate == "EA0C" for c in fd.carried)
+    only_carried = dataclasses.replace(fd, undetermined=[], partly=[], implausible=[], inseparable=[])
+    banner = document._verdict_banner(r, only_carried)
+    assert "class='box warn'" in banner and "OK WITH RESERVATIONS" in banner
+    assert "EA0C" in banner and "left out" in banner
+    clean = document._verdict_banner(r, dataclasses.replace(only_carried, carried=[]))
+    assert "class='box ok'" in clean and "RESERVATIONS" not in clean

@@ -198,7 +198,8 @@ def _verdict_banner(result, fd, standing=None, anchor: bool = True) -> str:
     amber UNDECIDED or ALARM (undecided against a tolerance; a change the
     history's CUSUM detected at this calibration) and amber OK WITH
     RESERVATIONS, green OK only for a usable fit with nothing left
-    undetermined or inseparable that passes whatever it was graded against.
+    undetermined or inseparable and no left-out error carried into an
+    estimate beyond its σ, that passes whatever it was graded against.
     ``anchor``: the report's one ``id='verdict'``; a notebook page shows many
     results, and an id must be unique in a page."""
     a = fd.assessment
@@ -208,7 +209,7 @@ def _verdict_banner(result, fd, standing=None, anchor: bool = True) -> str:
                 f"{_e(a.reason[:1].upper() + a.reason[1:])}. Do not compensate a machine with these "
                 "values: compensation, error tables and G-code refuse this result (force=True / "
                 "<code>--force</code> only to inspect it). The values below are shown for diagnosis.</div>")
-    cls = "warn" if (fd.undetermined or fd.inseparable or fd.implausible or fd.partly) else "ok"
+    cls = "warn" if (fd.undetermined or fd.inseparable or fd.implausible or fd.partly or fd.carried) else "ok"
     notes = []
     if fd.undetermined:
         notes.append(f"{len(fd.undetermined)} parameters not determined by this data (left out of "
@@ -219,6 +220,11 @@ def _verdict_banner(result, fd, standing=None, anchor: bool = True) -> str:
         notes.append(f"implausible values: {', '.join(fd.implausible)}")
     if fd.inseparable:
         notes.append(f"{len(fd.inseparable)} pairs with |r| ≥ {_NEAR_R:g}")
+    if fd.carried:
+        # their σ assumes the left-out error is 0: a plausible value moves them by more
+        moved = list(dict.fromkeys(c.estimate for c in fd.carried))
+        notes.append(f"{_count(len(moved), 'estimate')} ({guards.name_list(moved)}) would move by more than "
+                     f"{guards.CARRIED_SIGMAS:g} σ under an error the preset left out")
     grade = "OK WITH RESERVATIONS" if cls == "warn" else "OK"
     head = []
     if standing is not None and standing.grade == "fail":
