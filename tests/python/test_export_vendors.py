@@ -276,3 +276,30 @@ def test_an_identified_tool_length_error_reaches_the_vendors_tool_length(head_ch
     sigma_mm = _GUARD_UNITS[value["unit"]][1] * value["sigma"]
     assert sigma_mm >= 0.9 * tip["std"], (value["name"], sigma_mm, tip["std"])
     assert abs(size - TOOL_LENGTH_ERROR) < 3 * sigma_mm, (value["name"], size, sigma_mm)
+
+
+@pytest.mark.parametrize("vendor", VENDORS)
+def test_max_change_off_leaves_the_old_check_on(check, vendor, capsys):
+    """--max-change off switches the change guard off, not the check that
+    --old describes the machine file's controller: --old values 1 mm from the
+    machine file's pivot are still refused (at the default limits) until
+    --force-old."""
+    d, _, _ = check
+    machine = os.path.join(MACHINES, "c600u.json")
+    doc = json.load(open(machine))
+    doc["axes"]["C"]["point"] = [float(x) + (1.0 if i == 0 else 0.0) for i, x in enumerate(doc["axes"]["C"]["point"])]
+    moved = d / "c600u_moved.json"
+    moved.write_text(json.dumps(doc))
+    first = d / f"moved-{vendor}"
+    assert main(["export", vendor, str(d / "check.json"), "--machine", str(moved), "--out", str(first),
+                 *_sets(vendor)]) == 0
+    old = first / next(f for f in sorted(os.listdir(first)) if f.startswith(vendor))
+    base = ["export", vendor, str(d / "check.json"), "--machine", machine, "--old", str(old),
+            "--max-change", "off", *_sets(vendor)]
+    capsys.readouterr()
+    assert main([*base, "--out", str(d / f"off1-{vendor}")]) == 2
+    err = capsys.readouterr().err
+    assert "--old" in err and "against the machine file" in err and "--force-old" in err, err
+    assert not os.path.exists(d / f"off1-{vendor}")
+    assert main([*base, "--out", str(d / f"off2-{vendor}"), "--force-old"]) == 0
+    capsys.readouterr()

@@ -120,9 +120,12 @@ def _run_vendor(args) -> int:
         # the identification is relative to the machine file: a controller
         # running other values than the file states has another nominal
         differs = [dict(v, change=float(d)) for v, d in zip(exp.values, exp.old_minus_nominal)]
+        # 'off' is the change guard's switch; this one is --force-old's, so it
+        # keeps the default limits when the change guard is off
+        old_limits = limits if limits is not None else {"mm": L.DEFAULT_MAX_CHANGE, "rad": L.DEFAULT_MAX_CHANGE_RAD}
         L.check_changes(f"--old {args.old} against the machine file {args.machine} (the identified errors are "
                         "relative to the machine file: make it describe what the controller runs, or --force-old)",
-                        _guarded(differs, "change"), limits, args.force or args.force_old)
+                        _guarded(differs, "change"), old_limits, args.force or args.force_old)
     L.check_changes(f"{args.vendor} values (--force-change writes them anyway)", _guarded(exp.values, "change"),
                     limits, args.force or args.force_change)
     contents = {f"{args.vendor}{suffix}": text for suffix, text in writer.write(exp, machine).items()}
@@ -300,12 +303,12 @@ def _register_vendor(esub, RD, vendor: str, writer) -> None:
     pv.add_argument("--max-change", default=f"{L.DEFAULT_MAX_CHANGE},{L.DEFAULT_MAX_CHANGE_RAD}",
                     help=f"plausibility limit on any value's change, MM[,RAD] (default {L.DEFAULT_MAX_CHANGE} "
                     f"mm, {L.DEFAULT_MAX_CHANGE_RAD} rad; degrees and direction components by their angle; "
-                    "'off' switches it off)")
+                    "'off' switches the change guard off; the --old check then keeps the defaults)")
     pv.add_argument("--force-change", action="store_true", help="write a change beyond --max-change (the "
                     "other guards stay)")
     pv.add_argument("--force-old", action="store_true", help="take --old values that differ from the machine "
-                    "file's nominal beyond --max-change (e.g. a controller whose origin is not the machine "
-                    "file's; the other guards stay)")
+                    "file's nominal beyond --max-change (the defaults when it is 'off'; e.g. a controller whose "
+                    "origin is not the machine file's; the other guards stay)")
     pv.add_argument("--force", action="store_true", help="all of --force-change and --force-old, and use a "
                     "result that is not usable or has no covariance; only to inspect the values")
     pv.set_defaults(func=_run_vendor, vendor=vendor, out_is_folder=True)
