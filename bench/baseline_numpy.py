@@ -439,13 +439,13 @@ def lm(evaluate, x0, max_iterations=100):
             if radius < 1e-32:
                 break
     return {"x": x, "cost": c, "converged": converged, "iterations": it, "jacobian_evaluations": nj,
-            "residual_evaluations": nr, "JtJ": J.T @ J}
+            "residual_evaluations": nr, "JtJ": J.T @ J, "r": r, "J": J}
 
 
 # ---- estimate "auto": hierarchical prior, evidence loop, variance components ----
 #
 # fivecal's identify(ds, "auto") (cpp/src/solve/identify.cc, AdaptHyperparameters)
-# written with numpy/SciPy: every candidate under a Gaussian prior (mean 0,
+# written with numpy: every candidate under a Gaussian prior (mean 0,
 # the documented sigma of its class), the class scales lambda_k in [1e-3, 1]
 # on those sigmas by MacKay's evidence fixed point
 #     lambda_k^2 = sum_j (theta_j / s_j)^2 / sum_j gamma_j,
@@ -460,9 +460,6 @@ def lm(evaluate, x0, max_iterations=100):
 
 MIN_CLASS_SCALE = 1e-3
 MIN_REDUNDANCY = 5.0
-# Finite-difference step in prior sigmas: the Jacobian then within ~3e-6
-# relative of the exact one on TANGO (truncation and rounding balanced).
-AUTO_FD_STEP = 1e-5
 # A probe touch of any kind is one instrument (fivecal's noise class "probe");
 # the ball instruments are each their own.
 NOISE_GROUP = {"facet": "probe", "sphere": "probe", "dbb": "dbb", "ball3d": "ball3d"}
@@ -582,71 +579,66 @@ def auto_covariance(Jd, lam_p, chi2, n_rows):
 
 
 def identify_auto(dataset, names, variance_components=False, setup=None, max_rounds=60):
-    """estimate="auto" with numpy/SciPy over ``names`` (fivecal's candidates,
-    ``Result.estimated``). Each MAP fit is scipy least_squares (2-point
-    finite differences, as ``fit``, with a step of AUTO_FD_STEP) on the
-    weighted rows augmented by the prior rows u / lambda, in u = theta /
-    documented sigma: in those units one step suits every error, a cubic
-    motion's as a location's. Returns a dict: values, std (dicts by name), class_scales,
-    variance_factors, rounds, function_evaluations."""
+    """estimate="auto" with numpy over ``names`` (fivecal's candidates,
+    ``Result.estimated``), as a strong numpy user writes it: each MAP fit is
+    ``lm`` (fivecal's Levenberg-Marquardt rule, warm-started from the last
+    round) on FusedProblem's weighted rows, with their exact dual-number
+    Jacobian, augmented by the prior rows u / lambda, in u = theta /
+    documented sigma; the evidence and variance updates use the Jacobian
+    ``lm`` ends on (no extra evaluation). Returns a dict: values, std (dicts
+    by name), class_scales, variance_factors, rounds, function_evaluations
+    (costed without derivatives) and jacobian_evaluations."""
     a = AutoSetup(dataset, names) if setup is None else setup
-    prob, prior, n = a.prob, a.prior, len(a.names)
+    if getattr(a, "fused", None) is None:
+        a.fused = FusedProblem(dataset, a.names)   # built once per setup, like the JAX baseline's trace
+    fused = a.fused
+    prior, n, m = a.prior, len(a.names), a.n_rows
     lam = np.ones(len(a.classes))
     factor = np.ones(len(a.groups))
     tol = 1e-3 if variance_components else 0.01
     u = np.zeros(n)
-    nfev = 0
+    counts = {"residual": 0, "jacobian": 0}
 
-    def map_fit(u0, lam_p, sig):
-        last = {}
+    def map_fit(u0, lam_p, f_rows):
+        prior_rows = np.diag(1.0 / lam_p)
 
-        def fun(x):
-            nonlocal nfev
-            nfev += 1
-            f = np.concatenate([prob.residuals(dict(zip(a.names, x * prior))) / sig, x / lam_p])
-            last["x"], last["f"] = x.copy(), f
-            return f
+        def evaluate(x, jacobian=True):
+            r, J = fused.evaluate(x * prior, jacobian)
+            r = np.concatenate([r / f_rows, x / lam_p])
+            if J is None:
+                return r, None
+            return r, np.vstack([J * prior[None, :] / f_rows[:, None], prior_rows])
 
-        def jac(x):
-            # 2-point differences with a step of AUTO_FD_STEP prior sigma
-            # (SciPy's relative sqrt(eps) step is 1e-8 of a prior sigma at
-            # most: the rounding of the ~500 mm coordinates the residuals are
-            # differences of then put percent errors on the weakly seen
-            # columns and moved the optimum by ~0.006 sigma).
-            f0 = last["f"] if "x" in last and np.array_equal(last["x"], x) else fun(x)
-            cols = [(fun(x + AUTO_FD_STEP * e) - f0) / AUTO_FD_STEP for e in np.eye(n)]
-            return np.stack(cols, axis=1)
-
-        # u is already scaled (prior units), hence x_scale=1.
-        return least_squares(fun, u0, jac=jac, method="trf", x_scale=1.0, ftol=1e-12, xtol=1e-12, gtol=1e-12)
+        sol = lm(evaluate, u0)
+        counts["residual"] += sol["residual_evaluations"]
+        counts["jacobian"] += sol["jacobian_evaluations"]
+        return sol
 
     rounds = 0
     for rounds in range(1, max_rounds + 1):
         lam_p = a.lam_per_name(lam)
-        sig = prob.sigma * a.factor_per_row(factor)
-        sol = map_fit(u, lam_p, sig)
-        u = sol.x
-        Jd = sol.jac[: a.n_rows]
+        sol = map_fit(u, lam_p, a.factor_per_row(factor))
+        u = sol["x"]
+        Jd = sol["J"][:m]
         new_lam, Ninv = evidence_update(a.members, u, Jd, lam_p)
         change = float(np.max(np.abs(np.log(new_lam / lam)), initial=0.0))
         lam = new_lam
         if variance_components:
-            new_f, _ = variance_update(a.group_rows, factor, sol.fun[: a.n_rows] * (a.row_group >= 0), Jd, Ninv)
+            new_f, _ = variance_update(a.group_rows, factor, sol["r"][:m] * (a.row_group >= 0), Jd, Ninv)
             change = max(change, float(np.max(np.abs(np.log(new_f / factor)), initial=0.0)))
             factor = new_f
         if change < tol:
             break
     lam_p = a.lam_per_name(lam)
-    sig = prob.sigma * a.factor_per_row(factor)
-    sol = map_fit(u, lam_p, sig)
-    Jd = sol.jac[: a.n_rows]
-    r_w = sol.fun[: a.n_rows]
-    Cs = auto_covariance(Jd, lam_p, float(r_w @ r_w), a.n_rows)
+    sol = map_fit(u, lam_p, a.factor_per_row(factor))
+    Jd, r_w = sol["J"][:m], sol["r"][:m]
+    Cs = auto_covariance(Jd, lam_p, float(r_w @ r_w), m)
     std = prior * np.sqrt(np.maximum(np.diag(Cs), 0.0))
-    return {"values": dict(zip(a.names, sol.x * prior)), "std": dict(zip(a.names, std)),
+    return {"values": dict(zip(a.names, sol["x"] * prior)), "std": dict(zip(a.names, std)),
             "class_scales": dict(zip(a.classes, lam)),
             "variance_factors": dict(zip(a.groups, factor)) if variance_components else {},
-            "rounds": rounds, "function_evaluations": int(nfev)}
+            "rounds": rounds, "function_evaluations": counts["residual"],
+            "jacobian_evaluations": counts["jacobian"]}
 
 
 # ---- test design: greedy + exchange D-optimal search ----------------------------

@@ -204,7 +204,7 @@ def check_auto_agreement(agreement, who):
 
 def small_auto_problem():
     """A smaller "auto" problem than the bench's (61 unknowns, not 166, so
-    the finite-difference baseline takes seconds, not minutes): TANGO S3
+    the baselines take seconds, not a minute): TANGO S3
     data with every motion error but the scale gains fixed. Its loop still
     shrinks three classes and estimates the probe's noise. Used by the
     tests and by ``--quick``."""
@@ -219,11 +219,12 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
     """estimate="auto" on the TANGO touches: every candidate error under its
     prior with the class scales found by the evidence (a loop of MAP fits),
     optionally with variance components. The baselines run the same loop over
-    fivecal's candidates (baseline_numpy.identify_auto: SciPy MAP fits with
-    finite differences; baseline_jax.JaxAuto: a jitted LM round with jacfwd)
+    fivecal's candidates (baseline_numpy.identify_auto: fivecal's LM rule on
+    the dual-number Jacobian of the fused model; baseline_jax.JaxAuto: a
+    jitted LM round with jacfwd)
     and must reproduce fivecal's values, sigmas, class scales and noise
     factors. The numpy baseline runs ``baseline_repeat`` times (default
-    ``repeat``; on the full problem one run takes minutes).
+    ``repeat``; on the full problem one run takes about 30 s).
     ``dataset``, ``fix``: another problem (``small_auto_problem``)."""
     ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=3) if dataset is None else dataset
     fix = list(fix or [])
@@ -231,7 +232,7 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
     t_f, runs_f, r = timed(lambda: fivecal.identify(ds, "auto", fix=fix, variance_components=vc), repeat)
     if baseline_repeat == 0:
         why = ("not run in this bench run (bench/run.py --auto-baselines 0): one numpy run of the evidence "
-               "loop takes about 10 min and a JAX one minutes after a compile of minutes")
+               "loop takes about 30 s and a JAX one about a minute after a compile of minutes")
         return {"case": "tango_auto" + ("_vce" if vc else ""),
                 "size": {"touches": len(ds), "unknowns": r.n_parameters, "rows": r.n_observations},
                 "fivecal_s": t_f, "runs_fivecal_s": runs_f, "fivecal_iterations": r.iterations,
@@ -271,6 +272,7 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
             "fivecal_s": t_f, "runs_fivecal_s": runs_f, "fivecal_iterations": r.iterations,
             "baseline_s": t_b, "ratio": t_b / t_f, "runs_baseline_s": runs_b,
             "baseline_rounds": b["rounds"], "baseline_function_evaluations": b["function_evaluations"],
+            "baseline_jacobian_evaluations": b["jacobian_evaluations"],
             "class_scales": {c: float(v) for c, v in r.class_scales.items()},
             **({"variance_factors": {g: float(r.variance_components[g]["factor"]) for g in groups}} if vc else {}),
             **agree, "note": note}
@@ -704,8 +706,8 @@ def readme_section(doc):
              + "; medians of at least 5 runs, the numpy baseline "
              "(`bench/baseline_numpy.py`: the model of `bench/fused_model.py`, one expression per matrix "
              "entry specialised to the estimated parameters, on numpy arrays, exact Jacobians by forward-mode "
-             "dual numbers, fivecal's Levenberg–Marquardt start and stopping rule; SciPy's `least_squares` "
-             "with finite differences only in the `auto` loop, central differences in the design search) "
+             "dual numbers, fivecal's Levenberg–Marquardt start and stopping rule, in the `auto` loop too; "
+             "central differences for the one Jacobian of the design search) "
              + jax_words + "run in the same process on the same data"
              + ("; JAX's first call (trace, XLA compile and one run) is shown apart from its warm median "
                 "and left out of its ratio, and XLA picks its own threads (it may use every core)"
@@ -875,9 +877,9 @@ def main(argv=None):
     p.add_argument("--out", default=os.path.join(HERE, "results.json"))
     p.add_argument("--auto-baselines", type=int, default=None, metavar="N",
                    help="numpy runs of the 'auto' cases (default: as many as fivecal's, 5; one takes about "
-                   "4 min; 0: neither baseline)")
+                   "30 s; 0: neither baseline)")
     p.add_argument("--auto-jax-runs", type=int, default=None, metavar="N",
-                   help="warm JAX runs of the 'auto' cases (default: as many as fivecal's; one takes minutes)")
+                   help="warm JAX runs of the 'auto' cases (default: as many as fivecal's; one takes about a minute)")
     p.add_argument("--auto-from", metavar="JSON", help="take the two 'auto' cases from this results file "
                    "(bench/run.py --only-auto --out JSON) instead of running them")
     p.add_argument("--only-auto", action="store_true", help="run the two 'auto' cases only")
@@ -916,7 +918,7 @@ def main(argv=None):
         results.append(case_tango(s, repeat, 1 if a.quick else 5))
         print(table(results[-1:]), flush=True)
     if a.auto_from:
-        # measured apart (a numpy run of the evidence loop takes minutes)
+        # measured apart (a JAX run of the evidence loop takes about a minute)
         with open(a.auto_from) as f:
             apart = json.load(f)
     for vc in (False, True):
@@ -924,7 +926,7 @@ def main(argv=None):
             results.append({**next(r for r in apart["results"] if r["case"] == "tango_auto" + ("_vce" if vc else "")),
                             "measured_apart": apart["machine"]["date"]})
         elif a.quick:
-            # the tests' smaller problem: the full one's baselines take minutes a run
+            # the tests' smaller problem: the full one's JAX baseline takes a minute a run
             ds, fix = small_auto_problem()
             results.append(case_tango_auto(3, vc, baseline_repeat=a.auto_baselines, jax_repeat=a.auto_jax_runs,
                                            dataset=ds, fix=fix))
