@@ -33,6 +33,7 @@ import fivecal  # noqa: E402
 from fivecal.procedures import tango  # noqa: E402
 
 import baseline_numpy as base  # noqa: E402
+import versus  # noqa: E402
 
 try:
     import baseline_jax as jbase  # noqa: E402
@@ -691,6 +692,22 @@ def previous_paragraph(doc):
             + "; ".join(cells) + "."]
 
 
+def versus_paragraph(doc):
+    """fivecal's own times against another build, measured in this run
+    (bench/run.py --versus TREE, bench/versus.py): interleaved runs, both
+    outputs compared."""
+    v = doc.get("versus")
+    if not v:
+        return []
+    cells = [f"{r['case']} {_ms(r['this_s'], 2)} against {_ms(r['other_s'], 2)} ({r['this_over_other']:.2f})"
+             + ("" if r["agree"] else " (outputs differ)") for r in v["results"]]
+    slower = [r["case"] for r in v["results"] if r["this_over_other"] > 1.05]
+    return ["", f"fivecal's own time against commit {v['other']['commit']} in the same run (`bench/versus.py`: "
+            f"{v['rounds']} interleaved runs of each build, its median; both builds' outputs agree to 1e-4 unless "
+            "said): " + "; ".join(cells) + ". "
+            + (f"Slower by more than 5 %: {', '.join(slower)}." if slower else "No case is slower by more than 5 %.")]
+
+
 def readme_section(doc):
     res = {r["case"]: r for r in doc["results"]}
     jax_measured = any("jax_s" in r for r in doc["results"])
@@ -790,6 +807,7 @@ def readme_section(doc):
                   + (f" (measured {c['measured']}, not in this run: build/ctest absent)" if "measured" in c else "")
                   + "."]
     lines += previous_paragraph(doc)
+    lines += versus_paragraph(doc)
     lines += ["", targets_paragraph(doc)]
     lines.append("<!-- performance:end -->")
     return "\n".join(lines)
@@ -883,6 +901,8 @@ def main(argv=None):
     p.add_argument("--auto-from", metavar="JSON", help="take the two 'auto' cases from this results file "
                    "(bench/run.py --only-auto --out JSON) instead of running them")
     p.add_argument("--only-auto", action="store_true", help="run the two 'auto' cases only")
+    p.add_argument("--versus", metavar="TREE", help="also time fivecal's side of every case with the build of "
+                   "another checkout, interleaved with this one (bench/versus.py), and keep it in results.json")
     p.add_argument("--numpy-runs-1e6", type=int, default=5, metavar="N",
                    help="runs of the numpy baseline of the 1e6-sample fit (about 2 min each; 0: none)")
     a = p.parse_args(argv)
@@ -940,6 +960,8 @@ def main(argv=None):
     results += optional_cases(a.quick, repeat)
     doc = {"machine": {**machine_info(), "load_average_before": load_before, "load_average_after": os.getloadavg()},
            "quick": a.quick, "results": results, "choices": core_choices(5 if a.quick else 21)}
+    if a.versus:
+        doc["versus"] = versus.compare(a.versus, 5)
     if previous:
         doc["previous"] = previous
         if not doc["choices"]:

@@ -168,25 +168,17 @@ class Side:
         self.proc.wait()
 
 
-def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("other", help="the other checkout (its python/fivecal holds its built _core)")
-    p.add_argument("--rounds", type=int, default=5, help="timed runs per side and case (median reported)")
-    p.add_argument("--cases", default=",".join(CASES), help="comma-separated subset of: " + ", ".join(CASES))
-    p.add_argument("--out", default=os.path.join(HERE, "versus.json"))
-    a = p.parse_args(argv)
-    cases = [c for c in a.cases.split(",") if c]
-    unknown = sorted(set(cases) - set(CASES))
-    if unknown:
-        p.error(f"--cases: unknown {', '.join(unknown)}")
-    sides = [Side("this", os.path.join(HERE, "..")), Side("other", a.other)]
+def compare(other: str, rounds: int = 5, cases=CASES, log=print) -> dict:
+    """fivecal's own time of each case in this tree and in ``other``,
+    interleaved; the document bench/run.py --versus keeps in results.json."""
+    sides = [Side("this", os.path.join(HERE, "..")), Side("other", other)]
     rows = []
     load_before = os.getloadavg()
     try:
         for case in cases:
             runs = {s.name: [] for s in sides}
             summary = {}
-            for k in range(a.rounds):
+            for k in range(rounds):
                 for s in (sides if k % 2 == 0 else sides[::-1]):
                     r = s.run(case)
                     runs[s.name].append(r["seconds"])
@@ -199,15 +191,29 @@ def main(argv=None):
                    "iterations": {n: summary[n].get("iterations") for n in summary},
                    "load_average": os.getloadavg()[0]}
             rows.append(row)
-            print(f"{case:24s} this {med['this'] * 1e3:10.2f} ms   other {med['other'] * 1e3:10.2f} ms   "
-                  f"this/other {row['this_over_other']:.3f}   agree: {row['agree']} ({diff:.1e})", flush=True)
+            log(f"{case:24s} this {med['this'] * 1e3:10.2f} ms   other {med['other'] * 1e3:10.2f} ms   "
+                f"this/other {row['this_over_other']:.3f}   agree: {row['agree']} ({diff:.1e})")
     finally:
         for s in sides:
             s.close()
-    doc = {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "rounds": a.rounds,
-           "this": {"tree": sides[0].tree, "commit": sides[0].commit},
-           "other": {"tree": sides[1].tree, "commit": sides[1].commit},
-           "load_average_before": load_before, "load_average_after": os.getloadavg(), "results": rows}
+    return {"date": time.strftime("%Y-%m-%d %H:%M:%S"), "rounds": rounds,
+            "this": {"tree": sides[0].tree, "commit": sides[0].commit},
+            "other": {"tree": sides[1].tree, "commit": sides[1].commit},
+            "load_average_before": load_before, "load_average_after": os.getloadavg(), "results": rows}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("other", help="the other checkout (its python/fivecal holds its built _core)")
+    p.add_argument("--rounds", type=int, default=5, help="timed runs per side and case (median reported)")
+    p.add_argument("--cases", default=",".join(CASES), help="comma-separated subset of: " + ", ".join(CASES))
+    p.add_argument("--out", default=os.path.join(HERE, "versus.json"))
+    a = p.parse_args(argv)
+    cases = [c for c in a.cases.split(",") if c]
+    unknown = sorted(set(cases) - set(CASES))
+    if unknown:
+        p.error(f"--cases: unknown {', '.join(unknown)}")
+    doc = compare(a.other, a.rounds, cases)
     with open(a.out, "w") as f:
         json.dump(doc, f, indent=1)
     print(f"written {a.out}")
