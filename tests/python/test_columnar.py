@@ -194,8 +194,10 @@ def test_mixed_kinds_across_many_batches_keep_their_order(tmp_path, monkeypatch)
     assert columnar.read_parquet(tmp_path / "b.parquet").to_dict() == ds.to_dict()
 
 
-@pytest.mark.parametrize("make", ["dbb_ball3d", "facet", "pose"])
+@pytest.mark.parametrize("make", sorted(DATASETS))
 def test_identify_on_json_and_parquet_is_bit_identical(make, tmp_path):
+    """The columnar path (Parquet columns; a trace's column blocks) gives the
+    fit of the per-observation path (JSON objects) on every kind, bit for bit."""
     ds = DATASETS[make]()
     fivecal.save_dataset(ds, tmp_path / "a.json")
     fivecal.save_dataset(ds, tmp_path / "a.parquet")
