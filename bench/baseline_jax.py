@@ -103,7 +103,7 @@ def forward_kinematics(machine, names):
 FTOL, XTOL, GTOL, MIN_RELATIVE_DECREASE = 1e-10, 1e-12, 1e-16, 1e-3
 
 
-def lm(fun, x0, max_iterations=100):
+def lm(fun, x0, max_iterations=100, with_rows=False):
     """Levenberg-Marquardt on fun: x -> residual vector with fivecal's start
     and stopping rule, in one lax.while_loop (it jits and vmaps). Each pass
     of the loop evaluates one point: the start or a refresh (residuals and
@@ -114,7 +114,8 @@ def lm(fun, x0, max_iterations=100):
 
     Returns (x, Jacobian evaluations, cost, converged, iterations (steps
     solved, as fivecal's Result.iterations), residual-only evaluations,
-    J^T J at x)."""
+    J^T J at x) and, ``with_rows``, the residuals and Jacobian at x (what
+    the evidence loop reuses instead of evaluating them again)."""
     jac = jax.jacfwd(lambda x: (lambda f: (f, f))(fun(x)), has_aux=True)
     p = x0.shape[0]
     m = jax.eval_shape(fun, x0).shape[0]
@@ -159,8 +160,8 @@ def lm(fun, x0, max_iterations=100):
     i0 = jnp.asarray(0)
     state = (x0, jnp.zeros(m), jnp.zeros((m, p)), jnp.asarray(0.0), jnp.asarray(1e12), jnp.asarray(2.0), i0, i0,
              i0, jnp.asarray(False), jnp.asarray(False), x0, i0, jnp.asarray(0.0))
-    x, _, J, c, _, _, it, nj, nr, _, ok, _, _, _ = lax.while_loop(lambda s: ~s[9], body, state)
-    return x, nj, c, ok, it, nr, J.T @ J
+    x, r, J, c, _, _, it, nj, nr, _, ok, _, _, _ = lax.while_loop(lambda s: ~s[9], body, state)
+    return (x, nj, c, ok, it, nr, J.T @ J) + ((r, J) if with_rows else ())
 
 
 # ---- the fits of bench/run.py ---------------------------------------------------
@@ -307,14 +308,14 @@ class JaxAuto:
         def data_rows(u, f_rows):
             return jp.residuals(u * prior) / (sigma * f_rows)
 
-        jac_data = jax.jacfwd(data_rows)
-
         def one_round(u, lam, factor):
             lam_p = jnp.append(lam, 1.0)[cls_idx]
             f_rows = jnp.append(factor, 1.0)[row_group]
-            u, evaluations, _, conv = lm(lambda x: jnp.concatenate([data_rows(x, f_rows), x / lam_p]), u)[:4]
-            Jd = jac_data(u, f_rows)
-            r = data_rows(u, f_rows)
+            out = lm(lambda x: jnp.concatenate([data_rows(x, f_rows), x / lam_p]), u, with_rows=True)
+            u, evaluations, conv = out[0], out[1], out[3]
+            # the data rows and their Jacobian where lm stopped (a strong user
+            # does not evaluate them again)
+            r, Jd = out[7][:m], out[8][:m]
             N = Jd.T @ Jd
             Ninv = jnp.linalg.inv(N + jnp.diag(1.0 / lam_p ** 2))
             gamma = jnp.clip(1.0 - jnp.diag(Ninv) / lam_p ** 2, 0.0, 1.0)
@@ -336,7 +337,7 @@ class JaxAuto:
             p_eff = p - jnp.trace(jnp.linalg.inv(lam_p[:, None] * N * lam_p[None, :] + jnp.eye(p)))
             dof = jnp.maximum(1.0, m - jnp.round(p_eff))
             std = prior * jnp.sqrt(jnp.maximum(jnp.maximum(1.0, (r @ r) / dof) * jnp.diag(Cs), 0.0))
-            return u, new, f, change, conv, evaluations + 1, std
+            return u, new, f, change, conv, evaluations, std
 
         self._round = jax.jit(one_round)
         self._p = p
