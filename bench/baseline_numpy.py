@@ -438,8 +438,8 @@ def lm(evaluate, x0, max_iterations=100):
             df *= 2.0
             if radius < 1e-32:
                 break
-    return {"x": x, "cost": c, "converged": converged, "iterations": it, "jacobian_evaluations": nj,
-            "residual_evaluations": nr, "JtJ": J.T @ J, "r": r, "J": J}
+    return {"x": x, "cost": c, "converged": bool(converged), "iterations": int(it),
+            "jacobian_evaluations": int(nj), "residual_evaluations": int(nr), "JtJ": J.T @ J, "r": r, "J": J}
 
 
 # ---- estimate "auto": hierarchical prior, evidence loop, variance components ----
@@ -637,8 +637,8 @@ def identify_auto(dataset, names, variance_components=False, setup=None, max_rou
     return {"values": dict(zip(a.names, sol["x"] * prior)), "std": dict(zip(a.names, std)),
             "class_scales": dict(zip(a.classes, lam)),
             "variance_factors": dict(zip(a.groups, factor)) if variance_components else {},
-            "rounds": rounds, "function_evaluations": counts["residual"],
-            "jacobian_evaluations": counts["jacobian"]}
+            "rounds": rounds, "function_evaluations": int(counts["residual"]),
+            "jacobian_evaluations": int(counts["jacobian"])}
 
 
 # ---- test design: greedy + exchange D-optimal search ----------------------------

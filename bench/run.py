@@ -703,7 +703,8 @@ def versus_paragraph(doc):
              + ("" if r["agree"] else " (outputs differ)") for r in v["results"]]
     slower = [r["case"] for r in v["results"] if r["this_over_other"] > 1.05]
     return ["", f"fivecal's own time against commit {v['other']['commit']} in the same run (`bench/versus.py`: "
-            f"{v['rounds']} interleaved runs of each build, its median; both builds' outputs agree to 1e-4 unless "
+            f"{v['rounds']} interleaved rounds of each build, a round the fastest of as many runs as take 0.3 s, "
+            "the median of the rounds; both builds' outputs agree to 1e-4 unless "
             "said): " + "; ".join(cells) + ". "
             + (f"Slower by more than 5 %: {', '.join(slower)}." if slower else "No case is slower by more than 5 %.")]
 
@@ -888,6 +889,22 @@ def update_readme(doc, path):
         f.write(text)
 
 
+def _write_json(path, doc):
+    """Write-then-rename: a run that fails while writing leaves the old file."""
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(doc, f, indent=1, default=_plain)
+    os.replace(tmp, path)
+
+
+def _plain(o):
+    """numpy scalars as JSON numbers: a run of half an hour must not be lost
+    at its last line to an int64 a count picked up."""
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"Object of type {type(o).__name__} is not JSON serializable")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
@@ -916,8 +933,7 @@ def main(argv=None):
             old = json.load(f)
         if not old.get("quick"):
             keep = os.path.join(os.path.dirname(os.path.abspath(a.out)), "results_previous.json")
-            with open(keep, "w") as f:
-                json.dump(old, f, indent=1)
+            _write_json(keep, old)
             previous = {"machine": old["machine"], "choices": old.get("choices", []),
                         "results": [{k: r[k] for k in ("case", "fivecal_s", "ratio", "ratio_jax", "jax_s") if k in r}
                                     for r in old["results"]]}
@@ -928,10 +944,12 @@ def main(argv=None):
                                            jax_repeat=a.auto_jax_runs))
             results[-1].update(load_average_before=before, load_average_after=os.getloadavg())
         doc = {"machine": machine_info(), "quick": False, "results": results, "choices": []}
-        with open(a.out, "w") as f:
-            json.dump(doc, f, indent=1)
+        _write_json(a.out, doc)
         print(table(results))
         return 0
+    # First, in a quiet process: once JAX has run here, its thread pool
+    # disturbed the two builds' workers by tens of percent.
+    versus_doc = versus.compare(a.versus, 7) if a.versus else None
     results.append(case_forward_kinematics(20_000 if a.quick else 1_000_000, repeat))
     print(table(results[-1:]), flush=True)
     for s in ("S3", "S4"):
@@ -960,8 +978,8 @@ def main(argv=None):
     results += optional_cases(a.quick, repeat)
     doc = {"machine": {**machine_info(), "load_average_before": load_before, "load_average_after": os.getloadavg()},
            "quick": a.quick, "results": results, "choices": core_choices(5 if a.quick else 21)}
-    if a.versus:
-        doc["versus"] = versus.compare(a.versus, 5)
+    if versus_doc:
+        doc["versus"] = versus_doc
     if previous:
         doc["previous"] = previous
         if not doc["choices"]:
@@ -970,8 +988,7 @@ def main(argv=None):
                               for c in previous["choices"]]
     for c in doc["choices"]:
         print(json.dumps(c))
-    with open(a.out, "w") as f:
-        json.dump(doc, f, indent=1)
+    _write_json(a.out, doc)
     print()
     print(table(results))
     print(f"\nwritten {a.out}")

@@ -16,6 +16,15 @@
 #else
 #define FIVECAL_ISA_CLONES
 #endif
+// The chain's small helpers must be inlined into its clones: called out of
+// line they are default-ISA functions, and when this file grew (the lane
+// kernel) GCC stopped inlining RotateAbout into Chain on its own, which made
+// the forward kinematics 15 % slower (bench/versus.py against d499e5f).
+#if defined(__GNUC__)
+#define FIVECAL_CHAIN_INLINE __attribute__((always_inline)) inline
+#else
+#define FIVECAL_CHAIN_INLINE inline
+#endif
 
 namespace fivecal {
 namespace {
@@ -24,7 +33,7 @@ namespace {
 // terms are exact to double precision and several times cheaper than libm:
 // below 1e-3 the first omitted terms (x^7/5040, x^6/720) are under 1e-20
 // relative, below 0.1 (to x^9 / x^10) under 1e-18.
-inline void SinCos(double x, double* s, double* c) {
+FIVECAL_CHAIN_INLINE void SinCos(double x, double* s, double* c) {
   const double x2 = x * x;
   if (x2 < 1e-6) {
     *s = x + x * x2 * (-1.0 / 6 + x2 * (1.0 / 120));
@@ -42,7 +51,7 @@ inline void SinCos(double x, double* s, double* c) {
 // in three parts (exact for |k| < 2^20) and Taylor polynomials on
 // |r| <= pi/4 to r^15 / r^16 (first omitted terms below 7e-17 relative), so
 // within an ulp or two of libm at a third of its cost.
-inline void SinCosCommand(double x, double* s, double* c) {
+FIVECAL_CHAIN_INLINE void SinCosCommand(double x, double* s, double* c) {
   if (!(std::abs(x) < 1e5)) {
     *s = std::sin(x);
     *c = std::cos(x);
@@ -73,14 +82,14 @@ inline void SinCosCommand(double x, double* s, double* c) {
 
 // R <- R . Rot_k(angle) for a coordinate axis k: two columns change.
 template <int k>
-inline void RotateAbout(Eigen::Matrix3d* R, double s, double c) {
+FIVECAL_CHAIN_INLINE void RotateAbout(Eigen::Matrix3d* R, double s, double c) {
   constexpr int i = (k + 1) % 3, j = (k + 2) % 3;
   const Eigen::Vector3d ci = R->col(i), cj = R->col(j);
   R->col(i) = c * ci + s * cj;
   R->col(j) = c * cj - s * ci;
 }
 
-inline void RotateAbout(Eigen::Matrix3d* R, int k, double s, double c) {
+FIVECAL_CHAIN_INLINE void RotateAbout(Eigen::Matrix3d* R, int k, double s, double c) {
   switch (k) {
     case 0: RotateAbout<0>(R, s, c); break;
     case 1: RotateAbout<1>(R, s, c); break;
