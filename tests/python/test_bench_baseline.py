@@ -365,8 +365,9 @@ def test_jax_auto_is_fivecal_s_and_the_check_has_teeth():
 def test_every_case_of_the_committed_bench_carries_both_ratios_or_says_why_not():
     """bench/results.json (the figures the README prints) compares every case
     with the numpy and the JAX baselines, in medians of at least 5 runs of
-    each, with its size and the machine it ran on; a case whose baselines were
-    left out of a run says so (the 'auto' cases: minutes per baseline run)."""
+    each, with its size and the machine it ran on. No case is left out or
+    run fewer times (the 'auto' numpy baseline takes about 30 s a run since it
+    uses the fused model's exact Jacobian; the 10^6-sample numpy fit about 10 s)."""
     with open(os.path.join(ROOT, "bench", "results.json")) as f:
         doc = json.load(f)
     assert not doc["quick"]
@@ -375,24 +376,13 @@ def test_every_case_of_the_committed_bench_carries_both_ratios_or_says_why_not()
         case = r["case"]
         assert "skipped" not in r, case
         assert r["size"] and len(r["runs_fivecal_s"]) >= 5, case
-        if r.get("baseline_skipped", "").startswith("not run in this bench run"):
-            assert case.startswith("tango_auto"), case
-            continue
-        assert "jax_skipped" not in r, case
+        assert "baseline_skipped" not in r and "jax_skipped" not in r, case
         assert r["ratio"] == pytest.approx(r["baseline_s"] / r["fivecal_s"]), case
         assert r["ratio_jax"] == pytest.approx(r["jax_s"] / r["fivecal_s"]), case
         assert r["jax_compile_s"] > 0, case
         # the baselines' figures are medians of at least 5 runs too (the numpy
         # Monte Carlo: 5 single re-fits times the trial count)
-        # The harness's options run the slowest baselines fewer times (minutes
-        # to half an hour a run on 2 cores: the 'auto' cases' numpy and JAX,
-        # --auto-baselines / --auto-jax-runs; the 10^6-sample numpy fit,
-        # --numpy-runs-1e6); such a case's note says how many numpy runs its
-        # median has, and the README prints both counts.
-        reduced = case.startswith("tango_auto") or case == "ball3d_fit_1000000"
-        n_b, n_j = len(r["runs_baseline_s"]), len(r["runs_jax_s"])
-        assert n_b >= 5 or (reduced and n_b >= 1 and f"median of {n_b} run(s)" in r.get("note", "")), case
-        assert n_j >= 5 or (case.startswith("tango_auto") and n_j >= 1), case
+        assert len(r["runs_baseline_s"]) >= 5 and len(r["runs_jax_s"]) >= 5, case
         per_trial = case.startswith("monte_carlo")
         assert r["baseline_s"] == pytest.approx(statistics.median(r["runs_baseline_s"])
                                                 * (r["size"]["trials"] if per_trial else 1)), case
