@@ -14,6 +14,8 @@ checks that it computes the same thing as fivecal.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -288,10 +290,11 @@ class FusedProblem:
     """NumpyProblem's weighted probing rows (facets, spheres, scale bars; the
     TANGO fits) over ``names`` with fused_model and dual numbers.
     ``evaluate(x, jacobian)`` -> (weighted rows, their Jacobian or None);
-    ``noise`` (sigma units) is added to the weighted rows (a Monte Carlo trial)."""
+    ``noise`` (sigma units) is added to the weighted rows (a Monte Carlo trial);
+    ``prob``: the dataset's NumpyProblem when the caller has parsed it already."""
 
-    def __init__(self, dataset, names):
-        self.np = p = NumpyProblem(dataset)
+    def __init__(self, dataset, names, prob=None):
+        self.np = p = NumpyProblem(dataset) if prob is None else prob
         if p.b_idx.size:
             raise ValueError("FusedProblem: probing datasets only")
         self.names = list(names)
@@ -513,6 +516,7 @@ class AutoSetup:
     group of every residual row of NumpyProblem (scale bars: none, -1)."""
 
     def __init__(self, dataset, names, prob=None):
+        self.dataset = dataset
         self.prob = NumpyProblem(dataset) if prob is None else prob
         self.names = list(names)
         self.prior, cls = prior_sigmas(dataset, self.names)
@@ -530,6 +534,12 @@ class AutoSetup:
         self.group_rows = np.array([self.row_group == g for g in range(len(self.groups))], float).reshape(
             len(self.groups), self.row_group.size)
         self.n_rows = self.row_group.size
+
+    @functools.cached_property
+    def fused(self):
+        """The numpy baseline's problem over these names (built once per
+        setup, like the JAX baseline's trace; probing datasets only)."""
+        return FusedProblem(self.dataset, self.names, prob=self.prob)
 
     def lam_per_name(self, lam):
         return np.where(self.cls_idx >= 0, np.append(lam, 1.0)[self.cls_idx], 1.0)
@@ -589,8 +599,6 @@ def identify_auto(dataset, names, variance_components=False, setup=None, max_rou
     by name), class_scales, variance_factors, rounds, function_evaluations
     (costed without derivatives) and jacobian_evaluations."""
     a = AutoSetup(dataset, names) if setup is None else setup
-    if getattr(a, "fused", None) is None:
-        a.fused = FusedProblem(dataset, a.names)   # built once per setup, like the JAX baseline's trace
     fused = a.fused
     prior, n, m = a.prior, len(a.names), a.n_rows
     lam = np.ones(len(a.classes))

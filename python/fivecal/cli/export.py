@@ -122,7 +122,7 @@ def _run_vendor(args) -> int:
         differs = [dict(v, change=float(d)) for v, d in zip(exp.values, exp.old_minus_nominal)]
         # 'off' is the change guard's switch; this one is --force-old's, so it
         # keeps the default limits when the change guard is off
-        old_limits = limits if limits is not None else {"mm": L.DEFAULT_MAX_CHANGE, "rad": L.DEFAULT_MAX_CHANGE_RAD}
+        old_limits = limits if limits is not None else L.default_max_change()
         L.check_changes(f"--old {args.old} against the machine file {args.machine} (the identified errors are "
                         "relative to the machine file: make it describe what the controller runs, or --force-old)",
                         _guarded(differs, "change"), old_limits, args.force or args.force_old)

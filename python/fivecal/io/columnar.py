@@ -488,8 +488,6 @@ def _stream_to_json(src: str, dst, rows: int, from_parquet: bool) -> int:
     return n
 
 
-
-
 def _stream_to_parquet(src: str, dst, rows: int) -> int:
     pa = _pyarrow()
     writer = _core.ColumnWriter()

@@ -238,6 +238,11 @@ class ChangeLimitError(CorrectionLimitError):
             "the machine really is that far off")
 
 
+def default_max_change() -> Dict[str, float]:
+    """The plausibility limits by unit when ``--max-change`` gives none."""
+    return {"mm": DEFAULT_MAX_CHANGE, "rad": DEFAULT_MAX_CHANGE_RAD}
+
+
 def parse_max_change(text: str, angular: bool = False) -> Optional[Dict[str, float]]:
     """``--max-change`` as limits by unit: ``MM`` (and, with ``angular``,
     ``MM,RAD``; the other keeps its default) or ``off`` (None)."""
@@ -245,7 +250,7 @@ def parse_max_change(text: str, angular: bool = False) -> Optional[Dict[str, flo
         return None
     parts = [t.strip() for t in str(text).split(",")]
     form = "MM,RAD" if angular else "MM"
-    limits = {"mm": DEFAULT_MAX_CHANGE, "rad": DEFAULT_MAX_CHANGE_RAD}
+    limits = default_max_change()
     if len(parts) > (2 if angular else 1):
         raise ValueError(f"--max-change: expected {form} or 'off', got '{text}'")
     for unit, t in zip(("mm", "rad"), parts):
