@@ -699,12 +699,18 @@ def versus_paragraph(doc):
     v = doc.get("versus")
     if not v:
         return []
-    cells = [f"{r['case']} {_ms(r['this_s'], 2)} against {_ms(r['other_s'], 2)} ({r['this_over_other']:.2f})"
+    def ratio(r):
+        ci = r.get("ratio_ci95")
+        return f"{r['this_over_other']:.2f}" + (f", 95 % {ci[0]:.2f}–{ci[1]:.2f}" if ci else "")
+
+    cells = [f"{r['case']} {_ms(r['this_s'], 2)} against {_ms(r['other_s'], 2)} ({ratio(r)})"
              + ("" if r["agree"] else " (outputs differ)") for r in v["results"]]
     slower = [r["case"] for r in v["results"] if r["this_over_other"] > 1.05]
-    return ["", f"fivecal's own time against commit {v['other']['commit']} in the same run (`bench/versus.py`: "
-            f"{v['rounds']} interleaved rounds of each build, a round the fastest of as many runs as take 0.3 s, "
-            "the median of the rounds; both builds' outputs agree to 1e-4 unless "
+    when = f"measured apart on {v['date']}" if v.get("measured_apart") else "in the same run"
+    return ["", f"fivecal's own time against commit {v['other']['commit']} {when} (`bench/versus.py`: "
+            f"{v['rounds']} interleaved rounds of each build, a round the fastest of as many runs as take 0.3 s; "
+            "medians of the rounds, and in brackets the median of each round's ratio this / other with its "
+            "bootstrap 95 % interval; both builds' outputs agree to 1e-4 unless "
             "said): " + "; ".join(cells) + ". "
             + (f"Slower by more than 5 %: {', '.join(slower)}." if slower else "No case is slower by more than 5 %.")]
 
@@ -920,6 +926,10 @@ def main(argv=None):
     p.add_argument("--only-auto", action="store_true", help="run the two 'auto' cases only")
     p.add_argument("--versus", metavar="TREE", help="also time fivecal's side of every case with the build of "
                    "another checkout, interleaved with this one (bench/versus.py), and keep it in results.json")
+    p.add_argument("--versus-only", action="store_true",
+                   help="with --versus: run only the comparison and put it into the existing --out file (and the "
+                   "README with --readme); the cases' figures stay those of the file's own run")
+    p.add_argument("--versus-rounds", type=int, default=7, metavar="N", help="interleaved rounds of --versus")
     p.add_argument("--numpy-runs-1e6", type=int, default=5, metavar="N",
                    help="runs of the numpy baseline of the 1e6-sample fit (about 2 min each; 0: none)")
     a = p.parse_args(argv)
@@ -928,7 +938,7 @@ def main(argv=None):
     load_before = os.getloadavg()
     # The previous run's figures stay beside the new ones (its baselines were another's).
     previous = None
-    if not a.quick and not a.only_auto and os.path.exists(a.out):
+    if not a.quick and not a.only_auto and not a.versus_only and os.path.exists(a.out):
         with open(a.out) as f:
             old = json.load(f)
         if not old.get("quick"):
@@ -949,7 +959,19 @@ def main(argv=None):
         return 0
     # First, in a quiet process: once JAX has run here, its thread pool
     # disturbed the two builds' workers by tens of percent.
-    versus_doc = versus.compare(a.versus, 7) if a.versus else None
+    if a.versus_only:
+        if not a.versus:
+            p.error("--versus-only needs --versus TREE")
+        with open(a.out) as f:
+            doc = json.load(f)
+        doc["versus"] = {**versus.compare(a.versus, a.versus_rounds), "measured_apart": True}
+        _write_json(a.out, doc)
+        print(f"written {a.out}")
+        if a.readme:
+            update_readme(doc, os.path.join(HERE, "..", "README.md"))
+            print("README performance section updated")
+        return 0
+    versus_doc = versus.compare(a.versus, a.versus_rounds) if a.versus else None
     results.append(case_forward_kinematics(20_000 if a.quick else 1_000_000, repeat))
     print(table(results[-1:]), flush=True)
     for s in ("S3", "S4"):

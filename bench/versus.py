@@ -18,6 +18,13 @@ Both sides' outputs are compared (fitted values in their sigma, Monte Carlo
 spreads and forward-kinematics sums relatively, the design's chosen groups):
 the "agree" column says whether the two trees solved the same problem to
 rounding (1e-4), so a time is never compared with different work.
+
+The ratio of a case is the median over rounds of this side's time over the
+other's in the same round, with a bootstrap 95 % interval. The two runs of a
+round are seconds apart and share the machine's state; the ratio of the two
+sides' medians does not pair them, and on this VM, whose runs are bimodal
+(the same run at 8 or 11 s), it read 1.14 for a case whose paired rounds
+read 0.96 (bench/NOTES.md, session 17).
 """
 from __future__ import annotations
 
@@ -26,6 +33,7 @@ import hashlib
 import json
 import math
 import os
+import random
 import statistics
 import subprocess
 import sys
@@ -173,6 +181,18 @@ class Side:
         self.proc.wait()
 
 
+def paired_ratio(this_runs, other_runs, resamples=4000, seed=0):
+    """The median of the per-round ratios this/other and its bootstrap 95 %
+    interval (percentiles of the median over resampled rounds; a fixed seed,
+    so one run's document is reproducible from its times)."""
+    if len(this_runs) != len(other_runs) or not this_runs:
+        raise ValueError("paired_ratio: the two sides need the same, non-zero number of rounds")
+    q = [a / b for a, b in zip(this_runs, other_runs)]
+    rng = random.Random(seed)
+    meds = sorted(statistics.median(rng.choices(q, k=len(q))) for _ in range(resamples))
+    return statistics.median(q), [meds[int(0.025 * resamples)], meds[int(0.975 * resamples) - 1]]
+
+
 def compare(other: str, rounds: int = 5, cases=CASES, log=print) -> dict:
     """fivecal's own time of each case in this tree and in ``other``,
     interleaved; the document bench/run.py --versus keeps in results.json."""
@@ -196,14 +216,15 @@ def compare(other: str, rounds: int = 5, cases=CASES, log=print) -> dict:
                     summary[s.name] = r["summary"]
             med = {n: statistics.median(v) for n, v in runs.items()}
             diff = _difference(summary["this"], summary["other"])
+            ratio, ci = paired_ratio(runs["this"], runs["other"])
             row = {"case": case, "this_s": med["this"], "other_s": med["other"],
-                   "this_over_other": med["this"] / med["other"], "runs_this_s": runs["this"],
+                   "this_over_other": ratio, "ratio_ci95": ci, "runs_this_s": runs["this"],
                    "runs_other_s": runs["other"], "best_of": best_of, "difference": diff, "agree": diff <= 1e-4,
                    "iterations": {n: summary[n].get("iterations") for n in summary},
                    "load_average": os.getloadavg()[0]}
             rows.append(row)
             log(f"{case:24s} this {med['this'] * 1e3:10.2f} ms   other {med['other'] * 1e3:10.2f} ms   "
-                f"this/other {row['this_over_other']:.3f}   agree: {row['agree']} ({diff:.1e})")
+                f"this/other {ratio:.3f} [{ci[0]:.3f}, {ci[1]:.3f}]   agree: {row['agree']} ({diff:.1e})")
     finally:
         for s in sides:
             s.close()
@@ -216,7 +237,7 @@ def compare(other: str, rounds: int = 5, cases=CASES, log=print) -> dict:
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("other", help="the other checkout (its python/fivecal holds its built _core)")
-    p.add_argument("--rounds", type=int, default=5, help="timed runs per side and case (median reported)")
+    p.add_argument("--rounds", type=int, default=5, help="timed rounds per side and case (the median of the paired ratios reported)")
     p.add_argument("--cases", default=",".join(CASES), help="comma-separated subset of: " + ", ".join(CASES))
     p.add_argument("--out", default=os.path.join(HERE, "versus.json"))
     a = p.parse_args(argv)

@@ -3,6 +3,7 @@ right thing (each side's own tree), and it says when a case is slower or the
 two builds solved different problems."""
 import json
 import os
+import statistics
 import sys
 
 import pytest
@@ -60,3 +61,50 @@ def test_versus_times_every_case_of_the_bench():
     assert cases == versus.CASES
     with pytest.raises(ValueError, match="unknown case"):
         versus._prepare("no_such_case")
+
+
+def test_the_ratio_pairs_each_round_and_carries_an_interval():
+    """On a machine whose runs are bimodal the two sides' medians do not
+    pair: here this side is 4 % faster in every round both ran at the same
+    speed (four), and the slow mode hit only this side in three; the medians
+    say 1.34, the rounds 0.96."""
+    other = [1.4, 1.4, 1.4, 1.0, 1.0, 1.0, 1.0]
+    this = [0.96 * 1.4, 0.96 * 1.4, 0.96 * 1.4, 0.96, 0.96 * 1.4, 0.96 * 1.4, 0.96 * 1.4]
+    assert statistics.median(this) / statistics.median(other) == pytest.approx(1.344)
+    ratio, ci = versus.paired_ratio(this, other)
+    assert ratio == pytest.approx(0.96)
+    assert ci[0] <= ratio <= ci[1] and ci[1] == pytest.approx(1.344)
+    assert versus.paired_ratio(this, other) == (ratio, ci)  # reproducible from the times
+    with pytest.raises(ValueError, match="same, non-zero number of rounds"):
+        versus.paired_ratio([1.0], [1.0, 2.0])
+
+
+def test_the_readme_paragraph_shows_the_interval_and_a_comparison_measured_apart():
+    row = {"case": "tango_S3", "this_s": 0.004, "other_s": 0.005, "this_over_other": 0.8,
+           "ratio_ci95": [0.7, 0.9], "agree": True}
+    doc = {"machine": {"date": "2026-11-28 17:14:23"},
+           "versus": {"rounds": 9, "other": {"commit": "abc1234"}, "results": [row], "date": "2026-11-29 10:00:00",
+                      "measured_apart": True}}
+    text = " ".join(bench.versus_paragraph(doc))
+    assert "(0.80, 95 % 0.70–0.90)" in text and "measured apart on 2026-11-29 10:00:00" in text
+    del doc["versus"]["measured_apart"]
+    assert "in the same run" in " ".join(bench.versus_paragraph(doc))
+
+
+def test_versus_only_puts_the_comparison_into_the_existing_results(tmp_path, monkeypatch):
+    """--versus-only replaces the file's comparison and nothing else: the
+    cases keep their run's figures and results_previous.json (the run before
+    that one) is not overwritten."""
+    out = tmp_path / "results.json"
+    doc = {"machine": {"date": "2026-11-28 17:14:23"}, "quick": False, "results": [{"case": "tango_S3"}],
+           "versus": {"date": "old"}}
+    out.write_text(json.dumps(doc))
+    fake = {"date": "2026-11-28 18:46:58", "rounds": 9, "results": []}
+    monkeypatch.setattr(bench.versus, "compare", lambda tree, rounds: dict(fake, tree=tree, asked=rounds))
+    with pytest.raises(SystemExit):
+        bench.main(["--versus-only", "--out", str(out)])  # needs --versus TREE
+    assert bench.main(["--versus", "/some/tree", "--versus-only", "--versus-rounds", "9", "--out", str(out)]) == 0
+    new = json.loads(out.read_text())
+    assert new["results"] == doc["results"] and new["machine"] == doc["machine"]
+    assert new["versus"] == dict(fake, tree="/some/tree", asked=9, measured_apart=True)
+    assert not (tmp_path / "results_previous.json").exists()
