@@ -11,7 +11,10 @@ baseline, the same model and fits in JAX (bench/baseline_jax.py: jit, exact
 jacfwd Jacobians, fivecal's Levenberg-Marquardt rule in lax.while_loop,
 lax.map over Monte Carlo trials), runs beside it when jax is installed (the ``bench`` extra): its first
 call (trace, compile and one run) is recorded apart as ``jax_compile_s``, its
-warm median as ``jax_s``, and ``ratio_jax`` = jax_s / fivecal_s. Without jax
+warm median as ``jax_s``, and ``ratio_jax`` = JAX / fivecal: for the fits and
+forward kinematics the median of rounds that alternate one fivecal and one
+JAX run (``ratio_jax_ci95`` its bootstrap interval), elsewhere jax_s /
+fivecal_s. Without jax
 the JAX columns say so and everything else runs.
 """
 from __future__ import annotations
@@ -73,9 +76,40 @@ def timed_jax(fn, repeat):
     return first, t_w, runs, out
 
 
-def jax_result(t_f, first, t_w, runs, **agreement):
-    """The JAX keys of a case (ratio_jax = warm JAX / fivecal)."""
-    return {"jax_s": t_w, "jax_compile_s": first, "ratio_jax": t_w / t_f, "runs_jax_s": runs, **agreement}
+def timed_jax_paired(fivecal_fn, jax_fn, repeat):
+    """JAX's first call (trace + compile + one run) apart, then `repeat`
+    rounds of one fivecal run and one warm JAX run, in alternating order.
+    This VM runs in two speeds that last seconds to minutes (the same call
+    at 4 or 7 ms): five runs of one side then five of the other can fall in
+    different speeds, a round's two runs seldom do (bench/NOTES.md, session
+    17). Returns (first, jax median, jax runs, fivecal runs, JAX output)."""
+    t = time.perf_counter()
+    jbase.block(jax_fn())
+    first = time.perf_counter() - t
+    runs_f, runs_j, out = [], [], None
+    for k in range(repeat):
+        for side in ((0, 1) if k % 2 == 0 else (1, 0)):
+            t = time.perf_counter()
+            if side == 0:
+                fivecal_fn()
+                runs_f.append(time.perf_counter() - t)
+            else:
+                out = jbase.block(jax_fn())
+                runs_j.append(time.perf_counter() - t)
+    return first, statistics.median(runs_j), runs_j, runs_f, out
+
+
+def jax_result(t_f, first, t_w, runs, paired_fivecal=None, **agreement):
+    """The JAX keys of a case. ratio_jax = warm JAX / fivecal: with
+    ``paired_fivecal`` (fivecal's runs interleaved with ``runs``,
+    timed_jax_paired) the median of the rounds' ratios and its bootstrap 95 %
+    interval; otherwise the ratio of the medians (JAX run with other sizes
+    or counts than fivecal's, then scaled)."""
+    if paired_fivecal is None:
+        return {"jax_s": t_w, "jax_compile_s": first, "ratio_jax": t_w / t_f, "runs_jax_s": runs, **agreement}
+    ratio, ci = versus.paired_ratio(runs, paired_fivecal)
+    return {"jax_s": t_w, "jax_compile_s": first, "ratio_jax": ratio, "ratio_jax_ci95": ci, "runs_jax_s": runs,
+            "runs_fivecal_with_jax_s": paired_fivecal, **agreement}
 
 
 def machine_info():
@@ -125,10 +159,11 @@ def case_forward_kinematics(n, repeat):
     else:
         fk = jbase.forward_kinematics(m, list(errors))
         x = np.array(list(errors.values()))
-        first, t_j, runs_j, p_j = timed_jax(lambda: fk(qi, x), repeat)
+        first, t_j, runs_j, runs_fj, p_j = timed_jax_paired(
+            lambda: fivecal._core.tool_poses(m._core, theta, q, None, None, False), lambda: fk(qi, x), repeat)
         d_j = float(np.abs(p_f - np.asarray(p_j)).max())
         assert d_j < 1e-9, f"JAX forward kinematics disagree by {d_j} mm"
-        jx = jax_result(t_f, first, t_j, runs_j, jax_poses_per_s=n / t_j, jax_max_difference_mm=d_j)
+        jx = jax_result(t_f, first, t_j, runs_j, runs_fj, jax_poses_per_s=n / t_j, jax_max_difference_mm=d_j)
     return {**jx, "case": "forward_kinematics", "size": {"poses": n, "parameters_nonzero": len(errors)},
             "fivecal_s": t_f, "baseline_s": t_b, "ratio": t_b / t_f,
             "fivecal_poses_per_s": n / t_f, "baseline_poses_per_s": n / t_b,
@@ -156,12 +191,13 @@ def case_tango(subset, repeat, baseline_repeat):
         jx = {"jax_skipped": JAX_MISSING}
     else:
         fit = jbase.JaxProblem(ds, names).fit_function()
-        first, t_j, runs_j, (x_j, it_j, _, ok_j, *_) = timed_jax(fit, baseline_repeat)
+        first, t_j, runs_j, runs_fj, (x_j, it_j, _, ok_j, *_) = timed_jax_paired(
+            lambda: fivecal.identify(ds, subset, allow_unidentifiable=subset == "S4"), fit, baseline_repeat)
         assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
         z_j = max(abs(float(x_j[i]) - r.values[n]) / r.std[n] for i, n in enumerate(names)
                   if n not in r.undetermined and r.std[n] > 0)
         assert z_j < 0.1, f"JAX fit off fivecal's by {z_j} sigma"
-        jx = jax_result(t_f, first, t_j, runs_j, jax_jacobian_evaluations=int(it_j),
+        jx = jax_result(t_f, first, t_j, runs_j, runs_fj, jax_jacobian_evaluations=int(it_j),
                         jax_max_difference_in_sigma=float(z_j))
     return {**jx, "case": f"tango_{subset}", "size": {"touches": len(ds), "unknowns": len(names),
                                                 "rows": r.n_observations},
@@ -259,13 +295,15 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
         jx = {"jax_skipped": JAX_MISSING}
     else:
         ja = jbase.JaxAuto(ds, names, vc)
-        first, t_j, runs_j, out = timed_jax(ja.run, repeat if jax_repeat is None else jax_repeat)
+        first, t_j, runs_j, runs_fj, out = timed_jax_paired(
+            lambda: fivecal.identify(ds, "auto", fix=fix, variance_components=vc), ja.run,
+            repeat if jax_repeat is None else jax_repeat)
         assert out["converged"], "JAX Levenberg-Marquardt did not converge in every round"
         x, s, lam, f = (np.asarray(out[k]) for k in ("values", "std", "class_scales", "variance_factors"))
         agree_j = auto_agreement(r, dict(zip(names, x)), dict(zip(names, s)), dict(zip(setup.classes, lam)),
                                  dict(zip(setup.groups, f)), groups)
         check_auto_agreement(agree_j, "JAX")
-        jx = jax_result(t_f, first, t_j, runs_j, jax_rounds=out["rounds"],
+        jx = jax_result(t_f, first, t_j, runs_j, runs_fj, jax_rounds=out["rounds"],
                         jax_jacobian_evaluations=out["jacobian_evaluations"],
                         **{"jax_" + k: v for k, v in agree_j.items()})
     return {**jx, "case": "tango_auto" + ("_vce" if vc else ""),
@@ -331,11 +369,12 @@ def case_ball3d(n, repeat, baseline_repeat):
                 qj[:, i] = np.deg2rad(qj[:, i])
         fit = jbase.ball3d_fit_function(m, names)
         tool_a, table_a = np.asarray(tool, float), np.asarray(table, float)
-        first, t_j, runs_j, (x_j, it_j, _, ok_j, *_) = timed_jax(lambda: fit(qj, tool_a, table_a, meas), repeat)
+        first, t_j, runs_j, runs_fj, (x_j, it_j, _, ok_j, *_) = timed_jax_paired(
+            lambda: fivecal.identify(ds, names, default_setup=False), lambda: fit(qj, tool_a, table_a, meas), repeat)
         assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
         z_j = max(abs(float(x_j[i]) - r.values[k]) / r.std[k] for i, k in enumerate(names))
         assert z_j < 0.01, f"JAX ball3d fit off fivecal's by {z_j} sigma"
-        out.update(jax_result(t_f, first, t_j, runs_j, jax_jacobian_evaluations=int(it_j),
+        out.update(jax_result(t_f, first, t_j, runs_j, runs_fj, jax_jacobian_evaluations=int(it_j),
                               jax_max_difference_in_sigma=float(z_j)))
     return out
 
@@ -632,7 +671,9 @@ def jax_cells(r, times="x", dash="-"):
     """(JAX warm, JAX first call, ratio JAX / fivecal) as printed, or the
     reason there is no JAX figure in the first cell."""
     if "jax_s" in r:
-        return _ms(r["jax_s"]), _ms(r["jax_compile_s"]), _ratio(r["ratio_jax"], times)
+        ci = r.get("ratio_jax_ci95")
+        return (_ms(r["jax_s"]), _ms(r["jax_compile_s"]),
+                _ratio(r["ratio_jax"], times) + (f" ({_ratio(ci[0], '')}–{_ratio(ci[1], '')})" if ci else ""))
     why = r.get("jax_skipped", "")
     if why.startswith("not run"):              # said once below the table
         return "not run (below)", "", ""
@@ -643,7 +684,7 @@ def jax_cells(r, times="x", dash="-"):
 
 def table(results):
     lines = [f"{'case':<26}{'size':<34}{'fivecal':>12}{'baseline':>12}{'ratio':>9}"
-             f"{'jax':>12}{'jax 1st':>12}{'ratio':>9}"]
+             f"{'jax':>12}{'jax 1st':>12}{'ratio':>17}"]
     for r in results:
         if "skipped" in r:
             lines.append(f"{r['case']:<26}skipped: {r['skipped']}")
@@ -653,7 +694,7 @@ def table(results):
         b = _ms(r["baseline_s"]) if "baseline_s" in r else "-"
         ratio = _ratio(r["ratio"]) if "ratio" in r else "-"
         j, jc, jr = jax_cells(r)
-        jax_part = f"  {j}" if not jc else f"{j:>12}{jc:>12}{jr:>9}"
+        jax_part = f"  {j}" if not jc else f"{j:>12}{jc:>12}{jr:>17}"
         lines.append(f"{r['case']:<26}{size:<34}{f:>12}{b:>12}{ratio:>9}{jax_part}")
     return "\n".join(lines)
 
@@ -735,7 +776,11 @@ def readme_section(doc):
              + jax_words + "run in the same process on the same data"
              + ("; JAX's first call (trace, XLA compile and one run) is shown apart from its warm median "
                 "and left out of its ratio, and XLA picks its own threads (it may use every core)"
-                if jax_measured else "") + ".", "",
+                if jax_measured else "")
+             + ("; where fivecal's and JAX's runs alternate (the fits and forward kinematics), the JAX ratio is "
+                "the median of each round's JAX / fivecal with its bootstrap 95 % interval in brackets: this "
+                "machine runs at two speeds for seconds to minutes, which a round's two runs share"
+                if any("ratio_jax_ci95" in r for r in doc["results"]) else "") + ".", "",
              "| case | size | fivecal | numpy | ratio | JAX (warm) | JAX first call | ratio JAX "
              "| Jacobians per fit: fivecal / numpy / JAX |",
              "|---|---|---|---|---|---|---|---|---|"]

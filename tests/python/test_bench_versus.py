@@ -108,3 +108,23 @@ def test_versus_only_puts_the_comparison_into_the_existing_results(tmp_path, mon
     assert new["results"] == doc["results"] and new["machine"] == doc["machine"]
     assert new["versus"] == dict(fake, tree="/some/tree", asked=9, measured_apart=True)
     assert not (tmp_path / "results_previous.json").exists()
+
+
+def test_the_jax_ratio_pairs_alternating_runs(monkeypatch):
+    """timed_jax_paired alternates the sides (fivecal first in even rounds)
+    and jax_result takes the median of each round's JAX / fivecal."""
+    order = []
+
+    class FakeJax:
+        @staticmethod
+        def block(x):
+            return x
+    monkeypatch.setattr(bench, "jbase", FakeJax)
+    first, t_j, runs_j, runs_f, out = bench.timed_jax_paired(lambda: order.append("f"),
+                                                              lambda: order.append("j") or "out", 3)
+    assert order == ["j", "f", "j", "j", "f", "f", "j"] and out == "out"
+    assert len(runs_j) == len(runs_f) == 3
+    r = bench.jax_result(1.0, 0.5, 2.0, [2.0, 4.0, 2.2], paired_fivecal=[1.0, 1.0, 2.0])
+    assert r["ratio_jax"] == pytest.approx(2.0) and r["ratio_jax_ci95"][0] <= 2.0 <= r["ratio_jax_ci95"][1]
+    assert bench.jax_result(1.0, 0.5, 2.0, [2.0])["ratio_jax"] == 2.0
+    assert bench.jax_cells({**r, "jax_s": 2.0})[2].startswith("2x (")

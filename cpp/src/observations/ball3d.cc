@@ -165,6 +165,12 @@ class Kind final : public BallMountKind {
   Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d&) const override {
     return Eigen::Vector3d(r[0], r[1], r[2]);
   }
+  // EvaluateAnalytic's residual inverted (to rounding): P = table + measured + r.
+  bool PointFromRows(const double* r, const BallMountData& d, const Eigen::Vector3d& table_ball,
+                     Eigen::Vector3d* point) const override {
+    *point = table_ball + d.measured + Eigen::Vector3d(r[0], r[1], r[2]);
+    return true;
+  }
   // NC programs: an R-test path with a dwell per sample (nc_programs.rtest_program).
   const char* nc_program() const override { return "rtest"; }
 };

@@ -420,16 +420,16 @@ void BallMountKind::ReportVector(const ReportContext& c, const Observation& o, c
                                  Eigen::Vector3d* point, Eigen::Vector3d* vector) const {
   const Dataset& ds = *c.dataset;
   const Eigen::VectorXd& values = *c.values;
-  const PoseData pose(ds.machine(), o);
   const auto& mt = c.table->group(type(), o.setup);
-  Eigen::Vector3d t = c.model->tip();
   const BallMountData& d = o.data<BallMountData>();
   Eigen::Vector3d table_ball = d.table_ball;
-  for (int k = 0; k < 3; ++k) {
-    t[k] = d.tool_ball[k] + values[mt[1 + k]];
-    table_ball[k] += values[mt[4 + k]];
+  for (int k = 0; k < 3; ++k) table_ball[k] += values[mt[4 + k]];
+  if (!PointFromRows(r, d, table_ball, point)) {
+    Eigen::Vector3d t = c.model->tip();
+    for (int k = 0; k < 3; ++k) t[k] = d.tool_ball[k] + values[mt[1 + k]];
+    const PoseData pose(ds.machine(), o);
+    *point = c.model->ToolPoint(pose.q.data(), pose.dir.data(), t);
   }
-  *point = c.model->ToolPoint(pose.q.data(), pose.dir.data(), t);
   *vector = ReportRows(r, *point - table_ball);
 }
 

@@ -1648,6 +1648,15 @@ const Observation& Dataset::Row(size_t i, Observation* scratch) const {
   throw std::out_of_range("dataset: observation " + std::to_string(i) + " of " + std::to_string(size()));
 }
 
+void Dataset::FillRowSigma(const TraceBlock& b, size_t r, Observation* o) {
+  if (b.sigma.empty() || std::isnan(b.sigma_at(0, r))) {
+    o->sigma.resize(0);
+  } else {
+    o->sigma.resize(static_cast<Eigen::Index>(b.sigma.size()));
+    for (size_t k = 0; k < b.sigma.size(); ++k) o->sigma[static_cast<Eigen::Index>(k)] = b.sigma_at(static_cast<int>(k), r);
+  }
+}
+
 void Dataset::FillRow(const TraceBlock& b, size_t r, Observation* o) const {
   const int na = static_cast<int>(b.axes.size());
   const ObservationKind& kind = KindOf(b.type);
@@ -1661,12 +1670,7 @@ void Dataset::FillRow(const TraceBlock& b, size_t r, Observation* o) const {
     o->axes[k] = b.axes[k][r];
     o->direction[k] = b.direction.empty() ? 0 : b.direction[k][r];
   }
-  if (b.sigma.empty() || std::isnan(b.sigma_at(0, r))) {
-    o->sigma.resize(0);
-  } else {
-    o->sigma.resize(static_cast<Eigen::Index>(b.sigma.size()));
-    for (size_t k = 0; k < b.sigma.size(); ++k) o->sigma[static_cast<Eigen::Index>(k)] = b.sigma_at(static_cast<int>(k), r);
-  }
+  FillRowSigma(b, r, o);
   o->payload = b.common;
   double v[16];
   const int nv = static_cast<int>(b.values.size());

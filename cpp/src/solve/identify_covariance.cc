@@ -152,7 +152,7 @@ IdentifyCovariance CovarianceAtSolution(const Dataset& ds, const IdentifyOptions
     const std::vector<std::string>& units = fit.other_units;
     for (size_t u = 0; u < units.size(); ++u)
       share[units[u]] = hat.cwiseProduct(fit.nfit.at_solution.JtJ_units[u]).sum();
-    out.residual_units = ResidualsByUnit(ds, r, *fit.row_source, share, sigma_dof);
+    out.residual_units = ResidualsByUnit(r, *fit.row_unit, units, share, sigma_dof);
   } else {
     out.residual_units = ResidualsByUnit(ds, r, *fit.row_source, fit.Jw, hat, sigma_dof);
   }

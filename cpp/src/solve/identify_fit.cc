@@ -287,6 +287,7 @@ IdentifyFit FitRequest(const Dataset& ds, const IdentifyOptions& opt, const Iden
     out.num_rows = nep.num_rows();
     out.normal_equations = true;
     out.other_units = nep.other_units();
+    out.row_unit = &nep.row_unit();
   } else {
     if (out.fit.Jw.size()) {
       // The fit's own evaluation at its solution: what WeightedJacobian

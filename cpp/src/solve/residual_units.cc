@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <stdexcept>
 #include <string>
 
 #include "fivecal/observations/registry.h"
@@ -85,27 +86,19 @@ namespace {
 
 // row_share(i): row i's share Jw_i hat Jw_i^T, asked for rows of units
 // other than mm only; unit_share: a whole unit's instead.
-std::vector<UnitResiduals> ByUnit(const Dataset& ds, const Eigen::VectorXd& r, const std::vector<int>& source,
+// out: the units, "mm" first; group(i): row i's index into out.
+std::vector<UnitResiduals> ByUnit(const Eigen::VectorXd& r, std::vector<UnitResiduals> out,
+                                  const std::function<int(size_t)>& group,
                                   const std::function<double(size_t)>& row_share,
                                   const std::map<std::string, double>* unit_share, int dof) {
-  const std::vector<const char*> unit = RowUnits(ds, source);
-  // "mm" first: every kind's first row is a length.
-  std::vector<UnitResiduals> out(1);
-  out[0].unit = "mm";
-  std::vector<int> group(unit.size());
-  for (size_t i = 0; i < unit.size(); ++i) {
-    size_t g = 0;
-    while (g < out.size() && out[g].unit != unit[i]) ++g;
-    if (g == out.size()) out.emplace_back().unit = unit[i];
-    group[i] = static_cast<int>(g);
-  }
   std::vector<double> ss(out.size(), 0.0), used(out.size(), 0.0);
-  for (size_t i = 0; i < unit.size(); ++i) {
-    UnitResiduals& u = out[group[i]];
+  for (Eigen::Index i = 0; i < r.size(); ++i) {
+    const int g = group(static_cast<size_t>(i));
+    UnitResiduals& u = out[g];
     ++u.rows;
-    ss[group[i]] += r[i] * r[i];
+    ss[g] += r[i] * r[i];
     u.max_abs = std::max(u.max_abs, std::abs(r[i]));
-    if (group[i] > 0 && row_share) used[group[i]] += row_share(i);
+    if (g > 0 && row_share) used[g] += row_share(static_cast<size_t>(i));
   }
   if (unit_share)
     for (size_t g = 1; g < out.size(); ++g) {
@@ -129,16 +122,35 @@ std::vector<UnitResiduals> ByUnit(const Dataset& ds, const Eigen::VectorXd& r, c
 std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
                                            const std::vector<int>& source, const Eigen::MatrixXd& Jw,
                                            const Eigen::MatrixXd& hat, int dof) {
+  const std::vector<const char*> unit = RowUnits(ds, source);
+  // "mm" first: every kind's first row is a length.
+  std::vector<UnitResiduals> out(1);
+  out[0].unit = "mm";
+  std::vector<int> group(unit.size());
+  for (size_t i = 0; i < unit.size(); ++i) {
+    size_t g = 0;
+    while (g < out.size() && out[g].unit != unit[i]) ++g;
+    if (g == out.size()) out.emplace_back().unit = unit[i];
+    group[i] = static_cast<int>(g);
+  }
   std::function<double(size_t)> share;
   if (hat.rows() == Jw.cols() && Jw.rows() == r.size())
     share = [&](size_t i) { return Jw.row(i).dot(hat * Jw.row(i).transpose()); };
-  return ByUnit(ds, r, source, share, nullptr, dof);
+  return ByUnit(r, std::move(out), [&](size_t i) { return group[i]; }, share, nullptr, dof);
 }
 
-std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
-                                           const std::vector<int>& source,
+std::vector<UnitResiduals> ResidualsByUnit(const Eigen::VectorXd& r, const std::vector<unsigned char>& row_unit,
+                                           const std::vector<std::string>& other_units,
                                            const std::map<std::string, double>& share, int dof) {
-  return ByUnit(ds, r, source, nullptr, &share, dof);
+  if (!row_unit.empty() && row_unit.size() != static_cast<size_t>(r.size()))
+    throw std::logic_error("residual units: one unit per residual row expected");
+  // other_units are in the order their first rows come, as RowUnits finds them.
+  std::vector<UnitResiduals> out(1 + other_units.size());
+  out[0].unit = "mm";
+  for (size_t u = 0; u < other_units.size(); ++u) out[1 + u].unit = other_units[u];
+  std::function<int(size_t)> group = [](size_t) { return 0; };
+  if (!row_unit.empty()) group = [&](size_t i) { return static_cast<int>(row_unit[i]); };
+  return ByUnit(r, std::move(out), group, nullptr, &share, dof);
 }
 
 }  // namespace fivecal

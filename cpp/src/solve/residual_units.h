@@ -48,9 +48,11 @@ std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::Vecto
 
 // The same with each unit's share of the parameters given (unit -> sum over
 // its rows of Jw_i hat Jw_i^T, i.e. trace(hat Jw_u^T Jw_u)): the
-// normal-equation fit has no rows of Jw, only each unit's Jw_u^T Jw_u.
-std::vector<UnitResiduals> ResidualsByUnit(const Dataset& ds, const Eigen::VectorXd& r,
-                                           const std::vector<int>& source,
+// normal-equation fit has no rows of Jw, only each unit's Jw_u^T Jw_u. The
+// rows' units are the fit's own (NormalEquationProblem::row_unit and
+// other_units): no walk over the dataset's rows and kinds again.
+std::vector<UnitResiduals> ResidualsByUnit(const Eigen::VectorXd& r, const std::vector<unsigned char>& row_unit,
+                                           const std::vector<std::string>& other_units,
                                            const std::map<std::string, double>& share, int dof);
 
 }  // namespace fivecal

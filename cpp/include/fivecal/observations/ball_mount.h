@@ -130,6 +130,15 @@ class BallMountKind : public ObservationKind {
                                Observation* ob) const = 0;
   // The report vector of rows r given the ball distance vector d.
   virtual Eigen::Vector3d ReportRows(const double* r, const Eigen::Vector3d& d) const = 0;
+  // The tool ball at the solution from the sample's residual rows r where
+  // they hold it whole (ball3d: r = P - table - measured), so the report
+  // does not run the chain of every sample a third time; false (a length
+  // reading holds one component): the report evaluates the chain.
+  virtual bool PointFromRows(const double* r, const BallMountData& d, const Eigen::Vector3d& table_ball,
+                             Eigen::Vector3d* point) const {
+    (void)r, (void)d, (void)table_ball, (void)point;
+    return false;
+  }
 
  private:
   // The fields of a prepared row that come from the sample itself.

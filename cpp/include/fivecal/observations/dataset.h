@@ -229,6 +229,9 @@ class Dataset {
   }
   // Row r of block b as an observation, into *o.
   void FillRow(const TraceBlock& b, size_t r, Observation* o) const;
+  // Only the declared sigma of row r into *o (the rest of a block's rows'
+  // set-up is the block's): for a walk that reads a row's noise alone.
+  static void FillRowSigma(const TraceBlock& b, size_t r, Observation* o);
   // f(i, observation) for every observation in order (block rows through
   // one scratch observation: f must not keep a reference to it).
   template <class F>

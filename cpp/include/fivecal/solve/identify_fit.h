@@ -52,10 +52,12 @@ struct IdentifyFit {
   // of the QR of Jw with the placement rows appended (R^T R = Jw^T Jw + U^-2).
   Eigen::MatrixXd factor;
   // Normal equations only: the pass at the solution (J^T J in mm, per unit)
-  // and the units of its rows other than mm (NormalEquationProblem::other_units).
+  // and the units of its rows other than mm (NormalEquationProblem::other_units,
+  // row_unit; held by the problem).
   bool normal_equations = false;
   NormalEquationFit nfit;
   std::vector<std::string> other_units;
+  const std::vector<unsigned char>* row_unit = nullptr;
   std::unique_ptr<Problem> problem;    // dense: the problem at the solution
 };
 

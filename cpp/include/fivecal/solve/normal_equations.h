@@ -61,6 +61,8 @@ class NormalEquationProblem {
   // The row units other than mm in this data, in order of first row
   // (empty for data of lengths only).
   const std::vector<std::string>& other_units() const { return other_units_; }
+  // Each row's unit: 0 mm, else 1 + its index in other_units(); empty when every row is in mm.
+  const std::vector<unsigned char>& row_unit() const { return row_unit_; }
 
   // At `values` (every table entry): residuals only (mm, data-sized), or the
   // normal equations (unweighted J^T J too when `unweighted`).
