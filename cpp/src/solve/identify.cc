@@ -1,4 +1,3 @@
-#define FIVECAL_IDENTIFY_TIMING 1
 // Identify as a pipeline of stages, each a file of its own with a typed
 // input and output (identify_request.h ... identify_verdict.h); the fit's
 // one factor of the weighted Jacobian at the solution is handed on to the
