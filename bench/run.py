@@ -748,12 +748,25 @@ def versus_paragraph(doc):
              + ("" if r["agree"] else " (outputs differ)") for r in v["results"]]
     slower = [r["case"] for r in v["results"] if r["this_over_other"] > 1.05]
     when = f"measured apart on {v['date']}" if v.get("measured_apart") else "in the same run"
-    return ["", f"fivecal's own time against commit {v['other']['commit']} {when} (`bench/versus.py`: "
+    text = (f"fivecal's own time against commit {v['other']['commit']} {when} (`bench/versus.py`: "
             f"{v['rounds']} interleaved rounds of each build, a round the fastest of as many runs as take 0.3 s; "
             "medians of the rounds, and in brackets the median of each round's ratio this / other with its "
             "bootstrap 95 % interval; both builds' outputs agree to 1e-4 unless "
             "said): " + "; ".join(cells) + ". "
-            + (f"Slower by more than 5 %: {', '.join(slower)}." if slower else "No case is slower by more than 5 %.")]
+            + (f"Slower by more than 5 %: {', '.join(slower)}." if slower else "No case is slower by more than 5 %."))
+    # A case named slower is measured again, apart and with more rounds
+    # (bench/run.py --versus-recheck): both results stand in the text, and
+    # the later, larger one decides.
+    rc = doc.get("versus_recheck")
+    if slower and rc and rc["other"]["commit"] == v["other"]["commit"]:
+        again = {r["case"]: r for r in rc["results"]}
+        cells = [f"{c} {ratio(again[c])}" + ("" if again[c]["agree"] else " (outputs differ)")
+                 for c in slower if c in again]
+        still = [c for c in slower if c not in again or again[c]["this_over_other"] > 1.05 or not again[c]["agree"]]
+        text += (f" Measured again on {rc['date']} ({rc['rounds']} rounds, those cases only): " + "; ".join(cells)
+                 + ". " + (f"Slower by more than 5 % in both: {', '.join(still)}." if still
+                           else "None is slower by more than 5 % there."))
+    return ["", text]
 
 
 def readme_section(doc):
@@ -975,6 +988,9 @@ def main(argv=None):
                    help="with --versus: run only the comparison and put it into the existing --out file (and the "
                    "README with --readme); the cases' figures stay those of the file's own run")
     p.add_argument("--versus-rounds", type=int, default=7, metavar="N", help="interleaved rounds of --versus")
+    p.add_argument("--versus-recheck", metavar="JSON", help="a bench/versus.py result that measured again, with "
+                   "more rounds, the cases the --out file's comparison named slower: kept beside it in the file "
+                   "(and the README with --readme); nothing is rerun")
     p.add_argument("--numpy-runs-1e6", type=int, default=5, metavar="N",
                    help="runs of the numpy baseline of the 1e6-sample fit (about 2 min each; 0: none)")
     a = p.parse_args(argv)
@@ -983,7 +999,7 @@ def main(argv=None):
     load_before = os.getloadavg()
     # The previous run's figures stay beside the new ones (its baselines were another's).
     previous = None
-    if not a.quick and not a.only_auto and not a.versus_only and os.path.exists(a.out):
+    if not a.quick and not a.only_auto and not a.versus_only and not a.versus_recheck and os.path.exists(a.out):
         with open(a.out) as f:
             old = json.load(f)
         if not old.get("quick"):
@@ -1004,6 +1020,17 @@ def main(argv=None):
         return 0
     # First, in a quiet process: once JAX has run here, its thread pool
     # disturbed the two builds' workers by tens of percent.
+    if a.versus_recheck:
+        with open(a.out) as f:
+            doc = json.load(f)
+        with open(a.versus_recheck) as f:
+            doc["versus_recheck"] = json.load(f)
+        if doc.get("versus", {}).get("other", {}).get("commit") != doc["versus_recheck"]["other"]["commit"]:
+            p.error("--versus-recheck: compares another commit than the --out file's comparison")
+        _write_json(a.out, doc)
+        if a.readme:
+            update_readme(doc, os.path.join(HERE, "..", "README.md"))
+        return 0
     if a.versus_only:
         if not a.versus:
             p.error("--versus-only needs --versus TREE")

@@ -108,6 +108,16 @@ def test_versus_only_puts_the_comparison_into_the_existing_results(tmp_path, mon
     assert new["results"] == doc["results"] and new["machine"] == doc["machine"]
     assert new["versus"] == dict(fake, tree="/some/tree", asked=9, measured_apart=True)
     assert not (tmp_path / "results_previous.json").exists()
+    # --versus-recheck keeps a later re-measurement beside it, also without touching results_previous.json
+    check = tmp_path / "check.json"
+    check.write_text(json.dumps({"date": "d2", "rounds": 15, "other": {"commit": "abc"}, "results": []}))
+    with pytest.raises(SystemExit):   # against another commit than the file's comparison
+        bench.main(["--versus-recheck", str(check), "--out", str(out)])
+    new["versus"]["other"] = {"commit": "abc"}
+    out.write_text(json.dumps(new))
+    assert bench.main(["--versus-recheck", str(check), "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["versus_recheck"]["date"] == "d2"
+    assert not (tmp_path / "results_previous.json").exists()
 
 
 def test_the_jax_ratio_pairs_alternating_runs(monkeypatch):
@@ -128,3 +138,26 @@ def test_the_jax_ratio_pairs_alternating_runs(monkeypatch):
     assert r["ratio_jax"] == pytest.approx(2.0) and r["ratio_jax_ci95"][0] <= 2.0 <= r["ratio_jax_ci95"][1]
     assert bench.jax_result(1.0, 0.5, 2.0, [2.0])["ratio_jax"] == 2.0
     assert bench.jax_cells({**r, "jax_s": 2.0})[2].startswith("2x (")
+
+
+def test_a_case_named_slower_and_measured_again_shows_both():
+    """The same-run comparison names a case; a later, larger re-measurement
+    of it is shown beside it and decides, and a case it does not clear is
+    still named."""
+    row = lambda case, x, agree=True: {"case": case, "this_s": 1.0, "other_s": 1.0, "this_over_other": x,  # noqa: E731
+                                       "ratio_ci95": [x - 0.05, x + 0.05], "agree": agree}
+    v = {"rounds": 7, "other": {"commit": "abc1234"}, "date": "d1",
+         "results": [row("forward_kinematics", 1.06), row("design_search_10000", 1.13), row("tango_S3", 0.8)]}
+    rc = {"rounds": 15, "other": {"commit": "abc1234"}, "date": "d2",
+          "results": [row("forward_kinematics", 1.01), row("design_search_10000", 1.08)]}
+    text = " ".join(bench.versus_paragraph({"versus": v, "versus_recheck": rc}))
+    assert "Slower by more than 5 %: forward_kinematics, design_search_10000." in text
+    assert "Measured again on d2 (15 rounds, those cases only): forward_kinematics 1.01" in text
+    assert "Slower by more than 5 % in both: design_search_10000." in text
+    rc["results"][1] = row("design_search_10000", 0.99)
+    assert "None is slower by more than 5 % there." in " ".join(bench.versus_paragraph({"versus": v, "versus_recheck": rc}))
+    rc["results"][1] = row("design_search_10000", 0.99, agree=False)
+    assert "in both: design_search_10000" in " ".join(bench.versus_paragraph({"versus": v, "versus_recheck": rc}))
+    # a re-measurement against another commit is not this comparison's
+    rc["other"]["commit"] = "fffffff"
+    assert "Measured again" not in " ".join(bench.versus_paragraph({"versus": v, "versus_recheck": rc}))
