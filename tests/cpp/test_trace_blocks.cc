@@ -5,10 +5,12 @@
 // row of a bad sample.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <limits>
 #include <random>
 #include <stdexcept>
 
+#include "fivecal/model/kinematics.h"
 #include "fivecal/observations/columns.h"
 #include "fivecal/observations/registry.h"
 #include "fivecal/solve/identify.h"
@@ -94,6 +96,45 @@ TEST(TraceBlocks, BlocksAndObjectsFitAlike) {
       EXPECT_EQ(a.fit_path, path);
       ExpectSameResult(a, b);
     }
+  }
+}
+
+// The report point of an R-test sample comes from its residual
+// (P = table + measured + r, BallMountKind::PointFromRows), not from the
+// chain a third time: it must be the chain's tool ball at the solution.
+TEST(TraceBlocks, Ball3dReportPointsAreTheChainsToolBall) {
+  const Dataset ds = Trace(ObservationType::kBall3d, 2000);
+  const Machine& m = ds.machine();
+  const TraceBlock& b = ds.blocks.back();
+  const int n = static_cast<int>(b.size());
+  Eigen::MatrixXd axes(n, m.num_axes());
+  Eigen::MatrixXi dirs(n, m.num_axes());
+  for (int k = 0; k < m.num_axes(); ++k)
+    for (int i = 0; i < n; ++i) {
+      axes(i, k) = b.axes[k][i];
+      dirs(i, k) = b.direction.empty() ? 0 : b.direction[k][i];
+    }
+  for (const char* path : {"normal_equations", "dense"}) {
+    IdentifyOptions opt;
+    opt.estimate = {"EB0A", "EA0C", "EB0C", "EY0C", "ball3d.R1.tool.x", "ball3d.R1.tool.z"};
+    opt.fit_path = path;
+    const Result res = Identify(ds, opt);
+    SCOPED_TRACE(path);
+    ASSERT_EQ(res.points.rows(), n);
+    const Eigen::VectorXd theta = res.values.head(m.num_parameters());
+    auto value = [&](const std::string& name) {
+      const auto it = std::find(res.names.begin(), res.names.end(), name);
+      return it == res.names.end() ? 0.0 : res.values[it - res.names.begin()];
+    };
+    const Eigen::Vector3d tip(value("ball3d.R1.tool.x"), value("ball3d.R1.tool.y"),
+                              150.0 + value("ball3d.R1.tool.z"));
+    EXPECT_NE(tip.x(), 0.0);  // a fitted tool ball offset, not the nominal one
+    Eigen::MatrixXd expected;
+    ToolPoses(m, theta, axes, &dirs, &expected, nullptr, &tip);
+    EXPECT_LT((res.points - expected).cwiseAbs().maxCoeff(), 1e-9);
+    EXPECT_EQ(res.residual_vectors.rows(), n);
+    for (int i = 0; i < n; i += 97)
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(res.residual_vectors(i, c), res.residuals[3 * i + c]);
   }
 }
 
