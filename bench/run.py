@@ -714,8 +714,8 @@ def jacobian_cell(r):
 
 
 def previous_paragraph(doc):
-    """The ratios of the previous bench run (bench/results_previous.json, its
-    weaker baselines) beside this run's, case by case."""
+    """The ratios of the previous bench run (bench/results_previous.json)
+    beside this run's, case by case."""
     prev = doc.get("previous")
     if not prev:
         return []
@@ -727,10 +727,13 @@ def previous_paragraph(doc):
             cells.append(f"{r['case']} {_ratio(o['ratio_jax'], '×')} → {_ratio(r['ratio_jax'], '×')}")
     if not cells:
         return []
-    return ["", f"Against the previous bench run ({prev['machine']['date']}, `bench/results_previous.json`: "
-            "the JAX baseline then evaluated every absent error as zero times its term over all samples, "
-            "multiplied frames by batched 3×3 einsums and started its LM damped), JAX / fivecal went: "
-            + "; ".join(cells) + "."]
+    # What differs in how the two runs took the JAX ratio, said where it does.
+    paired_now = any("ratio_jax_ci95" in r for r in doc["results"])
+    paired_then = any("ratio_jax_ci95" in r for r in prev["results"])
+    how = (": its JAX ratios were the ratios of the two sides' medians, this run's fits and forward kinematics "
+           "pair alternating rounds" if paired_now and not paired_then else "")
+    return ["", f"Against the previous bench run ({prev['machine']['date']}, `bench/results_previous.json`{how}), "
+            "JAX / fivecal went: " + "; ".join(cells) + "."]
 
 
 def versus_paragraph(doc):
@@ -1006,7 +1009,8 @@ def main(argv=None):
             keep = os.path.join(os.path.dirname(os.path.abspath(a.out)), "results_previous.json")
             _write_json(keep, old)
             previous = {"machine": old["machine"], "choices": old.get("choices", []),
-                        "results": [{k: r[k] for k in ("case", "fivecal_s", "ratio", "ratio_jax", "jax_s") if k in r}
+                        "results": [{k: r[k] for k in ("case", "fivecal_s", "ratio", "ratio_jax", "ratio_jax_ci95",
+                                                       "jax_s") if k in r}
                                     for r in old["results"]]}
     if a.only_auto:
         for vc in (False, True):

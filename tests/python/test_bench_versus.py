@@ -161,3 +161,12 @@ def test_a_case_named_slower_and_measured_again_shows_both():
     # a re-measurement against another commit is not this comparison's
     rc["other"]["commit"] = "fffffff"
     assert "Measured again" not in " ".join(bench.versus_paragraph({"versus": v, "versus_recheck": rc}))
+
+
+def test_the_previous_run_paragraph_says_when_its_ratios_were_not_paired():
+    doc = {"previous": {"machine": {"date": "d0"}, "results": [{"case": "tango_S3", "ratio_jax": 1.6}]},
+           "results": [{"case": "tango_S3", "ratio_jax": 0.81, "ratio_jax_ci95": [0.66, 1.1]}]}
+    text = " ".join(bench.previous_paragraph(doc))
+    assert "tango_S3 1.6× → 0.81×" in text and "ratios of the two sides' medians" in text
+    doc["previous"]["results"][0]["ratio_jax_ci95"] = [1.5, 1.7]
+    assert "medians" not in " ".join(bench.previous_paragraph(doc))
