@@ -98,10 +98,12 @@ class Result(Viewable):
         self._core = core
         self.dataset = dataset
         self.estimated: list = list(core.estimated)
-        all_values = dict(zip(core.names, np.asarray(core.values)))
+        # Python floats and a set: a table of hundreds of names is walked once per fit.
+        estimated = set(self.estimated)
         #: estimated parameters and fixed non-zero ones, name -> value
-        self.values: dict = {n: float(v) for n, v in all_values.items() if v != 0.0 or n in self.estimated}
-        self.std: dict = {n: float(s) for n, s in zip(self.estimated, np.asarray(core.std))}
+        self.values: dict = {n: v for n, v in zip(core.names, np.asarray(core.values).tolist())
+                             if v != 0.0 or n in estimated}
+        self.std: dict = dict(zip(self.estimated, np.asarray(core.std).tolist()))
         self.covariance: np.ndarray = np.asarray(core.covariance)
         self.correlation: np.ndarray = np.asarray(core.correlation)
         self.residuals: np.ndarray = np.asarray(core.residuals)
