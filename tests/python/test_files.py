@@ -70,8 +70,13 @@ def test_a_write_that_raises_midway_keeps_the_old_file(tmp_path, monkeypatch):
 
 
 _SLOW_SIMULATE = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
     from fivecal import cli, files
+
+    # A user's Ctrl-C: the child of a runner that ignores SIGINT (pytest-xdist
+    # workers, a shell's background job) inherits SIG_IGN, and Python then
+    # installs no KeyboardInterrupt handler at all.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
     def slow(f):
         f.flush()
