@@ -143,8 +143,8 @@ def case_forward_kinematics(n, repeat):
     # The core batch call (what a controller links: validation included) on
     # an (N, num_axes) array, and the public call a Python user makes (dict of
     # axis arrays in, with the Python-side checks and the column stacking).
-    t_f, runs_f, p_f = timed(lambda: fivecal._core.tool_poses(m._core, theta, q, None, None, False)[0],
-                             repeat)
+    run_f = lambda: fivecal._core.tool_poses(m._core, theta, q, None, None, False)[0]  # noqa: E731
+    t_f, runs_f, p_f = timed(run_f, repeat)
     t_api, runs_api, p_api = timed(lambda: m.tool_point(axes, errors), repeat)
     assert np.array_equal(p_f, p_api)
     qi = q.copy()
@@ -159,8 +159,7 @@ def case_forward_kinematics(n, repeat):
     else:
         fk = jbase.forward_kinematics(m, list(errors))
         x = np.array(list(errors.values()))
-        first, t_j, runs_j, runs_fj, p_j = timed_jax_paired(
-            lambda: fivecal._core.tool_poses(m._core, theta, q, None, None, False), lambda: fk(qi, x), repeat)
+        first, t_j, runs_j, runs_fj, p_j = timed_jax_paired(run_f, lambda: fk(qi, x), repeat)
         d_j = float(np.abs(p_f - np.asarray(p_j)).max())
         assert d_j < 1e-9, f"JAX forward kinematics disagree by {d_j} mm"
         jx = jax_result(t_f, first, t_j, runs_j, runs_fj, jax_poses_per_s=n / t_j, jax_max_difference_mm=d_j)
@@ -179,7 +178,8 @@ def case_tango(subset, repeat, baseline_repeat):
     ds = tango.hu40t_dataset(errors=errors, seed=3)
     # S4 on this plan leaves some errors undetermined (identify refuses it);
     # the bench times the same solver path with the refusal switched off.
-    t_f, runs_f, r = timed(lambda: fivecal.identify(ds, subset, allow_unidentifiable=subset == "S4"), repeat)
+    run_f = lambda: fivecal.identify(ds, subset, allow_unidentifiable=subset == "S4")  # noqa: E731
+    t_f, runs_f, r = timed(run_f, repeat)
     names = r.estimated
     prob = base.FusedProblem(ds, names)
     t_b, runs_b, sol = timed(lambda: base.lm(prob.evaluate, np.zeros(len(names))), baseline_repeat)
@@ -191,8 +191,7 @@ def case_tango(subset, repeat, baseline_repeat):
         jx = {"jax_skipped": JAX_MISSING}
     else:
         fit = jbase.JaxProblem(ds, names).fit_function()
-        first, t_j, runs_j, runs_fj, (x_j, it_j, _, ok_j, *_) = timed_jax_paired(
-            lambda: fivecal.identify(ds, subset, allow_unidentifiable=subset == "S4"), fit, baseline_repeat)
+        first, t_j, runs_j, runs_fj, (x_j, it_j, _, ok_j, *_) = timed_jax_paired(run_f, fit, baseline_repeat)
         assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
         z_j = max(abs(float(x_j[i]) - r.values[n]) / r.std[n] for i, n in enumerate(names)
                   if n not in r.undetermined and r.std[n] > 0)
@@ -266,7 +265,8 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
     ds = tango.hu40t_dataset(errors=tango.thesis_s3_errors(), seed=3) if dataset is None else dataset
     fix = list(fix or [])
     vc = bool(variance_components)
-    t_f, runs_f, r = timed(lambda: fivecal.identify(ds, "auto", fix=fix, variance_components=vc), repeat)
+    run_f = lambda: fivecal.identify(ds, "auto", fix=fix, variance_components=vc)  # noqa: E731
+    t_f, runs_f, r = timed(run_f, repeat)
     if baseline_repeat == 0:
         why = ("not run in this bench run (bench/run.py --auto-baselines 0): one numpy run of the evidence "
                "loop takes about 30 s and a JAX one about a minute after a compile of minutes")
@@ -295,9 +295,7 @@ def case_tango_auto(repeat, variance_components=False, baseline_repeat=None, dat
         jx = {"jax_skipped": JAX_MISSING}
     else:
         ja = jbase.JaxAuto(ds, names, vc)
-        first, t_j, runs_j, runs_fj, out = timed_jax_paired(
-            lambda: fivecal.identify(ds, "auto", fix=fix, variance_components=vc), ja.run,
-            repeat if jax_repeat is None else jax_repeat)
+        first, t_j, runs_j, runs_fj, out = timed_jax_paired(run_f, ja.run, repeat if jax_repeat is None else jax_repeat)
         assert out["converged"], "JAX Levenberg-Marquardt did not converge in every round"
         x, s, lam, f = (np.asarray(out[k]) for k in ("values", "std", "class_scales", "variance_factors"))
         agree_j = auto_agreement(r, dict(zip(names, x)), dict(zip(names, s)), dict(zip(setup.classes, lam)),
@@ -338,7 +336,8 @@ def ball3d_dataset(n):
 
 def case_ball3d(n, repeat, baseline_repeat):
     m, ds, names, axes, tool, table, meas = ball3d_dataset(n)
-    t_f, runs_f, r = timed(lambda: fivecal.identify(ds, names, default_setup=False), repeat)
+    run_f = lambda: fivecal.identify(ds, names, default_setup=False)  # noqa: E731
+    t_f, runs_f, r = timed(run_f, repeat)
     assert r.verdict == "ok", r.verdict
     out = {"case": f"ball3d_fit_{n}", "size": {"samples": n, "rows": 3 * n, "unknowns": len(names)},
            "fivecal_s": t_f, "runs_fivecal_s": runs_f, "fivecal_iterations": r.iterations,
@@ -370,7 +369,7 @@ def case_ball3d(n, repeat, baseline_repeat):
         fit = jbase.ball3d_fit_function(m, names)
         tool_a, table_a = np.asarray(tool, float), np.asarray(table, float)
         first, t_j, runs_j, runs_fj, (x_j, it_j, _, ok_j, *_) = timed_jax_paired(
-            lambda: fivecal.identify(ds, names, default_setup=False), lambda: fit(qj, tool_a, table_a, meas), repeat)
+            run_f, lambda: fit(qj, tool_a, table_a, meas), repeat)
         assert bool(ok_j), "JAX Levenberg-Marquardt did not converge"
         z_j = max(abs(float(x_j[i]) - r.values[k]) / r.std[k] for i, k in enumerate(names))
         assert z_j < 0.01, f"JAX ball3d fit off fivecal's by {z_j} sigma"
@@ -1022,31 +1021,27 @@ def main(argv=None):
         _write_json(a.out, doc)
         print(table(results))
         return 0
-    # First, in a quiet process: once JAX has run here, its thread pool
-    # disturbed the two builds' workers by tens of percent.
-    if a.versus_recheck:
+    if a.versus_recheck or a.versus_only:
+        # Only the file's comparison changes; its cases keep their run's figures.
         with open(a.out) as f:
             doc = json.load(f)
-        with open(a.versus_recheck) as f:
-            doc["versus_recheck"] = json.load(f)
-        if doc.get("versus", {}).get("other", {}).get("commit") != doc["versus_recheck"]["other"]["commit"]:
-            p.error("--versus-recheck: compares another commit than the --out file's comparison")
-        _write_json(a.out, doc)
-        if a.readme:
-            update_readme(doc, os.path.join(HERE, "..", "README.md"))
-        return 0
-    if a.versus_only:
-        if not a.versus:
-            p.error("--versus-only needs --versus TREE")
-        with open(a.out) as f:
-            doc = json.load(f)
-        doc["versus"] = {**versus.compare(a.versus, a.versus_rounds), "measured_apart": True}
+        if a.versus_recheck:
+            with open(a.versus_recheck) as f:
+                doc["versus_recheck"] = json.load(f)
+            if doc.get("versus", {}).get("other", {}).get("commit") != doc["versus_recheck"]["other"]["commit"]:
+                p.error("--versus-recheck: compares another commit than the --out file's comparison")
+        else:
+            if not a.versus:
+                p.error("--versus-only needs --versus TREE")
+            doc["versus"] = {**versus.compare(a.versus, a.versus_rounds), "measured_apart": True}
         _write_json(a.out, doc)
         print(f"written {a.out}")
         if a.readme:
             update_readme(doc, os.path.join(HERE, "..", "README.md"))
             print("README performance section updated")
         return 0
+    # First, in a quiet process: once JAX has run here, its thread pool
+    # disturbed the two builds' workers by tens of percent.
     versus_doc = versus.compare(a.versus, a.versus_rounds) if a.versus else None
     results.append(case_forward_kinematics(20_000 if a.quick else 1_000_000, repeat))
     print(table(results[-1:]), flush=True)

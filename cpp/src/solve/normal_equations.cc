@@ -52,21 +52,7 @@ NormalEquationProblem::NormalEquationProblem(const Dataset& ds, const ParameterT
   Block B{0, static_cast<int>((static_cast<long long>(n) * 1) / nb), 0, 0};
   const ObservationKind* last = nullptr;
   std::vector<std::string> unit_of;  // of `last`'s rows
-  // A block row's sigma is the block's set-up and its own declared noise
-  // (FillRowSigma), not the whole row (a block of 10^7 samples).
-  auto each_row = [&](auto&& f) {
-    size_t i = 0;
-    for (const Observation& o : ds.observations) f(i++, o);
-    Observation scratch;
-    for (const TraceBlock& tb : ds.blocks) {
-      if (tb.size()) ds.FillRow(tb, 0, &scratch);
-      for (size_t r = 0, nr_b = tb.size(); r < nr_b; ++r) {
-        Dataset::FillRowSigma(tb, r, &scratch);
-        f(i++, static_cast<const Observation&>(scratch));
-      }
-    }
-  };
-  each_row([&](size_t row_index, const Observation& o) {
+  ds.ForEachRowNoise([&](size_t row_index, const Observation& o) {
     const int i = static_cast<int>(row_index);
     const ObservationKind* kind = &KindOf(o);
     const int rows = kind->rows();

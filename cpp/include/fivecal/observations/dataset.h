@@ -230,21 +230,39 @@ class Dataset {
   // Row r of block b as an observation, into *o.
   void FillRow(const TraceBlock& b, size_t r, Observation* o) const;
   // Only the declared sigma of row r into *o (the rest of a block's rows'
-  // set-up is the block's): for a walk that reads a row's noise alone.
+  // set-up is the block's): ForEachRowNoise's step.
   static void FillRowSigma(const TraceBlock& b, size_t r, Observation* o);
   // f(i, observation) for every observation in order (block rows through
   // one scratch observation: f must not keep a reference to it).
   template <class F>
   void ForEachRow(F&& f) const {
+    EachRow(f, false);
+  }
+  // The same for a walk that reads only a row's kind, set-up and declared
+  // noise (the row sigmas of a fit): a block row is its block's first row
+  // with its own sigma, not a whole row filled per sample (10^7 of them).
+  template <class F>
+  void ForEachRowNoise(F&& f) const {
+    EachRow(f, true);
+  }
+
+ private:
+  template <class F>
+  void EachRow(F& f, bool noise_only) const {
     size_t i = 0;
     for (const Observation& o : observations) f(i++, o);
     Observation scratch;
-    for (const TraceBlock& b : blocks)
+    for (const TraceBlock& b : blocks) {
+      if (noise_only && b.size()) FillRow(b, 0, &scratch);
       for (size_t r = 0, n = b.size(); r < n; ++r) {
-        FillRow(b, r, &scratch);
+        if (noise_only) FillRowSigma(b, r, &scratch);
+        else FillRow(b, r, &scratch);
         f(i++, static_cast<const Observation&>(scratch));
       }
+    }
   }
+
+ public:
   // THE expansion: a copy whose blocks are Observations (same order), for
   // the code that works on Observation objects (procedures, design, refit,
   // simulation, the dense fit paths). A dataset without blocks is copied
